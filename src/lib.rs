@@ -1,0 +1,19 @@
+//! polyspline: curved high-order quad/hex meshes from linear ones, without CAD.
+//!
+//! The pipeline (see `design/architecture.md`):
+//!
+//! ```text
+//! read ──▶ LinearMesh ──▶ Topology ──▶ SplineSpace ──▶ Fit ──▶ Validity ──▶ Sample ──▶ write
+//! (io/)    (mesh/)        (mesh/)      (spline/)       (fit/)  (validity/)  (sample/)   (io/)
+//! ```
+//!
+//! ```no_run
+//! use polyspline::{io::read_mesh, mesh::{MeshOptions, Topology}};
+//! let mesh = read_mesh("meshes/real/mfem/cylinder-hex.mesh".as_ref(), &MeshOptions::default())?;
+//! let topo = Topology::build(&mesh);
+//! println!("{} hexes, {} boundary faces", mesh.n_elements(), topo.boundary_facets.len());
+//! # Ok::<(), polyspline::io::ReadError>(())
+//! ```
+
+pub mod io;
+pub mod mesh;

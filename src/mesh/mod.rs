@@ -1,0 +1,8 @@
+//! Linear meshes and their topology.
+
+pub mod generate;
+pub mod linear;
+pub mod topology;
+
+pub use linear::{InvalidElement, InvalidKind, LinearMesh, MeshOptions};
+pub use topology::Topology;
