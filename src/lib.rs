@@ -15,5 +15,6 @@
 //! # Ok::<(), polyspline::io::ReadError>(())
 //! ```
 
+pub mod info;
 pub mod io;
 pub mod mesh;

@@ -157,7 +157,9 @@ impl RawBlock {
         self.len() == 0
     }
     pub fn kind(&self) -> &CellKind {
-        self.kind.as_ref().expect("RawBlock kind is set by the reader")
+        self.kind
+            .as_ref()
+            .expect("RawBlock kind is set by the reader")
     }
     pub fn location(&self, cell: usize) -> Location {
         self.locations.get(cell).copied().unwrap_or_default()

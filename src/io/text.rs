@@ -204,7 +204,10 @@ impl<'a> TextCursor<'a> {
     /// An error at the last token's line: `expected WHAT, found "TOKEN"`.
     pub fn expected(&self, what: &str, found: &str) -> ParseError {
         let shown: String = found.chars().take(40).collect();
-        ParseError::at_line(self.token_line, format!("expected {what}, found \"{shown}\""))
+        ParseError::at_line(
+            self.token_line,
+            format!("expected {what}, found \"{shown}\""),
+        )
     }
 
     /// An error at the last token's line.

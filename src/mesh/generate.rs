@@ -1,1 +1,234 @@
-//! Generators stub.
+//! Small synthetic meshes for tests, examples and benchmarks.
+//!
+//! Every generator returns an oriented [`LinearMesh`] (counter-clockwise quads, right-handed
+//! hexes) with boundary tags: in 2D tag `2k + s + 1` on the grid side where coordinate k is at
+//! its minimum (s = 0) or maximum (s = 1), likewise in 3D; curved or star-shaped generators tag
+//! their whole outer boundary 1.
+
+use super::{LinearMesh, MeshOptions};
+
+/// Structured quad grid on the tensor product of the coordinate lists `xs` × `ys`.
+pub fn grid_2d(xs: &[f64], ys: &[f64]) -> LinearMesh {
+    let (nx, ny) = (xs.len(), ys.len());
+    assert!(nx >= 2 && ny >= 2, "a grid needs two coordinates per axis");
+    let id = |i: usize, j: usize| (j * nx + i) as u32;
+    let coords = (0..ny)
+        .flat_map(|j| (0..nx).map(move |i| [xs[i], ys[j], 0.0]))
+        .collect();
+    let mut elements = Vec::with_capacity(4 * (nx - 1) * (ny - 1));
+    for j in 0..ny - 1 {
+        for i in 0..nx - 1 {
+            elements.extend([id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)]);
+        }
+    }
+    let mut tagged_facets = Vec::new();
+    let mut facet_tags = Vec::new();
+    for i in 0..nx - 1 {
+        tagged_facets.extend([id(i, 0), id(i + 1, 0), id(i, ny - 1), id(i + 1, ny - 1)]);
+        facet_tags.extend([3, 4]);
+    }
+    for j in 0..ny - 1 {
+        tagged_facets.extend([id(0, j), id(0, j + 1), id(nx - 1, j), id(nx - 1, j + 1)]);
+        facet_tags.extend([1, 2]);
+    }
+    finish(2, coords, elements, tagged_facets, facet_tags)
+}
+
+/// Structured hex grid on `xs` × `ys` × `zs`.
+pub fn grid_3d(xs: &[f64], ys: &[f64], zs: &[f64]) -> LinearMesh {
+    let (nx, ny, nz) = (xs.len(), ys.len(), zs.len());
+    assert!(
+        nx >= 2 && ny >= 2 && nz >= 2,
+        "a grid needs two coordinates per axis"
+    );
+    let id = |i: usize, j: usize, k: usize| ((k * ny + j) * nx + i) as u32;
+    let mut coords = Vec::with_capacity(nx * ny * nz);
+    for &z in zs {
+        for &y in ys {
+            for &x in xs {
+                coords.push([x, y, z]);
+            }
+        }
+    }
+    let mut elements = Vec::with_capacity(8 * (nx - 1) * (ny - 1) * (nz - 1));
+    for k in 0..nz - 1 {
+        for j in 0..ny - 1 {
+            for i in 0..nx - 1 {
+                elements.extend([
+                    id(i, j, k),
+                    id(i + 1, j, k),
+                    id(i + 1, j + 1, k),
+                    id(i, j + 1, k),
+                    id(i, j, k + 1),
+                    id(i + 1, j, k + 1),
+                    id(i + 1, j + 1, k + 1),
+                    id(i, j + 1, k + 1),
+                ]);
+            }
+        }
+    }
+    let mut tagged_facets = Vec::new();
+    let mut facet_tags = Vec::new();
+    // Faces normal to axis `a` at index 0 and at the last index.
+    let n = [nx, ny, nz];
+    for a in 0..3 {
+        let (b, c) = ((a + 1) % 3, (a + 2) % 3);
+        for (s, at) in [0, n[a] - 1].into_iter().enumerate() {
+            for u in 0..n[b] - 1 {
+                for v in 0..n[c] - 1 {
+                    let p = |du: usize, dv: usize| {
+                        let mut ijk = [0; 3];
+                        ijk[a] = at;
+                        ijk[b] = u + du;
+                        ijk[c] = v + dv;
+                        id(ijk[0], ijk[1], ijk[2])
+                    };
+                    tagged_facets.extend([p(0, 0), p(1, 0), p(1, 1), p(0, 1)]);
+                    facet_tags.push((2 * a + s + 1) as i32);
+                }
+            }
+        }
+    }
+    finish(3, coords, elements, tagged_facets, facet_tags)
+}
+
+/// Evenly spaced coordinates `0, h, 2h, …, n·h`.
+pub fn uniform(n: usize, h: f64) -> Vec<f64> {
+    (0..=n).map(|i| i as f64 * h).collect()
+}
+
+/// L-shaped domain: the unit-spaced `2n × 2n` square without its top-right `n × n` quarter.
+/// The re-entrant corner at (n, n) is a boundary vertex with 3 quads.
+pub fn l_shape(n: usize) -> LinearMesh {
+    let full = grid_2d(&uniform(2 * n, 1.0), &uniform(2 * n, 1.0));
+    let keep: Vec<bool> = (0..full.n_elements())
+        .map(|e| {
+            let (i, j) = (e % (2 * n), e / (2 * n));
+            !(i >= n && j >= n)
+        })
+        .collect();
+    let elements: Vec<u32> = full
+        .elements
+        .chunks(4)
+        .zip(&keep)
+        .filter(|(_, k)| **k)
+        .flat_map(|(c, _)| c.iter().copied())
+        .collect();
+    let used: std::collections::HashSet<u32> = elements.iter().copied().collect();
+    // Boundary tags of the full square do not describe the L; tag nothing here and compact.
+    let mut map = vec![u32::MAX; full.coords.len()];
+    let mut coords = Vec::new();
+    for (i, p) in full.coords.iter().enumerate() {
+        if used.contains(&(i as u32)) {
+            map[i] = coords.len() as u32;
+            coords.push(*p);
+        }
+    }
+    let elements = elements.iter().map(|&v| map[v as usize]).collect();
+    finish(2, coords, elements, Vec::new(), Vec::new())
+}
+
+/// A disc-like quad mesh whose centre vertex has `k` quads around it (k = 3, 5, …): an inner
+/// fan of k quads and an outer ring of 3k quads, so every other interior vertex has valence 4.
+pub fn star_2d(k: usize) -> LinearMesh {
+    assert!(k >= 3, "a star needs at least 3 sectors");
+    use std::f64::consts::PI;
+    let polar = |r: f64, t: f64| [r * t.cos(), r * t.sin(), 0.0];
+    let w = 2.0 * PI / k as f64;
+    let mut coords = vec![[0.0, 0.0, 0.0]];
+    // Per sector i: a_i (spoke), b_i (corner), p_i, q_i, c_i, r_i (outer ring).
+    for i in 0..k {
+        let t = i as f64 * w;
+        coords.push(polar(1.0, t)); // a
+        coords.push(polar(1.4, t + w / 2.0)); // b
+        coords.push(polar(2.5, t)); // p
+        coords.push(polar(2.6, t + w / 4.0)); // q
+        coords.push(polar(3.0, t + w / 2.0)); // c
+        coords.push(polar(2.6, t + 3.0 * w / 4.0)); // r
+    }
+    let v = |i: usize, which: usize| (1 + 6 * (i % k) + which) as u32;
+    let (a, b, p, q, c, r) = (0, 1, 2, 3, 4, 5);
+    let mut elements = Vec::new();
+    let mut tagged_facets = Vec::new();
+    for i in 0..k {
+        let j = i + 1;
+        elements.extend([0, v(i, a), v(i, b), v(j, a)]);
+        elements.extend([v(i, a), v(i, p), v(i, q), v(i, b)]);
+        elements.extend([v(i, b), v(i, q), v(i, c), v(i, r)]);
+        elements.extend([v(i, b), v(i, r), v(j, p), v(j, a)]);
+        tagged_facets.extend([
+            v(i, p),
+            v(i, q),
+            v(i, q),
+            v(i, c),
+            v(i, c),
+            v(i, r),
+            v(i, r),
+            v(j, p),
+        ]);
+    }
+    let facet_tags = vec![1; tagged_facets.len() / 2];
+    finish(2, coords, elements, tagged_facets, facet_tags)
+}
+
+/// Extrude a quad mesh along z through the levels `zs`: hexes whose vertical edges through
+/// interior 2D vertices of valence k have valence k.
+pub fn extrude(mesh: &LinearMesh, zs: &[f64]) -> LinearMesh {
+    assert_eq!(mesh.dim, 2, "extrude takes a quad mesh");
+    assert!(zs.len() >= 2, "extrusion needs two levels");
+    let nv = mesh.coords.len() as u32;
+    let mut coords = Vec::with_capacity(mesh.coords.len() * zs.len());
+    for &z in zs {
+        coords.extend(mesh.coords.iter().map(|p| [p[0], p[1], z]));
+    }
+    let mut elements = Vec::new();
+    for l in 0..zs.len() as u32 - 1 {
+        for q in mesh.elements.chunks(4) {
+            elements.extend(q.iter().map(|&v| v + l * nv));
+            elements.extend(q.iter().map(|&v| v + (l + 1) * nv));
+        }
+    }
+    // Side tags carry over (as quads); bottom and top get the next two tags.
+    let top_tag = mesh.facet_tags.iter().copied().max().unwrap_or(0);
+    let mut tagged_facets = Vec::new();
+    let mut facet_tags = Vec::new();
+    for l in 0..zs.len() as u32 - 1 {
+        for (f, &t) in mesh.tagged_facets.chunks(2).zip(&mesh.facet_tags) {
+            tagged_facets.extend([
+                f[0] + l * nv,
+                f[1] + l * nv,
+                f[1] + (l + 1) * nv,
+                f[0] + (l + 1) * nv,
+            ]);
+            facet_tags.push(t);
+        }
+    }
+    let last = (zs.len() as u32 - 1) * nv;
+    for q in mesh.elements.chunks(4) {
+        tagged_facets.extend([q[0], q[3], q[2], q[1]]);
+        facet_tags.push(top_tag + 1);
+        tagged_facets.extend(q.iter().map(|&v| v + last));
+        facet_tags.push(top_tag + 2);
+    }
+    finish(3, coords, elements, tagged_facets, facet_tags)
+}
+
+fn finish(
+    dim: usize,
+    coords: Vec<[f64; 3]>,
+    elements: Vec<u32>,
+    tagged_facets: Vec<u32>,
+    facet_tags: Vec<i32>,
+) -> LinearMesh {
+    let mut mesh = LinearMesh {
+        dim,
+        coords,
+        elements,
+        tagged_facets,
+        facet_tags,
+        ..Default::default()
+    };
+    mesh.normalise_orientation(&MeshOptions::default(), &[])
+        .expect("generated meshes are valid");
+    mesh
+}

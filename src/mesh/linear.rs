@@ -261,7 +261,10 @@ impl LinearMesh {
         for b in &blocks {
             let k = b.kind();
             let bad = match k.dim() {
-                Some(d) => (dim == 0 && d >= 2) || (dim > 0 && d >= dim && d <= 3 && *k != element_kind(dim)),
+                Some(d) => {
+                    (dim == 0 && d >= 2)
+                        || (dim > 0 && d >= dim && d <= 3 && *k != element_kind(dim))
+                }
                 None => true,
             };
             if bad && !b.is_empty() {
@@ -322,7 +325,8 @@ impl LinearMesh {
             }
         };
 
-        let mut elements: Vec<u32> = Vec::with_capacity(npe * if dim == 3 { n_hex } else { n_quad });
+        let mut elements: Vec<u32> =
+            Vec::with_capacity(npe * if dim == 3 { n_hex } else { n_quad });
         let mut element_locations: Vec<Location> = Vec::new();
         let mut element_tags: Vec<i32> = Vec::new();
         let mut any_element_tags = false;
@@ -481,7 +485,10 @@ impl LinearMesh {
         self.reoriented += reoriented;
         if !invalid.is_empty() && !options.allow_invalid {
             let first = invalid[0];
-            let loc = locations.get(first.element as usize).copied().unwrap_or_default();
+            let loc = locations
+                .get(first.element as usize)
+                .copied()
+                .unwrap_or_default();
             let listed: Vec<String> = invalid
                 .iter()
                 .take(MAX_LISTED)

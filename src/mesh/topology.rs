@@ -1,4 +1,542 @@
-//! Topology stub.
+//! Mesh topology: unique edges and faces, adjacency, boundary, components, valences.
+//!
+//! Input: a [`LinearMesh`]. Output: a [`Topology`] built by sorting entity keys (O(n log n)
+//! with a parallel sort, linear memory), with these conventions:
+//!
+//! * **Local sides.** Element sides are numbered by parametric direction and end:
+//!   side `2k + s` is the side where coordinate k equals s (quad: x0, x1, y0, y1; hex: x0, x1,
+//!   y0, y1, z0, z1). [`QUAD_SIDES`] / [`HEX_SIDES`] list their vertices, ordered so the side's
+//!   normal points out of the element.
+//! * **Local edges of a hex** (12) are numbered by direction then position: edge `4k + i` runs
+//!   along direction k, from its lower to its upper vertex ([`HEX_EDGES`]). A quad's edges are
+//!   its sides.
+//! * **Facets** are the (d−1)-entities: edges in 2D, faces in 3D. `facet_elements[f]` holds
+//!   the one or two elements on it (`NONE` for the outside) and `facet_sides` their local sides.
+//! * The boundary is computed from the topology alone: facets with one element. Boundary tags
+//!   of the file are attached to the boundary facets with the same vertex set.
+//! * Non-manifold configurations (a facet shared by more than two elements, a boundary edge
+//!   on other than two boundary faces, a vertex whose elements do not form one fan) are
+//!   recorded in [`NonManifold`], not repaired.
+
 use super::LinearMesh;
-pub struct Topology;
-impl Topology { pub fn build(_m: &LinearMesh) -> Topology { Topology } }
+use rayon::prelude::*;
+use std::collections::HashMap;
+
+/// Marks "no element" / "no entity".
+pub const NONE: u32 = u32::MAX;
+
+/// Quad sides in order x0, x1, y0, y1 (vertex pairs, counter-clockwise around the quad).
+pub const QUAD_SIDES: [[usize; 2]; 4] = [[3, 0], [1, 2], [0, 1], [2, 3]];
+
+/// Hex sides in order x0, x1, y0, y1, z0, z1 (vertex cycles with outward normal).
+pub const HEX_SIDES: [[usize; 4]; 6] = [
+    [0, 4, 7, 3],
+    [1, 2, 6, 5],
+    [0, 1, 5, 4],
+    [3, 7, 6, 2],
+    [0, 3, 2, 1],
+    [4, 5, 6, 7],
+];
+
+/// Hex edges: 4 along x, then 4 along y, then 4 along z, each from lower to upper vertex.
+/// Within a direction the edges are ordered by the other two coordinates (lower first).
+pub const HEX_EDGES: [[usize; 2]; 12] = [
+    [0, 1],
+    [3, 2],
+    [4, 5],
+    [7, 6],
+    [0, 3],
+    [1, 2],
+    [4, 7],
+    [5, 6],
+    [0, 4],
+    [1, 5],
+    [3, 7],
+    [2, 6],
+];
+
+/// Reference coordinates of the hex vertices (quad: the first four, z ignored).
+pub const HEX_VERTEX_PARAMS: [[u8; 3]; 8] = [
+    [0, 0, 0],
+    [1, 0, 0],
+    [1, 1, 0],
+    [0, 1, 0],
+    [0, 0, 1],
+    [1, 0, 1],
+    [1, 1, 1],
+    [0, 1, 1],
+];
+
+/// Configurations the curving cannot treat as a manifold mesh.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct NonManifold {
+    /// Facets shared by more than two elements.
+    pub facets: Vec<u32>,
+    /// 3D: boundary edges that do not have exactly two boundary faces.
+    pub edges: Vec<u32>,
+    /// Vertices whose incident elements do not form one fan (connected through facets at
+    /// the vertex), or 2D boundary vertices without exactly two boundary edges.
+    pub vertices: Vec<u32>,
+}
+
+impl NonManifold {
+    pub fn is_empty(&self) -> bool {
+        self.facets.is_empty() && self.edges.is_empty() && self.vertices.is_empty()
+    }
+}
+
+/// The topology of a [`LinearMesh`].
+#[derive(Clone, Debug, Default)]
+pub struct Topology {
+    pub dim: usize,
+    pub n_elements: usize,
+    pub n_vertices: usize,
+    /// Unique edges as (lower vertex id, higher vertex id).
+    pub edges: Vec<[u32; 2]>,
+    /// Edge id of each local edge: 4 per quad (by side), 12 per hex (see [`HEX_EDGES`]).
+    pub element_edges: Vec<u32>,
+    /// 3D: unique faces, vertices in the local order of the first element that has the face
+    /// (outward for that element). Empty in 2D.
+    pub faces: Vec<[u32; 4]>,
+    /// 3D: face id of each local side (6 per hex). Empty in 2D.
+    pub element_faces: Vec<u32>,
+    /// Elements on each facet (edges in 2D, faces in 3D); the second is `NONE` on the boundary.
+    pub facet_elements: Vec<[u32; 2]>,
+    /// Local side of the facet in each of `facet_elements` (unused entries are `u8::MAX`).
+    pub facet_sides: Vec<[u8; 2]>,
+    /// Neighbour across each local side (`2·dim` per element), `NONE` on the boundary.
+    pub element_neighbors: Vec<u32>,
+    /// Facets with one element, in facet order.
+    pub boundary_facets: Vec<u32>,
+    /// Tag of each boundary facet (parallel to `boundary_facets`; 0 = untagged).
+    pub boundary_facet_tags: Vec<i32>,
+    /// Vertices on a boundary facet.
+    pub vertex_on_boundary: Vec<bool>,
+    /// Edges on a boundary facet.
+    pub edge_on_boundary: Vec<bool>,
+    /// Elements around each vertex, CSR: `vertex_elements[vertex_offsets[v]..vertex_offsets[v+1]]`.
+    pub vertex_offsets: Vec<u32>,
+    pub vertex_elements: Vec<u32>,
+    /// Number of elements around each edge (3D edge valence; in 2D 1 or 2).
+    pub edge_valence: Vec<u32>,
+    /// Connected component of each element (through shared facets), numbered from 0.
+    pub element_component: Vec<u32>,
+    pub n_components: usize,
+    pub non_manifold: NonManifold,
+    /// File-tagged facets that are interior facets of the mesh (tags kept nowhere).
+    pub interior_tagged_facets: usize,
+    /// File-tagged facets that are no facet of any element.
+    pub unmatched_tagged_facets: usize,
+}
+
+impl Topology {
+    /// Number of local sides per element (4 or 6).
+    pub fn sides(&self) -> usize {
+        2 * self.dim
+    }
+
+    pub fn n_facets(&self) -> usize {
+        self.facet_elements.len()
+    }
+
+    /// Elements around vertex `v`.
+    pub fn elements_at_vertex(&self, v: usize) -> &[u32] {
+        &self.vertex_elements[self.vertex_offsets[v] as usize..self.vertex_offsets[v + 1] as usize]
+    }
+
+    /// Number of elements around vertex `v` (2D valence; 3D n(v)).
+    pub fn vertex_valence(&self, v: usize) -> usize {
+        (self.vertex_offsets[v + 1] - self.vertex_offsets[v]) as usize
+    }
+
+    /// Neighbour of element `e` across local side `side`, or `NONE`.
+    pub fn neighbor(&self, e: usize, side: usize) -> u32 {
+        self.element_neighbors[e * self.sides() + side]
+    }
+
+    /// Facet id of local side `side` of element `e`.
+    pub fn element_facet(&self, e: usize, side: usize) -> u32 {
+        if self.dim == 2 {
+            self.element_edges[e * 4 + side]
+        } else {
+            self.element_faces[e * 6 + side]
+        }
+    }
+
+    /// Vertices of facet `f` (2 or 4 entries).
+    pub fn facet_vertices(&self, f: usize) -> &[u32] {
+        if self.dim == 2 {
+            &self.edges[f][..]
+        } else {
+            &self.faces[f][..]
+        }
+    }
+
+    /// 2D: interior vertices whose valence is not 4. 3D: edges not having both end points on
+    /// the boundary whose valence is not 4 (the "irregular" measure of `meshes/real/SOURCES.md`).
+    pub fn irregular_count(&self) -> usize {
+        if self.dim == 2 {
+            (0..self.n_vertices)
+                .filter(|&v| !self.vertex_on_boundary[v] && self.vertex_valence(v) != 4)
+                .count()
+        } else {
+            self.edges
+                .iter()
+                .zip(&self.edge_valence)
+                .filter(|&(e, &val)| {
+                    !(self.vertex_on_boundary[e[0] as usize]
+                        && self.vertex_on_boundary[e[1] as usize])
+                        && val != 4
+                })
+                .count()
+        }
+    }
+
+    /// Build the topology of `mesh`.
+    pub fn build(mesh: &LinearMesh) -> Topology {
+        let dim = mesh.dim;
+        let ne = mesh.n_elements();
+        let nv = mesh.n_vertices();
+        let npe = mesh.nodes_per_element();
+        let nsides = 2 * dim;
+        let elems = &mesh.elements;
+
+        // Edges: sort (key, slot) pairs; one slot per local edge.
+        let local_edges: Vec<[usize; 2]> = if dim == 2 {
+            QUAD_SIDES.to_vec()
+        } else {
+            HEX_EDGES.to_vec()
+        };
+        let nle = local_edges.len();
+        let mut keys: Vec<(u64, u32)> = (0..ne * nle)
+            .into_par_iter()
+            .map(|slot| {
+                let (e, l) = (slot / nle, slot % nle);
+                let a = elems[e * npe + local_edges[l][0]];
+                let b = elems[e * npe + local_edges[l][1]];
+                let (lo, hi) = if a < b { (a, b) } else { (b, a) };
+                (((lo as u64) << 32) | hi as u64, slot as u32)
+            })
+            .collect();
+        keys.par_sort_unstable();
+        let mut edges = Vec::new();
+        let mut edge_valence = Vec::new();
+        let mut element_edges = vec![NONE; ne * nle];
+        for (i, &(k, slot)) in keys.iter().enumerate() {
+            if i == 0 || keys[i - 1].0 != k {
+                edges.push([(k >> 32) as u32, k as u32]);
+                edge_valence.push(0);
+            }
+            let id = edges.len() - 1;
+            element_edges[slot as usize] = id as u32;
+            edge_valence[id] += 1;
+        }
+        drop(keys);
+
+        // Facets: edges in 2D (already unique), faces in 3D.
+        let mut faces = Vec::new();
+        let mut element_faces = Vec::new();
+        let facet_of_slot: &[u32];
+        let n_facets;
+        if dim == 3 {
+            let mut keys: Vec<([u32; 4], u32)> = (0..ne * 6)
+                .into_par_iter()
+                .map(|slot| {
+                    let (e, l) = (slot / 6, slot % 6);
+                    let mut k = HEX_SIDES[l].map(|c| elems[e * 8 + c]);
+                    k.sort_unstable();
+                    (k, slot as u32)
+                })
+                .collect();
+            keys.par_sort_unstable();
+            element_faces = vec![NONE; ne * 6];
+            for (i, &(k, slot)) in keys.iter().enumerate() {
+                if i == 0 || keys[i - 1].0 != k {
+                    let (e, l) = (slot as usize / 6, slot as usize % 6);
+                    faces.push(HEX_SIDES[l].map(|c| elems[e * 8 + c]));
+                }
+                element_faces[slot as usize] = (faces.len() - 1) as u32;
+            }
+            n_facets = faces.len();
+            facet_of_slot = &element_faces;
+        } else {
+            n_facets = edges.len();
+            facet_of_slot = &element_edges;
+        }
+
+        // Facet → elements, element → neighbours.
+        let mut facet_elements = vec![[NONE, NONE]; n_facets];
+        let mut facet_sides = vec![[u8::MAX, u8::MAX]; n_facets];
+        let mut facet_count = vec![0u32; n_facets];
+        for (slot, &f) in facet_of_slot.iter().enumerate() {
+            let f = f as usize;
+            let c = facet_count[f] as usize;
+            if c < 2 {
+                facet_elements[f][c] = (slot / nsides) as u32;
+                facet_sides[f][c] = (slot % nsides) as u8;
+            }
+            facet_count[f] += 1;
+        }
+        let mut non_manifold = NonManifold::default();
+        let mut element_neighbors = vec![NONE; ne * nsides];
+        for f in 0..n_facets {
+            if facet_count[f] > 2 {
+                non_manifold.facets.push(f as u32);
+                continue;
+            }
+            let [a, b] = facet_elements[f];
+            if b != NONE {
+                let [sa, sb] = facet_sides[f];
+                element_neighbors[a as usize * nsides + sa as usize] = b;
+                element_neighbors[b as usize * nsides + sb as usize] = a;
+            }
+        }
+        let boundary_facets: Vec<u32> = (0..n_facets as u32)
+            .filter(|&f| facet_count[f as usize] == 1)
+            .collect();
+
+        // Boundary vertices and edges.
+        let mut vertex_on_boundary = vec![false; nv];
+        let mut edge_on_boundary = vec![false; edges.len()];
+        for &f in &boundary_facets {
+            let [e, _] = facet_elements[f as usize];
+            let side = facet_sides[f as usize][0] as usize;
+            let e = e as usize;
+            if dim == 2 {
+                edge_on_boundary[f as usize] = true;
+                for &c in &QUAD_SIDES[side] {
+                    vertex_on_boundary[elems[e * 4 + c] as usize] = true;
+                }
+            } else {
+                for &c in &HEX_SIDES[side] {
+                    vertex_on_boundary[elems[e * 8 + c] as usize] = true;
+                }
+                for (l, le) in HEX_EDGES.iter().enumerate() {
+                    if HEX_SIDES[side].contains(&le[0]) && HEX_SIDES[side].contains(&le[1]) {
+                        edge_on_boundary[element_edges[e * 12 + l] as usize] = true;
+                    }
+                }
+            }
+        }
+
+        // Vertex → elements (counting sort).
+        let mut vertex_offsets = vec![0u32; nv + 1];
+        for &v in elems {
+            vertex_offsets[v as usize + 1] += 1;
+        }
+        for v in 0..nv {
+            vertex_offsets[v + 1] += vertex_offsets[v];
+        }
+        let mut fill = vertex_offsets.clone();
+        let mut vertex_elements = vec![0u32; elems.len()];
+        for (i, &v) in elems.iter().enumerate() {
+            vertex_elements[fill[v as usize] as usize] = (i / npe) as u32;
+            fill[v as usize] += 1;
+        }
+        drop(fill);
+
+        // Components: union-find over interior facets.
+        let mut uf = UnionFind::new(ne);
+        for (f, fe) in facet_elements.iter().enumerate() {
+            if fe[1] != NONE && facet_count[f] == 2 {
+                uf.union(fe[0] as usize, fe[1] as usize);
+            }
+        }
+        let mut comp_id = vec![NONE; ne];
+        let mut element_component = vec![0u32; ne];
+        let mut n_components = 0;
+        for (e, c) in element_component.iter_mut().enumerate() {
+            let r = uf.find(e);
+            if comp_id[r] == NONE {
+                comp_id[r] = n_components as u32;
+                n_components += 1;
+            }
+            *c = comp_id[r];
+        }
+
+        let mut topo = Topology {
+            dim,
+            n_elements: ne,
+            n_vertices: nv,
+            edges,
+            element_edges,
+            faces,
+            element_faces,
+            facet_elements,
+            facet_sides,
+            element_neighbors,
+            boundary_facets,
+            boundary_facet_tags: Vec::new(),
+            vertex_on_boundary,
+            edge_on_boundary,
+            vertex_offsets,
+            vertex_elements,
+            edge_valence,
+            element_component,
+            n_components,
+            non_manifold,
+            interior_tagged_facets: 0,
+            unmatched_tagged_facets: 0,
+        };
+        topo.find_non_manifold_edges_and_vertices(mesh);
+        topo.attach_tags(mesh);
+        topo
+    }
+
+    fn find_non_manifold_edges_and_vertices(&mut self, mesh: &LinearMesh) {
+        let npe = mesh.nodes_per_element();
+        let nsides = self.sides();
+        if self.dim == 3 {
+            // Boundary faces per edge.
+            let mut count = vec![0u8; self.edges.len()];
+            for &f in &self.boundary_facets {
+                let [e, _] = self.facet_elements[f as usize];
+                let side = self.facet_sides[f as usize][0] as usize;
+                for (l, le) in HEX_EDGES.iter().enumerate() {
+                    if HEX_SIDES[side].contains(&le[0]) && HEX_SIDES[side].contains(&le[1]) {
+                        let id = self.element_edges[e as usize * 12 + l] as usize;
+                        count[id] = count[id].saturating_add(1);
+                    }
+                }
+            }
+            self.non_manifold.edges = (0..self.edges.len() as u32)
+                .filter(|&i| self.edge_on_boundary[i as usize] && count[i as usize] != 2)
+                .collect();
+        } else {
+            // 2D: a boundary vertex has exactly two boundary edges.
+            let mut count = vec![0u8; self.n_vertices];
+            for &f in &self.boundary_facets {
+                for &v in &self.edges[f as usize] {
+                    count[v as usize] = count[v as usize].saturating_add(1);
+                }
+            }
+            self.non_manifold.vertices = (0..self.n_vertices as u32)
+                .filter(|&v| self.vertex_on_boundary[v as usize] && count[v as usize] != 2)
+                .collect();
+        }
+        // Vertex fans: the elements at v must be connected through the sides that contain v.
+        let elems = &mesh.elements;
+        let sides_of_corner: Vec<Vec<usize>> = (0..npe)
+            .map(|c| {
+                (0..nsides)
+                    .filter(|&s| {
+                        if self.dim == 2 {
+                            QUAD_SIDES[s].contains(&c)
+                        } else {
+                            HEX_SIDES[s].contains(&c)
+                        }
+                    })
+                    .collect()
+            })
+            .collect();
+        let split: Vec<u32> = (0..self.n_vertices)
+            .into_par_iter()
+            .filter(|&v| {
+                let around = self.elements_at_vertex(v);
+                if around.len() <= 1 {
+                    return false;
+                }
+                let mut reached = vec![false; around.len()];
+                let mut stack = vec![0usize];
+                reached[0] = true;
+                let mut n_reached = 1;
+                while let Some(i) = stack.pop() {
+                    let e = around[i] as usize;
+                    let corner = (0..npe)
+                        .find(|&c| elems[e * npe + c] == v as u32)
+                        .expect("vertex belongs to the element");
+                    for &s in &sides_of_corner[corner] {
+                        let n = self.element_neighbors[e * nsides + s];
+                        if n == NONE {
+                            continue;
+                        }
+                        if let Some(j) = around.iter().position(|&x| x == n)
+                            && !reached[j]
+                        {
+                            reached[j] = true;
+                            n_reached += 1;
+                            stack.push(j);
+                        }
+                    }
+                }
+                n_reached != around.len()
+            })
+            .map(|v| v as u32)
+            .collect();
+        self.non_manifold.vertices.extend(split);
+        self.non_manifold.vertices.sort_unstable();
+        self.non_manifold.vertices.dedup();
+    }
+
+    fn attach_tags(&mut self, mesh: &LinearMesh) {
+        self.boundary_facet_tags = vec![0; self.boundary_facets.len()];
+        if mesh.facet_tags.is_empty() {
+            return;
+        }
+        let npf = mesh.nodes_per_facet();
+        let key = |vs: &[u32]| -> [u32; 4] {
+            let mut k = [u32::MAX; 4];
+            k[..vs.len()].copy_from_slice(vs);
+            k.sort_unstable();
+            k
+        };
+        let mut tagged: HashMap<[u32; 4], i32> = HashMap::with_capacity(mesh.facet_tags.len());
+        for (f, &t) in mesh.tagged_facets.chunks(npf).zip(&mesh.facet_tags) {
+            tagged.entry(key(f)).or_insert(t);
+        }
+        let mut matched = 0;
+        for (i, &f) in self.boundary_facets.iter().enumerate() {
+            if let Some(&t) = tagged.get(&key(self.facet_vertices(f as usize))) {
+                self.boundary_facet_tags[i] = t;
+                matched += 1;
+            }
+        }
+        // The rest are interior facets or no facet at all.
+        let mut interior = 0;
+        if matched < tagged.len() {
+            for f in 0..self.n_facets() {
+                if self.facet_elements[f][1] != NONE
+                    && tagged.contains_key(&key(self.facet_vertices(f)))
+                {
+                    interior += 1;
+                }
+            }
+        }
+        self.interior_tagged_facets = interior;
+        self.unmatched_tagged_facets = tagged.len() - matched - interior;
+    }
+}
+
+/// Union-find with path halving and union by size.
+struct UnionFind {
+    parent: Vec<u32>,
+    size: Vec<u32>,
+}
+
+impl UnionFind {
+    fn new(n: usize) -> Self {
+        UnionFind {
+            parent: (0..n as u32).collect(),
+            size: vec![1; n],
+        }
+    }
+    fn find(&mut self, mut x: usize) -> usize {
+        while self.parent[x] as usize != x {
+            let p = self.parent[x] as usize;
+            self.parent[x] = self.parent[p];
+            x = self.parent[x] as usize;
+        }
+        x
+    }
+    fn union(&mut self, a: usize, b: usize) {
+        let (mut a, mut b) = (self.find(a), self.find(b));
+        if a == b {
+            return;
+        }
+        if self.size[a] < self.size[b] {
+            std::mem::swap(&mut a, &mut b);
+        }
+        self.parent[b] = a as u32;
+        self.size[a] += self.size[b];
+    }
+}
