@@ -15,16 +15,20 @@ fn topology(c: &mut Criterion) {
         // n^3 hexes: 10.6k, 104k, 1M.
         let mesh = grid_3d(&uniform(n, 1.0), &uniform(n, 1.0), &uniform(n, 1.0));
         group.throughput(Throughput::Elements(mesh.n_elements() as u64));
-        group.bench_with_input(BenchmarkId::new("hex_grid", mesh.n_elements()), &mesh, |b, m| {
-            b.iter(|| black_box(Topology::build(m)))
-        });
+        group.bench_with_input(
+            BenchmarkId::new("hex_grid", mesh.n_elements()),
+            &mesh,
+            |b, m| b.iter(|| black_box(Topology::build(m))),
+        );
     }
     // An irregular mesh: a valence-5 star extruded (edges of valence 3, 4 and 5).
     let mesh = extrude(&star_2d(5), &uniform(2000, 0.01));
     group.throughput(Throughput::Elements(mesh.n_elements() as u64));
-    group.bench_with_input(BenchmarkId::new("star5_extruded", mesh.n_elements()), &mesh, |b, m| {
-        b.iter(|| black_box(Topology::build(m)))
-    });
+    group.bench_with_input(
+        BenchmarkId::new("star5_extruded", mesh.n_elements()),
+        &mesh,
+        |b, m| b.iter(|| black_box(Topology::build(m))),
+    );
     group.finish();
 }
 

@@ -18,3 +18,5 @@
 pub mod info;
 pub mod io;
 pub mod mesh;
+pub mod pipeline;
+pub mod sample;

@@ -13,7 +13,9 @@ fn scratch(name: &str) -> PathBuf {
 }
 
 fn real(rel: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("meshes/real").join(rel)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("meshes/real")
+        .join(rel)
 }
 
 /// Run `polyspline info FILE`, expect failure, return the message.
@@ -24,11 +26,23 @@ fn info_error(path: &Path) -> String {
         .output()
         .unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
-    assert_eq!(out.status.code(), Some(1), "{}: expected exit 1, stderr: {stderr}", path.display());
+    assert_eq!(
+        out.status.code(),
+        Some(1),
+        "{}: expected exit 1, stderr: {stderr}",
+        path.display()
+    );
     assert!(!stderr.contains("panicked"), "{stderr}");
-    assert_eq!(stderr.trim_end().lines().count(), 1, "one line expected: {stderr}");
+    assert_eq!(
+        stderr.trim_end().lines().count(),
+        1,
+        "one line expected: {stderr}"
+    );
     assert!(stderr.starts_with("polyspline: error: "), "{stderr}");
-    assert!(stderr.contains(&path.display().to_string()), "message must name the file: {stderr}");
+    assert!(
+        stderr.contains(&path.display().to_string()),
+        "message must name the file: {stderr}"
+    );
     assert!(out.stdout.is_empty(), "nothing on stdout on failure");
     stderr
 }
@@ -39,26 +53,41 @@ fn write(name: &str, data: &[u8]) -> PathBuf {
     p
 }
 
-const SU2_OK: &str = "NDIME= 2\nNELEM= 1\n9 0 1 2 3 0\nNPOIN= 4\n0 0 0\n1 0 1\n1 1 2\n0 1 3\nNMARK= 0\n";
+const SU2_OK: &str =
+    "NDIME= 2\nNELEM= 1\n9 0 1 2 3 0\nNPOIN= 4\n0 0 0\n1 0 1\n1 1 2\n0 1 3\nNMARK= 0\n";
 
 #[test]
 fn the_valid_twin_of_the_su2_cases_reads() {
     // The bad cases below differ from this file in one place only.
     let p = write("ok.su2", SU2_OK.as_bytes());
-    let out = Command::new(env!("CARGO_BIN_EXE_polyspline")).arg("info").arg(&p).output().unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = Command::new(env!("CARGO_BIN_EXE_polyspline"))
+        .arg("info")
+        .arg(&p)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
 }
 
 #[test]
 fn out_of_range_node_index_names_the_line() {
-    let p = write("range.su2", SU2_OK.replace("9 0 1 2 3 0", "9 0 1 2 7 0").as_bytes());
+    let p = write(
+        "range.su2",
+        SU2_OK.replace("9 0 1 2 3 0", "9 0 1 2 7 0").as_bytes(),
+    );
     let e = info_error(&p);
     assert!(e.contains("line 3") && e.contains("node"), "{e}");
 }
 
 #[test]
 fn negative_node_index_names_the_line() {
-    let p = write("negative.su2", SU2_OK.replace("9 0 1 2 3 0", "9 0 -1 2 3 0").as_bytes());
+    let p = write(
+        "negative.su2",
+        SU2_OK.replace("9 0 1 2 3 0", "9 0 -1 2 3 0").as_bytes(),
+    );
     let e = info_error(&p);
     assert!(e.contains("line 3"), "{e}");
 }
@@ -120,7 +149,10 @@ fn garbage_is_reported() {
 
 #[test]
 fn empty_meshes_are_reported() {
-    let p = write("empty.msh", b"$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n0\n$EndNodes\n$Elements\n0\n$EndElements\n");
+    let p = write(
+        "empty.msh",
+        b"$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n0\n$EndNodes\n$Elements\n0\n$EndElements\n",
+    );
     let e = info_error(&p);
     assert!(e.contains("empty"), "{e}");
     let p = write("zero.su2", b"");
@@ -150,9 +182,15 @@ fn tetrahedra_are_refused_with_a_count() {
 
 #[test]
 fn tangled_elements_are_refused_unless_allowed() {
-    let p = write("tangled.su2", SU2_OK.replace("9 0 1 2 3 0", "9 0 1 3 2 0").as_bytes());
+    let p = write(
+        "tangled.su2",
+        SU2_OK.replace("9 0 1 2 3 0", "9 0 1 3 2 0").as_bytes(),
+    );
     let e = info_error(&p);
-    assert!(e.contains("tangled") && e.contains("element 0") && e.contains("line 3"), "{e}");
+    assert!(
+        e.contains("tangled") && e.contains("element 0") && e.contains("line 3"),
+        "{e}"
+    );
     let out = Command::new(env!("CARGO_BIN_EXE_polyspline"))
         .args(["info", "--json", "--allow-invalid"])
         .arg(&p)
@@ -228,7 +266,12 @@ fn mutated_files_never_panic() {
                 }
             }
             if let Ok(raw) = format.parse(&d)
-                && let Ok(mesh) = LinearMesh::from_raw(raw, &MeshOptions { allow_invalid: true })
+                && let Ok(mesh) = LinearMesh::from_raw(
+                    raw,
+                    &MeshOptions {
+                        allow_invalid: true,
+                    },
+                )
             {
                 let _ = Topology::build(&mesh);
             }

@@ -19,13 +19,16 @@
 pub mod abaqus;
 pub mod exodus;
 pub mod gmsh;
+pub mod gmsh_write;
 pub mod medit;
 pub mod mfem;
+pub mod output;
 pub mod raw;
 pub mod su2;
 pub mod text;
 pub mod vtk;
 pub mod vtu;
+pub mod vtu_write;
 
 use crate::mesh::{LinearMesh, MeshOptions};
 pub use raw::{CellKind, Location, ParseError, RawBlock, RawMesh};

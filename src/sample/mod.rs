@@ -1,0 +1,526 @@
+//! Sampling element maps on equispaced lattices into a conforming high-order mesh.
+//!
+//! Input: element maps as tensor-product quadratic Bézier nets ([`BezierElements`]: the spline
+//! space, or a linear mesh degree-elevated), the mesh [`Topology`], and an order p (1…10).
+//! Output: a [`HighOrderMesh`] whose element e has the (p+1)^d nodes x_e(i/p, j/p[, k/p]) in
+//! lattice order (i fastest). Because every element map is a quadratic polynomial, an output
+//! element of order p ≥ 2 represents the map exactly: its Lagrange interpolant reproduces every
+//! polynomial of degree ≤ p per direction.
+//!
+//! **Conforming numbering.** A node is created once per mesh entity and position on it, never by
+//! matching coordinates: vertices take the vertex ids 0..V; edge interiors follow (p−1 per edge,
+//! counted from the edge's lower vertex id); then face interiors ((p−1)² per face, in the face's
+//! stored frame: origin at its first vertex, first axis toward its second); then element
+//! interiors. Each node's position is evaluated once, from one element that contains it, so
+//! neighbours share ids and positions exactly.
+
+pub mod ordering;
+
+use crate::mesh::topology::{HEX_EDGES, HEX_VERTEX_PARAMS, QUAD_SIDES};
+use crate::mesh::{LinearMesh, Topology};
+use ordering::{Lattice, lattice_index, lattice_point};
+use rayon::prelude::*;
+use std::collections::BTreeMap;
+
+/// Largest output order.
+pub const MAX_ORDER: usize = 10;
+
+/// Elements that are tensor-product quadratic Bézier maps of [0,1]^d.
+pub trait BezierElements: Sync {
+    fn dim(&self) -> usize;
+    fn n_elements(&self) -> usize;
+    /// Bernstein control points of element `e`, index 9z + 3y + x (the first 9 in 2D).
+    fn bezier_net(&self, e: usize) -> [[f64; 3]; 27];
+}
+
+impl BezierElements for LinearMesh {
+    fn dim(&self) -> usize {
+        self.dim
+    }
+    fn n_elements(&self) -> usize {
+        LinearMesh::n_elements(self)
+    }
+    /// The multilinear map degree-elevated to quadratic: its Bernstein points are its values on
+    /// the half lattice {0, ½, 1}^d.
+    fn bezier_net(&self, e: usize) -> [[f64; 3]; 27] {
+        let x = self.element_coords(e);
+        let mut net = [[0.0; 3]; 27];
+        let nz = if self.dim == 2 { 1 } else { 3 };
+        for c in 0..nz {
+            for b in 0..3 {
+                for a in 0..3 {
+                    let t = [a as f64 / 2.0, b as f64 / 2.0, c as f64 / 2.0];
+                    net[9 * c + 3 * b + a] = multilinear(self.dim, &x, t);
+                }
+            }
+        }
+        net
+    }
+}
+
+/// Bilinear (2D) or trilinear (3D) interpolation of element corners at `t`.
+pub fn multilinear(dim: usize, x: &[[f64; 3]; 8], t: [f64; 3]) -> [f64; 3] {
+    let mut out = [0.0; 3];
+    let n = if dim == 2 { 4 } else { 8 };
+    for (c, p) in HEX_VERTEX_PARAMS.iter().enumerate().take(n) {
+        let mut w = 1.0;
+        for k in 0..dim {
+            w *= if p[k] == 1 { t[k] } else { 1.0 - t[k] };
+        }
+        for k in 0..3 {
+            out[k] += w * x[c][k];
+        }
+    }
+    out
+}
+
+/// Quadratic Bernstein values at `t`.
+#[inline]
+pub fn bernstein2(t: f64) -> [f64; 3] {
+    let s = 1.0 - t;
+    [s * s, 2.0 * s * t, t * t]
+}
+
+/// Evaluate a quadratic Bézier net at `xi`.
+pub fn eval_net(dim: usize, net: &[[f64; 3]; 27], xi: [f64; 3]) -> [f64; 3] {
+    let bu = bernstein2(xi[0]);
+    let bv = bernstein2(xi[1]);
+    let bw = if dim == 2 {
+        [1.0, 0.0, 0.0]
+    } else {
+        bernstein2(xi[2])
+    };
+    let nz = if dim == 2 { 1 } else { 3 };
+    let mut out = [0.0; 3];
+    for c in 0..nz {
+        for b in 0..3 {
+            for a in 0..3 {
+                let w = bu[a] * bv[b] * bw[c];
+                let p = net[9 * c + 3 * b + a];
+                for k in 0..3 {
+                    out[k] += w * p[k];
+                }
+            }
+        }
+    }
+    out
+}
+
+/// A conforming high-order quad or hex mesh.
+#[derive(Clone, Debug, Default)]
+pub struct HighOrderMesh {
+    pub dim: usize,
+    pub order: usize,
+    pub nodes: Vec<[f64; 3]>,
+    /// (order+1)^dim node ids per element, lattice order (i fastest).
+    pub elements: Vec<u32>,
+    /// Region tag per element, or empty.
+    pub element_tags: Vec<i32>,
+    /// (order+1)^(dim−1) node ids per boundary facet in lattice order of the facet's frame,
+    /// oriented with the outward normal (2D: counter-clockwise around the domain).
+    pub boundary: Vec<u32>,
+    /// Tag per boundary facet (0 = untagged).
+    pub boundary_tags: Vec<i32>,
+    pub tag_names: BTreeMap<i32, String>,
+}
+
+impl HighOrderMesh {
+    pub fn nodes_per_element(&self) -> usize {
+        (self.order + 1).pow(self.dim as u32)
+    }
+    pub fn nodes_per_facet(&self) -> usize {
+        (self.order + 1).pow(self.dim as u32 - 1)
+    }
+    pub fn n_elements(&self) -> usize {
+        self.elements.len() / self.nodes_per_element()
+    }
+    pub fn n_boundary(&self) -> usize {
+        self.boundary.len() / self.nodes_per_facet()
+    }
+    pub fn element(&self, e: usize) -> &[u32] {
+        let n = self.nodes_per_element();
+        &self.elements[e * n..(e + 1) * n]
+    }
+
+    /// Split every element of order k into k^d linear elements (and the boundary likewise):
+    /// a refined linear mesh whose nodes lie on the curved geometry.
+    pub fn subdivided(&self) -> HighOrderMesh {
+        let p = self.order;
+        let split = |cells: &[u32], dim: usize| -> Vec<u32> {
+            let per = (p + 1).pow(dim as u32);
+            let mut out = Vec::with_capacity(cells.len() / per * p.pow(dim as u32) * (1 << dim));
+            for c in cells.chunks(per) {
+                let at = |i: usize, j: usize, k: usize| c[lattice_index(p, [i, j, k])];
+                match dim {
+                    1 => {
+                        for i in 0..p {
+                            out.extend([at(i, 0, 0), at(i + 1, 0, 0)]);
+                        }
+                    }
+                    2 => {
+                        for j in 0..p {
+                            for i in 0..p {
+                                out.extend([
+                                    at(i, j, 0),
+                                    at(i + 1, j, 0),
+                                    at(i + 1, j + 1, 0),
+                                    at(i, j + 1, 0),
+                                ]);
+                            }
+                        }
+                    }
+                    _ => {
+                        for k in 0..p {
+                            for j in 0..p {
+                                for i in 0..p {
+                                    for q in HEX_VERTEX_PARAMS {
+                                        out.push(at(
+                                            i + q[0] as usize,
+                                            j + q[1] as usize,
+                                            k + q[2] as usize,
+                                        ));
+                                    }
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+            out
+        };
+        let rep = |tags: &[i32], n: usize| -> Vec<i32> {
+            tags.iter()
+                .flat_map(|&t| std::iter::repeat_n(t, n))
+                .collect()
+        };
+        let per_e = p.pow(self.dim as u32);
+        let per_f = p.pow(self.dim as u32 - 1);
+        HighOrderMesh {
+            dim: self.dim,
+            order: 1,
+            nodes: self.nodes.clone(),
+            elements: split(&self.elements, self.dim),
+            element_tags: rep(&self.element_tags, per_e),
+            boundary: split(&self.boundary, self.dim - 1),
+            boundary_tags: rep(&self.boundary_tags, per_f),
+            tag_names: self.tag_names.clone(),
+        }
+    }
+}
+
+/// Conforming node numbering of an order-p mesh over a topology.
+pub struct Numbering<'a> {
+    mesh: &'a LinearMesh,
+    topo: &'a Topology,
+    p: usize,
+    edge_base: usize,
+    face_base: usize,
+    cell_base: usize,
+    total: usize,
+}
+
+/// Corner number of a lattice point whose coordinates are all 0 or p.
+fn corner_of(p: usize, l: Lattice) -> usize {
+    let b = [l[0] / p, l[1] / p, l[2] / p];
+    const TABLE: [usize; 8] = [0, 1, 3, 2, 4, 5, 7, 6];
+    TABLE[b[0] + 2 * b[1] + 4 * b[2]]
+}
+
+impl<'a> Numbering<'a> {
+    pub fn new(mesh: &'a LinearMesh, topo: &'a Topology, p: usize) -> Self {
+        let d = mesh.dim;
+        let m = p - 1;
+        let edge_base = mesh.n_vertices();
+        let face_base = edge_base + topo.edges.len() * m;
+        let cell_base = face_base + if d == 3 { topo.faces.len() * m * m } else { 0 };
+        let total = cell_base + mesh.n_elements() * m.pow(d as u32);
+        Numbering {
+            mesh,
+            topo,
+            p,
+            edge_base,
+            face_base,
+            cell_base,
+            total,
+        }
+    }
+
+    pub fn n_nodes(&self) -> usize {
+        self.total
+    }
+
+    /// Face frame of side `side` of hex `e` against the stored face: for the two free
+    /// directions (u < v) of the side, the lattice origin (ou, ov) of the face's first vertex
+    /// and whether the face's first axis runs along v instead of u.
+    fn face_frame(&self, e: usize, side: usize) -> ([usize; 2], [usize; 2], bool) {
+        let p = self.p;
+        let f = self.topo.element_faces[e * 6 + side] as usize;
+        let fv = self.topo.faces[f];
+        let m = side / 2;
+        let dirs = match m {
+            0 => [1, 2],
+            1 => [0, 2],
+            _ => [0, 1],
+        };
+        let nodes = self.mesh.element(e);
+        let vertex_at = |a: usize, b: usize| {
+            let mut l = [0; 3];
+            l[m] = (side % 2) * p;
+            l[dirs[0]] = a;
+            l[dirs[1]] = b;
+            nodes[corner_of(p, l)]
+        };
+        let corners = [(0, 0), (p, 0), (0, p), (p, p)];
+        let (ou, ov) = *corners
+            .iter()
+            .find(|&&(a, b)| vertex_at(a, b) == fv[0])
+            .expect("stored face vertex belongs to the element side");
+        let swapped = vertex_at(p - ou, ov) != fv[1];
+        (dirs, [ou, ov], swapped)
+    }
+
+    /// Node id of lattice point `l` of element `e`.
+    pub fn node_id(&self, e: usize, l: Lattice) -> u32 {
+        let p = self.p;
+        let d = self.mesh.dim;
+        let at_end = |x: usize| x == 0 || x == p;
+        let interior: Vec<usize> = (0..d).filter(|&k| !at_end(l[k])).collect();
+        let nodes = self.mesh.element(e);
+        let m = p - 1;
+        match interior.len() {
+            0 => nodes[corner_of(p, l)],
+            1 if d == 2 || d == 3 => {
+                let dir = interior[0];
+                let local = if d == 2 {
+                    let other = 1 - dir;
+                    2 * other + l[other] / p
+                } else {
+                    let others: Vec<usize> = (0..3).filter(|&k| k != dir).collect();
+                    4 * dir + l[others[0]] / p + 2 * (l[others[1]] / p)
+                };
+                let edge =
+                    self.topo.element_edges[e * if d == 2 { 4 } else { 12 } + local] as usize;
+                let mut start = l;
+                start[dir] = 0;
+                let start_vertex = nodes[corner_of(p, start)];
+                let t = l[dir];
+                let pos = if start_vertex == self.topo.edges[edge][0] {
+                    t
+                } else {
+                    p - t
+                };
+                (self.edge_base + edge * m + pos - 1) as u32
+            }
+            2 if d == 3 => {
+                let fixed = (0..3).find(|k| !interior.contains(k)).unwrap();
+                let side = 2 * fixed + l[fixed] / p;
+                let f = self.topo.element_faces[e * 6 + side] as usize;
+                let (dirs, [ou, ov], swapped) = self.face_frame(e, side);
+                let du = l[dirs[0]].abs_diff(ou);
+                let dv = l[dirs[1]].abs_diff(ov);
+                let (a, b) = if swapped { (dv, du) } else { (du, dv) };
+                (self.face_base + f * m * m + (a - 1) + (b - 1) * m) as u32
+            }
+            _ => {
+                let local = (l[0] - 1) + m * ((l[1] - 1) + if d == 3 { m * (l[2] - 1) } else { 0 });
+                (self.cell_base + e * m.pow(d as u32) + local) as u32
+            }
+        }
+    }
+}
+
+/// Element lattice point of canonical position `pos` (1..p−1) on edge `edge` = local edge
+/// `local` of element `e`.
+fn edge_lattice(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    p: usize,
+    e: usize,
+    local: usize,
+    pos: usize,
+) -> Lattice {
+    let nodes = mesh.element(e);
+    let edge = topo.element_edges[e * if mesh.dim == 2 { 4 } else { 12 } + local] as usize;
+    let (a, b, dir, mut l) = if mesh.dim == 2 {
+        let [a, b] = QUAD_SIDES[local];
+        let dir = 1 - local / 2;
+        let mut l = [0; 3];
+        l[local / 2] = (local % 2) * p;
+        (a, b, dir, l)
+    } else {
+        let [a, b] = HEX_EDGES[local];
+        let dir = local / 4;
+        let q = HEX_VERTEX_PARAMS[a];
+        (
+            a,
+            b,
+            dir,
+            [q[0] as usize * p, q[1] as usize * p, q[2] as usize * p],
+        )
+    };
+    // The lattice runs along `dir` from the corner with the lower parameter.
+    let lower = if HEX_VERTEX_PARAMS[a][dir] < HEX_VERTEX_PARAMS[b][dir] {
+        a
+    } else {
+        b
+    };
+    let t = if nodes[lower] == topo.edges[edge][0] {
+        pos
+    } else {
+        p - pos
+    };
+    l[dir] = t;
+    l
+}
+
+/// Sample `source` at order `p` over `mesh`'s topology.
+pub fn sample(
+    source: &dyn BezierElements,
+    mesh: &LinearMesh,
+    topo: &Topology,
+    p: usize,
+) -> HighOrderMesh {
+    assert!((1..=MAX_ORDER).contains(&p), "order {p} out of range");
+    assert_eq!(source.n_elements(), mesh.n_elements());
+    let d = mesh.dim;
+    let num = Numbering::new(mesh, topo, p);
+    let npe = (p + 1).pow(d as u32);
+    let ne = mesh.n_elements();
+    let pf = p as f64;
+    let param = |l: Lattice| [l[0] as f64 / pf, l[1] as f64 / pf, l[2] as f64 / pf];
+
+    // Element connectivity.
+    let mut elements = vec![0u32; ne * npe];
+    elements
+        .par_chunks_mut(npe)
+        .enumerate()
+        .for_each(|(e, out)| {
+            for (n, id) in out.iter_mut().enumerate() {
+                *id = num.node_id(e, lattice_point(p, d, n));
+            }
+        });
+
+    // Node positions, entity by entity, each from one owning element.
+    let mut nodes = vec![[0.0; 3]; num.n_nodes()];
+    let (vertex_part, rest) = nodes.split_at_mut(num.edge_base);
+    let (edge_part, rest) = rest.split_at_mut(num.face_base - num.edge_base);
+    let (face_part, cell_part) = rest.split_at_mut(num.cell_base - num.face_base);
+    vertex_part.par_iter_mut().enumerate().for_each(|(v, x)| {
+        let e = topo.elements_at_vertex(v)[0] as usize;
+        let c = mesh
+            .element(e)
+            .iter()
+            .position(|&u| u as usize == v)
+            .unwrap();
+        let q = HEX_VERTEX_PARAMS[c];
+        *x = eval_net(
+            d,
+            &source.bezier_net(e),
+            [q[0] as f64, q[1] as f64, q[2] as f64],
+        );
+    });
+    if p > 1 {
+        // First element and local edge of every edge.
+        let nle = if d == 2 { 4 } else { 12 };
+        let mut edge_owner = vec![u32::MAX; topo.edges.len()];
+        for (slot, &edge) in topo.element_edges.iter().enumerate() {
+            if edge_owner[edge as usize] == u32::MAX {
+                edge_owner[edge as usize] = slot as u32;
+            }
+        }
+        edge_part
+            .par_chunks_mut(p - 1)
+            .enumerate()
+            .for_each(|(edge, out)| {
+                let slot = edge_owner[edge] as usize;
+                let (e, local) = (slot / nle, slot % nle);
+                let net = source.bezier_net(e);
+                for (i, x) in out.iter_mut().enumerate() {
+                    *x = eval_net(d, &net, param(edge_lattice(mesh, topo, p, e, local, i + 1)));
+                }
+            });
+        if d == 3 {
+            let m = p - 1;
+            face_part
+                .par_chunks_mut(m * m)
+                .enumerate()
+                .for_each(|(f, out)| {
+                    let e = topo.facet_elements[f][0] as usize;
+                    let side = topo.facet_sides[f][0] as usize;
+                    let net = source.bezier_net(e);
+                    let (dirs, [ou, ov], swapped) = num.face_frame(e, side);
+                    for b in 1..p {
+                        for a in 1..p {
+                            let (du, dv) = if swapped { (b, a) } else { (a, b) };
+                            let mut l = [0; 3];
+                            l[side / 2] = (side % 2) * p;
+                            l[dirs[0]] = if ou == 0 { du } else { p - du };
+                            l[dirs[1]] = if ov == 0 { dv } else { p - dv };
+                            out[(a - 1) + (b - 1) * m] = eval_net(d, &net, param(l));
+                        }
+                    }
+                });
+        }
+        let m = p - 1;
+        cell_part
+            .par_chunks_mut(m.pow(d as u32))
+            .enumerate()
+            .for_each(|(e, out)| {
+                let net = source.bezier_net(e);
+                for (n, x) in out.iter_mut().enumerate() {
+                    let l = lattice_point(m - 1, d, n).map(|c| c + 1);
+                    let l = if d == 2 { [l[0], l[1], 0] } else { l };
+                    *x = eval_net(d, &net, param(l));
+                }
+            });
+    }
+
+    // Boundary facets in their outward frames.
+    let npf = (p + 1).pow(d as u32 - 1);
+    let mut boundary = vec![0u32; topo.boundary_facets.len() * npf];
+    boundary
+        .par_chunks_mut(npf)
+        .zip(&topo.boundary_facets)
+        .for_each(|(out, &f)| {
+            let f = f as usize;
+            let e = topo.facet_elements[f][0] as usize;
+            let side = topo.facet_sides[f][0] as usize;
+            if d == 2 {
+                let [a, b] = QUAD_SIDES[side];
+                let (qa, qb) = (HEX_VERTEX_PARAMS[a], HEX_VERTEX_PARAMS[b]);
+                for (t, id) in out.iter_mut().enumerate() {
+                    let l: Lattice = std::array::from_fn(|k| {
+                        if k == 2 {
+                            0
+                        } else {
+                            qa[k] as usize * (p - t) + qb[k] as usize * t
+                        }
+                    });
+                    *id = num.node_id(e, l);
+                }
+            } else {
+                // The stored face cycle is outward for its first element; walk its frame.
+                let (dirs, [ou, ov], swapped) = num.face_frame(e, side);
+                for b in 0..=p {
+                    for a in 0..=p {
+                        let (du, dv) = if swapped { (b, a) } else { (a, b) };
+                        let mut l = [0; 3];
+                        l[side / 2] = (side % 2) * p;
+                        l[dirs[0]] = if ou == 0 { du } else { p - du };
+                        l[dirs[1]] = if ov == 0 { dv } else { p - dv };
+                        out[a + b * (p + 1)] = num.node_id(e, l);
+                    }
+                }
+            }
+        });
+    HighOrderMesh {
+        dim: d,
+        order: p,
+        nodes,
+        elements,
+        element_tags: mesh.element_tags.clone(),
+        boundary,
+        boundary_tags: topo.boundary_facet_tags.clone(),
+        tag_names: mesh.tag_names.clone(),
+    }
+}
