@@ -19,4 +19,6 @@ pub mod info;
 pub mod io;
 pub mod mesh;
 pub mod pipeline;
+pub mod plot;
+pub mod quality;
 pub mod sample;

@@ -4,10 +4,13 @@ use clap::{Parser, Subcommand};
 use polyspline::info::MeshInfo;
 use polyspline::io::gmsh_write::MshVersion;
 use polyspline::io::output::write_atomically;
-use polyspline::io::read_mesh;
 use polyspline::io::vtu_write::VtuEncoding;
+use polyspline::io::{read_mesh, read_raw};
 use polyspline::mesh::{MeshOptions, Topology};
 use polyspline::pipeline::{CurveOptions, Geometry, OutputOptions, curve};
+use polyspline::plot::{Layer, render_svg};
+use polyspline::quality::CheckReport;
+use polyspline::sample::HighOrderMesh;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -66,6 +69,28 @@ enum Command {
         /// Keep tangled or degenerate input elements instead of failing.
         #[arg(long)]
         allow_invalid: bool,
+    },
+    /// Report the validity and quality of a high-order mesh (.msh or .vtu).
+    Check {
+        /// High-order mesh file.
+        mesh: PathBuf,
+        /// Print one JSON object instead of a table.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Draw a 2D mesh (linear or high order) as SVG, with curved edges drawn as curves.
+    Plot {
+        /// Mesh file (.msh, .vtu, or any input format).
+        mesh: PathBuf,
+        /// Output SVG file.
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Draw another mesh on top (e.g. the linear input, or a second method's result).
+        #[arg(long, value_name = "MESH")]
+        overlay: Vec<PathBuf>,
+        /// Picture width in pixels.
+        #[arg(long, default_value_t = 1000.0)]
+        width: f64,
     },
 }
 
@@ -155,8 +180,77 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 })?;
             }
         }
+        Command::Check { mesh, json } => {
+            let ho = read_high_order(&mesh)?;
+            let report = CheckReport::new(&ho);
+            if json {
+                println!("{}", serde_json::to_string_pretty(&report)?);
+            } else {
+                println!("{:<22}{}", "mesh", mesh.display());
+                println!(
+                    "{:<22}{} ({}D, order {})",
+                    "elements", report.elements, report.dimension, report.order
+                );
+                println!("{:<22}{}", "nodes", report.nodes);
+                println!("{:<22}{}", "boundary facets", report.boundary_facets);
+                println!("{:<22}{}", "invalid elements", report.invalid);
+                println!(
+                    "{:<22}{:.6} (element {})",
+                    "min scaled Jacobian", report.min_scaled_jacobian, report.worst_element
+                );
+                println!("{:<22}{:.6e}", "min det J", report.min_det_jacobian);
+                println!("{:<22}{}", "method", report.method);
+            }
+        }
+        Command::Plot {
+            mesh,
+            output,
+            overlay,
+            width,
+        } => {
+            let base = read_high_order(&mesh)?;
+            let others = overlay
+                .iter()
+                .map(|p| read_high_order(p))
+                .collect::<Result<Vec<_>, _>>()?;
+            for (m, p) in std::iter::once((&base, &mesh)).chain(others.iter().zip(&overlay)) {
+                if m.dim != 2 {
+                    anyhow::bail!("{}: plot draws 2D meshes; this mesh is 3D", p.display());
+                }
+            }
+            const COLOURS: [&str; 4] = ["#d62728", "#1f77b4", "#2ca02c", "#9467bd"];
+            let mut layers = vec![Layer::Mesh {
+                mesh: &base,
+                colour: "#222222",
+                width: 1.0,
+                label: "mesh",
+            }];
+            for (i, m) in others.iter().enumerate() {
+                layers.push(Layer::Mesh {
+                    mesh: m,
+                    colour: COLOURS[i % 4],
+                    width: 1.0,
+                    label: "overlay",
+                });
+            }
+            let svg = render_svg(&layers, width);
+            let inputs: Vec<&std::path::Path> = std::iter::once(mesh.as_path())
+                .chain(overlay.iter().map(|p| p.as_path()))
+                .collect();
+            write_atomically(&output, &inputs, |w| {
+                use std::io::Write;
+                w.write_all(svg.as_bytes())
+            })?;
+        }
     }
     Ok(())
+}
+
+/// Read a high-order mesh written by `curve` (or any linear/Lagrange quad/hex mesh).
+fn read_high_order(path: &std::path::Path) -> anyhow::Result<HighOrderMesh> {
+    let raw = read_raw(path)?;
+    HighOrderMesh::from_raw(raw)
+        .map_err(|e| anyhow::anyhow!("{}: {}: {}", path.display(), e.location, e.message))
 }
 
 fn main() -> ExitCode {

@@ -39,8 +39,9 @@
 //! MSH 2 binary element blocks (type, count, tag count) followed by records; counts in headers
 //! are never trusted for allocation beyond what the remaining input can hold.
 
-use super::raw::{CellKind, Location, ParseError, RawBlock, RawMesh};
+use super::raw::{CellKind, Location, NodeConvention, ParseError, RawBlock, RawMesh};
 use super::text::{TextCursor, parse_f64};
+use crate::sample::ordering::gmsh_type_info;
 use std::collections::HashMap;
 
 /// Parse a Gmsh `.msh` file held in memory.
@@ -129,6 +130,16 @@ fn element_type(t: i64) -> Result<(CellKind, usize), String> {
         _ => None,
     };
     if let Some(kind) = linear {
+        let n = kind.nodes().unwrap_or(1);
+        return Ok((kind, n));
+    }
+    // Complete Lagrange lines, quads and hexes of order >= 2 (polyspline's own output).
+    if let Some((dim, order)) = u32::try_from(t).ok().and_then(gmsh_type_info) {
+        let kind = CellKind::Lagrange {
+            dim,
+            order,
+            convention: NodeConvention::Gmsh,
+        };
         let n = kind.nodes().unwrap_or(1);
         return Ok((kind, n));
     }
@@ -1478,8 +1489,16 @@ mod tests {
     #[test]
     fn high_order_cells_are_named() {
         let m = parse(&fixture("quad9_22.msh"));
-        let q9 = CellKind::Other("9-node quadrilateral (Gmsh type 10)".into());
-        let l3 = CellKind::Other("3-node line (Gmsh type 8)".into());
+        let q9 = CellKind::Lagrange {
+            dim: 2,
+            order: 2,
+            convention: NodeConvention::Gmsh,
+        };
+        let l3 = CellKind::Lagrange {
+            dim: 1,
+            order: 2,
+            convention: NodeConvention::Gmsh,
+        };
         assert_eq!(count(&m, &q9), 4);
         assert_eq!(count(&m, &l3), 8);
         assert_eq!(count(&m, &CellKind::Vertex), 4);
@@ -1493,7 +1512,7 @@ mod tests {
         }
         let e = linear(m).unwrap_err();
         assert!(
-            e.message.contains("9-node quadrilateral (Gmsh type 10)"),
+            e.message.contains("order-2 9-node quadrilaterals"),
             "{}",
             e.message
         );
@@ -1505,15 +1524,25 @@ mod tests {
         assert_eq!(element_type(15).unwrap(), (CellKind::Vertex, 1));
         assert_eq!(element_type(6).unwrap(), (CellKind::Wedge, 6));
         for (t, name, n) in [
-            (12, "27-node hexahedron (Gmsh type 12)", 27),
             (17, "20-node hexahedron (Gmsh type 17)", 20),
             (16, "8-node quadrilateral (Gmsh type 16)", 8),
-            (36, "16-node quadrilateral (Gmsh type 36)", 16),
-            (92, "64-node hexahedron (Gmsh type 92)", 64),
             (11, "10-node tetrahedron (Gmsh type 11)", 10),
-            (98, "1000-node hexahedron (Gmsh type 98)", 1000),
         ] {
             assert_eq!(element_type(t).unwrap(), (CellKind::Other(name.into()), n));
+        }
+        for (t, dim, order, n) in [
+            (12, 3, 2, 27),
+            (36, 2, 3, 16),
+            (92, 3, 3, 64),
+            (98, 3, 9, 1000),
+            (8, 1, 2, 3),
+        ] {
+            let kind = CellKind::Lagrange {
+                dim,
+                order,
+                convention: NodeConvention::Gmsh,
+            };
+            assert_eq!(element_type(t).unwrap(), (kind, n));
         }
         assert!(
             element_type(76)

@@ -31,7 +31,7 @@ pub mod vtu;
 pub mod vtu_write;
 
 use crate::mesh::{LinearMesh, MeshOptions};
-pub use raw::{CellKind, Location, ParseError, RawBlock, RawMesh};
+pub use raw::{CellKind, Location, NodeConvention, ParseError, RawBlock, RawMesh};
 use std::path::{Path, PathBuf};
 
 /// A mesh file that could not be read or is not a mesh polyspline can curve.

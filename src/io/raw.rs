@@ -73,9 +73,23 @@ pub enum CellKind {
     Hexahedron,
     Wedge,
     Pyramid,
+    /// A Lagrange line (dim 1), quadrilateral (2) or hexahedron (3) of order ≥ 2 on the
+    /// equispaced lattice, its nodes in the file's node-order convention.
+    Lagrange {
+        dim: usize,
+        order: usize,
+        convention: NodeConvention,
+    },
     /// Anything else (high-order or polygonal cells), with a human-readable name such as
     /// "9-node quadrilateral (Gmsh type 10)".
     Other(String),
+}
+
+/// Whose node order a Lagrange cell follows (see [`crate::sample::ordering`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum NodeConvention {
+    Gmsh,
+    Vtk,
 }
 
 impl CellKind {
@@ -86,6 +100,7 @@ impl CellKind {
             CellKind::Line => Some(1),
             CellKind::Triangle | CellKind::Quad => Some(2),
             CellKind::Tetra | CellKind::Hexahedron | CellKind::Wedge | CellKind::Pyramid => Some(3),
+            CellKind::Lagrange { dim, .. } => Some(*dim),
             CellKind::Other(_) => None,
         }
     }
@@ -101,6 +116,7 @@ impl CellKind {
             CellKind::Hexahedron => Some(8),
             CellKind::Wedge => Some(6),
             CellKind::Pyramid => Some(5),
+            CellKind::Lagrange { dim, order, .. } => Some((order + 1).pow(*dim as u32)),
             CellKind::Other(_) => None,
         }
     }
@@ -116,6 +132,11 @@ impl CellKind {
             CellKind::Hexahedron => "hexahedra".into(),
             CellKind::Wedge => "wedges (prisms)".into(),
             CellKind::Pyramid => "pyramids".into(),
+            CellKind::Lagrange { dim, order, .. } => {
+                let n = (order + 1).pow(*dim as u32);
+                let what = ["points", "lines", "quadrilaterals", "hexahedra"][*dim];
+                format!("order-{order} {n}-node {what}")
+            }
             CellKind::Other(name) => format!("cells of type {name}"),
         }
     }
