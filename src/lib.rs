@@ -22,3 +22,5 @@ pub mod pipeline;
 pub mod plot;
 pub mod quality;
 pub mod sample;
+pub mod solve;
+pub mod validity;

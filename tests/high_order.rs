@@ -396,3 +396,79 @@ fn vtk_reads_our_vtu_files() {
         assert_close(ctx, &v["probed"], want);
     }
 }
+
+/// Our own readers read back every file variant we write, element by element in lattice order
+/// (the node-ordering round trip: a wrong permutation in writer or reader moves nodes).
+#[test]
+fn round_trip_through_our_readers() {
+    use polyspline::io::read_raw;
+    for (name, m) in meshes() {
+        let t = Topology::build(&m);
+        for p in 1..=6 {
+            let ho = sample(&m, &m, &t, p);
+            let mut files = Vec::new();
+            for (version, binary) in [
+                (MshVersion::V41, false),
+                (MshVersion::V41, true),
+                (MshVersion::V22, false),
+                (MshVersion::V22, true),
+            ] {
+                let path = scratch(&format!("rt_{name}_{p}_{version:?}_{binary}.msh"));
+                let mut w = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
+                write_msh(&ho, version, binary, &mut w).unwrap();
+                files.push(path);
+            }
+            for enc in [
+                VtuEncoding::Ascii,
+                VtuEncoding::Base64,
+                VtuEncoding::Appended,
+            ] {
+                let path = scratch(&format!("rt_{name}_{p}_{enc:?}.vtu"));
+                let mut w = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
+                write_vtu(&ho, enc, &mut w).unwrap();
+                files.push(path);
+            }
+            for path in files {
+                let back = HighOrderMesh::from_raw(read_raw(&path).unwrap())
+                    .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+                let ctx = format!("{}", path.display());
+                assert_eq!(
+                    (back.dim, back.order, back.n_elements(), back.n_boundary()),
+                    (ho.dim, ho.order, ho.n_elements(), ho.n_boundary()),
+                    "{ctx}"
+                );
+                for e in 0..ho.n_elements() {
+                    for (a, b) in ho.element(e).iter().zip(back.element(e)) {
+                        let (x, y) = (ho.nodes[*a as usize], back.nodes[*b as usize]);
+                        assert!(
+                            (0..3).all(|k| (x[k] - y[k]).abs() < 1e-12),
+                            "{ctx}: element {e}"
+                        );
+                    }
+                }
+                let npf = ho.nodes_per_facet();
+                let mut want: Vec<Vec<[i64; 3]>> = ho
+                    .boundary
+                    .chunks(npf)
+                    .map(|f| {
+                        f.iter()
+                            .map(|&n| ho.nodes[n as usize].map(|c| (c * 1e9).round() as i64))
+                            .collect()
+                    })
+                    .collect();
+                let mut got: Vec<Vec<[i64; 3]>> = back
+                    .boundary
+                    .chunks(npf)
+                    .map(|f| {
+                        f.iter()
+                            .map(|&n| back.nodes[n as usize].map(|c| (c * 1e9).round() as i64))
+                            .collect()
+                    })
+                    .collect();
+                want.sort();
+                got.sort();
+                assert_eq!(want, got, "{ctx}: boundary facets");
+            }
+        }
+    }
+}
