@@ -15,6 +15,7 @@
 //! # Ok::<(), polyspline::io::ReadError>(())
 //! ```
 
+pub mod fit;
 pub mod info;
 pub mod io;
 pub mod mesh;

@@ -355,3 +355,145 @@ mod tests {
         assert!(b.lower <= true_min + 1e-12 && true_min <= b.upper + 1e-12);
     }
 }
+
+/// Certified det J bounds of every element of a Bézier source.
+pub fn certify_elements(
+    dim: usize,
+    n_elements: usize,
+    net: impl Fn(usize) -> [[f64; 3]; 27] + Sync,
+    max_depth: usize,
+) -> Vec<DetBounds> {
+    use rayon::prelude::*;
+    (0..n_elements)
+        .into_par_iter()
+        .map(|e| det_jacobian_bounds(dim, &net(e), max_depth))
+        .collect()
+}
+
+/// Line-search parameters (paper §2.3: bisection on α in C(α) = C0 + α(C* − C0)).
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct LineSearchParams {
+    /// Bisection steps at most.
+    pub max_bisections: usize,
+    /// Stop when the bracket [valid α, invalid α] is narrower than this.
+    pub tolerance: f64,
+    /// Subdivision depth of the Bernstein certificate.
+    pub certificate_depth: usize,
+}
+
+impl Default for LineSearchParams {
+    fn default() -> Self {
+        LineSearchParams {
+            max_bisections: 30,
+            tolerance: 1e-3,
+            certificate_depth: 6,
+        }
+    }
+}
+
+/// One element and its certified lower bound of det J.
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct WorstElement {
+    pub element: usize,
+    pub lower: f64,
+    pub upper: f64,
+}
+
+/// Outcome of the line search.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct LineSearchInfo {
+    /// Step taken: 1 when the full fit is certified valid.
+    pub alpha: f64,
+    pub bisections: usize,
+    /// Elements not certified valid at α = 1.
+    pub invalid_at_full_step: usize,
+    /// The least certified elements at α = 1 (at most 10), worst first.
+    pub worst_at_full_step: Vec<WorstElement>,
+    /// Smallest certified lower bound of det J over the mesh at the chosen α.
+    pub min_det_lower_bound: f64,
+}
+
+/// Why no valid mesh could be certified.
+#[derive(Clone, Debug, thiserror::Error)]
+pub enum ValidityError {
+    #[error(
+        "the initial spline map is not certified valid on {count} element(s) (first: {}); the input is too distorted for the spline space there",
+        first.iter().map(|e| e.to_string()).collect::<Vec<_>>().join(", ")
+    )]
+    InitialInvalid { count: usize, first: Vec<usize> },
+}
+
+fn worst(bounds: &[DetBounds], n: usize) -> Vec<WorstElement> {
+    let mut idx: Vec<usize> = (0..bounds.len()).collect();
+    idx.sort_by(|&a, &b| bounds[a].lower.total_cmp(&bounds[b].lower));
+    idx.into_iter()
+        .take(n)
+        .map(|e| WorstElement {
+            element: e,
+            lower: bounds[e].lower,
+            upper: bounds[e].upper,
+        })
+        .collect()
+}
+
+/// Largest certified-valid α in [0, 1] for C(α) = C0 + α(C* − C0), by bisection. `net(e, cps)`
+/// gives the Bernstein net of element e for control points cps. C0 must be certified valid.
+pub fn line_search(
+    dim: usize,
+    n_elements: usize,
+    net: impl Fn(usize, &[[f64; 3]]) -> [[f64; 3]; 27] + Sync,
+    c0: &[[f64; 3]],
+    c_star: &[[f64; 3]],
+    params: &LineSearchParams,
+) -> Result<(Vec<[f64; 3]>, LineSearchInfo), ValidityError> {
+    let at = |alpha: f64| -> Vec<[f64; 3]> {
+        c0.iter()
+            .zip(c_star)
+            .map(|(a, b)| std::array::from_fn(|k| a[k] + alpha * (b[k] - a[k])))
+            .collect()
+    };
+    let check = |cps: &[[f64; 3]]| {
+        certify_elements(dim, n_elements, |e| net(e, cps), params.certificate_depth)
+    };
+    let full = check(c_star);
+    let bad: Vec<usize> = (0..n_elements)
+        .filter(|&e| !full[e].certified_positive())
+        .collect();
+    let min_lower = |b: &[DetBounds]| b.iter().map(|x| x.lower).fold(f64::INFINITY, f64::min);
+    let mut info = LineSearchInfo {
+        alpha: 1.0,
+        bisections: 0,
+        invalid_at_full_step: bad.len(),
+        worst_at_full_step: worst(&full, 10),
+        min_det_lower_bound: min_lower(&full),
+    };
+    if bad.is_empty() {
+        return Ok((c_star.to_vec(), info));
+    }
+    let start = check(c0);
+    let bad0: Vec<usize> = (0..n_elements)
+        .filter(|&e| !start[e].certified_positive())
+        .collect();
+    if !bad0.is_empty() {
+        return Err(ValidityError::InitialInvalid {
+            count: bad0.len(),
+            first: bad0.into_iter().take(8).collect(),
+        });
+    }
+    let (mut lo, mut hi) = (0.0, 1.0);
+    let mut lo_bounds = start;
+    while info.bisections < params.max_bisections && hi - lo > params.tolerance {
+        let mid = 0.5 * (lo + hi);
+        let b = check(&at(mid));
+        if b.iter().all(DetBounds::certified_positive) {
+            lo = mid;
+            lo_bounds = b;
+        } else {
+            hi = mid;
+        }
+        info.bisections += 1;
+    }
+    info.alpha = lo;
+    info.min_det_lower_bound = min_lower(&lo_bounds);
+    Ok((at(lo), info))
+}
