@@ -24,4 +24,5 @@ pub mod plot;
 pub mod quality;
 pub mod sample;
 pub mod solve;
+pub mod spline;
 pub mod validity;

@@ -24,17 +24,20 @@
 //! bytes. Errors inside binary blocks name byte offsets; errors in the text between them name
 //! lines as a text editor counts them (every newline byte, including those in binary data).
 
-use super::raw::{CellKind, Location, ParseError, RawBlock, RawMesh};
+use super::raw::{CellKind, Location, NodeConvention, ParseError, RawBlock, RawMesh};
 use super::text::{TextCursor, parse_f64};
+use std::borrow::Cow;
 
 /// Names of cell data arrays that hold cell tags, most preferred first.
-pub(crate) const TAG_ARRAYS: [&str; 6] = [
+pub(crate) const TAG_ARRAYS: [&str; 7] = [
     "gmsh:physical",
     "CellEntityIds",
     "medit:ref",
     "mat_id",
     "MaterialIds",
     "attribute",
+    // polyspline's own VTU output.
+    "tag",
 ];
 
 /// Preference of a cell data array as the tag array (lower is better), if it is one.
@@ -223,41 +226,100 @@ fn vtk_type_name(t: i64) -> &'static str {
     }
 }
 
-/// Kind of a VTK cell type with `n` nodes, and the renumbering into VTK/Gmsh linear order
-/// where the type needs one.
-fn vtk_cell(t: i64, n: usize) -> (CellKind, Option<&'static [usize]>) {
-    match t {
-        1 => (CellKind::Vertex, None),
-        3 => (CellKind::Line, None),
-        5 => (CellKind::Triangle, None),
-        8 => (CellKind::Quad, Some(&PIXEL_TO_QUAD)),
-        9 => (CellKind::Quad, None),
-        10 => (CellKind::Tetra, None),
-        11 => (CellKind::Hexahedron, Some(&VOXEL_TO_HEX)),
-        12 => (CellKind::Hexahedron, None),
-        13 => (CellKind::Wedge, None),
-        14 => (CellKind::Pyramid, None),
-        _ => (
-            CellKind::Other(format!("{n}-node {} (VTK type {t})", vtk_type_name(t))),
-            None,
-        ),
+/// The order `p` of a Lagrange cell of dimension `dim` with `n = (p + 1)^dim` nodes.
+fn lattice_order(n: usize, dim: u32) -> Option<usize> {
+    let mut k = 2usize;
+    loop {
+        match k.checked_pow(dim) {
+            Some(v) if v == n => return Some(k - 1),
+            Some(v) if v < n => k += 1,
+            _ => return None,
+        }
     }
 }
 
-fn singular(kind: &CellKind) -> &str {
+/// A complete Lagrange cell in VTK node order; order 1 is the linear cell.
+fn lagrange(dim: usize, order: usize) -> CellKind {
+    match (dim, order) {
+        (1, 1) => CellKind::Line,
+        (2, 1) => CellKind::Quad,
+        (3, 1) => CellKind::Hexahedron,
+        _ => CellKind::Lagrange {
+            dim,
+            order,
+            convention: NodeConvention::Vtk,
+        },
+    }
+}
+
+/// Kind of a VTK cell type with `n` nodes, and the renumbering into VTK/Gmsh linear order
+/// where the type needs one.
+fn vtk_cell(t: i64, n: usize) -> (CellKind, Option<&'static [usize]>) {
+    let other = || CellKind::Other(format!("{n}-node {} (VTK type {t})", vtk_type_name(t)));
+    let kind = match t {
+        1 => CellKind::Vertex,
+        3 => CellKind::Line,
+        5 => CellKind::Triangle,
+        8 => return (CellKind::Quad, Some(&PIXEL_TO_QUAD)),
+        9 => CellKind::Quad,
+        10 => CellKind::Tetra,
+        11 => return (CellKind::Hexahedron, Some(&VOXEL_TO_HEX)),
+        12 => CellKind::Hexahedron,
+        13 => CellKind::Wedge,
+        14 => CellKind::Pyramid,
+        // Quadratic edge, biquadratic quad and triquadratic hex number their nodes exactly as
+        // the order-2 Lagrange cells do.
+        21 => lagrange(1, 2),
+        28 => lagrange(2, 2),
+        29 => lagrange(3, 2),
+        // Lagrange curve, quadrilateral and hexahedron of uniform order, read from the node
+        // count (anisotropic orders stay unsupported cells).
+        68 | 70 | 72 => {
+            let dim = (t as usize - 66) / 2;
+            match lattice_order(n, dim as u32) {
+                Some(p) => lagrange(dim, p),
+                None => other(),
+            }
+        }
+        _ => other(),
+    };
+    (kind, None)
+}
+
+/// Node renumbering of a VTK Lagrange hexahedron of order `p` written before VTK 9 (legacy
+/// files before 5.1, XML files before 2.1): VTK 9 swapped the node runs of the vertical edges
+/// above corners 2 and 3. Entry `j` is the file node that becomes node `j`.
+fn vtk8_hex_to_vtk9(p: usize) -> Vec<usize> {
+    let m = p.saturating_sub(1);
+    let start = 8 + 10 * m;
+    (0..(p + 1).pow(3))
+        .map(|j| {
+            if (start..start + m).contains(&j) {
+                j + m
+            } else if (start + m..start + 2 * m).contains(&j) {
+                j - m
+            } else {
+                j
+            }
+        })
+        .collect()
+}
+
+fn singular(kind: &CellKind) -> String {
     match kind {
-        CellKind::Vertex => "vertex",
-        CellKind::Line => "line",
-        CellKind::Triangle => "triangle",
-        CellKind::Quad => "quadrilateral",
-        CellKind::Tetra => "tetrahedron",
-        CellKind::Hexahedron => "hexahedron",
-        CellKind::Wedge => "wedge",
-        CellKind::Pyramid => "pyramid",
-        CellKind::Lagrange { dim: 1, .. } => "Lagrange curve",
-        CellKind::Lagrange { dim: 2, .. } => "Lagrange quadrilateral",
-        CellKind::Lagrange { .. } => "Lagrange hexahedron",
-        CellKind::Other(name) => name,
+        CellKind::Vertex => "vertex".into(),
+        CellKind::Line => "line".into(),
+        CellKind::Triangle => "triangle".into(),
+        CellKind::Quad => "quadrilateral".into(),
+        CellKind::Tetra => "tetrahedron".into(),
+        CellKind::Hexahedron => "hexahedron".into(),
+        CellKind::Wedge => "wedge".into(),
+        CellKind::Pyramid => "pyramid".into(),
+        CellKind::Lagrange { dim, order, .. } => {
+            let what = ["point", "line", "quadrilateral", "hexahedron"][(*dim).min(3)];
+            format!("order-{order} Lagrange {what}")
+        }
+        CellKind::Other(name) => name.clone(),
     }
 }
 
@@ -270,6 +332,8 @@ pub(crate) struct CellList {
     pub conn: Vec<i64>,
     /// Where each cell was read.
     pub locations: Vec<Location>,
+    /// The file predates VTK 9's Lagrange hexahedron numbering (see [`vtk8_hex_to_vtk9`]).
+    pub vtk8_hexes: bool,
 }
 
 impl CellList {
@@ -287,7 +351,7 @@ impl CellList {
     pub fn push_to(&self, mesh: &mut RawMesh, tags: &[i32]) -> Result<(), ParseError> {
         let mut block: Option<RawBlock> = None;
         let mut current: Option<(i64, usize)> = None;
-        let mut perm: Option<&'static [usize]> = None;
+        let mut perm: Option<Cow<'static, [usize]>> = None;
         for (c, &t) in self.types.iter().enumerate() {
             let (Some(&lo), Some(&hi)) = (self.offsets.get(c), self.offsets.get(c + 1)) else {
                 break;
@@ -311,12 +375,17 @@ impl CellList {
                 if let Some(b) = block.take() {
                     mesh.push_block(b);
                 }
+                perm = match kind {
+                    CellKind::Lagrange { dim: 3, order, .. } if t == 72 && self.vtk8_hexes => {
+                        Some(Cow::Owned(vtk8_hex_to_vtk9(order)))
+                    }
+                    _ => p.map(Cow::Borrowed),
+                };
                 block = Some(RawBlock::new(kind, nodes.len()));
                 current = Some((t, nodes.len()));
-                perm = p;
             }
             let Some(b) = block.as_mut() else { break };
-            match perm {
+            match &perm {
                 Some(p) => b.nodes.extend(p.iter().map(|&i| nodes[i])),
                 None => b.nodes.extend_from_slice(nodes),
             }
@@ -359,6 +428,7 @@ pub fn read(data: &[u8]) -> Result<RawMesh, ParseError> {
     Legacy {
         cur: TextCursor::new(data),
         binary: false,
+        version: (0, 0),
     }
     .parse()
 }
@@ -374,6 +444,8 @@ enum Section {
 struct Legacy<'a> {
     cur: TextCursor<'a>,
     binary: bool,
+    /// File version from the first line (major, minor); (0, 0) if unreadable.
+    version: (u32, u32),
 }
 
 /// The best tag array found so far: its preference and values.
@@ -474,6 +546,9 @@ impl<'a> Legacy<'a> {
                 ));
             }
             let tags = tags.map(|(_, t)| t).unwrap_or_default();
+            // VTK reads Lagrange hexahedra of files before 5.1 in the VTK 8 numbering.
+            let mut list = list;
+            list.vtk8_hexes = self.version < (5, 1);
             list.push_to(&mut mesh, &tags)?;
         }
         Ok(mesh)
@@ -490,6 +565,15 @@ impl<'a> Legacy<'a> {
                 1,
                 format!("expected \"# vtk DataFile Version ...\", found \"{shown}\""),
             ));
+        }
+        let number = first.get(14..).unwrap_or("").trim_start();
+        let number = number
+            .strip_prefix("Version")
+            .or_else(|| number.strip_prefix("version"))
+            .unwrap_or(number)
+            .trim();
+        if let Some((major, minor)) = number.split_once('.') {
+            self.version = (major.parse().unwrap_or(0), minor.parse().unwrap_or(0));
         }
         if self.cur.next_line().is_none() {
             return Err(ParseError::at_line(
@@ -715,6 +799,7 @@ impl<'a> Legacy<'a> {
             offsets: Vec::with_capacity(self.capacity(n, 2) + 1),
             conn: Vec::with_capacity(self.capacity(size, if self.binary { 4 } else { 2 })),
             locations: Vec::with_capacity(self.capacity(n, 2)),
+            vtk8_hexes: false,
         };
         list.offsets.push(0);
         // Nodes still to read for the current cell.
@@ -778,6 +863,7 @@ impl<'a> Legacy<'a> {
             offsets: Vec::with_capacity(self.capacity(n_offsets, 2)),
             conn: Vec::new(),
             locations: Vec::new(),
+            vtk8_hexes: false,
         };
         self.ints(n_offsets, ty, "OFFSETS", |i, v, loc| {
             let prev = list.offsets.last().copied();
@@ -1294,19 +1380,75 @@ mod tests {
     #[test]
     fn other_cells_are_named() {
         let text = format!(
-            "{HEAD}POINTS 9 float\n{}CELLS 2 16\n9 0 1 2 3 4 5 6 7 8\n5 0 1 2 3 4\nCELL_TYPES 2\n28\n7\n",
-            "0 0 0\n".repeat(9)
+            "{HEAD}POINTS 12 float\n{}CELLS 5 47\n8 0 1 2 3 4 5 6 7\n5 0 1 2 3 4\n\
+             12 0 1 2 3 4 5 6 7 8 9 10 11\n8 0 1 2 3 4 5 6 7\n9 0 1 2 3 4 5 6 7 8\n\
+             CELL_TYPES 5\n23\n7\n70\n72\n28\n",
+            "0 0 0\n".repeat(12)
         );
         let m = read(text.as_bytes()).unwrap();
+        let kinds: Vec<_> = m.blocks.iter().map(|b| b.kind().clone()).collect();
         assert_eq!(
-            m.blocks[0].kind(),
-            &CellKind::Other("9-node biquadratic quadrilateral (VTK type 28)".into())
+            kinds,
+            [
+                CellKind::Other("8-node quadratic quadrilateral (VTK type 23)".into()),
+                CellKind::Other("5-node polygon (VTK type 7)".into()),
+                CellKind::Other("12-node Lagrange quadrilateral (VTK type 70)".into()),
+                // An order-1 Lagrange hexahedron is a linear one.
+                CellKind::Hexahedron,
+                CellKind::Lagrange {
+                    dim: 2,
+                    order: 2,
+                    convention: NodeConvention::Vtk
+                },
+            ]
         );
-        assert_eq!(m.blocks[0].nodes_per_cell, 9);
-        assert_eq!(
-            m.blocks[1].kind(),
-            &CellKind::Other("5-node polygon (VTK type 7)".into())
+        assert_eq!(m.blocks[0].nodes_per_cell, 8);
+        // A biquadratic quad needs 9 nodes.
+        let bad = text
+            .replace("CELLS 5 47", "CELLS 5 42")
+            .replace("9 0 1 2 3 4 5 6 7 8\n", "4 0 1 2 3\n");
+        let e = read(bad.as_bytes()).unwrap_err();
+        assert!(
+            e.message
+                .contains("order-2 Lagrange quadrilateral) and 4 nodes, expected 9"),
+            "{e}"
         );
+        assert_eq!(e.location, Location::Line(23));
+    }
+
+    #[test]
+    fn lagrange_cells_match_vtk() {
+        // Node ids as VTK 9.7's reader returns them; the 4.2 file's order-3 hexahedron is
+        // renumbered from the VTK 8 layout.
+        let expected: serde_json::Value =
+            serde_json::from_slice(&data("lagrange_expected.json")).unwrap();
+        for name in ["lagrange_vtk97.vtk", "lagrange_vtk97_v42.vtk"] {
+            let m = read(&data(name)).unwrap();
+            let lagrange = |dim, order| CellKind::Lagrange {
+                dim,
+                order,
+                convention: NodeConvention::Vtk,
+            };
+            let kinds: Vec<_> = m.blocks.iter().map(|b| b.kind().clone()).collect();
+            assert_eq!(
+                kinds,
+                [
+                    lagrange(3, 3),
+                    lagrange(2, 2),
+                    lagrange(1, 3),
+                    lagrange(3, 2)
+                ]
+            );
+            assert_eq!(m.blocks[1].len(), 2);
+            let got: Vec<i64> = m.blocks.iter().flat_map(|b| b.nodes.clone()).collect();
+            let want: Vec<i64> = expected[name]
+                .as_array()
+                .unwrap()
+                .iter()
+                .flat_map(|c| c.as_array().unwrap().iter().map(|v| v.as_i64().unwrap()))
+                .collect();
+            assert_eq!(got, want, "{name}");
+        }
     }
 
     #[test]

@@ -40,6 +40,8 @@ pub fn read(data: &[u8]) -> Result<RawMesh, ParseError> {
     let mut mesh = RawMesh::default();
     let mut cells = CellList::default();
     cells.offsets.push(0);
+    // VTK reads Lagrange hexahedra of files before version 2.1 in the VTK 8 numbering.
+    cells.vtk8_hexes = file.version < (2, 1);
     let mut tags: Vec<i32> = Vec::new();
     let mut any_tags = false;
     for piece in &file.pieces {
@@ -121,6 +123,8 @@ struct Appended<'a> {
 }
 
 struct File<'a> {
+    /// The `version` attribute (major, minor); (0, 0) when missing.
+    version: (u32, u32),
     big: bool,
     header64: bool,
     compressor: Compressor,
@@ -177,6 +181,7 @@ fn parse_count(v: Option<Cow<str>>, what: &str, line: usize) -> Result<usize, Pa
 fn parse_xml(data: &[u8]) -> Result<File<'_>, ParseError> {
     let mut reader = Reader::from_reader(data);
     let mut file = File {
+        version: (0, 0),
         big: false,
         header64: false,
         compressor: Compressor::None,
@@ -229,6 +234,11 @@ fn parse_xml(data: &[u8]) -> Result<File<'_>, ParseError> {
                             "VTK XML file of type \"{ty}\": only UnstructuredGrid (.vtu) is supported"
                         ),
                     ));
+                }
+                if let Some(v) = attr(e, "version", data, pos)?
+                    && let Some((major, minor)) = v.trim().split_once('.')
+                {
+                    file.version = (major.parse().unwrap_or(0), minor.parse().unwrap_or(0));
                 }
                 match attr(e, "byte_order", data, pos)?.as_deref() {
                     None | Some("LittleEndian") => {}
@@ -1077,6 +1087,33 @@ mod tests {
         ] {
             let m = read(&data(name)).unwrap_or_else(|e| panic!("{name}: {e}"));
             check_block(&m);
+        }
+    }
+
+    #[test]
+    fn lagrange_cells_match_vtk() {
+        // Node ids as VTK 9.7's reader returns them; in the file relabelled as version 1.0
+        // the order-3 hexahedron is renumbered from the VTK 8 layout.
+        let expected: serde_json::Value =
+            serde_json::from_slice(&data("lagrange_expected.json")).unwrap();
+        for name in ["lagrange_vtk97.vtu", "lagrange_v10.vtu"] {
+            let m = read(&data(name)).unwrap();
+            assert_eq!(
+                m.blocks[0].kind(),
+                &CellKind::Lagrange {
+                    dim: 3,
+                    order: 3,
+                    convention: crate::io::raw::NodeConvention::Vtk
+                }
+            );
+            let got: Vec<i64> = m.blocks.iter().flat_map(|b| b.nodes.clone()).collect();
+            let want: Vec<i64> = expected[name]
+                .as_array()
+                .unwrap()
+                .iter()
+                .flat_map(|c| c.as_array().unwrap().iter().map(|v| v.as_i64().unwrap()))
+                .collect();
+            assert_eq!(got, want, "{name}");
         }
     }
 

@@ -11,7 +11,7 @@ sits at (i + 0.125 i k, 1.5 j, 0.25 k + 0.125 i), exact in float32. The reader t
 recompute this mesh and compare every variant against it.
 """
 
-import struct
+import json
 
 import meshio
 import numpy as np
@@ -240,6 +240,64 @@ def write_with_vtk():
         w.Write()
 
 
+def lagrange_grid():
+    """One cell each of VTK types 72 (order-3 Lagrange hexahedron), 70 (order-2 Lagrange
+    quadrilateral), 28 (biquadratic quad), 68 (order-3 Lagrange curve) and 29 (triquadratic
+    hexahedron), node ids 0..112 in order, point i at (i, i mod 7, i mod 3)."""
+    from vtkmodules.vtkCommonCore import vtkPoints
+    from vtkmodules.vtkCommonDataModel import vtkUnstructuredGrid
+
+    grid = vtkUnstructuredGrid()
+    points = vtkPoints()
+    cells = [(72, 64), (70, 9), (28, 9), (68, 4), (29, 27)]
+    n = sum(c for _, c in cells)
+    for i in range(n):
+        points.InsertNextPoint(float(i), float(i % 7), float(i % 3))
+    grid.SetPoints(points)
+    first = 0
+    for t, c in cells:
+        grid.InsertNextCell(t, c, list(range(first, first + c)))
+        first += c
+    return grid
+
+
+def vtk_cell_ids(path):
+    """Node ids of every cell as VTK 9.7's own reader returns them."""
+    from vtkmodules.vtkIOLegacy import vtkUnstructuredGridReader
+    from vtkmodules.vtkIOXML import vtkXMLUnstructuredGridReader
+
+    r = vtkXMLUnstructuredGridReader() if path.endswith(".vtu") else vtkUnstructuredGridReader()
+    r.SetFileName(path)
+    r.Update()
+    g = r.GetOutput()
+    out = []
+    for c in range(g.GetNumberOfCells()):
+        ids = g.GetCell(c).GetPointIds()
+        out.append([ids.GetId(k) for k in range(ids.GetNumberOfIds())])
+    return out
+
+
+def write_lagrange():
+    """Lagrange cells written by VTK in the current (5.1) and an old (4.2) legacy version;
+    VTK reads old files' Lagrange hexahedra in the VTK 8 numbering. The node ids VTK's reader
+    returns for each file go to lagrange_expected.json."""
+    from vtkmodules.vtkIOLegacy import vtkUnstructuredGridWriter
+
+    grid = lagrange_grid()
+    expected = {}
+    for name, version in [("lagrange_vtk97.vtk", None), ("lagrange_vtk97_v42.vtk", 42)]:
+        w = vtkUnstructuredGridWriter()
+        w.SetInputData(grid)
+        w.SetFileName(name)
+        if version:
+            w.SetFileVersion(version)
+        w.Write()
+        expected[name] = vtk_cell_ids(name)
+    with open("lagrange_expected.json", "w") as f:
+        json.dump(expected, f)
+
+
 if __name__ == "__main__":
     main()
     write_with_vtk()
+    write_lagrange()

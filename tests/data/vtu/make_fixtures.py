@@ -12,7 +12,9 @@ pieces. VTK 9.7 itself writes `block_vtk97_*` (`write_with_vtk`).
 """
 
 import base64
+import json
 import os
+import re
 import sys
 import zlib
 
@@ -20,7 +22,13 @@ import meshio
 import numpy as np
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "vtk"))
-from make_fixtures import block_mesh, meshio_block, vtk_block_grid  # noqa: E402
+from make_fixtures import (  # noqa: E402
+    block_mesh,
+    lagrange_grid,
+    meshio_block,
+    vtk_block_grid,
+    vtk_cell_ids,
+)
 
 
 def encode_array(data, header_type, compression, block_size, b64, endian):
@@ -180,6 +188,28 @@ def write_with_vtk():
         w.Write()
 
 
+def write_lagrange():
+    """Lagrange cells written by VTK (file version 2.3), and the same file relabelled as
+    version 1.0, whose Lagrange hexahedra VTK reads in the VTK 8 numbering. The node ids
+    VTK's reader returns for each file go to lagrange_expected.json."""
+    from vtkmodules.vtkIOXML import vtkXMLUnstructuredGridWriter
+
+    w = vtkXMLUnstructuredGridWriter()
+    w.SetInputData(lagrange_grid())
+    w.SetFileName("lagrange_vtk97.vtu")
+    w.SetDataModeToAscii()
+    w.Write()
+    text = open("lagrange_vtk97.vtu").read()
+    old = re.sub(r'(<VTKFile[^>]*) version="[0-9.]+"', r'\1 version="1.0"', text, count=1)
+    assert old != text
+    with open("lagrange_v10.vtu", "w") as f:
+        f.write(old)
+    expected = {name: vtk_cell_ids(name) for name in ["lagrange_vtk97.vtu", "lagrange_v10.vtu"]}
+    with open("lagrange_expected.json", "w") as f:
+        json.dump(expected, f)
+
+
 if __name__ == "__main__":
     main()
     write_with_vtk()
+    write_lagrange()
