@@ -7,7 +7,10 @@ use polyspline::io::output::write_atomically;
 use polyspline::io::vtu_write::VtuEncoding;
 use polyspline::io::{read_mesh, read_raw};
 use polyspline::mesh::{MeshOptions, Topology};
+use polyspline::fit::{FitParams, FitWeights};
 use polyspline::pipeline::{CurveOptions, Geometry, OutputOptions, curve};
+use polyspline::solve::CgParams;
+use polyspline::validity::LineSearchParams;
 use polyspline::plot::{Layer, render_svg};
 use polyspline::quality::CheckReport;
 use polyspline::sample::HighOrderMesh;
@@ -49,8 +52,34 @@ enum Command {
         #[arg(long, default_value_t = 2)]
         order: usize,
         /// Write the straight-sided order-P mesh of the input (no curving), for comparison.
-        #[arg(long)]
+        #[arg(long, conflicts_with = "fit")]
         straight: bool,
+        /// Fit of the spline control points: `none` samples the initial spline map; `position`
+        /// and `frame` are the paper's weight presets (least squares, then a certified line
+        /// search).
+        #[arg(long, value_enum, default_value_t = FitArg::Position)]
+        fit: FitArg,
+        /// Position weight at interior element corners (overrides the preset).
+        #[arg(long)]
+        w_corner: Option<f64>,
+        /// Position weight at element corners on the boundary (overrides the preset).
+        #[arg(long)]
+        w_boundary_corner: Option<f64>,
+        /// Position weight at edge/face midpoints and element centres (overrides the preset).
+        #[arg(long)]
+        w_midpoint: Option<f64>,
+        /// Frame (derivative) weight at corners (overrides the preset).
+        #[arg(long)]
+        w_frame_corner: Option<f64>,
+        /// Frame weight at midpoints and centres (overrides the preset).
+        #[arg(long)]
+        w_frame_midpoint: Option<f64>,
+        /// Relative tolerance of the conjugate-gradient solve.
+        #[arg(long, default_value_t = 1e-6)]
+        cg_tol: f64,
+        /// Most bisections of the validity line search.
+        #[arg(long, default_value_t = 30)]
+        max_bisections: usize,
         /// With --order 1: split each element into K^d linear elements on the curved geometry.
         #[arg(long, value_name = "K")]
         subdivide: Option<usize>,
@@ -94,6 +123,13 @@ enum Command {
     },
 }
 
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum FitArg {
+    None,
+    Position,
+    Frame,
+}
+
 #[derive(Clone, Copy, clap::ValueEnum)]
 enum MshVersionArg {
     #[value(name = "4.1")]
@@ -132,6 +168,14 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             output,
             order,
             straight,
+            fit,
+            w_corner,
+            w_boundary_corner,
+            w_midpoint,
+            w_frame_corner,
+            w_frame_midpoint,
+            cg_tol,
+            max_bisections,
             subdivide,
             msh_version,
             binary,
@@ -139,15 +183,39 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             report,
             allow_invalid,
         } => {
-            if !straight {
-                anyhow::bail!(
-                    "only --straight is available in this version: the spline geometry is not built yet"
-                );
+            let mut weights = match fit {
+                FitArg::Frame => FitWeights::frame(),
+                _ => FitWeights::position(),
+            };
+            for (slot, value) in [
+                (&mut weights.corner, w_corner),
+                (&mut weights.boundary_corner, w_boundary_corner),
+                (&mut weights.midpoint, w_midpoint),
+                (&mut weights.frame_corner, w_frame_corner),
+                (&mut weights.frame_midpoint, w_frame_midpoint),
+            ] {
+                if let Some(v) = value {
+                    if !(v >= 0.0 && v.is_finite()) {
+                        anyhow::bail!("fit weights must be finite and non-negative, got {v}");
+                    }
+                    *slot = v;
+                }
             }
             let options = CurveOptions {
                 order,
                 subdivide,
-                geometry: Geometry::Straight,
+                geometry: if straight {
+                    Geometry::Straight
+                } else if fit == FitArg::None {
+                    Geometry::SplineInitial
+                } else {
+                    Geometry::SplineFitted
+                },
+                fit: FitParams {
+                    weights,
+                    cg: CgParams { rel_tol: cg_tol, ..Default::default() },
+                },
+                line_search: LineSearchParams { max_bisections, ..Default::default() },
                 mesh: MeshOptions { allow_invalid },
                 output: OutputOptions {
                     msh_version: match msh_version {
@@ -171,6 +239,23 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 r.output_nodes,
                 r.boundary_facets,
                 r.timings["total"]
+            );
+            if r.control_points > 0 {
+                eprintln!(
+                    "spline: {} control points, {} spline and {} Q2 elements",
+                    r.control_points, r.spline_elements, r.q2_elements
+                );
+            }
+            if let (Some(it), Some(res), Some(alpha)) = (r.cg_iterations, r.cg_rel_residual, r.line_search_alpha) {
+                eprintln!("fit: {it} CG iterations, relative residual {res:.2e}, line search alpha {alpha:.4}");
+            }
+            eprintln!(
+                "quality: min scaled Jacobian {:.4} (input {:.4}), invalid elements {}, boundary deviation max {:.2e} rms {:.2e}",
+                r.min_scaled_jacobian,
+                r.input_min_scaled_jacobian,
+                r.invalid_elements,
+                r.boundary_deviation_max,
+                r.boundary_deviation_rms
             );
             if let Some(path) = report {
                 let json = serde_json::to_string_pretty(&r)?;

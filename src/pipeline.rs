@@ -6,7 +6,12 @@
 use crate::io::gmsh_write::{MshVersion, write_msh};
 use crate::io::output::{WriteError, write_atomically};
 use crate::io::vtu_write::{VtuEncoding, write_vtu};
+use crate::fit::{FitParams, FitWeights, fit};
 use crate::io::{ReadError, read_mesh};
+use crate::quality::sample_det_jacobian;
+use crate::solve::CgError;
+use crate::spline::SplineSpace;
+use crate::validity::{LineSearchInfo, LineSearchParams, ValidityError, certify_elements, line_search};
 use crate::mesh::{MeshOptions, Topology};
 use crate::sample::{BezierElements, HighOrderMesh, MAX_ORDER, sample};
 use serde::Serialize;
@@ -20,6 +25,10 @@ use std::time::Instant;
 pub enum Geometry {
     /// The input's straight-sided (bilinear/trilinear) elements at the requested order.
     Straight,
+    /// The spline map from the initial control points (vertex averages), not fitted.
+    SplineInitial,
+    /// The spline map fitted by least squares with these weights, then certified.
+    SplineFitted,
 }
 
 /// Output file options.
@@ -47,6 +56,9 @@ pub struct CurveOptions {
     /// Order 1 output split into `subdivide`^d elements per input element.
     pub subdivide: Option<usize>,
     pub geometry: Geometry,
+    /// Weights of the fit (used with [`Geometry::SplineFitted`]).
+    pub fit: FitParams,
+    pub line_search: LineSearchParams,
     pub mesh: MeshOptions,
     pub output: OutputOptions,
 }
@@ -60,6 +72,12 @@ pub enum CurveError {
     Write(#[from] WriteError),
     #[error("{0}")]
     Options(String),
+    #[error("{}: fit: {source}", input.display())]
+    Solve { input: PathBuf, source: CgError },
+    #[error("{}: {source}", input.display())]
+    Validity { input: PathBuf, source: ValidityError },
+    #[error("{}: the {what} is not certified valid on {count} element(s) (first: {first}); nothing was written", input.display())]
+    Invalid { input: PathBuf, what: String, count: usize, first: String },
 }
 
 /// What `curve` did, for `--report` and the terminal.
@@ -78,6 +96,24 @@ pub struct CurveReport {
     pub control_points: usize,
     pub spline_elements: usize,
     pub q2_elements: usize,
+    /// Fit weights, when fitted.
+    pub fit_weights: Option<FitWeights>,
+    pub cg_iterations: Option<usize>,
+    pub cg_rel_residual: Option<f64>,
+    /// Step of the certified line search (1 = the full least-squares fit).
+    pub line_search_alpha: Option<f64>,
+    pub line_search: Option<LineSearchInfo>,
+    /// Elements of the written mesh not certified valid (always 0: otherwise nothing is written).
+    pub invalid_elements: usize,
+    /// Smallest certified lower bound of det J over the written elements (spline geometry).
+    pub min_det_jacobian_bound: Option<f64>,
+    /// Minimum scaled Jacobian of the input (corners) and of the output (sampled).
+    pub input_min_scaled_jacobian: f64,
+    pub min_scaled_jacobian: f64,
+    /// Distance of the output's boundary vertex nodes from the input's boundary vertices,
+    /// relative to the bounding-box diagonal.
+    pub boundary_deviation_max: f64,
+    pub boundary_deviation_rms: f64,
     /// Seconds per stage, and `total`.
     pub timings: BTreeMap<String, f64>,
 }
@@ -162,14 +198,76 @@ pub fn curve(
     lap("read", &mut timings);
     let topo = Topology::build(&mesh);
     lap("topology", &mut timings);
-    let source: &dyn BezierElements = match options.geometry {
-        Geometry::Straight => &mesh,
+    let input_msj = mesh.min_scaled_jacobian().map_or(f64::NAN, |m| m.0);
+    let mut space = None;
+    let mut fit_info = None;
+    let mut ls_info = None;
+    let mut min_det_bound = None;
+    if options.geometry != Geometry::Straight {
+        let mut s = SplineSpace::build(&mesh, &topo);
+        lap("spline", &mut timings);
+        let depth = options.line_search.certificate_depth;
+        if options.geometry == Geometry::SplineFitted {
+            let (c_star, info) = fit(&s, &mesh, &topo, &options.fit, |_, _| {})
+                .map_err(|source| CurveError::Solve { input: input.to_owned(), source })?;
+            lap("fit", &mut timings);
+            let (c, ls) = line_search(
+                s.dim,
+                s.n_elements(),
+                |e, cps| s.element_bezier_with(e, cps),
+                &s.control_points,
+                &c_star,
+                &options.line_search,
+            )
+            .map_err(|source| CurveError::Validity { input: input.to_owned(), source })?;
+            s.control_points = c;
+            min_det_bound = Some(ls.min_det_lower_bound);
+            fit_info = Some(info);
+            ls_info = Some(ls);
+            lap("validity", &mut timings);
+        } else {
+            let bounds = certify_elements(s.dim, s.n_elements(), |e| s.element_bezier(e), depth);
+            let bad: Vec<usize> = (0..bounds.len()).filter(|&e| !bounds[e].certified_positive()).collect();
+            if !bad.is_empty() {
+                return Err(CurveError::Invalid {
+                    input: input.to_owned(),
+                    what: "initial spline map".into(),
+                    count: bad.len(),
+                    first: bad.iter().take(8).map(|e| e.to_string()).collect::<Vec<_>>().join(", "),
+                });
+            }
+            min_det_bound = Some(bounds.iter().map(|b| b.lower).fold(f64::INFINITY, f64::min));
+            lap("validity", &mut timings);
+        }
+        space = Some(s);
+    }
+    let source: &dyn BezierElements = match &space {
+        None => &mesh,
+        Some(s) => s,
     };
     let mut ho = sample(source, &mesh, &topo, order);
     if options.subdivide.is_some() {
         ho = ho.subdivided();
     }
     lap("sample", &mut timings);
+    let quality = sample_det_jacobian(&ho);
+    let min_sj = quality.iter().map(|q| q.min_scaled_jacobian).fold(f64::INFINITY, f64::min);
+    let invalid = quality.iter().filter(|q| !(q.min_det_jacobian > 0.0)).count();
+    if invalid > 0 {
+        let first: Vec<String> = (0..quality.len())
+            .filter(|&e| !(quality[e].min_det_jacobian > 0.0))
+            .take(8)
+            .map(|e| e.to_string())
+            .collect();
+        return Err(CurveError::Invalid {
+            input: input.to_owned(),
+            what: "sampled output".into(),
+            count: invalid,
+            first: first.join(", "),
+        });
+    }
+    let (dev_max, dev_rms) = boundary_deviation(&mesh, &topo, &ho);
+    lap("quality", &mut timings);
     write_high_order(&ho, output, &options.output, &[input])?;
     lap("write", &mut timings);
     timings.insert("total".into(), start.elapsed().as_secs_f64());
@@ -184,9 +282,39 @@ pub fn curve(
         output_nodes: ho.nodes.len(),
         output_elements: ho.n_elements(),
         boundary_facets: ho.n_boundary(),
-        control_points: 0,
-        spline_elements: 0,
-        q2_elements: 0,
+        control_points: space.as_ref().map_or(0, |s| s.n_control_points()),
+        spline_elements: space.as_ref().map_or(0, |s| s.n_spline_elements()),
+        q2_elements: space.as_ref().map_or(0, |s| s.n_q2_elements()),
+        fit_weights: fit_info.as_ref().map(|_| options.fit.weights),
+        cg_iterations: fit_info.as_ref().map(|f| f.cg.iterations),
+        cg_rel_residual: fit_info.as_ref().map(|f| f.cg.rel_residual),
+        line_search_alpha: ls_info.as_ref().map(|l| l.alpha),
+        line_search: ls_info,
+        invalid_elements: 0,
+        min_det_jacobian_bound: min_det_bound,
+        input_min_scaled_jacobian: input_msj,
+        min_scaled_jacobian: min_sj,
+        boundary_deviation_max: dev_max,
+        boundary_deviation_rms: dev_rms,
         timings,
     })
+}
+
+/// Distance of the output's vertex nodes on the boundary from the input's boundary vertices
+/// (node ids of vertices equal the input vertex ids), relative to the bounding-box diagonal:
+/// (max, rms).
+pub fn boundary_deviation(mesh: &crate::mesh::LinearMesh, topo: &Topology, ho: &HighOrderMesh) -> (f64, f64) {
+    let (lo, hi) = mesh.bounding_box();
+    let diag = (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f64>().sqrt().max(f64::MIN_POSITIVE);
+    let (mut max, mut sum, mut n) = (0.0f64, 0.0, 0usize);
+    for (v, &b) in topo.vertex_on_boundary.iter().enumerate() {
+        if b {
+            let (x, y) = (mesh.coords[v], ho.nodes[v]);
+            let d = (0..3).map(|k| (x[k] - y[k]).powi(2)).sum::<f64>().sqrt() / diag;
+            max = max.max(d);
+            sum += d * d;
+            n += 1;
+        }
+    }
+    (max, if n > 0 { (sum / n as f64).sqrt() } else { 0.0 })
 }

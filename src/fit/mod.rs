@@ -435,3 +435,25 @@ pub fn fit(
         },
     ))
 }
+
+impl FitSpace for crate::spline::SplineSpace {
+    fn dim(&self) -> usize {
+        self.dim
+    }
+    fn n_elements(&self) -> usize {
+        crate::spline::SplineSpace::n_elements(self)
+    }
+    fn control_points(&self) -> &[[f64; 3]] {
+        &self.control_points
+    }
+    fn element_rows(&self, e: usize, offsets: &mut Vec<usize>, cols: &mut Vec<u32>, weights: &mut Vec<f64>) {
+        let mut rows = crate::spline::ElementRows::default();
+        self.extraction.rows(e, &mut rows);
+        *offsets = rows.offsets;
+        *cols = rows.cols;
+        *weights = rows.weights;
+    }
+    fn bezier_net_with(&self, e: usize, cps: &[[f64; 3]]) -> [[f64; 3]; 27] {
+        self.element_bezier_with(e, cps)
+    }
+}
