@@ -1,19 +1,19 @@
 //! The `polyspline` command line.
 
 use clap::{Parser, Subcommand};
+use polyspline::fit::{FitParams, FitWeights};
 use polyspline::info::MeshInfo;
 use polyspline::io::gmsh_write::MshVersion;
 use polyspline::io::output::write_atomically;
 use polyspline::io::vtu_write::VtuEncoding;
 use polyspline::io::{read_mesh, read_raw};
 use polyspline::mesh::{MeshOptions, Topology};
-use polyspline::fit::{FitParams, FitWeights};
-use polyspline::pipeline::{CurveOptions, Geometry, OutputOptions, curve};
-use polyspline::solve::CgParams;
-use polyspline::validity::LineSearchParams;
+use polyspline::pipeline::{CurveOptions, Geometry, LineSearchMode, OutputOptions, curve};
 use polyspline::plot::{Layer, render_svg};
 use polyspline::quality::CheckReport;
 use polyspline::sample::HighOrderMesh;
+use polyspline::solve::CgParams;
+use polyspline::validity::LineSearchParams;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
@@ -80,6 +80,14 @@ enum Command {
         /// Most bisections of the validity line search.
         #[arg(long, default_value_t = 30)]
         max_bisections: usize,
+        /// Accept an element in the line search only when its certified det J bound exceeds this
+        /// fraction of its straight input element's smallest corner det J (0: any positive).
+        #[arg(long, default_value_t = 0.1)]
+        min_det_fraction: f64,
+        /// Shorten the fitted step per control point around invalid elements (`local`), or by
+        /// one factor for the whole mesh as in the paper (`global`).
+        #[arg(long, value_enum, default_value_t = LineSearchArg::Local)]
+        line_search: LineSearchArg,
         /// With --order 1: split each element into K^d linear elements on the curved geometry.
         #[arg(long, value_name = "K")]
         subdivide: Option<usize>,
@@ -121,6 +129,12 @@ enum Command {
         #[arg(long, default_value_t = 1000.0)]
         width: f64,
     },
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum LineSearchArg {
+    Local,
+    Global,
 }
 
 #[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -176,6 +190,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             w_frame_midpoint,
             cg_tol,
             max_bisections,
+            line_search,
+            min_det_fraction,
             subdivide,
             msh_version,
             binary,
@@ -213,9 +229,20 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 },
                 fit: FitParams {
                     weights,
-                    cg: CgParams { rel_tol: cg_tol, ..Default::default() },
+                    cg: CgParams {
+                        rel_tol: cg_tol,
+                        ..Default::default()
+                    },
                 },
-                line_search: LineSearchParams { max_bisections, ..Default::default() },
+                line_search: LineSearchParams {
+                    max_bisections,
+                    min_det_fraction,
+                    ..Default::default()
+                },
+                line_search_mode: match line_search {
+                    LineSearchArg::Local => LineSearchMode::Local,
+                    LineSearchArg::Global => LineSearchMode::Global,
+                },
                 mesh: MeshOptions { allow_invalid },
                 output: OutputOptions {
                     msh_version: match msh_version {
@@ -246,8 +273,13 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     r.control_points, r.spline_elements, r.q2_elements
                 );
             }
-            if let (Some(it), Some(res), Some(alpha)) = (r.cg_iterations, r.cg_rel_residual, r.line_search_alpha) {
-                eprintln!("fit: {it} CG iterations, relative residual {res:.2e}, line search alpha {alpha:.4}");
+            if let (Some(it), Some(res), Some(alpha)) =
+                (r.cg_iterations, r.cg_rel_residual, r.line_search_alpha)
+            {
+                eprintln!(
+                    "fit: {it} CG iterations, relative residual {res:.2e}; {} elements invalid at the full step, {} control points damped, smallest step {alpha:.4}",
+                    r.invalid_at_full_step, r.damped_control_points
+                );
             }
             eprintln!(
                 "quality: min scaled Jacobian {:.4} (input {:.4}), invalid elements {}, boundary deviation max {:.2e} rms {:.2e}",

@@ -3,17 +3,20 @@
 //! Input: a mesh path and [`CurveOptions`]. Output: the written high-order mesh file and a
 //! [`CurveReport`]. The output file is written atomically and never onto the input.
 
+use crate::fit::{FitParams, FitWeights, fit};
 use crate::io::gmsh_write::{MshVersion, write_msh};
 use crate::io::output::{WriteError, write_atomically};
 use crate::io::vtu_write::{VtuEncoding, write_vtu};
-use crate::fit::{FitParams, FitWeights, fit};
 use crate::io::{ReadError, read_mesh};
+use crate::mesh::{MeshOptions, Topology};
 use crate::quality::sample_det_jacobian;
+use crate::sample::{BezierElements, HighOrderMesh, MAX_ORDER, sample};
 use crate::solve::CgError;
 use crate::spline::SplineSpace;
-use crate::validity::{LineSearchInfo, LineSearchParams, ValidityError, certify_elements, line_search};
-use crate::mesh::{MeshOptions, Topology};
-use crate::sample::{BezierElements, HighOrderMesh, MAX_ORDER, sample};
+use crate::validity::{
+    LineSearchInfo, LineSearchParams, ValidityError, certify_elements, line_search,
+    local_line_search,
+};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -29,6 +32,17 @@ pub enum Geometry {
     SplineInitial,
     /// The spline map fitted by least squares with these weights, then certified.
     SplineFitted,
+}
+
+/// How the fitted step is shortened where it would invalidate elements.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LineSearchMode {
+    /// One α for all control points (paper §2.3).
+    Global,
+    /// A factor per control point, halved only around elements that are not certified
+    /// ([`crate::validity::local_line_search`]).
+    Local,
 }
 
 /// Output file options.
@@ -59,6 +73,7 @@ pub struct CurveOptions {
     /// Weights of the fit (used with [`Geometry::SplineFitted`]).
     pub fit: FitParams,
     pub line_search: LineSearchParams,
+    pub line_search_mode: LineSearchMode,
     pub mesh: MeshOptions,
     pub output: OutputOptions,
 }
@@ -75,9 +90,17 @@ pub enum CurveError {
     #[error("{}: fit: {source}", input.display())]
     Solve { input: PathBuf, source: CgError },
     #[error("{}: {source}", input.display())]
-    Validity { input: PathBuf, source: ValidityError },
+    Validity {
+        input: PathBuf,
+        source: ValidityError,
+    },
     #[error("{}: the {what} is not certified valid on {count} element(s) (first: {first}); nothing was written", input.display())]
-    Invalid { input: PathBuf, what: String, count: usize, first: String },
+    Invalid {
+        input: PathBuf,
+        what: String,
+        count: usize,
+        first: String,
+    },
 }
 
 /// What `curve` did, for `--report` and the terminal.
@@ -96,12 +119,20 @@ pub struct CurveReport {
     pub control_points: usize,
     pub spline_elements: usize,
     pub q2_elements: usize,
+    /// Elements made Q2 because their initial spline map was not certified valid.
+    pub demoted_elements: usize,
     /// Fit weights, when fitted.
     pub fit_weights: Option<FitWeights>,
     pub cg_iterations: Option<usize>,
     pub cg_rel_residual: Option<f64>,
-    /// Step of the certified line search (1 = the full least-squares fit).
+    pub line_search_mode: LineSearchMode,
+    /// Step of the certified line search (1 = the full least-squares fit); with the local
+    /// search, the smallest step factor of any control point.
     pub line_search_alpha: Option<f64>,
+    /// Elements not certified valid at the full least-squares step.
+    pub invalid_at_full_step: usize,
+    /// Local search: control points whose step was shortened.
+    pub damped_control_points: usize,
     pub line_search: Option<LineSearchInfo>,
     /// Elements of the written mesh not certified valid (always 0: otherwise nothing is written).
     pub invalid_elements: usize,
@@ -203,38 +234,137 @@ pub fn curve(
     let mut fit_info = None;
     let mut ls_info = None;
     let mut min_det_bound = None;
+    let mut demoted = 0;
+    let mut ls_alpha = None;
+    let mut ls_invalid_full = 0;
+    let mut ls_damped = 0;
     if options.geometry != Geometry::Straight {
+        let depth = options.line_search.certificate_depth;
+        let invalid = |what: &str, bad: &[usize]| CurveError::Invalid {
+            input: input.to_owned(),
+            what: what.into(),
+            count: bad.len(),
+            first: bad
+                .iter()
+                .take(8)
+                .map(|e| e.to_string())
+                .collect::<Vec<_>>()
+                .join(", "),
+        };
+        let mut demote = vec![false; mesh.n_elements()];
         let mut s = SplineSpace::build(&mesh, &topo);
         lap("spline", &mut timings);
-        let depth = options.line_search.certificate_depth;
         if options.geometry == Geometry::SplineFitted {
-            let (c_star, info) = fit(&s, &mesh, &topo, &options.fit, |_, _| {})
-                .map_err(|source| CurveError::Solve { input: input.to_owned(), source })?;
-            lap("fit", &mut timings);
-            let (c, ls) = line_search(
-                s.dim,
-                s.n_elements(),
-                |e, cps| s.element_bezier_with(e, cps),
-                &s.control_points,
-                &c_star,
-                &options.line_search,
-            )
-            .map_err(|source| CurveError::Validity { input: input.to_owned(), source })?;
-            s.control_points = c;
-            min_det_bound = Some(ls.min_det_lower_bound);
-            fit_info = Some(info);
-            ls_info = Some(ls);
-            lap("validity", &mut timings);
+            // Fit; take the full step when certified, else bisect towards the initial map.
+            // Where the initial map itself is not certified valid, those elements become
+            // constrained Q2 elements (the input's own shape) and the fit is repeated.
+            let mut round = 0;
+            loop {
+                let (c_star, info) =
+                    fit(&s, &mesh, &topo, &options.fit, |_, _| {}).map_err(|source| {
+                        CurveError::Solve {
+                            input: input.to_owned(),
+                            source,
+                        }
+                    })?;
+                lap("fit", &mut timings);
+                let net = |e: usize, cps: &[[f64; 3]]| s.element_bezier_with(e, cps);
+                let thresholds =
+                    acceptance_thresholds(&mesh, &s, options.line_search.min_det_fraction, depth);
+                let result = match options.line_search_mode {
+                    LineSearchMode::Global => line_search(
+                        s.dim,
+                        s.n_elements(),
+                        net,
+                        &s.control_points,
+                        &c_star,
+                        &thresholds,
+                        &options.line_search,
+                    )
+                    .map(|(c, ls)| {
+                        (
+                            c,
+                            ls.alpha,
+                            ls.min_det_lower_bound,
+                            ls.invalid_at_full_step,
+                            0,
+                            Some(ls),
+                        )
+                    }),
+                    LineSearchMode::Local => {
+                        let support = |e: usize| {
+                            let mut rows = crate::spline::ElementRows::default();
+                            s.extraction.rows(e, &mut rows);
+                            let mut ids = rows.cols;
+                            ids.sort_unstable();
+                            ids.dedup();
+                            ids
+                        };
+                        local_line_search(
+                            s.dim,
+                            s.n_elements(),
+                            net,
+                            support,
+                            &s.control_points,
+                            &c_star,
+                            &thresholds,
+                            &options.line_search,
+                        )
+                        .map(|(c, ls)| {
+                            (
+                                c,
+                                ls.min_step,
+                                ls.min_det_lower_bound,
+                                ls.invalid_at_full_step,
+                                ls.damped_control_points,
+                                None,
+                            )
+                        })
+                    }
+                };
+                match result {
+                    Ok((c, alpha, bound, invalid_full, damped, ls)) => {
+                        s.control_points = c;
+                        min_det_bound = Some(bound);
+                        fit_info = Some(info);
+                        ls_alpha = Some(alpha);
+                        ls_invalid_full = invalid_full;
+                        ls_damped = damped;
+                        ls_info = ls;
+                        lap("validity", &mut timings);
+                        break;
+                    }
+                    Err(ValidityError::InitialInvalid { .. }) if round < MAX_DEMOTION_ROUNDS => {
+                        let bounds =
+                            certify_elements(s.dim, s.n_elements(), |e| s.element_bezier(e), depth);
+                        let bad: Vec<usize> = (0..bounds.len())
+                            .filter(|&e| !bounds[e].certified_positive())
+                            .collect();
+                        demote_with_rings(&topo, &bad, round, &mut demote);
+                        s = SplineSpace::build_with_demoted(&mesh, &topo, &demote);
+                        round += 1;
+                        lap("validity", &mut timings);
+                    }
+                    Err(source) => {
+                        return Err(CurveError::Validity {
+                            input: input.to_owned(),
+                            source,
+                        });
+                    }
+                }
+            }
+            demoted = demote.iter().filter(|&&d| d).count();
         } else {
             let bounds = certify_elements(s.dim, s.n_elements(), |e| s.element_bezier(e), depth);
-            let bad: Vec<usize> = (0..bounds.len()).filter(|&e| !bounds[e].certified_positive()).collect();
+            let bad: Vec<usize> = (0..bounds.len())
+                .filter(|&e| !bounds[e].certified_positive())
+                .collect();
             if !bad.is_empty() {
-                return Err(CurveError::Invalid {
-                    input: input.to_owned(),
-                    what: "initial spline map".into(),
-                    count: bad.len(),
-                    first: bad.iter().take(8).map(|e| e.to_string()).collect::<Vec<_>>().join(", "),
-                });
+                // The unfitted map is what was asked for: refuse rather than change it.
+                return Err(invalid(
+                    "initial spline map (use --fit position to fit it)",
+                    &bad,
+                ));
             }
             min_det_bound = Some(bounds.iter().map(|b| b.lower).fold(f64::INFINITY, f64::min));
             lap("validity", &mut timings);
@@ -251,8 +381,14 @@ pub fn curve(
     }
     lap("sample", &mut timings);
     let quality = sample_det_jacobian(&ho);
-    let min_sj = quality.iter().map(|q| q.min_scaled_jacobian).fold(f64::INFINITY, f64::min);
-    let invalid = quality.iter().filter(|q| !(q.min_det_jacobian > 0.0)).count();
+    let min_sj = quality
+        .iter()
+        .map(|q| q.min_scaled_jacobian)
+        .fold(f64::INFINITY, f64::min);
+    let invalid = quality
+        .iter()
+        .filter(|q| !(q.min_det_jacobian > 0.0))
+        .count();
     if invalid > 0 {
         let first: Vec<String> = (0..quality.len())
             .filter(|&e| !(quality[e].min_det_jacobian > 0.0))
@@ -285,10 +421,14 @@ pub fn curve(
         control_points: space.as_ref().map_or(0, |s| s.n_control_points()),
         spline_elements: space.as_ref().map_or(0, |s| s.n_spline_elements()),
         q2_elements: space.as_ref().map_or(0, |s| s.n_q2_elements()),
+        demoted_elements: demoted,
         fit_weights: fit_info.as_ref().map(|_| options.fit.weights),
         cg_iterations: fit_info.as_ref().map(|f| f.cg.iterations),
         cg_rel_residual: fit_info.as_ref().map(|f| f.cg.rel_residual),
-        line_search_alpha: ls_info.as_ref().map(|l| l.alpha),
+        line_search_mode: options.line_search_mode,
+        line_search_alpha: ls_alpha,
+        invalid_at_full_step: ls_invalid_full,
+        damped_control_points: ls_damped,
         line_search: ls_info,
         invalid_elements: 0,
         min_det_jacobian_bound: min_det_bound,
@@ -303,9 +443,17 @@ pub fn curve(
 /// Distance of the output's vertex nodes on the boundary from the input's boundary vertices
 /// (node ids of vertices equal the input vertex ids), relative to the bounding-box diagonal:
 /// (max, rms).
-pub fn boundary_deviation(mesh: &crate::mesh::LinearMesh, topo: &Topology, ho: &HighOrderMesh) -> (f64, f64) {
+pub fn boundary_deviation(
+    mesh: &crate::mesh::LinearMesh,
+    topo: &Topology,
+    ho: &HighOrderMesh,
+) -> (f64, f64) {
     let (lo, hi) = mesh.bounding_box();
-    let diag = (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f64>().sqrt().max(f64::MIN_POSITIVE);
+    let diag = (0..3)
+        .map(|k| (hi[k] - lo[k]).powi(2))
+        .sum::<f64>()
+        .sqrt()
+        .max(f64::MIN_POSITIVE);
     let (mut max, mut sum, mut n) = (0.0f64, 0.0, 0usize);
     for (v, &b) in topo.vertex_on_boundary.iter().enumerate() {
         if b {
@@ -317,4 +465,65 @@ pub fn boundary_deviation(mesh: &crate::mesh::LinearMesh, topo: &Topology, ho: &
         }
     }
     (max, if n > 0 { (sum / n as f64).sqrt() } else { 0.0 })
+}
+
+/// Rounds of demotion before giving up on an initially invalid spline map.
+const MAX_DEMOTION_ROUNDS: usize = 16;
+
+/// Mark `bad` elements for demotion; after the first round also their facet neighbours, so
+/// repeated rounds grow a Q2 region around an area the spline cannot follow.
+fn demote_with_rings(topo: &Topology, bad: &[usize], round: usize, demote: &mut [bool]) {
+    for &e in bad {
+        demote[e] = true;
+        if round > 0 {
+            for side in 0..topo.sides() {
+                let n = topo.neighbor(e, side);
+                if n != crate::mesh::topology::NONE {
+                    demote[n as usize] = true;
+                }
+            }
+        }
+    }
+}
+
+/// Per-element acceptance threshold of the line search: `fraction` × the smallest corner det J
+/// of the straight input element, but never more than half of what the initial map is
+/// certified to achieve (0 where the initial map is not certified).
+fn acceptance_thresholds(
+    mesh: &crate::mesh::LinearMesh,
+    s: &SplineSpace,
+    fraction: f64,
+    depth: usize,
+) -> Vec<f64> {
+    use rayon::prelude::*;
+    if fraction <= 0.0 {
+        return Vec::new();
+    }
+    let npe = mesh.nodes_per_element();
+    (0..mesh.n_elements())
+        .into_par_iter()
+        .map(|e| {
+            let x = mesh.element_coords(e);
+            let mut jac = [0.0; 8];
+            let mut scaled = [0.0; 8];
+            crate::mesh::linear::corner_jacobians(
+                mesh.dim,
+                &x[..npe],
+                &mut jac[..npe],
+                &mut scaled[..npe],
+            );
+            let reference = jac[..npe]
+                .iter()
+                .copied()
+                .fold(f64::INFINITY, f64::min)
+                .max(0.0);
+            let initial =
+                crate::validity::det_jacobian_bounds(s.dim, &s.element_bezier(e), depth).lower;
+            if initial > 0.0 {
+                (fraction * reference).min(0.5 * initial)
+            } else {
+                0.0
+            }
+        })
+        .collect()
 }

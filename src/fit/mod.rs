@@ -446,7 +446,13 @@ impl FitSpace for crate::spline::SplineSpace {
     fn control_points(&self) -> &[[f64; 3]] {
         &self.control_points
     }
-    fn element_rows(&self, e: usize, offsets: &mut Vec<usize>, cols: &mut Vec<u32>, weights: &mut Vec<f64>) {
+    fn element_rows(
+        &self,
+        e: usize,
+        offsets: &mut Vec<usize>,
+        cols: &mut Vec<u32>,
+        weights: &mut Vec<f64>,
+    ) {
         let mut rows = crate::spline::ElementRows::default();
         self.extraction.rows(e, &mut rows);
         *offsets = rows.offsets;

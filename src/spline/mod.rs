@@ -95,6 +95,13 @@ impl SplineSpace {
     /// Panics if the mesh has 2^30 or more vertices, edges, faces or elements (the packed
     /// stencil representation's limit), or if `topo` does not belong to `mesh`.
     pub fn build(mesh: &LinearMesh, topo: &Topology) -> SplineSpace {
+        Self::build_with_demoted(mesh, topo, &[])
+    }
+
+    /// [`SplineSpace::build`], with the elements marked in `demote` (indexed by element; an
+    /// empty slice demotes none) made constrained Q2 elements
+    /// ([`Q2Reason::InvalidSplineMap`]). Their spline neighbours keep their stencils.
+    pub fn build_with_demoted(mesh: &LinearMesh, topo: &Topology, demote: &[bool]) -> SplineSpace {
         let dim = topo.dim;
         assert!(dim == 2 || dim == 3, "quad or hex meshes only");
         let ne = topo.n_elements;
@@ -108,6 +115,11 @@ impl SplineSpace {
 
         // 1–2. Classes and stencils.
         let mut classes = classify::classify(mesh, topo);
+        for (c, &d) in classes.iter_mut().zip(demote) {
+            if d && c.is_spline() {
+                *c = ElementClass::Q2(Q2Reason::InvalidSplineMap);
+            }
+        }
         let mut local_nodes = vec![NONE; ne * nl];
         {
             let transport = stencil::transport_table(mesh, topo);

@@ -379,6 +379,11 @@ pub struct LineSearchParams {
     pub tolerance: f64,
     /// Subdivision depth of the Bernstein certificate.
     pub certificate_depth: usize,
+    /// Accept an element only when its certified det J lower bound exceeds this fraction of
+    /// the smallest corner det J of its straight input element (capped at half the initial
+    /// map's own bound), so a valid result is not also a nearly degenerate one. 0 accepts any
+    /// certified-positive element, as in the paper.
+    pub min_det_fraction: f64,
 }
 
 impl Default for LineSearchParams {
@@ -387,6 +392,7 @@ impl Default for LineSearchParams {
             max_bisections: 30,
             tolerance: 1e-3,
             certificate_depth: 6,
+            min_det_fraction: 0.1,
         }
     }
 }
@@ -437,15 +443,19 @@ fn worst(bounds: &[DetBounds], n: usize) -> Vec<WorstElement> {
 }
 
 /// Largest certified-valid α in [0, 1] for C(α) = C0 + α(C* − C0), by bisection. `net(e, cps)`
-/// gives the Bernstein net of element e for control points cps. C0 must be certified valid.
+/// gives the Bernstein net of element e for control points cps. An element is accepted when
+/// its certified lower bound of det J exceeds `thresholds[e]` (0 where the slice is short).
+/// C0 must be accepted.
 pub fn line_search(
     dim: usize,
     n_elements: usize,
     net: impl Fn(usize, &[[f64; 3]]) -> [[f64; 3]; 27] + Sync,
     c0: &[[f64; 3]],
     c_star: &[[f64; 3]],
+    thresholds: &[f64],
     params: &LineSearchParams,
 ) -> Result<(Vec<[f64; 3]>, LineSearchInfo), ValidityError> {
+    let ok = |e: usize, b: &DetBounds| b.lower > thresholds.get(e).copied().unwrap_or(0.0);
     let at = |alpha: f64| -> Vec<[f64; 3]> {
         c0.iter()
             .zip(c_star)
@@ -485,7 +495,7 @@ pub fn line_search(
     while info.bisections < params.max_bisections && hi - lo > params.tolerance {
         let mid = 0.5 * (lo + hi);
         let b = check(&at(mid));
-        if b.iter().all(DetBounds::certified_positive) {
+        if b.iter().enumerate().all(|(e, x)| ok(e, x)) {
             lo = mid;
             lo_bounds = b;
         } else {
@@ -496,4 +506,110 @@ pub fn line_search(
     info.alpha = lo;
     info.min_det_lower_bound = min_lower(&lo_bounds);
     Ok((at(lo), info))
+}
+
+/// Outcome of the local line search.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct LocalSearchInfo {
+    /// Rounds of halving.
+    pub rounds: usize,
+    /// Control points whose step was shortened, and the smallest step factor among them.
+    pub damped_control_points: usize,
+    pub min_step: f64,
+    /// Elements not certified valid at the full step.
+    pub invalid_at_full_step: usize,
+    pub min_det_lower_bound: f64,
+}
+
+/// A local variant of the line search: every control point moves by its own factor
+/// s_c ∈ [0, 1] of the fitted displacement, C = C0 + s ⊙ (C* − C0). Starting from s = 1,
+/// the factors of all control points of elements that are not certified valid are halved
+/// until every element is certified (after `max_bisections` halvings they are set to 0,
+/// which restores the certified initial map locally). Elements away from trouble keep the
+/// full least-squares step, where a single global α would shorten it everywhere.
+/// `support(e)` lists the control points that element e depends on.
+#[allow(clippy::too_many_arguments)]
+pub fn local_line_search(
+    dim: usize,
+    n_elements: usize,
+    net: impl Fn(usize, &[[f64; 3]]) -> [[f64; 3]; 27] + Sync,
+    support: impl Fn(usize) -> Vec<u32> + Sync,
+    c0: &[[f64; 3]],
+    c_star: &[[f64; 3]],
+    thresholds: &[f64],
+    params: &LineSearchParams,
+) -> Result<(Vec<[f64; 3]>, LocalSearchInfo), ValidityError> {
+    use rayon::prelude::*;
+    let ok = |e: usize, b: &DetBounds| b.lower > thresholds.get(e).copied().unwrap_or(0.0);
+    let n = c0.len();
+    let supports: Vec<Vec<u32>> = (0..n_elements).into_par_iter().map(&support).collect();
+    let mut step = vec![1.0f64; n];
+    let place = |step: &[f64]| -> Vec<[f64; 3]> {
+        c0.iter()
+            .zip(c_star)
+            .zip(step)
+            .map(|((a, b), s)| std::array::from_fn(|k| a[k] + s * (b[k] - a[k])))
+            .collect()
+    };
+    let mut cps = c_star.to_vec();
+    let mut bounds: Vec<DetBounds> = (0..n_elements)
+        .into_par_iter()
+        .map(|e| det_jacobian_bounds(dim, &net(e, &cps), params.certificate_depth))
+        .collect();
+    let invalid_at_full_step = (0..n_elements).filter(|&e| !ok(e, &bounds[e])).count();
+    let mut rounds = 0;
+    loop {
+        let bad: Vec<usize> = (0..n_elements).filter(|&e| !ok(e, &bounds[e])).collect();
+        if bad.is_empty() {
+            break;
+        }
+        if rounds > params.max_bisections + 1 {
+            // Even the initial map is not valid there.
+            return Err(ValidityError::InitialInvalid {
+                count: bad.len(),
+                first: bad.into_iter().take(8).collect(),
+            });
+        }
+        let last = rounds >= params.max_bisections;
+        let mut touched = vec![false; n];
+        for &e in &bad {
+            for &c in &supports[e] {
+                let c = c as usize;
+                if !touched[c] {
+                    touched[c] = true;
+                    step[c] = if last { 0.0 } else { 0.5 * step[c] };
+                }
+            }
+        }
+        cps = place(&step);
+        // Re-certify the elements that depend on a changed control point.
+        let recheck: Vec<usize> = (0..n_elements)
+            .into_par_iter()
+            .filter(|&e| supports[e].iter().any(|&c| touched[c as usize]))
+            .collect();
+        let fresh: Vec<(usize, DetBounds)> = recheck
+            .into_par_iter()
+            .map(|e| {
+                (
+                    e,
+                    det_jacobian_bounds(dim, &net(e, &cps), params.certificate_depth),
+                )
+            })
+            .collect();
+        for (e, b) in fresh {
+            bounds[e] = b;
+        }
+        rounds += 1;
+    }
+    let damped: Vec<f64> = step.iter().copied().filter(|&s| s < 1.0).collect();
+    Ok((
+        cps,
+        LocalSearchInfo {
+            rounds,
+            damped_control_points: damped.len(),
+            min_step: damped.iter().copied().fold(1.0, f64::min),
+            invalid_at_full_step,
+            min_det_lower_bound: bounds.iter().map(|b| b.lower).fold(f64::INFINITY, f64::min),
+        },
+    ))
 }

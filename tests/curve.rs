@@ -1,0 +1,300 @@
+//! The `curve` job end to end on real and generated meshes: every written mesh is read back and
+//! checked, the sampled output represents the spline geometry exactly, and bad output paths
+//! lose nothing.
+
+use polyspline::io::read_raw;
+use polyspline::mesh::generate::{grid_2d, grid_3d, uniform};
+use polyspline::mesh::{LinearMesh, MeshOptions, Topology};
+use polyspline::pipeline::{
+    CurveError, CurveOptions, Geometry, LineSearchMode, OutputOptions, curve,
+};
+use polyspline::quality::{CheckReport, lagrange_1d};
+use polyspline::sample::ordering::lattice_point;
+use polyspline::sample::{HighOrderMesh, multilinear, sample};
+use polyspline::spline::SplineSpace;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("curve");
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+fn real_meshes() -> Vec<PathBuf> {
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("meshes/real");
+    let mut out = Vec::new();
+    for d in std::fs::read_dir(&root).unwrap().flatten() {
+        if d.path().is_dir() {
+            for f in std::fs::read_dir(d.path()).unwrap().flatten() {
+                out.push(f.path());
+            }
+        }
+    }
+    out.sort();
+    assert_eq!(out.len(), 15, "the bundled real meshes");
+    out
+}
+
+fn options(order: usize, geometry: Geometry) -> CurveOptions {
+    CurveOptions {
+        order,
+        subdivide: None,
+        geometry,
+        fit: Default::default(),
+        line_search: Default::default(),
+        line_search_mode: LineSearchMode::Local,
+        mesh: MeshOptions::default(),
+        output: OutputOptions::default(),
+    }
+}
+
+fn read_back(path: &Path) -> HighOrderMesh {
+    HighOrderMesh::from_raw(read_raw(path).unwrap()).unwrap()
+}
+
+/// Straight-sided output and the unfitted spline map at orders 2 and 3 on every real mesh: the
+/// written files read back with the right size and no invalid element. Where the unfitted
+/// map is not certified valid, `curve` refuses and writes nothing.
+#[test]
+fn straight_and_unfitted_on_every_real_mesh() {
+    for mesh in real_meshes() {
+        for order in [2, 3] {
+            for geometry in [Geometry::Straight, Geometry::SplineInitial] {
+                let name = format!(
+                    "{}_{order}_{geometry:?}.msh",
+                    mesh.file_stem().unwrap().to_string_lossy()
+                );
+                let out = scratch(&name);
+                let _ = std::fs::remove_file(&out);
+                match curve(&mesh, &out, &options(order, geometry)) {
+                    Ok(r) => {
+                        let back = read_back(&out);
+                        assert_eq!(
+                            (back.n_elements(), back.order),
+                            (r.elements, order),
+                            "{name}"
+                        );
+                        let check = CheckReport::new(&back);
+                        assert_eq!(check.invalid, 0, "{name}");
+                        assert_eq!(r.invalid_elements, 0);
+                    }
+                    Err(CurveError::Invalid { what, count, .. }) => {
+                        assert_eq!(
+                            geometry,
+                            Geometry::SplineInitial,
+                            "{name}: straight output must not fail"
+                        );
+                        assert!(what.contains("initial spline map") && count > 0);
+                        assert!(!out.exists(), "{name}: nothing may be written");
+                    }
+                    Err(e) => panic!("{name}: {e}"),
+                }
+            }
+        }
+    }
+}
+
+/// The default fit on every real mesh: certified valid output, checked again by sampling our
+/// file and by Gmsh's own Jacobians; the fit moves the boundary closer to the input vertices
+/// than the unfitted map.
+#[test]
+fn fitted_on_every_real_mesh() {
+    let mut jobs = Vec::new();
+    for mesh in real_meshes() {
+        let name = format!("{}_fit.msh", mesh.file_stem().unwrap().to_string_lossy());
+        let out = scratch(&name);
+        let r = curve(&mesh, &out, &options(2, Geometry::SplineFitted))
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(r.invalid_elements, 0);
+        assert!(r.min_det_jacobian_bound.unwrap() > 0.0, "{name}");
+        let back = read_back(&out);
+        assert_eq!(CheckReport::new(&back).invalid, 0, "{name}");
+        // Boundary vertices of the unfitted spline map, for comparison.
+        let m = polyspline::io::read_mesh(&mesh, &MeshOptions::default()).unwrap();
+        let t = Topology::build(&m);
+        let s = SplineSpace::build(&m, &t);
+        let (unfitted, _) =
+            polyspline::pipeline::boundary_deviation(&m, &t, &sample(&s, &m, &t, 1));
+        assert!(
+            r.boundary_deviation_max < 0.5 * unfitted || r.boundary_deviation_max < 1e-12,
+            "{name}: boundary deviation {} fitted, {unfitted} unfitted",
+            r.boundary_deviation_max
+        );
+        jobs.push(serde_json::json!({ "file": out, "probes": [] }));
+    }
+    let ok = Command::new("python3")
+        .args(["-c", "import gmsh"])
+        .status()
+        .is_ok_and(|s| s.success());
+    if !ok {
+        assert!(
+            std::env::var("CI").is_err(),
+            "CI must have the Python gmsh module"
+        );
+        eprintln!("SKIPPED: Python module gmsh not available; Gmsh's Jacobian check did not run");
+        return;
+    }
+    let path = scratch("fit_jobs.json");
+    std::fs::write(&path, serde_json::json!({ "jobs": jobs }).to_string()).unwrap();
+    let out = Command::new("python3")
+        .arg(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/tests/external/gmsh_probe.py"
+        ))
+        .arg(&path)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let results: Vec<serde_json::Value> = serde_json::from_slice(&out.stdout).unwrap();
+    for (v, job) in results.iter().zip(&jobs) {
+        let (lo, hi) = (
+            v["min_det_jac"].as_f64().unwrap(),
+            v["max_det_jac"].as_f64().unwrap(),
+        );
+        let three_d = v["type_name"].as_str().unwrap().contains("Hexahedron");
+        assert!(
+            lo * hi > 0.0 && (!three_d || lo > 0.0),
+            "{}: Gmsh finds det J in [{lo}, {hi}]",
+            job["file"]
+        );
+    }
+}
+
+/// Uniform grids (and affine images) keep the identity map at orders 2–5 with the spline
+/// geometry, unfitted and fitted.
+#[test]
+fn uniform_grids_reproduce_the_linear_map() {
+    let affine = |p: [f64; 3]| {
+        [
+            2.0 * p[0] + 0.5 * p[1] + 1.0,
+            -0.3 * p[0] + 1.5 * p[1] + 0.2 * p[2],
+            0.1 * p[0] + p[2] * 0.8,
+        ]
+    };
+    let mut g2 = grid_2d(&uniform(4, 1.0), &uniform(3, 1.0));
+    let mut g3 = grid_3d(&uniform(3, 1.0), &uniform(3, 1.0), &uniform(2, 1.0));
+    for p in g2.coords.iter_mut() {
+        let q = affine(*p);
+        *p = [q[0], q[1], 0.0];
+    }
+    for p in g3.coords.iter_mut() {
+        *p = affine(*p);
+    }
+    for m in [g2, g3] {
+        let t = Topology::build(&m);
+        let s = SplineSpace::build(&m, &t);
+        for p in 2..=5 {
+            let ho = sample(&s, &m, &t, p);
+            for e in 0..m.n_elements() {
+                let x = m.element_coords(e);
+                for (n, &id) in ho.element(e).iter().enumerate() {
+                    let l = lattice_point(p, m.dim, n);
+                    let want = multilinear(m.dim, &x, l.map(|c| c as f64 / p as f64));
+                    let got = ho.nodes[id as usize];
+                    assert!(
+                        (0..3).all(|k| (got[k] - want[k]).abs() < 1e-11),
+                        "p={p} e={e}"
+                    );
+                }
+            }
+        }
+        // The fit keeps an exactly reproduced map.
+        let (c, _) = polyspline::fit::fit(&s, &m, &t, &Default::default(), |_, _| {}).unwrap();
+        let s2 = SplineSpace {
+            control_points: c,
+            ..s.clone()
+        };
+        for e in 0..m.n_elements() {
+            let want = multilinear(m.dim, &m.element_coords(e), [0.3, 0.6, 0.2]);
+            let got = s2.eval(e, [0.3, 0.6, 0.2]);
+            assert!(
+                (0..3).all(|k| (got[k] - want[k]).abs() < 1e-6),
+                "fitted e={e}"
+            );
+        }
+    }
+}
+
+/// An order-p ≥ 2 output element is the spline element itself: its Lagrange interpolant,
+/// evaluated anywhere, equals the spline map.
+#[test]
+fn sampled_elements_represent_the_spline_exactly() {
+    let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("meshes/real/mfem/cylinder-hex.mesh");
+    let m: LinearMesh = polyspline::io::read_mesh(&path, &MeshOptions::default()).unwrap();
+    let t = Topology::build(&m);
+    let s = SplineSpace::build(&m, &t);
+    for p in [2, 3, 4] {
+        let ho = sample(&s, &m, &t, p);
+        let mut v = [vec![0.0; p + 1], vec![0.0; p + 1], vec![0.0; p + 1]];
+        let mut d = vec![0.0; p + 1];
+        for e in (0..m.n_elements()).step_by(7) {
+            let u = [0.13, 0.71, 0.42];
+            for k in 0..3 {
+                lagrange_1d(p, u[k], &mut v[k], &mut d);
+            }
+            let mut x = [0.0; 3];
+            for (n, &id) in ho.element(e).iter().enumerate() {
+                let l = lattice_point(p, 3, n);
+                let w = v[0][l[0]] * v[1][l[1]] * v[2][l[2]];
+                for k in 0..3 {
+                    x[k] += w * ho.nodes[id as usize][k];
+                }
+            }
+            let want = s.eval(e, u);
+            assert!(
+                (0..3).all(|k| (x[k] - want[k]).abs() < 1e-10),
+                "p={p} e={e}: {x:?} vs {want:?}"
+            );
+        }
+    }
+}
+
+/// Output problems: an unwritable place or the input itself; nothing is left behind.
+#[test]
+fn bad_outputs_lose_nothing() {
+    let input = scratch("input_copy.msh");
+    std::fs::copy(
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("meshes/generated/block_hex8_8.msh"),
+        &input,
+    )
+    .unwrap();
+    let before = std::fs::read(&input).unwrap();
+    let e = curve(&input, &input, &options(2, Geometry::SplineFitted)).unwrap_err();
+    assert!(
+        e.to_string().contains("refusing to overwrite the input"),
+        "{e}"
+    );
+    assert_eq!(std::fs::read(&input).unwrap(), before);
+    let missing_dir = scratch("no/such/dir/out.msh");
+    let e = curve(&input, &missing_dir, &options(2, Geometry::SplineFitted)).unwrap_err();
+    assert!(e.to_string().contains("cannot write"), "{e}");
+    let e = curve(
+        &input,
+        &scratch("out.xyz"),
+        &options(2, Geometry::SplineFitted),
+    )
+    .unwrap_err();
+    assert!(e.to_string().contains("unknown output format"), "{e}");
+    // No temporary files are left next to the outputs.
+    let leftovers: Vec<_> = std::fs::read_dir(scratch(""))
+        .unwrap()
+        .flatten()
+        .filter(|f| f.file_name().to_string_lossy().ends_with(".tmp"))
+        .collect();
+    assert!(leftovers.is_empty(), "{leftovers:?}");
+    // The CLI says so in one line with exit status 1.
+    let out = Command::new(env!("CARGO_BIN_EXE_polyspline"))
+        .arg("curve")
+        .arg(&input)
+        .arg("-o")
+        .arg(&input)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("refusing to overwrite"));
+}
