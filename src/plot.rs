@@ -56,7 +56,7 @@ pub fn edge_polylines(mesh: &HighOrderMesh) -> Vec<Vec<[f64; 2]>> {
             let key = (
                 edge[0].min(edge[p]),
                 edge[0].max(edge[p]),
-                edge[p / 2].min(edge[(p + 1) / 2]),
+                edge[p / 2].min(edge[p.div_ceil(2)]),
             );
             if !seen.insert(key) {
                 continue;

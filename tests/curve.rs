@@ -241,8 +241,8 @@ fn sampled_elements_represent_the_spline_exactly() {
             for (n, &id) in ho.element(e).iter().enumerate() {
                 let l = lattice_point(p, 3, n);
                 let w = v[0][l[0]] * v[1][l[1]] * v[2][l[2]];
-                for k in 0..3 {
-                    x[k] += w * ho.nodes[id as usize][k];
+                for (xk, nk) in x.iter_mut().zip(ho.nodes[id as usize]) {
+                    *xk += w * nk;
                 }
             }
             let want = s.eval(e, u);

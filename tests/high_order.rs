@@ -31,8 +31,8 @@ fn scrambled(mut m: LinearMesh, rng: &mut Rng) -> LinearMesh {
     let t = Topology::build(&m);
     for (v, p) in m.coords.iter_mut().enumerate() {
         if !t.vertex_on_boundary[v] {
-            for k in 0..m.dim {
-                p[k] += 0.2 * (rng.unit() - 0.5);
+            for c in p.iter_mut().take(m.dim) {
+                *c += 0.2 * (rng.unit() - 0.5);
             }
         }
     }
@@ -46,8 +46,7 @@ fn scrambled(mut m: LinearMesh, rng: &mut Rng) -> LinearMesh {
         }
         let flips: Vec<u8> = (0..d).map(|_| (rng.next() % 2) as u8).collect();
         let old: Vec<u32> = m.element(e).to_vec();
-        for c in 0..npe {
-            let q = HEX_VERTEX_PARAMS[c];
+        for (c, &q) in HEX_VERTEX_PARAMS.iter().enumerate().take(npe) {
             let mut r = [0u8; 3];
             for k in 0..d {
                 r[perm[k]] = q[k] ^ flips[k];

@@ -202,7 +202,7 @@ fn every_real_mesh_has_the_documented_counts() {
             ));
         }
         // After normalisation no element is inverted, and the topology is a manifold.
-        if !(info.min_scaled_jacobian > 0.0) {
+        if info.min_scaled_jacobian.is_nan() || info.min_scaled_jacobian <= 0.0 {
             failures.push(format!(
                 "{}: min scaled Jacobian {}",
                 m.path, info.min_scaled_jacobian

@@ -212,6 +212,10 @@ fn corner_of(l: [usize; 3]) -> usize {
     TABLE[l[0] / 2 + 2 * (l[1] / 2) + 4 * (l[2] / 2)]
 }
 
+/// Rows, columns and values of matrix entries, and right-hand-side entries, of a batch of
+/// elements.
+type Triplets = (Vec<u32>, Vec<u32>, Vec<f64>, Vec<(u32, [f64; 3])>);
+
 /// Assemble K and the right-hand side of the displacement system (F − K C0).
 pub fn assemble(
     space: &dyn FitSpace,
@@ -274,7 +278,7 @@ pub fn assemble(
     }
 
     // Per element: local dense block on its distinct control points, as triplets.
-    let chunks: Vec<(Vec<u32>, Vec<u32>, Vec<f64>, Vec<(u32, [f64; 3])>)> = (0..space.n_elements())
+    let chunks: Vec<Triplets> = (0..space.n_elements())
         .into_par_iter()
         .fold(
             || (Vec::new(), Vec::new(), Vec::new(), Vec::new()),

@@ -168,11 +168,10 @@ impl RawBlock {
         }
     }
     pub fn len(&self) -> usize {
-        if self.nodes_per_cell == 0 {
-            0
-        } else {
-            self.nodes.len() / self.nodes_per_cell
-        }
+        self.nodes
+            .len()
+            .checked_div(self.nodes_per_cell)
+            .unwrap_or(0)
     }
     pub fn is_empty(&self) -> bool {
         self.len() == 0

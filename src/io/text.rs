@@ -36,6 +36,7 @@ impl<'a> TextCursor<'a> {
     }
 
     /// Line of the last token or line returned.
+    #[allow(clippy::misnamed_getters)] // `line` is where the cursor is; users want the token's
     pub fn line(&self) -> usize {
         self.token_line
     }

@@ -120,7 +120,7 @@ impl Bernstein {
         let dims = [self.deg[0] + 1, self.deg[1] + 1, self.deg[2] + 1];
         let stride = [1, dims[0], dims[0] * dims[1]];
         let lines: Vec<usize> = (0..self.coef.len())
-            .filter(|&o| (o / stride[d]) % dims[d] == 0)
+            .filter(|&o| (o / stride[d]).is_multiple_of(dims[d]))
             .collect();
         let mut buf = vec![0.0; n + 1];
         for &o in &lines {
