@@ -420,3 +420,49 @@ fn snapping_the_boundary_keeps_the_certificate() {
         }
     }
 }
+
+/// `plot` draws each element edge once, as a curve through the edge's nodes.
+#[test]
+fn plot_draws_every_edge_through_its_nodes() {
+    let mesh = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("meshes/real/dealii/unstructured_refined_ball.msh");
+    let out = scratch("ball_p3.msh");
+    curve(&mesh, &out, &options(3, Geometry::SplineFitted)).unwrap();
+    let ho = read_back(&out);
+    let lines = polyspline::plot::edge_polylines(&ho);
+    let m = polyspline::io::read_mesh(&mesh, &MeshOptions::default()).unwrap();
+    assert_eq!(lines.len(), Topology::build(&m).edges.len());
+    // Each polyline starts and ends at element corners and passes through the edge's nodes
+    // (the samples at 0, 1/3, 2/3, 1 of 16 segments are not all nodes; check the ends and
+    // that the middle of the curve is off the chord somewhere, i.e. edges are drawn curved).
+    let mut curved = 0;
+    for l in &lines {
+        let (a, b) = (l[0], l[l.len() - 1]);
+        let mid = l[l.len() / 2];
+        let chord = [(a[0] + b[0]) / 2.0, (a[1] + b[1]) / 2.0];
+        if ((mid[0] - chord[0]).powi(2) + (mid[1] - chord[1]).powi(2)).sqrt() > 1e-6 {
+            curved += 1;
+        }
+        assert!(
+            ho.nodes
+                .iter()
+                .any(|n| (n[0] - a[0]).abs() < 1e-12 && (n[1] - a[1]).abs() < 1e-12)
+        );
+    }
+    assert!(
+        curved > lines.len() / 10,
+        "{curved} of {} edges curved",
+        lines.len()
+    );
+    let svg = polyspline::plot::render_svg(
+        &[polyspline::plot::Layer::Mesh {
+            mesh: &ho,
+            colour: "black",
+            width: 1.0,
+            label: "m",
+        }],
+        800.0,
+    );
+    assert_eq!(svg.matches("<polyline").count(), lines.len());
+    assert!(svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"));
+}
