@@ -111,6 +111,21 @@ enum Command {
         #[arg(long)]
         allow_invalid: bool,
     },
+    /// Make a synthetic linear mesh with curved boundaries for benchmarks: a butterfly disc
+    /// (2D), a solid cylinder or a torus (3D), with valence-3 vertices/edges.
+    Generate {
+        #[arg(value_enum)]
+        kind: KindArg,
+        /// Approximate number of elements.
+        #[arg(long)]
+        elements: usize,
+        /// Output file (.msh or .vtu).
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Binary Gmsh output.
+        #[arg(long)]
+        binary: bool,
+    },
     /// Report the validity and quality of a high-order mesh (.msh or .vtu).
     Check {
         /// High-order mesh file.
@@ -133,6 +148,13 @@ enum Command {
         #[arg(long, default_value_t = 1000.0)]
         width: f64,
     },
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum KindArg {
+    Disc,
+    Cylinder,
+    Torus,
 }
 
 #[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -305,6 +327,34 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     writeln!(w, "{json}")
                 })?;
             }
+        }
+        Command::Generate {
+            kind,
+            elements,
+            output,
+            binary,
+        } => {
+            use polyspline::mesh::generate::{Kind, generate};
+            let kind = match kind {
+                KindArg::Disc => Kind::Disc,
+                KindArg::Cylinder => Kind::Cylinder,
+                KindArg::Torus => Kind::Torus,
+            };
+            let mesh = generate(kind, elements);
+            let topo = Topology::build(&mesh);
+            let linear = polyspline::sample::sample(&mesh, &mesh, &topo, 1);
+            let options = OutputOptions {
+                binary,
+                ..Default::default()
+            };
+            polyspline::pipeline::write_high_order(&linear, &output, &options, &[])?;
+            eprintln!(
+                "wrote {}: {} elements, {} vertices, {} boundary facets",
+                output.display(),
+                mesh.n_elements(),
+                mesh.n_vertices(),
+                topo.boundary_facets.len()
+            );
         }
         Command::Check { mesh, json } => {
             let ho = read_high_order(&mesh)?;
