@@ -81,6 +81,10 @@ enum Command {
         /// Most bisections of the validity line search.
         #[arg(long, default_value_t = 30)]
         max_bisections: usize,
+        /// Move boundary vertex nodes back onto the input vertices where the result stays
+        /// certified valid.
+        #[arg(long)]
+        snap_boundary: bool,
         /// Accept an element in the line search only when its certified det J bound exceeds this
         /// fraction of its straight input element's smallest corner det J (0: any positive).
         #[arg(long, default_value_t = 0.1)]
@@ -194,6 +198,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             max_bisections,
             line_search,
             min_det_fraction,
+            snap_boundary,
             subdivide,
             msh_version,
             binary,
@@ -247,6 +252,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     min_det_fraction,
                     ..Default::default()
                 },
+                snap_boundary,
                 line_search_mode: match line_search {
                     LineSearchArg::Local => LineSearchMode::Local,
                     LineSearchArg::Global => LineSearchMode::Global,
@@ -288,6 +294,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     "fit: {it} CG iterations, relative residual {res:.2e}; {} elements invalid at the full step, {} control points damped, smallest step {alpha:.4}",
                     r.invalid_at_full_step, r.damped_control_points
                 );
+            }
+            if let Some(n) = r.snapped_boundary_vertices {
+                eprintln!("snap: {n} boundary vertices moved onto the input");
             }
             eprintln!(
                 "quality: min scaled Jacobian {:.4} (input {:.4}), invalid elements {}, boundary deviation max {:.2e} rms {:.2e}",

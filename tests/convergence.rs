@@ -325,6 +325,7 @@ fn options(mode: &str) -> CurveOptions {
         fit,
         line_search: Default::default(),
         line_search_mode: LineSearchMode::Local,
+        snap_boundary: false,
         mesh: MeshOptions::default(),
         output: Default::default(),
     }
@@ -621,7 +622,8 @@ fn smooth_targets_converge() {
             for e in 0..m.n_elements() {
                 let x = m.element_coords(e);
                 let corr = st.element_corrections(&m, &t, e);
-                for i in 0..if shape.dim == 2 { 9 } else { 27 } {
+                let n_samples = if shape.dim == 2 { 9 } else { 27 };
+                for (i, c) in corr.iter().enumerate().take(n_samples) {
                     let l = [i % 3, (i / 3) % 3, i / 9];
                     let on = (0..shape.dim).any(|k| {
                         l[k] != 1
@@ -631,7 +633,7 @@ fn smooth_targets_converge() {
                         continue;
                     }
                     let p = multilinear(shape.dim, &x, l.map(|c| c as f64 / 2.0));
-                    let q: [f64; 3] = std::array::from_fn(|k| p[k] + corr[i][k]);
+                    let q: [f64; 3] = std::array::from_fn(|k| p[k] + c[k]);
                     chord = chord.max((shape.dist)(p));
                     target = target.max((shape.dist)(q));
                 }
