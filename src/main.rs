@@ -1,7 +1,7 @@
 //! The `polyspline` command line.
 
 use clap::{Parser, Subcommand};
-use polyspline::fit::{FitParams, FitWeights};
+use polyspline::fit::{FitParams, FitTargets, FitWeights, SmoothParams};
 use polyspline::info::MeshInfo;
 use polyspline::io::gmsh_write::MshVersion;
 use polyspline::io::output::write_atomically;
@@ -56,7 +56,8 @@ enum Command {
         straight: bool,
         /// Fit of the spline control points: `none` samples the initial spline map; `position`
         /// and `frame` are the paper's weight presets (least squares, then a certified line
-        /// search).
+        /// search); `smooth` takes the midpoint targets from a local reconstruction of the
+        /// smooth boundary instead of the straight chords (third-order accurate boundary).
         #[arg(long, value_enum, default_value_t = FitArg::Position)]
         fit: FitArg,
         /// Position weight at interior element corners (overrides the preset).
@@ -168,6 +169,7 @@ enum FitArg {
     None,
     Position,
     Frame,
+    Smooth,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -228,6 +230,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         } => {
             let mut weights = match fit {
                 FitArg::Frame => FitWeights::frame(),
+                FitArg::Smooth => FitWeights::smooth(),
                 _ => FitWeights::position(),
             };
             for (slot, value) in [
@@ -259,6 +262,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     cg: CgParams {
                         rel_tol: cg_tol,
                         ..Default::default()
+                    },
+                    targets: if fit == FitArg::Smooth {
+                        FitTargets::Smooth(SmoothParams::default())
+                    } else {
+                        FitTargets::Chords
                     },
                 },
                 line_search: LineSearchParams {

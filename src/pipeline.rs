@@ -3,7 +3,7 @@
 //! Input: a mesh path and [`CurveOptions`]. Output: the written high-order mesh file and a
 //! [`CurveReport`]. The output file is written atomically and never onto the input.
 
-use crate::fit::{FitParams, FitWeights, fit};
+use crate::fit::{FitParams, FitTargets, FitWeights, fit};
 use crate::io::gmsh_write::{MshVersion, write_msh};
 use crate::io::output::{WriteError, write_atomically};
 use crate::io::vtu_write::{VtuEncoding, write_vtu};
@@ -127,6 +127,8 @@ pub struct CurveReport {
     pub snapped_boundary_vertices: Option<usize>,
     /// Fit weights, when fitted.
     pub fit_weights: Option<FitWeights>,
+    /// Fit targets (chords or smooth-boundary reconstruction), when fitted.
+    pub fit_targets: Option<FitTargets>,
     pub cg_iterations: Option<usize>,
     pub cg_rel_residual: Option<f64>,
     pub line_search_mode: LineSearchMode,
@@ -435,6 +437,7 @@ pub fn curve(
         demoted_elements: demoted,
         snapped_boundary_vertices: snapped,
         fit_weights: fit_info.as_ref().map(|_| options.fit.weights),
+        fit_targets: fit_info.as_ref().map(|_| options.fit.targets),
         cg_iterations: fit_info.as_ref().map(|f| f.cg.iterations),
         cg_rel_residual: fit_info.as_ref().map(|f| f.cg.rel_residual),
         line_search_mode: options.line_search_mode,

@@ -81,6 +81,7 @@ fn the_fit_minimises_the_objective() {
             rel_tol: 1e-13,
             ..Default::default()
         },
+        ..Default::default()
     };
     let (c, _) = polyspline::fit::fit(&s, &m, &t, &params, |_, _| {}).unwrap();
     // Q = Σ_e Σ_i w_i |x_e(u_i) - P_e(u_i)|² over the 3x3 lattice.

@@ -16,6 +16,15 @@
 //! coordinates. They are solved for the displacement δ = C − C0 (K δ = F − K C0), which keeps
 //! the right-hand side small and the iteration well scaled, by Jacobi-preconditioned CG
 //! ([`crate::solve::pcg`]) on the assembled matrix.
+//!
+//! **Targets.** [`FitTargets::Chords`] is the paper's P_e. [`FitTargets::Smooth`] moves the
+//! midpoint targets (edge midpoints, face and cell centres) from the chords onto a local
+//! second-order reconstruction of the smooth boundary ([`smooth`]), which makes the fitted
+//! boundary third-order accurate instead of second.
+
+pub mod smooth;
+
+pub use smooth::{SmoothParams, SmoothTargets};
 
 use crate::mesh::{LinearMesh, Topology};
 use crate::sample::{bernstein2, multilinear};
@@ -68,6 +77,12 @@ impl FitWeights {
             frame_midpoint: 0.0,
         }
     }
+    /// Weights of the smooth-boundary mode (`--fit smooth`, used with
+    /// [`FitTargets::Smooth`]): the position preset's weights, no frame term (the frames of the
+    /// initial map follow the chords and would pull the boundary back towards them).
+    pub fn smooth() -> Self {
+        FitWeights::position()
+    }
     /// The paper's position + frame example: w^r = 1 everywhere, w^d = 0 at midpoints,
     /// corners as in [`FitWeights::position`].
     pub fn frame() -> Self {
@@ -81,11 +96,34 @@ impl FitWeights {
     }
 }
 
+/// Where the position targets of midpoint samples come from.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FitTargets {
+    /// The input's multilinear map (midpoints on straight edges/faces), as in the paper.
+    #[default]
+    Chords,
+    /// Midpoints moved onto a local reconstruction of the smooth boundary ([`smooth`]).
+    Smooth(SmoothParams),
+}
+
 /// Fit parameters.
 #[derive(Clone, Debug)]
 pub struct FitParams {
     pub weights: FitWeights,
     pub cg: CgParams,
+    pub targets: FitTargets,
+}
+
+impl FitParams {
+    /// The smooth-boundary mode: [`FitWeights::smooth`] with [`FitTargets::Smooth`].
+    pub fn smooth() -> Self {
+        FitParams {
+            weights: FitWeights::smooth(),
+            cg: CgParams::default(),
+            targets: FitTargets::Smooth(SmoothParams::default()),
+        }
+    }
 }
 
 impl Default for FitParams {
@@ -93,6 +131,7 @@ impl Default for FitParams {
         FitParams {
             weights: FitWeights::position(),
             cg: CgParams::default(),
+            targets: FitTargets::Chords,
         }
     }
 }
@@ -407,6 +446,17 @@ pub fn assemble(
     topo: &Topology,
     w: &FitWeights,
 ) -> (NormalMatrix, Vec<[f64; 3]>) {
+    assemble_with_targets(space, mesh, topo, w, None)
+}
+
+/// [`assemble`] with the midpoint targets moved by `smooth` (None: the chords).
+pub fn assemble_with_targets(
+    space: &dyn FitSpace,
+    mesh: &LinearMesh,
+    topo: &Topology,
+    w: &FitWeights,
+    smooth: Option<&SmoothTargets>,
+) -> (NormalMatrix, Vec<[f64; 3]>) {
     let dim = space.dim();
     let nb = if dim == 2 { 9 } else { 27 };
     let samples = Samples::new(dim);
@@ -437,6 +487,7 @@ pub fn assemble(
                 let (gd, gr) = &cache[&masks[e]];
                 // Targets: input multilinear positions; initial net for the frame term.
                 let x = mesh.element_coords(e);
+                let shift = smooth.map(|t| t.element_corrections(mesh, topo, e));
                 let net0 = space.bezier_net_with(e, c0);
                 let mut rhs_b = [[0.0; 3]; 27]; // F_e in Bernstein space
                 // F_e = Σ_i w^d_i b_i P_iᵀ + G^r B⁰.
@@ -454,7 +505,12 @@ pub fn assemble(
                     if wd == 0.0 {
                         continue;
                     }
-                    let p = multilinear(dim, &x, l.map(|c| c as f64 / 2.0));
+                    let mut p = multilinear(dim, &x, l.map(|c| c as f64 / 2.0));
+                    if let Some(shift) = &shift {
+                        for c in 0..3 {
+                            p[c] += shift[i][c];
+                        }
+                    }
                     for a in 0..nb {
                         let s = wd * samples.values[i][a];
                         for c in 0..3 {
@@ -553,7 +609,11 @@ pub fn fit(
     progress: impl FnMut(usize, f64),
 ) -> Result<(Vec<[f64; 3]>, FitInfo), CgError> {
     let t = std::time::Instant::now();
-    let (k, rhs) = assemble(space, mesh, topo, &params.weights);
+    let smooth = match params.targets {
+        FitTargets::Chords => None,
+        FitTargets::Smooth(p) => Some(SmoothTargets::build(mesh, topo, &p)),
+    };
+    let (k, rhs) = assemble_with_targets(space, mesh, topo, &params.weights, smooth.as_ref());
     let assembly_seconds = t.elapsed().as_secs_f64();
     let t = std::time::Instant::now();
     let mut delta = vec![[0.0; 3]; k.n];
