@@ -274,6 +274,8 @@ pub fn curve(
                         }
                     })?;
                 lap("fit", &mut timings);
+                *timings.entry("fit_assembly".into()).or_insert(0.0) += info.assembly_seconds;
+                *timings.entry("fit_cg".into()).or_insert(0.0) += info.solve_seconds;
                 let net = |e: usize, cps: &[[f64; 3]]| s.element_bezier_with(e, cps);
                 let thresholds =
                     acceptance_thresholds(&mesh, &s, options.line_search.min_det_fraction, depth);

@@ -22,6 +22,7 @@
 //! second-order reconstruction of the smooth boundary ([`smooth`]), which makes the fitted
 //! boundary third-order accurate instead of second.
 
+pub mod assembly;
 pub mod smooth;
 
 pub use smooth::{SmoothParams, SmoothTargets};
@@ -48,6 +49,12 @@ pub trait FitSpace: Sync {
     );
     /// Bernstein net of element `e` for the control points `cps`.
     fn bezier_net_with(&self, e: usize, cps: &[[f64; 3]]) -> [[f64; 3]; 27];
+    /// When E_e is a matrix shared by every element with the same `key` times the selection of
+    /// 3^d distinct control points `ids` (in local-node order), return them; the assembly then
+    /// computes one local matrix per key. `None` (the default) always works.
+    fn element_pattern(&self, _e: usize) -> Option<(u64, Vec<u32>)> {
+        None
+    }
 }
 
 /// Sample-point weights (they multiply squared residuals).
@@ -435,10 +442,6 @@ impl LinOp for MatrixFree<'_> {
     }
 }
 
-/// Rows, columns and values of matrix entries, and right-hand-side entries, of a batch of
-/// elements.
-type Triplets = (Vec<u32>, Vec<u32>, Vec<f64>, Vec<(u32, [f64; 3])>);
-
 /// Assemble K and the right-hand side of the displacement system (F − K C0).
 pub fn assemble(
     space: &dyn FitSpace,
@@ -464,139 +467,99 @@ pub fn assemble_with_targets(
     let c0 = space.control_points();
     let blocks = ElementBlocks::new(space, mesh, topo, w);
     let (masks, cache) = (&blocks.masks, &blocks.cache);
-    // Per element: local dense block on its distinct control points, as triplets.
-    let chunks: Vec<Triplets> = (0..space.n_elements())
+    // Per element: the right-hand side on its distinct control points.
+    let chunks: Vec<Vec<(u32, [f64; 3])>> = (0..space.n_elements())
         .into_par_iter()
-        .fold(
-            || (Vec::new(), Vec::new(), Vec::new(), Vec::new()),
-            |mut acc, e| {
-                let (mut offsets, mut cols, mut weights) = (Vec::new(), Vec::new(), Vec::new());
-                space.element_rows(e, &mut offsets, &mut cols, &mut weights);
-                let mut ids: Vec<u32> = cols.clone();
-                ids.sort_unstable();
-                ids.dedup();
-                let m = ids.len();
-                // Dense R (nb × m).
-                let mut r = vec![0.0; nb * m];
-                for i in 0..nb {
-                    for k in offsets[i]..offsets[i + 1] {
-                        let j = ids.binary_search(&cols[k]).unwrap();
-                        r[i * m + j] += weights[k];
-                    }
+        .fold(Vec::new, |mut acc, e| {
+            let (mut offsets, mut cols, mut weights) = (Vec::new(), Vec::new(), Vec::new());
+            space.element_rows(e, &mut offsets, &mut cols, &mut weights);
+            let mut ids: Vec<u32> = cols.clone();
+            ids.sort_unstable();
+            ids.dedup();
+            let m = ids.len();
+            // Dense R (nb × m).
+            let mut r = vec![0.0; nb * m];
+            for i in 0..nb {
+                for k in offsets[i]..offsets[i + 1] {
+                    let j = ids.binary_search(&cols[k]).unwrap();
+                    r[i * m + j] += weights[k];
                 }
-                let (gd, gr) = &cache[&masks[e]];
-                // Targets: input multilinear positions; initial net for the frame term.
-                let x = mesh.element_coords(e);
-                let shift = smooth.map(|t| t.element_corrections(mesh, topo, e));
-                let net0 = space.bezier_net_with(e, c0);
-                let mut rhs_b = [[0.0; 3]; 27]; // F_e in Bernstein space
-                // F_e = Σ_i w^d_i b_i P_iᵀ + G^r B⁰.
-                for (i, l) in samples.points.iter().enumerate() {
-                    let corner = samples.is_corner(i);
-                    let wd = if corner {
-                        if masks[e] & (1 << corner_of(*l)) != 0 {
-                            w.boundary_corner
-                        } else {
-                            w.corner
-                        }
+            }
+            let (gd, gr) = &cache[&masks[e]];
+            // Targets: input multilinear positions; initial net for the frame term.
+            let x = mesh.element_coords(e);
+            let shift = smooth.map(|t| t.element_corrections(mesh, topo, e));
+            let net0 = space.bezier_net_with(e, c0);
+            let mut rhs_b = [[0.0; 3]; 27]; // F_e in Bernstein space
+            // F_e = Σ_i w^d_i b_i P_iᵀ + G^r B⁰.
+            for (i, l) in samples.points.iter().enumerate() {
+                let corner = samples.is_corner(i);
+                let wd = if corner {
+                    if masks[e] & (1 << corner_of(*l)) != 0 {
+                        w.boundary_corner
                     } else {
-                        w.midpoint
-                    };
-                    if wd == 0.0 {
-                        continue;
+                        w.corner
                     }
-                    let mut p = multilinear(dim, &x, l.map(|c| c as f64 / 2.0));
-                    if let Some(shift) = &shift {
-                        for c in 0..3 {
-                            p[c] += shift[i][c];
-                        }
-                    }
-                    for a in 0..nb {
-                        let s = wd * samples.values[i][a];
-                        for c in 0..3 {
-                            rhs_b[a][c] += s * p[c];
-                        }
+                } else {
+                    w.midpoint
+                };
+                if wd == 0.0 {
+                    continue;
+                }
+                let mut p = multilinear(dim, &x, l.map(|c| c as f64 / 2.0));
+                if let Some(shift) = &shift {
+                    for c in 0..3 {
+                        p[c] += shift[i][c];
                     }
                 }
                 for a in 0..nb {
-                    for b in 0..nb {
-                        let g = gr[a * nb + b];
-                        if g != 0.0 {
-                            for c in 0..3 {
-                                rhs_b[a][c] += g * net0[b][c];
-                            }
-                        }
+                    let s = wd * samples.values[i][a];
+                    for c in 0..3 {
+                        rhs_b[a][c] += s * p[c];
                     }
                 }
-                // Displacement form: F_e − G_e B⁰_e.
-                for a in 0..nb {
-                    for b in 0..nb {
-                        let g = gd[a * nb + b] + gr[a * nb + b];
+            }
+            for a in 0..nb {
+                for b in 0..nb {
+                    let g = gr[a * nb + b];
+                    if g != 0.0 {
                         for c in 0..3 {
-                            rhs_b[a][c] -= g * net0[b][c];
+                            rhs_b[a][c] += g * net0[b][c];
                         }
                     }
                 }
-                // K_loc = Rᵀ G R, f_loc = Rᵀ F.
-                let mut gr_r = vec![0.0; nb * m]; // G R
+            }
+            // Displacement form: F_e − G_e B⁰_e.
+            for a in 0..nb {
+                for b in 0..nb {
+                    let g = gd[a * nb + b] + gr[a * nb + b];
+                    for c in 0..3 {
+                        rhs_b[a][c] -= g * net0[b][c];
+                    }
+                }
+            }
+            // f_loc = Rᵀ F (K is assembled separately).
+            for i in 0..m {
+                let mut f = [0.0; 3];
                 for a in 0..nb {
-                    for b in 0..nb {
-                        let g = gd[a * nb + b] + gr[a * nb + b];
-                        if g == 0.0 {
-                            continue;
-                        }
-                        for j in 0..m {
-                            gr_r[a * m + j] += g * r[b * m + j];
-                        }
+                    for c in 0..3 {
+                        f[c] += r[a * m + i] * rhs_b[a][c];
                     }
                 }
-                for i in 0..m {
-                    for j in 0..m {
-                        let mut s = 0.0;
-                        for a in 0..nb {
-                            s += r[a * m + i] * gr_r[a * m + j];
-                        }
-                        if s != 0.0 {
-                            acc.0.push(ids[i]);
-                            acc.1.push(ids[j]);
-                            acc.2.push(s);
-                        }
-                    }
-                    let mut f = [0.0; 3];
-                    for a in 0..nb {
-                        for c in 0..3 {
-                            f[c] += r[a * m + i] * rhs_b[a][c];
-                        }
-                    }
-                    acc.3.push((ids[i], f));
-                }
-                acc
-            },
-        )
+                acc.push((ids[i], f));
+            }
+            acc
+        })
         .collect();
-    let mut rows = Vec::new();
-    let mut colv = Vec::new();
-    let mut vals = Vec::new();
     let mut rhs = vec![[0.0; 3]; n];
-    for (r, c, v, f) in chunks {
-        rows.extend(r.into_iter().map(|x| x as usize));
-        colv.extend(c.into_iter().map(|x| x as usize));
-        vals.extend(v);
+    for f in chunks {
         for (i, f) in f {
             for k in 0..3 {
                 rhs[i as usize][k] += f[k];
             }
         }
     }
-    let tri = sprs::TriMat::from_triplets((n, n), rows, colv, vals);
-    let csr: sprs::CsMat<f64> = tri.to_csr();
-    let (indptr, indices, data) = csr.into_raw_storage();
-    let k = NormalMatrix {
-        n,
-        indptr,
-        indices: indices.into_iter().map(|i| i as u32).collect(),
-        data,
-    };
+    let k = assembly::assemble_matrix(space, &blocks);
     (k, rhs)
 }
 
@@ -662,5 +625,23 @@ impl FitSpace for crate::spline::SplineSpace {
     }
     fn bezier_net_with(&self, e: usize, cps: &[[f64; 3]]) -> [[f64; 3]; 27] {
         self.element_bezier_with(e, cps)
+    }
+    /// Elements whose local nodes are all plain control points (spline elements, and Q2
+    /// elements made only of own nodes): E_e = (M_z ⊗ M_y ⊗ M_x) · selection, keyed by the
+    /// three 1D operators.
+    fn element_pattern(&self, e: usize) -> Option<(u64, Vec<u32>)> {
+        let x = &self.extraction;
+        let nodes = x.element_nodes(e);
+        if nodes.iter().any(|&n| n as usize >= x.n_control) {
+            return None;
+        }
+        let mut sorted = nodes.to_vec();
+        sorted.sort_unstable();
+        sorted.dedup();
+        if sorted.len() != nodes.len() {
+            return None;
+        }
+        let key = x.ops[e].iter().fold(0u64, |k, op| k * 8 + *op as u64);
+        Some((key, nodes.to_vec()))
     }
 }
