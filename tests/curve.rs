@@ -46,6 +46,7 @@ fn options(order: usize, geometry: Geometry) -> CurveOptions {
         line_search_mode: LineSearchMode::Local,
         mesh: MeshOptions::default(),
         output: OutputOptions::default(),
+        backend: Default::default(),
     }
 }
 
