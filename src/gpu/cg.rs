@@ -363,21 +363,18 @@ pub fn pcg(
         if total >= params.max_iters {
             break;
         }
-        // Inner problem A d = res from d = 0.
-        let zv: Vec<[f64; 3]> = res
-            .iter()
-            .zip(&inv)
-            .map(|(r, d)| r.map(|v| v * d))
-            .collect();
-        let rz = dot3(&res, &zv);
-        let target2: [f64; 3] = std::array::from_fn(|k| {
-            let t = target[k].max(inner_reduction * rr[k].sqrt());
-            if rr[k].sqrt() <= target[k] {
-                f64::INFINITY
-            } else {
-                t * t
+        // Inner problem A d = res / s from d = 0, each component scaled by its residual norm
+        // s_k (the components have separate recurrences, so this is exact) so that f32 sees
+        // O(1) values: no underflow of squared norms when b is tiny.
+        let scale: [f64; 3] = std::array::from_fn(|k| if rr[k] > 0.0 { rr[k].sqrt() } else { 1.0 });
+        for r in res.iter_mut() {
+            for k in 0..3 {
+                r[k] /= scale[k];
             }
-        });
+        }
+        let zv: Vec<[f64; 3]> = res.iter().zip(&inv).map(|(r, d)| r.map(|v| v * d)).collect();
+        let rz = dot3(&res, &zv);
+        let rr_scaled = dot3(&res, &res);
         let q = &ctx.queue;
         q.write_buffer(&xd, 0, &vec![0u8; vbytes as usize]);
         q.write_buffer(&r, 0, &vec4_bytes(prec, &res));
@@ -386,12 +383,12 @@ pub fn pcg(
         let mut sc = vec![0.0f64; SCALARS];
         for k in 0..3 {
             sc[k] = rz[k];
-            sc[4 + k] = rr[k];
-            // f32::MAX stands for "inactive" in f32.
-            sc[8 + k] = if target2[k].is_finite() {
-                target2[k]
-            } else {
+            sc[4 + k] = rr_scaled[k];
+            // Converged components get target² = f32::MAX: never active.
+            sc[8 + k] = if rr[k].sqrt() <= target[k] {
                 f32::MAX as f64
+            } else {
+                (target[k] / scale[k]).max(inner_reduction).powi(2)
             };
         }
         q.write_buffer(&scalars, 0, &reals_to_bytes(prec, sc.into_iter()));
@@ -465,7 +462,8 @@ pub fn pcg(
                     curvature: (0..3).map(|k| sc[20 + k]).fold(f64::INFINITY, f64::min),
                 });
             }
-            progress(total + st.iterations as usize, rel([sc[4], sc[5], sc[6]]));
+            let rr_now: [f64; 3] = std::array::from_fn(|k| sc[4 + k] * scale[k] * scale[k]);
+            progress(total + st.iterations as usize, rel(rr_now));
             if st.done != 0 {
                 break st;
             }
@@ -476,7 +474,7 @@ pub fn pcg(
         ));
         for (x, d) in x.iter_mut().zip(&d) {
             for k in 0..3 {
-                x[k] += d[k];
+                x[k] += d[k] * scale[k];
             }
         }
         if st.iterations == 0 {

@@ -31,7 +31,8 @@ pub struct Evaluation {
 /// largest distance of a control point from the element anchor): the 27 Bernstein weights are
 /// non-negative and sum to one, so the result has ≈ 27·2 roundings of quantities bounded by
 /// that size, plus the rounding of the anchored input. Derivatives carry a factor 4 more
-/// (weights up to 2 in magnitude, differences).
+/// (weights up to 2 in magnitude, differences). Adding the anchor back (in f64) rounds once
+/// more, by ε₆₄ relative to the coordinates.
 pub const EVALUATE_TOL_F32: f64 = 64.0 * f32::EPSILON as f64;
 /// The same for f64 kernels.
 pub const EVALUATE_TOL_F64: f64 = 64.0 * f64::EPSILON;
