@@ -372,7 +372,11 @@ pub fn pcg(
                 r[k] /= scale[k];
             }
         }
-        let zv: Vec<[f64; 3]> = res.iter().zip(&inv).map(|(r, d)| r.map(|v| v * d)).collect();
+        let zv: Vec<[f64; 3]> = res
+            .iter()
+            .zip(&inv)
+            .map(|(r, d)| r.map(|v| v * d))
+            .collect();
         let rz = dot3(&res, &zv);
         let rr_scaled = dot3(&res, &res);
         let q = &ctx.queue;
