@@ -17,6 +17,10 @@ fn build(c: &mut Criterion) {
             grid_3d(&uniform(30, 1.0), &uniform(30, 1.0), &uniform(30, 1.0)),
         ),
         (
+            "grid_3d_100x100x100",
+            grid_3d(&uniform(100, 1.0), &uniform(100, 1.0), &uniform(100, 1.0)),
+        ),
+        (
             "extruded_star5_x10",
             extrude(&star_2d(5), &uniform(10, 0.1)),
         ),

@@ -52,10 +52,28 @@ pub struct MeshInfo {
     pub unmatched_tagged_facets: usize,
     /// Cells of the file that are neither elements nor boundary tags.
     pub ignored_cells: BTreeMap<String, usize>,
+    /// Poly-spline space: elements with a spline stencil, constrained Q2 elements, control
+    /// points (spline control points and own Q2 nodes).
+    pub spline_elements: usize,
+    pub q2_elements: usize,
+    pub control_points: usize,
+    /// Q2 elements by reason.
+    pub q2_reasons: BTreeMap<String, usize>,
 }
 
 impl MeshInfo {
     pub fn new(mesh: &LinearMesh, topo: &Topology) -> MeshInfo {
+        let space = crate::spline::SplineSpace::build(mesh, topo);
+        let mut q2_reasons = BTreeMap::new();
+        for c in &space.classes {
+            if let crate::spline::ElementClass::Q2(r) = c {
+                let name = serde_json::to_value(r)
+                    .ok()
+                    .and_then(|v| v.as_str().map(str::to_owned))
+                    .unwrap_or_default();
+                *q2_reasons.entry(name).or_insert(0) += 1;
+            }
+        }
         let mut boundary_tags = BTreeMap::new();
         for &t in &topo.boundary_facet_tags {
             *boundary_tags.entry(t).or_insert(0) += 1;
@@ -110,6 +128,10 @@ impl MeshInfo {
             interior_tagged_facets: topo.interior_tagged_facets,
             unmatched_tagged_facets: topo.unmatched_tagged_facets,
             ignored_cells: mesh.ignored_cells.clone(),
+            spline_elements: space.n_spline_elements(),
+            q2_elements: space.n_q2_elements(),
+            control_points: space.n_control_points(),
+            q2_reasons,
         }
     }
 }
@@ -172,6 +194,22 @@ impl fmt::Display for MeshInfo {
             "irregular",
             format!("{} {}", self.irregular, self.irregular_kind),
         )?;
+        row(
+            f,
+            "spline space",
+            format!(
+                "{} spline + {} Q2 elements, {} control points",
+                self.spline_elements, self.q2_elements, self.control_points
+            ),
+        )?;
+        if !self.q2_reasons.is_empty() {
+            let reasons: Vec<String> = self
+                .q2_reasons
+                .iter()
+                .map(|(k, n)| format!("{n} {}", k.replace('_', " ")))
+                .collect();
+            row(f, "Q2 because", reasons.join(", "))?;
+        }
         let mut valence = format!("vertex {}", self.max_vertex_valence);
         if self.dimension == 3 {
             valence += &format!(", edge {}", self.max_edge_valence);

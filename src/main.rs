@@ -80,6 +80,10 @@ enum Command {
         /// Most bisections of the validity line search.
         #[arg(long, default_value_t = 30)]
         max_bisections: usize,
+        /// Move boundary vertex nodes back onto the input vertices where the result stays
+        /// certified valid.
+        #[arg(long)]
+        snap_boundary: bool,
         /// Accept an element in the line search only when its certified det J bound exceeds this
         /// fraction of its straight input element's smallest corner det J (0: any positive).
         #[arg(long, default_value_t = 0.1)]
@@ -115,6 +119,21 @@ enum Command {
         #[arg(long, value_enum)]
         precision: Option<PrecisionArg>,
     },
+    /// Make a synthetic linear mesh with curved boundaries for benchmarks: a butterfly disc
+    /// (2D), a solid cylinder or a torus (3D), with valence-3 vertices/edges.
+    Generate {
+        #[arg(value_enum)]
+        kind: KindArg,
+        /// Approximate number of elements.
+        #[arg(long)]
+        elements: usize,
+        /// Output file (.msh or .vtu).
+        #[arg(short, long)]
+        output: PathBuf,
+        /// Binary Gmsh output.
+        #[arg(long)]
+        binary: bool,
+    },
     /// Report the validity and quality of a high-order mesh (.msh or .vtu).
     Check {
         /// High-order mesh file.
@@ -137,6 +156,13 @@ enum Command {
         #[arg(long, default_value_t = 1000.0)]
         width: f64,
     },
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum KindArg {
+    Disc,
+    Cylinder,
+    Torus,
 }
 
 #[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -200,6 +226,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             max_bisections,
             line_search,
             min_det_fraction,
+            snap_boundary,
             subdivide,
             msh_version,
             binary,
@@ -250,6 +277,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     min_det_fraction,
                     ..Default::default()
                 },
+                snap_boundary,
                 line_search_mode: match line_search {
                     LineSearchArg::Local => LineSearchMode::Local,
                     LineSearchArg::Global => LineSearchMode::Global,
@@ -293,6 +321,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     r.invalid_at_full_step, r.damped_control_points
                 );
             }
+            if let Some(n) = r.snapped_boundary_vertices {
+                eprintln!("snap: {n} boundary vertices moved onto the input");
+            }
             eprintln!(
                 "quality: min scaled Jacobian {:.4} (input {:.4}), invalid elements {}, boundary deviation max {:.2e} rms {:.2e}",
                 r.min_scaled_jacobian,
@@ -308,6 +339,34 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     writeln!(w, "{json}")
                 })?;
             }
+        }
+        Command::Generate {
+            kind,
+            elements,
+            output,
+            binary,
+        } => {
+            use polyspline::mesh::generate::{Kind, generate};
+            let kind = match kind {
+                KindArg::Disc => Kind::Disc,
+                KindArg::Cylinder => Kind::Cylinder,
+                KindArg::Torus => Kind::Torus,
+            };
+            let mesh = generate(kind, elements);
+            let topo = Topology::build(&mesh);
+            let linear = polyspline::sample::sample(&mesh, &mesh, &topo, 1);
+            let options = OutputOptions {
+                binary,
+                ..Default::default()
+            };
+            polyspline::pipeline::write_high_order(&linear, &output, &options, &[])?;
+            eprintln!(
+                "wrote {}: {} elements, {} vertices, {} boundary facets",
+                output.display(),
+                mesh.n_elements(),
+                mesh.n_vertices(),
+                topo.boundary_facets.len()
+            );
         }
         Command::Check { mesh, json } => {
             let ho = read_high_order(&mesh)?;

@@ -75,6 +75,8 @@ pub struct CurveOptions {
     pub fit: FitParams,
     pub line_search: LineSearchParams,
     pub line_search_mode: LineSearchMode,
+    /// Move boundary vertex nodes back to the input vertices where that stays certified valid.
+    pub snap_boundary: bool,
     pub mesh: MeshOptions,
     pub output: OutputOptions,
     /// Executor of sampling, certification and the CG solve.
@@ -129,6 +131,8 @@ pub struct CurveReport {
     pub q2_elements: usize,
     /// Elements made Q2 because their initial spline map was not certified valid.
     pub demoted_elements: usize,
+    /// With `--snap-boundary`: boundary vertices moved back onto the input vertices.
+    pub snapped_boundary_vertices: Option<usize>,
     /// Fit weights, when fitted.
     pub fit_weights: Option<FitWeights>,
     pub cg_iterations: Option<usize>,
@@ -421,6 +425,13 @@ pub fn curve(
         ho = ho.subdivided();
     }
     lap("sample", &mut timings);
+    let snapped = if options.snap_boundary {
+        let n = snap_boundary(&mesh, &topo, &mut ho, options.line_search.certificate_depth);
+        lap("snap", &mut timings);
+        Some(n)
+    } else {
+        None
+    };
     let quality = sample_det_jacobian(&ho);
     let min_sj = quality
         .iter()
@@ -463,6 +474,7 @@ pub fn curve(
         spline_elements: space.as_ref().map_or(0, |s| s.n_spline_elements()),
         q2_elements: space.as_ref().map_or(0, |s| s.n_q2_elements()),
         demoted_elements: demoted,
+        snapped_boundary_vertices: snapped,
         fit_weights: fit_info.as_ref().map(|_| options.fit.weights),
         cg_iterations: fit_info.as_ref().map(|f| f.cg.iterations),
         cg_rel_residual: fit_info.as_ref().map(|f| f.cg.rel_residual),
@@ -568,4 +580,77 @@ fn acceptance_thresholds(
             }
         })
         .collect()
+}
+
+/// Rounds of undoing snaps around elements that lose their certificate.
+const MAX_SNAP_ROUNDS: usize = 8;
+
+/// Move the output's boundary vertex nodes (node ids = input vertex ids) onto the input
+/// vertices (paper §3), keeping only the moves after which every element containing a moved
+/// node is still certified valid (det J of its Lagrange map, in Bernstein form). Returns the
+/// number of vertices moved.
+pub fn snap_boundary(
+    mesh: &crate::mesh::LinearMesh,
+    topo: &Topology,
+    ho: &mut HighOrderMesh,
+    depth: usize,
+) -> usize {
+    use crate::validity::{bernstein_min_bounds, det_jacobian_bernstein_lagrange};
+    use rayon::prelude::*;
+    let nv = mesh.n_vertices();
+    let original: Vec<[f64; 3]> = ho.nodes[..nv].to_vec();
+    let mut snapped = topo.vertex_on_boundary.clone();
+    for v in 0..nv {
+        if snapped[v] {
+            ho.nodes[v] = mesh.coords[v];
+        }
+    }
+    let corner_ids = |ho: &HighOrderMesh, e: usize| -> Vec<u32> {
+        ho.element(e)
+            .iter()
+            .copied()
+            .filter(|&n| (n as usize) < nv)
+            .collect()
+    };
+    let mut affected: Vec<usize> = (0..ho.n_elements())
+        .filter(|&e| corner_ids(ho, e).iter().any(|&n| snapped[n as usize]))
+        .collect();
+    for round in 0..=MAX_SNAP_ROUNDS {
+        let bad: Vec<usize> = affected
+            .par_iter()
+            .copied()
+            .filter(|&e| {
+                let nodes: Vec<[f64; 3]> = ho
+                    .element(e)
+                    .iter()
+                    .map(|&n| ho.nodes[n as usize])
+                    .collect();
+                let b = det_jacobian_bernstein_lagrange(ho.dim, ho.order, &nodes);
+                !bernstein_min_bounds(ho.dim, b, depth).certified_positive()
+            })
+            .collect();
+        if bad.is_empty() {
+            break;
+        }
+        // Undo the snaps of the failing elements (all of them in the last round).
+        for &e in &bad {
+            for n in corner_ids(ho, e) {
+                let n = n as usize;
+                if snapped[n] {
+                    snapped[n] = false;
+                    ho.nodes[n] = original[n];
+                }
+            }
+        }
+        if round == MAX_SNAP_ROUNDS {
+            for (n, s) in snapped.iter_mut().enumerate() {
+                if *s {
+                    *s = false;
+                    ho.nodes[n] = original[n];
+                }
+            }
+        }
+        affected = bad;
+    }
+    snapped.iter().filter(|&&s| s).count()
 }

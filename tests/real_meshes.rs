@@ -294,9 +294,15 @@ fn info_json_on_every_real_mesh() {
             "components",
             "reoriented",
             "min_scaled_jacobian",
+            "spline_elements",
+            "q2_elements",
+            "control_points",
         ] {
             assert!(v.get(key).is_some(), "{}: key {key} missing", m.path);
         }
+        let spline = v["spline_elements"].as_u64().unwrap();
+        let q2 = v["q2_elements"].as_u64().unwrap();
+        assert_eq!(spline + q2, m.elements as u64, "{}", m.path);
         assert_eq!(
             v["elements"].as_u64(),
             Some(m.elements as u64),
@@ -304,5 +310,10 @@ fn info_json_on_every_real_mesh() {
             m.path
         );
         assert_eq!(v["dimension"].as_u64(), Some(m.dim as u64), "{}", m.path);
+        let (s, q) = (
+            v["spline_elements"].as_u64().unwrap(),
+            v["q2_elements"].as_u64().unwrap(),
+        );
+        assert_eq!(s + q, m.elements as u64, "{}", m.path);
     }
 }

@@ -212,6 +212,190 @@ fn corner_of(l: [usize; 3]) -> usize {
     TABLE[l[0] / 2 + 2 * (l[1] / 2) + 4 * (l[2] / 2)]
 }
 
+/// The per-element blocks G_e = G^d_e + G^r_e of the normal equations on the Bernstein points.
+/// They depend on an element only through which of its corners are boundary vertices (the
+/// position weights), so one block per corner pattern is kept.
+pub struct ElementBlocks {
+    /// Boundary-corner bit mask of each element.
+    pub masks: Vec<u8>,
+    /// (G^d, G^r), row-major 3^d × 3^d, per mask.
+    pub cache: HashMap<u8, (Vec<f64>, Vec<f64>)>,
+}
+
+impl ElementBlocks {
+    pub fn new(space: &dyn FitSpace, mesh: &LinearMesh, topo: &Topology, w: &FitWeights) -> Self {
+        let dim = space.dim();
+        let nb = if dim == 2 { 9 } else { 27 };
+        let samples = Samples::new(dim);
+        let g_of = |mask: u8| -> (Vec<f64>, Vec<f64>) {
+            let mut gd = vec![0.0; nb * nb];
+            let mut gr = vec![0.0; nb * nb];
+            for i in 0..nb {
+                let corner = samples.is_corner(i);
+                let wd = if corner {
+                    if mask & (1 << corner_of(samples.points[i])) != 0 {
+                        w.boundary_corner
+                    } else {
+                        w.corner
+                    }
+                } else {
+                    w.midpoint
+                };
+                let wr = if corner {
+                    w.frame_corner
+                } else {
+                    w.frame_midpoint
+                };
+                let b = &samples.values[i];
+                for r in 0..nb {
+                    for c in 0..nb {
+                        gd[r * nb + c] += wd * b[r] * b[c];
+                        for j in 0..dim {
+                            let d = &samples.derivs[i][j];
+                            gr[r * nb + c] += wr * d[r] * d[c];
+                        }
+                    }
+                }
+            }
+            (gd, gr)
+        };
+        let masks: Vec<u8> = (0..space.n_elements())
+            .map(|e| {
+                let mut m = 0u8;
+                for (c, &v) in mesh.element(e).iter().enumerate() {
+                    if topo.vertex_on_boundary[v as usize] {
+                        m |= 1 << c;
+                    }
+                }
+                m
+            })
+            .collect();
+        let mut cache = HashMap::new();
+        for &m in &masks {
+            cache.entry(m).or_insert_with(|| g_of(m));
+        }
+        ElementBlocks { masks, cache }
+    }
+}
+
+/// K applied without assembling it: y = Σ_e E_eᵀ G_e E_e x, element by element (the
+/// alternative to [`NormalMatrix`]; see BENCHMARKS.md for the measured comparison).
+pub struct MatrixFree<'a> {
+    pub space: &'a dyn FitSpace,
+    pub blocks: ElementBlocks,
+    /// Explicit extraction rows per element (offsets, columns, weights).
+    rows: Vec<(Vec<usize>, Vec<u32>, Vec<f64>)>,
+}
+
+impl<'a> MatrixFree<'a> {
+    pub fn new(
+        space: &'a dyn FitSpace,
+        mesh: &LinearMesh,
+        topo: &Topology,
+        w: &FitWeights,
+    ) -> Self {
+        let rows = (0..space.n_elements())
+            .into_par_iter()
+            .map(|e| {
+                let (mut o, mut c, mut w) = (Vec::new(), Vec::new(), Vec::new());
+                space.element_rows(e, &mut o, &mut c, &mut w);
+                (o, c, w)
+            })
+            .collect();
+        MatrixFree {
+            space,
+            blocks: ElementBlocks::new(space, mesh, topo, w),
+            rows,
+        }
+    }
+}
+
+impl LinOp for MatrixFree<'_> {
+    fn nrows(&self) -> usize {
+        self.space.control_points().len()
+    }
+    fn apply(&self, x: &[[f64; 3]], y: &mut [[f64; 3]]) {
+        let n = self.nrows();
+        let nb = if self.space.dim() == 2 { 9 } else { 27 };
+        let sum = (0..self.rows.len())
+            .into_par_iter()
+            .fold(
+                || vec![[0.0; 3]; n],
+                |mut acc, e| {
+                    let (o, c, w) = &self.rows[e];
+                    let mut b = [[0.0; 3]; 27];
+                    for i in 0..nb {
+                        for k in o[i]..o[i + 1] {
+                            let xc = x[c[k] as usize];
+                            for d in 0..3 {
+                                b[i][d] += w[k] * xc[d];
+                            }
+                        }
+                    }
+                    let (gd, gr) = &self.blocks.cache[&self.blocks.masks[e]];
+                    for i in 0..nb {
+                        let mut z = [0.0; 3];
+                        for j in 0..nb {
+                            let g = gd[i * nb + j] + gr[i * nb + j];
+                            for d in 0..3 {
+                                z[d] += g * b[j][d];
+                            }
+                        }
+                        for k in o[i]..o[i + 1] {
+                            let t = &mut acc[c[k] as usize];
+                            for d in 0..3 {
+                                t[d] += w[k] * z[d];
+                            }
+                        }
+                    }
+                    acc
+                },
+            )
+            .reduce(
+                || vec![[0.0; 3]; n],
+                |mut a, b| {
+                    for (p, q) in a.iter_mut().zip(&b) {
+                        for d in 0..3 {
+                            p[d] += q[d];
+                        }
+                    }
+                    a
+                },
+            );
+        y.copy_from_slice(&sum);
+    }
+    fn diagonal(&self) -> Vec<f64> {
+        let n = self.nrows();
+        let nb = if self.space.dim() == 2 { 9 } else { 27 };
+        let mut diag = vec![0.0; n];
+        for (e, (o, c, w)) in self.rows.iter().enumerate() {
+            let (gd, gr) = &self.blocks.cache[&self.blocks.masks[e]];
+            // diag_c = Σ_e Σ_ij R_ic G_ij R_jc
+            let mut cols: Vec<u32> = c.clone();
+            cols.sort_unstable();
+            cols.dedup();
+            for &col in &cols {
+                let r: Vec<f64> = (0..nb)
+                    .map(|i| {
+                        (o[i]..o[i + 1])
+                            .filter(|&k| c[k] == col)
+                            .map(|k| w[k])
+                            .sum()
+                    })
+                    .collect();
+                let mut s = 0.0;
+                for i in 0..nb {
+                    for j in 0..nb {
+                        s += r[i] * (gd[i * nb + j] + gr[i * nb + j]) * r[j];
+                    }
+                }
+                diag[col as usize] += s;
+            }
+        }
+        diag
+    }
+}
+
 /// Rows, columns and values of matrix entries, and right-hand-side entries, of a batch of
 /// elements.
 type Triplets = (Vec<u32>, Vec<u32>, Vec<f64>, Vec<(u32, [f64; 3])>);
@@ -228,55 +412,8 @@ pub fn assemble(
     let samples = Samples::new(dim);
     let n = space.control_points().len();
     let c0 = space.control_points();
-    // G_e depends on the element only through which corners are boundary vertices.
-    let g_of = |mask: u8| -> (Vec<f64>, Vec<f64>) {
-        let mut gd = vec![0.0; nb * nb];
-        let mut gr = vec![0.0; nb * nb];
-        for i in 0..nb {
-            let corner = samples.is_corner(i);
-            let wd = if corner {
-                if mask & (1 << corner_of(samples.points[i])) != 0 {
-                    w.boundary_corner
-                } else {
-                    w.corner
-                }
-            } else {
-                w.midpoint
-            };
-            let wr = if corner {
-                w.frame_corner
-            } else {
-                w.frame_midpoint
-            };
-            let b = &samples.values[i];
-            for r in 0..nb {
-                for c in 0..nb {
-                    gd[r * nb + c] += wd * b[r] * b[c];
-                    for j in 0..dim {
-                        let d = &samples.derivs[i][j];
-                        gr[r * nb + c] += wr * d[r] * d[c];
-                    }
-                }
-            }
-        }
-        (gd, gr)
-    };
-    let masks: Vec<u8> = (0..space.n_elements())
-        .map(|e| {
-            let mut m = 0u8;
-            for (c, &v) in mesh.element(e).iter().enumerate() {
-                if topo.vertex_on_boundary[v as usize] {
-                    m |= 1 << c;
-                }
-            }
-            m
-        })
-        .collect();
-    let mut cache: HashMap<u8, (Vec<f64>, Vec<f64>)> = HashMap::new();
-    for &m in &masks {
-        cache.entry(m).or_insert_with(|| g_of(m));
-    }
-
+    let blocks = ElementBlocks::new(space, mesh, topo, w);
+    let (masks, cache) = (&blocks.masks, &blocks.cache);
     // Per element: local dense block on its distinct control points, as triplets.
     let chunks: Vec<Triplets> = (0..space.n_elements())
         .into_par_iter()

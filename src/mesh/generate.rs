@@ -232,3 +232,169 @@ fn finish(
         .expect("generated meshes are valid");
     mesh
 }
+
+/// A disc of radius 1 meshed as a "butterfly" O-grid: an inner square block of `n × n` quads
+/// and four outer blocks of `n × m` quads reaching the circle. The four corners of the inner
+/// square are interior vertices of valence 3, so the elements around them are Q2 elements of
+/// the spline space; everything else is regular. Boundary tag 1 ("wall").
+pub fn butterfly_disc(n: usize, m: usize) -> LinearMesh {
+    assert!(
+        n >= 1 && m >= 1,
+        "a disc needs at least one element per block side"
+    );
+    use std::collections::HashMap;
+    let a = 0.45_f64; // half-width of the inner square
+    let mut coords: Vec<[f64; 3]> = Vec::new();
+    let mut index: HashMap<(i64, i64), u32> = HashMap::new();
+    let mut id = |p: [f64; 2], coords: &mut Vec<[f64; 3]>| -> u32 {
+        let key = ((p[0] * 1e9).round() as i64, (p[1] * 1e9).round() as i64);
+        *index.entry(key).or_insert_with(|| {
+            coords.push([p[0], p[1], 0.0]);
+            (coords.len() - 1) as u32
+        })
+    };
+    let mut elements = Vec::new();
+    // Inner square.
+    let sq = |i: usize, j: usize| {
+        [
+            -a + 2.0 * a * i as f64 / n as f64,
+            -a + 2.0 * a * j as f64 / n as f64,
+        ]
+    };
+    for j in 0..n {
+        for i in 0..n {
+            let q = [sq(i, j), sq(i + 1, j), sq(i + 1, j + 1), sq(i, j + 1)];
+            for p in q {
+                elements.push(id(p, &mut coords));
+            }
+        }
+    }
+    // Outer blocks: blend between a side of the square and the matching quarter arc.
+    use std::f64::consts::PI;
+    for side in 0..4 {
+        let rot = side as f64 * PI / 2.0;
+        let (c, s) = (rot.cos(), rot.sin());
+        let turn = |p: [f64; 2]| [c * p[0] - s * p[1], s * p[0] + c * p[1]];
+        // Side x = a, y from -a to a; arc angle from -π/4 to π/4.
+        let point = |i: usize, k: usize| {
+            let t = i as f64 / n as f64;
+            let r = k as f64 / m as f64;
+            let inner = [a, -a + 2.0 * a * t];
+            let ang = -PI / 4.0 + t * PI / 2.0;
+            let outer = [ang.cos(), ang.sin()];
+            turn([
+                inner[0] + r * (outer[0] - inner[0]),
+                inner[1] + r * (outer[1] - inner[1]),
+            ])
+        };
+        for k in 0..m {
+            for i in 0..n {
+                let q = [
+                    point(i, k),
+                    point(i, k + 1),
+                    point(i + 1, k + 1),
+                    point(i + 1, k),
+                ];
+                for p in q {
+                    elements.push(id(p, &mut coords));
+                }
+            }
+        }
+    }
+    let mut mesh = LinearMesh {
+        dim: 2,
+        coords,
+        elements,
+        ..Default::default()
+    };
+    mesh.normalise_orientation(&MeshOptions::default(), &[])
+        .expect("generated meshes are valid");
+    let topo = super::Topology::build(&mesh);
+    for &f in &topo.boundary_facets {
+        mesh.tagged_facets
+            .extend_from_slice(&topo.edges[f as usize]);
+        mesh.facet_tags.push(1);
+    }
+    mesh.tag_names.insert(1, "wall".into());
+    mesh
+}
+
+/// Revolve a quad mesh (x > −`major`) into a ring-shaped solid:
+/// solid: the cross-section is moved to x + `major` and turned through `segments` equal steps
+/// of a full turn about the z axis (the section's y becomes z), closing the ring.
+pub fn revolve(section: &LinearMesh, major: f64, segments: usize) -> LinearMesh {
+    assert_eq!(section.dim, 2, "revolve takes a quad mesh");
+    assert!(segments >= 3, "a ring needs at least 3 segments");
+    let nv = section.coords.len() as u32;
+    let mut coords = Vec::with_capacity(section.coords.len() * segments);
+    for k in 0..segments {
+        let phi = 2.0 * std::f64::consts::PI * k as f64 / segments as f64;
+        coords.extend(section.coords.iter().map(|p| {
+            let r = major + p[0];
+            [r * phi.cos(), r * phi.sin(), p[1]]
+        }));
+    }
+    let mut elements = Vec::new();
+    for k in 0..segments as u32 {
+        let next = (k + 1) % segments as u32;
+        // The section's (x, y) axes become (radial, z); radial × z points against the turning
+        // direction, so the next section is the hex's bottom face for a right-handed hex.
+        for q in section.elements.chunks(4) {
+            elements.extend(q.iter().map(|&v| v + next * nv));
+            elements.extend(q.iter().map(|&v| v + k * nv));
+        }
+    }
+    let mut tagged_facets = Vec::new();
+    let mut facet_tags = Vec::new();
+    for k in 0..segments as u32 {
+        let next = (k + 1) % segments as u32;
+        for (f, &t) in section.tagged_facets.chunks(2).zip(&section.facet_tags) {
+            tagged_facets.extend([
+                f[0] + k * nv,
+                f[1] + k * nv,
+                f[1] + next * nv,
+                f[0] + next * nv,
+            ]);
+            facet_tags.push(t);
+        }
+    }
+    let mut mesh = finish(3, coords, elements, tagged_facets, facet_tags);
+    mesh.tag_names = section.tag_names.clone();
+    mesh
+}
+
+/// Kinds of [`generate`]d benchmark meshes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Kind {
+    /// 2D butterfly disc (valence-3 vertices).
+    Disc,
+    /// The disc extruded along z: a solid cylinder of height 2 (valence-3 edges).
+    Cylinder,
+    /// The disc revolved into a torus (major radius 3, tube radius 1).
+    Torus,
+}
+
+/// A mesh of `kind` with about `elements` elements (at least a few dozen).
+pub fn generate(kind: Kind, elements: usize) -> LinearMesh {
+    // Disc: 3n² quads with m = n/2 ... n² + 4·n·m = 3n² for m = n/2.
+    match kind {
+        Kind::Disc => {
+            let n = ((elements as f64 / 3.0).sqrt().round() as usize).max(2);
+            butterfly_disc(n, (n / 2).max(1))
+        }
+        Kind::Cylinder => {
+            let n = ((elements as f64 / 3.0).cbrt().round() as usize).max(2);
+            let disc = butterfly_disc(n, (n / 2).max(1));
+            let mut m = extrude(&disc, &uniform(n, 2.0 / n as f64));
+            m.tag_names.insert(1, "wall".into());
+            m.tag_names.insert(2, "bottom".into());
+            m.tag_names.insert(3, "top".into());
+            m
+        }
+        Kind::Torus => {
+            // 3n² per section, 3n sections.
+            let n = ((elements as f64 / 9.0).cbrt().round() as usize).max(2);
+            revolve(&butterfly_disc(n, (n / 2).max(1)), 3.0, 3 * n)
+        }
+    }
+}

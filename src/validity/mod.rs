@@ -10,11 +10,14 @@
 //! coefficients are inconclusive. Output: a certified interval [lower, upper] ∋ min det J;
 //! `lower > 0` certifies the element valid, `upper ≤ 0` proves it invalid.
 
-/// Binomial coefficients up to 6.
-const BINOM: [[f64; 7]; 7] = {
-    let mut t = [[0.0; 7]; 7];
+/// Largest polynomial degree handled (det J of an order-10 hex has degree 29 per direction).
+const MAX_DEGREE: usize = 32;
+
+/// Binomial coefficients up to [`MAX_DEGREE`].
+const BINOM: [[f64; MAX_DEGREE + 1]; MAX_DEGREE + 1] = {
+    let mut t = [[0.0; MAX_DEGREE + 1]; MAX_DEGREE + 1];
     let mut n = 0;
-    while n < 7 {
+    while n <= MAX_DEGREE {
         let mut k = 0;
         while k <= n {
             t[n][k] = if k == 0 || k == n {
@@ -197,6 +200,126 @@ pub fn det_jacobian_bernstein(dim: usize, net: &[[f64; 3]; 27]) -> Bernstein {
     }
 }
 
+/// Bernstein coefficients of det J of an order-p Lagrange element whose nodes are given in
+/// lattice order (i fastest; (p+1)^dim points): the nodes are converted to Bernstein points of
+/// degree p per direction, then differentiated and multiplied exactly.
+pub fn det_jacobian_bernstein_lagrange(dim: usize, p: usize, nodes: &[[f64; 3]]) -> Bernstein {
+    let m = p + 1;
+    // 1D Lagrange → Bernstein: solve A c = f with A[i][j] = B^p_j(i/p) (Gauss–Jordan, small).
+    let mut a: Vec<Vec<f64>> = (0..m)
+        .map(|i| {
+            let t = i as f64 / p as f64;
+            (0..m)
+                .map(|j| BINOM[p][j] * t.powi(j as i32) * (1.0 - t).powi((p - j) as i32))
+                .collect()
+        })
+        .collect();
+    let mut inv: Vec<Vec<f64>> = (0..m)
+        .map(|i| (0..m).map(|j| (i == j) as u8 as f64).collect())
+        .collect();
+    for c in 0..m {
+        let piv = (c..m)
+            .max_by(|&x, &y| a[x][c].abs().total_cmp(&a[y][c].abs()))
+            .unwrap();
+        a.swap(c, piv);
+        inv.swap(c, piv);
+        let d = a[c][c];
+        for j in 0..m {
+            a[c][j] /= d;
+            inv[c][j] /= d;
+        }
+        for r in 0..m {
+            if r != c && a[r][c] != 0.0 {
+                let f = a[r][c];
+                for j in 0..m {
+                    a[r][j] -= f * a[c][j];
+                    inv[r][j] -= f * inv[c][j];
+                }
+            }
+        }
+    }
+    let mz = if dim == 2 { 1 } else { m };
+    let mut net = nodes.to_vec();
+    for d in 0..dim {
+        let stride = [1, m, m * m][d];
+        let mut out = net.clone();
+        for o in 0..m * m * mz {
+            if (o / stride) % m != 0 {
+                continue;
+            }
+            for i in 0..m {
+                let mut acc = [0.0; 3];
+                for j in 0..m {
+                    let x = net[o + j * stride];
+                    for k in 0..3 {
+                        acc[k] += inv[i][j] * x[k];
+                    }
+                }
+                out[o + i * stride] = acc;
+            }
+        }
+        net = out;
+    }
+    let partial = |d: usize, c: usize| -> Bernstein {
+        let mut deg = if dim == 2 { [p, p, 0] } else { [p, p, p] };
+        deg[d] = p - 1;
+        let mut b = Bernstein::zeros(deg);
+        for k in 0..=deg[2] {
+            for j in 0..=deg[1] {
+                for i in 0..=deg[0] {
+                    let mut hi = [i, j, k];
+                    hi[d] += 1;
+                    let at = |q: [usize; 3]| net[q[0] + m * (q[1] + m * q[2])][c];
+                    let o = b.idx(i, j, k);
+                    b.coef[o] = p as f64 * (at(hi) - at([i, j, k]));
+                }
+            }
+        }
+        b
+    };
+    if dim == 2 {
+        let mut det = partial(0, 0).mul(&partial(1, 1));
+        det.add_scaled(&partial(0, 1).mul(&partial(1, 0)), -1.0);
+        det
+    } else {
+        let mut det: Option<Bernstein> = None;
+        for c in 0..3 {
+            let (a, b) = ((c + 1) % 3, (c + 2) % 3);
+            let mut cross = partial(1, a).mul(&partial(2, b));
+            cross.add_scaled(&partial(1, b).mul(&partial(2, a)), -1.0);
+            let term = partial(0, c).mul(&cross);
+            match &mut det {
+                None => det = Some(term),
+                Some(d) => d.add_scaled(&term, 1.0),
+            }
+        }
+        det.expect("three terms")
+    }
+}
+
+/// Certified bounds of min det J of a Bernstein polynomial, with subdivision as in
+/// [`det_jacobian_bounds`].
+pub fn bernstein_min_bounds(dim: usize, b: Bernstein, max_depth: usize) -> DetBounds {
+    let mut upper = b.min_corner();
+    let mut lower = f64::INFINITY;
+    let mut stack = vec![(b, 0usize)];
+    while let Some((p, depth)) = stack.pop() {
+        let lo = p.min_coef();
+        upper = upper.min(p.min_corner());
+        if lo > 0.0 || depth >= max_depth || upper <= 0.0 {
+            lower = lower.min(lo);
+            continue;
+        }
+        let (a, c) = p.split(depth % dim);
+        stack.push((a, depth + 1));
+        stack.push((c, depth + 1));
+    }
+    DetBounds {
+        lower: lower.min(upper),
+        upper,
+    }
+}
+
 /// Certified bounds on min det J over an element.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct DetBounds {
@@ -216,26 +339,7 @@ impl DetBounds {
 /// Certified bounds of min det J, subdividing up to `max_depth` times (each time halving the
 /// direction of the largest degree, cycling) where the coefficients do not decide the sign.
 pub fn det_jacobian_bounds(dim: usize, net: &[[f64; 3]; 27], max_depth: usize) -> DetBounds {
-    let b = det_jacobian_bernstein(dim, net);
-    let mut upper = b.min_corner();
-    let mut lower = f64::INFINITY;
-    // Work list of (patch, depth).
-    let mut stack = vec![(b, 0usize)];
-    while let Some((p, depth)) = stack.pop() {
-        let lo = p.min_coef();
-        upper = upper.min(p.min_corner());
-        if lo > 0.0 || depth >= max_depth || upper <= 0.0 {
-            lower = lower.min(lo);
-            continue;
-        }
-        let (a, c) = p.split(depth % dim);
-        stack.push((a, depth + 1));
-        stack.push((c, depth + 1));
-    }
-    DetBounds {
-        lower: lower.min(upper),
-        upper,
-    }
+    bernstein_min_bounds(dim, det_jacobian_bernstein(dim, net), max_depth)
 }
 
 #[cfg(test)]
@@ -320,6 +424,38 @@ mod tests {
                 assert!(
                     (b.eval(t) - want).abs() < 1e-7,
                     "dim {dim} at {t:?}: {} vs {want}",
+                    b.eval(t)
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn lagrange_det_matches_the_bezier_det_and_finite_differences() {
+        let f = |t: [f64; 3]| {
+            [
+                t[0] + 0.3 * t[1] * t[1],
+                t[1] + 0.2 * t[0] * t[0] * t[1] + 0.05 * t[2],
+                t[2] + 0.1 * t[0] * t[1],
+            ]
+        };
+        for p in [2, 3, 5] {
+            let m = p + 1;
+            let nodes: Vec<[f64; 3]> = (0..m * m * m)
+                .map(|n| {
+                    f([
+                        (n % m) as f64 / p as f64,
+                        ((n / m) % m) as f64 / p as f64,
+                        (n / (m * m)) as f64 / p as f64,
+                    ])
+                })
+                .collect();
+            let b = det_jacobian_bernstein_lagrange(3, p, &nodes);
+            for t in [[0.1, 0.7, 0.3], [0.9, 0.2, 0.5], [1.0, 0.0, 1.0]] {
+                let want = det_fd(3, &f, t);
+                assert!(
+                    (b.eval(t) - want).abs() < 1e-6,
+                    "p={p} at {t:?}: {} vs {want}",
                     b.eval(t)
                 );
             }

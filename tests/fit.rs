@@ -1,0 +1,133 @@
+//! The normal equations: the assembled matrix and the matrix-free operator agree, K is
+//! symmetric positive definite, and the fit solves the least-squares problem (its residual is
+//! orthogonal to every basis direction).
+
+use polyspline::fit::{FitSpace, FitWeights, MatrixFree, assemble};
+use polyspline::io::read_mesh;
+use polyspline::mesh::generate::{extrude, star_2d, uniform};
+use polyspline::mesh::{LinearMesh, MeshOptions, Topology};
+use polyspline::solve::LinOp;
+use polyspline::spline::SplineSpace;
+use std::path::PathBuf;
+
+fn meshes() -> Vec<LinearMesh> {
+    let real = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("meshes/real");
+    vec![
+        star_2d(5),
+        extrude(&star_2d(3), &uniform(3, 0.7)),
+        read_mesh(&real.join("dealii/example.msh"), &MeshOptions::default()).unwrap(),
+        read_mesh(
+            &real.join("mfem/cylinder-hex.mesh"),
+            &MeshOptions::default(),
+        )
+        .unwrap(),
+    ]
+}
+
+#[test]
+fn assembled_and_matrix_free_operators_agree() {
+    for m in meshes() {
+        let t = Topology::build(&m);
+        let s = SplineSpace::build(&m, &t);
+        for w in [FitWeights::position(), FitWeights::frame()] {
+            let (k, _) = assemble(&s, &m, &t, &w);
+            let mf = MatrixFree::new(&s, &m, &t, &w);
+            let n = k.nrows();
+            let x: Vec<[f64; 3]> = (0..n)
+                .map(|i| [(i as f64 * 0.37).sin(), (i as f64 * 0.11).cos(), 1.0])
+                .collect();
+            let (mut y1, mut y2) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
+            k.apply(&x, &mut y1);
+            mf.apply(&x, &mut y2);
+            let scale = y1
+                .iter()
+                .flat_map(|v| v.iter())
+                .fold(0.0f64, |a, b| a.max(b.abs()));
+            for (a, b) in y1.iter().zip(&y2) {
+                for d in 0..3 {
+                    assert!((a[d] - b[d]).abs() <= 1e-12 * scale, "{a:?} vs {b:?}");
+                }
+            }
+            for (a, b) in k.diagonal().iter().zip(mf.diagonal()) {
+                assert!((a - b).abs() <= 1e-12 * a.abs().max(1.0));
+                assert!(*a > 0.0, "K is positive definite: its diagonal is positive");
+            }
+            // Symmetry: yᵀ K x = xᵀ K y.
+            let z: Vec<[f64; 3]> = (0..n)
+                .map(|i| [(i as f64 * 0.91).cos(), 0.5, (i as f64).sin()])
+                .collect();
+            let mut kz = vec![[0.0; 3]; n];
+            k.apply(&z, &mut kz);
+            for d in 0..3 {
+                let a: f64 = (0..n).map(|i| z[i][d] * y1[i][d]).sum();
+                let b: f64 = (0..n).map(|i| x[i][d] * kz[i][d]).sum();
+                assert!((a - b).abs() <= 1e-10 * a.abs().max(1.0));
+            }
+        }
+    }
+}
+
+/// At the least-squares minimum, moving any one control point in any direction does not
+/// decrease Q: the gradient, evaluated by finite differences of Q itself, vanishes.
+#[test]
+fn the_fit_minimises_the_objective() {
+    let m = star_2d(5);
+    let t = Topology::build(&m);
+    let s = SplineSpace::build(&m, &t);
+    let w = FitWeights::position();
+    let params = polyspline::fit::FitParams {
+        weights: w,
+        cg: polyspline::solve::CgParams {
+            rel_tol: 1e-13,
+            ..Default::default()
+        },
+    };
+    let (c, _) = polyspline::fit::fit(&s, &m, &t, &params, |_, _| {}).unwrap();
+    // Q = Σ_e Σ_i w_i |x_e(u_i) - P_e(u_i)|² over the 3x3 lattice.
+    let q = |cps: &[[f64; 3]]| -> f64 {
+        let mut total = 0.0;
+        for e in 0..m.n_elements() {
+            let x = m.element_coords(e);
+            let net = s.bezier_net_with(e, cps);
+            for j in 0..3 {
+                for i in 0..3 {
+                    let u = [i as f64 / 2.0, j as f64 / 2.0, 0.0];
+                    let corner = i != 1 && j != 1;
+                    let c_idx = match (i, j) {
+                        (0, 0) => 0,
+                        (2, 0) => 1,
+                        (2, 2) => 2,
+                        (0, 2) => 3,
+                        _ => 0,
+                    };
+                    let wd = if corner {
+                        if t.vertex_on_boundary[m.element(e)[c_idx] as usize] {
+                            w.boundary_corner
+                        } else {
+                            w.corner
+                        }
+                    } else {
+                        w.midpoint
+                    };
+                    let p = polyspline::sample::multilinear(2, &x, u);
+                    let y = polyspline::sample::eval_net(2, &net, u);
+                    total += wd * ((y[0] - p[0]).powi(2) + (y[1] - p[1]).powi(2));
+                }
+            }
+        }
+        total
+    };
+    let q0 = q(&c);
+    let h = 1e-4;
+    for i in (0..c.len()).step_by(3) {
+        for d in 0..2 {
+            let mut plus = c.clone();
+            plus[i][d] += h;
+            let mut minus = c.clone();
+            minus[i][d] -= h;
+            let grad = (q(&plus) - q(&minus)) / (2.0 * h);
+            assert!(grad.abs() < 1e-6, "dQ/dC[{i}][{d}] = {grad}");
+            assert!(q(&plus) >= q0 - 1e-12 && q(&minus) >= q0 - 1e-12);
+        }
+    }
+}
