@@ -2,6 +2,7 @@
 //! kernel against its CPU twin, the f64 reference and independent oracles on lavapipe or a
 //! hardware GPU. A missing adapter fails under `CI=true` and is a printed skip elsewhere.
 
+#![allow(clippy::needless_range_loop)]
 use polyspline::cpu;
 use polyspline::gpu::{self, AdapterChoice, GpuContext, Precision};
 
@@ -703,6 +704,7 @@ fn curve_gpu_matches_cpu() {
                     mesh: MeshOptions::default(),
                     output: OutputOptions::default(),
                     backend,
+                    snap_boundary: false,
                 };
                 let r = curve(&input, &out, &opts).unwrap();
                 let ho = polyspline::sample::HighOrderMesh::from_raw(
@@ -791,7 +793,12 @@ fn million_hex_gpu_sampling_and_certification() {
     let t_gpu_cert = t.elapsed();
     for (c, g) in cpu_b.iter().zip(&gpu_b) {
         assert_eq!(c.certified_positive(), g.certified_positive());
-        assert!((c.lower - g.lower).abs() <= 1e-4 * c.lower.abs());
+        // f32 certificate = min coefficient − rounding bound (≈ 2·6·270·ε₃₂ ≈ 4e-4 of the
+        // coefficient scale, which is det J for these cubes).
+        assert!(
+            (c.lower - g.lower).abs() <= 2e-3 * c.lower.abs(),
+            "{c:?} vs {g:?}"
+        );
     }
     println!(
         "1M hexes ({} control points, {} output nodes): sample order 2: CPU {t_cpu_sample:.2?}, GPU {t_gpu_sample:.2?}; certify: CPU {t_cpu_cert:.2?}, GPU {t_gpu_cert:.2?} ({})",

@@ -23,8 +23,8 @@ fn add<T: Real>(a: Vec4<T>, b: Vec4<T>) -> Vec4<T> {
 
 /// Sum the partial pairs into (a·b, a·a) with the shader's lane order and tree.
 fn reduce_partials<T: Real>(params: &CgKernelParams, partials: &[Vec4<T>]) -> (Vec4<T>, Vec4<T>) {
-    let mut s0 = vec![[T::of(0.0); 4]; WG];
-    let mut s1 = vec![[T::of(0.0); 4]; WG];
+    let mut s0 = [[T::of(0.0); 4]; WG];
+    let mut s1 = [[T::of(0.0); 4]; WG];
     for l in 0..WG {
         let mut g = l;
         while g < params.n_partials as usize {

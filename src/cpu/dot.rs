@@ -20,8 +20,8 @@ pub fn dot_partial<T: Real>(
 ) {
     let stride = n_workgroups * WG;
     for wid in 0..n_workgroups {
-        let mut sab = vec![[T::of(0.0); 4]; WG];
-        let mut saa = vec![[T::of(0.0); 4]; WG];
+        let mut sab = [[T::of(0.0); 4]; WG];
+        let mut saa = [[T::of(0.0); 4]; WG];
         for lid in 0..WG {
             let mut ab = [T::of(0.0); 4];
             let mut aa = [T::of(0.0); 4];

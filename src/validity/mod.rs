@@ -244,7 +244,7 @@ pub fn det_jacobian_bernstein_lagrange(dim: usize, p: usize, nodes: &[[f64; 3]])
         let stride = [1, m, m * m][d];
         let mut out = net.clone();
         for o in 0..m * m * mz {
-            if (o / stride) % m != 0 {
+            if !(o / stride).is_multiple_of(m) {
                 continue;
             }
             for i in 0..m {
