@@ -111,6 +111,14 @@ enum Command {
         /// Keep tangled or degenerate input elements instead of failing.
         #[arg(long)]
         allow_invalid: bool,
+        /// Where sampling, certification and the CG solve run: `auto` uses a hardware GPU
+        /// when there is one and the CPU otherwise (a software adapter such as lavapipe only
+        /// with `gpu`).
+        #[arg(long, value_enum, default_value_t = BackendArg::Auto)]
+        backend: BackendArg,
+        /// Float type of the GPU kernels (default: f64 where the adapter has it).
+        #[arg(long, value_enum)]
+        precision: Option<PrecisionArg>,
     },
     /// Make a synthetic linear mesh with curved boundaries for benchmarks: a butterfly disc
     /// (2D), a solid cylinder or a torus (3D), with valence-3 vertices/edges.
@@ -227,7 +235,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             vtu_encoding,
             report,
             allow_invalid,
+            backend,
+            precision,
         } => {
+            let backend = resolve_backend(backend, precision)?;
             let mut weights = match fit {
                 FitArg::Frame => FitWeights::frame(),
                 FitArg::Smooth => FitWeights::smooth(),
@@ -292,6 +303,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                         VtuEncodingArg::Appended => VtuEncoding::Appended,
                     },
                 },
+                backend,
             };
             let r = curve(&mesh, &output, &options)?;
             eprintln!(
@@ -428,6 +440,40 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum BackendArg {
+    Auto,
+    Cpu,
+    Gpu,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum PrecisionArg {
+    F32,
+    F64,
+}
+
+/// The executor for `--backend`: `gpu` fails without an adapter; `auto` falls back to the CPU
+/// unless a hardware GPU is present.
+fn resolve_backend(
+    backend: BackendArg,
+    precision: Option<PrecisionArg>,
+) -> anyhow::Result<polyspline::gpu::Backend> {
+    use polyspline::gpu::{AdapterChoice, Backend, GpuContext, Precision};
+    let precision = precision.map(|p| match p {
+        PrecisionArg::F32 => Precision::F32,
+        PrecisionArg::F64 => Precision::F64,
+    });
+    Ok(match backend {
+        BackendArg::Cpu => Backend::Cpu,
+        BackendArg::Gpu => Backend::Gpu(GpuContext::new(AdapterChoice::Any, precision)?.into()),
+        BackendArg::Auto => match GpuContext::new(AdapterChoice::HardwareOnly, precision) {
+            Ok(ctx) => Backend::Gpu(ctx.into()),
+            Err(_) => Backend::Cpu,
+        },
+    })
 }
 
 /// Read a high-order mesh written by `curve` (or any linear/Lagrange quad/hex mesh).

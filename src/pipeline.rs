@@ -3,7 +3,8 @@
 //! Input: a mesh path and [`CurveOptions`]. Output: the written high-order mesh file and a
 //! [`CurveReport`]. The output file is written atomically and never onto the input.
 
-use crate::fit::{FitParams, FitTargets, FitWeights, fit};
+use crate::fit::{FitParams, FitTargets, FitWeights, fit_with};
+use crate::gpu::{AdapterReport, Backend, Precision};
 use crate::io::gmsh_write::{MshVersion, write_msh};
 use crate::io::output::{WriteError, write_atomically};
 use crate::io::vtu_write::{VtuEncoding, write_vtu};
@@ -14,8 +15,8 @@ use crate::sample::{BezierElements, HighOrderMesh, MAX_ORDER, sample};
 use crate::solve::CgError;
 use crate::spline::SplineSpace;
 use crate::validity::{
-    LineSearchInfo, LineSearchParams, ValidityError, certify_elements, line_search,
-    local_line_search,
+    Certifier, CpuCertifier, LineSearchInfo, LineSearchParams, ValidityError, line_search_with,
+    local_line_search_with,
 };
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -78,6 +79,8 @@ pub struct CurveOptions {
     pub snap_boundary: bool,
     pub mesh: MeshOptions,
     pub output: OutputOptions,
+    /// Executor of sampling, certification and the CG solve.
+    pub backend: Backend,
 }
 
 /// Everything that can stop the `curve` job.
@@ -89,6 +92,11 @@ pub enum CurveError {
     Write(#[from] WriteError),
     #[error("{0}")]
     Options(String),
+    #[error("{}: GPU: {source}", input.display())]
+    Gpu {
+        input: PathBuf,
+        source: crate::gpu::GpuError,
+    },
     #[error("{}: fit: {source}", input.display())]
     Solve { input: PathBuf, source: CgError },
     #[error("{}: {source}", input.display())]
@@ -153,6 +161,10 @@ pub struct CurveReport {
     pub boundary_deviation_rms: f64,
     /// Seconds per stage, and `total`.
     pub timings: BTreeMap<String, f64>,
+    /// `cpu` or `gpu`; with `gpu`, the adapter and the kernels' precision.
+    pub backend: String,
+    pub adapter: Option<AdapterReport>,
+    pub gpu_precision: Option<Precision>,
 }
 
 /// Output format from the file extension.
@@ -244,8 +256,22 @@ pub fn curve(
     let mut ls_alpha = None;
     let mut ls_invalid_full = 0;
     let mut ls_damped = 0;
+    let gpu = options.backend.gpu();
+    let gpu_certifier = gpu.map(crate::gpu::jacobian_check::GpuCertifier::new);
+    let certifier: &dyn Certifier = match &gpu_certifier {
+        Some(c) => c,
+        None => &CpuCertifier,
+    };
+    let certify_all = |s: &SplineSpace| {
+        let all: Vec<usize> = (0..s.n_elements()).collect();
+        certifier.certify(
+            s.dim,
+            &all,
+            &|e| s.element_bezier(e),
+            options.line_search.certificate_depth,
+        )
+    };
     if options.geometry != Geometry::Straight {
-        let depth = options.line_search.certificate_depth;
         let invalid = |what: &str, bad: &[usize]| CurveError::Invalid {
             input: input.to_owned(),
             what: what.into(),
@@ -267,20 +293,26 @@ pub fn curve(
             let mut round = 0;
             loop {
                 let (c_star, info) =
-                    fit(&s, &mesh, &topo, &options.fit, |_, _| {}).map_err(|source| {
-                        CurveError::Solve {
-                            input: input.to_owned(),
-                            source,
-                        }
+                    fit_with(&s, &mesh, &topo, &options.fit, |k, rhs, x, cg| match gpu {
+                        Some(ctx) => crate::gpu::cg::pcg(ctx, k, rhs, x, cg, |_, _| {}),
+                        None => crate::solve::pcg(k, rhs, x, cg, |_, _| {}),
+                    })
+                    .map_err(|source| CurveError::Solve {
+                        input: input.to_owned(),
+                        source,
                     })?;
                 lap("fit", &mut timings);
                 *timings.entry("fit_assembly".into()).or_insert(0.0) += info.assembly_seconds;
                 *timings.entry("fit_cg".into()).or_insert(0.0) += info.solve_seconds;
                 let net = |e: usize, cps: &[[f64; 3]]| s.element_bezier_with(e, cps);
-                let thresholds =
-                    acceptance_thresholds(&mesh, &s, options.line_search.min_det_fraction, depth);
+                let thresholds = acceptance_thresholds(
+                    &mesh,
+                    options.line_search.min_det_fraction,
+                    &certify_all(&s),
+                );
                 let result = match options.line_search_mode {
-                    LineSearchMode::Global => line_search(
+                    LineSearchMode::Global => line_search_with(
+                        certifier,
                         s.dim,
                         s.n_elements(),
                         net,
@@ -308,7 +340,8 @@ pub fn curve(
                             ids.dedup();
                             ids
                         };
-                        local_line_search(
+                        local_line_search_with(
+                            certifier,
                             s.dim,
                             s.n_elements(),
                             net,
@@ -343,8 +376,7 @@ pub fn curve(
                         break;
                     }
                     Err(ValidityError::InitialInvalid { .. }) if round < MAX_DEMOTION_ROUNDS => {
-                        let bounds =
-                            certify_elements(s.dim, s.n_elements(), |e| s.element_bezier(e), depth);
+                        let bounds = certify_all(&s);
                         let bad: Vec<usize> = (0..bounds.len())
                             .filter(|&e| !bounds[e].certified_positive())
                             .collect();
@@ -363,7 +395,7 @@ pub fn curve(
             }
             demoted = demote.iter().filter(|&&d| d).count();
         } else {
-            let bounds = certify_elements(s.dim, s.n_elements(), |e| s.element_bezier(e), depth);
+            let bounds = certify_all(&s);
             let bad: Vec<usize> = (0..bounds.len())
                 .filter(|&e| !bounds[e].certified_positive())
                 .collect();
@@ -383,7 +415,16 @@ pub fn curve(
         None => &mesh,
         Some(s) => s,
     };
-    let mut ho = sample(source, &mesh, &topo, order);
+    let mut ho =
+        match gpu {
+            Some(ctx) => crate::gpu::evaluate::sample(ctx, source, &mesh, &topo, order).map_err(
+                |source| CurveError::Gpu {
+                    input: input.to_owned(),
+                    source,
+                },
+            )?,
+            None => sample(source, &mesh, &topo, order),
+        };
     if options.subdivide.is_some() {
         ho = ho.subdivided();
     }
@@ -454,6 +495,9 @@ pub fn curve(
         boundary_deviation_max: dev_max,
         boundary_deviation_rms: dev_rms,
         timings,
+        backend: options.backend.name().into(),
+        adapter: gpu.map(|g| g.adapter.clone()),
+        gpu_precision: gpu.map(|g| g.precision),
     })
 }
 
@@ -508,9 +552,8 @@ fn demote_with_rings(topo: &Topology, bad: &[usize], round: usize, demote: &mut 
 /// certified to achieve (0 where the initial map is not certified).
 fn acceptance_thresholds(
     mesh: &crate::mesh::LinearMesh,
-    s: &SplineSpace,
     fraction: f64,
-    depth: usize,
+    initial: &[crate::validity::DetBounds],
 ) -> Vec<f64> {
     use rayon::prelude::*;
     if fraction <= 0.0 {
@@ -534,8 +577,7 @@ fn acceptance_thresholds(
                 .copied()
                 .fold(f64::INFINITY, f64::min)
                 .max(0.0);
-            let initial =
-                crate::validity::det_jacobian_bounds(s.dim, &s.element_bezier(e), depth).lower;
+            let initial = initial[e].lower;
             if initial > 0.0 {
                 (fraction * reference).min(0.5 * initial)
             } else {

@@ -328,6 +328,7 @@ fn options(mode: &str) -> CurveOptions {
         snap_boundary: false,
         mesh: MeshOptions::default(),
         output: Default::default(),
+        backend: Default::default(),
     }
 }
 

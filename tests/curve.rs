@@ -47,6 +47,7 @@ fn options(order: usize, geometry: Geometry) -> CurveOptions {
         snap_boundary: false,
         mesh: MeshOptions::default(),
         output: OutputOptions::default(),
+        backend: Default::default(),
     }
 }
 

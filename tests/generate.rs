@@ -43,7 +43,10 @@ fn generated_meshes_have_their_shape() {
         let irregular = t.irregular_count();
         match kind {
             Kind::Disc => assert_eq!(irregular, 4),
-            _ => assert!(irregular > 0 && irregular % 4 == 0, "{kind:?}: {irregular}"),
+            _ => assert!(
+                irregular > 0 && irregular.is_multiple_of(4),
+                "{kind:?}: {irregular}"
+            ),
         }
         // Every boundary facet is tagged.
         assert!(t.boundary_facet_tags.iter().all(|&x| x > 0), "{kind:?}");

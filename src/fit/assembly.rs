@@ -21,6 +21,9 @@ use std::collections::HashMap;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
+/// Local matrices shared by elements of one (pattern key, weight mask), in local-node order.
+type SharedLocals = HashMap<(u64, u8), Arc<Vec<f64>>>;
+
 /// Dense element matrix on the element's sorted distinct columns.
 struct Local {
     ids: Vec<u32>,
@@ -150,7 +153,7 @@ pub fn assemble_matrix(space: &dyn FitSpace, blocks: &ElementBlocks) -> NormalMa
     let values: Vec<AtomicU64> = (0..indices.len()).map(|_| AtomicU64::new(0)).collect();
 
     // 3. Values. Shared local matrices by (pattern key, weight mask), in local-node order.
-    let shared: Mutex<HashMap<(u64, u8), Arc<Vec<f64>>>> = Mutex::new(HashMap::new());
+    let shared: Mutex<SharedLocals> = Mutex::new(HashMap::new());
     (0..ne).into_par_iter().for_each(|e| {
         let (ids, k): (Vec<u32>, Arc<Vec<f64>>) = match space.element_pattern(e) {
             Some((key, local_ids)) => {

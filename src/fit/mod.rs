@@ -569,7 +569,27 @@ pub fn fit(
     mesh: &LinearMesh,
     topo: &Topology,
     params: &FitParams,
-    progress: impl FnMut(usize, f64),
+    mut progress: impl FnMut(usize, f64),
+) -> Result<(Vec<[f64; 3]>, FitInfo), CgError> {
+    fit_with(space, mesh, topo, params, |k, rhs, delta, cg| {
+        pcg(k, rhs, delta, cg, &mut progress)
+    })
+}
+
+/// [`fit`] with the normal equations solved by `solve(matrix, rhs, delta, cg)` (the
+/// unknowns are displacements from the initial control points, starting at 0), e.g. the GPU
+/// solver `crate::gpu::cg::pcg`.
+pub fn fit_with(
+    space: &dyn FitSpace,
+    mesh: &LinearMesh,
+    topo: &Topology,
+    params: &FitParams,
+    solve: impl FnOnce(
+        &NormalMatrix,
+        &[[f64; 3]],
+        &mut [[f64; 3]],
+        &crate::solve::CgParams,
+    ) -> Result<crate::solve::CgInfo, CgError>,
 ) -> Result<(Vec<[f64; 3]>, FitInfo), CgError> {
     let t = std::time::Instant::now();
     let smooth = match params.targets {
@@ -580,7 +600,7 @@ pub fn fit(
     let assembly_seconds = t.elapsed().as_secs_f64();
     let t = std::time::Instant::now();
     let mut delta = vec![[0.0; 3]; k.n];
-    let cg = pcg(&k, &rhs, &mut delta, &params.cg, progress)?;
+    let cg = solve(&k, &rhs, &mut delta, &params.cg)?;
     let solve_seconds = t.elapsed().as_secs_f64();
     let c: Vec<[f64; 3]> = space
         .control_points()

@@ -380,14 +380,39 @@ pub fn sample(
     topo: &Topology,
     p: usize,
 ) -> HighOrderMesh {
-    assert!((1..=MAX_ORDER).contains(&p), "order {p} out of range");
     assert_eq!(source.n_elements(), mesh.n_elements());
+    let d = mesh.dim;
+    let pf = p as f64;
+    let (mut ho, nodes) = sample_with(mesh, topo, p, |e, lattice, out: &mut [[f64; 3]]| {
+        let net = source.bezier_net(e);
+        for (l, x) in lattice.iter().zip(out) {
+            *x = eval_net(
+                d,
+                &net,
+                [l[0] as f64 / pf, l[1] as f64 / pf, l[2] as f64 / pf],
+            );
+        }
+    });
+    ho.nodes = nodes;
+    ho
+}
+
+/// The order-`p` mesh over `mesh`'s topology with node values from `eval(e, lattice, out)`,
+/// which fills `out[i]` for lattice point `lattice[i]` of element `e` (each node is produced
+/// once, from one element that contains it). Returns the mesh with `nodes` empty, and the node
+/// values. [`sample`] evaluates positions directly; the GPU path first collects
+/// (element, lattice point) queries this way and evaluates them in a kernel.
+pub fn sample_with<T: Copy + Default + Send + Sync>(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    p: usize,
+    eval: impl Fn(usize, &[Lattice], &mut [T]) + Sync,
+) -> (HighOrderMesh, Vec<T>) {
+    assert!((1..=MAX_ORDER).contains(&p), "order {p} out of range");
     let d = mesh.dim;
     let num = Numbering::new(mesh, topo, p);
     let npe = (p + 1).pow(d as u32);
     let ne = mesh.n_elements();
-    let pf = p as f64;
-    let param = |l: Lattice| [l[0] as f64 / pf, l[1] as f64 / pf, l[2] as f64 / pf];
 
     // Element connectivity.
     let mut elements = vec![0u32; ne * npe];
@@ -400,8 +425,8 @@ pub fn sample(
             }
         });
 
-    // Node positions, entity by entity, each from one owning element.
-    let mut nodes = vec![[0.0; 3]; num.n_nodes()];
+    // Node values, entity by entity, each from one owning element.
+    let mut nodes = vec![T::default(); num.n_nodes()];
     let (vertex_part, rest) = nodes.split_at_mut(num.edge_base);
     let (edge_part, rest) = rest.split_at_mut(num.face_base - num.edge_base);
     let (face_part, cell_part) = rest.split_at_mut(num.cell_base - num.face_base);
@@ -413,11 +438,8 @@ pub fn sample(
             .position(|&u| u as usize == v)
             .unwrap();
         let q = HEX_VERTEX_PARAMS[c];
-        *x = eval_net(
-            d,
-            &source.bezier_net(e),
-            [q[0] as f64, q[1] as f64, q[2] as f64],
-        );
+        let l = [q[0] as usize * p, q[1] as usize * p, q[2] as usize * p];
+        eval(e, &[l], std::slice::from_mut(x));
     });
     if p > 1 {
         // First element and local edge of every edge.
@@ -434,10 +456,10 @@ pub fn sample(
             .for_each(|(edge, out)| {
                 let slot = edge_owner[edge] as usize;
                 let (e, local) = (slot / nle, slot % nle);
-                let net = source.bezier_net(e);
-                for (i, x) in out.iter_mut().enumerate() {
-                    *x = eval_net(d, &net, param(edge_lattice(mesh, topo, p, e, local, i + 1)));
-                }
+                let lattice: Vec<Lattice> = (0..out.len())
+                    .map(|i| edge_lattice(mesh, topo, p, e, local, i + 1))
+                    .collect();
+                eval(e, &lattice, out);
             });
         if d == 3 {
             let m = p - 1;
@@ -447,8 +469,8 @@ pub fn sample(
                 .for_each(|(f, out)| {
                     let e = topo.facet_elements[f][0] as usize;
                     let side = topo.facet_sides[f][0] as usize;
-                    let net = source.bezier_net(e);
                     let (dirs, [ou, ov], swapped) = num.face_frame(e, side);
+                    let mut lattice = vec![[0; 3]; m * m];
                     for b in 1..p {
                         for a in 1..p {
                             let (du, dv) = if swapped { (b, a) } else { (a, b) };
@@ -456,9 +478,10 @@ pub fn sample(
                             l[side / 2] = (side % 2) * p;
                             l[dirs[0]] = if ou == 0 { du } else { p - du };
                             l[dirs[1]] = if ov == 0 { dv } else { p - dv };
-                            out[(a - 1) + (b - 1) * m] = eval_net(d, &net, param(l));
+                            lattice[(a - 1) + (b - 1) * m] = l;
                         }
                     }
+                    eval(e, &lattice, out);
                 });
         }
         let m = p - 1;
@@ -466,12 +489,13 @@ pub fn sample(
             .par_chunks_mut(m.pow(d as u32))
             .enumerate()
             .for_each(|(e, out)| {
-                let net = source.bezier_net(e);
-                for (n, x) in out.iter_mut().enumerate() {
-                    let l = lattice_point(m - 1, d, n).map(|c| c + 1);
-                    let l = if d == 2 { [l[0], l[1], 0] } else { l };
-                    *x = eval_net(d, &net, param(l));
-                }
+                let lattice: Vec<Lattice> = (0..out.len())
+                    .map(|n| {
+                        let l = lattice_point(m - 1, d, n).map(|c| c + 1);
+                        if d == 2 { [l[0], l[1], 0] } else { l }
+                    })
+                    .collect();
+                eval(e, &lattice, out);
             });
     }
 
@@ -513,16 +537,17 @@ pub fn sample(
                 }
             }
         });
-    HighOrderMesh {
+    let ho = HighOrderMesh {
         dim: d,
         order: p,
-        nodes,
+        nodes: Vec::new(),
         elements,
         element_tags: mesh.element_tags.clone(),
         boundary,
         boundary_tags: topo.boundary_facet_tags.clone(),
         tag_names: mesh.tag_names.clone(),
-    }
+    };
+    (ho, nodes)
 }
 
 /// Reading a high-order mesh back from a file's [`RawMesh`].

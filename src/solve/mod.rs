@@ -63,6 +63,9 @@ pub enum CgError {
     NotPositiveDefinite { iteration: usize, curvature: f64 },
     #[error("the Jacobi preconditioner has a non-positive diagonal entry {value:.3e} at row {row}")]
     BadDiagonal { row: usize, value: f64 },
+    /// The GPU solver's device failed.
+    #[error("the GPU solver failed: {0}")]
+    Device(String),
 }
 
 fn dot3(a: &[[f64; 3]], b: &[[f64; 3]]) -> [f64; 3] {

@@ -506,6 +506,38 @@ pub fn certify_elements(
         .collect()
 }
 
+/// Who computes certified det J bounds for a batch of elements: the CPU ([`CpuCertifier`]) or
+/// the GPU (`crate::gpu::jacobian_check::GpuCertifier`). Both return bounds that are certified.
+pub trait Certifier: Sync {
+    /// Bounds of `elements`, in that order; `net(e)` is the Bézier net of element e.
+    fn certify(
+        &self,
+        dim: usize,
+        elements: &[usize],
+        net: &(dyn Fn(usize) -> [[f64; 3]; 27] + Sync),
+        max_depth: usize,
+    ) -> Vec<DetBounds>;
+}
+
+/// [`det_jacobian_bounds`] on every element, in parallel on the CPU (the reference).
+pub struct CpuCertifier;
+
+impl Certifier for CpuCertifier {
+    fn certify(
+        &self,
+        dim: usize,
+        elements: &[usize],
+        net: &(dyn Fn(usize) -> [[f64; 3]; 27] + Sync),
+        max_depth: usize,
+    ) -> Vec<DetBounds> {
+        use rayon::prelude::*;
+        elements
+            .par_iter()
+            .map(|&e| det_jacobian_bounds(dim, &net(e), max_depth))
+            .collect()
+    }
+}
+
 /// Line-search parameters (paper §2.3: bisection on α in C(α) = C0 + α(C* − C0)).
 #[derive(Clone, Copy, Debug, serde::Serialize)]
 pub struct LineSearchParams {
@@ -591,6 +623,31 @@ pub fn line_search(
     thresholds: &[f64],
     params: &LineSearchParams,
 ) -> Result<(Vec<[f64; 3]>, LineSearchInfo), ValidityError> {
+    line_search_with(
+        &CpuCertifier,
+        dim,
+        n_elements,
+        net,
+        c0,
+        c_star,
+        thresholds,
+        params,
+    )
+}
+
+/// [`line_search`] with the certificates computed by `certifier`.
+#[allow(clippy::too_many_arguments)]
+pub fn line_search_with(
+    certifier: &dyn Certifier,
+    dim: usize,
+    n_elements: usize,
+    net: impl Fn(usize, &[[f64; 3]]) -> [[f64; 3]; 27] + Sync,
+    c0: &[[f64; 3]],
+    c_star: &[[f64; 3]],
+    thresholds: &[f64],
+    params: &LineSearchParams,
+) -> Result<(Vec<[f64; 3]>, LineSearchInfo), ValidityError> {
+    let all: Vec<usize> = (0..n_elements).collect();
     let ok = |e: usize, b: &DetBounds| b.lower > thresholds.get(e).copied().unwrap_or(0.0);
     let at = |alpha: f64| -> Vec<[f64; 3]> {
         c0.iter()
@@ -598,9 +655,8 @@ pub fn line_search(
             .map(|(a, b)| std::array::from_fn(|k| a[k] + alpha * (b[k] - a[k])))
             .collect()
     };
-    let check = |cps: &[[f64; 3]]| {
-        certify_elements(dim, n_elements, |e| net(e, cps), params.certificate_depth)
-    };
+    let check =
+        |cps: &[[f64; 3]]| certifier.certify(dim, &all, &|e| net(e, cps), params.certificate_depth);
     let full = check(c_star);
     let bad: Vec<usize> = (0..n_elements)
         .filter(|&e| !full[e].certified_positive())
@@ -675,6 +731,32 @@ pub fn local_line_search(
     thresholds: &[f64],
     params: &LineSearchParams,
 ) -> Result<(Vec<[f64; 3]>, LocalSearchInfo), ValidityError> {
+    local_line_search_with(
+        &CpuCertifier,
+        dim,
+        n_elements,
+        net,
+        support,
+        c0,
+        c_star,
+        thresholds,
+        params,
+    )
+}
+
+/// [`local_line_search`] with the certificates computed by `certifier`.
+#[allow(clippy::too_many_arguments)]
+pub fn local_line_search_with(
+    certifier: &dyn Certifier,
+    dim: usize,
+    n_elements: usize,
+    net: impl Fn(usize, &[[f64; 3]]) -> [[f64; 3]; 27] + Sync,
+    support: impl Fn(usize) -> Vec<u32> + Sync,
+    c0: &[[f64; 3]],
+    c_star: &[[f64; 3]],
+    thresholds: &[f64],
+    params: &LineSearchParams,
+) -> Result<(Vec<[f64; 3]>, LocalSearchInfo), ValidityError> {
     use rayon::prelude::*;
     let ok = |e: usize, b: &DetBounds| b.lower > thresholds.get(e).copied().unwrap_or(0.0);
     let n = c0.len();
@@ -688,10 +770,9 @@ pub fn local_line_search(
             .collect()
     };
     let mut cps = c_star.to_vec();
-    let mut bounds: Vec<DetBounds> = (0..n_elements)
-        .into_par_iter()
-        .map(|e| det_jacobian_bounds(dim, &net(e, &cps), params.certificate_depth))
-        .collect();
+    let all: Vec<usize> = (0..n_elements).collect();
+    let mut bounds: Vec<DetBounds> =
+        certifier.certify(dim, &all, &|e| net(e, &cps), params.certificate_depth);
     let invalid_at_full_step = (0..n_elements).filter(|&e| !ok(e, &bounds[e])).count();
     let mut rounds = 0;
     loop {
@@ -723,16 +804,8 @@ pub fn local_line_search(
             .into_par_iter()
             .filter(|&e| supports[e].iter().any(|&c| touched[c as usize]))
             .collect();
-        let fresh: Vec<(usize, DetBounds)> = recheck
-            .into_par_iter()
-            .map(|e| {
-                (
-                    e,
-                    det_jacobian_bounds(dim, &net(e, &cps), params.certificate_depth),
-                )
-            })
-            .collect();
-        for (e, b) in fresh {
+        let fresh = certifier.certify(dim, &recheck, &|e| net(e, &cps), params.certificate_depth);
+        for (&e, b) in recheck.iter().zip(fresh) {
             bounds[e] = b;
         }
         rounds += 1;

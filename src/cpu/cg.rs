@@ -1,0 +1,138 @@
+//! CPU twin of `shaders/cg.wgsl`: second reduction stage with α/β, and the vector updates.
+
+use super::{Real, Vec4};
+pub use crate::gpu::cg::{CgKernelParams, CgState};
+
+/// Workgroup size of the finalize entry points.
+pub const WG: usize = 256;
+
+/// `Scalars` of the shader.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Scalars<T> {
+    pub rz: Vec4<T>,
+    pub rr: Vec4<T>,
+    pub target2: Vec4<T>,
+    pub alpha: Vec4<T>,
+    pub beta: Vec4<T>,
+    pub pap: Vec4<T>,
+}
+
+fn add<T: Real>(a: Vec4<T>, b: Vec4<T>) -> Vec4<T> {
+    std::array::from_fn(|k| a[k] + b[k])
+}
+
+/// Sum the partial pairs into (a·b, a·a) with the shader's lane order and tree.
+fn reduce_partials<T: Real>(params: &CgKernelParams, partials: &[Vec4<T>]) -> (Vec4<T>, Vec4<T>) {
+    let mut s0 = [[T::of(0.0); 4]; WG];
+    let mut s1 = [[T::of(0.0); 4]; WG];
+    for l in 0..WG {
+        let mut g = l;
+        while g < params.n_partials as usize {
+            s0[l] = add(s0[l], partials[2 * g]);
+            s1[l] = add(s1[l], partials[2 * g + 1]);
+            g += WG;
+        }
+    }
+    let mut h = WG / 2;
+    while h > 0 {
+        for l in 0..h {
+            s0[l] = add(s0[l], s0[l + h]);
+            s1[l] = add(s1[l], s1[l + h]);
+        }
+        h /= 2;
+    }
+    (s0[0], s1[0])
+}
+
+pub fn finalize_alpha<T: Real>(
+    params: &CgKernelParams,
+    scalars: &mut Scalars<T>,
+    state: &mut CgState,
+    partials: &[Vec4<T>],
+) {
+    let (pap, _) = reduce_partials(params, partials);
+    let mut alpha = [T::of(0.0); 4];
+    let mut running = false;
+    if state.done == 0 && state.breakdown == 0 {
+        for k in 0..3 {
+            if scalars.rr[k] > scalars.target2[k] {
+                running = true;
+            }
+        }
+        if running && state.iterations >= params.max_iters {
+            running = false;
+        }
+        if running {
+            for k in 0..3 {
+                if scalars.rr[k] > scalars.target2[k] {
+                    if pap[k] > T::of(0.0) {
+                        alpha[k] = scalars.rz[k] / pap[k];
+                    } else {
+                        state.breakdown = state.iterations + 1;
+                        alpha = [T::of(0.0); 4];
+                        break;
+                    }
+                }
+            }
+            state.iterations += 1;
+        } else {
+            state.done = 1;
+        }
+    }
+    scalars.pap = pap;
+    scalars.alpha = alpha;
+}
+
+#[allow(clippy::too_many_arguments)]
+pub fn update_xr<T: Real>(
+    params: &CgKernelParams,
+    scalars: &Scalars<T>,
+    x: &mut [Vec4<T>],
+    r: &mut [Vec4<T>],
+    z: &mut [Vec4<T>],
+    p: &[Vec4<T>],
+    ap: &[Vec4<T>],
+    inv_diag: &[T],
+) {
+    let alpha = scalars.alpha;
+    for i in 0..params.n as usize {
+        for k in 0..4 {
+            x[i][k] += alpha[k] * p[i][k];
+            r[i][k] -= alpha[k] * ap[i][k];
+            z[i][k] = inv_diag[i] * r[i][k];
+        }
+    }
+}
+
+pub fn finalize_beta<T: Real>(
+    params: &CgKernelParams,
+    scalars: &mut Scalars<T>,
+    state: &CgState,
+    partials: &[Vec4<T>],
+) {
+    let (rz_new, rr_new) = reduce_partials(params, partials);
+    let mut beta = [T::of(0.0); 4];
+    if state.done == 0 {
+        for k in 0..3 {
+            if scalars.rz[k] > T::of(0.0) {
+                beta[k] = rz_new[k] / scalars.rz[k];
+            }
+        }
+        scalars.rz = rz_new;
+        scalars.rr = rr_new;
+    }
+    scalars.beta = beta;
+}
+
+pub fn update_p<T: Real>(
+    params: &CgKernelParams,
+    scalars: &Scalars<T>,
+    z: &[Vec4<T>],
+    p: &mut [Vec4<T>],
+) {
+    for i in 0..params.n as usize {
+        for k in 0..4 {
+            p[i][k] = z[i][k] + scalars.beta[k] * p[i][k];
+        }
+    }
+}

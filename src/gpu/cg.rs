@@ -1,0 +1,528 @@
+//! The CG pieces on the GPU: `shaders/spmv.wgsl` (CSR operator on three right-hand sides),
+//! `shaders/dot.wgsl` (first reduction stage), `shaders/cg.wgsl` (second stage with α/β, and
+//! the vector updates). CPU twins: [`crate::cpu::spmv`], [`crate::cpu::dot`], [`crate::cpu::cg`].
+//!
+//! [`GpuOperator`] is a [`LinOp`] (one SpMV per `apply`, with an upload and a read-back), so
+//! the CPU's CG loop can run on it; [`pcg`] keeps the whole iteration on the GPU: every scalar
+//! lives in a GPU buffer, [`CG_BATCH`] iterations are encoded per submit, and only the state
+//! and the scalars (a few hundred bytes) are read back per batch. In f32 it is wrapped in
+//! iterative refinement: the residual b − A x is recomputed in f64 on the CPU, and the GPU
+//! solves for the correction (displacement unknowns), so the f64 tolerance is met although
+//! the GPU's arithmetic is f32.
+
+use super::{GpuContext, GpuError, Precision, bytes_to_reals, groups, reals_to_bytes};
+use crate::fit::NormalMatrix;
+use crate::solve::{CgError, CgInfo, CgParams, LinOp};
+
+pub const SPMV_SOURCE: &str = include_str!("../../shaders/spmv.wgsl");
+pub const DOT_SOURCE: &str = include_str!("../../shaders/dot.wgsl");
+pub const CG_SOURCE: &str = include_str!("../../shaders/cg.wgsl");
+
+/// Iterations encoded per submit (one read-back of a few bytes per batch).
+pub const CG_BATCH: usize = 10;
+/// Workgroups of the first reduction stage (the second stage is one workgroup of 256).
+pub const DOT_WORKGROUPS: u32 = 64;
+/// f32 inner solves reduce the residual by this factor per refinement round: the recursively
+/// updated f32 residual is not trustworthy much below ~1e-5 of its start.
+pub const F32_INNER_REDUCTION: f64 = 1e-3;
+/// Refinement rounds at most.
+pub const MAX_REFINEMENTS: usize = 60;
+/// Agreement of an f32 SpMV with the f64 one, relative to Σ|a_ij||x_j| per row: each product
+/// and sum is rounded once (rows have ≤ ~130 entries, so 2·130·ε/2 bounds the sum; the
+/// inputs' own rounding adds 2ε).
+pub const SPMV_TOL_F32: f64 = 160.0 * f32::EPSILON as f64;
+/// The same for f64 kernels.
+pub const SPMV_TOL_F64: f64 = 160.0 * f64::EPSILON;
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct SpmvParams {
+    pub n_rows: u32,
+    pub row_base: u32,
+    pub _pad0: u32,
+    pub _pad1: u32,
+}
+const _: () = assert!(std::mem::size_of::<SpmvParams>() == 16);
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct DotParams {
+    pub n: u32,
+    pub _pad0: u32,
+    pub _pad1: u32,
+    pub _pad2: u32,
+}
+const _: () = assert!(std::mem::size_of::<DotParams>() == 16);
+
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct CgKernelParams {
+    pub n: u32,
+    pub n_partials: u32,
+    pub max_iters: u32,
+    pub _pad: u32,
+}
+const _: () = assert!(std::mem::size_of::<CgKernelParams>() == 16);
+
+/// `State` of cg.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct CgState {
+    pub iterations: u32,
+    pub done: u32,
+    pub breakdown: u32,
+    pub _pad: u32,
+}
+const _: () = assert!(std::mem::size_of::<CgState>() == 16);
+/// Scalars of cg.wgsl: rz, rr, target², α, β, pᵀAp, each a vec4.
+pub const SCALARS: usize = 6 * 4;
+
+/// A row block of the matrix, small enough for one binding.
+struct Block {
+    params: wgpu::Buffer,
+    indptr: wgpu::Buffer,
+    indices: wgpu::Buffer,
+    data: wgpu::Buffer,
+    n_rows: usize,
+}
+
+/// A CSR matrix on the GPU, split into row blocks whose index and value arrays each fit one
+/// storage binding.
+pub struct GpuMatrix {
+    pub n: usize,
+    blocks: Vec<Block>,
+    diag: Vec<f64>,
+}
+
+impl GpuMatrix {
+    pub fn new(ctx: &GpuContext, a: &NormalMatrix) -> Result<GpuMatrix, GpuError> {
+        let sz = ctx.precision.size() as u64;
+        let vec_bytes = 4 * sz * a.n as u64;
+        if vec_bytes > ctx.max_binding() || a.n > ctx.max_workgroups() as usize * 64 {
+            return Err(GpuError::TooLarge(format!(
+                "{} unknowns need {vec_bytes} bytes per vector (binding limit {})",
+                a.n,
+                ctx.max_binding()
+            )));
+        }
+        let max_nnz = (ctx.max_binding() / sz.max(4)) as usize;
+        let mut blocks = Vec::new();
+        let mut r0 = 0;
+        while r0 < a.n {
+            let mut r1 = r0 + 1;
+            while r1 < a.n && a.indptr[r1 + 1] - a.indptr[r0] <= max_nnz {
+                r1 += 1;
+            }
+            let (k0, k1) = (a.indptr[r0], a.indptr[r1]);
+            if k1 - k0 > max_nnz {
+                return Err(GpuError::TooLarge(format!(
+                    "row {r0} has {} entries",
+                    k1 - k0
+                )));
+            }
+            let indptr: Vec<u32> = a.indptr[r0..=r1].iter().map(|&k| (k - k0) as u32).collect();
+            blocks.push(Block {
+                params: ctx.uniform(
+                    "spmv params",
+                    &SpmvParams {
+                        n_rows: (r1 - r0) as u32,
+                        row_base: r0 as u32,
+                        _pad0: 0,
+                        _pad1: 0,
+                    },
+                ),
+                indptr: ctx.storage("indptr", bytemuck::cast_slice(&indptr), false),
+                indices: ctx.storage("indices", bytemuck::cast_slice(&a.indices[k0..k1]), false),
+                data: ctx.storage(
+                    "data",
+                    &reals_to_bytes(ctx.precision, a.data[k0..k1].iter().copied()),
+                    false,
+                ),
+                n_rows: r1 - r0,
+            });
+            r0 = r1;
+        }
+        Ok(GpuMatrix {
+            n: a.n,
+            blocks,
+            diag: a.diagonal(),
+        })
+    }
+
+    /// Number of row blocks (1 unless the matrix exceeds one binding).
+    pub fn n_blocks(&self) -> usize {
+        self.blocks.len()
+    }
+
+    /// Bind groups of y = A x for every block.
+    fn bind(
+        &self,
+        ctx: &GpuContext,
+        pipeline: &wgpu::ComputePipeline,
+        x: &wgpu::Buffer,
+        y: &wgpu::Buffer,
+    ) -> Vec<wgpu::BindGroup> {
+        self.blocks
+            .iter()
+            .map(|b| {
+                ctx.bind(
+                    pipeline,
+                    &[
+                        (0, &b.params),
+                        (1, &b.indptr),
+                        (2, &b.indices),
+                        (3, &b.data),
+                        (4, x),
+                        (5, y),
+                    ],
+                )
+            })
+            .collect()
+    }
+
+    fn encode(
+        &self,
+        pass: &mut wgpu::ComputePass<'_>,
+        pipeline: &wgpu::ComputePipeline,
+        binds: &[wgpu::BindGroup],
+    ) {
+        pass.set_pipeline(pipeline);
+        for (b, g) in self.blocks.iter().zip(binds) {
+            pass.set_bind_group(0, g, &[]);
+            pass.dispatch_workgroups(groups(b.n_rows, 64), 1, 1);
+        }
+    }
+}
+
+/// Vectors of three components as vec4 lanes at precision `p`.
+fn vec4_bytes(p: Precision, v: &[[f64; 3]]) -> Vec<u8> {
+    reals_to_bytes(p, v.iter().flat_map(|x| [x[0], x[1], x[2], 0.0]))
+}
+
+fn from_vec4(v: &[f64]) -> Vec<[f64; 3]> {
+    v.chunks_exact(4).map(|c| [c[0], c[1], c[2]]).collect()
+}
+
+/// The normal matrix on the GPU as a [`LinOp`]: `apply` uploads x, runs spmv.wgsl, reads y.
+pub struct GpuOperator<'a> {
+    ctx: &'a GpuContext,
+    matrix: GpuMatrix,
+    pipeline: wgpu::ComputePipeline,
+}
+
+impl<'a> GpuOperator<'a> {
+    pub fn new(ctx: &'a GpuContext, a: &NormalMatrix) -> Result<Self, GpuError> {
+        Ok(GpuOperator {
+            ctx,
+            matrix: GpuMatrix::new(ctx, a)?,
+            pipeline: ctx.pipeline(SPMV_SOURCE, "spmv"),
+        })
+    }
+
+    pub fn try_apply(&self, x: &[[f64; 3]]) -> Result<Vec<[f64; 3]>, GpuError> {
+        let ctx = self.ctx;
+        let n = self.matrix.n;
+        let bytes = 4 * ctx.precision.size() as u64 * n as u64;
+        let xb = ctx.storage("x", &vec4_bytes(ctx.precision, x), false);
+        let yb = ctx.storage_zeroed("y", bytes);
+        let binds = self.matrix.bind(ctx, &self.pipeline, &xb, &yb);
+        let mut enc = ctx.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            self.matrix.encode(&mut pass, &self.pipeline, &binds);
+        }
+        ctx.queue.submit([enc.finish()]);
+        Ok(from_vec4(&bytes_to_reals(
+            ctx.precision,
+            &ctx.read_back(&yb, bytes)?,
+        )))
+    }
+
+    pub fn n_blocks(&self) -> usize {
+        self.matrix.n_blocks()
+    }
+}
+
+impl LinOp for GpuOperator<'_> {
+    fn nrows(&self) -> usize {
+        self.matrix.n
+    }
+    /// Panics if the device fails (use [`GpuOperator::try_apply`] to handle it).
+    fn apply(&self, x: &[[f64; 3]], y: &mut [[f64; 3]]) {
+        let r = self.try_apply(x).expect("GPU SpMV failed");
+        y.copy_from_slice(&r);
+    }
+    fn diagonal(&self) -> Vec<f64> {
+        self.matrix.diag.clone()
+    }
+}
+
+fn dot3(a: &[[f64; 3]], b: &[[f64; 3]]) -> [f64; 3] {
+    let mut s = [0.0; 3];
+    for (x, y) in a.iter().zip(b) {
+        for k in 0..3 {
+            s[k] += x[k] * y[k];
+        }
+    }
+    s
+}
+
+/// Jacobi-PCG for `a` x = b with the iteration on the GPU (see the module docs). Same
+/// contract as [`crate::solve::pcg`]; a device failure is [`CgError::Device`].
+pub fn pcg(
+    ctx: &GpuContext,
+    a: &NormalMatrix,
+    b: &[[f64; 3]],
+    x: &mut [[f64; 3]],
+    params: &CgParams,
+    mut progress: impl FnMut(usize, f64),
+) -> Result<CgInfo, CgError> {
+    let dev = |e: GpuError| CgError::Device(e.to_string());
+    let n = a.n;
+    assert_eq!(b.len(), n);
+    assert_eq!(x.len(), n);
+    let diag = a.diagonal();
+    if let Some((row, &value)) = diag.iter().enumerate().find(|(_, d)| !(**d > 0.0)) {
+        return Err(CgError::BadDiagonal { row, value });
+    }
+    let inv: Vec<f64> = diag.iter().map(|d| 1.0 / d).collect();
+    let prec = ctx.precision;
+    let sz = prec.size() as u64;
+    let vbytes = 4 * sz * n as u64;
+    let matrix = GpuMatrix::new(ctx, a).map_err(dev)?;
+    let spmv = ctx.pipeline(SPMV_SOURCE, "spmv");
+    let dot = ctx.pipeline(DOT_SOURCE, "dot_partial");
+    let fin_a = ctx.pipeline(CG_SOURCE, "finalize_alpha");
+    let upd_xr = ctx.pipeline(CG_SOURCE, "update_xr");
+    let fin_b = ctx.pipeline(CG_SOURCE, "finalize_beta");
+    let upd_p = ctx.pipeline(CG_SOURCE, "update_p");
+    let xd = ctx.storage_zeroed("x", vbytes);
+    let r = ctx.storage_zeroed("r", vbytes);
+    let z = ctx.storage_zeroed("z", vbytes);
+    let p = ctx.storage_zeroed("p", vbytes);
+    let ap = ctx.storage_zeroed("ap", vbytes);
+    let invb = ctx.storage(
+        "inv_diag",
+        &reals_to_bytes(prec, inv.iter().copied()),
+        false,
+    );
+    let partials = ctx.storage_zeroed("partials", 2 * 4 * sz * DOT_WORKGROUPS as u64);
+    let scalars = ctx.storage_zeroed("scalars", SCALARS as u64 * sz);
+    let state = ctx.storage_zeroed("state", 16);
+    let dot_params = ctx.uniform(
+        "dot params",
+        &DotParams {
+            n: n as u32,
+            ..Default::default()
+        },
+    );
+    let spmv_binds = matrix.bind(ctx, &spmv, &p, &ap);
+    let dot_pap = ctx.bind(&dot, &[(0, &dot_params), (1, &p), (2, &ap), (3, &partials)]);
+    let dot_rz = ctx.bind(&dot, &[(0, &dot_params), (1, &r), (2, &z), (3, &partials)]);
+    let staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("cg state"),
+        size: 16 + SCALARS as u64 * sz,
+        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+        mapped_at_creation: false,
+    });
+
+    let bnorm = dot3(b, b).map(f64::sqrt);
+    let target: [f64; 3] = std::array::from_fn(|k| (params.rel_tol * bnorm[k]).max(params.abs_tol));
+    let rel = |rr: [f64; 3]| -> f64 {
+        (0..3)
+            .map(|k| {
+                if bnorm[k] > 0.0 {
+                    rr[k].sqrt() / bnorm[k]
+                } else {
+                    rr[k].sqrt()
+                }
+            })
+            .fold(0.0, f64::max)
+    };
+    let inner_reduction = match prec {
+        Precision::F32 => F32_INNER_REDUCTION,
+        Precision::F64 => 0.0,
+    };
+    let mut total = 0usize;
+    let mut res = vec![[0.0; 3]; n];
+    for _round in 0..MAX_REFINEMENTS {
+        // f64 residual of the current iterate.
+        a.apply(x, &mut res);
+        for (r, b) in res.iter_mut().zip(b) {
+            for k in 0..3 {
+                r[k] = b[k] - r[k];
+            }
+        }
+        let rr = dot3(&res, &res);
+        if (0..3).all(|k| rr[k].sqrt() <= target[k]) {
+            return Ok(CgInfo {
+                iterations: total,
+                rel_residual: rel(rr),
+            });
+        }
+        if total >= params.max_iters {
+            break;
+        }
+        // Inner problem A d = res / s from d = 0, each component scaled by its residual norm
+        // s_k (the components have separate recurrences, so this is exact) so that f32 sees
+        // O(1) values: no underflow of squared norms when b is tiny.
+        let scale: [f64; 3] = std::array::from_fn(|k| if rr[k] > 0.0 { rr[k].sqrt() } else { 1.0 });
+        for r in res.iter_mut() {
+            for k in 0..3 {
+                r[k] /= scale[k];
+            }
+        }
+        let zv: Vec<[f64; 3]> = res
+            .iter()
+            .zip(&inv)
+            .map(|(r, d)| r.map(|v| v * d))
+            .collect();
+        let rz = dot3(&res, &zv);
+        let rr_scaled = dot3(&res, &res);
+        let q = &ctx.queue;
+        q.write_buffer(&xd, 0, &vec![0u8; vbytes as usize]);
+        q.write_buffer(&r, 0, &vec4_bytes(prec, &res));
+        q.write_buffer(&z, 0, &vec4_bytes(prec, &zv));
+        q.write_buffer(&p, 0, &vec4_bytes(prec, &zv));
+        let mut sc = vec![0.0f64; SCALARS];
+        for k in 0..3 {
+            sc[k] = rz[k];
+            sc[4 + k] = rr_scaled[k];
+            // Converged components get target² = f32::MAX: never active.
+            sc[8 + k] = if rr[k].sqrt() <= target[k] {
+                f32::MAX as f64
+            } else {
+                (target[k] / scale[k]).max(inner_reduction).powi(2)
+            };
+        }
+        q.write_buffer(&scalars, 0, &reals_to_bytes(prec, sc.into_iter()));
+        q.write_buffer(&state, 0, bytemuck::bytes_of(&CgState::default()));
+        let cgp = ctx.uniform(
+            "cg params",
+            &CgKernelParams {
+                n: n as u32,
+                n_partials: DOT_WORKGROUPS,
+                max_iters: (params.max_iters - total).min(u32::MAX as usize) as u32,
+                _pad: 0,
+            },
+        );
+        let fa = ctx.bind(
+            &fin_a,
+            &[(0, &cgp), (1, &scalars), (2, &state), (3, &partials)],
+        );
+        let fb = ctx.bind(
+            &fin_b,
+            &[(0, &cgp), (1, &scalars), (2, &state), (3, &partials)],
+        );
+        let uxr = ctx.bind(
+            &upd_xr,
+            &[
+                (0, &cgp),
+                (1, &scalars),
+                (4, &xd),
+                (5, &r),
+                (6, &z),
+                (7, &p),
+                (8, &ap),
+                (9, &invb),
+            ],
+        );
+        let up = ctx.bind(&upd_p, &[(0, &cgp), (1, &scalars), (6, &z), (7, &p)]);
+        let st = loop {
+            let mut enc = ctx.device.create_command_encoder(&Default::default());
+            {
+                let mut pass = enc.begin_compute_pass(&Default::default());
+                for _ in 0..CG_BATCH {
+                    matrix.encode(&mut pass, &spmv, &spmv_binds);
+                    pass.set_pipeline(&dot);
+                    pass.set_bind_group(0, &dot_pap, &[]);
+                    pass.dispatch_workgroups(DOT_WORKGROUPS, 1, 1);
+                    pass.set_pipeline(&fin_a);
+                    pass.set_bind_group(0, &fa, &[]);
+                    pass.dispatch_workgroups(1, 1, 1);
+                    pass.set_pipeline(&upd_xr);
+                    pass.set_bind_group(0, &uxr, &[]);
+                    pass.dispatch_workgroups(groups(n, 64), 1, 1);
+                    pass.set_pipeline(&dot);
+                    pass.set_bind_group(0, &dot_rz, &[]);
+                    pass.dispatch_workgroups(DOT_WORKGROUPS, 1, 1);
+                    pass.set_pipeline(&fin_b);
+                    pass.set_bind_group(0, &fb, &[]);
+                    pass.dispatch_workgroups(1, 1, 1);
+                    pass.set_pipeline(&upd_p);
+                    pass.set_bind_group(0, &up, &[]);
+                    pass.dispatch_workgroups(groups(n, 64), 1, 1);
+                }
+            }
+            enc.copy_buffer_to_buffer(&state, 0, &staging, 0, 16);
+            enc.copy_buffer_to_buffer(&scalars, 0, &staging, 16, SCALARS as u64 * sz);
+            q.submit([enc.finish()]);
+            let bytes = map_read(ctx, &staging).map_err(dev)?;
+            let st: CgState = *bytemuck::from_bytes(&bytes[..16]);
+            let sc = bytes_to_reals(prec, &bytes[16..]);
+            if st.breakdown > 0 {
+                return Err(CgError::NotPositiveDefinite {
+                    iteration: total + st.breakdown as usize - 1,
+                    curvature: (0..3).map(|k| sc[20 + k]).fold(f64::INFINITY, f64::min),
+                });
+            }
+            let rr_now: [f64; 3] = std::array::from_fn(|k| sc[4 + k] * scale[k] * scale[k]);
+            progress(total + st.iterations as usize, rel(rr_now));
+            if st.done != 0 {
+                break st;
+            }
+        };
+        let d = from_vec4(&bytes_to_reals(
+            prec,
+            &ctx.read_back(&xd, vbytes).map_err(dev)?,
+        ));
+        for (x, d) in x.iter_mut().zip(&d) {
+            for k in 0..3 {
+                x[k] += d[k] * scale[k];
+            }
+        }
+        if st.iterations == 0 {
+            // No progress possible at this precision.
+            break;
+        }
+        total += st.iterations as usize;
+    }
+    a.apply(x, &mut res);
+    for (r, b) in res.iter_mut().zip(b) {
+        for k in 0..3 {
+            r[k] = b[k] - r[k];
+        }
+    }
+    let rr = dot3(&res, &res);
+    if (0..3).all(|k| rr[k].sqrt() <= target[k]) {
+        return Ok(CgInfo {
+            iterations: total,
+            rel_residual: rel(rr),
+        });
+    }
+    Err(CgError::NoConvergence {
+        iterations: total,
+        rel_residual: rel(rr),
+        rel_tol: params.rel_tol,
+    })
+}
+
+/// Map a MAP_READ buffer after the last submit, copy it out, unmap.
+fn map_read(ctx: &GpuContext, staging: &wgpu::Buffer) -> Result<Vec<u8>, GpuError> {
+    let (tx, rx) = std::sync::mpsc::channel();
+    staging.map_async(wgpu::MapMode::Read, .., move |r| {
+        let _ = tx.send(r);
+    });
+    ctx.device
+        .poll(wgpu::PollType::wait_indefinitely())
+        .map_err(|e| GpuError::Readback(e.to_string()))?;
+    rx.recv()
+        .map_err(|e| GpuError::Readback(e.to_string()))?
+        .map_err(|e| GpuError::Readback(e.to_string()))?;
+    let out = staging
+        .get_mapped_range(..)
+        .map_err(|e| GpuError::Readback(e.to_string()))?
+        .to_vec();
+    staging.unmap();
+    Ok(out)
+}

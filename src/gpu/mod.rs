@@ -1,0 +1,396 @@
+//! The GPU executor: wgpu compute kernels from `shaders/`, each checked against its CPU twin
+//! in [`crate::cpu`] (see `docs/gpu.md`).
+//!
+//! Only the binary and the test harness create a [`GpuContext`]; kernels take the context (its
+//! `device` and `queue`). Arrays larger than one storage binding (lavapipe: 128 MiB) are split
+//! into chunks, each uploaded into its own buffers.
+//!
+//! Environment: `VK_DRIVER_FILES=/usr/share/vulkan/icd.d/lvp_icd.x86_64.json` restricts Vulkan
+//! to Mesa's software driver (lavapipe); `XDG_RUNTIME_DIR=/tmp` silences a harmless Mesa
+//! warning when the variable is unset. Without any Vulkan driver, adapter selection fails
+//! within milliseconds with [`GpuError::NoAdapter`].
+
+pub mod cg;
+pub mod evaluate;
+pub mod jacobian_check;
+
+use wgpu::util::DeviceExt;
+
+/// Floating-point type of the kernels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Precision {
+    /// f32 everywhere (portable); accuracy from element-anchored coordinates and displacement
+    /// unknowns with f64 residuals on the CPU.
+    F32,
+    /// f64 (needs `SHADER_F64`; lavapipe has it, Metal has not).
+    F64,
+}
+
+impl Precision {
+    /// Bytes per scalar.
+    pub fn size(self) -> usize {
+        match self {
+            Precision::F32 => 4,
+            Precision::F64 => 8,
+        }
+    }
+    /// Machine epsilon of the scalar type.
+    pub fn epsilon(self) -> f64 {
+        match self {
+            Precision::F32 => f32::EPSILON as f64,
+            Precision::F64 => f64::EPSILON,
+        }
+    }
+}
+
+/// Which adapters may be used.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AdapterChoice {
+    /// Only hardware GPUs (integrated, discrete, virtual); a CPU-type adapter such as lavapipe
+    /// is slower than the CPU path and is refused.
+    HardwareOnly,
+    /// Any adapter, hardware preferred.
+    Any,
+}
+
+/// Everything the GPU path can fail with that a user can cause.
+#[derive(Debug, thiserror::Error)]
+pub enum GpuError {
+    #[error(
+        "no GPU adapter found ({0}); install a Vulkan driver (e.g. `apt-get install mesa-vulkan-drivers` for the lavapipe software driver) or use --backend cpu"
+    )]
+    NoAdapter(String),
+    #[error(
+        "no hardware GPU adapter found (only the CPU-type adapter \"{0}\"; use --backend gpu to use it)"
+    )]
+    OnlySoftwareAdapter(String),
+    #[error(
+        "the GPU adapter \"{0}\" has no 64-bit float support (SHADER_F64); use --precision f32"
+    )]
+    NoF64(String),
+    #[error("requesting the GPU device failed: {0}")]
+    Device(String),
+    #[error("reading back a GPU buffer failed: {0}")]
+    Readback(String),
+    #[error("the problem is too large for the GPU path: {0}")]
+    TooLarge(String),
+}
+
+/// Name and type of the adapter in use, for reports.
+#[derive(Clone, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct AdapterReport {
+    pub name: String,
+    pub device_type: String,
+    pub driver: String,
+}
+
+/// A device and queue, with what the kernels need to know about them.
+pub struct GpuContext {
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub adapter: AdapterReport,
+    pub limits: wgpu::Limits,
+    /// Whether SHADER_F64 was enabled.
+    pub has_f64: bool,
+    /// Kernel precision.
+    pub precision: Precision,
+    /// Compiled pipelines by entry point (compiling is slow on lavapipe).
+    pipelines: std::sync::Mutex<std::collections::HashMap<String, wgpu::ComputePipeline>>,
+}
+
+impl std::fmt::Debug for GpuContext {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("GpuContext")
+            .field("adapter", &self.adapter)
+            .field("precision", &self.precision)
+            .finish()
+    }
+}
+
+fn is_hardware(t: wgpu::DeviceType) -> bool {
+    matches!(
+        t,
+        wgpu::DeviceType::DiscreteGpu
+            | wgpu::DeviceType::IntegratedGpu
+            | wgpu::DeviceType::VirtualGpu
+    )
+}
+
+impl GpuContext {
+    /// Pick an adapter (hardware first; a CPU-type adapter only with [`AdapterChoice::Any`])
+    /// and create a device with the adapter's own limits. `precision` None means f64 when the
+    /// adapter has it, else f32.
+    pub fn new(
+        choice: AdapterChoice,
+        precision: Option<Precision>,
+    ) -> Result<GpuContext, GpuError> {
+        let mut desc = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+        desc.backends = wgpu::Backends::VULKAN;
+        let instance = wgpu::Instance::new(desc);
+        let adapters = pollster::block_on(instance.enumerate_adapters(wgpu::Backends::VULKAN));
+        let rank = |a: &wgpu::Adapter| match a.get_info().device_type {
+            wgpu::DeviceType::DiscreteGpu => 0,
+            wgpu::DeviceType::IntegratedGpu => 1,
+            wgpu::DeviceType::VirtualGpu => 2,
+            wgpu::DeviceType::Cpu => 3,
+            wgpu::DeviceType::Other => 4,
+        };
+        let Some(adapter) = adapters.into_iter().min_by_key(rank) else {
+            return Err(GpuError::NoAdapter("no Vulkan adapter".into()));
+        };
+        let info = adapter.get_info();
+        if choice == AdapterChoice::HardwareOnly && !is_hardware(info.device_type) {
+            return Err(GpuError::OnlySoftwareAdapter(info.name));
+        }
+        let features = adapter.features();
+        let has_f64 = features.contains(wgpu::Features::SHADER_F64);
+        let precision = match precision {
+            Some(Precision::F64) if !has_f64 => return Err(GpuError::NoF64(info.name)),
+            Some(p) => p,
+            None if has_f64 => Precision::F64,
+            None => Precision::F32,
+        };
+        let required_features = if has_f64 {
+            wgpu::Features::SHADER_F64
+        } else {
+            wgpu::Features::empty()
+        };
+        // wgpu's defaults are WebGPU's (8 storage buffers, 256 MiB buffers); ask for what the
+        // adapter offers.
+        let limits = adapter.limits();
+        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+            label: Some("polyspline"),
+            required_features,
+            required_limits: limits.clone(),
+            ..Default::default()
+        }))
+        .map_err(|e| GpuError::Device(e.to_string()))?;
+        Ok(GpuContext {
+            device,
+            queue,
+            adapter: AdapterReport {
+                name: info.name,
+                device_type: format!("{:?}", info.device_type),
+                driver: format!("{} {}", info.driver, info.driver_info)
+                    .trim()
+                    .to_string(),
+            },
+            limits,
+            has_f64,
+            precision,
+            pipelines: Default::default(),
+        })
+    }
+
+    /// Largest storage binding in bytes (lavapipe: 128 MiB).
+    pub fn max_binding(&self) -> u64 {
+        self.limits
+            .max_storage_buffer_binding_size
+            .min(self.limits.max_buffer_size)
+    }
+
+    /// Largest number of workgroups in one dispatch dimension.
+    pub fn max_workgroups(&self) -> u32 {
+        self.limits.max_compute_workgroups_per_dimension
+    }
+
+    /// A compute pipeline for `entry` of a shader, at the context's precision.
+    pub(crate) fn pipeline(&self, source: &str, entry: &str) -> wgpu::ComputePipeline {
+        let mut cache = self.pipelines.lock().unwrap_or_else(|e| e.into_inner());
+        cache
+            .entry(entry.to_string())
+            .or_insert_with(|| self.compile(source, entry))
+            .clone()
+    }
+
+    fn compile(&self, source: &str, entry: &str) -> wgpu::ComputePipeline {
+        let module = self
+            .device
+            .create_shader_module(wgpu::ShaderModuleDescriptor {
+                label: Some(entry),
+                source: wgpu::ShaderSource::Wgsl(shader_source(source, self.precision).into()),
+            });
+        self.device
+            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                label: Some(entry),
+                layout: None,
+                module: &module,
+                entry_point: Some(entry),
+                compilation_options: Default::default(),
+                cache: None,
+            })
+    }
+
+    /// A storage buffer holding `data` (at least 16 bytes, so empty arrays bind too).
+    pub(crate) fn storage(&self, label: &str, data: &[u8], writable: bool) -> wgpu::Buffer {
+        let mut usage = wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST;
+        if writable {
+            usage |= wgpu::BufferUsages::COPY_SRC;
+        }
+        if data.len() < 16 {
+            let mut padded = data.to_vec();
+            padded.resize(16, 0);
+            return self
+                .device
+                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some(label),
+                    contents: &padded,
+                    usage,
+                });
+        }
+        self.device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents: data,
+                usage,
+            })
+    }
+
+    /// A zeroed storage buffer of `bytes` (read-write, copyable).
+    pub(crate) fn storage_zeroed(&self, label: &str, bytes: u64) -> wgpu::Buffer {
+        self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some(label),
+            size: bytes.max(16).next_multiple_of(4),
+            usage: wgpu::BufferUsages::STORAGE
+                | wgpu::BufferUsages::COPY_SRC
+                | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        })
+    }
+
+    /// A uniform buffer holding a `Pod` value.
+    pub(crate) fn uniform<T: bytemuck::Pod>(&self, label: &str, value: &T) -> wgpu::Buffer {
+        self.device
+            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents: bytemuck::bytes_of(value),
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            })
+    }
+
+    /// A bind group for group 0 of `pipeline` with whole-buffer bindings in binding order.
+    pub(crate) fn bind(
+        &self,
+        pipeline: &wgpu::ComputePipeline,
+        buffers: &[(u32, &wgpu::Buffer)],
+    ) -> wgpu::BindGroup {
+        let entries: Vec<wgpu::BindGroupEntry> = buffers
+            .iter()
+            .map(|&(binding, b)| wgpu::BindGroupEntry {
+                binding,
+                resource: b.as_entire_binding(),
+            })
+            .collect();
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: None,
+            layout: &pipeline.get_bind_group_layout(0),
+            entries: &entries,
+        })
+    }
+
+    /// Copy `bytes` bytes of `src` (from offset 0) back to the host.
+    pub(crate) fn read_back(&self, src: &wgpu::Buffer, bytes: u64) -> Result<Vec<u8>, GpuError> {
+        let bytes = bytes.next_multiple_of(4).max(4);
+        let staging = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("readback"),
+            size: bytes,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let mut enc = self.device.create_command_encoder(&Default::default());
+        enc.copy_buffer_to_buffer(src, 0, &staging, 0, bytes);
+        self.queue.submit([enc.finish()]);
+        let (tx, rx) = std::sync::mpsc::channel();
+        staging.map_async(wgpu::MapMode::Read, .., move |r| {
+            let _ = tx.send(r);
+        });
+        self.device
+            .poll(wgpu::PollType::wait_indefinitely())
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        rx.recv()
+            .map_err(|e| GpuError::Readback(e.to_string()))?
+            .map_err(|e| GpuError::Readback(e.to_string()))?;
+        let out = staging
+            .get_mapped_range(..)
+            .map_err(|e| GpuError::Readback(e.to_string()))?
+            .to_vec();
+        staging.unmap();
+        Ok(out)
+    }
+}
+
+/// Which executor runs the heavy stages (sampling, certification, the CG solve).
+#[derive(Clone, Debug, Default)]
+pub enum Backend {
+    /// The CPU reference path.
+    #[default]
+    Cpu,
+    /// WGSL kernels on this device.
+    Gpu(std::sync::Arc<GpuContext>),
+}
+
+impl Backend {
+    pub fn name(&self) -> &'static str {
+        match self {
+            Backend::Cpu => "cpu",
+            Backend::Gpu(_) => "gpu",
+        }
+    }
+    pub fn gpu(&self) -> Option<&GpuContext> {
+        match self {
+            Backend::Cpu => None,
+            Backend::Gpu(c) => Some(c),
+        }
+    }
+}
+
+/// Shader source at a precision: every shader declares `alias real = f32;`, replaced by f64.
+pub fn shader_source(source: &str, precision: Precision) -> String {
+    match precision {
+        Precision::F32 => source.to_string(),
+        Precision::F64 => source.replace("alias real = f32;", "alias real = f64;"),
+    }
+}
+
+/// The WGSL sources by file name, for validation.
+pub const SHADERS: [(&str, &str); 5] = [
+    ("evaluate.wgsl", evaluate::SOURCE),
+    ("jacobian_check.wgsl", jacobian_check::SOURCE),
+    ("spmv.wgsl", cg::SPMV_SOURCE),
+    ("dot.wgsl", cg::DOT_SOURCE),
+    ("cg.wgsl", cg::CG_SOURCE),
+];
+
+/// Scalars of the context's precision as bytes.
+pub(crate) fn reals_to_bytes(p: Precision, v: impl Iterator<Item = f64>) -> Vec<u8> {
+    match p {
+        Precision::F32 => v.flat_map(|x| (x as f32).to_le_bytes()).collect(),
+        Precision::F64 => v.flat_map(|x| x.to_le_bytes()).collect(),
+    }
+}
+
+/// Bytes of scalars of the context's precision as f64.
+pub(crate) fn bytes_to_reals(p: Precision, b: &[u8]) -> Vec<f64> {
+    match p {
+        Precision::F32 => b
+            .chunks_exact(4)
+            .map(|c| f32::from_le_bytes(c.try_into().unwrap()) as f64)
+            .collect(),
+        Precision::F64 => b
+            .chunks_exact(8)
+            .map(|c| f64::from_le_bytes(c.try_into().unwrap()))
+            .collect(),
+    }
+}
+
+/// Workgroups to cover `n` items with groups of `size`.
+pub(crate) fn groups(n: usize, size: usize) -> u32 {
+    n.div_ceil(size) as u32
+}
+
+/// Anchor of a Bézier net: its centre control point (index 4 in 2D, 13 in 3D). Kernels see
+/// net − anchor, so f32 rounding scales with the element's size, not with its coordinates.
+pub fn anchor(dim: usize, net: &[[f64; 3]; 27]) -> [f64; 3] {
+    net[if dim == 2 { 4 } else { 13 }]
+}
