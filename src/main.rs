@@ -57,8 +57,9 @@ enum Command {
         /// Fit of the spline control points: `none` samples the initial spline map; `position`
         /// and `frame` are the paper's weight presets (least squares, then a certified line
         /// search); `smooth` takes the midpoint targets from a local reconstruction of the
-        /// smooth boundary instead of the straight chords (third-order accurate boundary).
-        #[arg(long, value_enum, default_value_t = FitArg::Position)]
+        /// smooth boundary instead of the straight chords (more accurate curved boundaries; the
+        /// default).
+        #[arg(long, value_enum, default_value_t = FitArg::Smooth)]
         fit: FitArg,
         /// Position weight at interior element corners (overrides the preset).
         #[arg(long)]
