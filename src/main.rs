@@ -157,6 +157,10 @@ enum Command {
         /// Picture width in pixels.
         #[arg(long, default_value_t = 1000.0)]
         width: f64,
+        /// MESH is a linear input: also draw its poly-spline control points and the unfitted
+        /// spline map they define (paper Fig. 1).
+        #[arg(long)]
+        control_points: bool,
     },
 }
 
@@ -404,8 +408,20 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             output,
             overlay,
             width,
+            control_points,
         } => {
             let base = read_high_order(&mesh)?;
+            // The spline construction of a linear input (paper Fig. 1): its control points and
+            // the unfitted spline map they define.
+            let spline = if control_points {
+                let linear = read_mesh(&mesh, &MeshOptions::default())?;
+                let topo = Topology::build(&linear);
+                let space = polyspline::spline::SplineSpace::build(&linear, &topo);
+                let curved = polyspline::sample::sample(&space, &linear, &topo, 4);
+                Some((space.control_points, curved))
+            } else {
+                None
+            };
             let others = overlay
                 .iter()
                 .map(|p| read_high_order(p))
@@ -428,6 +444,19 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     colour: COLOURS[i % 4],
                     width: 1.0,
                     label: "overlay",
+                });
+            }
+            if let Some((points, curved)) = &spline {
+                layers.push(Layer::Mesh {
+                    mesh: curved,
+                    colour: "#1f77b4",
+                    width: 0.8,
+                    label: "unfitted spline map",
+                });
+                layers.push(Layer::Points {
+                    points,
+                    colour: "#d62728",
+                    label: "control points",
                 });
             }
             let svg = render_svg(&layers, width);

@@ -159,7 +159,7 @@ pub fn render_svg(layers: &[Layer], size: f64) -> String {
                 let _ = writeln!(svg, "<g fill=\"{colour}\"><title>{label}</title>");
                 for x in points.iter() {
                     let (a, b) = tx(x);
-                    let _ = writeln!(svg, "<circle cx=\"{a:.2}\" cy=\"{b:.2}\" r=\"1.6\"/>");
+                    let _ = writeln!(svg, "<circle cx=\"{a:.2}\" cy=\"{b:.2}\" r=\"2.4\"/>");
                 }
                 let _ = writeln!(svg, "</g>");
             }

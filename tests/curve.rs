@@ -500,3 +500,36 @@ fn smooth_fit_on_every_real_mesh() {
         println!("{line}");
     }
 }
+
+/// `plot --control-points` draws one disc per control point of the spline space.
+#[test]
+fn plot_shows_the_control_points() {
+    let mesh =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("meshes/generated/star5_quad4_20.msh");
+    let svg = scratch("star_cp.svg");
+    let out = Command::new(env!("CARGO_BIN_EXE_polyspline"))
+        .args(["plot", "--control-points", "-o"])
+        .arg(&svg)
+        .arg(&mesh)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(&svg).unwrap();
+    let m = polyspline::io::read_mesh(&mesh, &MeshOptions::default()).unwrap();
+    let s = SplineSpace::build(&m, &Topology::build(&m));
+    assert_eq!(text.matches("<circle").count(), s.n_control_points());
+    // 3D meshes are refused with a message.
+    let hex = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("meshes/generated/block_hex8_8.msh");
+    let out = Command::new(env!("CARGO_BIN_EXE_polyspline"))
+        .args(["plot", "-o"])
+        .arg(scratch("b.svg"))
+        .arg(&hex)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("2D"));
+}
