@@ -514,6 +514,12 @@ fn read_high_order(path: &std::path::Path) -> anyhow::Result<HighOrderMesh> {
 }
 
 fn main() -> ExitCode {
+    // Mesa's Vulkan drivers print an error line while adapters are probed when the process has
+    // no runtime directory; give it the temporary directory instead.
+    if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
+        // SAFETY: no other thread exists yet (rayon and wgpu start theirs later).
+        unsafe { std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir()) };
+    }
     let cli = Cli::parse();
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
