@@ -138,6 +138,8 @@ pub struct CurveReport {
     /// Fit targets (chords or smooth-boundary reconstruction), when fitted.
     pub fit_targets: Option<FitTargets>,
     pub cg_iterations: Option<usize>,
+    /// Stored entries of the normal-equation matrix (one matrix for x, y, z).
+    pub matrix_nonzeros: Option<usize>,
     pub cg_rel_residual: Option<f64>,
     pub line_search_mode: LineSearchMode,
     /// Step of the certified line search (1 = the full least-squares fit); with the local
@@ -482,6 +484,7 @@ pub fn curve(
         fit_weights: fit_info.as_ref().map(|_| options.fit.weights),
         fit_targets: fit_info.as_ref().map(|_| options.fit.targets),
         cg_iterations: fit_info.as_ref().map(|f| f.cg.iterations),
+        matrix_nonzeros: fit_info.as_ref().map(|f| f.nonzeros),
         cg_rel_residual: fit_info.as_ref().map(|f| f.cg.rel_residual),
         line_search_mode: options.line_search_mode,
         line_search_alpha: ls_alpha,
