@@ -1272,18 +1272,11 @@ mod tests {
     }
 
     fn count(m: &RawMesh, kind: &CellKind) -> usize {
-        m.blocks
-            .iter()
-            .filter(|b| b.kind() == kind)
-            .map(|b| b.len())
-            .sum()
+        m.count(kind)
     }
 
     fn block<'m>(m: &'m RawMesh, kind: &CellKind) -> &'m RawBlock {
-        m.blocks
-            .iter()
-            .find(|b| b.kind() == kind)
-            .unwrap_or_else(|| panic!("no {kind:?} block"))
+        m.block(kind).unwrap_or_else(|| panic!("no {kind:?} block"))
     }
 
     type Cell = (i32, Vec<[i64; 3]>);

@@ -366,15 +366,11 @@ mod tests {
     }
 
     fn count(m: &RawMesh, k: &CellKind) -> usize {
-        m.blocks
-            .iter()
-            .filter(|b| b.kind() == k)
-            .map(|b| b.len())
-            .sum()
+        m.count(k)
     }
 
     fn block<'a>(m: &'a RawMesh, k: &CellKind) -> &'a RawBlock {
-        m.blocks.iter().find(|b| b.kind() == k).unwrap()
+        m.block(k).unwrap()
     }
 
     #[test]

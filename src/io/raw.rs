@@ -201,6 +201,20 @@ pub struct RawMesh {
 }
 
 impl RawMesh {
+    /// Number of cells of `kind` over all blocks.
+    pub fn count(&self, kind: &CellKind) -> usize {
+        self.blocks
+            .iter()
+            .filter(|b| b.kind() == kind)
+            .map(|b| b.len())
+            .sum()
+    }
+
+    /// The first block of cells of `kind`.
+    pub fn block(&self, kind: &CellKind) -> Option<&RawBlock> {
+        self.blocks.iter().find(|b| b.kind() == kind)
+    }
+
     /// Append a block, merging it into the last block when kind and stride agree (readers of
     /// per-element formats call this once per cell group).
     pub fn push_block(&mut self, block: RawBlock) {

@@ -231,6 +231,9 @@ impl LinearMesh {
     /// Build a checked, oriented mesh from what a reader found. Errors name the place in the
     /// file (from the raw block's locations) and the problem.
     pub fn from_raw(raw: RawMesh, options: &MeshOptions) -> Result<LinearMesh, ParseError> {
+        // Pick the element kind: hexes if any, else quads.
+        let n_hex = raw.count(&CellKind::Hexahedron);
+        let n_quad = raw.count(&CellKind::Quad);
         let RawMesh {
             points,
             point_locations,
@@ -238,17 +241,6 @@ impl LinearMesh {
             blocks,
             tag_names,
         } = raw;
-
-        // Pick the element kind: hexes if any, else quads.
-        let count = |k: &CellKind| -> usize {
-            blocks
-                .iter()
-                .filter(|b| b.kind() == k)
-                .map(|b| b.len())
-                .sum()
-        };
-        let n_hex = count(&CellKind::Hexahedron);
-        let n_quad = count(&CellKind::Quad);
         let dim = if n_hex > 0 {
             3
         } else if n_quad > 0 {
