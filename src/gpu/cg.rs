@@ -457,7 +457,7 @@ pub fn pcg(
             enc.copy_buffer_to_buffer(&state, 0, &staging, 0, 16);
             enc.copy_buffer_to_buffer(&scalars, 0, &staging, 16, SCALARS as u64 * sz);
             q.submit([enc.finish()]);
-            let bytes = map_read(ctx, &staging).map_err(dev)?;
+            let bytes = ctx.map_read(&staging).map_err(dev)?;
             let st: CgState = *bytemuck::from_bytes(&bytes[..16]);
             let sc = bytes_to_reals(prec, &bytes[16..]);
             if st.breakdown > 0 {
@@ -505,24 +505,4 @@ pub fn pcg(
         rel_residual: rel(rr),
         rel_tol: params.rel_tol,
     })
-}
-
-/// Map a MAP_READ buffer after the last submit, copy it out, unmap.
-fn map_read(ctx: &GpuContext, staging: &wgpu::Buffer) -> Result<Vec<u8>, GpuError> {
-    let (tx, rx) = std::sync::mpsc::channel();
-    staging.map_async(wgpu::MapMode::Read, .., move |r| {
-        let _ = tx.send(r);
-    });
-    ctx.device
-        .poll(wgpu::PollType::wait_indefinitely())
-        .map_err(|e| GpuError::Readback(e.to_string()))?;
-    rx.recv()
-        .map_err(|e| GpuError::Readback(e.to_string()))?
-        .map_err(|e| GpuError::Readback(e.to_string()))?;
-    let out = staging
-        .get_mapped_range(..)
-        .map_err(|e| GpuError::Readback(e.to_string()))?
-        .to_vec();
-    staging.unmap();
-    Ok(out)
 }
