@@ -508,3 +508,20 @@ fn plot_shows_the_control_points() {
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("2D"));
 }
+
+/// `--order 1 --subdivide K` writes a valid refined linear mesh on the curved geometry.
+#[test]
+fn subdivided_output_is_valid() {
+    let mesh = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("meshes/real/dealii/unstructured_refined_ball.msh");
+    for (k, file) in [(3, "ball_sub3.msh"), (2, "ball_sub2.vtu")] {
+        let out = scratch(file);
+        let mut o = options(1, Geometry::SplineFitted);
+        o.subdivide = Some(k);
+        let r = curve(&mesh, &out, &o).unwrap();
+        assert_eq!(r.output_elements, r.elements * k * k);
+        let back = read_back(&out);
+        assert_eq!((back.order, back.n_elements()), (1, r.elements * k * k));
+        assert_eq!(CheckReport::new(&back).invalid, 0);
+    }
+}

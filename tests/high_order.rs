@@ -192,21 +192,53 @@ fn check_boundary(ho: &HighOrderMesh, m: &LinearMesh) {
 
 #[test]
 fn subdivision_gives_linear_elements_on_the_geometry() {
-    let (_, m) = meshes().remove(2);
-    let t = Topology::build(&m);
-    let k = 3;
-    let ho = sample(&m, &m, &t, k).subdivided();
-    assert_eq!(ho.order, 1);
-    assert_eq!(ho.n_elements(), m.n_elements() * 27);
-    assert_eq!(ho.n_boundary(), t.boundary_facets.len() * 9);
-    // The refined linear mesh is valid and has the same volume as the input.
-    let lin = LinearMesh {
-        dim: 3,
-        coords: ho.nodes.clone(),
-        elements: ho.elements.clone(),
-        ..Default::default()
-    };
-    assert!(lin.min_scaled_jacobian().unwrap().0 > 0.0);
+    for (name, m) in meshes() {
+        let t = Topology::build(&m);
+        let k = 3;
+        let ho = sample(&m, &m, &t, k).subdivided();
+        let d = m.dim as u32;
+        assert_eq!(ho.order, 1);
+        assert_eq!(ho.n_elements(), m.n_elements() * k.pow(d));
+        assert_eq!(ho.n_boundary(), t.boundary_facets.len() * k.pow(d - 1));
+        // Sub-elements are in lattice order like every element of a HighOrderMesh: read as a
+        // linear mesh (corner order) they are valid, and the sampled check agrees.
+        const LATTICE_TO_CORNER: [usize; 8] = [0, 1, 3, 2, 4, 5, 7, 6];
+        let npe = 1 << d;
+        let mut elements = vec![0; ho.elements.len()];
+        for (sub, cell) in ho.elements.chunks(npe).enumerate() {
+            for (l, &v) in cell.iter().enumerate() {
+                elements[sub * npe + LATTICE_TO_CORNER[l]] = v;
+            }
+        }
+        let lin = LinearMesh {
+            dim: m.dim,
+            coords: ho.nodes.clone(),
+            elements,
+            ..Default::default()
+        };
+        assert!(lin.min_scaled_jacobian().unwrap().0 > 0.0, "{name}");
+        assert_eq!(
+            polyspline::quality::CheckReport::new(&ho).invalid,
+            0,
+            "{name}"
+        );
+        // The subdivided boundary facets are exactly the boundary of the refined mesh.
+        let tl = Topology::build(&lin);
+        let key = |f: &[u32]| {
+            let mut k = f.to_vec();
+            k.sort_unstable();
+            k
+        };
+        let mut got: Vec<Vec<u32>> = ho.boundary.chunks(ho.nodes_per_facet()).map(key).collect();
+        let mut want: Vec<Vec<u32>> = tl
+            .boundary_facets
+            .iter()
+            .map(|&f| key(tl.facet_vertices(f as usize)))
+            .collect();
+        got.sort();
+        want.sort();
+        assert_eq!(got, want, "{name}");
+    }
 }
 
 fn scratch(name: &str) -> PathBuf {

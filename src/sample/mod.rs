@@ -146,43 +146,24 @@ impl HighOrderMesh {
     /// a refined linear mesh whose nodes lie on the curved geometry.
     pub fn subdivided(&self) -> HighOrderMesh {
         let p = self.order;
+        // Each sub-cell keeps the lattice order of an order-1 element (i fastest), like every
+        // element of a HighOrderMesh.
         let split = |cells: &[u32], dim: usize| -> Vec<u32> {
             let per = (p + 1).pow(dim as u32);
-            let mut out = Vec::with_capacity(cells.len() / per * p.pow(dim as u32) * (1 << dim));
+            let sub = p.pow(dim as u32);
+            let mut out = Vec::with_capacity(cells.len() / per * sub * (1 << dim));
             for c in cells.chunks(per) {
-                let at = |i: usize, j: usize, k: usize| c[lattice_index(p, [i, j, k])];
-                match dim {
-                    1 => {
-                        for i in 0..p {
-                            out.extend([at(i, 0, 0), at(i + 1, 0, 0)]);
-                        }
-                    }
-                    2 => {
-                        for j in 0..p {
-                            for i in 0..p {
-                                out.extend([
-                                    at(i, j, 0),
-                                    at(i + 1, j, 0),
-                                    at(i + 1, j + 1, 0),
-                                    at(i, j + 1, 0),
-                                ]);
+                for s in 0..sub {
+                    let base = lattice_point(p - 1, dim, s);
+                    for corner in 0..1usize << dim {
+                        let l: Lattice = std::array::from_fn(|k| {
+                            if k < dim {
+                                base[k] + (corner >> k & 1)
+                            } else {
+                                0
                             }
-                        }
-                    }
-                    _ => {
-                        for k in 0..p {
-                            for j in 0..p {
-                                for i in 0..p {
-                                    for q in HEX_VERTEX_PARAMS {
-                                        out.push(at(
-                                            i + q[0] as usize,
-                                            j + q[1] as usize,
-                                            k + q[2] as usize,
-                                        ));
-                                    }
-                                }
-                            }
-                        }
+                        });
+                        out.push(c[lattice_index(p, l)]);
                     }
                 }
             }
