@@ -113,6 +113,23 @@ pub enum CurveError {
     },
 }
 
+impl CurveError {
+    /// The output would contain the elements `bad`, not certified valid: name the first few.
+    fn invalid(input: &Path, what: &str, bad: &[usize]) -> CurveError {
+        CurveError::Invalid {
+            input: input.to_owned(),
+            what: what.into(),
+            count: bad.len(),
+            first: bad
+                .iter()
+                .take(8)
+                .map(|e| e.to_string())
+                .collect::<Vec<_>>()
+                .join(", "),
+        }
+    }
+}
+
 /// What `curve` did, for `--report` and the terminal.
 #[derive(Clone, Debug, Serialize)]
 pub struct CurveReport {
@@ -274,17 +291,6 @@ pub fn curve(
         )
     };
     if options.geometry != Geometry::Straight {
-        let invalid = |what: &str, bad: &[usize]| CurveError::Invalid {
-            input: input.to_owned(),
-            what: what.into(),
-            count: bad.len(),
-            first: bad
-                .iter()
-                .take(8)
-                .map(|e| e.to_string())
-                .collect::<Vec<_>>()
-                .join(", "),
-        };
         let mut demote = vec![false; mesh.n_elements()];
         let mut s = SplineSpace::build(&mesh, &topo);
         lap("spline", &mut timings);
@@ -403,7 +409,8 @@ pub fn curve(
                 .collect();
             if !bad.is_empty() {
                 // The unfitted map is what was asked for: refuse rather than change it.
-                return Err(invalid(
+                return Err(CurveError::invalid(
+                    input,
                     "initial spline map (use --fit position to fit it)",
                     &bad,
                 ));
@@ -443,22 +450,11 @@ pub fn curve(
         .iter()
         .map(|q| q.min_scaled_jacobian)
         .fold(f64::INFINITY, f64::min);
-    let invalid = quality
-        .iter()
-        .filter(|q| !(q.min_det_jacobian > 0.0))
-        .count();
-    if invalid > 0 {
-        let first: Vec<String> = (0..quality.len())
-            .filter(|&e| !(quality[e].min_det_jacobian > 0.0))
-            .take(8)
-            .map(|e| e.to_string())
-            .collect();
-        return Err(CurveError::Invalid {
-            input: input.to_owned(),
-            what: "sampled output".into(),
-            count: invalid,
-            first: first.join(", "),
-        });
+    let invalid: Vec<usize> = (0..quality.len())
+        .filter(|&e| !(quality[e].min_det_jacobian > 0.0))
+        .collect();
+    if !invalid.is_empty() {
+        return Err(CurveError::invalid(input, "sampled output", &invalid));
     }
     let (dev_max, dev_rms) = boundary_deviation(&mesh, &topo, &ho);
     lap("quality", &mut timings);
