@@ -19,7 +19,9 @@
 // such as `!(det > 0.0)` deliberately count NaN as failing.
 #![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod compare;
 pub mod cpu;
+pub mod elastic;
 pub mod fit;
 pub mod gpu;
 pub mod info;

@@ -8,7 +8,9 @@ use polyspline::io::output::write_atomically;
 use polyspline::io::vtu_write::VtuEncoding;
 use polyspline::io::{read_mesh, read_raw};
 use polyspline::mesh::{MeshOptions, Topology};
-use polyspline::pipeline::{CurveOptions, Geometry, LineSearchMode, OutputOptions, curve};
+use polyspline::compare::{CompareOptions, compare};
+use polyspline::elastic::{ElasticParams, ElasticPreconditioner};
+use polyspline::pipeline::{CurveOptions, Geometry, LineSearchMode, Method, OutputOptions, curve};
 use polyspline::plot::{Layer, render_svg};
 use polyspline::quality::CheckReport;
 use polyspline::sample::HighOrderMesh;
@@ -52,8 +54,15 @@ enum Command {
         #[arg(long, default_value_t = 2)]
         order: usize,
         /// Write the straight-sided order-P mesh of the input (no curving), for comparison.
-        #[arg(long, conflicts_with = "fit")]
+        #[arg(long, conflicts_with_all = ["fit", "method"])]
         straight: bool,
+        /// `iga` samples the fitted spline everywhere; `elastic` (the paper's baseline, §2.5)
+        /// puts the boundary nodes on the same fitted spline and moves the interior nodes of the
+        /// straight order-P mesh by linear elasticity.
+        #[arg(long, value_enum, default_value_t = MethodArg::Iga)]
+        method: MethodArg,
+        #[command(flatten)]
+        elastic: ElasticArgs,
         /// Fit of the spline control points: `none` samples the initial spline map; `position`
         /// and `frame` are the paper's weight presets (least squares, then a certified line
         /// search); `smooth` takes the midpoint targets from a local reconstruction of the
@@ -121,6 +130,31 @@ enum Command {
         #[arg(long, value_enum)]
         precision: Option<PrecisionArg>,
     },
+    /// Curve one mesh with every method (straight, IGA with the position, frame and smooth
+    /// fits, elastic analogy) and print one table: times, validity, quality, boundary
+    /// deviation and the facet angle jump (docs/compare.md). Writes nothing.
+    Compare {
+        /// Input mesh file.
+        mesh: PathBuf,
+        /// Order of the output elements.
+        #[arg(long, default_value_t = 2)]
+        order: usize,
+        /// Print one JSON object instead of a table.
+        #[arg(long)]
+        json: bool,
+        #[command(flatten)]
+        elastic: ElasticArgs,
+        /// Relative tolerance of the conjugate-gradient solves (fit and elasticity).
+        #[arg(long, default_value_t = 1e-6)]
+        cg_tol: f64,
+        /// Keep tangled or degenerate input elements instead of failing.
+        #[arg(long)]
+        allow_invalid: bool,
+        /// Where sampling, certification and the fit's CG solve run (the elastic solve runs on
+        /// the CPU).
+        #[arg(long, value_enum, default_value_t = BackendArg::Cpu)]
+        backend: BackendArg,
+    },
     /// Make a synthetic linear mesh with curved boundaries for benchmarks: a butterfly disc
     /// (2D), a solid cylinder or a torus (3D), with valence-3 vertices/edges.
     Generate {
@@ -162,6 +196,49 @@ enum Command {
         #[arg(long)]
         control_points: bool,
     },
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum MethodArg {
+    Iga,
+    Elastic,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum PreconditionerArg {
+    Jacobi,
+    BlockJacobi,
+}
+
+/// Material and solver of the elastic analogy.
+#[derive(clap::Args)]
+struct ElasticArgs {
+    /// Young's modulus of the elastic analogy.
+    #[arg(long, default_value_t = 1.5)]
+    young: f64,
+    /// Poisson's ratio of the elastic analogy (below 0.5).
+    #[arg(long, default_value_t = 0.49)]
+    poisson: f64,
+    /// Preconditioner of the elastic CG solve: per-node d×d block inverse, or the diagonal.
+    #[arg(long, value_enum, default_value_t = PreconditionerArg::BlockJacobi)]
+    elastic_preconditioner: PreconditionerArg,
+}
+
+impl ElasticArgs {
+    fn params(&self, cg_tol: f64) -> ElasticParams {
+        ElasticParams {
+            young: self.young,
+            poisson: self.poisson,
+            cg: CgParams {
+                rel_tol: cg_tol,
+                ..Default::default()
+            },
+            preconditioner: match self.elastic_preconditioner {
+                PreconditionerArg::Jacobi => ElasticPreconditioner::Jacobi,
+                PreconditionerArg::BlockJacobi => ElasticPreconditioner::BlockJacobi,
+            },
+        }
+    }
 }
 
 #[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -223,6 +300,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             output,
             order,
             straight,
+            method,
+            elastic,
             fit,
             w_corner,
             w_boundary_corner,
@@ -272,6 +351,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     Geometry::SplineInitial
                 } else {
                     Geometry::SplineFitted
+                },
+                method: match method {
+                    MethodArg::Iga => Method::Iga,
+                    MethodArg::Elastic => Method::Elastic(elastic.params(cg_tol)),
                 },
                 fit: FitParams {
                     weights,
@@ -334,6 +417,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     r.invalid_at_full_step, r.damped_control_points
                 );
             }
+            if let Some(e) = &r.elastic {
+                eprintln!(
+                    "elastic: E {} nu {}, {} unknowns, {} CG iterations ({:?}), relative residual {:.2e}",
+                    e.young, e.poisson, e.unknowns, e.cg.iterations, e.preconditioner, e.cg.rel_residual
+                );
+            }
             if let Some(n) = r.snapped_boundary_vertices {
                 eprintln!("snap: {n} boundary vertices moved onto the input");
             }
@@ -351,6 +440,46 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     use std::io::Write;
                     writeln!(w, "{json}")
                 })?;
+            }
+        }
+        Command::Compare {
+            mesh,
+            order,
+            json,
+            elastic,
+            cg_tol,
+            allow_invalid,
+            backend,
+        } => {
+            let backend = resolve_backend(backend, None)?;
+            let cg = CgParams {
+                rel_tol: cg_tol,
+                ..Default::default()
+            };
+            let options = CompareOptions {
+                base: CurveOptions {
+                    order,
+                    subdivide: None,
+                    geometry: Geometry::SplineFitted,
+                    method: Method::Iga,
+                    fit: FitParams {
+                        cg,
+                        ..FitParams::smooth()
+                    },
+                    line_search: LineSearchParams::default(),
+                    line_search_mode: LineSearchMode::Local,
+                    snap_boundary: false,
+                    mesh: MeshOptions { allow_invalid },
+                    output: OutputOptions::default(),
+                    backend,
+                },
+                elastic: elastic.params(cg_tol),
+            };
+            let report = compare(&mesh, &options)?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&report)?);
+            } else {
+                print!("{report}");
             }
         }
         Command::Generate {

@@ -3,6 +3,7 @@
 //! Input: a mesh path and [`CurveOptions`]. Output: the written high-order mesh file and a
 //! [`CurveReport`]. The output file is written atomically and never onto the input.
 
+use crate::elastic::{ElasticError, ElasticInfo, ElasticParams, elastic_analogy};
 use crate::fit::{FitParams, FitTargets, FitWeights, fit_with};
 use crate::gpu::{AdapterReport, Backend, Precision};
 use crate::io::gmsh_write::{MshVersion, write_msh};
@@ -15,8 +16,8 @@ use crate::sample::{BezierElements, HighOrderMesh, MAX_ORDER, sample};
 use crate::solve::CgError;
 use crate::spline::SplineSpace;
 use crate::validity::{
-    Certifier, CpuCertifier, LineSearchInfo, LineSearchParams, ValidityError, line_search_with,
-    local_line_search_with,
+    Certifier, CpuCertifier, LineSearchInfo, LineSearchParams, ValidityError,
+    lagrange_element_bounds, line_search_with, local_line_search_with,
 };
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -46,6 +47,25 @@ pub enum LineSearchMode {
     Local,
 }
 
+/// How the interior of the curved mesh is placed.
+#[derive(Clone, Copy, Debug)]
+pub enum Method {
+    /// Sample the (fitted) spline map everywhere (the paper's method).
+    Iga,
+    /// Sample the spline only on the boundary; move the interior nodes of the straight order-P
+    /// mesh by linear elasticity (paper §2.5, the baseline).
+    Elastic(ElasticParams),
+}
+
+impl Method {
+    pub fn name(&self) -> &'static str {
+        match self {
+            Method::Iga => "iga",
+            Method::Elastic(_) => "elastic",
+        }
+    }
+}
+
 /// Output file options.
 #[derive(Clone, Debug)]
 pub struct OutputOptions {
@@ -71,6 +91,8 @@ pub struct CurveOptions {
     /// Order 1 output split into `subdivide`^d elements per input element.
     pub subdivide: Option<usize>,
     pub geometry: Geometry,
+    /// IGA everywhere, or the elastic analogy inside the IGA boundary.
+    pub method: Method,
     /// Weights of the fit (used with [`Geometry::SplineFitted`]).
     pub fit: FitParams,
     pub line_search: LineSearchParams,
@@ -99,6 +121,11 @@ pub enum CurveError {
     },
     #[error("{}: fit: {source}", input.display())]
     Solve { input: PathBuf, source: CgError },
+    #[error("{}: {source}", input.display())]
+    Elastic {
+        input: PathBuf,
+        source: ElasticError,
+    },
     #[error("{}: {source}", input.display())]
     Validity {
         input: PathBuf,
@@ -140,6 +167,10 @@ pub struct CurveReport {
     pub order: usize,
     pub subdivide: Option<usize>,
     pub geometry: Geometry,
+    /// `iga` or `elastic`.
+    pub method: &'static str,
+    /// The elastic solve, with `--method elastic`.
+    pub elastic: Option<ElasticInfo>,
     pub output_nodes: usize,
     pub output_elements: usize,
     pub boundary_facets: usize,
@@ -229,12 +260,44 @@ pub fn write_high_order(
     })
 }
 
+/// A curved mesh in memory with the input it was made from (the `curve` job without writing).
+pub struct Curved {
+    pub mesh: crate::mesh::LinearMesh,
+    pub topo: Topology,
+    pub ho: HighOrderMesh,
+    /// The report; `output` is empty and `timings` has no `write`.
+    pub report: CurveReport,
+}
+
 /// Run the `curve` job.
 pub fn curve(
     input: &Path,
     output: &Path,
     options: &CurveOptions,
 ) -> Result<CurveReport, CurveError> {
+    if OutputFormat::from_path(output).is_none() {
+        return Err(WriteError::Unsupported {
+            path: output.to_owned(),
+            what: "unknown output format; use .msh (Gmsh) or .vtu (VTK)".into(),
+        }
+        .into());
+    }
+    let start = Instant::now();
+    let Curved { ho, mut report, .. } = curve_in_memory(input, options)?;
+    let t = Instant::now();
+    write_high_order(&ho, output, &options.output, &[input])?;
+    report
+        .timings
+        .insert("write".into(), t.elapsed().as_secs_f64());
+    report
+        .timings
+        .insert("total".into(), start.elapsed().as_secs_f64());
+    report.output = output.to_owned();
+    Ok(report)
+}
+
+/// Everything of the `curve` job but writing the output.
+pub fn curve_in_memory(input: &Path, options: &CurveOptions) -> Result<Curved, CurveError> {
     let order = options.subdivide.unwrap_or(options.order);
     if options.subdivide.is_some() && options.order != 1 {
         return Err(CurveError::Options(
@@ -246,12 +309,21 @@ pub fn curve(
             "order {order} is out of range 1..={MAX_ORDER}"
         )));
     }
-    if OutputFormat::from_path(output).is_none() {
-        return Err(WriteError::Unsupported {
-            path: output.to_owned(),
-            what: "unknown output format; use .msh (Gmsh) or .vtu (VTK)".into(),
-        }
-        .into());
+    let elastic = match options.method {
+        Method::Elastic(params) => Some(params),
+        Method::Iga => None,
+    };
+    if elastic.is_some() && options.geometry == Geometry::Straight {
+        return Err(CurveError::Options(
+            "--method elastic moves the straight mesh onto the spline boundary; it cannot be combined with --straight".into(),
+        ));
+    }
+    if elastic.is_some() && !(1..=crate::elastic::MAX_ELASTIC_ORDER).contains(&options.order) {
+        return Err(CurveError::Options(format!(
+            "--method elastic supports orders 1..={}, not {}",
+            crate::elastic::MAX_ELASTIC_ORDER,
+            options.order
+        )));
     }
     let start = Instant::now();
     let mut timings = BTreeMap::new();
@@ -434,7 +506,7 @@ pub fn curve(
             )?,
             None => sample(source, &mesh, &topo, order),
         };
-    if options.subdivide.is_some() {
+    if options.subdivide.is_some() && elastic.is_none() {
         ho = ho.subdivided();
     }
     lap("sample", &mut timings);
@@ -445,6 +517,41 @@ pub fn curve(
     } else {
         None
     };
+    let mut elastic_info = None;
+    if let Some(params) = elastic {
+        // The straight order-P mesh, its boundary moved onto the sampled spline's boundary.
+        let straight = sample(&mesh, &mesh, &topo, options.order);
+        lap("elastic_sample", &mut timings);
+        let (moved, info) =
+            elastic_analogy(&straight, &ho, &params).map_err(|source| CurveError::Elastic {
+                input: input.to_owned(),
+                source,
+            })?;
+        lap("elastic", &mut timings);
+        timings.insert("elastic_assembly".into(), info.assembly_seconds);
+        timings.insert("elastic_cg".into(), info.solve_seconds);
+        let depth = options.line_search.certificate_depth;
+        let bounds: Vec<_> = {
+            use rayon::prelude::*;
+            (0..moved.n_elements())
+                .into_par_iter()
+                .map(|e| lagrange_element_bounds(&moved, e, depth))
+                .collect()
+        };
+        let bad: Vec<usize> = (0..bounds.len())
+            .filter(|&e| !bounds[e].certified_positive())
+            .collect();
+        if !bad.is_empty() {
+            return Err(CurveError::invalid(input, "elastic-analogy mesh", &bad));
+        }
+        min_det_bound = Some(bounds.iter().map(|b| b.lower).fold(f64::INFINITY, f64::min));
+        lap("elastic_validity", &mut timings);
+        ho = moved;
+        if options.subdivide.is_some() {
+            ho = ho.subdivided();
+        }
+        elastic_info = Some(info);
+    }
     let quality = sample_det_jacobian(&ho);
     let min_sj = quality
         .iter()
@@ -458,17 +565,17 @@ pub fn curve(
     }
     let (dev_max, dev_rms) = boundary_deviation(&mesh, &topo, &ho);
     lap("quality", &mut timings);
-    write_high_order(&ho, output, &options.output, &[input])?;
-    lap("write", &mut timings);
     timings.insert("total".into(), start.elapsed().as_secs_f64());
-    Ok(CurveReport {
+    let report = CurveReport {
         input: input.to_owned(),
-        output: output.to_owned(),
+        output: PathBuf::new(),
         dimension: mesh.dim,
         elements: mesh.n_elements(),
         order: ho.order,
         subdivide: options.subdivide,
         geometry: options.geometry,
+        method: options.method.name(),
+        elastic: elastic_info,
         output_nodes: ho.nodes.len(),
         output_elements: ho.n_elements(),
         boundary_facets: ho.n_boundary(),
@@ -497,6 +604,12 @@ pub fn curve(
         backend: options.backend.name().into(),
         adapter: gpu.map(|g| g.adapter.clone()),
         gpu_precision: gpu.map(|g| g.precision),
+    };
+    Ok(Curved {
+        mesh,
+        topo,
+        ho,
+        report,
     })
 }
 
@@ -599,7 +712,6 @@ pub fn snap_boundary(
     ho: &mut HighOrderMesh,
     depth: usize,
 ) -> usize {
-    use crate::validity::{bernstein_min_bounds, det_jacobian_bernstein_lagrange};
     use rayon::prelude::*;
     let nv = mesh.n_vertices();
     let original: Vec<[f64; 3]> = ho.nodes[..nv].to_vec();
@@ -623,15 +735,7 @@ pub fn snap_boundary(
         let bad: Vec<usize> = affected
             .par_iter()
             .copied()
-            .filter(|&e| {
-                let nodes: Vec<[f64; 3]> = ho
-                    .element(e)
-                    .iter()
-                    .map(|&n| ho.nodes[n as usize])
-                    .collect();
-                let b = det_jacobian_bernstein_lagrange(ho.dim, ho.order, &nodes);
-                !bernstein_min_bounds(ho.dim, b, depth).certified_positive()
-            })
+            .filter(|&e| !lagrange_element_bounds(ho, e, depth).certified_positive())
             .collect();
         if bad.is_empty() {
             break;

@@ -322,6 +322,7 @@ fn options(mode: &str) -> CurveOptions {
         order,
         subdivide: None,
         geometry,
+        method: polyspline::pipeline::Method::Iga,
         fit,
         line_search: Default::default(),
         line_search_mode: LineSearchMode::Local,

@@ -41,6 +41,7 @@ fn options(order: usize, geometry: Geometry) -> CurveOptions {
         order,
         subdivide: None,
         geometry,
+        method: polyspline::pipeline::Method::Iga,
         fit: Default::default(),
         line_search: Default::default(),
         line_search_mode: LineSearchMode::Local,

@@ -691,6 +691,7 @@ fn curve_gpu_matches_cpu() {
                     order: 3,
                     subdivide: None,
                     geometry: Geometry::SplineFitted,
+                    method: polyspline::pipeline::Method::Iga,
                     // Tight, so the two solutions differ by the solver's rounding only.
                     fit: polyspline::fit::FitParams {
                         cg: CgParams {

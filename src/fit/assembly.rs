@@ -71,7 +71,7 @@ fn local_matrix(space: &dyn FitSpace, e: usize, g: &[f64], nb: usize) -> Local {
     Local { ids, k }
 }
 
-fn atomic_add(slot: &AtomicU64, v: f64) {
+pub(crate) fn atomic_add(slot: &AtomicU64, v: f64) {
     let mut cur = slot.load(Ordering::Relaxed);
     loop {
         let new = (f64::from_bits(cur) + v).to_bits();

@@ -6,6 +6,8 @@
 //! component (or ≤ `abs_tol`), and a [`CgInfo`]; or [`CgError::NoConvergence`] with the
 //! residuals reached. Each coordinate runs its own CG recurrence (its own α, β); they share the
 //! operator application, so the matrix is read once per iteration for all three.
+//! [`pcg_coupled`] is the variant for operators that couple the components of a node
+//! (elasticity): one recurrence over all unknowns, with a caller-supplied preconditioner.
 
 use rayon::prelude::*;
 
@@ -178,6 +180,96 @@ pub fn pcg(
         rr = dot3(&r, &r);
         it += 1;
         progress(it, rel(rr));
+    }
+    Ok(CgInfo {
+        iterations: it,
+        rel_residual: rel(rr),
+    })
+}
+
+/// A preconditioner M⁻¹ for [`pcg_coupled`]: z = M⁻¹ r, symmetric positive definite.
+pub trait Preconditioner: Sync {
+    fn apply(&self, r: &[[f64; 3]], z: &mut [[f64; 3]]);
+}
+
+fn dot_all(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
+    let d = dot3(a, b);
+    d[0] + d[1] + d[2]
+}
+
+/// Solve A x = b by preconditioned CG for an operator that couples the three components of a
+/// node (linear elasticity): one recurrence over all 3n unknowns, unlike [`pcg`]'s three.
+/// Stops when ‖r‖ ≤ rel_tol·‖b‖ (Euclidean norm over all components) or ≤ abs_tol.
+pub fn pcg_coupled(
+    op: &dyn LinOp,
+    pre: &dyn Preconditioner,
+    b: &[[f64; 3]],
+    x: &mut [[f64; 3]],
+    params: &CgParams,
+) -> Result<CgInfo, CgError> {
+    let n = op.nrows();
+    assert_eq!(b.len(), n);
+    assert_eq!(x.len(), n);
+    let mut r = vec![[0.0; 3]; n];
+    op.apply(x, &mut r);
+    r.par_iter_mut().zip(b.par_iter()).for_each(|(r, b)| {
+        for k in 0..3 {
+            r[k] = b[k] - r[k];
+        }
+    });
+    let bnorm = dot_all(b, b).sqrt();
+    let target = (params.rel_tol * bnorm).max(params.abs_tol);
+    let rel = |rr: f64| {
+        if bnorm > 0.0 {
+            rr.sqrt() / bnorm
+        } else {
+            rr.sqrt()
+        }
+    };
+    let mut z = vec![[0.0; 3]; n];
+    pre.apply(&r, &mut z);
+    let mut p = z.clone();
+    let mut rz = dot_all(&r, &z);
+    let mut rr = dot_all(&r, &r);
+    let mut ap = vec![[0.0; 3]; n];
+    let mut it = 0;
+    while rr.sqrt() > target {
+        if it >= params.max_iters {
+            return Err(CgError::NoConvergence {
+                iterations: it,
+                rel_residual: rel(rr),
+                rel_tol: params.rel_tol,
+            });
+        }
+        op.apply(&p, &mut ap);
+        let pap = dot_all(&p, &ap);
+        if !(pap > 0.0) {
+            return Err(CgError::NotPositiveDefinite {
+                iteration: it,
+                curvature: pap,
+            });
+        }
+        let alpha = rz / pap;
+        x.par_iter_mut()
+            .zip(r.par_iter_mut())
+            .zip(p.par_iter().zip(ap.par_iter()))
+            .for_each(|((x, r), (p, ap))| {
+                for k in 0..3 {
+                    x[k] += alpha * p[k];
+                    r[k] -= alpha * ap[k];
+                }
+            });
+        pre.apply(&r, &mut z);
+        let rz_new = dot_all(&r, &z);
+        let beta = if rz > 0.0 { rz_new / rz } else { 0.0 };
+        p.par_iter_mut().zip(z.par_iter()).for_each(|(p, z)| {
+            for k in 0..3 {
+                p[k] = z[k] + beta * p[k];
+            }
+        });
+        rz = rz_new;
+        rr = dot_all(&r, &r);
+        it += 1;
     }
     Ok(CgInfo {
         iterations: it,

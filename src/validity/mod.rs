@@ -320,6 +320,17 @@ pub fn bernstein_min_bounds(dim: usize, b: Bernstein, max_depth: usize) -> DetBo
     }
 }
 
+/// Certified bounds of min det J of element `e` of a high-order Lagrange mesh.
+pub fn lagrange_element_bounds(
+    ho: &crate::sample::HighOrderMesh,
+    e: usize,
+    max_depth: usize,
+) -> DetBounds {
+    let nodes: Vec<[f64; 3]> = ho.element(e).iter().map(|&n| ho.nodes[n as usize]).collect();
+    let b = det_jacobian_bernstein_lagrange(ho.dim, ho.order, &nodes);
+    bernstein_min_bounds(ho.dim, b, max_depth)
+}
+
 /// Certified bounds on min det J over an element.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct DetBounds {

@@ -1,0 +1,545 @@
+//! Elastic-analogy curving (paper §2.5), the baseline the IGA method is compared with.
+//!
+//! Input: the straight-sided order-p mesh of the input ([`HighOrderMesh`], the reference
+//! configuration), and a curved mesh with the same numbering whose boundary nodes are the target
+//! (the IGA-fitted spline sampled at order p, so both methods share the boundary). Output: the
+//! straight mesh with every boundary node moved onto the target and every interior node moved by
+//! the displacement that minimises the linear-elastic energy with that boundary displacement
+//! prescribed, and an [`ElasticInfo`].
+//!
+//! Discretisation: order-p tensor-product Lagrange elements on the straight lattice nodes
+//! (isoparametric), (p+1)^d Gauss points per element, isotropic material (E, ν). Dirichlet
+//! nodes are eliminated: the unknowns are the free nodes' d displacement components, the matrix
+//! is a block CSR of d×d nodal blocks (assembled in parallel with atomic adds, like the fit's
+//! normal matrix), and K_ff u_f = −K_fb u_b is solved by [`crate::solve::pcg_coupled`] with a
+//! nodal block-Jacobi preconditioner (or pointwise Jacobi, for comparison).
+//!
+//! Invariants: with zero boundary displacement the mesh is unchanged (u = 0 exactly); a
+//! displacement that is linear in x on the boundary is reproduced exactly inside (patch test),
+//! up to the CG tolerance.
+
+use crate::fit::assembly::atomic_add;
+use crate::quality::lagrange_1d;
+use crate::sample::HighOrderMesh;
+use crate::sample::ordering::lattice_point;
+use crate::solve::{CgError, CgInfo, CgParams, LinOp, Preconditioner, pcg_coupled};
+use rayon::prelude::*;
+use serde::Serialize;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Instant;
+
+/// Highest element order of the elastic solve (the dense element matrix grows as (p+1)^{2d}).
+pub const MAX_ELASTIC_ORDER: usize = 6;
+
+/// Preconditioner of the elastic CG solve.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ElasticPreconditioner {
+    /// The inverse of the diagonal of K.
+    Jacobi,
+    /// The inverse of each node's d×d diagonal block of K (couples a node's components,
+    /// which matters as ν → 0.5).
+    BlockJacobi,
+}
+
+/// Material and solver parameters.
+#[derive(Clone, Copy, Debug)]
+pub struct ElasticParams {
+    /// Young's modulus E (> 0).
+    pub young: f64,
+    /// Poisson's ratio ν (−1 < ν < 0.5).
+    pub poisson: f64,
+    pub cg: CgParams,
+    pub preconditioner: ElasticPreconditioner,
+}
+
+impl Default for ElasticParams {
+    /// The paper's material: E = 1.5, ν = 0.49.
+    fn default() -> Self {
+        ElasticParams {
+            young: 1.5,
+            poisson: 0.49,
+            cg: CgParams::default(),
+            preconditioner: ElasticPreconditioner::BlockJacobi,
+        }
+    }
+}
+
+/// What the elastic solve did.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct ElasticInfo {
+    pub young: f64,
+    pub poisson: f64,
+    pub preconditioner: ElasticPreconditioner,
+    /// Scalar unknowns (free nodes × d).
+    pub unknowns: usize,
+    /// Prescribed (boundary) nodes.
+    pub prescribed_nodes: usize,
+    /// Stored d×d blocks of K_ff.
+    pub nonzero_blocks: usize,
+    pub cg: CgInfo,
+    pub assembly_seconds: f64,
+    pub solve_seconds: f64,
+}
+
+/// Failures of the elastic solve.
+#[derive(Clone, Debug, thiserror::Error)]
+pub enum ElasticError {
+    #[error("elastic material: {0}")]
+    Material(String),
+    #[error("elastic analogy supports orders 1..={MAX_ELASTIC_ORDER}, not {0}")]
+    Order(usize),
+    #[error("elastic solve: {0}")]
+    Solve(#[from] CgError),
+}
+
+/// Lamé parameters (λ, μ) of (E, ν).
+fn lame(young: f64, poisson: f64) -> Result<(f64, f64), ElasticError> {
+    if !(young > 0.0 && young.is_finite()) {
+        return Err(ElasticError::Material(format!(
+            "Young's modulus must be positive and finite, got {young}"
+        )));
+    }
+    if !(poisson > -1.0 && poisson < 0.5) {
+        return Err(ElasticError::Material(format!(
+            "Poisson's ratio must lie in (-1, 0.5), got {poisson}"
+        )));
+    }
+    let lambda = young * poisson / ((1.0 + poisson) * (1.0 - 2.0 * poisson));
+    let mu = young / (2.0 * (1.0 + poisson));
+    Ok((lambda, mu))
+}
+
+/// Gauss–Legendre points and weights on [0, 1] (n points, exact to degree 2n − 1).
+pub fn gauss_legendre(n: usize) -> (Vec<f64>, Vec<f64>) {
+    let (mut xs, mut ws) = (Vec::with_capacity(n), Vec::with_capacity(n));
+    for i in 0..n {
+        // Newton on P_n from the Chebyshev-like guess; converges in a few steps.
+        let mut x = (std::f64::consts::PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
+        let mut dp = 1.0;
+        for _ in 0..100 {
+            let (mut p0, mut p1) = (1.0, x);
+            for k in 2..=n {
+                let p2 = ((2 * k - 1) as f64 * x * p1 - (k - 1) as f64 * p0) / k as f64;
+                p0 = p1;
+                p1 = p2;
+            }
+            let pn = if n == 0 { 1.0 } else { p1 };
+            let pm = if n == 1 { 1.0 } else { p0 };
+            dp = n as f64 * (x * pn - pm) / (x * x - 1.0);
+            let dx = pn / dp;
+            x -= dx;
+            if dx.abs() < 1e-15 {
+                break;
+            }
+        }
+        xs.push(0.5 * (1.0 - x));
+        ws.push(1.0 / ((1.0 - x * x) * dp * dp));
+    }
+    (xs, ws)
+}
+
+/// Reference derivatives of the (p+1)^d Lagrange basis at the Gauss points, with weights.
+struct Quadrature {
+    /// Per point: weight, then for each node its d reference derivatives.
+    weights: Vec<f64>,
+    grads: Vec<[f64; 3]>,
+    n_nodes: usize,
+}
+
+impl Quadrature {
+    fn new(dim: usize, p: usize) -> Quadrature {
+        let m = p + 1;
+        let (xs, ws) = gauss_legendre(m);
+        let mut v = vec![vec![0.0; m]; m];
+        let mut d = vec![vec![0.0; m]; m];
+        for g in 0..m {
+            lagrange_1d(p, xs[g], &mut v[g], &mut d[g]);
+        }
+        let n_nodes = m.pow(dim as u32);
+        let (mut weights, mut grads) = (Vec::new(), Vec::new());
+        for q in 0..n_nodes {
+            let g = lattice_point(p, dim, q);
+            weights.push((0..dim).map(|k| ws[g[k]]).product());
+            for a in 0..n_nodes {
+                let l = lattice_point(p, dim, a);
+                let mut grad = [0.0; 3];
+                for c in 0..dim {
+                    grad[c] = (0..dim)
+                        .map(|k| if k == c { d[g[k]][l[k]] } else { v[g[k]][l[k]] })
+                        .product();
+                }
+                grads.push(grad);
+            }
+        }
+        Quadrature {
+            weights,
+            grads,
+            n_nodes,
+        }
+    }
+}
+
+/// Invert a d×d matrix (d = 2, 3) held in the top-left of `a`; returns det and the inverse.
+fn invert(dim: usize, a: &[[f64; 3]; 3]) -> (f64, [[f64; 3]; 3]) {
+    let mut inv = [[0.0; 3]; 3];
+    if dim == 2 {
+        let det = a[0][0] * a[1][1] - a[0][1] * a[1][0];
+        inv[0][0] = a[1][1] / det;
+        inv[0][1] = -a[0][1] / det;
+        inv[1][0] = -a[1][0] / det;
+        inv[1][1] = a[0][0] / det;
+        (det, inv)
+    } else {
+        let c = |i: usize, j: usize| {
+            let (i1, i2, j1, j2) = ((i + 1) % 3, (i + 2) % 3, (j + 1) % 3, (j + 2) % 3);
+            a[i1][j1] * a[i2][j2] - a[i1][j2] * a[i2][j1]
+        };
+        let det = a[0][0] * c(0, 0) + a[0][1] * c(0, 1) + a[0][2] * c(0, 2);
+        for i in 0..3 {
+            for j in 0..3 {
+                inv[j][i] = c(i, j) / det;
+            }
+        }
+        (det, inv)
+    }
+}
+
+/// Dense element stiffness, index ((a·d + i)·n·d + b·d + j) for nodes a, b and components i, j.
+fn element_stiffness(dim: usize, quad: &Quadrature, x: &[[f64; 3]], lambda: f64, mu: f64) -> Vec<f64> {
+    let n = quad.n_nodes;
+    let nd = n * dim;
+    let mut k = vec![0.0; nd * nd];
+    let mut g = vec![[0.0; 3]; n];
+    for (q, &w) in quad.weights.iter().enumerate() {
+        let ref_grads = &quad.grads[q * n..(q + 1) * n];
+        // J[r][c] = ∂x_r/∂ξ_c.
+        let mut jac = [[0.0; 3]; 3];
+        for (a, rg) in ref_grads.iter().enumerate() {
+            for r in 0..dim {
+                for c in 0..dim {
+                    jac[r][c] += x[a][r] * rg[c];
+                }
+            }
+        }
+        let (det, inv) = invert(dim, &jac);
+        // ∇_x N = J⁻ᵀ ∇_ξ N.
+        for (a, rg) in ref_grads.iter().enumerate() {
+            g[a] = [0.0; 3];
+            for i in 0..dim {
+                g[a][i] = (0..dim).map(|c| inv[c][i] * rg[c]).sum();
+            }
+        }
+        let f = w * det.abs();
+        for a in 0..n {
+            for b in 0..n {
+                let dot: f64 = (0..dim).map(|i| g[a][i] * g[b][i]).sum();
+                for i in 0..dim {
+                    let row = (a * dim + i) * nd + b * dim;
+                    for j in 0..dim {
+                        let mut v = lambda * g[a][i] * g[b][j] + mu * g[a][j] * g[b][i];
+                        if i == j {
+                            v += mu * dot;
+                        }
+                        k[row + j] += f * v;
+                    }
+                }
+            }
+        }
+    }
+    k
+}
+
+/// K_ff in block CSR: d×d blocks per (free node, free node).
+pub struct BlockMatrix {
+    dim: usize,
+    indptr: Vec<usize>,
+    indices: Vec<u32>,
+    /// d·d values per block, row-major.
+    values: Vec<f64>,
+}
+
+impl BlockMatrix {
+    fn block(&self, k: usize) -> &[f64] {
+        let dd = self.dim * self.dim;
+        &self.values[k * dd..(k + 1) * dd]
+    }
+    fn diagonal_block(&self, row: usize) -> &[f64] {
+        let cols = &self.indices[self.indptr[row]..self.indptr[row + 1]];
+        let at = cols.binary_search(&(row as u32)).expect("diagonal block");
+        self.block(self.indptr[row] + at)
+    }
+}
+
+impl LinOp for BlockMatrix {
+    fn nrows(&self) -> usize {
+        self.indptr.len() - 1
+    }
+    fn apply(&self, x: &[[f64; 3]], y: &mut [[f64; 3]]) {
+        let d = self.dim;
+        y.par_iter_mut().enumerate().for_each(|(r, y)| {
+            *y = [0.0; 3];
+            for k in self.indptr[r]..self.indptr[r + 1] {
+                let xc = x[self.indices[k] as usize];
+                let b = self.block(k);
+                for i in 0..d {
+                    for j in 0..d {
+                        y[i] += b[i * d + j] * xc[j];
+                    }
+                }
+            }
+        });
+    }
+    /// Per node, the mean of its block's diagonal.
+    fn diagonal(&self) -> Vec<f64> {
+        let d = self.dim;
+        (0..self.nrows())
+            .map(|r| {
+                let b = self.diagonal_block(r);
+                (0..d).map(|i| b[i * d + i]).sum::<f64>() / d as f64
+            })
+            .collect()
+    }
+}
+
+/// Nodal (block) Jacobi: per node a 3×3 matrix applied to the residual.
+struct NodalPreconditioner(Vec<[[f64; 3]; 3]>);
+
+impl NodalPreconditioner {
+    fn new(k: &BlockMatrix, kind: ElasticPreconditioner) -> Result<Self, CgError> {
+        let d = k.dim;
+        let mut out = Vec::with_capacity(k.nrows());
+        for r in 0..k.nrows() {
+            let b = k.diagonal_block(r);
+            let mut a = [[0.0; 3]; 3];
+            for i in 0..d {
+                for j in 0..d {
+                    a[i][j] = b[i * d + j];
+                }
+            }
+            if let Some(i) = (0..d).find(|&i| !(a[i][i] > 0.0)) {
+                return Err(CgError::BadDiagonal {
+                    row: r * d + i,
+                    value: a[i][i],
+                });
+            }
+            out.push(match kind {
+                ElasticPreconditioner::Jacobi => {
+                    let mut m = [[0.0; 3]; 3];
+                    for i in 0..d {
+                        m[i][i] = 1.0 / a[i][i];
+                    }
+                    m
+                }
+                ElasticPreconditioner::BlockJacobi => invert(d, &a).1,
+            });
+        }
+        Ok(NodalPreconditioner(out))
+    }
+}
+
+impl Preconditioner for NodalPreconditioner {
+    fn apply(&self, r: &[[f64; 3]], z: &mut [[f64; 3]]) {
+        z.par_iter_mut()
+            .zip(r.par_iter().zip(self.0.par_iter()))
+            .for_each(|(z, (r, m))| {
+                for i in 0..3 {
+                    z[i] = m[i][0] * r[0] + m[i][1] * r[1] + m[i][2] * r[2];
+                }
+            });
+    }
+}
+
+/// Solve the elasticity problem on the order-p mesh `reference` with the displacements of the
+/// nodes in `prescribed` fixed (`None`: free). Returns the displacement of every node.
+pub fn solve_displacement(
+    reference: &HighOrderMesh,
+    prescribed: &[Option<[f64; 3]>],
+    params: &ElasticParams,
+) -> Result<(Vec<[f64; 3]>, ElasticInfo), ElasticError> {
+    let (dim, p) = (reference.dim, reference.order);
+    if !(1..=MAX_ELASTIC_ORDER).contains(&p) {
+        return Err(ElasticError::Order(p));
+    }
+    let (lambda, mu) = lame(params.young, params.poisson)?;
+    let start = Instant::now();
+    let nn = reference.nodes.len();
+    assert_eq!(prescribed.len(), nn);
+    const FIXED: u32 = u32::MAX;
+    let mut free = vec![FIXED; nn];
+    let mut nf = 0u32;
+    for (n, slot) in free.iter_mut().enumerate() {
+        if prescribed[n].is_none() {
+            *slot = nf;
+            nf += 1;
+        }
+    }
+    let nf = nf as usize;
+    let npe = reference.nodes_per_element();
+    let ne = reference.n_elements();
+
+    // Pattern: row (free node) → sorted free nodes of the elements around it.
+    let mut count = vec![0usize; nf + 1];
+    for &n in &reference.elements {
+        let f = free[n as usize];
+        if f != FIXED {
+            count[f as usize + 1] += 1;
+        }
+    }
+    for i in 0..nf {
+        count[i + 1] += count[i];
+    }
+    let mut around = vec![0u32; count[nf]];
+    let mut fill = count.clone();
+    for e in 0..ne {
+        for &n in reference.element(e) {
+            let f = free[n as usize];
+            if f != FIXED {
+                around[fill[f as usize]] = e as u32;
+                fill[f as usize] += 1;
+            }
+        }
+    }
+    let rows: Vec<Vec<u32>> = (0..nf)
+        .into_par_iter()
+        .map(|r| {
+            let mut cols: Vec<u32> = around[count[r]..count[r + 1]]
+                .iter()
+                .flat_map(|&e| reference.element(e as usize))
+                .map(|&n| free[n as usize])
+                .filter(|&f| f != FIXED)
+                .collect();
+            cols.sort_unstable();
+            cols.dedup();
+            cols
+        })
+        .collect();
+    let mut indptr = Vec::with_capacity(nf + 1);
+    indptr.push(0);
+    for r in &rows {
+        indptr.push(indptr.last().unwrap() + r.len());
+    }
+    let indices: Vec<u32> = rows.into_iter().flatten().collect();
+    let dd = dim * dim;
+    let values: Vec<AtomicU64> = (0..indices.len() * dd).map(|_| AtomicU64::new(0)).collect();
+    let rhs: Vec<[AtomicU64; 3]> = (0..nf).map(|_| Default::default()).collect();
+
+    let quad = Quadrature::new(dim, p);
+    (0..ne).into_par_iter().for_each(|e| {
+        let ids = reference.element(e);
+        if ids.iter().all(|&n| free[n as usize] == FIXED) {
+            return;
+        }
+        let x: Vec<[f64; 3]> = ids.iter().map(|&n| reference.nodes[n as usize]).collect();
+        let k = element_stiffness(dim, &quad, &x, lambda, mu);
+        let nd = npe * dim;
+        for (a, &na) in ids.iter().enumerate() {
+            let r = free[na as usize];
+            if r == FIXED {
+                continue;
+            }
+            let r = r as usize;
+            let cols = &indices[indptr[r]..indptr[r + 1]];
+            let mut load = [0.0; 3];
+            for (b, &nb) in ids.iter().enumerate() {
+                match prescribed[nb as usize] {
+                    None => {
+                        let c = free[nb as usize];
+                        let at = indptr[r] + cols.binary_search(&c).expect("column in pattern");
+                        for i in 0..dim {
+                            for j in 0..dim {
+                                let v = k[(a * dim + i) * nd + b * dim + j];
+                                atomic_add(&values[at * dd + i * dim + j], v);
+                            }
+                        }
+                    }
+                    Some(u) => {
+                        for i in 0..dim {
+                            for j in 0..dim {
+                                load[i] -= k[(a * dim + i) * nd + b * dim + j] * u[j];
+                            }
+                        }
+                    }
+                }
+            }
+            for i in 0..dim {
+                if load[i] != 0.0 {
+                    atomic_add(&rhs[r][i], load[i]);
+                }
+            }
+        }
+    });
+    let matrix = BlockMatrix {
+        dim,
+        indptr,
+        indices,
+        values: values
+            .into_iter()
+            .map(|v| f64::from_bits(v.into_inner()))
+            .collect(),
+    };
+    let b: Vec<[f64; 3]> = rhs
+        .iter()
+        .map(|r| std::array::from_fn(|i| f64::from_bits(r[i].load(Ordering::Relaxed))))
+        .collect();
+    let assembly_seconds = start.elapsed().as_secs_f64();
+
+    let solve_start = Instant::now();
+    let mut u = vec![[0.0; 3]; nf];
+    let cg = if nf == 0 {
+        CgInfo {
+            iterations: 0,
+            rel_residual: 0.0,
+        }
+    } else {
+        let pre = NodalPreconditioner::new(&matrix, params.preconditioner)?;
+        pcg_coupled(&matrix, &pre, &b, &mut u, &params.cg)?
+    };
+    let displacement = (0..nn)
+        .map(|n| match prescribed[n] {
+            Some(v) => v,
+            None => u[free[n] as usize],
+        })
+        .collect();
+    Ok((
+        displacement,
+        ElasticInfo {
+            young: params.young,
+            poisson: params.poisson,
+            preconditioner: params.preconditioner,
+            unknowns: nf * dim,
+            prescribed_nodes: nn - nf,
+            nonzero_blocks: matrix.indices.len(),
+            cg,
+            assembly_seconds,
+            solve_seconds: solve_start.elapsed().as_secs_f64(),
+        },
+    ))
+}
+
+/// The elastic-analogy mesh: `straight` with its boundary nodes moved onto those of `curved`
+/// (same numbering) and its interior nodes moved by the elastic displacement.
+pub fn elastic_analogy(
+    straight: &HighOrderMesh,
+    curved: &HighOrderMesh,
+    params: &ElasticParams,
+) -> Result<(HighOrderMesh, ElasticInfo), ElasticError> {
+    assert_eq!(straight.nodes.len(), curved.nodes.len(), "same numbering");
+    let mut prescribed = vec![None; straight.nodes.len()];
+    for &n in &curved.boundary {
+        let n = n as usize;
+        prescribed[n] = Some(std::array::from_fn(|k| {
+            curved.nodes[n][k] - straight.nodes[n][k]
+        }));
+    }
+    let (u, info) = solve_displacement(straight, &prescribed, params)?;
+    let mut out = straight.clone();
+    for (n, x) in out.nodes.iter_mut().enumerate() {
+        *x = match prescribed[n] {
+            // Boundary nodes take the target positions exactly (no round-off from x + u).
+            Some(_) => curved.nodes[n],
+            None => std::array::from_fn(|k| x[k] + u[n][k]),
+        };
+    }
+    Ok((out, info))
+}
