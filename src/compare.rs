@@ -78,7 +78,11 @@ impl Acc {
 
 /// The facet angle jump of `ho` (element e of `ho` is element e of `mesh`, same vertex ids).
 pub fn facet_angle_jumps(mesh: &LinearMesh, topo: &Topology, ho: &HighOrderMesh) -> Smoothness {
-    assert_eq!(ho.n_elements(), mesh.n_elements(), "one output element per input element");
+    assert_eq!(
+        ho.n_elements(),
+        mesh.n_elements(),
+        "one output element per input element"
+    );
     let (d, p) = (ho.dim, ho.order);
     let m = p + 1;
     // L_i'(0) and L_i'(1): derivative across a facet at the lattice ends.
@@ -145,7 +149,10 @@ pub fn facet_angle_jumps(mesh: &LinearMesh, topo: &Topology, ho: &HighOrderMesh)
                 ..Default::default()
             };
             for (n, ta) in &pa {
-                let (_, tb) = pb.iter().find(|(nb, _)| nb == n).expect("shared facet node");
+                let (_, tb) = pb
+                    .iter()
+                    .find(|(nb, _)| nb == n)
+                    .expect("shared facet node");
                 let dot: f64 = (0..3).map(|c| -ta[c] * tb[c]).sum();
                 let na = ta.iter().map(|x| x * x).sum::<f64>().sqrt();
                 let nb = tb.iter().map(|x| x * x).sum::<f64>().sqrt();
@@ -258,10 +265,7 @@ fn row(method: &str, result: Result<Curved, CurveError>) -> CompareRow {
             row.min_scaled_jacobian = Some(r.min_scaled_jacobian);
             row.boundary_deviation_max = Some(r.boundary_deviation_max);
             row.boundary_deviation_rms = Some(r.boundary_deviation_rms);
-            row.cg_iterations = r
-                .elastic
-                .map(|e| e.cg.iterations)
-                .or(r.cg_iterations);
+            row.cg_iterations = r.elastic.map(|e| e.cg.iterations).or(r.cg_iterations);
             row.smoothness = Some(facet_angle_jumps(&c.mesh, &c.topo, &c.ho));
         }
     }
@@ -367,8 +371,9 @@ impl std::fmt::Display for CompareReport {
         let opt = |x: Option<f64>, prec: usize| x.map_or("-".into(), |v| format!("{v:.prec$}"));
         for r in &self.rows {
             let jump = |s: Option<AngleStats>| {
-                s.filter(|s| s.points > 0)
-                    .map_or("-".into(), |s| format!("{:.2}/{:.1}", s.mean_deg, s.max_deg))
+                s.filter(|s| s.points > 0).map_or("-".into(), |s| {
+                    format!("{:.2}/{:.1}", s.mean_deg, s.max_deg)
+                })
             };
             writeln!(
                 f,
@@ -385,7 +390,10 @@ impl std::fmt::Display for CompareReport {
                 jump(r.smoothness.map(|s| s.interior)),
             )?;
         }
-        writeln!(f, "(jump: mean/max angle between the elements' transversal derivatives across interior facets)")?;
+        writeln!(
+            f,
+            "(jump: mean/max angle between the elements' transversal derivatives across interior facets)"
+        )?;
         for r in &self.rows {
             if let Some(e) = &r.error {
                 writeln!(f, "{}: failed: {e}", r.method)?;

@@ -206,7 +206,13 @@ fn invert(dim: usize, a: &[[f64; 3]; 3]) -> (f64, [[f64; 3]; 3]) {
 }
 
 /// Dense element stiffness, index ((a·d + i)·n·d + b·d + j) for nodes a, b and components i, j.
-fn element_stiffness(dim: usize, quad: &Quadrature, x: &[[f64; 3]], lambda: f64, mu: f64) -> Vec<f64> {
+fn element_stiffness(
+    dim: usize,
+    quad: &Quadrature,
+    x: &[[f64; 3]],
+    lambda: f64,
+    mu: f64,
+) -> Vec<f64> {
     let n = quad.n_nodes;
     let nd = n * dim;
     let mut k = vec![0.0; nd * nd];

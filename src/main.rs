@@ -1,6 +1,8 @@
 //! The `polyspline` command line.
 
 use clap::{Parser, Subcommand};
+use polyspline::compare::{CompareOptions, compare};
+use polyspline::elastic::{ElasticParams, ElasticPreconditioner};
 use polyspline::fit::{FitParams, FitTargets, FitWeights, SmoothParams};
 use polyspline::info::MeshInfo;
 use polyspline::io::gmsh_write::MshVersion;
@@ -8,8 +10,6 @@ use polyspline::io::output::write_atomically;
 use polyspline::io::vtu_write::VtuEncoding;
 use polyspline::io::{read_mesh, read_raw};
 use polyspline::mesh::{MeshOptions, Topology};
-use polyspline::compare::{CompareOptions, compare};
-use polyspline::elastic::{ElasticParams, ElasticPreconditioner};
 use polyspline::pipeline::{CurveOptions, Geometry, LineSearchMode, Method, OutputOptions, curve};
 use polyspline::plot::{Layer, render_svg};
 use polyspline::quality::CheckReport;
@@ -420,7 +420,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             if let Some(e) = &r.elastic {
                 eprintln!(
                     "elastic: E {} nu {}, {} unknowns, {} CG iterations ({:?}), relative residual {:.2e}",
-                    e.young, e.poisson, e.unknowns, e.cg.iterations, e.preconditioner, e.cg.rel_residual
+                    e.young,
+                    e.poisson,
+                    e.unknowns,
+                    e.cg.iterations,
+                    e.preconditioner,
+                    e.cg.rel_residual
                 );
             }
             if let Some(n) = r.snapped_boundary_vertices {

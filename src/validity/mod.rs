@@ -326,7 +326,11 @@ pub fn lagrange_element_bounds(
     e: usize,
     max_depth: usize,
 ) -> DetBounds {
-    let nodes: Vec<[f64; 3]> = ho.element(e).iter().map(|&n| ho.nodes[n as usize]).collect();
+    let nodes: Vec<[f64; 3]> = ho
+        .element(e)
+        .iter()
+        .map(|&n| ho.nodes[n as usize])
+        .collect();
     let b = det_jacobian_bernstein_lagrange(ho.dim, ho.order, &nodes);
     bernstein_min_bounds(ho.dim, b, max_depth)
 }

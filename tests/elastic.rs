@@ -1,0 +1,394 @@
+//! The elastic-analogy baseline (paper §2.5) and the `compare` job.
+//!
+//! Oracles: rigid motions and linear displacement fields are exact solutions of linear
+//! elasticity without body forces, and isoparametric Lagrange elements on straight-sided
+//! (multilinear) geometry contain them, so the discrete solution must reproduce them (patch
+//! test); the facet angle jump of a hand-made mesh is computed by hand.
+
+use polyspline::compare::facet_angle_jumps;
+use polyspline::elastic::{
+    ElasticParams, ElasticPreconditioner, elastic_analogy, solve_displacement,
+};
+use polyspline::mesh::generate::{grid_2d, grid_3d};
+use polyspline::mesh::{LinearMesh, MeshOptions, Topology};
+use polyspline::pipeline::{CurveOptions, Geometry, Method, curve_in_memory};
+use polyspline::sample::{HighOrderMesh, sample};
+use polyspline::solve::CgParams;
+use std::path::Path;
+use std::process::Command;
+
+fn tight() -> ElasticParams {
+    ElasticParams {
+        cg: CgParams {
+            rel_tol: 1e-13,
+            abs_tol: 1e-14,
+            max_iters: 20_000,
+        },
+        ..Default::default()
+    }
+}
+
+/// A graded grid with its interior vertices moved off the grid lines (straight-sided, but no
+/// two elements alike).
+fn distorted(dim: usize) -> (LinearMesh, Topology) {
+    let xs = [0.0, 0.3, 0.7, 1.2, 1.5];
+    let ys = [0.0, 0.4, 0.9, 1.1];
+    let mut mesh = if dim == 2 {
+        grid_2d(&xs, &ys)
+    } else {
+        grid_3d(&xs[..4], &ys, &[0.0, 0.5, 0.8, 1.3])
+    };
+    let topo = Topology::build(&mesh);
+    for (v, x) in mesh.coords.iter_mut().enumerate() {
+        if !topo.vertex_on_boundary[v] {
+            let s = v as f64;
+            x[0] += 0.05 * (1.3 * s).sin();
+            x[1] += 0.05 * (0.7 * s).cos();
+            if dim == 3 {
+                x[2] += 0.04 * (2.1 * s).sin();
+            }
+        }
+    }
+    let topo = Topology::build(&mesh);
+    (mesh, topo)
+}
+
+fn straight(dim: usize, p: usize) -> HighOrderMesh {
+    let (mesh, topo) = distorted(dim);
+    sample(&mesh, &mesh, &topo, p)
+}
+
+/// Boundary nodes displaced by `field`; everything else free.
+fn prescribe(ho: &HighOrderMesh, field: impl Fn([f64; 3]) -> [f64; 3]) -> Vec<Option<[f64; 3]>> {
+    let mut out = vec![None; ho.nodes.len()];
+    for &n in &ho.boundary {
+        out[n as usize] = Some(field(ho.nodes[n as usize]));
+    }
+    out
+}
+
+#[test]
+fn zero_boundary_displacement_leaves_the_mesh_unchanged() {
+    for dim in [2, 3] {
+        for p in [1, 2, 3] {
+            let ho = straight(dim, p);
+            let (moved, info) = elastic_analogy(&ho, &ho, &ElasticParams::default()).unwrap();
+            assert_eq!(moved.nodes, ho.nodes, "{dim}D order {p}");
+            assert_eq!(moved.elements, ho.elements);
+            assert!(info.unknowns > 0);
+        }
+    }
+}
+
+#[test]
+fn rigid_translation_of_the_boundary_translates_every_node() {
+    let c = [0.3, -0.2, 0.15];
+    for dim in [2, 3] {
+        for p in [1, 2, 3] {
+            let ho = straight(dim, p);
+            let t = [c[0], c[1], if dim == 3 { c[2] } else { 0.0 }];
+            let (u, info) = solve_displacement(&ho, &prescribe(&ho, |_| t), &tight()).unwrap();
+            assert!(info.cg.iterations > 0);
+            for (n, u) in u.iter().enumerate() {
+                for k in 0..3 {
+                    assert!((u[k] - t[k]).abs() < 1e-9, "{dim}D p{p} node {n}: {u:?}");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn linear_boundary_displacement_gives_the_linear_field_inside() {
+    // u(x) = A x + c, with a symmetric and a rotational part.
+    let a = [
+        [0.10, -0.05, 0.02],
+        [0.07, -0.08, 0.03],
+        [-0.04, 0.06, 0.05],
+    ];
+    let c = [0.01, 0.02, -0.03];
+    for dim in [2, 3] {
+        let field = |x: [f64; 3]| -> [f64; 3] {
+            std::array::from_fn(|i| {
+                if i < dim {
+                    c[i] + (0..dim).map(|j| a[i][j] * x[j]).sum::<f64>()
+                } else {
+                    0.0
+                }
+            })
+        };
+        for p in [1, 2, 3] {
+            let ho = straight(dim, p);
+            for pre in [
+                ElasticPreconditioner::BlockJacobi,
+                ElasticPreconditioner::Jacobi,
+            ] {
+                let params = ElasticParams {
+                    preconditioner: pre,
+                    ..tight()
+                };
+                let (u, info) = solve_displacement(&ho, &prescribe(&ho, field), &params).unwrap();
+                let free = ho.nodes.len() - info.prescribed_nodes;
+                assert!(free > 0 && info.unknowns == free * dim);
+                let mut worst = 0.0f64;
+                for (n, x) in ho.nodes.iter().enumerate() {
+                    let want = field(*x);
+                    for k in 0..3 {
+                        worst = worst.max((u[n][k] - want[k]).abs());
+                    }
+                }
+                assert!(worst < 1e-9, "{dim}D p{p} {pre:?}: error {worst:e}");
+                eprintln!(
+                    "patch test {dim}D p{p} {pre:?}: {} CG iterations, max error {worst:.1e}",
+                    info.cg.iterations
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn bad_material_is_an_error() {
+    let ho = straight(2, 2);
+    for (young, poisson) in [(1.5, 0.5), (0.0, 0.3), (1.0, -1.0), (f64::NAN, 0.3)] {
+        let params = ElasticParams {
+            young,
+            poisson,
+            ..Default::default()
+        };
+        let e = elastic_analogy(&ho, &ho, &params).unwrap_err();
+        assert!(e.to_string().contains("elastic material"), "{e}");
+    }
+}
+
+#[test]
+fn angle_jump_of_a_kinked_mesh_line() {
+    // Two unit squares side by side; the right one's far top corner is raised by h. Across the
+    // shared edge the left element's transversal derivative is (1, 0); the right element's,
+    // at the edge midpoint, is the mean of its bottom (1, 0) and top (1, h) edge vectors.
+    let h = 0.6;
+    let mut mesh = grid_2d(&[0.0, 1.0, 2.0], &[0.0, 1.0]);
+    mesh.coords[5][1] += h;
+    let topo = Topology::build(&mesh);
+    let ho = sample(&mesh, &mesh, &topo, 2);
+    let s = facet_angle_jumps(&mesh, &topo, &ho);
+    let want = (h / 2.0f64).atan().to_degrees();
+    assert_eq!(s.interior.facets, 0);
+    assert_eq!(s.near_boundary.facets, 1);
+    assert_eq!(s.near_boundary.points, 1);
+    assert!((s.near_boundary.mean_deg - want).abs() < 1e-9, "{s:?}");
+    // A uniform grid has straight mesh lines: no jump anywhere, near or away from the boundary.
+    let grid = grid_3d(
+        &[0.0, 1.0, 2.0, 3.0, 4.0],
+        &[0.0, 0.5, 1.0, 1.5],
+        &[0.0, 1.0, 2.0, 3.0],
+    );
+    let topo = Topology::build(&grid);
+    let s = facet_angle_jumps(&grid, &topo, &sample(&grid, &grid, &topo, 3));
+    assert!(s.interior.facets > 0 && s.interior.points == 4 * s.interior.facets);
+    assert!(
+        s.interior.max_deg < 1e-6 && s.near_boundary.max_deg < 1e-6,
+        "{s:?}"
+    );
+}
+
+fn root(rel: &str) -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join(rel)
+}
+
+/// Curve `rel` with the smooth fit and method `method` at order 2.
+fn curved(rel: &str, method: Method) -> polyspline::pipeline::Curved {
+    let options = CurveOptions {
+        order: 2,
+        subdivide: None,
+        geometry: Geometry::SplineFitted,
+        method,
+        fit: polyspline::fit::FitParams::smooth(),
+        line_search: Default::default(),
+        line_search_mode: polyspline::pipeline::LineSearchMode::Local,
+        snap_boundary: false,
+        mesh: MeshOptions::default(),
+        output: Default::default(),
+        backend: polyspline::gpu::Backend::Cpu,
+    };
+    curve_in_memory(&root(rel), &options).unwrap()
+}
+
+/// The paper's claim (Figs. 2f, 5): inside the domain the IGA mesh is smoother than the elastic
+/// one, which shares its boundary. Both are certified valid and share the boundary nodes.
+fn iga_is_smoother_inside(rel: &str) {
+    let iga = curved(rel, Method::Iga);
+    let el = curved(rel, Method::Elastic(ElasticParams::default()));
+    assert_eq!(el.report.invalid_elements, 0);
+    assert!(el.report.min_det_jacobian_bound.unwrap() > 0.0);
+    // Two fits of the same problem differ by the parallel CG's round-off only.
+    let (lo, hi) = iga.mesh.bounding_box();
+    let tol = 1e-8 * (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f64::max);
+    for &n in &iga.ho.boundary {
+        let (a, b) = (iga.ho.nodes[n as usize], el.ho.nodes[n as usize]);
+        assert!((0..3).all(|k| (a[k] - b[k]).abs() < tol), "{a:?} {b:?}");
+    }
+    let si = facet_angle_jumps(&iga.mesh, &iga.topo, &iga.ho);
+    let se = facet_angle_jumps(&el.mesh, &el.topo, &el.ho);
+    let straight = sample(&el.mesh, &el.mesh, &el.topo, 2);
+    let ss = facet_angle_jumps(&el.mesh, &el.topo, &straight);
+    eprintln!(
+        "{rel}: interior facet angle jump mean/max (deg): iga {:.3}/{:.2}, elastic {:.3}/{:.2}, straight {:.3}/{:.2}; near boundary: iga {:.3}, elastic {:.3}, straight {:.3}; elastic CG iterations {}",
+        si.interior.mean_deg,
+        si.interior.max_deg,
+        se.interior.mean_deg,
+        se.interior.max_deg,
+        ss.interior.mean_deg,
+        ss.interior.max_deg,
+        si.near_boundary.mean_deg,
+        se.near_boundary.mean_deg,
+        ss.near_boundary.mean_deg,
+        el.report.elastic.unwrap().cg.iterations,
+    );
+    assert!(si.interior.facets > 100);
+    assert!(
+        si.interior.mean_deg < 0.75 * se.interior.mean_deg,
+        "iga {si:?} elastic {se:?}"
+    );
+}
+
+#[test]
+fn iga_is_smoother_than_elastic_inside_the_plate_with_a_hole() {
+    iga_is_smoother_inside("meshes/real/dealii/hole8170.msh");
+}
+
+#[test]
+fn iga_is_smoother_than_elastic_inside_a_3d_mesh() {
+    iga_is_smoother_inside("meshes/real/libmesh/systems_of_equations_ex9.exo");
+}
+
+#[test]
+fn compare_json_has_every_method_and_key() {
+    let out = Command::new(env!("CARGO_BIN_EXE_polyspline"))
+        .args(["compare", "--json"])
+        .arg(root("meshes/real/dealii/unstructured_refined_ball.msh"))
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    for key in [
+        "input",
+        "dimension",
+        "elements",
+        "order",
+        "rows",
+        "elastic_over_iga_time",
+    ] {
+        assert!(v.get(key).is_some(), "missing {key}");
+    }
+    let rows = v["rows"].as_array().unwrap();
+    let names: Vec<&str> = rows.iter().map(|r| r["method"].as_str().unwrap()).collect();
+    assert_eq!(
+        names,
+        [
+            "straight",
+            "iga-position",
+            "iga-frame",
+            "iga-smooth",
+            "elastic"
+        ]
+    );
+    for r in rows {
+        for key in [
+            "error",
+            "timings",
+            "method_seconds",
+            "total_seconds",
+            "invalid_elements",
+            "min_scaled_jacobian",
+            "boundary_deviation_max",
+            "boundary_deviation_rms",
+            "cg_iterations",
+            "smoothness",
+        ] {
+            assert!(r.get(key).is_some(), "{}: missing {key}", r["method"]);
+        }
+        if r["error"].is_null() {
+            for part in ["near_boundary", "interior"] {
+                for key in ["facets", "points", "mean_deg", "max_deg"] {
+                    assert!(r["smoothness"][part][key].is_number(), "{part}.{key}");
+                }
+            }
+        } else {
+            assert!(r["smoothness"].is_null());
+        }
+    }
+    assert!(rows[4]["timings"]["elastic_cg"].is_number());
+}
+
+#[test]
+fn curve_method_elastic_writes_a_valid_mesh_with_the_iga_boundary() {
+    let dir = std::env::temp_dir().join(format!("polyspline-elastic-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let input = root("meshes/real/dealii/unstructured_refined_ball.msh");
+    let run = |method: &str, extra: &[&str]| {
+        let out = dir.join(format!("{method}.msh"));
+        let report = dir.join(format!("{method}.json"));
+        let st = Command::new(env!("CARGO_BIN_EXE_polyspline"))
+            .arg("curve")
+            .arg(&input)
+            .arg("-o")
+            .arg(&out)
+            .args(["--order", "3", "--method", method, "--report"])
+            .arg(&report)
+            .args(extra)
+            .output()
+            .unwrap();
+        (st, out, report)
+    };
+    let (st, out_e, rep_e) = run("elastic", &[]);
+    assert!(
+        st.status.success(),
+        "{}",
+        String::from_utf8_lossy(&st.stderr)
+    );
+    let (st, _, rep_i) = run("iga", &[]);
+    assert!(st.status.success());
+    let ri: serde_json::Value = serde_json::from_slice(&std::fs::read(&rep_i).unwrap()).unwrap();
+    let re: serde_json::Value = serde_json::from_slice(&std::fs::read(&rep_e).unwrap()).unwrap();
+    // Same report keys as the IGA path (plus the elastic solve's own).
+    for key in ri.as_object().unwrap().keys() {
+        assert!(re.get(key).is_some(), "elastic report lacks {key}");
+    }
+    assert_eq!(re["method"], "elastic");
+    assert_eq!(re["invalid_elements"], 0);
+    assert!(re["min_det_jacobian_bound"].as_f64().unwrap() > 0.0);
+    let (dev_e, dev_i) = (
+        re["boundary_deviation_max"].as_f64().unwrap(),
+        ri["boundary_deviation_max"].as_f64().unwrap(),
+    );
+    assert!((dev_e - dev_i).abs() <= 1e-6 * dev_i, "{dev_e} vs {dev_i}");
+    assert!(re["elastic"]["cg"]["iterations"].as_u64().unwrap() > 0);
+    // The written file reads back as a valid order-3 mesh (our `check`).
+    let chk = Command::new(env!("CARGO_BIN_EXE_polyspline"))
+        .args(["check", "--json"])
+        .arg(&out_e)
+        .output()
+        .unwrap();
+    let c: serde_json::Value = serde_json::from_slice(&chk.stdout).unwrap();
+    assert_eq!(c["invalid"], 0);
+    assert_eq!(c["order"], 3);
+    // A material the solve cannot use: error, exit non-zero, nothing written.
+    let bad = dir.join("bad.msh");
+    let st = Command::new(env!("CARGO_BIN_EXE_polyspline"))
+        .arg("curve")
+        .arg(&input)
+        .arg("-o")
+        .arg(&bad)
+        .args(["--method", "elastic", "--poisson", "0.5"])
+        .output()
+        .unwrap();
+    assert!(!st.status.success());
+    assert!(String::from_utf8_lossy(&st.stderr).contains("Poisson"));
+    assert!(!bad.exists());
+    std::fs::remove_dir_all(&dir).ok();
+}
