@@ -11,7 +11,7 @@ use polyspline::io::vtu_write::VtuEncoding;
 use polyspline::io::{read_mesh, read_raw};
 use polyspline::mesh::{MeshOptions, Topology};
 use polyspline::pipeline::{CurveOptions, Geometry, LineSearchMode, Method, OutputOptions, curve};
-use polyspline::plot::{Layer, render_svg};
+use polyspline::plot::{Layer, render_svg_window};
 use polyspline::quality::CheckReport;
 use polyspline::sample::HighOrderMesh;
 use polyspline::solve::CgParams;
@@ -185,9 +185,19 @@ enum Command {
         /// Output SVG file.
         #[arg(short, long)]
         output: PathBuf,
-        /// Draw another mesh on top (e.g. the linear input, or a second method's result).
+        /// Draw another mesh on top, in its own colour (e.g. the linear input, or a second
+        /// method's result: IGA vs elastic as in the paper's Fig. 2f). Repeatable.
         #[arg(long, value_name = "MESH")]
         overlay: Vec<PathBuf>,
+        /// Legend labels: the first for MESH, then one per --overlay (default: file names).
+        #[arg(long, value_name = "NAME")]
+        label: Vec<String>,
+        /// Also draw every mesh's nodes (high-order nodes included) as dots in its colour.
+        #[arg(long)]
+        nodes: bool,
+        /// Show only this rectangle of the plane (a zoom): X0,Y0,X1,Y1.
+        #[arg(long, value_name = "X0,Y0,X1,Y1", allow_hyphen_values = true)]
+        window: Option<String>,
         /// Picture width in pixels.
         #[arg(long, default_value_t = 1000.0)]
         width: f64,
@@ -541,9 +551,50 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             mesh,
             output,
             overlay,
+            label,
+            nodes,
+            window,
             width,
             control_points,
         } => {
+            if label.len() > overlay.len() + 1 {
+                anyhow::bail!(
+                    "{} labels for {} meshes: give at most one per mesh (MESH first, then each --overlay)",
+                    label.len(),
+                    overlay.len() + 1
+                );
+            }
+            let paths: Vec<&PathBuf> = std::iter::once(&mesh).chain(&overlay).collect();
+            let labels: Vec<String> = paths
+                .iter()
+                .enumerate()
+                .map(|(i, p)| {
+                    label.get(i).cloned().unwrap_or_else(|| {
+                        p.file_name()
+                            .map_or(String::new(), |n| n.to_string_lossy().into_owned())
+                    })
+                })
+                .collect();
+            let window = match window {
+                None => None,
+                Some(text) => {
+                    let v: Vec<f64> = text
+                        .split(',')
+                        .map(|x| x.trim().parse::<f64>())
+                        .collect::<Result<_, _>>()
+                        .map_err(|e| anyhow::anyhow!("--window {text}: {e}"))?;
+                    match v[..] {
+                        [x0, y0, x1, y1]
+                            if x0 != x1 && y0 != y1 && v.iter().all(|x| x.is_finite()) =>
+                        {
+                            Some([x0, y0, x1, y1])
+                        }
+                        _ => anyhow::bail!(
+                            "--window {text}: give four numbers X0,Y0,X1,Y1 of a rectangle of non-zero size"
+                        ),
+                    }
+                }
+            };
             let base = read_high_order(&mesh)?;
             // The spline construction of a linear input (paper Fig. 1): its control points and
             // the unfitted spline map they define.
@@ -565,20 +616,24 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     anyhow::bail!("{}: plot draws 2D meshes; this mesh is 3D", p.display());
                 }
             }
-            const COLOURS: [&str; 4] = ["#d62728", "#1f77b4", "#2ca02c", "#9467bd"];
-            let mut layers = vec![Layer::Mesh {
-                mesh: &base,
-                colour: "#222222",
-                width: 1.0,
-                label: "mesh",
-            }];
-            for (i, m) in others.iter().enumerate() {
+            const COLOURS: [&str; 5] = ["#222222", "#1f77b4", "#9467bd", "#d62728", "#2ca02c"];
+            let mut layers = Vec::new();
+            for (i, m) in std::iter::once(&base).chain(&others).enumerate() {
+                let colour = COLOURS[i % COLOURS.len()];
                 layers.push(Layer::Mesh {
                     mesh: m,
-                    colour: COLOURS[i % 4],
+                    colour,
                     width: 1.0,
-                    label: "overlay",
+                    label: &labels[i],
                 });
+                if nodes {
+                    layers.push(Layer::Points {
+                        points: &m.nodes,
+                        colour,
+                        label: &labels[i],
+                        radius: 1.6,
+                    });
+                }
             }
             if let Some((points, curved)) = &spline {
                 layers.push(Layer::Mesh {
@@ -591,9 +646,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     points,
                     colour: "#d62728",
                     label: "control points",
+                    radius: 2.4,
                 });
             }
-            let svg = render_svg(&layers, width);
+            let svg = render_svg_window(&layers, width, window, !others.is_empty() || nodes);
             let inputs: Vec<&std::path::Path> = std::iter::once(mesh.as_path())
                 .chain(overlay.iter().map(|p| p.as_path()))
                 .collect();

@@ -17,11 +17,12 @@ pub enum Layer<'a> {
         width: f64,
         label: &'a str,
     },
-    /// Points as small discs.
+    /// Points as small discs of `radius` pixels.
     Points {
         points: &'a [[f64; 3]],
         colour: &'a str,
         label: &'a str,
+        radius: f64,
     },
 }
 
@@ -79,11 +80,29 @@ pub fn edge_polylines(mesh: &HighOrderMesh) -> Vec<Vec<[f64; 2]>> {
     lines
 }
 
-/// Render layers to an SVG document `size` pixels wide.
+/// Render layers to an SVG document `size` pixels wide, showing all of them.
 pub fn render_svg(layers: &[Layer], size: f64) -> String {
-    let mut lo = [f64::INFINITY; 2];
-    let mut hi = [f64::NEG_INFINITY; 2];
+    render_svg_window(layers, size, None, false)
+}
+
+/// Render layers to an SVG document `size` pixels wide. `window` ([x0, y0, x1, y1]) shows only
+/// that rectangle (a zoom, as in the paper's Fig. 5), clipping what lies outside; `legend`
+/// writes each labelled layer's label in its colour at the top left.
+pub fn render_svg_window(
+    layers: &[Layer],
+    size: f64,
+    window: Option<[f64; 4]>,
+    legend: bool,
+) -> String {
+    let (mut lo, mut hi) = match window {
+        Some([x0, y0, x1, y1]) => ([x0.min(x1), y0.min(y1)], [x0.max(x1), y0.max(y1)]),
+        None => ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]),
+    };
+    let fixed = window.is_some();
     let mut grow = |x: &[f64]| {
+        if fixed {
+            return;
+        }
         for k in 0..2 {
             lo[k] = lo[k].min(x[k]);
             hi[k] = hi[k].max(x[k]);
@@ -126,6 +145,16 @@ pub fn render_svg(layers: &[Layer], size: f64) -> String {
         "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{w:.0}\" height=\"{h:.0}\" viewBox=\"0 0 {w:.2} {h:.2}\">"
     );
     let _ = writeln!(svg, "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>");
+    if fixed {
+        // Clip to the window itself (not the margin around it).
+        let _ = writeln!(
+            svg,
+            "<clipPath id=\"window\"><rect x=\"{m:.2}\" y=\"{m:.2}\" width=\"{:.2}\" height=\"{:.2}\"/></clipPath><g clip-path=\"url(#window)\">",
+            w - 2.0 * margin * scale,
+            h - 2.0 * margin * scale,
+            m = margin * scale
+        );
+    }
     for (layer, lines) in layers.iter().zip(&polylines) {
         match layer {
             Layer::Mesh {
@@ -140,6 +169,12 @@ pub fn render_svg(layers: &[Layer], size: f64) -> String {
                     0.6 * width
                 );
                 for l in lines {
+                    // Outside the window: leave it out rather than clip it.
+                    let outside =
+                        |k: usize| l.iter().all(|x| x[k] < lo[k]) || l.iter().all(|x| x[k] > hi[k]);
+                    if fixed && (outside(0) || outside(1)) {
+                        continue;
+                    }
                     let pts: Vec<String> = l
                         .iter()
                         .map(|x| {
@@ -155,16 +190,53 @@ pub fn render_svg(layers: &[Layer], size: f64) -> String {
                 points,
                 colour,
                 label,
+                radius,
             } => {
                 let _ = writeln!(svg, "<g fill=\"{colour}\"><title>{label}</title>");
                 for x in points.iter() {
+                    if fixed && (0..2).any(|k| x[k] < lo[k] || x[k] > hi[k]) {
+                        continue;
+                    }
                     let (a, b) = tx(x);
-                    let _ = writeln!(svg, "<circle cx=\"{a:.2}\" cy=\"{b:.2}\" r=\"2.4\"/>");
+                    let _ = writeln!(
+                        svg,
+                        "<circle cx=\"{a:.2}\" cy=\"{b:.2}\" r=\"{radius:.2}\"/>"
+                    );
                 }
                 let _ = writeln!(svg, "</g>");
             }
         }
     }
+    if fixed {
+        let _ = writeln!(svg, "</g>");
+    }
+    if legend {
+        let mut y = 18.0;
+        let mut seen = std::collections::HashSet::new();
+        for layer in layers {
+            let (colour, label) = match layer {
+                Layer::Mesh { colour, label, .. } | Layer::Points { colour, label, .. } => {
+                    (colour, label)
+                }
+            };
+            if label.is_empty() || !seen.insert((*colour, *label)) {
+                continue;
+            }
+            let _ = writeln!(
+                svg,
+                "<text x=\"10\" y=\"{y:.0}\" fill=\"{colour}\" font-family=\"sans-serif\" font-size=\"14\">{}</text>",
+                escape(label)
+            );
+            y += 18.0;
+        }
+    }
     let _ = writeln!(svg, "</svg>");
     svg
+}
+
+/// Text content safe inside an SVG element.
+fn escape(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
 }

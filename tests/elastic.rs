@@ -392,3 +392,65 @@ fn curve_method_elastic_writes_a_valid_mesh_with_the_iga_boundary() {
     assert!(!bad.exists());
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// `plot --overlay` draws two results (IGA vs elastic, paper Fig. 2f) with a legend, their
+/// nodes with `--nodes`, and only the part inside `--window`.
+#[test]
+fn plot_overlays_iga_and_elastic() {
+    let dir = std::env::temp_dir().join(format!("polyspline-plot-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let input = root("meshes/real/dealii/unstructured_refined_ball.msh");
+    let bin = env!("CARGO_BIN_EXE_polyspline");
+    for method in ["iga", "elastic"] {
+        let st = Command::new(bin)
+            .arg("curve")
+            .arg(&input)
+            .arg("-o")
+            .arg(dir.join(format!("{method}.msh")))
+            .args(["--method", method])
+            .output()
+            .unwrap();
+        assert!(
+            st.status.success(),
+            "{}",
+            String::from_utf8_lossy(&st.stderr)
+        );
+    }
+    let plot = |extra: &[&str]| -> String {
+        let svg = dir.join("p.svg");
+        let st = Command::new(bin)
+            .arg("plot")
+            .arg(dir.join("iga.msh"))
+            .arg("--overlay")
+            .arg(dir.join("elastic.msh"))
+            .args(["--label", "IGA", "--label", "elastic", "-o"])
+            .arg(&svg)
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(
+            st.status.success(),
+            "{}",
+            String::from_utf8_lossy(&st.stderr)
+        );
+        std::fs::read_to_string(&svg).unwrap()
+    };
+    let full = plot(&["--nodes"]);
+    let ho = |m: &str| {
+        let raw = polyspline::io::read_raw(&dir.join(m)).unwrap();
+        HighOrderMesh::from_raw(raw).unwrap()
+    };
+    let (a, b) = (ho("iga.msh"), ho("elastic.msh"));
+    assert_eq!(
+        full.matches("<circle").count(),
+        a.nodes.len() + b.nodes.len()
+    );
+    assert!(full.contains(">IGA</text>") && full.contains(">elastic</text>"));
+    let polylines = full.matches("<polyline").count();
+    // The ball has radius 6 about the origin: a window of one quadrant's corner shows less.
+    let zoom = plot(&["--window", "0,0,3,3"]);
+    let shown = zoom.matches("<polyline").count();
+    assert!(shown > 0 && shown < polylines / 2, "{shown} of {polylines}");
+    assert!(zoom.contains("clip-path"));
+    std::fs::remove_dir_all(&dir).ok();
+}
