@@ -14,8 +14,9 @@ use polyspline::mesh::{LinearMesh, MeshOptions, Topology};
 use polyspline::pipeline::{CurveOptions, Geometry, Method, curve_in_memory};
 use polyspline::sample::{HighOrderMesh, sample};
 use polyspline::solve::CgParams;
+use std::ffi::OsString;
 use std::path::Path;
-use std::process::Command;
+use std::process::{Command, Output};
 
 fn tight() -> ElasticParams {
     ElasticParams {
@@ -196,6 +197,25 @@ fn root(rel: &str) -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(rel)
 }
 
+/// Run the binary with `args`.
+fn polyspline<S: AsRef<std::ffi::OsStr>>(args: impl IntoIterator<Item = S>) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_polyspline"))
+        .args(args)
+        .output()
+        .unwrap()
+}
+
+/// Run the binary with `args`; it must succeed.
+fn polyspline_ok<S: AsRef<std::ffi::OsStr>>(args: impl IntoIterator<Item = S>) -> Output {
+    let out = polyspline(args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
 /// Curve `rel` with the smooth fit and method `method` at order 2.
 fn curved(rel: &str, method: Method) -> polyspline::pipeline::Curved {
     let options = CurveOptions {
@@ -264,16 +284,11 @@ fn iga_is_smoother_than_elastic_inside_a_3d_mesh() {
 
 #[test]
 fn compare_json_has_every_method_and_key() {
-    let out = Command::new(env!("CARGO_BIN_EXE_polyspline"))
-        .args(["compare", "--json"])
-        .arg(root("meshes/real/dealii/unstructured_refined_ball.msh"))
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = polyspline_ok([
+        OsString::from("compare"),
+        "--json".into(),
+        root("meshes/real/dealii/unstructured_refined_ball.msh").into(),
+    ]);
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     for key in [
         "input",
@@ -330,29 +345,25 @@ fn curve_method_elastic_writes_a_valid_mesh_with_the_iga_boundary() {
     let dir = std::env::temp_dir().join(format!("polyspline-elastic-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let input = root("meshes/real/dealii/unstructured_refined_ball.msh");
-    let run = |method: &str, extra: &[&str]| {
+    let run = |method: &str| {
         let out = dir.join(format!("{method}.msh"));
         let report = dir.join(format!("{method}.json"));
-        let st = Command::new(env!("CARGO_BIN_EXE_polyspline"))
-            .arg("curve")
-            .arg(&input)
-            .arg("-o")
-            .arg(&out)
-            .args(["--order", "3", "--method", method, "--report"])
-            .arg(&report)
-            .args(extra)
-            .output()
-            .unwrap();
-        (st, out, report)
+        polyspline_ok([
+            OsString::from("curve"),
+            input.clone().into(),
+            "-o".into(),
+            out.clone().into(),
+            "--order".into(),
+            "3".into(),
+            "--method".into(),
+            method.into(),
+            "--report".into(),
+            report.clone().into(),
+        ]);
+        (out, report)
     };
-    let (st, out_e, rep_e) = run("elastic", &[]);
-    assert!(
-        st.status.success(),
-        "{}",
-        String::from_utf8_lossy(&st.stderr)
-    );
-    let (st, _, rep_i) = run("iga", &[]);
-    assert!(st.status.success());
+    let (out_e, rep_e) = run("elastic");
+    let (_, rep_i) = run("iga");
     let ri: serde_json::Value = serde_json::from_slice(&std::fs::read(&rep_i).unwrap()).unwrap();
     let re: serde_json::Value = serde_json::from_slice(&std::fs::read(&rep_e).unwrap()).unwrap();
     // Same report keys as the IGA path (plus the elastic solve's own).
@@ -369,24 +380,22 @@ fn curve_method_elastic_writes_a_valid_mesh_with_the_iga_boundary() {
     assert!((dev_e - dev_i).abs() <= 1e-6 * dev_i, "{dev_e} vs {dev_i}");
     assert!(re["elastic"]["cg"]["iterations"].as_u64().unwrap() > 0);
     // The written file reads back as a valid order-3 mesh (our `check`).
-    let chk = Command::new(env!("CARGO_BIN_EXE_polyspline"))
-        .args(["check", "--json"])
-        .arg(&out_e)
-        .output()
-        .unwrap();
+    let chk = polyspline_ok([OsString::from("check"), "--json".into(), out_e.into()]);
     let c: serde_json::Value = serde_json::from_slice(&chk.stdout).unwrap();
     assert_eq!(c["invalid"], 0);
     assert_eq!(c["order"], 3);
     // A material the solve cannot use: error, exit non-zero, nothing written.
     let bad = dir.join("bad.msh");
-    let st = Command::new(env!("CARGO_BIN_EXE_polyspline"))
-        .arg("curve")
-        .arg(&input)
-        .arg("-o")
-        .arg(&bad)
-        .args(["--method", "elastic", "--poisson", "0.5"])
-        .output()
-        .unwrap();
+    let st = polyspline([
+        OsString::from("curve"),
+        input.into(),
+        "-o".into(),
+        bad.clone().into(),
+        "--method".into(),
+        "elastic".into(),
+        "--poisson".into(),
+        "0.5".into(),
+    ]);
     assert!(!st.status.success());
     assert!(String::from_utf8_lossy(&st.stderr).contains("Poisson"));
     assert!(!bad.exists());
@@ -400,39 +409,32 @@ fn plot_overlays_iga_and_elastic() {
     let dir = std::env::temp_dir().join(format!("polyspline-plot-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let input = root("meshes/real/dealii/unstructured_refined_ball.msh");
-    let bin = env!("CARGO_BIN_EXE_polyspline");
     for method in ["iga", "elastic"] {
-        let st = Command::new(bin)
-            .arg("curve")
-            .arg(&input)
-            .arg("-o")
-            .arg(dir.join(format!("{method}.msh")))
-            .args(["--method", method])
-            .output()
-            .unwrap();
-        assert!(
-            st.status.success(),
-            "{}",
-            String::from_utf8_lossy(&st.stderr)
-        );
+        polyspline_ok([
+            OsString::from("curve"),
+            input.clone().into(),
+            "-o".into(),
+            dir.join(format!("{method}.msh")).into(),
+            "--method".into(),
+            method.into(),
+        ]);
     }
     let plot = |extra: &[&str]| -> String {
         let svg = dir.join("p.svg");
-        let st = Command::new(bin)
-            .arg("plot")
-            .arg(dir.join("iga.msh"))
-            .arg("--overlay")
-            .arg(dir.join("elastic.msh"))
-            .args(["--label", "IGA", "--label", "elastic", "-o"])
-            .arg(&svg)
-            .args(extra)
-            .output()
-            .unwrap();
-        assert!(
-            st.status.success(),
-            "{}",
-            String::from_utf8_lossy(&st.stderr)
-        );
+        let mut args = vec![
+            OsString::from("plot"),
+            dir.join("iga.msh").into(),
+            "--overlay".into(),
+            dir.join("elastic.msh").into(),
+            "--label".into(),
+            "IGA".into(),
+            "--label".into(),
+            "elastic".into(),
+            "-o".into(),
+            svg.clone().into(),
+        ];
+        args.extend(extra.iter().map(OsString::from));
+        polyspline_ok(args);
         std::fs::read_to_string(&svg).unwrap()
     };
     let full = plot(&["--nodes"]);

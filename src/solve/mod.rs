@@ -85,6 +85,46 @@ fn dot3(a: &[[f64; 3]], b: &[[f64; 3]]) -> [f64; 3] {
         .reduce(|| [0.0; 3], |a, b| [a[0] + b[0], a[1] + b[1], a[2] + b[2]])
 }
 
+/// r = b − A x.
+fn residual(op: &dyn LinOp, b: &[[f64; 3]], x: &[[f64; 3]]) -> Vec<[f64; 3]> {
+    let mut r = vec![[0.0; 3]; b.len()];
+    op.apply(x, &mut r);
+    r.par_iter_mut().zip(b.par_iter()).for_each(|(r, b)| {
+        for k in 0..3 {
+            r[k] = b[k] - r[k];
+        }
+    });
+    r
+}
+
+/// x += α p, r −= α A p (per component α).
+fn advance(
+    x: &mut [[f64; 3]],
+    r: &mut [[f64; 3]],
+    p: &[[f64; 3]],
+    ap: &[[f64; 3]],
+    alpha: [f64; 3],
+) {
+    x.par_iter_mut()
+        .zip(r.par_iter_mut())
+        .zip(p.par_iter().zip(ap.par_iter()))
+        .for_each(|((x, r), (p, ap))| {
+            for k in 0..3 {
+                x[k] += alpha[k] * p[k];
+                r[k] -= alpha[k] * ap[k];
+            }
+        });
+}
+
+/// p = z + β p (per component β).
+fn new_direction(p: &mut [[f64; 3]], z: &[[f64; 3]], beta: [f64; 3]) {
+    p.par_iter_mut().zip(z.par_iter()).for_each(|(p, z)| {
+        for k in 0..3 {
+            p[k] = z[k] + beta[k] * p[k];
+        }
+    });
+}
+
 /// Solve A x = b by Jacobi-preconditioned CG, starting from `x`. `progress(iteration,
 /// rel_residual)` is called every iteration.
 pub fn pcg(
@@ -102,13 +142,7 @@ pub fn pcg(
         return Err(CgError::BadDiagonal { row, value });
     }
     let inv: Vec<f64> = diag.iter().map(|d| 1.0 / d).collect();
-    let mut r = vec![[0.0; 3]; n];
-    op.apply(x, &mut r);
-    r.par_iter_mut().zip(b.par_iter()).for_each(|(r, b)| {
-        for k in 0..3 {
-            r[k] = b[k] - r[k];
-        }
-    });
+    let mut r = residual(op, b, x);
     let bnorm = dot3(b, b).map(f64::sqrt);
     let target: [f64; 3] = std::array::from_fn(|k| (params.rel_tol * bnorm[k]).max(params.abs_tol));
     let rel = |rr: [f64; 3]| -> f64 {
@@ -156,26 +190,14 @@ pub fn pcg(
                 alpha[k] = rz[k] / pap[k];
             }
         }
-        x.par_iter_mut()
-            .zip(r.par_iter_mut())
-            .zip(p.par_iter().zip(ap.par_iter()))
-            .for_each(|((x, r), (p, ap))| {
-                for k in 0..3 {
-                    x[k] += alpha[k] * p[k];
-                    r[k] -= alpha[k] * ap[k];
-                }
-            });
+        advance(x, &mut r, &p, &ap, alpha);
         z.par_iter_mut()
             .zip(r.par_iter().zip(inv.par_iter()))
             .for_each(|(z, (r, d))| *z = r.map(|v| v * d));
         let rz_new = dot3(&r, &z);
         let beta: [f64; 3] =
             std::array::from_fn(|k| if rz[k] > 0.0 { rz_new[k] / rz[k] } else { 0.0 });
-        p.par_iter_mut().zip(z.par_iter()).for_each(|(p, z)| {
-            for k in 0..3 {
-                p[k] = z[k] + beta[k] * p[k];
-            }
-        });
+        new_direction(&mut p, &z, beta);
         rz = rz_new;
         rr = dot3(&r, &r);
         it += 1;
@@ -210,13 +232,7 @@ pub fn pcg_coupled(
     let n = op.nrows();
     assert_eq!(b.len(), n);
     assert_eq!(x.len(), n);
-    let mut r = vec![[0.0; 3]; n];
-    op.apply(x, &mut r);
-    r.par_iter_mut().zip(b.par_iter()).for_each(|(r, b)| {
-        for k in 0..3 {
-            r[k] = b[k] - r[k];
-        }
-    });
+    let mut r = residual(op, b, x);
     let bnorm = dot_all(b, b).sqrt();
     let target = (params.rel_tol * bnorm).max(params.abs_tol);
     let rel = |rr: f64| {
@@ -250,23 +266,11 @@ pub fn pcg_coupled(
             });
         }
         let alpha = rz / pap;
-        x.par_iter_mut()
-            .zip(r.par_iter_mut())
-            .zip(p.par_iter().zip(ap.par_iter()))
-            .for_each(|((x, r), (p, ap))| {
-                for k in 0..3 {
-                    x[k] += alpha * p[k];
-                    r[k] -= alpha * ap[k];
-                }
-            });
+        advance(x, &mut r, &p, &ap, [alpha; 3]);
         pre.apply(&r, &mut z);
         let rz_new = dot_all(&r, &z);
         let beta = if rz > 0.0 { rz_new / rz } else { 0.0 };
-        p.par_iter_mut().zip(z.par_iter()).for_each(|(p, z)| {
-            for k in 0..3 {
-                p[k] = z[k] + beta * p[k];
-            }
-        });
+        new_direction(&mut p, &z, [beta; 3]);
         rz = rz_new;
         rr = dot_all(&r, &r);
         it += 1;
