@@ -40,6 +40,9 @@ pub enum ElasticPreconditioner {
     /// The inverse of each node's d×d diagonal block of K (couples a node's components,
     /// which matters as ν → 0.5).
     BlockJacobi,
+    /// Symmetric block Gauss–Seidel: a forward then a backward sweep over the nodes with the
+    /// d×d diagonal blocks inverted (SSOR with ω = 1; sequential, about one matrix product).
+    BlockSgs,
 }
 
 /// Material and solver parameters.
@@ -337,7 +340,9 @@ impl NodalPreconditioner {
                     }
                     m
                 }
-                ElasticPreconditioner::BlockJacobi => invert(d, &a).1,
+                ElasticPreconditioner::BlockJacobi | ElasticPreconditioner::BlockSgs => {
+                    invert(d, &a).1
+                }
             });
         }
         Ok(NodalPreconditioner(out))
@@ -353,6 +358,57 @@ impl Preconditioner for NodalPreconditioner {
                     z[i] = m[i][0] * r[0] + m[i][1] * r[1] + m[i][2] * r[2];
                 }
             });
+    }
+}
+
+/// Symmetric block Gauss–Seidel: z = (D + U)⁻¹ D (D + L)⁻¹ r, with D⁻¹ from a
+/// [`NodalPreconditioner`] of block-Jacobi kind.
+struct BlockSgs<'a> {
+    k: &'a BlockMatrix,
+    dinv: NodalPreconditioner,
+}
+
+impl Preconditioner for BlockSgs<'_> {
+    fn apply(&self, r: &[[f64; 3]], z: &mut [[f64; 3]]) {
+        let (k, d) = (self.k, self.k.dim);
+        let n = k.nrows();
+        let forward = |i: usize, mut rhs: [f64; 3], z: &[[f64; 3]]| -> [f64; 3] {
+            for at in k.indptr[i]..k.indptr[i + 1] {
+                let j = k.indices[at] as usize;
+                if j < i {
+                    let b = k.block(at);
+                    for a in 0..d {
+                        for c in 0..d {
+                            rhs[a] -= b[a * d + c] * z[j][c];
+                        }
+                    }
+                }
+            }
+            let m = &self.dinv.0[i];
+            std::array::from_fn(|a| (0..3).map(|c| m[a][c] * rhs[c]).sum())
+        };
+        // Forward: (D + L) w = r.
+        for i in 0..n {
+            z[i] = forward(i, r[i], z);
+        }
+        // Backward: (D + U) z = D w, i.e. z_i = w_i − D_i⁻¹ Σ_{j>i} K_ij z_j.
+        for i in (0..n).rev() {
+            let m = &self.dinv.0[i];
+            let w = z[i];
+            let mut sum = [0.0; 3];
+            for at in k.indptr[i]..k.indptr[i + 1] {
+                let j = k.indices[at] as usize;
+                if j > i {
+                    let b = k.block(at);
+                    for a in 0..d {
+                        for c in 0..d {
+                            sum[a] += b[a * d + c] * z[j][c];
+                        }
+                    }
+                }
+            }
+            z[i] = std::array::from_fn(|a| w[a] - (0..3).map(|c| m[a][c] * sum[c]).sum::<f64>());
+        }
     }
 }
 
@@ -498,8 +554,16 @@ pub fn solve_displacement(
             rel_residual: 0.0,
         }
     } else {
-        let pre = NodalPreconditioner::new(&matrix, params.preconditioner)?;
-        pcg_coupled(&matrix, &pre, &b, &mut u, &params.cg)?
+        let nodal = NodalPreconditioner::new(&matrix, params.preconditioner)?;
+        if params.preconditioner == ElasticPreconditioner::BlockSgs {
+            let pre = BlockSgs {
+                k: &matrix,
+                dinv: nodal,
+            };
+            pcg_coupled(&matrix, &pre, &b, &mut u, &params.cg)?
+        } else {
+            pcg_coupled(&matrix, &nodal, &b, &mut u, &params.cg)?
+        }
     };
     let displacement = (0..nn)
         .map(|n| match prescribed[n] {

@@ -218,6 +218,7 @@ enum MethodArg {
 enum PreconditionerArg {
     Jacobi,
     BlockJacobi,
+    BlockSgs,
 }
 
 /// Material and solver of the elastic analogy.
@@ -229,7 +230,8 @@ struct ElasticArgs {
     /// Poisson's ratio of the elastic analogy (below 0.5).
     #[arg(long, default_value_t = 0.49)]
     poisson: f64,
-    /// Preconditioner of the elastic CG solve: per-node d×d block inverse, or the diagonal.
+    /// Preconditioner of the elastic CG solve: the diagonal, the per-node d×d block inverse,
+    /// or a symmetric block Gauss–Seidel sweep.
     #[arg(long, value_enum, default_value_t = PreconditionerArg::BlockJacobi)]
     elastic_preconditioner: PreconditionerArg,
 }
@@ -246,6 +248,7 @@ impl ElasticArgs {
             preconditioner: match self.elastic_preconditioner {
                 PreconditionerArg::Jacobi => ElasticPreconditioner::Jacobi,
                 PreconditionerArg::BlockJacobi => ElasticPreconditioner::BlockJacobi,
+                PreconditionerArg::BlockSgs => ElasticPreconditioner::BlockSgs,
             },
         }
     }

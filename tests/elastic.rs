@@ -123,6 +123,7 @@ fn linear_boundary_displacement_gives_the_linear_field_inside() {
             for pre in [
                 ElasticPreconditioner::BlockJacobi,
                 ElasticPreconditioner::Jacobi,
+                ElasticPreconditioner::BlockSgs,
             ] {
                 let params = ElasticParams {
                     preconditioner: pre,
