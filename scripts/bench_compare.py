@@ -23,6 +23,8 @@ METHODS = ["straight", "iga-position", "iga-frame", "iga-smooth", "elastic"]
 def fail_note(row):
     if row.get("invalid_elements"):
         return "invalid (%d)" % row["invalid_elements"]
+    if "did not converge" in (row.get("error") or ""):
+        return "CG did not converge"
     return "failed"
 
 
@@ -68,10 +70,12 @@ def main():
                 print("| %s | %s | %s | | | |" % (name, row["method"], fail_note(row)))
                 continue
             s = row["smoothness"]
-            print("| %s | %s | %.3f | %.2e | %.2f / %.1f | %.2f / %.1f |" % (
+
+            def jump(g):
+                return "%.2f / %.1f" % (g["mean_deg"], g["max_deg"]) if g["points"] else "- (no facets)"
+            print("| %s | %s | %.3f | %.2e | %s | %s |" % (
                 name, row["method"], row["min_scaled_jacobian"], row["boundary_deviation_max"],
-                s["interior"]["mean_deg"], s["interior"]["max_deg"],
-                s["near_boundary"]["mean_deg"], s["near_boundary"]["max_deg"]))
+                jump(s["interior"]), jump(s["near_boundary"])))
 
 
 if __name__ == "__main__":
