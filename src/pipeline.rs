@@ -2,6 +2,12 @@
 //!
 //! Input: a mesh path and [`CurveOptions`]. Output: the written high-order mesh file and a
 //! [`CurveReport`]. The output file is written atomically and never onto the input.
+//! [`curve_in_memory`] is the same job without writing (used by `compare`).
+//!
+//! With [`Method::Elastic`] the spline is fitted and sampled as usual, then only its boundary
+//! nodes are kept: the straight order-P mesh is moved onto them by linear elasticity
+//! ([`crate::elastic`]) and each of its Lagrange elements must pass the det J certificate, or the
+//! job fails with [`CurveError::Invalid`] and writes nothing.
 
 use crate::elastic::{ElasticError, ElasticInfo, ElasticParams, elastic_analogy};
 use crate::fit::{FitParams, FitTargets, FitWeights, fit_with};
