@@ -324,11 +324,10 @@ pub fn curve_in_memory(input: &Path, options: &CurveOptions) -> Result<Curved, C
             "--method elastic moves the straight mesh onto the spline boundary; it cannot be combined with --straight".into(),
         ));
     }
-    if elastic.is_some() && !(1..=crate::elastic::MAX_ELASTIC_ORDER).contains(&options.order) {
+    if elastic.is_some() && !(1..=crate::elastic::MAX_ELASTIC_ORDER).contains(&order) {
         return Err(CurveError::Options(format!(
-            "--method elastic supports orders 1..={}, not {}",
+            "--method elastic supports orders (or --subdivide) 1..={}, not {order}",
             crate::elastic::MAX_ELASTIC_ORDER,
-            options.order
         )));
     }
     let start = Instant::now();
@@ -526,7 +525,7 @@ pub fn curve_in_memory(input: &Path, options: &CurveOptions) -> Result<Curved, C
     let mut elastic_info = None;
     if let Some(params) = elastic {
         // The straight order-P mesh, its boundary moved onto the sampled spline's boundary.
-        let straight = sample(&mesh, &mesh, &topo, options.order);
+        let straight = sample(&mesh, &mesh, &topo, order);
         lap("elastic_sample", &mut timings);
         let (moved, info) =
             elastic_analogy(&straight, &ho, &params).map_err(|source| CurveError::Elastic {

@@ -219,7 +219,11 @@ fn polyspline_ok<S: AsRef<std::ffi::OsStr>>(args: impl IntoIterator<Item = S>) -
 
 /// Curve `rel` with the smooth fit and method `method` at order 2.
 fn curved(rel: &str, method: Method) -> polyspline::pipeline::Curved {
-    let options = CurveOptions {
+    curve_in_memory(&root(rel), &smooth_options(method)).unwrap()
+}
+
+fn smooth_options(method: Method) -> CurveOptions {
+    CurveOptions {
         order: 2,
         subdivide: None,
         geometry: Geometry::SplineFitted,
@@ -231,8 +235,28 @@ fn curved(rel: &str, method: Method) -> polyspline::pipeline::Curved {
         mesh: MeshOptions::default(),
         output: Default::default(),
         backend: polyspline::gpu::Backend::Cpu,
-    };
-    curve_in_memory(&root(rel), &options).unwrap()
+    }
+}
+
+/// `--order 1 --subdivide K` with the elastic analogy: the elasticity runs at order K, then the
+/// elements are split; the result is the subdivided order-K elastic mesh.
+#[test]
+fn elastic_with_subdivision_splits_the_order_k_result() {
+    let rel = "meshes/real/dealii/unstructured_refined_ball.msh";
+    let method = Method::Elastic(ElasticParams::default());
+    let whole = curved(rel, method);
+    let mut o = smooth_options(method);
+    o.order = 1;
+    o.subdivide = Some(2);
+    let split = curve_in_memory(&root(rel), &o).unwrap();
+    assert_eq!(split.ho.order, 1);
+    assert_eq!(split.ho.n_elements(), 4 * whole.ho.n_elements());
+    assert_eq!(split.ho.nodes.len(), whole.ho.nodes.len());
+    let (lo, hi) = whole.mesh.bounding_box();
+    let tol = 1e-6 * (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f64::max);
+    for (a, b) in split.ho.nodes.iter().zip(&whole.ho.nodes) {
+        assert!((0..3).all(|k| (a[k] - b[k]).abs() < tol), "{a:?} {b:?}");
+    }
 }
 
 /// The paper's claim (Figs. 2f, 5): inside the domain the IGA mesh is smoother than the elastic
