@@ -286,8 +286,8 @@ pub fn compare(input: &Path, options: &CompareOptions) -> Result<CompareReport, 
         method,
         fit: FitParams {
             weights,
-            cg: base.fit.cg,
             targets,
+            ..base.fit.clone()
         },
         ..base.clone()
     };

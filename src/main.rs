@@ -477,19 +477,13 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let options = CompareOptions {
                 base: CurveOptions {
                     order,
-                    subdivide: None,
-                    geometry: Geometry::SplineFitted,
-                    method: Method::Iga,
                     fit: FitParams {
                         cg,
                         ..FitParams::smooth()
                     },
-                    line_search: LineSearchParams::default(),
-                    line_search_mode: LineSearchMode::Local,
-                    snap_boundary: false,
                     mesh: MeshOptions { allow_invalid },
-                    output: OutputOptions::default(),
                     backend,
+                    ..Default::default()
                 },
                 elastic: elastic.params(cg_tol),
             };

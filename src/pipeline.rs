@@ -111,6 +111,25 @@ pub struct CurveOptions {
     pub backend: Backend,
 }
 
+impl Default for CurveOptions {
+    /// The CLI's defaults: order 2, the smooth-boundary fit, local line search, CPU backend.
+    fn default() -> Self {
+        CurveOptions {
+            order: 2,
+            subdivide: None,
+            geometry: Geometry::SplineFitted,
+            method: Method::Iga,
+            fit: FitParams::smooth(),
+            line_search: LineSearchParams::default(),
+            line_search_mode: LineSearchMode::Local,
+            snap_boundary: false,
+            mesh: MeshOptions::default(),
+            output: OutputOptions::default(),
+            backend: Backend::default(),
+        }
+    }
+}
+
 /// Everything that can stop the `curve` job.
 #[derive(Debug, thiserror::Error)]
 pub enum CurveError {

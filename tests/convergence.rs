@@ -320,16 +320,10 @@ fn options(mode: &str) -> CurveOptions {
     };
     CurveOptions {
         order,
-        subdivide: None,
         geometry,
-        method: polyspline::pipeline::Method::Iga,
         fit,
-        line_search: Default::default(),
         line_search_mode: LineSearchMode::Local,
-        snap_boundary: false,
-        mesh: MeshOptions::default(),
-        output: Default::default(),
-        backend: Default::default(),
+        ..Default::default()
     }
 }
 

@@ -5,9 +5,7 @@
 use polyspline::io::read_raw;
 use polyspline::mesh::generate::{grid_2d, grid_3d, uniform};
 use polyspline::mesh::{LinearMesh, MeshOptions, Topology};
-use polyspline::pipeline::{
-    CurveError, CurveOptions, Geometry, LineSearchMode, OutputOptions, curve,
-};
+use polyspline::pipeline::{CurveError, CurveOptions, Geometry, LineSearchMode, curve};
 use polyspline::quality::{CheckReport, lagrange_1d};
 use polyspline::sample::ordering::lattice_point;
 use polyspline::sample::{HighOrderMesh, multilinear, sample};
@@ -39,16 +37,10 @@ fn real_meshes() -> Vec<PathBuf> {
 fn options(order: usize, geometry: Geometry) -> CurveOptions {
     CurveOptions {
         order,
-        subdivide: None,
         geometry,
-        method: polyspline::pipeline::Method::Iga,
         fit: Default::default(),
-        line_search: Default::default(),
         line_search_mode: LineSearchMode::Local,
-        snap_boundary: false,
-        mesh: MeshOptions::default(),
-        output: OutputOptions::default(),
-        backend: Default::default(),
+        ..Default::default()
     }
 }
 

@@ -10,7 +10,7 @@ use polyspline::elastic::{
     ElasticParams, ElasticPreconditioner, elastic_analogy, solve_displacement,
 };
 use polyspline::mesh::generate::{grid_2d, grid_3d};
-use polyspline::mesh::{LinearMesh, MeshOptions, Topology};
+use polyspline::mesh::{LinearMesh, Topology};
 use polyspline::pipeline::{CurveOptions, Geometry, Method, curve_in_memory};
 use polyspline::sample::{HighOrderMesh, sample};
 use polyspline::solve::CgParams;
@@ -225,16 +225,12 @@ fn curved(rel: &str, method: Method) -> polyspline::pipeline::Curved {
 fn smooth_options(method: Method) -> CurveOptions {
     CurveOptions {
         order: 2,
-        subdivide: None,
         geometry: Geometry::SplineFitted,
         method,
         fit: polyspline::fit::FitParams::smooth(),
-        line_search: Default::default(),
         line_search_mode: polyspline::pipeline::LineSearchMode::Local,
-        snap_boundary: false,
-        mesh: MeshOptions::default(),
-        output: Default::default(),
         backend: polyspline::gpu::Backend::Cpu,
+        ..Default::default()
     }
 }
 

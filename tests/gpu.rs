@@ -670,7 +670,7 @@ fn backend_gpu_without_adapter_is_a_clear_error() {
 #[test]
 fn curve_gpu_matches_cpu() {
     use polyspline::gpu::Backend;
-    use polyspline::pipeline::{CurveOptions, Geometry, LineSearchMode, OutputOptions, curve};
+    use polyspline::pipeline::{CurveOptions, Geometry, LineSearchMode, curve};
     for prec in [Precision::F32, Precision::F64] {
         let Some(ctx) = context(prec) else { return };
         let ctx = std::sync::Arc::new(ctx);
@@ -689,9 +689,7 @@ fn curve_gpu_matches_cpu() {
                 ));
                 let opts = CurveOptions {
                     order: 3,
-                    subdivide: None,
                     geometry: Geometry::SplineFitted,
-                    method: polyspline::pipeline::Method::Iga,
                     // Tight, so the two solutions differ by the solver's rounding only.
                     fit: polyspline::fit::FitParams {
                         cg: CgParams {
@@ -700,12 +698,9 @@ fn curve_gpu_matches_cpu() {
                         },
                         ..Default::default()
                     },
-                    line_search: Default::default(),
                     line_search_mode: LineSearchMode::Local,
-                    mesh: MeshOptions::default(),
-                    output: OutputOptions::default(),
                     backend,
-                    snap_boundary: false,
+                    ..Default::default()
                 };
                 let r = curve(&input, &out, &opts).unwrap();
                 let ho = polyspline::sample::HighOrderMesh::from_raw(

@@ -127,8 +127,8 @@ impl FitParams {
     pub fn smooth() -> Self {
         FitParams {
             weights: FitWeights::smooth(),
-            cg: CgParams::default(),
             targets: FitTargets::Smooth(SmoothParams::default()),
+            ..Default::default()
         }
     }
 }
