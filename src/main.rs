@@ -88,6 +88,11 @@ enum Command {
         /// Relative tolerance of the conjugate-gradient solve.
         #[arg(long, default_value_t = 1e-6)]
         cg_tol: f64,
+        /// Preconditioner of the fit's CG solve on the CPU: the diagonal, or exact inverses of
+        /// the diagonal blocks on aggregates of 64 neighbouring control points (the GPU solver
+        /// always uses the diagonal).
+        #[arg(long, value_enum, default_value_t = FitPreconditionerArg::BlockJacobi)]
+        cg_preconditioner: FitPreconditionerArg,
         /// Most bisections of the validity line search.
         #[arg(long, default_value_t = 30)]
         max_bisections: usize,
@@ -214,6 +219,22 @@ enum MethodArg {
     Elastic,
 }
 
+/// Preconditioner of the fit's CG solve.
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum FitPreconditionerArg {
+    Jacobi,
+    BlockJacobi,
+}
+
+impl From<FitPreconditionerArg> for polyspline::solve::CgPreconditioner {
+    fn from(a: FitPreconditionerArg) -> Self {
+        match a {
+            FitPreconditionerArg::Jacobi => Self::Jacobi,
+            FitPreconditionerArg::BlockJacobi => Self::default(),
+        }
+    }
+}
+
 #[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 enum PreconditionerArg {
     Jacobi,
@@ -322,6 +343,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             w_frame_corner,
             w_frame_midpoint,
             cg_tol,
+            cg_preconditioner,
             max_bisections,
             line_search,
             min_det_fraction,
@@ -373,6 +395,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     weights,
                     cg: CgParams {
                         rel_tol: cg_tol,
+                        preconditioner: cg_preconditioner.into(),
                         ..Default::default()
                     },
                     targets: if fit == FitArg::Smooth {

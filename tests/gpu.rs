@@ -445,8 +445,10 @@ fn gpu_cg_matches_cpu_cg() {
         let Some(ctx) = context(prec) else { return };
         for (name, mesh) in meshes().into_iter().take(6) {
             let (k, b) = normal_system(&mesh);
+            // The GPU solver is point-Jacobi PCG; compare it with the same CPU algorithm.
             let params = CgParams {
                 rel_tol: 1e-9,
+                preconditioner: polyspline::solve::CgPreconditioner::Jacobi,
                 ..Default::default()
             };
             let mut want = vec![[0.0; 3]; k.n];

@@ -8,7 +8,9 @@
 //! and the scalars (a few hundred bytes) are read back per batch. In f32 it is wrapped in
 //! iterative refinement: the residual b − A x is recomputed in f64 on the CPU, and the GPU
 //! solves for the correction (displacement unknowns), so the f64 tolerance is met although
-//! the GPU's arithmetic is f32.
+//! the GPU's arithmetic is f32. The GPU solver is point-Jacobi PCG whatever
+//! `CgParams::preconditioner` asks for (the block-Jacobi triangular solves are sequential per
+//! aggregate and are not ported to WGSL).
 
 use super::{GpuContext, GpuError, Precision, bytes_to_reals, groups, reals_to_bytes};
 use crate::fit::NormalMatrix;
