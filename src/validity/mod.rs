@@ -53,35 +53,58 @@ impl Bernstein {
     }
 
     /// Product, exact in Bernstein form: B^m_i B^n_j = C(m,i)C(n,j)/C(m+n,i+j) B^{m+n}_{i+j}.
+    /// In scaled coefficients ĉ_i = C(n,i) c_i (per direction) the product is a plain
+    /// convolution, so the inner loop is a contiguous multiply-add without weights.
     pub fn mul(&self, other: &Bernstein) -> Bernstein {
         let deg = [0, 1, 2].map(|d| self.deg[d] + other.deg[d]);
+        let a = self.scaled(1.0);
+        let b = other.scaled(1.0);
         let mut out = Bernstein::zeros(deg);
-        let w = |d: usize, i: usize, j: usize| {
-            let (m, n) = (self.deg[d], other.deg[d]);
-            BINOM[m][i] * BINOM[n][j] / BINOM[m + n][i + j]
-        };
-        for k1 in 0..=self.deg[2] {
-            for j1 in 0..=self.deg[1] {
-                for i1 in 0..=self.deg[0] {
-                    let a = self.coef[self.idx(i1, j1, k1)];
-                    if a == 0.0 {
+        let (na, nb) = (self.deg.map(|d| d + 1), other.deg.map(|d| d + 1));
+        let no = deg.map(|d| d + 1);
+        for k1 in 0..na[2] {
+            for j1 in 0..na[1] {
+                for i1 in 0..na[0] {
+                    let x = a[i1 + na[0] * (j1 + na[1] * k1)];
+                    if x == 0.0 {
                         continue;
                     }
-                    for k2 in 0..=other.deg[2] {
-                        let wk = w(2, k1, k2);
-                        for j2 in 0..=other.deg[1] {
-                            let wjk = wk * w(1, j1, j2);
-                            for i2 in 0..=other.deg[0] {
-                                let b = other.coef[other.idx(i2, j2, k2)];
-                                let o = out.idx(i1 + i2, j1 + j2, k1 + k2);
-                                out.coef[o] += a * b * wjk * w(0, i1, i2);
+                    for k2 in 0..nb[2] {
+                        for j2 in 0..nb[1] {
+                            let bo = nb[0] * (j2 + nb[1] * k2);
+                            let oo = i1 + no[0] * (j1 + j2 + no[1] * (k1 + k2));
+                            let row = &mut out.coef[oo..oo + nb[0]];
+                            for (o, y) in row.iter_mut().zip(&b[bo..bo + nb[0]]) {
+                                *o += x * y;
                             }
                         }
                     }
                 }
             }
         }
+        let inv = out.scaled(-1.0);
+        out.coef = inv;
         out
+    }
+
+    /// Coefficients times (`sign` > 0) or divided by (`sign` < 0) C(n0,i)·C(n1,j)·C(n2,k).
+    fn scaled(&self, sign: f64) -> Vec<f64> {
+        let mut c = self.coef.clone();
+        for k in 0..=self.deg[2] {
+            for j in 0..=self.deg[1] {
+                let bjk = BINOM[self.deg[1]][j] * BINOM[self.deg[2]][k];
+                for i in 0..=self.deg[0] {
+                    let f = BINOM[self.deg[0]][i] * bjk;
+                    let o = self.idx(i, j, k);
+                    if sign > 0.0 {
+                        c[o] *= f;
+                    } else {
+                        c[o] /= f;
+                    }
+                }
+            }
+        }
+        c
     }
 
     fn add_scaled(&mut self, other: &Bernstein, s: f64) {
@@ -160,44 +183,92 @@ impl Bernstein {
     }
 }
 
-/// Bernstein coefficients of det J of a quadratic Bézier element (`dim` 2 or 3).
-pub fn det_jacobian_bernstein(dim: usize, net: &[[f64; 3]; 27]) -> Bernstein {
-    // Partial derivatives: degree 1 in their own direction, coefficients 2 ΔP.
-    let partial = |d: usize, c: usize| -> Bernstein {
-        let mut deg = if dim == 2 { [2, 2, 0] } else { [2, 2, 2] };
-        deg[d] = 1;
-        let mut b = Bernstein::zeros(deg);
-        for k in 0..=deg[2] {
-            for j in 0..=deg[1] {
-                for i in 0..=deg[0] {
-                    let mut hi = [i, j, k];
-                    hi[d] += 1;
-                    let at = |q: [usize; 3]| net[q[0] + 3 * q[1] + 9 * q[2]][c];
-                    let o = b.idx(i, j, k);
-                    b.coef[o] = 2.0 * (at(hi) - at([i, j, k]));
+/// out += a ∗ b (tensor convolution) of scaled coefficient arrays with `na`, `nb`, `no`
+/// coefficients per direction (no = na + nb − 1).
+#[inline(always)]
+fn convolve(a: &[f64], na: [usize; 3], b: &[f64], nb: [usize; 3], out: &mut [f64], no: [usize; 3]) {
+    for k1 in 0..na[2] {
+        for j1 in 0..na[1] {
+            for i1 in 0..na[0] {
+                let x = a[i1 + na[0] * (j1 + na[1] * k1)];
+                for k2 in 0..nb[2] {
+                    for j2 in 0..nb[1] {
+                        let bo = nb[0] * (j2 + nb[1] * k2);
+                        let oo = i1 + no[0] * (j1 + j2 + no[1] * (k1 + k2));
+                        for i2 in 0..nb[0] {
+                            out[oo + i2] += x * b[bo + i2];
+                        }
+                    }
                 }
             }
         }
-        b
+    }
+}
+
+/// Bernstein coefficients of det J of a quadratic Bézier element (`dim` 2 or 3).
+///
+/// Computed in scaled coefficients (c_ijk · C(n0,i)C(n1,j)C(n2,k), see [`Bernstein::mul`]):
+/// the partial derivatives are scaled once, the products are plain convolutions on fixed-size
+/// arrays, and det J is unscaled once at the end.
+pub fn det_jacobian_bernstein(dim: usize, net: &[[f64; 3]; 27]) -> Bernstein {
+    // Scaled partial derivative d of coordinate c: degree 1 in direction d (coefficients
+    // 2 ΔP), 2 elsewhere (binomials 1, 2, 1); 18 coefficients in 3D, 6 in 2D.
+    let partial = |d: usize, c: usize| -> [f64; 18] {
+        let mut n = if dim == 2 { [3, 3, 1] } else { [3, 3, 3] };
+        n[d] = 2;
+        let mut out = [0.0; 18];
+        for k in 0..n[2] {
+            for j in 0..n[1] {
+                for i in 0..n[0] {
+                    let l = [i, j, k];
+                    let mut hi = l;
+                    hi[d] += 1;
+                    let at = |q: [usize; 3]| net[q[0] + 3 * q[1] + 9 * q[2]][c];
+                    let mut scale = 2.0;
+                    for e in 0..3 {
+                        if e != d && n[e] == 3 && l[e] == 1 {
+                            scale *= 2.0;
+                        }
+                    }
+                    out[i + n[0] * (j + n[1] * k)] = scale * (at(hi) - at(l));
+                }
+            }
+        }
+        out
     };
-    if dim == 2 {
-        let mut det = partial(0, 0).mul(&partial(1, 1));
-        det.add_scaled(&partial(0, 1).mul(&partial(1, 0)), -1.0);
+    let mut det = if dim == 2 {
+        let (ux, uy, vx, vy) = (partial(0, 0), partial(0, 1), partial(1, 0), partial(1, 1));
+        let (nu, nv, no) = ([2, 3, 1], [3, 2, 1], [4, 4, 1]);
+        let mut det = Bernstein::zeros([3, 3, 0]);
+        let mut neg = [0.0; 16];
+        convolve(&ux, nu, &vy, nv, &mut det.coef, no);
+        convolve(&uy, nu, &vx, nv, &mut neg, no);
+        for (d, n) in det.coef.iter_mut().zip(neg) {
+            *d -= n;
+        }
         det
     } else {
-        let du: Vec<Bernstein> = (0..3).map(|c| partial(0, c)).collect();
-        let dv: Vec<Bernstein> = (0..3).map(|c| partial(1, c)).collect();
-        let dw: Vec<Bernstein> = (0..3).map(|c| partial(2, c)).collect();
+        let du: [[f64; 18]; 3] = std::array::from_fn(|c| partial(0, c));
+        let dv: [[f64; 18]; 3] = std::array::from_fn(|c| partial(1, c));
+        let dw: [[f64; 18]; 3] = std::array::from_fn(|c| partial(2, c));
+        let (nu, nv, nw, nc) = ([2, 3, 3], [3, 2, 3], [3, 3, 2], [5, 4, 4]);
         let mut det = Bernstein::zeros([5, 5, 5]);
         for c in 0..3 {
             let (a, b) = ((c + 1) % 3, (c + 2) % 3);
             // (dv × dw)_c = dv_a dw_b − dv_b dw_a
-            let mut cross = dv[a].mul(&dw[b]);
-            cross.add_scaled(&dv[b].mul(&dw[a]), -1.0);
-            det.add_scaled(&du[c].mul(&cross), 1.0);
+            let mut cross = [0.0; 80];
+            let mut neg = [0.0; 80];
+            convolve(&dv[a], nv, &dw[b], nw, &mut cross, nc);
+            convolve(&dv[b], nv, &dw[a], nw, &mut neg, nc);
+            for (x, n) in cross.iter_mut().zip(neg) {
+                *x -= n;
+            }
+            convolve(&du[c], nu, &cross, nc, &mut det.coef, [6, 6, 6]);
         }
         det
-    }
+    };
+    det.coef = det.scaled(-1.0);
+    det
 }
 
 /// Bernstein coefficients of det J of an order-p Lagrange element whose nodes are given in
@@ -406,6 +477,38 @@ mod tests {
             let w = col(2);
             u[0] * (v[1] * w[2] - v[2] * w[1]) - u[1] * (v[0] * w[2] - v[2] * w[0])
                 + u[2] * (v[0] * w[1] - v[1] * w[0])
+        }
+    }
+
+    #[test]
+    fn product_evaluates_to_the_product_of_values() {
+        let poly = |deg: [usize; 3], seed: f64| {
+            let mut b = Bernstein::zeros(deg);
+            for (i, c) in b.coef.iter_mut().enumerate() {
+                *c = (seed + 1.7 * i as f64).sin();
+            }
+            b
+        };
+        for (da, db) in [
+            ([2, 1, 2], [2, 2, 1]),
+            ([1, 2, 0], [3, 0, 0]),
+            ([4, 3, 3], [1, 2, 2]),
+        ] {
+            let (a, b) = (poly(da, 0.3), poly(db, 1.1));
+            let p = a.mul(&b);
+            assert_eq!(p.deg, [0, 1, 2].map(|d| da[d] + db[d]));
+            for t in [
+                [0.1, 0.7, 0.4],
+                [0.5, 0.5, 0.5],
+                [1.0, 0.0, 0.9],
+                [0.33, 0.01, 0.99],
+            ] {
+                let (want, got) = (a.eval(t) * b.eval(t), p.eval(t));
+                assert!(
+                    (want - got).abs() <= 1e-12 * (1.0 + want.abs()),
+                    "{want} vs {got}"
+                );
+            }
         }
     }
 
