@@ -131,17 +131,26 @@ pub fn assemble_matrix(space: &dyn FitSpace, blocks: &ElementBlocks) -> NormalMa
         }
     }
     drop(fill);
+    // A per-thread marker (last row that took each column) dedups before sorting, so only
+    // the ~115 distinct columns are sorted instead of the ~27 × 27 incident ones.
     let rows: Vec<Vec<u32>> = (0..n)
         .into_par_iter()
-        .map(|c| {
-            let mut cols: Vec<u32> = incident[start[c] as usize..start[c + 1] as usize]
-                .iter()
-                .flat_map(|&e| columns[e as usize].iter().copied())
-                .collect();
-            cols.sort_unstable();
-            cols.dedup();
-            cols
-        })
+        .map_init(
+            || vec![u32::MAX; n],
+            |mark, c| {
+                let mut cols = Vec::new();
+                for &e in &incident[start[c] as usize..start[c + 1] as usize] {
+                    for &j in &columns[e as usize] {
+                        if mark[j as usize] != c as u32 {
+                            mark[j as usize] = c as u32;
+                            cols.push(j);
+                        }
+                    }
+                }
+                cols.sort_unstable();
+                cols
+            },
+        )
         .collect();
     drop(incident);
     let mut indptr = Vec::with_capacity(n + 1);

@@ -55,6 +55,17 @@ pub trait FitSpace: Sync {
     fn element_pattern(&self, _e: usize) -> Option<(u64, Vec<u32>)> {
         None
     }
+    /// Append E_eᵀ f to `out` as (control point, value) pairs (a control point may repeat),
+    /// for f one 3-vector per Bernstein point. The default expands the explicit rows.
+    fn add_transposed(&self, e: usize, f: &[[f64; 3]; 27], out: &mut Vec<(u32, [f64; 3])>) {
+        let (mut offsets, mut cols, mut weights) = (Vec::new(), Vec::new(), Vec::new());
+        self.element_rows(e, &mut offsets, &mut cols, &mut weights);
+        for i in 0..offsets.len() - 1 {
+            for k in offsets[i]..offsets[i + 1] {
+                out.push((cols[k], f[i].map(|v| weights[k] * v)));
+            }
+        }
+    }
 }
 
 /// Sample-point weights (they multiply squared residuals).
@@ -486,20 +497,6 @@ pub fn assemble_with_targets(
     let chunks: Vec<Vec<(u32, [f64; 3])>> = (0..space.n_elements())
         .into_par_iter()
         .fold(Vec::new, |mut acc, e| {
-            let (mut offsets, mut cols, mut weights) = (Vec::new(), Vec::new(), Vec::new());
-            space.element_rows(e, &mut offsets, &mut cols, &mut weights);
-            let mut ids: Vec<u32> = cols.clone();
-            ids.sort_unstable();
-            ids.dedup();
-            let m = ids.len();
-            // Dense R (nb × m).
-            let mut r = vec![0.0; nb * m];
-            for i in 0..nb {
-                for k in offsets[i]..offsets[i + 1] {
-                    let j = ids.binary_search(&cols[k]).unwrap();
-                    r[i * m + j] += weights[k];
-                }
-            }
             let (gd, gr) = &cache[&masks[e]];
             // Targets: input multilinear positions; initial net for the frame term.
             let x = mesh.element_coords(e);
@@ -553,16 +550,8 @@ pub fn assemble_with_targets(
                     }
                 }
             }
-            // f_loc = Rᵀ F (K is assembled separately).
-            for i in 0..m {
-                let mut f = [0.0; 3];
-                for a in 0..nb {
-                    for c in 0..3 {
-                        f[c] += r[a * m + i] * rhs_b[a][c];
-                    }
-                }
-                acc.push((ids[i], f));
-            }
+            // f_loc = E_eᵀ F (K is assembled separately).
+            space.add_transposed(e, &rhs_b, &mut acc);
             acc
         })
         .collect();
@@ -660,6 +649,38 @@ impl FitSpace for crate::spline::SplineSpace {
     }
     fn bezier_net_with(&self, e: usize, cps: &[[f64; 3]]) -> [[f64; 3]; 27] {
         self.element_bezier_with(e, cps)
+    }
+    /// By sum factorisation: E_e = (M_z ⊗ M_y ⊗ M_x) N_e with N_e the local nodes' control
+    /// point entries, so E_eᵀ f applies the transposed 1D matrices direction by direction
+    /// (3 · 3^d · 3 multiply-adds each) and then N_eᵀ, instead of expanding the rows.
+    fn add_transposed(&self, e: usize, f: &[[f64; 3]; 27], out: &mut Vec<(u32, [f64; 3])>) {
+        let x = &self.extraction;
+        let m = x.matrices(e);
+        let n = x.n_local();
+        let mut t = *f;
+        for (d, md) in m.iter().enumerate().take(self.dim) {
+            let stride = [1, 3, 9][d];
+            let mut u = [[0.0; 3]; 27];
+            for (o, u) in u.iter_mut().enumerate().take(n) {
+                let l = (o / stride) % 3;
+                let base = o - l * stride;
+                for (b, row) in md.iter().enumerate() {
+                    let w = row[l];
+                    if w != 0.0 {
+                        let v = t[base + b * stride];
+                        for c in 0..3 {
+                            u[c] += w * v[c];
+                        }
+                    }
+                }
+            }
+            t = u;
+        }
+        for (l, &node) in x.element_nodes(e).iter().enumerate() {
+            for (g, w) in x.node_entries(node) {
+                out.push((g, t[l].map(|v| w * v)));
+            }
+        }
     }
     /// Elements whose local nodes are all plain control points (spline elements, and Q2
     /// elements made only of own nodes): E_e = (M_z ⊗ M_y ⊗ M_x) · selection, keyed by the
