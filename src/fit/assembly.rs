@@ -133,8 +133,10 @@ pub fn assemble_matrix(space: &dyn FitSpace, blocks: &ElementBlocks) -> NormalMa
     drop(fill);
     // A per-thread marker (last row that took each column) dedups before sorting, so only
     // the ~115 distinct columns are sorted instead of the ~27 × 27 incident ones.
+    // At most ~32 markers are made (one per split), not one per row range rayon cuts.
     let rows: Vec<Vec<u32>> = (0..n)
         .into_par_iter()
+        .with_min_len((n / 32).max(1024))
         .map_init(
             || vec![u32::MAX; n],
             |mark, c| {
