@@ -29,6 +29,7 @@ pub mod io;
 pub mod mesh;
 pub mod pipeline;
 pub mod plot;
+pub mod progress;
 pub mod quality;
 pub mod sample;
 pub mod solve;

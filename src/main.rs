@@ -10,7 +10,9 @@ use polyspline::io::output::write_atomically;
 use polyspline::io::vtu_write::VtuEncoding;
 use polyspline::io::{read_mesh, read_raw};
 use polyspline::mesh::{MeshOptions, Topology};
-use polyspline::pipeline::{CurveOptions, Geometry, LineSearchMode, Method, OutputOptions, curve};
+use polyspline::pipeline::{
+    CurveOptions, Geometry, LineSearchMode, Method, OutputOptions, curve_with_progress,
+};
 use polyspline::plot::{Layer, render_svg_window};
 use polyspline::quality::CheckReport;
 use polyspline::sample::HighOrderMesh;
@@ -50,6 +52,9 @@ enum Command {
         /// Output file: .msh (Gmsh) or .vtu (VTK Lagrange cells).
         #[arg(short, long)]
         output: PathBuf,
+        /// No progress spinner on stderr (it is also off when stderr is not a terminal).
+        #[arg(short, long)]
+        quiet: bool,
         /// Order of the output elements (1-10; Gmsh hexes up to 9).
         #[arg(long, default_value_t = 2)]
         order: usize,
@@ -332,6 +337,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Curve {
             mesh,
             output,
+            quiet,
             order,
             straight,
             method,
@@ -429,7 +435,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 },
                 backend,
             };
-            let r = curve(&mesh, &output, &options)?;
+            let progress = polyspline::progress::Terminal::new(quiet);
+            let r = curve_with_progress(&mesh, &output, &options, &progress);
+            progress.clear();
+            let r = r?;
             eprintln!(
                 "wrote {}: {} elements of order {}, {} nodes, {} boundary facets ({:.3} s)",
                 r.output.display(),

@@ -300,6 +300,16 @@ pub fn curve(
     output: &Path,
     options: &CurveOptions,
 ) -> Result<CurveReport, CurveError> {
+    curve_with_progress(input, output, options, &crate::progress::Silent)
+}
+
+/// [`curve`], reporting stage progress to `progress`.
+pub fn curve_with_progress(
+    input: &Path,
+    output: &Path,
+    options: &CurveOptions,
+    progress: &dyn crate::progress::Progress,
+) -> Result<CurveReport, CurveError> {
     if OutputFormat::from_path(output).is_none() {
         return Err(WriteError::Unsupported {
             path: output.to_owned(),
@@ -308,7 +318,7 @@ pub fn curve(
         .into());
     }
     let start = Instant::now();
-    let Curved { ho, mut report, .. } = curve_in_memory(input, options)?;
+    let Curved { ho, mut report, .. } = curve_in_memory_with_progress(input, options, progress)?;
     let t = Instant::now();
     write_high_order(&ho, output, &options.output, &[input])?;
     report
@@ -323,6 +333,15 @@ pub fn curve(
 
 /// Everything of the `curve` job but writing the output.
 pub fn curve_in_memory(input: &Path, options: &CurveOptions) -> Result<Curved, CurveError> {
+    curve_in_memory_with_progress(input, options, &crate::progress::Silent)
+}
+
+/// [`curve_in_memory`], reporting stage progress to `progress`.
+pub fn curve_in_memory_with_progress(
+    input: &Path,
+    options: &CurveOptions,
+    progress: &dyn crate::progress::Progress,
+) -> Result<Curved, CurveError> {
     let order = options.subdivide.unwrap_or(options.order);
     if options.subdivide.is_some() && options.order != 1 {
         return Err(CurveError::Options(
@@ -355,6 +374,7 @@ pub fn curve_in_memory(input: &Path, options: &CurveOptions) -> Result<Curved, C
         let mut t = Instant::now();
         move |name: &str, timings: &mut BTreeMap<String, f64>| {
             timings.insert(name.to_string(), t.elapsed().as_secs_f64());
+            progress.finished(name);
             t = Instant::now();
         }
     };
@@ -399,7 +419,7 @@ pub fn curve_in_memory(input: &Path, options: &CurveOptions) -> Result<Curved, C
                 let (c_star, info) =
                     fit_with(&s, &mesh, &topo, &options.fit, |k, rhs, x, cg| match gpu {
                         Some(ctx) => crate::gpu::cg::pcg(ctx, k, rhs, x, cg, |_, _| {}),
-                        None => crate::solve::pcg(k, rhs, x, cg, |_, _| {}),
+                        None => crate::solve::pcg(k, rhs, x, cg, |i, r| progress.cg(i, r)),
                     })
                     .map_err(|source| CurveError::Solve {
                         input: input.to_owned(),

@@ -518,3 +518,65 @@ fn subdivided_output_is_valid() {
         assert_eq!(CheckReport::new(&back).invalid, 0);
     }
 }
+
+/// Progress goes through the callback: every stage of the report's timings is announced in
+/// order, the fit's CG iterations are counted, and the command line prints no spinner when
+/// stderr is not a terminal (here a pipe), with or without `--quiet`.
+#[test]
+fn progress_reports_stages_and_stays_off_stderr_pipes() {
+    use polyspline::progress::Progress;
+    use std::sync::Mutex;
+    #[derive(Default)]
+    struct Log(Mutex<(Vec<String>, usize)>);
+    impl Progress for Log {
+        fn finished(&self, name: &str) {
+            self.0.lock().unwrap().0.push(name.to_string());
+        }
+        fn cg(&self, iteration: usize, _: f64) {
+            self.0.lock().unwrap().1 = iteration;
+        }
+    }
+    let input =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("meshes/real/mfem/cylinder-hex.mesh");
+    let out = scratch("progress.msh");
+    let log = Log::default();
+    let r = polyspline::pipeline::curve_with_progress(
+        &input,
+        &out,
+        &options(2, Geometry::SplineFitted),
+        &log,
+    )
+    .unwrap();
+    let (stages, cg) = log.0.into_inner().unwrap();
+    for s in [
+        "read", "topology", "spline", "fit", "validity", "sample", "quality",
+    ] {
+        assert!(stages.iter().any(|x| x == s), "{s} missing from {stages:?}");
+        assert!(r.timings.contains_key(s));
+    }
+    assert_eq!(stages[0], "read");
+    assert!(
+        cg > 0 && Some(cg) <= r.cg_iterations,
+        "{cg} vs {:?}",
+        r.cg_iterations
+    );
+    for quiet in [false, true] {
+        let mut cmd = Command::new(env!("CARGO_BIN_EXE_polyspline"));
+        cmd.args([
+            "curve",
+            input.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+        ]);
+        if quiet {
+            cmd.arg("-q");
+        }
+        let o = cmd.output().unwrap();
+        assert!(o.status.success());
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            !err.contains("relative residual 1") && !err.contains('\r'),
+            "{err}"
+        );
+    }
+}
