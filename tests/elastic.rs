@@ -24,6 +24,7 @@ fn tight() -> ElasticParams {
             rel_tol: 1e-13,
             abs_tol: 1e-14,
             max_iters: 20_000,
+            ..Default::default()
         },
         ..Default::default()
     }
