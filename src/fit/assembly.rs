@@ -132,35 +132,53 @@ pub fn assemble_matrix(space: &dyn FitSpace, blocks: &ElementBlocks) -> NormalMa
     }
     drop(fill);
     // A per-thread marker (last row that took each column) dedups before sorting, so only
-    // the ~115 distinct columns are sorted instead of the ~27 × 27 incident ones.
-    // At most ~32 markers are made (one per split), not one per row range rayon cuts.
-    let rows: Vec<Vec<u32>> = (0..n)
-        .into_par_iter()
-        .with_min_len((n / 32).max(1024))
-        .map_init(
-            || vec![u32::MAX; n],
-            |mark, c| {
-                let mut cols = Vec::new();
-                for &e in &incident[start[c] as usize..start[c + 1] as usize] {
-                    for &j in &columns[e as usize] {
-                        if mark[j as usize] != c as u32 {
-                            mark[j as usize] = c as u32;
-                            cols.push(j);
-                        }
-                    }
+    // the ~115 distinct columns are sorted instead of the ~27 × 27 incident ones. Two passes
+    // (lengths, then the columns into their final place) avoid a vector per row; at most ~32
+    // markers are made per pass (one per split), not one per row range rayon cuts.
+    let row_columns = |mark: &mut Vec<u32>, c: usize, cols: &mut Vec<u32>| {
+        cols.clear();
+        for &e in &incident[start[c] as usize..start[c + 1] as usize] {
+            for &j in &columns[e as usize] {
+                if mark[j as usize] != c as u32 {
+                    mark[j as usize] = c as u32;
+                    cols.push(j);
                 }
-                cols.sort_unstable();
-                cols
-            },
-        )
+            }
+        }
+        cols.sort_unstable();
+    };
+    let split = (n / 32).max(1024);
+    let marker = || (vec![u32::MAX; n], Vec::new());
+    let lengths: Vec<usize> = (0..n)
+        .into_par_iter()
+        .with_min_len(split)
+        .map_init(marker, |(mark, cols), c| {
+            row_columns(mark, c, cols);
+            cols.len()
+        })
         .collect();
-    drop(incident);
     let mut indptr = Vec::with_capacity(n + 1);
     indptr.push(0usize);
-    for r in &rows {
-        indptr.push(indptr.last().unwrap() + r.len());
+    for l in lengths {
+        indptr.push(indptr.last().unwrap() + l);
     }
-    let indices: Vec<u32> = rows.into_iter().flatten().collect();
+    let mut indices = vec![0u32; indptr[n]];
+    let mut slices = Vec::with_capacity(n);
+    let mut rest = &mut indices[..];
+    for c in 0..n {
+        let (row, tail) = rest.split_at_mut(indptr[c + 1] - indptr[c]);
+        slices.push(row);
+        rest = tail;
+    }
+    slices
+        .into_par_iter()
+        .enumerate()
+        .with_min_len(split)
+        .for_each_init(marker, |(mark, cols), (c, row)| {
+            row_columns(mark, c, cols);
+            row.copy_from_slice(cols);
+        });
+    drop(incident);
     let values: Vec<AtomicU64> = (0..indices.len()).map(|_| AtomicU64::new(0)).collect();
 
     // 3. Values. Shared local matrices by (pattern key, weight mask), in local-node order.
