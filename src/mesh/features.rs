@@ -50,6 +50,37 @@ impl FeatureParams {
     }
 }
 
+/// Feature detection as the CLI asks for it: parameters and an optional edits file.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FeatureOptions {
+    pub params: FeatureParams,
+    /// `--feature-edits FILE` (see [`read_edits`]).
+    pub edits: Option<PathBuf>,
+}
+
+impl FeatureOptions {
+    /// Read the edits file, if any, and detect the features of `mesh`.
+    pub fn detect(&self, mesh: &LinearMesh, topo: &Topology) -> Result<Features, FeatureError> {
+        match &self.edits {
+            None => Ok(Features::detect_without_edits(mesh, topo, &self.params)),
+            Some(path) => Features::detect(mesh, topo, &self.params, &read_edits(path)?, path),
+        }
+    }
+}
+
+/// What the features became in a curved mesh (the `features` object of `curve --report`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct FeatureReport {
+    #[serde(flatten)]
+    pub found: FeatureSummary,
+    /// Largest distance of an output node at a feature vertex from the input vertex, relative
+    /// to the bounding-box diagonal.
+    pub feature_vertex_deviation_max: f64,
+    /// Largest distance of an output boundary node of a planar patch from the patch's plane,
+    /// relative to the bounding-box diagonal (0 without planar patches).
+    pub planarity_max: f64,
+}
+
 /// One line of a feature edits file.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct FeatureEdit {
@@ -160,6 +191,8 @@ pub struct FeatureSummary {
     pub feature_vertices: usize,
     pub patches: usize,
     pub planar_patches: usize,
+    /// Elements a crease runs between ([`Features::crease_elements`]).
+    pub crease_elements: usize,
 }
 
 impl Features {
@@ -380,7 +413,7 @@ impl Features {
     }
 
     /// Counts for reports.
-    pub fn summary(&self, params: &FeatureParams) -> FeatureSummary {
+    pub fn summary(&self, params: &FeatureParams, topo: &Topology) -> FeatureSummary {
         FeatureSummary {
             feature_angle_deg: params.angle_deg,
             tags: params.tags,
@@ -389,7 +422,29 @@ impl Features {
             feature_vertices: self.vertex_mask.iter().filter(|&&m| m).count(),
             patches: self.n_patches,
             planar_patches: self.planes.iter().filter(|p| p.is_some()).count(),
+            crease_elements: self.crease_elements(topo).iter().filter(|&&c| c).count(),
         }
+    }
+
+    /// (feature vertex deviation, planarity) of the sampled mesh `ho` of `mesh`, relative to
+    /// the bounding-box diagonal (see [`FeatureReport`]).
+    pub fn deviations(&self, mesh: &LinearMesh, ho: &crate::sample::HighOrderMesh) -> (f64, f64) {
+        let (lo, hi) = mesh.bounding_box();
+        let diag = norm(sub(hi, lo)).max(f64::MIN_POSITIVE);
+        let vertex = (0..mesh.n_vertices())
+            .filter(|&v| self.vertex_mask[v])
+            .map(|v| norm(sub(ho.nodes[v], mesh.coords[v])))
+            .fold(0.0, f64::max);
+        let npf = ho.nodes_per_facet();
+        let mut planarity = 0.0f64;
+        for (i, &p) in self.facet_patch.iter().enumerate() {
+            if let Some(Some((n, d))) = self.planes.get(p as usize) {
+                for &k in &ho.boundary[i * npf..(i + 1) * npf] {
+                    planarity = planarity.max((dot(*n, ho.nodes[k as usize]) - d).abs());
+                }
+            }
+        }
+        (vertex / diag, planarity / diag)
     }
 
     /// Elements on either side of a crease that runs *between* elements: in 3D a feature edge
@@ -429,7 +484,7 @@ impl Features {
 }
 
 /// Topology edge ids of local side `side` of hex `e`.
-fn face_edges(topo: &Topology, e: usize, side: usize) -> Vec<u32> {
+pub fn face_edges(topo: &Topology, e: usize, side: usize) -> Vec<u32> {
     use crate::mesh::topology::HEX_EDGES;
     let k = side / 2;
     let s = (side % 2) as u8;
