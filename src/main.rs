@@ -691,7 +691,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     radius: 2.4,
                 });
             }
-            let svg = render_svg_window(&layers, width, window, !others.is_empty() || nodes);
+            let svg = render_svg_window(
+                &layers,
+                width,
+                window,
+                !others.is_empty() || nodes || show_features,
+            );
             let inputs: Vec<&std::path::Path> = std::iter::once(mesh.as_path())
                 .chain(overlay.iter().map(|p| p.as_path()))
                 .collect();

@@ -307,3 +307,121 @@ fn snap_boundary_puts_feature_vertices_back() {
     assert_eq!(g.feature_vertex_deviation_max, 0.0, "{g:?}");
     assert!(g.planarity_max < 1e-14, "{g:?}");
 }
+
+fn polyspline() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_polyspline"))
+}
+
+/// An L-shaped domain of three unit quads (Gmsh 2.2 ASCII): six polygon corners, five of them
+/// convex, one re-entrant; the re-entrant corner (node 5, 0-based 4) lies between two quads.
+fn l_shape() -> PathBuf {
+    let path = scratch("l_shape.msh");
+    let nodes = [
+        (0.0, 0.0),
+        (1.0, 0.0),
+        (2.0, 0.0),
+        (0.0, 1.0),
+        (1.0, 1.0),
+        (2.0, 1.0),
+        (0.0, 2.0),
+        (1.0, 2.0),
+    ];
+    let mut s = String::from("$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n8\n");
+    for (i, (x, y)) in nodes.iter().enumerate() {
+        s += &format!("{} {x} {y} 0\n", i + 1);
+    }
+    s += "$EndNodes\n$Elements\n3\n1 3 2 1 1 1 2 5 4\n2 3 2 1 1 2 3 6 5\n3 3 2 1 1 4 5 8 7\n$EndElements\n";
+    std::fs::write(&path, s).unwrap();
+    path
+}
+
+/// `info --json` reports the corners of the L (six, found by angle alone), none at 180°,
+/// and the re-entrant corner's crease between two quads.
+#[test]
+fn info_reports_the_features_found() {
+    let input = l_shape();
+    let run = |args: &[&str]| -> serde_json::Value {
+        let out = polyspline()
+            .arg("info")
+            .arg(&input)
+            .arg("--json")
+            .args(args)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()["features"].clone()
+    };
+    let f = run(&[]);
+    assert_eq!(f["feature_corners"], 6, "{f}");
+    assert_eq!(f["patches"], 6, "{f}");
+    // Corner (1, 1) of the L lies between quads 2 and 3; the convex ones are own corners.
+    assert_eq!(f["crease_elements"], 2, "{f}");
+    let none = run(&["--feature-angle", "180"]);
+    assert_eq!(none["feature_corners"], 0, "{none}");
+    let table = polyspline().arg("info").arg(&input).output().unwrap();
+    assert!(String::from_utf8_lossy(&table.stdout).contains("sharp features        6 corners"));
+}
+
+/// `plot --show-features` draws one marker per corner; a bad edits file is refused with the
+/// file and line named, and nothing is written.
+#[test]
+fn plot_shows_corners_and_bad_edits_are_refused() {
+    let input = l_shape();
+    let svg = scratch("l_shape.svg");
+    let _ = std::fs::remove_file(&svg);
+    let out = polyspline()
+        .args(["plot", input.to_str().unwrap(), "-o", svg.to_str().unwrap()])
+        .arg("--show-features")
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let text = std::fs::read_to_string(&svg).unwrap();
+    let group = text
+        .split("<title>feature corners</title>")
+        .nth(1)
+        .expect("a feature corner layer");
+    let group = group.split("</g>").next().unwrap();
+    assert_eq!(group.matches("<circle").count(), 6);
+
+    let edits = scratch("bad_edits.txt");
+    std::fs::write(&edits, "add 4\nadd 1 2\n").unwrap();
+    let svg2 = scratch("l_shape_bad.svg");
+    let _ = std::fs::remove_file(&svg2);
+    let out = polyspline()
+        .args([
+            "plot",
+            input.to_str().unwrap(),
+            "-o",
+            svg2.to_str().unwrap(),
+        ])
+        .args([
+            "--show-features",
+            "--feature-edits",
+            edits.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains(&format!("{}:2:", edits.display())) && err.contains("one vertex id"),
+        "{err}"
+    );
+    assert!(!svg2.exists());
+    let out = polyspline()
+        .args(["curve", input.to_str().unwrap(), "-o"])
+        .arg(scratch("l_shape_bad.msh"))
+        .args(["--feature-edits", "/nonexistent/edits.txt"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent/edits.txt"));
+}
