@@ -87,7 +87,7 @@ enum Command {
         /// Frame weight at midpoints and centres (overrides the preset).
         #[arg(long)]
         w_frame_midpoint: Option<f64>,
-        /// Position weight at feature vertices and feature edge midpoints (default 10).
+        /// Position weight at element corners on sharp-feature vertices (default 10).
         #[arg(long)]
         w_feature: Option<f64>,
         #[command(flatten)]
@@ -723,6 +723,10 @@ struct FeatureArgs {
     /// `remove I` (2D corners), 0-based vertex ids.
     #[arg(long, value_name = "FILE")]
     feature_edits: Option<PathBuf>,
+    /// Detect and report the features but curve as if the boundary were smooth everywhere
+    /// (for comparisons).
+    #[arg(long)]
+    ignore_features: bool,
 }
 
 impl FeatureArgs {
@@ -733,6 +737,7 @@ impl FeatureArgs {
                 tags: !self.no_feature_tags,
             },
             edits: self.feature_edits.clone(),
+            ignore: self.ignore_features,
         }
     }
 }

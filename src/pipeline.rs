@@ -397,11 +397,10 @@ pub fn curve_in_memory(input: &Path, options: &CurveOptions) -> Result<Curved, C
         Geometry::Straight => None,
         _ => Some(options.features.detect(&mesh, &topo)?).filter(|f| !f.is_empty()),
     };
-    let crease = features
-        .as_ref()
-        .map_or_else(Vec::new, |f| f.crease_elements(&topo));
+    let used = features.as_ref().filter(|_| !options.features.ignore);
+    let crease = used.map_or_else(Vec::new, |f| f.crease_elements(&topo));
     let fit_params = FitParams {
-        features: features.clone().map(std::sync::Arc::new),
+        features: used.cloned().map(std::sync::Arc::new),
         ..options.fit.clone()
     };
     let build = |demote: &[bool]| {
@@ -433,7 +432,7 @@ pub fn curve_in_memory(input: &Path, options: &CurveOptions) -> Result<Curved, C
                         input: input.to_owned(),
                         source,
                     })?;
-                if let Some(f) = &features {
+                if let Some(f) = used {
                     crate::fit::features::project_onto_planes(&s, &topo, f, &mut c_star);
                 }
                 lap("fit", &mut timings);

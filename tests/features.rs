@@ -169,7 +169,7 @@ fn with_features(on: bool) -> CurveOptions {
             } else {
                 FeatureParams::off()
             },
-            edits: None,
+            ..Default::default()
         },
         ..Default::default()
     }

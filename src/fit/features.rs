@@ -9,8 +9,8 @@
 //!   a feature edge the curve models, samples on a non-feature boundary edge those of the
 //!   patch of its faces; corners (≠ 2 feature edges) have no curve model, so targets next to
 //!   them follow the other end's model or the chord.
-//! * **Weights** ([`sample_mask`]): corner samples at feature vertices and midpoint samples
-//!   of feature edges take [`super::FitWeights::feature`].
+//! * **Weights** ([`sample_mask`]): corner samples at feature vertices take
+//!   [`super::FitWeights::feature`].
 //! * **Planar patches** ([`project_onto_planes`]): after the solve, every control point of a
 //!   boundary entity is projected onto the planes of the planar patches it belongs to (their
 //!   intersection line or point where there are several), so planar input faces stay exactly
@@ -19,7 +19,7 @@
 
 use super::smooth::{VertexModel, fit_parabola, fit_quadric};
 use crate::mesh::features::Features;
-use crate::mesh::topology::{HEX_EDGES, HEX_VERTEX_PARAMS};
+use crate::mesh::topology::HEX_VERTEX_PARAMS;
 use crate::mesh::{LinearMesh, Topology};
 use crate::spline::{ControlPoint, SplineSpace};
 use std::collections::HashMap;
@@ -203,9 +203,11 @@ fn curve_model(x: [f64; 3], a: [f64; 3], b: [f64; 3]) -> Option<VertexModel> {
 }
 
 /// Samples of element `e` that take the feature weight, as bits of the 3^d lattice index
-/// (9z + 3y + x): corners at feature vertices, and in 3D midpoints of feature edges.
-pub fn sample_mask(features: &Features, mesh: &LinearMesh, topo: &Topology, e: usize) -> u64 {
-    let dim = mesh.dim;
+/// (9z + 3y + x): its corners at feature vertices. Midpoints of feature edges keep the
+/// midpoint weight: weighting them as strongly as the vertices makes the quadratic spline
+/// trade vertex position for midpoint position where the spacing along a feature changes,
+/// sliding feature vertices along their curve (measured on the real meshes).
+pub fn sample_mask(features: &Features, mesh: &LinearMesh, e: usize) -> u64 {
     let verts = mesh.element(e);
     let mut mask = 0u64;
     for (c, &v) in verts.iter().enumerate() {
@@ -213,17 +215,6 @@ pub fn sample_mask(features: &Features, mesh: &LinearMesh, topo: &Topology, e: u
             let p = HEX_VERTEX_PARAMS[c];
             let i = 2 * p[0] as usize + 6 * p[1] as usize + 18 * p[2] as usize;
             mask |= 1 << i;
-        }
-    }
-    if dim == 3 {
-        for (le, [a, b]) in HEX_EDGES.iter().enumerate() {
-            if features.edge_mask[topo.element_edges[e * 12 + le] as usize] {
-                let (pa, pb) = (HEX_VERTEX_PARAMS[*a], HEX_VERTEX_PARAMS[*b]);
-                let i: usize = (0..3)
-                    .map(|k| (pa[k] + pb[k]) as usize * [1, 3, 9][k])
-                    .sum();
-                mask |= 1 << i;
-            }
         }
     }
     mask

@@ -71,9 +71,9 @@ pub struct FitWeights {
     pub frame_corner: f64,
     /// Frame weight at midpoints and centres.
     pub frame_midpoint: f64,
-    /// Position weight at corners on sharp-feature vertices and at midpoints of feature edges
-    /// (3D) when the fit is given [`FitParams::features`]; it keeps the feature curves close
-    /// to the input's feature polylines.
+    /// Position weight at element corners on sharp-feature vertices when the fit is given
+    /// [`FitParams::features`]; it keeps the feature curves close to the input's feature
+    /// polylines.
     pub feature: f64,
 }
 
@@ -345,7 +345,7 @@ impl ElementBlocks {
                     }
                 }
                 if let Some(f) = features {
-                    m |= features::sample_mask(f, mesh, topo, e) << 8;
+                    m |= features::sample_mask(f, mesh, e) << 8;
                 }
                 m
             })

@@ -56,6 +56,9 @@ pub struct FeatureOptions {
     pub params: FeatureParams,
     /// `--feature-edits FILE` (see [`read_edits`]).
     pub edits: Option<PathBuf>,
+    /// Detect and measure the features (reports), but let neither the spline space nor the fit
+    /// use them: the smooth treatment, for comparisons.
+    pub ignore: bool,
 }
 
 impl FeatureOptions {
