@@ -18,7 +18,7 @@
 //!   coplanar vertices), so every step of the line search keeps them there.
 
 use super::smooth::{VertexModel, fit_parabola, fit_quadric};
-use crate::mesh::features::Features;
+use crate::mesh::features::{Features, add, cross, dot, norm, sub};
 use crate::mesh::topology::HEX_VERTEX_PARAMS;
 use crate::mesh::{LinearMesh, Topology};
 use crate::spline::{ControlPoint, SplineSpace};
@@ -326,26 +326,6 @@ fn solve_small(mut g: [[f64; 3]; 3], mut r: [f64; 3], m: usize) -> Option<[f64; 
         x[i] = s / g[i][i];
     }
     Some(x)
-}
-
-fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
-}
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-fn norm(a: [f64; 3]) -> f64 {
-    dot(a, a).sqrt()
-}
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
 }
 
 #[cfg(test)]
