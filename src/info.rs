@@ -59,6 +59,9 @@ pub struct MeshInfo {
     pub control_points: usize,
     /// Q2 elements by reason.
     pub q2_reasons: BTreeMap<String, usize>,
+    /// Sharp features, when detected (`docs/features.md`); `crease_elements` become
+    /// `feature_crease` Q2 elements in `curve` (not counted in `q2_reasons`).
+    pub features: Option<crate::mesh::features::FeatureSummary>,
 }
 
 impl MeshInfo {
@@ -132,6 +135,7 @@ impl MeshInfo {
             q2_elements: space.n_q2_elements(),
             control_points: space.n_control_points(),
             q2_reasons,
+            features: None,
         }
     }
 }
@@ -268,6 +272,28 @@ impl fmt::Display for MeshInfo {
                 .map(|(k, n)| format!("{n} {k}"))
                 .collect();
             row(f, "ignored cells", c.join(", "))?;
+        }
+        if let Some(s) = &self.features {
+            let what = if self.dimension == 2 {
+                format!("{} corners", s.feature_corners)
+            } else {
+                format!(
+                    "{} edges, {} corners, {} vertices",
+                    s.feature_edges, s.feature_corners, s.feature_vertices
+                )
+            };
+            row(
+                f,
+                "sharp features",
+                format!(
+                    "{what}; {} patches ({} planar); {} crease elements (angle {}°{})",
+                    s.patches,
+                    s.planar_patches,
+                    s.crease_elements,
+                    s.feature_angle_deg,
+                    if s.tags { ", tags" } else { "" }
+                ),
+            )?;
         }
         Ok(())
     }

@@ -44,6 +44,8 @@ enum Command {
         /// Keep tangled or degenerate elements instead of failing.
         #[arg(long)]
         allow_invalid: bool,
+        #[command(flatten)]
+        features: FeatureArgs,
     },
     /// Make a curved high-order mesh from a linear quad/hex mesh.
     Curve {
@@ -90,6 +92,11 @@ enum Command {
         /// Frame weight at midpoints and centres (overrides the preset).
         #[arg(long)]
         w_frame_midpoint: Option<f64>,
+        /// Position weight at element corners on sharp-feature vertices (default 10).
+        #[arg(long)]
+        w_feature: Option<f64>,
+        #[command(flatten)]
+        features: FeatureArgs,
         /// Relative tolerance of the conjugate-gradient solve.
         #[arg(long, default_value_t = 1e-6)]
         cg_tol: f64,
@@ -215,6 +222,12 @@ enum Command {
         /// spline map they define (paper Fig. 1).
         #[arg(long)]
         control_points: bool,
+        /// MESH is a linear input: also mark its sharp features (2D: corners of the boundary
+        /// polygon), found with the --feature-* options.
+        #[arg(long)]
+        show_features: bool,
+        #[command(flatten)]
+        features: FeatureArgs,
     },
 }
 
@@ -322,11 +335,15 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             mesh,
             json,
             allow_invalid,
+            features,
         } => {
             let options = MeshOptions { allow_invalid };
             let linear = read_mesh(&mesh, &options)?;
             let topo = Topology::build(&linear);
-            let info = MeshInfo::new(&linear, &topo);
+            let feature_options = features.options();
+            let found = feature_options.detect(&linear, &topo)?;
+            let mut info = MeshInfo::new(&linear, &topo);
+            info.features = Some(found.summary(&feature_options.params, &topo));
             if json {
                 println!("{}", serde_json::to_string_pretty(&info)?);
             } else {
@@ -348,6 +365,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             w_midpoint,
             w_frame_corner,
             w_frame_midpoint,
+            w_feature,
+            features,
             cg_tol,
             cg_preconditioner,
             max_bisections,
@@ -375,6 +394,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 (&mut weights.midpoint, w_midpoint),
                 (&mut weights.frame_corner, w_frame_corner),
                 (&mut weights.frame_midpoint, w_frame_midpoint),
+                (&mut weights.feature, w_feature),
             ] {
                 if let Some(v) = value {
                     if !(v >= 0.0 && v.is_finite()) {
@@ -409,7 +429,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     } else {
                         FitTargets::Chords
                     },
+                    ..Default::default()
                 },
+                features: features.options(),
                 line_search: LineSearchParams {
                     max_bisections,
                     min_det_fraction,
@@ -585,6 +607,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             window,
             width,
             control_points,
+            show_features,
+            features,
         } => {
             if label.len() > overlay.len() + 1 {
                 anyhow::bail!(
@@ -664,6 +688,27 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     });
                 }
             }
+            // Feature corners of a linear input, drawn on top.
+            let corners: Vec<[f64; 3]> = if show_features {
+                let linear = read_mesh(&mesh, &MeshOptions::default())?;
+                let topo = Topology::build(&linear);
+                let found = features.options().detect(&linear, &topo)?;
+                found
+                    .corners
+                    .iter()
+                    .map(|&v| linear.coords[v as usize])
+                    .collect()
+            } else {
+                Vec::new()
+            };
+            if show_features {
+                layers.push(Layer::Points {
+                    points: &corners,
+                    colour: "#ff7f0e",
+                    label: "feature corners",
+                    radius: 4.0,
+                });
+            }
             if let Some((points, curved)) = &spline {
                 layers.push(Layer::Mesh {
                     mesh: curved,
@@ -678,7 +723,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     radius: 2.4,
                 });
             }
-            let svg = render_svg_window(&layers, width, window, !others.is_empty() || nodes);
+            let svg = render_svg_window(
+                &layers,
+                width,
+                window,
+                !others.is_empty() || nodes || show_features,
+            );
             let inputs: Vec<&std::path::Path> = std::iter::once(mesh.as_path())
                 .chain(overlay.iter().map(|p| p.as_path()))
                 .collect();
@@ -689,6 +739,39 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// Sharp feature detection (`docs/features.md`).
+#[derive(clap::Args)]
+struct FeatureArgs {
+    /// Boundary facets whose normals differ by more than this angle (degrees; 2D: boundary
+    /// turning angle) meet at a sharp feature; 180 finds none by angle.
+    #[arg(long, default_value_t = 35.0, value_name = "DEG")]
+    feature_angle: f64,
+    /// Do not make the boundaries between differently tagged boundary regions features.
+    #[arg(long)]
+    no_feature_tags: bool,
+    /// Add or remove features: lines `add I J` / `remove I J` (3D edges) or `add I` /
+    /// `remove I` (2D corners), 0-based vertex ids.
+    #[arg(long, value_name = "FILE")]
+    feature_edits: Option<PathBuf>,
+    /// Detect and report the features but curve as if the boundary were smooth everywhere
+    /// (for comparisons).
+    #[arg(long)]
+    ignore_features: bool,
+}
+
+impl FeatureArgs {
+    fn options(&self) -> polyspline::mesh::features::FeatureOptions {
+        polyspline::mesh::features::FeatureOptions {
+            params: polyspline::mesh::features::FeatureParams {
+                angle_deg: self.feature_angle,
+                tags: !self.no_feature_tags,
+            },
+            edits: self.feature_edits.clone(),
+            ignore: self.ignore_features,
+        }
+    }
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]

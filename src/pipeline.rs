@@ -105,6 +105,8 @@ pub struct CurveOptions {
     pub line_search_mode: LineSearchMode,
     /// Move boundary vertex nodes back to the input vertices where that stays certified valid.
     pub snap_boundary: bool,
+    /// Sharp features kept by the spline space and the fit (`docs/features.md`).
+    pub features: crate::mesh::features::FeatureOptions,
     pub mesh: MeshOptions,
     pub output: OutputOptions,
     /// Executor of sampling, certification and the CG solve.
@@ -123,6 +125,7 @@ impl Default for CurveOptions {
             line_search: LineSearchParams::default(),
             line_search_mode: LineSearchMode::Local,
             snap_boundary: false,
+            features: Default::default(),
             mesh: MeshOptions::default(),
             output: OutputOptions::default(),
             backend: Backend::default(),
@@ -139,6 +142,8 @@ pub enum CurveError {
     Write(#[from] WriteError),
     #[error("{0}")]
     Options(String),
+    #[error(transparent)]
+    Features(#[from] crate::mesh::features::FeatureError),
     #[error("{}: GPU: {source}", input.display())]
     Gpu {
         input: PathBuf,
@@ -206,6 +211,8 @@ pub struct CurveReport {
     pub demoted_elements: usize,
     /// With `--snap-boundary`: boundary vertices moved back onto the input vertices.
     pub snapped_boundary_vertices: Option<usize>,
+    /// Sharp features found and how the output keeps them (spline geometries).
+    pub features: Option<crate::mesh::features::FeatureReport>,
     /// Fit weights, when fitted.
     pub fit_weights: Option<FitWeights>,
     /// Fit targets (chords or smooth-boundary reconstruction), when fitted.
@@ -406,9 +413,29 @@ pub fn curve_in_memory_with_progress(
             options.line_search.certificate_depth,
         )
     };
+    let features = match options.geometry {
+        Geometry::Straight => None,
+        _ => Some(options.features.detect(&mesh, &topo)?).filter(|f| !f.is_empty()),
+    };
+    let used = features.as_ref().filter(|_| !options.features.ignore);
+    let crease = used.map_or_else(Vec::new, |f| f.crease_elements(&topo));
+    let fit_params = FitParams {
+        features: used.cloned().map(std::sync::Arc::new),
+        ..options.fit.clone()
+    };
+    let build = |demote: &[bool]| {
+        SplineSpace::build_with_q2(
+            &mesh,
+            &topo,
+            &[
+                (&crease, crate::spline::Q2Reason::FeatureCrease),
+                (demote, crate::spline::Q2Reason::InvalidSplineMap),
+            ],
+        )
+    };
     if options.geometry != Geometry::Straight {
         let mut demote = vec![false; mesh.n_elements()];
-        let mut s = SplineSpace::build(&mesh, &topo);
+        let mut s = build(&[]);
         lap("spline", &mut timings);
         if options.geometry == Geometry::SplineFitted {
             // Fit; take the full step when certified, else bisect towards the initial map.
@@ -416,8 +443,8 @@ pub fn curve_in_memory_with_progress(
             // constrained Q2 elements (the input's own shape) and the fit is repeated.
             let mut round = 0;
             loop {
-                let (c_star, info) =
-                    fit_with(&s, &mesh, &topo, &options.fit, |k, rhs, x, cg| match gpu {
+                let (mut c_star, info) =
+                    fit_with(&s, &mesh, &topo, &fit_params, |k, rhs, x, cg| match gpu {
                         Some(ctx) => crate::gpu::cg::pcg(ctx, k, rhs, x, cg, |_, _| {}),
                         None => crate::solve::pcg(k, rhs, x, cg, |i, r| progress.cg(i, r)),
                     })
@@ -425,6 +452,9 @@ pub fn curve_in_memory_with_progress(
                         input: input.to_owned(),
                         source,
                     })?;
+                if let Some(f) = used {
+                    crate::fit::features::project_onto_planes(&s, &topo, f, &mut c_star);
+                }
                 lap("fit", &mut timings);
                 *timings.entry("fit_assembly".into()).or_insert(0.0) += info.assembly_seconds;
                 *timings.entry("fit_cg".into()).or_insert(0.0) += info.solve_seconds;
@@ -505,7 +535,7 @@ pub fn curve_in_memory_with_progress(
                             .filter(|&e| !bounds[e].certified_positive())
                             .collect();
                         demote_with_rings(&topo, &bad, round, &mut demote);
-                        s = SplineSpace::build_with_demoted(&mesh, &topo, &demote);
+                        s = build(&demote);
                         round += 1;
                         lap("validity", &mut timings);
                     }
@@ -628,6 +658,14 @@ pub fn curve_in_memory_with_progress(
         q2_elements: space.as_ref().map_or(0, |s| s.n_q2_elements()),
         demoted_elements: demoted,
         snapped_boundary_vertices: snapped,
+        features: features.as_ref().map(|f| {
+            let (vertex, planarity) = f.deviations(&mesh, &ho);
+            crate::mesh::features::FeatureReport {
+                found: f.summary(&options.features.params, &topo),
+                feature_vertex_deviation_max: vertex,
+                planarity_max: planarity,
+            }
+        }),
         fit_weights: fit_info.as_ref().map(|_| options.fit.weights),
         fit_targets: fit_info.as_ref().map(|_| options.fit.targets),
         cg_iterations: fit_info.as_ref().map(|f| f.cg.iterations),

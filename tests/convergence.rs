@@ -323,6 +323,12 @@ fn options(mode: &str) -> CurveOptions {
         geometry,
         fit,
         line_search_mode: LineSearchMode::Local,
+        // The shapes are smooth; their coarse levels turn by up to 60° between facets, which
+        // the default feature angle would take for sharp edges.
+        features: polyspline::mesh::features::FeatureOptions {
+            params: polyspline::mesh::features::FeatureParams::off(),
+            ..Default::default()
+        },
         ..Default::default()
     }
 }

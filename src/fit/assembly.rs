@@ -22,7 +22,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 
 /// Local matrices shared by elements of one (pattern key, weight mask), in local-node order.
-type SharedLocals = HashMap<(u64, u8), Arc<Vec<f64>>>;
+type SharedLocals = HashMap<(u64, u64), Arc<Vec<f64>>>;
 
 /// Dense element matrix on the element's sorted distinct columns.
 struct Local {

@@ -23,6 +23,7 @@
 //! boundary third-order accurate instead of second.
 
 pub mod assembly;
+pub mod features;
 pub mod smooth;
 
 pub use smooth::{SmoothParams, SmoothTargets};
@@ -81,6 +82,10 @@ pub struct FitWeights {
     pub frame_corner: f64,
     /// Frame weight at midpoints and centres.
     pub frame_midpoint: f64,
+    /// Position weight at element corners on sharp-feature vertices when the fit is given
+    /// [`FitParams::features`]; it keeps the feature curves close to the input's feature
+    /// polylines.
+    pub feature: f64,
 }
 
 impl FitWeights {
@@ -93,6 +98,7 @@ impl FitWeights {
             midpoint: 0.5,
             frame_corner: 0.0,
             frame_midpoint: 0.0,
+            feature: 10.0,
         }
     }
     /// Weights of the smooth-boundary mode (`--fit smooth`, used with
@@ -110,6 +116,7 @@ impl FitWeights {
             midpoint: 0.0,
             frame_corner: 1.0,
             frame_midpoint: 1.0,
+            feature: 10.0,
         }
     }
 }
@@ -131,6 +138,10 @@ pub struct FitParams {
     pub weights: FitWeights,
     pub cg: CgParams,
     pub targets: FitTargets,
+    /// Sharp features of the input: smooth targets are reconstructed per patch and feature
+    /// samples get [`FitWeights::feature`] (see [`features`]). `None` treats the boundary as
+    /// one smooth surface.
+    pub features: Option<std::sync::Arc<crate::mesh::features::Features>>,
 }
 
 impl FitParams {
@@ -150,6 +161,7 @@ impl Default for FitParams {
             weights: FitWeights::position(),
             cg: CgParams::default(),
             targets: FitTargets::Chords,
+            features: None,
         }
     }
 }
@@ -285,34 +297,53 @@ fn corner_of(l: [usize; 3]) -> usize {
 }
 
 /// The per-element blocks G_e = G^d_e + G^r_e of the normal equations on the Bernstein points.
-/// They depend on an element only through which of its corners are boundary vertices (the
-/// position weights), so one block per corner pattern is kept.
+/// They depend on an element only through which of its corners are boundary vertices and
+/// which samples lie on sharp features (the position weights), so one block per pattern is
+/// kept.
 pub struct ElementBlocks {
-    /// Boundary-corner bit mask of each element.
-    pub masks: Vec<u8>,
+    /// Per element: bit c (c < 8) for a boundary corner c, bit 8 + i for a sample i that takes
+    /// the feature weight.
+    pub masks: Vec<u64>,
     /// (G^d, G^r), row-major 3^d × 3^d, per mask.
-    pub cache: HashMap<u8, (Vec<f64>, Vec<f64>)>,
+    pub cache: HashMap<u64, (Vec<f64>, Vec<f64>)>,
+}
+
+/// Position weight of sample `i` (lattice point `l`) of an element with weight mask `mask`.
+fn sample_weight(w: &FitWeights, mask: u64, i: usize, l: [usize; 3], corner: bool) -> f64 {
+    if mask & (1 << (8 + i)) != 0 {
+        w.feature
+    } else if !corner {
+        w.midpoint
+    } else if mask & (1 << corner_of(l)) != 0 {
+        w.boundary_corner
+    } else {
+        w.corner
+    }
 }
 
 impl ElementBlocks {
     pub fn new(space: &dyn FitSpace, mesh: &LinearMesh, topo: &Topology, w: &FitWeights) -> Self {
+        Self::with_features(space, mesh, topo, w, None)
+    }
+
+    /// [`ElementBlocks::new`], with the feature samples of `features` weighted by
+    /// [`FitWeights::feature`].
+    pub fn with_features(
+        space: &dyn FitSpace,
+        mesh: &LinearMesh,
+        topo: &Topology,
+        w: &FitWeights,
+        features: Option<&crate::mesh::features::Features>,
+    ) -> Self {
         let dim = space.dim();
         let nb = if dim == 2 { 9 } else { 27 };
         let samples = Samples::new(dim);
-        let g_of = |mask: u8| -> (Vec<f64>, Vec<f64>) {
+        let g_of = |mask: u64| -> (Vec<f64>, Vec<f64>) {
             let mut gd = vec![0.0; nb * nb];
             let mut gr = vec![0.0; nb * nb];
             for i in 0..nb {
                 let corner = samples.is_corner(i);
-                let wd = if corner {
-                    if mask & (1 << corner_of(samples.points[i])) != 0 {
-                        w.boundary_corner
-                    } else {
-                        w.corner
-                    }
-                } else {
-                    w.midpoint
-                };
+                let wd = sample_weight(w, mask, i, samples.points[i], corner);
                 let wr = if corner {
                     w.frame_corner
                 } else {
@@ -331,13 +362,16 @@ impl ElementBlocks {
             }
             (gd, gr)
         };
-        let masks: Vec<u8> = (0..space.n_elements())
+        let masks: Vec<u64> = (0..space.n_elements())
             .map(|e| {
-                let mut m = 0u8;
+                let mut m = 0u64;
                 for (c, &v) in mesh.element(e).iter().enumerate() {
                     if topo.vertex_on_boundary[v as usize] {
                         m |= 1 << c;
                     }
+                }
+                if let Some(f) = features {
+                    m |= features::sample_mask(f, mesh, e) << 8;
                 }
                 m
             })
@@ -489,12 +523,25 @@ pub fn assemble_with_targets(
     w: &FitWeights,
     smooth: Option<&SmoothTargets>,
 ) -> (NormalMatrix, Vec<[f64; 3]>) {
+    assemble_with_features(space, mesh, topo, w, smooth, None)
+}
+
+/// [`assemble_with_targets`] with the samples on the sharp `features` weighted by
+/// [`FitWeights::feature`].
+pub fn assemble_with_features(
+    space: &dyn FitSpace,
+    mesh: &LinearMesh,
+    topo: &Topology,
+    w: &FitWeights,
+    smooth: Option<&SmoothTargets>,
+    features: Option<&crate::mesh::features::Features>,
+) -> (NormalMatrix, Vec<[f64; 3]>) {
     let dim = space.dim();
     let nb = if dim == 2 { 9 } else { 27 };
     let samples = Samples::new(dim);
     let n = space.control_points().len();
     let c0 = space.control_points();
-    let blocks = ElementBlocks::new(space, mesh, topo, w);
+    let blocks = ElementBlocks::with_features(space, mesh, topo, w, features);
     let (masks, cache) = (&blocks.masks, &blocks.cache);
     // Per element: the right-hand side on its control points, computed in parallel and added
     // in element order (the same sums on any thread count), a bounded batch of elements at a
@@ -513,16 +560,7 @@ pub fn assemble_with_targets(
                 let mut rhs_b = [[0.0; 3]; 27]; // F_e in Bernstein space
                 // F_e = Σ_i w^d_i b_i P_iᵀ + G^r B⁰.
                 for (i, l) in samples.points.iter().enumerate() {
-                    let corner = samples.is_corner(i);
-                    let wd = if corner {
-                        if masks[e] & (1 << corner_of(*l)) != 0 {
-                            w.boundary_corner
-                        } else {
-                            w.corner
-                        }
-                    } else {
-                        w.midpoint
-                    };
+                    let wd = sample_weight(w, masks[e], i, *l, samples.is_corner(i));
                     if wd == 0.0 {
                         continue;
                     }
@@ -606,9 +644,21 @@ pub fn fit_with(
     let t = std::time::Instant::now();
     let smooth = match params.targets {
         FitTargets::Chords => None,
-        FitTargets::Smooth(p) => Some(SmoothTargets::build(mesh, topo, &p)),
+        FitTargets::Smooth(p) => Some(SmoothTargets::build_with_features(
+            mesh,
+            topo,
+            &p,
+            params.features.as_deref(),
+        )),
     };
-    let (k, rhs) = assemble_with_targets(space, mesh, topo, &params.weights, smooth.as_ref());
+    let (k, rhs) = assemble_with_features(
+        space,
+        mesh,
+        topo,
+        &params.weights,
+        smooth.as_ref(),
+        params.features.as_deref(),
+    );
     let assembly_seconds = t.elapsed().as_secs_f64();
     let t = std::time::Instant::now();
     let mut delta = vec![[0.0; 3]; k.n];

@@ -30,7 +30,13 @@
 //! the boundary's correction: a thin boundary-layer cell is moved as a whole instead of having
 //! its boundary side pushed through its inner side, while isotropic cells see the correction
 //! only on their boundary side.
+//!
+//! With detected sharp features ([`SmoothTargets::build_with_features`]) the vertices on
+//! features take their models per patch and along feature curves instead
+//! ([`super::features::FeatureModels`]), so no model averages across a feature.
 
+use super::features::{BoundaryEntity, FeatureModels};
+use crate::mesh::features::Features;
 use crate::mesh::topology::{HEX_EDGES, HEX_VERTEX_PARAMS, NONE};
 use crate::mesh::{LinearMesh, Topology};
 use crate::sample::multilinear;
@@ -71,7 +77,7 @@ pub struct VertexModel {
 
 impl VertexModel {
     /// The model's displacement c(p) of the point p = Σ φ_j x_j of an entity (see module docs).
-    fn correction(&self, p: [f64; 3], xs: &[[f64; 3]], phi: f64) -> [f64; 3] {
+    pub(crate) fn correction(&self, p: [f64; 3], xs: &[[f64; 3]], phi: f64) -> [f64; 3] {
         let mut s = 0.0;
         for x in xs {
             let y = sub(*x, p);
@@ -93,11 +99,24 @@ pub struct SmoothTargets {
     pub feature_vertices: usize,
     /// Interior vertices with an inherited model of positive weight.
     pub blended_vertices: usize,
+    /// Models of the feature vertices per patch and curve, with features.
+    feature_models: Option<FeatureModels>,
 }
 
 impl SmoothTargets {
     /// Reconstruct the boundary models of `mesh` (quads or hexes) with topology `topo`.
     pub fn build(mesh: &LinearMesh, topo: &Topology, params: &SmoothParams) -> SmoothTargets {
+        Self::build_with_features(mesh, topo, params, None)
+    }
+
+    /// [`SmoothTargets::build`] where the vertices on `features` take per-patch and curve
+    /// models instead of one model each.
+    pub fn build_with_features(
+        mesh: &LinearMesh,
+        topo: &Topology,
+        params: &SmoothParams,
+        features: Option<&Features>,
+    ) -> SmoothTargets {
         let nv = mesh.n_vertices();
         let cos_max = params.feature_angle_deg.to_radians().cos();
         let mut models: Vec<Option<VertexModel>> = vec![None; nv];
@@ -115,7 +134,10 @@ impl SmoothTargets {
         }
         let x = |v: u32| mesh.coords[v as usize];
         for v in 0..nv {
-            if !topo.vertex_on_boundary[v] || non_manifold[v] {
+            if !topo.vertex_on_boundary[v]
+                || non_manifold[v]
+                || features.is_some_and(|f| f.vertex_mask[v])
+            {
                 continue;
             }
             let xv = mesh.coords[v];
@@ -251,6 +273,7 @@ impl SmoothTargets {
             smooth_vertices,
             feature_vertices,
             blended_vertices,
+            feature_models: features.map(|f| FeatureModels::build(mesh, topo, f, cos_max)),
         }
     }
 
@@ -272,7 +295,8 @@ impl SmoothTargets {
         let verts = mesh.element(e);
         let x = mesh.element_coords(e);
         let mut out = [[0.0; 3]; 27];
-        if verts.iter().all(|&v| self.models[v as usize].is_none()) {
+        if self.feature_models.is_none() && verts.iter().all(|&v| self.models[v as usize].is_none())
+        {
             return out;
         }
         let mut xs = Vec::with_capacity(8);
@@ -291,13 +315,24 @@ impl SmoothTargets {
                     ks.push(verts[c] as usize);
                 }
             }
-            let on_boundary = m < dim && self.entity_on_boundary(topo, e, l);
+            let at = if m < dim {
+                self.boundary_entity(topo, e, l)
+            } else {
+                None
+            };
+            let on_boundary = at.is_some();
             let p = multilinear(dim, &x, l.map(|c| c as f64 / 2.0));
             let phi = 1.0 / xs.len() as f64;
             let mut delta = [0.0; 3];
             let mut wsum = 0.0;
             for &k in &ks {
-                if let Some(model) = &self.models[k] {
+                let model = self.models[k].as_ref().or_else(|| {
+                    self.feature_models
+                        .as_ref()
+                        .zip(at)
+                        .and_then(|(f, at)| f.model(k as u32, at))
+                });
+                if let Some(model) = model {
                     let c = model.correction(p, &xs, phi);
                     let w = phi * model.weight;
                     delta = add(delta, c.map(|ci| w * ci));
@@ -312,15 +347,16 @@ impl SmoothTargets {
         out
     }
 
-    /// Whether the edge (one lattice coordinate 1) or 3D face (two) of element `e` at lattice
-    /// point `l` lies on the boundary.
-    fn entity_on_boundary(&self, topo: &Topology, e: usize, l: [usize; 3]) -> bool {
+    /// The boundary facet or 3D boundary edge of element `e` at lattice point `l` (an edge
+    /// with one lattice coordinate 1, a 3D face with two), if it is on the boundary.
+    fn boundary_entity(&self, topo: &Topology, e: usize, l: [usize; 3]) -> Option<BoundaryEntity> {
         let dim = self.dim;
         let ones: Vec<usize> = (0..dim).filter(|&k| l[k] == 1).collect();
         if dim == 2 || ones.len() == 2 {
             let k = (0..dim).find(|&k| l[k] != 1).unwrap();
-            let f = topo.element_facet(e, 2 * k + l[k] / 2) as usize;
-            return topo.facet_elements[f][1] == NONE;
+            let f = topo.element_facet(e, 2 * k + l[k] / 2);
+            return (topo.facet_elements[f as usize][1] == NONE)
+                .then_some(BoundaryEntity::Facet(f));
         }
         let k = ones[0];
         let others: Vec<usize> = (0..3).filter(|&j| j != k).collect();
@@ -329,12 +365,17 @@ impl SmoothTargets {
             HEX_EDGES[4 * k + i].map(|c| HEX_VERTEX_PARAMS[c][others[0]] as usize * 2),
             [l[others[0]]; 2]
         );
-        topo.edge_on_boundary[topo.element_edges[e * 12 + 4 * k + i] as usize]
+        let ed = topo.element_edges[e * 12 + 4 * k + i];
+        topo.edge_on_boundary[ed as usize].then_some(BoundaryEntity::Edge(ed))
     }
 }
 
 /// 2D model at x through its boundary neighbours a and b: (normal, H).
-fn fit_parabola(x: [f64; 3], a: [f64; 3], b: [f64; 3]) -> Option<([f64; 3], [[f64; 3]; 3])> {
+pub(super) fn fit_parabola(
+    x: [f64; 3],
+    a: [f64; 3],
+    b: [f64; 3],
+) -> Option<([f64; 3], [[f64; 3]; 3])> {
     let (ua, ub) = (sub(a, x), sub(b, x));
     let d = sub(ub, ua);
     let l = norm(d);
@@ -366,7 +407,11 @@ fn fit_parabola(x: [f64; 3], a: [f64; 3], b: [f64; 3]) -> Option<([f64; 3], [[f6
 
 /// 3D model: least-squares quadric height over the tangent plane of normal n0 through the
 /// neighbour offsets `pts` (relative to the vertex); `scale` ~ the edge length.
-fn fit_quadric(n0: [f64; 3], pts: &[[f64; 3]], scale: f64) -> Option<([f64; 3], [[f64; 3]; 3])> {
+pub(super) fn fit_quadric(
+    n0: [f64; 3],
+    pts: &[[f64; 3]],
+    scale: f64,
+) -> Option<([f64; 3], [[f64; 3]; 3])> {
     let mut n = n0;
     let mut q = [0.0; 3];
     let mut frame = tangent_frame(n);

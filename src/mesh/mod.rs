@@ -1,5 +1,6 @@
 //! Linear meshes and their topology.
 
+pub mod features;
 pub mod generate;
 pub mod linear;
 pub mod topology;

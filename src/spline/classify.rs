@@ -40,6 +40,10 @@ pub enum Q2Reason {
     AmbiguousStencil,
     /// Two stencil slots resolve to the same entity (e.g. a ring of fewer than 3 elements).
     RepeatedStencilEntry,
+    /// Demoted by the caller: a sharp feature (crease) runs between this element and a
+    /// neighbour ([`crate::mesh::features::Features::crease_elements`]), where the map must be
+    /// only C⁰.
+    FeatureCrease,
     /// Demoted by the caller: the spline map of the element was not certified valid on the
     /// initial control points, so it takes its own Lagrange nodes (the input's shape).
     InvalidSplineMap,

@@ -102,6 +102,18 @@ impl SplineSpace {
     /// empty slice demotes none) made constrained Q2 elements
     /// ([`Q2Reason::InvalidSplineMap`]). Their spline neighbours keep their stencils.
     pub fn build_with_demoted(mesh: &LinearMesh, topo: &Topology, demote: &[bool]) -> SplineSpace {
+        Self::build_with_q2(mesh, topo, &[(demote, Q2Reason::InvalidSplineMap)])
+    }
+
+    /// [`SplineSpace::build`], with the spline elements marked in each `(marks, reason)` pair
+    /// (indexed by element; empty slices mark none) made constrained Q2 elements for that
+    /// reason, the first pair that marks an element deciding. Their spline neighbours keep
+    /// their stencils.
+    pub fn build_with_q2(
+        mesh: &LinearMesh,
+        topo: &Topology,
+        demote: &[(&[bool], Q2Reason)],
+    ) -> SplineSpace {
         let dim = topo.dim;
         assert!(dim == 2 || dim == 3, "quad or hex meshes only");
         let ne = topo.n_elements;
@@ -115,9 +127,11 @@ impl SplineSpace {
 
         // 1–2. Classes and stencils.
         let mut classes = classify::classify(mesh, topo);
-        for (c, &d) in classes.iter_mut().zip(demote) {
-            if d && c.is_spline() {
-                *c = ElementClass::Q2(Q2Reason::InvalidSplineMap);
+        for &(marks, reason) in demote {
+            for (c, &d) in classes.iter_mut().zip(marks) {
+                if d && c.is_spline() {
+                    *c = ElementClass::Q2(reason);
+                }
             }
         }
         let mut local_nodes = vec![NONE; ne * nl];

@@ -1,0 +1,365 @@
+//! The fit's treatment of sharp features ([`crate::mesh::features`]).
+//!
+//! Input: the [`Features`] of the input mesh. Three things depend on them:
+//! * **Targets** ([`FeatureModels`]): the smooth-boundary reconstruction ([`super::smooth`])
+//!   never averages across a feature. A vertex on a feature edge carries one quadric model per
+//!   patch around it, fitted to that patch's faces only, and — where exactly two feature edges
+//!   meet — a curve model: the parabola through the vertex and its two neighbours along the
+//!   feature polyline (in their plane). Face samples use the models of their patch, samples on
+//!   a feature edge the curve models, samples on a non-feature boundary edge those of the
+//!   patch of its faces; corners (≠ 2 feature edges) have no curve model, so targets next to
+//!   them follow the other end's model or the chord.
+//! * **Weights** ([`sample_mask`]): corner samples at feature vertices take
+//!   [`super::FitWeights::feature`].
+//! * **Planar patches** ([`project_onto_planes`]): after the solve, every control point of a
+//!   boundary entity is projected onto the planes of the planar patches it belongs to (their
+//!   intersection line or point where there are several), so planar input faces stay exactly
+//!   planar. The initial control points lie on those planes already (vertex averages of
+//!   coplanar vertices), so every step of the line search keeps them there.
+
+use super::smooth::{VertexModel, fit_parabola, fit_quadric};
+use crate::mesh::features::{Features, add, cross, dot, norm, sub};
+use crate::mesh::topology::HEX_VERTEX_PARAMS;
+use crate::mesh::{LinearMesh, Topology};
+use crate::spline::{ControlPoint, SplineSpace};
+use std::collections::HashMap;
+
+/// Per-patch and per-curve boundary models at feature vertices.
+#[derive(Clone, Debug, Default)]
+pub struct FeatureModels {
+    /// (vertex, patch) → the quadric model of that patch at that vertex.
+    patch: HashMap<(u32, u32), VertexModel>,
+    /// Vertex with two feature edges → the model of the feature curve through it.
+    curve: HashMap<u32, VertexModel>,
+    /// Boundary facet id → patch (boundary facets at feature vertices).
+    facet_patch: HashMap<u32, u32>,
+    /// Boundary edge id → patch of its faces (non-feature edges at feature vertices).
+    edge_patch: HashMap<u32, u32>,
+    edge_mask: Vec<bool>,
+}
+
+/// Where a sample lies on the boundary.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum BoundaryEntity {
+    Facet(u32),
+    /// 3D boundary edge.
+    Edge(u32),
+}
+
+impl FeatureModels {
+    /// Models at the feature vertices of `features`; `cos_max` bounds the angle between a
+    /// patch's facet normals and the patch normal at a vertex (beyond it: no model).
+    pub fn build(
+        mesh: &LinearMesh,
+        topo: &Topology,
+        features: &Features,
+        cos_max: f64,
+    ) -> FeatureModels {
+        let mut out = FeatureModels {
+            edge_mask: features.edge_mask.clone(),
+            ..Default::default()
+        };
+        if topo.dim != 3 {
+            return out;
+        }
+        let x = |v: u32| mesh.coords[v as usize];
+        let mut fan: HashMap<u32, Vec<(u32, u32)>> = HashMap::new();
+        for (i, &f) in topo.boundary_facets.iter().enumerate() {
+            let p = features.facet_patch[i];
+            let q = topo.faces[f as usize];
+            if q.iter().any(|&v| features.vertex_mask[v as usize]) {
+                out.facet_patch.insert(f, p);
+                let e = topo.facet_elements[f as usize][0] as usize;
+                let side = topo.facet_sides[f as usize][0] as usize;
+                for ed in crate::mesh::features::face_edges(topo, e, side) {
+                    if !features.edge_mask[ed as usize] {
+                        out.edge_patch.insert(ed, p);
+                    }
+                }
+            }
+            for &v in &q {
+                if features.vertex_mask[v as usize] {
+                    fan.entry(v).or_default().push((f, p));
+                }
+            }
+        }
+        // Quadric per patch, from that patch's faces at the vertex.
+        for (&v, faces) in &fan {
+            let xv = x(v);
+            let mut patches: Vec<u32> = faces.iter().map(|&(_, p)| p).collect();
+            patches.sort_unstable();
+            patches.dedup();
+            for p in patches {
+                let mut area = [0.0; 3];
+                let mut normals = Vec::new();
+                let mut nb: Vec<u32> = Vec::new();
+                let mut total = 0.0;
+                for &(f, _) in faces.iter().filter(|&&(_, q)| q == p) {
+                    let q = topo.faces[f as usize];
+                    let a = cross(sub(x(q[2]), x(q[0])), sub(x(q[3]), x(q[1])));
+                    area = add(area, a);
+                    total += 0.5 * norm(a);
+                    normals.push(a.map(|c| c / norm(a).max(f64::MIN_POSITIVE)));
+                    nb.extend(q.iter().copied().filter(|&w| w != v));
+                }
+                nb.sort_unstable();
+                nb.dedup();
+                let la = norm(area);
+                if la == 0.0 || nb.len() < 5 {
+                    continue;
+                }
+                let n0 = area.map(|c| c / la);
+                if normals.iter().any(|nf| dot(*nf, n0) < cos_max) {
+                    continue;
+                }
+                let ell = (total / normals.len() as f64).sqrt();
+                let pts: Vec<[f64; 3]> = nb.iter().map(|&w| sub(x(w), xv)).collect();
+                if let Some((normal, h)) = fit_quadric(n0, &pts, ell) {
+                    out.patch.insert(
+                        (v, p),
+                        VertexModel {
+                            normal,
+                            h,
+                            weight: 1.0,
+                        },
+                    );
+                }
+            }
+        }
+        // Curve models where a feature curve passes through (two feature edges).
+        let mut along: HashMap<u32, Vec<u32>> = HashMap::new();
+        for &ed in &features.edges {
+            let [a, b] = topo.edges[ed as usize];
+            along.entry(a).or_default().push(b);
+            along.entry(b).or_default().push(a);
+        }
+        for (&v, nbs) in &along {
+            if let [a, b] = nbs[..]
+                && let Some(m) = curve_model(x(v), x(a), x(b))
+            {
+                out.curve.insert(v, m);
+            }
+        }
+        out
+    }
+
+    /// The model of vertex `k` for a sample on the boundary entity `at`.
+    pub(crate) fn model(&self, k: u32, at: BoundaryEntity) -> Option<&VertexModel> {
+        match at {
+            BoundaryEntity::Edge(ed) if self.edge_mask[ed as usize] => self.curve.get(&k),
+            BoundaryEntity::Edge(ed) => {
+                let p = self.edge_patch.get(&ed)?;
+                self.patch.get(&(k, *p))
+            }
+            BoundaryEntity::Facet(f) => {
+                let p = self.facet_patch.get(&f)?;
+                self.patch.get(&(k, *p))
+            }
+        }
+    }
+}
+
+/// The parabola through x and its feature-curve neighbours a, b, as a model in their plane
+/// (zero curvature when the three are collinear).
+fn curve_model(x: [f64; 3], a: [f64; 3], b: [f64; 3]) -> Option<VertexModel> {
+    let (ua, ub) = (sub(a, x), sub(b, x));
+    let d = sub(ub, ua);
+    let l = norm(d);
+    if l == 0.0 {
+        return None;
+    }
+    let t = d.map(|c| c / l);
+    // In-plane normal: the part of ua + ub across the chord direction.
+    let s = add(ua, ub);
+    let off = sub(s, t.map(|c| c * dot(s, t)));
+    let lo = norm(off);
+    if lo <= 1e-12 * l {
+        return Some(VertexModel {
+            normal: [0.0; 3],
+            h: [[0.0; 3]; 3],
+            weight: 1.0,
+        });
+    }
+    let n = off.map(|c| c / lo);
+    let to2 = |u: [f64; 3]| [dot(u, t), dot(u, n), 0.0];
+    let (n2, h2) = fit_parabola([0.0; 3], to2(ua), to2(ub))?;
+    let back = |u: [f64; 3]| add(t.map(|c| c * u[0]), n.map(|c| c * u[1]));
+    let basis = [t, n];
+    let mut h = [[0.0; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            for (p, bp) in basis.iter().enumerate() {
+                for (q, bq) in basis.iter().enumerate() {
+                    h[i][j] += bp[i] * h2[p][q] * bq[j];
+                }
+            }
+        }
+    }
+    Some(VertexModel {
+        normal: back(n2),
+        h,
+        weight: 1.0,
+    })
+}
+
+/// Samples of element `e` that take the feature weight, as bits of the 3^d lattice index
+/// (9z + 3y + x): its corners at feature vertices. Midpoints of feature edges keep the
+/// midpoint weight: weighting them as strongly as the vertices makes the quadratic spline
+/// trade vertex position for midpoint position where the spacing along a feature changes,
+/// sliding feature vertices along their curve (measured on the real meshes).
+pub fn sample_mask(features: &Features, mesh: &LinearMesh, e: usize) -> u64 {
+    let verts = mesh.element(e);
+    let mut mask = 0u64;
+    for (c, &v) in verts.iter().enumerate() {
+        if features.vertex_mask[v as usize] {
+            let p = HEX_VERTEX_PARAMS[c];
+            let i = 2 * p[0] as usize + 6 * p[1] as usize + 18 * p[2] as usize;
+            mask |= 1 << i;
+        }
+    }
+    mask
+}
+
+/// Project the boundary control points of `space` in `cps` onto the planes of the planar
+/// patches of `features` they belong to (see module docs). Returns how many moved.
+pub fn project_onto_planes(
+    space: &SplineSpace,
+    topo: &Topology,
+    features: &Features,
+    cps: &mut [[f64; 3]],
+) -> usize {
+    if topo.dim != 3 || features.planes.iter().all(|p| p.is_none()) {
+        return 0;
+    }
+    // Planar patches of every boundary face, edge and vertex.
+    let mut face_plane: HashMap<u32, u32> = HashMap::new();
+    let mut edge_planes: HashMap<u32, Vec<u32>> = HashMap::new();
+    let mut vertex_planes: HashMap<u32, Vec<u32>> = HashMap::new();
+    for (i, &f) in topo.boundary_facets.iter().enumerate() {
+        let p = features.facet_patch[i];
+        if features.planes[p as usize].is_none() {
+            continue;
+        }
+        face_plane.insert(f, p);
+        let e = topo.facet_elements[f as usize][0] as usize;
+        let side = topo.facet_sides[f as usize][0] as usize;
+        for ed in crate::mesh::features::face_edges(topo, e, side) {
+            edge_planes.entry(ed).or_default().push(p);
+        }
+        for &v in &topo.faces[f as usize] {
+            vertex_planes.entry(v).or_default().push(p);
+        }
+    }
+    let mut moved = 0;
+    for (c, key) in cps.iter_mut().zip(&space.control_point_keys) {
+        use ControlPoint::*;
+        let mut ps: Vec<u32> = match *key {
+            BFace(f) | Q2Face(f) => face_plane.get(&f).map(|&p| vec![p]).unwrap_or_default(),
+            BEdge(ed) | Q2Edge(ed) => edge_planes.get(&ed).cloned().unwrap_or_default(),
+            BVertex(v) | Q2Vertex(v) => vertex_planes.get(&v).cloned().unwrap_or_default(),
+            Cell(_) | Q2Centre(_) => Vec::new(),
+        };
+        ps.sort_unstable();
+        ps.dedup();
+        if ps.is_empty() {
+            continue;
+        }
+        let planes: Vec<([f64; 3], f64)> = ps
+            .iter()
+            .map(|&p| features.planes[p as usize].expect("planar"))
+            .collect();
+        if let Some(x) = project(*c, &planes) {
+            moved += 1;
+            *c = x;
+        }
+    }
+    moved
+}
+
+/// The nearest point to x on the intersection of up to three planes n·y = d (None when their
+/// normals are dependent, e.g. more than three planes or parallel ones).
+fn project(x: [f64; 3], planes: &[([f64; 3], f64)]) -> Option<[f64; 3]> {
+    let m = planes.len();
+    if m > 3 {
+        return None;
+    }
+    // y = x + Nᵀ λ with (N Nᵀ) λ = d − N x.
+    let mut g = [[0.0; 3]; 3];
+    let mut r = [0.0; 3];
+    for i in 0..m {
+        for j in 0..m {
+            g[i][j] = dot(planes[i].0, planes[j].0);
+        }
+        r[i] = planes[i].1 - dot(planes[i].0, x);
+    }
+    let lambda = solve_small(g, r, m)?;
+    let mut y = x;
+    for i in 0..m {
+        y = add(y, planes[i].0.map(|c| c * lambda[i]));
+    }
+    Some(y)
+}
+
+/// Solve the leading m×m block of g λ = r by elimination; None when near singular.
+fn solve_small(mut g: [[f64; 3]; 3], mut r: [f64; 3], m: usize) -> Option<[f64; 3]> {
+    for c in 0..m {
+        let p = (c..m).max_by(|&i, &j| g[i][c].abs().total_cmp(&g[j][c].abs()))?;
+        if g[p][c].abs() < 1e-8 {
+            return None;
+        }
+        g.swap(c, p);
+        r.swap(c, p);
+        for i in c + 1..m {
+            let f = g[i][c] / g[c][c];
+            for k in c..m {
+                g[i][k] -= f * g[c][k];
+            }
+            r[i] -= f * r[c];
+        }
+    }
+    let mut x = [0.0; 3];
+    for i in (0..m).rev() {
+        let mut s = r[i];
+        for k in i + 1..m {
+            s -= g[i][k] * x[k];
+        }
+        x[i] = s / g[i][i];
+    }
+    Some(x)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A feature curve on a circle: the corrected chord midpoint is much closer to the circle
+    /// than the chord's; a straight feature line gets no correction.
+    #[test]
+    fn curve_model_follows_a_circle_in_space() {
+        // Circle of radius 2 in the tilted plane spanned by e1 and (0, 1, 1)/√2.
+        let s = std::f64::consts::FRAC_1_SQRT_2;
+        let c = |t: f64| [2.0 * t.cos(), 2.0 * t.sin() * s, 2.0 * t.sin() * s];
+        let (a, x, b) = (c(0.0), c(0.2), c(0.45));
+        let m = curve_model(x, a, b).unwrap();
+        let p = [0.0, 1.0, 2.0].map(|k: f64| 0.5 * (x[k as usize] + b[k as usize]));
+        let q = add(p, m.correction(p, &[x, b], 0.5));
+        let (ep, eq) = ((norm(p) - 2.0).abs(), (norm(q) - 2.0).abs());
+        assert!(eq < 0.05 * ep, "chord {ep}, corrected {eq}");
+        let line = curve_model([1.0, 1.0, 1.0], [0.0; 3], [3.0, 3.0, 3.0]).unwrap();
+        let p = [2.0; 3];
+        assert_eq!(line.correction(p, &[[1.0; 3], [3.0; 3]], 0.5), [0.0; 3]);
+    }
+
+    /// Projection onto one plane, two planes (their line) and three (their point).
+    #[test]
+    fn projection_onto_plane_intersections() {
+        let x = [1.0, 2.0, 3.0];
+        let px = ([1.0, 0.0, 0.0], 0.0);
+        let py = ([0.0, 1.0, 0.0], 0.5);
+        let pz = ([0.0, 0.0, 1.0], -1.0);
+        assert_eq!(project(x, &[px]).unwrap(), [0.0, 2.0, 3.0]);
+        assert_eq!(project(x, &[px, py]).unwrap(), [0.0, 0.5, 3.0]);
+        assert_eq!(project(x, &[px, py, pz]).unwrap(), [0.0, 0.5, -1.0]);
+        assert!(project(x, &[px, px]).is_none());
+    }
+}

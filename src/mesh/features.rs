@@ -1,0 +1,744 @@
+//! Sharp features of the boundary: feature edges, feature corners and smooth patches.
+//!
+//! Input: a [`LinearMesh`], its [`Topology`], [`FeatureParams`] and optional user edits
+//! ([`read_edits`]). Output: [`Features`].
+//!
+//! * **3D.** A boundary edge is a *feature edge* when the normals of its two boundary faces
+//!   differ by more than `angle_deg` (dihedral angle), when the two faces carry different
+//!   boundary tags (with `tags`), or when it does not lie on exactly two boundary faces
+//!   (non-manifold). User edits then add or remove edges (`add i j` / `remove i j`, vertex ids).
+//!   A *feature corner* is a vertex where a number of feature edges other than 2 meet.
+//!   *Patches* are the connected sets of boundary faces joined across non-feature edges.
+//! * **2D.** Features are the corners of the boundary polygon: boundary vertices where the
+//!   boundary turns by more than `angle_deg`, where the tags of the two boundary edges differ,
+//!   or that do not lie on exactly two boundary edges; edits `add i` / `remove i` name vertices.
+//!   Patches are the boundary chains between corners (a closed loop without corners is one).
+//!
+//! Invariants: feature edges are boundary edges; [`Features::vertex_mask`] is true exactly at
+//! the vertices of feature edges (3D) or at corners (2D); every boundary facet has one patch.
+
+use crate::mesh::topology::NONE;
+use crate::mesh::{LinearMesh, Topology};
+use std::path::{Path, PathBuf};
+
+/// What counts as a sharp feature.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct FeatureParams {
+    /// Facet normals (3D) or boundary edge directions (2D) turning by more than this many
+    /// degrees make a feature; 180 finds none by angle.
+    pub angle_deg: f64,
+    /// Boundaries between differently tagged boundary regions are features.
+    pub tags: bool,
+}
+
+impl Default for FeatureParams {
+    fn default() -> Self {
+        FeatureParams {
+            angle_deg: 35.0,
+            tags: true,
+        }
+    }
+}
+
+impl FeatureParams {
+    /// No feature is found (angle 180, tags ignored).
+    pub fn off() -> Self {
+        FeatureParams {
+            angle_deg: 180.0,
+            tags: false,
+        }
+    }
+}
+
+/// Feature detection as the CLI asks for it: parameters and an optional edits file.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct FeatureOptions {
+    pub params: FeatureParams,
+    /// `--feature-edits FILE` (see [`read_edits`]).
+    pub edits: Option<PathBuf>,
+    /// Detect and measure the features (reports), but let neither the spline space nor the fit
+    /// use them: the smooth treatment, for comparisons.
+    pub ignore: bool,
+}
+
+impl FeatureOptions {
+    /// Read the edits file, if any, and detect the features of `mesh`.
+    pub fn detect(&self, mesh: &LinearMesh, topo: &Topology) -> Result<Features, FeatureError> {
+        match &self.edits {
+            None => Ok(Features::detect_without_edits(mesh, topo, &self.params)),
+            Some(path) => Features::detect(mesh, topo, &self.params, &read_edits(path)?, path),
+        }
+    }
+}
+
+/// What the features became in a curved mesh (the `features` object of `curve --report`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct FeatureReport {
+    #[serde(flatten)]
+    pub found: FeatureSummary,
+    /// Largest distance of an output node at a feature vertex from the input vertex, relative
+    /// to the bounding-box diagonal.
+    pub feature_vertex_deviation_max: f64,
+    /// Largest distance of an output boundary node of a planar patch from the patch's plane,
+    /// relative to the bounding-box diagonal (0 without planar patches).
+    pub planarity_max: f64,
+}
+
+/// One line of a feature edits file.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct FeatureEdit {
+    /// `add` (true) or `remove`.
+    pub add: bool,
+    /// One vertex (2D corners) or two (3D edges), 0-based in the order the file's vertices are
+    /// read.
+    pub vertices: Vec<u32>,
+    /// 1-based line of the file, for messages.
+    pub line: usize,
+}
+
+/// A bad feature edits file.
+#[derive(Debug, thiserror::Error)]
+pub enum FeatureError {
+    #[error("{}: {source}", path.display())]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("{}:{line}: {what}", path.display())]
+    Line {
+        path: PathBuf,
+        line: usize,
+        what: String,
+    },
+}
+
+/// Read a feature edits file: one edit per line, `add i j` / `remove i j` (3D) or `add i` /
+/// `remove i` (2D); `#` starts a comment, blank lines are skipped. The ids are checked
+/// against the mesh by [`Features::detect`].
+pub fn read_edits(path: &Path) -> Result<Vec<FeatureEdit>, FeatureError> {
+    let text = std::fs::read_to_string(path).map_err(|source| FeatureError::Io {
+        path: path.to_owned(),
+        source,
+    })?;
+    let mut edits = Vec::new();
+    for (i, raw) in text.lines().enumerate() {
+        let line = i + 1;
+        let content = raw.split('#').next().unwrap_or("").trim();
+        if content.is_empty() {
+            continue;
+        }
+        let bad = |what: String| FeatureError::Line {
+            path: path.to_owned(),
+            line,
+            what,
+        };
+        let mut words = content.split_whitespace();
+        let add = match words.next() {
+            Some("add") => true,
+            Some("remove") => false,
+            Some(w) => {
+                return Err(bad(format!(
+                    "unknown edit `{w}`; expected `add` or `remove` followed by vertex ids"
+                )));
+            }
+            None => unreachable!("non-empty line"),
+        };
+        let vertices = words
+            .map(|w| {
+                w.parse::<u32>()
+                    .map_err(|_| bad(format!("`{w}` is not a vertex id (0-based integer)")))
+            })
+            .collect::<Result<Vec<u32>, _>>()?;
+        if vertices.is_empty() || vertices.len() > 2 {
+            return Err(bad(format!(
+                "expected one vertex id (2D corner) or two (3D edge), found {}",
+                vertices.len()
+            )));
+        }
+        edits.push(FeatureEdit {
+            add,
+            vertices,
+            line,
+        });
+    }
+    Ok(edits)
+}
+
+/// The sharp features of a mesh boundary (see module docs).
+#[derive(Clone, Debug, Default)]
+pub struct Features {
+    pub dim: usize,
+    /// 3D: feature edges as topology edge ids, sorted. Empty in 2D.
+    pub edges: Vec<u32>,
+    /// Feature corners (vertex ids, sorted): 3D vertices with ≠ 2 feature edges, 2D corners.
+    pub corners: Vec<u32>,
+    /// Patch of each boundary facet (parallel to `topo.boundary_facets`).
+    pub facet_patch: Vec<u32>,
+    pub n_patches: usize,
+    /// Per patch: `Some((unit normal, offset))` when all its vertices lie on the plane
+    /// `n·x = offset` within 1e-6 × the mesh's bounding-box diagonal (3D only).
+    pub planes: Vec<Option<([f64; 3], f64)>>,
+    /// Per vertex: on a feature edge (3D) or a corner (2D).
+    pub vertex_mask: Vec<bool>,
+    /// Per topology edge: a feature edge (3D; all false in 2D).
+    pub edge_mask: Vec<bool>,
+}
+
+/// What [`Features`] found, for `info` and reports.
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct FeatureSummary {
+    pub feature_angle_deg: f64,
+    pub tags: bool,
+    pub feature_edges: usize,
+    pub feature_corners: usize,
+    pub feature_vertices: usize,
+    pub patches: usize,
+    pub planar_patches: usize,
+    /// Elements a crease runs between ([`Features::crease_elements`]).
+    pub crease_elements: usize,
+}
+
+impl Features {
+    /// Detect the features of `mesh` (topology `topo`) with `params`, then apply `edits`
+    /// (from `edits_path`, named in errors).
+    pub fn detect(
+        mesh: &LinearMesh,
+        topo: &Topology,
+        params: &FeatureParams,
+        edits: &[FeatureEdit],
+        edits_path: &Path,
+    ) -> Result<Features, FeatureError> {
+        let nv = mesh.n_vertices();
+        let cos_max = params.angle_deg.to_radians().cos();
+        let nb = topo.boundary_facets.len();
+        let bad = |line: usize, what: String| FeatureError::Line {
+            path: edits_path.to_owned(),
+            line,
+            what,
+        };
+        let tag = |i: usize| topo.boundary_facet_tags.get(i).copied().unwrap_or(0);
+        let mut vertex_mask = vec![false; nv];
+        let mut edge_mask = vec![false; topo.edges.len()];
+        // Boundary facets at each vertex (2D) or edge (3D), as indices into boundary_facets.
+        if topo.dim == 2 {
+            let mut at: Vec<Vec<usize>> = vec![Vec::new(); nv];
+            for (i, &f) in topo.boundary_facets.iter().enumerate() {
+                for &v in topo.facet_vertices(f as usize) {
+                    at[v as usize].push(i);
+                }
+            }
+            for v in 0..nv {
+                match at[v][..] {
+                    [] => {}
+                    [i, j] => {
+                        let other = |i: usize| {
+                            let e = topo.edges[topo.boundary_facets[i] as usize];
+                            if e[0] as usize == v { e[1] } else { e[0] }
+                        };
+                        let x = mesh.coords[v];
+                        let a = sub(mesh.coords[other(i) as usize], x);
+                        let b = sub(mesh.coords[other(j) as usize], x);
+                        // Turning angle = π − the angle between the two edges.
+                        let cos_turn = -dot(a, b) / (norm(a) * norm(b));
+                        vertex_mask[v] = cos_turn < cos_max || (params.tags && tag(i) != tag(j));
+                    }
+                    _ => vertex_mask[v] = true,
+                }
+            }
+            for ed in edits {
+                let &[v] = &ed.vertices[..] else {
+                    return Err(bad(
+                        ed.line,
+                        "a 2D mesh's features are corners: give one vertex id".into(),
+                    ));
+                };
+                if v as usize >= nv || !topo.vertex_on_boundary[v as usize] {
+                    return Err(bad(
+                        ed.line,
+                        format!("vertex {v} is not a boundary vertex of the mesh ({nv} vertices)"),
+                    ));
+                }
+                vertex_mask[v as usize] = ed.add;
+            }
+        } else {
+            let mut normal = vec![[0.0; 3]; nb];
+            for (i, &f) in topo.boundary_facets.iter().enumerate() {
+                let q = topo.faces[f as usize];
+                let x = |k: usize| mesh.coords[q[k] as usize];
+                let n = cross(sub(x(2), x(0)), sub(x(3), x(1)));
+                let l = norm(n);
+                normal[i] = if l > 0.0 { n.map(|c| c / l) } else { n };
+            }
+            let mut edge_facets: Vec<Vec<usize>> = vec![Vec::new(); topo.edges.len()];
+            for (i, &f) in topo.boundary_facets.iter().enumerate() {
+                let fe = topo.facet_elements[f as usize][0] as usize;
+                let side = topo.facet_sides[f as usize][0] as usize;
+                for ed in face_edges(topo, fe, side) {
+                    edge_facets[ed as usize].push(i);
+                }
+            }
+            for (ed, fs) in edge_facets.iter().enumerate() {
+                edge_mask[ed] = match fs[..] {
+                    [] => false,
+                    [i, j] => {
+                        dot(normal[i], normal[j]) < cos_max || (params.tags && tag(i) != tag(j))
+                    }
+                    _ => true,
+                };
+            }
+            for ed in edits {
+                let &[a, b] = &ed.vertices[..] else {
+                    return Err(bad(
+                        ed.line,
+                        "a 3D mesh's features are edges: give two vertex ids".into(),
+                    ));
+                };
+                let key = [a.min(b), a.max(b)];
+                let id = topo
+                    .edges
+                    .binary_search(&key)
+                    .ok()
+                    .filter(|&id| topo.edge_on_boundary[id]);
+                let Some(id) = id else {
+                    return Err(bad(
+                        ed.line,
+                        format!(
+                            "vertices {a} and {b} are not the ends of a boundary edge of the mesh"
+                        ),
+                    ));
+                };
+                edge_mask[id] = ed.add;
+            }
+            for (ed, &m) in edge_mask.iter().enumerate() {
+                if m {
+                    for v in topo.edges[ed] {
+                        vertex_mask[v as usize] = true;
+                    }
+                }
+            }
+        }
+
+        // Patches: union boundary facets across non-feature edges (3D) / vertices (2D).
+        let mut uf: Vec<u32> = (0..nb as u32).collect();
+        fn find(uf: &mut [u32], mut i: u32) -> u32 {
+            while uf[i as usize] != i {
+                uf[i as usize] = uf[uf[i as usize] as usize];
+                i = uf[i as usize];
+            }
+            i
+        }
+        let mut joined: Vec<u32> = vec![NONE; if topo.dim == 2 { nv } else { topo.edges.len() }];
+        for (i, &f) in topo.boundary_facets.iter().enumerate() {
+            let keys: Vec<u32> = if topo.dim == 2 {
+                topo.facet_vertices(f as usize)
+                    .iter()
+                    .copied()
+                    .filter(|&v| !vertex_mask[v as usize])
+                    .collect()
+            } else {
+                let fe = topo.facet_elements[f as usize][0] as usize;
+                let side = topo.facet_sides[f as usize][0] as usize;
+                face_edges(topo, fe, side)
+                    .into_iter()
+                    .filter(|&ed| !edge_mask[ed as usize])
+                    .collect()
+            };
+            for k in keys {
+                let j = joined[k as usize];
+                if j == NONE {
+                    joined[k as usize] = i as u32;
+                } else {
+                    let (a, b) = (find(&mut uf, i as u32), find(&mut uf, j));
+                    uf[a.max(b) as usize] = a.min(b);
+                }
+            }
+        }
+        let mut facet_patch = vec![NONE; nb];
+        let mut n_patches = 0;
+        for i in 0..nb {
+            let r = find(&mut uf, i as u32) as usize;
+            if facet_patch[r] == NONE {
+                facet_patch[r] = n_patches as u32;
+                n_patches += 1;
+            }
+            facet_patch[i] = facet_patch[r];
+        }
+
+        let (lo, hi) = mesh.bounding_box();
+        let tol = 1e-6 * norm(sub(hi, lo));
+        let planes = if topo.dim == 3 {
+            planar_patches(mesh, topo, &facet_patch, n_patches, tol)
+        } else {
+            vec![None; n_patches]
+        };
+        let edges: Vec<u32> = (0..edge_mask.len() as u32)
+            .filter(|&e| edge_mask[e as usize])
+            .collect();
+        let corners = if topo.dim == 2 {
+            (0..nv as u32)
+                .filter(|&v| vertex_mask[v as usize])
+                .collect()
+        } else {
+            let mut count = vec![0u32; nv];
+            for &e in &edges {
+                for v in topo.edges[e as usize] {
+                    count[v as usize] += 1;
+                }
+            }
+            (0..nv as u32)
+                .filter(|&v| count[v as usize] != 0 && count[v as usize] != 2)
+                .collect()
+        };
+        Ok(Features {
+            dim: topo.dim,
+            edges,
+            corners,
+            facet_patch,
+            n_patches,
+            planes,
+            vertex_mask,
+            edge_mask,
+        })
+    }
+
+    /// Features by angle and tags alone (no edits).
+    pub fn detect_without_edits(
+        mesh: &LinearMesh,
+        topo: &Topology,
+        params: &FeatureParams,
+    ) -> Features {
+        Self::detect(mesh, topo, params, &[], Path::new("")).expect("no edits, so no edit errors")
+    }
+
+    /// True when nothing was found.
+    pub fn is_empty(&self) -> bool {
+        !self.vertex_mask.iter().any(|&m| m)
+    }
+
+    /// Counts for reports.
+    pub fn summary(&self, params: &FeatureParams, topo: &Topology) -> FeatureSummary {
+        FeatureSummary {
+            feature_angle_deg: params.angle_deg,
+            tags: params.tags,
+            feature_edges: self.edges.len(),
+            feature_corners: self.corners.len(),
+            feature_vertices: self.vertex_mask.iter().filter(|&&m| m).count(),
+            patches: self.n_patches,
+            planar_patches: self.planes.iter().filter(|p| p.is_some()).count(),
+            crease_elements: self.crease_elements(topo).iter().filter(|&&c| c).count(),
+        }
+    }
+
+    /// (feature vertex deviation, planarity) of the sampled mesh `ho` of `mesh`, relative to
+    /// the bounding-box diagonal (see [`FeatureReport`]).
+    pub fn deviations(&self, mesh: &LinearMesh, ho: &crate::sample::HighOrderMesh) -> (f64, f64) {
+        let (lo, hi) = mesh.bounding_box();
+        let diag = norm(sub(hi, lo)).max(f64::MIN_POSITIVE);
+        let vertex = (0..mesh.n_vertices())
+            .filter(|&v| self.vertex_mask[v])
+            .map(|v| norm(sub(ho.nodes[v], mesh.coords[v])))
+            .fold(0.0, f64::max);
+        let npf = ho.nodes_per_facet();
+        let mut planarity = 0.0f64;
+        for (i, &p) in self.facet_patch.iter().enumerate() {
+            if let Some(Some((n, d))) = self.planes.get(p as usize) {
+                for &k in &ho.boundary[i * npf..(i + 1) * npf] {
+                    planarity = planarity.max((dot(*n, ho.nodes[k as usize]) - d).abs());
+                }
+            }
+        }
+        (vertex / diag, planarity / diag)
+    }
+
+    /// Elements on either side of a crease that runs *between* elements: in 3D a feature edge
+    /// whose boundary faces belong to two different elements, in 2D a corner whose two boundary
+    /// edges do. They become constrained Q2 elements, so the map is only C⁰ there; a crease
+    /// along one element's own edge is C⁰ inside that element already.
+    pub fn crease_elements(&self, topo: &Topology) -> Vec<bool> {
+        let mut mark = vec![false; topo.n_elements];
+        // Element of each boundary facet at each feature vertex / edge.
+        let mut owners: std::collections::HashMap<u32, Vec<u32>> = Default::default();
+        for &f in &topo.boundary_facets {
+            let e = topo.facet_elements[f as usize][0];
+            if self.dim == 2 {
+                for &v in topo.facet_vertices(f as usize) {
+                    if self.vertex_mask[v as usize] {
+                        owners.entry(v).or_default().push(e);
+                    }
+                }
+            } else {
+                let side = topo.facet_sides[f as usize][0] as usize;
+                for ed in face_edges(topo, e as usize, side) {
+                    if self.edge_mask[ed as usize] {
+                        owners.entry(ed).or_default().push(e);
+                    }
+                }
+            }
+        }
+        for es in owners.values() {
+            if es.iter().any(|&e| e != es[0]) {
+                for &e in es {
+                    mark[e as usize] = true;
+                }
+            }
+        }
+        mark
+    }
+}
+
+/// Topology edge ids of local side `side` of hex `e`.
+pub fn face_edges(topo: &Topology, e: usize, side: usize) -> Vec<u32> {
+    use crate::mesh::topology::HEX_EDGES;
+    let k = side / 2;
+    let s = (side % 2) as u8;
+    (0..12)
+        .filter(|&le| {
+            let [a, b] = HEX_EDGES[le];
+            crate::mesh::topology::HEX_VERTEX_PARAMS[a][k] == s
+                && crate::mesh::topology::HEX_VERTEX_PARAMS[b][k] == s
+        })
+        .map(|le| topo.element_edges[e * 12 + le])
+        .collect()
+}
+
+/// Planes of the patches whose vertices are all within `tol` of their area-weighted plane.
+fn planar_patches(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    facet_patch: &[u32],
+    n_patches: usize,
+    tol: f64,
+) -> Vec<Option<([f64; 3], f64)>> {
+    let mut area = vec![[0.0; 3]; n_patches];
+    let mut centre = vec![[0.0; 4]; n_patches];
+    for (i, &f) in topo.boundary_facets.iter().enumerate() {
+        let q = topo.faces[f as usize];
+        let x = |k: usize| mesh.coords[q[k] as usize];
+        let p = facet_patch[i] as usize;
+        let n = cross(sub(x(2), x(0)), sub(x(3), x(1)));
+        area[p] = add(area[p], n);
+        for k in 0..4 {
+            for c in 0..3 {
+                centre[p][c] += x(k)[c];
+            }
+            centre[p][3] += 1.0;
+        }
+    }
+    let mut planes: Vec<Option<([f64; 3], f64)>> = (0..n_patches)
+        .map(|p| {
+            let l = norm(area[p]);
+            (l > 0.0).then(|| {
+                let n = area[p].map(|c| c / l);
+                let c = [0, 1, 2].map(|k| centre[p][k] / centre[p][3]);
+                (n, dot(n, c))
+            })
+        })
+        .collect();
+    for (i, &f) in topo.boundary_facets.iter().enumerate() {
+        let p = facet_patch[i] as usize;
+        if let Some((n, d)) = planes[p]
+            && topo.faces[f as usize]
+                .iter()
+                .any(|&v| (dot(n, mesh.coords[v as usize]) - d).abs() > tol)
+        {
+            planes[p] = None;
+        }
+    }
+    planes
+}
+
+pub(crate) fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+}
+pub(crate) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+pub(crate) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+pub(crate) fn norm(a: [f64; 3]) -> f64 {
+    dot(a, a).sqrt()
+}
+pub(crate) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::generate::{grid_2d, grid_3d, uniform};
+
+    fn detect(mesh: &LinearMesh, params: FeatureParams) -> Features {
+        Features::detect_without_edits(mesh, &Topology::build(mesh), &params)
+    }
+
+    fn untagged(mut mesh: LinearMesh) -> LinearMesh {
+        mesh.tagged_facets.clear();
+        mesh.facet_tags.clear();
+        mesh
+    }
+
+    /// A cube of one hex: 12 feature edges, 8 corners, 6 planar patches; a 3×3×3 grid of it
+    /// (4 per axis) has the same corners and 4 mesh edges per cube edge. The tags alone find the same.
+    #[test]
+    fn cube_has_twelve_feature_edges_and_eight_corners() {
+        let one = untagged(grid_3d(&[0.0, 1.0], &[0.0, 1.0], &[0.0, 1.0]));
+        let f = detect(&one, FeatureParams::default());
+        assert_eq!((f.edges.len(), f.corners.len(), f.n_patches), (12, 8, 6));
+        assert!(f.planes.iter().all(|p| p.is_some()));
+        let u = uniform(4, 0.25);
+        let grid = grid_3d(&u, &u, &u);
+        let f = detect(&untagged(grid.clone()), FeatureParams::default());
+        assert_eq!((f.edges.len(), f.corners.len(), f.n_patches), (48, 8, 6));
+        // Vertices on the 12 cube edges: 8 corners + 12 × 3 inner ones.
+        assert_eq!(f.vertex_mask.iter().filter(|&&m| m).count(), 44);
+        let tags_only = FeatureParams {
+            angle_deg: 180.0,
+            tags: true,
+        };
+        let t = detect(&grid, tags_only);
+        assert_eq!((t.edges, t.corners), (f.edges, f.corners));
+        assert!(detect(&untagged(grid), tags_only).is_empty());
+    }
+
+    /// An extruded polygon: the rims are features at 35°, the 30° turns between wall facets
+    /// are not, and a 25° threshold finds the wall's vertical edges too.
+    #[test]
+    fn cylinder_rims_and_angle_threshold() {
+        let k = 12; // 30° between neighbouring wall facets
+        let ring = |r: f64| -> Vec<[f64; 3]> {
+            (0..k)
+                .map(|i| {
+                    let t = std::f64::consts::TAU * i as f64 / k as f64;
+                    [r * t.cos(), r * t.sin(), 0.0]
+                })
+                .collect()
+        };
+        // Annulus of k quads between radii 1 and 2, extruded in 2 layers.
+        let mut coords = ring(1.0);
+        coords.extend(ring(2.0));
+        let mut elements = Vec::new();
+        for i in 0..k as u32 {
+            let j = (i + 1) % k as u32;
+            elements.extend([i, k as u32 + i, k as u32 + j, j]);
+        }
+        let annulus = LinearMesh {
+            dim: 2,
+            coords,
+            elements,
+            ..Default::default()
+        };
+        let mesh = crate::mesh::generate::extrude(&annulus, &[0.0, 0.5, 1.0]);
+        let mesh = untagged(mesh);
+        let f = detect(&mesh, FeatureParams::default());
+        // 4 rims of k edges (inner/outer × bottom/top), no corners, 4 patches.
+        assert_eq!((f.edges.len(), f.corners.len(), f.n_patches), (4 * k, 0, 4));
+        assert_eq!(f.planes.iter().filter(|p| p.is_some()).count(), 2);
+        let fine = detect(
+            &mesh,
+            FeatureParams {
+                angle_deg: 25.0,
+                tags: false,
+            },
+        );
+        // Plus 2 × k vertical walls' edges of 2 segments.
+        assert_eq!(fine.edges.len(), 4 * k + 2 * 2 * k);
+        assert!(detect(&mesh, FeatureParams::off()).is_empty());
+    }
+
+    /// 2D: the corners of a square are features, the straight sides' vertices are not; a
+    /// crease between two elements marks both.
+    #[test]
+    fn square_corners_in_2d_and_crease_elements() {
+        let u = uniform(3, 1.0 / 3.0);
+        let mesh = untagged(grid_2d(&u, &u));
+        let topo = Topology::build(&mesh);
+        let f = Features::detect_without_edits(&mesh, &topo, &FeatureParams::default());
+        assert_eq!(f.corners, vec![0, 3, 12, 15]);
+        assert_eq!(f.n_patches, 4);
+        // Each corner is one quad's own corner: nothing to demote.
+        assert!(f.crease_elements(&topo).iter().all(|&m| !m));
+        // A corner added on the bottom side runs between quads 0 and 1.
+        let edits = [FeatureEdit {
+            add: true,
+            vertices: vec![1],
+            line: 1,
+        }];
+        let f = Features::detect(
+            &mesh,
+            &topo,
+            &FeatureParams::default(),
+            &edits,
+            Path::new("e"),
+        )
+        .unwrap();
+        let marked: Vec<usize> = (0..9).filter(|&e| f.crease_elements(&topo)[e]).collect();
+        assert_eq!(marked, vec![0, 1]);
+        assert_eq!(f.n_patches, 5);
+    }
+
+    /// Write `text` to a file of its own (removed on drop).
+    struct Temp(PathBuf);
+    impl Drop for Temp {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_file(&self.0);
+        }
+    }
+    fn write(text: &str) -> (Temp, PathBuf) {
+        use std::sync::atomic::{AtomicUsize, Ordering};
+        static N: AtomicUsize = AtomicUsize::new(0);
+        let path = std::env::temp_dir().join(format!(
+            "polyspline-edits-{}-{}.txt",
+            std::process::id(),
+            N.fetch_add(1, Ordering::Relaxed)
+        ));
+        std::fs::write(&path, text).unwrap();
+        (Temp(path.clone()), path)
+    }
+
+    /// Edits add and remove edges; bad lines are refused with the file and line named.
+    #[test]
+    fn edits_file_adds_removes_and_reports_bad_lines() {
+        let u = uniform(3, 1.0 / 3.0);
+        let mesh = untagged(grid_3d(&u, &u, &u));
+        let topo = Topology::build(&mesh);
+        let p = FeatureParams::default();
+        // Vertices 0–1 lie on a cube edge; 1–2 too; 5–6 is an edge of the bottom face's inside.
+        let (_d, path) = write("# edits\nremove 0 1\n\nadd 5 6  # a line on the bottom face\n");
+        let edits = read_edits(&path).unwrap();
+        let f = Features::detect(&mesh, &topo, &p, &edits, &path).unwrap();
+        let base = Features::detect_without_edits(&mesh, &topo, &p);
+        assert_eq!(f.edges.len(), base.edges.len());
+        let id = |a: u32, b: u32| topo.edges.binary_search(&[a, b]).unwrap();
+        assert!(!f.edge_mask[id(0, 1)] && base.edge_mask[id(0, 1)]);
+        assert!(f.edge_mask[id(5, 6)] && !base.edge_mask[id(5, 6)]);
+        for (text, needle) in [
+            ("add 0 1\nmove 1 2\n", ":2: unknown edit `move`"),
+            ("add 0 x\n", ":1: `x` is not a vertex id"),
+            ("add 0 1 2\n", ":1: expected one vertex id"),
+            (
+                "\nadd 0 63\n",
+                ":2: vertices 0 and 63 are not the ends of a boundary edge",
+            ),
+            ("add 21 22\n", ":1: vertices 21 and 22"), // an interior edge
+            ("remove 0\n", ":1: a 3D mesh's features are edges"),
+            ("add 0 1000\n", ":1: vertices 0 and 1000"),
+        ] {
+            let (_d, path) = write(text);
+            let err = read_edits(&path)
+                .and_then(|e| Features::detect(&mesh, &topo, &p, &e, &path))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                err.starts_with(&path.display().to_string()) && err.contains(needle),
+                "{text:?}: {err}"
+            );
+        }
+        let missing = read_edits(Path::new("/nonexistent/edits.txt")).unwrap_err();
+        assert!(missing.to_string().starts_with("/nonexistent/edits.txt: "));
+    }
+}
