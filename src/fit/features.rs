@@ -17,8 +17,8 @@
 //!   planar. The initial control points lie on those planes already (vertex averages of
 //!   coplanar vertices), so every step of the line search keeps them there.
 
-use super::smooth::{VertexModel, fit_parabola, fit_quadric};
-use crate::mesh::features::{Features, add, cross, dot, norm, sub};
+use super::smooth::{VertexModel, fan_model, fit_parabola};
+use crate::mesh::features::{Features, add, dot, norm, sub};
 use crate::mesh::topology::HEX_VERTEX_PARAMS;
 use crate::mesh::{LinearMesh, Topology};
 use crate::spline::{ControlPoint, SplineSpace};
@@ -85,44 +85,17 @@ impl FeatureModels {
         }
         // Quadric per patch, from that patch's faces at the vertex.
         for (&v, faces) in &fan {
-            let xv = x(v);
             let mut patches: Vec<u32> = faces.iter().map(|&(_, p)| p).collect();
             patches.sort_unstable();
             patches.dedup();
             for p in patches {
-                let mut area = [0.0; 3];
-                let mut normals = Vec::new();
-                let mut nb: Vec<u32> = Vec::new();
-                let mut total = 0.0;
-                for &(f, _) in faces.iter().filter(|&&(_, q)| q == p) {
-                    let q = topo.faces[f as usize];
-                    let a = cross(sub(x(q[2]), x(q[0])), sub(x(q[3]), x(q[1])));
-                    area = add(area, a);
-                    total += 0.5 * norm(a);
-                    normals.push(a.map(|c| c / norm(a).max(f64::MIN_POSITIVE)));
-                    nb.extend(q.iter().copied().filter(|&w| w != v));
-                }
-                nb.sort_unstable();
-                nb.dedup();
-                let la = norm(area);
-                if la == 0.0 || nb.len() < 5 {
-                    continue;
-                }
-                let n0 = area.map(|c| c / la);
-                if normals.iter().any(|nf| dot(*nf, n0) < cos_max) {
-                    continue;
-                }
-                let ell = (total / normals.len() as f64).sqrt();
-                let pts: Vec<[f64; 3]> = nb.iter().map(|&w| sub(x(w), xv)).collect();
-                if let Some((normal, h)) = fit_quadric(n0, &pts, ell) {
-                    out.patch.insert(
-                        (v, p),
-                        VertexModel {
-                            normal,
-                            h,
-                            weight: 1.0,
-                        },
-                    );
+                let own: Vec<u32> = faces
+                    .iter()
+                    .filter(|&&(_, q)| q == p)
+                    .map(|&(f, _)| f)
+                    .collect();
+                if let Some((Some(model), _)) = fan_model(mesh, topo, v, &own, cos_max) {
+                    out.patch.insert((v, p), model);
                 }
             }
         }

@@ -170,36 +170,10 @@ impl SmoothTargets {
                 if fan[v].len() < 3 {
                     continue;
                 }
-                let mut area = [0.0; 3];
-                let mut normals = Vec::with_capacity(fan[v].len());
-                let mut nb: Vec<u32> = Vec::new();
-                let mut total_area = 0.0;
-                for &f in &fan[v] {
-                    let q = topo.faces[f as usize];
-                    let a = cross(sub(x(q[2]), x(q[0])), sub(x(q[3]), x(q[1])));
-                    area = add(area, a);
-                    let l = norm(a);
-                    total_area += 0.5 * l;
-                    normals.push(a.map(|c| c / l.max(f64::MIN_POSITIVE)));
-                    nb.extend(q.iter().copied().filter(|&w| w as usize != v));
+                if let Some((model, l)) = fan_model(mesh, topo, v as u32, &fan[v], cos_max) {
+                    ell[v] = l;
+                    models[v] = model;
                 }
-                nb.sort_unstable();
-                nb.dedup();
-                let la = norm(area);
-                if la == 0.0 || nb.len() < 5 {
-                    continue;
-                }
-                let n0 = area.map(|c| c / la);
-                if normals.iter().any(|nf| dot(*nf, n0) < cos_max) {
-                    continue;
-                }
-                ell[v] = (total_area / fan[v].len() as f64).sqrt();
-                let pts: Vec<[f64; 3]> = nb.iter().map(|&w| sub(x(w), xv)).collect();
-                models[v] = fit_quadric(n0, &pts, ell[v]).map(|(normal, h)| VertexModel {
-                    normal,
-                    h,
-                    weight: 1.0,
-                });
             }
         }
         let smooth_vertices = models.iter().filter(|m| m.is_some()).count();
@@ -370,6 +344,51 @@ impl SmoothTargets {
     }
 }
 
+/// The 3D model at vertex `v` from the boundary faces `faces` around it, with the fan's length
+/// scale ℓ; `None` when the fan is degenerate, has fewer than 5 neighbour vertices, or a face
+/// normal is more than acos(`cos_max`) from the fan normal (the model is `None` when the
+/// quadric fit fails).
+pub(super) fn fan_model(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    v: u32,
+    faces: &[u32],
+    cos_max: f64,
+) -> Option<(Option<VertexModel>, f64)> {
+    let x = |w: u32| mesh.coords[w as usize];
+    let mut area = [0.0; 3];
+    let mut normals = Vec::with_capacity(faces.len());
+    let mut nb: Vec<u32> = Vec::new();
+    let mut total_area = 0.0;
+    for &f in faces {
+        let q = topo.faces[f as usize];
+        let a = cross(sub(x(q[2]), x(q[0])), sub(x(q[3]), x(q[1])));
+        area = add(area, a);
+        let l = norm(a);
+        total_area += 0.5 * l;
+        normals.push(a.map(|c| c / l.max(f64::MIN_POSITIVE)));
+        nb.extend(q.iter().copied().filter(|&w| w != v));
+    }
+    nb.sort_unstable();
+    nb.dedup();
+    let la = norm(area);
+    if la == 0.0 || nb.len() < 5 {
+        return None;
+    }
+    let n0 = area.map(|c| c / la);
+    if normals.iter().any(|nf| dot(*nf, n0) < cos_max) {
+        return None;
+    }
+    let ell = (total_area / faces.len() as f64).sqrt();
+    let pts: Vec<[f64; 3]> = nb.iter().map(|&w| sub(x(w), x(v))).collect();
+    let model = fit_quadric(n0, &pts, ell).map(|(normal, h)| VertexModel {
+        normal,
+        h,
+        weight: 1.0,
+    });
+    Some((model, ell))
+}
+
 /// 2D model at x through its boundary neighbours a and b: (normal, H).
 pub(super) fn fit_parabola(
     x: [f64; 3],
@@ -407,11 +426,7 @@ pub(super) fn fit_parabola(
 
 /// 3D model: least-squares quadric height over the tangent plane of normal n0 through the
 /// neighbour offsets `pts` (relative to the vertex); `scale` ~ the edge length.
-pub(super) fn fit_quadric(
-    n0: [f64; 3],
-    pts: &[[f64; 3]],
-    scale: f64,
-) -> Option<([f64; 3], [[f64; 3]; 3])> {
+fn fit_quadric(n0: [f64; 3], pts: &[[f64; 3]], scale: f64) -> Option<([f64; 3], [[f64; 3]; 3])> {
     let mut n = n0;
     let mut q = [0.0; 3];
     let mut frame = tangent_frame(n);
