@@ -20,7 +20,7 @@ use crate::mesh::{MeshOptions, Topology};
 use crate::quality::sample_det_jacobian;
 use crate::sample::{BezierElements, HighOrderMesh, MAX_ORDER, sample};
 use crate::solve::CgError;
-use crate::spline::SplineSpace;
+use crate::spline::{SplineSpace, kinks};
 use crate::validity::{
     Certifier, CpuCertifier, LineSearchInfo, LineSearchParams, ValidityError,
     lagrange_element_bounds, line_search_with, local_line_search_with,
@@ -204,6 +204,8 @@ pub struct CurveReport {
     pub q2_elements: usize,
     /// Elements made Q2 because their initial spline map was not certified valid.
     pub demoted_elements: usize,
+    /// Elements made Q2 because they touch a kink of a boundary grid line (smooth fit).
+    pub kink_elements: usize,
     /// With `--snap-boundary`: boundary vertices moved back onto the input vertices.
     pub snapped_boundary_vertices: Option<usize>,
     /// Fit weights, when fitted.
@@ -368,6 +370,7 @@ pub fn curve_in_memory(input: &Path, options: &CurveOptions) -> Result<Curved, C
     let mut ls_info = None;
     let mut min_det_bound = None;
     let mut demoted = 0;
+    let mut kink_elements = 0;
     let mut ls_alpha = None;
     let mut ls_invalid_full = 0;
     let mut ls_damped = 0;
@@ -388,7 +391,16 @@ pub fn curve_in_memory(input: &Path, options: &CurveOptions) -> Result<Curved, C
     };
     if options.geometry != Geometry::Straight {
         let mut demote = vec![false; mesh.n_elements()];
-        let mut s = SplineSpace::build(&mesh, &topo);
+        // With the smooth fit, elements at kinks of the boundary grid lines start as Q2.
+        let kinks = match options.fit.targets {
+            FitTargets::Smooth(p) if options.geometry == Geometry::SplineFitted => {
+                let features = kinks::feature_vertices(&mesh, &topo, p.feature_angle_deg);
+                kinks::detect(&mesh, &topo, p.kink_angle_deg, &features)
+            }
+            _ => kinks::Kinks::default(),
+        };
+        kink_elements = kinks.n_elements;
+        let mut s = SplineSpace::build_with_reasons(&mesh, &topo, &kinks.q2_reasons(&demote));
         lap("spline", &mut timings);
         if options.geometry == Geometry::SplineFitted {
             // Fit; take the full step when certified, else bisect towards the initial map.
@@ -485,7 +497,11 @@ pub fn curve_in_memory(input: &Path, options: &CurveOptions) -> Result<Curved, C
                             .filter(|&e| !bounds[e].certified_positive())
                             .collect();
                         demote_with_rings(&topo, &bad, round, &mut demote);
-                        s = SplineSpace::build_with_demoted(&mesh, &topo, &demote);
+                        s = SplineSpace::build_with_reasons(
+                            &mesh,
+                            &topo,
+                            &kinks.q2_reasons(&demote),
+                        );
                         round += 1;
                         lap("validity", &mut timings);
                     }
@@ -607,6 +623,7 @@ pub fn curve_in_memory(input: &Path, options: &CurveOptions) -> Result<Curved, C
         spline_elements: space.as_ref().map_or(0, |s| s.n_spline_elements()),
         q2_elements: space.as_ref().map_or(0, |s| s.n_q2_elements()),
         demoted_elements: demoted,
+        kink_elements,
         snapped_boundary_vertices: snapped,
         fit_weights: fit_info.as_ref().map(|_| options.fit.weights),
         fit_targets: fit_info.as_ref().map(|_| options.fit.targets),

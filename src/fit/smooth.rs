@@ -47,6 +47,10 @@ pub struct SmoothParams {
     /// distance along mesh edges to the boundary vertex, ℓ its boundary edge length; 0 keeps
     /// all interior targets on the chords.
     pub decay: f64,
+    /// Elements touching a vertex where a boundary grid line kinks by more than this angle
+    /// (degrees, geodesic turning against the line's neighbours; [`crate::spline::kinks`])
+    /// become constrained Q2 elements; 180 or more turns the detection off.
+    pub kink_angle_deg: f64,
 }
 
 impl Default for SmoothParams {
@@ -54,6 +58,7 @@ impl Default for SmoothParams {
         SmoothParams {
             feature_angle_deg: 30.0,
             decay: 1.0,
+            kink_angle_deg: 10.0,
         }
     }
 }

@@ -27,6 +27,7 @@
 pub mod classify;
 pub mod eval;
 pub mod extraction;
+pub mod kinks;
 pub mod knots;
 pub mod q2;
 pub mod stencil;
@@ -102,6 +103,21 @@ impl SplineSpace {
     /// empty slice demotes none) made constrained Q2 elements
     /// ([`Q2Reason::InvalidSplineMap`]). Their spline neighbours keep their stencils.
     pub fn build_with_demoted(mesh: &LinearMesh, topo: &Topology, demote: &[bool]) -> SplineSpace {
+        let reasons: Vec<Option<Q2Reason>> = demote
+            .iter()
+            .map(|&d| d.then_some(Q2Reason::InvalidSplineMap))
+            .collect();
+        Self::build_with_reasons(mesh, topo, &reasons)
+    }
+
+    /// [`SplineSpace::build`], with every element that has a reason in `q2` (indexed by
+    /// element; an empty slice demotes none) made a constrained Q2 element for that reason.
+    /// Their spline neighbours keep their stencils.
+    pub fn build_with_reasons(
+        mesh: &LinearMesh,
+        topo: &Topology,
+        q2: &[Option<Q2Reason>],
+    ) -> SplineSpace {
         let dim = topo.dim;
         assert!(dim == 2 || dim == 3, "quad or hex meshes only");
         let ne = topo.n_elements;
@@ -115,9 +131,11 @@ impl SplineSpace {
 
         // 1–2. Classes and stencils.
         let mut classes = classify::classify(mesh, topo);
-        for (c, &d) in classes.iter_mut().zip(demote) {
-            if d && c.is_spline() {
-                *c = ElementClass::Q2(Q2Reason::InvalidSplineMap);
+        for (c, &r) in classes.iter_mut().zip(q2) {
+            if let Some(r) = r
+                && c.is_spline()
+            {
+                *c = ElementClass::Q2(r);
             }
         }
         let mut local_nodes = vec![NONE; ne * nl];
