@@ -496,7 +496,8 @@ pub fn curve_in_memory(input: &Path, options: &CurveOptions) -> Result<Curved, C
                         let bad: Vec<usize> = (0..bounds.len())
                             .filter(|&e| !bounds[e].certified_positive())
                             .collect();
-                        demote_with_rings(&topo, &bad, round, &mut demote);
+                        let is_q2 = |e: usize| !s.is_spline(e);
+                        demote_with_rings(&mesh, &topo, &bad, round, &is_q2, &mut demote);
                         s = SplineSpace::build_with_reasons(
                             &mesh,
                             &topo,
@@ -684,15 +685,24 @@ pub fn boundary_deviation(
 /// Rounds of demotion before giving up on an initially invalid spline map.
 const MAX_DEMOTION_ROUNDS: usize = 16;
 
-/// Mark `bad` elements for demotion; after the first round also their facet neighbours, so
-/// repeated rounds grow a Q2 region around an area the spline cannot follow.
-fn demote_with_rings(topo: &Topology, bad: &[usize], round: usize, demote: &mut [bool]) {
+/// Mark `bad` elements for demotion; after the first round, or at once where a bad element is
+/// Q2 already (demoting it again changes nothing), also every element sharing a vertex with
+/// it, so repeated rounds grow a Q2 region around an area the spline cannot follow. (Growing by
+/// facet neighbours only never frees a Q2 element constrained by spline neighbours across its
+/// edges.)
+fn demote_with_rings(
+    mesh: &crate::mesh::LinearMesh,
+    topo: &Topology,
+    bad: &[usize],
+    round: usize,
+    is_q2: &dyn Fn(usize) -> bool,
+    demote: &mut [bool],
+) {
     for &e in bad {
         demote[e] = true;
-        if round > 0 {
-            for side in 0..topo.sides() {
-                let n = topo.neighbor(e, side);
-                if n != crate::mesh::topology::NONE {
+        if round > 0 || is_q2(e) {
+            for &v in mesh.element(e) {
+                for &n in topo.elements_at_vertex(v as usize) {
                     demote[n as usize] = true;
                 }
             }

@@ -297,8 +297,6 @@ struct Shape {
     dist: fn([f64; 3]) -> f64,
     /// Points away from the irregular boundary vertices (the cubed sphere's 8 corners).
     regular: fn([f64; 3]) -> bool,
-    /// Levels at which `frame` is not run (it fails there after long demotion rounds).
-    frame_fails: &'static [usize],
 }
 
 /// `smooth_no_kinks` is `smooth` with the kink detection off (`--kink-angle 180`).
@@ -348,7 +346,6 @@ fn shapes() -> Vec<Shape> {
             make: |n| disc(n, 1.0),
             dist: |x| ((x[0] * x[0] + x[1] * x[1]).sqrt() - 1.0).abs(),
             regular: |_| true,
-            frame_fails: &[],
         },
         Shape {
             name: "sphere",
@@ -363,7 +360,6 @@ fn shapes() -> Vec<Shape> {
                 (x[0].abs() + x[1].abs() + x[2].abs()) / (3f64.sqrt() * l)
                     < 30f64.to_radians().cos()
             },
-            frame_fails: &[8, 12],
         },
         Shape {
             name: "torus",
@@ -375,7 +371,6 @@ fn shapes() -> Vec<Shape> {
                 ((rho * rho + x[2] * x[2]).sqrt() - 0.5).abs()
             },
             regular: |_| true,
-            frame_fails: &[],
         },
     ]
 }
@@ -434,30 +429,10 @@ fn run(shape: &Shape) -> Study {
         study.elements.push(ne);
         for mode in MODES {
             let out = dir().join(format!("{}_{ne}_{mode}.msh", shape.name));
-            if mode == "frame" && shape.frame_fails.contains(&n) {
-                study.errors.entry(mode.into()).or_default().push(None);
-                study
-                    .errors_regular
-                    .entry(mode.into())
-                    .or_default()
-                    .push(None);
-                continue;
-            }
-            let r: CurveReport = match curve(&input, &out, &options(mode)) {
-                Ok(r) => r,
-                Err(e) => {
-                    // Only `frame` is allowed to fail (its initial map is not certified).
-                    assert_eq!(mode, "frame", "{} n={n} {mode}: {e}", shape.name);
-                    println!("  {} n={n} {mode}: {e}", shape.name);
-                    study.errors.entry(mode.into()).or_default().push(None);
-                    study
-                        .errors_regular
-                        .entry(mode.into())
-                        .or_default()
-                        .push(None);
-                    continue;
-                }
-            };
+            // Every mode writes a valid mesh (`frame` included: where its initial map is not
+            // certified, demotion grows Q2 regions until it is).
+            let r: CurveReport = curve(&input, &out, &options(mode))
+                .unwrap_or_else(|e| panic!("{} n={n} {mode}: {e}", shape.name));
             assert_eq!(r.invalid_elements, 0);
             let ho = HighOrderMesh::from_raw(read_raw(&out).unwrap()).unwrap();
             let (err, err_regular) =
@@ -576,8 +551,12 @@ fn boundary_convergence() {
     assert!(o < 2.2, "sphere without kink elements: order {o:.2}");
     let ratio = last(sphere, "smooth_no_kinks") / last(sphere, "smooth");
     assert!(ratio > 5.0, "sphere: kink elements gain only {ratio:.2}×");
+    // (Equal up to the CG tolerance: the two runs need not sum in the same order.)
     for (name, s) in [("circle", circle), ("torus", torus)] {
-        assert_eq!(s.errors["smooth"], s.errors["smooth_no_kinks"], "{name}");
+        for (a, b) in s.errors["smooth"].iter().zip(&s.errors["smooth_no_kinks"]) {
+            let (a, b) = (a.unwrap(), b.unwrap());
+            assert!((a / b - 1.0).abs() < 1e-3, "{name}: {a:.4e} vs {b:.4e}");
+        }
     }
     // `position` stays at second order on the circle (the chords limit it).
     assert!(last_order(circle, "position") < 2.5);
