@@ -156,13 +156,10 @@ impl Kinks {
 /// [`detect`].
 pub fn feature_vertices(mesh: &LinearMesh, topo: &Topology, angle_deg: f64) -> Vec<bool> {
     let nv = mesh.n_vertices();
-    let mut out = vec![false; nv];
     if topo.dim != 3 {
-        return out;
+        return vec![false; nv];
     }
-    for &v in &topo.non_manifold.vertices {
-        out[v as usize] = true;
-    }
+    let mut out = topo.non_manifold_vertex_mask();
     let normals: Vec<[f64; 3]> = topo
         .boundary_facets
         .iter()
@@ -190,16 +187,8 @@ pub fn feature_vertices(mesh: &LinearMesh, topo: &Topology, angle_deg: f64) -> V
 /// each in exactly two of the quads); `None` elsewhere.
 fn regular_fans(mesh: &LinearMesh, topo: &Topology) -> Vec<Option<Fan>> {
     let nv = mesh.n_vertices();
-    let mut faces_at: Vec<Vec<u32>> = vec![Vec::new(); nv];
-    for &f in &topo.boundary_facets {
-        for &v in topo.facet_vertices(f as usize) {
-            faces_at[v as usize].push(f);
-        }
-    }
-    let mut non_manifold = vec![false; nv];
-    for &v in &topo.non_manifold.vertices {
-        non_manifold[v as usize] = true;
-    }
+    let faces_at = topo.boundary_facets_at_vertices();
+    let non_manifold = topo.non_manifold_vertex_mask();
     (0..nv)
         .map(|v| {
             let faces = &faces_at[v];
