@@ -538,3 +538,53 @@ fn subdivided_output_is_valid() {
         assert_eq!(CheckReport::new(&back).invalid, 0);
     }
 }
+
+/// `--kink-angle` on the command line: the smooth fit (the default) makes the elements at
+/// kinks of a cubed sphere's boundary grid lines Q2 and says how many, in the report and on the
+/// terminal; 180 turns it off, the paper's presets never use it, and a non-positive angle is
+/// refused before anything is written.
+#[test]
+fn kink_angle_on_the_command_line() {
+    let mesh = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("meshes/real/sfepy/hsphere8.vtk");
+    let run = |name: &str, args: &[&str]| -> (std::process::Output, serde_json::Value) {
+        let (out, report) = (
+            scratch(&format!("{name}.msh")),
+            scratch(&format!("{name}.json")),
+        );
+        let _ = std::fs::remove_file(&out);
+        let o = Command::new(env!("CARGO_BIN_EXE_polyspline"))
+            .arg("curve")
+            .arg(&mesh)
+            .arg("-o")
+            .arg(&out)
+            .arg("--report")
+            .arg(&report)
+            .args(args)
+            .output()
+            .unwrap();
+        let r = if o.status.success() {
+            serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap()
+        } else {
+            assert!(!out.exists(), "{name}: nothing may be written");
+            serde_json::Value::Null
+        };
+        (o, r)
+    };
+    let (o, on) = run("kinks_default", &[]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let kinks = on["kink_elements"].as_u64().unwrap();
+    assert!(kinks > 0, "the cubed sphere's block arcs kink");
+    assert!(String::from_utf8_lossy(&o.stderr).contains(&format!("({kinks} at boundary kinks)")));
+    let (_, off) = run("kinks_off", &["--kink-angle", "180"]);
+    assert_eq!(off["kink_elements"], 0);
+    assert!(on["q2_elements"].as_u64().unwrap() > off["q2_elements"].as_u64().unwrap());
+    for preset in ["position", "frame"] {
+        let (_, r) = run(&format!("kinks_{preset}"), &["--fit", preset]);
+        assert_eq!(r["kink_elements"], 0, "{preset}");
+    }
+    for bad in ["0", "-5", "nan"] {
+        let (o, _) = run("kinks_bad", &[&format!("--kink-angle={bad}")]);
+        assert_eq!(o.status.code(), Some(1), "--kink-angle {bad}");
+        assert!(String::from_utf8_lossy(&o.stderr).contains("--kink-angle"));
+    }
+}
