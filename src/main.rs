@@ -97,6 +97,11 @@ enum Command {
         w_feature: Option<f64>,
         #[command(flatten)]
         features: FeatureArgs,
+        /// With `--fit smooth`: elements at vertices where a boundary grid line kinks by more
+        /// than this angle (degrees, turning within the surface) become Q2 elements, which can
+        /// follow the kink; 180 turns this off.
+        #[arg(long, default_value_t = 10.0, value_name = "DEG")]
+        kink_angle: f64,
         /// Relative tolerance of the conjugate-gradient solve.
         #[arg(long, default_value_t = 1e-6)]
         cg_tol: f64,
@@ -367,6 +372,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             w_frame_midpoint,
             w_feature,
             features,
+            kink_angle,
             cg_tol,
             cg_preconditioner,
             max_bisections,
@@ -383,6 +389,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             precision,
         } => {
             let backend = resolve_backend(backend, precision)?;
+            if kink_angle.is_nan() || kink_angle <= 0.0 {
+                anyhow::bail!("--kink-angle must be positive (180 turns it off), got {kink_angle}");
+            }
             let mut weights = match fit {
                 FitArg::Frame => FitWeights::frame(),
                 FitArg::Smooth => FitWeights::smooth(),
@@ -425,7 +434,10 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                         ..Default::default()
                     },
                     targets: if fit == FitArg::Smooth {
-                        FitTargets::Smooth(SmoothParams::default())
+                        FitTargets::Smooth(SmoothParams {
+                            kink_angle_deg: kink_angle,
+                            ..Default::default()
+                        })
                     } else {
                         FitTargets::Chords
                     },
@@ -472,8 +484,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             );
             if r.control_points > 0 {
                 eprintln!(
-                    "spline: {} control points, {} spline and {} Q2 elements",
-                    r.control_points, r.spline_elements, r.q2_elements
+                    "spline: {} control points, {} spline and {} Q2 elements ({} at boundary kinks)",
+                    r.control_points, r.spline_elements, r.q2_elements, r.kink_elements
                 );
             }
             if let (Some(it), Some(res), Some(alpha)) =

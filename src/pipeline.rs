@@ -20,7 +20,7 @@ use crate::mesh::{MeshOptions, Topology};
 use crate::quality::sample_det_jacobian;
 use crate::sample::{BezierElements, HighOrderMesh, MAX_ORDER, sample};
 use crate::solve::CgError;
-use crate::spline::SplineSpace;
+use crate::spline::{SplineSpace, kinks};
 use crate::validity::{
     Certifier, CpuCertifier, LineSearchInfo, LineSearchParams, ValidityError,
     lagrange_element_bounds, line_search_with, local_line_search_with,
@@ -209,6 +209,8 @@ pub struct CurveReport {
     pub q2_elements: usize,
     /// Elements made Q2 because their initial spline map was not certified valid.
     pub demoted_elements: usize,
+    /// Elements made Q2 because they touch a kink of a boundary grid line (smooth fit).
+    pub kink_elements: usize,
     /// With `--snap-boundary`: boundary vertices moved back onto the input vertices.
     pub snapped_boundary_vertices: Option<usize>,
     /// Sharp features found and how the output keeps them (spline geometries).
@@ -423,19 +425,35 @@ pub fn curve_in_memory_with_progress(
         features: used.cloned().map(std::sync::Arc::new),
         ..options.fit.clone()
     };
+    // With the smooth fit, elements at kinks of the boundary grid lines start as Q2; vertices
+    // on sharp features are left to the feature handling.
+    let kinks = match options.fit.targets {
+        FitTargets::Smooth(p) if options.geometry == Geometry::SplineFitted => {
+            let mut exclude = kinks::feature_vertices(&mesh, &topo, p.feature_angle_deg);
+            if let Some(f) = used {
+                for (x, &m) in exclude.iter_mut().zip(&f.vertex_mask) {
+                    *x |= m;
+                }
+            }
+            kinks::detect(&mesh, &topo, p.kink_angle_deg, &exclude)
+        }
+        _ => kinks::Kinks::default(),
+    };
+    let kink_elements = kinks.n_elements;
     let build = |demote: &[bool]| {
         SplineSpace::build_with_q2(
             &mesh,
             &topo,
             &[
                 (&crease, crate::spline::Q2Reason::FeatureCrease),
+                (&kinks.elements, crate::spline::Q2Reason::BoundaryKink),
                 (demote, crate::spline::Q2Reason::InvalidSplineMap),
             ],
         )
     };
     if options.geometry != Geometry::Straight {
         let mut demote = vec![false; mesh.n_elements()];
-        let mut s = build(&[]);
+        let mut s = build(&demote);
         lap("spline", &mut timings);
         if options.geometry == Geometry::SplineFitted {
             // Fit; take the full step when certified, else bisect towards the initial map.
@@ -534,7 +552,8 @@ pub fn curve_in_memory_with_progress(
                         let bad: Vec<usize> = (0..bounds.len())
                             .filter(|&e| !bounds[e].certified_positive())
                             .collect();
-                        demote_with_rings(&topo, &bad, round, &mut demote);
+                        let is_q2 = |e: usize| !s.is_spline(e);
+                        demote_with_rings(&mesh, &topo, &bad, round, &is_q2, &mut demote);
                         s = build(&demote);
                         round += 1;
                         lap("validity", &mut timings);
@@ -657,6 +676,7 @@ pub fn curve_in_memory_with_progress(
         spline_elements: space.as_ref().map_or(0, |s| s.n_spline_elements()),
         q2_elements: space.as_ref().map_or(0, |s| s.n_q2_elements()),
         demoted_elements: demoted,
+        kink_elements,
         snapped_boundary_vertices: snapped,
         features: features.as_ref().map(|f| {
             let (vertex, planarity) = f.deviations(&mesh, &ho);
@@ -725,15 +745,24 @@ pub fn boundary_deviation(
 /// Rounds of demotion before giving up on an initially invalid spline map.
 const MAX_DEMOTION_ROUNDS: usize = 16;
 
-/// Mark `bad` elements for demotion; after the first round also their facet neighbours, so
-/// repeated rounds grow a Q2 region around an area the spline cannot follow.
-fn demote_with_rings(topo: &Topology, bad: &[usize], round: usize, demote: &mut [bool]) {
+/// Mark `bad` elements for demotion; after the first round, or at once where a bad element is
+/// Q2 already (demoting it again changes nothing), also every element sharing a vertex with
+/// it, so repeated rounds grow a Q2 region around an area the spline cannot follow. (Growing by
+/// facet neighbours only never frees a Q2 element constrained by spline neighbours across its
+/// edges.)
+fn demote_with_rings(
+    mesh: &crate::mesh::LinearMesh,
+    topo: &Topology,
+    bad: &[usize],
+    round: usize,
+    is_q2: &dyn Fn(usize) -> bool,
+    demote: &mut [bool],
+) {
     for &e in bad {
         demote[e] = true;
-        if round > 0 {
-            for side in 0..topo.sides() {
-                let n = topo.neighbor(e, side);
-                if n != crate::mesh::topology::NONE {
+        if round > 0 || is_q2(e) {
+            for &v in mesh.element(e) {
+                for &n in topo.elements_at_vertex(v as usize) {
                     demote[n as usize] = true;
                 }
             }

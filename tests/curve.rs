@@ -118,10 +118,15 @@ fn fitted_on_every_real_mesh() {
         );
         jobs.push(serde_json::json!({ "file": out, "probes": [] }));
     }
-    let Some(results) = gmsh_probe(&jobs, "fit") else {
+    assert_gmsh_finds_valid(&jobs, "fit");
+}
+
+/// Gmsh's Jacobians of every file in `jobs` have one sign (positive for hexes).
+fn assert_gmsh_finds_valid(jobs: &[serde_json::Value], tag: &str) {
+    let Some(results) = gmsh_probe(jobs, tag) else {
         return;
     };
-    for (v, job) in results.iter().zip(&jobs) {
+    for (v, job) in results.iter().zip(jobs) {
         let (lo, hi) = (
             v["min_det_jac"].as_f64().unwrap(),
             v["max_det_jac"].as_f64().unwrap(),
@@ -436,37 +441,52 @@ fn plot_draws_every_edge_through_its_nodes() {
     assert!(svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"));
 }
 
-/// The smooth-boundary fit on every real mesh: written, certified valid (our certificate and
-/// the sampled check of the file read back); prints how far from the input vertices it stays
-/// and how many steps the line search shortened, next to the paper's `position` fit.
+/// The smooth-boundary fit (the default, with Q2 elements at kinks of the boundary grid lines)
+/// on every real mesh at orders 2 and 3: written, certified valid (our certificate, the sampled
+/// check of the file read back, and Gmsh's own Jacobians); prints how far from the input
+/// vertices it stays, how many steps the line search shortened and how many elements it made
+/// Q2, next to the paper's `position` fit.
 #[test]
 fn smooth_fit_on_every_real_mesh() {
+    let mut jobs = Vec::new();
     for mesh in real_meshes() {
         let stem = mesh.file_stem().unwrap().to_string_lossy().to_string();
         let mut line = format!("{stem:40}");
-        for (mode, fit) in [
-            ("position", polyspline::fit::FitParams::default()),
-            ("smooth", polyspline::fit::FitParams::smooth()),
+        for (mode, fit, order) in [
+            ("position", polyspline::fit::FitParams::default(), 2),
+            ("smooth", polyspline::fit::FitParams::smooth(), 2),
+            ("smooth", polyspline::fit::FitParams::smooth(), 3),
         ] {
-            let out = scratch(&format!("{stem}_{mode}.msh"));
-            let mut o = options(2, Geometry::SplineFitted);
+            let out = scratch(&format!("{stem}_{mode}_{order}.msh"));
+            let mut o = options(order, Geometry::SplineFitted);
             o.fit = fit;
-            let r = curve(&mesh, &out, &o).unwrap_or_else(|e| panic!("{stem} {mode}: {e}"));
+            let r = curve(&mesh, &out, &o)
+                .unwrap_or_else(|e| panic!("{stem} {mode} order {order}: {e}"));
             assert_eq!(r.invalid_elements, 0);
             assert!(r.min_det_jacobian_bound.unwrap() > 0.0, "{stem} {mode}");
             let back = read_back(&out);
+            assert_eq!(back.order, order);
             assert_eq!(CheckReport::new(&back).invalid, 0, "{stem} {mode}");
-            line += &format!(
-                " | {mode}: dev {:.2e} msj {:.3} invalid_full {} damped {} demoted {}",
-                r.boundary_deviation_max,
-                r.min_scaled_jacobian,
-                r.invalid_at_full_step,
-                r.damped_control_points,
-                r.demoted_elements
-            );
+            if mode == "position" {
+                assert_eq!(r.kink_elements, 0, "{stem}: kinks only with the smooth fit");
+            } else {
+                jobs.push(serde_json::json!({ "file": out, "probes": [] }));
+            }
+            if order == 2 {
+                line += &format!(
+                    " | {mode}: dev {:.2e} msj {:.3} invalid_full {} damped {} demoted {} kinks {}",
+                    r.boundary_deviation_max,
+                    r.min_scaled_jacobian,
+                    r.invalid_at_full_step,
+                    r.damped_control_points,
+                    r.demoted_elements,
+                    r.kink_elements
+                );
+            }
         }
         println!("{line}");
     }
+    assert_gmsh_finds_valid(&jobs, "smooth");
 }
 
 /// `plot --control-points` draws one disc per control point of the spline space.
@@ -578,5 +598,55 @@ fn progress_reports_stages_and_stays_off_stderr_pipes() {
             !err.contains("relative residual 1") && !err.contains('\r'),
             "{err}"
         );
+    }
+}
+
+/// `--kink-angle` on the command line: the smooth fit (the default) makes the elements at
+/// kinks of a cubed sphere's boundary grid lines Q2 and says how many, in the report and on the
+/// terminal; 180 turns it off, the paper's presets never use it, and a non-positive angle is
+/// refused before anything is written.
+#[test]
+fn kink_angle_on_the_command_line() {
+    let mesh = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("meshes/real/sfepy/hsphere8.vtk");
+    let run = |name: &str, args: &[&str]| -> (std::process::Output, serde_json::Value) {
+        let (out, report) = (
+            scratch(&format!("{name}.msh")),
+            scratch(&format!("{name}.json")),
+        );
+        let _ = std::fs::remove_file(&out);
+        let o = Command::new(env!("CARGO_BIN_EXE_polyspline"))
+            .arg("curve")
+            .arg(&mesh)
+            .arg("-o")
+            .arg(&out)
+            .arg("--report")
+            .arg(&report)
+            .args(args)
+            .output()
+            .unwrap();
+        let r = if o.status.success() {
+            serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap()
+        } else {
+            assert!(!out.exists(), "{name}: nothing may be written");
+            serde_json::Value::Null
+        };
+        (o, r)
+    };
+    let (o, on) = run("kinks_default", &[]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let kinks = on["kink_elements"].as_u64().unwrap();
+    assert!(kinks > 0, "the cubed sphere's block arcs kink");
+    assert!(String::from_utf8_lossy(&o.stderr).contains(&format!("({kinks} at boundary kinks)")));
+    let (_, off) = run("kinks_off", &["--kink-angle", "180"]);
+    assert_eq!(off["kink_elements"], 0);
+    assert!(on["q2_elements"].as_u64().unwrap() > off["q2_elements"].as_u64().unwrap());
+    for preset in ["position", "frame"] {
+        let (_, r) = run(&format!("kinks_{preset}"), &["--fit", preset]);
+        assert_eq!(r["kink_elements"], 0, "{preset}");
+    }
+    for bad in ["0", "-5", "nan"] {
+        let (o, _) = run("kinks_bad", &[&format!("--kink-angle={bad}")]);
+        assert_eq!(o.status.code(), Some(1), "--kink-angle {bad}");
+        assert!(String::from_utf8_lossy(&o.stderr).contains("--kink-angle"));
     }
 }

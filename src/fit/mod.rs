@@ -20,7 +20,9 @@
 //! **Targets.** [`FitTargets::Chords`] is the paper's P_e. [`FitTargets::Smooth`] moves the
 //! midpoint targets (edge midpoints, face and cell centres) from the chords onto a local
 //! second-order reconstruction of the smooth boundary ([`smooth`]), which makes the fitted
-//! boundary third-order accurate instead of second.
+//! boundary third-order accurate instead of second where the spline space can follow the
+//! input's boundary grid; where the grid lines kink, the caller makes the elements there Q2
+//! ([`crate::spline::kinks`], [`SmoothParams::kink_angle_deg`]).
 
 pub mod assembly;
 pub mod features;

@@ -22,7 +22,10 @@
 //! a sharp feature (a facet normal more than `feature_angle_deg` from the vertex normal, or a
 //! non-manifold fan) has none, so targets there stay on the chords. Points on a smooth
 //! boundary are reproduced to O(h³) (O(h⁴) where the spacing is locally uniform), so the
-//! fitted quadratic boundary converges at third order instead of second.
+//! fitted quadratic boundary converges at third order instead of second — provided the space
+//! can follow the boundary grid: a C¹ spline element cannot follow grid lines that kink within
+//! the surface (a cubed sphere's block arcs, order ≈ 1.6 there), so the pipeline makes the
+//! elements at such kinks Q2 ([`crate::spline::kinks`], `kink_angle_deg`).
 //!
 //! Interior vertices within `decay` × (local boundary edge length) of the boundary, measured
 //! along mesh edges, inherit the model of their nearest smooth boundary vertex with weight
@@ -53,6 +56,10 @@ pub struct SmoothParams {
     /// distance along mesh edges to the boundary vertex, ℓ its boundary edge length; 0 keeps
     /// all interior targets on the chords.
     pub decay: f64,
+    /// Elements touching a vertex where a boundary grid line kinks by more than this angle
+    /// (degrees, geodesic turning against the line's neighbours; [`crate::spline::kinks`])
+    /// become constrained Q2 elements; 180 or more turns the detection off.
+    pub kink_angle_deg: f64,
 }
 
 impl Default for SmoothParams {
@@ -60,6 +67,7 @@ impl Default for SmoothParams {
         SmoothParams {
             feature_angle_deg: 30.0,
             decay: 1.0,
+            kink_angle_deg: 10.0,
         }
     }
 }

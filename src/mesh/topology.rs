@@ -163,6 +163,26 @@ impl Topology {
         }
     }
 
+    /// The boundary facets at each vertex (empty for interior vertices).
+    pub fn boundary_facets_at_vertices(&self) -> Vec<Vec<u32>> {
+        let mut out: Vec<Vec<u32>> = vec![Vec::new(); self.n_vertices];
+        for &f in &self.boundary_facets {
+            for &v in self.facet_vertices(f as usize) {
+                out[v as usize].push(f);
+            }
+        }
+        out
+    }
+
+    /// Per vertex: it is one of [`NonManifold::vertices`].
+    pub fn non_manifold_vertex_mask(&self) -> Vec<bool> {
+        let mut out = vec![false; self.n_vertices];
+        for &v in &self.non_manifold.vertices {
+            out[v as usize] = true;
+        }
+        out
+    }
+
     /// Vertices of facet `f` (2 or 4 entries).
     pub fn facet_vertices(&self, f: usize) -> &[u32] {
         if self.dim == 2 {

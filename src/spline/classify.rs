@@ -47,6 +47,9 @@ pub enum Q2Reason {
     /// Demoted by the caller: the spline map of the element was not certified valid on the
     /// initial control points, so it takes its own Lagrange nodes (the input's shape).
     InvalidSplineMap,
+    /// Made Q2 by the caller: the element touches a vertex where a boundary grid line kinks
+    /// ([`crate::spline::kinks`]), which a C¹ spline cannot follow.
+    BoundaryKink,
 }
 
 /// The kind of an element in the poly-spline space.

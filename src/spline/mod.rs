@@ -27,6 +27,7 @@
 pub mod classify;
 pub mod eval;
 pub mod extraction;
+pub mod kinks;
 pub mod knots;
 pub mod q2;
 pub mod stencil;

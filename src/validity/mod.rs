@@ -898,14 +898,24 @@ pub fn local_line_search_with(
         if bad.is_empty() {
             break;
         }
-        if rounds > params.max_bisections + 1 {
-            // Even the initial map is not valid there.
-            return Err(ValidityError::InitialInvalid {
-                count: bad.len(),
-                first: bad.into_iter().take(8).collect(),
-            });
-        }
         let last = rounds >= params.max_bisections;
+        if last {
+            // Past the bisections whole supports are reset, which can leave a neighbour with a
+            // mix of steps that is invalid although its initial map is valid; such elements
+            // are reset in turn (each round zeroes more steps, so this ends). Only an element
+            // whose whole support is back at the initial map has an invalid initial map.
+            let initial: Vec<usize> = bad
+                .iter()
+                .copied()
+                .filter(|&e| supports[e].iter().all(|&c| step[c as usize] == 0.0))
+                .collect();
+            if !initial.is_empty() {
+                return Err(ValidityError::InitialInvalid {
+                    count: initial.len(),
+                    first: initial.into_iter().take(8).collect(),
+                });
+            }
+        }
         let mut touched = vec![false; n];
         for &e in &bad {
             for &c in &supports[e] {
@@ -939,4 +949,53 @@ pub fn local_line_search_with(
             min_det_lower_bound: bounds.iter().map(|b| b.lower).fold(f64::INFINITY, f64::min),
         },
     ))
+}
+
+#[cfg(test)]
+mod local_search_tests {
+    use super::*;
+
+    /// A row of quads of width 1 + x(c_{e+1}) − x(c_e), height 1: element e depends on
+    /// control points e and e + 1 and is valid iff its width is positive.
+    fn row_net(e: usize, cps: &[[f64; 3]]) -> [[f64; 3]; 27] {
+        let w = 1.0 + cps[e + 1][0] - cps[e][0];
+        let mut net = [[0.0; 3]; 27];
+        for j in 0..3 {
+            for i in 0..3 {
+                net[3 * j + i] = [0.5 * i as f64 * w, 0.5 * j as f64, 0.0];
+            }
+        }
+        net
+    }
+
+    #[test]
+    fn resets_cascade_to_neighbours_instead_of_blaming_the_initial_map() {
+        // Full step: element 0 has width −4; the others are valid (3, 3, 1). Resetting
+        // element 0's support leaves element 1 at width −2, resetting that leaves element 2 at
+        // width 0, and so on: every element ends valid, as its initial map is.
+        let c0 = vec![[0.0; 3]; 5];
+        let c_star: Vec<[f64; 3]> = [0.0, -5.0, -3.0, -1.0, -1.0]
+            .iter()
+            .map(|&x| [x, 0.0, 0.0])
+            .collect();
+        let params = LineSearchParams {
+            max_bisections: 0,
+            ..Default::default()
+        };
+        let support = |e: usize| vec![e as u32, e as u32 + 1];
+        let (c, info) = local_line_search(2, 4, row_net, support, &c0, &c_star, &[], &params)
+            .expect("the initial map is valid everywhere");
+        assert!(info.min_det_lower_bound > 0.0);
+        assert_eq!(info.invalid_at_full_step, 1);
+        for e in 0..4 {
+            assert!(1.0 + c[e + 1][0] - c[e][0] > 0.0, "element {e}");
+        }
+        // A really invalid initial map (element 2 of width −1 at c0) is still reported.
+        let mut bad0 = c0.clone();
+        bad0[3][0] = -2.0;
+        match local_line_search(2, 4, row_net, support, &bad0, &c_star, &[], &params) {
+            Err(ValidityError::InitialInvalid { first, .. }) => assert_eq!(first, vec![2]),
+            other => panic!("{:?}", other.map(|(_, i)| i)),
+        }
+    }
 }

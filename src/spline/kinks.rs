@@ -1,0 +1,400 @@
+//! Kinks of the boundary grid lines: where a C¹ spline cannot follow the input's parametrisation.
+//!
+//! A spline element is C¹ across its facets, so along a smooth boundary it can follow the
+//! input's vertices only where the boundary grid lines themselves are smooth. Block-structured
+//! meshes break this: on a cubed sphere the grid lines crossing the 12 block arcs turn by up to
+//! 55° within the surface there, although the surface is smooth. A C¹ map cannot reproduce such
+//! a C⁰ parametrisation and keeps an O(h²) error along the whole arc, however good the fit's
+//! targets are. The elements touching such vertices are made constrained Q2 elements
+//! ([`super::Q2Reason::BoundaryKink`]), which are only C⁰ there.
+//!
+//! Input: a hex mesh, its topology, the kink angle and a per-vertex `exclude` mask (vertices
+//! left to other handling, e.g. sharp features). Output: [`Kinks`], a per-vertex mask and the
+//! set of elements touching a marked vertex. 2D meshes have no kinks (the boundary is a single
+//! grid line; a corner of it is a sharp feature).
+//!
+//! At a regular boundary vertex v (four boundary faces, so two grid lines a–v–b cross there)
+//! the **geodesic turning** of a line is the signed angle between v − a and b − v after both
+//! are projected onto the tangent plane of v (outward normal). A line kinks at v when
+//! * its turning at v differs by more than the kink angle from its turning at each of its two
+//!   neighbours on the line that have one, and is the largest in magnitude of them (a peak:
+//!   a polar grid with equal turning at every vertex has no kink), or
+//! * the edge lengths on either side of v differ by more than [`SPACING_RATIO`].
+//!
+//! Vertices inside planar boundary patches are never kinks: a planar patch is reproduced
+//! exactly by any map that keeps its vertices in the plane, whatever its grid lines do.
+
+use crate::mesh::topology::NONE;
+use crate::mesh::{LinearMesh, Topology};
+
+/// Edge-length ratio along a grid line above which its vertex is a kink.
+pub const SPACING_RATIO: f64 = 2.5;
+
+/// Relative distance from the vertex's tangent plane (to its fan's size) below which every
+/// vertex of a fan counts as coplanar.
+const PLANAR_TOLERANCE: f64 = 1e-6;
+
+/// The kinks found.
+#[derive(Clone, Debug, Default)]
+pub struct Kinks {
+    /// Per vertex: a boundary grid line kinks there.
+    pub vertices: Vec<bool>,
+    /// Per element: it touches a kink vertex.
+    pub elements: Vec<bool>,
+    pub n_vertices: usize,
+    pub n_elements: usize,
+}
+
+/// The boundary fan of a regular vertex: its outward unit normal and the two grid lines
+/// through it, each as (vertex before, vertex after).
+#[derive(Clone, Copy, Debug)]
+struct Fan {
+    normal: [f64; 3],
+    lines: [[u32; 2]; 2],
+    planar: bool,
+}
+
+/// Find the kinks of the boundary grid lines of `mesh` (see the module docs). `angle_deg` is
+/// the jump of the geodesic turning (degrees) that makes a kink; `exclude` (per vertex, or
+/// empty) marks vertices that are never kinks and whose turning is not compared against.
+pub fn detect(mesh: &LinearMesh, topo: &Topology, angle_deg: f64, exclude: &[bool]) -> Kinks {
+    let nv = mesh.n_vertices();
+    let mut kinks = Kinks {
+        vertices: vec![false; nv],
+        elements: vec![false; mesh.n_elements()],
+        ..Default::default()
+    };
+    if topo.dim != 3 || angle_deg.is_nan() || angle_deg >= 180.0 {
+        return kinks;
+    }
+    let fans = regular_fans(mesh, topo);
+    let excluded = |v: usize| exclude.get(v).copied().unwrap_or(false);
+    let x = |v: u32| mesh.coords[v as usize];
+    // Turning of the line through `v` that arrives from `a` and leaves to `b`.
+    let turning = |v: usize, a: u32, b: u32| -> f64 {
+        let n = fans[v].as_ref().unwrap().normal;
+        let d1 = tangential(sub(mesh.coords[v], x(a)), n);
+        let d2 = tangential(sub(x(b), mesh.coords[v]), n);
+        dot(n, cross(d1, d2)).atan2(dot(d1, d2))
+    };
+    // Turning at `w` of its line that contains the edge w–`towards`, oriented to leave to it.
+    let neighbour_turning = |w: u32, towards: u32, leaving: bool| -> Option<f64> {
+        let w = w as usize;
+        if excluded(w) {
+            return None;
+        }
+        let fan = fans[w].as_ref()?;
+        fan.lines.iter().find_map(|&[p, q]| {
+            let (p, q) = match (leaving, p == towards, q == towards) {
+                (true, _, true) | (false, true, _) => (p, q),
+                (true, true, _) | (false, _, true) => (q, p),
+                _ => return None,
+            };
+            Some(turning(w, p, q))
+        })
+    };
+    let threshold = angle_deg.to_radians();
+    for v in 0..nv {
+        let Some(fan) = fans[v] else { continue };
+        if excluded(v) || fan.planar {
+            continue;
+        }
+        let xv = mesh.coords[v];
+        for [a, b] in fan.lines {
+            let (la, lb) = (norm(sub(xv, x(a))), norm(sub(x(b), xv)));
+            let spacing = la.max(lb) > SPACING_RATIO * la.min(lb);
+            let kv = turning(v, a, b);
+            let around = [
+                neighbour_turning(a, v as u32, true),
+                neighbour_turning(b, v as u32, false),
+            ];
+            let mut compared = 0;
+            let mut peak = true;
+            for k in around.into_iter().flatten() {
+                compared += 1;
+                peak &= (kv - k).abs() > threshold && kv.abs() >= k.abs();
+            }
+            if spacing || (compared > 0 && peak) {
+                kinks.vertices[v] = true;
+            }
+        }
+    }
+    for v in 0..nv {
+        if kinks.vertices[v] {
+            kinks.n_vertices += 1;
+            for &e in topo.elements_at_vertex(v) {
+                kinks.elements[e as usize] = true;
+            }
+        }
+    }
+    kinks.n_elements = kinks.elements.iter().filter(|&&k| k).count();
+    kinks
+}
+
+impl Kinks {}
+
+/// Boundary vertices of a hex mesh where a boundary facet's normal is more than `angle_deg`
+/// from the vertex normal (sharp features), and non-manifold vertices: an `exclude` mask for
+/// [`detect`].
+pub fn feature_vertices(mesh: &LinearMesh, topo: &Topology, angle_deg: f64) -> Vec<bool> {
+    let nv = mesh.n_vertices();
+    if topo.dim != 3 {
+        return vec![false; nv];
+    }
+    let mut out = topo.non_manifold_vertex_mask();
+    let normals: Vec<[f64; 3]> = topo
+        .boundary_facets
+        .iter()
+        .map(|&f| unit(facet_normal(mesh, topo, f as usize)))
+        .collect();
+    let mut vertex_normal = vec![[0.0; 3]; nv];
+    for (i, &f) in topo.boundary_facets.iter().enumerate() {
+        for &v in topo.facet_vertices(f as usize) {
+            vertex_normal[v as usize] = add(vertex_normal[v as usize], normals[i]);
+        }
+    }
+    let cos_max = angle_deg.to_radians().cos();
+    for (i, &f) in topo.boundary_facets.iter().enumerate() {
+        for &v in topo.facet_vertices(f as usize) {
+            let n = unit(vertex_normal[v as usize]);
+            if dot(n, normals[i]).is_nan() || dot(n, normals[i]) < cos_max {
+                out[v as usize] = true;
+            }
+        }
+    }
+    out
+}
+
+/// The fans of the regular boundary vertices (four boundary quads, four distinct neighbours,
+/// each in exactly two of the quads); `None` elsewhere.
+fn regular_fans(mesh: &LinearMesh, topo: &Topology) -> Vec<Option<Fan>> {
+    let nv = mesh.n_vertices();
+    let faces_at = topo.boundary_facets_at_vertices();
+    let non_manifold = topo.non_manifold_vertex_mask();
+    (0..nv)
+        .map(|v| {
+            let faces = &faces_at[v];
+            if faces.len() != 4 || non_manifold[v] {
+                return None;
+            }
+            // The two neighbours of v in each quad.
+            let mut pairs = [[0u32; 2]; 4];
+            let mut normal = [0.0; 3];
+            for (p, &f) in pairs.iter_mut().zip(faces) {
+                let q = topo.facet_vertices(f as usize);
+                let i = q.iter().position(|&w| w as usize == v)?;
+                *p = [q[(i + 3) % 4], q[(i + 1) % 4]];
+                normal = add(normal, unit(facet_normal(mesh, topo, f as usize)));
+            }
+            let mut ws: Vec<u32> = pairs.iter().flatten().copied().collect();
+            ws.sort_unstable();
+            ws.dedup();
+            if ws.len() != 4 {
+                return None;
+            }
+            let in_pair = |w: u32| pairs.iter().filter(|p| p.contains(&w)).count();
+            if ws.iter().any(|&w| in_pair(w) != 2) {
+                return None;
+            }
+            // Opposite neighbours share no quad.
+            let opposite = |w: u32| {
+                ws.iter()
+                    .copied()
+                    .find(|&u| u != w && !pairs.iter().any(|p| p.contains(&w) && p.contains(&u)))
+            };
+            let o0 = opposite(ws[0])?;
+            let a1 = ws.iter().copied().find(|&u| u != ws[0] && u != o0)?;
+            let lines = [[ws[0], o0], [a1, opposite(a1)?]];
+            let normal = unit(normal);
+            let xv = mesh.coords[v];
+            let mut size = 0.0f64;
+            let mut height = 0.0f64;
+            for &f in faces {
+                for &w in topo.facet_vertices(f as usize) {
+                    let d = sub(mesh.coords[w as usize], xv);
+                    size = size.max(norm(d));
+                    height = height.max(dot(d, normal).abs());
+                }
+            }
+            Some(Fan {
+                normal,
+                lines,
+                planar: height <= PLANAR_TOLERANCE * size,
+            })
+        })
+        .collect()
+}
+
+/// Normal of boundary facet `f` (length ≈ twice its area), pointing out of its element.
+fn facet_normal(mesh: &LinearMesh, topo: &Topology, f: usize) -> [f64; 3] {
+    let q = topo.facet_vertices(f);
+    let x = |i: usize| mesh.coords[q[i] as usize];
+    let n = cross(sub(x(2), x(0)), sub(x(3), x(1)));
+    let e = topo.facet_elements[f][0];
+    if e == NONE {
+        return n;
+    }
+    let centre = mesh
+        .element(e as usize)
+        .iter()
+        .fold([0.0; 3], |s, &v| add(s, mesh.coords[v as usize]));
+    let k = mesh.element(e as usize).len() as f64;
+    let face_centre = (0..4).fold([0.0; 3], |s, i| add(s, x(i)));
+    let out = sub(face_centre.map(|c| c / 4.0), centre.map(|c| c / k));
+    if dot(n, out) < 0.0 { n.map(|c| -c) } else { n }
+}
+
+fn tangential(d: [f64; 3], n: [f64; 3]) -> [f64; 3] {
+    let s = dot(d, n);
+    sub(d, n.map(|c| s * c))
+}
+
+fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    std::array::from_fn(|k| a[k] + b[k])
+}
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    std::array::from_fn(|k| a[k] - b[k])
+}
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+fn norm(a: [f64; 3]) -> f64 {
+    dot(a, a).sqrt()
+}
+fn unit(a: [f64; 3]) -> [f64; 3] {
+    let l = norm(a);
+    if l > 0.0 { a.map(|c| c / l) } else { a }
+}
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::generate::{grid_3d, uniform};
+    use crate::spline::{ElementClass, Q2Reason};
+
+    /// A one-layer hex grid on `xs` × [0, 1] (8 cells) × [0, 0.2], its lines along x sheared
+    /// by `bend_deg` from x = 0.5 on (y += tan(bend)·max(0, x − 0.5)), then, with `bent`,
+    /// rolled onto cylinders about the y axis (x → angle, z → radius 1 + z); the shear is a
+    /// single kink of the x-lines in the flat domain, and rolling keeps it within the surface.
+    fn sheared(xs: &[f64], bend_deg: f64, bent: bool, layers: usize) -> LinearMesh {
+        let zs: Vec<f64> = (0..=layers)
+            .map(|k| 0.2 * k as f64 / layers as f64)
+            .collect();
+        let mut mesh = grid_3d(xs, &uniform(8, 0.125), &zs);
+        let t = bend_deg.to_radians().tan();
+        for p in &mut mesh.coords {
+            let [x, y, z] = *p;
+            let y = y + t * (x - 0.5).max(0.0);
+            *p = if bent {
+                [(1.0 + z) * x.cos(), y, (1.0 + z) * x.sin()]
+            } else {
+                [x, y, z]
+            };
+        }
+        mesh
+    }
+
+    fn kinks_of(mesh: &LinearMesh) -> Kinks {
+        let topo = Topology::build(mesh);
+        detect(mesh, &topo, 10.0, &feature_vertices(mesh, &topo, 30.0))
+    }
+
+    /// Vertices of the `sheared` grid at x index `i` inside the top and bottom faces.
+    fn column(nx: usize, i: usize) -> Vec<usize> {
+        let mut out = Vec::new();
+        for k in [0, 1] {
+            for j in 1..8 {
+                out.push((k * 9 + j) * nx + i);
+            }
+        }
+        out
+    }
+
+    fn marked(mask: &[bool]) -> Vec<usize> {
+        (0..mask.len()).filter(|&i| mask[i]).collect()
+    }
+
+    #[test]
+    fn flat_and_bent_grids_have_no_kinks() {
+        let flat = grid_3d(&uniform(4, 0.25), &uniform(5, 0.2), &uniform(3, 0.3));
+        assert_eq!(kinks_of(&flat).n_vertices, 0);
+        // Graded spacing (factor 1.3 per cell) on cylinders, three layers.
+        let mut xs = vec![0.0];
+        for i in 0..8 {
+            xs.push(xs[i] + 0.05 * 1.3f64.powi(i as i32));
+        }
+        let bent = sheared(&xs, 0.0, true, 3);
+        let k = kinks_of(&bent);
+        assert_eq!(k.n_vertices, 0, "{:?}", marked(&k.vertices));
+        assert_eq!(k.n_elements, 0);
+    }
+
+    #[test]
+    fn a_bend_is_found_on_its_line_on_curved_faces_only() {
+        let xs = uniform(10, 0.1);
+        let k = kinks_of(&sheared(&xs, 30.0, true, 1));
+        assert_eq!(marked(&k.vertices), {
+            let mut c = column(11, 5);
+            c.sort_unstable();
+            c
+        });
+        // The elements touching that column: x indices 4 and 5, all 8 rows.
+        let want: Vec<usize> = (0..8).flat_map(|j| [j * 10 + 4, j * 10 + 5]).collect();
+        assert_eq!(marked(&k.elements), want);
+        assert_eq!(k.n_elements, 16);
+        // On planes the same bend is no kink (planar patches stay exact).
+        assert_eq!(kinks_of(&sheared(&xs, 30.0, false, 1)).n_vertices, 0);
+        // A 5° bend is below the angle.
+        assert_eq!(kinks_of(&sheared(&xs, 5.0, true, 1)).n_vertices, 0);
+        // 180° turns detection off.
+        let mesh = sheared(&xs, 30.0, true, 1);
+        let topo = Topology::build(&mesh);
+        assert_eq!(detect(&mesh, &topo, 180.0, &[]).n_vertices, 0);
+    }
+
+    #[test]
+    fn spacing_jumps_are_kinks_on_curved_faces() {
+        // Spacing 0.1 up to x = 0.5, then 0.3: a ratio of 3 at x = 0.5 only.
+        let xs = [0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.8, 1.1, 1.4];
+        let k = kinks_of(&sheared(&xs, 0.0, true, 1));
+        let mut want = column(9, 5);
+        want.sort_unstable();
+        assert_eq!(marked(&k.vertices), want);
+        assert_eq!(kinks_of(&sheared(&xs, 0.0, false, 1)).n_vertices, 0);
+    }
+
+    #[test]
+    fn excluded_vertices_are_no_kinks_and_reasons_follow_the_masks() {
+        let mesh = sheared(&uniform(10, 0.1), 30.0, true, 1);
+        let topo = Topology::build(&mesh);
+        let mut exclude = feature_vertices(&mesh, &topo, 30.0);
+        for v in column(11, 5) {
+            exclude[v] = true;
+        }
+        assert_eq!(detect(&mesh, &topo, 10.0, &exclude).n_vertices, 0);
+        let k = detect(&mesh, &topo, 10.0, &feature_vertices(&mesh, &topo, 30.0));
+        let mut demote = vec![false; mesh.n_elements()];
+        demote[0] = true;
+        demote[4] = true;
+        assert!(k.elements[4] && !k.elements[0]);
+        // The pipeline's order of reasons: a kink element stays a kink element when demoted.
+        let s = crate::spline::SplineSpace::build_with_q2(
+            &mesh,
+            &topo,
+            &[
+                (&k.elements, Q2Reason::BoundaryKink),
+                (&demote, Q2Reason::InvalidSplineMap),
+            ],
+        );
+        assert_eq!(s.classes[0], ElementClass::Q2(Q2Reason::InvalidSplineMap));
+        assert_eq!(s.classes[4], ElementClass::Q2(Q2Reason::BoundaryKink));
+        assert!(s.classes[1].is_spline() || k.elements[1]);
+    }
+}
