@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Least squares against the degeneration-energy fit (L-BFGS and coloured) on real meshes.
 
-usage: python3 scripts/bench_energy.py [--runs N] [MESH ...]
+usage: python3 scripts/bench_energy.py [--runs N] [--timeout S] [MESH ...]
 Builds nothing: run `cargo build --release` first (or set POLYSPLINE to a binary). For each mesh, runs
 `curve --fit smooth`, `curve --fit energy` and `curve --fit energy --energy-solver colored`
 (order 2) N times (default 1) and prints a Markdown table: smallest step factor of the
@@ -34,6 +34,7 @@ MODES = [
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--runs", type=int, default=1)
+    ap.add_argument("--timeout", type=float, default=900.0, help="seconds per run")
     ap.add_argument("meshes", nargs="*", default=MESHES)
     args = ap.parse_args()
     print("| mesh | elements | fit | LS step | min SJ in → out | boundary dev. max | it. | energy s | total s |")
@@ -45,11 +46,18 @@ def main():
                 totals, energies, r = [], [], None
                 for _ in range(args.runs):
                     out, rep = os.path.join(tmp, "o.msh"), os.path.join(tmp, "r.json")
-                    subprocess.run([EXE, "curve", path, "-o", out, "--report", rep, *flags],
-                                   check=True, capture_output=True)
+                    try:
+                        subprocess.run([EXE, "curve", path, "-o", out, "--report", rep, *flags],
+                                       check=True, capture_output=True, timeout=args.timeout)
+                    except subprocess.TimeoutExpired:
+                        r = None
+                        break
                     r = json.load(open(rep))
                     totals.append(r["timings"]["total"])
                     energies.append(r["timings"].get("energy", 0.0))
+                if r is None:
+                    print(f"| {mesh} | | {name} | | | | timeout ({args.timeout} s) | | |", flush=True)
+                    continue
                 e = r.get("energy")
                 it = f"{e['iterations']} ({e['stop']})" if e else "–"
                 print(f"| {mesh} | {r['elements']} | {name} | {r['line_search_alpha']:.3g} | "

@@ -494,7 +494,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     "energy: {:?}, {} {} ({:?}), Q {:.4e} -> {:.4e}, degeneration {:.4e} -> {:.4e}",
                     e.solver,
                     e.iterations,
-                    if e.solver == EnergySolver::Colored { "sweeps" } else { "iterations" },
+                    if e.solver == EnergySolver::Colored {
+                        "sweeps"
+                    } else {
+                        "iterations"
+                    },
                     e.stop,
                     e.initial_energy,
                     e.final_energy,

@@ -152,10 +152,7 @@ pub enum CurveError {
     #[error("{}: fit: {source}", input.display())]
     Solve { input: PathBuf, source: CgError },
     #[error("{}: energy: {source}", input.display())]
-    Energy {
-        input: PathBuf,
-        source: EnergyError,
-    },
+    Energy { input: PathBuf, source: EnergyError },
     #[error("{}: {source}", input.display())]
     Elastic {
         input: PathBuf,
@@ -487,8 +484,15 @@ pub fn curve_in_memory(input: &Path, options: &CurveOptions) -> Result<Curved, C
                             Some(params) => {
                                 lap("validity", &mut timings);
                                 let (c, info) = minimize_energy(
-                                    &s, &mesh, &topo, options, params, certifier, &c_star,
-                                    &thresholds, &c,
+                                    &s,
+                                    &mesh,
+                                    &topo,
+                                    options,
+                                    params,
+                                    certifier,
+                                    &c_star,
+                                    &thresholds,
+                                    &c,
                                 )
                                 .map_err(|source| CurveError::Energy {
                                     input: input.to_owned(),

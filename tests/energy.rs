@@ -54,7 +54,18 @@ fn gradient_matches_finite_differences() {
         let t = Topology::build(&m);
         let s = SplineSpace::build(&m, &t);
         let c_star = fitted(&m, &t, &s);
-        let e = Energy::new(&s, &m, &t, &FitParams::smooth(), &c_star, &EnergyParams { weight: 0.7, ..Default::default() }).unwrap();
+        let e = Energy::new(
+            &s,
+            &m,
+            &t,
+            &FitParams::smooth(),
+            &c_star,
+            &EnergyParams {
+                weight: 0.7,
+                ..Default::default()
+            },
+        )
+        .unwrap();
         // A point between the initial map and the fit, off any symmetry.
         let c: Vec<[f64; 3]> = s
             .control_points
@@ -170,12 +181,21 @@ fn energy_of_an_affine_image_is_known() {
         },
         ..Default::default()
     };
-    for m in [half_annulus(6, 3, 0.1, 1.5), extrude(&star_2d(3), &uniform(2, 0.4))] {
+    for m in [
+        half_annulus(6, 3, 0.1, 1.5),
+        extrude(&star_2d(3), &uniform(2, 0.4)),
+    ] {
         let t = Topology::build(&m);
         let d = m.dim;
         let (c, s) = (0.6f64.cos(), 0.6f64.sin());
         // A rotation: f = 0, ∇ = 0.
-        let rot = |p: [f64; 3]| [c * p[0] - s * p[1] + 1.0, s * p[0] + c * p[1] - 2.0, p[2] + 0.5];
+        let rot = |p: [f64; 3]| {
+            [
+                c * p[0] - s * p[1] + 1.0,
+                s * p[0] + c * p[1] - 2.0,
+                p[2] + 0.5,
+            ]
+        };
         // Stretch by 2 and 1/2 after the rotation: singular values 2, 1/2 (, 1):
         // f = (4 + 1/4 + 4 + 1/4 (+ 2) − 2d) / (2d) = 4.5 / (2d).
         let stretch = |p: [f64; 3]| {
@@ -186,7 +206,10 @@ fn energy_of_an_affine_image_is_known() {
         let n = m.n_elements();
         let vols: Vec<f64> = (0..n).map(|el| element_volume(&m, el)).collect();
         let mean = vols.iter().sum::<f64>() / n as f64;
-        let maps = [(&rot as &dyn Fn([f64; 3]) -> [f64; 3], 0.0), (&stretch, expected_f)];
+        let maps = [
+            (&rot as &dyn Fn([f64; 3]) -> [f64; 3], 0.0),
+            (&stretch, expected_f),
+        ];
         for ((map, f), scale_kind) in maps
             .into_iter()
             .flat_map(|m| [(m, EnergyScale::Element), (m, EnergyScale::Mean)])
@@ -215,7 +238,10 @@ fn energy_of_an_affine_image_is_known() {
             if f == 0.0 {
                 let gmax = g.iter().flatten().fold(0.0f64, |a, b| a.max(b.abs()));
                 let (lo, hi) = m.bounding_box();
-                assert!(gmax <= 1e-9 * scale / (hi[0] - lo[0]), "gradient {gmax} at a rotation");
+                assert!(
+                    gmax <= 1e-9 * scale / (hi[0] - lo[0]),
+                    "gradient {gmax} at a rotation"
+                );
             }
         }
     }
@@ -229,7 +255,15 @@ fn minimisers_descend_through_certified_iterates() {
         let t = Topology::build(&m);
         let s = SplineSpace::build(&m, &t);
         let c_star = fitted(&m, &t, &s);
-        let e = Energy::new(&s, &m, &t, &FitParams::smooth(), &c_star, &EnergyParams::default()).unwrap();
+        let e = Energy::new(
+            &s,
+            &m,
+            &t,
+            &FitParams::smooth(),
+            &c_star,
+            &EnergyParams::default(),
+        )
+        .unwrap();
         // Start from the initial map (certified for these meshes).
         let start = s.control_points.clone();
         let validity = Validity::for_start(&e, &CpuCertifier, 6, &[], &start).unwrap();
@@ -245,10 +279,16 @@ fn minimisers_descend_through_certified_iterates() {
                 seen += 1;
                 for el in 0..s.n_elements() {
                     let b = det_jacobian_bounds(m.dim, &s.element_bezier_with(el, c), 6);
-                    assert!(b.certified_positive(), "{solver:?}: element {el} not certified");
+                    assert!(
+                        b.certified_positive(),
+                        "{solver:?}: element {el} not certified"
+                    );
                 }
                 let q = e.value(c);
-                assert!(q.is_finite() && q <= last, "{solver:?}: Q rose {last} -> {q}");
+                assert!(
+                    q.is_finite() && q <= last,
+                    "{solver:?}: Q rose {last} -> {q}"
+                );
                 last = q;
             })
             .unwrap();
@@ -265,15 +305,29 @@ fn colouring_separates_the_control_points_of_every_element() {
     for m in meshes() {
         let t = Topology::build(&m);
         let s = SplineSpace::build(&m, &t);
-        let e = Energy::new(&s, &m, &t, &FitParams::smooth(), &s.control_points, &EnergyParams::default()).unwrap();
-        let ids: Vec<&[u32]> = (0..e.n_elements()).map(|el| e.element_control_points(el)).collect();
+        let e = Energy::new(
+            &s,
+            &m,
+            &t,
+            &FitParams::smooth(),
+            &s.control_points,
+            &EnergyParams::default(),
+        )
+        .unwrap();
+        let ids: Vec<&[u32]> = (0..e.n_elements())
+            .map(|el| e.element_control_points(el))
+            .collect();
         let color = color_control_points(s.n_control_points(), &ids);
         for el in ids {
             let mut seen: Vec<u32> = el.iter().map(|&i| color[i as usize]).collect();
             seen.sort_unstable();
             let n = seen.len();
             seen.dedup();
-            assert_eq!(seen.len(), n, "two control points of one element share a colour");
+            assert_eq!(
+                seen.len(),
+                n,
+                "two control points of one element share a colour"
+            );
         }
     }
 }
@@ -291,7 +345,15 @@ fn results_do_not_depend_on_the_thread_count() {
             .build()
             .unwrap()
             .install(|| {
-                let e = Energy::new(&s, &m, &t, &FitParams::smooth(), &c_star, &EnergyParams::default()).unwrap();
+                let e = Energy::new(
+                    &s,
+                    &m,
+                    &t,
+                    &FitParams::smooth(),
+                    &c_star,
+                    &EnergyParams::default(),
+                )
+                .unwrap();
                 let start = s.control_points.clone();
                 let v = Validity::for_start(&e, &CpuCertifier, 6, &[], &start).unwrap();
                 let params = EnergyParams {
@@ -318,8 +380,13 @@ fn energy_fit_improves_quality_where_least_squares_was_shortened() {
     let t = Topology::build(&m);
     let linear = polyspline::sample::sample(&m, &m, &t, 1);
     polyspline::pipeline::write_high_order(&linear, &path, &Default::default(), &[]).unwrap();
-    let ls = curve_in_memory(&path, &CurveOptions::default()).unwrap().report;
-    assert!(ls.line_search_alpha.unwrap() < 1.0, "the least-squares step was not shortened");
+    let ls = curve_in_memory(&path, &CurveOptions::default())
+        .unwrap()
+        .report;
+    assert!(
+        ls.line_search_alpha.unwrap() < 1.0,
+        "the least-squares step was not shortened"
+    );
     for solver in [EnergySolver::Lbfgs, EnergySolver::Colored] {
         let options = CurveOptions {
             energy: Some(EnergyParams {

@@ -56,15 +56,16 @@ pub fn color_control_points(n: usize, element_ids: &[&[u32]]) -> Vec<u32> {
 const LOCAL_BACKTRACKS: usize = 12;
 
 /// One quadrature point of a local problem: w_e h_e² w_q, the current M and ψ.
-#[derive(Clone, Copy)]
-pub(crate) struct LocalPoint {
+#[derive(Clone, Copy, Debug)]
+pub struct LocalPoint {
     pub w: f64,
     pub m: Mat3,
     pub psi: [f64; 3],
 }
 
 /// The local problem of one control point (see the module docs).
-pub(crate) struct LocalProblem {
+#[derive(Clone, Debug)]
+pub struct LocalProblem {
     pub dim: usize,
     pub kii: f64,
     /// (K δ)_i − (F − K C0)_i.
@@ -132,7 +133,10 @@ impl LocalProblem {
 
 /// Solve H x = r for SPD H (d×d) by Cholesky, shifting the diagonal until it factors.
 fn solve_spd(d: usize, h: &Mat3, r: [f64; 3]) -> [f64; 3] {
-    let scale = (0..d).map(|i| h[i][i].abs()).fold(0.0f64, f64::max).max(f64::MIN_POSITIVE);
+    let scale = (0..d)
+        .map(|i| h[i][i].abs())
+        .fold(0.0f64, f64::max)
+        .max(f64::MIN_POSITIVE);
     let mut shift = 0.0;
     loop {
         let mut l = [[0.0; 3]; 3];
@@ -165,8 +169,101 @@ fn solve_spd(d: usize, h: &Mat3, r: [f64; 3]) -> [f64; 3] {
             }
             return x;
         }
-        shift = if shift == 0.0 { 1e-6 * scale } else { shift * 10.0 };
+        shift = if shift == 0.0 {
+            1e-6 * scale
+        } else {
+            shift * 10.0
+        };
     }
+}
+
+/// What the local problems share: each control point's support and K_ii.
+struct Locals {
+    /// Support of each control point: (element, column in the element's rows).
+    support: Vec<Vec<(u32, u32)>>,
+    kii: Vec<f64>,
+}
+
+impl Locals {
+    fn new(energy: &Energy) -> Self {
+        let n = energy.space.control_points().len();
+        let mut support: Vec<Vec<(u32, u32)>> = vec![Vec::new(); n];
+        for (e, r) in energy.rows.iter().enumerate() {
+            for (k, &i) in r.ids.iter().enumerate() {
+                support[i as usize].push((e as u32, k as u32));
+            }
+        }
+        let k = &energy.k;
+        let kii = (0..n)
+            .map(|i| {
+                (k.indptr[i]..k.indptr[i + 1])
+                    .find(|&p| k.indices[p] as usize == i)
+                    .map_or(0.0, |p| k.data[p])
+            })
+            .collect();
+        Locals { support, kii }
+    }
+
+    /// The local problem of control point i at control points `x` (element nets `nets`).
+    fn problem(
+        &self,
+        energy: &Energy,
+        x: &[[f64; 3]],
+        nets: &[[[f64; 3]; 27]],
+        i: usize,
+    ) -> LocalProblem {
+        let (k, c0) = (&energy.k, energy.space.control_points());
+        let (nb, nq) = (energy.nb, energy.nq());
+        let mut kd = [0.0; 3];
+        for p in k.indptr[i]..k.indptr[i + 1] {
+            let j = k.indices[p] as usize;
+            for c in 0..3 {
+                kd[c] += k.data[p] * (x[j][c] - c0[j][c]);
+            }
+        }
+        let b = [0, 1, 2].map(|c| kd[c] - energy.rhs[i][c]);
+        let mut points = Vec::with_capacity(self.support[i].len() * nq);
+        for &(e, kk) in &self.support[i] {
+            let (e, kk) = (e as usize, kk as usize);
+            let r = &energy.rows[e];
+            for q in 0..nq {
+                let db = &energy.dbq[q];
+                let mut phi = [0.0; 3];
+                for a in 0..nb {
+                    let w = r.r[a * r.ids.len() + kk];
+                    for j in 0..3 {
+                        phi[j] += w * db[j][a];
+                    }
+                }
+                let p = &energy.pinv[e * nq + q];
+                let psi = [0, 1, 2].map(|j| (0..3).map(|l| p[l][j] * phi[l]).sum());
+                points.push(LocalPoint {
+                    w: energy.qw[q] * energy.scale[e],
+                    m: energy.m_at(e, q, &nets[e]),
+                    psi,
+                });
+            }
+        }
+        LocalProblem {
+            dim: energy.dim,
+            kii: self.kii[i],
+            b,
+            points,
+        }
+    }
+}
+
+/// The local problems of control points `which` at control points `x`.
+pub fn local_problems(energy: &Energy, x: &[[f64; 3]], which: &[usize]) -> Vec<LocalProblem> {
+    let locals = Locals::new(energy);
+    let nets: Vec<[[f64; 3]; 27]> = (0..energy.n_elements())
+        .into_par_iter()
+        .map(|e| energy.net(e, x))
+        .collect();
+    which
+        .par_iter()
+        .map(|&i| locals.problem(energy, x, &nets, i))
+        .collect()
 }
 
 /// Minimise by coloured sweeps (see the module docs).
@@ -180,7 +277,6 @@ pub(crate) fn minimize(
     let n = start.len();
     let dim = energy.dim;
     let nb = energy.nb;
-    let nq = energy.nq();
     let ids: Vec<&[u32]> = energy.rows.iter().map(|r| r.ids.as_slice()).collect();
     let color = color_control_points(n, &ids);
     let n_colors = color.iter().map(|&c| c as usize + 1).max().unwrap_or(0);
@@ -188,22 +284,8 @@ pub(crate) fn minimize(
     for (i, &c) in color.iter().enumerate() {
         by_color[c as usize].push(i as u32);
     }
-    // Support of each control point: (element, column in the element's rows).
-    let mut support: Vec<Vec<(u32, u32)>> = vec![Vec::new(); n];
-    for (e, r) in energy.rows.iter().enumerate() {
-        for (k, &i) in r.ids.iter().enumerate() {
-            support[i as usize].push((e as u32, k as u32));
-        }
-    }
-    let k = &energy.k;
-    let kii: Vec<f64> = (0..n)
-        .map(|i| {
-            (k.indptr[i]..k.indptr[i + 1])
-                .find(|&p| k.indices[p] as usize == i)
-                .map_or(0.0, |p| k.data[p])
-        })
-        .collect();
-    let c0 = energy.space.control_points();
+    let locals = Locals::new(energy);
+    let support = &locals.support;
     let mut x = start.to_vec();
     let mut nets: Vec<[[f64; 3]; 27]> = (0..energy.n_elements())
         .into_par_iter()
@@ -234,42 +316,7 @@ pub(crate) fn minimize(
                         let r = &energy.rows[e];
                         r.r[a * r.ids.len() + kk]
                     };
-                    // The local problem at the current state.
-                    let mut kd = [0.0; 3];
-                    for p in k.indptr[i]..k.indptr[i + 1] {
-                        let j = k.indices[p] as usize;
-                        for c in 0..3 {
-                            kd[c] += k.data[p] * (x[j][c] - c0[j][c]);
-                        }
-                    }
-                    let b = [0, 1, 2].map(|c| kd[c] - energy.rhs[i][c]);
-                    let mut points = Vec::with_capacity(support[i].len() * nq);
-                    for &(e, kk) in &support[i] {
-                        let (e, kk) = (e as usize, kk as usize);
-                        for q in 0..nq {
-                            let db = &energy.dbq[q];
-                            let mut phi = [0.0; 3];
-                            for a in 0..nb {
-                                let w = col(e, kk, a);
-                                for j in 0..3 {
-                                    phi[j] += w * db[j][a];
-                                }
-                            }
-                            let p = &energy.pinv[e * nq + q];
-                            let psi = [0, 1, 2].map(|j| (0..3).map(|l| p[l][j] * phi[l]).sum());
-                            points.push(super::colored::LocalPoint {
-                                w: energy.qw[q] * energy.scale[e],
-                                m: energy.m_at(e, q, &nets[e]),
-                                psi,
-                            });
-                        }
-                    }
-                    let lp = LocalProblem {
-                        dim,
-                        kii: kii[i],
-                        b,
-                        points,
-                    };
+                    let lp = locals.problem(energy, &x, &nets, i);
                     // Newton with a certified Armijo line search on the support elements.
                     let mut v = [0.0; 3];
                     let mut lv = lp.eval(v, None);
@@ -391,14 +438,22 @@ mod tests {
                 vp[k] += eps;
                 vm[k] -= eps;
                 let fd = (lp.eval(vp, None) - lp.eval(vm, None)) / (2.0 * eps);
-                assert!((fd - g[k]).abs() < 1e-6 * (1.0 + g[k].abs()), "grad {k}: {fd} vs {}", g[k]);
+                assert!(
+                    (fd - g[k]).abs() < 1e-6 * (1.0 + g[k].abs()),
+                    "grad {k}: {fd} vs {}",
+                    g[k]
+                );
                 let (mut gp, mut gm) = ([0.0; 3], [0.0; 3]);
                 let mut hh = [[0.0; 3]; 3];
                 lp.eval(vp, Some((&mut gp, &mut hh)));
                 lp.eval(vm, Some((&mut gm, &mut hh)));
                 for i in 0..dim {
                     let fd = (gp[i] - gm[i]) / (2.0 * eps);
-                    assert!((fd - h[i][k]).abs() < 1e-5 * (1.0 + h[i][k].abs()), "H[{i}][{k}]: {fd} vs {}", h[i][k]);
+                    assert!(
+                        (fd - h[i][k]).abs() < 1e-5 * (1.0 + h[i][k].abs()),
+                        "H[{i}][{k}]: {fd} vs {}",
+                        h[i][k]
+                    );
                 }
             }
         }

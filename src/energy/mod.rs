@@ -170,7 +170,8 @@ const GAUSS3: [(f64, f64); 3] = [
 pub type Mat3 = [[f64; 3]; 3];
 
 pub(crate) fn det3(m: &Mat3) -> f64 {
-    m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1]) - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+    m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+        - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
         + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
 }
 
@@ -301,7 +302,11 @@ impl<'a> Energy<'a> {
         for qz in 0..nz {
             for qy in 0..3 {
                 for qx in 0..3 {
-                    let u = [GAUSS3[qx].0, GAUSS3[qy].0, if dim == 2 { 0.0 } else { GAUSS3[qz].0 }];
+                    let u = [
+                        GAUSS3[qx].0,
+                        GAUSS3[qy].0,
+                        if dim == 2 { 0.0 } else { GAUSS3[qz].0 },
+                    ];
                     let w = GAUSS3[qx].1 * GAUSS3[qy].1 * if dim == 2 { 1.0 } else { GAUSS3[qz].1 };
                     let b = u.map(bernstein);
                     let db = u.map(bernstein_derivative);
@@ -433,7 +438,12 @@ impl<'a> Energy<'a> {
 
     /// w_e S_e of element e with Bernstein net `net`; with `grad`, ∂(w_e S_e)/∂B is added into
     /// it (nb × 3).
-    fn element_energy(&self, e: usize, net: &[[f64; 3]; 27], mut grad: Option<&mut [[f64; 3]; 27]>) -> f64 {
+    fn element_energy(
+        &self,
+        e: usize,
+        net: &[[f64; 3]; 27],
+        mut grad: Option<&mut [[f64; 3]; 27]>,
+    ) -> f64 {
         let nq = self.nq();
         let mut s = 0.0;
         for q in 0..nq {
@@ -560,7 +570,12 @@ impl<'a> Energy<'a> {
     }
 
     /// Per-element certified lower bounds of det J for control points `cps`.
-    pub(crate) fn bounds(&self, certifier: &dyn Certifier, cps: &[[f64; 3]], depth: usize) -> Vec<f64> {
+    pub(crate) fn bounds(
+        &self,
+        certifier: &dyn Certifier,
+        cps: &[[f64; 3]],
+        depth: usize,
+    ) -> Vec<f64> {
         let all: Vec<usize> = (0..self.n_elements()).collect();
         certifier
             .certify(self.dim, &all, &|e| self.net(e, cps), depth)
@@ -682,6 +697,9 @@ pub fn minimize(
     Ok((c, info))
 }
 
+/// An L-BFGS pair (s, y, 1 / sᵀy).
+type Pair = (Vec<[f64; 3]>, Vec<[f64; 3]>, f64);
+
 fn lbfgs(
     energy: &Energy,
     validity: &Validity,
@@ -710,8 +728,8 @@ fn lbfgs(
     let g0 = max_abs(&g);
     // First step: move the furthest control point by a tenth of the smallest element size.
     let h_min = energy.h_min;
-    let mut hist: std::collections::VecDeque<(Vec<[f64; 3]>, Vec<[f64; 3]>, f64)> =
-        Default::default();
+    // (s, y, 1 / sᵀy) pairs, oldest first.
+    let mut hist: std::collections::VecDeque<Pair> = Default::default();
     while info.iterations < params.max_iterations {
         if max_abs(&g) <= params.grad_tol * g0 {
             info.stop = EnergyStop::Gradient;
@@ -774,8 +792,16 @@ fn lbfgs(
         };
         info.iterations += 1;
         observe(&xn);
-        let s: Vec<[f64; 3]> = xn.iter().zip(&x).map(|(a, b)| [a[0] - b[0], a[1] - b[1], a[2] - b[2]]).collect();
-        let y: Vec<[f64; 3]> = gn.iter().zip(&g).map(|(a, b)| [a[0] - b[0], a[1] - b[1], a[2] - b[2]]).collect();
+        let s: Vec<[f64; 3]> = xn
+            .iter()
+            .zip(&x)
+            .map(|(a, b)| [a[0] - b[0], a[1] - b[1], a[2] - b[2]])
+            .collect();
+        let y: Vec<[f64; 3]> = gn
+            .iter()
+            .zip(&g)
+            .map(|(a, b)| [a[0] - b[0], a[1] - b[1], a[2] - b[2]])
+            .collect();
         let sy = dot(&s, &y);
         if sy > 1e-12 * dot(&y, &y).sqrt() * dot(&s, &s).sqrt() {
             if hist.len() == params.history.max(1) {

@@ -13,6 +13,7 @@
 pub mod cg;
 pub mod evaluate;
 pub mod jacobian_check;
+pub mod local_newton;
 
 use wgpu::util::DeviceExt;
 
@@ -359,12 +360,13 @@ pub fn shader_source(source: &str, precision: Precision) -> String {
 }
 
 /// The WGSL sources by file name, for validation.
-pub const SHADERS: [(&str, &str); 5] = [
+pub const SHADERS: [(&str, &str); 6] = [
     ("evaluate.wgsl", evaluate::SOURCE),
     ("jacobian_check.wgsl", jacobian_check::SOURCE),
     ("spmv.wgsl", cg::SPMV_SOURCE),
     ("dot.wgsl", cg::DOT_SOURCE),
     ("cg.wgsl", cg::CG_SOURCE),
+    ("local_newton.wgsl", local_newton::SOURCE),
 ];
 
 /// Scalars of the context's precision as bytes.
