@@ -48,24 +48,33 @@ fn fitted(m: &LinearMesh, t: &Topology, s: &SplineSpace) -> Vec<[f64; 3]> {
         .0
 }
 
+/// The energy with the smooth fit's least-squares term and `params`.
+fn energy<'a>(
+    s: &'a SplineSpace,
+    m: &LinearMesh,
+    t: &Topology,
+    c_star: &[[f64; 3]],
+    params: &EnergyParams,
+) -> Energy<'a> {
+    Energy::new(s, m, t, &FitParams::smooth(), c_star, params).unwrap()
+}
+
 #[test]
 fn gradient_matches_finite_differences() {
     for m in meshes() {
         let t = Topology::build(&m);
         let s = SplineSpace::build(&m, &t);
         let c_star = fitted(&m, &t, &s);
-        let e = Energy::new(
+        let e = energy(
             &s,
             &m,
             &t,
-            &FitParams::smooth(),
             &c_star,
             &EnergyParams {
                 weight: 0.7,
                 ..Default::default()
             },
-        )
-        .unwrap();
+        );
         // A point between the initial map and the fit, off any symmetry.
         let c: Vec<[f64; 3]> = s
             .control_points
@@ -255,15 +264,7 @@ fn minimisers_descend_through_certified_iterates() {
         let t = Topology::build(&m);
         let s = SplineSpace::build(&m, &t);
         let c_star = fitted(&m, &t, &s);
-        let e = Energy::new(
-            &s,
-            &m,
-            &t,
-            &FitParams::smooth(),
-            &c_star,
-            &EnergyParams::default(),
-        )
-        .unwrap();
+        let e = energy(&s, &m, &t, &c_star, &EnergyParams::default());
         // Start from the initial map (certified for these meshes).
         let start = s.control_points.clone();
         let validity = Validity::for_start(&e, &CpuCertifier, 6, &[], &start).unwrap();
@@ -305,15 +306,7 @@ fn colouring_separates_the_control_points_of_every_element() {
     for m in meshes() {
         let t = Topology::build(&m);
         let s = SplineSpace::build(&m, &t);
-        let e = Energy::new(
-            &s,
-            &m,
-            &t,
-            &FitParams::smooth(),
-            &s.control_points,
-            &EnergyParams::default(),
-        )
-        .unwrap();
+        let e = energy(&s, &m, &t, &s.control_points, &EnergyParams::default());
         let ids: Vec<&[u32]> = (0..e.n_elements())
             .map(|el| e.element_control_points(el))
             .collect();
@@ -345,15 +338,7 @@ fn results_do_not_depend_on_the_thread_count() {
             .build()
             .unwrap()
             .install(|| {
-                let e = Energy::new(
-                    &s,
-                    &m,
-                    &t,
-                    &FitParams::smooth(),
-                    &c_star,
-                    &EnergyParams::default(),
-                )
-                .unwrap();
+                let e = energy(&s, &m, &t, &c_star, &EnergyParams::default());
                 let start = s.control_points.clone();
                 let v = Validity::for_start(&e, &CpuCertifier, 6, &[], &start).unwrap();
                 let params = EnergyParams {

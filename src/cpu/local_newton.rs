@@ -118,9 +118,7 @@ pub fn local_newton<T: Real>(
             }
             for c in 0..d {
                 let mut dm = [[T::of(0.0); 3]; 3];
-                for j in 0..3 {
-                    dm[c][j] = psi[j];
-                }
+                dm[c] = psi;
                 let da = mul(&mul(&a, &dm), &a).map(|r| r.map(|x| -x));
                 let dat = tr(&da);
                 let t1 = mul(&mul(&dat, &a), &at);

@@ -2,7 +2,7 @@
 //! local problems ([`crate::energy::colored::LocalProblem`]) at the current position, one
 //! invocation per control point. CPU twin: [`crate::cpu::local_newton`].
 
-use super::{GpuContext, GpuError, bytes_to_reals, groups, reals_to_bytes};
+use super::{GpuContext, GpuError, bytes_to_reals, reals_to_bytes};
 use crate::energy::colored::LocalProblem;
 
 pub const SOURCE: &str = include_str!("../../shaders/local_newton.wgsl");
@@ -101,7 +101,7 @@ pub fn local_newton(
         };
         let point_buf = ctx.storage("points", &reals_to_bytes(prec, points.into_iter()), false);
         let out_buf = ctx.storage_zeroed("local derivatives", 13 * sz * n as u64);
-        let bind = ctx.bind(
+        ctx.run_once(
             &pipeline,
             &[
                 (0, &params),
@@ -110,15 +110,8 @@ pub fn local_newton(
                 (3, &point_buf),
                 (4, &out_buf),
             ],
+            n,
         );
-        let mut enc = ctx.device.create_command_encoder(&Default::default());
-        {
-            let mut pass = enc.begin_compute_pass(&Default::default());
-            pass.set_pipeline(&pipeline);
-            pass.set_bind_group(0, &bind, &[]);
-            pass.dispatch_workgroups(groups(n, 64), 1, 1);
-        }
-        ctx.queue.submit([enc.finish()]);
         let v = bytes_to_reals(prec, &ctx.read_back(&out_buf, 13 * sz * n as u64)?);
         out.extend(unpack(&v));
     }

@@ -290,6 +290,25 @@ impl GpuContext {
         })
     }
 
+    /// Bind `buffers` (binding, buffer) to `pipeline` and run it once over `n` invocations in
+    /// workgroups of 64.
+    pub(crate) fn run_once(
+        &self,
+        pipeline: &wgpu::ComputePipeline,
+        buffers: &[(u32, &wgpu::Buffer)],
+        n: usize,
+    ) {
+        let bind = self.bind(pipeline, buffers);
+        let mut enc = self.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, &bind, &[]);
+            pass.dispatch_workgroups(groups(n, 64), 1, 1);
+        }
+        self.queue.submit([enc.finish()]);
+    }
+
     /// Copy `bytes` bytes of `src` (from offset 0) back to the host.
     pub(crate) fn read_back(&self, src: &wgpu::Buffer, bytes: u64) -> Result<Vec<u8>, GpuError> {
         let bytes = bytes.next_multiple_of(4).max(4);
