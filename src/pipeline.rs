@@ -721,11 +721,12 @@ fn minimize_energy(
     thresholds: &[f64],
     start: &[[f64; 3]],
 ) -> Result<(Vec<[f64; 3]>, EnergyInfo), EnergyError> {
-    use crate::energy::{Energy, Validity, minimize};
+    use crate::energy::{Energy, Validity, minimize_on};
     let energy = Energy::new(s, mesh, topo, &options.fit, c_star, params)?;
     let depth = options.line_search.certificate_depth;
     let validity = Validity::for_start(&energy, certifier, depth, thresholds, start)?;
-    minimize(&energy, &validity, start, params, &mut |_| {})
+    let gpu = options.backend.gpu();
+    minimize_on(&energy, &validity, start, params, gpu, &mut |_| {})
 }
 
 /// Rounds of demotion before giving up on an initially invalid spline map.

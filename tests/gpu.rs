@@ -895,3 +895,48 @@ fn local_newton_matches_twin_and_local_problem() {
         }
     }
 }
+
+/// The coloured energy solver with the GPU's local derivatives: every accepted iterate is
+/// certified valid, Q falls, and it ends where the CPU solver ends (the derivatives differ only
+/// by rounding).
+#[test]
+fn colored_energy_with_gpu_derivatives_matches_cpu() {
+    use polyspline::energy::{Energy, EnergyParams, EnergySolver, Validity, minimize_on};
+    use polyspline::validity::CpuCertifier;
+    for prec in [Precision::F32, Precision::F64] {
+        let Some(ctx) = context(prec) else { continue };
+        if ctx.precision != prec {
+            continue;
+        }
+        let m = star_2d(4);
+        let t = Topology::build(&m);
+        let s = SplineSpace::build(&m, &t);
+        let fit = FitParams::smooth();
+        let c_star = polyspline::fit::fit(&s, &m, &t, &fit, |_, _| {}).unwrap().0;
+        let params = EnergyParams {
+            solver: EnergySolver::Colored,
+            max_iterations: 5,
+            ..Default::default()
+        };
+        let e = Energy::new(&s, &m, &t, &fit, &c_star, &params).unwrap();
+        let start = s.control_points.clone();
+        let v = Validity::for_start(&e, &CpuCertifier, 6, &[], &start).unwrap();
+        let (_, cpu) = minimize_on(&e, &v, &start, &params, None, &mut |_| {}).unwrap();
+        let (_, gpu) = minimize_on(&e, &v, &start, &params, Some(&ctx), &mut |c| {
+            for el in 0..s.n_elements() {
+                let b = det_jacobian_bounds(2, &s.element_bezier_with(el, c), 6);
+                assert!(b.certified_positive(), "element {el} not certified");
+            }
+        })
+        .unwrap();
+        assert!(gpu.final_energy < gpu.initial_energy, "{gpu:?}");
+        let tol = if prec == Precision::F64 { 1e-9 } else { 1e-3 };
+        assert!(
+            (gpu.final_energy - cpu.final_energy).abs()
+                <= tol * (cpu.initial_energy - cpu.final_energy),
+            "{prec:?}: GPU {} vs CPU {}",
+            gpu.final_energy,
+            cpu.final_energy
+        );
+    }
+}

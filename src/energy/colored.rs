@@ -267,13 +267,16 @@ pub fn local_problems(energy: &Energy, x: &[[f64; 3]], which: &[usize]) -> Vec<L
 }
 
 /// Minimise by coloured sweeps (see the module docs).
+/// With `gpu`, each colour's first Newton step takes its derivatives from the
+/// `local_newton` kernel (the line search and certificate stay on the CPU).
 pub(crate) fn minimize(
     energy: &Energy,
     validity: &Validity,
     start: &[[f64; 3]],
     params: &EnergyParams,
+    gpu: Option<&crate::gpu::GpuContext>,
     observe: &mut dyn FnMut(&[[f64; 3]]),
-) -> (Vec<[f64; 3]>, EnergyInfo) {
+) -> Result<(Vec<[f64; 3]>, EnergyInfo), crate::gpu::GpuError> {
     let n = start.len();
     let dim = energy.dim;
     let nb = energy.nb;
@@ -308,15 +311,24 @@ pub(crate) fn minimize(
     };
     while info.iterations < params.max_iterations {
         for cps in &by_color {
+            let problems: Vec<LocalProblem> = cps
+                .par_iter()
+                .map(|&i| locals.problem(energy, &x, &nets, i as usize))
+                .collect();
+            let first = match gpu {
+                Some(ctx) => Some(crate::gpu::local_newton::local_newton(ctx, dim, &problems)?),
+                None => None,
+            };
             let moves: Vec<(u32, [f64; 3], usize, usize)> = cps
                 .par_iter()
-                .map(|&i| {
+                .zip(&problems)
+                .enumerate()
+                .map(|(slot, (&i, lp))| {
                     let i = i as usize;
                     let col = |e: usize, kk: usize, a: usize| {
                         let r = &energy.rows[e];
                         r.r[a * r.ids.len() + kk]
                     };
-                    let lp = locals.problem(energy, &x, &nets, i);
                     // Newton with a certified Armijo line search on the support elements.
                     let mut v = [0.0; 3];
                     let mut lv = lp.eval(v, None);
@@ -324,10 +336,15 @@ pub(crate) fn minimize(
                     // the local energy's natural size.
                     let negligible = 1e-12 * lp.points.iter().map(|p| p.w).sum::<f64>();
                     let (mut tried, mut uncertified) = (0, 0);
-                    for _ in 0..params.local_iterations {
+                    for it in 0..params.local_iterations {
                         let mut g = [0.0; 3];
                         let mut h = [[0.0; 3]; 3];
-                        lp.eval(v, Some((&mut g, &mut h)));
+                        match &first {
+                            Some(d) if it == 0 => (g, h) = (d[slot].gradient, d[slot].hessian),
+                            _ => {
+                                lp.eval(v, Some((&mut g, &mut h)));
+                            }
+                        }
                         let step = solve_spd(dim, &h, g.map(|x| -x));
                         let slope: f64 = (0..dim).map(|c| g[c] * step[c]).sum();
                         if !(-slope > negligible) {
@@ -395,7 +412,7 @@ pub(crate) fn minimize(
         }
     }
     info.final_energy = f;
-    (x, info)
+    Ok((x, info))
 }
 
 #[cfg(test)]

@@ -158,6 +158,8 @@ pub enum EnergyError {
     UncertifiedStart { element: usize },
     #[error("energy weight must be finite and non-negative, got {0}")]
     Weight(f64),
+    #[error("GPU: {0}")]
+    Gpu(String),
 }
 
 /// 3-point Gauss rule on [0, 1] (exact to degree 5).
@@ -677,6 +679,19 @@ pub fn minimize(
     params: &EnergyParams,
     observe: &mut dyn FnMut(&[[f64; 3]]),
 ) -> Result<(Vec<[f64; 3]>, EnergyInfo), EnergyError> {
+    minimize_on(energy, validity, start, params, None, observe)
+}
+
+/// [`minimize`]; with `gpu`, the coloured solver's local derivatives come from the
+/// `local_newton` kernel.
+pub fn minimize_on(
+    energy: &Energy,
+    validity: &Validity,
+    start: &[[f64; 3]],
+    params: &EnergyParams,
+    gpu: Option<&crate::gpu::GpuContext>,
+    observe: &mut dyn FnMut(&[[f64; 3]]),
+) -> Result<(Vec<[f64; 3]>, EnergyInfo), EnergyError> {
     let t = Instant::now();
     let deg = |c: &[[f64; 3]]| {
         let parts = energy.degeneration(c);
@@ -689,7 +704,8 @@ pub fn minimize(
     }
     let (c, mut info) = match params.solver {
         EnergySolver::Lbfgs => lbfgs(energy, validity, start, params, observe),
-        EnergySolver::Colored => colored::minimize(energy, validity, start, params, observe),
+        EnergySolver::Colored => colored::minimize(energy, validity, start, params, gpu, observe)
+            .map_err(|e| EnergyError::Gpu(e.to_string()))?,
     };
     info.initial_degeneration = initial_degeneration;
     info.final_degeneration = deg(&c).1;
