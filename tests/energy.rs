@@ -396,3 +396,29 @@ fn energy_fit_improves_quality_where_least_squares_was_shortened() {
     }
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// A bad energy option is a one-line error and a non-zero exit, with nothing written.
+#[test]
+fn bad_energy_weight_is_a_clear_error() {
+    let dir = std::env::temp_dir().join(format!("polyspline-energy-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = dir.join("out.msh");
+    let input =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("meshes/real/dealii/example.msh");
+    let r = std::process::Command::new(env!("CARGO_BIN_EXE_polyspline"))
+        .arg("curve")
+        .arg(&input)
+        .arg("-o")
+        .arg(&out)
+        .args(["--fit", "energy", "--energy-weight=-1"])
+        .output()
+        .unwrap();
+    assert!(!r.status.success());
+    let err = String::from_utf8_lossy(&r.stderr);
+    assert!(
+        err.contains("--energy-weight") && err.lines().count() == 1,
+        "{err}"
+    );
+    assert!(!out.exists());
+    std::fs::remove_dir_all(&dir).ok();
+}
