@@ -15,11 +15,12 @@
 //!
 //! with J_e the Jacobian of the curved element's map, J⁰_e that of the straight input element at
 //! the same reference point, u_q, w_q a 3^d Gauss rule on [0,1]^d (weights summing to 1), and
-//! h_e² = vol(e)^{2/d} of the input element. f is the standard symmetric Dirichlet energy
-//! (the paper's eq. 11 is garbled) normalised so that its minimum, 0, is attained exactly when
-//! M is a rotation; f is invariant to scaling the mesh, so thin boundary-layer cells that keep
-//! their input shape cost nothing, and h_e² gives S_e the units of D (length²), so the weight
-//! w_e is dimensionless and Q scales with the mesh. f = +∞ where det M ≤ 0 at a quadrature point
+//! h_e² a length² ([`EnergyScale`]: the mean input element volume^{2/d} for every element by
+//! default, or each element's own). f is the standard symmetric Dirichlet energy (the paper's
+//! eq. 11 is garbled) normalised so that its minimum, 0, is attained exactly when M is a
+//! rotation; f is invariant to scaling the mesh, so thin boundary-layer cells that keep their
+//! input shape cost nothing, and h_e² gives S_e the units of D (length²), so the weight w_e is
+//! dimensionless and Q scales with the mesh. f = +∞ where det M ≤ 0 at a quadrature point
 //! (the barrier); the minimisers additionally accept a step only when every element it touches
 //! stays certified valid by the Bernstein bound.
 //!
@@ -31,7 +32,8 @@
 //! when every element is certified. [`EnergySolver::Colored`] ([`colored`]): control points are
 //! coloured so that no two of one colour share an element; each colour is optimised in parallel
 //! by Newton steps on each control point's local energy with a certified line search on its
-//! support elements, colour after colour, until a sweep stalls.
+//! support elements, colour after colour, until a sweep stalls (with a GPU, the first Newton
+//! step's derivatives come from `shaders/local_newton.wgsl`).
 //!
 //! **Determinism.** Element contributions are computed in parallel into per-element slots and
 //! summed in element order, so values and iterates do not depend on the thread count.
