@@ -283,12 +283,11 @@ fn minimisers_descend_through_certified_iterates() {
             let mut last = e.value(&start);
             let (c, info) = minimize(&e, &validity, &start, &params, &mut |c| {
                 seen += 1;
-                for el in 0..s.n_elements() {
+                for (el, &req) in required.iter().enumerate() {
                     let b = det_jacobian_bounds(m.dim, &s.element_bezier_with(el, c), 6);
                     assert!(
-                        b.certified_positive() && b.lower > required[el],
-                        "{solver:?}: element {el} not certified above {}",
-                        required[el]
+                        b.certified_positive() && b.lower > req,
+                        "{solver:?}: element {el} not certified above {req}"
                     );
                 }
                 let q = e.value(c);
