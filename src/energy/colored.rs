@@ -295,20 +295,8 @@ pub(crate) fn minimize(
         .map(|e| energy.net(e, &x))
         .collect();
     let mut f = energy.value(&x);
-    let mut info = EnergyInfo {
-        solver: EnergySolver::Colored,
-        weight: energy.weight,
-        iterations: 0,
-        stop: EnergyStop::MaxIterations,
-        initial_energy: f,
-        final_energy: f,
-        initial_degeneration: 0.0,
-        final_degeneration: 0.0,
-        evaluations: 0,
-        uncertified_trials: 0,
-        colors: Some(n_colors),
-        seconds: 0.0,
-    };
+    let mut info = EnergyInfo::start(EnergySolver::Colored, energy.weight, f);
+    info.colors = Some(n_colors);
     while info.iterations < params.max_iterations {
         for cps in &by_color {
             let problems: Vec<LocalProblem> = cps

@@ -149,6 +149,26 @@ pub struct EnergyInfo {
     pub seconds: f64,
 }
 
+impl EnergyInfo {
+    /// Nothing done yet, at energy `q`.
+    fn start(solver: EnergySolver, weight: f64, q: f64) -> Self {
+        EnergyInfo {
+            solver,
+            weight,
+            iterations: 0,
+            stop: EnergyStop::MaxIterations,
+            initial_energy: q,
+            final_energy: q,
+            initial_degeneration: 0.0,
+            final_degeneration: 0.0,
+            evaluations: 0,
+            uncertified_trials: 0,
+            colors: None,
+            seconds: 0.0,
+        }
+    }
+}
+
 /// Why the energy cannot be minimised from the given start.
 #[derive(Clone, Debug, thiserror::Error)]
 pub enum EnergyError {
@@ -729,20 +749,8 @@ fn lbfgs(
     let mut x = start.to_vec();
     let mut g = vec![[0.0; 3]; n];
     let mut f = energy.value_and_gradient(&x, &mut g);
-    let mut info = EnergyInfo {
-        solver: EnergySolver::Lbfgs,
-        weight: energy.weight,
-        iterations: 0,
-        stop: EnergyStop::MaxIterations,
-        initial_energy: f,
-        final_energy: f,
-        initial_degeneration: 0.0,
-        final_degeneration: 0.0,
-        evaluations: 1,
-        uncertified_trials: 0,
-        colors: None,
-        seconds: 0.0,
-    };
+    let mut info = EnergyInfo::start(EnergySolver::Lbfgs, energy.weight, f);
+    info.evaluations = 1;
     let g0 = max_abs(&g);
     // First step: move the furthest control point by a tenth of the smallest element size.
     let h_min = energy.h_min;
