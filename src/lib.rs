@@ -22,6 +22,7 @@
 pub mod compare;
 pub mod cpu;
 pub mod elastic;
+pub mod energy;
 pub mod fit;
 pub mod gpu;
 pub mod info;

@@ -3,6 +3,7 @@
 use clap::{Parser, Subcommand};
 use polyspline::compare::{CompareOptions, compare};
 use polyspline::elastic::{ElasticParams, ElasticPreconditioner};
+use polyspline::energy::{EnergyParams, EnergySolver};
 use polyspline::fit::{FitParams, FitTargets, FitWeights, SmoothParams};
 use polyspline::info::MeshInfo;
 use polyspline::io::gmsh_write::MshVersion;
@@ -74,9 +75,12 @@ enum Command {
         /// and `frame` are the paper's weight presets (least squares, then a certified line
         /// search); `smooth` takes the midpoint targets from a local reconstruction of the
         /// smooth boundary instead of the straight chords (more accurate curved boundaries; the
-        /// default).
+        /// default); `energy` is `smooth` followed by minimising the element degeneration energy
+        /// under the det J certificate (paper §2.4, docs/energy.md).
         #[arg(long, value_enum, default_value_t = FitArg::Smooth)]
         fit: FitArg,
+        #[command(flatten)]
+        energy: EnergyArgs,
         /// Position weight at interior element corners (overrides the preset).
         #[arg(long)]
         w_corner: Option<f64>,
@@ -317,6 +321,55 @@ enum FitArg {
     Position,
     Frame,
     Smooth,
+    Energy,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum EnergySolverArg {
+    Lbfgs,
+    Colored,
+}
+
+/// Options of `--fit energy`.
+#[derive(clap::Args)]
+struct EnergyArgs {
+    /// Minimiser of the degeneration energy: global L-BFGS, or coloured local Newton steps.
+    #[arg(long, value_enum, default_value_t = EnergySolverArg::Lbfgs)]
+    energy_solver: EnergySolverArg,
+    /// Weight of the degeneration energy against the least-squares terms.
+    #[arg(long, default_value_t = EnergyParams::default().weight)]
+    energy_weight: f64,
+    /// L-BFGS iterations or coloured sweeps at most.
+    #[arg(long, default_value_t = EnergyParams::default().max_iterations)]
+    energy_max_iterations: usize,
+    /// Stop L-BFGS when an iteration lowers the energy by less than this fraction.
+    #[arg(long, default_value_t = EnergyParams::default().rel_tol)]
+    energy_tol: f64,
+    /// Stop the coloured solver when a sweep lowers the energy by less than this fraction.
+    #[arg(long, default_value_t = EnergyParams::default().sweep_tol)]
+    energy_sweep_tol: f64,
+}
+
+impl EnergyArgs {
+    fn params(&self) -> anyhow::Result<EnergyParams> {
+        if !(self.energy_weight >= 0.0 && self.energy_weight.is_finite()) {
+            anyhow::bail!(
+                "--energy-weight must be finite and non-negative, got {}",
+                self.energy_weight
+            );
+        }
+        Ok(EnergyParams {
+            weight: self.energy_weight,
+            solver: match self.energy_solver {
+                EnergySolverArg::Lbfgs => EnergySolver::Lbfgs,
+                EnergySolverArg::Colored => EnergySolver::Colored,
+            },
+            max_iterations: self.energy_max_iterations,
+            rel_tol: self.energy_tol,
+            sweep_tol: self.energy_sweep_tol,
+            ..Default::default()
+        })
+    }
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -365,6 +418,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             method,
             elastic,
             fit,
+            energy,
             w_corner,
             w_boundary_corner,
             w_midpoint,
@@ -394,7 +448,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             }
             let mut weights = match fit {
                 FitArg::Frame => FitWeights::frame(),
-                FitArg::Smooth => FitWeights::smooth(),
+                FitArg::Smooth | FitArg::Energy => FitWeights::smooth(),
                 _ => FitWeights::position(),
             };
             for (slot, value) in [
@@ -433,7 +487,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                         preconditioner: cg_preconditioner.into(),
                         ..Default::default()
                     },
-                    targets: if fit == FitArg::Smooth {
+                    targets: if matches!(fit, FitArg::Smooth | FitArg::Energy) {
                         FitTargets::Smooth(SmoothParams {
                             kink_angle_deg: kink_angle,
                             ..Default::default()
@@ -468,6 +522,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     },
                 },
                 backend,
+                energy: if fit == FitArg::Energy {
+                    Some(energy.params()?)
+                } else {
+                    None
+                },
             };
             let progress = polyspline::progress::Terminal::new(quiet);
             let r = curve_with_progress(&mesh, &output, &options, &progress);
@@ -494,6 +553,23 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 eprintln!(
                     "fit: {it} CG iterations, relative residual {res:.2e}; {} elements invalid at the full step, {} control points damped, smallest step {alpha:.4}",
                     r.invalid_at_full_step, r.damped_control_points
+                );
+            }
+            if let Some(e) = &r.energy {
+                eprintln!(
+                    "energy: {:?}, {} {} ({:?}), Q {:.4e} -> {:.4e}, degeneration {:.4e} -> {:.4e}",
+                    e.solver,
+                    e.iterations,
+                    if e.solver == EnergySolver::Colored {
+                        "sweeps"
+                    } else {
+                        "iterations"
+                    },
+                    e.stop,
+                    e.initial_energy,
+                    e.final_energy,
+                    e.initial_degeneration,
+                    e.final_degeneration
                 );
             }
             if let Some(e) = &r.elastic {

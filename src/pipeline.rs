@@ -10,6 +10,7 @@
 //! job fails with [`CurveError::Invalid`] and writes nothing.
 
 use crate::elastic::{ElasticError, ElasticInfo, ElasticParams, elastic_analogy};
+use crate::energy::{EnergyError, EnergyInfo, EnergyParams};
 use crate::fit::{FitParams, FitTargets, FitWeights, fit_with};
 use crate::gpu::{AdapterReport, Backend, Precision};
 use crate::io::gmsh_write::{MshVersion, write_msh};
@@ -111,6 +112,9 @@ pub struct CurveOptions {
     pub output: OutputOptions,
     /// Executor of sampling, certification and the CG solve.
     pub backend: Backend,
+    /// After the certified least-squares fit, minimise the element degeneration energy
+    /// ([`crate::energy`]); `None` (the default) keeps the least-squares result.
+    pub energy: Option<EnergyParams>,
 }
 
 impl Default for CurveOptions {
@@ -129,6 +133,7 @@ impl Default for CurveOptions {
             mesh: MeshOptions::default(),
             output: OutputOptions::default(),
             backend: Backend::default(),
+            energy: None,
         }
     }
 }
@@ -151,6 +156,8 @@ pub enum CurveError {
     },
     #[error("{}: fit: {source}", input.display())]
     Solve { input: PathBuf, source: CgError },
+    #[error("{}: energy: {source}", input.display())]
+    Energy { input: PathBuf, source: EnergyError },
     #[error("{}: {source}", input.display())]
     Elastic {
         input: PathBuf,
@@ -232,6 +239,8 @@ pub struct CurveReport {
     /// Local search: control points whose step was shortened.
     pub damped_control_points: usize,
     pub line_search: Option<LineSearchInfo>,
+    /// The degeneration-energy minimisation, with `--fit energy`.
+    pub energy: Option<EnergyInfo>,
     /// Elements of the written mesh not certified valid (always 0: otherwise nothing is written).
     pub invalid_elements: usize,
     /// Smallest certified lower bound of det J over the written elements (spline geometry).
@@ -400,6 +409,7 @@ pub fn curve_in_memory_with_progress(
     let mut ls_alpha = None;
     let mut ls_invalid_full = 0;
     let mut ls_damped = 0;
+    let mut energy_info = None;
     let gpu = options.backend.gpu();
     let gpu_certifier = gpu.map(crate::gpu::jacobian_check::GpuCertifier::new);
     let certifier: &dyn Certifier = match &gpu_certifier {
@@ -537,8 +547,40 @@ pub fn curve_in_memory_with_progress(
                 };
                 match result {
                     Ok((c, alpha, bound, invalid_full, damped, ls)) => {
+                        let c = match &options.energy {
+                            None => c,
+                            Some(params) => {
+                                lap("validity", &mut timings);
+                                let (c, info) = minimize_energy(
+                                    &s,
+                                    &mesh,
+                                    &topo,
+                                    &fit_params,
+                                    options,
+                                    params,
+                                    certifier,
+                                    &c_star,
+                                    &thresholds,
+                                    &c,
+                                )
+                                .map_err(|source| CurveError::Energy {
+                                    input: input.to_owned(),
+                                    source,
+                                })?;
+                                energy_info = Some(info);
+                                lap("energy", &mut timings);
+                                c
+                            }
+                        };
                         s.control_points = c;
-                        min_det_bound = Some(bound);
+                        min_det_bound = Some(if options.energy.is_some() {
+                            certify_all(&s)
+                                .iter()
+                                .map(|b| b.lower)
+                                .fold(f64::INFINITY, f64::min)
+                        } else {
+                            bound
+                        });
                         fit_info = Some(info);
                         ls_alpha = Some(alpha);
                         ls_invalid_full = invalid_full;
@@ -696,6 +738,7 @@ pub fn curve_in_memory_with_progress(
         invalid_at_full_step: ls_invalid_full,
         damped_control_points: ls_damped,
         line_search: ls_info,
+        energy: energy_info,
         invalid_elements: 0,
         min_det_jacobian_bound: min_det_bound,
         input_min_scaled_jacobian: input_msj,
@@ -740,6 +783,30 @@ pub fn boundary_deviation(
         }
     }
     (max, if n > 0 { (sum / n as f64).sqrt() } else { 0.0 })
+}
+
+/// The energy minimisation of `--fit energy` from the certified least-squares result `start`;
+/// the least-squares line search's thresholds stay in force. Returns C and the bound of the
+/// result (certified by the minimiser's acceptance test).
+#[allow(clippy::too_many_arguments)]
+fn minimize_energy(
+    s: &SplineSpace,
+    mesh: &crate::mesh::LinearMesh,
+    topo: &Topology,
+    fit: &FitParams,
+    options: &CurveOptions,
+    params: &EnergyParams,
+    certifier: &dyn Certifier,
+    c_star: &[[f64; 3]],
+    thresholds: &[f64],
+    start: &[[f64; 3]],
+) -> Result<(Vec<[f64; 3]>, EnergyInfo), EnergyError> {
+    use crate::energy::{Energy, Validity, minimize_on};
+    let energy = Energy::new(s, mesh, topo, fit, c_star, params)?;
+    let depth = options.line_search.certificate_depth;
+    let validity = Validity::for_start(&energy, certifier, depth, thresholds, start)?;
+    let gpu = options.backend.gpu();
+    minimize_on(&energy, &validity, start, params, gpu, &mut |_| {})
 }
 
 /// Rounds of demotion before giving up on an initially invalid spline map.

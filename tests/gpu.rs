@@ -805,3 +805,140 @@ fn million_hex_gpu_sampling_and_certification() {
         ctx.adapter.name
     );
 }
+
+/// The coloured energy solver's local derivatives: the f64 CPU twin against the analytic local
+/// problem (`LocalProblem::eval`, FD-tested in src/energy/colored.rs), and the GPU kernel
+/// against its twin at the same precision, on local problems of real energy states.
+#[test]
+fn local_newton_matches_twin_and_local_problem() {
+    use polyspline::cpu::local_newton as twin;
+    use polyspline::energy::colored::{LocalProblem, local_problems};
+    use polyspline::energy::{Energy, EnergyParams};
+    use polyspline::gpu::local_newton::{LocalDerivatives, Params, local_newton, pack, unpack};
+    use polyspline::mesh::generate::extrude;
+    let run_twin = |dim: usize, problems: &[LocalProblem], prec: Precision| {
+        let (coefs, ranges, points) = pack(problems);
+        let params = Params {
+            dim: dim as u32,
+            n_problems: problems.len() as u32,
+            _pad0: 0,
+            _pad1: 0,
+        };
+        let mut out = vec![0.0f64; 13 * problems.len()];
+        match prec {
+            Precision::F64 => twin::local_newton(&params, &coefs, &ranges, &points, &mut out),
+            Precision::F32 => {
+                let c: Vec<f32> = coefs.iter().map(|&x| x as f32).collect();
+                let p: Vec<f32> = points.iter().map(|&x| x as f32).collect();
+                let mut o = vec![0.0f32; out.len()];
+                twin::local_newton(&params, &c, &ranges, &p, &mut o);
+                out = o.iter().map(|&x| x as f64).collect();
+            }
+        }
+        unpack(&out)
+    };
+    let close = |a: &LocalDerivatives, b: &LocalDerivatives, tol: f64, what: &str| {
+        let scale = a
+            .hessian
+            .iter()
+            .flatten()
+            .chain(&a.gradient)
+            .fold(a.value.abs(), |m, x| m.max(x.abs()));
+        let pairs = std::iter::once((a.value, b.value))
+            .chain(a.gradient.iter().copied().zip(b.gradient))
+            .chain(
+                a.hessian
+                    .iter()
+                    .flatten()
+                    .copied()
+                    .zip(b.hessian.iter().flatten().copied()),
+            );
+        for (x, y) in pairs {
+            assert!((x - y).abs() <= tol * scale, "{what}: {a:?} vs {b:?}");
+        }
+    };
+    for m in [star_2d(3), extrude(&star_2d(3), &uniform(2, 0.5))] {
+        let t = Topology::build(&m);
+        let s = SplineSpace::build(&m, &t);
+        let fit = FitParams::smooth();
+        let c_star = polyspline::fit::fit(&s, &m, &t, &fit, |_, _| {}).unwrap().0;
+        let e = Energy::new(&s, &m, &t, &fit, &c_star, &EnergyParams::default()).unwrap();
+        let x: Vec<[f64; 3]> = s
+            .control_points
+            .iter()
+            .zip(&c_star)
+            .map(|(a, b)| [0, 1, 2].map(|k| 0.5 * (a[k] + b[k])))
+            .collect();
+        let which: Vec<usize> = (0..x.len()).collect();
+        let problems = local_problems(&e, &x, &which);
+        let reference = run_twin(m.dim, &problems, Precision::F64);
+        for (p, r) in problems.iter().zip(&reference) {
+            let (mut g, mut h) = ([0.0; 3], [[0.0; 3]; 3]);
+            let value = p.eval([0.0; 3], Some((&mut g, &mut h)));
+            let analytic = LocalDerivatives {
+                value,
+                gradient: g,
+                hessian: h,
+            };
+            close(&analytic, r, 1e-10, "f64 twin vs analytic");
+        }
+        for prec in [Precision::F32, Precision::F64] {
+            let Some(ctx) = context(prec) else { continue };
+            if ctx.precision != prec {
+                continue;
+            }
+            let gpu = local_newton(&ctx, m.dim, &problems).unwrap();
+            let cpu = run_twin(m.dim, &problems, prec);
+            let tol = if prec == Precision::F64 { 1e-9 } else { 1e-3 };
+            assert_eq!(gpu.len(), cpu.len());
+            for (a, b) in cpu.iter().zip(&gpu) {
+                close(a, b, tol, &format!("{prec:?} GPU vs twin"));
+            }
+        }
+    }
+}
+
+/// The coloured energy solver with the GPU's local derivatives: every accepted iterate is
+/// certified valid, Q falls, and it ends where the CPU solver ends (the derivatives differ only
+/// by rounding).
+#[test]
+fn colored_energy_with_gpu_derivatives_matches_cpu() {
+    use polyspline::energy::{Energy, EnergyParams, EnergySolver, Validity, minimize_on};
+    use polyspline::validity::CpuCertifier;
+    for prec in [Precision::F32, Precision::F64] {
+        let Some(ctx) = context(prec) else { continue };
+        if ctx.precision != prec {
+            continue;
+        }
+        let m = star_2d(4);
+        let t = Topology::build(&m);
+        let s = SplineSpace::build(&m, &t);
+        let fit = FitParams::smooth();
+        let c_star = polyspline::fit::fit(&s, &m, &t, &fit, |_, _| {}).unwrap().0;
+        let params = EnergyParams {
+            solver: EnergySolver::Colored,
+            max_iterations: 5,
+            ..Default::default()
+        };
+        let e = Energy::new(&s, &m, &t, &fit, &c_star, &params).unwrap();
+        let start = s.control_points.clone();
+        let v = Validity::for_start(&e, &CpuCertifier, 6, &[], &start).unwrap();
+        let (_, cpu) = minimize_on(&e, &v, &start, &params, None, &mut |_| {}).unwrap();
+        let (_, gpu) = minimize_on(&e, &v, &start, &params, Some(&ctx), &mut |c| {
+            for el in 0..s.n_elements() {
+                let b = det_jacobian_bounds(2, &s.element_bezier_with(el, c), 6);
+                assert!(b.certified_positive(), "element {el} not certified");
+            }
+        })
+        .unwrap();
+        assert!(gpu.final_energy < gpu.initial_energy, "{gpu:?}");
+        let tol = if prec == Precision::F64 { 1e-9 } else { 1e-3 };
+        assert!(
+            (gpu.final_energy - cpu.final_energy).abs()
+                <= tol * (cpu.initial_energy - cpu.final_energy),
+            "{prec:?}: GPU {} vs CPU {}",
+            gpu.final_energy,
+            cpu.final_energy
+        );
+    }
+}

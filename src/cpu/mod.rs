@@ -8,6 +8,7 @@ pub mod cg;
 pub mod dot;
 pub mod evaluate;
 pub mod jacobian_check;
+pub mod local_newton;
 pub mod spmv;
 
 use std::ops::{Add, AddAssign, Div, Mul, Neg, Sub, SubAssign};

@@ -13,6 +13,7 @@
 pub mod cg;
 pub mod evaluate;
 pub mod jacobian_check;
+pub mod local_newton;
 
 use wgpu::util::DeviceExt;
 
@@ -289,6 +290,25 @@ impl GpuContext {
         })
     }
 
+    /// Bind `buffers` (binding, buffer) to `pipeline` and run it once over `n` invocations in
+    /// workgroups of 64.
+    pub(crate) fn run_once(
+        &self,
+        pipeline: &wgpu::ComputePipeline,
+        buffers: &[(u32, &wgpu::Buffer)],
+        n: usize,
+    ) {
+        let bind = self.bind(pipeline, buffers);
+        let mut enc = self.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, &bind, &[]);
+            pass.dispatch_workgroups(groups(n, 64), 1, 1);
+        }
+        self.queue.submit([enc.finish()]);
+    }
+
     /// Copy `bytes` bytes of `src` (from offset 0) back to the host.
     pub(crate) fn read_back(&self, src: &wgpu::Buffer, bytes: u64) -> Result<Vec<u8>, GpuError> {
         let bytes = bytes.next_multiple_of(4).max(4);
@@ -359,12 +379,13 @@ pub fn shader_source(source: &str, precision: Precision) -> String {
 }
 
 /// The WGSL sources by file name, for validation.
-pub const SHADERS: [(&str, &str); 5] = [
+pub const SHADERS: [(&str, &str); 6] = [
     ("evaluate.wgsl", evaluate::SOURCE),
     ("jacobian_check.wgsl", jacobian_check::SOURCE),
     ("spmv.wgsl", cg::SPMV_SOURCE),
     ("dot.wgsl", cg::DOT_SOURCE),
     ("cg.wgsl", cg::CG_SOURCE),
+    ("local_newton.wgsl", local_newton::SOURCE),
 ];
 
 /// Scalars of the context's precision as bytes.

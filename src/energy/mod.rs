@@ -1,0 +1,862 @@
+//! Element degeneration energy (paper §2.4): the least-squares objective plus a symmetric
+//! Dirichlet energy of every element, minimised under the det J certificate.
+//!
+//! **Inputs:** a spline space ([`FitSpace`]), the linear mesh it was built from, the
+//! least-squares fit's parameters and solution C*, [`EnergyParams`], a start C that is certified
+//! valid (the least-squares result after its line search), and a [`Certifier`].
+//! **Output:** control points C with Q(C) ≤ Q(start), every element certified valid, and an
+//! [`EnergyInfo`].
+//!
+//! **Energy.** Q(C) = (D + R)(C) − (D + R)(C*) + w_e Σ_e S_e(C), where D + R is the fit's
+//! quadratic (normal equations K, F of [`crate::fit`]; written relative to its unconstrained
+//! minimum, so the first term is (δ − δ*)ᵀ K (δ − δ*) ≥ 0) and
+//!
+//! S_e = h_e² Σ_q w_q f(M_q),   f(M) = (‖M‖²_F + ‖M⁻¹‖²_F) / (2d) − 1,   M_q = J_e(u_q) J⁰_e(u_q)⁻¹,
+//!
+//! with J_e the Jacobian of the curved element's map, J⁰_e that of the straight input element at
+//! the same reference point, u_q, w_q a 3^d Gauss rule on [0,1]^d (weights summing to 1), and
+//! h_e² a length² ([`EnergyScale`]: the mean input element volume^{2/d} for every element by
+//! default, or each element's own). f is the standard symmetric Dirichlet energy (the paper's
+//! eq. 11 is garbled) normalised so that its minimum, 0, is attained exactly when M is a
+//! rotation; f is invariant to scaling the mesh, so thin boundary-layer cells that keep their
+//! input shape cost nothing, and h_e² gives S_e the units of D (length²), so the weight w_e is
+//! dimensionless and Q scales with the mesh. f = +∞ where det M ≤ 0 at a quadrature point
+//! (the barrier); the minimisers additionally accept a step only when every element it touches
+//! stays certified valid by the Bernstein bound.
+//!
+//! **Gradient.** With the element's Bernstein net B = R_e C (extraction rows), J = Σ_a B_a ⊗ ∇b_a
+//! and M = J P (P = J⁰⁻¹): ∂f/∂M = (M − M⁻ᵀ M⁻¹ M⁻ᵀ)/d and ∂S/∂B_a = h² Σ_q w_q (∂f/∂M) Pᵀ ∇b_a,
+//! then ∂/∂C = R_eᵀ ∂/∂B. The least-squares term contributes 2(K δ − (F − K C0)).
+//!
+//! **Solvers.** [`EnergySolver::Lbfgs`]: L-BFGS with Armijo backtracking, a step accepted only
+//! when every element is certified. [`EnergySolver::Colored`] ([`colored`]): control points are
+//! coloured so that no two of one colour share an element; each colour is optimised in parallel
+//! by Newton steps on each control point's local energy with a certified line search on its
+//! support elements, colour after colour, until a sweep stalls (with a GPU, the first Newton
+//! step's derivatives come from `shaders/local_newton.wgsl`).
+//!
+//! **Determinism.** Element contributions are computed in parallel into per-element slots and
+//! summed in element order, so values and iterates do not depend on the thread count.
+
+pub mod colored;
+
+use crate::fit::{FitParams, FitSpace, FitTargets, NormalMatrix, SmoothTargets};
+use crate::mesh::{LinearMesh, Topology};
+use crate::sample::multilinear;
+use crate::solve::LinOp;
+use crate::spline::knots::{bernstein, bernstein_derivative};
+use crate::validity::Certifier;
+use rayon::prelude::*;
+use std::time::Instant;
+
+/// Which minimiser runs.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EnergySolver {
+    /// Global L-BFGS with a certified Armijo line search.
+    #[default]
+    Lbfgs,
+    /// Coloured local Newton (one control point at a time, a colour in parallel).
+    Colored,
+}
+
+/// The length² that makes S_e comparable with D.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EnergyScale {
+    /// h_e² of each element: every element weighs by its size, like D.
+    Element,
+    /// h̄² = (mean element volume)^{2/d} for every element: every element weighs the same,
+    /// so thin boundary-layer cells count as much as large ones.
+    #[default]
+    Mean,
+}
+
+/// Parameters of the energy minimisation.
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct EnergyParams {
+    /// w_e, the weight of the degeneration energy against D + R.
+    pub weight: f64,
+    pub scale: EnergyScale,
+    pub solver: EnergySolver,
+    /// L-BFGS iterations, or coloured sweeps, at most.
+    pub max_iterations: usize,
+    /// Stop L-BFGS when an iteration lowers Q by less than this fraction of Q.
+    pub rel_tol: f64,
+    /// Stop the coloured solver when a sweep lowers Q by less than this fraction of Q.
+    pub sweep_tol: f64,
+    /// Stop when ‖∇Q‖∞ falls below this fraction of its initial value (L-BFGS).
+    pub grad_tol: f64,
+    /// L-BFGS memory (pairs kept).
+    pub history: usize,
+    /// Halvings of a step before giving up on it.
+    pub max_backtracks: usize,
+    /// Newton steps per control point and sweep (coloured solver).
+    pub local_iterations: usize,
+}
+
+impl Default for EnergyParams {
+    fn default() -> Self {
+        EnergyParams {
+            weight: 1.0,
+            scale: EnergyScale::default(),
+            solver: EnergySolver::Lbfgs,
+            max_iterations: 200,
+            rel_tol: 1e-6,
+            sweep_tol: 1e-3,
+            grad_tol: 1e-6,
+            history: 8,
+            max_backtracks: 30,
+            local_iterations: 2,
+        }
+    }
+}
+
+/// Why the minimisation stopped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum EnergyStop {
+    /// The decrease per iteration fell below `rel_tol`.
+    Stalled,
+    /// The gradient fell below `grad_tol`.
+    Gradient,
+    /// `max_iterations` reached.
+    MaxIterations,
+    /// No certified step lowering Q was found along the search direction.
+    LineSearch,
+}
+
+/// What the minimisation did.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct EnergyInfo {
+    pub solver: EnergySolver,
+    pub weight: f64,
+    /// L-BFGS iterations or coloured sweeps.
+    pub iterations: usize,
+    pub stop: EnergyStop,
+    /// Q at the start (the least-squares result) and at the end.
+    pub initial_energy: f64,
+    pub final_energy: f64,
+    /// Σ_e S_e (without the weight) at the start and at the end.
+    pub initial_degeneration: f64,
+    pub final_degeneration: f64,
+    /// Energy evaluations (L-BFGS) or local Newton steps tried (coloured).
+    pub evaluations: usize,
+    /// Steps shortened because an element lost its certificate.
+    pub uncertified_trials: usize,
+    /// Number of colours (coloured solver).
+    pub colors: Option<usize>,
+    pub seconds: f64,
+}
+
+impl EnergyInfo {
+    /// Nothing done yet, at energy `q`.
+    fn start(solver: EnergySolver, weight: f64, q: f64) -> Self {
+        EnergyInfo {
+            solver,
+            weight,
+            iterations: 0,
+            stop: EnergyStop::MaxIterations,
+            initial_energy: q,
+            final_energy: q,
+            initial_degeneration: 0.0,
+            final_degeneration: 0.0,
+            evaluations: 0,
+            uncertified_trials: 0,
+            colors: None,
+            seconds: 0.0,
+        }
+    }
+}
+
+/// Why the energy cannot be minimised from the given start.
+#[derive(Clone, Debug, thiserror::Error)]
+pub enum EnergyError {
+    #[error(
+        "the degeneration energy is infinite at the start: element {element} has det J ≤ 0 at a quadrature point"
+    )]
+    InfiniteStart { element: usize },
+    #[error("the start is not certified valid on element {element}")]
+    UncertifiedStart { element: usize },
+    #[error("energy weight must be finite and non-negative, got {0}")]
+    Weight(f64),
+    #[error("GPU: {0}")]
+    Gpu(String),
+}
+
+/// 3-point Gauss rule on [0, 1] (exact to degree 5).
+const GAUSS3: [(f64, f64); 3] = [
+    (0.112_701_665_379_258_31, 5.0 / 18.0),
+    (0.5, 8.0 / 18.0),
+    (0.887_298_334_620_741_7, 5.0 / 18.0),
+];
+
+pub type Mat3 = [[f64; 3]; 3];
+
+pub(crate) fn det3(m: &Mat3) -> f64 {
+    m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+        - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
+}
+
+/// Inverse and determinant.
+pub(crate) fn inv3(m: &Mat3) -> (Mat3, f64) {
+    let det = det3(m);
+    let s = 1.0 / det;
+    let mut r = [[0.0; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            let (a, b) = ((j + 1) % 3, (j + 2) % 3);
+            let (c, d) = ((i + 1) % 3, (i + 2) % 3);
+            r[i][j] = s * (m[a][c] * m[b][d] - m[a][d] * m[b][c]);
+        }
+    }
+    (r, det)
+}
+
+pub(crate) fn mul3(a: &Mat3, b: &Mat3) -> Mat3 {
+    let mut r = [[0.0; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            r[i][j] = a[i][0] * b[0][j] + a[i][1] * b[1][j] + a[i][2] * b[2][j];
+        }
+    }
+    r
+}
+
+pub(crate) fn transpose(a: &Mat3) -> Mat3 {
+    let mut r = [[0.0; 3]; 3];
+    for i in 0..3 {
+        for j in 0..3 {
+            r[i][j] = a[j][i];
+        }
+    }
+    r
+}
+
+fn norm2(a: &Mat3) -> f64 {
+    a.iter().flatten().map(|x| x * x).sum()
+}
+
+/// Symmetric Dirichlet density f(M) (M embedded as 3×3 with M₃₃ = 1 in 2D, which the `−6`
+/// accounts for) and, when `grad` is given, ∂f/∂M. +∞ when det M ≤ 0.
+pub fn dirichlet(dim: usize, m: &Mat3, grad: Option<&mut Mat3>) -> f64 {
+    let (a, det) = inv3(m);
+    if !(det > 0.0) {
+        return f64::INFINITY;
+    }
+    let d = dim as f64;
+    let f = (norm2(m) + norm2(&a) - 6.0) / (2.0 * d);
+    if let Some(g) = grad {
+        // ∂‖M⁻¹‖²/∂M = −2 M⁻ᵀ M⁻¹ M⁻ᵀ.
+        let at = transpose(&a);
+        let t = mul3(&mul3(&at, &a), &at);
+        for i in 0..3 {
+            for j in 0..3 {
+                g[i][j] = (m[i][j] - t[i][j]) / d;
+            }
+        }
+    }
+    f
+}
+
+/// One element's extraction as a dense matrix on its distinct control points.
+pub(crate) struct ElementRows {
+    /// Distinct control points, sorted.
+    pub ids: Vec<u32>,
+    /// nb × ids.len(), row-major: Bernstein point a = Σ_k r[a·m + k] C[ids[k]].
+    pub r: Vec<f64>,
+}
+
+/// The energy Q with its per-element reference data precomputed.
+pub struct Energy<'a> {
+    pub(crate) space: &'a dyn FitSpace,
+    pub(crate) dim: usize,
+    pub(crate) nb: usize,
+    pub(crate) weight: f64,
+    pub(crate) k: NormalMatrix,
+    /// F − K C0 (the displacement right-hand side).
+    pub(crate) rhs: Vec<[f64; 3]>,
+    /// δ*ᵀ (F − K C0), the constant making the least-squares term vanish at C*.
+    ls_offset: f64,
+    /// Quadrature weights and reference gradients ∇b_a(u_q) (component, Bernstein index).
+    pub(crate) qw: Vec<f64>,
+    pub(crate) dbq: Vec<[[f64; 27]; 3]>,
+    /// Per element and quadrature point: P = J⁰⁻¹ (flattened element-major).
+    pub(crate) pinv: Vec<Mat3>,
+    /// Per element: w_e h_e².
+    pub(crate) scale: Vec<f64>,
+    pub(crate) rows: Vec<ElementRows>,
+    /// Smallest input element size vol^{1/d}.
+    h_min: f64,
+}
+
+impl<'a> Energy<'a> {
+    /// Precompute the reference data; `c_star` is the least-squares solution.
+    pub fn new(
+        space: &'a dyn FitSpace,
+        mesh: &LinearMesh,
+        topo: &Topology,
+        fit: &FitParams,
+        c_star: &[[f64; 3]],
+        params: &EnergyParams,
+    ) -> Result<Self, EnergyError> {
+        let weight = params.weight;
+        if !(weight >= 0.0 && weight.is_finite()) {
+            return Err(EnergyError::Weight(weight));
+        }
+        let dim = space.dim();
+        let nb = if dim == 2 { 9 } else { 27 };
+        let smooth = match fit.targets {
+            FitTargets::Chords => None,
+            FitTargets::Smooth(p) => Some(SmoothTargets::build_with_features(
+                mesh,
+                topo,
+                &p,
+                fit.features.as_deref(),
+            )),
+        };
+        // The fit's own normal equations (features and their weights included), so the
+        // least-squares term is the one C* minimises.
+        let (k, rhs) = crate::fit::assemble_with_features(
+            space,
+            mesh,
+            topo,
+            &fit.weights,
+            smooth.as_ref(),
+            fit.features.as_deref(),
+        );
+        let c0 = space.control_points();
+        let ls_offset: f64 = c_star
+            .iter()
+            .zip(c0)
+            .zip(&rhs)
+            .map(|((s, c), r)| (0..3).map(|i| (s[i] - c[i]) * r[i]).sum::<f64>())
+            .sum();
+        // Tensor Gauss rule.
+        let nz = if dim == 2 { 1 } else { 3 };
+        let (mut qw, mut dbq, mut qu) = (Vec::new(), Vec::new(), Vec::new());
+        for qz in 0..nz {
+            for qy in 0..3 {
+                for qx in 0..3 {
+                    let u = [
+                        GAUSS3[qx].0,
+                        GAUSS3[qy].0,
+                        if dim == 2 { 0.0 } else { GAUSS3[qz].0 },
+                    ];
+                    let w = GAUSS3[qx].1 * GAUSS3[qy].1 * if dim == 2 { 1.0 } else { GAUSS3[qz].1 };
+                    let b = u.map(bernstein);
+                    let db = u.map(bernstein_derivative);
+                    let mut g = [[0.0; 27]; 3];
+                    for c in 0..nz {
+                        for bb in 0..3 {
+                            for a in 0..3 {
+                                let o = a + 3 * bb + 9 * c;
+                                let bz = if dim == 2 { 1.0 } else { b[2][c] };
+                                g[0][o] = db[0][a] * b[1][bb] * bz;
+                                g[1][o] = b[0][a] * db[1][bb] * bz;
+                                if dim == 3 {
+                                    g[2][o] = b[0][a] * b[1][bb] * db[2][c];
+                                }
+                            }
+                        }
+                    }
+                    qw.push(w);
+                    dbq.push(g);
+                    qu.push(u);
+                }
+            }
+        }
+        let nq = qw.len();
+        let per_element: Vec<(Vec<Mat3>, f64, ElementRows)> = (0..space.n_elements())
+            .into_par_iter()
+            .map(|e| {
+                // The straight element's degree-elevated net: its multilinear map at the lattice.
+                let x = mesh.element_coords(e);
+                let mut net = [[0.0; 3]; 27];
+                for (a, p) in net.iter_mut().enumerate().take(nb) {
+                    let l = [a % 3, (a / 3) % 3, a / 9];
+                    *p = multilinear(dim, &x, l.map(|c| c as f64 / 2.0));
+                }
+                let mut pinv = Vec::with_capacity(nq);
+                let mut vol = 0.0;
+                for q in 0..nq {
+                    let j0 = jacobian(dim, nb, &net, &dbq[q]);
+                    let (p, det) = inv3(&j0);
+                    vol += qw[q] * det;
+                    pinv.push(p);
+                }
+                let (mut o, mut c, mut w) = (Vec::new(), Vec::new(), Vec::new());
+                space.element_rows(e, &mut o, &mut c, &mut w);
+                let mut ids = c.clone();
+                ids.sort_unstable();
+                ids.dedup();
+                let m = ids.len();
+                let mut r = vec![0.0; nb * m];
+                for a in 0..nb {
+                    for k in o[a]..o[a + 1] {
+                        r[a * m + ids.binary_search(&c[k]).unwrap()] += w[k];
+                    }
+                }
+                (pinv, vol.abs(), ElementRows { ids, r })
+            })
+            .collect();
+        let mut pinv = Vec::with_capacity(nq * per_element.len());
+        let mut scale = Vec::with_capacity(per_element.len());
+        let mut rows = Vec::with_capacity(per_element.len());
+        let h_min = per_element
+            .iter()
+            .map(|p| p.1.abs().powf(1.0 / dim as f64))
+            .fold(f64::INFINITY, f64::min);
+        let mean = per_element.iter().map(|p| p.1).sum::<f64>() / per_element.len().max(1) as f64;
+        for (p, vol, r) in per_element {
+            pinv.extend(p);
+            let v = match params.scale {
+                EnergyScale::Element => vol,
+                EnergyScale::Mean => mean,
+            };
+            scale.push(weight * v.powf(2.0 / dim as f64));
+            rows.push(r);
+        }
+        Ok(Energy {
+            space,
+            dim,
+            nb,
+            weight,
+            k,
+            rhs,
+            ls_offset,
+            qw,
+            dbq,
+            pinv,
+            scale,
+            rows,
+            h_min,
+        })
+    }
+
+    pub fn n_elements(&self) -> usize {
+        self.rows.len()
+    }
+
+    /// The distinct control points element e depends on (sorted).
+    pub fn element_control_points(&self, e: usize) -> &[u32] {
+        &self.rows[e].ids
+    }
+
+    pub(crate) fn nq(&self) -> usize {
+        self.qw.len()
+    }
+
+    /// Bernstein net of element e for control points `cps` (from the cached rows).
+    pub(crate) fn net(&self, e: usize, cps: &[[f64; 3]]) -> [[f64; 3]; 27] {
+        let ElementRows { ids, r } = &self.rows[e];
+        let m = ids.len();
+        let mut net = [[0.0; 3]; 27];
+        for a in 0..self.nb {
+            for (k, &id) in ids.iter().enumerate() {
+                let w = r[a * m + k];
+                if w != 0.0 {
+                    let c = cps[id as usize];
+                    for i in 0..3 {
+                        net[a][i] += w * c[i];
+                    }
+                }
+            }
+        }
+        net
+    }
+
+    /// M_q = J(u_q) P_q of element e with Bernstein net `net`.
+    pub(crate) fn m_at(&self, e: usize, q: usize, net: &[[f64; 3]; 27]) -> Mat3 {
+        let j = jacobian(self.dim, self.nb, net, &self.dbq[q]);
+        mul3(&j, &self.pinv[e * self.nq() + q])
+    }
+
+    /// w_e S_e of element e with Bernstein net `net`; with `grad`, ∂(w_e S_e)/∂B is added into
+    /// it (nb × 3).
+    fn element_energy(
+        &self,
+        e: usize,
+        net: &[[f64; 3]; 27],
+        mut grad: Option<&mut [[f64; 3]; 27]>,
+    ) -> f64 {
+        let nq = self.nq();
+        let mut s = 0.0;
+        for q in 0..nq {
+            let m = self.m_at(e, q, net);
+            let mut g = [[0.0; 3]; 3];
+            let f = dirichlet(self.dim, &m, grad.as_ref().map(|_| &mut g));
+            if !f.is_finite() {
+                return f64::INFINITY;
+            }
+            s += self.qw[q] * f;
+            if let Some(out) = grad.as_deref_mut() {
+                // H = w_q (∂f/∂M) Pᵀ; ∂/∂B_a = H ∇b_a.
+                let p = &self.pinv[e * nq + q];
+                let mut h = mul3(&g, &transpose(p));
+                for row in h.iter_mut() {
+                    for x in row.iter_mut() {
+                        *x *= self.qw[q] * self.scale[e];
+                    }
+                }
+                let db = &self.dbq[q];
+                for a in 0..self.nb {
+                    for i in 0..self.dim {
+                        out[a][i] += h[i][0] * db[0][a] + h[i][1] * db[1][a] + h[i][2] * db[2][a];
+                    }
+                }
+            }
+        }
+        self.scale[e] * s
+    }
+
+    /// w_e Σ_e S_e and its per-element parts (+∞ when an element has det J ≤ 0 somewhere).
+    pub fn degeneration(&self, cps: &[[f64; 3]]) -> Vec<f64> {
+        (0..self.n_elements())
+            .into_par_iter()
+            .map(|e| self.element_energy(e, &self.net(e, cps), None))
+            .collect()
+    }
+
+    /// The least-squares term (δ − δ*)ᵀ K (δ − δ*) and, with `grad`, its gradient written to it.
+    fn least_squares(&self, cps: &[[f64; 3]], grad: Option<&mut [[f64; 3]]>) -> f64 {
+        let c0 = self.space.control_points();
+        let delta: Vec<[f64; 3]> = cps
+            .iter()
+            .zip(c0)
+            .map(|(c, z)| [c[0] - z[0], c[1] - z[1], c[2] - z[2]])
+            .collect();
+        let mut kd = vec![[0.0; 3]; delta.len()];
+        self.k.apply(&delta, &mut kd);
+        let parts: Vec<f64> = delta
+            .par_chunks(4096)
+            .zip(kd.par_chunks(4096))
+            .zip(self.rhs.par_chunks(4096))
+            .map(|((d, k), r)| {
+                let mut s = 0.0;
+                for i in 0..d.len() {
+                    for c in 0..3 {
+                        s += d[i][c] * (k[i][c] - 2.0 * r[i][c]);
+                    }
+                }
+                s
+            })
+            .collect();
+        if let Some(g) = grad {
+            for i in 0..g.len() {
+                for c in 0..3 {
+                    g[i][c] = 2.0 * (kd[i][c] - self.rhs[i][c]);
+                }
+            }
+        }
+        parts.iter().sum::<f64>() + self.ls_offset
+    }
+
+    /// Q(C).
+    pub fn value(&self, cps: &[[f64; 3]]) -> f64 {
+        let s: f64 = self.degeneration(cps).iter().sum();
+        if !s.is_finite() {
+            return f64::INFINITY;
+        }
+        self.least_squares(cps, None) + s
+    }
+
+    /// Q(C) and ∇Q(C) (zero z components in 2D).
+    pub fn value_and_gradient(&self, cps: &[[f64; 3]], grad: &mut [[f64; 3]]) -> f64 {
+        let ls = self.least_squares(cps, Some(grad));
+        let parts: Vec<(f64, Vec<[f64; 3]>)> = (0..self.n_elements())
+            .into_par_iter()
+            .map(|e| {
+                let mut gb = [[0.0; 3]; 27];
+                let s = self.element_energy(e, &self.net(e, cps), Some(&mut gb));
+                let ElementRows { ids, r } = &self.rows[e];
+                let m = ids.len();
+                let mut gc = vec![[0.0; 3]; m];
+                for a in 0..self.nb {
+                    for k in 0..m {
+                        let w = r[a * m + k];
+                        if w != 0.0 {
+                            for i in 0..3 {
+                                gc[k][i] += w * gb[a][i];
+                            }
+                        }
+                    }
+                }
+                (s, gc)
+            })
+            .collect();
+        let mut s = 0.0;
+        for (e, (se, gc)) in parts.iter().enumerate() {
+            s += se;
+            for (k, &id) in self.rows[e].ids.iter().enumerate() {
+                for i in 0..3 {
+                    grad[id as usize][i] += gc[k][i];
+                }
+            }
+        }
+        if self.dim == 2 {
+            for g in grad.iter_mut() {
+                g[2] = 0.0;
+            }
+        }
+        if !s.is_finite() {
+            return f64::INFINITY;
+        }
+        ls + s
+    }
+
+    /// Per-element certified lower bounds of det J for control points `cps`.
+    pub(crate) fn bounds(
+        &self,
+        certifier: &dyn Certifier,
+        cps: &[[f64; 3]],
+        depth: usize,
+    ) -> Vec<f64> {
+        let all: Vec<usize> = (0..self.n_elements()).collect();
+        certifier
+            .certify(self.dim, &all, &|e| self.net(e, cps), depth)
+            .iter()
+            .map(|b| b.lower)
+            .collect()
+    }
+}
+
+/// J = Σ_a B_a ⊗ ∇b_a (J₃₃ = 1 in 2D).
+pub(crate) fn jacobian(dim: usize, nb: usize, net: &[[f64; 3]; 27], db: &[[f64; 27]; 3]) -> Mat3 {
+    let mut j = [[0.0; 3]; 3];
+    for a in 0..nb {
+        for i in 0..dim {
+            for k in 0..dim {
+                j[i][k] += net[a][i] * db[k][a];
+            }
+        }
+    }
+    if dim == 2 {
+        j[2][2] = 1.0;
+    }
+    j
+}
+
+/// How the minimisers decide that a candidate keeps the mesh valid: element e is accepted when
+/// its certified lower bound of det J exceeds `threshold[e]`.
+pub struct Validity<'c> {
+    pub certifier: &'c dyn Certifier,
+    pub depth: usize,
+    pub threshold: Vec<f64>,
+}
+
+impl Validity<'_> {
+    /// Thresholds for `start`: `requested[e]` (0 where the slice is short), lowered to half of
+    /// what `start` achieves where it achieves less, so the start is always accepted.
+    pub fn for_start<'c>(
+        energy: &Energy,
+        certifier: &'c dyn Certifier,
+        depth: usize,
+        requested: &[f64],
+        start: &[[f64; 3]],
+    ) -> Result<Validity<'c>, EnergyError> {
+        let lower = energy.bounds(certifier, start, depth);
+        let mut threshold = Vec::with_capacity(lower.len());
+        for (e, &l) in lower.iter().enumerate() {
+            if !(l > 0.0) {
+                return Err(EnergyError::UncertifiedStart { element: e });
+            }
+            let t = requested.get(e).copied().unwrap_or(0.0).max(0.0);
+            threshold.push(if l > t { t } else { 0.5 * l });
+        }
+        Ok(Validity {
+            certifier,
+            depth,
+            threshold,
+        })
+    }
+
+    fn accepts(&self, energy: &Energy, cps: &[[f64; 3]]) -> bool {
+        energy
+            .bounds(self.certifier, cps, self.depth)
+            .iter()
+            .zip(&self.threshold)
+            .all(|(l, t)| *l > *t)
+    }
+}
+
+fn dot(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
+    a.par_chunks(4096)
+        .zip(b.par_chunks(4096))
+        .map(|(a, b)| {
+            a.iter()
+                .zip(b)
+                .map(|(x, y)| x[0] * y[0] + x[1] * y[1] + x[2] * y[2])
+                .sum::<f64>()
+        })
+        .collect::<Vec<f64>>()
+        .iter()
+        .sum()
+}
+
+fn max_abs(a: &[[f64; 3]]) -> f64 {
+    a.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()))
+}
+
+fn axpy(x: &[[f64; 3]], a: f64, d: &[[f64; 3]]) -> Vec<[f64; 3]> {
+    x.iter()
+        .zip(d)
+        .map(|(x, d)| [x[0] + a * d[0], x[1] + a * d[1], x[2] + a * d[2]])
+        .collect()
+}
+
+/// Minimise Q from `start` with the solver in `params`; `observe` sees every accepted iterate.
+pub fn minimize(
+    energy: &Energy,
+    validity: &Validity,
+    start: &[[f64; 3]],
+    params: &EnergyParams,
+    observe: &mut dyn FnMut(&[[f64; 3]]),
+) -> Result<(Vec<[f64; 3]>, EnergyInfo), EnergyError> {
+    minimize_on(energy, validity, start, params, None, observe)
+}
+
+/// [`minimize`]; with `gpu`, the coloured solver's local derivatives come from the
+/// `local_newton` kernel.
+pub fn minimize_on(
+    energy: &Energy,
+    validity: &Validity,
+    start: &[[f64; 3]],
+    params: &EnergyParams,
+    gpu: Option<&crate::gpu::GpuContext>,
+    observe: &mut dyn FnMut(&[[f64; 3]]),
+) -> Result<(Vec<[f64; 3]>, EnergyInfo), EnergyError> {
+    let t = Instant::now();
+    let deg = |c: &[[f64; 3]]| {
+        let parts = energy.degeneration(c);
+        let s: f64 = parts.iter().sum();
+        (parts, s / energy.weight.max(f64::MIN_POSITIVE))
+    };
+    let (parts, initial_degeneration) = deg(start);
+    if let Some(e) = parts.iter().position(|s| !s.is_finite()) {
+        return Err(EnergyError::InfiniteStart { element: e });
+    }
+    let (c, mut info) = match params.solver {
+        EnergySolver::Lbfgs => lbfgs(energy, validity, start, params, observe),
+        EnergySolver::Colored => colored::minimize(energy, validity, start, params, gpu, observe)
+            .map_err(|e| EnergyError::Gpu(e.to_string()))?,
+    };
+    info.initial_degeneration = initial_degeneration;
+    info.final_degeneration = deg(&c).1;
+    info.seconds = t.elapsed().as_secs_f64();
+    Ok((c, info))
+}
+
+/// An L-BFGS pair (s, y, 1 / sᵀy).
+type Pair = (Vec<[f64; 3]>, Vec<[f64; 3]>, f64);
+
+fn lbfgs(
+    energy: &Energy,
+    validity: &Validity,
+    start: &[[f64; 3]],
+    params: &EnergyParams,
+    observe: &mut dyn FnMut(&[[f64; 3]]),
+) -> (Vec<[f64; 3]>, EnergyInfo) {
+    let n = start.len();
+    let mut x = start.to_vec();
+    let mut g = vec![[0.0; 3]; n];
+    let mut f = energy.value_and_gradient(&x, &mut g);
+    let mut info = EnergyInfo::start(EnergySolver::Lbfgs, energy.weight, f);
+    info.evaluations = 1;
+    let g0 = max_abs(&g);
+    // First step: move the furthest control point by a tenth of the smallest element size.
+    let h_min = energy.h_min;
+    // (s, y, 1 / sᵀy) pairs, oldest first.
+    let mut hist: std::collections::VecDeque<Pair> = Default::default();
+    while info.iterations < params.max_iterations {
+        if max_abs(&g) <= params.grad_tol * g0 {
+            info.stop = EnergyStop::Gradient;
+            break;
+        }
+        // Two-loop recursion.
+        let mut d: Vec<[f64; 3]> = g.iter().map(|v| v.map(|x| -x)).collect();
+        let mut alphas = Vec::with_capacity(hist.len());
+        for (s, y, rho) in hist.iter().rev() {
+            let a = rho * dot(s, &d);
+            d = axpy(&d, -a, y);
+            alphas.push(a);
+        }
+        if let Some((s, y, _)) = hist.back() {
+            let gamma = dot(s, y) / dot(y, y);
+            for v in d.iter_mut() {
+                for c in v.iter_mut() {
+                    *c *= gamma;
+                }
+            }
+        } else {
+            let scale = 0.1 * h_min / max_abs(&d).max(f64::MIN_POSITIVE);
+            for v in d.iter_mut() {
+                for c in v.iter_mut() {
+                    *c *= scale;
+                }
+            }
+        }
+        for ((s, y, rho), a) in hist.iter().zip(alphas.iter().rev()) {
+            let b = rho * dot(y, &d);
+            d = axpy(&d, a - b, s);
+        }
+        let mut slope = dot(&g, &d);
+        if !(slope < 0.0) {
+            hist.clear();
+            let scale = 0.1 * h_min / max_abs(&g).max(f64::MIN_POSITIVE);
+            d = g.iter().map(|v| v.map(|x| -scale * x)).collect();
+            slope = dot(&g, &d);
+        }
+        // Armijo backtracking; a trial counts only when every element stays certified.
+        let mut alpha = 1.0;
+        let mut accepted = None;
+        for _ in 0..=params.max_backtracks {
+            let xn = axpy(&x, alpha, &d);
+            let mut gn = vec![[0.0; 3]; n];
+            let fnew = energy.value_and_gradient(&xn, &mut gn);
+            info.evaluations += 1;
+            if fnew.is_finite() && fnew <= f + 1e-4 * alpha * slope {
+                if validity.accepts(energy, &xn) {
+                    accepted = Some((xn, gn, fnew));
+                    break;
+                }
+                info.uncertified_trials += 1;
+            }
+            alpha *= 0.5;
+        }
+        let Some((xn, gn, fnew)) = accepted else {
+            info.stop = EnergyStop::LineSearch;
+            break;
+        };
+        info.iterations += 1;
+        observe(&xn);
+        let s: Vec<[f64; 3]> = xn
+            .iter()
+            .zip(&x)
+            .map(|(a, b)| [a[0] - b[0], a[1] - b[1], a[2] - b[2]])
+            .collect();
+        let y: Vec<[f64; 3]> = gn
+            .iter()
+            .zip(&g)
+            .map(|(a, b)| [a[0] - b[0], a[1] - b[1], a[2] - b[2]])
+            .collect();
+        let sy = dot(&s, &y);
+        if sy > 1e-12 * dot(&y, &y).sqrt() * dot(&s, &s).sqrt() {
+            if hist.len() == params.history.max(1) {
+                hist.pop_front();
+            }
+            hist.push_back((s, y, 1.0 / sy));
+        }
+        let decrease = f - fnew;
+        x = xn;
+        g = gn;
+        f = fnew;
+        if decrease <= params.rel_tol * f.abs().max(f64::MIN_POSITIVE) {
+            info.stop = EnergyStop::Stalled;
+            break;
+        }
+    }
+    info.final_energy = f;
+    (x, info)
+}
