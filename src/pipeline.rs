@@ -806,7 +806,17 @@ fn minimize_energy(
     let depth = options.line_search.certificate_depth;
     let validity = Validity::for_start(&energy, certifier, depth, thresholds, start)?;
     let gpu = options.backend.gpu();
-    minimize_on(&energy, &validity, start, params, gpu, &mut |_| {})
+    let (mut c, info) = minimize_on(&energy, &validity, start, params, gpu, &mut |_| {})?;
+    // The energy moves control points off the planes of planar patches; put them back where
+    // the result stays accepted (it is a small move: the start was on the planes).
+    if let Some(f) = &fit.features {
+        let mut projected = c.clone();
+        crate::fit::features::project_onto_planes(s, topo, f, &mut projected);
+        if validity.accepts(&energy, &projected) {
+            c = projected;
+        }
+    }
+    Ok((c, info))
 }
 
 /// Rounds of demotion before giving up on an initially invalid spline map.

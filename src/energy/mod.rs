@@ -672,7 +672,8 @@ impl Validity<'_> {
         })
     }
 
-    fn accepts(&self, energy: &Energy, cps: &[[f64; 3]]) -> bool {
+    /// Every element of `cps` passes its threshold.
+    pub fn accepts(&self, energy: &Energy, cps: &[[f64; 3]]) -> bool {
         energy
             .bounds(self.certifier, cps, self.depth)
             .iter()
