@@ -163,14 +163,7 @@ pub fn assemble_matrix(space: &dyn FitSpace, blocks: &ElementBlocks) -> NormalMa
         indptr.push(indptr.last().unwrap() + l);
     }
     let mut indices = vec![0u32; indptr[n]];
-    let mut slices = Vec::with_capacity(n);
-    let mut rest = &mut indices[..];
-    for c in 0..n {
-        let (row, tail) = rest.split_at_mut(indptr[c + 1] - indptr[c]);
-        slices.push(row);
-        rest = tail;
-    }
-    slices
+    crate::solve::block_jacobi::split_at_offsets(&mut indices, &indptr)
         .into_par_iter()
         .enumerate()
         .with_min_len(split)

@@ -199,12 +199,17 @@ pub fn write_msh(
             } else {
                 writeln!(w, "1 {nn} {} {nn}", 1.min(nn))?;
                 writeln!(w, "{d} {vol_entity} 0 {nn}")?;
-                for i in 1..=nn {
-                    writeln!(w, "{i}")?;
-                }
-                for x in &mesh.nodes {
-                    writeln!(w, "{} {} {}", x[0], x[1], x[2])?;
-                }
+                write_lines(w, mesh.nodes.len(), |i, out| {
+                    out.extend_from_slice(itoa::Buffer::new().format(i + 1).as_bytes());
+                })?;
+                write_lines(w, mesh.nodes.len(), |i, out| {
+                    for (k, &c) in mesh.nodes[i].iter().enumerate() {
+                        if k > 0 {
+                            out.push(b' ');
+                        }
+                        out.extend_from_slice(zmij::Buffer::new().format(c).as_bytes());
+                    }
+                })?;
             }
             writeln!(w, "$EndNodes")?;
 
@@ -234,21 +239,24 @@ pub fn write_msh(
                         g.members.len()
                     )?;
                 }
-                for &i in &g.members {
-                    let nodes = nodes_of(g, i);
-                    if binary {
+                if binary {
+                    for &i in &g.members {
                         w.u64(tag)?;
-                        for n in nodes {
+                        for n in nodes_of(g, i) {
                             w.u64(n as u64 + 1)?;
                         }
-                    } else {
-                        write!(w, "{tag}")?;
-                        for n in nodes {
-                            write!(w, " {}", n + 1)?;
-                        }
-                        writeln!(w)?;
+                        tag += 1;
                     }
-                    tag += 1;
+                } else {
+                    write_lines(w, g.members.len(), |k, out| {
+                        let mut b = itoa::Buffer::new();
+                        out.extend_from_slice(b.format(tag + k as u64).as_bytes());
+                        for n in nodes_of(g, g.members[k]) {
+                            out.push(b' ');
+                            out.extend_from_slice(b.format(n as u64 + 1).as_bytes());
+                        }
+                    })?;
+                    tag += g.members.len() as u64;
                 }
             }
             if binary {
@@ -302,6 +310,36 @@ pub fn write_msh(
                 writeln!(w)?;
             }
             writeln!(w, "$EndElements")?;
+        }
+    }
+    Ok(())
+}
+
+/// Write `n` lines, line `i` made by `line(i, buffer)` (without its newline): formatted in
+/// parallel in chunks, written in order, so the bytes are those of a serial loop. At most
+/// 64 chunks are held at once.
+pub(crate) fn write_lines(
+    w: &mut impl Write,
+    n: usize,
+    line: impl Fn(usize, &mut Vec<u8>) + Sync,
+) -> io::Result<()> {
+    use rayon::prelude::*;
+    const CHUNK: usize = 8192;
+    let starts: Vec<usize> = (0..n).step_by(CHUNK).collect();
+    for batch in starts.chunks(64) {
+        let buffers: Vec<Vec<u8>> = batch
+            .par_iter()
+            .map(|&s| {
+                let mut out = Vec::with_capacity(64 * CHUNK);
+                for i in s..(s + CHUNK).min(n) {
+                    line(i, &mut out);
+                    out.push(b'\n');
+                }
+                out
+            })
+            .collect();
+        for b in buffers {
+            w.write_all(&b)?;
         }
     }
     Ok(())

@@ -89,32 +89,27 @@ impl BlockJacobi {
             factor_start.push(factor_start[a] + m * (m + 1) / 2);
         }
         let mut factors = vec![0.0; factor_start[na]];
-        // Disjoint factor slices, one per aggregate.
-        let mut pieces = Vec::with_capacity(na);
-        let mut rest = &mut factors[..];
-        for a in 0..na {
-            let (head, tail) = rest.split_at_mut(factor_start[a + 1] - factor_start[a]);
-            pieces.push(head);
-            rest = tail;
-        }
-        pieces.into_par_iter().enumerate().try_for_each(|(a, l)| {
-            let (s, e) = (start[a], start[a + 1]);
-            let m = e - s;
-            // Dense lower triangle of the block, packed row by row: (i, j ≤ i) at i(i+1)/2 + j.
-            for (i, &r) in rows[s..e].iter().enumerate() {
-                let r = r as usize;
-                for k in indptr[r]..indptr[r + 1] {
-                    let j = slot[indices[k] as usize] as usize;
-                    if (s..e).contains(&j) && j - s <= i {
-                        l[i * (i + 1) / 2 + (j - s)] += data[k];
+        split_at_offsets(&mut factors, &factor_start)
+            .into_par_iter()
+            .enumerate()
+            .try_for_each(|(a, l)| {
+                let (s, e) = (start[a], start[a + 1]);
+                let m = e - s;
+                // Dense lower triangle of the block, packed row by row: (i, j ≤ i) at i(i+1)/2 + j.
+                for (i, &r) in rows[s..e].iter().enumerate() {
+                    let r = r as usize;
+                    for k in indptr[r]..indptr[r + 1] {
+                        let j = slot[indices[k] as usize] as usize;
+                        if (s..e).contains(&j) && j - s <= i {
+                            l[i * (i + 1) / 2 + (j - s)] += data[k];
+                        }
                     }
                 }
-            }
-            cholesky_packed(l, m).map_err(|i| CgError::BadDiagonal {
-                row: rows[s + i] as usize,
-                value: l[i * (i + 1) / 2 + i],
-            })
-        })?;
+                cholesky_packed(l, m).map_err(|i| CgError::BadDiagonal {
+                    row: rows[s + i] as usize,
+                    value: l[i * (i + 1) / 2 + i],
+                })
+            })?;
         Ok(BlockJacobi {
             rows,
             start,
@@ -128,6 +123,18 @@ impl BlockJacobi {
     pub fn n_blocks(&self) -> usize {
         self.start.len() - 1
     }
+}
+
+/// Disjoint mutable pieces `v[offsets[i]..offsets[i + 1]]` (offsets ascending from 0), for
+/// filling variable-length blocks in parallel.
+pub(crate) fn split_at_offsets<'a, T>(mut v: &'a mut [T], offsets: &[usize]) -> Vec<&'a mut [T]> {
+    let mut pieces = Vec::with_capacity(offsets.len().saturating_sub(1));
+    for w in offsets.windows(2) {
+        let (head, tail) = v.split_at_mut(w[1] - w[0]);
+        pieces.push(head);
+        v = tail;
+    }
+    pieces
 }
 
 /// In-place Cholesky factorisation of a packed lower triangle; `Err(i)` at a non-positive pivot.
@@ -156,44 +163,39 @@ fn cholesky_packed(l: &mut [f64], m: usize) -> Result<(), usize> {
 impl Preconditioner for BlockJacobi {
     fn apply(&self, r: &[[f64; 3]], z: &mut [[f64; 3]]) {
         let mut tmp = vec![[0.0; 3]; self.rows.len()];
-        let na = self.n_blocks();
-        let mut pieces = Vec::with_capacity(na);
-        let mut rest = &mut tmp[..];
-        for a in 0..na {
-            let (head, tail) = rest.split_at_mut(self.start[a + 1] - self.start[a]);
-            pieces.push(head);
-            rest = tail;
-        }
-        pieces.into_par_iter().enumerate().for_each(|(a, y)| {
-            let rows = &self.rows[self.start[a]..self.start[a + 1]];
-            let l = &self.factors[self.factor_start[a]..self.factor_start[a + 1]];
-            let m = rows.len();
-            // L y = r.
-            for i in 0..m {
-                let ri = i * (i + 1) / 2;
-                let mut s = r[rows[i] as usize];
-                for k in 0..i {
+        split_at_offsets(&mut tmp, &self.start)
+            .into_par_iter()
+            .enumerate()
+            .for_each(|(a, y)| {
+                let rows = &self.rows[self.start[a]..self.start[a + 1]];
+                let l = &self.factors[self.factor_start[a]..self.factor_start[a + 1]];
+                let m = rows.len();
+                // L y = r.
+                for i in 0..m {
+                    let ri = i * (i + 1) / 2;
+                    let mut s = r[rows[i] as usize];
+                    for k in 0..i {
+                        for c in 0..3 {
+                            s[c] -= l[ri + k] * y[k][c];
+                        }
+                    }
+                    y[i] = s.map(|v| v / l[ri + i]);
+                }
+                // Lᵀ x = y, in place.
+                for i in (0..m).rev() {
+                    let d = l[i * (i + 1) / 2 + i];
                     for c in 0..3 {
-                        s[c] -= l[ri + k] * y[k][c];
+                        y[i][c] /= d;
+                    }
+                    let yi = y[i];
+                    let ri = i * (i + 1) / 2;
+                    for k in 0..i {
+                        for c in 0..3 {
+                            y[k][c] -= l[ri + k] * yi[c];
+                        }
                     }
                 }
-                y[i] = s.map(|v| v / l[ri + i]);
-            }
-            // Lᵀ x = y, in place.
-            for i in (0..m).rev() {
-                let d = l[i * (i + 1) / 2 + i];
-                for c in 0..3 {
-                    y[i][c] /= d;
-                }
-                let yi = y[i];
-                let ri = i * (i + 1) / 2;
-                for k in 0..i {
-                    for c in 0..3 {
-                        y[k][c] -= l[ri + k] * yi[c];
-                    }
-                }
-            }
-        });
+            });
         z.par_iter_mut()
             .zip(self.slot.par_iter())
             .with_min_len(1024)
