@@ -245,6 +245,34 @@ fn box_with_hole_keeps_its_planes_and_rims() {
     assert!(lo > 0.0 && hi > 0.0, "Gmsh finds det J in [{lo}, {hi}]");
 }
 
+/// The degeneration energy (`--fit energy`) moves control points after the least-squares fit;
+/// planar faces must still come out planar, and the worst element no worse than without it.
+#[test]
+fn energy_fit_keeps_the_planes_of_the_box_with_a_hole() {
+    if !have_gmsh() {
+        return;
+    }
+    let input = gmsh_mesh("box_hole", 4);
+    let ls = measure(&input, &BOX_HOLE, &with_features(true));
+    let energy = CurveOptions {
+        energy: Some(polyspline::energy::EnergyParams::default()),
+        ..with_features(true)
+    };
+    let on = measure(&input, &BOX_HOLE, &energy);
+    eprintln!("least squares: {ls:?}\nenergy: {on:?}");
+    for s in 0..2 {
+        assert!(
+            on.surface[s] < 1e-12,
+            "{}: {}",
+            BOX_HOLE.names[s],
+            on.surface[s]
+        );
+    }
+    // The energy trades some boundary accuracy (rims 2.2× here) for element quality.
+    assert!(on.min_scaled_jacobian >= ls.min_scaled_jacobian);
+    assert!(on.min_det_bound > 0.0);
+}
+
 /// Gmsh cylinder: its rims are single hexes' edges, so the map is C⁰ there with or without
 /// features; with features the end planes stay exactly planar, the side is as accurate as
 /// without, the rims are at least as close, and the result is valid by us and by Gmsh.
