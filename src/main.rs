@@ -910,6 +910,13 @@ fn main() -> ExitCode {
         // SAFETY: no other thread exists yet (rayon and wgpu start theirs later).
         unsafe { std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir()) };
     }
+    // Printing into a closed pipe (`polyspline info M | head`) ends the process quietly, as
+    // other command-line tools do, instead of panicking in `println!`.
+    #[cfg(unix)]
+    // SAFETY: restores the default disposition of SIGPIPE before any other thread exists.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let cli = Cli::parse();
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
