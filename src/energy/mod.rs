@@ -40,7 +40,7 @@
 
 pub mod colored;
 
-use crate::fit::{FitParams, FitSpace, FitTargets, NormalMatrix, SmoothTargets};
+use crate::fit::{FitParams, FitSpace, NormalMatrix};
 use crate::mesh::{LinearMesh, Topology};
 use crate::sample::multilinear;
 use crate::solve::LinOp;
@@ -307,25 +307,9 @@ impl<'a> Energy<'a> {
         }
         let dim = space.dim();
         let nb = if dim == 2 { 9 } else { 27 };
-        let smooth = match fit.targets {
-            FitTargets::Chords => None,
-            FitTargets::Smooth(p) => Some(SmoothTargets::build_with_features(
-                mesh,
-                topo,
-                &p,
-                fit.features.as_deref(),
-            )),
-        };
         // The fit's own normal equations (features and their weights included), so the
         // least-squares term is the one C* minimises.
-        let (k, rhs) = crate::fit::assemble_with_features(
-            space,
-            mesh,
-            topo,
-            &fit.weights,
-            smooth.as_ref(),
-            fit.features.as_deref(),
-        );
+        let (k, rhs) = crate::fit::normal_equations(space, mesh, topo, fit);
         let c0 = space.control_points();
         let ls_offset: f64 = c_star
             .iter()

@@ -529,6 +529,29 @@ pub fn assemble_with_targets(
     assemble_with_features(space, mesh, topo, w, smooth, None)
 }
 
+/// The normal equations of the fit described by `params`: its targets (chords, or the smooth
+/// reconstruction per feature patch), weights and features.
+pub fn normal_equations(
+    space: &dyn FitSpace,
+    mesh: &LinearMesh,
+    topo: &Topology,
+    params: &FitParams,
+) -> (NormalMatrix, Vec<[f64; 3]>) {
+    let features = params.features.as_deref();
+    let smooth = match params.targets {
+        FitTargets::Chords => None,
+        FitTargets::Smooth(p) => Some(SmoothTargets::build_with_features(mesh, topo, &p, features)),
+    };
+    assemble_with_features(
+        space,
+        mesh,
+        topo,
+        &params.weights,
+        smooth.as_ref(),
+        features,
+    )
+}
+
 /// [`assemble_with_targets`] with the samples on the sharp `features` weighted by
 /// [`FitWeights::feature`].
 pub fn assemble_with_features(
@@ -645,23 +668,7 @@ pub fn fit_with(
     ) -> Result<crate::solve::CgInfo, CgError>,
 ) -> Result<(Vec<[f64; 3]>, FitInfo), CgError> {
     let t = std::time::Instant::now();
-    let smooth = match params.targets {
-        FitTargets::Chords => None,
-        FitTargets::Smooth(p) => Some(SmoothTargets::build_with_features(
-            mesh,
-            topo,
-            &p,
-            params.features.as_deref(),
-        )),
-    };
-    let (k, rhs) = assemble_with_features(
-        space,
-        mesh,
-        topo,
-        &params.weights,
-        smooth.as_ref(),
-        params.features.as_deref(),
-    );
+    let (k, rhs) = normal_equations(space, mesh, topo, params);
     let assembly_seconds = t.elapsed().as_secs_f64();
     let t = std::time::Instant::now();
     let mut delta = vec![[0.0; 3]; k.n];
