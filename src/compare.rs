@@ -280,6 +280,11 @@ pub fn compare(input: &Path, options: &CompareOptions) -> Result<CompareReport, 
         ));
     }
     let mesh = crate::io::read_mesh(input, &options.base.mesh)?;
+    // A bad feature edits file is an input error, not one method's failure.
+    if options.base.features.edits.is_some() {
+        let topo = crate::mesh::Topology::build(&mesh);
+        options.base.features.detect(&mesh, &topo)?;
+    }
     let base = &options.base;
     let fitted = |weights: FitWeights, targets: FitTargets, method: Method| CurveOptions {
         geometry: Geometry::SplineFitted,

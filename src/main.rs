@@ -180,6 +180,8 @@ enum Command {
         /// the CPU).
         #[arg(long, value_enum, default_value_t = BackendArg::Cpu)]
         backend: BackendArg,
+        #[command(flatten)]
+        features: FeatureArgs,
     },
     /// Make a synthetic linear mesh with curved boundaries for benchmarks: a butterfly disc
     /// (2D), a solid cylinder or a torus (3D), with valence-3 vertices/edges.
@@ -610,6 +612,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             cg_tol,
             allow_invalid,
             backend,
+            features,
         } => {
             let backend = resolve_backend(backend, None)?;
             let cg = CgParams {
@@ -625,6 +628,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     },
                     mesh: MeshOptions { allow_invalid },
                     backend,
+                    features: features.options(),
                     ..Default::default()
                 },
                 elastic: elastic.params(cg_tol),

@@ -362,6 +362,27 @@ fn compare_json_has_every_method_and_key() {
     assert!(rows[4]["timings"]["elastic_cg"].is_number());
 }
 
+/// `compare` takes the sharp-feature options of `curve`: an edits file naming a vertex that
+/// does not exist is refused with the file and line, before any table is printed.
+#[test]
+fn compare_takes_the_feature_options() {
+    let dir = std::env::temp_dir().join(format!("polyspline-cmp-feat-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let edits = dir.join("edits.txt");
+    std::fs::write(&edits, "add 0 999999999\n").unwrap();
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_polyspline"))
+        .arg("compare")
+        .arg(root("meshes/real/dealii/unstructured_refined_ball.msh"))
+        .arg("--feature-edits")
+        .arg(&edits)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(err.contains("edits.txt:1"), "{err}");
+    assert!(o.stdout.is_empty());
+}
+
 #[test]
 fn curve_method_elastic_writes_a_valid_mesh_with_the_iga_boundary() {
     let dir = std::env::temp_dir().join(format!("polyspline-elastic-{}", std::process::id()));
