@@ -18,8 +18,9 @@
 //!   coplanar vertices), so every step of the line search keeps them there.
 
 use super::smooth::{VertexModel, fan_model, fit_parabola};
-use crate::mesh::features::{Features, add, dot, norm, sub};
+use crate::mesh::features::Features;
 use crate::mesh::topology::HEX_VERTEX_PARAMS;
+use crate::mesh::vec3::{add, dot, norm, sub};
 use crate::mesh::{LinearMesh, Topology};
 use crate::spline::{ControlPoint, SplineSpace};
 use std::collections::HashMap;

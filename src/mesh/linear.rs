@@ -13,6 +13,7 @@
 //!   3D) for boundary conditions; the boundary itself comes from [`crate::mesh::Topology`].
 
 use crate::io::raw::{CellKind, Location, ParseError, RawMesh};
+use crate::mesh::vec3::{norm, sub};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 
@@ -90,14 +91,6 @@ const DEGENERATE_REL_TOL: f64 = 1e-12;
 
 /// How many offending elements an error message lists.
 const MAX_LISTED: usize = 8;
-
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn norm(a: [f64; 3]) -> f64 {
-    (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt()
-}
 
 fn det3(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> f64 {
     a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])

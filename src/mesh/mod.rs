@@ -4,6 +4,7 @@ pub mod features;
 pub mod generate;
 pub mod linear;
 pub mod topology;
+pub(crate) mod vec3;
 
 pub use linear::{InvalidElement, InvalidKind, LinearMesh, MeshOptions};
 pub use topology::Topology;

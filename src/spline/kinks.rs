@@ -25,6 +25,7 @@
 //! exactly by any map that keeps its vertices in the plane, whatever its grid lines do.
 
 use crate::mesh::topology::NONE;
+use crate::mesh::vec3::{add, cross, dot, norm, sub, unit};
 use crate::mesh::{LinearMesh, Topology};
 
 /// Edge-length ratio along a grid line above which its vertex is a kink.
@@ -247,30 +248,6 @@ fn facet_normal(mesh: &LinearMesh, topo: &Topology, f: usize) -> [f64; 3] {
 fn tangential(d: [f64; 3], n: [f64; 3]) -> [f64; 3] {
     let s = dot(d, n);
     sub(d, n.map(|c| s * c))
-}
-
-fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    std::array::from_fn(|k| a[k] + b[k])
-}
-fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    std::array::from_fn(|k| a[k] - b[k])
-}
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-fn norm(a: [f64; 3]) -> f64 {
-    dot(a, a).sqrt()
-}
-fn unit(a: [f64; 3]) -> [f64; 3] {
-    let l = norm(a);
-    if l > 0.0 { a.map(|c| c / l) } else { a }
-}
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
 }
 
 #[cfg(test)]
