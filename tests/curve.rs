@@ -2,6 +2,8 @@
 //! checked, the sampled output represents the spline geometry exactly, and bad output paths
 //! lose nothing.
 
+mod common;
+
 use polyspline::io::read_raw;
 use polyspline::mesh::generate::{grid_2d, grid_3d, uniform};
 use polyspline::mesh::{LinearMesh, MeshOptions, Topology};
@@ -123,7 +125,7 @@ fn fitted_on_every_real_mesh() {
 
 /// Gmsh's Jacobians of every file in `jobs` have one sign (positive for hexes).
 fn assert_gmsh_finds_valid(jobs: &[serde_json::Value], tag: &str) {
-    let Some(results) = gmsh_probe(jobs, tag) else {
+    let Some(results) = common::gmsh_probe(jobs, &scratch(&format!("{tag}_jobs.json"))) else {
         return;
     };
     for (v, job) in results.iter().zip(jobs) {
@@ -274,50 +276,6 @@ fn bad_outputs_lose_nothing() {
     assert!(String::from_utf8_lossy(&out.stderr).contains("refusing to overwrite"));
 }
 
-/// Run Gmsh's own reader and Jacobians on a batch of files (`tests/external/gmsh_probe.py`);
-/// `None` (a visible skip) when the Python module is missing outside CI.
-fn gmsh_probe(jobs: &[serde_json::Value], tag: &str) -> Option<Vec<serde_json::Value>> {
-    let ok = Command::new("python3")
-        .args(["-c", "import gmsh"])
-        .status()
-        .is_ok_and(|s| s.success());
-    if !ok {
-        assert!(
-            std::env::var("CI").is_err(),
-            "CI must have the Python gmsh module"
-        );
-        eprintln!("SKIPPED: Python module gmsh not available; Gmsh's Jacobian check did not run");
-        return None;
-    }
-    let path = scratch(&format!("{tag}_jobs.json"));
-    std::fs::write(&path, serde_json::json!({ "jobs": jobs }).to_string()).unwrap();
-    let out = Command::new("python3")
-        .arg(concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/tests/external/gmsh_probe.py"
-        ))
-        .arg(&path)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    Some(serde_json::from_slice(&out.stdout).unwrap())
-}
-
-fn gmsh_det_range(file: &Path) -> Option<(f64, f64, bool)> {
-    let tag = file.file_name().unwrap().to_string_lossy().to_string();
-    let v = gmsh_probe(&[serde_json::json!({ "file": file, "probes": [] })], &tag)?;
-    let three_d = v[0]["type_name"].as_str().unwrap().contains("Hexahedron");
-    Some((
-        v[0]["min_det_jac"].as_f64().unwrap(),
-        v[0]["max_det_jac"].as_f64().unwrap(),
-        three_d,
-    ))
-}
-
 /// The turbine cascade has thin boundary-layer cells that the full least-squares step inverts:
 /// the global line search (paper §2.3) stops at α < 1, the local one damps only some control
 /// points, and both written meshes are certified valid, by us and by Gmsh.
@@ -344,7 +302,8 @@ fn line_search_keeps_a_mesh_the_full_fit_would_invert_valid() {
         }
         assert!(r.min_det_jacobian_bound.unwrap() > 0.0);
         assert_eq!(CheckReport::new(&read_back(&out)).invalid, 0);
-        if let Some((lo, hi, _)) = gmsh_det_range(&out) {
+        let jobs = scratch(&format!("turbine_{mode:?}_jobs.json"));
+        if let Some((lo, hi, _)) = common::gmsh_det_range(&out, &jobs) {
             assert!(lo * hi > 0.0, "{mode:?}: Gmsh finds det J in [{lo}, {hi}]");
         }
     }

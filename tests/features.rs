@@ -3,6 +3,8 @@
 //! feature handling, measured against their analytic surfaces, and checked by Gmsh's
 //! Jacobians (`tests/external/gmsh_probe.py`).
 
+mod common;
+
 use polyspline::mesh::features::{FeatureOptions, FeatureParams};
 use polyspline::pipeline::{CurveOptions, Geometry, curve, curve_in_memory};
 use std::path::{Path, PathBuf};
@@ -15,20 +17,7 @@ fn scratch(name: &str) -> PathBuf {
 }
 
 fn have_gmsh() -> bool {
-    let ok = Command::new("python3")
-        .args(["-c", "import gmsh"])
-        .status()
-        .is_ok_and(|s| s.success());
-    if !ok {
-        assert!(
-            std::env::var("CI").is_err(),
-            "CI must have the Python gmsh module"
-        );
-        eprintln!(
-            "SKIPPED: Python module gmsh not available; the Gmsh-meshed solids were not made"
-        );
-    }
-    ok
+    common::have_gmsh("the Gmsh-meshed solids were not made")
 }
 
 /// Make a Gmsh mesh of `kind` with `n` elements per block side.
@@ -175,35 +164,15 @@ fn with_features(on: bool) -> CurveOptions {
     }
 }
 
-/// Gmsh's Jacobians of a written file: (min, max) det J over a Gauss rule.
+/// Gmsh's Jacobians of a written file: (min, max) det J over a Gauss rule (the callers
+/// checked that Gmsh is there).
 fn gmsh_det_range(file: &Path) -> (f64, f64) {
     let jobs = scratch(&format!(
         "{}_jobs.json",
         file.file_stem().unwrap().to_string_lossy()
     ));
-    std::fs::write(
-        &jobs,
-        serde_json::json!({ "jobs": [{ "file": file, "probes": [] }] }).to_string(),
-    )
-    .unwrap();
-    let out = Command::new("python3")
-        .arg(concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/tests/external/gmsh_probe.py"
-        ))
-        .arg(&jobs)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    (
-        v[0]["min_det_jac"].as_f64().unwrap(),
-        v[0]["max_det_jac"].as_f64().unwrap(),
-    )
+    let (lo, hi, _) = common::gmsh_det_range(file, &jobs).expect("gmsh checked by the caller");
+    (lo, hi)
 }
 
 /// Box with a hole: with features the side planes and top/bottom stay planar to rounding (the
