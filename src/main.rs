@@ -101,9 +101,11 @@ enum Command {
         w_feature: Option<f64>,
         #[command(flatten)]
         features: FeatureArgs,
-        /// With `--fit smooth`: elements at vertices where a boundary grid line kinks by more
-        /// than this angle (degrees, turning within the surface) become Q2 elements, which can
-        /// follow the kink; 180 turns this off.
+        /// With `--fit smooth`: elements at vertices where a boundary grid line kinks (its
+        /// turning within the surface jumps by more than the normal turning of the vertex's
+        /// grid lines, at least 1° and at most this angle in degrees) become Q2 elements, which
+        /// can follow the kink, as do those next to irregular boundary vertices; 180 turns
+        /// this off.
         #[arg(long, default_value_t = 10.0, value_name = "DEG")]
         kink_angle: f64,
         /// Relative tolerance of the conjugate-gradient solve.

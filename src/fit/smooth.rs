@@ -57,9 +57,10 @@ pub struct SmoothParams {
     /// distance along mesh edges to the boundary vertex, ℓ its boundary edge length; 0 keeps
     /// all interior targets on the chords.
     pub decay: f64,
-    /// Elements touching a vertex where a boundary grid line kinks by more than this angle
-    /// (degrees, geodesic turning against the line's neighbours; [`crate::spline::kinks`])
-    /// become constrained Q2 elements; 180 or more turns the detection off.
+    /// Elements touching a vertex where a boundary grid line kinks (geodesic turning jumping
+    /// against the line's neighbours by more than the vertex's normal turning, clamped to
+    /// [1°, this angle]; [`crate::spline::kinks`]) become constrained Q2 elements; 180 or
+    /// more turns the detection off.
     pub kink_angle_deg: f64,
 }
 

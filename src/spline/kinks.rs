@@ -16,10 +16,23 @@
 //! At a regular boundary vertex v (four boundary faces, so two grid lines a–v–b cross there)
 //! the **geodesic turning** of a line is the signed angle between v − a and b − v after both
 //! are projected onto the tangent plane of v (outward normal). A line kinks at v when
-//! * its turning at v differs by more than the kink angle from its turning at each of its two
-//!   neighbours on the line that have one, and is the largest in magnitude of them (a peak:
-//!   a polar grid with equal turning at every vertex has no kink), or
+//! * its turning at v differs by more than the vertex's threshold from its turning at each of
+//!   its two neighbours on the line that have one, and is the largest in magnitude of them (a
+//!   peak: a polar grid with equal turning at every vertex has no kink), or
 //! * the edge lengths on either side of v differ by more than [`SPACING_RATIO`].
+//!
+//! The threshold scales with the mesh: it is the larger **normal turning** ν of v's two lines
+//! (the change of their elevation over the tangent plane, ≈ curvature × edge length), kept
+//! between [`MIN_KINK_ANGLE_DEG`] and the kink angle. A kink of turning jump δ left to a C¹
+//! element displaces the map within the surface by O(δh), which moves the surface off by
+//! O(κδh²); with δ ≤ ν = O(κh) that is O(h³), so the fit keeps third order where a fixed angle
+//! leaves a fixed length of each kinked curve C¹ and falls back to second order (the cubed
+//! sphere's block arcs, whose turning jump grows from 0 at an arc's middle).
+//!
+//! Regular vertices that share a boundary face with an **irregular boundary vertex** (not four
+//! boundary faces, e.g. a cubed sphere's eight corners) count as kinks too: the spline
+//! element diagonal to such a vertex stays at second order otherwise (measured on the cubed
+//! sphere: 4.0e-5, 1.6e-5, 9.3e-6 at 16, 24, 32 cube divisions).
 //!
 //! Vertices inside planar boundary patches are never kinks: a planar patch is reproduced
 //! exactly by any map that keeps its vertices in the plane, whatever its grid lines do.
@@ -30,6 +43,10 @@ use crate::mesh::{LinearMesh, Topology};
 
 /// Edge-length ratio along a grid line above which its vertex is a kink.
 pub const SPACING_RATIO: f64 = 2.5;
+
+/// Smallest kink threshold (degrees): turning jumps below it are noise on nearly flat patches,
+/// where a kink moves the surface by little.
+pub const MIN_KINK_ANGLE_DEG: f64 = 1.0;
 
 /// Relative distance from the vertex's tangent plane (to its fan's size) below which every
 /// vertex of a fan counts as coplanar.
@@ -56,8 +73,8 @@ struct Fan {
 }
 
 /// Find the kinks of the boundary grid lines of `mesh` (see the module docs). `angle_deg` is
-/// the jump of the geodesic turning (degrees) that makes a kink; `exclude` (per vertex, or
-/// empty) marks vertices that are never kinks and whose turning is not compared against.
+/// the largest threshold (degrees) on the jump of the geodesic turning; `exclude` (per vertex,
+/// or empty) marks vertices that are never kinks and whose turning is not compared against.
 pub fn detect(mesh: &LinearMesh, topo: &Topology, angle_deg: f64, exclude: &[bool]) -> Kinks {
     let nv = mesh.n_vertices();
     let mut kinks = Kinks {
@@ -94,13 +111,21 @@ pub fn detect(mesh: &LinearMesh, topo: &Topology, angle_deg: f64, exclude: &[boo
             Some(turning(w, p, q))
         })
     };
-    let threshold = angle_deg.to_radians();
+    let max_threshold = angle_deg.to_radians();
+    let min_threshold = MIN_KINK_ANGLE_DEG.to_radians().min(max_threshold);
     for v in 0..nv {
         let Some(fan) = fans[v] else { continue };
         if excluded(v) || fan.planar {
             continue;
         }
         let xv = mesh.coords[v];
+        // Normal turning of the line a–v–b: change of the edges' elevation over the tangent
+        // plane.
+        let elevation = |d: [f64; 3]| dot(fan.normal, unit(d)).clamp(-1.0, 1.0).asin();
+        let normal_turning =
+            |[a, b]: [u32; 2]| (elevation(sub(xv, x(a))) - elevation(sub(x(b), xv))).abs();
+        let nu = normal_turning(fan.lines[0]).max(normal_turning(fan.lines[1]));
+        let threshold = nu.clamp(min_threshold, max_threshold);
         for [a, b] in fan.lines {
             let (la, lb) = (norm(sub(xv, x(a))), norm(sub(x(b), xv)));
             let spacing = la.max(lb) > SPACING_RATIO * la.min(lb);
@@ -117,6 +142,21 @@ pub fn detect(mesh: &LinearMesh, topo: &Topology, angle_deg: f64, exclude: &[boo
             }
             if spacing || (compared > 0 && peak) {
                 kinks.vertices[v] = true;
+            }
+        }
+    }
+    // Regular vertices next to an irregular boundary vertex.
+    let faces_at = topo.boundary_facets_at_vertices();
+    for (v, faces) in faces_at.iter().enumerate() {
+        if faces.is_empty() || fans[v].is_some() || excluded(v) {
+            continue;
+        }
+        for &f in faces {
+            for &w in topo.facet_vertices(f as usize) {
+                let w = w as usize;
+                if fans[w].is_some_and(|fan| !fan.planar) && !excluded(w) {
+                    kinks.vertices[w] = true;
+                }
             }
         }
     }
@@ -328,10 +368,67 @@ mod tests {
         assert_eq!(k.n_elements, 16);
         // On planes the same bend is no kink (planar patches stay exact).
         assert_eq!(kinks_of(&sheared(&xs, 30.0, false, 1)).n_vertices, 0);
-        // A 5° bend is below the angle.
+        // A 5° bend is below the threshold at this spacing (normal turning 0.1 rad ≈ 5.7°),
+        // and above it at half the spacing (≈ 2.9°): the threshold scales with the mesh.
         assert_eq!(kinks_of(&sheared(&xs, 5.0, true, 1)).n_vertices, 0);
+        assert_eq!(
+            marked(&kinks_of(&sheared(&uniform(20, 0.05), 5.0, true, 1)).vertices),
+            {
+                let mut c = column(21, 10);
+                c.sort_unstable();
+                c
+            }
+        );
+        // A 0.5° bend stays below the smallest threshold.
+        let fine = uniform(100, 0.01);
+        assert_eq!(kinks_of(&sheared(&fine, 0.5, true, 1)).n_vertices, 0);
         // 180° turns detection off.
         let mesh = sheared(&xs, 30.0, true, 1);
+        let topo = Topology::build(&mesh);
+        assert_eq!(detect(&mesh, &topo, 180.0, &[]).n_vertices, 0);
+    }
+
+    /// A cube grid of n³ cells on [−1, 1]³ pushed out onto the unit sphere (x → x·|x|∞/|x|):
+    /// its boundary is a cubed sphere with eight corners of three boundary faces.
+    fn cubed_ball(n: usize) -> LinearMesh {
+        let s = uniform(n, 2.0 / n as f64)
+            .iter()
+            .map(|x| x - 1.0)
+            .collect::<Vec<_>>();
+        let mut mesh = grid_3d(&s, &s, &s);
+        for p in &mut mesh.coords {
+            let inf = p.iter().fold(0.0f64, |m, c| m.max(c.abs()));
+            let l = norm(*p);
+            if l > 0.0 {
+                *p = p.map(|c| c * inf / l);
+            }
+        }
+        mesh
+    }
+
+    #[test]
+    fn neighbours_of_irregular_boundary_vertices_are_kinks() {
+        let n = 6;
+        let mesh = cubed_ball(n);
+        let k = kinks_of(&mesh);
+        let id = |i: usize, j: usize, l: usize| (l * (n + 1) + j) * (n + 1) + i;
+        for c in 0..8 {
+            let at = |b: usize, near: usize| if c >> b & 1 == 0 { near } else { n - near };
+            let corner = id(at(0, 0), at(1, 0), at(2, 0));
+            // The corner itself is irregular (no grid lines to kink), the diagonal vertex of
+            // each of its three boundary faces is smooth but marked, and so are the block arcs.
+            assert!(!k.vertices[corner]);
+            for diagonal in [
+                id(at(0, 1), at(1, 1), at(2, 0)),
+                id(at(0, 1), at(1, 0), at(2, 1)),
+                id(at(0, 0), at(1, 1), at(2, 1)),
+            ] {
+                assert!(k.vertices[diagonal], "corner {c}: vertex {diagonal}");
+            }
+        }
+        // Face-interior vertices two cells from every arc are smooth and not marked.
+        assert!(!k.vertices[id(2, 2, 0)] && !k.vertices[id(3, 3, 0)]);
+        // 180° turns the detection off, next to irregular vertices too.
         let topo = Topology::build(&mesh);
         assert_eq!(detect(&mesh, &topo, 180.0, &[]).n_vertices, 0);
     }
