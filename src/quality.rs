@@ -56,9 +56,20 @@ pub fn sample_det_jacobian(mesh: &HighOrderMesh) -> Vec<ElementQuality> {
             &mut dv[s * m..(s + 1) * m],
         );
     }
+    // Scratch of the 3D sum factorisation, one pair per rayon task (not per element).
+    let scratch = || {
+        if d == 2 {
+            (Vec::new(), Vec::new())
+        } else {
+            (
+                vec![[[0.0; 3]; 2]; m * m * ns],
+                vec![[[0.0; 3]; 3]; m * ns * ns],
+            )
+        }
+    };
     (0..mesh.n_elements())
         .into_par_iter()
-        .map(|e| {
+        .map_init(scratch, |(t1, t2), e| {
             let nodes = mesh.element(e);
             let x = |i: usize, j: usize, k: usize| mesh.nodes[nodes[i + m * (j + m * k)] as usize];
             let mut min_det = f64::INFINITY;
@@ -87,7 +98,7 @@ pub fn sample_det_jacobian(mesh: &HighOrderMesh) -> Vec<ElementQuality> {
                 }
             } else {
                 // Sum factorisation: contract k, then j, then i.
-                let mut t1 = vec![[[0.0; 3]; 2]; m * m * ns]; // [i][j][c] with V / D along k
+                t1.fill([[0.0; 3]; 2]); // [i][j][c] with V / D along k
                 for k in 0..m {
                     for j in 0..m {
                         for i in 0..m {
@@ -104,7 +115,7 @@ pub fn sample_det_jacobian(mesh: &HighOrderMesh) -> Vec<ElementQuality> {
                     }
                 }
                 // t2[i][b][c]: (V_j V_k), (D_j V_k), (V_j D_k)
-                let mut t2 = vec![[[0.0; 3]; 3]; m * ns * ns];
+                t2.fill([[0.0; 3]; 3]);
                 for c in 0..ns {
                     for b in 0..ns {
                         for i in 0..m {
@@ -137,8 +148,14 @@ pub fn sample_det_jacobian(mesh: &HighOrderMesh) -> Vec<ElementQuality> {
                             let det = j[0][0] * (j[1][1] * j[2][2] - j[1][2] * j[2][1])
                                 - j[0][1] * (j[1][0] * j[2][2] - j[1][2] * j[2][0])
                                 + j[0][2] * (j[1][0] * j[2][1] - j[1][1] * j[2][0]);
-                            let n = |u: [f64; 3]| (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt();
-                            let norm = n(j[0]) * n(j[1]) * n(j[2]);
+                            let n2 = |u: [f64; 3]| u[0] * u[0] + u[1] * u[1] + u[2] * u[2];
+                            let (a, b, c) = (n2(j[0]), n2(j[1]), n2(j[2]));
+                            // One square root per point; three where the product leaves the
+                            // normal range of f64 (or is 0).
+                            let mut norm = (a * b * c).sqrt();
+                            if !norm.is_normal() {
+                                norm = a.sqrt() * b.sqrt() * c.sqrt();
+                            }
                             min_det = min_det.min(det);
                             min_sj = min_sj.min(if norm > 0.0 { det / norm } else { 0.0 });
                         }
