@@ -244,6 +244,8 @@ pub struct CurveReport {
     /// Elements of the written mesh not certified valid (always 0: otherwise nothing is written).
     pub invalid_elements: usize,
     /// Smallest certified lower bound of det J over the written elements (spline geometry).
+    /// It is the exact Bernstein certificate's (the screen, `validity::screen`, decides only
+    /// elements whose exact bound is larger).
     pub min_det_jacobian_bound: Option<f64>,
     /// Minimum scaled Jacobian of the input (corners) and of the output (sampled).
     pub input_min_scaled_jacobian: f64,

@@ -68,7 +68,7 @@ fn array<T: Value>(
                 for (k, &v) in chunk.iter().enumerate() {
                     let i = c * CHUNK + k;
                     if i > 0 {
-                        s.push(if i % 12 == 0 { '\n' } else { ' ' });
+                        s.push(if i.is_multiple_of(12) { '\n' } else { ' ' });
                     }
                     write!(s, "{v}").expect("formatting into a String");
                 }
@@ -77,7 +77,7 @@ fn array<T: Value>(
             .collect();
         text = parts.concat();
     } else {
-        bytes.reserve(values.len() * std::mem::size_of::<T>());
+        bytes.reserve(std::mem::size_of_val(values));
         for &v in values {
             v.put_le(&mut bytes);
         }

@@ -13,6 +13,10 @@
 //! stored frame: origin at its first vertex, first axis toward its second); then element
 //! interiors. Each node's position is evaluated once, from one element that contains it, so
 //! neighbours share ids and positions exactly.
+//!
+//! **Cost.** [`sample`] runs element by element: an element computes its Bézier net once and
+//! evaluates the nodes it owns (about p^d of its (p+1)^d), so the spline's extraction is
+//! applied once per element rather than once per node.
 
 pub mod ordering;
 

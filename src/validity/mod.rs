@@ -471,7 +471,8 @@ mod tests {
         net
     }
 
-    fn det_fd(dim: usize, f: &impl Fn([f64; 3]) -> [f64; 3], t: [f64; 3]) -> f64 {
+    /// det J of the map `f` at `t` by central differences.
+    pub(super) fn det_fd(dim: usize, f: &impl Fn([f64; 3]) -> [f64; 3], t: [f64; 3]) -> f64 {
         let h = 1e-6;
         let col = |d: usize| {
             let mut a = t;

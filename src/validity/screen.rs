@@ -352,25 +352,7 @@ mod tests {
     /// det J of the Bézier map at `t` by central differences of the map (independent of the
     /// Bernstein algebra).
     fn det_fd(dim: usize, net: &[[f64; 3]; 27], t: [f64; 3]) -> f64 {
-        let h = 1e-6;
-        let col = |d: usize| {
-            let (mut a, mut b) = (t, t);
-            a[d] -= h;
-            b[d] += h;
-            let (fa, fb) = (
-                crate::sample::eval_net(dim, net, a),
-                crate::sample::eval_net(dim, net, b),
-            );
-            [0, 1, 2].map(|c| (fb[c] - fa[c]) / (2.0 * h))
-        };
-        let (u, v) = (col(0), col(1));
-        if dim == 2 {
-            u[0] * v[1] - u[1] * v[0]
-        } else {
-            let w = col(2);
-            u[0] * (v[1] * w[2] - v[2] * w[1]) - u[1] * (v[0] * w[2] - v[2] * w[0])
-                + u[2] * (v[0] * w[1] - v[1] * w[0])
-        }
+        crate::validity::tests::det_fd(dim, &|u| crate::sample::eval_net(dim, net, u), t)
     }
 
     #[test]
