@@ -6,9 +6,6 @@
 //! on the equispaced lattice of order 2p (which contains the nodes and the corners). This is a
 //! sampled measure, not a certificate: `sample_det_jacobian` may miss a negative region smaller
 //! than the sample spacing. The certified bound of quadratic Bézier elements lives with the fit.
-//!
-//! Hexes go through one sum-factorised kernel instantiated per order (constant loop bounds,
-//! scratch reused per rayon task); the result per element does not depend on the thread count.
 
 use crate::sample::HighOrderMesh;
 use rayon::prelude::*;
@@ -171,31 +168,19 @@ fn hex_quality<const M: usize, const NS: usize>(
             }
         }
     }
-    // Last contraction with the sample index a innermost (weights transposed), so that the
-    // NS points of a line are computed side by side; the sums run over i in the same order.
-    let mut wvt = [[0.0; NS]; M];
-    let mut wdt = [[0.0; NS]; M];
-    for i in 0..M {
-        for a in 0..NS {
-            wvt[i][a] = v[a * M + i];
-            wdt[i][a] = dv[a * M + i];
-        }
-    }
     for c in 0..NS {
         for b in 0..NS {
-            let mut jl = [[[0.0f64; NS]; 3]; 3]; // [row][r][a]
-            for i in 0..M {
-                let s = t2[(i * NS + b) * NS + c];
-                for r in 0..3 {
-                    for a in 0..NS {
-                        jl[0][r][a] += wdt[i][a] * s[0][r];
-                        jl[1][r][a] += wvt[i][a] * s[1][r];
-                        jl[2][r][a] += wvt[i][a] * s[2][r];
+            for a in 0..NS {
+                let mut j = [[0.0; 3]; 3];
+                for i in 0..M {
+                    let s = t2[(i * NS + b) * NS + c];
+                    let (wv, wd) = (v[a * M + i], dv[a * M + i]);
+                    for r in 0..3 {
+                        j[0][r] += wd * s[0][r];
+                        j[1][r] += wv * s[1][r];
+                        j[2][r] += wv * s[2][r];
                     }
                 }
-            }
-            for a in 0..NS {
-                let j: [[f64; 3]; 3] = std::array::from_fn(|row| jl[row].map(|x| x[a]));
                 let det = j[0][0] * (j[1][1] * j[2][2] - j[1][2] * j[2][1])
                     - j[0][1] * (j[1][0] * j[2][2] - j[1][2] * j[2][0])
                     + j[0][2] * (j[1][0] * j[2][1] - j[1][1] * j[2][0]);
