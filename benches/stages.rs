@@ -1,7 +1,8 @@
 //! Every stage of `curve` on generated thick-walled cylinders (`polyspline generate cylinder`:
 //! O-grid hexes with valence-3 lines, curved boundaries), reported in elements per second:
 //! read (MSH 4.1 binary), topology, spline space, fit assembly (K and right-hand side), CG
-//! (block Jacobi and point Jacobi), certificate (Bernstein det J bounds), sampling at order 2
+//! (block Jacobi and point Jacobi), certificate (Bernstein det J bounds; `certificate_screened`
+//! with the cheap screen first, as the line searches run it), sampling at order 2
 //! and writing (MSH 4.1 ASCII).
 //!
 //! `cargo bench --bench stages` runs 10k, 100k and 1M elements (`POLYSPLINE_BENCH_SIZES=
@@ -17,7 +18,7 @@ use polyspline::pipeline::{OutputOptions, write_high_order};
 use polyspline::sample::sample;
 use polyspline::solve::{CgParams, CgPreconditioner, pcg};
 use polyspline::spline::SplineSpace;
-use polyspline::validity::certify_elements;
+use polyspline::validity::{CpuCertifier, certify_elements, certify_screened};
 use std::hint::black_box;
 
 /// Element counts: quick under `cargo test --benches` (no `--bench` argument).
@@ -100,6 +101,19 @@ fn stages(c: &mut Criterion) {
                     ne,
                     |e| fitted.element_bezier(e),
                     6,
+                ))
+            })
+        });
+        group.bench_function(id("certificate_screened"), |b| {
+            let all: Vec<usize> = (0..ne).collect();
+            b.iter(|| {
+                black_box(certify_screened(
+                    &CpuCertifier,
+                    space.dim(),
+                    &all,
+                    &|e| fitted.element_bezier(e),
+                    6,
+                    &|_| 0.0,
                 ))
             })
         });

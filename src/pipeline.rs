@@ -23,7 +23,7 @@ use crate::sample::{BezierElements, HighOrderMesh, MAX_ORDER, sample};
 use crate::solve::CgError;
 use crate::spline::{SplineSpace, kinks};
 use crate::validity::{
-    Certifier, CpuCertifier, LineSearchInfo, LineSearchParams, ValidityError,
+    Certifier, CpuCertifier, LineSearchInfo, LineSearchParams, ValidityError, certify_screened,
     lagrange_element_bounds, line_search_with, local_line_search_with,
 };
 use serde::Serialize;
@@ -244,6 +244,8 @@ pub struct CurveReport {
     /// Elements of the written mesh not certified valid (always 0: otherwise nothing is written).
     pub invalid_elements: usize,
     /// Smallest certified lower bound of det J over the written elements (spline geometry).
+    /// It is the exact Bernstein certificate's (the screen, `validity::screen`, decides only
+    /// elements whose exact bound is larger).
     pub min_det_jacobian_bound: Option<f64>,
     /// Minimum scaled Jacobian of the input (corners) and of the output (sampled).
     pub input_min_scaled_jacobian: f64,
@@ -416,15 +418,17 @@ pub fn curve_in_memory_with_progress(
         Some(c) => c,
         None => &CpuCertifier,
     };
-    let certify_all = |s: &SplineSpace| {
+    // Screened certificate (crate::validity::screen): decisions "lower > t" for t ≤ target(e)
+    // and the smallest bound are the exact certificate's.
+    let certify_above = |s: &SplineSpace, target: &(dyn Fn(usize) -> f64 + Sync)| {
         let all: Vec<usize> = (0..s.n_elements()).collect();
-        certifier.certify(
-            s.dim,
-            &all,
-            &|e| s.element_bezier(e),
-            options.line_search.certificate_depth,
-        )
+        let net = |e: usize| s.element_bezier(e);
+        let depth = options.line_search.certificate_depth;
+        let mut c = certify_screened(certifier, s.dim, &all, &net, depth, target);
+        c.refine_smallest(certifier, s.dim, &all, &net, depth, 1);
+        c.bounds
     };
+    let certify_all = |s: &SplineSpace| certify_above(s, &|_| 0.0);
     let features = match options.geometry {
         Geometry::Straight => None,
         _ => Some(options.features.detect(&mesh, &topo)?).filter(|f| !f.is_empty()),
@@ -487,11 +491,10 @@ pub fn curve_in_memory_with_progress(
                 *timings.entry("fit_assembly".into()).or_insert(0.0) += info.assembly_seconds;
                 *timings.entry("fit_cg".into()).or_insert(0.0) += info.solve_seconds;
                 let net = |e: usize, cps: &[[f64; 3]]| s.element_bezier_with(e, cps);
-                let thresholds = acceptance_thresholds(
-                    &mesh,
-                    options.line_search.min_det_fraction,
-                    &certify_all(&s),
-                );
+                let thresholds =
+                    acceptance_thresholds(&mesh, options.line_search.min_det_fraction, |t| {
+                        certify_above(&s, t)
+                    });
                 let result = match options.line_search_mode {
                     LineSearchMode::Global => line_search_with(
                         certifier,
@@ -849,18 +852,20 @@ fn demote_with_rings(
 
 /// Per-element acceptance threshold of the line search: `fraction` × the smallest corner det J
 /// of the straight input element, but never more than half of what the initial map is
-/// certified to achieve (0 where the initial map is not certified).
+/// certified to achieve (0 where the initial map is not certified). `certify(target)` certifies
+/// the initial map; its bounds need to be exact only where they are at most `target(e)` =
+/// 2 × `fraction` × reference, since above that the threshold is `fraction` × reference.
 fn acceptance_thresholds(
     mesh: &crate::mesh::LinearMesh,
     fraction: f64,
-    initial: &[crate::validity::DetBounds],
+    certify: impl FnOnce(&(dyn Fn(usize) -> f64 + Sync)) -> Vec<crate::validity::DetBounds>,
 ) -> Vec<f64> {
     use rayon::prelude::*;
     if fraction <= 0.0 {
         return Vec::new();
     }
     let npe = mesh.nodes_per_element();
-    (0..mesh.n_elements())
+    let reference: Vec<f64> = (0..mesh.n_elements())
         .into_par_iter()
         .map(|e| {
             let x = mesh.element_coords(e);
@@ -872,12 +877,19 @@ fn acceptance_thresholds(
                 &mut jac[..npe],
                 &mut scaled[..npe],
             );
-            let reference = jac[..npe]
+            jac[..npe]
                 .iter()
                 .copied()
                 .fold(f64::INFINITY, f64::min)
-                .max(0.0);
-            let initial = initial[e].lower;
+                .max(0.0)
+        })
+        .collect();
+    let initial = certify(&|e| 2.0 * (fraction * reference[e]));
+    reference
+        .par_iter()
+        .zip(&initial)
+        .map(|(&reference, initial)| {
+            let initial = initial.lower;
             if initial > 0.0 {
                 (fraction * reference).min(0.5 * initial)
             } else {

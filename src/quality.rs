@@ -56,9 +56,20 @@ pub fn sample_det_jacobian(mesh: &HighOrderMesh) -> Vec<ElementQuality> {
             &mut dv[s * m..(s + 1) * m],
         );
     }
+    // Scratch of the 3D sum factorisation, one pair per rayon task (not per element).
+    let scratch = || {
+        if d == 2 {
+            (Vec::new(), Vec::new())
+        } else {
+            (
+                vec![[[0.0; 3]; 2]; m * m * ns],
+                vec![[[0.0; 3]; 3]; m * ns * ns],
+            )
+        }
+    };
     (0..mesh.n_elements())
         .into_par_iter()
-        .map(|e| {
+        .map_init(scratch, |(t1, t2), e| {
             let nodes = mesh.element(e);
             let x = |i: usize, j: usize, k: usize| mesh.nodes[nodes[i + m * (j + m * k)] as usize];
             let mut min_det = f64::INFINITY;
@@ -86,64 +97,20 @@ pub fn sample_det_jacobian(mesh: &HighOrderMesh) -> Vec<ElementQuality> {
                     }
                 }
             } else {
-                // Sum factorisation: contract k, then j, then i.
-                let mut t1 = vec![[[0.0; 3]; 2]; m * m * ns]; // [i][j][c] with V / D along k
-                for k in 0..m {
-                    for j in 0..m {
-                        for i in 0..m {
-                            let p = x(i, j, k);
-                            for c in 0..ns {
-                                let (wv, wd) = (v[c * m + k], dv[c * m + k]);
-                                let t = &mut t1[(i + m * j) * ns + c];
-                                for r in 0..3 {
-                                    t[0][r] += wv * p[r];
-                                    t[1][r] += wd * p[r];
-                                }
-                            }
-                        }
-                    }
-                }
-                // t2[i][b][c]: (V_j V_k), (D_j V_k), (V_j D_k)
-                let mut t2 = vec![[[0.0; 3]; 3]; m * ns * ns];
-                for c in 0..ns {
-                    for b in 0..ns {
-                        for i in 0..m {
-                            let t = &mut t2[(i * ns + b) * ns + c];
-                            for j in 0..m {
-                                let s = t1[(i + m * j) * ns + c];
-                                let (wv, wd) = (v[b * m + j], dv[b * m + j]);
-                                for r in 0..3 {
-                                    t[0][r] += wv * s[0][r];
-                                    t[1][r] += wd * s[0][r];
-                                    t[2][r] += wv * s[1][r];
-                                }
-                            }
-                        }
-                    }
-                }
-                for c in 0..ns {
-                    for b in 0..ns {
-                        for a in 0..ns {
-                            let mut j = [[0.0; 3]; 3];
-                            for i in 0..m {
-                                let s = t2[(i * ns + b) * ns + c];
-                                let (wv, wd) = (v[a * m + i], dv[a * m + i]);
-                                for r in 0..3 {
-                                    j[0][r] += wd * s[0][r];
-                                    j[1][r] += wv * s[1][r];
-                                    j[2][r] += wv * s[2][r];
-                                }
-                            }
-                            let det = j[0][0] * (j[1][1] * j[2][2] - j[1][2] * j[2][1])
-                                - j[0][1] * (j[1][0] * j[2][2] - j[1][2] * j[2][0])
-                                + j[0][2] * (j[1][0] * j[2][1] - j[1][1] * j[2][0]);
-                            let n = |u: [f64; 3]| (u[0] * u[0] + u[1] * u[1] + u[2] * u[2]).sqrt();
-                            let norm = n(j[0]) * n(j[1]) * n(j[2]);
-                            min_det = min_det.min(det);
-                            min_sj = min_sj.min(if norm > 0.0 { det / norm } else { 0.0 });
-                        }
-                    }
-                }
+                let x = |n: usize| mesh.nodes[nodes[n] as usize];
+                (min_det, min_sj) = match p {
+                    1 => hex_quality::<2, 3>(&x, &v, &dv, t1, t2),
+                    2 => hex_quality::<3, 5>(&x, &v, &dv, t1, t2),
+                    3 => hex_quality::<4, 7>(&x, &v, &dv, t1, t2),
+                    4 => hex_quality::<5, 9>(&x, &v, &dv, t1, t2),
+                    5 => hex_quality::<6, 11>(&x, &v, &dv, t1, t2),
+                    6 => hex_quality::<7, 13>(&x, &v, &dv, t1, t2),
+                    7 => hex_quality::<8, 15>(&x, &v, &dv, t1, t2),
+                    8 => hex_quality::<9, 17>(&x, &v, &dv, t1, t2),
+                    9 => hex_quality::<10, 19>(&x, &v, &dv, t1, t2),
+                    10 => hex_quality::<11, 21>(&x, &v, &dv, t1, t2),
+                    _ => panic!("order {p} out of range"),
+                };
             }
             ElementQuality {
                 min_det_jacobian: min_det,
@@ -151,6 +118,86 @@ pub fn sample_det_jacobian(mesh: &HighOrderMesh) -> Vec<ElementQuality> {
             }
         })
         .collect()
+}
+
+/// Smallest sampled det J and scaled Jacobian of one hex of order M − 1 (nodes `x(n)` in
+/// lattice order) on the lattice of NS = 2M − 1 points per direction, by sum factorisation:
+/// contract k, then j, then i. Loop bounds are constants so each order is unrolled for itself.
+fn hex_quality<const M: usize, const NS: usize>(
+    x: &dyn Fn(usize) -> [f64; 3],
+    v: &[f64],
+    dv: &[f64],
+    t1: &mut [[[f64; 3]; 2]],
+    t2: &mut [[[f64; 3]; 3]],
+) -> (f64, f64) {
+    let (v, dv) = (&v[..NS * M], &dv[..NS * M]);
+    let t1 = &mut t1[..M * M * NS]; // [i][j][c] with V / D along k
+    let t2 = &mut t2[..M * NS * NS]; // [i][b][c]: (V_j V_k), (D_j V_k), (V_j D_k)
+    let mut min_det = f64::INFINITY;
+    let mut min_sj = f64::INFINITY;
+    t1.fill([[0.0; 3]; 2]);
+    for k in 0..M {
+        for j in 0..M {
+            for i in 0..M {
+                let p = x(i + M * (j + M * k));
+                for c in 0..NS {
+                    let (wv, wd) = (v[c * M + k], dv[c * M + k]);
+                    let t = &mut t1[(i + M * j) * NS + c];
+                    for r in 0..3 {
+                        t[0][r] += wv * p[r];
+                        t[1][r] += wd * p[r];
+                    }
+                }
+            }
+        }
+    }
+    t2.fill([[0.0; 3]; 3]);
+    for c in 0..NS {
+        for b in 0..NS {
+            for i in 0..M {
+                let t = &mut t2[(i * NS + b) * NS + c];
+                for j in 0..M {
+                    let s = t1[(i + M * j) * NS + c];
+                    let (wv, wd) = (v[b * M + j], dv[b * M + j]);
+                    for r in 0..3 {
+                        t[0][r] += wv * s[0][r];
+                        t[1][r] += wd * s[0][r];
+                        t[2][r] += wv * s[1][r];
+                    }
+                }
+            }
+        }
+    }
+    for c in 0..NS {
+        for b in 0..NS {
+            for a in 0..NS {
+                let mut j = [[0.0; 3]; 3];
+                for i in 0..M {
+                    let s = t2[(i * NS + b) * NS + c];
+                    let (wv, wd) = (v[a * M + i], dv[a * M + i]);
+                    for r in 0..3 {
+                        j[0][r] += wd * s[0][r];
+                        j[1][r] += wv * s[1][r];
+                        j[2][r] += wv * s[2][r];
+                    }
+                }
+                let det = j[0][0] * (j[1][1] * j[2][2] - j[1][2] * j[2][1])
+                    - j[0][1] * (j[1][0] * j[2][2] - j[1][2] * j[2][0])
+                    + j[0][2] * (j[1][0] * j[2][1] - j[1][1] * j[2][0]);
+                let n2 = |u: [f64; 3]| u[0] * u[0] + u[1] * u[1] + u[2] * u[2];
+                let (na, nb, nc) = (n2(j[0]), n2(j[1]), n2(j[2]));
+                // One square root per point; three where the product leaves the normal range
+                // of f64 (or is 0).
+                let mut norm = (na * nb * nc).sqrt();
+                if !norm.is_normal() {
+                    norm = na.sqrt() * nb.sqrt() * nc.sqrt();
+                }
+                min_det = min_det.min(det);
+                min_sj = min_sj.min(if norm > 0.0 { det / norm } else { 0.0 });
+            }
+        }
+    }
+    (min_det, min_sj)
 }
 
 /// Summary of [`sample_det_jacobian`] over a mesh: the `check` report.

@@ -4,6 +4,8 @@
 //! The kernel's result is made certified by a forward rounding-error bound
 //! ([`rounding_bound`]): an element is certified on the GPU when min coefficient − bound > 0;
 //! every other element is finished on the CPU in f64 by [`det_jacobian_bounds`] (subdivision).
+//! The line searches call the certifier only for the elements that the CPU screen
+//! ([`crate::validity::screen`]) leaves undecided; the kernel computes the exact coefficients.
 
 use super::{GpuContext, GpuError, Precision, anchor, bytes_to_reals, groups, reals_to_bytes};
 use crate::validity::{Certifier, DetBounds, det_jacobian_bounds};

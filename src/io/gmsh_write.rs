@@ -125,18 +125,35 @@ pub fn write_msh(
     match version {
         MshVersion::V41 => {
             // Entities with bounding boxes of their elements' nodes.
+            // In parallel: min and max are exact, so the result does not depend on the split.
             let bbox = |g: &Group| {
-                let mut lo = [f64::INFINITY; 3];
-                let mut hi = [f64::NEG_INFINITY; 3];
-                for &i in &g.members {
-                    for n in nodes_of(g, i) {
-                        let x = mesh.nodes[n as usize];
-                        for k in 0..3 {
-                            lo[k] = lo[k].min(x[k]);
-                            hi[k] = hi[k].max(x[k]);
+                use rayon::prelude::*;
+                let npf = mesh.nodes_per_facet();
+                let empty = || ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+                let (lo, hi) = g
+                    .members
+                    .par_iter()
+                    .fold(empty, |(mut lo, mut hi), &i| {
+                        let ids = if g.dim == d {
+                            mesh.element(i)
+                        } else {
+                            &mesh.boundary[i * npf..(i + 1) * npf]
+                        };
+                        for &n in ids {
+                            let x = mesh.nodes[n as usize];
+                            for k in 0..3 {
+                                lo[k] = lo[k].min(x[k]);
+                                hi[k] = hi[k].max(x[k]);
+                            }
                         }
-                    }
-                }
+                        (lo, hi)
+                    })
+                    .reduce(empty, |(a, b), (c, e)| {
+                        (
+                            std::array::from_fn(|k| a[k].min(c[k])),
+                            std::array::from_fn(|k| b[k].max(e[k])),
+                        )
+                    });
                 [lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]]
             };
             let mut count = [0u64; 4];

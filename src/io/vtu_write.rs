@@ -20,7 +20,7 @@ pub enum VtuEncoding {
     Appended,
 }
 
-/// One data array, already in little-endian bytes, with how to print it as text.
+/// One data array: little-endian bytes (binary encodings) or text (ASCII).
 struct Array {
     name: &'static str,
     vtk_type: &'static str,
@@ -29,21 +29,58 @@ struct Array {
     text: String,
 }
 
-fn array<T: Copy + std::fmt::Display>(
+/// Values that a data array holds.
+trait Value: Copy + std::fmt::Display + Send + Sync {
+    fn put_le(self, out: &mut Vec<u8>);
+}
+
+macro_rules! value {
+    ($($t:ty),*) => {$(
+        impl Value for $t {
+            fn put_le(self, out: &mut Vec<u8>) {
+                out.extend_from_slice(&self.to_le_bytes());
+            }
+        }
+    )*};
+}
+value!(f64, i64, i32, u8);
+
+/// The array in the form `encoding` needs: text (12 values a line) for ASCII, else bytes.
+/// Text is formatted in parallel in fixed chunks and joined in order.
+fn array<T: Value>(
     name: &'static str,
     vtk_type: &'static str,
     components: usize,
     values: &[T],
-    to_le: impl Fn(T) -> Vec<u8>,
+    encoding: VtuEncoding,
 ) -> Array {
-    let mut bytes = Vec::with_capacity(values.len() * 8);
-    let mut text = String::with_capacity(values.len() * 8);
-    for (i, &v) in values.iter().enumerate() {
-        bytes.extend(to_le(v));
-        if i > 0 {
-            text.push(if i % 12 == 0 { '\n' } else { ' ' });
+    use rayon::prelude::*;
+    use std::fmt::Write as _;
+    let mut bytes = Vec::new();
+    let mut text = String::new();
+    if encoding == VtuEncoding::Ascii {
+        const CHUNK: usize = 12 * 1024;
+        let parts: Vec<String> = values
+            .par_chunks(CHUNK)
+            .enumerate()
+            .map(|(c, chunk)| {
+                let mut s = String::with_capacity(chunk.len() * 8);
+                for (k, &v) in chunk.iter().enumerate() {
+                    let i = c * CHUNK + k;
+                    if i > 0 {
+                        s.push(if i.is_multiple_of(12) { '\n' } else { ' ' });
+                    }
+                    write!(s, "{v}").expect("formatting into a String");
+                }
+                s
+            })
+            .collect();
+        text = parts.concat();
+    } else {
+        bytes.reserve(std::mem::size_of_val(values));
+        for &v in values {
+            v.put_le(&mut bytes);
         }
-        text.push_str(&v.to_string());
     }
     Array {
         name,
@@ -96,18 +133,15 @@ pub fn write_vtu(
     let boundary: Vec<u8> = (0..ne + nb).map(|i| (i >= ne) as u8).collect();
     let points: Vec<f64> = mesh.nodes.iter().flat_map(|x| x.iter().copied()).collect();
 
-    let le64 = |v: i64| v.to_le_bytes().to_vec();
-    let points = array("Points", "Float64", 3, &points, |v: f64| {
-        v.to_le_bytes().to_vec()
-    });
+    let points = array("Points", "Float64", 3, &points, encoding);
     let cells = [
-        array("connectivity", "Int64", 1, &connectivity, le64),
-        array("offsets", "Int64", 1, &offsets, le64),
-        array("types", "UInt8", 1, &types, |v: u8| vec![v]),
+        array("connectivity", "Int64", 1, &connectivity, encoding),
+        array("offsets", "Int64", 1, &offsets, encoding),
+        array("types", "UInt8", 1, &types, encoding),
     ];
     let cell_data = [
-        array("tag", "Int32", 1, &tags, |v: i32| v.to_le_bytes().to_vec()),
-        array("boundary", "UInt8", 1, &boundary, |v: u8| vec![v]),
+        array("tag", "Int32", 1, &tags, encoding),
+        array("boundary", "UInt8", 1, &boundary, encoding),
     ];
 
     writeln!(w, "<?xml version=\"1.0\"?>")?;

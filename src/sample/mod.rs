@@ -13,6 +13,10 @@
 //! stored frame: origin at its first vertex, first axis toward its second); then element
 //! interiors. Each node's position is evaluated once, from one element that contains it, so
 //! neighbours share ids and positions exactly.
+//!
+//! **Cost.** [`sample`] runs element by element: an element computes its Bézier net once and
+//! evaluates the nodes it owns (about p^d of its (p+1)^d), so the spline's extraction is
+//! applied once per element rather than once per node.
 
 pub mod ordering;
 
@@ -265,7 +269,15 @@ impl<'a> Numbering<'a> {
         let p = self.p;
         let d = self.mesh.dim;
         let at_end = |x: usize| x == 0 || x == p;
-        let interior: Vec<usize> = (0..d).filter(|&k| !at_end(l[k])).collect();
+        let mut interior = [0usize; 3];
+        let mut n_interior = 0;
+        for k in 0..d {
+            if !at_end(l[k]) {
+                interior[n_interior] = k;
+                n_interior += 1;
+            }
+        }
+        let interior = &interior[..n_interior];
         let nodes = self.mesh.element(e);
         let m = p - 1;
         match interior.len() {
@@ -276,7 +288,7 @@ impl<'a> Numbering<'a> {
                     let other = 1 - dir;
                     2 * other + l[other] / p
                 } else {
-                    let others: Vec<usize> = (0..3).filter(|&k| k != dir).collect();
+                    let others = [[1, 2], [0, 2], [0, 1]][dir];
                     4 * dir + l[others[0]] / p + 2 * (l[others[1]] / p)
                 };
                 let edge =
@@ -355,6 +367,10 @@ fn edge_lattice(
 }
 
 /// Sample `source` at order `p` over `mesh`'s topology.
+///
+/// Element by element: each element computes its Bézier net once and evaluates the nodes it
+/// owns (the same owner and lattice point as [`sample_with`], so the nodes are those of
+/// `sample_with` with [`eval_net`], bit for bit), instead of one net per node.
 pub fn sample(
     source: &dyn BezierElements,
     mesh: &LinearMesh,
@@ -362,20 +378,168 @@ pub fn sample(
     p: usize,
 ) -> HighOrderMesh {
     assert_eq!(source.n_elements(), mesh.n_elements());
+    assert!((1..=MAX_ORDER).contains(&p), "order {p} out of range");
     let d = mesh.dim;
     let pf = p as f64;
-    let (mut ho, nodes) = sample_with(mesh, topo, p, |e, lattice, out: &mut [[f64; 3]]| {
-        let net = source.bezier_net(e);
-        for (l, x) in lattice.iter().zip(out) {
-            *x = eval_net(
-                d,
-                &net,
-                [l[0] as f64 / pf, l[1] as f64 / pf, l[2] as f64 / pf],
-            );
-        }
-    });
-    ho.nodes = nodes;
+    let num = Numbering::new(mesh, topo, p);
+    let owner = Owners::new(mesh, topo, &num);
+    let npe = (p + 1).pow(d as u32);
+    let ne = mesh.n_elements();
+    let lattice: Vec<Lattice> = (0..npe).map(|n| lattice_point(p, d, n)).collect();
+    let mut elements = vec![0u32; ne * npe];
+    let mut nodes = vec![[0.0f64; 3]; num.n_nodes()];
+    let writer = DisjointWriter::new(&mut nodes);
+    elements
+        .par_chunks_mut(npe)
+        .enumerate()
+        .for_each(|(e, ids)| {
+            for (id, &l) in ids.iter_mut().zip(&lattice) {
+                *id = num.node_id(e, l);
+            }
+            let mut net = None;
+            for (&id, l) in ids.iter().zip(&lattice) {
+                if owner.of(id) != e {
+                    continue;
+                }
+                let net = net.get_or_insert_with(|| source.bezier_net(e));
+                let x = eval_net(
+                    d,
+                    net,
+                    [l[0] as f64 / pf, l[1] as f64 / pf, l[2] as f64 / pf],
+                );
+                // SAFETY: every node id has exactly one owner element ([`Owners::of`]), and
+                // only that element's task writes it.
+                unsafe { writer.write(id as usize, x) };
+            }
+        });
+    let mut ho = HighOrderMesh {
+        dim: d,
+        order: p,
+        nodes,
+        elements,
+        element_tags: mesh.element_tags.clone(),
+        boundary: boundary_facets(mesh, topo, &num),
+        boundary_tags: topo.boundary_facet_tags.clone(),
+        tag_names: mesh.tag_names.clone(),
+    };
+    ho.nodes.shrink_to_fit();
     ho
+}
+
+/// Write access to distinct entries of a slice from parallel tasks.
+struct DisjointWriter<'a, T> {
+    ptr: *mut T,
+    len: usize,
+    _slice: std::marker::PhantomData<&'a mut [T]>,
+}
+
+// SAFETY: the writer only hands out writes to entries; callers of `write` guarantee that no
+// entry is written by two tasks, so tasks never touch the same memory.
+unsafe impl<T: Send> Sync for DisjointWriter<'_, T> {}
+
+impl<'a, T> DisjointWriter<'a, T> {
+    fn new(slice: &'a mut [T]) -> Self {
+        DisjointWriter {
+            ptr: slice.as_mut_ptr(),
+            len: slice.len(),
+            _slice: std::marker::PhantomData,
+        }
+    }
+
+    /// # Safety
+    /// No other task may write or read entry `i` while the writer lives.
+    unsafe fn write(&self, i: usize, value: T) {
+        assert!(i < self.len, "entry {i} out of {}", self.len);
+        // SAFETY: in bounds (checked above); exclusive per the caller's guarantee.
+        unsafe { self.ptr.add(i).write(value) }
+    }
+}
+
+/// The element that evaluates each node (as in [`sample_with`]): a vertex's first element, an
+/// edge's first element (in `element_edges` order), a face's first element, the element of
+/// an interior node.
+struct Owners<'a> {
+    topo: &'a Topology,
+    edge_owner: Vec<u32>,
+    /// Nodes per edge, face and element interior.
+    per: [usize; 3],
+    bases: [usize; 3],
+}
+
+impl<'a> Owners<'a> {
+    fn new(mesh: &LinearMesh, topo: &'a Topology, num: &Numbering) -> Self {
+        let nle = if mesh.dim == 2 { 4 } else { 12 };
+        let mut edge_owner = vec![u32::MAX; topo.edges.len()];
+        for (slot, &edge) in topo.element_edges.iter().enumerate().rev() {
+            edge_owner[edge as usize] = (slot / nle) as u32;
+        }
+        let m = num.p - 1;
+        Owners {
+            topo,
+            edge_owner,
+            per: [m, m * m, m.pow(mesh.dim as u32)],
+            bases: [num.edge_base, num.face_base, num.cell_base],
+        }
+    }
+
+    /// Owner of node `id` (an id of an edge, face or interior node implies p ≥ 2, so the
+    /// divisions are by non-zero counts).
+    fn of(&self, id: u32) -> usize {
+        let id = id as usize;
+        let [edge_base, face_base, cell_base] = self.bases;
+        if id < edge_base {
+            self.topo.elements_at_vertex(id)[0] as usize
+        } else if id < face_base {
+            self.edge_owner[(id - edge_base) / self.per[0]] as usize
+        } else if id < cell_base {
+            self.topo.facet_elements[(id - face_base) / self.per[1]][0] as usize
+        } else {
+            (id - cell_base) / self.per[2]
+        }
+    }
+}
+
+/// Boundary facets in their outward frames: (p+1)^(d−1) node ids each.
+fn boundary_facets(mesh: &LinearMesh, topo: &Topology, num: &Numbering) -> Vec<u32> {
+    let (d, p) = (mesh.dim, num.p);
+    let npf = (p + 1).pow(d as u32 - 1);
+    let mut boundary = vec![0u32; topo.boundary_facets.len() * npf];
+    boundary
+        .par_chunks_mut(npf)
+        .zip(&topo.boundary_facets)
+        .for_each(|(out, &f)| {
+            let f = f as usize;
+            let e = topo.facet_elements[f][0] as usize;
+            let side = topo.facet_sides[f][0] as usize;
+            if d == 2 {
+                let [a, b] = QUAD_SIDES[side];
+                let (qa, qb) = (HEX_VERTEX_PARAMS[a], HEX_VERTEX_PARAMS[b]);
+                for (t, id) in out.iter_mut().enumerate() {
+                    let l: Lattice = std::array::from_fn(|k| {
+                        if k == 2 {
+                            0
+                        } else {
+                            qa[k] as usize * (p - t) + qb[k] as usize * t
+                        }
+                    });
+                    *id = num.node_id(e, l);
+                }
+            } else {
+                // The stored face cycle is outward for its first element; walk its frame.
+                let (dirs, [ou, ov], swapped) = num.face_frame(e, side);
+                for b in 0..=p {
+                    for a in 0..=p {
+                        let (du, dv) = if swapped { (b, a) } else { (a, b) };
+                        let mut l = [0; 3];
+                        l[side / 2] = (side % 2) * p;
+                        l[dirs[0]] = if ou == 0 { du } else { p - du };
+                        l[dirs[1]] = if ov == 0 { dv } else { p - dv };
+                        out[a + b * (p + 1)] = num.node_id(e, l);
+                    }
+                }
+            }
+        });
+    boundary
 }
 
 /// The order-`p` mesh over `mesh`'s topology with node values from `eval(e, lattice, out)`,
@@ -480,51 +644,13 @@ pub fn sample_with<T: Copy + Default + Send + Sync>(
             });
     }
 
-    // Boundary facets in their outward frames.
-    let npf = (p + 1).pow(d as u32 - 1);
-    let mut boundary = vec![0u32; topo.boundary_facets.len() * npf];
-    boundary
-        .par_chunks_mut(npf)
-        .zip(&topo.boundary_facets)
-        .for_each(|(out, &f)| {
-            let f = f as usize;
-            let e = topo.facet_elements[f][0] as usize;
-            let side = topo.facet_sides[f][0] as usize;
-            if d == 2 {
-                let [a, b] = QUAD_SIDES[side];
-                let (qa, qb) = (HEX_VERTEX_PARAMS[a], HEX_VERTEX_PARAMS[b]);
-                for (t, id) in out.iter_mut().enumerate() {
-                    let l: Lattice = std::array::from_fn(|k| {
-                        if k == 2 {
-                            0
-                        } else {
-                            qa[k] as usize * (p - t) + qb[k] as usize * t
-                        }
-                    });
-                    *id = num.node_id(e, l);
-                }
-            } else {
-                // The stored face cycle is outward for its first element; walk its frame.
-                let (dirs, [ou, ov], swapped) = num.face_frame(e, side);
-                for b in 0..=p {
-                    for a in 0..=p {
-                        let (du, dv) = if swapped { (b, a) } else { (a, b) };
-                        let mut l = [0; 3];
-                        l[side / 2] = (side % 2) * p;
-                        l[dirs[0]] = if ou == 0 { du } else { p - du };
-                        l[dirs[1]] = if ov == 0 { dv } else { p - dv };
-                        out[a + b * (p + 1)] = num.node_id(e, l);
-                    }
-                }
-            }
-        });
     let ho = HighOrderMesh {
         dim: d,
         order: p,
         nodes: Vec::new(),
         elements,
         element_tags: mesh.element_tags.clone(),
-        boundary,
+        boundary: boundary_facets(mesh, topo, &num),
         boundary_tags: topo.boundary_facet_tags.clone(),
         tag_names: mesh.tag_names.clone(),
     };

@@ -9,6 +9,17 @@
 //! det J. [`det_jacobian_bounds`] sharpens the lower bound by de Casteljau subdivision where the
 //! coefficients are inconclusive. Output: a certified interval [lower, upper] ∋ min det J;
 //! `lower > 0` certifies the element valid, `upper ≤ 0` proves it invalid.
+//!
+//! The line searches first try the cheap [`screen`] bound (a lower bound of every Bernstein
+//! coefficient of det J) and run the exact certificate only where the screen does not already
+//! exceed the element's acceptance threshold; decisions are those of the exact certificate,
+//! and the reported smallest bound (and worst elements) are made exact by
+//! [`Screened::refine_smallest`]. Other per-element bounds may be the screen's, which are
+//! certified lower bounds too, only less sharp.
+
+pub mod screen;
+
+pub use screen::{Screened, certify_screened, screen_bounds};
 
 /// Largest polynomial degree handled (det J of an order-10 hex has degree 29 per direction).
 const MAX_DEGREE: usize = 32;
@@ -460,7 +471,8 @@ mod tests {
         net
     }
 
-    fn det_fd(dim: usize, f: &impl Fn([f64; 3]) -> [f64; 3], t: [f64; 3]) -> f64 {
+    /// det J of the map `f` at `t` by central differences.
+    pub(super) fn det_fd(dim: usize, f: &impl Fn([f64; 3]) -> [f64; 3], t: [f64; 3]) -> f64 {
         let h = 1e-6;
         let col = |d: usize| {
             let mut a = t;
@@ -766,33 +778,38 @@ pub fn line_search_with(
     params: &LineSearchParams,
 ) -> Result<(Vec<[f64; 3]>, LineSearchInfo), ValidityError> {
     let all: Vec<usize> = (0..n_elements).collect();
-    let ok = |e: usize, b: &DetBounds| b.lower > thresholds.get(e).copied().unwrap_or(0.0);
+    let threshold = |e: usize| thresholds.get(e).copied().unwrap_or(0.0);
+    let ok = |e: usize, b: &DetBounds| b.lower > threshold(e);
     let at = |alpha: f64| -> Vec<[f64; 3]> {
         c0.iter()
             .zip(c_star)
             .map(|(a, b)| std::array::from_fn(|k| a[k] + alpha * (b[k] - a[k])))
             .collect()
     };
+    // Screen against max(threshold, 0): both decisions below (> 0, > threshold) are then the
+    // exact certificate's.
+    let target = |e: usize| threshold(e).max(0.0);
+    let depth = params.certificate_depth;
     let check =
-        |cps: &[[f64; 3]]| certifier.certify(dim, &all, &|e| net(e, cps), params.certificate_depth);
-    let full = check(c_star);
+        |cps: &[[f64; 3]]| certify_screened(certifier, dim, &all, &|e| net(e, cps), depth, &target);
+    let mut full = check(c_star);
+    full.refine_smallest(certifier, dim, &all, &|e| net(e, c_star), depth, 10);
     let bad: Vec<usize> = (0..n_elements)
-        .filter(|&e| !full[e].certified_positive())
+        .filter(|&e| !full.bounds[e].certified_positive())
         .collect();
-    let min_lower = |b: &[DetBounds]| b.iter().map(|x| x.lower).fold(f64::INFINITY, f64::min);
     let mut info = LineSearchInfo {
         alpha: 1.0,
         bisections: 0,
         invalid_at_full_step: bad.len(),
-        worst_at_full_step: worst(&full, 10),
-        min_det_lower_bound: min_lower(&full),
+        worst_at_full_step: worst(&full.bounds, 10),
+        min_det_lower_bound: full.min_lower(),
     };
     if bad.is_empty() {
         return Ok((c_star.to_vec(), info));
     }
     let start = check(c0);
     let bad0: Vec<usize> = (0..n_elements)
-        .filter(|&e| !start[e].certified_positive())
+        .filter(|&e| !start.bounds[e].certified_positive())
         .collect();
     if !bad0.is_empty() {
         return Err(ValidityError::InitialInvalid {
@@ -805,7 +822,7 @@ pub fn line_search_with(
     while info.bisections < params.max_bisections && hi - lo > params.tolerance {
         let mid = 0.5 * (lo + hi);
         let b = check(&at(mid));
-        if b.iter().enumerate().all(|(e, x)| ok(e, x)) {
+        if b.bounds.iter().enumerate().all(|(e, x)| ok(e, x)) {
             lo = mid;
             lo_bounds = b;
         } else {
@@ -813,9 +830,11 @@ pub fn line_search_with(
         }
         info.bisections += 1;
     }
+    let c = at(lo);
+    lo_bounds.refine_smallest(certifier, dim, &all, &|e| net(e, &c), depth, 1);
     info.alpha = lo;
-    info.min_det_lower_bound = min_lower(&lo_bounds);
-    Ok((at(lo), info))
+    info.min_det_lower_bound = lo_bounds.min_lower();
+    Ok((c, info))
 }
 
 /// Outcome of the local line search.
@@ -876,9 +895,12 @@ pub fn local_line_search_with(
     params: &LineSearchParams,
 ) -> Result<(Vec<[f64; 3]>, LocalSearchInfo), ValidityError> {
     use rayon::prelude::*;
-    let ok = |e: usize, b: &DetBounds| b.lower > thresholds.get(e).copied().unwrap_or(0.0);
+    let threshold = |e: usize| thresholds.get(e).copied().unwrap_or(0.0);
+    let ok = |e: usize, b: &DetBounds| b.lower > threshold(e);
+    // Screen against max(threshold, 0), so that the decisions are the exact certificate's.
+    let target = |e: usize| threshold(e).max(0.0);
+    let depth = params.certificate_depth;
     let n = c0.len();
-    let supports: Vec<Vec<u32>> = (0..n_elements).into_par_iter().map(&support).collect();
     let mut step = vec![1.0f64; n];
     let place = |step: &[f64]| -> Vec<[f64; 3]> {
         c0.iter()
@@ -889,14 +911,20 @@ pub fn local_line_search_with(
     };
     let mut cps = c_star.to_vec();
     let all: Vec<usize> = (0..n_elements).collect();
-    let mut bounds: Vec<DetBounds> =
-        certifier.certify(dim, &all, &|e| net(e, &cps), params.certificate_depth);
-    let invalid_at_full_step = (0..n_elements).filter(|&e| !ok(e, &bounds[e])).count();
+    let mut cert = certify_screened(certifier, dim, &all, &|e| net(e, &cps), depth, &target);
+    let invalid_at_full_step = (0..n_elements).filter(|&e| !ok(e, &cert.bounds[e])).count();
+    // Supports are needed only once some element fails.
+    let mut supports: Vec<Vec<u32>> = Vec::new();
     let mut rounds = 0;
     loop {
-        let bad: Vec<usize> = (0..n_elements).filter(|&e| !ok(e, &bounds[e])).collect();
+        let bad: Vec<usize> = (0..n_elements)
+            .filter(|&e| !ok(e, &cert.bounds[e]))
+            .collect();
         if bad.is_empty() {
             break;
+        }
+        if supports.is_empty() {
+            supports = (0..n_elements).into_par_iter().map(&support).collect();
         }
         let last = rounds >= params.max_bisections;
         if last {
@@ -932,12 +960,14 @@ pub fn local_line_search_with(
             .into_par_iter()
             .filter(|&e| supports[e].iter().any(|&c| touched[c as usize]))
             .collect();
-        let fresh = certifier.certify(dim, &recheck, &|e| net(e, &cps), params.certificate_depth);
-        for (&e, b) in recheck.iter().zip(fresh) {
-            bounds[e] = b;
+        let fresh = certify_screened(certifier, dim, &recheck, &|e| net(e, &cps), depth, &target);
+        for ((&e, b), x) in recheck.iter().zip(fresh.bounds).zip(fresh.exact) {
+            cert.bounds[e] = b;
+            cert.exact[e] = x;
         }
         rounds += 1;
     }
+    cert.refine_smallest(certifier, dim, &all, &|e| net(e, &cps), depth, 1);
     let damped: Vec<f64> = step.iter().copied().filter(|&s| s < 1.0).collect();
     Ok((
         cps,
@@ -946,7 +976,7 @@ pub fn local_line_search_with(
             damped_control_points: damped.len(),
             min_step: damped.iter().copied().fold(1.0, f64::min),
             invalid_at_full_step,
-            min_det_lower_bound: bounds.iter().map(|b| b.lower).fold(f64::INFINITY, f64::min),
+            min_det_lower_bound: cert.min_lower(),
         },
     ))
 }
