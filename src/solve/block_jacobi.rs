@@ -35,15 +35,18 @@ pub struct BlockJacobi {
     factor_start: Vec<usize>,
 }
 
-impl BlockJacobi {
-    /// Aggregate the rows of the CSR matrix (`indptr`, `indices`, `data`) into blocks of at
-    /// most `size` rows and factor each diagonal block.
-    pub fn new(
-        indptr: &[usize],
-        indices: &[u32],
-        data: &[f64],
-        size: usize,
-    ) -> Result<Self, CgError> {
+/// Greedy breadth-first aggregates of a CSR graph (see the module docs).
+pub(crate) struct Aggregates {
+    /// Rows of every aggregate, concatenated; aggregate a is `rows[start[a]..start[a + 1]]`.
+    pub rows: Vec<u32>,
+    pub start: Vec<usize>,
+    /// Position of row i in `rows`.
+    pub slot: Vec<u32>,
+}
+
+impl Aggregates {
+    /// Aggregates of at most `size` rows of the graph (`indptr`, `indices`).
+    pub fn new(indptr: &[usize], indices: &[u32], size: usize) -> Self {
         let n = indptr.len() - 1;
         let size = size.max(1);
         const FREE: u32 = u32::MAX;
@@ -76,11 +79,24 @@ impl BlockJacobi {
             }
             start.push(rows.len());
         }
-        drop(agg);
         let mut slot = vec![0u32; n];
         for (k, &r) in rows.iter().enumerate() {
             slot[r as usize] = k as u32;
         }
+        Aggregates { rows, start, slot }
+    }
+}
+
+impl BlockJacobi {
+    /// Aggregate the rows of the CSR matrix (`indptr`, `indices`, `data`) into blocks of at
+    /// most `size` rows and factor each diagonal block.
+    pub fn new(
+        indptr: &[usize],
+        indices: &[u32],
+        data: &[f64],
+        size: usize,
+    ) -> Result<Self, CgError> {
+        let Aggregates { rows, start, slot } = Aggregates::new(indptr, indices, size);
         let na = start.len() - 1;
         let mut factor_start = Vec::with_capacity(na + 1);
         factor_start.push(0usize);
@@ -138,15 +154,24 @@ pub(crate) fn split_at_offsets<'a, T>(mut v: &'a mut [T], offsets: &[usize]) -> 
 }
 
 /// In-place Cholesky factorisation of a packed lower triangle; `Err(i)` at a non-positive pivot.
-fn cholesky_packed(l: &mut [f64], m: usize) -> Result<(), usize> {
+pub(crate) fn cholesky_packed(l: &mut [f64], m: usize) -> Result<(), usize> {
     for i in 0..m {
         let ri = i * (i + 1) / 2;
         for j in 0..=i {
             let rj = j * (j + 1) / 2;
-            let mut s = l[ri + j];
-            for k in 0..j {
-                s -= l[ri + k] * l[rj + k];
+            // Four partial sums: the dot product is not one long dependency chain.
+            let mut acc = [0.0; 4];
+            let (a, b) = (l[ri..ri + j].chunks_exact(4), l[rj..rj + j].chunks_exact(4));
+            let (ar, br) = (a.remainder(), b.remainder());
+            for (a, b) in a.zip(b) {
+                for q in 0..4 {
+                    acc[q] += a[q] * b[q];
+                }
             }
+            for (a, b) in ar.iter().zip(br) {
+                acc[0] += a * b;
+            }
+            let s = l[ri + j] - ((acc[0] + acc[1]) + (acc[2] + acc[3]));
             if i == j {
                 if !(s > 0.0) {
                     return Err(i);

@@ -11,8 +11,10 @@
 //! (elasticity): one recurrence over all unknowns, with a caller-supplied preconditioner.
 
 pub mod block_jacobi;
+pub mod blocked;
 
 pub use block_jacobi::BlockJacobi;
+pub use blocked::BlockedSystem;
 use rayon::prelude::*;
 
 /// A symmetric positive definite operator on vectors of 3-component entries.
@@ -208,6 +210,12 @@ pub fn pcg(
     params: &CgParams,
     progress: impl FnMut(usize, f64),
 ) -> Result<CgInfo, CgError> {
+    // An assembled matrix with block Jacobi takes the reordered, fused solver (same method).
+    if let (CgPreconditioner::BlockJacobi { size }, Some((indptr, indices, data))) =
+        (params.preconditioner, op.csr())
+    {
+        return BlockedSystem::new(indptr, indices, data, size)?.solve(b, x, params, progress);
+    }
     let pre = preconditioner(op, params)?;
     pcg_with(op, pre.as_ref(), b, x, params, progress)
 }
