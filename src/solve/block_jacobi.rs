@@ -97,35 +97,19 @@ impl BlockJacobi {
         size: usize,
     ) -> Result<Self, CgError> {
         let Aggregates { rows, start, slot } = Aggregates::new(indptr, indices, size);
-        let na = start.len() - 1;
-        let mut factor_start = Vec::with_capacity(na + 1);
-        factor_start.push(0usize);
-        for a in 0..na {
-            let m = start[a + 1] - start[a];
-            factor_start.push(factor_start[a] + m * (m + 1) / 2);
-        }
-        let mut factors = vec![0.0; factor_start[na]];
-        split_at_offsets(&mut factors, &factor_start)
-            .into_par_iter()
-            .enumerate()
-            .try_for_each(|(a, l)| {
-                let (s, e) = (start[a], start[a + 1]);
-                let m = e - s;
-                // Dense lower triangle of the block, packed row by row: (i, j ≤ i) at i(i+1)/2 + j.
-                for (i, &r) in rows[s..e].iter().enumerate() {
-                    let r = r as usize;
-                    for k in indptr[r]..indptr[r + 1] {
-                        let j = slot[indices[k] as usize] as usize;
-                        if (s..e).contains(&j) && j - s <= i {
-                            l[i * (i + 1) / 2 + (j - s)] += data[k];
-                        }
+        let (factors, factor_start) = factor_blocks(&start, &rows, |a, l| {
+            let s = start[a];
+            // Dense lower triangle of the block, packed row by row: (i, j ≤ i) at i(i+1)/2 + j.
+            for (i, &r) in rows[s..start[a + 1]].iter().enumerate() {
+                let r = r as usize;
+                for k in indptr[r]..indptr[r + 1] {
+                    let j = slot[indices[k] as usize] as usize;
+                    if (s..start[a + 1]).contains(&j) && j - s <= i {
+                        l[i * (i + 1) / 2 + (j - s)] += data[k];
                     }
                 }
-                cholesky_packed(l, m).map_err(|i| CgError::BadDiagonal {
-                    row: rows[s + i] as usize,
-                    value: l[i * (i + 1) / 2 + i],
-                })
-            })?;
+            }
+        })?;
         Ok(BlockJacobi {
             rows,
             start,
@@ -141,6 +125,36 @@ impl BlockJacobi {
     }
 }
 
+/// Packed lower Cholesky factors of the diagonal blocks of the aggregates `start` (rows of
+/// aggregate a at `start[a]..start[a + 1]`; `rows` maps them to the caller's row numbers for
+/// errors): `fill(a, l)` adds block a's lower triangle into the zeroed packed `l`. Returns the
+/// factors and the start of each block's factor.
+pub(crate) fn factor_blocks(
+    start: &[usize],
+    rows: &[u32],
+    fill: impl Fn(usize, &mut [f64]) + Sync,
+) -> Result<(Vec<f64>, Vec<usize>), CgError> {
+    let na = start.len() - 1;
+    let mut factor_start = Vec::with_capacity(na + 1);
+    factor_start.push(0usize);
+    for a in 0..na {
+        let m = start[a + 1] - start[a];
+        factor_start.push(factor_start[a] + m * (m + 1) / 2);
+    }
+    let mut factors = vec![0.0; factor_start[na]];
+    split_at_offsets(&mut factors, &factor_start)
+        .into_par_iter()
+        .enumerate()
+        .try_for_each(|(a, l)| {
+            fill(a, l);
+            cholesky_packed(l, start[a + 1] - start[a]).map_err(|i| CgError::BadDiagonal {
+                row: rows[start[a] + i] as usize,
+                value: l[i * (i + 1) / 2 + i],
+            })
+        })?;
+    Ok((factors, factor_start))
+}
+
 /// Disjoint mutable pieces `v[offsets[i]..offsets[i + 1]]` (offsets ascending from 0), for
 /// filling variable-length blocks in parallel.
 pub(crate) fn split_at_offsets<'a, T>(mut v: &'a mut [T], offsets: &[usize]) -> Vec<&'a mut [T]> {
@@ -154,7 +168,7 @@ pub(crate) fn split_at_offsets<'a, T>(mut v: &'a mut [T], offsets: &[usize]) -> 
 }
 
 /// In-place Cholesky factorisation of a packed lower triangle; `Err(i)` at a non-positive pivot.
-pub(crate) fn cholesky_packed(l: &mut [f64], m: usize) -> Result<(), usize> {
+fn cholesky_packed(l: &mut [f64], m: usize) -> Result<(), usize> {
     for i in 0..m {
         let ri = i * (i + 1) / 2;
         for j in 0..=i {
@@ -229,11 +243,14 @@ impl Preconditioner for BlockJacobi {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    /// 2D 5-point Laplacian plus a shift on a g × g grid, CSR.
-    fn laplacian(g: usize) -> (Vec<usize>, Vec<u32>, Vec<f64>) {
+    pub(crate) type Csr = (Vec<usize>, Vec<u32>, Vec<f64>);
+
+    /// 2D 5-point Laplacian plus `shift(x, y)` on the diagonal, g × g grid, CSR: with a
+    /// constant shift the interior rows repeat one value sequence.
+    pub(crate) fn laplacian(g: usize, shift: impl Fn(usize, usize) -> f64) -> Csr {
         let (mut indptr, mut indices, mut data) = (vec![0], Vec::new(), Vec::new());
         for y in 0..g {
             for x in 0..g {
@@ -247,7 +264,7 @@ mod tests {
                 if x > 0 {
                     push(x - 1, y, -1.0);
                 }
-                push(x, y, 4.1);
+                push(x, y, 4.0 + shift(x, y));
                 if x + 1 < g {
                     push(x + 1, y, -1.0);
                 }
@@ -260,7 +277,8 @@ mod tests {
         (indptr, indices, data)
     }
 
-    fn matvec(a: &(Vec<usize>, Vec<u32>, Vec<f64>), x: &[[f64; 3]]) -> Vec<[f64; 3]> {
+    /// The plain CSR product (the oracle).
+    pub(crate) fn matvec(a: &Csr, x: &[[f64; 3]]) -> Vec<[f64; 3]> {
         (0..a.0.len() - 1)
             .map(|r| {
                 let mut s = [0.0; 3];
@@ -276,7 +294,7 @@ mod tests {
 
     #[test]
     fn aggregates_partition_the_rows_and_are_connected_patches() {
-        let a = laplacian(20);
+        let a = laplacian(20, |_, _| 0.1);
         let bj = BlockJacobi::new(&a.0, &a.1, &a.2, 16).unwrap();
         let mut seen = vec![false; 400];
         for &r in &bj.rows {
@@ -298,7 +316,7 @@ mod tests {
     #[test]
     fn one_block_is_the_exact_inverse() {
         // With every row in one aggregate, M⁻¹ = A⁻¹: A M⁻¹ r = r.
-        let a = laplacian(6);
+        let a = laplacian(6, |_, _| 0.1);
         let bj = BlockJacobi::new(&a.0, &a.1, &a.2, 36).unwrap();
         assert_eq!(bj.n_blocks(), 1);
         let r: Vec<[f64; 3]> = (0..36).map(|i| [(i as f64).sin(), 1.0, i as f64]).collect();
@@ -313,7 +331,7 @@ mod tests {
 
     #[test]
     fn blocks_of_one_are_point_jacobi() {
-        let a = laplacian(5);
+        let a = laplacian(5, |_, _| 0.1);
         let bj = BlockJacobi::new(&a.0, &a.1, &a.2, 1).unwrap();
         let r = vec![[1.0, 2.0, -3.0]; 25];
         let mut z = vec![[0.0; 3]; 25];
@@ -325,7 +343,7 @@ mod tests {
 
     #[test]
     fn an_indefinite_block_is_an_error() {
-        let mut a = laplacian(4);
+        let mut a = laplacian(4, |_, _| 0.1);
         // Row 5's diagonal made negative.
         let k = (a.0[5]..a.0[6]).find(|&k| a.1[k] == 5).unwrap();
         a.2[k] = -1.0;

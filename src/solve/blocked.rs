@@ -24,8 +24,8 @@
 //! Invariants: every dot product is a sum of per-chunk partial sums (fixed chunks of rows, or
 //! aggregates) added in order, so the result does not depend on the thread count.
 
-use super::block_jacobi::{Aggregates, cholesky_packed, split_at_offsets};
-use super::{CgError, CgInfo, CgParams};
+use super::block_jacobi::{Aggregates, factor_blocks, split_at_offsets};
+use super::{CgError, CgInfo, CgParams, Stopping};
 use rayon::prelude::*;
 use std::collections::HashMap;
 
@@ -357,34 +357,19 @@ impl BlockedSystem {
         let agg = Aggregates::new(indptr, indices, size);
         let a = TemplateMatrix::new(indptr, indices, data, &agg.rows, &agg.slot);
         let start = &agg.start;
-        let na = start.len() - 1;
-        let mut factor_start = Vec::with_capacity(na + 1);
-        factor_start.push(0usize);
-        for b in 0..na {
-            let m = start[b + 1] - start[b];
-            factor_start.push(factor_start[b] + m * (m + 1) / 2);
-        }
-        let mut factors = vec![0.0; factor_start[na]];
-        split_at_offsets(&mut factors, &factor_start)
-            .into_par_iter()
-            .enumerate()
-            .try_for_each(|(b, l)| {
-                let (s, e) = (start[b], start[b + 1]);
-                for i in s..e {
-                    let (cols, vals) = a.row(i);
-                    let ri = (i - s) * (i - s + 1) / 2;
-                    for (&c, &v) in cols.iter().zip(vals) {
-                        let c = c as usize;
-                        if (s..=i).contains(&c) {
-                            l[ri + c - s] += v;
-                        }
+        let (factors, factor_start) = factor_blocks(start, &agg.rows, |b, l| {
+            let s = start[b];
+            for i in s..start[b + 1] {
+                let (cols, vals) = a.row(i);
+                let ri = (i - s) * (i - s + 1) / 2;
+                for (&c, &v) in cols.iter().zip(vals) {
+                    let c = c as usize;
+                    if (s..=i).contains(&c) {
+                        l[ri + c - s] += v;
                     }
                 }
-                cholesky_packed(l, e - s).map_err(|i| CgError::BadDiagonal {
-                    row: agg.rows[s + i] as usize,
-                    value: l[i * (i + 1) / 2 + i],
-                })
-            })?;
+            }
+        })?;
         Ok(BlockedSystem {
             agg,
             a,
@@ -459,20 +444,8 @@ impl BlockedSystem {
             })
             .collect();
         let bnorm = sum(&bb).map(f64::sqrt);
-        let target: [f64; 3] =
-            std::array::from_fn(|k| (params.rel_tol * bnorm[k]).max(params.abs_tol));
-        let rel = |rr: V4| -> f64 {
-            (0..3)
-                .map(|k| {
-                    if bnorm[k] > 0.0 {
-                        rr[k].sqrt() / bnorm[k]
-                    } else {
-                        rr[k].sqrt()
-                    }
-                })
-                .fold(0.0, f64::max)
-        };
-        let converged = |rr: V4| (0..3).all(|k| rr[k].sqrt() <= target[k]);
+        let stop = Stopping::new([bnorm[0], bnorm[1], bnorm[2]], params);
+        let head = |v: V4| [v[0], v[1], v[2]];
         let mut z = vec![[0.0; 4]; n];
         let mut p = vec![[0.0; 4]; n];
         let mut ap = vec![[0.0; 4]; n];
@@ -481,32 +454,17 @@ impl BlockedSystem {
             self.update_and_precondition([0.0; 4], &mut xp, &mut r, &mut z, &p, &ap);
         p.copy_from_slice(&z);
         let mut it = 0;
-        while !converged(rr) {
+        while !stop.converged(head(rr)) {
             if it >= params.max_iters {
-                return Err(CgError::NoConvergence {
-                    iterations: it,
-                    rel_residual: rel(rr),
-                    rel_tol: params.rel_tol,
-                });
+                return Err(stop.no_convergence(it, head(rr)));
             }
             let pap = self.a.apply_dot(&p, &mut ap);
-            // Components already converged keep their iterate (α = 0), so 0/0 never occurs.
-            let mut alpha = [0.0; 4];
-            for k in 0..3 {
-                if rr[k].sqrt() > target[k] {
-                    if !(pap[k] > 0.0) {
-                        return Err(CgError::NotPositiveDefinite {
-                            iteration: it,
-                            curvature: pap[k],
-                        });
-                    }
-                    alpha[k] = rz[k] / pap[k];
-                }
-            }
+            let [a0, a1, a2] = stop.alpha(it, head(rr), head(rz), head(pap))?;
+            let alpha = [a0, a1, a2, 0.0];
             let (rz_new, rr_new) =
                 self.update_and_precondition(alpha, &mut xp, &mut r, &mut z, &p, &ap);
-            let beta: V4 =
-                std::array::from_fn(|k| if rz[k] > 0.0 { rz_new[k] / rz[k] } else { 0.0 });
+            let [b0, b1, b2] = Stopping::beta(head(rz), head(rz_new));
+            let beta = [b0, b1, b2, 0.0];
             p.par_iter_mut()
                 .zip(z.par_iter())
                 .with_min_len(ROW_CHUNK)
@@ -518,14 +476,14 @@ impl BlockedSystem {
             rz = rz_new;
             rr = rr_new;
             it += 1;
-            progress(it, rel(rr));
+            progress(it, stop.rel(head(rr)));
         }
         for (&i, xp) in rows.iter().zip(&xp) {
             x[i as usize] = [xp[0], xp[1], xp[2]];
         }
         Ok(CgInfo {
             iterations: it,
-            rel_residual: rel(rr),
+            rel_residual: stop.rel(head(rr)),
         })
     }
 }
@@ -533,53 +491,8 @@ impl BlockedSystem {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::solve::block_jacobi::tests::{Csr, laplacian, matvec};
     use crate::solve::{BlockJacobi, CgPreconditioner, LinOp, Preconditioner, pcg_with};
-
-    type Csr = (Vec<usize>, Vec<u32>, Vec<f64>);
-
-    /// 2D 5-point Laplacian plus `shift(x, y)` on the diagonal, g × g grid, CSR: with a
-    /// constant shift the interior rows repeat one value sequence.
-    fn laplacian(g: usize, shift: impl Fn(usize, usize) -> f64) -> Csr {
-        let (mut indptr, mut indices, mut data) = (vec![0], Vec::new(), Vec::new());
-        for y in 0..g {
-            for x in 0..g {
-                let mut push = |xx: usize, yy: usize, v: f64| {
-                    indices.push((yy * g + xx) as u32);
-                    data.push(v);
-                };
-                if y > 0 {
-                    push(x, y - 1, -1.0);
-                }
-                if x > 0 {
-                    push(x - 1, y, -1.0);
-                }
-                push(x, y, 4.0 + shift(x, y));
-                if x + 1 < g {
-                    push(x + 1, y, -1.0);
-                }
-                if y + 1 < g {
-                    push(x, y + 1, -1.0);
-                }
-                indptr.push(indices.len());
-            }
-        }
-        (indptr, indices, data)
-    }
-
-    /// The plain CSR product (the oracle).
-    fn matvec(a: &Csr, x: &[[f64; 3]]) -> Vec<[f64; 3]> {
-        (0..a.0.len() - 1)
-            .map(|r| {
-                let mut s = [0.0; 3];
-                for k in a.0[r]..a.0[r + 1] {
-                    for c in 0..3 {
-                        s[c] += a.2[k] * x[a.1[k] as usize][c];
-                    }
-                }
-                s
-            })
-            .collect()
-    }
 
     struct Op<'a>(&'a Csr);
     impl LinOp for Op<'_> {
