@@ -20,6 +20,9 @@
 //! * **Fused passes.** One iteration is three parallel passes: the product A p with the
 //!   partial sums of pᵀAp; per aggregate the updates of x and r, the block solve z = M⁻¹ r and
 //!   the partial sums of rᵀz and rᵀr; then p = z + β p.
+//! * **4-lane entries.** Vectors hold [f64; 4] (lane 3 zero), one 256-bit operation per entry;
+//!   the two kernels are compiled a second time for AVX2 and chosen at run time (no FMA, so
+//!   both give the same bits).
 //!
 //! Invariants: every dot product is a sum of per-chunk partial sums (fixed chunks of rows, or
 //! aggregates) added in order, so the result does not depend on the thread count.
