@@ -35,15 +35,18 @@ pub struct BlockJacobi {
     factor_start: Vec<usize>,
 }
 
-impl BlockJacobi {
-    /// Aggregate the rows of the CSR matrix (`indptr`, `indices`, `data`) into blocks of at
-    /// most `size` rows and factor each diagonal block.
-    pub fn new(
-        indptr: &[usize],
-        indices: &[u32],
-        data: &[f64],
-        size: usize,
-    ) -> Result<Self, CgError> {
+/// Greedy breadth-first aggregates of a CSR graph (see the module docs).
+pub(crate) struct Aggregates {
+    /// Rows of every aggregate, concatenated; aggregate a is `rows[start[a]..start[a + 1]]`.
+    pub rows: Vec<u32>,
+    pub start: Vec<usize>,
+    /// Position of row i in `rows`.
+    pub slot: Vec<u32>,
+}
+
+impl Aggregates {
+    /// Aggregates of at most `size` rows of the graph (`indptr`, `indices`).
+    pub fn new(indptr: &[usize], indices: &[u32], size: usize) -> Self {
         let n = indptr.len() - 1;
         let size = size.max(1);
         const FREE: u32 = u32::MAX;
@@ -76,40 +79,37 @@ impl BlockJacobi {
             }
             start.push(rows.len());
         }
-        drop(agg);
         let mut slot = vec![0u32; n];
         for (k, &r) in rows.iter().enumerate() {
             slot[r as usize] = k as u32;
         }
-        let na = start.len() - 1;
-        let mut factor_start = Vec::with_capacity(na + 1);
-        factor_start.push(0usize);
-        for a in 0..na {
-            let m = start[a + 1] - start[a];
-            factor_start.push(factor_start[a] + m * (m + 1) / 2);
-        }
-        let mut factors = vec![0.0; factor_start[na]];
-        split_at_offsets(&mut factors, &factor_start)
-            .into_par_iter()
-            .enumerate()
-            .try_for_each(|(a, l)| {
-                let (s, e) = (start[a], start[a + 1]);
-                let m = e - s;
-                // Dense lower triangle of the block, packed row by row: (i, j ≤ i) at i(i+1)/2 + j.
-                for (i, &r) in rows[s..e].iter().enumerate() {
-                    let r = r as usize;
-                    for k in indptr[r]..indptr[r + 1] {
-                        let j = slot[indices[k] as usize] as usize;
-                        if (s..e).contains(&j) && j - s <= i {
-                            l[i * (i + 1) / 2 + (j - s)] += data[k];
-                        }
+        Aggregates { rows, start, slot }
+    }
+}
+
+impl BlockJacobi {
+    /// Aggregate the rows of the CSR matrix (`indptr`, `indices`, `data`) into blocks of at
+    /// most `size` rows and factor each diagonal block.
+    pub fn new(
+        indptr: &[usize],
+        indices: &[u32],
+        data: &[f64],
+        size: usize,
+    ) -> Result<Self, CgError> {
+        let Aggregates { rows, start, slot } = Aggregates::new(indptr, indices, size);
+        let (factors, factor_start) = factor_blocks(&start, &rows, |a, l| {
+            let s = start[a];
+            // Dense lower triangle of the block, packed row by row: (i, j ≤ i) at i(i+1)/2 + j.
+            for (i, &r) in rows[s..start[a + 1]].iter().enumerate() {
+                let r = r as usize;
+                for k in indptr[r]..indptr[r + 1] {
+                    let j = slot[indices[k] as usize] as usize;
+                    if (s..start[a + 1]).contains(&j) && j - s <= i {
+                        l[i * (i + 1) / 2 + (j - s)] += data[k];
                     }
                 }
-                cholesky_packed(l, m).map_err(|i| CgError::BadDiagonal {
-                    row: rows[s + i] as usize,
-                    value: l[i * (i + 1) / 2 + i],
-                })
-            })?;
+            }
+        })?;
         Ok(BlockJacobi {
             rows,
             start,
@@ -123,6 +123,36 @@ impl BlockJacobi {
     pub fn n_blocks(&self) -> usize {
         self.start.len() - 1
     }
+}
+
+/// Packed lower Cholesky factors of the diagonal blocks of the aggregates `start` (rows of
+/// aggregate a at `start[a]..start[a + 1]`; `rows` maps them to the caller's row numbers for
+/// errors): `fill(a, l)` adds block a's lower triangle into the zeroed packed `l`. Returns the
+/// factors and the start of each block's factor.
+pub(crate) fn factor_blocks(
+    start: &[usize],
+    rows: &[u32],
+    fill: impl Fn(usize, &mut [f64]) + Sync,
+) -> Result<(Vec<f64>, Vec<usize>), CgError> {
+    let na = start.len() - 1;
+    let mut factor_start = Vec::with_capacity(na + 1);
+    factor_start.push(0usize);
+    for a in 0..na {
+        let m = start[a + 1] - start[a];
+        factor_start.push(factor_start[a] + m * (m + 1) / 2);
+    }
+    let mut factors = vec![0.0; factor_start[na]];
+    split_at_offsets(&mut factors, &factor_start)
+        .into_par_iter()
+        .enumerate()
+        .try_for_each(|(a, l)| {
+            fill(a, l);
+            cholesky_packed(l, start[a + 1] - start[a]).map_err(|i| CgError::BadDiagonal {
+                row: rows[start[a] + i] as usize,
+                value: l[i * (i + 1) / 2 + i],
+            })
+        })?;
+    Ok((factors, factor_start))
 }
 
 /// Disjoint mutable pieces `v[offsets[i]..offsets[i + 1]]` (offsets ascending from 0), for
@@ -143,10 +173,19 @@ fn cholesky_packed(l: &mut [f64], m: usize) -> Result<(), usize> {
         let ri = i * (i + 1) / 2;
         for j in 0..=i {
             let rj = j * (j + 1) / 2;
-            let mut s = l[ri + j];
-            for k in 0..j {
-                s -= l[ri + k] * l[rj + k];
+            // Four partial sums: the dot product is not one long dependency chain.
+            let mut acc = [0.0; 4];
+            let (a, b) = (l[ri..ri + j].chunks_exact(4), l[rj..rj + j].chunks_exact(4));
+            let (ar, br) = (a.remainder(), b.remainder());
+            for (a, b) in a.zip(b) {
+                for q in 0..4 {
+                    acc[q] += a[q] * b[q];
+                }
             }
+            for (a, b) in ar.iter().zip(br) {
+                acc[0] += a * b;
+            }
+            let s = l[ri + j] - ((acc[0] + acc[1]) + (acc[2] + acc[3]));
             if i == j {
                 if !(s > 0.0) {
                     return Err(i);
@@ -204,11 +243,14 @@ impl Preconditioner for BlockJacobi {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
 
-    /// 2D 5-point Laplacian plus a shift on a g × g grid, CSR.
-    fn laplacian(g: usize) -> (Vec<usize>, Vec<u32>, Vec<f64>) {
+    pub(crate) type Csr = (Vec<usize>, Vec<u32>, Vec<f64>);
+
+    /// 2D 5-point Laplacian plus `shift(x, y)` on the diagonal, g × g grid, CSR: with a
+    /// constant shift the interior rows repeat one value sequence.
+    pub(crate) fn laplacian(g: usize, shift: impl Fn(usize, usize) -> f64) -> Csr {
         let (mut indptr, mut indices, mut data) = (vec![0], Vec::new(), Vec::new());
         for y in 0..g {
             for x in 0..g {
@@ -222,7 +264,7 @@ mod tests {
                 if x > 0 {
                     push(x - 1, y, -1.0);
                 }
-                push(x, y, 4.1);
+                push(x, y, 4.0 + shift(x, y));
                 if x + 1 < g {
                     push(x + 1, y, -1.0);
                 }
@@ -235,7 +277,8 @@ mod tests {
         (indptr, indices, data)
     }
 
-    fn matvec(a: &(Vec<usize>, Vec<u32>, Vec<f64>), x: &[[f64; 3]]) -> Vec<[f64; 3]> {
+    /// The plain CSR product (the oracle).
+    pub(crate) fn matvec(a: &Csr, x: &[[f64; 3]]) -> Vec<[f64; 3]> {
         (0..a.0.len() - 1)
             .map(|r| {
                 let mut s = [0.0; 3];
@@ -251,7 +294,7 @@ mod tests {
 
     #[test]
     fn aggregates_partition_the_rows_and_are_connected_patches() {
-        let a = laplacian(20);
+        let a = laplacian(20, |_, _| 0.1);
         let bj = BlockJacobi::new(&a.0, &a.1, &a.2, 16).unwrap();
         let mut seen = vec![false; 400];
         for &r in &bj.rows {
@@ -273,7 +316,7 @@ mod tests {
     #[test]
     fn one_block_is_the_exact_inverse() {
         // With every row in one aggregate, M⁻¹ = A⁻¹: A M⁻¹ r = r.
-        let a = laplacian(6);
+        let a = laplacian(6, |_, _| 0.1);
         let bj = BlockJacobi::new(&a.0, &a.1, &a.2, 36).unwrap();
         assert_eq!(bj.n_blocks(), 1);
         let r: Vec<[f64; 3]> = (0..36).map(|i| [(i as f64).sin(), 1.0, i as f64]).collect();
@@ -288,7 +331,7 @@ mod tests {
 
     #[test]
     fn blocks_of_one_are_point_jacobi() {
-        let a = laplacian(5);
+        let a = laplacian(5, |_, _| 0.1);
         let bj = BlockJacobi::new(&a.0, &a.1, &a.2, 1).unwrap();
         let r = vec![[1.0, 2.0, -3.0]; 25];
         let mut z = vec![[0.0; 3]; 25];
@@ -300,7 +343,7 @@ mod tests {
 
     #[test]
     fn an_indefinite_block_is_an_error() {
-        let mut a = laplacian(4);
+        let mut a = laplacian(4, |_, _| 0.1);
         // Row 5's diagonal made negative.
         let k = (a.0[5]..a.0[6]).find(|&k| a.1[k] == 5).unwrap();
         a.2[k] = -1.0;

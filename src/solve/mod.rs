@@ -9,10 +9,17 @@
 //! operator application, so the matrix is read once per iteration for all three.
 //! [`pcg_coupled`] is the variant for operators that couple the components of a node
 //! (elasticity): one recurrence over all unknowns, with a caller-supplied preconditioner.
+//!
+//! [`pcg`] on an assembled matrix with block Jacobi (the fit's default) runs the same method
+//! through [`blocked`]: unknowns renumbered by aggregates, rows stored by value template,
+//! vector updates, block solves and dot products fused into three passes per iteration.
+//! [`pcg_with`] is the generic loop (any operator, any preconditioner).
 
 pub mod block_jacobi;
+pub mod blocked;
 
 pub use block_jacobi::BlockJacobi;
+pub use blocked::BlockedSystem;
 use rayon::prelude::*;
 
 /// A symmetric positive definite operator on vectors of 3-component entries.
@@ -164,6 +171,81 @@ fn new_direction(p: &mut [[f64; 3]], z: &[[f64; 3]], beta: [f64; 3]) {
     });
 }
 
+/// The stopping rule and step lengths of the three per-component recurrences of [`pcg`].
+struct Stopping {
+    bnorm: [f64; 3],
+    /// ‖r‖ at which a component has converged.
+    target: [f64; 3],
+    rel_tol: f64,
+}
+
+impl Stopping {
+    fn new(bnorm: [f64; 3], params: &CgParams) -> Self {
+        Stopping {
+            bnorm,
+            target: std::array::from_fn(|k| (params.rel_tol * bnorm[k]).max(params.abs_tol)),
+            rel_tol: params.rel_tol,
+        }
+    }
+
+    /// Largest ‖r‖/‖b‖ (‖r‖ where b = 0) from the squared norms rᵀr.
+    fn rel(&self, rr: [f64; 3]) -> f64 {
+        (0..3)
+            .map(|k| {
+                if self.bnorm[k] > 0.0 {
+                    rr[k].sqrt() / self.bnorm[k]
+                } else {
+                    rr[k].sqrt()
+                }
+            })
+            .fold(0.0, f64::max)
+    }
+
+    fn running(&self, rr: [f64; 3], k: usize) -> bool {
+        rr[k].sqrt() > self.target[k]
+    }
+
+    fn converged(&self, rr: [f64; 3]) -> bool {
+        (0..3).all(|k| !self.running(rr, k))
+    }
+
+    fn no_convergence(&self, iterations: usize, rr: [f64; 3]) -> CgError {
+        CgError::NoConvergence {
+            iterations,
+            rel_residual: self.rel(rr),
+            rel_tol: self.rel_tol,
+        }
+    }
+
+    /// α = rᵀz / pᵀAp per component; components already converged keep their iterate
+    /// (α = 0), so 0/0 never occurs.
+    fn alpha(
+        &self,
+        iteration: usize,
+        rr: [f64; 3],
+        rz: [f64; 3],
+        pap: [f64; 3],
+    ) -> Result<[f64; 3], CgError> {
+        let mut alpha = [0.0; 3];
+        for k in 0..3 {
+            if self.running(rr, k) {
+                if !(pap[k] > 0.0) {
+                    return Err(CgError::NotPositiveDefinite {
+                        iteration,
+                        curvature: pap[k],
+                    });
+                }
+                alpha[k] = rz[k] / pap[k];
+            }
+        }
+        Ok(alpha)
+    }
+
+    fn beta(rz: [f64; 3], rz_new: [f64; 3]) -> [f64; 3] {
+        std::array::from_fn(|k| if rz[k] > 0.0 { rz_new[k] / rz[k] } else { 0.0 })
+    }
+}
+
 /// Point Jacobi: z = D⁻¹ r.
 pub struct Jacobi(Vec<f64>);
 
@@ -200,7 +282,9 @@ pub fn preconditioner(
 }
 
 /// Solve A x = b by preconditioned CG (the preconditioner of `params`), starting from `x`.
-/// `progress(iteration, rel_residual)` is called every iteration.
+/// `progress(iteration, rel_residual)` is called every iteration. An assembled operator
+/// ([`LinOp::csr`]) with block Jacobi is solved by [`BlockedSystem`], anything else by
+/// [`pcg_with`].
 pub fn pcg(
     op: &dyn LinOp,
     b: &[[f64; 3]],
@@ -208,6 +292,12 @@ pub fn pcg(
     params: &CgParams,
     progress: impl FnMut(usize, f64),
 ) -> Result<CgInfo, CgError> {
+    // An assembled matrix with block Jacobi takes the reordered, fused solver (same method).
+    if let (CgPreconditioner::BlockJacobi { size }, Some((indptr, indices, data))) =
+        (params.preconditioner, op.csr())
+    {
+        return BlockedSystem::new(indptr, indices, data, size)?.solve(b, x, params, progress);
+    }
     let pre = preconditioner(op, params)?;
     pcg_with(op, pre.as_ref(), b, x, params, progress)
 }
@@ -225,64 +315,32 @@ pub fn pcg_with(
     assert_eq!(b.len(), n);
     assert_eq!(x.len(), n);
     let mut r = residual(op, b, x);
-    let bnorm = dot3(b, b).map(f64::sqrt);
-    let target: [f64; 3] = std::array::from_fn(|k| (params.rel_tol * bnorm[k]).max(params.abs_tol));
-    let rel = |rr: [f64; 3]| -> f64 {
-        (0..3)
-            .map(|k| {
-                if bnorm[k] > 0.0 {
-                    rr[k].sqrt() / bnorm[k]
-                } else {
-                    rr[k].sqrt()
-                }
-            })
-            .fold(0.0, f64::max)
-    };
+    let stop = Stopping::new(dot3(b, b).map(f64::sqrt), params);
     let mut z = vec![[0.0; 3]; n];
     pre.apply(&r, &mut z);
     let mut p = z.clone();
     let mut rz = dot3(&r, &z);
     let mut rr = dot3(&r, &r);
     let mut ap = vec![[0.0; 3]; n];
-    let converged = |rr: [f64; 3]| (0..3).all(|k| rr[k].sqrt() <= target[k]);
     let mut it = 0;
-    while !converged(rr) {
+    while !stop.converged(rr) {
         if it >= params.max_iters {
-            return Err(CgError::NoConvergence {
-                iterations: it,
-                rel_residual: rel(rr),
-                rel_tol: params.rel_tol,
-            });
+            return Err(stop.no_convergence(it, rr));
         }
         op.apply(&p, &mut ap);
-        let pap = dot3(&p, &ap);
-        // Components already converged keep their iterate (α = 0), so 0/0 never occurs.
-        let mut alpha = [0.0; 3];
-        for k in 0..3 {
-            if rr[k].sqrt() > target[k] {
-                if !(pap[k] > 0.0) {
-                    return Err(CgError::NotPositiveDefinite {
-                        iteration: it,
-                        curvature: pap[k],
-                    });
-                }
-                alpha[k] = rz[k] / pap[k];
-            }
-        }
+        let alpha = stop.alpha(it, rr, rz, dot3(&p, &ap))?;
         advance(x, &mut r, &p, &ap, alpha);
         pre.apply(&r, &mut z);
         let rz_new = dot3(&r, &z);
-        let beta: [f64; 3] =
-            std::array::from_fn(|k| if rz[k] > 0.0 { rz_new[k] / rz[k] } else { 0.0 });
-        new_direction(&mut p, &z, beta);
+        new_direction(&mut p, &z, Stopping::beta(rz, rz_new));
         rz = rz_new;
         rr = dot3(&r, &r);
         it += 1;
-        progress(it, rel(rr));
+        progress(it, stop.rel(rr));
     }
     Ok(CgInfo {
         iterations: it,
-        rel_residual: rel(rr),
+        rel_residual: stop.rel(rr),
     })
 }
 

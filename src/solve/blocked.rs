@@ -1,0 +1,683 @@
+//! Block-Jacobi PCG on an assembled matrix, reordered by aggregates and stored by row
+//! templates: the CPU solver of the fit's normal equations.
+//!
+//! Input: a symmetric positive definite CSR matrix A (`indptr`, `indices`, `data`), an
+//! aggregate size m, right-hand sides b (three components) and a start x. Output: x with
+//! ‖b − A x‖ ≤ `rel_tol`·‖b‖ per component, as [`super::pcg`] with
+//! [`super::CgPreconditioner::BlockJacobi`] (same recurrences, same stopping rule, same
+//! preconditioner M = the block diagonal of A over the same aggregates), only faster:
+//!
+//! * **Aggregate order.** The unknowns are renumbered so that every aggregate of
+//!   [`Aggregates`] is a contiguous range; the block solves then work in place, with no
+//!   gather/scatter, and the whole solve runs in that order (b and x are permuted once).
+//! * **Row templates.** The fit's K depends on the topology and the weights only, not on the
+//!   geometry, so most rows repeat the value sequence (in column order) of some other row:
+//!   on a 52,728-hex cylinder the 61,180 rows have 898 distinct sequences, 94 k values for
+//!   7.05 M entries. Each row stores its template id and its columns; the values come from the
+//!   template table, which stays in cache, so the product streams 4 B per entry instead of 12.
+//!   The values are A's own f64 values bit for bit (templates are found by exact comparison):
+//!   the operator is A exactly, and a matrix without repeats just has one template per row.
+//! * **Fused passes.** One iteration is three parallel passes: the product A p with the
+//!   partial sums of pᵀAp; per aggregate the updates of x and r, the block solve z = M⁻¹ r and
+//!   the partial sums of rᵀz and rᵀr; then p = z + β p.
+//! * **4-lane entries.** Vectors hold [f64; 4] (lane 3 zero), one 256-bit operation per entry;
+//!   the two kernels are compiled a second time for AVX2 and chosen at run time (no FMA, so
+//!   both give the same bits).
+//!
+//! Invariants: every dot product is a sum of per-chunk partial sums (fixed chunks of rows, or
+//! aggregates) added in order, so the result does not depend on the thread count.
+
+use super::block_jacobi::{Aggregates, factor_blocks, split_at_offsets};
+use super::{CgError, CgInfo, CgParams, Stopping};
+use rayon::prelude::*;
+use std::collections::HashMap;
+
+/// Rows per chunk of the product (and per partial sum of pᵀAp).
+const ROW_CHUNK: usize = 512;
+
+/// A vector entry: the three components and a zero lane, so that one entry is one 256-bit
+/// (or two 128-bit) vector operation.
+pub type V4 = [f64; 4];
+
+/// Runs `f` compiled for AVX2 where the CPU has it (no FMA: each lane does the same IEEE
+/// multiplications and additions in the same order as the portable code, so results are
+/// identical on every x86-64 CPU).
+macro_rules! dispatch {
+    ($avx:ident, $generic:ident ( $($arg:expr),* )) => {{
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::is_x86_feature_detected!("avx2") {
+                // SAFETY: the CPU supports AVX2 (checked just above).
+                unsafe { $avx($($arg),*) }
+            } else {
+                $generic($($arg),*)
+            }
+        }
+        #[cfg(not(target_arch = "x86_64"))]
+        {
+            $generic($($arg),*)
+        }
+    }};
+}
+
+/// A in aggregate order with rows stored by template (see the module docs).
+pub struct TemplateMatrix {
+    /// Row i's columns (new numbering) are `cols[indptr[i]..indptr[i + 1]]`.
+    indptr: Vec<usize>,
+    cols: Vec<u32>,
+    /// Template of each row; template t's values are `values[template_start[t]..]`, in the
+    /// order of the row's columns.
+    template: Vec<u32>,
+    template_start: Vec<usize>,
+    values: Vec<f64>,
+}
+
+/// A hash of a row's value sequence (four independent lanes, so it is not latency-bound).
+fn hash_row(v: &[f64]) -> u64 {
+    let mut h = [v.len() as u64, 1, 2, 3];
+    let mut it = v.chunks_exact(4);
+    for c in &mut it {
+        for l in 0..4 {
+            h[l] = (h[l] ^ c[l].to_bits()).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+        }
+    }
+    for (l, x) in it.remainder().iter().enumerate() {
+        h[l] = (h[l] ^ x.to_bits()).wrapping_mul(0x9e37_79b9_7f4a_7c15);
+    }
+    h.iter().fold(0u64, |a, &x| {
+        (a ^ x ^ (x >> 29)).wrapping_mul(0x100_0000_01b3)
+    })
+}
+
+fn same_bits(a: &[f64], b: &[f64]) -> bool {
+    a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
+}
+
+impl TemplateMatrix {
+    /// A (CSR) renumbered so that new row i is old row `rows[i]` (`slot` is the inverse).
+    pub(crate) fn new(
+        indptr: &[usize],
+        indices: &[u32],
+        data: &[f64],
+        rows: &[u32],
+        slot: &[u32],
+    ) -> Self {
+        Self::with_hash(indptr, indices, data, rows, slot, hash_row)
+    }
+
+    /// [`Self::new`] with a given row hash (tests force collisions with it).
+    fn with_hash(
+        indptr: &[usize],
+        indices: &[u32],
+        data: &[f64],
+        rows: &[u32],
+        slot: &[u32],
+        hash: impl Fn(&[f64]) -> u64 + Sync,
+    ) -> Self {
+        let n = rows.len();
+        let mut new_indptr = Vec::with_capacity(n + 1);
+        new_indptr.push(0usize);
+        for &r in rows {
+            let r = r as usize;
+            new_indptr.push(new_indptr.last().unwrap() + indptr[r + 1] - indptr[r]);
+        }
+        let row_values = |i: usize| {
+            let r = rows[i] as usize;
+            &data[indptr[r]..indptr[r + 1]]
+        };
+        let mut cols = vec![0u32; indices.len()];
+        let hashes: Vec<u64> = split_at_offsets(&mut cols, &new_indptr)
+            .into_par_iter()
+            .zip(rows.par_iter())
+            .with_min_len(256)
+            .map(|(c, &r)| {
+                let (lo, hi) = (indptr[r as usize], indptr[r as usize + 1]);
+                for (c, &old) in c.iter_mut().zip(&indices[lo..hi]) {
+                    *c = slot[old as usize];
+                }
+                hash(&data[lo..hi])
+            })
+            .collect();
+        // Templates by hash in order of first appearance (sequential: a deterministic
+        // numbering), then every row compared with its template's first row in parallel; the
+        // rows of a hash collision (if any) get templates of their own.
+        let mut by_hash: HashMap<u64, u32> = HashMap::new();
+        let mut first_row: Vec<usize> = Vec::new();
+        let mut template: Vec<u32> = hashes
+            .iter()
+            .enumerate()
+            .map(|(i, &h)| {
+                *by_hash.entry(h).or_insert_with(|| {
+                    first_row.push(i);
+                    first_row.len() as u32 - 1
+                })
+            })
+            .collect();
+        let collisions: Vec<usize> = (0..n)
+            .into_par_iter()
+            .with_min_len(256)
+            .filter(|&i| !same_bits(row_values(i), row_values(first_row[template[i] as usize])))
+            .collect();
+        let mut extra: Vec<usize> = Vec::new();
+        for i in collisions {
+            let t = match extra
+                .iter()
+                .position(|&f| same_bits(row_values(f), row_values(i)))
+            {
+                Some(k) => first_row.len() + k,
+                None => {
+                    extra.push(i);
+                    first_row.len() + extra.len() - 1
+                }
+            };
+            template[i] = t as u32;
+        }
+        first_row.extend(extra);
+        let mut template_start = vec![0usize];
+        let mut values = Vec::new();
+        for &f in &first_row {
+            values.extend_from_slice(row_values(f));
+            template_start.push(values.len());
+        }
+        TemplateMatrix {
+            indptr: new_indptr,
+            cols,
+            template,
+            template_start,
+            values,
+        }
+    }
+
+    pub fn nrows(&self) -> usize {
+        self.template.len()
+    }
+
+    /// Number of distinct row templates.
+    pub fn n_templates(&self) -> usize {
+        self.template_start.len() - 1
+    }
+
+    /// Row i as (columns, values).
+    #[inline(always)]
+    fn row(&self, i: usize) -> (&[u32], &[f64]) {
+        let t = self.template[i] as usize;
+        (
+            &self.cols[self.indptr[i]..self.indptr[i + 1]],
+            &self.values[self.template_start[t]..self.template_start[t + 1]],
+        )
+    }
+
+    /// y = A x, returning xᵀ A x per lane (a fixed-chunk sum).
+    pub fn apply_dot(&self, x: &[V4], y: &mut [V4]) -> V4 {
+        let partials: Vec<V4> = y
+            .par_chunks_mut(ROW_CHUNK)
+            .enumerate()
+            .map(|(k, y)| dispatch!(spmv_chunk_avx2, spmv_chunk(self, k * ROW_CHUNK, x, y)))
+            .collect();
+        sum(&partials)
+    }
+}
+
+/// Rows `base..base + y.len()` of A x into y; returns Σ x_i y_i over those rows.
+#[inline(always)]
+fn spmv_chunk(a: &TemplateMatrix, base: usize, x: &[V4], y: &mut [V4]) -> V4 {
+    let mut dot = [0.0; 4];
+    for (j, y) in y.iter_mut().enumerate() {
+        let (cols, vals) = a.row(base + j);
+        // Four partial sums break the dependency chain of the accumulation.
+        let mut s = [[0.0; 4]; 4];
+        let mut ci = cols.chunks_exact(4);
+        let mut vi = vals.chunks_exact(4);
+        for (c, v) in (&mut ci).zip(&mut vi) {
+            for l in 0..4 {
+                let xc = x[c[l] as usize];
+                for d in 0..4 {
+                    s[l][d] += v[l] * xc[d];
+                }
+            }
+        }
+        for (&c, &v) in ci.remainder().iter().zip(vi.remainder()) {
+            let xc = x[c as usize];
+            for d in 0..4 {
+                s[0][d] += v * xc[d];
+            }
+        }
+        *y = std::array::from_fn(|d| (s[0][d] + s[1][d]) + (s[2][d] + s[3][d]));
+        let xi = x[base + j];
+        for d in 0..4 {
+            dot[d] += xi[d] * y[d];
+        }
+    }
+    dot
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn spmv_chunk_avx2(a: &TemplateMatrix, base: usize, x: &[V4], y: &mut [V4]) -> V4 {
+    spmv_chunk(a, base, x, y)
+}
+
+fn sum(partials: &[V4]) -> V4 {
+    partials
+        .iter()
+        .fold([0.0; 4], |a, b| std::array::from_fn(|d| a[d] + b[d]))
+}
+
+/// The reordered system and its block-Jacobi factors.
+pub struct BlockedSystem {
+    agg: Aggregates,
+    a: TemplateMatrix,
+    /// Packed lower Cholesky factor of aggregate a's diagonal block, from `factor_start[a]`.
+    factors: Vec<f64>,
+    factor_start: Vec<usize>,
+}
+
+/// One aggregate's step: x += α p, r −= α ap, z = (L Lᵀ)⁻¹ r; returns (rᵀz, rᵀr).
+#[inline(always)]
+fn block_step(
+    l: &[f64],
+    alpha: V4,
+    x: &mut [V4],
+    r: &mut [V4],
+    z: &mut [V4],
+    p: &[V4],
+    ap: &[V4],
+) -> (V4, V4) {
+    let m = x.len();
+    let mut rr = [0.0; 4];
+    for i in 0..m {
+        for c in 0..4 {
+            x[i][c] += alpha[c] * p[i][c];
+            r[i][c] -= alpha[c] * ap[i][c];
+            rr[c] += r[i][c] * r[i][c];
+        }
+    }
+    // L y = r, row by row (two partial sums per row).
+    for i in 0..m {
+        let ri = i * (i + 1) / 2;
+        let (mut s0, mut s1) = ([0.0; 4], [0.0; 4]);
+        let mut lk = l[ri..ri + i].chunks_exact(2);
+        let mut zk = z[..i].chunks_exact(2);
+        for (lk, zk) in (&mut lk).zip(&mut zk) {
+            for c in 0..4 {
+                s0[c] += lk[0] * zk[0][c];
+                s1[c] += lk[1] * zk[1][c];
+            }
+        }
+        for (lk, zk) in lk.remainder().iter().zip(zk.remainder()) {
+            for c in 0..4 {
+                s0[c] += lk * zk[c];
+            }
+        }
+        let d = l[ri + i];
+        z[i] = std::array::from_fn(|c| (r[i][c] - (s0[c] + s1[c])) / d);
+    }
+    // Lᵀ z = y in place, column by column (independent updates).
+    for i in (0..m).rev() {
+        let ri = i * (i + 1) / 2;
+        let d = l[ri + i];
+        for c in 0..4 {
+            z[i][c] /= d;
+        }
+        let zi = z[i];
+        for (zk, &lk) in z[..i].iter_mut().zip(&l[ri..ri + i]) {
+            for c in 0..4 {
+                zk[c] -= lk * zi[c];
+            }
+        }
+    }
+    let mut rz = [0.0; 4];
+    for (r, z) in r.iter().zip(z.iter()) {
+        for c in 0..4 {
+            rz[c] += r[c] * z[c];
+        }
+    }
+    (rz, rr)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn block_step_avx2(
+    l: &[f64],
+    alpha: V4,
+    x: &mut [V4],
+    r: &mut [V4],
+    z: &mut [V4],
+    p: &[V4],
+    ap: &[V4],
+) -> (V4, V4) {
+    block_step(l, alpha, x, r, z, p, ap)
+}
+
+impl BlockedSystem {
+    /// Aggregate A (CSR) into blocks of at most `size` rows, reorder and factor.
+    pub fn new(
+        indptr: &[usize],
+        indices: &[u32],
+        data: &[f64],
+        size: usize,
+    ) -> Result<Self, CgError> {
+        let agg = Aggregates::new(indptr, indices, size);
+        let a = TemplateMatrix::new(indptr, indices, data, &agg.rows, &agg.slot);
+        let start = &agg.start;
+        let (factors, factor_start) = factor_blocks(start, &agg.rows, |b, l| {
+            let s = start[b];
+            for i in s..start[b + 1] {
+                let (cols, vals) = a.row(i);
+                let ri = (i - s) * (i - s + 1) / 2;
+                for (&c, &v) in cols.iter().zip(vals) {
+                    let c = c as usize;
+                    if (s..=i).contains(&c) {
+                        l[ri + c - s] += v;
+                    }
+                }
+            }
+        })?;
+        Ok(BlockedSystem {
+            agg,
+            a,
+            factors,
+            factor_start,
+        })
+    }
+
+    /// The reordered matrix.
+    pub fn matrix(&self) -> &TemplateMatrix {
+        &self.a
+    }
+
+    /// Per aggregate: x += α p, r −= α ap, z = M⁻¹ r; returns (rᵀz, rᵀr).
+    fn update_and_precondition(
+        &self,
+        alpha: V4,
+        x: &mut [V4],
+        r: &mut [V4],
+        z: &mut [V4],
+        p: &[V4],
+        ap: &[V4],
+    ) -> (V4, V4) {
+        let start = &self.agg.start;
+        let partials: Vec<(V4, V4)> = split_at_offsets(x, start)
+            .into_par_iter()
+            .zip(split_at_offsets(r, start))
+            .zip(split_at_offsets(z, start))
+            .enumerate()
+            .map(|(b, ((x, r), z))| {
+                let (s, e) = (start[b], start[b + 1]);
+                let l = &self.factors[self.factor_start[b]..self.factor_start[b + 1]];
+                let (p, ap) = (&p[s..e], &ap[s..e]);
+                dispatch!(block_step_avx2, block_step(l, alpha, x, r, z, p, ap))
+            })
+            .collect();
+        let rz: Vec<V4> = partials.iter().map(|p| p.0).collect();
+        let rr: Vec<V4> = partials.iter().map(|p| p.1).collect();
+        (sum(&rz), sum(&rr))
+    }
+
+    /// Solve A x = b (original numbering) from the start `x`; see the module docs.
+    pub fn solve(
+        &self,
+        b: &[[f64; 3]],
+        x: &mut [[f64; 3]],
+        params: &CgParams,
+        mut progress: impl FnMut(usize, f64),
+    ) -> Result<CgInfo, CgError> {
+        let n = self.a.nrows();
+        assert_eq!(b.len(), n);
+        assert_eq!(x.len(), n);
+        let rows = &self.agg.rows;
+        let widen = |v: &[f64; 3]| [v[0], v[1], v[2], 0.0];
+        let bp: Vec<V4> = rows.par_iter().map(|&i| widen(&b[i as usize])).collect();
+        let mut xp: Vec<V4> = rows.par_iter().map(|&i| widen(&x[i as usize])).collect();
+        // r = b − A x (no product for the usual start x = 0).
+        let mut r = vec![[0.0; 4]; n];
+        if xp.par_iter().any(|v| v.iter().any(|&c| c != 0.0)) {
+            self.a.apply_dot(&xp, &mut r);
+        }
+        r.par_iter_mut().zip(bp.par_iter()).for_each(|(r, b)| {
+            for k in 0..4 {
+                r[k] = b[k] - r[k];
+            }
+        });
+        let bb: Vec<V4> = bp
+            .par_chunks(ROW_CHUNK)
+            .map(|c| {
+                c.iter()
+                    .fold([0.0; 4], |s, v| std::array::from_fn(|d| s[d] + v[d] * v[d]))
+            })
+            .collect();
+        let bnorm = sum(&bb).map(f64::sqrt);
+        let stop = Stopping::new([bnorm[0], bnorm[1], bnorm[2]], params);
+        let head = |v: V4| [v[0], v[1], v[2]];
+        let mut z = vec![[0.0; 4]; n];
+        let mut p = vec![[0.0; 4]; n];
+        let mut ap = vec![[0.0; 4]; n];
+        // z = M⁻¹ r (a zero step leaves x and r as they are).
+        let (mut rz, mut rr) =
+            self.update_and_precondition([0.0; 4], &mut xp, &mut r, &mut z, &p, &ap);
+        p.copy_from_slice(&z);
+        let mut it = 0;
+        while !stop.converged(head(rr)) {
+            if it >= params.max_iters {
+                return Err(stop.no_convergence(it, head(rr)));
+            }
+            let pap = self.a.apply_dot(&p, &mut ap);
+            let [a0, a1, a2] = stop.alpha(it, head(rr), head(rz), head(pap))?;
+            let alpha = [a0, a1, a2, 0.0];
+            let (rz_new, rr_new) =
+                self.update_and_precondition(alpha, &mut xp, &mut r, &mut z, &p, &ap);
+            let [b0, b1, b2] = Stopping::beta(head(rz), head(rz_new));
+            let beta = [b0, b1, b2, 0.0];
+            p.par_iter_mut()
+                .zip(z.par_iter())
+                .with_min_len(ROW_CHUNK)
+                .for_each(|(p, z)| {
+                    for k in 0..4 {
+                        p[k] = z[k] + beta[k] * p[k];
+                    }
+                });
+            rz = rz_new;
+            rr = rr_new;
+            it += 1;
+            progress(it, stop.rel(head(rr)));
+        }
+        for (&i, xp) in rows.iter().zip(&xp) {
+            x[i as usize] = [xp[0], xp[1], xp[2]];
+        }
+        Ok(CgInfo {
+            iterations: it,
+            rel_residual: stop.rel(head(rr)),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::solve::block_jacobi::tests::{Csr, laplacian, matvec};
+    use crate::solve::{BlockJacobi, CgPreconditioner, LinOp, Preconditioner, pcg_with};
+
+    struct Op<'a>(&'a Csr);
+    impl LinOp for Op<'_> {
+        fn nrows(&self) -> usize {
+            self.0.0.len() - 1
+        }
+        fn apply(&self, x: &[[f64; 3]], y: &mut [[f64; 3]]) {
+            y.copy_from_slice(&matvec(self.0, x));
+        }
+        fn diagonal(&self) -> Vec<f64> {
+            unimplemented!()
+        }
+    }
+
+    fn test_vector(n: usize) -> Vec<[f64; 3]> {
+        (0..n)
+            .map(|i| {
+                [
+                    (i as f64 * 0.7).sin(),
+                    1.0 + (i % 5) as f64,
+                    -(i as f64).sqrt(),
+                ]
+            })
+            .collect()
+    }
+
+    /// The reordered template product, brought back to the original numbering.
+    fn template_product(a: &Csr, m: &TemplateMatrix, agg: &Aggregates, x: &[[f64; 3]]) -> Vec<V4> {
+        let xp: Vec<V4> = agg
+            .rows
+            .iter()
+            .map(|&i| {
+                let v = x[i as usize];
+                [v[0], v[1], v[2], 0.0]
+            })
+            .collect();
+        let mut yp = vec![[0.0; 4]; xp.len()];
+        m.apply_dot(&xp, &mut yp);
+        let mut y = vec![[0.0; 4]; a.0.len() - 1];
+        for (&i, v) in agg.rows.iter().zip(&yp) {
+            y[i as usize] = *v;
+        }
+        y
+    }
+
+    fn assert_close(got: &[V4], want: &[[f64; 3]], tol: f64) {
+        for (g, w) in got.iter().zip(want) {
+            for c in 0..3 {
+                assert!(
+                    (g[c] - w[c]).abs() <= tol * (1.0 + w[c].abs()),
+                    "{g:?} vs {w:?}"
+                );
+            }
+            assert_eq!(g[3], 0.0);
+        }
+    }
+
+    #[test]
+    fn repeated_rows_share_a_template_and_the_product_is_exact() {
+        let a = laplacian(30, |_, _| 0.5);
+        let agg = Aggregates::new(&a.0, &a.1, 16);
+        let m = TemplateMatrix::new(&a.0, &a.1, &a.2, &agg.rows, &agg.slot);
+        // Value sequences in column order: interior [-1, -1, d, -1, -1]; edges with the
+        // diagonal second ([-1, d, -1, -1]: top and left) or third (right and bottom);
+        // corners [d, -1, -1], [-1, d, -1] (two corners) and [-1, -1, d]: six in all.
+        assert_eq!(m.n_templates(), 6);
+        let x = test_vector(900);
+        assert_close(&template_product(&a, &m, &agg, &x), &matvec(&a, &x), 1e-14);
+    }
+
+    #[test]
+    fn distinct_rows_and_hash_collisions_keep_their_own_values() {
+        // Every diagonal differs, so every row is its own template; a constant hash sends every
+        // row through the collision path, which must find the same templates.
+        let a = laplacian(12, |x, y| 0.01 * (x * 12 + y) as f64);
+        let agg = Aggregates::new(&a.0, &a.1, 8);
+        let x = test_vector(144);
+        let want = matvec(&a, &x);
+        for m in [
+            TemplateMatrix::new(&a.0, &a.1, &a.2, &agg.rows, &agg.slot),
+            TemplateMatrix::with_hash(&a.0, &a.1, &a.2, &agg.rows, &agg.slot, |_| 7),
+        ] {
+            assert_eq!(m.n_templates(), 144);
+            assert_close(&template_product(&a, &m, &agg, &x), &want, 1e-14);
+        }
+        // Two distinct sequences under one hash, each repeated: two templates, not more.
+        let b = laplacian(12, |x, _| if x % 2 == 0 { 0.25 } else { 0.5 });
+        let agg = Aggregates::new(&b.0, &b.1, 8);
+        let plain = TemplateMatrix::new(&b.0, &b.1, &b.2, &agg.rows, &agg.slot);
+        let collided = TemplateMatrix::with_hash(&b.0, &b.1, &b.2, &agg.rows, &agg.slot, |_| 7);
+        assert_eq!(plain.n_templates(), collided.n_templates());
+        assert_close(
+            &template_product(&b, &collided, &agg, &x),
+            &matvec(&b, &x),
+            1e-14,
+        );
+    }
+
+    #[test]
+    fn solves_a_known_system_like_the_generic_block_jacobi_cg() {
+        let a = laplacian(40, |x, y| 0.05 + 0.01 * ((x + 2 * y) % 7) as f64);
+        let n = 1600;
+        let want = test_vector(n);
+        let b = matvec(&a, &want);
+        let params = CgParams {
+            rel_tol: 1e-10,
+            preconditioner: CgPreconditioner::BlockJacobi { size: 16 },
+            ..Default::default()
+        };
+        let sys = BlockedSystem::new(&a.0, &a.1, &a.2, 16).unwrap();
+        let mut x = vec![[0.0; 3]; n];
+        let info = sys.solve(&b, &mut x, &params, |_, _| {}).unwrap();
+        // The true residual of the returned x, computed independently, meets the tolerance.
+        let ax = matvec(&a, &x);
+        for c in 0..3 {
+            let r: f64 = ax.iter().zip(&b).map(|(p, q)| (p[c] - q[c]).powi(2)).sum();
+            let bb: f64 = b.iter().map(|q| q[c] * q[c]).sum();
+            assert!(r.sqrt() <= 1.01e-10 * bb.sqrt(), "component {c}");
+        }
+        for (g, w) in x.iter().zip(&want) {
+            for c in 0..3 {
+                assert!((g[c] - w[c]).abs() < 1e-8);
+            }
+        }
+        // The same method as the generic PCG with the block-Jacobi preconditioner.
+        let pre = BlockJacobi::new(&a.0, &a.1, &a.2, 16).unwrap();
+        let mut y = vec![[0.0; 3]; n];
+        let generic = pcg_with(
+            &Op(&a),
+            &pre as &dyn Preconditioner,
+            &b,
+            &mut y,
+            &params,
+            |_, _| {},
+        )
+        .unwrap();
+        assert!(info.iterations.abs_diff(generic.iterations) <= 1);
+        // A start near the solution converges in fewer iterations.
+        let mut z: Vec<[f64; 3]> = want.iter().map(|w| w.map(|v| v * (1.0 + 1e-6))).collect();
+        let warm = sys.solve(&b, &mut z, &params, |_, _| {}).unwrap();
+        assert!(warm.iterations < info.iterations);
+    }
+
+    #[test]
+    fn result_does_not_depend_on_the_thread_count() {
+        let a = laplacian(70, |x, _| 0.1 + 0.001 * (x % 3) as f64);
+        let b = test_vector(4900);
+        let solve = |threads: usize| {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                let sys = BlockedSystem::new(&a.0, &a.1, &a.2, 64).unwrap();
+                let mut x = vec![[0.0; 3]; 4900];
+                let info = sys
+                    .solve(&b, &mut x, &CgParams::default(), |_, _| {})
+                    .unwrap();
+                (x, info.iterations, info.rel_residual)
+            })
+        };
+        let one = solve(1);
+        let three = solve(3);
+        assert_eq!(one.1, three.1);
+        assert_eq!(one.2.to_bits(), three.2.to_bits());
+        assert!(
+            one.0
+                .iter()
+                .zip(&three.0)
+                .all(|(p, q)| p.map(f64::to_bits) == q.map(f64::to_bits))
+        );
+    }
+
+    #[test]
+    fn an_indefinite_block_names_its_original_row() {
+        let mut a = laplacian(6, |_, _| 0.0);
+        let k = (a.0[14]..a.0[15]).find(|&k| a.1[k] == 14).unwrap();
+        a.2[k] = -1.0;
+        match BlockedSystem::new(&a.0, &a.1, &a.2, 8) {
+            Err(CgError::BadDiagonal { row, .. }) => assert_eq!(row, 14),
+            Err(e) => panic!("{e}"),
+            Ok(_) => panic!("accepted an indefinite block"),
+        }
+    }
+}
