@@ -230,3 +230,80 @@ fn transposed_extraction_by_sum_factorisation_matches_the_rows() {
         }
     }
 }
+
+/// The row-parallel assembly on a mesh with spline elements, Q2 elements of own nodes and Q2
+/// elements with constrained nodes (a generated cylinder: valence-3 edges and a boundary):
+/// K equals the matrix-free operator on random vectors, its columns are sorted and unique,
+/// and it is bitwise the same on one and on two threads.
+#[test]
+fn row_parallel_assembly_matches_the_matrix_free_operator() {
+    use polyspline::mesh::generate::{Kind, generate};
+    let m = generate(Kind::Cylinder, 400);
+    let t = Topology::build(&m);
+    let s = SplineSpace::build(&m, &t);
+    let mut ids = Vec::new();
+    let own = (0..s.n_elements())
+        .filter(|&e| s.element_pattern(e, &mut ids).is_none())
+        .count();
+    assert!(
+        own > 0 && own < s.n_elements(),
+        "{own} of {}",
+        s.n_elements()
+    );
+    assert!(t.vertex_on_boundary.iter().any(|&b| b));
+    for w in [FitWeights::position(), FitWeights::frame()] {
+        let on = |threads: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| assemble(&s, &m, &t, &w))
+        };
+        let ((k, b), (k2, b2)) = (on(1), on(2));
+        assert_eq!(k.indptr, k2.indptr);
+        assert_eq!(k.indices, k2.indices);
+        assert!(
+            k.data
+                .iter()
+                .zip(&k2.data)
+                .all(|(a, b)| a.to_bits() == b.to_bits())
+        );
+        assert!(
+            b.iter()
+                .zip(&b2)
+                .all(|(a, b)| a.map(f64::to_bits) == b.map(f64::to_bits))
+        );
+        for r in 0..k.n {
+            let cols = &k.indices[k.indptr[r]..k.indptr[r + 1]];
+            assert!(
+                cols.windows(2).all(|p| p[0] < p[1]),
+                "row {r} not sorted/unique"
+            );
+            assert!(
+                cols.binary_search(&(r as u32)).is_ok(),
+                "row {r} lacks its diagonal"
+            );
+        }
+        let mf = MatrixFree::new(&s, &m, &t, &w);
+        let n = k.nrows();
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut rand = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        for _ in 0..3 {
+            let x: Vec<[f64; 3]> = (0..n).map(|_| [rand(), rand(), rand()]).collect();
+            let (mut y1, mut y2) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
+            k.apply(&x, &mut y1);
+            mf.apply(&x, &mut y2);
+            let scale = y2.iter().flatten().fold(0.0f64, |a, b| a.max(b.abs()));
+            for (a, b) in y1.iter().zip(&y2) {
+                for d in 0..3 {
+                    assert!((a[d] - b[d]).abs() <= 1e-12 * scale, "{a:?} vs {b:?}");
+                }
+            }
+        }
+    }
+}

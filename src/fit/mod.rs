@@ -53,10 +53,11 @@ pub trait FitSpace: Sync {
     );
     /// Bernstein net of element `e` for the control points `cps`.
     fn bezier_net_with(&self, e: usize, cps: &[[f64; 3]]) -> [[f64; 3]; 27];
-    /// When E_e is a matrix shared by every element with the same `key` times the selection of
-    /// 3^d distinct control points `ids` (in local-node order), return them; the assembly then
-    /// computes one local matrix per key. `None` (the default) always works.
-    fn element_pattern(&self, _e: usize) -> Option<(u64, Vec<u32>)> {
+    /// When E_e is a matrix shared by every element with the same key times the selection of
+    /// 3^d distinct control points (in local-node order), return the key and write the
+    /// control points into `ids`; the assembly then computes one local matrix per key.
+    /// `None` (the default) always works.
+    fn element_pattern(&self, _e: usize, _ids: &mut Vec<u32>) -> Option<u64> {
         None
     }
     /// Append E_eᵀ f to `out` as (control point, value) pairs (a control point may repeat),
@@ -753,19 +754,21 @@ impl FitSpace for crate::spline::SplineSpace {
     /// Elements whose local nodes are all plain control points (spline elements, and Q2
     /// elements made only of own nodes): E_e = (M_z ⊗ M_y ⊗ M_x) · selection, keyed by the
     /// three 1D operators.
-    fn element_pattern(&self, e: usize) -> Option<(u64, Vec<u32>)> {
+    fn element_pattern(&self, e: usize, ids: &mut Vec<u32>) -> Option<u64> {
         let x = &self.extraction;
         let nodes = x.element_nodes(e);
         if nodes.iter().any(|&n| n as usize >= x.n_control) {
             return None;
         }
-        let mut sorted = nodes.to_vec();
+        let mut sorted = [0u32; 27];
+        let sorted = &mut sorted[..nodes.len()];
+        sorted.copy_from_slice(nodes);
         sorted.sort_unstable();
-        sorted.dedup();
-        if sorted.len() != nodes.len() {
+        if sorted.windows(2).any(|w| w[0] == w[1]) {
             return None;
         }
-        let key = x.ops[e].iter().fold(0u64, |k, op| k * 8 + *op as u64);
-        Some((key, nodes.to_vec()))
+        ids.clear();
+        ids.extend_from_slice(nodes);
+        Some(x.ops[e].iter().fold(0u64, |k, op| k * 8 + *op as u64))
     }
 }
