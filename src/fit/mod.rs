@@ -27,12 +27,13 @@
 
 pub mod assembly;
 pub mod features;
+mod rhs;
 pub mod smooth;
 
 pub use smooth::{SmoothParams, SmoothTargets};
 
 use crate::mesh::{LinearMesh, Topology};
-use crate::sample::{bernstein2, multilinear};
+use crate::sample::bernstein2;
 use crate::solve::{CgError, CgInfo, CgParams, LinOp, pcg};
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -506,9 +507,6 @@ impl LinOp for MatrixFree<'_> {
     }
 }
 
-/// Elements per batch of the right-hand side (bounds its temporary memory).
-const RHS_BATCH: usize = 1 << 16;
-
 /// Assemble K and the right-hand side of the displacement system (F − K C0).
 pub fn assemble(
     space: &dyn FitSpace,
@@ -563,79 +561,8 @@ pub fn assemble_with_features(
     smooth: Option<&SmoothTargets>,
     features: Option<&crate::mesh::features::Features>,
 ) -> (NormalMatrix, Vec<[f64; 3]>) {
-    let dim = space.dim();
-    let nb = if dim == 2 { 9 } else { 27 };
-    let samples = Samples::new(dim);
-    let n = space.control_points().len();
-    let c0 = space.control_points();
     let blocks = ElementBlocks::with_features(space, mesh, topo, w, features);
-    let (masks, cache) = (&blocks.masks, &blocks.cache);
-    // Per element: the right-hand side on its control points, computed in parallel and added
-    // in element order (the same sums on any thread count), a bounded batch of elements at a
-    // time so the (control point, value) pairs never exist for the whole mesh at once.
-    let ne = space.n_elements();
-    let mut rhs = vec![[0.0; 3]; n];
-    for batch in (0..ne).step_by(RHS_BATCH) {
-        let chunks: Vec<Vec<(u32, [f64; 3])>> = (batch..(batch + RHS_BATCH).min(ne))
-            .into_par_iter()
-            .fold(Vec::new, |mut acc, e| {
-                let (gd, gr) = &cache[&masks[e]];
-                // Targets: input multilinear positions; initial net for the frame term.
-                let x = mesh.element_coords(e);
-                let shift = smooth.map(|t| t.element_corrections(mesh, topo, e));
-                let net0 = space.bezier_net_with(e, c0);
-                let mut rhs_b = [[0.0; 3]; 27]; // F_e in Bernstein space
-                // F_e = Σ_i w^d_i b_i P_iᵀ + G^r B⁰.
-                for (i, l) in samples.points.iter().enumerate() {
-                    let wd = sample_weight(w, masks[e], i, *l, samples.is_corner(i));
-                    if wd == 0.0 {
-                        continue;
-                    }
-                    let mut p = multilinear(dim, &x, l.map(|c| c as f64 / 2.0));
-                    if let Some(shift) = &shift {
-                        for c in 0..3 {
-                            p[c] += shift[i][c];
-                        }
-                    }
-                    for a in 0..nb {
-                        let s = wd * samples.values[i][a];
-                        for c in 0..3 {
-                            rhs_b[a][c] += s * p[c];
-                        }
-                    }
-                }
-                for a in 0..nb {
-                    for b in 0..nb {
-                        let g = gr[a * nb + b];
-                        if g != 0.0 {
-                            for c in 0..3 {
-                                rhs_b[a][c] += g * net0[b][c];
-                            }
-                        }
-                    }
-                }
-                // Displacement form: F_e − G_e B⁰_e.
-                for a in 0..nb {
-                    for b in 0..nb {
-                        let g = gd[a * nb + b] + gr[a * nb + b];
-                        for c in 0..3 {
-                            rhs_b[a][c] -= g * net0[b][c];
-                        }
-                    }
-                }
-                // f_loc = E_eᵀ F (K is assembled separately).
-                space.add_transposed(e, &rhs_b, &mut acc);
-                acc
-            })
-            .collect();
-        for f in chunks {
-            for (i, f) in f {
-                for k in 0..3 {
-                    rhs[i as usize][k] += f[k];
-                }
-            }
-        }
-    }
+    let rhs = rhs::displacement_rhs(space, mesh, topo, w, &blocks.masks, smooth);
     let k = assembly::assemble_matrix(space, &blocks);
     (k, rhs)
 }
