@@ -46,7 +46,7 @@ fn lin(alpha: f64, a: [f64; 3], beta: f64, b: [f64; 3]) -> [f64; 3] {
 }
 
 /// The multilinear map of the corners `x` at the lattice: midpoints of the lines.
-fn multilinear_lattice(dim: usize, x: &[[f64; 3]; 8]) -> Lattice {
+pub(super) fn multilinear_lattice(dim: usize, x: &[[f64; 3]; 8]) -> Lattice {
     let mut p = [[0.0; 3]; 27];
     for (c, pc) in HEX_VERTEX_PARAMS.iter().enumerate().take(1 << dim) {
         p[2 * (pc[0] as usize + 3 * pc[1] as usize + 9 * pc[2] as usize)] = x[c];
@@ -72,7 +72,8 @@ pub(super) fn displacement_rhs(
     let element = |e: usize, acc: &mut Vec<(u32, [f64; 3])>| {
         let mut r = multilinear_lattice(dim, &mesh.element_coords(e));
         if let Some(t) = smooth {
-            for (p, s) in r.iter_mut().zip(t.element_corrections(mesh, topo, e)) {
+            let shift = t.corrections_at(mesh, topo, e, &r);
+            for (p, s) in r.iter_mut().zip(shift) {
                 *p = add(*p, s);
             }
         }
