@@ -20,10 +20,10 @@
 //!    the second writes columns and values in place. The values of an entry are summed over
 //!    the incident elements in element order, so K is the same on any thread count.
 //!
-//! Memory besides K itself: ~27 column indices, 27 incidence entries (6 bytes each) and one
-//! table index per element, the shared table (a few hundred 27 × 27 matrices) and the own
-//! matrices of the constrained elements; no triplet list, no per-element allocation for
-//! pattern elements.
+//! Memory besides K itself: per element ~27 column indices, 27 incidence entries (6 bytes
+//! each), a table index and a 16-byte tag; the shared table (one 27 × 27 matrix per (key,
+//! mask): a handful on regular meshes) and the own matrices of the constrained elements. No
+//! triplet list, no value array besides K's, no per-element allocation for pattern elements.
 
 use super::{ElementBlocks, FitSpace, NormalMatrix};
 use crate::solve::block_jacobi::split_at_offsets;
@@ -37,7 +37,8 @@ struct Local {
     k: Vec<f64>,
 }
 
-/// Rᵀ G R for the explicit rows of element `e` (R: nb × m over the sorted distinct columns).
+/// Rᵀ G R for the explicit rows of element `e` (R: nb × m over the sorted distinct columns),
+/// through R's non-zeros: G R column by column, then Rᵀ (G R) row by row.
 fn local_matrix(space: &dyn FitSpace, e: usize, g: &[f64], nb: usize) -> Local {
     let (mut offsets, mut cols, mut weights) = (Vec::new(), Vec::new(), Vec::new());
     space.element_rows(e, &mut offsets, &mut cols, &mut weights);
@@ -45,32 +46,26 @@ fn local_matrix(space: &dyn FitSpace, e: usize, g: &[f64], nb: usize) -> Local {
     ids.sort_unstable();
     ids.dedup();
     let m = ids.len();
-    let mut r = vec![0.0; nb * m];
-    for i in 0..nb {
-        for k in offsets[i]..offsets[i + 1] {
-            let j = ids.binary_search(&cols[k]).expect("column of the element");
-            r[i * m + j] += weights[k];
-        }
-    }
+    let local: Vec<usize> = cols
+        .iter()
+        .map(|c| ids.binary_search(c).expect("column of the element"))
+        .collect();
     let mut gr = vec![0.0; nb * m];
-    for a in 0..nb {
-        for b in 0..nb {
-            let x = g[a * nb + b];
-            if x != 0.0 {
-                for j in 0..m {
-                    gr[a * m + j] += x * r[b * m + j];
-                }
+    for b in 0..nb {
+        for k in offsets[b]..offsets[b + 1] {
+            let (j, w) = (local[k], weights[k]);
+            for a in 0..nb {
+                gr[a * m + j] += g[a * nb + b] * w;
             }
         }
     }
     let mut k = vec![0.0; m * m];
     for a in 0..nb {
-        for i in 0..m {
-            let ri = r[a * m + i];
-            if ri != 0.0 {
-                for j in 0..m {
-                    k[i * m + j] += ri * gr[a * m + j];
-                }
+        let gra = &gr[a * m..(a + 1) * m];
+        for t in offsets[a]..offsets[a + 1] {
+            let (i, w) = (local[t], weights[t]);
+            for (kij, g) in k[i * m..(i + 1) * m].iter_mut().zip(gra) {
+                *kij += w * g;
             }
         }
     }

@@ -289,8 +289,13 @@ impl SmoothTargets {
         let n = if dim == 2 { 9 } else { 27 };
         let verts = mesh.element(e);
         let mut out = [[0.0; 3]; 27];
-        if self.feature_models.is_none() && verts.iter().all(|&v| self.models[v as usize].is_none())
-        {
+        // Without a vertex model, only feature models at boundary entities (whose vertices are
+        // boundary vertices) can move a sample.
+        let unmoved = |v: usize| {
+            self.models[v].is_none()
+                && (self.feature_models.is_none() || !topo.vertex_on_boundary[v])
+        };
+        if verts.iter().all(|&v| unmoved(v as usize)) {
             return out;
         }
         let x = mesh.element_coords(e);
@@ -309,7 +314,7 @@ impl SmoothTargets {
                 }
             }
             let (xs, ks) = (&xs[..len], &ks[..len]);
-            if self.feature_models.is_none() && ks.iter().all(|&k| self.models[k].is_none()) {
+            if ks.iter().all(|&k| unmoved(k)) {
                 continue;
             }
             let at = if m < dim {
