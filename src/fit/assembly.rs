@@ -15,7 +15,8 @@
 //!    order.
 //! 3. **Rows, in parallel and without atomics.** Row c is built by its own task: the union of
 //!    the columns of its incident elements (a per-thread marker dedups them; only the ~100
-//!    distinct ones are sorted), then a per-thread column → position map scatters row i of
+//!    distinct ones are sorted, through a per-thread bitmap when they span a narrow range of
+//!    indices), then a per-thread column → position map scatters row i of
 //!    each incident element's local matrix into the row. A first pass counts the row lengths,
 //!    the second writes columns and values in place. The values of an entry are summed over
 //!    the incident elements in element order, so K is the same on any thread count.
@@ -80,6 +81,32 @@ pub(crate) fn atomic_add(slot: &std::sync::atomic::AtomicU64, v: f64) {
         match slot.compare_exchange_weak(cur, new, Ordering::Relaxed, Ordering::Relaxed) {
             Ok(_) => return,
             Err(x) => cur = x,
+        }
+    }
+}
+
+/// Sort the distinct columns `cols` of a row. When they span few 64-bit words, as they do
+/// on meshes numbered with some locality, they are set in the all-zero bitmap `bits` and read
+/// back in order (clearing it again), which is far cheaper than a comparison sort.
+fn sort_columns(cols: &mut [u32], bits: &mut [u64]) {
+    let (Some(&lo), Some(&hi)) = (cols.iter().min(), cols.iter().max()) else {
+        return;
+    };
+    let (lo, hi) = (lo as usize / 64, hi as usize / 64);
+    if hi - lo > 4 * cols.len() {
+        cols.sort_unstable();
+        return;
+    }
+    for &j in cols.iter() {
+        bits[j as usize / 64] |= 1 << (j % 64);
+    }
+    let mut out = 0;
+    for (w, word) in bits[lo..=hi].iter_mut().enumerate() {
+        let mut x = std::mem::take(word);
+        while x != 0 {
+            cols[out] = ((lo + w) * 64) as u32 + x.trailing_zeros();
+            out += 1;
+            x &= x - 1;
         }
     }
 }
@@ -243,10 +270,13 @@ pub fn assemble_matrix(space: &dyn FitSpace, blocks: &ElementBlocks) -> NormalMa
         .enumerate()
         .with_min_len(split)
         .for_each_init(
-            || (vec![u32::MAX; n], vec![0u32; n], Vec::new()),
-            |(mark, pos, cols), (c, (row_cols, row_vals))| {
+            || {
+                let bits = vec![0u64; n.div_ceil(64)];
+                (vec![u32::MAX; n], vec![0u32; n], bits, Vec::new())
+            },
+            |(mark, pos, bits, cols), (c, (row_cols, row_vals))| {
                 row_columns(mark, c, cols);
-                cols.sort_unstable();
+                sort_columns(cols, bits);
                 row_cols.copy_from_slice(cols);
                 for (p, &j) in cols.iter().enumerate() {
                     pos[j as usize] = p as u32;
