@@ -43,6 +43,7 @@ use crate::mesh::features::Features;
 use crate::mesh::topology::{HEX_EDGES, HEX_VERTEX_PARAMS, NONE};
 use crate::mesh::vec3::{add, cross, dot, norm, sub};
 use crate::mesh::{LinearMesh, Topology};
+use rayon::prelude::*;
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
@@ -141,49 +142,55 @@ impl SmoothTargets {
             non_manifold[v as usize] = true;
         }
         let x = |v: u32| mesh.coords[v as usize];
-        for v in 0..nv {
-            if !topo.vertex_on_boundary[v]
-                || non_manifold[v]
-                || features.is_some_and(|f| f.vertex_mask[v])
-            {
-                continue;
-            }
-            let xv = mesh.coords[v];
-            if mesh.dim == 2 {
-                if fan[v].len() != 2 {
-                    continue;
+        // Each boundary vertex's model depends only on its fan: in parallel.
+        models
+            .par_iter_mut()
+            .zip(ell.par_iter_mut())
+            .enumerate()
+            .with_min_len(1024)
+            .for_each(|(v, (model, ell))| {
+                if !topo.vertex_on_boundary[v]
+                    || non_manifold[v]
+                    || features.is_some_and(|f| f.vertex_mask[v])
+                {
+                    return;
                 }
-                let other = |f: u32| {
-                    let e = topo.edges[f as usize];
-                    if e[0] as usize == v { e[1] } else { e[0] }
-                };
-                let (a, b) = (x(other(fan[v][0])), x(other(fan[v][1])));
-                let (ua, ub) = (sub(a, xv), sub(b, xv));
-                let (la, lb) = (norm(ua), norm(ub));
-                if la == 0.0 || lb == 0.0 {
-                    continue;
+                let xv = mesh.coords[v];
+                if mesh.dim == 2 {
+                    if fan[v].len() != 2 {
+                        return;
+                    }
+                    let other = |f: u32| {
+                        let e = topo.edges[f as usize];
+                        if e[0] as usize == v { e[1] } else { e[0] }
+                    };
+                    let (a, b) = (x(other(fan[v][0])), x(other(fan[v][1])));
+                    let (ua, ub) = (sub(a, xv), sub(b, xv));
+                    let (la, lb) = (norm(ua), norm(ub));
+                    if la == 0.0 || lb == 0.0 {
+                        return;
+                    }
+                    *ell = 0.5 * (la + lb);
+                    // Turning angle between the edges ≤ 2 × the feature angle.
+                    let cos_turn = -dot(ua, ub) / (la * lb);
+                    if cos_turn < (2.0 * params.feature_angle_deg.to_radians()).cos() {
+                        return;
+                    }
+                    *model = fit_parabola(xv, a, b).map(|(normal, h)| VertexModel {
+                        normal,
+                        h,
+                        weight: 1.0,
+                    });
+                } else {
+                    if fan[v].len() < 3 {
+                        return;
+                    }
+                    if let Some((m, l)) = fan_model(mesh, topo, v as u32, &fan[v], cos_max) {
+                        *ell = l;
+                        *model = m;
+                    }
                 }
-                ell[v] = 0.5 * (la + lb);
-                // Turning angle between the edges ≤ 2 × the feature angle.
-                let cos_turn = -dot(ua, ub) / (la * lb);
-                if cos_turn < (2.0 * params.feature_angle_deg.to_radians()).cos() {
-                    continue;
-                }
-                models[v] = fit_parabola(xv, a, b).map(|(normal, h)| VertexModel {
-                    normal,
-                    h,
-                    weight: 1.0,
-                });
-            } else {
-                if fan[v].len() < 3 {
-                    continue;
-                }
-                if let Some((model, l)) = fan_model(mesh, topo, v as u32, &fan[v], cos_max) {
-                    ell[v] = l;
-                    models[v] = model;
-                }
-            }
-        }
+            });
         let smooth_vertices = models.iter().filter(|m| m.is_some()).count();
         let feature_vertices =
             topo.vertex_on_boundary.iter().filter(|&&b| b).count() - smooth_vertices;
