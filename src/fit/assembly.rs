@@ -113,10 +113,12 @@ fn sort_columns(cols: &mut [u32], bits: &mut [u64]) {
 
 /// Where an element's local matrix lives.
 enum Matrix {
-    /// Index into the shared table (pattern elements), with the pattern key.
+    /// A pattern element, by its pattern key (its shared-table entry follows from the key and
+    /// its weight mask).
     Shared(u64),
-    /// The element's own matrix (its columns are `Local::ids`).
-    Own(Local),
+    /// The element's own matrix (its columns are `Local::ids`), boxed so that the tag stays
+    /// 16 bytes per element.
+    Own(Box<Local>),
 }
 
 /// Assemble K.
@@ -134,7 +136,7 @@ pub fn assemble_matrix(space: &dyn FitSpace, blocks: &ElementBlocks) -> NormalMa
         .into_par_iter()
         .map_init(Vec::new, |ids, e| match space.element_pattern(e, ids) {
             Some(key) => Matrix::Shared(key),
-            None => Matrix::Own(local_matrix(space, e, &g_of(e), nb)),
+            None => Matrix::Own(Box::new(local_matrix(space, e, &g_of(e), nb))),
         })
         .collect();
     let mut elem_ptr = Vec::with_capacity(ne + 1);
