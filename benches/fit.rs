@@ -1,6 +1,6 @@
-//! The fit's normal equations: assembling K (sprs triplets → CSR) against applying it
-//! matrix-free through the Bézier extraction, per apply and per CG solve, on 3D grids with a
-//! curved (cylindrical) boundary. `cargo bench --bench fit`; `cargo test --benches` runs each
+//! The fit's normal equations: assembling K and the right-hand side (K row by row into CSR,
+//! see `polyspline::fit::assembly`) against applying K matrix-free through the Bézier
+//! extraction, per apply and per CG solve, on 3D grids with a curved (cylindrical) boundary. `cargo bench --bench fit`; `cargo test --benches` runs each
 //! case once.
 
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};

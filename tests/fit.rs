@@ -230,3 +230,149 @@ fn transposed_extraction_by_sum_factorisation_matches_the_rows() {
         }
     }
 }
+
+/// The row-parallel assembly on a mesh with spline elements, Q2 elements of own nodes and Q2
+/// elements with constrained nodes (a generated cylinder: valence-3 edges and a boundary):
+/// K equals the matrix-free operator on random vectors, its columns are sorted and unique,
+/// and it is bitwise the same on one and on two threads.
+#[test]
+fn row_parallel_assembly_matches_the_matrix_free_operator() {
+    use polyspline::mesh::generate::{Kind, generate};
+    let m = generate(Kind::Cylinder, 400);
+    let t = Topology::build(&m);
+    let s = SplineSpace::build(&m, &t);
+    let mut ids = Vec::new();
+    let own = (0..s.n_elements())
+        .filter(|&e| s.element_pattern(e, &mut ids).is_none())
+        .count();
+    assert!(
+        own > 0 && own < s.n_elements(),
+        "{own} of {}",
+        s.n_elements()
+    );
+    assert!(t.vertex_on_boundary.iter().any(|&b| b));
+    for w in [FitWeights::position(), FitWeights::frame()] {
+        let on = |threads: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| assemble(&s, &m, &t, &w))
+        };
+        let ((k, b), (k2, b2)) = (on(1), on(2));
+        assert_eq!(k.indptr, k2.indptr);
+        assert_eq!(k.indices, k2.indices);
+        assert!(
+            k.data
+                .iter()
+                .zip(&k2.data)
+                .all(|(a, b)| a.to_bits() == b.to_bits())
+        );
+        assert!(
+            b.iter()
+                .zip(&b2)
+                .all(|(a, b)| a.map(f64::to_bits) == b.map(f64::to_bits))
+        );
+        for r in 0..k.n {
+            let cols = &k.indices[k.indptr[r]..k.indptr[r + 1]];
+            assert!(
+                cols.windows(2).all(|p| p[0] < p[1]),
+                "row {r} not sorted/unique"
+            );
+            assert!(
+                cols.binary_search(&(r as u32)).is_ok(),
+                "row {r} lacks its diagonal"
+            );
+        }
+        let mf = MatrixFree::new(&s, &m, &t, &w);
+        let n = k.nrows();
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut rand = || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        };
+        for _ in 0..3 {
+            let x: Vec<[f64; 3]> = (0..n).map(|_| [rand(), rand(), rand()]).collect();
+            let (mut y1, mut y2) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
+            k.apply(&x, &mut y1);
+            mf.apply(&x, &mut y2);
+            let scale = y2.iter().flatten().fold(0.0f64, |a, b| a.max(b.abs()));
+            for (a, b) in y1.iter().zip(&y2) {
+                for d in 0..3 {
+                    assert!((a[d] - b[d]).abs() <= 1e-12 * scale, "{a:?} vs {b:?}");
+                }
+            }
+        }
+    }
+}
+
+/// The right-hand side is F − K C0 = −½ ∇D(C0), D = Σ_e Σ_i w_i ‖x_e(u_i) − P_e(u_i)‖² the
+/// position misfit over the 3×3×3 lattice (the frame term is stationary at C0): checked by
+/// central differences of D, evaluated here from the Bézier nets and the multilinear map, on
+/// a 3D mesh with Q2 elements, with chord and smooth targets and with and without frames.
+#[test]
+fn right_hand_side_is_the_gradient_of_the_misfit() {
+    use polyspline::fit::{SmoothParams, SmoothTargets, assemble_with_targets};
+    use polyspline::mesh::generate::{Kind, generate};
+    use polyspline::sample::{eval_net, multilinear};
+    let m = generate(Kind::Cylinder, 200);
+    let t = Topology::build(&m);
+    let s = SplineSpace::build(&m, &t);
+    let smooth = SmoothTargets::build(&m, &t, &SmoothParams::default());
+    // Lattice corner (x, y, z ∈ {0, 2}) → hex vertex.
+    const CORNER: [usize; 8] = [0, 1, 3, 2, 4, 5, 7, 6];
+    for w in [FitWeights::position(), FitWeights::frame()] {
+        for targets in [None, Some(&smooth)] {
+            let (_, rhs) = assemble_with_targets(&s, &m, &t, &w, targets);
+            let misfit = |cps: &[[f64; 3]]| -> f64 {
+                let mut total = 0.0;
+                for e in 0..m.n_elements() {
+                    let x = m.element_coords(e);
+                    let net = s.bezier_net_with(e, cps);
+                    let shift = targets.map(|st| st.element_corrections(&m, &t, e));
+                    for i in 0..27 {
+                        let l = [i % 3, (i / 3) % 3, i / 9];
+                        let u = l.map(|c| c as f64 / 2.0);
+                        let wd = if l.contains(&1) {
+                            w.midpoint
+                        } else {
+                            let v = m.element(e)[CORNER[l[0] / 2 + l[1] + 2 * l[2]]];
+                            if t.vertex_on_boundary[v as usize] {
+                                w.boundary_corner
+                            } else {
+                                w.corner
+                            }
+                        };
+                        let mut p = multilinear(3, &x, u);
+                        if let Some(sh) = &shift {
+                            p = std::array::from_fn(|d| p[d] + sh[i][d]);
+                        }
+                        let y = eval_net(3, &net, u);
+                        total += wd * (0..3).map(|d| (y[d] - p[d]).powi(2)).sum::<f64>();
+                    }
+                }
+                total
+            };
+            let c0 = &s.control_points;
+            let scale = rhs.iter().flatten().fold(0.0f64, |a, b| a.max(b.abs()));
+            assert!(scale > 0.0);
+            let h = 1e-3;
+            for c in (0..c0.len()).step_by(7) {
+                for d in 0..3 {
+                    let (mut plus, mut minus) = (c0.clone(), c0.clone());
+                    plus[c][d] += h;
+                    minus[c][d] -= h;
+                    let grad = (misfit(&plus) - misfit(&minus)) / (2.0 * h);
+                    assert!(
+                        (rhs[c][d] + 0.5 * grad).abs() <= 1e-7 * scale,
+                        "control point {c}, component {d}: {} vs {}",
+                        rhs[c][d],
+                        -0.5 * grad
+                    );
+                }
+            }
+        }
+    }
+}

@@ -3,26 +3,33 @@
 //! Input: a [`FitSpace`] and the element blocks G_e ([`ElementBlocks`]). Output: K as a
 //! [`NormalMatrix`] with sorted column indices per row.
 //!
-//! 1. Each element's distinct control points (its columns) are collected once.
-//! 2. The sparsity pattern follows from them: row c holds the union of the columns of the
-//!    elements that use c (a control point → elements incidence in CSR form, then one sorted
-//!    union per row, in parallel).
-//! 3. Element matrices are added into the values with atomic adds, in parallel. Most elements
-//!    share their local matrix: when E_e is a fixed matrix times a selection of distinct
-//!    control points ([`FitSpace::element_pattern`]: spline elements, and Q2 elements made only
-//!    of own nodes), the local matrix depends only on the pattern key and the element's weight
-//!    pattern, and is computed once per (key, weight pattern).
+//! 1. **Element columns and local matrices.** Every element gets its list of distinct control
+//!    points (its columns, flat CSR over the elements) and a dense local matrix
+//!    Rᵀ G_e R over them. Most elements share it: when E_e is a fixed matrix times a selection
+//!    of distinct control points ([`FitSpace::element_pattern`]: spline elements, and Q2
+//!    elements made only of own nodes), the local matrix depends only on the pattern key and
+//!    the element's weight mask, so one table entry per (key, mask) is computed up front, in
+//!    parallel, and the element keeps an index into it. The other elements (Q2 elements with
+//!    constrained nodes) keep their own matrix.
+//! 2. **Incidence.** Control point → (element, local index) in CSR form, filled in element
+//!    order.
+//! 3. **Rows, in parallel and without atomics.** Row c is built by its own task: the union of
+//!    the columns of its incident elements (a per-thread marker dedups them; only the ~100
+//!    distinct ones are sorted, through a per-thread bitmap when they span a narrow range of
+//!    indices), then a per-thread column → position map scatters row i of
+//!    each incident element's local matrix into the row. A first pass counts the row lengths,
+//!    the second writes columns and values in place. The values of an entry are summed over
+//!    the incident elements in element order, so K is the same on any thread count.
 //!
-//! Memory is the CSR itself plus ~30 indices per element, never a triplet list.
+//! Memory besides K itself: per element ~27 column indices, 27 incidence entries (6 bytes
+//! each), a table index and a 16-byte tag; the shared table (one 27 × 27 matrix per (key,
+//! mask): a handful on regular meshes) and the own matrices of the constrained elements. No
+//! triplet list, no value array besides K's, no per-element allocation for pattern elements.
 
 use super::{ElementBlocks, FitSpace, NormalMatrix};
+use crate::solve::block_jacobi::split_at_offsets;
 use rayon::prelude::*;
 use std::collections::HashMap;
-use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
-
-/// Local matrices shared by elements of one (pattern key, weight mask), in local-node order.
-type SharedLocals = HashMap<(u64, u64), Arc<Vec<f64>>>;
 
 /// Dense element matrix on the element's sorted distinct columns.
 struct Local {
@@ -31,7 +38,8 @@ struct Local {
     k: Vec<f64>,
 }
 
-/// Rᵀ G R for the explicit rows of element `e` (R: nb × m over the sorted distinct columns).
+/// Rᵀ G R for the explicit rows of element `e` (R: nb × m over the sorted distinct columns),
+/// through R's non-zeros: G R column by column, then Rᵀ (G R) row by row.
 fn local_matrix(space: &dyn FitSpace, e: usize, g: &[f64], nb: usize) -> Local {
     let (mut offsets, mut cols, mut weights) = (Vec::new(), Vec::new(), Vec::new());
     space.element_rows(e, &mut offsets, &mut cols, &mut weights);
@@ -39,39 +47,34 @@ fn local_matrix(space: &dyn FitSpace, e: usize, g: &[f64], nb: usize) -> Local {
     ids.sort_unstable();
     ids.dedup();
     let m = ids.len();
-    let mut r = vec![0.0; nb * m];
-    for i in 0..nb {
-        for k in offsets[i]..offsets[i + 1] {
-            let j = ids.binary_search(&cols[k]).expect("column of the element");
-            r[i * m + j] += weights[k];
-        }
-    }
+    let local: Vec<usize> = cols
+        .iter()
+        .map(|c| ids.binary_search(c).expect("column of the element"))
+        .collect();
     let mut gr = vec![0.0; nb * m];
-    for a in 0..nb {
-        for b in 0..nb {
-            let x = g[a * nb + b];
-            if x != 0.0 {
-                for j in 0..m {
-                    gr[a * m + j] += x * r[b * m + j];
-                }
+    for b in 0..nb {
+        for k in offsets[b]..offsets[b + 1] {
+            let (j, w) = (local[k], weights[k]);
+            for a in 0..nb {
+                gr[a * m + j] += g[a * nb + b] * w;
             }
         }
     }
     let mut k = vec![0.0; m * m];
     for a in 0..nb {
-        for i in 0..m {
-            let ri = r[a * m + i];
-            if ri != 0.0 {
-                for j in 0..m {
-                    k[i * m + j] += ri * gr[a * m + j];
-                }
+        let gra = &gr[a * m..(a + 1) * m];
+        for t in offsets[a]..offsets[a + 1] {
+            let (i, w) = (local[t], weights[t]);
+            for (kij, g) in k[i * m..(i + 1) * m].iter_mut().zip(gra) {
+                *kij += w * g;
             }
         }
     }
     Local { ids, k }
 }
 
-pub(crate) fn atomic_add(slot: &AtomicU64, v: f64) {
+pub(crate) fn atomic_add(slot: &std::sync::atomic::AtomicU64, v: f64) {
+    use std::sync::atomic::Ordering;
     let mut cur = slot.load(Ordering::Relaxed);
     loop {
         let new = (f64::from_bits(cur) + v).to_bits();
@@ -80,6 +83,42 @@ pub(crate) fn atomic_add(slot: &AtomicU64, v: f64) {
             Err(x) => cur = x,
         }
     }
+}
+
+/// Sort the distinct columns `cols` of a row. When they span few 64-bit words, as they do
+/// on meshes numbered with some locality, they are set in the all-zero bitmap `bits` and read
+/// back in order (clearing it again), which is far cheaper than a comparison sort.
+fn sort_columns(cols: &mut [u32], bits: &mut [u64]) {
+    let (Some(&lo), Some(&hi)) = (cols.iter().min(), cols.iter().max()) else {
+        return;
+    };
+    let (lo, hi) = (lo as usize / 64, hi as usize / 64);
+    if hi - lo > 4 * cols.len() {
+        cols.sort_unstable();
+        return;
+    }
+    for &j in cols.iter() {
+        bits[j as usize / 64] |= 1 << (j % 64);
+    }
+    let mut out = 0;
+    for (w, word) in bits[lo..=hi].iter_mut().enumerate() {
+        let mut x = std::mem::take(word);
+        while x != 0 {
+            cols[out] = ((lo + w) * 64) as u32 + x.trailing_zeros();
+            out += 1;
+            x &= x - 1;
+        }
+    }
+}
+
+/// Where an element's local matrix lives.
+enum Matrix {
+    /// A pattern element, by its pattern key (its shared-table entry follows from the key and
+    /// its weight mask).
+    Shared(u64),
+    /// The element's own matrix (its columns are `Local::ids`), boxed so that the tag stays
+    /// 16 bytes per element.
+    Own(Box<Local>),
 }
 
 /// Assemble K.
@@ -92,146 +131,169 @@ pub fn assemble_matrix(space: &dyn FitSpace, blocks: &ElementBlocks) -> NormalMa
         gd.iter().zip(gr).map(|(a, b)| a + b).collect()
     };
 
-    // 1. Columns of every element.
-    let columns: Vec<Vec<u32>> = (0..ne)
+    // 1. Pattern keys (or own matrices) and the element columns, flat.
+    let kinds: Vec<Matrix> = (0..ne)
         .into_par_iter()
-        .map(|e| match space.element_pattern(e) {
-            Some((_, ids)) => {
-                let mut ids = ids;
-                ids.sort_unstable();
-                ids.dedup();
-                ids
-            }
-            None => {
-                let (mut o, mut cols, mut w) = (Vec::new(), Vec::new(), Vec::new());
-                space.element_rows(e, &mut o, &mut cols, &mut w);
-                cols.sort_unstable();
-                cols.dedup();
-                cols
-            }
+        .map_init(Vec::new, |ids, e| match space.element_pattern(e, ids) {
+            Some(key) => Matrix::Shared(key),
+            None => Matrix::Own(Box::new(local_matrix(space, e, &g_of(e), nb))),
         })
         .collect();
+    let mut elem_ptr = Vec::with_capacity(ne + 1);
+    elem_ptr.push(0usize);
+    for k in &kinds {
+        let m = match k {
+            Matrix::Shared(_) => nb,
+            Matrix::Own(l) => l.ids.len(),
+        };
+        elem_ptr.push(elem_ptr[elem_ptr.len() - 1] + m);
+    }
+    let mut elem_cols = vec![0u32; elem_ptr[ne]];
+    split_at_offsets(&mut elem_cols, &elem_ptr)
+        .into_par_iter()
+        .enumerate()
+        .for_each_init(Vec::new, |ids, (e, out)| match &kinds[e] {
+            Matrix::Shared(_) => {
+                space.element_pattern(e, ids);
+                out.copy_from_slice(ids);
+            }
+            Matrix::Own(l) => out.copy_from_slice(&l.ids),
+        });
 
-    // 2. Pattern: control point → elements, then the union of columns per row.
-    let mut start = vec![0u32; n + 1];
-    for ids in &columns {
-        for &c in ids {
-            start[c as usize + 1] += 1;
+    // The shared table: one representative element per (key, mask), in element order, and
+    // each pattern element's entry.
+    let mut slot_of: HashMap<(u64, u64), u32> = HashMap::new();
+    let mut representatives = Vec::new();
+    let table_index: Vec<u32> = kinds
+        .iter()
+        .enumerate()
+        .map(|(e, k)| match k {
+            Matrix::Shared(key) => *slot_of.entry((*key, blocks.masks[e])).or_insert_with(|| {
+                representatives.push(e);
+                representatives.len() as u32 - 1
+            }),
+            Matrix::Own(_) => u32::MAX,
+        })
+        .collect();
+    drop(slot_of);
+    // Local-node order: permute the sorted-column matrix back to the pattern's node order.
+    let table: Vec<Vec<f64>> = representatives
+        .par_iter()
+        .map(|&e| {
+            let l = local_matrix(space, e, &g_of(e), nb);
+            let local_ids = &elem_cols[elem_ptr[e]..elem_ptr[e + 1]];
+            let pos: Vec<usize> = local_ids
+                .iter()
+                .map(|c| l.ids.binary_search(c).expect("column of the element"))
+                .collect();
+            let m = local_ids.len();
+            let mut k = vec![0.0; m * m];
+            for i in 0..m {
+                for j in 0..m {
+                    k[i * m + j] = l.k[pos[i] * l.ids.len() + pos[j]];
+                }
+            }
+            k
+        })
+        .collect();
+    let matrix_of = |e: usize| -> &[f64] {
+        match &kinds[e] {
+            Matrix::Shared(_) => &table[table_index[e] as usize],
+            Matrix::Own(l) => &l.k,
         }
+    };
+
+    // 2. Incidence: control point → (element, local index), in element order.
+    let mut start = vec![0usize; n + 1];
+    for &c in &elem_cols {
+        start[c as usize + 1] += 1;
     }
     for c in 0..n {
         start[c + 1] += start[c];
     }
     let mut fill = start.clone();
-    let mut incident = vec![0u32; start[n] as usize];
-    for (e, ids) in columns.iter().enumerate() {
-        for &c in ids {
-            incident[fill[c as usize] as usize] = e as u32;
-            fill[c as usize] += 1;
+    let mut inc_elem = vec![0u32; start[n]];
+    let mut inc_local = vec![0u16; start[n]];
+    for e in 0..ne {
+        let cols = &elem_cols[elem_ptr[e]..elem_ptr[e + 1]];
+        assert!(
+            cols.len() <= u16::MAX as usize,
+            "element {e} has too many columns"
+        );
+        for (i, &c) in cols.iter().enumerate() {
+            let f = &mut fill[c as usize];
+            inc_elem[*f] = e as u32;
+            inc_local[*f] = i as u16;
+            *f += 1;
         }
     }
     drop(fill);
-    // A per-thread marker (last row that took each column) dedups before sorting, so only
-    // the ~115 distinct columns are sorted instead of the ~27 × 27 incident ones. Two passes
-    // (lengths, then the columns into their final place) avoid a vector per row; at most ~32
-    // markers are made per pass (one per split), not one per row range rayon cuts.
+    let incident = |c: usize| {
+        let r = start[c]..start[c + 1];
+        inc_elem[r.clone()].iter().zip(&inc_local[r])
+    };
+
+    // 3. Rows. `mark[j] == c` once column j is in row c; at most ~32 markers are made per pass
+    // (one per split), not one per row range rayon cuts.
     let row_columns = |mark: &mut Vec<u32>, c: usize, cols: &mut Vec<u32>| {
         cols.clear();
-        for &e in &incident[start[c] as usize..start[c + 1] as usize] {
-            for &j in &columns[e as usize] {
+        for (&e, _) in incident(c) {
+            let e = e as usize;
+            for &j in &elem_cols[elem_ptr[e]..elem_ptr[e + 1]] {
                 if mark[j as usize] != c as u32 {
                     mark[j as usize] = c as u32;
                     cols.push(j);
                 }
             }
         }
-        cols.sort_unstable();
     };
     let split = (n / 32).max(1024);
-    let marker = || (vec![u32::MAX; n], Vec::new());
     let lengths: Vec<usize> = (0..n)
         .into_par_iter()
         .with_min_len(split)
-        .map_init(marker, |(mark, cols), c| {
-            row_columns(mark, c, cols);
-            cols.len()
-        })
+        .map_init(
+            || (vec![u32::MAX; n], Vec::new()),
+            |(mark, cols), c| {
+                row_columns(mark, c, cols);
+                cols.len()
+            },
+        )
         .collect();
     let mut indptr = Vec::with_capacity(n + 1);
     indptr.push(0usize);
     for l in lengths {
-        indptr.push(indptr.last().unwrap() + l);
+        indptr.push(indptr[indptr.len() - 1] + l);
     }
     let mut indices = vec![0u32; indptr[n]];
-    crate::solve::block_jacobi::split_at_offsets(&mut indices, &indptr)
+    let mut data = vec![0.0f64; indptr[n]];
+    split_at_offsets(&mut indices, &indptr)
         .into_par_iter()
+        .zip(split_at_offsets(&mut data, &indptr))
         .enumerate()
         .with_min_len(split)
-        .for_each_init(marker, |(mark, cols), (c, row)| {
-            row_columns(mark, c, cols);
-            row.copy_from_slice(cols);
-        });
-    drop(incident);
-    let values: Vec<AtomicU64> = (0..indices.len()).map(|_| AtomicU64::new(0)).collect();
-
-    // 3. Values. Shared local matrices by (pattern key, weight mask), in local-node order.
-    let shared: Mutex<SharedLocals> = Mutex::new(HashMap::new());
-    (0..ne).into_par_iter().for_each(|e| {
-        let (ids, k): (Vec<u32>, Arc<Vec<f64>>) = match space.element_pattern(e) {
-            Some((key, local_ids)) => {
-                let mask = blocks.masks[e];
-                let cached = shared
-                    .lock()
-                    .expect("no panics while held")
-                    .get(&(key, mask))
-                    .cloned();
-                let k = cached.unwrap_or_else(|| {
-                    // Local-node order: permute the sorted-column matrix back to `local_ids`.
-                    let l = local_matrix(space, e, &g_of(e), nb);
-                    let pos: Vec<usize> = local_ids
-                        .iter()
-                        .map(|c| l.ids.binary_search(c).unwrap())
-                        .collect();
-                    let m = local_ids.len();
-                    let mut k = vec![0.0; m * m];
-                    for i in 0..m {
-                        for j in 0..m {
-                            k[i * m + j] = l.k[pos[i] * l.ids.len() + pos[j]];
-                        }
-                    }
-                    let k = Arc::new(k);
-                    shared
-                        .lock()
-                        .expect("no panics while held")
-                        .insert((key, mask), k.clone());
-                    k
-                });
-                (local_ids, k)
-            }
-            None => {
-                let l = local_matrix(space, e, &g_of(e), nb);
-                (l.ids, Arc::new(l.k))
-            }
-        };
-        let m = ids.len();
-        for i in 0..m {
-            let row = ids[i] as usize;
-            let cols = &indices[indptr[row]..indptr[row + 1]];
-            for j in 0..m {
-                let v = k[i * m + j];
-                if v != 0.0 {
-                    let at = cols
-                        .binary_search(&ids[j])
-                        .expect("pattern holds the element's columns");
-                    atomic_add(&values[indptr[row] + at], v);
+        .for_each_init(
+            || {
+                let bits = vec![0u64; n.div_ceil(64)];
+                (vec![u32::MAX; n], vec![0u32; n], bits, Vec::new())
+            },
+            |(mark, pos, bits, cols), (c, (row_cols, row_vals))| {
+                row_columns(mark, c, cols);
+                sort_columns(cols, bits);
+                row_cols.copy_from_slice(cols);
+                for (p, &j) in cols.iter().enumerate() {
+                    pos[j as usize] = p as u32;
                 }
-            }
-        }
-    });
-    let data = values
-        .into_iter()
-        .map(|a| f64::from_bits(a.into_inner()))
-        .collect();
+                for (&e, &i) in incident(c) {
+                    let e = e as usize;
+                    let ids = &elem_cols[elem_ptr[e]..elem_ptr[e + 1]];
+                    let m = ids.len();
+                    let k = &matrix_of(e)[i as usize * m..(i as usize + 1) * m];
+                    for (&j, &v) in ids.iter().zip(k) {
+                        row_vals[pos[j as usize] as usize] += v;
+                    }
+                }
+            },
+        );
     NormalMatrix {
         n,
         indptr,

@@ -27,12 +27,13 @@
 
 pub mod assembly;
 pub mod features;
+mod rhs;
 pub mod smooth;
 
 pub use smooth::{SmoothParams, SmoothTargets};
 
 use crate::mesh::{LinearMesh, Topology};
-use crate::sample::{bernstein2, multilinear};
+use crate::sample::bernstein2;
 use crate::solve::{CgError, CgInfo, CgParams, LinOp, pcg};
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -53,10 +54,11 @@ pub trait FitSpace: Sync {
     );
     /// Bernstein net of element `e` for the control points `cps`.
     fn bezier_net_with(&self, e: usize, cps: &[[f64; 3]]) -> [[f64; 3]; 27];
-    /// When E_e is a matrix shared by every element with the same `key` times the selection of
-    /// 3^d distinct control points `ids` (in local-node order), return them; the assembly then
-    /// computes one local matrix per key. `None` (the default) always works.
-    fn element_pattern(&self, _e: usize) -> Option<(u64, Vec<u32>)> {
+    /// When E_e is a matrix shared by every element with the same key times the selection of
+    /// 3^d distinct control points (in local-node order), return the key and write the
+    /// control points into `ids`; the assembly then computes one local matrix per key.
+    /// `None` (the default) always works.
+    fn element_pattern(&self, _e: usize, _ids: &mut Vec<u32>) -> Option<u64> {
         None
     }
     /// Append E_eᵀ f to `out` as (control point, value) pairs (a control point may repeat),
@@ -505,9 +507,6 @@ impl LinOp for MatrixFree<'_> {
     }
 }
 
-/// Elements per batch of the right-hand side (bounds its temporary memory).
-const RHS_BATCH: usize = 1 << 16;
-
 /// Assemble K and the right-hand side of the displacement system (F − K C0).
 pub fn assemble(
     space: &dyn FitSpace,
@@ -562,79 +561,8 @@ pub fn assemble_with_features(
     smooth: Option<&SmoothTargets>,
     features: Option<&crate::mesh::features::Features>,
 ) -> (NormalMatrix, Vec<[f64; 3]>) {
-    let dim = space.dim();
-    let nb = if dim == 2 { 9 } else { 27 };
-    let samples = Samples::new(dim);
-    let n = space.control_points().len();
-    let c0 = space.control_points();
     let blocks = ElementBlocks::with_features(space, mesh, topo, w, features);
-    let (masks, cache) = (&blocks.masks, &blocks.cache);
-    // Per element: the right-hand side on its control points, computed in parallel and added
-    // in element order (the same sums on any thread count), a bounded batch of elements at a
-    // time so the (control point, value) pairs never exist for the whole mesh at once.
-    let ne = space.n_elements();
-    let mut rhs = vec![[0.0; 3]; n];
-    for batch in (0..ne).step_by(RHS_BATCH) {
-        let chunks: Vec<Vec<(u32, [f64; 3])>> = (batch..(batch + RHS_BATCH).min(ne))
-            .into_par_iter()
-            .fold(Vec::new, |mut acc, e| {
-                let (gd, gr) = &cache[&masks[e]];
-                // Targets: input multilinear positions; initial net for the frame term.
-                let x = mesh.element_coords(e);
-                let shift = smooth.map(|t| t.element_corrections(mesh, topo, e));
-                let net0 = space.bezier_net_with(e, c0);
-                let mut rhs_b = [[0.0; 3]; 27]; // F_e in Bernstein space
-                // F_e = Σ_i w^d_i b_i P_iᵀ + G^r B⁰.
-                for (i, l) in samples.points.iter().enumerate() {
-                    let wd = sample_weight(w, masks[e], i, *l, samples.is_corner(i));
-                    if wd == 0.0 {
-                        continue;
-                    }
-                    let mut p = multilinear(dim, &x, l.map(|c| c as f64 / 2.0));
-                    if let Some(shift) = &shift {
-                        for c in 0..3 {
-                            p[c] += shift[i][c];
-                        }
-                    }
-                    for a in 0..nb {
-                        let s = wd * samples.values[i][a];
-                        for c in 0..3 {
-                            rhs_b[a][c] += s * p[c];
-                        }
-                    }
-                }
-                for a in 0..nb {
-                    for b in 0..nb {
-                        let g = gr[a * nb + b];
-                        if g != 0.0 {
-                            for c in 0..3 {
-                                rhs_b[a][c] += g * net0[b][c];
-                            }
-                        }
-                    }
-                }
-                // Displacement form: F_e − G_e B⁰_e.
-                for a in 0..nb {
-                    for b in 0..nb {
-                        let g = gd[a * nb + b] + gr[a * nb + b];
-                        for c in 0..3 {
-                            rhs_b[a][c] -= g * net0[b][c];
-                        }
-                    }
-                }
-                // f_loc = E_eᵀ F (K is assembled separately).
-                space.add_transposed(e, &rhs_b, &mut acc);
-                acc
-            })
-            .collect();
-        for f in chunks {
-            for (i, f) in f {
-                for k in 0..3 {
-                    rhs[i as usize][k] += f[k];
-                }
-            }
-        }
-    }
+    let rhs = rhs::displacement_rhs(space, mesh, topo, w, &blocks.masks, smooth);
     let k = assembly::assemble_matrix(space, &blocks);
     (k, rhs)
 }
@@ -753,19 +681,21 @@ impl FitSpace for crate::spline::SplineSpace {
     /// Elements whose local nodes are all plain control points (spline elements, and Q2
     /// elements made only of own nodes): E_e = (M_z ⊗ M_y ⊗ M_x) · selection, keyed by the
     /// three 1D operators.
-    fn element_pattern(&self, e: usize) -> Option<(u64, Vec<u32>)> {
+    fn element_pattern(&self, e: usize, ids: &mut Vec<u32>) -> Option<u64> {
         let x = &self.extraction;
         let nodes = x.element_nodes(e);
         if nodes.iter().any(|&n| n as usize >= x.n_control) {
             return None;
         }
-        let mut sorted = nodes.to_vec();
+        let mut sorted = [0u32; 27];
+        let sorted = &mut sorted[..nodes.len()];
+        sorted.copy_from_slice(nodes);
         sorted.sort_unstable();
-        sorted.dedup();
-        if sorted.len() != nodes.len() {
+        if sorted.windows(2).any(|w| w[0] == w[1]) {
             return None;
         }
-        let key = x.ops[e].iter().fold(0u64, |k, op| k * 8 + *op as u64);
-        Some((key, nodes.to_vec()))
+        ids.clear();
+        ids.extend_from_slice(nodes);
+        Some(x.ops[e].iter().fold(0u64, |k, op| k * 8 + *op as u64))
     }
 }

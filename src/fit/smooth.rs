@@ -43,7 +43,7 @@ use crate::mesh::features::Features;
 use crate::mesh::topology::{HEX_EDGES, HEX_VERTEX_PARAMS, NONE};
 use crate::mesh::vec3::{add, cross, dot, norm, sub};
 use crate::mesh::{LinearMesh, Topology};
-use crate::sample::multilinear;
+use rayon::prelude::*;
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
@@ -143,49 +143,55 @@ impl SmoothTargets {
             non_manifold[v as usize] = true;
         }
         let x = |v: u32| mesh.coords[v as usize];
-        for v in 0..nv {
-            if !topo.vertex_on_boundary[v]
-                || non_manifold[v]
-                || features.is_some_and(|f| f.vertex_mask[v])
-            {
-                continue;
-            }
-            let xv = mesh.coords[v];
-            if mesh.dim == 2 {
-                if fan[v].len() != 2 {
-                    continue;
+        // Each boundary vertex's model depends only on its fan: in parallel.
+        models
+            .par_iter_mut()
+            .zip(ell.par_iter_mut())
+            .enumerate()
+            .with_min_len(1024)
+            .for_each(|(v, (model, ell))| {
+                if !topo.vertex_on_boundary[v]
+                    || non_manifold[v]
+                    || features.is_some_and(|f| f.vertex_mask[v])
+                {
+                    return;
                 }
-                let other = |f: u32| {
-                    let e = topo.edges[f as usize];
-                    if e[0] as usize == v { e[1] } else { e[0] }
-                };
-                let (a, b) = (x(other(fan[v][0])), x(other(fan[v][1])));
-                let (ua, ub) = (sub(a, xv), sub(b, xv));
-                let (la, lb) = (norm(ua), norm(ub));
-                if la == 0.0 || lb == 0.0 {
-                    continue;
+                let xv = mesh.coords[v];
+                if mesh.dim == 2 {
+                    if fan[v].len() != 2 {
+                        return;
+                    }
+                    let other = |f: u32| {
+                        let e = topo.edges[f as usize];
+                        if e[0] as usize == v { e[1] } else { e[0] }
+                    };
+                    let (a, b) = (x(other(fan[v][0])), x(other(fan[v][1])));
+                    let (ua, ub) = (sub(a, xv), sub(b, xv));
+                    let (la, lb) = (norm(ua), norm(ub));
+                    if la == 0.0 || lb == 0.0 {
+                        return;
+                    }
+                    *ell = 0.5 * (la + lb);
+                    // Turning angle between the edges ≤ 2 × the feature angle.
+                    let cos_turn = -dot(ua, ub) / (la * lb);
+                    if cos_turn < (2.0 * params.feature_angle_deg.to_radians()).cos() {
+                        return;
+                    }
+                    *model = fit_parabola(xv, a, b).map(|(normal, h)| VertexModel {
+                        normal,
+                        h,
+                        weight: 1.0,
+                    });
+                } else {
+                    if fan[v].len() < 3 {
+                        return;
+                    }
+                    if let Some((m, l)) = fan_model(mesh, topo, v as u32, &fan[v], cos_max) {
+                        *ell = l;
+                        *model = m;
+                    }
                 }
-                ell[v] = 0.5 * (la + lb);
-                // Turning angle between the edges ≤ 2 × the feature angle.
-                let cos_turn = -dot(ua, ub) / (la * lb);
-                if cos_turn < (2.0 * params.feature_angle_deg.to_radians()).cos() {
-                    continue;
-                }
-                models[v] = fit_parabola(xv, a, b).map(|(normal, h)| VertexModel {
-                    normal,
-                    h,
-                    weight: 1.0,
-                });
-            } else {
-                if fan[v].len() < 3 {
-                    continue;
-                }
-                if let Some((model, l)) = fan_model(mesh, topo, v as u32, &fan[v], cos_max) {
-                    ell[v] = l;
-                    models[v] = model;
-                }
-            }
-        }
+            });
         let smooth_vertices = models.iter().filter(|m| m.is_some()).count();
         let feature_vertices =
             topo.vertex_on_boundary.iter().filter(|&&b| b).count() - smooth_vertices;
@@ -274,30 +280,50 @@ impl SmoothTargets {
         topo: &Topology,
         e: usize,
     ) -> [[f64; 3]; 27] {
+        let lattice = super::rhs::multilinear_lattice(self.dim, &mesh.element_coords(e));
+        self.corrections_at(mesh, topo, e, &lattice)
+    }
+
+    /// [`SmoothTargets::element_corrections`] given the element's multilinear map at the
+    /// lattice (`lattice[i]` the multilinear point of sample i).
+    pub(crate) fn corrections_at(
+        &self,
+        mesh: &LinearMesh,
+        topo: &Topology,
+        e: usize,
+        lattice: &[[f64; 3]; 27],
+    ) -> [[f64; 3]; 27] {
         let dim = self.dim;
         let n = if dim == 2 { 9 } else { 27 };
         let verts = mesh.element(e);
-        let x = mesh.element_coords(e);
         let mut out = [[0.0; 3]; 27];
-        if self.feature_models.is_none() && verts.iter().all(|&v| self.models[v as usize].is_none())
-        {
+        // Without a vertex model, only feature models at boundary entities (whose vertices are
+        // boundary vertices) can move a sample.
+        let unmoved = |v: usize| {
+            self.models[v].is_none()
+                && (self.feature_models.is_none() || !topo.vertex_on_boundary[v])
+        };
+        if verts.iter().all(|&v| unmoved(v as usize)) {
             return out;
         }
-        let mut xs = Vec::with_capacity(8);
-        let mut ks = Vec::with_capacity(8);
+        let x = mesh.element_coords(e);
+        let (mut xs, mut ks) = ([[0.0; 3]; 8], [0usize; 8]);
         for (i, slot) in out.iter_mut().enumerate().take(n) {
             let l = [i % 3, (i / 3) % 3, i / 9];
             let m = (0..dim).filter(|&k| l[k] == 1).count();
             if m == 0 {
                 continue;
             }
-            xs.clear();
-            ks.clear();
+            let mut len = 0;
             for (c, pc) in HEX_VERTEX_PARAMS.iter().enumerate().take(1 << dim) {
                 if (0..dim).all(|k| l[k] == 1 || 2 * pc[k] as usize == l[k]) {
-                    xs.push(x[c]);
-                    ks.push(verts[c] as usize);
+                    (xs[len], ks[len]) = (x[c], verts[c] as usize);
+                    len += 1;
                 }
+            }
+            let (xs, ks) = (&xs[..len], &ks[..len]);
+            if ks.iter().all(|&k| unmoved(k)) {
+                continue;
             }
             let at = if m < dim {
                 self.boundary_entity(topo, e, l)
@@ -305,11 +331,11 @@ impl SmoothTargets {
                 None
             };
             let on_boundary = at.is_some();
-            let p = multilinear(dim, &x, l.map(|c| c as f64 / 2.0));
-            let phi = 1.0 / xs.len() as f64;
+            let p = lattice[i];
+            let phi = 1.0 / len as f64;
             let mut delta = [0.0; 3];
             let mut wsum = 0.0;
-            for &k in &ks {
+            for &k in ks {
                 let model = self.models[k].as_ref().or_else(|| {
                     self.feature_models
                         .as_ref()
@@ -317,7 +343,7 @@ impl SmoothTargets {
                         .and_then(|(f, at)| f.model(k as u32, at))
                 });
                 if let Some(model) = model {
-                    let c = model.correction(p, &xs, phi);
+                    let c = model.correction(p, xs, phi);
                     let w = phi * model.weight;
                     delta = add(delta, c.map(|ci| w * ci));
                     wsum += phi;
@@ -335,15 +361,16 @@ impl SmoothTargets {
     /// with one lattice coordinate 1, a 3D face with two), if it is on the boundary.
     fn boundary_entity(&self, topo: &Topology, e: usize, l: [usize; 3]) -> Option<BoundaryEntity> {
         let dim = self.dim;
-        let ones: Vec<usize> = (0..dim).filter(|&k| l[k] == 1).collect();
-        if dim == 2 || ones.len() == 2 {
+        let ones = (0..dim).filter(|&k| l[k] == 1).count();
+        if dim == 2 || ones == 2 {
             let k = (0..dim).find(|&k| l[k] != 1).unwrap();
             let f = topo.element_facet(e, 2 * k + l[k] / 2);
             return (topo.facet_elements[f as usize][1] == NONE)
                 .then_some(BoundaryEntity::Facet(f));
         }
-        let k = ones[0];
-        let others: Vec<usize> = (0..3).filter(|&j| j != k).collect();
+        let k = (0..3).find(|&k| l[k] == 1).unwrap();
+        let others = [(k + 1) % 3, (k + 2) % 3];
+        let others = [others[0].min(others[1]), others[0].max(others[1])];
         let i = l[others[0]] / 2 + 2 * (l[others[1]] / 2);
         debug_assert_eq!(
             HEX_EDGES[4 * k + i].map(|c| HEX_VERTEX_PARAMS[c][others[0]] as usize * 2),

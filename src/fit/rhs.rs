@@ -1,0 +1,122 @@
+//! Right-hand side of the displacement system, F − K C0.
+//!
+//! Input: a [`FitSpace`] (E_e, C0), the linear mesh, the weights and per-element weight masks
+//! ([`super::ElementBlocks::masks`]) and the optional smooth targets. Output: one 3-vector per
+//! control point.
+//!
+//! With B the Bernstein values at the 3^d lattice samples (rows b_iᵀ), W the position weights
+//! and P_e the targets at the samples, F_e = Bᵀ W P_e + G^r_e B⁰_e and G_e = Bᵀ W B + G^r_e,
+//! so the frame term cancels in the displacement form:
+//!
+//!   F_e − G_e B⁰_e = Bᵀ W (P_e − B B⁰_e),
+//!
+//! the weighted residual of the initial map at the samples, pulled back to the Bernstein
+//! points. B = B₁ ⊗ B₁ (⊗ B₁) with B₁ the 1D Bernstein values at {0, ½, 1}, so P_e (the
+//! multilinear map at the lattice: repeated midpoints), B B⁰_e and Bᵀ r are all applied line
+//! by line, direction by direction (sum factorisation), and E_eᵀ by
+//! [`FitSpace::add_transposed`]. Elements are processed in parallel, a bounded batch at a
+//! time, and their contributions added in element order, so the result does not depend on
+//! the thread count.
+
+use super::{FitSpace, FitWeights, SmoothTargets, sample_weight};
+use crate::mesh::topology::HEX_VERTEX_PARAMS;
+use crate::mesh::vec3::{add, sub};
+use crate::mesh::{LinearMesh, Topology};
+use rayon::prelude::*;
+
+/// Elements per batch (bounds the temporary (control point, value) pairs).
+const RHS_BATCH: usize = 1 << 16;
+
+type Lattice = [[f64; 3]; 27];
+
+/// Apply `f` to every line of the 3^`dim` lattice `v`, direction by direction (x, y, z).
+fn map_lines(dim: usize, v: &mut Lattice, f: impl Fn([[f64; 3]; 3]) -> [[f64; 3]; 3]) {
+    let n = 3usize.pow(dim as u32);
+    for s in [1, 3, 9].into_iter().take(dim) {
+        for b in (0..n).filter(|i| (i / s) % 3 == 0) {
+            let out = f([v[b], v[b + s], v[b + 2 * s]]);
+            (v[b], v[b + s], v[b + 2 * s]) = (out[0], out[1], out[2]);
+        }
+    }
+}
+
+/// α a + β b.
+fn lin(alpha: f64, a: [f64; 3], beta: f64, b: [f64; 3]) -> [f64; 3] {
+    std::array::from_fn(|c| alpha * a[c] + beta * b[c])
+}
+
+/// The multilinear map of the corners `x` at the lattice: midpoints of the lines.
+pub(super) fn multilinear_lattice(dim: usize, x: &[[f64; 3]; 8]) -> Lattice {
+    let mut p = [[0.0; 3]; 27];
+    for (c, pc) in HEX_VERTEX_PARAMS.iter().enumerate().take(1 << dim) {
+        p[2 * (pc[0] as usize + 3 * pc[1] as usize + 9 * pc[2] as usize)] = x[c];
+    }
+    map_lines(dim, &mut p, |[a, _, c]| [a, lin(0.5, a, 0.5, c), c]);
+    p
+}
+
+/// F − K C0 for the fit with weights `w`, weight masks `masks` and optional smooth targets.
+pub(super) fn displacement_rhs(
+    space: &dyn FitSpace,
+    mesh: &LinearMesh,
+    topo: &Topology,
+    w: &FitWeights,
+    masks: &[u64],
+    smooth: Option<&SmoothTargets>,
+) -> Vec<[f64; 3]> {
+    let dim = space.dim();
+    let nb = if dim == 2 { 9 } else { 27 };
+    let c0 = space.control_points();
+    let ne = space.n_elements();
+    let mut rhs = vec![[0.0; 3]; c0.len()];
+    let element = |e: usize, acc: &mut Vec<(u32, [f64; 3])>| {
+        let mut r = multilinear_lattice(dim, &mesh.element_coords(e));
+        if let Some(t) = smooth {
+            let shift = t.corrections_at(mesh, topo, e, &r);
+            for (p, s) in r.iter_mut().zip(shift) {
+                *p = add(*p, s);
+            }
+        }
+        // The initial map at the samples: B B⁰.
+        let mut x0 = space.bezier_net_with(e, c0);
+        map_lines(dim, &mut x0, |[a, b, c]| {
+            [a, add(lin(0.25, a, 0.25, c), b.map(|b| 0.5 * b)), c]
+        });
+        for (i, (r, x0)) in r.iter_mut().zip(&x0).enumerate().take(nb) {
+            let l = [i % 3, (i / 3) % 3, i / 9];
+            let corner = l[..dim].iter().all(|&c| c != 1);
+            let wd = sample_weight(w, masks[e], i, l, corner);
+            *r = if wd == 0.0 {
+                [0.0; 3]
+            } else {
+                sub(*r, *x0).map(|d| wd * d)
+            };
+        }
+        // Bᵀ: B₁ᵀ on every line.
+        map_lines(dim, &mut r, |[a, b, c]| {
+            [
+                lin(1.0, a, 0.25, b),
+                b.map(|b| 0.5 * b),
+                lin(0.25, b, 1.0, c),
+            ]
+        });
+        space.add_transposed(e, &r, acc);
+    };
+    for batch in (0..ne).step_by(RHS_BATCH) {
+        let chunks: Vec<Vec<(u32, [f64; 3])>> = (batch..(batch + RHS_BATCH).min(ne))
+            .into_par_iter()
+            .fold(Vec::new, |mut acc, e| {
+                element(e, &mut acc);
+                acc
+            })
+            .collect();
+        for f in chunks {
+            for (i, f) in f {
+                for k in 0..3 {
+                    rhs[i as usize][k] += f[k];
+                }
+            }
+        }
+    }
+    rhs
+}
