@@ -234,7 +234,10 @@ fn sampled_elements_represent_the_spline_exactly() {
 /// Output problems: an unwritable place or the input itself; nothing is left behind.
 #[test]
 fn bad_outputs_lose_nothing() {
-    let input = scratch("input_copy.msh");
+    // A folder of its own: other tests write (and briefly hold .tmp files) in `scratch("")`.
+    let dir = scratch("lose_nothing");
+    std::fs::create_dir_all(&dir).unwrap();
+    let input = dir.join("input_copy.msh");
     std::fs::copy(
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("meshes/generated/block_hex8_8.msh"),
         &input,
@@ -247,18 +250,18 @@ fn bad_outputs_lose_nothing() {
         "{e}"
     );
     assert_eq!(std::fs::read(&input).unwrap(), before);
-    let missing_dir = scratch("no/such/dir/out.msh");
+    let missing_dir = dir.join("no/such/dir/out.msh");
     let e = curve(&input, &missing_dir, &options(2, Geometry::SplineFitted)).unwrap_err();
     assert!(e.to_string().contains("cannot write"), "{e}");
     let e = curve(
         &input,
-        &scratch("out.xyz"),
+        &dir.join("out.xyz"),
         &options(2, Geometry::SplineFitted),
     )
     .unwrap_err();
     assert!(e.to_string().contains("unknown output format"), "{e}");
     // No temporary files are left next to the outputs.
-    let leftovers: Vec<_> = std::fs::read_dir(scratch(""))
+    let leftovers: Vec<_> = std::fs::read_dir(&dir)
         .unwrap()
         .flatten()
         .filter(|f| f.file_name().to_string_lossy().ends_with(".tmp"))
