@@ -216,7 +216,8 @@ pub struct CurveReport {
     pub q2_elements: usize,
     /// Elements made Q2 because their initial spline map was not certified valid.
     pub demoted_elements: usize,
-    /// Elements made Q2 because they touch a kink of a boundary grid line (smooth fit).
+    /// Elements made Q2 because they touch a kink of a boundary grid line (smooth fit), counting
+    /// only elements that would otherwise be spline elements.
     pub kink_elements: usize,
     /// With `--snap-boundary`: boundary vertices moved back onto the input vertices.
     pub snapped_boundary_vertices: Option<usize>,
@@ -453,7 +454,6 @@ pub fn curve_in_memory_with_progress(
         }
         _ => kinks::Kinks::default(),
     };
-    let kink_elements = kinks.n_elements;
     let build = |demote: &[bool]| {
         SplineSpace::build_with_q2(
             &mesh,
@@ -721,7 +721,15 @@ pub fn curve_in_memory_with_progress(
         spline_elements: space.as_ref().map_or(0, |s| s.n_spline_elements()),
         q2_elements: space.as_ref().map_or(0, |s| s.n_q2_elements()),
         demoted_elements: demoted,
-        kink_elements,
+        // Counted in the built space: elements Q2 for other reasons already are not kinks'.
+        kink_elements: space.as_ref().map_or(0, |s| {
+            s.classes
+                .iter()
+                .filter(|c| {
+                    **c == crate::spline::ElementClass::Q2(crate::spline::Q2Reason::BoundaryKink)
+                })
+                .count()
+        }),
         snapped_boundary_vertices: snapped,
         features: features.as_ref().map(|f| {
             let (vertex, planarity) = f.deviations(&mesh, &ho);
