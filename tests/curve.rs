@@ -457,16 +457,11 @@ fn plot_shows_the_control_points() {
     let mesh =
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("meshes/generated/star5_quad4_20.msh");
     let svg = scratch("star_cp.svg");
-    let out = Command::new(env!("CARGO_BIN_EXE_polyspline"))
-        .args(["plot", "--control-points", "-o"])
-        .arg(&svg)
-        .arg(&mesh)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    common::run_ok(
+        Command::new(env!("CARGO_BIN_EXE_polyspline"))
+            .args(["plot", "--control-points", "-o"])
+            .arg(&svg)
+            .arg(&mesh),
     );
     let text = std::fs::read_to_string(&svg).unwrap();
     let m = polyspline::io::read_mesh(&mesh, &MeshOptions::default()).unwrap();

@@ -164,15 +164,19 @@ fn with_features(on: bool) -> CurveOptions {
     }
 }
 
-/// Gmsh's Jacobians of a written file: (min, max) det J over a Gauss rule (the callers
-/// checked that Gmsh is there).
-fn gmsh_det_range(file: &Path) -> (f64, f64) {
+/// Gmsh's Jacobians of a written file are positive: (min, max) det J over a Gauss rule (the
+/// callers checked that Gmsh is there).
+fn assert_gmsh_valid(file: &Path) {
     let jobs = scratch(&format!(
         "{}_jobs.json",
         file.file_stem().unwrap().to_string_lossy()
     ));
     let (lo, hi, _) = common::gmsh_det_range(file, &jobs).expect("gmsh checked by the caller");
-    (lo, hi)
+    assert!(
+        lo > 0.0 && hi > 0.0,
+        "Gmsh finds det J in [{lo}, {hi}] on {}",
+        file.display()
+    );
 }
 
 /// Box with a hole: with features the side planes and top/bottom stay planar to rounding (the
@@ -210,8 +214,7 @@ fn box_with_hole_keeps_its_planes_and_rims() {
     assert!(on.q2_elements > off.q2_elements, "crease elements are Q2");
     let out = scratch("box_hole_features.msh");
     curve(&input, &out, &with_features(true)).unwrap();
-    let (lo, hi) = gmsh_det_range(&out);
-    assert!(lo > 0.0 && hi > 0.0, "Gmsh finds det J in [{lo}, {hi}]");
+    assert_gmsh_valid(&out);
 }
 
 /// The degeneration energy (`--fit energy`) moves control points after the least-squares fit;
@@ -270,8 +273,7 @@ fn gmsh_cylinder_keeps_its_rims_and_end_planes() {
     assert!(on.min_det_bound > 0.0);
     let out = scratch("cylinder_features.msh");
     curve(&input, &out, &with_features(true)).unwrap();
-    let (lo, hi) = gmsh_det_range(&out);
-    assert!(lo > 0.0 && hi > 0.0, "Gmsh finds det J in [{lo}, {hi}]");
+    assert_gmsh_valid(&out);
 }
 
 /// `--snap-boundary` puts the feature vertices back onto the input exactly; the report's
@@ -338,17 +340,12 @@ fn l_shape() -> PathBuf {
 fn info_reports_the_features_found() {
     let input = l_shape();
     let run = |args: &[&str]| -> serde_json::Value {
-        let out = polyspline()
-            .arg("info")
-            .arg(&input)
-            .arg("--json")
-            .args(args)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
+        let out = common::run_ok(
+            polyspline()
+                .arg("info")
+                .arg(&input)
+                .arg("--json")
+                .args(args),
         );
         serde_json::from_slice::<serde_json::Value>(&out.stdout).unwrap()["features"].clone()
     };
@@ -370,15 +367,10 @@ fn plot_shows_corners_and_bad_edits_are_refused() {
     let input = l_shape();
     let svg = scratch("l_shape.svg");
     let _ = std::fs::remove_file(&svg);
-    let out = polyspline()
-        .args(["plot", input.to_str().unwrap(), "-o", svg.to_str().unwrap()])
-        .arg("--show-features")
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    common::run_ok(
+        polyspline()
+            .args(["plot", input.to_str().unwrap(), "-o", svg.to_str().unwrap()])
+            .arg("--show-features"),
     );
     let text = std::fs::read_to_string(&svg).unwrap();
     let group = text

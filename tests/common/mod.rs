@@ -23,6 +23,17 @@ pub fn have_gmsh(skipped: &str) -> bool {
     ok
 }
 
+/// Run `cmd` and insist that it succeeds (its stderr is the failure message).
+pub fn run_ok(cmd: &mut Command) -> std::process::Output {
+    let out = cmd.output().unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    out
+}
+
 /// Run Gmsh's own reader and Jacobians on a batch of files (the jobs are written to
 /// `jobs_file`); `None` (a visible skip) when the Python module is missing outside CI.
 pub fn gmsh_probe(jobs: &[Value], jobs_file: &Path) -> Option<Vec<Value>> {
@@ -30,18 +41,13 @@ pub fn gmsh_probe(jobs: &[Value], jobs_file: &Path) -> Option<Vec<Value>> {
         return None;
     }
     std::fs::write(jobs_file, serde_json::json!({ "jobs": jobs }).to_string()).unwrap();
-    let out = Command::new("python3")
-        .arg(concat!(
-            env!("CARGO_MANIFEST_DIR"),
-            "/tests/external/gmsh_probe.py"
-        ))
-        .arg(jobs_file)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    let out = run_ok(
+        Command::new("python3")
+            .arg(concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/tests/external/gmsh_probe.py"
+            ))
+            .arg(jobs_file),
     );
     Some(serde_json::from_slice(&out.stdout).unwrap())
 }
