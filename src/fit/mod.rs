@@ -198,27 +198,8 @@ impl LinOp for NormalMatrix {
             .enumerate()
             .with_min_len(256)
             .for_each(|(r, y)| {
-                // Four partial sums break the dependency chain of the accumulation.
                 let (lo, hi) = (self.indptr[r], self.indptr[r + 1]);
-                let (cols, vals) = (&self.indices[lo..hi], &self.data[lo..hi]);
-                let mut s = [[0.0; 3]; 4];
-                let mut ci = cols.chunks_exact(4);
-                let mut vi = vals.chunks_exact(4);
-                for (c, v) in (&mut ci).zip(&mut vi) {
-                    for l in 0..4 {
-                        let xc = x[c[l] as usize];
-                        for d in 0..3 {
-                            s[l][d] += v[l] * xc[d];
-                        }
-                    }
-                }
-                for (&c, &v) in ci.remainder().iter().zip(vi.remainder()) {
-                    let xc = x[c as usize];
-                    for d in 0..3 {
-                        s[0][d] += v * xc[d];
-                    }
-                }
-                *y = std::array::from_fn(|d| (s[0][d] + s[1][d]) + (s[2][d] + s[3][d]));
+                *y = crate::solve::row_dot(&self.indices[lo..hi], &self.data[lo..hi], x);
             });
     }
     fn diagonal(&self) -> Vec<f64> {

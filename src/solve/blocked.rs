@@ -224,25 +224,7 @@ fn spmv_chunk(a: &TemplateMatrix, base: usize, x: &[V4], y: &mut [V4]) -> V4 {
     let mut dot = [0.0; 4];
     for (j, y) in y.iter_mut().enumerate() {
         let (cols, vals) = a.row(base + j);
-        // Four partial sums break the dependency chain of the accumulation.
-        let mut s = [[0.0; 4]; 4];
-        let mut ci = cols.chunks_exact(4);
-        let mut vi = vals.chunks_exact(4);
-        for (c, v) in (&mut ci).zip(&mut vi) {
-            for l in 0..4 {
-                let xc = x[c[l] as usize];
-                for d in 0..4 {
-                    s[l][d] += v[l] * xc[d];
-                }
-            }
-        }
-        for (&c, &v) in ci.remainder().iter().zip(vi.remainder()) {
-            let xc = x[c as usize];
-            for d in 0..4 {
-                s[0][d] += v * xc[d];
-            }
-        }
-        *y = std::array::from_fn(|d| (s[0][d] + s[1][d]) + (s[2][d] + s[3][d]));
+        *y = super::row_dot(cols, vals, x);
         let xi = x[base + j];
         for d in 0..4 {
             dot[d] += xi[d] * y[d];

@@ -281,6 +281,31 @@ pub fn preconditioner(
     }
 }
 
+/// Σ_k vals[k] x[cols[k]] for one CSR row, on N-component entries. Four partial sums break
+/// the dependency chain of the accumulation; their order is fixed, so every caller gets the
+/// same bits for the same row.
+#[inline(always)]
+pub(crate) fn row_dot<const N: usize>(cols: &[u32], vals: &[f64], x: &[[f64; N]]) -> [f64; N] {
+    let mut s = [[0.0; N]; 4];
+    let mut ci = cols.chunks_exact(4);
+    let mut vi = vals.chunks_exact(4);
+    for (c, v) in (&mut ci).zip(&mut vi) {
+        for l in 0..4 {
+            let xc = x[c[l] as usize];
+            for d in 0..N {
+                s[l][d] += v[l] * xc[d];
+            }
+        }
+    }
+    for (&c, &v) in ci.remainder().iter().zip(vi.remainder()) {
+        let xc = x[c as usize];
+        for d in 0..N {
+            s[0][d] += v * xc[d];
+        }
+    }
+    std::array::from_fn(|d| (s[0][d] + s[1][d]) + (s[2][d] + s[3][d]))
+}
+
 /// Solve A x = b by preconditioned CG (the preconditioner of `params`), starting from `x`.
 /// `progress(iteration, rel_residual)` is called every iteration. An assembled operator
 /// ([`LinOp::csr`]) with block Jacobi is solved by [`BlockedSystem`], anything else by
