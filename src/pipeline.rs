@@ -11,7 +11,7 @@
 
 use crate::elastic::{ElasticError, ElasticInfo, ElasticParams, elastic_analogy};
 use crate::energy::{EnergyError, EnergyInfo, EnergyParams};
-use crate::fit::{FitParams, FitTargets, FitWeights, fit_with};
+use crate::fit::{FitParams, FitTargets, FitWeights, fit_with_targets};
 use crate::gpu::{AdapterReport, Backend, Precision};
 use crate::io::gmsh_write::{MshVersion, write_msh};
 use crate::io::output::{WriteError, write_atomically};
@@ -22,6 +22,7 @@ use crate::quality::sample_det_jacobian;
 use crate::sample::{BezierElements, HighOrderMesh, MAX_ORDER, sample};
 use crate::solve::CgError;
 use crate::spline::{SplineSpace, kinks};
+use crate::validity::blend::{BlendError, BlendInfo, Blended, blend_search};
 use crate::validity::{
     Certifier, CpuCertifier, LineSearchInfo, LineSearchParams, ValidityError, certify_screened,
     lagrange_element_bounds, line_search_with, local_line_search_with,
@@ -164,6 +165,11 @@ pub enum CurveError {
         source: ElasticError,
     },
     #[error("{}: {source}", input.display())]
+    Blend {
+        input: PathBuf,
+        source: BlendError,
+    },
+    #[error("{}: {source}", input.display())]
     Validity {
         input: PathBuf,
         source: ValidityError,
@@ -233,15 +239,24 @@ pub struct CurveReport {
     pub cg_rel_residual: Option<f64>,
     pub line_search_mode: LineSearchMode,
     /// Step of the certified line search (1 = the full least-squares fit); with the local
-    /// search, the smallest step factor of any control point.
+    /// search, the smallest step factor of any point.
     pub line_search_alpha: Option<f64>,
     /// Elements not certified valid at the full least-squares step.
     pub invalid_at_full_step: usize,
-    /// Local search: control points whose step was shortened.
+    /// Points held back from the full step: shared Bernstein points of the certified blend
+    /// (least-squares fits), or control points of the local search (`--fit energy`).
     pub damped_control_points: usize,
     pub line_search: Option<LineSearchInfo>,
+    /// Elements whose curving the certified blend reduced (some Bernstein point held back
+    /// towards the straight elevation; `validity::blend`).
+    pub reduced_elements: usize,
+    /// The certified blend between the straight elevation and the fitted map: elements and
+    /// points reduced, by how much, the worst ones with their coordinates.
+    pub blend: Option<BlendInfo>,
     /// The degeneration-energy minimisation, with `--fit energy`.
     pub energy: Option<EnergyInfo>,
+    /// Why `--fit energy` fell back to the blended least-squares fit, when it did.
+    pub energy_skipped: Option<String>,
     /// Elements of the written mesh not certified valid (always 0: otherwise nothing is written).
     pub invalid_elements: usize,
     /// Smallest certified lower bound of det J over the written elements (spline geometry).
@@ -413,6 +428,9 @@ pub fn curve_in_memory_with_progress(
     let mut ls_invalid_full = 0;
     let mut ls_damped = 0;
     let mut energy_info = None;
+    let mut energy_skipped = None;
+    let mut blend_lambda: Option<Vec<f32>> = None;
+    let mut blend_info = None;
     let gpu = options.backend.gpu();
     let gpu_certifier = gpu.map(crate::gpu::jacobian_check::GpuCertifier::new);
     let certifier: &dyn Certifier = match &gpu_certifier {
@@ -465,28 +483,73 @@ pub fn curve_in_memory_with_progress(
             ],
         )
     };
+    // The fit's smooth targets, shared by the fit and the target map of the blend.
+    let targets = match options.geometry {
+        Geometry::SplineFitted => crate::fit::smooth_targets(&mesh, &topo, &fit_params),
+        _ => None,
+    };
+    let target_map = crate::fit::TargetMap {
+        mesh: &mesh,
+        topo: &topo,
+        smooth: targets.as_ref(),
+    };
     if options.geometry != Geometry::Straight {
         let mut demote = vec![false; mesh.n_elements()];
         let mut s = build(&demote);
         lap("spline", &mut timings);
-        if options.geometry == Geometry::SplineFitted {
+        // The least-squares fit of the space's control points (planar patches projected back).
+        let solve_fit = |s: &SplineSpace| {
+            let (mut c_star, info) =
+                fit_with_targets(s, &mesh, &topo, &fit_params, targets.as_ref(), |k, rhs, x, cg| match gpu {
+                    Some(ctx) => crate::gpu::cg::pcg(ctx, k, rhs, x, cg, |_, _| {}),
+                    None => crate::solve::pcg(k, rhs, x, cg, |i, r| progress.cg(i, r)),
+                })
+                .map_err(|source| CurveError::Solve {
+                    input: input.to_owned(),
+                    source,
+                })?;
+            if let Some(f) = used {
+                crate::fit::features::project_onto_planes(s, &topo, f, &mut c_star);
+            }
+            Ok::<_, CurveError>((c_star, info))
+        };
+        // The certified blend from the straight elevation to the fitted map (validity::blend):
+        // valid for every input whose straight elevation is certified.
+        let blend = |s: &SplineSpace| {
+            let mut blended = Blended::new(&mesh, &target_map, s, &mesh, &topo, Vec::new());
+            let info = blend_search(certifier, &mut blended, &options.line_search.blend(
+                options.line_search_mode == LineSearchMode::Global,
+            ))
+            .map_err(|source| CurveError::Blend {
+                input: input.to_owned(),
+                source,
+            })?;
+            Ok::<_, CurveError>((std::mem::take(&mut blended.factors), info))
+        };
+        if options.geometry == Geometry::SplineFitted && options.energy.is_none() {
+            let (c_star, info) = solve_fit(&s)?;
+            lap("fit", &mut timings);
+            *timings.entry("fit_assembly".into()).or_insert(0.0) += info.assembly_seconds;
+            *timings.entry("fit_cg".into()).or_insert(0.0) += info.solve_seconds;
+            s.control_points = c_star;
+            let (lambda, bi) = blend(&s)?;
+            blend_lambda = Some(lambda);
+            min_det_bound = Some(bi.min_det_lower_bound);
+            ls_alpha = Some(bi.min_factor);
+            ls_invalid_full = bi.invalid_at_full_step;
+            ls_damped = bi.reduced_points;
+            fit_info = Some(info);
+            blend_info = Some(bi);
+            lap("validity", &mut timings);
+        } else if options.geometry == Geometry::SplineFitted {
             // Fit; take the full step when certified, else bisect towards the initial map.
             // Where the initial map itself is not certified valid, those elements become
-            // constrained Q2 elements (the input's own shape) and the fit is repeated.
+            // constrained Q2 elements (the input's own shape) and the fit is repeated; when
+            // that does not give a certified start, the energy is skipped and the
+            // least-squares fit is blended with the straight elevation instead.
             let mut round = 0;
             loop {
-                let (mut c_star, info) =
-                    fit_with(&s, &mesh, &topo, &fit_params, |k, rhs, x, cg| match gpu {
-                        Some(ctx) => crate::gpu::cg::pcg(ctx, k, rhs, x, cg, |_, _| {}),
-                        None => crate::solve::pcg(k, rhs, x, cg, |i, r| progress.cg(i, r)),
-                    })
-                    .map_err(|source| CurveError::Solve {
-                        input: input.to_owned(),
-                        source,
-                    })?;
-                if let Some(f) = used {
-                    crate::fit::features::project_onto_planes(&s, &topo, f, &mut c_star);
-                }
+                let (c_star, info) = solve_fit(&s)?;
                 lap("fit", &mut timings);
                 *timings.entry("fit_assembly".into()).or_insert(0.0) += info.assembly_seconds;
                 *timings.entry("fit_cg".into()).or_insert(0.0) += info.solve_seconds;
@@ -603,11 +666,21 @@ pub fn curve_in_memory_with_progress(
                         round += 1;
                         lap("validity", &mut timings);
                     }
-                    Err(source) => {
-                        return Err(CurveError::Validity {
-                            input: input.to_owned(),
-                            source,
-                        });
+                    Err(ValidityError::InitialInvalid { count, .. }) => {
+                        energy_skipped = Some(format!(
+                            "the initial spline map is not certified valid on {count} element(s); the least-squares fit was blended with the straight elevation instead"
+                        ));
+                        s.control_points = c_star;
+                        let (lambda, bi) = blend(&s)?;
+                        blend_lambda = Some(lambda);
+                        min_det_bound = Some(bi.min_det_lower_bound);
+                        ls_alpha = Some(bi.min_factor);
+                        ls_invalid_full = bi.invalid_at_full_step;
+                        ls_damped = bi.reduced_points;
+                        fit_info = Some(info);
+                        blend_info = Some(bi);
+                        lap("validity", &mut timings);
+                        break;
                     }
                 }
             }
@@ -630,9 +703,14 @@ pub fn curve_in_memory_with_progress(
         }
         space = Some(s);
     }
-    let source: &dyn BezierElements = match &space {
-        None => &mesh,
-        Some(s) => s,
+    let blended = space
+        .as_ref()
+        .zip(blend_lambda)
+        .map(|(s, factors)| Blended::new(&mesh, &target_map, s, &mesh, &topo, factors));
+    let source: &dyn BezierElements = match (&blended, &space) {
+        (Some(b), _) => b,
+        (None, Some(s)) => s,
+        (None, None) => &mesh,
     };
     let mut ho =
         match gpu {
@@ -749,7 +827,10 @@ pub fn curve_in_memory_with_progress(
         invalid_at_full_step: ls_invalid_full,
         damped_control_points: ls_damped,
         line_search: ls_info,
+        reduced_elements: blend_info.as_ref().map_or(0, |b| b.reduced_elements),
+        blend: blend_info,
         energy: energy_info,
+        energy_skipped,
         invalid_elements: 0,
         min_det_jacobian_bound: min_det_bound,
         input_min_scaled_jacobian: input_msj,

@@ -32,7 +32,7 @@ pub mod smooth;
 
 pub use smooth::{SmoothParams, SmoothTargets};
 
-use crate::mesh::{LinearMesh, Topology};
+use crate::mesh::{LinearMesh, Topology, vec3};
 use crate::sample::bernstein2;
 use crate::solve::{CgError, CgInfo, CgParams, LinOp, pcg};
 use rayon::prelude::*;
@@ -296,6 +296,24 @@ pub struct ElementBlocks {
 
 /// Position weight of sample `i` (lattice point `l`) of an element with weight mask `mask`.
 fn sample_weight(w: &FitWeights, mask: u64, i: usize, l: [usize; 3], corner: bool) -> f64 {
+    size_scale(mask) * sample_weight_unscaled(w, mask, i, l, corner)
+}
+
+/// Bit offset of an element's size level in its weight mask.
+const LEVEL_SHIFT: u32 = 48;
+
+/// The weight factor 4^k of size level k (bits 48.. of the mask; see [`size_levels`]).
+fn size_scale(mask: u64) -> f64 {
+    let k = (mask >> LEVEL_SHIFT) as i32;
+    (4.0f64).powi(k)
+}
+
+/// The size level stored in a weight mask.
+pub fn mask_level(mask: u64) -> u16 {
+    (mask >> LEVEL_SHIFT) as u16
+}
+
+fn sample_weight_unscaled(w: &FitWeights, mask: u64, i: usize, l: [usize; 3], corner: bool) -> f64 {
     if mask & (1 << (8 + i)) != 0 {
         w.feature
     } else if !corner {
@@ -304,6 +322,87 @@ fn sample_weight(w: &FitWeights, mask: u64, i: usize, l: [usize; 3], corner: boo
         w.boundary_corner
     } else {
         w.corner
+    }
+}
+
+/// Size levels below this many halvings of the largest element's size get no extra weight, so
+/// meshes whose element sizes vary by less than 2^`LEVEL_DEAD_ZONE` keep plain weights.
+const LEVEL_DEAD_ZONE: f64 = 2.0;
+
+/// Per element, the size level k = max(0, ⌊log₂(h_max / h_e)⌋ − [`LEVEL_DEAD_ZONE`]), h_e the
+/// element's shortest edge: its samples are weighted by 4^k ≈ (h_max / h_e)², so the fit
+/// balances errors relative to the size of the element they distort. With plain weights the
+/// least-squares error of a large far-field cell leaks into the thin boundary-layer cells next
+/// to it (on a C-grid with wall cells 10⁻⁵ and far-field cells 10² long, errors of 10⁻² in cells
+/// 10⁻⁵ thin).
+pub fn size_levels(mesh: &LinearMesh) -> Vec<u16> {
+    let edges: &[[usize; 2]] = if mesh.dim == 2 {
+        &[[0, 1], [1, 2], [2, 3], [3, 0]]
+    } else {
+        &crate::mesh::topology::HEX_EDGES
+    };
+    let h: Vec<f64> = (0..mesh.n_elements())
+        .into_par_iter()
+        .map(|e| {
+            let x = mesh.element_coords(e);
+            edges
+                .iter()
+                .map(|&[a, b]| vec3::norm(vec3::sub(x[a], x[b])))
+                .fold(f64::INFINITY, f64::min)
+        })
+        .collect();
+    let hmax = h.iter().copied().fold(0.0, f64::max);
+    h.par_iter()
+        .map(|&he| {
+            if he > 0.0 && hmax > 0.0 {
+                ((hmax / he).log2().floor() - LEVEL_DEAD_ZONE).clamp(0.0, MAX_LEVEL as f64) as u16
+            } else {
+                0
+            }
+        })
+        .collect()
+}
+
+/// Largest size level (4^k stays far inside f64's range).
+const MAX_LEVEL: u16 = 200;
+
+/// Per control point, 2^−k with k the largest size level of the elements using it, or `None`
+/// when every level is 0. The fit solves D K D y = D b with D = diag(2^−k) and δ = D y: the
+/// same iterates under (block) Jacobi preconditioning, but the residual that stops CG then
+/// weighs every control point relative to its own elements' size, so far-field rows do not
+/// stop it before the boundary-layer rows have converged (powers of 2 keep K's values exact).
+fn control_point_scales(space: &dyn FitSpace, levels: &[u16]) -> Option<Vec<f64>> {
+    if levels.iter().all(|&l| l == 0) {
+        return None;
+    }
+    let mut k = vec![0u16; space.control_points().len()];
+    let (mut offsets, mut cols, mut weights) = (Vec::new(), Vec::new(), Vec::new());
+    for (e, &l) in levels.iter().enumerate() {
+        if l == 0 {
+            continue;
+        }
+        space.element_rows(e, &mut offsets, &mut cols, &mut weights);
+        for &c in &cols {
+            let slot = &mut k[c as usize];
+            *slot = (*slot).max(l);
+        }
+    }
+    Some(k.iter().map(|&k| (0.5f64).powi(k as i32)).collect())
+}
+
+impl NormalMatrix {
+    /// K ← D K D for the diagonal D = diag(`d`).
+    pub fn scale_symmetric(&mut self, d: &[f64]) {
+        let (indptr, indices) = (&self.indptr, &self.indices);
+        crate::solve::block_jacobi::split_at_offsets(&mut self.data, indptr)
+            .into_par_iter()
+            .enumerate()
+            .for_each(|(r, row)| {
+                let cols = &indices[indptr[r]..indptr[r + 1]];
+                for (v, &c) in row.iter_mut().zip(cols) {
+                    *v *= d[r] * d[c as usize];
+                }
+            });
     }
 }
 
@@ -330,11 +429,12 @@ impl ElementBlocks {
             for i in 0..nb {
                 let corner = samples.is_corner(i);
                 let wd = sample_weight(w, mask, i, samples.points[i], corner);
-                let wr = if corner {
-                    w.frame_corner
-                } else {
-                    w.frame_midpoint
-                };
+                let wr = size_scale(mask)
+                    * if corner {
+                        w.frame_corner
+                    } else {
+                        w.frame_midpoint
+                    };
                 let b = &samples.values[i];
                 for r in 0..nb {
                     for c in 0..nb {
@@ -348,6 +448,7 @@ impl ElementBlocks {
             }
             (gd, gr)
         };
+        let levels = size_levels(mesh);
         let masks: Vec<u64> = (0..space.n_elements())
             .map(|e| {
                 let mut m = 0u64;
@@ -359,7 +460,7 @@ impl ElementBlocks {
                 if let Some(f) = features {
                     m |= features::sample_mask(f, mesh, e) << 8;
                 }
-                m
+                m | (levels[e] as u64) << LEVEL_SHIFT
             })
             .collect();
         let mut cache = HashMap::new();
@@ -517,19 +618,78 @@ pub fn normal_equations(
     topo: &Topology,
     params: &FitParams,
 ) -> (NormalMatrix, Vec<[f64; 3]>) {
-    let features = params.features.as_deref();
-    let smooth = match params.targets {
+    normal_equations_with(space, mesh, topo, params, smooth_targets(mesh, topo, params).as_ref())
+}
+
+/// The smooth-boundary models of the fit described by `params` (`None` with chord targets).
+pub fn smooth_targets(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    params: &FitParams,
+) -> Option<SmoothTargets> {
+    match params.targets {
         FitTargets::Chords => None,
-        FitTargets::Smooth(p) => Some(SmoothTargets::build_with_features(mesh, topo, &p, features)),
-    };
+        FitTargets::Smooth(p) => Some(SmoothTargets::build_with_features(
+            mesh,
+            topo,
+            &p,
+            params.features.as_deref(),
+        )),
+    }
+}
+
+/// [`normal_equations`] with the smooth targets built already ([`smooth_targets`]).
+pub fn normal_equations_with(
+    space: &dyn FitSpace,
+    mesh: &LinearMesh,
+    topo: &Topology,
+    params: &FitParams,
+    smooth: Option<&SmoothTargets>,
+) -> (NormalMatrix, Vec<[f64; 3]>) {
     assemble_with_features(
         space,
         mesh,
         topo,
         &params.weights,
-        smooth.as_ref(),
-        features,
+        smooth,
+        params.features.as_deref(),
     )
+}
+
+/// The fit's targets as a conforming quadratic map: per element the multilinear lattice moved
+/// by the smooth-target corrections (chords without them), interpolated at {0, ½, 1}^d and
+/// written in Bernstein form. Every target depends only on its entity (its vertices and their
+/// models), so neighbours agree on shared points. It is the straight elevation plus the
+/// boundary's curvature carried into the layers next to it: the middle state of the certified
+/// blend (`crate::validity::blend`).
+pub struct TargetMap<'a> {
+    pub mesh: &'a LinearMesh,
+    pub topo: &'a Topology,
+    pub smooth: Option<&'a SmoothTargets>,
+}
+
+impl crate::sample::BezierElements for TargetMap<'_> {
+    fn dim(&self) -> usize {
+        self.mesh.dim
+    }
+    fn n_elements(&self) -> usize {
+        self.mesh.n_elements()
+    }
+    fn bezier_net(&self, e: usize) -> [[f64; 3]; 27] {
+        let dim = self.mesh.dim;
+        let mut v = rhs::multilinear_lattice(dim, &self.mesh.element_coords(e));
+        if let Some(t) = self.smooth {
+            let shift = t.corrections_at(self.mesh, self.topo, e, &v);
+            for (p, s) in v.iter_mut().zip(shift) {
+                *p = vec3::add(*p, s);
+            }
+        }
+        // Values at {0, ½, 1} to Bernstein points, line by line: b₁ = 2 v(½) − (v₀ + v₁)/2.
+        rhs::map_lines(dim, &mut v, |[a, m, c]| {
+            [a, std::array::from_fn(|k| 2.0 * m[k] - 0.5 * (a[k] + c[k])), c]
+        });
+        v
+    }
 }
 
 /// [`assemble_with_targets`] with the samples on the sharp `features` weighted by
@@ -576,12 +736,48 @@ pub fn fit_with(
         &crate::solve::CgParams,
     ) -> Result<crate::solve::CgInfo, CgError>,
 ) -> Result<(Vec<[f64; 3]>, FitInfo), CgError> {
+    fit_with_targets(
+        space,
+        mesh,
+        topo,
+        params,
+        smooth_targets(mesh, topo, params).as_ref(),
+        solve,
+    )
+}
+
+/// [`fit_with`] given the smooth targets ([`smooth_targets`]).
+pub fn fit_with_targets(
+    space: &dyn FitSpace,
+    mesh: &LinearMesh,
+    topo: &Topology,
+    params: &FitParams,
+    smooth: Option<&SmoothTargets>,
+    solve: impl FnOnce(
+        &NormalMatrix,
+        &[[f64; 3]],
+        &mut [[f64; 3]],
+        &crate::solve::CgParams,
+    ) -> Result<crate::solve::CgInfo, CgError>,
+) -> Result<(Vec<[f64; 3]>, FitInfo), CgError> {
     let t = std::time::Instant::now();
-    let (k, rhs) = normal_equations(space, mesh, topo, params);
+    let (mut k, mut rhs) = normal_equations_with(space, mesh, topo, params, smooth);
+    let scale = control_point_scales(space, &size_levels(mesh));
+    if let Some(d) = &scale {
+        k.scale_symmetric(d);
+        for (r, &d) in rhs.iter_mut().zip(d) {
+            *r = r.map(|x| d * x);
+        }
+    }
     let assembly_seconds = t.elapsed().as_secs_f64();
     let t = std::time::Instant::now();
     let mut delta = vec![[0.0; 3]; k.n];
     let cg = solve(&k, &rhs, &mut delta, &params.cg)?;
+    if let Some(d) = &scale {
+        for (x, &d) in delta.iter_mut().zip(d) {
+            *x = x.map(|x| d * x);
+        }
+    }
     let solve_seconds = t.elapsed().as_secs_f64();
     let c: Vec<[f64; 3]> = space
         .control_points()

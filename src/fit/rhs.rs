@@ -30,7 +30,7 @@ const RHS_BATCH: usize = 1 << 16;
 type Lattice = [[f64; 3]; 27];
 
 /// Apply `f` to every line of the 3^`dim` lattice `v`, direction by direction (x, y, z).
-fn map_lines(dim: usize, v: &mut Lattice, f: impl Fn([[f64; 3]; 3]) -> [[f64; 3]; 3]) {
+pub(super) fn map_lines(dim: usize, v: &mut Lattice, f: impl Fn([[f64; 3]; 3]) -> [[f64; 3]; 3]) {
     let n = 3usize.pow(dim as u32);
     for s in [1, 3, 9].into_iter().take(dim) {
         for b in (0..n).filter(|i| (i / s) % 3 == 0) {

@@ -17,6 +17,7 @@
 //! [`Screened::refine_smallest`]. Other per-element bounds may be the screen's, which are
 //! certified lower bounds too, only less sharp.
 
+pub mod blend;
 pub mod screen;
 
 pub use screen::{Screened, certify_screened, screen_bounds};
@@ -682,6 +683,13 @@ pub struct LineSearchParams {
     /// map's own bound), so a valid result is not also a nearly degenerate one. 0 accepts any
     /// certified-positive element, as in the paper.
     pub min_det_fraction: f64,
+    /// Least-squares fits: accept an element only when its Jacobian ratio bound (min det J
+    /// over max det J, certified) is at least this fraction of its straight elevation's
+    /// ([`blend`]); 0 turns the test off.
+    pub min_quality_fraction: f64,
+    /// … and at least this fraction of min(its straight ratio, the straight mesh's 1st
+    /// percentile) ([`blend`]).
+    pub percentile_quality_fraction: f64,
 }
 
 impl Default for LineSearchParams {
@@ -691,6 +699,23 @@ impl Default for LineSearchParams {
             tolerance: 1e-3,
             certificate_depth: 6,
             min_det_fraction: 0.1,
+            min_quality_fraction: 0.55,
+            percentile_quality_fraction: 0.85,
+        }
+    }
+}
+
+impl LineSearchParams {
+    /// The parameters of the certified blend ([`blend::blend_search`]); `global`: one factor
+    /// for the whole mesh.
+    pub fn blend(&self, global: bool) -> blend::BlendParams {
+        blend::BlendParams {
+            max_bisections: 6,
+            certificate_depth: self.certificate_depth,
+            min_det_fraction: self.min_det_fraction,
+            min_quality_fraction: self.min_quality_fraction,
+            percentile_quality_fraction: self.percentile_quality_fraction,
+            global,
         }
     }
 }

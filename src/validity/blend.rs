@@ -1,0 +1,585 @@
+//! Certified blend of the straight-sided elevation, the fit's target map and the fitted map.
+//!
+//! Input: per element three conforming quadratic Bernstein nets: S_e, the input's multilinear
+//! map elevated to quadratic (the straight-sided elevation, certified valid for every valid
+//! input); T_e, the fit's targets (`crate::fit::TargetMap`: S plus the smooth boundary's
+//! curvature carried into the layers next to it, C⁰); F_e, the fitted spline map (C¹ where the
+//! space is). Every Bernstein point of a quadratic element sits on one mesh entity (vertex,
+//! edge, face or cell) and is shared by all elements on it. Each entity n gets one factor
+//! t_n ∈ [0, 2] ([`entity_ids`]) on the path S → T → F:
+//!
+//!   B_e[i] = T + (t − 1)(F − T) for t ≥ 1,   S + t (T − S) for t ≤ 1,   t = t_n(i),
+//!
+//! so the blend is conforming for any factors; t = 2 is the fitted map, 1 the target map, 0 the
+//! straight elevation.
+//!
+//! [`blend_search`] starts from t = 2 and accepts an element when (validity) its certified lower
+//! bound of det J exceeds `min_det_fraction` × the straight element's and (quality) its
+//! Jacobian ratio bound r_B (certified min det J over the largest Bernstein coefficient of
+//! det J, an upper bound of max det J) is at least max(q_min · r_S, q_p · min(r_S, P)), r_S the
+//! straight element's ratio (from its corners) and P the 1st percentile of r_S over the mesh.
+//! Its smallest scaled Jacobian over the lattice {0, ½, 1}^d must also be at least q_min × the
+//! straight element's (det J alone does not see a thin cell sheared along its length).
+//! Every accepted element then has r_B ≥ q_min · r_S, so the mesh's smallest ratio is at least
+//! q_min × the straight mesh's; and an element below q_p · P has r_S < P, which only 1 % of
+//! the elements have, so the 1st percentile is at least q_p × the straight mesh's.
+//! The factors of the entities of rejected elements are halved towards 1 (twice, then set
+//! to 1: the target map), then towards 0 (the straight elevation, at most `max_bisections`
+//! halvings); global mode bisects one factor for the whole mesh instead. An element whose
+//! factors are all 0 is its straight elevation, which is accepted, so the search always ends
+//! with every element certified: the guarantee holds for every input whose straight
+//! elevation is certified valid, whatever the fit does.
+
+use super::{Certifier, DetBounds, bernstein_min_bounds, certify_screened, det_jacobian_bernstein};
+use crate::mesh::{LinearMesh, Topology, vec3};
+use crate::sample::BezierElements;
+use rayon::prelude::*;
+
+/// Bernstein nets, 9 (2D) or 27 (3D) points, index 9z + 3y + x.
+pub type Net = [[f64; 3]; 27];
+
+/// Global ids of the mesh entities of an element's 3^d Bernstein points: vertices first
+/// (ids 0..nv), then edges, faces (3D) and cells.
+pub struct EntityIds<'a> {
+    mesh: &'a LinearMesh,
+    topo: &'a Topology,
+}
+
+impl<'a> EntityIds<'a> {
+    pub fn new(mesh: &'a LinearMesh, topo: &'a Topology) -> Self {
+        EntityIds { mesh, topo }
+    }
+
+    /// Number of entities (the length of a λ vector).
+    pub fn len(&self) -> usize {
+        self.topo.n_vertices + self.topo.edges.len() + self.topo.faces.len() + self.mesh.n_elements()
+    }
+
+    /// Whether the mesh has no entity.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Entity ids of the Bernstein points of element `e` (the first 3^d entries).
+    pub fn of(&self, e: usize) -> [u32; 27] {
+        entity_ids(self.mesh, self.topo, e)
+    }
+}
+
+/// See [`EntityIds::of`].
+pub fn entity_ids(mesh: &LinearMesh, topo: &Topology, e: usize) -> [u32; 27] {
+    use crate::mesh::topology::HEX_VERTEX_PARAMS;
+    let dim = mesh.dim;
+    let n = if dim == 2 { 9 } else { 27 };
+    let verts = mesh.element(e);
+    let nv = topo.n_vertices as u32;
+    let ne = topo.edges.len() as u32;
+    let nf = topo.faces.len() as u32;
+    let edges_per = if dim == 2 { 4 } else { 12 };
+    let mut out = [u32::MAX; 27];
+    for (i, slot) in out.iter_mut().enumerate().take(n) {
+        let l = [i % 3, (i / 3) % 3, i / 9];
+        let ones: Vec<usize> = (0..dim).filter(|&k| l[k] == 1).collect();
+        *slot = match (dim, ones.len()) {
+            (_, 0) => {
+                let c = HEX_VERTEX_PARAMS
+                    .iter()
+                    .take(1 << dim)
+                    .position(|p| (0..dim).all(|k| 2 * p[k] as usize == l[k]))
+                    .expect("corner of the lattice");
+                verts[c]
+            }
+            (2, 1) => {
+                // Quad edges are its sides: side 2j + s where coordinate j (≠ the edge's
+                // direction) equals s.
+                let j = 1 - ones[0];
+                nv + topo.element_edges[edges_per * e + 2 * j + l[j] / 2]
+            }
+            (3, 1) => {
+                // Hex edge 4k + a + 2b, (a, b) the other two coordinates in axis order.
+                let k = ones[0];
+                let others: Vec<usize> = (0..3).filter(|&j| j != k).collect();
+                let local = 4 * k + l[others[0]] / 2 + 2 * (l[others[1]] / 2);
+                nv + topo.element_edges[edges_per * e + local]
+            }
+            (3, 2) => {
+                let j = (0..3).find(|&j| l[j] != 1).expect("one coordinate off 1");
+                nv + ne + topo.element_faces[6 * e + 2 * j + l[j] / 2]
+            }
+            _ => nv + ne + nf + e as u32,
+        };
+    }
+    out
+}
+
+/// Parameters of [`blend_search`].
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct BlendParams {
+    /// Halvings of a factor towards the straight elevation before it is set to 0.
+    pub max_bisections: usize,
+    /// Subdivision depth of the Bernstein certificate.
+    pub certificate_depth: usize,
+    /// Accept an element only when its certified lower bound of det J exceeds this fraction of
+    /// the straight element's.
+    pub min_det_fraction: f64,
+    /// q_min: every element keeps at least this fraction of its straight Jacobian ratio
+    /// (0: no quality test).
+    pub min_quality_fraction: f64,
+    /// q_p: elements keep at least this fraction of min(their straight ratio, the straight
+    /// mesh's 1st percentile).
+    pub percentile_quality_fraction: f64,
+    /// One factor for the whole mesh (the paper's bisection) instead of one per entity.
+    pub global: bool,
+}
+
+impl Default for BlendParams {
+    fn default() -> Self {
+        BlendParams {
+            max_bisections: 6,
+            certificate_depth: 6,
+            min_det_fraction: 0.1,
+            min_quality_fraction: 0.55,
+            percentile_quality_fraction: 0.85,
+            global: false,
+        }
+    }
+}
+
+/// An element whose curving was reduced.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ReducedElement {
+    pub element: usize,
+    /// Centroid of the input element.
+    pub centroid: [f64; 3],
+    /// Smallest factor on its Bernstein points (2 fitted, 1 target map, 0 straight).
+    pub min_factor: f64,
+    /// Largest distance by which a Bernstein point was held back from the fitted map,
+    /// relative to the element's shortest edge.
+    pub withheld: f64,
+}
+
+/// What [`blend_search`] did.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct BlendInfo {
+    /// Elements not certified valid at the full fit.
+    pub invalid_at_full_step: usize,
+    /// Elements certified valid at the full fit but below the quality bound.
+    pub poor_at_full_step: usize,
+    /// The straight mesh's Jacobian ratio: smallest and 1st percentile (from element corners).
+    pub straight_ratio_min: f64,
+    pub straight_ratio_p1: f64,
+    /// Rounds of reduction.
+    pub rounds: usize,
+    /// Elements with a point held back from the fitted map.
+    pub reduced_elements: usize,
+    /// Shared Bernstein points held back from the fitted map (factor < 2), at or below the
+    /// target map (≤ 1), and back at the straight elevation (0).
+    pub reduced_points: usize,
+    pub target_points: usize,
+    pub straight_points: usize,
+    /// Smallest factor (2 when nothing was reduced).
+    pub min_factor: f64,
+    /// The reduced elements with the largest withheld displacement (at most 10).
+    pub worst: Vec<ReducedElement>,
+    /// Smallest certified lower bound of det J over the mesh.
+    pub min_det_lower_bound: f64,
+}
+
+/// Why the blend cannot be certified.
+#[derive(Clone, Debug, thiserror::Error)]
+pub enum BlendError {
+    #[error(
+        "{count} input element(s) (first: {}) are not valid: det J of the multilinear element is not certified positive inside",
+        first.iter().map(|e| e.to_string()).collect::<Vec<_>>().join(", ")
+    )]
+    StraightInvalid { count: usize, first: Vec<usize> },
+}
+
+/// The blended mesh.
+pub struct Blended<'a> {
+    pub straight: &'a (dyn BezierElements + 'a),
+    pub target: &'a (dyn BezierElements + 'a),
+    pub fitted: &'a (dyn BezierElements + 'a),
+    pub ids: EntityIds<'a>,
+    /// One factor per entity; empty means 2 (the fitted map) everywhere.
+    pub factors: Vec<f32>,
+    /// Elements with a factor below 2 on one of their points.
+    reduced: Vec<bool>,
+}
+
+/// Factor of the fitted map.
+pub const FITTED: f32 = 2.0;
+
+impl<'a> Blended<'a> {
+    /// The blend with the factors `factors` (empty: the fitted map).
+    pub fn new(
+        straight: &'a (dyn BezierElements + 'a),
+        target: &'a (dyn BezierElements + 'a),
+        fitted: &'a (dyn BezierElements + 'a),
+        mesh: &'a LinearMesh,
+        topo: &'a Topology,
+        factors: Vec<f32>,
+    ) -> Self {
+        let mut b = Blended {
+            straight,
+            target,
+            fitted,
+            ids: EntityIds::new(mesh, topo),
+            factors,
+            reduced: Vec::new(),
+        };
+        b.refresh();
+        b
+    }
+
+    fn points(&self) -> usize {
+        if self.fitted.dim() == 2 { 9 } else { 27 }
+    }
+
+    fn refresh(&mut self) {
+        let np = self.points();
+        self.reduced = if self.factors.is_empty() {
+            Vec::new()
+        } else {
+            (0..self.fitted.n_elements())
+                .into_par_iter()
+                .map(|e| self.ids.of(e)[..np].iter().any(|&id| self.factors[id as usize] < FITTED))
+                .collect()
+        };
+    }
+
+    /// Whether element `e` differs from the fitted map.
+    pub fn is_reduced(&self, e: usize) -> bool {
+        self.reduced.get(e).copied().unwrap_or(false)
+    }
+
+    /// Blended net of element `e` under `factors`.
+    fn net_with(&self, e: usize, factors: &[f32], reduced: bool) -> Net {
+        let f = self.fitted.bezier_net(e);
+        if !reduced || factors.is_empty() {
+            return f;
+        }
+        let (s, t) = (self.straight.bezier_net(e), self.target.bezier_net(e));
+        let ids = self.ids.of(e);
+        let mut out = f;
+        for i in 0..self.points() {
+            let x = factors[ids[i] as usize] as f64;
+            if x >= 2.0 {
+                continue;
+            }
+            out[i] = if x >= 1.0 {
+                std::array::from_fn(|k| t[i][k] + (x - 1.0) * (f[i][k] - t[i][k]))
+            } else {
+                std::array::from_fn(|k| s[i][k] + x * (t[i][k] - s[i][k]))
+            };
+        }
+        out
+    }
+}
+
+impl BezierElements for Blended<'_> {
+    fn dim(&self) -> usize {
+        self.fitted.dim()
+    }
+    fn n_elements(&self) -> usize {
+        self.fitted.n_elements()
+    }
+    fn bezier_net(&self, e: usize) -> Net {
+        self.net_with(e, &self.factors, self.is_reduced(e))
+    }
+}
+
+/// Largest Bernstein coefficient of det J: an upper bound of max det J over the element.
+pub fn max_det_bound(dim: usize, net: &Net) -> f64 {
+    det_jacobian_bernstein(dim, net)
+        .coef
+        .iter()
+        .copied()
+        .fold(f64::NEG_INFINITY, f64::max)
+}
+
+/// Smallest scaled Jacobian det J / (|J₁| |J₂| (|J₃|)) of a quadratic Bézier element over the
+/// lattice {0, ½, 1}^d (sampled, not certified: a shape measure, not a validity test).
+pub fn lattice_scaled_jacobian(dim: usize, net: &Net) -> f64 {
+    const B: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.25, 0.5, 0.25], [0.0, 0.0, 1.0]];
+    const D: [[f64; 3]; 3] = [[-2.0, 2.0, 0.0], [-1.0, 0.0, 1.0], [0.0, -2.0, 2.0]];
+    let nz = if dim == 2 { 1 } else { 3 };
+    let mut min = f64::INFINITY;
+    for k in 0..nz {
+        for j in 0..3 {
+            for i in 0..3 {
+                let mut jac = [[0.0f64; 3]; 3];
+                for c in 0..nz {
+                    let (bz, dz) = if dim == 2 { (1.0, 0.0) } else { (B[k][c], D[k][c]) };
+                    for b in 0..3 {
+                        for a in 0..3 {
+                            let p = net[a + 3 * b + 9 * c];
+                            let w = [
+                                D[i][a] * B[j][b] * bz,
+                                B[i][a] * D[j][b] * bz,
+                                B[i][a] * B[j][b] * dz,
+                            ];
+                            for (col, w) in jac.iter_mut().zip(w) {
+                                if w != 0.0 {
+                                    for q in 0..3 {
+                                        col[q] += w * p[q];
+                                    }
+                                }
+                            }
+                        }
+                    }
+                }
+                let sj = if dim == 2 {
+                    let det = jac[0][0] * jac[1][1] - jac[0][1] * jac[1][0];
+                    det / (vec3::norm(jac[0]) * vec3::norm(jac[1]))
+                } else {
+                    let det = vec3::dot(vec3::cross(jac[0], jac[1]), jac[2]);
+                    det / (vec3::norm(jac[0]) * vec3::norm(jac[1]) * vec3::norm(jac[2]))
+                };
+                min = min.min(if sj.is_nan() { -1.0 } else { sj });
+            }
+        }
+    }
+    min
+}
+
+/// Jacobian ratio of a straight element from its corner values of det J (exact for quads,
+/// whose det J is affine in each coordinate).
+fn corner_ratio(mesh: &LinearMesh, e: usize) -> f64 {
+    let npe = mesh.nodes_per_element();
+    let x = mesh.element_coords(e);
+    let (mut jac, mut scaled) = ([0.0; 8], [0.0; 8]);
+    crate::mesh::linear::corner_jacobians(mesh.dim, &x[..npe], &mut jac[..npe], &mut scaled[..npe]);
+    let lo = jac[..npe].iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = jac[..npe].iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    lo / hi
+}
+
+/// The straight elements' certified lower bounds of det J and corner Jacobian ratios.
+fn straight_reference(
+    certifier: &dyn Certifier,
+    blended: &Blended,
+    depth: usize,
+) -> Result<(Vec<f64>, Vec<(f64, f64)>), BlendError> {
+    let n = blended.n_elements();
+    let dim = blended.dim();
+    let all: Vec<usize> = (0..n).collect();
+    let net = |e: usize| blended.straight.bezier_net(e);
+    let bounds = certifier.certify(dim, &all, &net, depth);
+    let bad: Vec<usize> = (0..n).filter(|&e| !(bounds[e].lower > 0.0)).collect();
+    if !bad.is_empty() {
+        return Err(BlendError::StraightInvalid {
+            count: bad.len(),
+            first: bad.into_iter().take(8).collect(),
+        });
+    }
+    let mesh = blended.ids.mesh;
+    let ratio = all
+        .par_iter()
+        .map(|&e| (corner_ratio(mesh, e), lattice_scaled_jacobian(dim, &net(e))))
+        .collect();
+    Ok((bounds.iter().map(|b| b.lower).collect(), ratio))
+}
+
+/// The next factor of a rejected entity: twice halve the way to 1 (the fitted map's C¹ shape
+/// is what the target map lacks, so a little of it is worth trying before giving it up), then
+/// 1, then halve the way to 0 at most `max_bisections` times, then 0.
+fn reduce(x: f32, max_bisections: usize) -> f32 {
+    let tiny = 0.5f32.powi(max_bisections as i32);
+    if x > 1.0 {
+        if x > 1.25 { 1.0 + 0.5 * (x - 1.0) } else { 1.0 }
+    } else if x > tiny {
+        0.5 * x
+    } else {
+        0.0
+    }
+}
+
+/// Find the factors (see the module docs) and store them in `blended`.
+pub fn blend_search(
+    certifier: &dyn Certifier,
+    blended: &mut Blended,
+    params: &BlendParams,
+) -> Result<BlendInfo, BlendError> {
+    let n = blended.n_elements();
+    let dim = blended.dim();
+    let np = blended.points();
+    let depth = params.certificate_depth;
+    let (straight_lower, reference) = straight_reference(certifier, blended, depth)?;
+    let straight_ratio: Vec<f64> = reference.iter().map(|r| r.0).collect();
+    let mut sorted = straight_ratio.clone();
+    sorted.sort_by(f64::total_cmp);
+    let p1 = sorted.get(n / 100).copied().unwrap_or(1.0);
+    let det_target = |e: usize| params.min_det_fraction.max(0.0) * straight_lower[e];
+    let quality = params.min_quality_fraction > 0.0 || params.percentile_quality_fraction > 0.0;
+    let ratio_target = |e: usize| {
+        let r = straight_ratio[e];
+        (params.min_quality_fraction * r).max(params.percentile_quality_fraction * r.min(p1))
+    };
+    // (valid, accepted, certified lower bound): det J above its target, then (only then,
+    // since it costs the det J polynomial) the ratio bound.
+    let accept = |e: usize, b: &DetBounds, net: &Net| -> (bool, bool, f64) {
+        if !(b.lower > det_target(e)) {
+            return (false, false, b.lower);
+        }
+        if !quality {
+            return (true, true, b.lower);
+        }
+        let poly = det_jacobian_bernstein(dim, net);
+        let max = poly.coef.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let need = ratio_target(e) * max;
+        // The screened lower bound may be loose: take the exact certificate's when it decides.
+        let lower = if b.lower >= need {
+            b.lower
+        } else {
+            bernstein_min_bounds(dim, poly, depth).lower
+        };
+        let shape = || {
+            lattice_scaled_jacobian(dim, net)
+                >= params.min_quality_fraction * reference[e].1
+        };
+        (true, lower >= need && shape(), lower.max(b.lower))
+    };
+    let judge = |blended: &Blended, factors: &[f32], reduced: &[bool], elements: &[usize]| {
+        let net = |e: usize| blended.net_with(e, factors, reduced.get(e).copied().unwrap_or(false));
+        let cert = certify_screened(certifier, dim, elements, &net, depth, &det_target);
+        elements
+            .par_iter()
+            .zip(&cert.bounds)
+            .map(|(&e, b)| accept(e, b, &net(e)))
+            .collect::<Vec<_>>()
+    };
+    let all: Vec<usize> = (0..n).collect();
+    let first = judge(blended, &[], &[], &all);
+    let mut info = BlendInfo {
+        invalid_at_full_step: first.iter().filter(|r| !r.0).count(),
+        poor_at_full_step: first.iter().filter(|r| r.0 && !r.1).count(),
+        straight_ratio_min: sorted.first().copied().unwrap_or(1.0),
+        straight_ratio_p1: p1,
+        min_factor: FITTED as f64,
+        ..Default::default()
+    };
+    let mut lower: Vec<f64> = first.iter().map(|r| r.2).collect();
+    let mut bad: Vec<usize> = (0..n).filter(|&e| !first[e].1).collect();
+    let mut factors = Vec::new();
+    if !bad.is_empty() {
+        factors = vec![FITTED; blended.ids.len()];
+    }
+    let mut reduced = vec![false; if bad.is_empty() { 0 } else { n }];
+    if params.global && !bad.is_empty() {
+        // Bisection on one factor in [0, 2]; 0 (straight) is accepted.
+        let (mut lo, mut hi) = (0.0f32, FITTED);
+        for _ in 0..2 * params.max_bisections.max(1) {
+            let mid = 0.5 * (lo + hi);
+            factors.fill(mid);
+            reduced.fill(true);
+            let r = judge(blended, &factors, &reduced, &all);
+            info.rounds += 1;
+            if r.iter().all(|r| r.1) {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        factors.fill(lo);
+        reduced.fill(true);
+        let r = judge(blended, &factors, &reduced, &all);
+        lower = r.iter().map(|r| r.2).collect();
+        bad.clear();
+    }
+    while !bad.is_empty() {
+        let mut touched = vec![false; factors.len()];
+        for &e in &bad {
+            for &id in &blended.ids.of(e)[..np] {
+                let id = id as usize;
+                if !touched[id] {
+                    touched[id] = true;
+                    factors[id] = reduce(factors[id], params.max_bisections);
+                }
+            }
+        }
+        // Elements sharing a changed point contain one of the rejected elements' vertices.
+        let mut recheck: Vec<usize> = bad
+            .iter()
+            .flat_map(|&e| blended.ids.mesh.element(e).to_vec())
+            .flat_map(|v| blended.ids.topo.elements_at_vertex(v as usize).to_vec())
+            .map(|e| e as usize)
+            .collect();
+        recheck.sort_unstable();
+        recheck.dedup();
+        for &e in &recheck {
+            reduced[e] = blended.ids.of(e)[..np]
+                .iter()
+                .any(|&id| factors[id as usize] < FITTED);
+        }
+        let r = judge(blended, &factors, &reduced, &recheck);
+        info.rounds += 1;
+        bad.clear();
+        for (&e, r) in recheck.iter().zip(&r) {
+            lower[e] = r.2;
+            let straight = || {
+                blended.ids.of(e)[..np]
+                    .iter()
+                    .all(|&id| factors[id as usize] == 0.0)
+            };
+            // A straight element is accepted by construction (its own reference).
+            if !r.1 && !straight() {
+                bad.push(e);
+            }
+        }
+    }
+    blended.factors = factors;
+    blended.refresh();
+    summarise(blended, &mut info, &lower);
+    Ok(info)
+}
+
+/// Fill the reduction counts and the worst reduced elements of `info`.
+fn summarise(blended: &Blended, info: &mut BlendInfo, lower: &[f64]) {
+    let n = blended.n_elements();
+    let dim = blended.dim();
+    let np = blended.points();
+    info.min_det_lower_bound = lower.iter().copied().fold(f64::INFINITY, f64::min);
+    let mesh = blended.ids.mesh;
+    let per: Vec<Option<ReducedElement>> = (0..n)
+        .into_par_iter()
+        .map(|e| {
+            if !blended.is_reduced(e) {
+                return None;
+            }
+            let (b, f) = (blended.bezier_net(e), blended.fitted.bezier_net(e));
+            let ids = blended.ids.of(e);
+            let x = mesh.element_coords(e);
+            let nc = 1 << dim;
+            let mut h = f64::INFINITY;
+            for a in 0..nc {
+                for c in a + 1..nc {
+                    h = h.min(vec3::norm(vec3::sub(x[a], x[c])));
+                }
+            }
+            let (mut min_factor, mut withheld) = (FITTED as f64, 0.0f64);
+            for i in 0..np {
+                let l = blended.factors[ids[i] as usize] as f64;
+                min_factor = min_factor.min(l);
+                withheld = withheld.max(vec3::norm(vec3::sub(f[i], b[i])));
+            }
+            let centroid =
+                std::array::from_fn(|k| x[..nc].iter().map(|p| p[k]).sum::<f64>() / nc as f64);
+            Some(ReducedElement {
+                element: e,
+                centroid,
+                min_factor,
+                withheld: withheld / h.max(f64::MIN_POSITIVE),
+            })
+        })
+        .collect();
+    let mut reduced: Vec<ReducedElement> = per.into_iter().flatten().collect();
+    info.reduced_elements = reduced.len();
+    info.reduced_points = blended.factors.iter().filter(|&&l| l < FITTED).count();
+    info.target_points = blended.factors.iter().filter(|&&l| l <= 1.0).count();
+    info.straight_points = blended.factors.iter().filter(|&&l| l == 0.0).count();
+    info.min_factor = reduced.iter().map(|r| r.min_factor).fold(FITTED as f64, f64::min);
+    reduced.sort_by(|a, b| b.withheld.total_cmp(&a.withheld));
+    reduced.truncate(10);
+    info.worst = reduced;
+}
