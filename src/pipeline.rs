@@ -238,8 +238,10 @@ pub struct CurveReport {
     pub matrix_nonzeros: Option<usize>,
     pub cg_rel_residual: Option<f64>,
     pub line_search_mode: LineSearchMode,
-    /// Step of the certified line search (1 = the full least-squares fit); with the local
-    /// search, the smallest step factor of any point.
+    /// Step of the certified search (1 = the full least-squares fit everywhere): with the
+    /// blend of least-squares fits, half its smallest factor (0.5 = the target map, 0 = the
+    /// straight elevation, somewhere); with `--fit energy`, the global step or the smallest
+    /// control point step of the local search.
     pub line_search_alpha: Option<f64>,
     /// Elements not certified valid at the full least-squares step.
     pub invalid_at_full_step: usize,
@@ -484,14 +486,27 @@ pub fn curve_in_memory_with_progress(
         )
     };
     // The fit's smooth targets, shared by the fit and the target map of the blend.
+    // The blend's middle state carries the smooth boundary whatever the fit's own targets
+    // (with the paper's chord targets it is built with the default reconstruction).
     let targets = match options.geometry {
         Geometry::SplineFitted => crate::fit::smooth_targets(&mesh, &topo, &fit_params),
+        _ => None,
+    };
+    let blend_targets = match (&targets, options.geometry) {
+        (None, Geometry::SplineFitted) => crate::fit::smooth_targets(
+            &mesh,
+            &topo,
+            &FitParams {
+                targets: FitTargets::Smooth(Default::default()),
+                ..fit_params.clone()
+            },
+        ),
         _ => None,
     };
     let target_map = crate::fit::TargetMap {
         mesh: &mesh,
         topo: &topo,
-        smooth: targets.as_ref(),
+        smooth: targets.as_ref().or(blend_targets.as_ref()),
     };
     if options.geometry != Geometry::Straight {
         let mut demote = vec![false; mesh.n_elements()];
@@ -535,7 +550,7 @@ pub fn curve_in_memory_with_progress(
             let (lambda, bi) = blend(&s)?;
             blend_lambda = Some(lambda);
             min_det_bound = Some(bi.min_det_lower_bound);
-            ls_alpha = Some(bi.min_factor);
+            ls_alpha = Some(0.5 * bi.min_factor);
             ls_invalid_full = bi.invalid_at_full_step;
             ls_damped = bi.reduced_points;
             fit_info = Some(info);
@@ -674,7 +689,7 @@ pub fn curve_in_memory_with_progress(
                         let (lambda, bi) = blend(&s)?;
                         blend_lambda = Some(lambda);
                         min_det_bound = Some(bi.min_det_lower_bound);
-                        ls_alpha = Some(bi.min_factor);
+                        ls_alpha = Some(0.5 * bi.min_factor);
                         ls_invalid_full = bi.invalid_at_full_step;
                         ls_damped = bi.reduced_points;
                         fit_info = Some(info);

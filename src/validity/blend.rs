@@ -343,6 +343,34 @@ pub fn lattice_scaled_jacobian(dim: usize, net: &Net) -> f64 {
     min
 }
 
+/// An upper bound of max det J: the product over directions of the largest Bernstein
+/// coefficient norm of the column ∂x/∂ξ_k (Hadamard's inequality; cheap, loose when sheared).
+fn hadamard_upper(dim: usize, net: &Net) -> f64 {
+    let nz = if dim == 2 { 1 } else { 3 };
+    let mut m = [0.0f64; 3];
+    for k in 0..nz {
+        for j in 0..3 {
+            for i in 0..3 {
+                let p = net[i + 3 * j + 9 * k];
+                let mut d = |dir: usize, q: [f64; 3]| {
+                    let v = vec3::sub(q, p);
+                    m[dir] = m[dir].max(2.0 * vec3::norm(v));
+                };
+                if i < 2 {
+                    d(0, net[i + 1 + 3 * j + 9 * k]);
+                }
+                if j < 2 {
+                    d(1, net[i + 3 * (j + 1) + 9 * k]);
+                }
+                if dim == 3 && k < 2 {
+                    d(2, net[i + 3 * j + 9 * (k + 1)]);
+                }
+            }
+        }
+    }
+    if dim == 2 { m[0] * m[1] } else { m[0] * m[1] * m[2] }
+}
+
 /// Jacobian ratio of a straight element from its corner values of det J (exact for quads,
 /// whose det J is affine in each coordinate).
 fn corner_ratio(mesh: &LinearMesh, e: usize) -> f64 {
@@ -365,7 +393,7 @@ fn straight_reference(
     let dim = blended.dim();
     let all: Vec<usize> = (0..n).collect();
     let net = |e: usize| blended.straight.bezier_net(e);
-    let bounds = certifier.certify(dim, &all, &net, depth);
+    let bounds = certify_screened(certifier, dim, &all, &net, depth, &|_| 0.0).bounds;
     let bad: Vec<usize> = (0..n).filter(|&e| !(bounds[e].lower > 0.0)).collect();
     if !bad.is_empty() {
         return Err(BlendError::StraightInvalid {
@@ -425,6 +453,13 @@ pub fn blend_search(
         if !quality {
             return (true, true, b.lower);
         }
+        let shape = || {
+            lattice_scaled_jacobian(dim, net) >= params.min_quality_fraction * reference[e].1
+        };
+        // Cheap first: the screened lower bound against the Hadamard upper bound of max det J.
+        if b.lower >= ratio_target(e) * hadamard_upper(dim, net) {
+            return (true, shape(), b.lower);
+        }
         let poly = det_jacobian_bernstein(dim, net);
         let max = poly.coef.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         let need = ratio_target(e) * max;
@@ -433,10 +468,6 @@ pub fn blend_search(
             b.lower
         } else {
             bernstein_min_bounds(dim, poly, depth).lower
-        };
-        let shape = || {
-            lattice_scaled_jacobian(dim, net)
-                >= params.min_quality_fraction * reference[e].1
         };
         (true, lower >= need && shape(), lower.max(b.lower))
     };

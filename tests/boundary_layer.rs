@@ -1,0 +1,321 @@
+//! Every valid input curves certified valid, and keeps its cells' quality: boundary-layer grids
+//! on curved walls (graded from 10⁻⁵, aspect ratios up to 10⁴·10), jittered and stretched
+//! grids, in 2D and 3D, for every fit mode and both line-search modes; the certified blend
+//! (`validity::blend`) against a fitted map made of garbage; Gmsh's Jacobian ratios of the
+//! written files against the straight-sided elevation.
+
+mod common;
+
+use polyspline::fit::{FitParams, FitTargets, FitWeights};
+use polyspline::mesh::generate::{extrude, grid_2d};
+use polyspline::mesh::{LinearMesh, Topology};
+use polyspline::pipeline::{
+    CurveOptions, LineSearchMode, OutputOptions, curve_in_memory, write_high_order,
+};
+use polyspline::sample::BezierElements;
+use polyspline::validity::blend::{BlendParams, Blended, blend_search, entity_ids};
+use polyspline::validity::{CpuCertifier, det_jacobian_bounds};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn out_dir() -> PathBuf {
+    let d = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("boundary_layer");
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// Write a linear mesh as MSH 4.1.
+fn write_linear(mesh: &LinearMesh, path: &Path) {
+    let topo = Topology::build(mesh);
+    let linear = polyspline::sample::sample(mesh, mesh, &topo, 1);
+    write_high_order(&linear, path, &OutputOptions::default(), &[]).unwrap();
+}
+
+/// `mesh` as the reader sees it (orientation normalised), or `None` when the reader refuses
+/// it as invalid (tangled or degenerate elements).
+fn as_read(mesh: &LinearMesh, name: &str) -> Option<LinearMesh> {
+    let path = out_dir().join(format!("{name}_read.msh"));
+    write_linear(mesh, &path);
+    polyspline::io::read_mesh(&path, &Default::default()).ok()
+}
+
+/// Geometric distances from the wall: first `h0`, ratio `r`, `n` layers (0 included).
+fn graded(h0: f64, r: f64, n: usize) -> Vec<f64> {
+    let mut d = vec![0.0];
+    let mut h = h0;
+    for _ in 0..n {
+        d.push(d.last().unwrap() + h);
+        h *= r;
+    }
+    d
+}
+
+/// A boundary layer on part of an ellipse with semi-axes 1 and `b` (angles 0.1..5.9 rad,
+/// `around` cells), offset along the wall normals by `dist`.
+fn ellipse_layer(b: f64, around: usize, dist: &[f64]) -> LinearMesh {
+    let xs: Vec<f64> = (0..=around).map(|i| i as f64 / around as f64).collect();
+    let ys: Vec<f64> = (0..dist.len()).map(|j| j as f64).collect();
+    let mut mesh = grid_2d(&xs, &ys);
+    for p in &mut mesh.coords {
+        let t = 0.1 + p[0] * 5.8;
+        let d = dist[p[1].round() as usize];
+        let (x, y) = (t.cos(), b * t.sin());
+        let n = [b * t.cos(), t.sin()];
+        let l = (n[0] * n[0] + n[1] * n[1]).sqrt();
+        *p = [x + d * n[0] / l, y + d * n[1] / l, 0.0];
+    }
+    mesh
+}
+
+/// A deterministic pseudo-random sequence in [−1, 1).
+struct Lcg(u64);
+impl Lcg {
+    fn next(&mut self) -> f64 {
+        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        ((self.0 >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+    }
+}
+
+/// Uniform grid with every interior vertex moved by up to `amount` × the spacing.
+fn jittered(n: usize, amount: f64, seed: u64) -> LinearMesh {
+    let xs: Vec<f64> = (0..=n).map(|i| i as f64 / n as f64).collect();
+    let mut mesh = grid_2d(&xs, &xs);
+    let mut rng = Lcg(seed);
+    let h = 1.0 / n as f64;
+    for p in &mut mesh.coords {
+        let interior = [p[0], p[1]].iter().all(|&c| c > 1e-12 && c < 1.0 - 1e-12);
+        if interior {
+            p[0] += amount * h * rng.next();
+            p[1] += amount * h * rng.next();
+        }
+    }
+    mesh
+}
+
+/// Thin cells of aspect ratio `aspect` on an arc of radius 1 (sagitta over one cell far larger
+/// than its height).
+fn stretched_arc(n: usize, layers: usize, aspect: f64) -> LinearMesh {
+    let len = 1.0 / n as f64;
+    let xs: Vec<f64> = (0..=n).map(|i| i as f64 * len).collect();
+    let ys: Vec<f64> = (0..=layers).map(|j| j as f64 * len / aspect).collect();
+    let mut mesh = grid_2d(&xs, &ys);
+    for p in &mut mesh.coords {
+        let (t, r) = (p[0] * 2.0, 1.0 + p[1]);
+        *p = [r * t.cos(), r * t.sin(), 0.0];
+    }
+    mesh
+}
+
+fn options(fit: &str, mode: LineSearchMode, order: usize) -> CurveOptions {
+    let fit = match fit {
+        "smooth" => FitParams::smooth(),
+        "position" => FitParams {
+            weights: FitWeights::position(),
+            targets: FitTargets::Chords,
+            ..Default::default()
+        },
+        "frame" => FitParams {
+            weights: FitWeights::frame(),
+            targets: FitTargets::Chords,
+            ..Default::default()
+        },
+        _ => unreachable!(),
+    };
+    CurveOptions {
+        order,
+        fit,
+        line_search_mode: mode,
+        ..Default::default()
+    }
+}
+
+/// Curve `mesh` with `opts` and insist on a certified-valid result whose every sampled det J
+/// is positive; returns the report's blend counts.
+fn curves_valid(name: &str, mesh: &LinearMesh, opts: &CurveOptions) -> usize {
+    let path = out_dir().join(format!("{name}.msh"));
+    write_linear(mesh, &path);
+    let c = curve_in_memory(&path, opts)
+        .unwrap_or_else(|e| panic!("{name}: a valid input was refused: {e}"));
+    let r = &c.report;
+    assert_eq!(r.invalid_elements, 0, "{name}");
+    assert!(r.min_det_jacobian_bound.unwrap() > 0.0, "{name}: {r:?}");
+    let q = polyspline::quality::sample_det_jacobian(&c.ho);
+    assert!(q.iter().all(|q| q.min_det_jacobian > 0.0), "{name}");
+    r.reduced_elements
+}
+
+#[test]
+fn every_valid_input_curves_valid_in_every_fit_mode() {
+    let layer = ellipse_layer(0.25, 48, &graded(1e-5, 1.3, 24));
+    let thin_arc = stretched_arc(24, 3, 1e4);
+    let meshes: Vec<(&str, LinearMesh)> = vec![
+        ("ellipse_layer", layer.clone()),
+        ("jittered", jittered(12, 0.35, 7)),
+        ("thin_arc", thin_arc),
+        (
+            "ellipse_layer_3d",
+            extrude(&ellipse_layer(0.25, 24, &graded(1e-5, 1.3, 16)), &[0.0, 0.05, 0.1]),
+        ),
+    ];
+    for (name, mesh) in &meshes {
+        for fit in ["smooth", "position", "frame"] {
+            for mode in [LineSearchMode::Local, LineSearchMode::Global] {
+                let order = if *name == "jittered" { 3 } else { 2 };
+                curves_valid(&format!("{name}_{fit}_{mode:?}"), mesh, &options(fit, mode, order));
+            }
+        }
+    }
+}
+
+#[test]
+fn random_valid_meshes_always_curve_valid() {
+    // Jitter, grading and stretching mixed at random: each draw is kept only when its own
+    // straight elevation is valid (the input is valid), and then must curve valid.
+    let mut rng = Lcg(2024);
+    let mut tried = 0;
+    for k in 0..12u64 {
+        let n = 6 + (k as usize % 4) * 2;
+        let mut mesh = jittered(n, 0.15 * (1.0 + rng.next()), 100 + k);
+        let stretch = 10f64.powf(2.0 * (1.0 + rng.next())); // 1 .. 10⁴
+        let bend = 0.5 + 1.5 * (1.0 + rng.next());
+        for p in &mut mesh.coords {
+            // Grade towards y = 0, squash by `stretch`, bend onto an arc of radius 1.
+            let y = p[1].powf(2.5) / stretch;
+            let t = p[0] * bend;
+            *p = [(1.0 + y) * t.cos(), (1.0 + y) * t.sin(), 0.0];
+        }
+        if as_read(&mesh, &format!("random_{k}")).is_none() {
+            continue;
+        }
+        tried += 1;
+        curves_valid(
+            &format!("random_{k}"),
+            &mesh,
+            &options("smooth", LineSearchMode::Local, 2),
+        );
+    }
+    assert!(tried >= 8, "only {tried} random meshes were valid inputs");
+}
+
+/// A fitted map of garbage: the straight elevation with every shared Bernstein point moved
+/// by up to `scale` × the mesh size (conforming, mostly tangled).
+struct Garbage<'a> {
+    mesh: &'a LinearMesh,
+    topo: &'a Topology,
+    shift: Vec<[f64; 3]>,
+}
+
+impl BezierElements for Garbage<'_> {
+    fn dim(&self) -> usize {
+        self.mesh.dim
+    }
+    fn n_elements(&self) -> usize {
+        self.mesh.n_elements()
+    }
+    fn bezier_net(&self, e: usize) -> [[f64; 3]; 27] {
+        let mut net = self.mesh.bezier_net(e);
+        let ids = entity_ids(self.mesh, self.topo, e);
+        let n = if self.mesh.dim == 2 { 9 } else { 27 };
+        for i in 0..n {
+            let s = self.shift[ids[i] as usize];
+            for k in 0..self.mesh.dim {
+                net[i][k] += s[k];
+            }
+        }
+        net
+    }
+}
+
+#[test]
+fn the_blend_certifies_any_fitted_map() {
+    for (dim, mesh) in [
+        (2, ellipse_layer(0.3, 32, &graded(1e-4, 1.3, 12))),
+        (3, extrude(&jittered(5, 0.3, 3), &[0.0, 0.1, 0.25])),
+    ] {
+        let mesh = as_read(&mesh, &format!("garbage_{dim}")).expect("a valid input");
+        let topo = Topology::build(&mesh);
+        let ids = |e| entity_ids(&mesh, &topo, e);
+        let n_ids = topo.n_vertices + topo.edges.len() + topo.faces.len() + mesh.n_elements();
+        let mut rng = Lcg(11);
+        let shift: Vec<[f64; 3]> = (0..n_ids)
+            .map(|_| [0.2 * rng.next(), 0.2 * rng.next(), 0.2 * rng.next()])
+            .collect();
+        let garbage = Garbage {
+            mesh: &mesh,
+            topo: &topo,
+            shift,
+        };
+        let invalid_full = (0..mesh.n_elements())
+            .filter(|&e| !det_jacobian_bounds(dim, &garbage.bezier_net(e), 6).certified_positive())
+            .count();
+        assert!(invalid_full > mesh.n_elements() / 4, "the garbage should be tangled");
+        let mut blended = Blended::new(&mesh, &mesh, &garbage, &mesh, &topo, Vec::new());
+        let info = blend_search(&CpuCertifier, &mut blended, &BlendParams::default()).unwrap();
+        assert_eq!(info.invalid_at_full_step, invalid_full);
+        for e in 0..mesh.n_elements() {
+            assert!(
+                det_jacobian_bounds(dim, &blended.bezier_net(e), 6).certified_positive(),
+                "element {e} of the blend is not certified"
+            );
+        }
+        assert!(info.min_det_lower_bound > 0.0);
+        // Conforming: every shared Bernstein point is the same in all its elements.
+        let np = if dim == 2 { 9 } else { 27 };
+        let mut at: Vec<Option<[f64; 3]>> = vec![None; n_ids];
+        for e in 0..mesh.n_elements() {
+            let net = blended.bezier_net(e);
+            for (i, &id) in ids(e)[..np].iter().enumerate() {
+                match at[id as usize] {
+                    None => at[id as usize] = Some(net[i]),
+                    Some(p) => assert_eq!(p, net[i], "point {id} differs in element {e}"),
+                }
+            }
+        }
+        assert!(info.reduced_elements > 0 && info.worst.len() <= 10);
+    }
+}
+
+/// Gmsh's (min, 1st percentile) Jacobian ratio of a written MSH file.
+fn gmsh_ratio(file: &Path) -> (f64, f64) {
+    let out = common::run_ok(
+        Command::new("python3")
+            .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/jacobian_ratio.py"))
+            .arg(file),
+    );
+    let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    (v["min"].as_f64().unwrap(), v["p1"].as_f64().unwrap())
+}
+
+#[test]
+fn boundary_layer_cells_keep_their_jacobian_ratio_by_gmsh() {
+    if !common::have_gmsh("the Jacobian ratio of the boundary-layer meshes was not checked by Gmsh")
+    {
+        return;
+    }
+    let exe = env!("CARGO_BIN_EXE_polyspline");
+    let dir = out_dir();
+    let meshes = [
+        ("bl_2d", ellipse_layer(0.2, 64, &graded(1e-5, 1.28, 30))),
+        (
+            "bl_3d",
+            extrude(&ellipse_layer(0.3, 32, &graded(1e-5, 1.32, 20)), &[0.0, 0.05]),
+        ),
+    ];
+    for (name, mesh) in meshes {
+        let input = dir.join(format!("{name}.msh"));
+        write_linear(&mesh, &input);
+        let (ours, straight) = (dir.join(format!("{name}_p2.msh")), dir.join(format!("{name}_s.msh")));
+        common::run_ok(Command::new(exe).args(["curve", "-q"]).arg(&input).arg("-o").arg(&ours));
+        common::run_ok(
+            Command::new(exe)
+                .args(["curve", "-q", "--straight"])
+                .arg(&input)
+                .arg("-o")
+                .arg(&straight),
+        );
+        let (o, s) = (gmsh_ratio(&ours), gmsh_ratio(&straight));
+        assert!(o.0 > 0.0, "{name}: Gmsh finds an invalid element");
+        assert!(o.0 >= 0.5 * s.0, "{name}: min ratio {} against straight {}", o.0, s.0);
+        assert!(o.1 >= 0.8 * s.1, "{name}: p1 ratio {} against straight {}", o.1, s.1);
+    }
+}
