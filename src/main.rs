@@ -745,6 +745,13 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             let mesh = match kind {
                 Some(kind) => generate(kind, elements.unwrap_or_default()),
                 None => {
+                    if elements.is_some() {
+                        anyhow::bail!(
+                            "{}: --elements applies to disc, cylinder and torus; ogrid and cgrid \
+                             take --around and --across",
+                            output.display()
+                        );
+                    }
                     let params = layer.params(cgrid);
                     let made = if cgrid {
                         boundary_layer::cgrid(&params)

@@ -425,6 +425,7 @@ fn generate_rejects_bad_boundary_layer_options_in_one_line() {
         &["ogrid", "--farfield", "0.5"],
         &["ogrid", "--layers", "2", "--span", "0"],
         &["cgrid", "--wake", "0"],
+        &["ogrid", "--elements", "100"],
     ]
     .iter()
     .enumerate()

@@ -18,11 +18,12 @@
 //! normal (the bisector at the O-grid's trailing edge, the lower/upper surface normal on either
 //! side of the C-grid's trailing edge) for as long as the cells grow geometrically, so the first
 //! cell height is `first_height` and the height ratio of consecutive cells is `growth` there
-//! ([`WallNormalSpacing`]). Beyond it the lines blend smoothly (Hermite weight of the distance)
-//! into the far field: for the O-grid in polar coordinates about the wall's centre onto the
-//! circle of radius `farfield × chord` (points equally spaced in angle); for the C-grid in
-//! Cartesian coordinates onto a half circle about the trailing edge continued downstream by the
-//! lines y = ±R to the outflow x = 1 + R. Every element has positive corner Jacobians, or the
+//! ([`WallNormalSpacing`]). Beyond it the lines blend smoothly (Hermite weight of the layer
+//! index for the O-grid, of the distance for the C-grid) into the far field: for the O-grid in
+//! polar coordinates about the wall's centre onto the circle of radius `farfield × chord`
+//! (points equally spaced in angle); for the C-grid in Cartesian coordinates onto a half circle
+//! about the trailing edge continued downstream by the lines y = ±R to the outflow x = 1 + R
+//! (R = `farfield` chords). Every element has positive corner Jacobians, or the
 //! generator returns an error naming the element (it does not for the documented option ranges;
 //! the tests sweep them).
 //!
@@ -476,19 +477,28 @@ pub fn wall_normal_spacing(
     })
 }
 
-/// Hermite blend weight of layer `k`: 0 through the geometric region (the lines are exact
-/// wall-normal offsets there), rising smoothly to 1 at the far field.
-fn blend_weights(s: &WallNormalSpacing) -> Vec<f64> {
+/// Hermite blend weight of each layer: 0 through the geometric region (the lines are exact
+/// wall-normal offsets there), rising smoothly to 1 at the far field, as a function of the
+/// layer index (`by_index`) or of the distance from the wall. The O-grid blends by index: its
+/// outer cells are long, and a weight of the distance would leave the lines still turning in
+/// the last layers, skewing the largest cells. The C-grid's Cartesian blend moves points by
+/// up to a chord or more, which is only safe once the offset itself is that far out: it blends
+/// by distance.
+fn blend_weights(s: &WallNormalSpacing, by_index: bool) -> Vec<f64> {
+    let k0 = s.geometric_cells;
     let d = &s.distances;
-    let start = d[s.geometric_cells];
-    let end = *d.last().unwrap();
-    d.iter()
-        .enumerate()
-        .map(|(k, &x)| {
-            if k <= s.geometric_cells {
+    let m = d.len() - 1;
+    (0..=m)
+        .map(|k| {
+            if k <= k0 {
                 0.0
             } else {
-                let t = ((x - start) / (end - start)).clamp(0.0, 1.0);
+                let t = if by_index {
+                    (k - k0) as f64 / (m - k0) as f64
+                } else {
+                    (d[k] - d[k0]) / (d[m] - d[k0])
+                };
+                let t = t.clamp(0.0, 1.0);
                 t * t * (3.0 - 2.0 * t)
             }
         })
@@ -563,7 +573,7 @@ pub fn ogrid(p: &BoundaryLayer) -> Result<BoundaryLayerMesh, GenerateError> {
         distance,
         mean_spacing(&closed),
     )?;
-    let blend = blend_weights(&spacing);
+    let blend = blend_weights(&spacing, true);
     let m = p.across;
     let mut coords = Vec::with_capacity(n * (m + 1));
     for (k, (&d, &b)) in spacing.distances.iter().zip(&blend).enumerate() {
@@ -722,7 +732,7 @@ pub fn cgrid(p: &BoundaryLayer) -> Result<BoundaryLayerMesh, GenerateError> {
         distance,
         mean_spacing(&wall_points),
     )?;
-    let blend = blend_weights(&spacing);
+    let blend = blend_weights(&spacing, false);
     let m = p.across;
     // Node ids: the upper wake's cut nodes are the lower wake's.
     let mut ids = vec![u32::MAX; (ni + 1) * (m + 1)];
