@@ -186,19 +186,22 @@ enum Command {
         features: FeatureArgs,
     },
     /// Make a synthetic linear mesh with curved boundaries for benchmarks: a butterfly disc
-    /// (2D), a solid cylinder or a torus (3D), with valence-3 vertices/edges.
+    /// (2D), a solid cylinder or a torus (3D), with valence-3 vertices/edges; or a
+    /// boundary-layer O-grid (ellipse, circle, NACA 00xx) or C-grid (NACA 00xx with a wake cut).
     Generate {
         #[arg(value_enum)]
         kind: KindArg,
-        /// Approximate number of elements.
-        #[arg(long)]
-        elements: usize,
+        /// Approximate number of elements (disc, cylinder, torus).
+        #[arg(long, required_if_eq_any([("kind", "disc"), ("kind", "cylinder"), ("kind", "torus")]))]
+        elements: Option<usize>,
         /// Output file (.msh or .vtu).
         #[arg(short, long)]
         output: PathBuf,
         /// Binary Gmsh output.
         #[arg(long)]
         binary: bool,
+        #[command(flatten)]
+        layer: BoundaryLayerArgs,
     },
     /// Report the validity and quality of a high-order mesh (.msh or .vtu).
     Check {
@@ -311,6 +314,88 @@ enum KindArg {
     Disc,
     Cylinder,
     Torus,
+    /// Boundary-layer O-grid around `--wall`.
+    Ogrid,
+    /// Boundary-layer C-grid around a NACA 00xx airfoil with a wake cut.
+    Cgrid,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+enum WallArg {
+    /// Semi-axes 1 and `--thickness` (chord 2).
+    Ellipse,
+    /// Radius 1 (chord 2).
+    Circle,
+    /// NACA 00xx of chord 1, thickness `--thickness`, closed trailing edge.
+    Naca,
+}
+
+/// Options of `generate ogrid|cgrid` (lengths in wall units: chord 2 for the ellipse and
+/// the circle, 1 for the airfoil).
+#[derive(clap::Args)]
+struct BoundaryLayerArgs {
+    /// Wall curve [default: ellipse for ogrid, naca for cgrid].
+    #[arg(long, value_enum)]
+    wall: Option<WallArg>,
+    /// Ellipse: minor/major semi-axis ratio (default 0.2); airfoil: maximum thickness over
+    /// chord (default 0.12).
+    #[arg(long)]
+    thickness: Option<f64>,
+    /// Cells around the wall (even for the airfoil).
+    #[arg(long, default_value_t = 128)]
+    around: usize,
+    /// Cells from the wall to the far field.
+    #[arg(long, default_value_t = 48)]
+    across: usize,
+    /// Height of the first cell off the wall (absolute).
+    #[arg(long, default_value_t = 1e-5)]
+    first_height: f64,
+    /// Wall-normal growth ratio of the cell heights near the wall.
+    #[arg(long, default_value_t = 1.25)]
+    growth: f64,
+    /// Far-field radius in chords.
+    #[arg(long, default_value_t = 10.0)]
+    farfield: f64,
+    /// 0: 2D quads; L >= 1: L hex layers extruded along z over --span.
+    #[arg(long, default_value_t = 0)]
+    layers: usize,
+    /// Extrusion length along z.
+    #[arg(long, default_value_t = 1.0)]
+    span: f64,
+    /// C-grid: cells along the wake cut.
+    #[arg(long, default_value_t = 32)]
+    wake: usize,
+}
+
+impl BoundaryLayerArgs {
+    fn params(&self, cgrid: bool) -> polyspline::mesh::generate::BoundaryLayer {
+        use polyspline::mesh::generate::{BoundaryLayer, Wall};
+        let default = if cgrid {
+            WallArg::Naca
+        } else {
+            WallArg::Ellipse
+        };
+        let wall = match self.wall.unwrap_or(default) {
+            WallArg::Ellipse => Wall::Ellipse {
+                thickness: self.thickness.unwrap_or(0.2),
+            },
+            WallArg::Circle => Wall::Circle,
+            WallArg::Naca => Wall::Naca {
+                thickness: self.thickness.unwrap_or(0.12),
+            },
+        };
+        BoundaryLayer {
+            wall,
+            around: self.around,
+            across: self.across,
+            first_height: self.first_height,
+            growth: self.growth,
+            farfield: self.farfield,
+            layers: self.layers,
+            span: self.span,
+            wake: self.wake,
+        }
+    }
 }
 
 #[derive(Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -647,14 +732,47 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             elements,
             output,
             binary,
+            layer,
         } => {
-            use polyspline::mesh::generate::{Kind, generate};
+            use polyspline::mesh::generate::{Kind, boundary_layer, generate};
+            let cgrid = kind == KindArg::Cgrid;
             let kind = match kind {
-                KindArg::Disc => Kind::Disc,
-                KindArg::Cylinder => Kind::Cylinder,
-                KindArg::Torus => Kind::Torus,
+                KindArg::Disc => Some(Kind::Disc),
+                KindArg::Cylinder => Some(Kind::Cylinder),
+                KindArg::Torus => Some(Kind::Torus),
+                KindArg::Ogrid | KindArg::Cgrid => None,
             };
-            let mesh = generate(kind, elements);
+            let mesh = match kind {
+                Some(kind) => generate(kind, elements.unwrap_or_default()),
+                None => {
+                    if elements.is_some() {
+                        anyhow::bail!(
+                            "{}: --elements applies to disc, cylinder and torus; ogrid and cgrid \
+                             take --around and --across",
+                            output.display()
+                        );
+                    }
+                    let params = layer.params(cgrid);
+                    let made = if cgrid {
+                        boundary_layer::cgrid(&params)
+                    } else {
+                        boundary_layer::ogrid(&params)
+                    }
+                    .map_err(|e| anyhow::anyhow!("{}: {e}", output.display()))?;
+                    let s = &made.spacing;
+                    eprintln!(
+                        "wall-normal: {} cells from {:e} growing by {}, then {} cells by {:.4} to the far field; min scaled Jacobian {:.4}, max aspect ratio {:.4e}",
+                        s.geometric_cells,
+                        params.first_height,
+                        params.growth,
+                        params.across - s.geometric_cells,
+                        s.outer_growth,
+                        made.mesh.min_scaled_jacobian().map_or(0.0, |m| m.0),
+                        boundary_layer::max_aspect_ratio(&made.mesh),
+                    );
+                    made.mesh
+                }
+            };
             let topo = Topology::build(&mesh);
             let linear = polyspline::sample::sample(&mesh, &mesh, &topo, 1);
             let options = OutputOptions {

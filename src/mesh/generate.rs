@@ -7,6 +7,11 @@
 
 use super::{LinearMesh, MeshOptions};
 
+pub mod boundary_layer;
+pub use boundary_layer::{
+    BoundaryLayer, BoundaryLayerMesh, GenerateError, Wall, WallNormalSpacing, cgrid, ogrid,
+};
+
 /// Structured quad grid on the tensor product of the coordinate lists `xs` × `ys`.
 pub fn grid_2d(xs: &[f64], ys: &[f64]) -> LinearMesh {
     let (nx, ny) = (xs.len(), ys.len());
