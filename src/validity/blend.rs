@@ -521,9 +521,13 @@ pub fn blend_search(
     while !bad.is_empty() {
         let mut touched = vec![false; factors.len()];
         for &e in &bad {
-            for &id in &blended.ids.of(e)[..np] {
+            // Down to the target map first: a mix of fitted and target points can fail where
+            // neither map does, and giving up the target map's curvature is the last resort.
+            let ids = blended.ids.of(e);
+            let above = ids[..np].iter().any(|&id| factors[id as usize] > 1.0);
+            for &id in &ids[..np] {
                 let id = id as usize;
-                if !touched[id] {
+                if !touched[id] && (!above || factors[id] > 1.0) {
                     touched[id] = true;
                     factors[id] = reduce(factors[id], params.max_bisections);
                 }
