@@ -736,6 +736,9 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                     .collect();
                 check_outputs(&[&output], &inputs)?;
             }
+            if !(width.is_finite() && (16.0..=100_000.0).contains(&width)) {
+                anyhow::bail!("--width {width}: must be a number of pixels in [16, 100000]");
+            }
             if label.len() > overlay.len() + 1 {
                 anyhow::bail!(
                     "{} labels for {} meshes: give at most one per mesh (MESH first, then each --overlay)",

@@ -11,7 +11,7 @@
 //! [`bytes_allowed`] (proportional to the file's size: nothing is allocated from a count the
 //! file cannot back); every error message is one line of bounded length.
 //!
-//! `POLYSPLINE_FUZZ_CASES` sets the cases per fixture (default 600), `POLYSPLINE_FUZZ_SEED` the
+//! `POLYSPLINE_FUZZ_CASES` sets the cases per fixture (default 4000), `POLYSPLINE_FUZZ_SEED` the
 //! seed (default fixed); a failure prints both and the fixture, so it can be replayed.
 
 use polyspline::io::Format;
@@ -242,8 +242,9 @@ fn check_message(msg: &str, context: &str) {
     );
 }
 
-/// Run one input through a reader and the checks after it; returns whether it was accepted.
-fn run_case(format: Format, data: &[u8], context: &str) -> bool {
+/// Run one input through a reader and the checks after it; returns whether it was accepted
+/// and the reader's peak heap allocation.
+fn run_case(format: Format, data: &[u8], context: &str) -> (bool, usize) {
     let t = Instant::now();
     let (parsed, peak) = peak_of(|| format.parse(data));
     assert!(
@@ -275,7 +276,7 @@ fn run_case(format: Format, data: &[u8], context: &str) -> bool {
         "{context}: took {:?}",
         t.elapsed()
     );
-    accepted
+    (accepted, peak)
 }
 
 #[test]
@@ -283,7 +284,7 @@ fn every_reader_survives_mutated_fixtures() {
     let cases: usize = std::env::var("POLYSPLINE_FUZZ_CASES")
         .ok()
         .and_then(|v| v.parse().ok())
-        .unwrap_or(600);
+        .unwrap_or(4000);
     let seed: u64 = std::env::var("POLYSPLINE_FUZZ_SEED")
         .ok()
         .and_then(|v| v.parse().ok())
@@ -294,6 +295,8 @@ fn every_reader_survives_mutated_fixtures() {
     assert_eq!(formats.len(), 8, "fixtures of every format: {formats:?}");
     let start = Instant::now();
     let (mut total, mut accepted) = (0usize, 0usize);
+    // Largest peak allocation per byte of input, over the cases of at least 1 kB.
+    let mut ratio: f64 = 0.0;
     for (k, (path, format, original)) in corpus.iter().enumerate() {
         // Some fixtures are meant to be refused (tetrahedra, high-order cells); all must run.
         run_case(*format, original, &path.display().to_string());
@@ -309,7 +312,12 @@ fn every_reader_survives_mutated_fixtures() {
             );
             let result = std::panic::catch_unwind(|| run_case(*format, &data, &context));
             match result {
-                Ok(a) => accepted += a as usize,
+                Ok((a, peak)) => {
+                    accepted += a as usize;
+                    if data.len() >= 1024 {
+                        ratio = ratio.max(peak as f64 / data.len() as f64);
+                    }
+                }
                 Err(_) => {
                     let dump = std::env::temp_dir().join("polyspline-fuzz-failure");
                     let _ = std::fs::write(&dump, &data);
@@ -320,7 +328,7 @@ fn every_reader_survives_mutated_fixtures() {
         }
     }
     eprintln!(
-        "fuzz: {total} mutated cases over {} fixtures of {} formats, {accepted} accepted, {:.1} s",
+        "fuzz: {total} mutated cases over {} fixtures of {} formats, {accepted} accepted, peak reader allocation at most {ratio:.1} bytes per input byte, {:.1} s",
         corpus.len(),
         formats.len(),
         start.elapsed().as_secs_f64()
@@ -401,5 +409,39 @@ fn huge_counts_in_tiny_files_fail_fast() {
     assert!(
         peak < bytes_allowed(bad.len()),
         "exodus: allocated {peak} bytes"
+    );
+}
+
+/// A zlib bomb in a VTU file (64 MiB of zeros in 65 kB) is refused; what it costs is bounded by
+/// deflate's largest expansion (1032:1), not by what the header claims.
+#[test]
+fn a_zlib_bomb_costs_at_most_the_deflate_ratio() {
+    use std::io::Write;
+    let raw = vec![0u8; 64 << 20];
+    let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::best());
+    z.write_all(&raw).unwrap();
+    let comp = z.finish().unwrap();
+    let mut data = br#"<VTKFile type="UnstructuredGrid" version="0.1" byte_order="LittleEndian" header_type="UInt32" compressor="vtkZLibDataCompressor">
+<UnstructuredGrid><Piece NumberOfPoints="1" NumberOfCells="1"><Points>
+<DataArray type="Float64" NumberOfComponents="3" format="appended" offset="0"/></Points>
+<Cells><DataArray type="Int64" Name="connectivity" format="ascii">0 0 0 0</DataArray>
+<DataArray type="Int64" Name="offsets" format="ascii">4</DataArray>
+<DataArray type="UInt8" Name="types" format="ascii">9</DataArray></Cells>
+</Piece></UnstructuredGrid><AppendedData encoding="raw">_"#
+        .to_vec();
+    for w in [1u32, raw.len() as u32, raw.len() as u32, comp.len() as u32] {
+        data.extend_from_slice(&w.to_le_bytes());
+    }
+    data.extend_from_slice(&comp);
+    data.extend_from_slice(b"</AppendedData></VTKFile>");
+    drop(raw);
+    let (result, peak) = peak_of(|| Format::Vtu.parse(&data));
+    let e = result.expect_err("a bomb is not a mesh");
+    check_message(&e.message, "zlib bomb");
+    assert!(
+        // The decompressed bytes and the values decoded from them: twice deflate's ratio.
+        peak <= 2 * 1040 * data.len() + (8 << 20),
+        "allocated {peak} bytes for {} bytes",
+        data.len()
     );
 }

@@ -345,6 +345,15 @@ fn numeric_options_are_validated() {
             .args(["--feature-angle", "nan"]),
     );
     assert!(e.contains("--feature-angle"), "{e}");
+    let e = fails(
+        bin()
+            .arg("plot")
+            .arg(&input)
+            .arg("-o")
+            .arg(d.join("p.svg"))
+            .args(["--width", "nan"]),
+    );
+    assert!(e.contains("--width"), "{e}");
     let e = fails(bin().arg("compare").arg(&input).args(["--order", "0"]));
     assert!(e.contains("--order"), "{e}");
     let e = fails(bin().arg("compare").arg(&input).args(["--cg-tol", "nan"]));
