@@ -442,6 +442,19 @@ fn curve_refuses_non_manifold_meshes() {
             "{}",
             String::from_utf8_lossy(&out.stderr)
         );
+        let listed = String::from_utf8_lossy(&out.stdout);
+        let row = if what == "duplicated" {
+            "duplicate elements"
+        } else {
+            "non-manifold"
+        };
+        assert!(
+            listed
+                .lines()
+                .any(|l| l.starts_with(row) && !l.contains("none")),
+            "{}: info must list it: {listed}",
+            path.display()
+        );
         let e = fails(
             bin()
                 .arg("curve")

@@ -45,11 +45,10 @@ fn elements_with(mesh: &LinearMesh, topo: &Topology, vs: &[u32]) -> Vec<u32> {
         .collect()
 }
 
-/// Refuse what `curve` cannot treat (see the module documentation).
-pub fn check_curvable(mesh: &LinearMesh, topo: &Topology) -> Result<(), String> {
+/// Elements on the vertex set of an earlier element: (earlier, later) pairs in element order.
+pub fn duplicate_elements(mesh: &LinearMesh) -> Vec<(u32, u32)> {
     let npe = mesh.nodes_per_element();
     let ne = mesh.n_elements();
-    // Duplicates first: they also make every shared facet look interior or non-manifold.
     let mut seen: HashMap<Vec<u32>, u32> = HashMap::with_capacity(ne);
     let mut pairs = Vec::new();
     for e in 0..ne {
@@ -61,6 +60,14 @@ pub fn check_curvable(mesh: &LinearMesh, topo: &Topology) -> Result<(), String> 
             seen.insert(key, e as u32);
         }
     }
+    pairs
+}
+
+/// Refuse what `curve` cannot treat (see the module documentation).
+pub fn check_curvable(mesh: &LinearMesh, topo: &Topology) -> Result<(), String> {
+    let ne = mesh.n_elements();
+    // Duplicates first: they also make every shared facet look interior or non-manifold.
+    let pairs = duplicate_elements(mesh);
     if !pairs.is_empty() {
         let shown: Vec<String> = pairs
             .iter()
