@@ -315,6 +315,21 @@ mod tests {
     }
 
     #[test]
+    fn a_failing_second_output_leaves_neither() {
+        // The `curve --report` order: the mesh is complete on disk, then the report fails
+        // (a full disk): the mesh's temporary goes away and neither target appears.
+        let dir = tempfile::tempdir().unwrap();
+        let mesh = dir.path().join("m.msh");
+        let report = dir.path().join("r.json");
+        let pending = prepare(&mesh, &[], |w| w.write_all(b"mesh")).unwrap();
+        let full = std::io::Error::from_raw_os_error(28); // ENOSPC
+        let e = prepare(&report, &[], |_| Err(full)).err().unwrap();
+        assert!(e.to_string().contains("r.json"), "{e}");
+        drop(pending);
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+    }
+
+    #[test]
     fn clashing_outputs_are_refused() {
         let dir = tempfile::tempdir().unwrap();
         let input = dir.path().join("in.msh");
