@@ -148,9 +148,19 @@ pub fn check_curve(o: &CurveOptions) -> Result<(), ParamError> {
         ));
     }
     if let Method::Elastic(e) = &o.method {
-        above("--young", e.young, 0.0, 1e300)?;
+        if !(e.young.is_finite() && e.young > 0.0) {
+            return Err(err(
+                "--young",
+                num(e.young),
+                "Young's modulus must be positive and finite",
+            ));
+        }
         if !(e.poisson.is_finite() && e.poisson > -1.0 && e.poisson < 0.5) {
-            return Err(err("--poisson", num(e.poisson), "must be in (-1, 0.5)"));
+            return Err(err(
+                "--poisson",
+                num(e.poisson),
+                "Poisson's ratio must be in (-1, 0.5)",
+            ));
         }
         check_cg(&e.cg)?;
     }

@@ -115,8 +115,10 @@ pub fn check_outputs(outputs: &[&Path], inputs: &[&Path]) -> Result<(), WriteErr
             path: out.to_owned(),
             what,
         };
-        if let Some(input) = inputs.iter().find(|i| same_file(i, out)) {
-            return Err(if input == &out || out == inputs[0] {
+        if let Some(k) = inputs.iter().position(|i| same_file(i, out)) {
+            let input = inputs[k];
+            // The mesh itself gets the message `curve` always gave; other inputs are named.
+            return Err(if k == 0 {
                 WriteError::WouldOverwriteInput {
                     path: out.to_owned(),
                 }
