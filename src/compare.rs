@@ -279,6 +279,7 @@ pub fn compare(input: &Path, options: &CompareOptions) -> Result<CompareReport, 
             "compare measures the order-P elements; --subdivide does not apply".into(),
         ));
     }
+    crate::params::check_compare(options).map_err(|e| CurveError::Options(e.to_string()))?;
     let mesh = crate::io::read_mesh(input, &options.base.mesh)?;
     // A bad feature edits file is an input error, not one method's failure.
     if options.base.features.edits.is_some() {
@@ -331,6 +332,15 @@ pub fn compare(input: &Path, options: &CompareOptions) -> Result<CompareReport, 
         .iter()
         .map(|(name, o)| row(name, curve_in_memory(input, o)))
         .collect();
+    // A table of failures only is an error, not a comparison.
+    if let Some(first) = rows.first().and_then(|r| r.error.clone())
+        && rows.iter().all(|r| r.error.is_some())
+    {
+        return Err(CurveError::Options(format!(
+            "every method failed; {}: {first}",
+            rows[0].method
+        )));
+    }
     let seconds = |name: &str| {
         rows.iter()
             .find(|r| r.method == name)

@@ -47,6 +47,8 @@ pub struct MeshInfo {
     pub non_manifold_facets: usize,
     pub non_manifold_edges: usize,
     pub non_manifold_vertices: usize,
+    /// Elements on the same vertex set as an earlier element (`curve` refuses them).
+    pub duplicate_elements: usize,
     pub unused_vertices: usize,
     pub interior_tagged_facets: usize,
     pub unmatched_tagged_facets: usize,
@@ -127,6 +129,7 @@ impl MeshInfo {
             non_manifold_facets: topo.non_manifold.facets.len(),
             non_manifold_edges: topo.non_manifold.edges.len(),
             non_manifold_vertices: topo.non_manifold.vertices.len(),
+            duplicate_elements: crate::mesh::manifold::duplicate_elements(mesh).len(),
             unused_vertices: mesh.unused_vertices,
             interior_tagged_facets: topo.interior_tagged_facets,
             unmatched_tagged_facets: topo.unmatched_tagged_facets,
@@ -248,6 +251,9 @@ impl fmt::Display for MeshInfo {
                 )
             },
         )?;
+        if self.duplicate_elements > 0 {
+            row(f, "duplicate elements", self.duplicate_elements.to_string())?;
+        }
         if self.unused_vertices > 0 {
             row(
                 f,

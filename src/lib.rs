@@ -28,6 +28,7 @@ pub mod gpu;
 pub mod info;
 pub mod io;
 pub mod mesh;
+pub mod params;
 pub mod pipeline;
 pub mod plot;
 pub mod progress;

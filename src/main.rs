@@ -7,19 +7,19 @@ use polyspline::energy::{EnergyParams, EnergySolver};
 use polyspline::fit::{FitParams, FitTargets, FitWeights, SmoothParams};
 use polyspline::info::MeshInfo;
 use polyspline::io::gmsh_write::MshVersion;
-use polyspline::io::output::write_atomically;
+use polyspline::io::output::{check_outputs, prepare, write_atomically};
 use polyspline::io::vtu_write::VtuEncoding;
 use polyspline::io::{read_mesh, read_raw};
 use polyspline::mesh::{MeshOptions, Topology};
 use polyspline::pipeline::{
-    CurveOptions, Geometry, LineSearchMode, Method, OutputOptions, curve_with_progress,
+    CurveOptions, Geometry, LineSearchMode, Method, OutputFormat, OutputOptions, curve_prepared,
 };
 use polyspline::plot::{Layer, render_svg_window};
 use polyspline::quality::CheckReport;
 use polyspline::sample::HighOrderMesh;
 use polyspline::solve::CgParams;
 use polyspline::validity::LineSearchParams;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 #[derive(Parser)]
@@ -127,6 +127,14 @@ enum Command {
         /// fraction of its straight input element's smallest corner det J (0: any positive).
         #[arg(long, default_value_t = 0.1)]
         min_det_fraction: f64,
+        /// Keep every element's Jacobian ratio (min/max det J) and scaled Jacobian at least this
+        /// fraction of its straight-sided elevation's (0: no quality test).
+        #[arg(long, default_value_t = 0.55)]
+        min_quality_fraction: f64,
+        /// Keep every element's Jacobian ratio at least this fraction of min(its straight ratio,
+        /// the straight mesh's 1st percentile).
+        #[arg(long, default_value_t = 0.85)]
+        percentile_quality_fraction: f64,
         /// Shorten the fitted step per control point around invalid elements (`local`), or by
         /// one factor for the whole mesh as in the paper (`global`).
         #[arg(long, value_enum, default_value_t = LineSearchArg::Local)]
@@ -521,6 +529,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             max_bisections,
             line_search,
             min_det_fraction,
+            min_quality_fraction,
+            percentile_quality_fraction,
             snap_boundary,
             subdivide,
             msh_version,
@@ -531,6 +541,20 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             backend,
             precision,
         } => {
+            // Every output path is checked before any work, against the inputs and each other.
+            if OutputFormat::from_path(&output).is_none() {
+                anyhow::bail!(
+                    "{}: unknown output format; use .msh (Gmsh) or .vtu (VTK)",
+                    output.display()
+                );
+            }
+            let outputs: Vec<&Path> = std::iter::once(output.as_path())
+                .chain(report.as_deref())
+                .collect();
+            let inputs: Vec<&Path> = std::iter::once(mesh.as_path())
+                .chain(features.feature_edits.as_deref())
+                .collect();
+            check_outputs(&outputs, &inputs)?;
             let backend = resolve_backend(backend, precision)?;
             if kink_angle.is_nan() || kink_angle <= 0.0 {
                 anyhow::bail!("--kink-angle must be positive (180 turns it off), got {kink_angle}");
@@ -590,6 +614,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 line_search: LineSearchParams {
                     max_bisections,
                     min_det_fraction,
+                    min_quality_fraction,
+                    percentile_quality_fraction,
                     ..Default::default()
                 },
                 snap_boundary,
@@ -618,9 +644,25 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 },
             };
             let progress = polyspline::progress::Terminal::new(quiet);
-            let r = curve_with_progress(&mesh, &output, &options, &progress);
+            let r = curve_prepared(&mesh, &output, &options, &progress);
             progress.clear();
-            let r = r?;
+            let (r, pending_mesh) = r?;
+            // Both files are complete on disk before either replaces its target, so a full disk
+            // or a failing report leaves no mesh without its report.
+            let pending_report = match &report {
+                Some(path) => {
+                    let json = serde_json::to_string_pretty(&r)?;
+                    Some(prepare(path, &inputs, |w| {
+                        use std::io::Write;
+                        writeln!(w, "{json}")
+                    })?)
+                }
+                None => None,
+            };
+            pending_mesh.commit()?;
+            if let Some(p) = pending_report {
+                p.commit()?;
+            }
             eprintln!(
                 "wrote {}: {} elements of order {}, {} nodes, {} boundary facets ({:.3} s)",
                 r.output.display(),
@@ -683,13 +725,6 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 r.boundary_deviation_max,
                 r.boundary_deviation_rms
             );
-            if let Some(path) = report {
-                let json = serde_json::to_string_pretty(&r)?;
-                write_atomically(&path, &[&mesh], |w| {
-                    use std::io::Write;
-                    writeln!(w, "{json}")
-                })?;
-            }
         }
         Command::Compare {
             mesh,
@@ -736,6 +771,12 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         } => {
             use polyspline::mesh::generate::{Kind, boundary_layer, generate};
             let cgrid = kind == KindArg::Cgrid;
+            if let Some(n) = elements {
+                if kind != KindArg::Ogrid && kind != KindArg::Cgrid {
+                    polyspline::params::check_generated_elements(n)?;
+                }
+            }
+            check_outputs(&[&output], &[])?;
             let kind = match kind {
                 KindArg::Disc => Some(Kind::Disc),
                 KindArg::Cylinder => Some(Kind::Cylinder),
@@ -822,6 +863,16 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             show_features,
             features,
         } => {
+            {
+                let inputs: Vec<&Path> = std::iter::once(mesh.as_path())
+                    .chain(overlay.iter().map(|p| p.as_path()))
+                    .chain(features.feature_edits.as_deref())
+                    .collect();
+                check_outputs(&[&output], &inputs)?;
+            }
+            if !(width.is_finite() && (16.0..=100_000.0).contains(&width)) {
+                anyhow::bail!("--width {width}: must be a number of pixels in [16, 100000]");
+            }
             if label.len() > overlay.len() + 1 {
                 anyhow::bail!(
                     "{} labels for {} meshes: give at most one per mesh (MESH first, then each --overlay)",
@@ -1041,12 +1092,62 @@ fn main() -> ExitCode {
     unsafe {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
+    #[cfg(unix)]
+    remove_temporaries_on_signals();
     let cli = Cli::parse();
     match run(cli) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("polyspline: error: {e}");
+            // One bounded line, whatever the message quotes from the input.
+            let line = polyspline::io::raw::one_line(&e.to_string(), MAX_ERROR_CHARS);
+            eprintln!("polyspline: error: {line}");
             ExitCode::FAILURE
         }
     }
+}
+
+/// Longest error line (characters after the prefix); paths and a quoted excerpt fit.
+const MAX_ERROR_CHARS: usize = 2000;
+
+/// SIGINT, SIGTERM and SIGHUP remove the temporary output files being written, then end the
+/// process with status 128 + the signal (130, 143, 129). The signals are blocked in every
+/// thread and taken by one thread with `sigwait`, so the clean-up runs as ordinary code (it
+/// takes a lock and unlinks files, which an asynchronous handler could not do safely).
+#[cfg(unix)]
+fn remove_temporaries_on_signals() {
+    // SAFETY: plain libc calls on a local signal set; called before any other thread exists,
+    // so every thread started later inherits the mask.
+    let set = unsafe {
+        let mut set: libc::sigset_t = std::mem::zeroed();
+        libc::sigemptyset(&mut set);
+        for sig in [libc::SIGINT, libc::SIGTERM, libc::SIGHUP] {
+            libc::sigaddset(&mut set, sig);
+        }
+        libc::pthread_sigmask(libc::SIG_BLOCK, &set, std::ptr::null_mut());
+        set
+    };
+    std::thread::spawn(move || {
+        loop {
+            let mut sig = 0;
+            // SAFETY: `set` and `sig` are valid for the call.
+            if unsafe { libc::sigwait(&set, &mut sig) } != 0 {
+                continue;
+            }
+            let removed = polyspline::io::output::remove_registered_temporaries();
+            let name = match sig {
+                libc::SIGINT => "SIGINT",
+                libc::SIGTERM => "SIGTERM",
+                _ => "SIGHUP",
+            };
+            eprintln!(
+                "polyspline: interrupted by {name}{}",
+                if removed > 0 {
+                    "; the unfinished output was removed"
+                } else {
+                    ""
+                }
+            );
+            std::process::exit(128 + sig);
+        }
+    });
 }

@@ -14,7 +14,7 @@ use crate::energy::{EnergyError, EnergyInfo, EnergyParams};
 use crate::fit::{FitParams, FitTargets, FitWeights, fit_with_targets};
 use crate::gpu::{AdapterReport, Backend, Precision};
 use crate::io::gmsh_write::{MshVersion, write_msh};
-use crate::io::output::{WriteError, write_atomically};
+use crate::io::output::WriteError;
 use crate::io::vtu_write::{VtuEncoding, write_vtu};
 use crate::io::{ReadError, read_mesh};
 use crate::mesh::{MeshOptions, Topology};
@@ -148,6 +148,9 @@ pub enum CurveError {
     Write(#[from] WriteError),
     #[error("{0}")]
     Options(String),
+    /// Duplicated elements, non-manifold facets, edges or vertices, or no boundary.
+    #[error("{}: cannot curve: {what}", input.display())]
+    NotCurvable { input: PathBuf, what: String },
     #[error(transparent)]
     Features(#[from] crate::mesh::features::FeatureError),
     #[error("{}: GPU: {source}", input.display())]
@@ -304,6 +307,18 @@ pub fn write_high_order(
     options: &OutputOptions,
     inputs: &[&Path],
 ) -> Result<(), WriteError> {
+    prepare_high_order(mesh, path, options, inputs)?.commit()
+}
+
+/// [`write_high_order`] into a synced temporary beside `path`, renamed into place by
+/// [`crate::io::output::PendingFile::commit`] (so several outputs can all be written before
+/// any replaces its target).
+pub fn prepare_high_order(
+    mesh: &HighOrderMesh,
+    path: &Path,
+    options: &OutputOptions,
+    inputs: &[&Path],
+) -> Result<crate::io::output::PendingFile, WriteError> {
     let format = OutputFormat::from_path(path).ok_or_else(|| WriteError::Unsupported {
         path: path.to_owned(),
         what: "unknown output format; use .msh (Gmsh) or .vtu (VTK)".into(),
@@ -317,7 +332,7 @@ pub fn write_high_order(
             ),
         });
     }
-    write_atomically(path, inputs, |w| match format {
+    crate::io::output::prepare(path, inputs, |w| match format {
         OutputFormat::Msh => write_msh(mesh, options.msh_version, options.binary, w),
         OutputFormat::Vtu => write_vtu(mesh, options.vtu_encoding, w),
     })
@@ -348,6 +363,20 @@ pub fn curve_with_progress(
     options: &CurveOptions,
     progress: &dyn crate::progress::Progress,
 ) -> Result<CurveReport, CurveError> {
+    let (report, pending) = curve_prepared(input, output, options, progress)?;
+    pending.commit()?;
+    Ok(report)
+}
+
+/// [`curve_with_progress`] up to a complete, synced temporary of the output that
+/// [`crate::io::output::PendingFile::commit`] renames into place (dropped, it is removed): the
+/// caller can write other outputs (the report) before either replaces its target.
+pub fn curve_prepared(
+    input: &Path,
+    output: &Path,
+    options: &CurveOptions,
+    progress: &dyn crate::progress::Progress,
+) -> Result<(CurveReport, crate::io::output::PendingFile), CurveError> {
     if OutputFormat::from_path(output).is_none() {
         return Err(WriteError::Unsupported {
             path: output.to_owned(),
@@ -355,10 +384,12 @@ pub fn curve_with_progress(
         }
         .into());
     }
+    // Before any work: the output must not be the input and must be creatable.
+    crate::io::output::check_outputs(&[output], &[input])?;
     let start = Instant::now();
     let Curved { ho, mut report, .. } = curve_in_memory_with_progress(input, options, progress)?;
     let t = Instant::now();
-    write_high_order(&ho, output, &options.output, &[input])?;
+    let pending = prepare_high_order(&ho, output, &options.output, &[input])?;
     report
         .timings
         .insert("write".into(), t.elapsed().as_secs_f64());
@@ -366,7 +397,7 @@ pub fn curve_with_progress(
         .timings
         .insert("total".into(), start.elapsed().as_secs_f64());
     report.output = output.to_owned();
-    Ok(report)
+    Ok((report, pending))
 }
 
 /// Everything of the `curve` job but writing the output.
@@ -386,6 +417,7 @@ pub fn curve_in_memory_with_progress(
             "--subdivide gives order-1 output; use it with --order 1".into(),
         ));
     }
+    crate::params::check_curve(options).map_err(|e| CurveError::Options(e.to_string()))?;
     if !(1..=MAX_ORDER).contains(&order) {
         return Err(CurveError::Options(format!(
             "order {order} is out of range 1..={MAX_ORDER}"
@@ -419,6 +451,12 @@ pub fn curve_in_memory_with_progress(
     let mesh = read_mesh(input, &options.mesh)?;
     lap("read", &mut timings);
     let topo = Topology::build(&mesh);
+    crate::mesh::manifold::check_curvable(&mesh, &topo).map_err(|what| {
+        CurveError::NotCurvable {
+            input: input.to_owned(),
+            what,
+        }
+    })?;
     lap("topology", &mut timings);
     let input_msj = mesh.min_scaled_jacobian().map_or(f64::NAN, |m| m.0);
     let mut space = None;

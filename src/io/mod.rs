@@ -20,6 +20,7 @@ pub mod abaqus;
 pub mod exodus;
 pub mod gmsh;
 pub mod gmsh_write;
+pub mod input;
 pub mod medit;
 pub mod mfem;
 pub mod output;
@@ -138,7 +139,7 @@ impl Format {
 
 /// Read and parse a file into a [`RawMesh`] without building the linear mesh.
 pub fn read_raw(path: &Path) -> Result<RawMesh, ReadError> {
-    let data = std::fs::read(path).map_err(|source| ReadError::Io {
+    let data = input::read_regular(path).map_err(|source| ReadError::Io {
         path: path.to_owned(),
         source,
     })?;

@@ -47,12 +47,46 @@ pub struct ParseError {
     pub message: String,
 }
 
-impl ParseError {
-    pub fn new(location: Location, message: impl Into<String>) -> Self {
-        ParseError {
-            location,
-            message: message.into(),
+/// Longest message a [`ParseError`] keeps (characters); the rest is cut with a note.
+pub const MAX_MESSAGE_CHARS: usize = 400;
+
+/// `text` as one bounded line: control characters (a newline copied from the input, an
+/// escape sequence) shown escaped (`\n`, `\x1b`), and cut after `max` characters with a
+/// note of how much was left out, so a message quoting hostile input stays one short line.
+pub fn one_line(text: &str, max: usize) -> String {
+    let mut out = String::with_capacity(text.len().min(max + 32));
+    // Characters of `out` so far (escapes count as what they show).
+    let mut shown = 0;
+    for (i, ch) in text.char_indices() {
+        let escaped = match ch {
+            '\n' => "\\n".to_string(),
+            '\r' => "\\r".to_string(),
+            '\t' => "\\t".to_string(),
+            c if c.is_control() => format!("\\x{:02x}", c as u32),
+            c => c.to_string(),
+        };
+        let n = escaped.chars().count();
+        if shown + n > max {
+            out.push_str(&format!("… ({} more bytes)", text.len() - i));
+            return out;
         }
+        out.push_str(&escaped);
+        shown += n;
+    }
+    out
+}
+
+impl ParseError {
+    /// The message is made one bounded line by [`one_line`].
+    pub fn new(location: Location, message: impl Into<String>) -> Self {
+        let message = message.into();
+        let message =
+            if message.len() <= MAX_MESSAGE_CHARS && !message.chars().any(|c| c.is_control()) {
+                message
+            } else {
+                one_line(&message, MAX_MESSAGE_CHARS)
+            };
+        ParseError { location, message }
     }
     pub fn at_line(line: usize, message: impl Into<String>) -> Self {
         Self::new(Location::Line(line), message)

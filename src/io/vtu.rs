@@ -965,6 +965,16 @@ fn inflate(words: &[u64], body: &[u8], loc: Location, name: &str) -> Result<Vec<
             })?;
         pos += block.len();
         let before = out.len();
+        // Room for the block as the header sizes it, but never more than deflate's largest
+        // expansion (1032:1) of the compressed bytes: a header cannot make the reader allocate
+        // beyond what the data can hold, and the exact reservation avoids doubling growth.
+        let room = want.min(1032 * block.len() as u64 + 64);
+        out.try_reserve_exact(usize::try_from(room).unwrap_or(usize::MAX))
+            .map_err(|_| {
+                err(format!(
+                    "compressed block {k}: cannot allocate {room} bytes"
+                ))
+            })?;
         flate2::read::ZlibDecoder::new(block)
             .take(want)
             .read_to_end(&mut out)

@@ -65,6 +65,7 @@ pub struct FeatureOptions {
 impl FeatureOptions {
     /// Read the edits file, if any, and detect the features of `mesh`.
     pub fn detect(&self, mesh: &LinearMesh, topo: &Topology) -> Result<Features, FeatureError> {
+        crate::params::check_features(&self.params)?;
         match &self.edits {
             None => Ok(Features::detect_without_edits(mesh, topo, &self.params)),
             Some(path) => Features::detect(mesh, topo, &self.params, &read_edits(path)?, path),
@@ -111,13 +112,15 @@ pub enum FeatureError {
         line: usize,
         what: String,
     },
+    #[error(transparent)]
+    Params(#[from] crate::params::ParamError),
 }
 
 /// Read a feature edits file: one edit per line, `add i j` / `remove i j` (3D) or `add i` /
 /// `remove i` (2D); `#` starts a comment, blank lines are skipped. The ids are checked
 /// against the mesh by [`Features::detect`].
 pub fn read_edits(path: &Path) -> Result<Vec<FeatureEdit>, FeatureError> {
-    let text = std::fs::read_to_string(path).map_err(|source| FeatureError::Io {
+    let text = crate::io::input::read_regular_text(path).map_err(|source| FeatureError::Io {
         path: path.to_owned(),
         source,
     })?;

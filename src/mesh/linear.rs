@@ -86,6 +86,12 @@ pub const HEX_CORNER_NEIGHBOURS: [[usize; 3]; 8] = [
 const QUAD_FLIP: [usize; 4] = [0, 3, 2, 1];
 const HEX_FLIP: [usize; 8] = [0, 3, 2, 1, 4, 7, 6, 5];
 
+/// Largest coordinate magnitude: the cube of a coordinate difference (a 3D det J) stays
+/// finite, with room for the fit's weights.
+pub const MAX_COORDINATE: f64 = 1e100;
+/// Smallest extent of a mesh: its det J stays a normal float.
+pub const MIN_EXTENT: f64 = 1e-100;
+
 /// Relative size below which a corner Jacobian counts as zero (degenerate corner).
 const DEGENERATE_REL_TOL: f64 = 1e-12;
 
@@ -374,8 +380,39 @@ impl LinearMesh {
                     ),
                 ));
             }
+            if let Some(k) = p.iter().position(|c| c.abs() > MAX_COORDINATE) {
+                let loc = point_locations.get(i).copied().unwrap_or_default();
+                return Err(ParseError::new(
+                    loc,
+                    format!(
+                        "node {} has its {} coordinate {:e} out of range (|x| ≤ {MAX_COORDINATE:e}, so that Jacobians cannot overflow); rescale the mesh",
+                        i + 1,
+                        ["x", "y", "z"][k],
+                        p[k]
+                    ),
+                ));
+            }
             new_index[i] = coords.len() as u32;
             coords.push(*p);
+        }
+        // The extent: a mesh this small has Jacobians that underflow to zero.
+        if let Some(first) = coords.first() {
+            let (mut lo, mut hi) = (*first, *first);
+            for p in &coords {
+                for k in 0..3 {
+                    lo[k] = lo[k].min(p[k]);
+                    hi[k] = hi[k].max(p[k]);
+                }
+            }
+            let extent = (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f64::max);
+            if extent > 0.0 && extent < MIN_EXTENT {
+                return Err(ParseError::new(
+                    Location::File,
+                    format!(
+                        "the mesh's extent {extent:e} is out of range (at least {MIN_EXTENT:e}, so that Jacobians cannot underflow); rescale the mesh"
+                    ),
+                ));
+            }
         }
         let unused_vertices = n_points - coords.len();
         for v in elements.iter_mut() {

@@ -3,6 +3,7 @@
 pub mod features;
 pub mod generate;
 pub mod linear;
+pub mod manifold;
 pub mod topology;
 pub(crate) mod vec3;
 
