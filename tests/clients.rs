@@ -23,14 +23,19 @@ fn scratch(name: &str) -> PathBuf {
     dir.join(name)
 }
 
-/// The 2D disc as a linear input file (written once per test binary run).
+/// The 2D disc as a linear input file, written once per run of this binary (the tests run in
+/// parallel and share it).
 fn disc_input() -> PathBuf {
-    let path = scratch("disc_input.msh");
-    let mesh = generate(Kind::Disc, 48);
-    let topo = Topology::build(&mesh);
-    let linear = sample(&mesh, &mesh, &topo, 1);
-    write_high_order(&linear, &path, &OutputOptions::default(), &[]).unwrap();
-    path
+    static PATH: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    PATH.get_or_init(|| {
+        let path = scratch("disc_input.msh");
+        let mesh = generate(Kind::Disc, 48);
+        let topo = Topology::build(&mesh);
+        let linear = sample(&mesh, &mesh, &topo, 1);
+        write_high_order(&linear, &path, &OutputOptions::default(), &[]).unwrap();
+        path
+    })
+    .clone()
 }
 
 fn cylinder_input() -> PathBuf {
@@ -157,25 +162,48 @@ fn our_volume(ho: &HighOrderMesh) -> f64 {
     total
 }
 
-/// Run one probe of `clients_probe.py`: Ok(JSON) or Err(the tool's message).
-fn probe(args: &[&str]) -> Result<Value, String> {
+/// Run `clients_probe.py KIND ARGS…`: its JSON (one object per file for the batch probes, each
+/// `{"error": …}` where the tool refused the file). Panics when the script itself fails.
+fn probe(kind: &str, args: &[&Path]) -> Value {
     let out = common::python()
         .arg(concat!(
             env!("CARGO_MANIFEST_DIR"),
             "/tests/external/clients_probe.py"
         ))
+        .arg(kind)
         .args(args)
         .output()
         .unwrap();
-    if out.status.success() {
-        Ok(serde_json::from_slice(&out.stdout).unwrap())
-    } else {
-        Err(String::from_utf8_lossy(&out.stderr).into_owned())
-    }
+    assert!(
+        out.status.success(),
+        "clients_probe.py {kind}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
 }
 
-fn path_str(p: &Path) -> &str {
-    p.to_str().unwrap()
+/// The per-file result, or a panic with the tool's refusal.
+fn ok<'a>(v: &'a Value, ctx: &str) -> &'a Value {
+    if let Some(e) = v.get("error") {
+        panic!("{ctx}: {e}");
+    }
+    v
+}
+
+fn count_sum(v: &Value) -> u64 {
+    v.as_object()
+        .unwrap()
+        .values()
+        .map(|n| n.as_u64().unwrap())
+        .sum()
+}
+
+fn lowercase_counts(v: &Value) -> BTreeMap<String, usize> {
+    v.as_object()
+        .unwrap()
+        .iter()
+        .map(|(k, n)| (k.to_lowercase(), n.as_u64().unwrap() as usize))
+        .collect()
 }
 
 /// `pyfr import` reads every ASCII MSH we write with the default options, 2D and 3D, MSH 4.1
@@ -186,89 +214,107 @@ fn pyfr_imports_our_msh_files() {
     if !common::python_has("pyfr.readers.gmsh", "pyfr_imports_our_msh_files") {
         return;
     }
+    let mut args: Vec<PathBuf> = Vec::new();
+    let mut expect = Vec::new();
     for (label, input, ety) in [
         ("disc", disc_input(), "quad"),
         ("cylinder", cylinder_input(), "hex"),
     ] {
         for order in 1..=5 {
             let ho = curved(&input, order);
-            let groups = our_boundary_groups(&ho);
-            for version in [MshVersion::V41, MshVersion::V22] {
-                if order == 5 && version == MshVersion::V22 {
-                    continue;
-                }
-                let ctx = format!("{label} p={order} {version:?}");
+            let versions: &[MshVersion] = match order {
+                2 | 4 => &[MshVersion::V41, MshVersion::V22],
+                _ => &[MshVersion::V41],
+            };
+            for &version in versions {
                 let msh = write(
                     &ho,
                     &format!("pyfr_{label}_{order}_{version:?}.msh"),
                     version,
                 );
-                let out = msh.with_extension("pyfrm");
-                let res = probe(&["pyfr", path_str(&msh), path_str(&out)]);
-                if order > 4 {
-                    let err = res.expect_err(&ctx);
-                    assert!(err.contains("Unsupported element type"), "{ctx}: {err}");
-                    continue;
-                }
-                let v = res.unwrap_or_else(|e| panic!("{ctx}: {e}"));
-                assert_eq!(
-                    v["eles"][ety].as_u64(),
-                    Some(ho.n_elements() as u64),
-                    "{ctx}"
-                );
-                let got: BTreeMap<String, usize> = v["bcs"]
-                    .as_object()
-                    .unwrap()
-                    .iter()
-                    .map(|(k, n)| (k.clone(), n.as_u64().unwrap() as usize))
+                args.push(msh.clone());
+                args.push(msh.with_extension("pyfrm"));
+                let groups: BTreeMap<String, usize> = our_boundary_groups(&ho)
+                    .into_iter()
+                    .map(|(k, n)| (k.to_lowercase(), n))
                     .collect();
-                let want: BTreeMap<String, usize> =
-                    groups.iter().map(|(k, n)| (k.to_lowercase(), *n)).collect();
-                assert_eq!(got, want, "{ctx}");
+                expect.push((
+                    format!("{label} p={order} {version:?}"),
+                    order,
+                    ety,
+                    ho.n_elements(),
+                    groups,
+                ));
             }
         }
     }
+    let refs: Vec<&Path> = args.iter().map(PathBuf::as_path).collect();
+    let results = probe("pyfr", &refs);
+    for (v, (ctx, order, ety, ne, groups)) in results.as_array().unwrap().iter().zip(&expect) {
+        if *order > 4 {
+            let err = v["error"].as_str().unwrap_or_else(|| panic!("{ctx}: {v}"));
+            assert!(err.contains("Unsupported element type"), "{ctx}: {err}");
+            continue;
+        }
+        let v = ok(v, ctx);
+        assert_eq!(v["eles"][ety].as_u64(), Some(*ne as u64), "{ctx}");
+        assert_eq!(&lowercase_counts(&v["bcs"]), groups, "{ctx}");
+    }
 }
 
-/// PyMFEM reads our default VTU (volume cells only) and our MSH 2.2 at orders 1–4: element
-/// counts, attributes, det J > 0 at its Gauss points, and the volume (area) to 1e-10 of ours.
+/// PyMFEM reads our default VTU (volume cells only) and our MSH 4.1 and 2.2 at orders 1–4:
+/// element counts, boundary elements, det J > 0 at its Gauss points, and the volume (area) to
+/// 1e-10 of ours.
 #[test]
 fn mfem_reads_our_vtu_and_msh() {
     if !common::python_has("mfem.ser", "mfem_reads_our_vtu_and_msh") {
         return;
     }
+    let mut files = Vec::new();
+    let mut expect = Vec::new();
     for (label, input) in [("disc", disc_input()), ("cylinder", cylinder_input())] {
         for order in 1..=4 {
             let ho = curved(&input, order);
             let volume = our_volume(&ho);
             let vtu = scratch(&format!("mfem_{label}_{order}.vtu"));
             write_high_order(&ho, &vtu, &OutputOptions::default(), &[]).unwrap();
-            let msh = write(&ho, &format!("mfem_{label}_{order}.msh"), MshVersion::V22);
-            for (file, boundary) in [(&vtu, 0), (&msh, ho.n_boundary())] {
-                let ctx = format!("{label} p={order} {}", file.display());
-                let v = probe(&["mfem", path_str(file)]).unwrap_or_else(|e| panic!("{ctx}: {e}"));
-                assert_eq!(v["dim"].as_u64(), Some(ho.dim as u64), "{ctx}");
-                assert_eq!(
-                    v["elements"].as_u64(),
-                    Some(ho.n_elements() as u64),
-                    "{ctx}"
-                );
-                assert_eq!(v["order"].as_u64(), Some(order as u64), "{ctx}");
-                if boundary > 0 {
-                    assert_eq!(
-                        v["boundary_elements"].as_u64(),
-                        Some(boundary as u64),
-                        "{ctx}"
-                    );
-                }
-                assert!(v["min_det_jac"].as_f64().unwrap() > 0.0, "{ctx}: {v}");
-                let theirs = v["volume"].as_f64().unwrap();
-                assert!(
-                    (theirs - volume).abs() <= 1e-10 * volume.abs(),
-                    "{ctx}: MFEM volume {theirs}, ours {volume}"
-                );
+            files.push(vtu);
+            files.push(write(
+                &ho,
+                &format!("mfem_{label}_{order}.msh"),
+                MshVersion::V41,
+            ));
+            files.push(write(
+                &ho,
+                &format!("mfem_{label}_{order}_22.msh"),
+                MshVersion::V22,
+            ));
+            for _ in 0..3 {
+                expect.push((ho.dim, order, ho.n_elements(), ho.n_boundary(), volume));
             }
         }
+    }
+    let refs: Vec<&Path> = files.iter().map(PathBuf::as_path).collect();
+    let results = probe("mfem", &refs);
+    for (v, (file, (dim, order, ne, nb, volume))) in results
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(files.iter().zip(&expect))
+    {
+        let ctx = file.display().to_string();
+        let v = ok(v, &ctx);
+        assert_eq!(v["dim"].as_u64(), Some(*dim as u64), "{ctx}");
+        assert_eq!(v["elements"].as_u64(), Some(*ne as u64), "{ctx}");
+        assert_eq!(v["order"].as_u64(), Some(*order as u64), "{ctx}");
+        // From the MSH's boundary elements, or (VTU) from MFEM's own boundary search.
+        assert_eq!(v["boundary_elements"].as_u64(), Some(*nb as u64), "{ctx}");
+        assert!(v["min_det_jac"].as_f64().unwrap() > 0.0, "{ctx}: {v}");
+        let theirs = v["volume"].as_f64().unwrap();
+        assert!(
+            (theirs - volume).abs() <= 1e-10 * volume.abs(),
+            "{ctx}: MFEM volume {theirs}, ours {volume}"
+        );
     }
 }
 
@@ -280,33 +326,21 @@ fn meshio_reads_our_files() {
     if !common::python_has("meshio", "meshio_reads_our_files") {
         return;
     }
+    // Per file: cells, groups that must be there, whether meshio must refuse it.
+    let mut files = Vec::new();
+    let mut expect = Vec::new();
     for (label, input) in [("disc", disc_input()), ("cylinder", cylinder_input())] {
         for order in [1, 2, 3] {
             let ho = curved(&input, order);
-            let groups = our_boundary_groups(&ho);
+            let mut groups: Vec<String> = our_boundary_groups(&ho).into_keys().collect();
+            groups.push("fluid".into());
             for version in [MshVersion::V41, MshVersion::V22] {
-                let msh = write(
+                files.push(write(
                     &ho,
                     &format!("meshio_{label}_{order}_{version:?}.msh"),
                     version,
-                );
-                let ctx = format!("{label} p={order} {version:?}");
-                let v = probe(&["meshio", path_str(&msh)]).unwrap_or_else(|e| panic!("{ctx}: {e}"));
-                let cells = v["cells"].as_object().unwrap();
-                let total: u64 = cells.values().map(|n| n.as_u64().unwrap()).sum();
-                assert_eq!(
-                    total,
-                    (ho.n_elements() + ho.n_boundary()) as u64,
-                    "{ctx}: {cells:?}"
-                );
-                assert_eq!(v["points"].as_u64(), Some(ho.nodes.len() as u64), "{ctx}");
-                let names = v["groups"].as_object().unwrap();
-                for name in groups.keys().chain(std::iter::once(&"fluid".to_string())) {
-                    assert!(
-                        names.contains_key(name),
-                        "{ctx}: no group {name}: {names:?}"
-                    );
-                }
+                ));
+                expect.push((ho.n_elements() + ho.n_boundary(), groups.clone(), false));
             }
             let vtu = scratch(&format!("meshio_{label}_{order}.vtu"));
             let bvtu = scratch(&format!("meshio_{label}_{order}_boundary.vtu"));
@@ -315,32 +349,42 @@ fn meshio_reads_our_files() {
                 ..Default::default()
             };
             write_high_order(&ho, &vtu, &options, &[]).unwrap();
-            let ctx = format!("{label} p={order} vtu");
-            let res = probe(&["meshio", path_str(&vtu)]);
-            if ho.dim == 3 && order >= 2 {
-                let err = res.expect_err(&ctx);
-                assert!(
-                    err.contains("Unknown VTU file version '2.2'"),
-                    "{ctx}: {err}"
-                );
-            } else {
-                let v = res.unwrap_or_else(|e| panic!("{ctx}: {e}"));
-                let total: u64 = v["cells"]
-                    .as_object()
-                    .unwrap()
-                    .values()
-                    .map(|n| n.as_u64().unwrap())
-                    .sum();
-                assert_eq!(total, ho.n_elements() as u64, "{ctx}");
-            }
-            let v = probe(&["meshio", path_str(&bvtu)]).unwrap_or_else(|e| panic!("{ctx}: {e}"));
-            let total: u64 = v["cells"]
-                .as_object()
-                .unwrap()
-                .values()
-                .map(|n| n.as_u64().unwrap())
-                .sum();
-            assert_eq!(total, ho.n_boundary() as u64, "{ctx} boundary");
+            files.push(vtu);
+            expect.push((ho.n_elements(), vec![], ho.dim == 3 && order >= 2));
+            files.push(bvtu);
+            expect.push((ho.n_boundary(), vec![], false));
+        }
+    }
+    let refs: Vec<&Path> = files.iter().map(PathBuf::as_path).collect();
+    let results = probe("meshio", &refs);
+    for (v, (file, (cells, groups, refused))) in results
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(files.iter().zip(&expect))
+    {
+        let ctx = file.display().to_string();
+        if *refused {
+            let err = v["error"].as_str().unwrap_or_else(|| panic!("{ctx}: {v}"));
+            assert!(
+                err.contains("Unknown VTU file version '2.2'"),
+                "{ctx}: {err}"
+            );
+            continue;
+        }
+        let v = ok(v, &ctx);
+        assert_eq!(
+            count_sum(&v["cells"]),
+            *cells as u64,
+            "{ctx}: {}",
+            v["cells"]
+        );
+        let names = v["groups"].as_object().unwrap();
+        for name in groups {
+            assert!(
+                names.contains_key(name),
+                "{ctx}: no group {name}: {names:?}"
+            );
         }
     }
 }
@@ -365,20 +409,14 @@ fn pyhope_converts_our_3d_msh() {
         );
         let dir = scratch(&format!("pyhope_{order}"));
         let ctx = format!("cylinder p={order}");
-        let v = probe(&["pyhope", path_str(&msh), path_str(&dir)])
-            .unwrap_or_else(|e| panic!("{ctx}: {e}"));
+        let v = probe("pyhope", &[&msh, &dir]);
         assert_eq!(
             v["elements"].as_u64(),
             Some(ho.n_elements() as u64),
             "{ctx}"
         );
         assert_eq!(v["ngeo"].as_u64(), Some(order as u64), "{ctx}");
-        let got: BTreeMap<String, usize> = v["bc_sides"]
-            .as_object()
-            .unwrap()
-            .iter()
-            .map(|(k, n)| (k.clone(), n.as_u64().unwrap() as usize))
-            .collect();
+        let got = lowercase_counts(&v["bc_sides"]);
         let want: BTreeMap<String, usize> =
             groups.iter().map(|(k, n)| (k.to_lowercase(), *n)).collect();
         assert_eq!(got, want, "{ctx}");
