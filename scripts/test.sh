@@ -9,7 +9,8 @@
 #  2. The Python checkers of tests/requirements.txt (Gmsh, VTK, meshio, PyFR, PyMFEM, PyHOPE)
 #     in a virtual environment of their own, .venv-tests (re-used while the requirements are
 #     unchanged). The tests find it through POLYSPLINE_PYTHON.
-#  3. `cargo test --release --all-targets`. A test whose checker is missing skips visibly
+#  3. `cargo test --release --all-targets` (or `cargo test --release ARGS…` when given
+#     arguments). A test whose checker is missing skips visibly
 #     (a failure under CI=true) and appends a line to target/test-skips.log.
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -66,7 +67,12 @@ mkdir -p "$root/target"
 export POLYSPLINE_SKIP_LOG="$root/target/test-skips.log"
 : >"$POLYSPLINE_SKIP_LOG"
 out="$root/target/test-output.log"
-cargo test --release --all-targets 2>&1 | tee "$out"
+# Arguments replace `--all-targets` (e.g. `bash scripts/test.sh --test clients`).
+if [ $# -gt 0 ]; then
+    cargo test --release "$@" 2>&1 | tee "$out"
+else
+    cargo test --release --all-targets 2>&1 | tee "$out"
+fi
 status=${PIPESTATUS[0]}
 
 echo

@@ -6,6 +6,9 @@
 //! Meshes are small: a 2D butterfly disc (untagged boundary: the default group names) and the
 //! 3D SU2 cylinder (315 hexes, six named markers).
 
+// The quadrature indexes the Jacobian by row and column.
+#![allow(clippy::needless_range_loop)]
+
 mod common;
 
 use polyspline::io::gmsh_write::MshVersion;
