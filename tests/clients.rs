@@ -449,3 +449,123 @@ fn our_volume_of_unit_boxes() {
         }
     }
 }
+
+/// The report's boundary measures against the analytic circle: on the disc (16 boundary
+/// edges of π/8), the curved wall stands off the chords by the sagitta 1 − cos(π/16) at the
+/// edge nodes, while the vertex nodes stay within 2% of it of the input vertices;
+/// `--snap-boundary` zeroes the vertex deviation only, and counts the vertices it moved.
+#[test]
+fn report_measures_the_wall_against_the_circle() {
+    let input = disc_input();
+    let sagitta = 1.0 - (std::f64::consts::PI / 16.0).cos();
+    for snap in [false, true] {
+        let options = CurveOptions {
+            order: 2,
+            snap_boundary: snap,
+            ..Default::default()
+        };
+        let r = curve_in_memory(&input, &options).unwrap().report;
+        let ctx = format!("snap {snap}");
+        let diag = r.bounding_box_diagonal;
+        assert!((diag - 8f64.sqrt()).abs() < 1e-12, "{ctx}: {diag}");
+        let node = r.boundary_node_distance_max * diag;
+        assert!(
+            (node - sagitta).abs() < 0.02 * sagitta,
+            "{ctx}: node distance {node}, sagitta {sagitta}"
+        );
+        // The sampled lattice contains the nodes.
+        assert!(
+            r.boundary_sample_distance_max >= r.boundary_node_distance_max,
+            "{ctx}"
+        );
+        let vertex = r.boundary_vertex_deviation_max * diag;
+        assert!(vertex < 0.02 * sagitta, "{ctx}: vertex deviation {vertex}");
+        if snap {
+            assert_eq!(r.boundary_vertex_deviation_max, 0.0, "{ctx}");
+            let n = r.snapped_boundary_vertices.unwrap();
+            assert!(n > 0 && n <= 16, "{ctx}: {n} snapped");
+        } else {
+            assert!(
+                vertex > 0.0 && r.snapped_boundary_vertices.is_none(),
+                "{ctx}"
+            );
+        }
+    }
+}
+
+/// The CLI's output options: `--volume-name` names the MSH volume group, `--vtu-boundary`
+/// writes the facets beside a volume-only VTU; a boundary file that is the output itself or
+/// not a .vtu, and an empty volume name, are refused with one line and nothing written.
+#[test]
+fn cli_volume_name_and_vtu_boundary() {
+    use polyspline::io::read_raw;
+    let input = disc_input();
+    let bin = env!("CARGO_BIN_EXE_polyspline");
+    let msh = scratch("cli_air.msh");
+    // The SU2 cylinder names no region (our disc output names its region `fluid`, which the
+    // option does not override).
+    common::run_ok(
+        std::process::Command::new(bin)
+            .args(["curve", "-q"])
+            .arg(cylinder_input())
+            .arg("-o")
+            .arg(&msh)
+            .args(["--volume-name", "air"]),
+    );
+    let text = std::fs::read_to_string(&msh).unwrap();
+    assert!(
+        text.contains("3 7 \"air\"") && text.contains("2 3 \"outer\""),
+        "{text:.300}"
+    );
+    let (vtu, bvtu) = (scratch("cli_vol.vtu"), scratch("cli_vol_boundary.vtu"));
+    common::run_ok(
+        std::process::Command::new(bin)
+            .args(["curve", "-q"])
+            .arg(&input)
+            .arg("-o")
+            .arg(&vtu)
+            .arg("--vtu-boundary")
+            .arg(&bvtu),
+    );
+    let vol = HighOrderMesh::from_raw(read_raw(&vtu).unwrap()).unwrap();
+    assert_eq!((vol.dim, vol.n_elements(), vol.n_boundary()), (2, 48, 0));
+    let raw = read_raw(&bvtu).unwrap();
+    let cells: usize = raw.blocks.iter().map(|b| b.len()).sum();
+    assert_eq!(cells, 16);
+    for (args, what) in [
+        (
+            vec!["--vtu-boundary", "SELF"],
+            "would overwrite the mesh output",
+        ),
+        (vec!["--vtu-boundary", "b.msh"], "extension .vtu"),
+        (vec!["--volume-name", ""], "--volume-name"),
+    ] {
+        let out = scratch("cli_refused.vtu");
+        let _ = std::fs::remove_file(&out);
+        let args: Vec<String> = args
+            .iter()
+            .map(|a| {
+                if *a == "SELF" {
+                    out.display().to_string()
+                } else {
+                    a.to_string()
+                }
+            })
+            .collect();
+        let o = std::process::Command::new(bin)
+            .args(["curve", "-q"])
+            .arg(&input)
+            .arg("-o")
+            .arg(&out)
+            .args(&args)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!o.status.success(), "{args:?}");
+        assert!(
+            err.contains(what) && err.trim().lines().count() == 1,
+            "{args:?}: {err}"
+        );
+        assert!(!out.exists(), "{args:?}: output written");
+    }
+}
