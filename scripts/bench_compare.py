@@ -74,7 +74,7 @@ def main():
             def jump(g):
                 return "%.2f / %.1f" % (g["mean_deg"], g["max_deg"]) if g["points"] else "- (no facets)"
             print("| %s | %s | %.3f | %.2e | %s | %s |" % (
-                name, row["method"], row["min_scaled_jacobian"], row["boundary_deviation_max"],
+                name, row["method"], row["min_scaled_jacobian"], row["boundary_vertex_deviation_max"],
                 jump(s["interior"]), jump(s["near_boundary"])))
 
 

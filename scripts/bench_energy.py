@@ -62,7 +62,7 @@ def main():
                 it = f"{e['iterations']} ({e['stop']})" if e else "–"
                 print(f"| {mesh} | {r['elements']} | {name} | {r['line_search_alpha']:.3g} | "
                       f"{r['input_min_scaled_jacobian']:.3f} → {r['min_scaled_jacobian']:.3f} | "
-                      f"{r['boundary_deviation_max']:.2e} | {it} | "
+                      f"{r['boundary_vertex_deviation_max']:.2e} | {it} | "
                       f"{statistics.median(energies):.2f} | {statistics.median(totals):.2f} |", flush=True)
 
 

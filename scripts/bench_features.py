@@ -42,7 +42,7 @@ def main():
                 print(f"| {m} | {mode} | {f['feature_edges']} / {f['feature_corners']} / "
                       f"{f['patches']} ({f['planar_patches']}) | {r['q2_elements']} ({crease}) "
                       f"| {f['feature_vertex_deviation_max']:.2e} | {f['planarity_max']:.2e} "
-                      f"| {r['boundary_deviation_max']:.2e} "
+                      f"| {r['boundary_vertex_deviation_max']:.2e} "
                       f"| {r['min_scaled_jacobian']:.3f} ({r['input_min_scaled_jacobian']:.3f}) |",
                       flush=True)
 

@@ -85,7 +85,7 @@ def main():
             "ratio_min": o["min"], "straight_min": s["min"],
             "ratio_p1": o["p1"], "straight_p1": s["p1"],
             "sj_in": r["input_min_scaled_jacobian"], "sj_out": r["min_scaled_jacobian"],
-            "deviation": r["boundary_deviation_max"],
+            "deviation": r["boundary_vertex_deviation_max"],
             "reduced": b.get("reduced_elements", 0), "target": b.get("target_points", 0),
             "straight_points": b.get("straight_points", 0),
             "seconds": statistics.median(times),

@@ -42,7 +42,7 @@ def main():
                 name, r["elements"], r["spline_elements"], r["q2_elements"], r["cg_iterations"],
                 r["line_search_alpha"], statistics.median(fits), statistics.median(vals),
                 statistics.median(totals), r["input_min_scaled_jacobian"], r["min_scaled_jacobian"],
-                r["boundary_deviation_max"]))
+                r["boundary_vertex_deviation_max"]))
 
 
 if __name__ == "__main__":

@@ -202,8 +202,11 @@ pub struct CompareRow {
     pub total_seconds: Option<f64>,
     pub invalid_elements: Option<usize>,
     pub min_scaled_jacobian: Option<f64>,
-    pub boundary_deviation_max: Option<f64>,
-    pub boundary_deviation_rms: Option<f64>,
+    /// Boundary vertex nodes from the input vertices (relative to the diagonal).
+    pub boundary_vertex_deviation_max: Option<f64>,
+    pub boundary_vertex_deviation_rms: Option<f64>,
+    /// Every written boundary node from the input's linear boundary (relative).
+    pub boundary_node_distance_max: Option<f64>,
     /// CG iterations of the fit (IGA) or of the elastic solve.
     pub cg_iterations: Option<usize>,
     pub smoothness: Option<Smoothness>,
@@ -239,8 +242,9 @@ fn row(method: &str, result: Result<Curved, CurveError>) -> CompareRow {
         total_seconds: None,
         invalid_elements: None,
         min_scaled_jacobian: None,
-        boundary_deviation_max: None,
-        boundary_deviation_rms: None,
+        boundary_vertex_deviation_max: None,
+        boundary_vertex_deviation_rms: None,
+        boundary_node_distance_max: None,
         cg_iterations: None,
         smoothness: None,
     };
@@ -263,8 +267,9 @@ fn row(method: &str, result: Result<Curved, CurveError>) -> CompareRow {
             row.timings = r.timings.clone();
             row.invalid_elements = Some(r.invalid_elements);
             row.min_scaled_jacobian = Some(r.min_scaled_jacobian);
-            row.boundary_deviation_max = Some(r.boundary_deviation_max);
-            row.boundary_deviation_rms = Some(r.boundary_deviation_rms);
+            row.boundary_vertex_deviation_max = Some(r.boundary_vertex_deviation_max);
+            row.boundary_vertex_deviation_rms = Some(r.boundary_vertex_deviation_rms);
+            row.boundary_node_distance_max = Some(r.boundary_node_distance_max);
             row.cg_iterations = r.elastic.map(|e| e.cg.iterations).or(r.cg_iterations);
             row.smoothness = Some(facet_angle_jumps(&c.mesh, &c.topo, &c.ho));
         }
@@ -372,13 +377,14 @@ impl std::fmt::Display for CompareReport {
         )?;
         writeln!(
             f,
-            "{:<13} {:>9} {:>9} {:>7} {:>8} {:>9} {:>6} {:>15} {:>15}",
+            "{:<13} {:>9} {:>9} {:>7} {:>8} {:>9} {:>9} {:>6} {:>15} {:>15}",
             "method",
             "method s",
             "total s",
             "invalid",
             "min SJ",
-            "bdev max",
+            "vtx dev",
+            "node dist",
             "CG it",
             "jump near (°)",
             "jump inner (°)"
@@ -392,13 +398,15 @@ impl std::fmt::Display for CompareReport {
             };
             writeln!(
                 f,
-                "{:<13} {:>9} {:>9} {:>7} {:>8} {:>9} {:>6} {:>15} {:>15}",
+                "{:<13} {:>9} {:>9} {:>7} {:>8} {:>9} {:>9} {:>6} {:>15} {:>15}",
                 r.method,
                 opt(r.method_seconds, 3),
                 opt(r.total_seconds, 3),
                 r.invalid_elements.map_or("-".into(), |n| n.to_string()),
                 opt(r.min_scaled_jacobian, 4),
-                r.boundary_deviation_max
+                r.boundary_vertex_deviation_max
+                    .map_or("-".into(), |v| format!("{v:.2e}")),
+                r.boundary_node_distance_max
                     .map_or("-".into(), |v| format!("{v:.2e}")),
                 r.cg_iterations.map_or("-".into(), |n| n.to_string()),
                 jump(r.smoothness.map(|s| s.near_boundary)),
@@ -408,6 +416,10 @@ impl std::fmt::Display for CompareReport {
         writeln!(
             f,
             "(jump: mean/max angle between the elements' transversal derivatives across interior facets)"
+        )?;
+        writeln!(
+            f,
+            "(vtx dev: boundary vertex nodes from the input vertices; node dist: every boundary node from the input's linear boundary; both relative to the bounding-box diagonal)"
         )?;
         for r in &self.rows {
             if let Some(e) = &r.error {

@@ -21,6 +21,7 @@
 
 pub mod compare;
 pub mod cpu;
+pub mod deviation;
 pub mod elastic;
 pub mod energy;
 pub mod fit;

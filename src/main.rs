@@ -33,6 +33,8 @@ struct Cli {
     command: Command,
 }
 
+// Parsed once per run: the size of the largest variant (`curve`'s options) does not matter.
+#[allow(clippy::large_enum_variant)]
 #[derive(Subcommand)]
 enum Command {
     /// Read a linear quad/hex mesh and report its size, topology and quality.
@@ -151,6 +153,14 @@ enum Command {
         /// How VTU data arrays are stored.
         #[arg(long, value_enum, default_value_t = VtuEncodingArg::Base64)]
         vtu_encoding: VtuEncodingArg,
+        /// Name of the MSH volume physical group where the input names no region (PyFR reads
+        /// its volume from a group named `fluid`).
+        #[arg(long, default_value = "fluid", value_name = "NAME")]
+        volume_name: String,
+        /// Also write the boundary facets, with their tags, to this VTU file (the main VTU
+        /// holds the volume cells only).
+        #[arg(long, value_name = "FILE.vtu")]
+        vtu_boundary: Option<PathBuf>,
         /// Write a JSON report (sizes, timings) to this file.
         #[arg(long, value_name = "FILE.json")]
         report: Option<PathBuf>,
@@ -536,6 +546,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
             msh_version,
             binary,
             vtu_encoding,
+            volume_name,
+            vtu_boundary,
             report,
             allow_invalid,
             backend,
@@ -556,6 +568,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 .collect();
             check_outputs(&outputs, &inputs)?;
             let backend = resolve_backend(backend, precision)?;
+            if volume_name.is_empty() || volume_name.contains(['"', '\n', '\r']) {
+                anyhow::bail!(
+                    "--volume-name must be non-empty, without quotes or line breaks, got {volume_name:?}"
+                );
+            }
             if kink_angle.is_nan() || kink_angle <= 0.0 {
                 anyhow::bail!("--kink-angle must be positive (180 turns it off), got {kink_angle}");
             }
@@ -635,6 +652,8 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                         VtuEncodingArg::Base64 => VtuEncoding::Base64,
                         VtuEncodingArg::Appended => VtuEncoding::Appended,
                     },
+                    volume_name,
+                    vtu_boundary,
                 },
                 backend,
                 energy: if fit == FitArg::Energy {
@@ -715,15 +734,21 @@ fn run(cli: Cli) -> anyhow::Result<()> {
                 );
             }
             if let Some(n) = r.snapped_boundary_vertices {
-                eprintln!("snap: {n} boundary vertices moved onto the input");
+                eprintln!(
+                    "snap: {n} boundary vertex nodes moved onto the input vertices (edge and face nodes stay)"
+                );
             }
             eprintln!(
-                "quality: min scaled Jacobian {:.4} (input {:.4}), invalid elements {}, boundary deviation max {:.2e} rms {:.2e}",
-                r.min_scaled_jacobian,
-                r.input_min_scaled_jacobian,
-                r.invalid_elements,
-                r.boundary_deviation_max,
-                r.boundary_deviation_rms
+                "quality: min scaled Jacobian {:.4} (input {:.4}), invalid elements {}",
+                r.min_scaled_jacobian, r.input_min_scaled_jacobian, r.invalid_elements,
+            );
+            eprintln!(
+                "boundary (relative to the diagonal {:.4e}): vertex nodes from the input vertices max {:.2e} rms {:.2e}; every boundary node from the input's linear boundary max {:.2e}, sampled facets max {:.2e}",
+                r.bounding_box_diagonal,
+                r.boundary_vertex_deviation_max,
+                r.boundary_vertex_deviation_rms,
+                r.boundary_node_distance_max,
+                r.boundary_sample_distance_max
             );
         }
         Command::Compare {

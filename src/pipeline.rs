@@ -13,9 +13,9 @@ use crate::elastic::{ElasticError, ElasticInfo, ElasticParams, elastic_analogy};
 use crate::energy::{EnergyError, EnergyInfo, EnergyParams};
 use crate::fit::{FitParams, FitTargets, FitWeights, fit_with_targets};
 use crate::gpu::{AdapterReport, Backend, Precision};
-use crate::io::gmsh_write::{MshVersion, write_msh};
-use crate::io::output::WriteError;
-use crate::io::vtu_write::{VtuEncoding, write_vtu};
+use crate::io::gmsh_write::{DEFAULT_VOLUME_NAME, MshVersion, write_msh_named};
+use crate::io::output::{WriteError, write_atomically};
+use crate::io::vtu_write::{VtuCells, VtuEncoding, write_vtu_cells};
 use crate::io::{ReadError, read_mesh};
 use crate::mesh::{MeshOptions, Topology};
 use crate::quality::sample_det_jacobian;
@@ -80,6 +80,10 @@ pub struct OutputOptions {
     pub msh_version: MshVersion,
     pub binary: bool,
     pub vtu_encoding: VtuEncoding,
+    /// Name of the MSH volume group where the input names no region (`fluid`, as PyFR needs).
+    pub volume_name: String,
+    /// Also write the boundary facets to this VTU file (the main VTU holds the volume only).
+    pub vtu_boundary: Option<PathBuf>,
 }
 
 impl Default for OutputOptions {
@@ -88,6 +92,8 @@ impl Default for OutputOptions {
             msh_version: MshVersion::V41,
             binary: false,
             vtu_encoding: VtuEncoding::Base64,
+            volume_name: DEFAULT_VOLUME_NAME.into(),
+            vtu_boundary: None,
         }
     }
 }
@@ -168,10 +174,7 @@ pub enum CurveError {
         source: ElasticError,
     },
     #[error("{}: {source}", input.display())]
-    Blend {
-        input: PathBuf,
-        source: BlendError,
-    },
+    Blend { input: PathBuf, source: BlendError },
     #[error("{}: {source}", input.display())]
     Validity {
         input: PathBuf,
@@ -271,10 +274,17 @@ pub struct CurveReport {
     /// Minimum scaled Jacobian of the input (corners) and of the output (sampled).
     pub input_min_scaled_jacobian: f64,
     pub min_scaled_jacobian: f64,
-    /// Distance of the output's boundary vertex nodes from the input's boundary vertices,
-    /// relative to the bounding-box diagonal.
-    pub boundary_deviation_max: f64,
-    pub boundary_deviation_rms: f64,
+    /// Bounding-box diagonal of the input: the `boundary_*` distances below are relative to it.
+    pub bounding_box_diagonal: f64,
+    /// Distance of the output's boundary vertex nodes from the input's boundary vertices
+    /// (0 where `--snap-boundary` snapped them), max and rms.
+    pub boundary_vertex_deviation_max: f64,
+    pub boundary_vertex_deviation_rms: f64,
+    /// Largest distance of any written boundary node (vertex, edge or face node) from the
+    /// input's linear boundary: how far the curving moved the wall ([`crate::deviation`]).
+    pub boundary_node_distance_max: f64,
+    /// The same over the output's boundary facets sampled on the lattice of order 2p.
+    pub boundary_sample_distance_max: f64,
     /// Seconds per stage, and `total`.
     pub timings: BTreeMap<String, f64>,
     /// `cpu` or `gpu`; with `gpu`, the adapter and the kernels' precision.
@@ -300,7 +310,8 @@ impl OutputFormat {
     }
 }
 
-/// Write a high-order mesh to `path` in the format its extension names.
+/// Write a high-order mesh to `path` in the format its extension names, and its boundary
+/// facets to `options.vtu_boundary` when that is set.
 pub fn write_high_order(
     mesh: &HighOrderMesh,
     path: &Path,
@@ -332,9 +343,36 @@ pub fn prepare_high_order(
             ),
         });
     }
+    if let Some(bpath) = &options.vtu_boundary {
+        if OutputFormat::from_path(bpath) != Some(OutputFormat::Vtu) {
+            return Err(WriteError::Unsupported {
+                path: bpath.clone(),
+                what: "the boundary file is written as VTU; give it the extension .vtu".into(),
+            });
+        }
+        if bpath == path {
+            return Err(WriteError::Unsupported {
+                path: bpath.clone(),
+                what: "the boundary file would overwrite the mesh output; choose another path"
+                    .into(),
+            });
+        }
+        // The secondary boundary file is written (atomically) before the mesh is prepared.
+        let mut not_onto: Vec<&Path> = inputs.to_vec();
+        not_onto.push(path);
+        write_atomically(bpath, &not_onto, |w| {
+            write_vtu_cells(mesh, options.vtu_encoding, VtuCells::Boundary, w)
+        })?;
+    }
     crate::io::output::prepare(path, inputs, |w| match format {
-        OutputFormat::Msh => write_msh(mesh, options.msh_version, options.binary, w),
-        OutputFormat::Vtu => write_vtu(mesh, options.vtu_encoding, w),
+        OutputFormat::Msh => write_msh_named(
+            mesh,
+            options.msh_version,
+            options.binary,
+            &options.volume_name,
+            w,
+        ),
+        OutputFormat::Vtu => write_vtu_cells(mesh, options.vtu_encoding, VtuCells::Volume, w),
     })
 }
 
@@ -552,15 +590,21 @@ pub fn curve_in_memory_with_progress(
         lap("spline", &mut timings);
         // The least-squares fit of the space's control points (planar patches projected back).
         let solve_fit = |s: &SplineSpace| {
-            let (mut c_star, info) =
-                fit_with_targets(s, &mesh, &topo, &fit_params, targets.as_ref(), |k, rhs, x, cg| match gpu {
+            let (mut c_star, info) = fit_with_targets(
+                s,
+                &mesh,
+                &topo,
+                &fit_params,
+                targets.as_ref(),
+                |k, rhs, x, cg| match gpu {
                     Some(ctx) => crate::gpu::cg::pcg(ctx, k, rhs, x, cg, |_, _| {}),
                     None => crate::solve::pcg(k, rhs, x, cg, |i, r| progress.cg(i, r)),
-                })
-                .map_err(|source| CurveError::Solve {
-                    input: input.to_owned(),
-                    source,
-                })?;
+                },
+            )
+            .map_err(|source| CurveError::Solve {
+                input: input.to_owned(),
+                source,
+            })?;
             if let Some(f) = used {
                 crate::fit::features::project_onto_planes(s, &topo, f, &mut c_star);
             }
@@ -570,9 +614,13 @@ pub fn curve_in_memory_with_progress(
         // valid for every input whose straight elevation is certified.
         let blend = |s: &SplineSpace| {
             let mut blended = Blended::new(&mesh, &target_map, s, &mesh, &topo, Vec::new());
-            let info = blend_search(certifier, &mut blended, &options.line_search.blend(
-                options.line_search_mode == LineSearchMode::Global,
-            ))
+            let info = blend_search(
+                certifier,
+                &mut blended,
+                &options
+                    .line_search
+                    .blend(options.line_search_mode == LineSearchMode::Global),
+            )
             .map_err(|source| CurveError::Blend {
                 input: input.to_owned(),
                 source,
@@ -832,7 +880,7 @@ pub fn curve_in_memory_with_progress(
     if !invalid.is_empty() {
         return Err(CurveError::invalid(input, "sampled output", &invalid));
     }
-    let (dev_max, dev_rms) = boundary_deviation(&mesh, &topo, &ho);
+    let deviation = crate::deviation::boundary_deviation(&mesh, &topo, &ho);
     lap("quality", &mut timings);
     timings.insert("total".into(), start.elapsed().as_secs_f64());
     let report = CurveReport {
@@ -888,8 +936,11 @@ pub fn curve_in_memory_with_progress(
         min_det_jacobian_bound: min_det_bound,
         input_min_scaled_jacobian: input_msj,
         min_scaled_jacobian: min_sj,
-        boundary_deviation_max: dev_max,
-        boundary_deviation_rms: dev_rms,
+        bounding_box_diagonal: deviation.diagonal,
+        boundary_vertex_deviation_max: deviation.vertex_max,
+        boundary_vertex_deviation_rms: deviation.vertex_rms,
+        boundary_node_distance_max: deviation.node_max,
+        boundary_sample_distance_max: deviation.sample_max,
         timings,
         backend: options.backend.name().into(),
         adapter: gpu.map(|g| g.adapter.clone()),
@@ -905,29 +956,13 @@ pub fn curve_in_memory_with_progress(
 
 /// Distance of the output's vertex nodes on the boundary from the input's boundary vertices
 /// (node ids of vertices equal the input vertex ids), relative to the bounding-box diagonal:
-/// (max, rms).
+/// (max, rms). The report's other boundary measures are in [`crate::deviation`].
 pub fn boundary_deviation(
     mesh: &crate::mesh::LinearMesh,
     topo: &Topology,
     ho: &HighOrderMesh,
 ) -> (f64, f64) {
-    let (lo, hi) = mesh.bounding_box();
-    let diag = (0..3)
-        .map(|k| (hi[k] - lo[k]).powi(2))
-        .sum::<f64>()
-        .sqrt()
-        .max(f64::MIN_POSITIVE);
-    let (mut max, mut sum, mut n) = (0.0f64, 0.0, 0usize);
-    for (v, &b) in topo.vertex_on_boundary.iter().enumerate() {
-        if b {
-            let (x, y) = (mesh.coords[v], ho.nodes[v]);
-            let d = (0..3).map(|k| (x[k] - y[k]).powi(2)).sum::<f64>().sqrt() / diag;
-            max = max.max(d);
-            sum += d * d;
-            n += 1;
-        }
-    }
-    (max, if n > 0 { (sum / n as f64).sqrt() } else { 0.0 })
+    crate::deviation::vertex_deviation(mesh, topo, ho)
 }
 
 /// The energy minimisation of `--fit energy` from the certified least-squares result `start`;
@@ -1047,7 +1082,8 @@ const MAX_SNAP_ROUNDS: usize = 8;
 /// Move the output's boundary vertex nodes (node ids = input vertex ids) onto the input
 /// vertices (paper §3), keeping only the moves after which every element containing a moved
 /// node is still certified valid (det J of its Lagrange map, in Bernstein form). Returns the
-/// number of vertices moved.
+/// number of vertices that really moved (not those already on their input vertex); edge and
+/// face nodes are never moved.
 pub fn snap_boundary(
     mesh: &crate::mesh::LinearMesh,
     topo: &Topology,
@@ -1102,5 +1138,7 @@ pub fn snap_boundary(
         }
         affected = bad;
     }
-    snapped.iter().filter(|&&s| s).count()
+    (0..nv)
+        .filter(|&n| snapped[n] && original[n] != mesh.coords[n])
+        .count()
 }

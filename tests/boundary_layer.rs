@@ -73,7 +73,10 @@ fn ellipse_layer(b: f64, around: usize, dist: &[f64]) -> LinearMesh {
 struct Lcg(u64);
 impl Lcg {
     fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         ((self.0 >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
     }
 }
@@ -156,14 +159,21 @@ fn every_valid_input_curves_valid_in_every_fit_mode() {
         ("thin_arc", thin_arc),
         (
             "ellipse_layer_3d",
-            extrude(&ellipse_layer(0.25, 24, &graded(1e-5, 1.3, 16)), &[0.0, 0.05, 0.1]),
+            extrude(
+                &ellipse_layer(0.25, 24, &graded(1e-5, 1.3, 16)),
+                &[0.0, 0.05, 0.1],
+            ),
         ),
     ];
     for (name, mesh) in &meshes {
         for fit in ["smooth", "position", "frame"] {
             for mode in [LineSearchMode::Local, LineSearchMode::Global] {
                 let order = if *name == "jittered" { 3 } else { 2 };
-                curves_valid(&format!("{name}_{fit}_{mode:?}"), mesh, &options(fit, mode, order));
+                curves_valid(
+                    &format!("{name}_{fit}_{mode:?}"),
+                    mesh,
+                    &options(fit, mode, order),
+                );
             }
         }
     }
@@ -179,7 +189,11 @@ fn random_valid_meshes_always_curve_valid() {
         let n = 6 + (k as usize % 4) * 2;
         let mut mesh = jittered(n, 0.15 * (1.0 + rng.next()), 100 + k);
         let stretch = 10f64.powf(2.0 * (1.0 + rng.next())); // 1 .. 10⁴
-        let bend = if k % 2 == 1 { 0.5 + 1.5 * (1.0 + rng.next()) } else { 0.0 };
+        let bend = if k % 2 == 1 {
+            0.5 + 1.5 * (1.0 + rng.next())
+        } else {
+            0.0
+        };
         if bend > 0.0 {
             // Thin straight-sided cells on an arc cannot also be sheared along it.
             let xs: Vec<f64> = (0..=n).map(|i| i as f64 / n as f64).collect();
@@ -267,7 +281,10 @@ fn the_blend_certifies_any_fitted_map() {
         let invalid_full = (0..mesh.n_elements())
             .filter(|&e| !det_jacobian_bounds(dim, &garbage.bezier_net(e), 6).certified_positive())
             .count();
-        assert!(invalid_full > mesh.n_elements() / 4, "the garbage should be tangled");
+        assert!(
+            invalid_full > mesh.n_elements() / 4,
+            "the garbage should be tangled"
+        );
         let mut blended = Blended::new(&mesh, &mesh, &garbage, &mesh, &topo, Vec::new());
         let info = blend_search(&CpuCertifier, &mut blended, &BlendParams::default()).unwrap();
         assert_eq!(info.invalid_at_full_step, invalid_full);
@@ -304,7 +321,10 @@ fn the_blend_certifies_any_fitted_map() {
 fn gmsh_ratio(file: &Path) -> (f64, f64) {
     let out = common::run_ok(
         Command::new("python3")
-            .arg(concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/jacobian_ratio.py"))
+            .arg(concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/scripts/jacobian_ratio.py"
+            ))
             .arg(file),
     );
     let v: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
@@ -323,14 +343,26 @@ fn boundary_layer_cells_keep_their_jacobian_ratio_by_gmsh() {
         ("bl_2d", ellipse_layer(0.2, 64, &graded(1e-5, 1.28, 30))),
         (
             "bl_3d",
-            extrude(&ellipse_layer(0.3, 32, &graded(1e-5, 1.32, 20)), &[0.0, 0.05]),
+            extrude(
+                &ellipse_layer(0.3, 32, &graded(1e-5, 1.32, 20)),
+                &[0.0, 0.05],
+            ),
         ),
     ];
     for (name, mesh) in meshes {
         let input = dir.join(format!("{name}.msh"));
         write_linear(&mesh, &input);
-        let (ours, straight) = (dir.join(format!("{name}_p2.msh")), dir.join(format!("{name}_s.msh")));
-        common::run_ok(Command::new(exe).args(["curve", "-q"]).arg(&input).arg("-o").arg(&ours));
+        let (ours, straight) = (
+            dir.join(format!("{name}_p2.msh")),
+            dir.join(format!("{name}_s.msh")),
+        );
+        common::run_ok(
+            Command::new(exe)
+                .args(["curve", "-q"])
+                .arg(&input)
+                .arg("-o")
+                .arg(&ours),
+        );
         common::run_ok(
             Command::new(exe)
                 .args(["curve", "-q", "--straight"])
@@ -340,8 +372,18 @@ fn boundary_layer_cells_keep_their_jacobian_ratio_by_gmsh() {
         );
         let (o, s) = (gmsh_ratio(&ours), gmsh_ratio(&straight));
         assert!(o.0 > 0.0, "{name}: Gmsh finds an invalid element");
-        assert!(o.0 >= 0.5 * s.0, "{name}: min ratio {} against straight {}", o.0, s.0);
-        assert!(o.1 >= 0.8 * s.1, "{name}: p1 ratio {} against straight {}", o.1, s.1);
+        assert!(
+            o.0 >= 0.5 * s.0,
+            "{name}: min ratio {} against straight {}",
+            o.0,
+            s.0
+        );
+        assert!(
+            o.1 >= 0.8 * s.1,
+            "{name}: p1 ratio {} against straight {}",
+            o.1,
+            s.1
+        );
     }
 }
 

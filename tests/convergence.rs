@@ -453,7 +453,9 @@ fn run(shape: &Shape, modes: &[&str]) -> Study {
                 study.h.push(max_boundary_edge(&ho, shape.dist));
             }
             if mode == "smooth" {
-                study.smooth_vertex_deviation.push(r.boundary_deviation_max);
+                study
+                    .smooth_vertex_deviation
+                    .push(r.boundary_vertex_deviation_max);
             }
         }
     }

@@ -342,8 +342,9 @@ fn compare_json_has_every_method_and_key() {
             "total_seconds",
             "invalid_elements",
             "min_scaled_jacobian",
-            "boundary_deviation_max",
-            "boundary_deviation_rms",
+            "boundary_vertex_deviation_max",
+            "boundary_vertex_deviation_rms",
+            "boundary_node_distance_max",
             "cg_iterations",
             "smoothness",
         ] {
@@ -417,8 +418,8 @@ fn curve_method_elastic_writes_a_valid_mesh_with_the_iga_boundary() {
     assert_eq!(re["invalid_elements"], 0);
     assert!(re["min_det_jacobian_bound"].as_f64().unwrap() > 0.0);
     let (dev_e, dev_i) = (
-        re["boundary_deviation_max"].as_f64().unwrap(),
-        ri["boundary_deviation_max"].as_f64().unwrap(),
+        re["boundary_vertex_deviation_max"].as_f64().unwrap(),
+        ri["boundary_vertex_deviation_max"].as_f64().unwrap(),
     );
     assert!((dev_e - dev_i).abs() <= 1e-6 * dev_i, "{dev_e} vs {dev_i}");
     assert!(re["elastic"]["cg"]["iterations"].as_u64().unwrap() > 0);

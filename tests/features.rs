@@ -23,7 +23,7 @@ fn have_gmsh() -> bool {
 /// Make a Gmsh mesh of `kind` with `n` elements per block side.
 fn gmsh_mesh(kind: &str, n: usize) -> PathBuf {
     let out = scratch(&format!("{kind}_{n}.msh"));
-    let status = Command::new("python3")
+    let status = common::python()
         .arg(concat!(
             env!("CARGO_MANIFEST_DIR"),
             "/tests/external/feature_meshes.py"

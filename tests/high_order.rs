@@ -1,8 +1,10 @@
 //! Sampling and high-order output: conforming numbering, exact reproduction of the element
 //! maps, and the files read back by Gmsh itself.
 
+mod common;
+
 use polyspline::io::gmsh_write::{MshVersion, write_msh};
-use polyspline::io::vtu_write::{VtuEncoding, write_vtu};
+use polyspline::io::vtu_write::{VtuCells, VtuEncoding, write_vtu, write_vtu_cells};
 use polyspline::mesh::generate::{extrude, grid_2d, grid_3d, star_2d, uniform};
 use polyspline::mesh::topology::HEX_VERTEX_PARAMS;
 use polyspline::mesh::{LinearMesh, MeshOptions, Topology};
@@ -10,7 +12,6 @@ use polyspline::sample::ordering::lattice_point;
 use polyspline::sample::{HighOrderMesh, multilinear, sample};
 use std::collections::HashSet;
 use std::path::PathBuf;
-use std::process::Command;
 
 struct Rng(u64);
 impl Rng {
@@ -269,7 +270,7 @@ fn probes(m: &LinearMesh, rng: &mut Rng, n: usize) -> (Vec<serde_json::Value>, V
 fn run_probe(script: &str, jobs: Vec<serde_json::Value>, tag: &str) -> Vec<serde_json::Value> {
     let path = scratch(&format!("{tag}_jobs.json"));
     std::fs::write(&path, serde_json::json!({ "jobs": jobs }).to_string()).unwrap();
-    let out = Command::new("python3")
+    let out = common::python()
         .arg(format!(
             "{}/tests/external/{script}",
             env!("CARGO_MANIFEST_DIR")
@@ -303,7 +304,7 @@ fn assert_close(ctx: &str, got: &serde_json::Value, want: &[[f64; 3]]) {
 /// its Jacobian determinants keep one sign (no inverted element).
 #[test]
 fn gmsh_reads_our_msh_files() {
-    if !python_has("gmsh") {
+    if !common::python_has("gmsh", "gmsh_reads_our_msh_files") {
         return;
     }
     let mut rng = Rng(99);
@@ -356,26 +357,11 @@ fn gmsh_reads_our_msh_files() {
     }
 }
 
-fn python_has(module: &str) -> bool {
-    let ok = Command::new("python3")
-        .args(["-c", &format!("import {module}")])
-        .status()
-        .is_ok_and(|s| s.success());
-    if !ok {
-        assert!(
-            std::env::var("CI").is_err(),
-            "CI must have the Python module {module} (.ci/run installs it)"
-        );
-        eprintln!("SKIPPED: Python module {module} not available; the external check did not run");
-    }
-    ok
-}
-
 /// VTK itself reads our VTU files in all three encodings, and its Lagrange cells, evaluated at
 /// random parametric points, give the positions of the elements' multilinear maps.
 #[test]
 fn vtk_reads_our_vtu_files() {
-    if !python_has("vtkmodules.vtkIOXML") {
+    if !common::python_has("vtkmodules.vtkIOXML", "vtk_reads_our_vtu_files") {
         return;
     }
     let mut rng = Rng(7);
@@ -402,19 +388,35 @@ fn vtk_reads_our_vtu_files() {
                     p,
                     m.n_elements(),
                     ho.nodes.len(),
-                    ho.n_boundary(),
                     want.clone(),
+                ));
+                // The boundary facets in their own file.
+                let path = scratch(&format!("{name}_{p}_{enc:?}_boundary.vtu"));
+                let mut w = std::io::BufWriter::new(std::fs::File::create(&path).unwrap());
+                write_vtu_cells(&ho, enc, VtuCells::Boundary, &mut w).unwrap();
+                drop(w);
+                jobs.push(serde_json::json!({ "file": path, "probes": [] }));
+                expect.push((
+                    format!("{name} p={p} {enc:?} boundary"),
+                    m.dim - 1,
+                    p,
+                    ho.n_boundary(),
+                    ho.nodes.len(),
+                    Vec::new(),
                 ));
             }
         }
     }
     let results = run_probe("vtk_probe.py", jobs, "vtk");
-    for (v, (ctx, dim, p, ne, nn, nb, want)) in results.iter().zip(&expect) {
+    // The volume files hold the volume cells only (MFEM refuses mixed dimensions).
+    for (v, (ctx, dim, p, ne, nn, want)) in results.iter().zip(&expect) {
         assert_eq!(v["points"].as_u64(), Some(*nn as u64), "{ctx}");
-        assert_eq!(v["cells"].as_u64(), Some((ne + nb) as u64), "{ctx}");
+        assert_eq!(v["cells"].as_u64(), Some(*ne as u64), "{ctx}");
         let vol_type = match (dim, p) {
+            (1, 1) => "3",
             (2, 1) => "9",
             (3, 1) => "12",
+            (1, _) => "68",
             (2, _) => "70",
             _ => "72",
         };
@@ -463,9 +465,16 @@ fn round_trip_through_our_readers() {
                 let back = HighOrderMesh::from_raw(read_raw(&path).unwrap())
                     .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
                 let ctx = format!("{}", path.display());
+                // A VTU holds the volume cells only; its facets go to a file of their own.
+                let vtu = path.extension().is_some_and(|e| e == "vtu");
                 assert_eq!(
                     (back.dim, back.order, back.n_elements(), back.n_boundary()),
-                    (ho.dim, ho.order, ho.n_elements(), ho.n_boundary()),
+                    (
+                        ho.dim,
+                        ho.order,
+                        ho.n_elements(),
+                        if vtu { 0 } else { ho.n_boundary() }
+                    ),
                     "{ctx}"
                 );
                 for e in 0..ho.n_elements() {
@@ -476,6 +485,9 @@ fn round_trip_through_our_readers() {
                             "{ctx}: element {e}"
                         );
                     }
+                }
+                if vtu {
+                    continue;
                 }
                 let npf = ho.nodes_per_facet();
                 let mut want: Vec<Vec<[i64; 3]>> = ho

@@ -618,7 +618,13 @@ pub fn normal_equations(
     topo: &Topology,
     params: &FitParams,
 ) -> (NormalMatrix, Vec<[f64; 3]>) {
-    normal_equations_with(space, mesh, topo, params, smooth_targets(mesh, topo, params).as_ref())
+    normal_equations_with(
+        space,
+        mesh,
+        topo,
+        params,
+        smooth_targets(mesh, topo, params).as_ref(),
+    )
 }
 
 /// The smooth-boundary models of the fit described by `params` (`None` with chord targets).
@@ -686,7 +692,11 @@ impl crate::sample::BezierElements for TargetMap<'_> {
         }
         // Values at {0, ½, 1} to Bernstein points, line by line: b₁ = 2 v(½) − (v₀ + v₁)/2.
         rhs::map_lines(dim, &mut v, |[a, m, c]| {
-            [a, std::array::from_fn(|k| 2.0 * m[k] - 0.5 * (a[k] + c[k])), c]
+            [
+                a,
+                std::array::from_fn(|k| 2.0 * m[k] - 0.5 * (a[k] + c[k])),
+                c,
+            ]
         });
         v
     }

@@ -1,12 +1,15 @@
 //! Gmsh MSH 4.1 and 2.2 output (ASCII or binary) of a [`HighOrderMesh`].
 //!
-//! Elements are Lagrange quads/hexes of the mesh's order (types 3/10/36/… and 5/12/92/…), the
-//! boundary facets Lagrange lines/quads of the same order, nodes in Gmsh's order
-//! ([`crate::sample::ordering`]). Boundary tags become physical groups of dimension d−1 (named
-//! from the input, or `boundary_<tag>`); untagged boundary facets form a group named
-//! `boundary` (when nothing is tagged) or `untagged`; elements form one physical group per
-//! region tag (or one named `domain`). MSH 4.1 writes one geometric entity per physical group
-//! in `$Entities`, as HOPR and other solvers' readers require.
+//! Input: a high-order mesh (orders 1–10 for quads, 1–9 for hexes). Output: elements as
+//! Lagrange quads/hexes of the mesh's order (types 3/10/36/… and 5/12/92/…), the boundary facets
+//! as Lagrange lines/quads of the same order, nodes in Gmsh's order
+//! ([`crate::sample::ordering`]). Invariants, so that solvers read the file unchanged (PyFR's
+//! importer is the strictest): every element and facet is in exactly one physical group, every
+//! group is named, physical ids are unique over all dimensions, and the volume group is named
+//! `fluid` (or the caller's name) when the input names no region. Boundary tags become groups
+//! of dimension d−1 named from the input (or `boundary_<tag>`); untagged facets form a group
+//! named `boundary` (when nothing is tagged) or `untagged`. MSH 4.1 writes one geometric
+//! entity per physical group in `$Entities`, as HOPR and other solvers' readers require.
 
 use super::output::WriteBin;
 use crate::sample::HighOrderMesh;
@@ -32,57 +35,119 @@ struct Group {
     members: Vec<usize>,
 }
 
-fn groups(mesh: &HighOrderMesh) -> Vec<Group> {
+/// Name of the volume group when the input names no region (PyFR takes its volume from a
+/// physical group of this name).
+pub const DEFAULT_VOLUME_NAME: &str = "fluid";
+
+/// The physical groups of `mesh`: boundary groups (dimension d−1) first, then volume groups.
+/// Physical ids are unique over all dimensions (PyFR refuses a file where a boundary and a
+/// volume group share an id, though Gmsh allows it) and every group is named. Boundary groups
+/// keep the input's tags as ids and its names (else `boundary_<tag>`); untagged facets get the
+/// next free id and the name `boundary` (nothing tagged) or `untagged`. Volume groups keep
+/// region tags unless one clashes with a boundary id, then all are shifted past the boundary
+/// ids; an unnamed region is `volume_name` when it is the only one, else `region_<tag>` (a
+/// region whose tag is also a boundary tag counts as unnamed).
+fn groups(mesh: &HighOrderMesh, volume_name: &str) -> Vec<Group> {
     let d = mesh.dim;
-    let mut out = Vec::new();
-    let mut make = |dim: usize, tags: &[i32], n: usize, untagged_name: &str| {
-        let mut by_tag: BTreeMap<i32, Vec<usize>> = BTreeMap::new();
+    let by_tag = |tags: &[i32], n: usize| {
+        let mut by: BTreeMap<i32, Vec<usize>> = BTreeMap::new();
         for i in 0..n {
-            by_tag
-                .entry(tags.get(i).copied().unwrap_or(0))
-                .or_default()
-                .push(i);
+            // Non-positive tags are not ids a reader accepts: they count as untagged.
+            let t = tags.get(i).copied().unwrap_or(0).max(0);
+            by.entry(t).or_default().push(i);
         }
-        let fresh = by_tag.keys().copied().max().unwrap_or(0).max(0) + 1;
-        let only_untagged = by_tag.len() == 1 && by_tag.contains_key(&0);
-        for (k, (tag, members)) in by_tag.into_iter().enumerate() {
-            let (physical, name) = if tag == 0 {
-                let name = if only_untagged {
-                    untagged_name
-                } else {
-                    "untagged"
-                };
-                (fresh, name.to_string())
-            } else {
-                let name = mesh.tag_names.get(&tag).cloned().unwrap_or_else(|| {
-                    format!("{}_{tag}", if dim == d { "region" } else { "boundary" })
-                });
-                (tag, name)
-            };
-            out.push(Group {
-                dim,
-                entity: k as i32 + 1,
-                physical,
-                name,
-                members,
-            });
-        }
+        by
     };
-    make(d - 1, &mesh.boundary_tags, mesh.n_boundary(), "boundary");
-    make(d, &mesh.element_tags, mesh.n_elements(), "domain");
+    let mut out = Vec::new();
+
+    let bnd = by_tag(&mesh.boundary_tags, mesh.n_boundary());
+    let bnd_tags: std::collections::BTreeSet<i32> = bnd.keys().copied().collect();
+    let bnd_fresh = bnd.keys().copied().max().unwrap_or(0) + 1;
+    let only_untagged = bnd.len() == 1 && bnd.contains_key(&0);
+    for (k, (tag, members)) in bnd.into_iter().enumerate() {
+        let (physical, name) = if tag == 0 {
+            let name = if only_untagged {
+                "boundary"
+            } else {
+                "untagged"
+            };
+            (bnd_fresh, name.to_string())
+        } else {
+            let name = mesh
+                .tag_names
+                .get(&tag)
+                .cloned()
+                .unwrap_or_else(|| format!("boundary_{tag}"));
+            (tag, name)
+        };
+        out.push(Group {
+            dim: d - 1,
+            entity: k as i32 + 1,
+            physical,
+            name,
+            members,
+        });
+    }
+    let bnd_ids: std::collections::BTreeSet<i32> = out.iter().map(|g| g.physical).collect();
+    let bnd_max = bnd_ids.iter().copied().max().unwrap_or(0);
+
+    let vol = by_tag(&mesh.element_tags, mesh.n_elements());
+    let clash = vol.keys().any(|t| *t > 0 && bnd_ids.contains(t));
+    let shift = if clash { bnd_max } else { 0 };
+    let vol_max = vol.keys().copied().max().unwrap_or(0);
+    let vol_fresh = (vol_max + shift).max(bnd_max) + 1;
+    let single = vol.len() == 1;
+    for (k, (tag, members)) in vol.into_iter().enumerate() {
+        let physical = if tag == 0 { vol_fresh } else { tag + shift };
+        // Tag names are one map for boundary and region tags: a name of a tag that is also a
+        // boundary tag belongs to the boundary group.
+        let named = if tag == 0 || bnd_tags.contains(&tag) {
+            None
+        } else {
+            mesh.tag_names.get(&tag).cloned()
+        };
+        let name = named.unwrap_or_else(|| {
+            if single {
+                volume_name.to_string()
+            } else if tag == 0 {
+                "untagged".to_string()
+            } else {
+                format!("region_{tag}")
+            }
+        });
+        out.push(Group {
+            dim: d,
+            entity: k as i32 + 1,
+            physical,
+            name,
+            members,
+        });
+    }
     out
 }
 
-/// Write `mesh` as MSH `version`, ASCII or binary.
+/// Write `mesh` as MSH `version`, ASCII or binary, the volume group named
+/// [`DEFAULT_VOLUME_NAME`] where the input names none.
 pub fn write_msh(
     mesh: &HighOrderMesh,
     version: MshVersion,
     binary: bool,
     w: &mut impl Write,
 ) -> io::Result<()> {
+    write_msh_named(mesh, version, binary, DEFAULT_VOLUME_NAME, w)
+}
+
+/// [`write_msh`] with `volume_name` for the volume group where the input names none.
+pub fn write_msh_named(
+    mesh: &HighOrderMesh,
+    version: MshVersion,
+    binary: bool,
+    volume_name: &str,
+    w: &mut impl Write,
+) -> io::Result<()> {
     let d = mesh.dim;
     let p = mesh.order;
-    let groups = groups(mesh);
+    let groups = groups(mesh, volume_name);
     let vol_order = to_indices(p, &if d == 2 { gmsh_quad(p) } else { gmsh_hex(p) });
     let bnd_order = to_indices(p, &if d == 2 { gmsh_line(p) } else { gmsh_quad(p) });
     let vol_type = gmsh_type(d, p).ok_or_else(|| unsupported(d, p))? as i32;
@@ -367,4 +432,82 @@ fn unsupported(dim: usize, p: usize) -> io::Error {
         io::ErrorKind::InvalidInput,
         format!("Gmsh has no Lagrange element of dimension {dim} and order {p}"),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 2D order-1 mesh of `ne` quads (no real nodes needed for the groups) with the given tags.
+    fn mesh(
+        element_tags: Vec<i32>,
+        boundary_tags: Vec<i32>,
+        names: &[(i32, &str)],
+    ) -> HighOrderMesh {
+        HighOrderMesh {
+            dim: 2,
+            order: 1,
+            nodes: vec![[0.0; 3]; 4],
+            elements: vec![0; 4 * element_tags.len().max(1)],
+            element_tags,
+            boundary: vec![0; 2 * boundary_tags.len()],
+            boundary_tags,
+            tag_names: names.iter().map(|(t, n)| (*t, n.to_string())).collect(),
+        }
+    }
+
+    fn summary(m: &HighOrderMesh) -> Vec<(usize, i32, String)> {
+        groups(m, DEFAULT_VOLUME_NAME)
+            .into_iter()
+            .map(|g| (g.dim, g.physical, g.name))
+            .collect()
+    }
+
+    #[test]
+    fn untagged_mesh_gets_boundary_and_fluid_with_distinct_ids() {
+        let m = mesh(vec![], vec![0, 0, 0], &[]);
+        assert_eq!(
+            summary(&m),
+            vec![(1, 1, "boundary".into()), (2, 2, "fluid".into())]
+        );
+    }
+
+    #[test]
+    fn region_tag_clashing_with_a_boundary_id_is_shifted() {
+        // Region 1 and boundary tags 1, 2 (named), plus untagged facets.
+        let m = mesh(vec![1, 1], vec![1, 2, 0], &[(1, "wall"), (2, "inlet")]);
+        let s = summary(&m);
+        assert_eq!(
+            s,
+            vec![
+                (1, 3, "untagged".into()),
+                (1, 1, "wall".into()),
+                (1, 2, "inlet".into()),
+                (2, 4, "fluid".into()),
+            ]
+        );
+        let ids: std::collections::BTreeSet<i32> = s.iter().map(|g| g.1).collect();
+        assert_eq!(ids.len(), s.len());
+    }
+
+    #[test]
+    fn named_and_several_regions_keep_their_names() {
+        let m = mesh(vec![5, 6], vec![1], &[(5, "solid")]);
+        assert_eq!(
+            summary(&m),
+            vec![
+                (1, 1, "boundary_1".into()),
+                (2, 5, "solid".into()),
+                (2, 6, "region_6".into()),
+            ]
+        );
+        let one = mesh(vec![7, 7], vec![1], &[]);
+        assert_eq!(
+            groups(&one, "air")
+                .into_iter()
+                .map(|g| g.name)
+                .collect::<Vec<_>>(),
+            vec!["boundary_1", "air"]
+        );
+    }
 }

@@ -1,11 +1,20 @@
-//! VTK XML unstructured grid (`.vtu`, file version 2.2) output of a [`HighOrderMesh`].
+//! VTK XML unstructured grid (`.vtu`) output of a [`HighOrderMesh`].
 //!
-//! Elements of order ≥ 2 are Lagrange quadrilaterals (70) or hexahedra (72) and boundary facets
-//! Lagrange curves (68) or quadrilaterals (70), nodes in VTK ≥ 9 order
-//! ([`crate::sample::ordering`]); order 1 uses the linear types 3/9/12. Version 2.2 matters:
-//! VTK ≥ 9 renumbers the hexahedron edges of files older than 2.1. Cell data: `tag` (region tag
-//! of elements, boundary tag of facets, 0 = none) and `boundary` (1 on boundary facets).
-//! Encodings: ASCII, inline base64 (`binary`) with UInt64 headers, or raw appended data.
+//! Input: a high-order mesh. Output: one file holding either the volume cells only (the default
+//! `.vtu`: MFEM refuses a file with cells of two dimensions) or the boundary facets only (a
+//! companion file, `--vtu-boundary`). Elements of order ≥ 2 are Lagrange quadrilaterals (70) or
+//! hexahedra (72) and boundary facets Lagrange curves (68) or quadrilaterals (70), nodes in
+//! VTK ≥ 9 order ([`crate::sample::ordering`]); order 1 uses the linear types 3/9/12. Both files
+//! hold all the nodes, so node ids agree between them.
+//!
+//! File version: VTK ≥ 9 renumbers the edges of Lagrange hexahedra in files older than 2.1, so
+//! a file with hexahedra of order ≥ 2 says `2.2`. meshio reads only versions 0.1 and 1.0 and
+//! would keep the order of the nodes as written, so every other file (lines, quads, linear
+//! hexes: node orders that no VTK version changed) says `1.0` and meshio reads it too; a 2.2
+//! file is refused by meshio with an error, never misread.
+//!
+//! Cell data: `tag` (region tag of elements, boundary tag of facets, 0 = none). Encodings:
+//! ASCII, inline base64 (`binary`) with UInt64 headers, or raw appended data.
 
 use crate::sample::HighOrderMesh;
 use crate::sample::ordering::{gmsh_line, to_indices, vtk_hex, vtk_quad};
@@ -91,10 +100,38 @@ fn array<T: Value>(
     }
 }
 
-/// Write `mesh` as a VTU file.
+/// Which cells a VTU file holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum VtuCells {
+    /// The elements (quads in 2D, hexes in 3D).
+    Volume,
+    /// The boundary facets (lines in 2D, quads in 3D).
+    Boundary,
+}
+
+/// The VTU file version for the cells of `mesh` in `cells` (see the module docs).
+pub fn vtu_version(mesh: &HighOrderMesh, cells: VtuCells) -> &'static str {
+    if mesh.dim == 3 && mesh.order >= 2 && cells == VtuCells::Volume {
+        "2.2"
+    } else {
+        "1.0"
+    }
+}
+
+/// Write the elements of `mesh` as a VTU file.
 pub fn write_vtu(
     mesh: &HighOrderMesh,
     encoding: VtuEncoding,
+    w: &mut impl Write,
+) -> io::Result<()> {
+    write_vtu_cells(mesh, encoding, VtuCells::Volume, w)
+}
+
+/// Write the elements or the boundary facets of `mesh` as a VTU file.
+pub fn write_vtu_cells(
+    mesh: &HighOrderMesh,
+    encoding: VtuEncoding,
+    which: VtuCells,
     w: &mut impl Write,
 ) -> io::Result<()> {
     let d = mesh.dim;
@@ -107,30 +144,34 @@ pub fn write_vtu(
     };
     let vol_order = to_indices(p, &if d == 2 { vtk_quad(p) } else { vtk_hex(p) });
     let bnd_order = to_indices(p, &if d == 2 { gmsh_line(p) } else { vtk_quad(p) });
-    let (ne, nb) = (mesh.n_elements(), mesh.n_boundary());
     let npf = mesh.nodes_per_facet();
-
-    let mut connectivity: Vec<i64> = Vec::with_capacity(mesh.elements.len() + mesh.boundary.len());
-    let mut offsets: Vec<i64> = Vec::with_capacity(ne + nb);
-    let mut types: Vec<u8> = Vec::with_capacity(ne + nb);
-    for e in 0..ne {
-        let nodes = mesh.element(e);
-        connectivity.extend(vol_order.iter().map(|&k| nodes[k] as i64));
-        offsets.push(connectivity.len() as i64);
-        types.push(vol_type);
-    }
-    for f in mesh.boundary.chunks(npf) {
-        connectivity.extend(bnd_order.iter().map(|&k| f[k] as i64));
-        offsets.push(connectivity.len() as i64);
-        types.push(bnd_type);
-    }
-    let mut tags: Vec<i32> = if mesh.element_tags.is_empty() {
-        vec![0; ne]
-    } else {
-        mesh.element_tags.clone()
+    let (n_cells, cell_type, order, cells): (usize, u8, Vec<usize>, Vec<&[u32]>) = match which {
+        VtuCells::Volume => (
+            mesh.n_elements(),
+            vol_type,
+            vol_order,
+            (0..mesh.n_elements()).map(|e| mesh.element(e)).collect(),
+        ),
+        VtuCells::Boundary => (
+            mesh.n_boundary(),
+            bnd_type,
+            bnd_order,
+            mesh.boundary.chunks(npf).collect(),
+        ),
     };
-    tags.extend_from_slice(&mesh.boundary_tags);
-    let boundary: Vec<u8> = (0..ne + nb).map(|i| (i >= ne) as u8).collect();
+    let mut connectivity: Vec<i64> = Vec::with_capacity(n_cells * order.len());
+    let mut offsets: Vec<i64> = Vec::with_capacity(n_cells);
+    for nodes in &cells {
+        connectivity.extend(order.iter().map(|&k| nodes[k] as i64));
+        offsets.push(connectivity.len() as i64);
+    }
+    let types: Vec<u8> = vec![cell_type; n_cells];
+    let tags: Vec<i32> = match which {
+        VtuCells::Volume if mesh.element_tags.is_empty() => vec![0; n_cells],
+        VtuCells::Volume => mesh.element_tags.clone(),
+        VtuCells::Boundary if mesh.boundary_tags.is_empty() => vec![0; n_cells],
+        VtuCells::Boundary => mesh.boundary_tags.clone(),
+    };
     let points: Vec<f64> = mesh.nodes.iter().flat_map(|x| x.iter().copied()).collect();
 
     let points = array("Points", "Float64", 3, &points, encoding);
@@ -139,22 +180,20 @@ pub fn write_vtu(
         array("offsets", "Int64", 1, &offsets, encoding),
         array("types", "UInt8", 1, &types, encoding),
     ];
-    let cell_data = [
-        array("tag", "Int32", 1, &tags, encoding),
-        array("boundary", "UInt8", 1, &boundary, encoding),
-    ];
+    let cell_data = [array("tag", "Int32", 1, &tags, encoding)];
 
     writeln!(w, "<?xml version=\"1.0\"?>")?;
     writeln!(
         w,
-        "<VTKFile type=\"UnstructuredGrid\" version=\"2.2\" byte_order=\"LittleEndian\" header_type=\"UInt64\">"
+        "<VTKFile type=\"UnstructuredGrid\" version=\"{}\" byte_order=\"LittleEndian\" header_type=\"UInt64\">",
+        vtu_version(mesh, which)
     )?;
     writeln!(w, "<UnstructuredGrid>")?;
     writeln!(
         w,
         "<Piece NumberOfPoints=\"{}\" NumberOfCells=\"{}\">",
         mesh.nodes.len(),
-        ne + nb
+        n_cells
     )?;
     let mut appended: Vec<u8> = Vec::new();
     let mut put = |w: &mut dyn Write, a: &Array| -> io::Result<()> {

@@ -52,7 +52,10 @@ impl<'a> EntityIds<'a> {
 
     /// Number of entities (the length of a λ vector).
     pub fn len(&self) -> usize {
-        self.topo.n_vertices + self.topo.edges.len() + self.topo.faces.len() + self.mesh.n_elements()
+        self.topo.n_vertices
+            + self.topo.edges.len()
+            + self.topo.faces.len()
+            + self.mesh.n_elements()
     }
 
     /// Whether the mesh has no entity.
@@ -243,7 +246,11 @@ impl<'a> Blended<'a> {
         } else {
             (0..self.fitted.n_elements())
                 .into_par_iter()
-                .map(|e| self.ids.of(e)[..np].iter().any(|&id| self.factors[id as usize] < FITTED))
+                .map(|e| {
+                    self.ids.of(e)[..np]
+                        .iter()
+                        .any(|&id| self.factors[id as usize] < FITTED)
+                })
                 .collect()
         };
     }
@@ -310,7 +317,11 @@ pub fn lattice_scaled_jacobian(dim: usize, net: &Net) -> f64 {
             for i in 0..3 {
                 let mut jac = [[0.0f64; 3]; 3];
                 for c in 0..nz {
-                    let (bz, dz) = if dim == 2 { (1.0, 0.0) } else { (B[k][c], D[k][c]) };
+                    let (bz, dz) = if dim == 2 {
+                        (1.0, 0.0)
+                    } else {
+                        (B[k][c], D[k][c])
+                    };
                     for b in 0..3 {
                         for a in 0..3 {
                             let p = net[a + 3 * b + 9 * c];
@@ -368,7 +379,11 @@ fn hadamard_upper(dim: usize, net: &Net) -> f64 {
             }
         }
     }
-    if dim == 2 { m[0] * m[1] } else { m[0] * m[1] * m[2] }
+    if dim == 2 {
+        m[0] * m[1]
+    } else {
+        m[0] * m[1] * m[2]
+    }
 }
 
 /// Jacobian ratio of a straight element from its corner values of det J (exact for quads,
@@ -453,9 +468,8 @@ pub fn blend_search(
         if !quality {
             return (true, true, b.lower);
         }
-        let shape = || {
-            lattice_scaled_jacobian(dim, net) >= params.min_quality_fraction * reference[e].1
-        };
+        let shape =
+            || lattice_scaled_jacobian(dim, net) >= params.min_quality_fraction * reference[e].1;
         // Cheap first: the screened lower bound against the Hadamard upper bound of max det J.
         if b.lower >= ratio_target(e) * hadamard_upper(dim, net) {
             return (true, shape(), b.lower);
@@ -613,7 +627,10 @@ fn summarise(blended: &Blended, info: &mut BlendInfo, lower: &[f64]) {
     info.reduced_points = blended.factors.iter().filter(|&&l| l < FITTED).count();
     info.target_points = blended.factors.iter().filter(|&&l| l <= 1.0).count();
     info.straight_points = blended.factors.iter().filter(|&&l| l == 0.0).count();
-    info.min_factor = reduced.iter().map(|r| r.min_factor).fold(FITTED as f64, f64::min);
+    info.min_factor = reduced
+        .iter()
+        .map(|r| r.min_factor)
+        .fold(FITTED as f64, f64::min);
     reduced.sort_by(|a, b| b.withheld.total_cmp(&a.withheld));
     reduced.truncate(10);
     info.worst = reduced;

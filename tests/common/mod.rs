@@ -1,26 +1,102 @@
-//! Helpers shared by the integration tests: Gmsh's Python API as an independent checker of
-//! our files (`tests/external/gmsh_probe.py`).
+//! Helpers shared by the integration tests: the Python that runs the independent checkers
+//! (Gmsh's Python API, VTK, solvers' readers under `tests/external/`), and visible skips.
+//!
+//! Python: `$POLYSPLINE_PYTHON` if set, else the test environment `.venv-tests` that
+//! `scripts/test.sh` makes, else `python3`. A check whose tool is missing fails under `CI=true`;
+//! elsewhere it is skipped, and the skip is printed and appended to `$POLYSPLINE_SKIP_LOG`
+//! (default `target/test-skips.log`), which `scripts/test.sh` prints at the end of the run.
 #![allow(dead_code)] // each test binary uses a subset
 
 use serde_json::Value;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Command;
+
+/// The Python interpreter of the checkers (see the module docs).
+pub fn python_path() -> PathBuf {
+    if let Some(p) = std::env::var_os("POLYSPLINE_PYTHON").filter(|p| !p.is_empty()) {
+        return PathBuf::from(p);
+    }
+    let venv = Path::new(env!("CARGO_MANIFEST_DIR")).join(".venv-tests/bin/python");
+    if venv.exists() {
+        venv
+    } else {
+        PathBuf::from("python3")
+    }
+}
+
+/// A command running the checkers' Python.
+pub fn python() -> Command {
+    Command::new(python_path())
+}
+
+/// Where skips are recorded.
+fn skip_log() -> PathBuf {
+    match std::env::var_os("POLYSPLINE_SKIP_LOG").filter(|p| !p.is_empty()) {
+        Some(p) => PathBuf::from(p),
+        None => Path::new(env!("CARGO_TARGET_TMPDIR"))
+            .parent()
+            .unwrap_or(Path::new("."))
+            .join("test-skips.log"),
+    }
+}
+
+/// The running test's name (the harness names each test's thread after it).
+pub fn current_test() -> String {
+    std::thread::current()
+        .name()
+        .unwrap_or("a test")
+        .to_string()
+}
+
+/// True under `CI=true`, where a missing checker is a failure.
+pub fn in_ci() -> bool {
+    std::env::var("CI").is_ok_and(|v| v == "true" || v == "1")
+}
+
+/// Record a skipped check: panics under CI, else prints `SKIPPED: <test>: <why>` (on stdout and
+/// stderr, which the harness may capture) and appends it to the skip log.
+pub fn skip(test: &str, why: &str) {
+    assert!(!in_ci(), "CI=true but {test} cannot run: {why}");
+    let line = format!("SKIPPED: {test}: {why}");
+    println!("{line}");
+    eprintln!("{line}");
+    use std::io::Write;
+    let log = skip_log();
+    if let Some(dir) = log.parent() {
+        let _ = std::fs::create_dir_all(dir);
+    }
+    if let Ok(mut f) = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(&log)
+    {
+        let _ = writeln!(f, "{line}");
+    }
+}
+
+/// True when the checkers' Python imports `module`; otherwise a recorded skip of `test` (a
+/// failure under CI).
+pub fn python_has(module: &str, test: &str) -> bool {
+    let ok = python()
+        .args(["-c", &format!("import {module}")])
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !ok {
+        skip(
+            test,
+            &format!(
+                "Python module {module} not importable by {} (run scripts/test.sh to install the checkers)",
+                python_path().display()
+            ),
+        );
+    }
+    ok
+}
 
 /// True when Python's `gmsh` module imports. Without it a CI run fails; elsewhere the caller
 /// skips visibly, and `skipped` says what did not run.
 pub fn have_gmsh(skipped: &str) -> bool {
-    let ok = Command::new("python3")
-        .args(["-c", "import gmsh"])
-        .status()
-        .is_ok_and(|s| s.success());
-    if !ok {
-        assert!(
-            std::env::var("CI").is_err(),
-            "CI must have the Python gmsh module"
-        );
-        eprintln!("SKIPPED: Python module gmsh not available; {skipped}");
-    }
-    ok
+    python_has("gmsh", skipped)
 }
 
 /// Run `cmd` and insist that it succeeds (its stderr is the failure message).
@@ -42,7 +118,7 @@ pub fn gmsh_probe(jobs: &[Value], jobs_file: &Path) -> Option<Vec<Value>> {
     }
     std::fs::write(jobs_file, serde_json::json!({ "jobs": jobs }).to_string()).unwrap();
     let out = run_ok(
-        Command::new("python3")
+        python()
             .arg(concat!(
                 env!("CARGO_MANIFEST_DIR"),
                 "/tests/external/gmsh_probe.py"

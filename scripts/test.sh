@@ -1,0 +1,98 @@
+#!/usr/bin/env bash
+# The test command (README, second command; `.ci/run` runs exactly this).
+#
+# On a fresh Debian machine it installs what the tests need, runs every test target, and ends
+# with the checks that were skipped and why, then one line `total: N passed, M failed`:
+#  1. Debian packages, where it may (root, or passwordless sudo): Mesa's Vulkan drivers
+#     (lavapipe) for the GPU tests, the X/GL libraries the gmsh wheel links against, and
+#     python3-venv where Python lacks ensurepip. Otherwise it says what it could not install.
+#  2. The Python checkers of tests/requirements.txt (Gmsh, VTK, meshio, PyFR, PyMFEM, PyHOPE)
+#     in a virtual environment of their own, .venv-tests (re-used while the requirements are
+#     unchanged). The tests find it through POLYSPLINE_PYTHON.
+#  3. `cargo test --release --all-targets` (or `cargo test --release ARGS…` when given
+#     arguments). A test whose checker is missing skips visibly
+#     (a failure under CI=true) and appends a line to target/test-skips.log.
+set -uo pipefail
+cd "$(dirname "$0")/.."
+root=$PWD
+
+export DEBIAN_FRONTEND=noninteractive
+# Mesa's Vulkan drivers warn on every process start without a runtime directory.
+export XDG_RUNTIME_DIR="${XDG_RUNTIME_DIR:-/tmp}"
+
+notes=()
+
+# 1. Debian packages.
+need=()
+for pkg in mesa-vulkan-drivers libvulkan1 libglu1-mesa libxcursor1 libxft2 libxinerama1; do
+    dpkg -s "$pkg" >/dev/null 2>&1 || need+=("$pkg")
+done
+if ! python3 -c 'import ensurepip, venv' >/dev/null 2>&1; then
+    need+=(python3-venv)
+fi
+if [ ${#need[@]} -gt 0 ]; then
+    if ! command -v apt-get >/dev/null 2>&1; then
+        notes+=("no apt-get: not installed: ${need[*]}")
+    else
+        sudo=""
+        if [ "$(id -u)" != 0 ]; then
+            if sudo -n true 2>/dev/null; then sudo="sudo -n"; else sudo="none"; fi
+        fi
+        if [ "$sudo" = none ]; then
+            notes+=("not root and no passwordless sudo: not installed: ${need[*]}")
+        elif ! { $sudo apt-get update -qq && $sudo apt-get install -y -qq --no-install-recommends "${need[@]}"; } >/dev/null; then
+            notes+=("apt-get failed: not installed: ${need[*]}")
+        fi
+    fi
+fi
+
+# 2. The Python checkers in their own virtual environment.
+venv="$root/.venv-tests"
+req="$root/tests/requirements.txt"
+stamp="$venv/.requirements"
+if [ -x "$venv/bin/python" ] && cmp -s "$req" "$stamp"; then
+    :
+elif { [ -x "$venv/bin/python" ] || python3 -m venv "$venv"; } &&
+    "$venv/bin/python" -m pip install --quiet --disable-pip-version-check -r "$req"; then
+    cp "$req" "$stamp"
+else
+    notes+=("the Python checkers could not be installed into $venv (see the pip output above)")
+fi
+if [ -x "$venv/bin/python" ]; then
+    export POLYSPLINE_PYTHON="$venv/bin/python"
+fi
+
+# 3. The tests.
+mkdir -p "$root/target"
+export POLYSPLINE_SKIP_LOG="$root/target/test-skips.log"
+: >"$POLYSPLINE_SKIP_LOG"
+out="$root/target/test-output.log"
+# Arguments replace `--all-targets` (e.g. `bash scripts/test.sh --test clients`).
+if [ $# -gt 0 ]; then
+    cargo test --release "$@" 2>&1 | tee "$out"
+else
+    cargo test --release --all-targets 2>&1 | tee "$out"
+fi
+status=${PIPESTATUS[0]}
+
+echo
+echo "== skipped checks =="
+if [ ${#notes[@]} -gt 0 ]; then
+    printf 'setup: %s\n' "${notes[@]}"
+fi
+if [ -s "$POLYSPLINE_SKIP_LOG" ]; then
+    sort "$POLYSPLINE_SKIP_LOG" | uniq -c | sed 's/^ *\([0-9]*\) \(.*\)/\2 (x\1)/'
+else
+    echo "none"
+fi
+# The harness's own ignored tests, if any.
+grep -E '^test .* \.\.\. ignored' "$out" || true
+
+passed=$(grep -Eo 'test result: [A-Za-z]+\. [0-9]+ passed' "$out" | grep -Eo '[0-9]+ passed' | awk '{s+=$1} END {print s+0}')
+failed=$(grep -Eo '[0-9]+ failed;' "$out" | awk '{s+=$1} END {print s+0}')
+if [ "$status" != 0 ] && [ "$failed" = 0 ]; then
+    echo "cargo test exited with status $status (build error or crash; see above)"
+    failed=1
+fi
+echo "total: $passed passed, $failed failed"
+exit "$status"
