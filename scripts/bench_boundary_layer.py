@@ -227,8 +227,10 @@ def run_ours(lin, out, extra, runs, timeout):
             lines = [ln for ln in p.stderr.splitlines() if ln.strip()]
             return {"error": f"exit {p.returncode}: {(lines[-1] if lines else '')[:300]}"}
         walls.append(time.perf_counter() - t0)
-        totals.append(json.load(open(rep))["timings"]["total"])
-    return {"time": statistics.median(totals), "wall_clock": statistics.median(walls), "runs": runs}
+        report = json.load(open(rep))
+        totals.append(report["timings"]["total"])
+    return {"time": statistics.median(totals), "wall_clock": statistics.median(walls), "runs": runs,
+            "input_min_sj": report["input_min_scaled_jacobian"]}
 
 
 # ---------------------------------------------------------------- driver
@@ -256,7 +258,16 @@ def bench(case, tmp, runs, timeout):
         if "wall_rms" in row and "wall_rms" in ref and ref["wall_rms"] > 0:
             row["wall_rms_vs_straight"] = row["wall_rms"] / ref["wall_rms"]
             row["wall_max_vs_straight"] = row["wall_max"] / ref["wall_max"]
+    if "input_min_sj" in rows[0]:
+        info["polyspline_min_sj"] = rows[0]["input_min_sj"]
     return info, rows
+
+
+def case_line(case, i):
+    return (f"{case}: {i.get('elements')} elements, {i.get('normal_cells')} wall-normal cells, "
+            f"first height {i.get('first_height', float('nan')):.3g}, linear min scaled Jacobian "
+            f"{i.get('min_sj', float('nan')):.3f} (Gmsh minSJ), "
+            f"{i.get('polyspline_min_sj', float('nan')):.3f} (polyspline's report)")
 
 
 def fmt_row(case, info, row):
@@ -282,8 +293,16 @@ def main():
     ap.add_argument("--timeout", type=float, default=900.0, help="seconds per run or Gmsh method")
     ap.add_argument("--json", action="store_true", help="print one JSON object instead of Markdown")
     ap.add_argument("--keep", help="write the meshes into this directory instead of a temporary one")
-    ap.add_argument("cases", nargs="*", default=list(CASES), choices=list(CASES))
+    ap.add_argument("--table-from", metavar="JSON", help="print the table of an earlier --json run, run nothing")
+    ap.add_argument("cases", nargs="*", metavar="CASE", help=f"default: all of {', '.join(CASES)}")
     args = ap.parse_args()
+    args.cases = args.cases or list(CASES)
+    for c in args.cases:
+        if c not in CASES:
+            ap.error(f"unknown case {c!r} (cases: {', '.join(CASES)})")
+    if args.table_from:
+        print_table(json.load(open(args.table_from)))
+        return
     if not os.path.isfile(EXE):
         sys.exit(f"{EXE}: not found; run `cargo build --release` first or set POLYSPLINE")
     results = {}
@@ -295,23 +314,22 @@ def main():
             info, rows = bench(case, tmp, args.runs, args.timeout)
             results[case] = {"linear": info, "rows": rows}
             if not args.json:
-                print(f"{case}: {info.get('elements')} elements, {info.get('normal_cells')} wall-normal cells, "
-                      f"first height {info.get('first_height', float('nan')):.3g}, "
-                      f"min scaled Jacobian {info.get('min_sj', float('nan')):.3f}", file=sys.stderr, flush=True)
+                print(case_line(case, info), file=sys.stderr, flush=True)
     if args.json:
         print(json.dumps(results, indent=1))
-        return
+    else:
+        print_table(results)
+
+
+def print_table(results):
     print("| case | elements | method | invalid | ratio min | ratio p1 | time s | wall RMS / max error |")
     print("|---|---|---|---|---|---|---|---|")
     for case, res in results.items():
         for row in res["rows"]:
             print(fmt_row(case, res["linear"], row))
-    for case, res in results.items():
-        i = res["linear"]
-        print(f"\n{case}: {i.get('elements')} elements, {i.get('normal_cells')} wall-normal cells, "
-              f"first height {i.get('first_height', float('nan')):.3g}, "
-              f"linear min scaled Jacobian {i.get('min_sj', float('nan')):.3f}", end="")
     print()
+    for case, res in results.items():
+        print(case_line(case, res["linear"]))
 
 
 if __name__ == "__main__":
