@@ -14,20 +14,32 @@ import gmsh
 import numpy as np
 
 
+def ratio_from_bounds(lo, hi):
+    """Per-element ratio min det J / max det J from Gmsh's bounds; both negative (Gmsh's sign
+    convention for planar elements) gives |max| / |min|. A ratio <= 0 is an invalid element."""
+    lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+    return np.where(hi < 0, hi / np.where(lo == 0, -1e-300, lo), lo / np.where(hi == 0, 1e-300, hi))
+
+
+def model_ratios():
+    """Element tags and ratios of the highest-dimensional elements of the current Gmsh model."""
+    dim = max(d for d, _ in gmsh.model.getEntities())
+    tags = []
+    for t in gmsh.model.mesh.getElementTypes(dim):
+        et, _ = gmsh.model.mesh.getElementsByType(t)
+        tags.extend(int(x) for x in et)
+    tags = np.array(tags, dtype=np.uint64)
+    lo = gmsh.model.mesh.getElementQualities(tags, "minDetJac")
+    hi = gmsh.model.mesh.getElementQualities(tags, "maxDetJac")
+    return dim, tags, ratio_from_bounds(lo, hi)
+
+
 def ratios(path):
     gmsh.initialize(["-nopopup"])
     gmsh.option.setNumber("General.Terminal", 0)
     try:
         gmsh.open(path)
-        dim = max(d for d, _ in gmsh.model.getEntities())
-        tags, cents = [], []
-        for t in gmsh.model.mesh.getElementTypes(dim):
-            et, _ = gmsh.model.mesh.getElementsByType(t)
-            tags.extend(int(x) for x in et)
-        tags = np.array(tags, dtype=np.uint64)
-        lo = np.array(gmsh.model.mesh.getElementQualities(tags, "minDetJac"))
-        hi = np.array(gmsh.model.mesh.getElementQualities(tags, "maxDetJac"))
-        r = np.where(hi < 0, hi / np.where(lo == 0, -1e-300, lo), lo / np.where(hi == 0, 1e-300, hi))
+        dim, tags, r = model_ratios()
         order = np.argsort(r)
         worst = []
         for i in order[:5]:
