@@ -796,10 +796,11 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         } => {
             use polyspline::mesh::generate::{Kind, boundary_layer, generate};
             let cgrid = kind == KindArg::Cgrid;
-            if let Some(n) = elements {
-                if kind != KindArg::Ogrid && kind != KindArg::Cgrid {
-                    polyspline::params::check_generated_elements(n)?;
-                }
+            if let Some(n) = elements
+                && kind != KindArg::Ogrid
+                && kind != KindArg::Cgrid
+            {
+                polyspline::params::check_generated_elements(n)?;
             }
             check_outputs(&[&output], &[])?;
             let kind = match kind {

@@ -398,12 +398,15 @@ fn corner_ratio(mesh: &LinearMesh, e: usize) -> f64 {
     lo / hi
 }
 
-/// The straight elements' certified lower bounds of det J and corner Jacobian ratios.
+/// A straight element's Jacobian ratio (from its corners) and lattice scaled Jacobian.
+type StraightShape = (f64, f64);
+
+/// The straight elements' certified lower bounds of det J and their shapes.
 fn straight_reference(
     certifier: &dyn Certifier,
     blended: &Blended,
     depth: usize,
-) -> Result<(Vec<f64>, Vec<(f64, f64)>), BlendError> {
+) -> Result<(Vec<f64>, Vec<StraightShape>), BlendError> {
     let n = blended.n_elements();
     let dim = blended.dim();
     let all: Vec<usize> = (0..n).collect();
