@@ -71,7 +71,7 @@ out="$root/target/test-output.log"
 if [ $# -gt 0 ]; then
     cargo test --release "$@" 2>&1 | tee "$out"
 else
-    cargo test --release --all-targets 2>&1 | tee "$out"
+    cargo test --release --all-targets --no-fail-fast 2>&1 | tee "$out"
 fi
 status=${PIPESTATUS[0]}
 

@@ -104,8 +104,17 @@ struct BoundaryGrid<'a> {
     lo: V3,
     h: f64,
     cells: HashMap<[i64; 3], Vec<u32>>,
+    /// Bounding box of each facet: a cheap lower bound of its distance, so only facets that
+    /// could be nearer than the best so far are measured.
+    boxes: Vec<(V3, V3)>,
     /// Grid extent in cells (bounds the ring search).
     span: i64,
+}
+
+/// Distance from `x` to the box (lo, hi) (0 inside).
+fn box_distance(x: V3, (lo, hi): &(V3, V3)) -> f64 {
+    let d: V3 = std::array::from_fn(|k| (lo[k] - x[k]).max(x[k] - hi[k]).max(0.0));
+    norm(d)
 }
 
 impl<'a> BoundaryGrid<'a> {
@@ -164,6 +173,7 @@ impl<'a> BoundaryGrid<'a> {
             lo,
             h,
             cells,
+            boxes,
             span,
         }
     }
@@ -178,12 +188,29 @@ impl<'a> BoundaryGrid<'a> {
     }
 
     /// Distance from `x` to the nearest point of the linear boundary.
+    #[cfg(test)]
     fn distance(&self, x: V3) -> f64 {
+        self.distance_below(x, f64::INFINITY)
+    }
+
+    /// Distance from `x`, a point of the output facet over input facet `own`, to the linear
+    /// boundary: its own facet's distance bounds the search.
+    fn distance_from(&self, x: V3, own: usize) -> f64 {
+        let d = self.facet_distance(x, own);
+        // On its own facet to rounding: no other facet can be meaningfully nearer.
+        if d <= 1e-12 * self.h {
+            d
+        } else {
+            self.distance_below(x, d)
+        }
+    }
+
+    /// Distance from `x` to the linear boundary, given an upper bound `best` of it.
+    fn distance_below(&self, x: V3, mut best: f64) -> f64 {
         if self.facets.is_empty() {
             return 0.0;
         }
         let c: [i64; 3] = std::array::from_fn(|k| ((x[k] - self.lo[k]) / self.h).floor() as i64);
-        let mut best = f64::INFINITY;
         // Facets outside the rings searched so far are at least r·h away.
         let far = c.iter().map(|v| v.abs()).max().unwrap_or(0) + self.span;
         for r in 0..=far {
@@ -195,7 +222,9 @@ impl<'a> BoundaryGrid<'a> {
                         }
                         if let Some(list) = self.cells.get(&[c[0] + i0, c[1] + i1, c[2] + i2]) {
                             for &f in list {
-                                best = best.min(self.facet_distance(x, f as usize));
+                                if box_distance(x, &self.boxes[f as usize]) < best {
+                                    best = best.min(self.facet_distance(x, f as usize));
+                                }
                             }
                         }
                     }
@@ -256,15 +285,18 @@ pub fn boundary_deviation(
     let diagonal = diagonal(mesh);
     let (vertex_max, vertex_rms) = vertex_deviation(mesh, topo, ho);
     let grid = BoundaryGrid::new(mesh, topo);
-    let mut on_boundary = vec![false; ho.nodes.len()];
-    for &n in &ho.boundary {
-        on_boundary[n as usize] = true;
-    }
-    let node_max = on_boundary
-        .par_iter()
+    // Output boundary facet f lies over input boundary facet f (both in the topology's order).
+    let npf = ho.nodes_per_facet();
+    let node_max = ho
+        .boundary
+        .par_chunks(npf)
         .enumerate()
-        .filter(|(_, b)| **b)
-        .map(|(n, _)| grid.distance(ho.nodes[n]))
+        .map(|(f, nodes)| {
+            nodes
+                .iter()
+                .map(|&n| grid.distance_from(ho.nodes[n as usize], f))
+                .fold(0.0, f64::max)
+        })
         .reduce(|| 0.0, f64::max)
         / diagonal;
 
@@ -274,12 +306,12 @@ pub fn boundary_deviation(
     let basis: Vec<Vec<f64>> = (0..=q)
         .map(|i| lagrange_1d(p, i as f64 / q as f64))
         .collect();
-    let npf = ho.nodes_per_facet();
     let facet_dim = ho.dim - 1;
     let sample_max = ho
         .boundary
         .par_chunks(npf)
-        .map(|f| {
+        .enumerate()
+        .map(|(own, f)| {
             let mut m = 0.0f64;
             let second = if facet_dim == 2 { q } else { 0 };
             for j in 0..=second {
@@ -299,7 +331,7 @@ pub fn boundary_deviation(
                             }
                         }
                     }
-                    m = m.max(grid.distance(x));
+                    m = m.max(grid.distance_from(x, own));
                 }
             }
             m
