@@ -187,12 +187,6 @@ impl<'a> BoundaryGrid<'a> {
         }
     }
 
-    /// Distance from `x` to the nearest point of the linear boundary.
-    #[cfg(test)]
-    fn distance(&self, x: V3) -> f64 {
-        self.distance_below(x, f64::INFINITY)
-    }
-
     /// Distance from `x`, a point of the output facet over input facet `own`, to the linear
     /// boundary: its own facet's distance bounds the search.
     fn distance_from(&self, x: V3, own: usize) -> f64 {
