@@ -190,6 +190,10 @@ impl<'a> BoundaryGrid<'a> {
     /// Distance from `x`, a point of the output facet over input facet `own`, to the linear
     /// boundary: its own facet's distance bounds the search.
     fn distance_from(&self, x: V3, own: usize) -> f64 {
+        if own >= self.facets.len() {
+            // Subdivided output: its facets no longer map one to one onto the input's.
+            return self.distance_below(x, f64::INFINITY);
+        }
         let d = self.facet_distance(x, own);
         // On its own facet to rounding: no other facet can be meaningfully nearer.
         if d <= 1e-12 * self.h {
@@ -279,8 +283,16 @@ pub fn boundary_deviation(
     let diagonal = diagonal(mesh);
     let (vertex_max, vertex_rms) = vertex_deviation(mesh, topo, ho);
     let grid = BoundaryGrid::new(mesh, topo);
-    // Output boundary facet f lies over input boundary facet f (both in the topology's order).
+    // Output boundary facet f lies over input boundary facet f (both in the topology's order),
+    // unless the output was subdivided: then every facet is searched for from scratch.
     let npf = ho.nodes_per_facet();
+    let own = |f: usize| {
+        if ho.n_boundary() == topo.boundary_facets.len() {
+            f
+        } else {
+            usize::MAX
+        }
+    };
     let node_max = ho
         .boundary
         .par_chunks(npf)
@@ -288,7 +300,7 @@ pub fn boundary_deviation(
         .map(|(f, nodes)| {
             nodes
                 .iter()
-                .map(|&n| grid.distance_from(ho.nodes[n as usize], f))
+                .map(|&n| grid.distance_from(ho.nodes[n as usize], own(f)))
                 .fold(0.0, f64::max)
         })
         .reduce(|| 0.0, f64::max)
@@ -305,7 +317,7 @@ pub fn boundary_deviation(
         .boundary
         .par_chunks(npf)
         .enumerate()
-        .map(|(own, f)| {
+        .map(|(facet, f)| {
             let mut m = 0.0f64;
             let second = if facet_dim == 2 { q } else { 0 };
             for j in 0..=second {
@@ -325,7 +337,7 @@ pub fn boundary_deviation(
                             }
                         }
                     }
-                    m = m.max(grid.distance_from(x, own));
+                    m = m.max(grid.distance_from(x, own(facet)));
                 }
             }
             m
