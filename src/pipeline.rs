@@ -635,10 +635,6 @@ pub fn curve_in_memory_with_progress(
             s.control_points = c_star;
             let (lambda, bi) = blend(&s)?;
             blend_lambda = Some(lambda);
-            min_det_bound = Some(bi.min_det_lower_bound);
-            ls_alpha = Some(0.5 * bi.min_factor);
-            ls_invalid_full = bi.invalid_at_full_step;
-            ls_damped = bi.reduced_points;
             fit_info = Some(info);
             blend_info = Some(bi);
             lap("validity", &mut timings);
@@ -774,10 +770,6 @@ pub fn curve_in_memory_with_progress(
                         s.control_points = c_star;
                         let (lambda, bi) = blend(&s)?;
                         blend_lambda = Some(lambda);
-                        min_det_bound = Some(bi.min_det_lower_bound);
-                        ls_alpha = Some(0.5 * bi.min_factor);
-                        ls_invalid_full = bi.invalid_at_full_step;
-                        ls_damped = bi.reduced_points;
                         fit_info = Some(info);
                         blend_info = Some(bi);
                         lap("validity", &mut timings);
@@ -801,6 +793,14 @@ pub fn curve_in_memory_with_progress(
             }
             min_det_bound = Some(bounds.iter().map(|b| b.lower).fold(f64::INFINITY, f64::min));
             lap("validity", &mut timings);
+        }
+        // The report's line-search figures of a blended fit (least squares, or the energy's
+        // fallback).
+        if let Some(bi) = &blend_info {
+            min_det_bound = Some(bi.min_det_lower_bound);
+            ls_alpha = Some(0.5 * bi.min_factor);
+            ls_invalid_full = bi.invalid_at_full_step;
+            ls_damped = bi.reduced_points;
         }
         space = Some(s);
     }
