@@ -1,6 +1,6 @@
 //! polyspline: curved high-order quad/hex meshes from linear ones, without CAD.
 //!
-//! The pipeline (see `design/architecture.md`):
+//! The pipeline (stages and seams: `docs/architecture.md`):
 //!
 //! ```text
 //! read ──▶ LinearMesh ──▶ Topology ──▶ SplineSpace ──▶ Fit ──▶ Validity ──▶ Sample ──▶ write

@@ -522,13 +522,13 @@ fn subdivided_output_is_valid() {
 /// stderr is not a terminal (here a pipe), with or without `--quiet`.
 #[test]
 fn progress_reports_stages_and_stays_off_stderr_pipes() {
-    use polyspline::progress::Progress;
+    use polyspline::progress::{Progress, Stage};
     use std::sync::Mutex;
     #[derive(Default)]
     struct Log(Mutex<(Vec<String>, usize)>);
     impl Progress for Log {
-        fn finished(&self, name: &str) {
-            self.0.lock().unwrap().0.push(name.to_string());
+        fn finished(&self, stage: Stage) {
+            self.0.lock().unwrap().0.push(stage.key().to_string());
         }
         fn cg(&self, iteration: usize, _: f64) {
             self.0.lock().unwrap().1 = iteration;

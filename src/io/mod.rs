@@ -20,6 +20,7 @@ pub mod abaqus;
 pub mod exodus;
 pub mod gmsh;
 pub mod gmsh_write;
+pub mod high_order;
 pub mod input;
 pub mod medit;
 pub mod mfem;

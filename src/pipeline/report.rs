@@ -1,0 +1,200 @@
+//! The `curve` job's report ([`CurveReport`]): what was done, the certificate, quality and
+//! boundary figures, and the seconds per [`crate::progress::Stage`]; assembled once, from the
+//! stages' outcomes, at the end of the job.
+
+use super::spline::{SplineOutcome, SplineSetup};
+use super::{Geometry, Job};
+use crate::deviation::BoundaryDeviation;
+use crate::elastic::ElasticInfo;
+use crate::energy::EnergyInfo;
+use crate::fit::{FitTargets, FitWeights};
+use crate::gpu::{AdapterReport, Precision};
+use crate::sample::HighOrderMesh;
+use crate::spline::{ElementClass, Q2Reason};
+use crate::validity::LineSearchInfo;
+use crate::validity::LineSearchMode;
+use crate::validity::blend::BlendInfo;
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+/// What `curve` did, for `--report` and the terminal.
+#[derive(Clone, Debug, Serialize)]
+pub struct CurveReport {
+    pub input: PathBuf,
+    pub output: PathBuf,
+    pub dimension: usize,
+    pub elements: usize,
+    pub order: usize,
+    pub subdivide: Option<usize>,
+    pub geometry: Geometry,
+    /// `iga` or `elastic`.
+    pub method: &'static str,
+    /// The elastic solve, with `--method elastic`.
+    pub elastic: Option<ElasticInfo>,
+    pub output_nodes: usize,
+    pub output_elements: usize,
+    pub boundary_facets: usize,
+    pub control_points: usize,
+    pub spline_elements: usize,
+    pub q2_elements: usize,
+    /// Elements made Q2 because their initial spline map was not certified valid.
+    pub demoted_elements: usize,
+    /// Elements made Q2 because they touch a kink of a boundary grid line (smooth fit), counting
+    /// only elements that would otherwise be spline elements.
+    pub kink_elements: usize,
+    /// With `--snap-boundary`: boundary vertices moved back onto the input vertices.
+    pub snapped_boundary_vertices: Option<usize>,
+    /// Sharp features found and how the output keeps them (spline geometries).
+    pub features: Option<crate::mesh::features::FeatureReport>,
+    /// Fit weights, when fitted.
+    pub fit_weights: Option<FitWeights>,
+    /// Fit targets (chords or smooth-boundary reconstruction), when fitted.
+    pub fit_targets: Option<FitTargets>,
+    pub cg_iterations: Option<usize>,
+    /// Stored entries of the normal-equation matrix (one matrix for x, y, z).
+    pub matrix_nonzeros: Option<usize>,
+    pub cg_rel_residual: Option<f64>,
+    pub line_search_mode: LineSearchMode,
+    /// Step of the certified search (1 = the full least-squares fit everywhere): with the
+    /// blend of least-squares fits, half its smallest factor (0.5 = the target map, 0 = the
+    /// straight elevation, somewhere); with `--fit energy`, the global step or the smallest
+    /// control point step of the local search.
+    pub line_search_alpha: Option<f64>,
+    /// Elements not certified valid at the full least-squares step.
+    pub invalid_at_full_step: usize,
+    /// Points held back from the full step: shared Bernstein points of the certified blend
+    /// (least-squares fits), or control points of the local search (`--fit energy`).
+    pub damped_control_points: usize,
+    pub line_search: Option<LineSearchInfo>,
+    /// Elements whose curving the certified blend reduced (some Bernstein point held back
+    /// towards the straight elevation; `validity::blend`).
+    pub reduced_elements: usize,
+    /// The certified blend between the straight elevation and the fitted map: elements and
+    /// points reduced, by how much, the worst ones with their coordinates.
+    pub blend: Option<BlendInfo>,
+    /// The degeneration-energy minimisation, with `--fit energy`.
+    pub energy: Option<EnergyInfo>,
+    /// Why `--fit energy` fell back to the blended least-squares fit, when it did.
+    pub energy_skipped: Option<String>,
+    /// Elements of the written mesh not certified valid (always 0: otherwise nothing is written).
+    pub invalid_elements: usize,
+    /// Smallest certified lower bound of det J over the written elements (spline geometry).
+    /// It is the exact Bernstein certificate's (the screen, `validity::screen`, decides only
+    /// elements whose exact bound is larger).
+    pub min_det_jacobian_bound: Option<f64>,
+    /// Minimum scaled Jacobian of the input (corners) and of the output (sampled).
+    pub input_min_scaled_jacobian: f64,
+    pub min_scaled_jacobian: f64,
+    /// Bounding-box diagonal of the input: the `boundary_*` distances below are relative to it.
+    pub bounding_box_diagonal: f64,
+    /// Distance of the output's boundary vertex nodes from the input's boundary vertices
+    /// (0 where `--snap-boundary` snapped them), max and rms.
+    pub boundary_vertex_deviation_max: f64,
+    pub boundary_vertex_deviation_rms: f64,
+    /// Largest distance of any written boundary node (vertex, edge or face node) from the
+    /// input's linear boundary: how far the curving moved the wall ([`crate::deviation`]).
+    pub boundary_node_distance_max: f64,
+    /// The same over the output's boundary facets sampled on the lattice of order 2p.
+    pub boundary_sample_distance_max: f64,
+    /// Seconds per stage, and `total`.
+    pub timings: BTreeMap<String, f64>,
+    /// `cpu` or `gpu`; with `gpu`, the adapter and the kernels' precision.
+    pub backend: String,
+    pub adapter: Option<AdapterReport>,
+    pub gpu_precision: Option<Precision>,
+}
+
+/// The outcomes of the stages after sampling.
+pub(super) struct Finished {
+    pub ho: HighOrderMesh,
+    pub snapped: Option<usize>,
+    /// The elastic solve and the certified bound of its mesh.
+    pub elastic: Option<(ElasticInfo, f64)>,
+    pub input_min_scaled_jacobian: f64,
+    pub min_scaled_jacobian: f64,
+    pub deviation: BoundaryDeviation,
+}
+
+impl CurveReport {
+    /// The report of `job` from its stages' outcomes (`output` empty: set when written).
+    pub(super) fn assemble(
+        job: &Job,
+        spline: Option<&(SplineSetup, SplineOutcome)>,
+        done: &Finished,
+        timings: BTreeMap<String, f64>,
+    ) -> CurveReport {
+        let (mesh, topo, options, ho) = (job.mesh, job.topo, job.options, &done.ho);
+        let setup = spline.map(|(setup, _)| setup);
+        let outcome = spline.map(|(_, outcome)| outcome);
+        let space = outcome.map(|o| &o.space);
+        let fit = outcome.and_then(|o| o.fit.as_ref());
+        let blend = outcome.and_then(|o| o.blend.clone());
+        let gpu = job.gpu;
+        CurveReport {
+            input: job.input.to_owned(),
+            output: PathBuf::new(),
+            dimension: mesh.dim,
+            elements: mesh.n_elements(),
+            order: ho.order,
+            subdivide: options.subdivide,
+            geometry: options.geometry,
+            method: options.method.name(),
+            elastic: done.elastic.as_ref().map(|(info, _)| info.clone()),
+            output_nodes: ho.nodes.len(),
+            output_elements: ho.n_elements(),
+            boundary_facets: ho.n_boundary(),
+            control_points: space.map_or(0, |s| s.n_control_points()),
+            spline_elements: space.map_or(0, |s| s.n_spline_elements()),
+            q2_elements: space.map_or(0, |s| s.n_q2_elements()),
+            demoted_elements: outcome.map_or(0, |o| o.demoted),
+            // Counted in the built space: elements Q2 for other reasons already are not kinks'.
+            kink_elements: space.map_or(0, |s| {
+                s.classes
+                    .iter()
+                    .filter(|c| **c == ElementClass::Q2(Q2Reason::BoundaryKink))
+                    .count()
+            }),
+            snapped_boundary_vertices: done.snapped,
+            features: setup.and_then(|s| s.features.as_ref()).map(|f| {
+                let (vertex, planarity) = f.deviations(mesh, ho);
+                crate::mesh::features::FeatureReport {
+                    found: f.summary(&options.features.params, topo),
+                    feature_vertex_deviation_max: vertex,
+                    planarity_max: planarity,
+                }
+            }),
+            fit_weights: fit.map(|_| options.fit.weights),
+            fit_targets: fit.map(|_| options.fit.targets),
+            cg_iterations: fit.map(|f| f.cg.iterations),
+            matrix_nonzeros: fit.map(|f| f.nonzeros),
+            cg_rel_residual: fit.map(|f| f.cg.rel_residual),
+            line_search_mode: options.line_search_mode,
+            line_search_alpha: outcome.and_then(|o| o.alpha),
+            invalid_at_full_step: outcome.map_or(0, |o| o.invalid_at_full_step),
+            damped_control_points: outcome.map_or(0, |o| o.damped_points),
+            line_search: outcome.and_then(|o| o.line_search.clone()),
+            reduced_elements: blend.as_ref().map_or(0, |b| b.reduced_elements),
+            blend,
+            energy: outcome.and_then(|o| o.energy.clone()),
+            energy_skipped: outcome.and_then(|o| o.energy_skipped.clone()),
+            invalid_elements: 0,
+            // The elastic mesh replaces the spline's: its own certificate's bound.
+            min_det_jacobian_bound: match &done.elastic {
+                Some((_, bound)) => Some(*bound),
+                None => outcome.and_then(|o| o.min_det_bound),
+            },
+            input_min_scaled_jacobian: done.input_min_scaled_jacobian,
+            min_scaled_jacobian: done.min_scaled_jacobian,
+            bounding_box_diagonal: done.deviation.diagonal,
+            boundary_vertex_deviation_max: done.deviation.vertex_max,
+            boundary_vertex_deviation_rms: done.deviation.vertex_rms,
+            boundary_node_distance_max: done.deviation.node_max,
+            boundary_sample_distance_max: done.deviation.sample_max,
+            timings,
+            backend: options.backend.name().into(),
+            adapter: gpu.map(|g| g.adapter.clone()),
+            gpu_precision: gpu.map(|g| g.precision),
+        }
+    }
+}

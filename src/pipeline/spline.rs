@@ -1,0 +1,463 @@
+//! The spline geometry's stages: the spline space ([`Stage::Spline`]), the least-squares fit
+//! ([`Stage::Fit`]), its certification ([`Stage::Validity`]) and, with `--fit energy`, the
+//! energy minimisation ([`Stage::Energy`]).
+//!
+//! Input: the [`Job`] (mesh, topology, options, certifier). Output: a [`SplineOutcome`], whose
+//! space (with the certified blend's factors, when there are any) is certified valid on every
+//! element; or an error, and nothing is sampled.
+//!
+//! Three paths, by geometry and fit:
+//! - least squares ([`fit_and_blend`]): fit once, then the certified blend between the
+//!   straight elevation and the fitted map ([`crate::validity::blend`]);
+//! - `--fit energy` ([`fit_with_energy`]): fit, certified line search, energy; where the initial
+//!   map is not certified, those elements are demoted to Q2 and the fit repeated, and when that
+//!   does not give a certified start the least-squares fit is blended instead;
+//! - the unfitted spline map ([`certify_initial`]): certified as it is, or refused.
+
+use super::clock::Clock;
+use super::{CurveError, Geometry, Job};
+use crate::energy::{EnergyError, EnergyInfo, EnergyParams};
+use crate::fit::{FitInfo, FitParams, FitTargets, SmoothTargets, TargetMap, fit_with_targets};
+use crate::mesh::features::Features;
+use crate::progress::{Progress, Stage};
+use crate::spline::{ElementRows, Q2Reason, SplineSpace, kinks};
+use crate::validity::blend::{BlendInfo, Blended, blend_search};
+use crate::validity::certificate::{
+    MAX_DEMOTION_ROUNDS, certify_mesh, demote_with_rings, uncertified,
+};
+use crate::validity::line_search::{CertifiedStep, acceptance_thresholds, certified_step};
+use crate::validity::{DetBounds, LineSearchInfo, LineSearchMode, ValidityError};
+
+/// What the spline space and the fit are built from.
+pub(super) struct SplineSetup {
+    /// Sharp features found (`None` when there are none).
+    pub features: Option<Features>,
+    /// Elements made Q2 by feature creases and by kinks of boundary grid lines.
+    crease: Vec<bool>,
+    kinks: kinks::Kinks,
+    /// The fit's parameters, with the features it keeps.
+    fit_params: FitParams,
+    /// The fit's smooth targets, shared by the fit and the blend's target map.
+    targets: Option<SmoothTargets>,
+    /// The blend's middle state carries the smooth boundary whatever the fit's own targets
+    /// (with the paper's chord targets it is built with the default reconstruction).
+    blend_targets: Option<SmoothTargets>,
+}
+
+impl SplineSetup {
+    fn new(job: &Job) -> Result<Self, CurveError> {
+        let (options, mesh, topo) = (job.options, job.mesh, job.topo);
+        let features = Some(options.features.detect(mesh, topo)?).filter(|f| !f.is_empty());
+        let used = features.as_ref().filter(|_| !options.features.ignore);
+        let crease = used.map_or_else(Vec::new, |f| f.crease_elements(topo));
+        let fit_params = FitParams {
+            features: used.cloned().map(std::sync::Arc::new),
+            ..options.fit.clone()
+        };
+        // With the smooth fit, elements at kinks of the boundary grid lines start as Q2;
+        // vertices on sharp features are left to the feature handling.
+        let kinks = match options.fit.targets {
+            FitTargets::Smooth(p) if options.geometry == Geometry::SplineFitted => {
+                let mut exclude = kinks::feature_vertices(mesh, topo, p.feature_angle_deg);
+                if let Some(f) = used {
+                    for (x, &m) in exclude.iter_mut().zip(&f.vertex_mask) {
+                        *x |= m;
+                    }
+                }
+                kinks::detect(mesh, topo, p.kink_angle_deg, &exclude)
+            }
+            _ => kinks::Kinks::default(),
+        };
+        let fitted = options.geometry == Geometry::SplineFitted;
+        let targets = match fitted {
+            true => crate::fit::smooth_targets(mesh, topo, &fit_params),
+            false => None,
+        };
+        let blend_targets = match (&targets, fitted) {
+            (None, true) => crate::fit::smooth_targets(
+                mesh,
+                topo,
+                &FitParams {
+                    targets: FitTargets::Smooth(Default::default()),
+                    ..fit_params.clone()
+                },
+            ),
+            _ => None,
+        };
+        Ok(SplineSetup {
+            features,
+            crease,
+            kinks,
+            fit_params,
+            targets,
+            blend_targets,
+        })
+    }
+
+    /// The features the fit keeps (none with `--ignore-features`).
+    fn used_features(&self) -> Option<&Features> {
+        self.fit_params.features.as_deref()
+    }
+
+    /// The spline space with the Q2 elements of creases, kinks and `demote`.
+    fn build(&self, job: &Job, demote: &[bool]) -> SplineSpace {
+        SplineSpace::build_with_q2(
+            job.mesh,
+            job.topo,
+            &[
+                (&self.crease, Q2Reason::FeatureCrease),
+                (&self.kinks.elements, Q2Reason::BoundaryKink),
+                (demote, Q2Reason::InvalidSplineMap),
+            ],
+        )
+    }
+
+    /// The target map of the certified blend (its middle state).
+    pub(super) fn target_map<'a>(&'a self, job: &Job<'a>) -> TargetMap<'a> {
+        TargetMap {
+            mesh: job.mesh,
+            topo: job.topo,
+            smooth: self.targets.as_ref().or(self.blend_targets.as_ref()),
+        }
+    }
+}
+
+/// The certified spline geometry and the report's figures of how it was reached.
+pub(super) struct SplineOutcome {
+    /// The space and its control points (the fitted map, or the initial one, unfitted).
+    pub space: SplineSpace,
+    /// The certified blend's factors (least-squares fits): the map to sample is
+    /// [`Blended`] of these; `None` samples `space` itself.
+    pub blend_factors: Option<Vec<f32>>,
+    pub fit: Option<FitInfo>,
+    pub blend: Option<BlendInfo>,
+    pub line_search: Option<LineSearchInfo>,
+    /// Step of the certified search (see `CurveReport::line_search_alpha`).
+    pub alpha: Option<f64>,
+    pub invalid_at_full_step: usize,
+    pub damped_points: usize,
+    pub min_det_bound: Option<f64>,
+    pub demoted: usize,
+    pub energy: Option<EnergyInfo>,
+    pub energy_skipped: Option<String>,
+}
+
+impl SplineOutcome {
+    /// A blended least-squares fit: the report's search figures are the blend's.
+    fn blended(
+        space: SplineSpace,
+        factors: Vec<f32>,
+        fit: FitInfo,
+        blend: BlendInfo,
+        demoted: usize,
+        energy_skipped: Option<String>,
+    ) -> Self {
+        SplineOutcome {
+            space,
+            blend_factors: Some(factors),
+            fit: Some(fit),
+            line_search: None,
+            alpha: Some(0.5 * blend.min_factor),
+            invalid_at_full_step: blend.invalid_at_full_step,
+            damped_points: blend.reduced_points,
+            min_det_bound: Some(blend.min_det_lower_bound),
+            blend: Some(blend),
+            demoted,
+            energy: None,
+            energy_skipped,
+        }
+    }
+}
+
+/// The spline geometry's stages (the job's geometry is not [`Geometry::Straight`]).
+pub(super) fn curve_spline(
+    job: &Job,
+    clock: &mut Clock,
+) -> Result<(SplineSetup, SplineOutcome), CurveError> {
+    let (setup, space) = clock.run(Stage::Spline, || {
+        let setup = SplineSetup::new(job)?;
+        let space = setup.build(job, &vec![false; job.mesh.n_elements()]);
+        Ok::<_, CurveError>((setup, space))
+    })?;
+    let outcome = match (job.options.geometry, &job.options.energy) {
+        (Geometry::SplineFitted, None) => fit_and_blend(job, &setup, clock, space)?,
+        (Geometry::SplineFitted, Some(params)) => {
+            fit_with_energy(job, &setup, clock, space, params)?
+        }
+        _ => certify_initial(job, clock, space)?,
+    };
+    Ok((setup, outcome))
+}
+
+/// Least squares: one fit, then the certified blend from the straight elevation to it (valid
+/// for every input whose straight elevation is certified).
+fn fit_and_blend(
+    job: &Job,
+    setup: &SplineSetup,
+    clock: &mut Clock,
+    mut space: SplineSpace,
+) -> Result<SplineOutcome, CurveError> {
+    let (c_star, info) = fit(job, setup, clock, &space)?;
+    space.control_points = c_star;
+    let (factors, blend) = clock.run(Stage::Validity, || blend(job, setup, &space))?;
+    Ok(SplineOutcome::blended(space, factors, info, blend, 0, None))
+}
+
+/// `--fit energy`: fit; take the full step when certified, else search towards the initial
+/// map; then minimise the energy from there. Where the initial map itself is not certified
+/// valid, those elements become constrained Q2 elements (the input's own shape) and the fit is
+/// repeated; when that does not give a certified start, the energy is skipped and the
+/// least-squares fit is blended with the straight elevation instead.
+fn fit_with_energy(
+    job: &Job,
+    setup: &SplineSetup,
+    clock: &mut Clock,
+    mut space: SplineSpace,
+    params: &EnergyParams,
+) -> Result<SplineOutcome, CurveError> {
+    let mut demote = vec![false; job.mesh.n_elements()];
+    for round in 0.. {
+        let (c_star, info) = fit(job, setup, clock, &space)?;
+        let (thresholds, step) = clock.run(Stage::Validity, || {
+            let fraction = job.options.line_search.min_det_fraction;
+            let thresholds =
+                acceptance_thresholds(job.mesh, fraction, |t| certify_space(job, &space, t));
+            let step = search(job, &space, &c_star, &thresholds);
+            (thresholds, step)
+        });
+        let count = match step {
+            Ok(step) => {
+                let (c, energy) = clock
+                    .run(Stage::Energy, || {
+                        minimize_energy(job, setup, &space, params, &c_star, &thresholds, &step)
+                    })
+                    .map_err(|source| CurveError::Energy {
+                        input: job.input.to_owned(),
+                        source,
+                    })?;
+                space.control_points = c;
+                let bound = clock.run(Stage::Validity, || {
+                    min_lower(&certify_space(job, &space, &|_| 0.0))
+                });
+                return Ok(SplineOutcome {
+                    space,
+                    blend_factors: None,
+                    fit: Some(info),
+                    blend: None,
+                    line_search: step.global,
+                    alpha: Some(step.alpha),
+                    invalid_at_full_step: step.invalid_at_full_step,
+                    damped_points: step.damped_control_points,
+                    min_det_bound: Some(bound),
+                    demoted: demote.iter().filter(|&&d| d).count(),
+                    energy: Some(energy),
+                    energy_skipped: None,
+                });
+            }
+            Err(ValidityError::InitialInvalid { count, .. }) => count,
+        };
+        if round < MAX_DEMOTION_ROUNDS {
+            space = clock.run(Stage::Validity, || {
+                let bad = uncertified(&certify_space(job, &space, &|_| 0.0));
+                let is_q2 = |e: usize| !space.is_spline(e);
+                demote_with_rings(job.mesh, job.topo, &bad, round, &is_q2, &mut demote);
+                setup.build(job, &demote)
+            });
+            continue;
+        }
+        let skipped = format!(
+            "the initial spline map is not certified valid on {count} element(s); the least-squares fit was blended with the straight elevation instead"
+        );
+        space.control_points = c_star;
+        let (factors, blend) = clock.run(Stage::Validity, || blend(job, setup, &space))?;
+        let demoted = demote.iter().filter(|&&d| d).count();
+        return Ok(SplineOutcome::blended(
+            space,
+            factors,
+            info,
+            blend,
+            demoted,
+            Some(skipped),
+        ));
+    }
+    unreachable!("the demotion rounds end in a return")
+}
+
+/// The unfitted map is what was asked for: certified as it is, or refused rather than changed.
+fn certify_initial(
+    job: &Job,
+    clock: &mut Clock,
+    space: SplineSpace,
+) -> Result<SplineOutcome, CurveError> {
+    let bounds = clock.run(Stage::Validity, || certify_space(job, &space, &|_| 0.0));
+    let bad = uncertified(&bounds);
+    if !bad.is_empty() {
+        return Err(CurveError::invalid(
+            job.input,
+            "initial spline map (use --fit position to fit it)",
+            &bad,
+        ));
+    }
+    Ok(SplineOutcome {
+        space,
+        blend_factors: None,
+        fit: None,
+        blend: None,
+        line_search: None,
+        alpha: None,
+        invalid_at_full_step: 0,
+        damped_points: 0,
+        min_det_bound: Some(min_lower(&bounds)),
+        demoted: 0,
+        energy: None,
+        energy_skipped: None,
+    })
+}
+
+/// The least-squares fit of the space's control points (planar patches projected back), timed
+/// as [`Stage::Fit`] with its assembly and CG parts.
+fn fit(
+    job: &Job,
+    setup: &SplineSetup,
+    clock: &mut Clock,
+    space: &SplineSpace,
+) -> Result<(Vec<[f64; 3]>, FitInfo), CurveError> {
+    let progress = clock.progress();
+    let (c_star, info) = clock.run(Stage::Fit, || solve_fit(job, setup, space, progress))?;
+    clock.add(Stage::FitAssembly, info.assembly_seconds);
+    clock.add(Stage::FitCg, info.solve_seconds);
+    Ok((c_star, info))
+}
+
+fn solve_fit(
+    job: &Job,
+    setup: &SplineSetup,
+    space: &SplineSpace,
+    progress: &dyn Progress,
+) -> Result<(Vec<[f64; 3]>, FitInfo), CurveError> {
+    let gpu = job.gpu;
+    let (mut c_star, info) = fit_with_targets(
+        space,
+        job.mesh,
+        job.topo,
+        &setup.fit_params,
+        setup.targets.as_ref(),
+        |k, rhs, x, cg| match gpu {
+            Some(ctx) => crate::gpu::cg::pcg(ctx, k, rhs, x, cg, |_, _| {}),
+            None => crate::solve::pcg(k, rhs, x, cg, |i, r| progress.cg(i, r)),
+        },
+    )
+    .map_err(|source| CurveError::Solve {
+        input: job.input.to_owned(),
+        source,
+    })?;
+    if let Some(f) = setup.used_features() {
+        crate::fit::features::project_onto_planes(space, job.topo, f, &mut c_star);
+    }
+    Ok((c_star, info))
+}
+
+/// The certified blend from the straight elevation to the fitted map (`validity::blend`).
+fn blend(
+    job: &Job,
+    setup: &SplineSetup,
+    space: &SplineSpace,
+) -> Result<(Vec<f32>, BlendInfo), CurveError> {
+    let target_map = setup.target_map(job);
+    let mut blended = Blended::new(job.mesh, &target_map, space, job.mesh, job.topo, Vec::new());
+    let global = job.options.line_search_mode == LineSearchMode::Global;
+    let info = blend_search(
+        job.certifier,
+        &mut blended,
+        &job.options.line_search.blend(global),
+    )
+    .map_err(|source| CurveError::Blend {
+        input: job.input.to_owned(),
+        source,
+    })?;
+    Ok((std::mem::take(&mut blended.factors), info))
+}
+
+/// Certified bounds of the space's current map, exact where at most `target(e)`
+/// ([`certify_mesh`]).
+fn certify_space(
+    job: &Job,
+    space: &SplineSpace,
+    target: &(dyn Fn(usize) -> f64 + Sync),
+) -> Vec<DetBounds> {
+    let net = |e: usize| space.element_bezier(e);
+    let depth = job.options.line_search.certificate_depth;
+    certify_mesh(
+        job.certifier,
+        space.dim,
+        space.n_elements(),
+        &net,
+        depth,
+        target,
+    )
+}
+
+fn min_lower(bounds: &[DetBounds]) -> f64 {
+    bounds.iter().map(|b| b.lower).fold(f64::INFINITY, f64::min)
+}
+
+/// The certified line search of the job's mode from the space's control points to `c_star`.
+fn search(
+    job: &Job,
+    space: &SplineSpace,
+    c_star: &[[f64; 3]],
+    thresholds: &[f64],
+) -> Result<CertifiedStep, ValidityError> {
+    let net = |e: usize, cps: &[[f64; 3]]| space.element_bezier_with(e, cps);
+    let support = |e: usize| {
+        let mut rows = ElementRows::default();
+        space.extraction.rows(e, &mut rows);
+        let mut ids = rows.cols;
+        ids.sort_unstable();
+        ids.dedup();
+        ids
+    };
+    certified_step(
+        job.certifier,
+        job.options.line_search_mode,
+        space.dim,
+        space.n_elements(),
+        net,
+        support,
+        &space.control_points,
+        c_star,
+        thresholds,
+        &job.options.line_search,
+    )
+}
+
+/// The energy minimisation of `--fit energy` from the certified least-squares step; the line
+/// search's thresholds stay in force. Returns C and the minimiser's figures (C is certified by
+/// the minimiser's acceptance test).
+fn minimize_energy(
+    job: &Job,
+    setup: &SplineSetup,
+    space: &SplineSpace,
+    params: &EnergyParams,
+    c_star: &[[f64; 3]],
+    thresholds: &[f64],
+    step: &CertifiedStep,
+) -> Result<(Vec<[f64; 3]>, EnergyInfo), EnergyError> {
+    use crate::energy::{Energy, Validity, minimize_on};
+    let (mesh, topo, fit) = (job.mesh, job.topo, &setup.fit_params);
+    let start = &step.control_points;
+    let energy = Energy::new(space, mesh, topo, fit, c_star, params)?;
+    let depth = job.options.line_search.certificate_depth;
+    let validity = Validity::for_start(&energy, job.certifier, depth, thresholds, start)?;
+    let (mut c, info) = minimize_on(&energy, &validity, start, params, job.gpu, &mut |_| {})?;
+    // The energy moves control points off the planes of planar patches; put them back where
+    // the result stays accepted (it is a small move: the start was on the planes).
+    if let Some(f) = &fit.features {
+        let mut projected = c.clone();
+        crate::fit::features::project_onto_planes(space, topo, f, &mut projected);
+        if validity.accepts(&energy, &projected) {
+            c = projected;
+        }
+    }
+    Ok((c, info))
+}
