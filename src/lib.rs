@@ -24,6 +24,7 @@ pub mod cpu;
 pub mod deviation;
 pub mod elastic;
 pub mod energy;
+pub mod executor;
 pub mod fit;
 pub mod gpu;
 pub mod info;

@@ -30,8 +30,9 @@ mod spline;
 
 use crate::elastic::{ElasticError, ElasticInfo, ElasticParams, elastic_analogy};
 use crate::energy::{EnergyError, EnergyParams};
+use crate::executor::Executor;
 use crate::fit::FitParams;
-use crate::gpu::{Backend, GpuContext};
+use crate::gpu::Backend;
 use crate::io::output::{PendingFile, WriteError};
 use crate::io::{ReadError, read_mesh};
 use crate::mesh::{LinearMesh, MeshOptions, Topology};
@@ -40,7 +41,7 @@ use crate::quality::sample_det_jacobian;
 use crate::sample::{BezierElements, HighOrderMesh, MAX_ORDER, sample};
 use crate::solve::CgError;
 use crate::validity::blend::{BlendError, Blended};
-use crate::validity::{Certifier, CpuCertifier, LineSearchParams, ValidityError};
+use crate::validity::{LineSearchParams, ValidityError};
 use clock::Clock;
 use report::Finished;
 use serde::Serialize;
@@ -260,10 +261,8 @@ pub(crate) struct Job<'a> {
     pub options: &'a CurveOptions,
     pub mesh: &'a LinearMesh,
     pub topo: &'a Topology,
-    /// The GPU of `--backend gpu`.
-    pub gpu: Option<&'a GpuContext>,
-    /// The GPU's certifier with `--backend gpu`, the CPU's otherwise.
-    pub certifier: &'a dyn Certifier,
+    /// Where certification, the fit's CG, sampling and the energy's local derivatives run.
+    pub executor: &'a dyn Executor,
 }
 
 /// [`curve_in_memory`], reporting stage progress to `progress`.
@@ -277,18 +276,13 @@ pub fn curve_in_memory_with_progress(
     let mut clock = Clock::new(progress);
     let mesh = clock.run(Stage::Read, || read_mesh(input, &options.mesh))?;
     let topo = clock.run(Stage::Topology, || topology(input, &mesh))?;
-    let gpu = options.backend.gpu();
-    let gpu_certifier = gpu.map(crate::gpu::jacobian_check::GpuCertifier::new);
+    let executor = crate::executor::executor(&options.backend);
     let job = Job {
         input,
         options,
         mesh: &mesh,
         topo: &topo,
-        gpu,
-        certifier: match &gpu_certifier {
-            Some(c) => c,
-            None => &CpuCertifier,
-        },
+        executor: executor.as_ref(),
     };
     let spline = match options.geometry {
         Geometry::Straight => None,
@@ -396,21 +390,18 @@ fn sample_stage(
         },
         None => mesh,
     };
-    let ho = match job.gpu {
-        Some(ctx) => {
-            crate::gpu::evaluate::sample(ctx, source, mesh, topo, order).map_err(|source| {
-                CurveError::Gpu {
-                    input: job.input.to_owned(),
-                    source,
-                }
-            })?
-        }
-        None => sample(source, mesh, topo, order),
-    };
-    Ok(match job.options.subdivide.is_some() && subdivide_now {
-        true => ho.subdivided(),
-        false => ho,
-    })
+    let ho = job
+        .executor
+        .sample(source, mesh, topo, order)
+        .map_err(|source| CurveError::Gpu {
+            input: job.input.to_owned(),
+            source,
+        })?;
+    if job.options.subdivide.is_some() && subdivide_now {
+        Ok(ho.subdivided())
+    } else {
+        Ok(ho)
+    }
 }
 
 /// The elastic analogy: the straight order-P mesh with its boundary moved onto the sampled

@@ -903,6 +903,7 @@ fn local_newton_matches_twin_and_local_problem() {
 #[test]
 fn colored_energy_with_gpu_derivatives_matches_cpu() {
     use polyspline::energy::{Energy, EnergyParams, EnergySolver, Validity, minimize_on};
+    use polyspline::executor::{CpuExecutor, GpuExecutor};
     use polyspline::validity::CpuCertifier;
     for prec in [Precision::F32, Precision::F64] {
         let Some(ctx) = context(prec) else { continue };
@@ -922,8 +923,8 @@ fn colored_energy_with_gpu_derivatives_matches_cpu() {
         let e = Energy::new(&s, &m, &t, &fit, &c_star, &params).unwrap();
         let start = s.control_points.clone();
         let v = Validity::for_start(&e, &CpuCertifier, 6, &[], &start).unwrap();
-        let (_, cpu) = minimize_on(&e, &v, &start, &params, None, &mut |_| {}).unwrap();
-        let (_, gpu) = minimize_on(&e, &v, &start, &params, Some(&ctx), &mut |c| {
+        let (_, cpu) = minimize_on(&e, &v, &start, &params, &CpuExecutor, &mut |_| {}).unwrap();
+        let (_, gpu) = minimize_on(&e, &v, &start, &params, &GpuExecutor::new(&ctx), &mut |c| {
             for el in 0..s.n_elements() {
                 let b = det_jacobian_bounds(2, &s.element_bezier_with(el, c), 6);
                 assert!(b.certified_positive(), "element {el} not certified");

@@ -7,6 +7,7 @@
 pub mod cg;
 pub mod dot;
 pub mod evaluate;
+pub mod executor;
 pub mod jacobian_check;
 pub mod local_newton;
 pub mod spmv;

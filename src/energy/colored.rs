@@ -63,6 +63,14 @@ pub struct LocalPoint {
     pub psi: [f64; 3],
 }
 
+/// Value, gradient and Hessian of one local problem at v = 0 (`value` is +∞ when some det M ≤ 0).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LocalDerivatives {
+    pub value: f64,
+    pub gradient: [f64; 3],
+    pub hessian: [[f64; 3]; 3],
+}
+
 /// The local problem of one control point (see the module docs).
 #[derive(Clone, Debug)]
 pub struct LocalProblem {
@@ -267,14 +275,14 @@ pub fn local_problems(energy: &Energy, x: &[[f64; 3]], which: &[usize]) -> Vec<L
 }
 
 /// Minimise by coloured sweeps (see the module docs).
-/// With `gpu`, each colour's first Newton step takes its derivatives from the
-/// `local_newton` kernel (the line search and certificate stay on the CPU).
+/// Each colour's first Newton step takes its derivatives from `executor` where it computes
+/// them (the GPU's `local_newton` kernel; the line search and certificate stay on the CPU).
 pub(crate) fn minimize(
     energy: &Energy,
     validity: &Validity,
     start: &[[f64; 3]],
     params: &EnergyParams,
-    gpu: Option<&crate::gpu::GpuContext>,
+    executor: &dyn crate::executor::Executor,
     observe: &mut dyn FnMut(&[[f64; 3]]),
 ) -> Result<(Vec<[f64; 3]>, EnergyInfo), crate::gpu::GpuError> {
     let n = start.len();
@@ -303,10 +311,7 @@ pub(crate) fn minimize(
                 .par_iter()
                 .map(|&i| locals.problem(energy, &x, &nets, i as usize))
                 .collect();
-            let first = match gpu {
-                Some(ctx) => Some(crate::gpu::local_newton::local_newton(ctx, dim, &problems)?),
-                None => None,
-            };
+            let first = executor.local_derivatives(dim, &problems)?;
             let moves: Vec<(u32, [f64; 3], usize, usize)> = cps
                 .par_iter()
                 .zip(&problems)

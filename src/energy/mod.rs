@@ -699,17 +699,24 @@ pub fn minimize(
     params: &EnergyParams,
     observe: &mut dyn FnMut(&[[f64; 3]]),
 ) -> Result<(Vec<[f64; 3]>, EnergyInfo), EnergyError> {
-    minimize_on(energy, validity, start, params, None, observe)
+    minimize_on(
+        energy,
+        validity,
+        start,
+        params,
+        &crate::executor::CpuExecutor,
+        observe,
+    )
 }
 
-/// [`minimize`]; with `gpu`, the coloured solver's local derivatives come from the
-/// `local_newton` kernel.
+/// [`minimize`] on `executor`: the coloured solver takes its local derivatives from it where
+/// it computes them (the GPU's `local_newton` kernel).
 pub fn minimize_on(
     energy: &Energy,
     validity: &Validity,
     start: &[[f64; 3]],
     params: &EnergyParams,
-    gpu: Option<&crate::gpu::GpuContext>,
+    executor: &dyn crate::executor::Executor,
     observe: &mut dyn FnMut(&[[f64; 3]]),
 ) -> Result<(Vec<[f64; 3]>, EnergyInfo), EnergyError> {
     let t = Instant::now();
@@ -724,8 +731,10 @@ pub fn minimize_on(
     }
     let (c, mut info) = match params.solver {
         EnergySolver::Lbfgs => lbfgs(energy, validity, start, params, observe),
-        EnergySolver::Colored => colored::minimize(energy, validity, start, params, gpu, observe)
-            .map_err(|e| EnergyError::Gpu(e.to_string()))?,
+        EnergySolver::Colored => {
+            colored::minimize(energy, validity, start, params, executor, observe)
+                .map_err(|e| EnergyError::Gpu(e.to_string()))?
+        }
     };
     info.initial_degeneration = initial_degeneration;
     info.final_degeneration = deg(&c).1;

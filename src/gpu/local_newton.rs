@@ -3,6 +3,7 @@
 //! invocation per control point. CPU twin: [`crate::cpu::local_newton`].
 
 use super::{GpuContext, GpuError, bytes_to_reals, reals_to_bytes};
+pub use crate::energy::colored::LocalDerivatives;
 use crate::energy::colored::LocalProblem;
 
 pub const SOURCE: &str = include_str!("../../shaders/local_newton.wgsl");
@@ -17,14 +18,6 @@ pub struct Params {
     pub _pad1: u32,
 }
 const _: () = assert!(std::mem::size_of::<Params>() == 16);
-
-/// Value, gradient and Hessian of one local problem at v = 0 (`value` is +∞ when some det M ≤ 0).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct LocalDerivatives {
-    pub value: f64,
-    pub gradient: [f64; 3],
-    pub hessian: [[f64; 3]; 3],
-}
 
 /// The kernel's inputs in binding order: coefficients (4 per problem), point ranges, points
 /// (13 per point).

@@ -12,6 +12,7 @@
 
 pub mod cg;
 pub mod evaluate;
+pub mod executor;
 pub mod jacobian_check;
 pub mod local_newton;
 

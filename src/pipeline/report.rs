@@ -103,6 +103,10 @@ pub struct CurveReport {
     pub backend: String,
     pub adapter: Option<AdapterReport>,
     pub gpu_precision: Option<Precision>,
+    /// With `gpu`: batches of work the device failed and the CPU did instead (the result is
+    /// the same certified one; above 0, the device is unreliable or short of memory here).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gpu_fallbacks: Option<usize>,
 }
 
 /// The outcomes of the stages after sampling.
@@ -130,7 +134,7 @@ impl CurveReport {
         let space = outcome.map(|o| &o.space);
         let fit = outcome.and_then(|o| o.fit.as_ref());
         let blend = outcome.and_then(|o| o.blend.clone());
-        let gpu = job.gpu;
+        let gpu = job.executor.gpu();
         CurveReport {
             input: job.input.to_owned(),
             output: PathBuf::new(),
@@ -195,6 +199,7 @@ impl CurveReport {
             backend: options.backend.name().into(),
             adapter: gpu.map(|g| g.adapter.clone()),
             gpu_precision: gpu.map(|g| g.precision),
+            gpu_fallbacks: gpu.map(|_| job.executor.fallbacks()),
         }
     }
 }

@@ -2,7 +2,7 @@
 //! ([`Stage::Fit`]), its certification ([`Stage::Validity`]) and, with `--fit energy`, the
 //! energy minimisation ([`Stage::Energy`]).
 //!
-//! Input: the [`Job`] (mesh, topology, options, certifier). Output: a [`SplineOutcome`], whose
+//! Input: the [`Job`] (mesh, topology, options, executor). Output: a [`SplineOutcome`], whose
 //! space (with the certified blend's factors, when there are any) is certified valid on every
 //! element; or an error, and nothing is sampled.
 //!
@@ -69,9 +69,10 @@ impl SplineSetup {
             _ => kinks::Kinks::default(),
         };
         let fitted = options.geometry == Geometry::SplineFitted;
-        let targets = match fitted {
-            true => crate::fit::smooth_targets(mesh, topo, &fit_params),
-            false => None,
+        let targets = if fitted {
+            crate::fit::smooth_targets(mesh, topo, &fit_params)
+        } else {
+            None
         };
         let blend_targets = match (&targets, fitted) {
             (None, true) => crate::fit::smooth_targets(
@@ -335,16 +336,15 @@ fn solve_fit(
     space: &SplineSpace,
     progress: &dyn Progress,
 ) -> Result<(Vec<[f64; 3]>, FitInfo), CurveError> {
-    let gpu = job.gpu;
     let (mut c_star, info) = fit_with_targets(
         space,
         job.mesh,
         job.topo,
         &setup.fit_params,
         setup.targets.as_ref(),
-        |k, rhs, x, cg| match gpu {
-            Some(ctx) => crate::gpu::cg::pcg(ctx, k, rhs, x, cg, |_, _| {}),
-            None => crate::solve::pcg(k, rhs, x, cg, |i, r| progress.cg(i, r)),
+        |k, rhs, x, cg| {
+            let mut report = |i, r| progress.cg(i, r);
+            job.executor.pcg(k, rhs, x, cg, &mut report)
         },
     )
     .map_err(|source| CurveError::Solve {
@@ -367,7 +367,7 @@ fn blend(
     let mut blended = Blended::new(job.mesh, &target_map, space, job.mesh, job.topo, Vec::new());
     let global = job.options.line_search_mode == LineSearchMode::Global;
     let info = blend_search(
-        job.certifier,
+        job.executor,
         &mut blended,
         &job.options.line_search.blend(global),
     )
@@ -388,7 +388,7 @@ fn certify_space(
     let net = |e: usize| space.element_bezier(e);
     let depth = job.options.line_search.certificate_depth;
     certify_mesh(
-        job.certifier,
+        job.executor,
         space.dim,
         space.n_elements(),
         &net,
@@ -418,7 +418,7 @@ fn search(
         ids
     };
     certified_step(
-        job.certifier,
+        job.executor,
         job.options.line_search_mode,
         space.dim,
         space.n_elements(),
@@ -448,8 +448,8 @@ fn minimize_energy(
     let start = &step.control_points;
     let energy = Energy::new(space, mesh, topo, fit, c_star, params)?;
     let depth = job.options.line_search.certificate_depth;
-    let validity = Validity::for_start(&energy, job.certifier, depth, thresholds, start)?;
-    let (mut c, info) = minimize_on(&energy, &validity, start, params, job.gpu, &mut |_| {})?;
+    let validity = Validity::for_start(&energy, job.executor, depth, thresholds, start)?;
+    let (mut c, info) = minimize_on(&energy, &validity, start, params, job.executor, &mut |_| {})?;
     // The energy moves control points off the planes of planar patches; put them back where
     // the result stays accepted (it is a small move: the start was on the planes).
     if let Some(f) = &fit.features {

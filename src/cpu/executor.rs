@@ -1,0 +1,60 @@
+//! The CPU reference [`Executor`]: f64 throughout, in parallel with rayon.
+
+use crate::energy::colored::{LocalDerivatives, LocalProblem};
+use crate::executor::Executor;
+use crate::fit::NormalMatrix;
+use crate::gpu::GpuError;
+use crate::mesh::{LinearMesh, Topology};
+use crate::sample::{BezierElements, HighOrderMesh};
+use crate::solve::{CgError, CgInfo, CgParams};
+use crate::validity::{Certifier, CpuCertifier, DetBounds};
+
+/// The CPU reference executor.
+pub struct CpuExecutor;
+
+impl Certifier for CpuExecutor {
+    fn certify(
+        &self,
+        dim: usize,
+        elements: &[usize],
+        net: &(dyn Fn(usize) -> [[f64; 3]; 27] + Sync),
+        max_depth: usize,
+    ) -> Vec<DetBounds> {
+        CpuCertifier.certify(dim, elements, net, max_depth)
+    }
+}
+
+impl Executor for CpuExecutor {
+    fn name(&self) -> &'static str {
+        "cpu"
+    }
+
+    fn pcg(
+        &self,
+        k: &NormalMatrix,
+        b: &[[f64; 3]],
+        x: &mut [[f64; 3]],
+        params: &CgParams,
+        progress: &mut dyn FnMut(usize, f64),
+    ) -> Result<CgInfo, CgError> {
+        crate::solve::pcg(k, b, x, params, progress)
+    }
+
+    fn sample(
+        &self,
+        source: &dyn BezierElements,
+        mesh: &LinearMesh,
+        topo: &Topology,
+        p: usize,
+    ) -> Result<HighOrderMesh, GpuError> {
+        Ok(crate::sample::sample(source, mesh, topo, p))
+    }
+
+    fn local_derivatives(
+        &self,
+        _dim: usize,
+        _problems: &[LocalProblem],
+    ) -> Result<Option<Vec<LocalDerivatives>>, GpuError> {
+        Ok(None)
+    }
+}

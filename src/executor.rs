@@ -1,0 +1,74 @@
+//! The one CPU/GPU seam: an [`Executor`] certifies det J bounds (it is a [`Certifier`]), solves
+//! the fit's normal equations by PCG, samples Lagrange nodes and computes the energy's local
+//! derivatives. [`CpuExecutor`] (`src/cpu/`) is the reference; [`GpuExecutor`] (`src/gpu/`)
+//! runs the WGSL kernels. Stages take a `&dyn Executor` and never a GPU context.
+//!
+//! Invariants: both return the same kind of result (certified bounds, a CG solution to the
+//! requested tolerance, nodes in the same order); a device failure is a typed error
+//! ([`GpuError`], or [`CgError::Device`] from the solve), never a panic; where the GPU
+//! executor hands work back to the CPU it counts it ([`Executor::fallbacks`]) and the report
+//! says so.
+
+use crate::energy::colored::{LocalDerivatives, LocalProblem};
+use crate::fit::NormalMatrix;
+use crate::gpu::{Backend, GpuContext, GpuError};
+use crate::mesh::{LinearMesh, Topology};
+use crate::sample::{BezierElements, HighOrderMesh};
+use crate::solve::{CgError, CgInfo, CgParams};
+use crate::validity::Certifier;
+
+pub use crate::cpu::executor::CpuExecutor;
+pub use crate::gpu::executor::GpuExecutor;
+
+/// Where the heavy work runs (see the module docs).
+pub trait Executor: Certifier {
+    /// `cpu` or `gpu`.
+    fn name(&self) -> &'static str;
+
+    /// The device, when this executor runs on one (for the report).
+    fn gpu(&self) -> Option<&GpuContext> {
+        None
+    }
+
+    /// Solve `k` x = `b` by preconditioned CG from `x`, calling `progress(iteration,
+    /// relative residual)` as it goes.
+    fn pcg(
+        &self,
+        k: &NormalMatrix,
+        b: &[[f64; 3]],
+        x: &mut [[f64; 3]],
+        params: &CgParams,
+        progress: &mut dyn FnMut(usize, f64),
+    ) -> Result<CgInfo, CgError>;
+
+    /// The order-`p` Lagrange nodes of `source`'s elements.
+    fn sample(
+        &self,
+        source: &dyn BezierElements,
+        mesh: &LinearMesh,
+        topo: &Topology,
+        p: usize,
+    ) -> Result<HighOrderMesh, GpuError>;
+
+    /// Value, gradient and Hessian of each local energy problem at its current point, or
+    /// `None` where the caller computes them itself (the CPU reference does so inside its
+    /// Newton loop).
+    fn local_derivatives(
+        &self,
+        dim: usize,
+        problems: &[LocalProblem],
+    ) -> Result<Option<Vec<LocalDerivatives>>, GpuError>;
+
+    /// Batches the device failed and the CPU computed instead (0 on the CPU).
+    fn fallbacks(&self) -> usize {
+        0
+    }
+}
+
+/// The executor of `backend`.
+pub fn executor(backend: &Backend) -> Box<dyn Executor + '_> {
+    match backend {
+        Backend::Cpu => Box::new(CpuExecutor),
+        Backend::Gpu(ctx) => Box::new(GpuExecutor::new(ctx)),
+    }
+}

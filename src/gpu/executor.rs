@@ -1,0 +1,87 @@
+//! The GPU [`Executor`]: the WGSL kernels on one device. Certification falls back to the CPU
+//! where the device fails (counted in [`Executor::fallbacks`]); the CG solve, sampling and the
+//! local derivatives return the device's error instead.
+
+use super::jacobian_check::GpuCertifier;
+use super::{GpuContext, GpuError};
+use crate::energy::colored::{LocalDerivatives, LocalProblem};
+use crate::executor::Executor;
+use crate::fit::NormalMatrix;
+use crate::mesh::{LinearMesh, Topology};
+use crate::sample::{BezierElements, HighOrderMesh};
+use crate::solve::{CgError, CgInfo, CgParams};
+use crate::validity::{Certifier, DetBounds};
+
+/// The executor on `ctx`.
+pub struct GpuExecutor<'a> {
+    certifier: GpuCertifier<'a>,
+}
+
+impl<'a> GpuExecutor<'a> {
+    pub fn new(ctx: &'a GpuContext) -> Self {
+        GpuExecutor {
+            certifier: GpuCertifier::new(ctx),
+        }
+    }
+
+    fn ctx(&self) -> &'a GpuContext {
+        self.certifier.ctx
+    }
+}
+
+impl Certifier for GpuExecutor<'_> {
+    fn certify(
+        &self,
+        dim: usize,
+        elements: &[usize],
+        net: &(dyn Fn(usize) -> [[f64; 3]; 27] + Sync),
+        max_depth: usize,
+    ) -> Vec<DetBounds> {
+        self.certifier.certify(dim, elements, net, max_depth)
+    }
+}
+
+impl Executor for GpuExecutor<'_> {
+    fn name(&self) -> &'static str {
+        "gpu"
+    }
+
+    fn gpu(&self) -> Option<&GpuContext> {
+        Some(self.ctx())
+    }
+
+    fn pcg(
+        &self,
+        k: &NormalMatrix,
+        b: &[[f64; 3]],
+        x: &mut [[f64; 3]],
+        params: &CgParams,
+        progress: &mut dyn FnMut(usize, f64),
+    ) -> Result<CgInfo, CgError> {
+        super::cg::pcg(self.ctx(), k, b, x, params, progress)
+    }
+
+    fn sample(
+        &self,
+        source: &dyn BezierElements,
+        mesh: &LinearMesh,
+        topo: &Topology,
+        p: usize,
+    ) -> Result<HighOrderMesh, GpuError> {
+        super::evaluate::sample(self.ctx(), source, mesh, topo, p)
+    }
+
+    fn local_derivatives(
+        &self,
+        dim: usize,
+        problems: &[LocalProblem],
+    ) -> Result<Option<Vec<LocalDerivatives>>, GpuError> {
+        super::local_newton::local_newton(self.ctx(), dim, problems).map(Some)
+    }
+
+    fn fallbacks(&self) -> usize {
+        self.certifier
+            .fallbacks
+            .load(std::sync::atomic::Ordering::Relaxed)
+    }
+}
