@@ -144,7 +144,7 @@ impl CurveReport {
             subdivide: options.subdivide,
             geometry: options.geometry,
             method: options.method.name(),
-            elastic: done.elastic.as_ref().map(|(info, _)| info.clone()),
+            elastic: done.elastic.map(|(info, _)| info),
             output_nodes: ho.nodes.len(),
             output_elements: ho.n_elements(),
             boundary_facets: ho.n_boundary(),
