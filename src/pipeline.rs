@@ -45,13 +45,16 @@ pub enum Geometry {
 }
 
 /// How the fitted step is shortened where it would invalidate elements.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
 pub enum LineSearchMode {
     /// One α for all control points (paper §2.3).
     Global,
     /// A factor per control point, halved only around elements that are not certified
     /// ([`crate::validity::local_line_search`]).
+    #[value(
+        help = "A factor per control point, halved only around elements that are not certified"
+    )]
     Local,
 }
 

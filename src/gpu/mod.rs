@@ -17,8 +17,8 @@ pub mod local_newton;
 
 use wgpu::util::DeviceExt;
 
-/// Floating-point type of the kernels.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+/// Floating-point type of the kernels (`--precision`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
 pub enum Precision {
     /// f32 everywhere (portable); accuracy from element-anchored coordinates and displacement
@@ -353,6 +353,35 @@ pub enum Backend {
     Cpu,
     /// WGSL kernels on this device.
     Gpu(std::sync::Arc<GpuContext>),
+}
+
+/// The executor a caller asks for (`--backend`), resolved into a [`Backend`] by
+/// [`BackendChoice::resolve`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum BackendChoice {
+    /// A hardware GPU when there is one, the CPU otherwise (never a software adapter).
+    Auto,
+    /// The CPU reference path.
+    Cpu,
+    /// Any GPU adapter, a software one such as lavapipe included; an error without one.
+    Gpu,
+}
+
+impl BackendChoice {
+    /// The executor: `gpu` fails without an adapter; `auto` falls back to the CPU unless a
+    /// hardware GPU is present. `precision` None means f64 where the adapter has it.
+    pub fn resolve(self, precision: Option<Precision>) -> Result<Backend, GpuError> {
+        Ok(match self {
+            BackendChoice::Cpu => Backend::Cpu,
+            BackendChoice::Gpu => {
+                Backend::Gpu(GpuContext::new(AdapterChoice::Any, precision)?.into())
+            }
+            BackendChoice::Auto => match GpuContext::new(AdapterChoice::HardwareOnly, precision) {
+                Ok(ctx) => Backend::Gpu(ctx.into()),
+                Err(_) => Backend::Cpu,
+            },
+        })
+    }
 }
 
 impl Backend {
