@@ -14,6 +14,7 @@ pub mod cg;
 pub mod evaluate;
 pub mod jacobian_check;
 pub mod local_newton;
+pub mod reflect;
 
 use wgpu::util::DeviceExt;
 
@@ -291,7 +292,7 @@ impl GpuContext {
     }
 
     /// Bind `buffers` (binding, buffer) to `pipeline` and run it once over `n` invocations in
-    /// workgroups of 64.
+    /// workgroups of [`ITEM_WORKGROUP`].
     pub(crate) fn run_once(
         &self,
         pipeline: &wgpu::ComputePipeline,
@@ -304,7 +305,7 @@ impl GpuContext {
             let mut pass = enc.begin_compute_pass(&Default::default());
             pass.set_pipeline(pipeline);
             pass.set_bind_group(0, &bind, &[]);
-            pass.dispatch_workgroups(groups(n, 64), 1, 1);
+            pass.dispatch_workgroups(groups(n, ITEM_WORKGROUP), 1, 1);
         }
         self.queue.submit([enc.finish()]);
     }
@@ -438,6 +439,10 @@ pub(crate) fn bytes_to_reals(p: Precision, b: &[u8]) -> Vec<f64> {
             .collect(),
     }
 }
+
+/// Invocations per workgroup of the per-item kernels, as the shaders declare it (checked at
+/// compile time by [`reflect`]).
+pub(crate) const ITEM_WORKGROUP: usize = reflect::ITEM_WORKGROUP as usize;
 
 /// Workgroups to cover `n` items with groups of `size`.
 pub(crate) fn groups(n: usize, size: usize) -> u32 {
