@@ -1,6 +1,7 @@
 //! polyspline: curved high-order quad/hex meshes from linear ones, without CAD.
 //!
-//! The pipeline (see `design/architecture.md`):
+//! The pipeline (each stage is described in the README, "How it curves", and in its module's
+//! documentation):
 //!
 //! ```text
 //! read ──▶ LinearMesh ──▶ Topology ──▶ SplineSpace ──▶ Fit ──▶ Validity ──▶ Sample ──▶ write
