@@ -43,7 +43,7 @@ pub trait FitSpace: Sync {
     fn dim(&self) -> usize;
     fn n_elements(&self) -> usize;
     fn control_points(&self) -> &[[f64; 3]];
-    /// Explicit rows of E_e: Bernstein point i (index 9z + 3y + x) is Σ weights · C[cols]
+    /// Explicit rows of E_e: Bernstein point i (index 9z + 3y + x) is Σ weights · C\[cols\]
     /// over `offsets[i]..offsets[i+1]`.
     fn element_rows(
         &self,
@@ -362,7 +362,7 @@ fn sample_weight_unscaled(w: &FitWeights, mask: u64, i: usize, l: [usize; 3], co
 /// meshes whose element sizes vary by less than 2^`LEVEL_DEAD_ZONE` keep plain weights.
 const LEVEL_DEAD_ZONE: f64 = 2.0;
 
-/// Per element, the size level k = max(0, ⌊log₂(h_max / h_e)⌋ − [`LEVEL_DEAD_ZONE`]), h_e the
+/// Per element, the size level k = max(0, ⌊log₂(h_max / h_e)⌋ − `LEVEL_DEAD_ZONE`), h_e the
 /// element's shortest edge: its samples are weighted by 4^k ≈ (h_max / h_e)², so the fit
 /// balances errors relative to the size of the element they distort. With plain weights the
 /// least-squares error of a large far-field cell leaks into the thin boundary-layer cells next

@@ -29,7 +29,7 @@ use std::collections::BTreeMap;
 /// Largest output order.
 pub const MAX_ORDER: usize = 10;
 
-/// Elements that are tensor-product quadratic Bézier maps of [0,1]^d.
+/// Elements that are tensor-product quadratic Bézier maps of \[0,1\]^d.
 pub trait BezierElements: Sync {
     fn dim(&self) -> usize;
     fn n_elements(&self) -> usize;

@@ -8,7 +8,7 @@
 //! preconditioner M = the block diagonal of A over the same aggregates), only faster:
 //!
 //! * **Aggregate order.** The unknowns are renumbered so that every aggregate of
-//!   [`Aggregates`] is a contiguous range; the block solves then work in place, with no
+//!   `Aggregates` is a contiguous range; the block solves then work in place, with no
 //!   gather/scatter, and the whole solve runs in that order (b and x are permuted once).
 //! * **Row templates.** The fit's K depends on the topology and the weights only, not on the
 //!   geometry, so most rows repeat the value sequence (in column order) of some other row:

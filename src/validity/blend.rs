@@ -8,7 +8,7 @@
 //! edge, face or cell) and is shared by all elements on it. Each entity n gets one factor
 //! t_n ∈ [0, 2] ([`entity_ids`]) on the path S → T → F:
 //!
-//!   B_e[i] = T + (t − 1)(F − T) for t ≥ 1,   S + t (T − S) for t ≤ 1,   t = t_n(i),
+//!   B_e\[i\] = T + (t − 1)(F − T) for t ≥ 1,   S + t (T − S) for t ≤ 1,   t = t_n(i),
 //!
 //! so the blend is conforming for any factors; t = 2 is the fitted map, 1 the target map, 0 the
 //! straight elevation.
