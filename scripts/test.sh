@@ -12,6 +12,10 @@
 #  3. `cargo test --release --all-targets` (or `cargo test --release ARGS…` when given
 #     arguments). A test whose checker is missing skips visibly
 #     (a failure under CI=true) and appends a line to target/test-skips.log.
+#  4. Lints, without arguments only: `cargo fmt --check`, `cargo clippy --all-targets -- -D
+#     warnings` and `cargo doc --no-deps` with RUSTDOCFLAGS=-D warnings (both with --release),
+#     each a pass/fail line in the summary (a failure fails the run; its output is in
+#     target/lint-NAME.log).
 set -uo pipefail
 cd "$(dirname "$0")/.."
 root=$PWD
@@ -75,6 +79,32 @@ else
 fi
 status=${PIPESTATUS[0]}
 
+# 4. Lints: formatting, clippy and rustdoc, each with warnings denied.
+lints=()
+lint_failed=0
+lint() {
+    local name=$1 log="$root/target/lint-$1.log"
+    shift
+    if "$@" >"$log" 2>&1; then
+        lints+=("lint $name: pass")
+    else
+        tail -n 60 "$log"
+        lints+=("lint $name: FAIL (see target/lint-$name.log)")
+        lint_failed=1
+    fi
+}
+if [ $# -eq 0 ]; then
+    for tool in clippy rustfmt; do
+        if ! cargo "${tool/rustfmt/fmt}" --version >/dev/null 2>&1 && command -v rustup >/dev/null 2>&1; then
+            rustup component add "$tool" >/dev/null 2>&1
+        fi
+    done
+    # --release: the build scripts' outputs of the test build are reused.
+    lint fmt cargo fmt --check
+    lint clippy cargo clippy --release --all-targets -- -D warnings
+    lint doc env RUSTDOCFLAGS="-D warnings" cargo doc --release --no-deps
+fi
+
 echo
 echo "== skipped checks =="
 if [ ${#notes[@]} -gt 0 ]; then
@@ -93,6 +123,12 @@ failed=$(grep -Eo '[0-9]+ failed;' "$out" | awk '{s+=$1} END {print s+0}')
 if [ "$status" != 0 ] && [ "$failed" = 0 ]; then
     echo "cargo test exited with status $status (build error or crash; see above)"
     failed=1
+fi
+if [ ${#lints[@]} -gt 0 ]; then
+    echo
+    echo "== lints =="
+    printf '%s\n' "${lints[@]}"
+    [ "$lint_failed" = 0 ] || [ "$status" != 0 ] || status=1
 fi
 echo "total: $passed passed, $failed failed"
 exit "$status"

@@ -31,8 +31,8 @@ use std::time::Instant;
 /// Highest element order of the elastic solve (the dense element matrix grows as (p+1)^{2d}).
 pub const MAX_ELASTIC_ORDER: usize = 6;
 
-/// Preconditioner of the elastic CG solve.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+/// Preconditioner of the elastic CG solve (`--elastic-preconditioner`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
 pub enum ElasticPreconditioner {
     /// The inverse of the diagonal of K.

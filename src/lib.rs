@@ -15,10 +15,6 @@
 //! # Ok::<(), polyspline::io::ReadError>(())
 //! ```
 
-// Numeric kernels index several arrays with one loop variable, and NaN-aware comparisons
-// such as `!(det > 0.0)` deliberately count NaN as failing.
-#![allow(clippy::needless_range_loop, clippy::neg_cmp_op_on_partial_ord)]
-
 pub mod compare;
 pub mod cpu;
 pub mod deviation;

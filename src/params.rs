@@ -1,8 +1,11 @@
-//! Validation of every numeric option before any work, in the library (so a caller of
-//! [`crate::pipeline::curve`] or [`crate::compare::compare`] is refused as the command line is).
+//! Validation of every option before any work, in the library (so a caller of
+//! [`crate::pipeline::curve`] or [`crate::compare::compare`] is refused as the command line is;
+//! the command line only parses).
 //!
-//! Input: the option structs of the jobs. Output: `Ok(())` or a [`ParamError`] naming the
-//! option (by its command-line spelling) and the value.
+//! Input: the option structs of the jobs, or single option values of the commands that have no
+//! job struct (`generate --elements`, `plot --width`, `--window`, `--label`). Output: `Ok(())`
+//! (or the parsed value) or a [`ParamError`] naming the option (by its command-line spelling)
+//! and the value.
 //!
 //! Invariants: every `f64` option is finite (NaN and infinities are refused) and inside a
 //! range in which the job means something; every count is at least 1 where 0 would silently
@@ -10,8 +13,10 @@
 //! normal-equation matrix cannot overflow (weights multiply squared residuals).
 
 use crate::compare::CompareOptions;
+use crate::elastic::ElasticParams;
 use crate::fit::{FitParams, FitTargets};
 use crate::mesh::features::FeatureParams;
+use crate::mesh::generate::Shape;
 use crate::pipeline::{CurveOptions, Method};
 use crate::sample::MAX_ORDER;
 use crate::solve::CgParams;
@@ -94,6 +99,12 @@ pub fn check_cg(p: &CgParams) -> Result<(), ParamError> {
     Ok(())
 }
 
+/// `--kink-angle`: degrees in (0, 360] (180 and above turn the kink test off). The command line
+/// checks it with every fit, though only the smooth targets use it.
+pub fn check_kink_angle(deg: f64) -> Result<(), ParamError> {
+    above("--kink-angle", deg, 0.0, 360.0)
+}
+
 /// Fit weights, CG and smooth-target parameters.
 pub fn check_fit(p: &FitParams) -> Result<(), ParamError> {
     let w = &p.weights;
@@ -109,7 +120,7 @@ pub fn check_fit(p: &FitParams) -> Result<(), ParamError> {
     }
     check_cg(&p.cg)?;
     if let FitTargets::Smooth(s) = &p.targets {
-        above("--kink-angle", s.kink_angle_deg, 0.0, 360.0)?;
+        check_kink_angle(s.kink_angle_deg)?;
         in_range("smooth feature angle", s.feature_angle_deg, 0.0, 180.0)?;
         in_range("smooth decay", s.decay, 0.0, 1e6)?;
     }
@@ -171,6 +182,14 @@ pub fn check_curve(o: &CurveOptions) -> Result<(), ParamError> {
         }
         check_cg(&e.cg)?;
     }
+    let name = &o.output.volume_name;
+    if name.is_empty() || name.contains(['"', '\n', '\r']) {
+        return Err(err(
+            "--volume-name",
+            format!("{name:?}"),
+            "must be non-empty, without quotes or line breaks",
+        ));
+    }
     if let Some(e) = &o.energy {
         in_range("--energy-weight", e.weight, 0.0, 1e12)?;
         in_range("--energy-tol", e.rel_tol, 0.0, 1.0)?;
@@ -187,6 +206,79 @@ pub fn check_compare(o: &CompareOptions) -> Result<(), ParamError> {
         method: Method::Elastic(o.elastic),
         ..o.base.clone()
     })
+}
+
+/// `generate SHAPE [--elements N]`: the element count belongs to the benchmark shapes (the
+/// boundary-layer grids take `--around` and `--across`, checked by their generators).
+pub fn check_generate(shape: Shape, elements: Option<usize>) -> Result<(), ParamError> {
+    match (shape, elements) {
+        (Shape::Benchmark(_), Some(n)) => check_generated_elements(n),
+        (Shape::Ogrid | Shape::Cgrid, Some(n)) => Err(err(
+            "--elements",
+            n,
+            "applies to disc, cylinder and torus; ogrid and cgrid take --around and --across",
+        )),
+        (_, None) => Ok(()),
+    }
+}
+
+/// `plot --width`: pixels in [16, 100000].
+pub fn check_plot_width(width: f64) -> Result<(), ParamError> {
+    if width.is_finite() && (16.0..=100_000.0).contains(&width) {
+        Ok(())
+    } else {
+        Err(err(
+            "--width",
+            num(width),
+            "must be a number of pixels in [16, 100000]",
+        ))
+    }
+}
+
+/// `plot --label`: at most one per drawn mesh.
+pub fn check_plot_labels(labels: usize, meshes: usize) -> Result<(), ParamError> {
+    if labels <= meshes {
+        Ok(())
+    } else {
+        Err(err(
+            "--label",
+            format!("given {labels} times"),
+            format!(
+                "{meshes} meshes: give at most one label per mesh (MESH first, then each --overlay)"
+            ),
+        ))
+    }
+}
+
+/// `plot --window X0,Y0,X1,Y1`: four finite numbers spanning a rectangle of non-zero size.
+pub fn parse_window(text: &str) -> Result<[f64; 4], ParamError> {
+    let v: Vec<f64> = text
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| err("--window", text, e.to_string()))?;
+    match v[..] {
+        [x0, y0, x1, y1] if x0 != x1 && y0 != y1 && v.iter().all(|x| x.is_finite()) => {
+            Ok([x0, y0, x1, y1])
+        }
+        _ => Err(err(
+            "--window",
+            text,
+            "give four numbers X0,Y0,X1,Y1 of a rectangle of non-zero size",
+        )),
+    }
+}
+
+/// `--method iga|elastic`; `elastic` carries default material and solver parameters, which
+/// the caller replaces with its own.
+impl clap::ValueEnum for Method {
+    fn value_variants<'a>() -> &'a [Self] {
+        static VARIANTS: std::sync::OnceLock<[Method; 2]> = std::sync::OnceLock::new();
+        VARIANTS.get_or_init(|| [Method::Iga, Method::Elastic(ElasticParams::default())])
+    }
+    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
+        Some(clap::builder::PossibleValue::new(self.name()))
+    }
 }
 
 /// `generate --elements N`: at least 1, at most [`MAX_GENERATED_ELEMENTS`].
@@ -226,7 +318,17 @@ mod tests {
             ..Default::default()
         };
         assert_eq!(check_curve(&o).unwrap_err().option, "--subdivide");
+        let mut o = CurveOptions::default();
+        o.output.volume_name = "a\"b".into();
+        assert_eq!(check_curve(&o).unwrap_err().option, "--volume-name");
         assert!(check_generated_elements(0).is_err());
+        assert!(check_generate(Shape::Ogrid, Some(100)).is_err());
+        assert!(check_generate(Shape::Ogrid, None).is_ok());
+        assert!(parse_window("0,0,1,1").is_ok());
+        assert!(parse_window("0,0,0,1").is_err());
+        assert!(parse_window("0,0,1").is_err());
+        assert!(check_plot_width(f64::NAN).is_err());
+        assert!(check_plot_labels(3, 2).is_err());
         assert!(check_generated_elements(MAX_GENERATED_ELEMENTS + 1).is_err());
     }
 }

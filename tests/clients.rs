@@ -7,7 +7,6 @@
 //! 3D SU2 cylinder (315 hexes, six named markers).
 
 // The quadrature indexes the Jacobian by row and column.
-#![allow(clippy::needless_range_loop)]
 
 mod common;
 

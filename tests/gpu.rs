@@ -2,8 +2,6 @@
 //! kernel against its CPU twin, the f64 reference and independent oracles on lavapipe or a
 //! hardware GPU. A missing adapter fails under `CI=true` and is a printed skip elsewhere.
 
-#![allow(clippy::needless_range_loop)]
-
 mod common;
 
 use polyspline::cpu;

@@ -1,5 +1,5 @@
-//! Node orderings against the tables of `design/node-ordering.md`, which Gmsh 4.15 and VTK 9.7
-//! generated themselves (reference nodes from `getElementProperties`, `PointIndexFromIJK`).
+//! Node orderings against the tables below, which Gmsh 4.15 and VTK 9.7 generated themselves
+//! (reference nodes from `gmsh.model.mesh.getElementProperties`, VTK's `PointIndexFromIJK`).
 
 use polyspline::sample::ordering::*;
 

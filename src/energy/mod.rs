@@ -49,8 +49,8 @@ use crate::validity::Certifier;
 use rayon::prelude::*;
 use std::time::Instant;
 
-/// Which minimiser runs.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+/// Which minimiser runs (`--energy-solver`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
 pub enum EnergySolver {
     /// Global L-BFGS with a certified Armijo line search.

@@ -126,6 +126,39 @@ impl FitWeights {
     }
 }
 
+/// The fit presets of the command line (`--fit`): which weights and targets the least-squares
+/// fit uses, and whether the energy minimisation follows it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum FitPreset {
+    /// No fit: sample the initial spline map.
+    None,
+    /// The paper's position weights (least squares, then a certified line search).
+    Position,
+    /// The paper's position + frame weights.
+    Frame,
+    /// Midpoint targets from a local reconstruction of the smooth boundary instead of the
+    /// straight chords (more accurate curved boundaries).
+    Smooth,
+    /// `smooth`, then the element degeneration energy minimised under the det J certificate
+    /// (paper §2.4, docs/energy.md).
+    Energy,
+}
+
+impl FitPreset {
+    /// The preset's weights (the command line overrides single ones).
+    pub fn weights(self) -> FitWeights {
+        match self {
+            FitPreset::Frame => FitWeights::frame(),
+            FitPreset::Smooth | FitPreset::Energy => FitWeights::smooth(),
+            FitPreset::None | FitPreset::Position => FitWeights::position(),
+        }
+    }
+    /// Whether the midpoint targets come from the smooth-boundary reconstruction.
+    pub fn smooth_targets(self) -> bool {
+        matches!(self, FitPreset::Smooth | FitPreset::Energy)
+    }
+}
+
 /// Where the position targets of midpoint samples come from.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 #[serde(rename_all = "snake_case")]

@@ -12,7 +12,9 @@
 //! `CgParams::preconditioner` asks for (the block-Jacobi triangular solves are sequential per
 //! aggregate and are not ported to WGSL).
 
-use super::{GpuContext, GpuError, Precision, bytes_to_reals, groups, reals_to_bytes};
+use super::{
+    GpuContext, GpuError, ITEM_WORKGROUP, Precision, bytes_to_reals, groups, reals_to_bytes,
+};
 use crate::fit::NormalMatrix;
 use crate::solve::{CgError, CgInfo, CgParams, LinOp};
 
@@ -100,7 +102,7 @@ impl GpuMatrix {
     pub fn new(ctx: &GpuContext, a: &NormalMatrix) -> Result<GpuMatrix, GpuError> {
         let sz = ctx.precision.size() as u64;
         let vec_bytes = 4 * sz * a.n as u64;
-        if vec_bytes > ctx.max_binding() || a.n > ctx.max_workgroups() as usize * 64 {
+        if vec_bytes > ctx.max_binding() || a.n > ctx.max_workgroups() as usize * ITEM_WORKGROUP {
             return Err(GpuError::TooLarge(format!(
                 "{} unknowns need {vec_bytes} bytes per vector (binding limit {})",
                 a.n,
@@ -191,7 +193,7 @@ impl GpuMatrix {
         pass.set_pipeline(pipeline);
         for (b, g) in self.blocks.iter().zip(binds) {
             pass.set_bind_group(0, g, &[]);
-            pass.dispatch_workgroups(groups(b.n_rows, 64), 1, 1);
+            pass.dispatch_workgroups(groups(b.n_rows, ITEM_WORKGROUP), 1, 1);
         }
     }
 }
@@ -444,7 +446,7 @@ pub fn pcg(
                     pass.dispatch_workgroups(1, 1, 1);
                     pass.set_pipeline(&upd_xr);
                     pass.set_bind_group(0, &uxr, &[]);
-                    pass.dispatch_workgroups(groups(n, 64), 1, 1);
+                    pass.dispatch_workgroups(groups(n, ITEM_WORKGROUP), 1, 1);
                     pass.set_pipeline(&dot);
                     pass.set_bind_group(0, &dot_rz, &[]);
                     pass.dispatch_workgroups(DOT_WORKGROUPS, 1, 1);
@@ -453,7 +455,7 @@ pub fn pcg(
                     pass.dispatch_workgroups(1, 1, 1);
                     pass.set_pipeline(&upd_p);
                     pass.set_bind_group(0, &up, &[]);
-                    pass.dispatch_workgroups(groups(n, 64), 1, 1);
+                    pass.dispatch_workgroups(groups(n, ITEM_WORKGROUP), 1, 1);
                 }
             }
             enc.copy_buffer_to_buffer(&state, 0, &staging, 0, 16);

@@ -1,7 +1,7 @@
 //! `shaders/evaluate.wgsl`: Bézier nets → points and parametric derivatives at parameters,
 //! and the GPU sampling stage built on it. CPU twin: [`crate::cpu::evaluate`].
 
-use super::{GpuContext, GpuError, anchor, bytes_to_reals, groups, reals_to_bytes};
+use super::{GpuContext, GpuError, ITEM_WORKGROUP, anchor, bytes_to_reals, groups, reals_to_bytes};
 use crate::mesh::{LinearMesh, Topology};
 use crate::sample::ordering::{Lattice, lattice_index, lattice_point};
 use crate::sample::{BezierElements, HighOrderMesh, sample_with};
@@ -51,7 +51,7 @@ pub fn evaluate(
     let prec = ctx.precision;
     let sz = prec.size() as u64;
     let max_q = ((ctx.max_binding() / (9 * sz)) as usize)
-        .min(ctx.max_workgroups() as usize * 64)
+        .min(ctx.max_workgroups() as usize * ITEM_WORKGROUP)
         .max(1);
     let max_e = ((ctx.max_binding() / (81 * sz)) as usize).max(1);
     let mut order: Vec<u32> = (0..queries.len() as u32).collect();
@@ -140,7 +140,7 @@ pub fn evaluate(
             let mut pass = enc.begin_compute_pass(&Default::default());
             pass.set_pipeline(&pipeline);
             pass.set_bind_group(0, &bind, &[]);
-            pass.dispatch_workgroups(groups(n, 64), 1, 1);
+            pass.dispatch_workgroups(groups(n, ITEM_WORKGROUP), 1, 1);
         }
         ctx.queue.submit([enc.finish()]);
         let pts = bytes_to_reals(prec, &ctx.read_back(&p_buf, 3 * sz * n as u64)?);

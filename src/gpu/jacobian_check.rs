@@ -7,7 +7,9 @@
 //! The line searches call the certifier only for the elements that the CPU screen
 //! ([`crate::validity::screen`]) leaves undecided; the kernel computes the exact coefficients.
 
-use super::{GpuContext, GpuError, Precision, anchor, bytes_to_reals, groups, reals_to_bytes};
+use super::{
+    GpuContext, GpuError, ITEM_WORKGROUP, Precision, anchor, bytes_to_reals, groups, reals_to_bytes,
+};
 use crate::validity::{Certifier, DetBounds, det_jacobian_bounds};
 use rayon::prelude::*;
 
@@ -74,7 +76,7 @@ pub fn jacobian_check(
     let prec = ctx.precision;
     let sz = prec.size() as u64;
     let max_e = ((ctx.max_binding() / (81 * sz)) as usize)
-        .min(ctx.max_workgroups() as usize * 64)
+        .min(ctx.max_workgroups() as usize * ITEM_WORKGROUP)
         .max(1);
     let pipeline = ctx.pipeline(SOURCE, "jacobian_check");
     let mut out = Vec::with_capacity(elements.len());
@@ -109,7 +111,7 @@ pub fn jacobian_check(
             let mut pass = enc.begin_compute_pass(&Default::default());
             pass.set_pipeline(&pipeline);
             pass.set_bind_group(0, &bind, &[]);
-            pass.dispatch_workgroups(groups(n, 64), 1, 1);
+            pass.dispatch_workgroups(groups(n, ITEM_WORKGROUP), 1, 1);
         }
         ctx.queue.submit([enc.finish()]);
         let v = bytes_to_reals(prec, &ctx.read_back(&out_buf, 8 * sz * n as u64)?);

@@ -2,7 +2,7 @@
 //! local problems ([`crate::energy::colored::LocalProblem`]) at the current position, one
 //! invocation per control point. CPU twin: [`crate::cpu::local_newton`].
 
-use super::{GpuContext, GpuError, bytes_to_reals, reals_to_bytes};
+use super::{GpuContext, GpuError, ITEM_WORKGROUP, bytes_to_reals, reals_to_bytes};
 pub use crate::energy::colored::LocalDerivatives;
 use crate::energy::colored::LocalProblem;
 
@@ -68,7 +68,7 @@ pub fn local_newton(
         .unwrap_or(1)
         .max(1);
     let max_p = ((ctx.max_binding() / (13 * sz * per_problem_points as u64)) as usize)
-        .min(ctx.max_workgroups() as usize * 64)
+        .min(ctx.max_workgroups() as usize * ITEM_WORKGROUP)
         .max(1);
     let pipeline = ctx.pipeline(SOURCE, "local_newton");
     let mut out = Vec::with_capacity(problems.len());

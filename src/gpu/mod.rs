@@ -15,11 +15,12 @@ pub mod evaluate;
 pub mod executor;
 pub mod jacobian_check;
 pub mod local_newton;
+pub mod reflect;
 
 use wgpu::util::DeviceExt;
 
-/// Floating-point type of the kernels.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+/// Floating-point type of the kernels (`--precision`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
 pub enum Precision {
     /// f32 everywhere (portable); accuracy from element-anchored coordinates and displacement
@@ -292,7 +293,7 @@ impl GpuContext {
     }
 
     /// Bind `buffers` (binding, buffer) to `pipeline` and run it once over `n` invocations in
-    /// workgroups of 64.
+    /// workgroups of [`ITEM_WORKGROUP`].
     pub(crate) fn run_once(
         &self,
         pipeline: &wgpu::ComputePipeline,
@@ -305,7 +306,7 @@ impl GpuContext {
             let mut pass = enc.begin_compute_pass(&Default::default());
             pass.set_pipeline(pipeline);
             pass.set_bind_group(0, &bind, &[]);
-            pass.dispatch_workgroups(groups(n, 64), 1, 1);
+            pass.dispatch_workgroups(groups(n, ITEM_WORKGROUP), 1, 1);
         }
         self.queue.submit([enc.finish()]);
     }
@@ -354,6 +355,35 @@ pub enum Backend {
     Cpu,
     /// WGSL kernels on this device.
     Gpu(std::sync::Arc<GpuContext>),
+}
+
+/// The executor a caller asks for (`--backend`), resolved into a [`Backend`] by
+/// [`BackendChoice::resolve`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum BackendChoice {
+    /// A hardware GPU when there is one, the CPU otherwise (never a software adapter).
+    Auto,
+    /// The CPU reference path.
+    Cpu,
+    /// Any GPU adapter, a software one such as lavapipe included; an error without one.
+    Gpu,
+}
+
+impl BackendChoice {
+    /// The executor: `gpu` fails without an adapter; `auto` falls back to the CPU unless a
+    /// hardware GPU is present. `precision` None means f64 where the adapter has it.
+    pub fn resolve(self, precision: Option<Precision>) -> Result<Backend, GpuError> {
+        Ok(match self {
+            BackendChoice::Cpu => Backend::Cpu,
+            BackendChoice::Gpu => {
+                Backend::Gpu(GpuContext::new(AdapterChoice::Any, precision)?.into())
+            }
+            BackendChoice::Auto => match GpuContext::new(AdapterChoice::HardwareOnly, precision) {
+                Ok(ctx) => Backend::Gpu(ctx.into()),
+                Err(_) => Backend::Cpu,
+            },
+        })
+    }
 }
 
 impl Backend {
@@ -410,6 +440,10 @@ pub(crate) fn bytes_to_reals(p: Precision, b: &[u8]) -> Vec<f64> {
             .collect(),
     }
 }
+
+/// Invocations per workgroup of the per-item kernels, as the shaders declare it (checked at
+/// compile time by [`reflect`]).
+pub(crate) const ITEM_WORKGROUP: usize = reflect::ITEM_WORKGROUP as usize;
 
 /// Workgroups to cover `n` items with groups of `size`.
 pub(crate) fn groups(n: usize, size: usize) -> u32 {

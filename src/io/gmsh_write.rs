@@ -17,11 +17,13 @@ use crate::sample::ordering::{gmsh_hex, gmsh_line, gmsh_quad, gmsh_type, to_indi
 use std::collections::BTreeMap;
 use std::io::{self, Write};
 
-/// MSH format version to write.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// MSH format version to write (`--msh-version`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum MshVersion {
-    V22,
+    #[value(name = "4.1")]
     V41,
+    #[value(name = "2.2")]
+    V22,
 }
 
 /// One physical group with its geometric entity.

@@ -21,8 +21,8 @@ use crate::sample::ordering::{gmsh_line, to_indices, vtk_hex, vtk_quad};
 use base64::Engine;
 use std::io::{self, Write};
 
-/// How the data arrays are stored.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// How the data arrays are stored (`--vtu-encoding`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum VtuEncoding {
     Ascii,
     Base64,

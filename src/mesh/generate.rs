@@ -369,7 +369,7 @@ pub fn revolve(section: &LinearMesh, major: f64, segments: usize) -> LinearMesh 
 }
 
 /// Kinds of [`generate`]d benchmark meshes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Kind {
     /// 2D butterfly disc (valence-3 vertices).
     Disc,
@@ -377,6 +377,41 @@ pub enum Kind {
     Cylinder,
     /// The disc revolved into a torus (major radius 3, tube radius 1).
     Torus,
+}
+
+/// What the `generate` command makes: a benchmark mesh of a [`Kind`] or a boundary-layer grid
+/// ([`boundary_layer::ogrid`], [`boundary_layer::cgrid`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Shape {
+    Benchmark(Kind),
+    Ogrid,
+    Cgrid,
+}
+
+/// `disc`, `cylinder`, `torus`, `ogrid`, `cgrid`.
+impl clap::ValueEnum for Shape {
+    fn value_variants<'a>() -> &'a [Self] {
+        &[
+            Shape::Benchmark(Kind::Disc),
+            Shape::Benchmark(Kind::Cylinder),
+            Shape::Benchmark(Kind::Torus),
+            Shape::Ogrid,
+            Shape::Cgrid,
+        ]
+    }
+    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
+        use clap::builder::PossibleValue;
+        match self {
+            Shape::Benchmark(kind) => kind.to_possible_value(),
+            Shape::Ogrid => {
+                Some(PossibleValue::new("ogrid").help("Boundary-layer O-grid around `--wall`"))
+            }
+            Shape::Cgrid => Some(
+                PossibleValue::new("cgrid")
+                    .help("Boundary-layer C-grid around a NACA 00xx airfoil with a wake cut"),
+            ),
+        }
+    }
 }
 
 /// A mesh of `kind` with about `elements` elements (at least a few dozen).

@@ -1,4 +1,6 @@
-//! The quadratic poly-spline space of a quad or hex mesh (`design/polyspline.md`).
+//! The quadratic poly-spline space of a quad or hex mesh: PolyFEM's construction, used by the
+//! paper "Isogeometric High Order Mesh Generation" (each step below is documented in its
+//! submodule).
 //!
 //! Input: a [`LinearMesh`] (quads or hexes) and its [`Topology`]. Output: a [`SplineSpace`]:
 //! global control points `C` at their initial positions and, for every element, the Bézier

@@ -13,13 +13,16 @@ use super::{DetBounds, certify_screened};
 use crate::mesh::LinearMesh;
 
 /// How the fitted step is shortened where it would invalidate elements.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
 pub enum LineSearchMode {
     /// One α for all control points (paper §2.3).
     Global,
     /// A factor per control point, halved only around elements that are not certified
     /// ([`local_line_search`]).
+    #[value(
+        help = "A factor per control point, halved only around elements that are not certified"
+    )]
     Local,
 }
 

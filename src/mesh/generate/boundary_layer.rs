@@ -72,6 +72,40 @@ pub enum Wall {
     Naca { thickness: f64 },
 }
 
+impl Wall {
+    /// The ellipse of the `ogrid` default: minor/major semi-axis ratio 0.2.
+    pub const ELLIPSE: Wall = Wall::Ellipse { thickness: 0.2 };
+    /// NACA 0012, the `cgrid` default.
+    pub const NACA_0012: Wall = Wall::Naca { thickness: 0.12 };
+
+    /// This wall with its thickness replaced where given (the circle has none).
+    pub fn with_thickness(self, thickness: Option<f64>) -> Wall {
+        match (self, thickness) {
+            (Wall::Ellipse { .. }, Some(thickness)) => Wall::Ellipse { thickness },
+            (Wall::Naca { .. }, Some(thickness)) => Wall::Naca { thickness },
+            (wall, _) => wall,
+        }
+    }
+}
+
+/// `--wall ellipse|circle|naca`, each with its default thickness.
+impl clap::ValueEnum for Wall {
+    fn value_variants<'a>() -> &'a [Self] {
+        &[Wall::ELLIPSE, Wall::Circle, Wall::NACA_0012]
+    }
+    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
+        use clap::builder::PossibleValue;
+        Some(match self {
+            Wall::Ellipse { .. } => {
+                PossibleValue::new("ellipse").help("Semi-axes 1 and `--thickness` (chord 2)")
+            }
+            Wall::Circle => PossibleValue::new("circle").help("Radius 1 (chord 2)"),
+            Wall::Naca { .. } => PossibleValue::new("naca")
+                .help("NACA 00xx of chord 1, thickness `--thickness`, closed trailing edge"),
+        })
+    }
+}
+
 /// NACA 4-digit half thickness in the parameter u = √x, and its u-derivative.
 fn naca_half(t: f64, u: f64) -> (f64, f64) {
     let (u2, u3) = (u * u, u * u * u);

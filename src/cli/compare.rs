@@ -1,0 +1,65 @@
+//! `polyspline compare`: every method on one mesh, one table.
+
+use super::{ElasticArgs, FeatureArgs};
+use polyspline::compare::{CompareOptions, compare};
+use polyspline::fit::FitParams;
+use polyspline::gpu::BackendChoice;
+use polyspline::mesh::MeshOptions;
+use polyspline::pipeline::CurveOptions;
+use polyspline::solve::CgParams;
+use std::path::PathBuf;
+
+#[derive(clap::Args)]
+pub(super) struct Args {
+    /// Input mesh file.
+    mesh: PathBuf,
+    /// Order of the output elements.
+    #[arg(long, default_value_t = 2)]
+    order: usize,
+    /// Print one JSON object instead of a table.
+    #[arg(long)]
+    json: bool,
+    #[command(flatten)]
+    elastic: ElasticArgs,
+    /// Relative tolerance of the conjugate-gradient solves (fit and elasticity).
+    #[arg(long, default_value_t = 1e-6)]
+    cg_tol: f64,
+    /// Keep tangled or degenerate input elements instead of failing.
+    #[arg(long)]
+    allow_invalid: bool,
+    /// Where sampling, certification and the fit's CG solve run (the elastic solve runs on
+    /// the CPU).
+    #[arg(long, value_enum, default_value_t = BackendChoice::Cpu)]
+    backend: BackendChoice,
+    #[command(flatten)]
+    features: FeatureArgs,
+}
+
+pub(super) fn run(args: Args) -> anyhow::Result<()> {
+    let options = CompareOptions {
+        base: CurveOptions {
+            order: args.order,
+            fit: FitParams {
+                cg: CgParams {
+                    rel_tol: args.cg_tol,
+                    ..Default::default()
+                },
+                ..FitParams::smooth()
+            },
+            mesh: MeshOptions {
+                allow_invalid: args.allow_invalid,
+            },
+            backend: args.backend.resolve(None)?,
+            features: args.features.options(),
+            ..Default::default()
+        },
+        elastic: args.elastic.params(args.cg_tol),
+    };
+    let report = compare(&args.mesh, &options)?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print!("{report}");
+    }
+    Ok(())
+}

@@ -1,0 +1,362 @@
+//! `polyspline curve`: the curved high-order mesh of a linear one, and its report.
+
+use super::{ElasticArgs, FeatureArgs};
+use polyspline::energy::{EnergyParams, EnergySolver};
+use polyspline::fit::{FitParams, FitPreset, FitTargets, FitWeights, SmoothParams};
+use polyspline::gpu::{BackendChoice, Precision};
+use polyspline::io::gmsh_write::MshVersion;
+use polyspline::io::output::{check_outputs, prepare};
+use polyspline::io::vtu_write::VtuEncoding;
+use polyspline::mesh::MeshOptions;
+use polyspline::pipeline::{
+    CurveOptions, CurveReport, Geometry, LineSearchMode, Method, OutputFormat, OutputOptions,
+    curve_prepared,
+};
+use polyspline::solve::{CgParams, CgPreconditioner};
+use polyspline::validity::LineSearchParams;
+use std::path::{Path, PathBuf};
+
+#[derive(clap::Args)]
+pub(super) struct Args {
+    /// Input mesh file.
+    mesh: PathBuf,
+    /// Output file: .msh (Gmsh) or .vtu (VTK Lagrange cells).
+    #[arg(short, long)]
+    output: PathBuf,
+    /// No progress spinner on stderr (it is also off when stderr is not a terminal).
+    #[arg(short, long)]
+    quiet: bool,
+    /// Order of the output elements (1-10; Gmsh hexes up to 9).
+    #[arg(long, default_value_t = 2)]
+    order: usize,
+    /// Write the straight-sided order-P mesh of the input (no curving), for comparison.
+    #[arg(long, conflicts_with_all = ["fit", "method"])]
+    straight: bool,
+    /// `iga` samples the fitted spline everywhere; `elastic` (the paper's baseline, §2.5)
+    /// puts the boundary nodes on the same fitted spline and moves the interior nodes of the
+    /// straight order-P mesh by linear elasticity.
+    #[arg(long, value_enum, default_value_t = Method::Iga)]
+    method: Method,
+    #[command(flatten)]
+    elastic: ElasticArgs,
+    /// Fit of the spline control points (`smooth` is the default).
+    #[arg(long, value_enum, default_value_t = FitPreset::Smooth)]
+    fit: FitPreset,
+    #[command(flatten)]
+    energy: EnergyArgs,
+    /// Position weight at interior element corners (overrides the preset).
+    #[arg(long)]
+    w_corner: Option<f64>,
+    /// Position weight at element corners on the boundary (overrides the preset).
+    #[arg(long)]
+    w_boundary_corner: Option<f64>,
+    /// Position weight at edge/face midpoints and element centres (overrides the preset).
+    #[arg(long)]
+    w_midpoint: Option<f64>,
+    /// Frame (derivative) weight at corners (overrides the preset).
+    #[arg(long)]
+    w_frame_corner: Option<f64>,
+    /// Frame weight at midpoints and centres (overrides the preset).
+    #[arg(long)]
+    w_frame_midpoint: Option<f64>,
+    /// Position weight at element corners on sharp-feature vertices (default 10).
+    #[arg(long)]
+    w_feature: Option<f64>,
+    #[command(flatten)]
+    features: FeatureArgs,
+    /// With `--fit smooth`: elements at vertices where a boundary grid line kinks (its
+    /// turning within the surface jumps by more than the normal turning of the vertex's
+    /// grid lines, at least 1° and at most this angle in degrees) become Q2 elements, which
+    /// can follow the kink, as do those next to irregular boundary vertices; 180 turns
+    /// this off.
+    #[arg(long, default_value_t = 10.0, value_name = "DEG")]
+    kink_angle: f64,
+    /// Relative tolerance of the conjugate-gradient solve.
+    #[arg(long, default_value_t = 1e-6)]
+    cg_tol: f64,
+    /// Preconditioner of the fit's CG solve on the CPU: the diagonal, or exact inverses of
+    /// the diagonal blocks on aggregates of 64 neighbouring control points (the GPU solver
+    /// always uses the diagonal).
+    #[arg(long, value_enum, default_value_t = CgPreconditioner::default())]
+    cg_preconditioner: CgPreconditioner,
+    /// Most bisections of the validity line search.
+    #[arg(long, default_value_t = 30)]
+    max_bisections: usize,
+    /// Move boundary vertex nodes back onto the input vertices where the result stays
+    /// certified valid.
+    #[arg(long)]
+    snap_boundary: bool,
+    /// Accept an element in the line search only when its certified det J bound exceeds this
+    /// fraction of its straight input element's smallest corner det J (0: any positive).
+    #[arg(long, default_value_t = 0.1)]
+    min_det_fraction: f64,
+    /// Keep every element's Jacobian ratio (min/max det J) and scaled Jacobian at least this
+    /// fraction of its straight-sided elevation's (0: no quality test).
+    #[arg(long, default_value_t = 0.55)]
+    min_quality_fraction: f64,
+    /// Keep every element's Jacobian ratio at least this fraction of min(its straight ratio,
+    /// the straight mesh's 1st percentile).
+    #[arg(long, default_value_t = 0.85)]
+    percentile_quality_fraction: f64,
+    /// Shorten the fitted step per control point around invalid elements (`local`), or by
+    /// one factor for the whole mesh as in the paper (`global`).
+    #[arg(long, value_enum, default_value_t = LineSearchMode::Local)]
+    line_search: LineSearchMode,
+    /// With --order 1: split each element into K^d linear elements on the curved geometry.
+    #[arg(long, value_name = "K")]
+    subdivide: Option<usize>,
+    /// Gmsh file version.
+    #[arg(long, value_enum, default_value_t = MshVersion::V41)]
+    msh_version: MshVersion,
+    /// Binary Gmsh output.
+    #[arg(long)]
+    binary: bool,
+    /// How VTU data arrays are stored.
+    #[arg(long, value_enum, default_value_t = VtuEncoding::Base64)]
+    vtu_encoding: VtuEncoding,
+    /// Name of the MSH volume physical group where the input names no region (PyFR reads
+    /// its volume from a group named `fluid`).
+    #[arg(long, default_value = "fluid", value_name = "NAME")]
+    volume_name: String,
+    /// Also write the boundary facets, with their tags, to this VTU file (the main VTU
+    /// holds the volume cells only).
+    #[arg(long, value_name = "FILE.vtu")]
+    vtu_boundary: Option<PathBuf>,
+    /// Write a JSON report (sizes, timings) to this file.
+    #[arg(long, value_name = "FILE.json")]
+    report: Option<PathBuf>,
+    /// Keep tangled or degenerate input elements instead of failing.
+    #[arg(long)]
+    allow_invalid: bool,
+    /// Where sampling, certification and the CG solve run: `auto` uses a hardware GPU
+    /// when there is one and the CPU otherwise (a software adapter such as lavapipe only
+    /// with `gpu`).
+    #[arg(long, value_enum, default_value_t = BackendChoice::Auto)]
+    backend: BackendChoice,
+    /// Float type of the GPU kernels (default: f64 where the adapter has it).
+    #[arg(long, value_enum)]
+    precision: Option<Precision>,
+}
+
+/// Options of `--fit energy`.
+#[derive(clap::Args)]
+struct EnergyArgs {
+    /// Minimiser of the degeneration energy: global L-BFGS, or coloured local Newton steps.
+    #[arg(long, value_enum, default_value_t = EnergySolver::Lbfgs)]
+    energy_solver: EnergySolver,
+    /// Weight of the degeneration energy against the least-squares terms.
+    #[arg(long, default_value_t = EnergyParams::default().weight)]
+    energy_weight: f64,
+    /// L-BFGS iterations or coloured sweeps at most.
+    #[arg(long, default_value_t = EnergyParams::default().max_iterations)]
+    energy_max_iterations: usize,
+    /// Stop L-BFGS when an iteration lowers the energy by less than this fraction.
+    #[arg(long, default_value_t = EnergyParams::default().rel_tol)]
+    energy_tol: f64,
+    /// Stop the coloured solver when a sweep lowers the energy by less than this fraction.
+    #[arg(long, default_value_t = EnergyParams::default().sweep_tol)]
+    energy_sweep_tol: f64,
+}
+
+impl EnergyArgs {
+    fn params(&self) -> EnergyParams {
+        EnergyParams {
+            weight: self.energy_weight,
+            solver: self.energy_solver,
+            max_iterations: self.energy_max_iterations,
+            rel_tol: self.energy_tol,
+            sweep_tol: self.energy_sweep_tol,
+            ..Default::default()
+        }
+    }
+}
+
+impl Args {
+    /// The preset's weights with the single weights given on the command line.
+    fn weights(&self) -> FitWeights {
+        let mut weights = self.fit.weights();
+        for (slot, value) in [
+            (&mut weights.corner, self.w_corner),
+            (&mut weights.boundary_corner, self.w_boundary_corner),
+            (&mut weights.midpoint, self.w_midpoint),
+            (&mut weights.frame_corner, self.w_frame_corner),
+            (&mut weights.frame_midpoint, self.w_frame_midpoint),
+            (&mut weights.feature, self.w_feature),
+        ] {
+            if let Some(v) = value {
+                *slot = v;
+            }
+        }
+        weights
+    }
+
+    /// The library's options (unchecked: [`curve_prepared`] validates them).
+    fn options(self, backend: polyspline::gpu::Backend) -> CurveOptions {
+        CurveOptions {
+            order: self.order,
+            subdivide: self.subdivide,
+            geometry: if self.straight {
+                Geometry::Straight
+            } else if self.fit == FitPreset::None {
+                Geometry::SplineInitial
+            } else {
+                Geometry::SplineFitted
+            },
+            method: match self.method {
+                Method::Elastic(_) => Method::Elastic(self.elastic.params(self.cg_tol)),
+                Method::Iga => Method::Iga,
+            },
+            fit: FitParams {
+                weights: self.weights(),
+                cg: CgParams {
+                    rel_tol: self.cg_tol,
+                    preconditioner: self.cg_preconditioner,
+                    ..Default::default()
+                },
+                targets: if self.fit.smooth_targets() {
+                    FitTargets::Smooth(SmoothParams {
+                        kink_angle_deg: self.kink_angle,
+                        ..Default::default()
+                    })
+                } else {
+                    FitTargets::Chords
+                },
+                ..Default::default()
+            },
+            features: self.features.options(),
+            line_search: LineSearchParams {
+                max_bisections: self.max_bisections,
+                min_det_fraction: self.min_det_fraction,
+                min_quality_fraction: self.min_quality_fraction,
+                percentile_quality_fraction: self.percentile_quality_fraction,
+                ..Default::default()
+            },
+            snap_boundary: self.snap_boundary,
+            line_search_mode: self.line_search,
+            mesh: MeshOptions {
+                allow_invalid: self.allow_invalid,
+            },
+            output: OutputOptions {
+                msh_version: self.msh_version,
+                binary: self.binary,
+                vtu_encoding: self.vtu_encoding,
+                volume_name: self.volume_name,
+                vtu_boundary: self.vtu_boundary,
+            },
+            backend,
+            energy: (self.fit == FitPreset::Energy).then(|| self.energy.params()),
+        }
+    }
+}
+
+pub(super) fn run(args: Args) -> anyhow::Result<()> {
+    // Every output path is checked before any work, against the inputs and each other.
+    if OutputFormat::from_path(&args.output).is_none() {
+        anyhow::bail!(
+            "{}: unknown output format; use .msh (Gmsh) or .vtu (VTK)",
+            args.output.display()
+        );
+    }
+    let mesh = args.mesh.clone();
+    let output = args.output.clone();
+    let report = args.report.clone();
+    let mut inputs: Vec<&Path> = vec![&mesh];
+    let edits = args.features.feature_edits.clone();
+    inputs.extend(edits.as_deref());
+    let outputs: Vec<&Path> = std::iter::once(output.as_path())
+        .chain(report.as_deref())
+        .collect();
+    check_outputs(&outputs, &inputs)?;
+    polyspline::params::check_kink_angle(args.kink_angle)?;
+    let backend = args.backend.resolve(args.precision)?;
+    let progress = polyspline::progress::Terminal::new(args.quiet);
+    let options = args.options(backend);
+    let r = curve_prepared(&mesh, &output, &options, &progress);
+    progress.clear();
+    let (r, pending_mesh) = r?;
+    // Both files are complete on disk before either replaces its target, so a full disk or a
+    // failing report leaves no mesh without its report.
+    let pending_report = match &report {
+        Some(path) => {
+            let json = serde_json::to_string_pretty(&r)?;
+            Some(prepare(path, &inputs, |w| {
+                use std::io::Write;
+                writeln!(w, "{json}")
+            })?)
+        }
+        None => None,
+    };
+    pending_mesh.commit()?;
+    if let Some(p) = pending_report {
+        p.commit()?;
+    }
+    print_summary(&r);
+    Ok(())
+}
+
+/// The lines on stderr after a successful run (the JSON report holds the same figures).
+fn print_summary(r: &CurveReport) {
+    eprintln!(
+        "wrote {}: {} elements of order {}, {} nodes, {} boundary facets ({:.3} s)",
+        r.output.display(),
+        r.output_elements,
+        r.order,
+        r.output_nodes,
+        r.boundary_facets,
+        r.timings["total"]
+    );
+    if r.control_points > 0 {
+        eprintln!(
+            "spline: {} control points, {} spline and {} Q2 elements ({} at boundary kinks)",
+            r.control_points, r.spline_elements, r.q2_elements, r.kink_elements
+        );
+    }
+    if let (Some(it), Some(res), Some(alpha)) =
+        (r.cg_iterations, r.cg_rel_residual, r.line_search_alpha)
+    {
+        eprintln!(
+            "fit: {it} CG iterations, relative residual {res:.2e}; {} elements invalid at the full step, {} control points damped, smallest step {alpha:.4}",
+            r.invalid_at_full_step, r.damped_control_points
+        );
+    }
+    if let Some(e) = &r.energy {
+        eprintln!(
+            "energy: {:?}, {} {} ({:?}), Q {:.4e} -> {:.4e}, degeneration {:.4e} -> {:.4e}",
+            e.solver,
+            e.iterations,
+            if e.solver == EnergySolver::Colored {
+                "sweeps"
+            } else {
+                "iterations"
+            },
+            e.stop,
+            e.initial_energy,
+            e.final_energy,
+            e.initial_degeneration,
+            e.final_degeneration
+        );
+    }
+    if let Some(e) = &r.elastic {
+        eprintln!(
+            "elastic: E {} nu {}, {} unknowns, {} CG iterations ({:?}), relative residual {:.2e}",
+            e.young, e.poisson, e.unknowns, e.cg.iterations, e.preconditioner, e.cg.rel_residual
+        );
+    }
+    if let Some(n) = r.snapped_boundary_vertices {
+        eprintln!(
+            "snap: {n} boundary vertex nodes moved onto the input vertices (edge and face nodes stay)"
+        );
+    }
+    eprintln!(
+        "quality: min scaled Jacobian {:.4} (input {:.4}), invalid elements {}",
+        r.min_scaled_jacobian, r.input_min_scaled_jacobian, r.invalid_elements,
+    );
+    eprintln!(
+        "boundary (relative to the diagonal {:.4e}): vertex nodes from the input vertices max {:.2e} rms {:.2e}; every boundary node from the input's linear boundary max {:.2e}, sampled facets max {:.2e}",
+        r.bounding_box_diagonal,
+        r.boundary_vertex_deviation_max,
+        r.boundary_vertex_deviation_rms,
+        r.boundary_node_distance_max,
+        r.boundary_sample_distance_max
+    );
+}

@@ -1,0 +1,40 @@
+//! `polyspline info`: size, topology, quality and sharp features of a linear mesh.
+
+use super::FeatureArgs;
+use polyspline::info::MeshInfo;
+use polyspline::io::read_mesh;
+use polyspline::mesh::{MeshOptions, Topology};
+use std::path::PathBuf;
+
+#[derive(clap::Args)]
+pub(super) struct Args {
+    /// Mesh file (.msh, .mesh, .vtk, .vtu, .su2, .inp, .exo).
+    mesh: PathBuf,
+    /// Print one JSON object instead of a table.
+    #[arg(long)]
+    json: bool,
+    /// Keep tangled or degenerate elements instead of failing.
+    #[arg(long)]
+    allow_invalid: bool,
+    #[command(flatten)]
+    features: FeatureArgs,
+}
+
+pub(super) fn run(args: Args) -> anyhow::Result<()> {
+    let options = MeshOptions {
+        allow_invalid: args.allow_invalid,
+    };
+    let linear = read_mesh(&args.mesh, &options)?;
+    let topo = Topology::build(&linear);
+    let feature_options = args.features.options();
+    let found = feature_options.detect(&linear, &topo)?;
+    let mut info = MeshInfo::new(&linear, &topo);
+    info.features = Some(found.summary(&feature_options.params, &topo));
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&info)?);
+    } else {
+        println!("{:<22}{}", "mesh", args.mesh.display());
+        print!("{info}");
+    }
+    Ok(())
+}
