@@ -82,8 +82,16 @@ pub fn entity_ids(mesh: &LinearMesh, topo: &Topology, e: usize) -> [u32; 27] {
     let mut out = [u32::MAX; 27];
     for (i, slot) in out.iter_mut().enumerate().take(n) {
         let l = [i % 3, (i / 3) % 3, i / 9];
-        let ones: Vec<usize> = (0..dim).filter(|&k| l[k] == 1).collect();
-        *slot = match (dim, ones.len()) {
+        // The coordinates at ½ (no allocation: this runs for every point of every judged
+        // element).
+        let (mut ones, mut n_ones) = ([0usize; 3], 0);
+        for k in 0..dim {
+            if l[k] == 1 {
+                ones[n_ones] = k;
+                n_ones += 1;
+            }
+        }
+        *slot = match (dim, n_ones) {
             (_, 0) => {
                 let c = HEX_VERTEX_PARAMS
                     .iter()
@@ -101,8 +109,9 @@ pub fn entity_ids(mesh: &LinearMesh, topo: &Topology, e: usize) -> [u32; 27] {
             (3, 1) => {
                 // Hex edge 4k + a + 2b, (a, b) the other two coordinates in axis order.
                 let k = ones[0];
-                let others: Vec<usize> = (0..3).filter(|&j| j != k).collect();
-                let local = 4 * k + l[others[0]] / 2 + 2 * (l[others[1]] / 2);
+                let others = [(k + 1) % 3, (k + 2) % 3];
+                let (a, b) = (others[0].min(others[1]), others[0].max(others[1]));
+                let local = 4 * k + l[a] / 2 + 2 * (l[b] / 2);
                 nv + topo.element_edges[edges_per * e + local]
             }
             (3, 2) => {
@@ -488,8 +497,23 @@ pub fn blend_search(
         };
         (true, lower >= need && shape(), lower.max(b.lower))
     };
+    // `elements` sorted. The blended nets are built once per call (a reduced element's costs
+    // the target map's smooth corrections) and shared by the screen, the certificate and the
+    // quality test; the full-fit call (no factors) reads the fitted map directly instead of
+    // holding every element's net.
     let judge = |blended: &Blended, factors: &[f32], reduced: &[bool], elements: &[usize]| {
-        let net = |e: usize| blended.net_with(e, factors, reduced.get(e).copied().unwrap_or(false));
+        let nets: Vec<Net> = if factors.is_empty() {
+            Vec::new()
+        } else {
+            elements
+                .par_iter()
+                .map(|&e| blended.net_with(e, factors, reduced.get(e).copied().unwrap_or(false)))
+                .collect()
+        };
+        let net = |e: usize| match elements.binary_search(&e) {
+            Ok(i) if !nets.is_empty() => nets[i],
+            _ => blended.net_with(e, factors, reduced.get(e).copied().unwrap_or(false)),
+        };
         let cert = certify_screened(certifier, dim, elements, &net, depth, &det_target);
         elements
             .par_iter()
