@@ -12,14 +12,14 @@
 //! * **sample distance**: the same at the points of the output's boundary facets on a lattice
 //!   twice as fine as the nodes (the facet's Lagrange interpolant), so between nodes too.
 //!
-//! Invariant: distances are to the nearest point of the whole linear boundary (a uniform grid
-//! of facet boxes finds the candidates; an exhaustive ring search makes it exact up to the
-//! bilinear projection, which takes the better of a Gauss–Newton projection and the four edges).
+//! Invariant: distances are to the nearest point of the whole linear boundary (a bounding-volume
+//! hierarchy of facet boxes finds the candidates; its branch and bound is exhaustive, so it is
+//! exact up to the bilinear projection, which takes the better of a Gauss–Newton projection and
+//! the four edges).
 
 use crate::mesh::{LinearMesh, Topology};
 use crate::sample::HighOrderMesh;
 use rayon::prelude::*;
-use std::collections::HashMap;
 
 /// The three measures (relative to `diagonal`).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -58,6 +58,41 @@ fn segment_distance(x: V3, a: V3, b: V3) -> f64 {
     ))
 }
 
+fn cross(a: V3, b: V3) -> V3 {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+/// The distance from `x` to a planar quad (corners within 10⁻¹² of its diameter of one plane)
+/// when `x` projects inside it: then it is the distance to the plane. `None` otherwise (a
+/// curved patch, or `x` beside the quad). Most queries are of this kind (points of flat
+/// boundary faces over their own facet), and it spares them the Gauss–Newton iteration.
+fn planar_inside_distance(x: V3, c: &[V3; 4]) -> Option<f64> {
+    let n = cross(sub(c[2], c[0]), sub(c[3], c[1]));
+    let nn = norm(n);
+    let diameter = norm(sub(c[2], c[0])).max(norm(sub(c[3], c[1])));
+    if !(nn > 0.0) {
+        return None;
+    }
+    let n = n.map(|v| v / nn);
+    let off = (1..4)
+        .map(|i| dot(n, sub(c[i], c[0])).abs())
+        .fold(0.0, f64::max);
+    if off > 1e-12 * diameter {
+        return None;
+    }
+    // Inside: on the inner side of every edge (the diagonals' normal orients a convex quad's
+    // edges all the same way; a non-convex quad fails for some inside points and falls back).
+    let inside = (0..4).all(|i| {
+        let e = sub(c[(i + 1) % 4], c[i]);
+        dot(cross(e, sub(x, c[i])), n) >= 0.0
+    });
+    inside.then(|| dot(n, sub(x, c[0])).abs())
+}
+
 /// Distance from `x` to the bilinear patch with cyclic corners `c`.
 fn bilinear_distance(x: V3, c: &[V3; 4]) -> f64 {
     let s = |u: f64, v: f64| -> V3 {
@@ -68,6 +103,9 @@ fn bilinear_distance(x: V3, c: &[V3; 4]) -> f64 {
                 + (1.0 - u) * v * c[3][k]
         })
     };
+    if let Some(d) = planar_inside_distance(x, c) {
+        return d;
+    }
     let mut best = (0..4)
         .map(|i| segment_distance(x, c[i], c[(i + 1) % 4]))
         .fold(f64::INFINITY, f64::min);
@@ -97,85 +135,130 @@ fn bilinear_distance(x: V3, c: &[V3; 4]) -> f64 {
     best
 }
 
-/// The input's linear boundary in a uniform grid of facet bounding boxes.
-struct BoundaryGrid<'a> {
+/// The input's linear boundary in a bounding-volume hierarchy of facet boxes.
+///
+/// A uniform grid fails on the meshes this is for: a CFD domain's far field is 10⁴–10⁷ times
+/// the wall cells, so one grid cell around the wall holds thousands of facets (and a one-layer
+/// extrusion's two side planes hold every element's face) and each query scanned them all.
+/// The hierarchy's boxes shrink with the facets, so a query visits O(log n) boxes.
+struct BoundaryTree<'a> {
     mesh: &'a LinearMesh,
     facets: Vec<&'a [u32]>,
-    lo: V3,
-    h: f64,
-    cells: HashMap<[i64; 3], Vec<u32>>,
-    /// Bounding box of each facet: a cheap lower bound of its distance, so only facets that
-    /// could be nearer than the best so far are measured.
-    boxes: Vec<(V3, V3)>,
-    /// Grid extent in cells (bounds the ring search).
-    span: i64,
+    /// Nodes in depth-first order; node 0 is the root.
+    nodes: Vec<TreeNode>,
+    /// Facet ids, permuted so that every node's facets are contiguous.
+    order: Vec<u32>,
 }
 
-/// Distance from `x` to the box (lo, hi) (0 inside).
+/// A node of [`BoundaryTree`]: its box, and either two children or a range of `order`.
+struct TreeNode {
+    bounds: (V3, V3),
+    /// Leaf: `order[start..end]`; inner node: `end == 0` and its children are `start` and
+    /// `start + 1`.
+    start: u32,
+    end: u32,
+}
+
+/// Facets per leaf.
+const LEAF: usize = 4;
+
+/// Distance from `x` to the box (lo, hi) (0 inside): a lower bound of the distance to
+/// anything inside it.
 fn box_distance(x: V3, (lo, hi): &(V3, V3)) -> f64 {
     let d: V3 = std::array::from_fn(|k| (lo[k] - x[k]).max(x[k] - hi[k]).max(0.0));
     norm(d)
 }
 
-impl<'a> BoundaryGrid<'a> {
+fn union(a: (V3, V3), b: &(V3, V3)) -> (V3, V3) {
+    (
+        std::array::from_fn(|k| a.0[k].min(b.0[k])),
+        std::array::from_fn(|k| a.1[k].max(b.1[k])),
+    )
+}
+
+const EMPTY_BOX: (V3, V3) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+
+impl<'a> BoundaryTree<'a> {
     fn new(mesh: &'a LinearMesh, topo: &'a Topology) -> Self {
         let facets: Vec<&[u32]> = topo
             .boundary_facets
             .iter()
             .map(|&f| topo.facet_vertices(f as usize))
             .collect();
-        let (lo, hi) = mesh.bounding_box();
         let boxes: Vec<(V3, V3)> = facets
             .iter()
             .map(|f| {
-                let mut a = [f64::INFINITY; 3];
-                let mut b = [f64::NEG_INFINITY; 3];
-                for &v in f.iter() {
+                f.iter().fold(EMPTY_BOX, |b, &v| {
                     let x = mesh.coords[v as usize];
-                    for k in 0..3 {
-                        a[k] = a[k].min(x[k]);
-                        b[k] = b[k].max(x[k]);
-                    }
-                }
-                (a, b)
+                    union(b, &(x, x))
+                })
             })
             .collect();
-        let mean_size = boxes
-            .iter()
-            .map(|(a, b)| (0..3).map(|k| b[k] - a[k]).fold(0.0, f64::max))
-            .sum::<f64>()
-            / boxes.len().max(1) as f64;
-        let extent = (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f64::max);
-        // At most ~200 cells across the mesh: with facets of very different sizes (a cone's tip
-        // and base) the mean size would put a large facet into millions of cells.
-        let h = if mean_size > 0.0 {
-            mean_size.max(extent / 200.0)
-        } else {
-            extent.max(1.0)
-        };
-        let cell =
-            |x: V3| -> [i64; 3] { std::array::from_fn(|k| ((x[k] - lo[k]) / h).floor() as i64) };
-        let mut cells: HashMap<[i64; 3], Vec<u32>> = HashMap::new();
-        for (i, (a, b)) in boxes.iter().enumerate() {
-            let (ca, cb) = (cell(*a), cell(*b));
-            for i0 in ca[0]..=cb[0] {
-                for i1 in ca[1]..=cb[1] {
-                    for i2 in ca[2]..=cb[2] {
-                        cells.entry([i0, i1, i2]).or_default().push(i as u32);
-                    }
-                }
-            }
+        let mut order: Vec<u32> = (0..facets.len() as u32).collect();
+        let mut nodes = Vec::with_capacity(2 * facets.len() / LEAF + 1);
+        if !facets.is_empty() {
+            nodes.push(TreeNode {
+                bounds: EMPTY_BOX,
+                start: 0,
+                end: 0,
+            });
+            Self::split(&boxes, &mut order, 0, 0, &mut nodes);
         }
-        let span = (extent / h) as i64 + 2;
-        BoundaryGrid {
+        BoundaryTree {
             mesh,
             facets,
-            lo,
-            h,
-            cells,
-            boxes,
-            span,
+            nodes,
+            order,
         }
+    }
+
+    /// Fill node `at` with the facets `order[start..start + len]`: a leaf when few, else split
+    /// at the median of the box centres along the widest axis of the centres.
+    fn split(
+        boxes: &[(V3, V3)],
+        order: &mut [u32],
+        offset: usize,
+        at: usize,
+        nodes: &mut Vec<TreeNode>,
+    ) {
+        let bounds = order
+            .iter()
+            .fold(EMPTY_BOX, |b, &f| union(b, &boxes[f as usize]));
+        nodes[at].bounds = bounds;
+        if order.len() <= LEAF {
+            nodes[at].start = offset as u32;
+            nodes[at].end = (offset + order.len()) as u32;
+            return;
+        }
+        let centre = |f: u32, k: usize| {
+            let (a, b) = &boxes[f as usize];
+            a[k] + b[k]
+        };
+        let spread = |k: usize| {
+            let (lo, hi) = order
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &f| {
+                    (l.min(centre(f, k)), h.max(centre(f, k)))
+                });
+            hi - lo
+        };
+        let axis = (0..3)
+            .max_by(|&a, &b| spread(a).total_cmp(&spread(b)))
+            .unwrap_or(0);
+        let mid = order.len() / 2;
+        order.select_nth_unstable_by(mid, |&a, &b| centre(a, axis).total_cmp(&centre(b, axis)));
+        let child = nodes.len();
+        nodes[at].start = child as u32;
+        for _ in 0..2 {
+            nodes.push(TreeNode {
+                bounds: EMPTY_BOX,
+                start: 0,
+                end: 0,
+            });
+        }
+        let (left, right) = order.split_at_mut(mid);
+        Self::split(boxes, left, offset, child, nodes);
+        Self::split(boxes, right, offset + mid, child + 1, nodes);
     }
 
     fn facet_distance(&self, x: V3, f: usize) -> f64 {
@@ -196,40 +279,50 @@ impl<'a> BoundaryGrid<'a> {
         }
         let d = self.facet_distance(x, own);
         // On its own facet to rounding: no other facet can be meaningfully nearer.
-        if d <= 1e-12 * self.h {
+        if d <= 1e-12 * self.scale() {
             d
         } else {
             self.distance_below(x, d)
         }
     }
 
-    /// Distance from `x` to the linear boundary, given an upper bound `best` of it.
+    /// Largest extent of the boundary's box.
+    fn scale(&self) -> f64 {
+        self.nodes.first().map_or(0.0, |n| {
+            (0..3)
+                .map(|k| n.bounds.1[k] - n.bounds.0[k])
+                .fold(0.0, f64::max)
+        })
+    }
+
+    /// Distance from `x` to the linear boundary, given an upper bound `best` of it: depth-first
+    /// branch and bound, nearer child first, skipping boxes no nearer than the best so far.
     fn distance_below(&self, x: V3, mut best: f64) -> f64 {
-        if self.facets.is_empty() {
+        if self.nodes.is_empty() {
             return 0.0;
         }
-        let c: [i64; 3] = std::array::from_fn(|k| ((x[k] - self.lo[k]) / self.h).floor() as i64);
-        // Facets outside the rings searched so far are at least r·h away.
-        let far = c.iter().map(|v| v.abs()).max().unwrap_or(0) + self.span;
-        for r in 0..=far {
-            for i0 in -r..=r {
-                for i1 in -r..=r {
-                    for i2 in -r..=r {
-                        if i0.abs().max(i1.abs()).max(i2.abs()) != r {
-                            continue;
-                        }
-                        if let Some(list) = self.cells.get(&[c[0] + i0, c[1] + i1, c[2] + i2]) {
-                            for &f in list {
-                                if box_distance(x, &self.boxes[f as usize]) < best {
-                                    best = best.min(self.facet_distance(x, f as usize));
-                                }
-                            }
-                        }
-                    }
-                }
+        let mut stack: Vec<(f64, u32)> = vec![(box_distance(x, &self.nodes[0].bounds), 0)];
+        while let Some((d, at)) = stack.pop() {
+            if d >= best {
+                continue;
             }
-            if best <= r as f64 * self.h {
-                break;
+            let node = &self.nodes[at as usize];
+            if node.end > 0 {
+                for &f in &self.order[node.start as usize..node.end as usize] {
+                    best = best.min(self.facet_distance(x, f as usize));
+                }
+                continue;
+            }
+            let (a, b) = (node.start, node.start + 1);
+            let da = box_distance(x, &self.nodes[a as usize].bounds);
+            let db = box_distance(x, &self.nodes[b as usize].bounds);
+            // Pushed far first, so the near child is searched first and tightens `best`.
+            if da <= db {
+                stack.push((db, b));
+                stack.push((da, a));
+            } else {
+                stack.push((da, a));
+                stack.push((db, b));
             }
         }
         best
@@ -282,7 +375,7 @@ pub fn boundary_deviation(
 ) -> BoundaryDeviation {
     let diagonal = diagonal(mesh);
     let (vertex_max, vertex_rms) = vertex_deviation(mesh, topo, ho);
-    let grid = BoundaryGrid::new(mesh, topo);
+    let grid = BoundaryTree::new(mesh, topo);
     // Output boundary facet f lies over input boundary facet f (both in the topology's order),
     // unless the output was subdivided: then every facet is searched for from scratch.
     let npf = ho.nodes_per_facet();
@@ -293,32 +386,21 @@ pub fn boundary_deviation(
             usize::MAX
         }
     };
-    let node_max = ho
-        .boundary
-        .par_chunks(npf)
-        .enumerate()
-        .map(|(f, nodes)| {
-            nodes
-                .iter()
-                .map(|&n| grid.distance_from(ho.nodes[n as usize], own(f)))
-                .fold(0.0, f64::max)
-        })
-        .reduce(|| 0.0, f64::max)
-        / diagonal;
-
-    // Facet points on the lattice of order 2p (p = 1: the midpoints too).
+    // Facet points on the lattice of order 2p (p = 1: the midpoints too). The even lattice
+    // points are the facet's nodes (the Lagrange basis is exactly 1 and 0 there, so the
+    // interpolated point is the node itself), so one pass gives both maxima.
     let p = ho.order;
     let q = 2 * p;
     let basis: Vec<Vec<f64>> = (0..=q)
         .map(|i| lagrange_1d(p, i as f64 / q as f64))
         .collect();
     let facet_dim = ho.dim - 1;
-    let sample_max = ho
+    let (node_max, sample_max) = ho
         .boundary
         .par_chunks(npf)
         .enumerate()
         .map(|(facet, f)| {
-            let mut m = 0.0f64;
+            let (mut node, mut sample) = (0.0f64, 0.0f64);
             let second = if facet_dim == 2 { q } else { 0 };
             for j in 0..=second {
                 for i in 0..=q {
@@ -337,13 +419,17 @@ pub fn boundary_deviation(
                             }
                         }
                     }
-                    m = m.max(grid.distance_from(x, own(facet)));
+                    let d = grid.distance_from(x, own(facet));
+                    sample = sample.max(d);
+                    if i % 2 == 0 && j % 2 == 0 {
+                        node = node.max(d);
+                    }
                 }
             }
-            m
+            (node, sample)
         })
-        .reduce(|| 0.0, f64::max)
-        / diagonal;
+        .reduce(|| (0.0, 0.0), |a, b| (a.0.max(b.0), a.1.max(b.1)));
+    let (node_max, sample_max) = (node_max / diagonal, sample_max / diagonal);
     BoundaryDeviation {
         diagonal,
         vertex_max,
@@ -378,6 +464,80 @@ mod tests {
             [0.0, 1.0, -0.25],
         ];
         assert!(bilinear_distance([0.5, 0.5, 0.0], &twisted) < 1e-14);
+        // A tilted planar trapezoid: the fast path (over the inside) and the iteration (beside
+        // it) against the nearest of a fine sampling of the patch.
+        let trap = [
+            [0.0, 0.0, 0.0],
+            [1.0, 0.0, 0.5],
+            [2.0, 2.0, 1.5],
+            [0.0, 2.0, 0.5],
+        ];
+        let n = 400;
+        for x in [
+            [0.5, 1.0, 3.0],
+            [0.3, 0.2, -1.0],
+            [3.0, 1.0, 0.0],
+            [-1.0, -1.0, 2.0],
+        ] {
+            let mut sampled = f64::INFINITY;
+            for i in 0..=n {
+                for j in 0..=n {
+                    let (u, v) = (i as f64 / n as f64, j as f64 / n as f64);
+                    let p: V3 = std::array::from_fn(|k| {
+                        (1.0 - u) * (1.0 - v) * trap[0][k]
+                            + u * (1.0 - v) * trap[1][k]
+                            + u * v * trap[2][k]
+                            + (1.0 - u) * v * trap[3][k]
+                    });
+                    sampled = sampled.min(norm(sub(x, p)));
+                }
+            }
+            let d = bilinear_distance(x, &trap);
+            assert!(d <= sampled + 1e-12 && d > sampled - 1e-4, "{d} {sampled}");
+        }
+        assert!(planar_inside_distance([0.5, 1.0, 3.0], &trap).is_some());
+        assert!(planar_inside_distance([3.0, 1.0, 0.0], &trap).is_none());
+    }
+
+    /// The tree's branch and bound against every facet, on a graded grid (facets from 10⁻⁴
+    /// to 1) and on a torus (curved, every facet a twisted patch), at points inside, outside
+    /// and far away.
+    #[test]
+    fn tree_search_matches_exhaustive_search() {
+        use crate::mesh::generate::{butterfly_disc, grid_3d, revolve};
+        let graded: Vec<f64> = (0..12)
+            .map(|i| if i == 0 { 0.0 } else { 1e-4 * 2.3f64.powi(i) })
+            .collect();
+        let meshes = [
+            grid_3d(&graded, &[0.0, 0.5, 1.0, 3.0], &[0.0, 1e-3, 1.0]),
+            revolve(&butterfly_disc(3, 2), 3.0, 24),
+        ];
+        for mesh in &meshes {
+            let topo = Topology::build(mesh);
+            let tree = BoundaryTree::new(mesh, &topo);
+            let (lo, hi) = mesh.bounding_box();
+            let mut seed = 12345u64;
+            let mut rand = || {
+                seed = seed
+                    .wrapping_mul(6364136223846793005)
+                    .wrapping_add(1442695040888963407);
+                (seed >> 11) as f64 / (1u64 << 53) as f64
+            };
+            for _ in 0..500 {
+                let x: V3 = std::array::from_fn(|k| {
+                    let w = hi[k] - lo[k];
+                    lo[k] - w + 3.0 * w * rand().powi(3)
+                });
+                let exhaustive = (0..tree.facets.len())
+                    .map(|f| tree.facet_distance(x, f))
+                    .fold(f64::INFINITY, f64::min);
+                // Equal up to rounding (a box distance may exceed a facet's by an ulp).
+                let tol = 1e-12 * (1.0 + exhaustive);
+                assert!((tree.distance_below(x, f64::INFINITY) - exhaustive).abs() <= tol);
+                let own = (rand() * tree.facets.len() as f64) as usize;
+                assert!((tree.distance_from(x, own) - exhaustive).abs() <= tol);
+            }
+        }
     }
 
     #[test]

@@ -323,7 +323,7 @@ fn the_blend_certifies_any_fitted_map() {
 /// Gmsh's (min, 1st percentile) Jacobian ratio of a written MSH file.
 fn gmsh_ratio(file: &Path) -> (f64, f64) {
     let out = common::run_ok(
-        Command::new("python3")
+        common::python()
             .arg(concat!(
                 env!("CARGO_MANIFEST_DIR"),
                 "/scripts/jacobian_ratio.py"
