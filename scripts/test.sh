@@ -12,6 +12,7 @@
 #  3. `cargo test --release --all-targets` (or `cargo test --release ARGS…` when given
 #     arguments). A test whose checker is missing skips visibly
 #     (a failure under CI=true) and appends a line to target/test-skips.log.
+#  4. Without arguments, also Open MPI and the distributed tests (`--features mpi`).
 set -uo pipefail
 cd "$(dirname "$0")/.."
 root=$PWD
@@ -74,6 +75,30 @@ else
     cargo test --release --all-targets --no-fail-fast 2>&1 | tee "$out"
 fi
 status=${PIPESTATUS[0]}
+
+# ---- 4. Distributed curving (feature `mpi`, docs/distributed.md) -------------------------
+# With no arguments: Open MPI and the headers rsmpi's bindings are generated from, then the
+# tests that run `mpirun --oversubscribe -np 1,2,4` against the serial result. Their results
+# count in the totals below.
+if [ $# -eq 0 ]; then
+    mpi_need=()
+    for pkg in libopenmpi-dev openmpi-bin libclang-dev; do
+        dpkg -s "$pkg" >/dev/null 2>&1 || mpi_need+=("$pkg")
+    done
+    if [ ${#mpi_need[@]} -gt 0 ]; then
+        mpi_sudo=""
+        [ "$(id -u)" = 0 ] || mpi_sudo="sudo -n"
+        if ! { $mpi_sudo apt-get update -qq && $mpi_sudo apt-get install -y -qq --no-install-recommends "${mpi_need[@]}"; } >/dev/null 2>&1; then
+            notes+=("could not install ${mpi_need[*]}: the distributed tests cannot build")
+        fi
+    fi
+    # mpirun refuses root unless told (CI containers run as root).
+    export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
+    cargo test --release --features mpi --test distributed 2>&1 | tee -a "$out"
+    mpi_status=${PIPESTATUS[0]}
+    [ "$mpi_status" = 0 ] || status=$mpi_status
+fi
+# ---- end of step 4 ------------------------------------------------------------------------
 
 echo
 echo "== skipped checks =="
