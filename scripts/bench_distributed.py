@@ -18,7 +18,7 @@ import sys
 import tempfile
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-BIN = os.path.join(ROOT, "target", "release", "polyspline")
+BIN = os.environ.get("POLYSPLINE_BIN", os.path.join(ROOT, "target", "release", "polyspline"))
 
 
 def run(cmd, env=None):

@@ -331,7 +331,7 @@ mod tests {
     #[test]
     fn one_rank_solves_a_small_spd_system() {
         // 1D Laplacian + identity on 5 unknowns, three right-hand sides.
-        let n = 5;
+        let n: usize = 5;
         let mut indptr = vec![0];
         let (mut indices, mut data) = (Vec::new(), Vec::new());
         for r in 0..n {
