@@ -1,5 +1,5 @@
 //! The collective operations the distributed curve job needs, behind one trait: MPI through
-//! rsmpi with the `mpi` feature ([`Mpi`]), or a single process ([`Single`], which the unit
+//! rsmpi with the `mpi` feature (`Mpi`), or a single process ([`Single`], which the unit
 //! tests and the one-rank case use).
 //!
 //! Every method is collective: all ranks call it in the same order. Each implementation
