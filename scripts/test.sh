@@ -16,6 +16,7 @@
 #     warnings` and `cargo doc --no-deps` with RUSTDOCFLAGS=-D warnings (both with --release),
 #     each a pass/fail line in the summary (a failure fails the run; its output is in
 #     target/lint-NAME.log).
+#  5. Without arguments, also Open MPI and the distributed tests (`--features mpi`).
 set -uo pipefail
 cd "$(dirname "$0")/.."
 root=$PWD
@@ -104,6 +105,29 @@ if [ $# -eq 0 ]; then
     lint clippy cargo clippy --release --all-targets -- -D warnings
     lint doc env RUSTDOCFLAGS="-D warnings" cargo doc --release --no-deps
 fi
+# ---- 5. Distributed curving (feature `mpi`, docs/distributed.md) -------------------------
+# With no arguments: Open MPI and the headers rsmpi's bindings are generated from, then the
+# tests that run `mpirun --oversubscribe -np 1,2,4` against the serial result. Their results
+# count in the totals below.
+if [ $# -eq 0 ]; then
+    mpi_need=()
+    for pkg in libopenmpi-dev openmpi-bin libclang-dev; do
+        dpkg -s "$pkg" >/dev/null 2>&1 || mpi_need+=("$pkg")
+    done
+    if [ ${#mpi_need[@]} -gt 0 ]; then
+        mpi_sudo=""
+        [ "$(id -u)" = 0 ] || mpi_sudo="sudo -n"
+        if ! { $mpi_sudo apt-get update -qq && $mpi_sudo apt-get install -y -qq --no-install-recommends "${mpi_need[@]}"; } >/dev/null 2>&1; then
+            notes+=("could not install ${mpi_need[*]}: the distributed tests cannot build")
+        fi
+    fi
+    # mpirun refuses root unless told (CI containers run as root).
+    export OMPI_ALLOW_RUN_AS_ROOT=1 OMPI_ALLOW_RUN_AS_ROOT_CONFIRM=1
+    cargo test --release --features mpi --test distributed 2>&1 | tee -a "$out"
+    mpi_status=${PIPESTATUS[0]}
+    [ "$mpi_status" = 0 ] || status=$mpi_status
+fi
+# ---- end of step 5 ------------------------------------------------------------------------
 
 echo
 echo "== skipped checks =="

@@ -18,6 +18,7 @@
 pub mod compare;
 pub mod cpu;
 pub mod deviation;
+pub mod distributed;
 pub mod elastic;
 pub mod energy;
 pub mod executor;

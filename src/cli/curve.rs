@@ -269,8 +269,26 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
     check_outputs(&outputs, &inputs)?;
     polyspline::params::check_kink_angle(args.kink_angle)?;
     let backend = args.backend.resolve(args.precision)?;
-    let progress = polyspline::progress::Terminal::new(args.quiet);
     let options = args.options(backend);
+    // Under mpirun with several ranks: the distributed job (docs/distributed.md).
+    #[cfg(feature = "mpi")]
+    if polyspline::distributed::launch::distributed() {
+        use polyspline::distributed::launch::{Outcome, curve};
+        if let Outcome::Written(r) = curve(&mesh, &output, &options, report.as_deref(), &inputs)? {
+            eprintln!(
+                "wrote {}: {} elements of order {}, {} nodes, {} boundary facets, on {} ranks ({:.3} s)",
+                output.display(),
+                r.curve.output_elements,
+                r.curve.order,
+                r.curve.output_nodes,
+                r.curve.boundary_facets,
+                r.ranks,
+                r.curve.timings["total"]
+            );
+        }
+        return Ok(());
+    }
+    let progress = polyspline::progress::Terminal::new(args.quiet);
     let r = curve_prepared(&mesh, &output, &options, &progress);
     progress.clear();
     let (r, pending_mesh) = r?;

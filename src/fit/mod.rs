@@ -27,6 +27,7 @@
 
 pub mod assembly;
 pub mod features;
+pub mod partial;
 mod rhs;
 pub mod smooth;
 

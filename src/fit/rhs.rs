@@ -64,10 +64,25 @@ pub(super) fn displacement_rhs(
     masks: &[u64],
     smooth: Option<&SmoothTargets>,
 ) -> Vec<[f64; 3]> {
+    displacement_rhs_of(space, mesh, topo, w, masks, smooth, None)
+}
+
+/// [`displacement_rhs`] summed over the elements `subset` only (all when `None`); element
+/// indices, like `masks`, are the mesh's.
+pub(super) fn displacement_rhs_of(
+    space: &dyn FitSpace,
+    mesh: &LinearMesh,
+    topo: &Topology,
+    w: &FitWeights,
+    masks: &[u64],
+    smooth: Option<&SmoothTargets>,
+    subset: Option<&[usize]>,
+) -> Vec<[f64; 3]> {
     let dim = space.dim();
     let nb = if dim == 2 { 9 } else { 27 };
     let c0 = space.control_points();
-    let ne = space.n_elements();
+    let ne = subset.map_or(space.n_elements(), |s| s.len());
+    let at = |i: usize| subset.map_or(i, |s| s[i]);
     let mut rhs = vec![[0.0; 3]; c0.len()];
     let element = |e: usize, acc: &mut Vec<(u32, [f64; 3])>| {
         let mut r = multilinear_lattice(dim, &mesh.element_coords(e));
@@ -105,8 +120,8 @@ pub(super) fn displacement_rhs(
     for batch in (0..ne).step_by(RHS_BATCH) {
         let chunks: Vec<Vec<(u32, [f64; 3])>> = (batch..(batch + RHS_BATCH).min(ne))
             .into_par_iter()
-            .fold(Vec::new, |mut acc, e| {
-                element(e, &mut acc);
+            .fold(Vec::new, |mut acc, i| {
+                element(at(i), &mut acc);
                 acc
             })
             .collect();

@@ -408,18 +408,27 @@ fn corner_ratio(mesh: &LinearMesh, e: usize) -> f64 {
 /// A straight element's Jacobian ratio (from its corners) and lattice scaled Jacobian.
 type StraightShape = (f64, f64);
 
-/// The straight elements' certified lower bounds of det J and their shapes.
+/// The straight elements' certified lower bounds of det J and their shapes, for the
+/// elements `mine` (the other entries are 0 and NaN); the invalid ones of every share are an
+/// error on every share.
 fn straight_reference(
     certifier: &dyn Certifier,
     blended: &Blended,
     depth: usize,
+    mine: &[usize],
+    share: &dyn BlendShare,
 ) -> Result<(Vec<f64>, Vec<StraightShape>), BlendError> {
     let n = blended.n_elements();
     let dim = blended.dim();
-    let all: Vec<usize> = (0..n).collect();
     let net = |e: usize| blended.straight.bezier_net(e);
-    let bounds = certify_screened(certifier, dim, &all, &net, depth, &|_| 0.0).bounds;
-    let bad: Vec<usize> = (0..n).filter(|&e| !(bounds[e].lower > 0.0)).collect();
+    let bounds = certify_screened(certifier, dim, mine, &net, depth, &|_| 0.0).bounds;
+    let bad: Vec<usize> = mine
+        .iter()
+        .zip(&bounds)
+        .filter(|(_, b)| !(b.lower > 0.0))
+        .map(|(&e, _)| e)
+        .collect();
+    let bad = share.union(bad);
     if !bad.is_empty() {
         return Err(BlendError::StraightInvalid {
             count: bad.len(),
@@ -427,11 +436,55 @@ fn straight_reference(
         });
     }
     let mesh = blended.ids.mesh;
-    let ratio = all
+    let shapes: Vec<StraightShape> = mine
         .par_iter()
         .map(|&e| (corner_ratio(mesh, e), lattice_scaled_jacobian(dim, &net(e))))
         .collect();
-    Ok((bounds.iter().map(|b| b.lower).collect(), ratio))
+    let mut lower = vec![0.0; n];
+    let mut ratio = vec![(f64::NAN, f64::NAN); n];
+    for ((&e, b), s) in mine.iter().zip(&bounds).zip(shapes) {
+        lower[e] = b.lower;
+        ratio[e] = s;
+    }
+    Ok((lower, ratio))
+}
+
+/// How [`blend_search_shared`] shares the search with other processes that judge the other
+/// elements (`crate::distributed`): each judges its own elements, and they agree on the
+/// rejected elements of every round, from which each applies the same factor reductions to
+/// its copy of the factors, so the factors are those of the search over the whole mesh.
+pub trait BlendShare {
+    /// The elements this process judges (`None`: all).
+    fn mine(&self) -> Option<&[usize]>;
+    /// The union of every process's `elements`, sorted.
+    fn union(&self, elements: Vec<usize>) -> Vec<usize>;
+    /// Every process's `values`, concatenated.
+    fn concat(&self, values: Vec<f64>) -> Vec<f64>;
+    /// The sum of every process's `v`.
+    fn sum(&self, v: usize) -> usize;
+    /// The minimum of every process's `v`.
+    fn min(&self, v: f64) -> f64;
+}
+
+/// The whole search in this process.
+pub struct Alone;
+
+impl BlendShare for Alone {
+    fn mine(&self) -> Option<&[usize]> {
+        None
+    }
+    fn union(&self, elements: Vec<usize>) -> Vec<usize> {
+        elements
+    }
+    fn concat(&self, values: Vec<f64>) -> Vec<f64> {
+        values
+    }
+    fn sum(&self, v: usize) -> usize {
+        v
+    }
+    fn min(&self, v: f64) -> f64 {
+        v
+    }
 }
 
 /// The next factor of a rejected entity: twice halve the way to 1 (the fitted map's C¹ shape
@@ -454,13 +507,31 @@ pub fn blend_search(
     blended: &mut Blended,
     params: &BlendParams,
 ) -> Result<BlendInfo, BlendError> {
+    blend_search_shared(certifier, blended, params, &Alone)
+}
+
+/// [`blend_search`] sharing the judging of the elements with other processes ([`BlendShare`]).
+/// The factors and the info are those of [`blend_search`] on the whole mesh, except
+/// `worst`, which lists the reduced elements of this process only.
+pub fn blend_search_shared(
+    certifier: &dyn Certifier,
+    blended: &mut Blended,
+    params: &BlendParams,
+    share: &dyn BlendShare,
+) -> Result<BlendInfo, BlendError> {
     let n = blended.n_elements();
     let dim = blended.dim();
     let np = blended.points();
     let depth = params.certificate_depth;
-    let (straight_lower, reference) = straight_reference(certifier, blended, depth)?;
+    let all: Vec<usize> = (0..n).collect();
+    let mine: &[usize] = share.mine().unwrap_or(&all);
+    let mut owned = vec![share.mine().is_none(); n];
+    for &e in mine {
+        owned[e] = true;
+    }
+    let (straight_lower, reference) = straight_reference(certifier, blended, depth, mine, share)?;
     let straight_ratio: Vec<f64> = reference.iter().map(|r| r.0).collect();
-    let mut sorted = straight_ratio.clone();
+    let mut sorted = share.concat(mine.iter().map(|&e| straight_ratio[e]).collect());
     sorted.sort_by(f64::total_cmp);
     let p1 = sorted.get(n / 100).copied().unwrap_or(1.0);
     let det_target = |e: usize| params.min_det_fraction.max(0.0) * straight_lower[e];
@@ -519,18 +590,27 @@ pub fn blend_search(
             .map(|(&e, b)| accept(e, b, &net(e)))
             .collect::<Vec<_>>()
     };
-    let all: Vec<usize> = (0..n).collect();
-    let first = judge(blended, &[], &[], &all);
+    let first = judge(blended, &[], &[], mine);
     let mut info = BlendInfo {
-        invalid_at_full_step: first.iter().filter(|r| !r.0).count(),
-        poor_at_full_step: first.iter().filter(|r| r.0 && !r.1).count(),
+        invalid_at_full_step: share.sum(first.iter().filter(|r| !r.0).count()),
+        poor_at_full_step: share.sum(first.iter().filter(|r| r.0 && !r.1).count()),
         straight_ratio_min: sorted.first().copied().unwrap_or(1.0),
         straight_ratio_p1: p1,
         min_factor: FITTED as f64,
         ..Default::default()
     };
-    let mut lower: Vec<f64> = first.iter().map(|r| r.2).collect();
-    let mut bad: Vec<usize> = (0..n).filter(|&e| !first[e].1).collect();
+    // Lower bounds of this process's elements (+∞ elsewhere, for the minimum).
+    let mut lower = vec![f64::INFINITY; n];
+    for (&e, r) in mine.iter().zip(&first) {
+        lower[e] = r.2;
+    }
+    let mut bad: Vec<usize> = share.union(
+        mine.iter()
+            .zip(&first)
+            .filter(|(_, r)| !r.1)
+            .map(|(&e, _)| e)
+            .collect(),
+    );
     let mut factors = Vec::new();
     if !bad.is_empty() {
         factors = vec![FITTED; blended.ids.len()];
@@ -543,9 +623,9 @@ pub fn blend_search(
             let mid = 0.5 * (lo + hi);
             factors.fill(mid);
             reduced.fill(true);
-            let r = judge(blended, &factors, &reduced, &all);
+            let r = judge(blended, &factors, &reduced, mine);
             info.rounds += 1;
-            if r.iter().all(|r| r.1) {
+            if share.sum(r.iter().filter(|r| !r.1).count()) == 0 {
                 lo = mid;
             } else {
                 hi = mid;
@@ -553,8 +633,10 @@ pub fn blend_search(
         }
         factors.fill(lo);
         reduced.fill(true);
-        let r = judge(blended, &factors, &reduced, &all);
-        lower = r.iter().map(|r| r.2).collect();
+        let r = judge(blended, &factors, &reduced, mine);
+        for (&e, r) in mine.iter().zip(&r) {
+            lower[e] = r.2;
+        }
         bad.clear();
     }
     while !bad.is_empty() {
@@ -586,9 +668,10 @@ pub fn blend_search(
                 .iter()
                 .any(|&id| factors[id as usize] < FITTED);
         }
+        recheck.retain(|&e| owned[e]);
         let r = judge(blended, &factors, &reduced, &recheck);
         info.rounds += 1;
-        bad.clear();
+        let mut mine_bad = Vec::new();
         for (&e, r) in recheck.iter().zip(&r) {
             lower[e] = r.2;
             let straight = || {
@@ -598,18 +681,24 @@ pub fn blend_search(
             };
             // A straight element is accepted by construction (its own reference).
             if !r.1 && !straight() {
-                bad.push(e);
+                mine_bad.push(e);
             }
         }
+        bad = share.union(mine_bad);
     }
     blended.factors = factors;
     blended.refresh();
-    summarise(blended, &mut info, &lower);
+    summarise(blended, &mut info, &lower, &owned);
+    info.reduced_elements = share.sum(info.reduced_elements);
+    info.min_det_lower_bound = share.min(info.min_det_lower_bound);
+    info.min_factor = share.min(info.min_factor);
     Ok(info)
 }
 
 /// Fill the reduction counts and the worst reduced elements of `info`.
-fn summarise(blended: &Blended, info: &mut BlendInfo, lower: &[f64]) {
+/// Only the elements marked `owned` are listed and counted (the point counts are global: every
+/// process holds all the factors).
+fn summarise(blended: &Blended, info: &mut BlendInfo, lower: &[f64], owned: &[bool]) {
     let n = blended.n_elements();
     let dim = blended.dim();
     let np = blended.points();
@@ -618,7 +707,7 @@ fn summarise(blended: &Blended, info: &mut BlendInfo, lower: &[f64]) {
     let per: Vec<Option<ReducedElement>> = (0..n)
         .into_par_iter()
         .map(|e| {
-            if !blended.is_reduced(e) {
+            if !owned[e] || !blended.is_reduced(e) {
                 return None;
             }
             let (b, f) = (blended.bezier_net(e), blended.fitted.bezier_net(e));

@@ -1,0 +1,367 @@
+//! The fit's normal equations solved across ranks: each rank holds the rows of the control
+//! points its elements touch, assembled from its own elements only, and the ranks run one
+//! Jacobi-preconditioned CG together.
+//!
+//! Input: this rank's share K_s, F_s of the system ([`crate::fit::partial`]), the control
+//! points each rank touches ([`Halo`]). Output: the displacement δ on this rank's control
+//! points, the same (to the CG tolerance) as the serial solve of K δ = F.
+//!
+//! **Vectors.** Every vector is stored on the rank's local control points, fully summed
+//! ("consistent"): a control point shared by several ranks has the same value on each.
+//! K x is the sum of the shares' products: each rank multiplies by its K_s, then the ranks
+//! sharing a control point exchange their partial values and add them **in rank order**, so
+//! every copy is bit-identical (a different order per rank would let the copies drift apart
+//! by rounding over the iterations). Dot products count each control point once, on its owner
+//! (the lowest rank touching it), then sum over the ranks (one all-reduce of 3 values per dot
+//! product, two per iteration besides the stopping test's).
+//!
+//! **Preconditioner.** Point Jacobi on the summed diagonal. The serial solver's default is
+//! block Jacobi on aggregates of 64 control points; the iterates differ, the solution agrees
+//! to the tolerance (the stopping rule, ‖r‖ ≤ rel_tol ‖b‖ per coordinate, is the serial one).
+
+use super::comm::Comm;
+use crate::fit::NormalMatrix;
+use crate::solve::{CgError, CgInfo, CgParams};
+use rayon::prelude::*;
+
+/// The control points of this rank and how they are shared.
+pub struct Halo {
+    /// Global ids of this rank's control points (those its elements touch), increasing.
+    pub global: Vec<u32>,
+    /// Whether this rank owns each (the lowest rank touching it): it counts in dot products.
+    pub owned: Vec<bool>,
+    /// Per other rank sharing control points with this one: the rank and the local indices
+    /// of the shared control points, in increasing global id (the same order on both sides).
+    pub neighbours: Vec<(usize, Vec<u32>)>,
+}
+
+impl Halo {
+    /// From every rank's control points (`touched[q]`: increasing global ids, known to every
+    /// rank since the setup is replicated; see docs/distributed.md).
+    pub fn new(rank: usize, touched: &[Vec<u32>], n_global: usize) -> Halo {
+        // Per control point, the ranks touching it (increasing).
+        let mut ranks: Vec<Vec<u16>> = vec![Vec::new(); n_global];
+        for (q, list) in touched.iter().enumerate() {
+            for &g in list {
+                ranks[g as usize].push(q as u16);
+            }
+        }
+        let global = touched[rank].clone();
+        let owned = global
+            .iter()
+            .map(|&g| ranks[g as usize][0] as usize == rank)
+            .collect();
+        let mut per: Vec<Vec<u32>> = vec![Vec::new(); touched.len()];
+        for (i, &g) in global.iter().enumerate() {
+            for &q in &ranks[g as usize] {
+                if q as usize != rank {
+                    per[q as usize].push(i as u32);
+                }
+            }
+        }
+        let neighbours = per
+            .into_iter()
+            .enumerate()
+            .filter(|(_, l)| !l.is_empty())
+            .collect();
+        Halo {
+            global,
+            owned,
+            neighbours,
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.global.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.global.is_empty()
+    }
+
+    /// Control points shared with another rank.
+    pub fn shared(&self) -> usize {
+        let mut s = vec![false; self.len()];
+        for (_, l) in &self.neighbours {
+            for &i in l {
+                s[i as usize] = true;
+            }
+        }
+        s.iter().filter(|&&b| b).count()
+    }
+
+    /// Local index of global control point `g`.
+    pub fn local(&self, g: u32) -> Option<usize> {
+        self.global.binary_search(&g).ok()
+    }
+
+    /// Turn per-rank partial values into their sums over the ranks sharing each control
+    /// point, added in rank order (see the module docs). `w` components per control point.
+    pub fn sum_partials(&self, comm: &dyn Comm, v: &mut [f64], w: usize) {
+        let me = comm.rank();
+        let mut send = vec![Vec::new(); comm.size()];
+        for (q, list) in &self.neighbours {
+            send[*q] = list
+                .iter()
+                .flat_map(|&i| v[w * i as usize..w * (i as usize + 1)].to_vec())
+                .collect();
+        }
+        let recv = comm.exchange_f64(&send);
+        let mine = v.to_vec();
+        v.fill(0.0);
+        // Rank order: the neighbours below this rank, this rank, the neighbours above.
+        let below = self.neighbours.partition_point(|(q, _)| *q < me);
+        let add = |v: &mut [f64], q: usize, list: &[u32]| {
+            for (k, &i) in list.iter().enumerate() {
+                for c in 0..w {
+                    v[w * i as usize + c] += recv[q][w * k + c];
+                }
+            }
+        };
+        for (q, list) in &self.neighbours[..below] {
+            add(v, *q, list);
+        }
+        for (x, m) in v.iter_mut().zip(&mine) {
+            *x += m;
+        }
+        for (q, list) in &self.neighbours[below..] {
+            add(v, *q, list);
+        }
+    }
+
+    /// Σ over owned control points of a·b per coordinate, summed over the ranks.
+    fn dot(&self, comm: &dyn Comm, a: &[[f64; 3]], b: &[[f64; 3]]) -> [f64; 3] {
+        let mut s = [0.0f64; 3];
+        for ((x, y), &o) in a.iter().zip(b).zip(&self.owned) {
+            if o {
+                for k in 0..3 {
+                    s[k] += x[k] * y[k];
+                }
+            }
+        }
+        comm.sum_f64(&mut s);
+        s
+    }
+}
+
+/// This rank's share of K in its local numbering (rows and columns of `halo.global`).
+pub struct LocalMatrix {
+    indptr: Vec<usize>,
+    indices: Vec<u32>,
+    data: Vec<f64>,
+}
+
+impl LocalMatrix {
+    /// Restrict `k` (global numbering; its non-empty rows are this rank's control points) to
+    /// the local numbering.
+    pub fn new(k: &NormalMatrix, halo: &Halo) -> LocalMatrix {
+        let mut indptr = vec![0usize];
+        let mut indices = Vec::new();
+        let mut data = Vec::new();
+        for &g in &halo.global {
+            let g = g as usize;
+            for j in k.indptr[g]..k.indptr[g + 1] {
+                let c = halo
+                    .local(k.indices[j])
+                    .expect("a column of this rank's share is one of its control points");
+                indices.push(c as u32);
+                data.push(k.data[j]);
+            }
+            indptr.push(indices.len());
+        }
+        LocalMatrix {
+            indptr,
+            indices,
+            data,
+        }
+    }
+
+    pub fn nonzeros(&self) -> usize {
+        self.data.len()
+    }
+
+    fn apply(&self, x: &[[f64; 3]], y: &mut [[f64; 3]]) {
+        y.par_iter_mut().enumerate().for_each(|(r, y)| {
+            let mut s = [0.0; 3];
+            for j in self.indptr[r]..self.indptr[r + 1] {
+                let xv = x[self.indices[j] as usize];
+                let a = self.data[j];
+                for k in 0..3 {
+                    s[k] += a * xv[k];
+                }
+            }
+            *y = s;
+        });
+    }
+
+    fn diagonal(&self) -> Vec<f64> {
+        (0..self.indptr.len() - 1)
+            .map(|r| {
+                (self.indptr[r]..self.indptr[r + 1])
+                    .find(|&j| self.indices[j] as usize == r)
+                    .map_or(0.0, |j| self.data[j])
+            })
+            .collect()
+    }
+}
+
+fn flat(v: &mut [[f64; 3]]) -> &mut [f64] {
+    v.as_flattened_mut()
+}
+
+/// Solve the distributed system for δ (consistent, on `halo`'s control points) from `x` = 0:
+/// `b` is this rank's partial right-hand side (summed here). Returns the CG figures; every
+/// rank returns the same ones.
+pub fn pcg(
+    comm: &dyn Comm,
+    halo: &Halo,
+    k: &LocalMatrix,
+    b_partial: &[[f64; 3]],
+    x: &mut [[f64; 3]],
+    params: &CgParams,
+) -> Result<CgInfo, CgError> {
+    let n = halo.len();
+    let mut b = b_partial.to_vec();
+    halo.sum_partials(comm, flat(&mut b), 3);
+    let mut diag = k.diagonal();
+    halo.sum_partials(comm, &mut diag, 1);
+    // The lowest diagonal over the ranks, to fail on every rank alike.
+    let mut worst = [diag
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| halo.owned[*i])
+        .map(|(_, &d)| d)
+        .fold(f64::INFINITY, f64::min)];
+    comm.min_f64(&mut worst);
+    if !(worst[0] > 0.0) {
+        return Err(CgError::BadDiagonal {
+            row: 0,
+            value: worst[0],
+        });
+    }
+    let apply = |p: &[[f64; 3]], y: &mut [[f64; 3]]| {
+        k.apply(p, y);
+        halo.sum_partials(comm, flat(y), 3);
+    };
+    let precondition = |r: &[[f64; 3]], z: &mut [[f64; 3]]| {
+        for ((z, r), d) in z.iter_mut().zip(r).zip(&diag) {
+            *z = r.map(|v| v / d);
+        }
+    };
+    let mut r = vec![[0.0; 3]; n];
+    apply(x, &mut r);
+    for (r, b) in r.iter_mut().zip(&b) {
+        for c in 0..3 {
+            r[c] = b[c] - r[c];
+        }
+    }
+    let bnorm = halo.dot(comm, &b, &b).map(f64::sqrt);
+    let target: [f64; 3] = std::array::from_fn(|c| (params.rel_tol * bnorm[c]).max(params.abs_tol));
+    let rel = |rr: [f64; 3]| {
+        (0..3)
+            .map(|c| {
+                if bnorm[c] > 0.0 {
+                    rr[c].sqrt() / bnorm[c]
+                } else {
+                    rr[c].sqrt()
+                }
+            })
+            .fold(0.0, f64::max)
+    };
+    let running = |rr: [f64; 3], c: usize| rr[c].sqrt() > target[c];
+    let mut z = vec![[0.0; 3]; n];
+    precondition(&r, &mut z);
+    let mut p = z.clone();
+    let mut rz = halo.dot(comm, &r, &z);
+    let mut rr = halo.dot(comm, &r, &r);
+    let mut ap = vec![[0.0; 3]; n];
+    let mut it = 0;
+    while (0..3).any(|c| running(rr, c)) {
+        if it >= params.max_iters {
+            return Err(CgError::NoConvergence {
+                iterations: it,
+                rel_residual: rel(rr),
+                rel_tol: params.rel_tol,
+            });
+        }
+        apply(&p, &mut ap);
+        let pap = halo.dot(comm, &p, &ap);
+        let mut alpha = [0.0; 3];
+        for c in 0..3 {
+            if running(rr, c) {
+                if !(pap[c] > 0.0) {
+                    return Err(CgError::NotPositiveDefinite {
+                        iteration: it,
+                        curvature: pap[c],
+                    });
+                }
+                alpha[c] = rz[c] / pap[c];
+            }
+        }
+        for i in 0..n {
+            for c in 0..3 {
+                x[i][c] += alpha[c] * p[i][c];
+                r[i][c] -= alpha[c] * ap[i][c];
+            }
+        }
+        precondition(&r, &mut z);
+        let rz_new = halo.dot(comm, &r, &z);
+        let beta: [f64; 3] =
+            std::array::from_fn(|c| if rz[c] > 0.0 { rz_new[c] / rz[c] } else { 0.0 });
+        for (p, z) in p.iter_mut().zip(&z) {
+            for c in 0..3 {
+                p[c] = z[c] + beta[c] * p[c];
+            }
+        }
+        rz = rz_new;
+        rr = halo.dot(comm, &r, &r);
+        it += 1;
+    }
+    Ok(CgInfo {
+        iterations: it,
+        rel_residual: rel(rr),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::distributed::comm::Single;
+
+    #[test]
+    fn one_rank_solves_a_small_spd_system() {
+        // 1D Laplacian + identity on 5 unknowns, three right-hand sides.
+        let n: usize = 5;
+        let mut indptr = vec![0];
+        let (mut indices, mut data) = (Vec::new(), Vec::new());
+        for r in 0..n {
+            for c in r.saturating_sub(1)..(r + 2).min(n) {
+                indices.push(c as u32);
+                data.push(if c == r { 3.0 } else { -1.0 });
+            }
+            indptr.push(indices.len());
+        }
+        let k = NormalMatrix {
+            n,
+            indptr,
+            indices,
+            data,
+        };
+        let halo = Halo::new(0, &[(0..n as u32).collect()], n);
+        let local = LocalMatrix::new(&k, &halo);
+        let b: Vec<[f64; 3]> = (0..n).map(|i| [1.0, i as f64, -2.0]).collect();
+        let mut x = vec![[0.0; 3]; n];
+        let params = CgParams {
+            rel_tol: 1e-12,
+            ..Default::default()
+        };
+        pcg(&Single::default(), &halo, &local, &b, &mut x, &params).unwrap();
+        let mut y = vec![[0.0; 3]; n];
+        crate::solve::LinOp::apply(&k, &x, &mut y);
+        for (y, b) in y.iter().zip(&b) {
+            for c in 0..3 {
+                assert!((y[c] - b[c]).abs() < 1e-10, "{y:?} vs {b:?}");
+            }
+        }
+    }
+}

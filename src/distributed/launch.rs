@@ -1,0 +1,88 @@
+//! The binary's entry under `mpirun` (feature `mpi`): MPI is initialised only when the
+//! process was started by an MPI launcher with more than one rank, so `polyspline curve`
+//! without mpirun, and `mpirun -np 1`, run the serial job unchanged.
+
+use super::comm::{Comm, Mpi};
+use super::job::{DistributedReport, curve as curve_job};
+use crate::pipeline::{CurveError, CurveOptions, prepare_high_order};
+use std::path::Path;
+
+/// The number of ranks of the MPI job this process belongs to, from the launcher's
+/// environment (Open MPI, MPICH/Hydra, PMIx), or `None` outside one.
+pub fn launched_size() -> Option<usize> {
+    ["OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "PMIX_SIZE"]
+        .iter()
+        .find_map(|v| std::env::var(v).ok()?.parse().ok())
+}
+
+/// Whether `curve` should run distributed: under an MPI launcher with more than one rank.
+pub fn distributed() -> bool {
+    launched_size().is_some_and(|n| n > 1)
+}
+
+/// What [`curve`] did on this rank.
+pub enum Outcome {
+    /// Rank 0: the output (and report) were written.
+    Written(Box<DistributedReport>),
+    /// Another rank: its share is done.
+    Share,
+}
+
+/// Run `curve` distributed: initialise MPI, run the job, write the output (and the JSON
+/// report) on rank 0, finalise MPI. An error on a rank other than 0 ends that process with
+/// status 1 after MPI is finalised (rank 0 reports the error line: every failure of the
+/// replicated setup, the CG or the blend happens on all ranks alike).
+pub fn curve(
+    input: &Path,
+    output: &Path,
+    options: &CurveOptions,
+    report: Option<&Path>,
+    inputs: &[&Path],
+) -> Result<Outcome, CurveError> {
+    let universe = mpi::initialize()
+        .ok_or_else(|| CurveError::Options("MPI was initialised already in this process".into()))?;
+    let comm = Mpi::new(universe.world());
+    let rank = comm.rank();
+    let result = run(&comm, input, output, options, report, inputs);
+    drop(comm);
+    drop(universe);
+    match result {
+        Err(_) if rank != 0 => std::process::exit(1),
+        r => r,
+    }
+}
+
+fn run(
+    comm: &dyn Comm,
+    input: &Path,
+    output: &Path,
+    options: &CurveOptions,
+    report: Option<&Path>,
+    inputs: &[&Path],
+) -> Result<Outcome, CurveError> {
+    let Some(gathered) = curve_job(comm, input, options)? else {
+        return Ok(Outcome::Share);
+    };
+    let t = std::time::Instant::now();
+    let pending = prepare_high_order(&gathered.mesh, output, &options.output, inputs)?;
+    let mut r = gathered.report;
+    r.curve.output = output.to_owned();
+    r.curve
+        .timings
+        .insert("write".into(), t.elapsed().as_secs_f64());
+    let pending_report = match report {
+        Some(path) => {
+            let json = serde_json::to_string_pretty(&r).expect("the report serialises");
+            Some(crate::io::output::prepare(path, inputs, |w| {
+                use std::io::Write;
+                writeln!(w, "{json}")
+            })?)
+        }
+        None => None,
+    };
+    pending.commit()?;
+    if let Some(p) = pending_report {
+        p.commit()?;
+    }
+    Ok(Outcome::Written(Box::new(r)))
+}

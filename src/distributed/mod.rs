@@ -1,0 +1,14 @@
+//! Curving across MPI ranks (`--features mpi`, `mpirun -np N polyspline curve …`).
+//!
+//! [`comm`] is the communication layer (rsmpi over the system MPI, or one process),
+//! [`partition`] the element partition along a Morton curve, [`cg`] the fit's CG across ranks
+//! (halo exchange of shared control points, global reductions), [`job`] the `curve` job
+//! stage by stage. `docs/distributed.md` states what is distributed, what is replicated on
+//! every rank so far, and the measured volumes.
+
+pub mod cg;
+pub mod comm;
+pub mod job;
+#[cfg(feature = "mpi")]
+pub mod launch;
+pub mod partition;

@@ -1,0 +1,207 @@
+//! The distributed `curve` (`--features mpi`) under `mpirun --oversubscribe -np 1, 2, 4`
+//! against the serial run of the same input: the same element count, node coordinates within
+//! 1e-6 of the bounding-box diagonal element by element, the same boundary facets and groups,
+//! every element valid by Gmsh's own Jacobians, and a report whose per-rank shares add up.
+#![cfg(feature = "mpi")]
+
+mod common;
+
+use polyspline::sample::HighOrderMesh;
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+const BIN: &str = env!("CARGO_BIN_EXE_polyspline");
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("distributed");
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+/// `mpirun` with what CI's containers need: more ranks than cores, and root.
+fn mpirun(np: usize) -> Command {
+    let mut c = Command::new("mpirun");
+    c.args(["--oversubscribe", "-np", &np.to_string()])
+        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+        // One rayon thread per rank: the ranks share the machine's cores.
+        .env("RAYON_NUM_THREADS", "1");
+    c
+}
+
+fn have_mpirun() -> bool {
+    let ok = Command::new("mpirun")
+        .arg("--version")
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !ok {
+        common::skip(
+            &common::current_test(),
+            "mpirun not found (install openmpi-bin; scripts/test.sh does)",
+        );
+    }
+    ok
+}
+
+fn read(path: &Path) -> HighOrderMesh {
+    let raw = polyspline::io::read_raw(path).unwrap();
+    HighOrderMesh::from_raw(raw).unwrap()
+}
+
+fn diagonal(m: &HighOrderMesh) -> f64 {
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for p in &m.nodes {
+        for k in 0..3 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f64>().sqrt()
+}
+
+fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
+    (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>().sqrt()
+}
+
+/// Largest distance between corresponding nodes of corresponding elements and boundary
+/// facets (the outputs list both in the input's order), after checking the counts, the
+/// element tags, the boundary tags and the group names agree.
+fn compare(serial: &HighOrderMesh, dist_mesh: &HighOrderMesh) -> f64 {
+    assert_eq!(serial.n_elements(), dist_mesh.n_elements());
+    assert_eq!(serial.order, dist_mesh.order);
+    assert_eq!(serial.nodes.len(), dist_mesh.nodes.len());
+    assert_eq!(serial.element_tags, dist_mesh.element_tags);
+    assert_eq!(serial.boundary_tags, dist_mesh.boundary_tags);
+    assert_eq!(serial.tag_names, dist_mesh.tag_names);
+    assert_eq!(serial.n_boundary(), dist_mesh.n_boundary());
+    let mut worst = 0.0f64;
+    for (a, b) in serial.elements.iter().zip(&dist_mesh.elements) {
+        worst = worst.max(dist(
+            serial.nodes[*a as usize],
+            dist_mesh.nodes[*b as usize],
+        ));
+    }
+    for (a, b) in serial.boundary.iter().zip(&dist_mesh.boundary) {
+        worst = worst.max(dist(
+            serial.nodes[*a as usize],
+            dist_mesh.nodes[*b as usize],
+        ));
+    }
+    worst
+}
+
+#[test]
+fn mpirun_1_2_4_ranks_equal_the_serial_run() {
+    if !have_mpirun() {
+        return;
+    }
+    let input = scratch("cylinder.msh");
+    common::run_ok(Command::new(BIN).args([
+        "generate",
+        "cylinder",
+        "--elements",
+        "1500",
+        "-o",
+        input.to_str().unwrap(),
+    ]));
+    let serial_out = scratch("serial.msh");
+    common::run_ok(Command::new(BIN).args([
+        "curve",
+        input.to_str().unwrap(),
+        "-o",
+        serial_out.to_str().unwrap(),
+        "-q",
+    ]));
+    let serial = read(&serial_out);
+    let diag = diagonal(&serial);
+    for np in [1usize, 2, 4] {
+        let out = scratch(&format!("np{np}.msh"));
+        let report = scratch(&format!("np{np}.json"));
+        let _ = std::fs::remove_file(&out);
+        common::run_ok(mpirun(np).args([
+            BIN,
+            "curve",
+            input.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--report",
+            report.to_str().unwrap(),
+            "-q",
+        ]));
+        let d = read(&out);
+        let worst = compare(&serial, &d);
+        assert!(
+            worst <= 1e-6 * diag,
+            "{np} ranks: a node is {worst:.3e} from the serial run's (diagonal {diag:.3})"
+        );
+        let r: Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+        assert_eq!(r["invalid_elements"], 0);
+        assert!(r["min_det_jacobian_bound"].as_f64().unwrap() > 0.0);
+        if np > 1 {
+            // The shares partition the elements; every rank has work and a halo.
+            assert_eq!(r["ranks"], np);
+            let per = r["per_rank"].as_array().unwrap();
+            assert_eq!(per.len(), np);
+            let total: u64 = per.iter().map(|f| f["elements"].as_u64().unwrap()).sum();
+            assert_eq!(total as usize, serial.n_elements());
+            for f in per {
+                assert!(f["elements"].as_u64().unwrap() > 0, "{f}");
+                assert!(f["shared_control_points"].as_u64().unwrap() > 0, "{f}");
+                assert!(f["bytes_sent"].as_u64().unwrap() > 0, "{f}");
+            }
+        } else {
+            // One rank is the serial job itself: the same file, byte for byte.
+            assert_eq!(
+                std::fs::read(&out).unwrap(),
+                std::fs::read(&serial_out).unwrap()
+            );
+        }
+        // Gmsh's own Jacobians: every element valid.
+        if let Some((min, _, hex)) = common::gmsh_det_range(&out, &scratch("jobs.json")) {
+            assert!(hex);
+            assert!(min > 0.0, "{np} ranks: Gmsh's smallest det J is {min}");
+        }
+    }
+}
+
+#[test]
+fn unsupported_options_under_mpirun_fail_with_one_line_and_write_nothing() {
+    if !have_mpirun() {
+        return;
+    }
+    let input = scratch("small.msh");
+    common::run_ok(Command::new(BIN).args([
+        "generate",
+        "cylinder",
+        "--elements",
+        "200",
+        "-o",
+        input.to_str().unwrap(),
+    ]));
+    let out = scratch("energy.msh");
+    let _ = std::fs::remove_file(&out);
+    let o = mpirun(2)
+        .args([
+            BIN,
+            "curve",
+            input.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--fit",
+            "energy",
+        ])
+        .output()
+        .unwrap();
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    let lines: Vec<&str> = err
+        .lines()
+        .filter(|l| l.starts_with("polyspline: error:"))
+        .collect();
+    assert_eq!(lines.len(), 1, "{err}");
+    assert!(lines[0].contains("--fit energy"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert!(!out.exists());
+}
