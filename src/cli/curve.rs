@@ -269,6 +269,7 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
     check_outputs(&outputs, &inputs)?;
     polyspline::params::check_kink_angle(args.kink_angle)?;
     let backend = args.backend.resolve(args.precision)?;
+    let quiet = args.quiet;
     let options = args.options(backend);
     // Under mpirun with several ranks: the distributed job (docs/distributed.md).
     #[cfg(feature = "mpi")]
@@ -288,7 +289,7 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
         }
         return Ok(());
     }
-    let progress = polyspline::progress::Terminal::new(args.quiet);
+    let progress = polyspline::progress::Terminal::new(quiet);
     let r = curve_prepared(&mesh, &output, &options, &progress);
     progress.clear();
     let (r, pending_mesh) = r?;

@@ -415,6 +415,8 @@ pub fn curve(
         geometry: options.geometry,
         method: options.method.name(),
         elastic: None,
+        // The distributed job runs on the CPU only.
+        gpu_fallbacks: None,
         output_nodes: ho.nodes.len(),
         output_elements: ho.n_elements(),
         boundary_facets: ho.n_boundary(),
