@@ -458,7 +458,7 @@ fn at_angle(angle_deg: f64) -> CurveOptions {
     }
 }
 
-/// Coarse smooth shapes turn by 45–60° between neighbouring facets everywhere: with the
+/// Coarse smooth shapes turn by 40–52° between neighbouring facets: with the
 /// default feature angle no crease is found, and the boundary is as close to the analytic
 /// surface as with features off (`--feature-angle 180`).
 #[test]
@@ -469,7 +469,8 @@ fn coarse_smooth_shapes_have_no_creases() {
     let cases: Vec<(&str, polyspline::mesh::LinearMesh, Distance)> = vec![
         (
             "torus",
-            generate(Kind::Torus, 72),
+            // 12 cells around the tube, 9 around the axis (40° between sections).
+            generate(Kind::Torus, 243),
             Box::new(|x: [f64; 3]| ((radius(x) - 3.0).hypot(x[2]) - 1.0).abs()),
         ),
         (
@@ -525,7 +526,7 @@ fn coarse_smooth_shapes_have_no_creases() {
             "{name}: {e_on:?} with default features, {e_off:?} without"
         );
         assert!(
-            e_on.0 < 0.5 * e_lin.0,
+            e_on.0 < 0.8 * e_lin.0,
             "{name}: {e_on:?} vs linear {e_lin:?}"
         );
         assert!(on.report.min_det_jacobian_bound.unwrap() > 0.0);
@@ -658,8 +659,10 @@ fn plate_with_a_hole_keeps_its_sides_straight() {
     )
     .unwrap();
     for order in [2, 3] {
-        let mut options = CurveOptions::default();
-        options.order = order;
+        let mut options = CurveOptions {
+            order,
+            ..Default::default()
+        };
         let on = curve_in_memory(&input, &options).unwrap();
         options.features.ignore = true;
         let off = curve_in_memory(&input, &options).unwrap();
@@ -688,8 +691,9 @@ fn plate_with_a_hole_keeps_its_sides_straight() {
 /// The generated C-grid's outflow side x = 11 is a straight chain: its nodes stay on it.
 #[test]
 fn generated_c_grid_keeps_its_outflow_straight() {
-    use polyspline::mesh::generate::{BoundaryLayer, cgrid};
+    use polyspline::mesh::generate::{BoundaryLayer, Wall, cgrid};
     let mesh = cgrid(&BoundaryLayer {
+        wall: Wall::Naca { thickness: 0.12 },
         around: 64,
         across: 24,
         ..Default::default()

@@ -747,14 +747,15 @@ mod tests {
         mesh
     }
 
-    /// A cube of one hex: 12 feature edges, 8 corners, 6 planar patches; a 3×3×3 grid of it
-    /// (4 per axis) has the same corners and 4 mesh edges per cube edge. The tags alone find the same.
+    /// A cube of 4×4×4 hexes: 12 feature edges of 4 mesh edges, 8 corners, 6 planar patches. The tags alone find the same. A cube of one hex turns by
+    /// 90° at every edge, as a coarse sphere would: its tags find its edges, the angle does not.
     #[test]
     fn cube_has_twelve_feature_edges_and_eight_corners() {
-        let one = untagged(grid_3d(&[0.0, 1.0], &[0.0, 1.0], &[0.0, 1.0]));
+        let one = grid_3d(&[0.0, 1.0], &[0.0, 1.0], &[0.0, 1.0]);
         let f = detect(&one, FeatureParams::default());
         assert_eq!((f.edges.len(), f.corners.len(), f.n_patches), (12, 8, 6));
         assert!(f.planes.iter().all(|p| p.is_some()));
+        assert!(detect(&untagged(one), FeatureParams::default()).is_empty());
         let u = uniform(4, 0.25);
         let grid = grid_3d(&u, &u, &u);
         let f = detect(&untagged(grid.clone()), FeatureParams::default());
@@ -771,7 +772,8 @@ mod tests {
     }
 
     /// An extruded polygon: the rims are features at 35°, the 30° turns between wall facets
-    /// are not, and a 25° threshold finds the wall's vertical edges too.
+    /// are not; at 25° the wall's vertical edges are not either (every one turns alike: a
+    /// smooth wall sampled coarsely), but a spike in the wall is.
     #[test]
     fn cylinder_rims_and_angle_threshold() {
         let k = 12; // 30° between neighbouring wall facets
@@ -810,9 +812,26 @@ mod tests {
                 tags: false,
             },
         );
-        // Plus 2 × k vertical walls' edges of 2 segments.
-        assert_eq!(fine.edges.len(), 4 * k + 2 * 2 * k);
+        assert_eq!(fine.edges, f.edges);
         assert!(detect(&mesh, FeatureParams::off()).is_empty());
+        // Pull the outer wall out to a spike at (3, 0): the wall turns by 104° there and by
+        // -7° (the other way) next to it, so the spike's edge is a crease.
+        let mut bent = mesh.clone();
+        for p in bent.coords.iter_mut() {
+            if (p[0] - 2.0).abs() < 1e-12 && p[1].abs() < 1e-12 {
+                p[0] = 3.0;
+            }
+        }
+        let g = detect(&bent, FeatureParams::default());
+        let vertical: Vec<[f64; 3]> = g
+            .edges
+            .iter()
+            .map(|&e| Topology::build(&bent).edges[e as usize])
+            .filter(|[p, q]| bent.coords[*p as usize][2] != bent.coords[*q as usize][2])
+            .map(|[p, _]| bent.coords[p as usize])
+            .collect();
+        assert!(!vertical.is_empty(), "{:?}", g.edges.len());
+        assert!(vertical.iter().all(|x| x[0] == 3.0 && x[1].abs() < 1e-12));
     }
 
     /// 2D: the corners of a square are features, the straight sides' vertices are not; a
@@ -825,6 +844,13 @@ mod tests {
         let f = Features::detect_without_edits(&mesh, &topo, &FeatureParams::default());
         assert_eq!(f.corners, vec![0, 3, 12, 15]);
         assert_eq!(f.n_patches, 4);
+        // The four sides are straight chains, on their lines to rounding.
+        for (i, &e) in topo.boundary_facets.iter().enumerate() {
+            let (n, d) = f.planes[f.facet_patch[i] as usize].expect("straight");
+            for v in topo.edges[e as usize] {
+                assert!((dot(n, mesh.coords[v as usize]) - d).abs() < 1e-15);
+            }
+        }
         // Each corner is one quad's own corner: nothing to demote.
         assert!(f.crease_elements(&topo).iter().all(|&m| !m));
         // A corner added on the bottom side runs between quads 0 and 1.
