@@ -14,9 +14,9 @@
 //!   or that do not lie on exactly two boundary edges; edits `add i` / `remove i` name vertices.
 //!   Patches are the boundary chains between corners (a closed loop without corners is one).
 //! * **Coarse smooth boundaries.** A turning above `angle_deg` makes a feature only where it is
-//!   concentrated: at least [`CONCENTRATION`] × the turning of a neighbour that turns the same
-//!   way (3D: the edges opposite it in its two faces; 2D: the neighbouring vertices), see
-//!   [`concentrated`]. A coarse torus or ellipse turns by 45° at every edge or vertex, smoothly;
+//!   concentrated: more than [`CONCENTRATION`] × the same-way turning of the flatter of its two
+//!   neighbours (3D: the edges opposite it in its two faces; 2D: the neighbouring vertices;
+//!   unknown or opposite turning counts as 0), see `concentrated`. A coarse torus or ellipse turns by 45° at every edge or vertex, smoothly;
 //!   a cylinder's rim, a box edge or a trailing edge turns with flat facets beside it. A shape
 //!   whose every edge turns alike (a one-hex cube) is taken for smooth.
 //! * **Planes and lines.** A patch is planar (3D) or a chain straight (2D) when its vertices lie
@@ -506,8 +506,8 @@ pub fn face_edges(topo: &Topology, e: usize, side: usize) -> Vec<u32> {
         .collect()
 }
 
-/// A turning above the feature angle is a crease only where it is at least this many times
-/// the turning next to it (see [`concentrated`]).
+/// A turning above the feature angle is a crease only where it is more than this many times
+/// the turning next to it.
 pub const CONCENTRATION: f64 = 4.0;
 
 /// Whether a turning of `theta` degrees (signed, positive where the boundary is convex) is a
