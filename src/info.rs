@@ -292,9 +292,14 @@ impl fmt::Display for MeshInfo {
                 f,
                 "sharp features",
                 format!(
-                    "{what}; {} patches ({} planar); {} crease elements (angle {}°{})",
+                    "{what}; {} patches ({} {}); {} crease elements (angle {}°{})",
                     s.patches,
                     s.planar_patches,
+                    if self.dimension == 2 {
+                        "straight"
+                    } else {
+                        "planar"
+                    },
                     s.crease_elements,
                     s.feature_angle_deg,
                     if s.tags { ", tags" } else { "" }

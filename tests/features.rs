@@ -422,3 +422,302 @@ fn plot_shows_corners_and_bad_edits_are_refused() {
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent/edits.txt"));
 }
+
+/// Write a linear mesh as MSH 4.1.
+fn write_linear(mesh: &polyspline::mesh::LinearMesh, path: &Path) {
+    let topo = polyspline::mesh::Topology::build(mesh);
+    let linear = polyspline::sample::sample(mesh, mesh, &topo, 1);
+    polyspline::pipeline::write_high_order(&linear, path, &Default::default(), &[]).unwrap();
+}
+
+/// RMS and max of `distance` over the nodes of the output boundary facets.
+fn boundary_error(
+    c: &polyspline::pipeline::Curved,
+    distance: &dyn Fn([f64; 3]) -> f64,
+) -> (f64, f64) {
+    let (mut sum, mut max, mut n) = (0.0, 0.0f64, 0usize);
+    for &k in &c.ho.boundary {
+        let d = distance(c.ho.nodes[k as usize]);
+        sum += d * d;
+        max = max.max(d);
+        n += 1;
+    }
+    ((sum / n as f64).sqrt(), max)
+}
+
+fn at_angle(angle_deg: f64) -> CurveOptions {
+    CurveOptions {
+        features: FeatureOptions {
+            params: FeatureParams {
+                angle_deg,
+                ..Default::default()
+            },
+            ..Default::default()
+        },
+        ..Default::default()
+    }
+}
+
+/// Coarse smooth shapes turn by 40–52° between neighbouring facets: with the
+/// default feature angle no crease is found, and the boundary is as close to the analytic
+/// surface as with features off (`--feature-angle 180`).
+#[test]
+fn coarse_smooth_shapes_have_no_creases() {
+    use polyspline::mesh::generate::{BoundaryLayer, Kind, Wall, generate, ogrid};
+    let ellipse = Wall::Ellipse { thickness: 0.2 };
+    type Distance = Box<dyn Fn([f64; 3]) -> f64>;
+    let cases: Vec<(&str, polyspline::mesh::LinearMesh, Distance)> = vec![
+        (
+            "torus",
+            // 12 cells around the tube, 9 around the axis (40° between sections).
+            generate(Kind::Torus, 243),
+            Box::new(|x: [f64; 3]| ((radius(x) - 3.0).hypot(x[2]) - 1.0).abs()),
+        ),
+        (
+            "disc",
+            generate(Kind::Disc, 12),
+            Box::new(|x: [f64; 3]| (radius(x) - 1.0).abs()),
+        ),
+        (
+            "ellipse",
+            ogrid(&BoundaryLayer {
+                wall: ellipse,
+                around: 32,
+                across: 12,
+                ..Default::default()
+            })
+            .unwrap()
+            .mesh,
+            // The wall only: the far field is a circle of radius 20.
+            Box::new(move |x: [f64; 3]| {
+                ellipse.distance([x[0], x[1]]).min((radius(x) - 20.0).abs())
+            }),
+        ),
+    ];
+    for (name, mesh, distance) in cases {
+        let topo = polyspline::mesh::Topology::build(&mesh);
+        let found = polyspline::mesh::features::Features::detect_without_edits(
+            &mesh,
+            &topo,
+            &FeatureParams::default(),
+        );
+        // Tags mark no crease on these shapes (one wall tag, or caps with their own tags).
+        assert!(found.is_empty(), "{name}: {} corners", found.corners.len());
+        let path = scratch(&format!("coarse_{name}.msh"));
+        write_linear(&mesh, &path);
+        let on = curve_in_memory(&path, &CurveOptions::default()).unwrap();
+        let off = curve_in_memory(&path, &at_angle(180.0)).unwrap();
+        let straight = curve_in_memory(
+            &path,
+            &CurveOptions {
+                geometry: Geometry::Straight,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let (e_on, e_off, e_lin) = (
+            boundary_error(&on, &distance),
+            boundary_error(&off, &distance),
+            boundary_error(&straight, &distance),
+        );
+        eprintln!("{name}: default {e_on:?}, angle 180 {e_off:?}, linear {e_lin:?}");
+        assert!(
+            e_on.0 <= 1.05 * e_off.0 && e_on.1 <= 1.05 * e_off.1,
+            "{name}: {e_on:?} with default features, {e_off:?} without"
+        );
+        assert!(
+            e_on.0 < 0.8 * e_lin.0,
+            "{name}: {e_on:?} vs linear {e_lin:?}"
+        );
+        assert!(on.report.min_det_jacobian_bound.unwrap() > 0.0);
+    }
+}
+
+/// Real creases are kept however coarse: a cylinder's rims (not its 45° wall edges), a NACA
+/// trailing edge in 2D and extruded, the corners of a plate with a hole.
+#[test]
+fn real_creases_are_kept_on_coarse_meshes() {
+    use polyspline::mesh::generate::{BoundaryLayer, Kind, Wall, generate, ogrid};
+    let detect = |mesh: &polyspline::mesh::LinearMesh| {
+        let topo = polyspline::mesh::Topology::build(mesh);
+        let params = FeatureParams {
+            tags: false,
+            ..Default::default()
+        };
+        let f = polyspline::mesh::features::Features::detect_without_edits(mesh, &topo, &params);
+        (f, topo)
+    };
+    // Butterfly disc of 8 boundary edges, extruded in 2 layers: 2 rims of 8 edges.
+    let cylinder = generate(Kind::Cylinder, 24);
+    let (f, topo) = detect(&cylinder);
+    assert_eq!((f.edges.len(), f.corners.len()), (16, 0));
+    for &e in &f.edges {
+        let [a, b] = topo.edges[e as usize];
+        let z = |v: u32| cylinder.coords[v as usize][2];
+        assert!(z(a) == z(b) && (z(a) == 0.0 || z(a) == 2.0), "edge {a}-{b}");
+    }
+    let naca = |layers| {
+        ogrid(&BoundaryLayer {
+            wall: Wall::Naca { thickness: 0.12 },
+            around: 32,
+            across: 12,
+            layers,
+            ..Default::default()
+        })
+        .unwrap()
+        .mesh
+    };
+    let at_te = |x: [f64; 3]| (x[0] - 1.0).abs() < 1e-9 && x[1].abs() < 1e-9;
+    let m2 = naca(0);
+    let (f, _) = detect(&m2);
+    assert_eq!(f.corners.len(), 1);
+    assert!(at_te(m2.coords[f.corners[0] as usize]));
+    let m3 = naca(1);
+    let (f, topo) = detect(&m3);
+    // The two rims of the wall and of the far field, and the trailing edge across the span.
+    let across: Vec<_> = f
+        .edges
+        .iter()
+        .map(|&e| topo.edges[e as usize].map(|v| m3.coords[v as usize]))
+        .filter(|[a, b]| a[2] != b[2])
+        .collect();
+    assert_eq!(across.len(), 1, "{across:?}");
+    assert!(at_te(across[0][0]) && at_te(across[0][1]));
+    if !have_gmsh() {
+        return;
+    }
+    let plate = polyspline::io::read_mesh(&gmsh_mesh("plate_2d", 12), &Default::default()).unwrap();
+    let (f, _) = detect(&plate);
+    let mut corners: Vec<[f64; 3]> = f
+        .corners
+        .iter()
+        .map(|&v| plate.coords[v as usize])
+        .collect();
+    corners.sort_by(|a, b| a.partial_cmp(b).unwrap());
+    assert_eq!(
+        corners,
+        vec![
+            [-1.0, -1.0, 0.0],
+            [-1.0, 1.0, 0.0],
+            [1.0, -1.0, 0.0],
+            [1.0, 1.0, 0.0]
+        ]
+    );
+}
+
+/// The largest distance of the output nodes of the boundary facets whose input vertices lie on
+/// the line n·x = d from that line, and the number of such facets.
+fn off_line(c: &polyspline::pipeline::Curved, n: [f64; 2], d: f64) -> (f64, usize) {
+    let (mesh, topo, ho) = (&c.mesh, &c.topo, &c.ho);
+    let npf = ho.nodes_per_facet();
+    let dist = |x: [f64; 3]| (n[0] * x[0] + n[1] * x[1] - d).abs();
+    let (mut max, mut count) = (0.0f64, 0);
+    for (i, &f) in topo.boundary_facets.iter().enumerate() {
+        let on = topo
+            .facet_vertices(f as usize)
+            .iter()
+            .all(|&v| dist(mesh.coords[v as usize]) < 1e-12);
+        if on {
+            count += 1;
+            for &k in &ho.boundary[i * npf..(i + 1) * npf] {
+                max = max.max(dist(ho.nodes[k as usize]));
+            }
+        }
+    }
+    (max, count)
+}
+
+/// A Gmsh plate with a hole (frontal triangles recombined into quads): its four straight sides
+/// are found, reported, and stay straight to rounding at orders 2 and 3 (they bend without
+/// features); the hole is still curved.
+#[test]
+fn plate_with_a_hole_keeps_its_sides_straight() {
+    if !have_gmsh() {
+        return;
+    }
+    let input = gmsh_mesh("plate_2d", 12);
+    let diag = 8f64.sqrt();
+    let sides = [
+        ([1.0, 0.0], 1.0),
+        ([1.0, 0.0], -1.0),
+        ([0.0, 1.0], 1.0),
+        ([0.0, 1.0], -1.0),
+    ];
+    let hole = |x: [f64; 3]| {
+        if radius(x) < 0.9 {
+            (radius(x) - 0.5).abs()
+        } else {
+            0.0
+        }
+    };
+    let straight = curve_in_memory(
+        &input,
+        &CurveOptions {
+            geometry: Geometry::Straight,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    for order in [2, 3] {
+        let mut options = CurveOptions {
+            order,
+            ..Default::default()
+        };
+        let on = curve_in_memory(&input, &options).unwrap();
+        options.features.ignore = true;
+        let off = curve_in_memory(&input, &options).unwrap();
+        let f = on.report.features.unwrap();
+        assert_eq!((f.found.feature_corners, f.found.planar_patches), (4, 4));
+        assert!(f.planarity_max <= 1e-12, "{f:?}");
+        let (mut worst_on, mut worst_off) = (0.0f64, 0.0f64);
+        for (n, d) in sides {
+            let (m, count) = off_line(&on, n, d);
+            assert!(count >= 10, "side {n:?} {d}: {count} facets");
+            worst_on = worst_on.max(m);
+            worst_off = worst_off.max(off_line(&off, n, d).0);
+        }
+        eprintln!("order {order}: sides {worst_on:.2e} (features ignored {worst_off:.2e})");
+        assert!(worst_on <= 1e-12 * diag, "order {order}: {worst_on}");
+        assert!(worst_off > 1e-9 * diag, "order {order}: {worst_off}");
+        let (h_on, h_lin) = (
+            boundary_error(&on, &hole).0,
+            boundary_error(&straight, &hole).0,
+        );
+        assert!(h_on < 0.1 * h_lin, "hole: {h_on} vs linear {h_lin}");
+        assert!(on.report.min_det_jacobian_bound.unwrap() > 0.0);
+    }
+}
+
+/// The generated C-grid's outflow side x = 11 is a straight chain: its nodes stay on it.
+#[test]
+fn generated_c_grid_keeps_its_outflow_straight() {
+    use polyspline::mesh::generate::{BoundaryLayer, Wall, cgrid};
+    let mesh = cgrid(&BoundaryLayer {
+        wall: Wall::Naca { thickness: 0.12 },
+        around: 64,
+        across: 24,
+        ..Default::default()
+    })
+    .unwrap()
+    .mesh;
+    let path = scratch("cgrid_straight.msh");
+    write_linear(&mesh, &path);
+    let xmax = mesh.coords.iter().map(|x| x[0]).fold(f64::MIN, f64::max);
+    let on = curve_in_memory(&path, &CurveOptions::default()).unwrap();
+    let mut ignored = CurveOptions::default();
+    ignored.features.ignore = true;
+    let off = curve_in_memory(&path, &ignored).unwrap();
+    let (lo, hi) = on.mesh.bounding_box();
+    let diag = lo
+        .iter()
+        .zip(&hi)
+        .map(|(a, b)| (b - a).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    let (m, count) = off_line(&on, [1.0, 0.0], xmax);
+    let (m_off, _) = off_line(&off, [1.0, 0.0], xmax);
+    eprintln!("outflow: {m:.2e} (features ignored {m_off:.2e}), {count} facets");
+    assert!(count > 10);
+    assert!(m <= 1e-12 * diag, "{m}");
+    assert!(on.report.features.unwrap().found.planar_patches >= 1);
+}

@@ -23,7 +23,8 @@ use crate::mesh::topology::HEX_VERTEX_PARAMS;
 use crate::mesh::vec3::{add, dot, norm, sub};
 use crate::mesh::{LinearMesh, Topology};
 use crate::spline::{ControlPoint, SplineSpace};
-use std::collections::HashMap;
+use std::cmp::Reverse;
+use std::collections::{BinaryHeap, HashMap};
 
 /// Per-patch and per-curve boundary models at feature vertices.
 #[derive(Clone, Debug, Default)]
@@ -37,6 +38,9 @@ pub struct FeatureModels {
     /// Boundary edge id → patch of its faces (non-feature edges at feature vertices).
     edge_patch: HashMap<u32, u32>,
     edge_mask: Vec<bool>,
+    /// Non-feature vertices of planar patches (2D: straight chains) → their model within the
+    /// plane, replacing the flat model of their fan (see module docs).
+    pub(crate) in_plane: HashMap<u32, VertexModel>,
 }
 
 /// Where a sample lies on the boundary.
@@ -49,18 +53,30 @@ pub(crate) enum BoundaryEntity {
 
 impl FeatureModels {
     /// Models at the feature vertices of `features`; `cos_max` bounds the angle between a
-    /// patch's facet normals and the patch normal at a vertex (beyond it: no model).
+    /// patch's facet normals and the patch normal at a vertex (beyond it: no model); the
+    /// in-plane models of planar patches decay over `decay` × the rim's edge length.
     pub fn build(
         mesh: &LinearMesh,
         topo: &Topology,
         features: &Features,
         cos_max: f64,
+        decay: f64,
     ) -> FeatureModels {
         let mut out = FeatureModels {
             edge_mask: features.edge_mask.clone(),
             ..Default::default()
         };
         if topo.dim != 3 {
+            // Straight chains: exactly flat models, so their targets stay on the line.
+            for (i, &f) in topo.boundary_facets.iter().enumerate() {
+                if let Some((n, _)) = features.planes[features.facet_patch[i] as usize] {
+                    for &v in topo.facet_vertices(f as usize) {
+                        if !features.vertex_mask[v as usize] {
+                            out.in_plane.insert(v, flat(n));
+                        }
+                    }
+                }
+            }
             return out;
         }
         let x = |v: u32| mesh.coords[v as usize];
@@ -114,7 +130,110 @@ impl FeatureModels {
                 out.curve.insert(v, m);
             }
         }
+        // A patch one element wide across the curve (the wall of a one-layer extrusion) has
+        // too few vertices at v for a quadric: the feature curve is its best model there.
+        for (&v, faces) in &fan {
+            if let Some(m) = out.curve.get(&v).copied() {
+                for &(_, p) in faces {
+                    out.patch.entry((v, p)).or_insert(m);
+                }
+            }
+        }
+        out.in_plane_models(mesh, topo, features, &along, decay);
         out
+    }
+
+    /// The 2D problem inside each planar patch: its rim vertices take their feature curve's
+    /// model (in the plane) for the patch, and the patch's other vertices inherit the model of
+    /// the nearest rim vertex (along the patch's edges) with weight 1 − d / (`decay` · ℓ), ℓ
+    /// the rim's edge length there — as interior vertices of a 2D mesh inherit its boundary's.
+    /// Those beyond reach keep a flat model.
+    fn in_plane_models(
+        &mut self,
+        mesh: &LinearMesh,
+        topo: &Topology,
+        features: &Features,
+        along: &HashMap<u32, Vec<u32>>,
+        decay: f64,
+    ) {
+        let x = |v: u32| mesh.coords[v as usize];
+        let mut adj: HashMap<u32, Vec<u32>> = HashMap::new();
+        let mut plane_of: HashMap<u32, [f64; 3]> = HashMap::new();
+        let mut rim: Vec<(u32, u32)> = Vec::new();
+        for (i, &f) in topo.boundary_facets.iter().enumerate() {
+            let p = features.facet_patch[i];
+            let Some((n, _)) = features.planes[p as usize] else {
+                continue;
+            };
+            let e = topo.facet_elements[f as usize][0] as usize;
+            let side = topo.facet_sides[f as usize][0] as usize;
+            for ed in crate::mesh::features::face_edges(topo, e, side) {
+                let [a, b] = topo.edges[ed as usize];
+                adj.entry(a).or_default().push(b);
+                adj.entry(b).or_default().push(a);
+            }
+            for &v in &topo.faces[f as usize] {
+                if features.vertex_mask[v as usize] {
+                    rim.push((v, p));
+                } else {
+                    plane_of.insert(v, n);
+                }
+            }
+        }
+        rim.sort_unstable();
+        rim.dedup();
+        // Rim vertices whose feature curve lies in the plane: the curve is the patch's boundary.
+        let mut heap = BinaryHeap::new();
+        let mut best: HashMap<u32, (f64, u32)> = HashMap::new();
+        for &(v, p) in &rim {
+            let (Some(m), Some((n, _))) = (self.curve.get(&v), features.planes[p as usize]) else {
+                continue;
+            };
+            if dot(m.normal, n).abs() > 1e-6 {
+                continue;
+            }
+            self.patch.insert((v, p), *m);
+            if best.insert(v, (0.0, v)).is_none() {
+                heap.push(Reverse((0u64, v)));
+            }
+        }
+        let ell = |s: u32| {
+            let nbs = &along[&s];
+            nbs.iter().map(|&w| norm(sub(x(w), x(s)))).sum::<f64>() / nbs.len() as f64
+        };
+        while let Some(Reverse((bits, v))) = heap.pop() {
+            let (d, s) = best[&v];
+            if bits != d.to_bits() {
+                continue;
+            }
+            let cutoff = decay * ell(s);
+            for &w in adj.get(&v).map_or(&[][..], |a| &a[..]) {
+                if !plane_of.contains_key(&w) {
+                    continue;
+                }
+                let nd = d + norm(sub(x(w), x(v)));
+                if nd < cutoff && best.get(&w).is_none_or(|&(old, _)| nd < old) {
+                    best.insert(w, (nd, s));
+                    heap.push(Reverse((nd.to_bits(), w)));
+                }
+            }
+        }
+        for (&v, &n) in &plane_of {
+            let model = match best.get(&v) {
+                Some(&(d, s)) => VertexModel {
+                    weight: 1.0 - d / (decay * ell(s)),
+                    ..self.curve[&s]
+                },
+                None => flat(n),
+            };
+            self.in_plane.insert(v, model);
+        }
+    }
+
+    /// The model of feature vertex `k` for samples inside the mesh: its feature curve's, so
+    /// the cells along a curved crease follow it as they follow a smooth boundary.
+    pub(crate) fn interior_model(&self, k: u32) -> Option<&VertexModel> {
+        self.curve.get(&k)
     }
 
     /// The model of vertex `k` for a sample on the boundary entity `at`.
@@ -130,6 +249,15 @@ impl FeatureModels {
                 self.patch.get(&(k, *p))
             }
         }
+    }
+}
+
+/// A model without curvature (targets on the chords), of normal `n`.
+fn flat(n: [f64; 3]) -> VertexModel {
+    VertexModel {
+        normal: n,
+        h: [[0.0; 3]; 3],
+        weight: 1.0,
     }
 }
 
@@ -195,17 +323,18 @@ pub fn sample_mask(features: &Features, mesh: &LinearMesh, e: usize) -> u64 {
 }
 
 /// Project the boundary control points of `space` in `cps` onto the planes of the planar
-/// patches of `features` they belong to (see module docs). Returns how many moved.
+/// patches (2D: the lines of the straight chains) of `features` they belong to (see module
+/// docs). Returns how many moved.
 pub fn project_onto_planes(
     space: &SplineSpace,
     topo: &Topology,
     features: &Features,
     cps: &mut [[f64; 3]],
 ) -> usize {
-    if topo.dim != 3 || features.planes.iter().all(|p| p.is_none()) {
+    if features.planes.iter().all(|p| p.is_none()) {
         return 0;
     }
-    // Planar patches of every boundary face, edge and vertex.
+    // Planar patches (2D: straight chains) of every boundary face, edge and vertex.
     let mut face_plane: HashMap<u32, u32> = HashMap::new();
     let mut edge_planes: HashMap<u32, Vec<u32>> = HashMap::new();
     let mut vertex_planes: HashMap<u32, Vec<u32>> = HashMap::new();
@@ -214,13 +343,18 @@ pub fn project_onto_planes(
         if features.planes[p as usize].is_none() {
             continue;
         }
-        face_plane.insert(f, p);
-        let e = topo.facet_elements[f as usize][0] as usize;
-        let side = topo.facet_sides[f as usize][0] as usize;
-        for ed in crate::mesh::features::face_edges(topo, e, side) {
-            edge_planes.entry(ed).or_default().push(p);
+        if topo.dim == 2 {
+            // The facet is the edge itself.
+            edge_planes.entry(f).or_default().push(p);
+        } else {
+            face_plane.insert(f, p);
+            let e = topo.facet_elements[f as usize][0] as usize;
+            let side = topo.facet_sides[f as usize][0] as usize;
+            for ed in crate::mesh::features::face_edges(topo, e, side) {
+                edge_planes.entry(ed).or_default().push(p);
+            }
         }
-        for &v in &topo.faces[f as usize] {
+        for &v in topo.facet_vertices(f as usize) {
             vertex_planes.entry(v).or_default().push(p);
         }
     }
@@ -242,7 +376,9 @@ pub fn project_onto_planes(
             .iter()
             .map(|&p| features.planes[p as usize].expect("planar"))
             .collect();
-        if let Some(x) = project(*c, &planes) {
+        // Planes that coincide (two straight chains on one line, split by a tag change) leave
+        // the intersection undefined: one of them is the constraint.
+        if let Some(x) = project(*c, &planes).or_else(|| project(*c, &planes[..1])) {
             moved += 1;
             *c = x;
         }

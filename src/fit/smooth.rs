@@ -36,7 +36,10 @@
 //!
 //! With detected sharp features ([`SmoothTargets::build_with_features`]) the vertices on
 //! features take their models per patch and along feature curves instead
-//! ([`super::features::FeatureModels`]), so no model averages across a feature.
+//! ([`super::features::FeatureModels`]), so no model averages across a feature; samples inside
+//! the mesh use a feature vertex's curve model. The vertices of planar patches (2D: straight
+//! chains) take in-plane models from the patch's rim instead of their flat fan model, and in
+//! 3D are no sources for the interior vertices.
 
 use super::features::{BoundaryEntity, FeatureModels};
 use crate::mesh::features::Features;
@@ -195,6 +198,16 @@ impl SmoothTargets {
         let smooth_vertices = models.iter().filter(|m| m.is_some()).count();
         let feature_vertices =
             topo.vertex_on_boundary.iter().filter(|&&b| b).count() - smooth_vertices;
+        let feature_models =
+            features.map(|f| FeatureModels::build(mesh, topo, f, cos_max, params.decay));
+        // A 3D planar patch is its own 2D problem (its vertices take in-plane models below):
+        // the cells next to it inherit from the curved boundary, not from the plane.
+        let in_plane_3d = |v: usize| {
+            mesh.dim == 3
+                && feature_models
+                    .as_ref()
+                    .is_some_and(|f| f.in_plane.contains_key(&(v as u32)))
+        };
 
         // Interior vertices inherit the nearest smooth boundary vertex's model (Dijkstra along
         // mesh edges from the smooth boundary vertices, cut off at decay · ℓ).
@@ -220,7 +233,7 @@ impl SmoothTargets {
             let mut source = vec![NONE; nv];
             let mut heap = BinaryHeap::new();
             for v in 0..nv {
-                if models[v].is_some() {
+                if models[v].is_some() && !in_plane_3d(v) {
                     dist[v] = 0.0;
                     source[v] = v as u32;
                     heap.push(Reverse((0u64, v as u32)));
@@ -257,13 +270,18 @@ impl SmoothTargets {
                 }
             }
         }
+        if let Some(f) = &feature_models {
+            for (&v, m) in &f.in_plane {
+                models[v as usize] = Some(*m);
+            }
+        }
         SmoothTargets {
             dim: mesh.dim,
             models,
             smooth_vertices,
             feature_vertices,
             blended_vertices,
-            feature_models: features.map(|f| FeatureModels::build(mesh, topo, f, cos_max)),
+            feature_models,
         }
     }
 
@@ -337,10 +355,11 @@ impl SmoothTargets {
             let mut wsum = 0.0;
             for &k in ks {
                 let model = self.models[k].as_ref().or_else(|| {
-                    self.feature_models
-                        .as_ref()
-                        .zip(at)
-                        .and_then(|(f, at)| f.model(k as u32, at))
+                    let f = self.feature_models.as_ref()?;
+                    match at {
+                        Some(at) => f.model(k as u32, at),
+                        None => f.interior_model(k as u32),
+                    }
                 });
                 if let Some(model) = model {
                     let c = model.correction(p, xs, phi);

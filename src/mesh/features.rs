@@ -13,6 +13,15 @@
 //!   boundary turns by more than `angle_deg`, where the tags of the two boundary edges differ,
 //!   or that do not lie on exactly two boundary edges; edits `add i` / `remove i` name vertices.
 //!   Patches are the boundary chains between corners (a closed loop without corners is one).
+//! * **Coarse smooth boundaries.** A turning above `angle_deg` makes a feature only where it is
+//!   concentrated: more than [`CONCENTRATION`] × the same-way turning of the flatter of its two
+//!   neighbours (3D: the edges opposite it in its two faces; 2D: the neighbouring vertices;
+//!   unknown or opposite turning counts as 0), see `concentrated`. A coarse torus or ellipse turns by 45° at every edge or vertex, smoothly;
+//!   a cylinder's rim, a box edge or a trailing edge turns with flat facets beside it. A shape
+//!   whose every edge turns alike (a one-hex cube) is taken for smooth.
+//! * **Planes and lines.** A patch is planar (3D) or a chain straight (2D) when its vertices lie
+//!   within 1e-6 × the bounding-box diagonal of its least-squares plane or line; the fit keeps
+//!   such patches planar and chains straight to rounding.
 //!
 //! Invariants: feature edges are boundary edges; [`Features::vertex_mask`] is true exactly at
 //! the vertices of feature edges (3D) or at corners (2D); every boundary facet has one patch.
@@ -81,8 +90,8 @@ pub struct FeatureReport {
     /// Largest distance of an output node at a feature vertex from the input vertex, relative
     /// to the bounding-box diagonal.
     pub feature_vertex_deviation_max: f64,
-    /// Largest distance of an output boundary node of a planar patch from the patch's plane,
-    /// relative to the bounding-box diagonal (0 without planar patches).
+    /// Largest distance of an output boundary node of a planar patch (2D: straight chain) from
+    /// the patch's plane (line), relative to the bounding-box diagonal (0 without any).
     pub planarity_max: f64,
 }
 
@@ -180,7 +189,8 @@ pub struct Features {
     pub facet_patch: Vec<u32>,
     pub n_patches: usize,
     /// Per patch: `Some((unit normal, offset))` when all its vertices lie on the plane
-    /// `n·x = offset` within 1e-6 × the mesh's bounding-box diagonal (3D only).
+    /// `n·x = offset` within 1e-6 × the mesh's bounding-box diagonal; in 2D the line of a
+    /// straight chain (normal with zero z).
     pub planes: Vec<Option<([f64; 3], f64)>>,
     /// Per vertex: on a feature edge (3D) or a corner (2D).
     pub vertex_mask: Vec<bool>,
@@ -197,6 +207,7 @@ pub struct FeatureSummary {
     pub feature_corners: usize,
     pub feature_vertices: usize,
     pub patches: usize,
+    /// Planar patches (3D) or straight chains (2D).
     pub planar_patches: usize,
     /// Elements a crease runs between ([`Features::crease_elements`]).
     pub crease_elements: usize,
@@ -213,7 +224,6 @@ impl Features {
         edits_path: &Path,
     ) -> Result<Features, FeatureError> {
         let nv = mesh.n_vertices();
-        let cos_max = params.angle_deg.to_radians().cos();
         let nb = topo.boundary_facets.len();
         let bad = |line: usize, what: String| FeatureError::Line {
             path: edits_path.to_owned(),
@@ -225,6 +235,7 @@ impl Features {
         let mut edge_mask = vec![false; topo.edges.len()];
         // Boundary facets at each vertex (2D) or edge (3D), as indices into boundary_facets.
         if topo.dim == 2 {
+            let by_angle = corners_2d(mesh, topo, params.angle_deg);
             let mut at: Vec<Vec<usize>> = vec![Vec::new(); nv];
             for (i, &f) in topo.boundary_facets.iter().enumerate() {
                 for &v in topo.facet_vertices(f as usize) {
@@ -235,16 +246,7 @@ impl Features {
                 match at[v][..] {
                     [] => {}
                     [i, j] => {
-                        let other = |i: usize| {
-                            let e = topo.edges[topo.boundary_facets[i] as usize];
-                            if e[0] as usize == v { e[1] } else { e[0] }
-                        };
-                        let x = mesh.coords[v];
-                        let a = sub(mesh.coords[other(i) as usize], x);
-                        let b = sub(mesh.coords[other(j) as usize], x);
-                        // Turning angle = π − the angle between the two edges.
-                        let cos_turn = -dot(a, b) / (norm(a) * norm(b));
-                        vertex_mask[v] = cos_turn < cos_max || (params.tags && tag(i) != tag(j));
+                        vertex_mask[v] = by_angle[v] || (params.tags && tag(i) != tag(j));
                     }
                     _ => vertex_mask[v] = true,
                 }
@@ -281,12 +283,11 @@ impl Features {
                     edge_facets[ed as usize].push(i);
                 }
             }
+            let by_angle = creases_3d(mesh, topo, &normal, &edge_facets, params.angle_deg);
             for (ed, fs) in edge_facets.iter().enumerate() {
                 edge_mask[ed] = match fs[..] {
                     [] => false,
-                    [i, j] => {
-                        dot(normal[i], normal[j]) < cos_max || (params.tags && tag(i) != tag(j))
-                    }
+                    [i, j] => by_angle[ed] || (params.tags && tag(i) != tag(j)),
                     _ => true,
                 };
             }
@@ -373,7 +374,7 @@ impl Features {
         let planes = if topo.dim == 3 {
             planar_patches(mesh, topo, &facet_patch, n_patches, tol)
         } else {
-            vec![None; n_patches]
+            straight_chains(mesh, topo, &facet_patch, n_patches, tol)
         };
         let edges: Vec<u32> = (0..edge_mask.len() as u32)
             .filter(|&e| edge_mask[e as usize])
@@ -505,6 +506,186 @@ pub fn face_edges(topo: &Topology, e: usize, side: usize) -> Vec<u32> {
         .collect()
 }
 
+/// A turning above the feature angle is a crease only where it is more than this many times
+/// the turning next to it.
+pub const CONCENTRATION: f64 = 4.0;
+
+/// Whether a turning of `theta` degrees (signed, positive where the boundary is convex) is a
+/// crease at `angle_deg`, given the signed turnings `beside` of the neighbouring edges across
+/// (3D) or vertices along the boundary (2D), `None` where unknown. A smooth boundary sampled
+/// coarsely turns by a lot everywhere, but smoothly: the next edge or vertex turns the same
+/// way by a comparable angle. A crease concentrates its turning on one line with flatter
+/// facets beside it. So the turning must exceed `angle_deg` and [`CONCENTRATION`] × the
+/// smaller part of it that a neighbour turning the same way explains.
+fn concentrated(theta: f64, beside: [Option<f64>; 2], angle_deg: f64) -> bool {
+    if theta.abs().is_nan() || theta.abs() <= angle_deg {
+        return false;
+    }
+    let explained = beside
+        .iter()
+        .map(|b| b.map_or(0.0, |b| (b * theta.signum()).clamp(0.0, theta.abs())))
+        .fold(f64::INFINITY, f64::min);
+    theta.abs() > CONCENTRATION * explained
+}
+
+fn centroid(xs: &[[f64; 3]]) -> [f64; 3] {
+    let s = xs.iter().fold([0.0; 3], |a, &x| add(a, x));
+    s.map(|c| c / xs.len() as f64)
+}
+
+/// 2D corners by angle: per vertex, whether it lies on two boundary edges and the boundary
+/// turns there by a [`concentrated`] angle above `angle_deg`.
+fn corners_2d(mesh: &LinearMesh, topo: &Topology, angle_deg: f64) -> Vec<bool> {
+    let nv = mesh.n_vertices();
+    let x = |v: u32| mesh.coords[v as usize];
+    // Boundary edges oriented with their element on the left, so the sign of the turning
+    // says convex (positive) or re-entrant whatever the elements' own orientation.
+    let (mut prev, mut next, mut count) = (vec![NONE; nv], vec![NONE; nv], vec![0u32; nv]);
+    for &f in &topo.boundary_facets {
+        let [mut p, mut q] = topo.edges[f as usize];
+        let e = topo.facet_elements[f as usize][0] as usize;
+        let c = centroid(&mesh.element_coords(e)[..4]);
+        let (dq, dc) = (sub(x(q), x(p)), sub(c, x(p)));
+        if dq[0] * dc[1] - dq[1] * dc[0] < 0.0 {
+            std::mem::swap(&mut p, &mut q);
+        }
+        next[p as usize] = q;
+        prev[q as usize] = p;
+        count[p as usize] += 1;
+        count[q as usize] += 1;
+    }
+    let turning: Vec<Option<f64>> = (0..nv)
+        .map(|v| {
+            if count[v] != 2 || prev[v] == NONE || next[v] == NONE {
+                return None;
+            }
+            let d1 = sub(mesh.coords[v], x(prev[v]));
+            let d2 = sub(x(next[v]), mesh.coords[v]);
+            Some(
+                (d1[0] * d2[1] - d1[1] * d2[0])
+                    .atan2(dot(d1, d2))
+                    .to_degrees(),
+            )
+        })
+        .collect();
+    (0..nv)
+        .map(|v| {
+            turning[v].is_some_and(|t| {
+                let beside = [prev[v], next[v]].map(|w| turning[w as usize]);
+                concentrated(t, beside, angle_deg)
+            })
+        })
+        .collect()
+}
+
+/// 3D creases by angle: per edge, whether it lies on two boundary faces whose unit normals
+/// `normal` turn by a [`concentrated`] angle above `angle_deg`, against the edges opposite
+/// it in those two faces. `edge_facets` lists the boundary facets (indices into
+/// `topo.boundary_facets`) of each edge.
+fn creases_3d(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    normal: &[[f64; 3]],
+    edge_facets: &[Vec<usize>],
+    angle_deg: f64,
+) -> Vec<bool> {
+    let x = |v: u32| mesh.coords[v as usize];
+    // Outward normals (away from the element's centroid) and face centres.
+    let mut out = normal.to_vec();
+    let mut centre = vec![[0.0; 3]; normal.len()];
+    for (i, &f) in topo.boundary_facets.iter().enumerate() {
+        centre[i] = centroid(&topo.faces[f as usize].map(x));
+        let inside = centroid(&mesh.element_coords(topo.facet_elements[f as usize][0] as usize));
+        if dot(out[i], sub(inside, centre[i])) > 0.0 {
+            out[i] = out[i].map(|c| -c);
+        }
+    }
+    let turning: Vec<Option<f64>> = edge_facets
+        .iter()
+        .map(|fs| match fs[..] {
+            [i, j] => {
+                let t = dot(out[i], out[j]).clamp(-1.0, 1.0).acos().to_degrees();
+                // Convex where face j bends below face i's plane.
+                Some(if dot(out[i], sub(centre[j], centre[i])) > 0.0 {
+                    -t
+                } else {
+                    t
+                })
+            }
+            _ => None,
+        })
+        .collect();
+    let opposite = |i: usize, ed: usize| -> Option<usize> {
+        let [a, b] = topo.edges[ed];
+        let q = topo.faces[topo.boundary_facets[i] as usize];
+        let rest: Vec<u32> = q.into_iter().filter(|&v| v != a && v != b).collect();
+        let &[c, d] = &rest[..] else { return None };
+        topo.edges.binary_search(&[c.min(d), c.max(d)]).ok()
+    };
+    edge_facets
+        .iter()
+        .enumerate()
+        .map(|(ed, fs)| match (&fs[..], turning[ed]) {
+            (&[i, j], Some(t)) => {
+                let beside = [i, j].map(|k| opposite(k, ed).and_then(|o| turning[o]));
+                concentrated(t, beside, angle_deg)
+            }
+            _ => false,
+        })
+        .collect()
+}
+
+/// 2D: the lines (unit normal with zero z, offset) of the boundary chains whose vertices all
+/// lie within `tol` of their least-squares line; a chain of one edge is straight.
+fn straight_chains(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    facet_patch: &[u32],
+    n_patches: usize,
+    tol: f64,
+) -> Vec<Option<([f64; 3], f64)>> {
+    // Per chain: the vertex count and sums of x, y (each edge's two ends).
+    let mut sums = vec![[0.0f64; 3]; n_patches];
+    for (i, &f) in topo.boundary_facets.iter().enumerate() {
+        for v in topo.edges[f as usize] {
+            let x = mesh.coords[v as usize];
+            let s = &mut sums[facet_patch[i] as usize];
+            *s = [s[0] + 1.0, s[1] + x[0], s[2] + x[1]];
+        }
+    }
+    let centre: Vec<[f64; 2]> = sums.iter().map(|s| [s[1] / s[0], s[2] / s[0]]).collect();
+    let mut moments = vec![[0.0f64; 3]; n_patches];
+    for (i, &f) in topo.boundary_facets.iter().enumerate() {
+        let p = facet_patch[i] as usize;
+        for v in topo.edges[f as usize] {
+            let x = mesh.coords[v as usize];
+            let (dx, dy) = (x[0] - centre[p][0], x[1] - centre[p][1]);
+            let m = &mut moments[p];
+            *m = [m[0] + dx * dx, m[1] + dx * dy, m[2] + dy * dy];
+        }
+    }
+    let mut lines: Vec<Option<([f64; 3], f64)>> = (0..n_patches)
+        .map(|p| {
+            let [xx, xy, yy] = moments[p];
+            // The principal direction of the chain's points; its normal.
+            let phi = 0.5 * (2.0 * xy).atan2(xx - yy);
+            let n = [-phi.sin(), phi.cos(), 0.0];
+            (xx + yy > 0.0).then(|| (n, n[0] * centre[p][0] + n[1] * centre[p][1]))
+        })
+        .collect();
+    for (i, &f) in topo.boundary_facets.iter().enumerate() {
+        let p = facet_patch[i] as usize;
+        if let Some((n, d)) = lines[p]
+            && topo.edges[f as usize]
+                .iter()
+                .any(|&v| (dot(n, mesh.coords[v as usize]) - d).abs() > tol)
+        {
+            lines[p] = None;
+        }
+    }
+    lines
+}
+
 /// Planes of the patches whose vertices are all within `tol` of their area-weighted plane.
 fn planar_patches(
     mesh: &LinearMesh,
@@ -566,14 +747,15 @@ mod tests {
         mesh
     }
 
-    /// A cube of one hex: 12 feature edges, 8 corners, 6 planar patches; a 3×3×3 grid of it
-    /// (4 per axis) has the same corners and 4 mesh edges per cube edge. The tags alone find the same.
+    /// A cube of 4×4×4 hexes: 12 feature edges of 4 mesh edges, 8 corners, 6 planar patches. The tags alone find the same. A cube of one hex turns by
+    /// 90° at every edge, as a coarse sphere would: its tags find its edges, the angle does not.
     #[test]
     fn cube_has_twelve_feature_edges_and_eight_corners() {
-        let one = untagged(grid_3d(&[0.0, 1.0], &[0.0, 1.0], &[0.0, 1.0]));
+        let one = grid_3d(&[0.0, 1.0], &[0.0, 1.0], &[0.0, 1.0]);
         let f = detect(&one, FeatureParams::default());
         assert_eq!((f.edges.len(), f.corners.len(), f.n_patches), (12, 8, 6));
         assert!(f.planes.iter().all(|p| p.is_some()));
+        assert!(detect(&untagged(one), FeatureParams::default()).is_empty());
         let u = uniform(4, 0.25);
         let grid = grid_3d(&u, &u, &u);
         let f = detect(&untagged(grid.clone()), FeatureParams::default());
@@ -590,7 +772,8 @@ mod tests {
     }
 
     /// An extruded polygon: the rims are features at 35°, the 30° turns between wall facets
-    /// are not, and a 25° threshold finds the wall's vertical edges too.
+    /// are not; at 25° the wall's vertical edges are not either (every one turns alike: a
+    /// smooth wall sampled coarsely), but a spike in the wall is.
     #[test]
     fn cylinder_rims_and_angle_threshold() {
         let k = 12; // 30° between neighbouring wall facets
@@ -629,9 +812,26 @@ mod tests {
                 tags: false,
             },
         );
-        // Plus 2 × k vertical walls' edges of 2 segments.
-        assert_eq!(fine.edges.len(), 4 * k + 2 * 2 * k);
+        assert_eq!(fine.edges, f.edges);
         assert!(detect(&mesh, FeatureParams::off()).is_empty());
+        // Pull the outer wall out to a spike at (3, 0): the wall turns by 104° there and by
+        // -7° (the other way) next to it, so the spike's edge is a crease.
+        let mut bent = mesh.clone();
+        for p in bent.coords.iter_mut() {
+            if (p[0] - 2.0).abs() < 1e-12 && p[1].abs() < 1e-12 {
+                p[0] = 3.0;
+            }
+        }
+        let g = detect(&bent, FeatureParams::default());
+        let vertical: Vec<[f64; 3]> = g
+            .edges
+            .iter()
+            .map(|&e| Topology::build(&bent).edges[e as usize])
+            .filter(|[p, q]| bent.coords[*p as usize][2] != bent.coords[*q as usize][2])
+            .map(|[p, _]| bent.coords[p as usize])
+            .collect();
+        assert!(!vertical.is_empty(), "{:?}", g.edges.len());
+        assert!(vertical.iter().all(|x| x[0] == 3.0 && x[1].abs() < 1e-12));
     }
 
     /// 2D: the corners of a square are features, the straight sides' vertices are not; a
@@ -644,6 +844,13 @@ mod tests {
         let f = Features::detect_without_edits(&mesh, &topo, &FeatureParams::default());
         assert_eq!(f.corners, vec![0, 3, 12, 15]);
         assert_eq!(f.n_patches, 4);
+        // The four sides are straight chains, on their lines to rounding.
+        for (i, &e) in topo.boundary_facets.iter().enumerate() {
+            let (n, d) = f.planes[f.facet_patch[i] as usize].expect("straight");
+            for v in topo.edges[e as usize] {
+                assert!((dot(n, mesh.coords[v as usize]) - d).abs() < 1e-15);
+            }
+        }
         // Each corner is one quad's own corner: nothing to demote.
         assert!(f.crease_elements(&topo).iter().all(|&m| !m));
         // A corner added on the bottom side runs between quads 0 and 1.

@@ -6,7 +6,10 @@ KIND: `cylinder`: radius 1, z in [0, 2]; an O-grid disc (inner square + 4 blocks
       N elements per block side.
       `box_hole`: the box [-1, 1]² × [0, 1] with a cylindrical hole of radius 0.5 along z;
       4 blocks between the hole and the box sides, extruded, N elements per block side.
-Writes MSH 4.1 with hexahedra only (no boundary tags: the features come from the angles).
+      `plate_2d`: the square [-1, 1]² with a hole of radius 0.5, quads (Gmsh's frontal
+      algorithm, triangles recombined), element size 2 / N.
+Writes MSH 4.1 with hexahedra (quads for plate_2d) only (no boundary tags: the features come
+from the angles).
 """
 import math
 import sys
@@ -14,10 +17,32 @@ import sys
 import gmsh
 
 
+def plate_2d(out, n):
+    occ = gmsh.model.occ
+    square = occ.addRectangle(-1, -1, 0, 2, 2)
+    hole = occ.addDisk(0, 0, 0, 0.5, 0.5)
+    occ.cut([(2, square)], [(2, hole)])
+    occ.synchronize()
+    gmsh.option.setNumber("Mesh.MeshSizeMin", 2.0 / n)
+    gmsh.option.setNumber("Mesh.MeshSizeMax", 2.0 / n)
+    gmsh.option.setNumber("Mesh.Algorithm", 6)
+    gmsh.option.setNumber("Mesh.RecombineAll", 1)
+    gmsh.model.mesh.generate(2)
+    gmsh.option.setNumber("Mesh.SaveAll", 0)
+    surfaces = [t for _, t in gmsh.model.getEntities(2)]
+    gmsh.model.addPhysicalGroup(2, surfaces, 1)
+    gmsh.option.setNumber("Mesh.MshFileVersion", 4.1)
+    gmsh.write(out)
+    gmsh.finalize()
+
+
 def main():
     kind, out, n = sys.argv[1], sys.argv[2], int(sys.argv[3])
     gmsh.initialize()
     gmsh.option.setNumber("General.Terminal", 0)
+    if kind == "plate_2d":
+        plate_2d(out, n)
+        return
     geo = gmsh.model.geo
     c = geo.addPoint(0, 0, 0)
     curves = {}
