@@ -7,10 +7,12 @@ usage:
       linearly at refinement LEVEL (1 = coarsest; the mesh size halves per level) and writes the
       linear mesh, then Gmsh's own order-2 mesh of it (setOrder(2): high-order nodes on the CAD).
       Prints {"elements": N}.
-  fidelity_shapes.py measure SHAPE FILE.msh [FILE.msh ...]
+  fidelity_shapes.py measure SHAPE [--only curved|all] FILE.msh [FILE.msh ...]
       Prints one JSON object per file: RMS and max distance of its boundary from the exact
       surface (relative to the bounding-box diagonal), sampled on a 9 x 9 (3D) or 17 (2D) lattice
-      of parameter points per boundary side, and the number of boundary sides.
+      of parameter points per boundary side, and the number of boundary sides. With
+      `--only curved`, only the points nearest to a curved part of the surface count (the hole
+      of the plate, the side of the cylinder; every point of the other shapes).
 
 Shapes (all with Gmsh 4.15's Python API; MSH 2.2 output):
   disk      O-grid disk of radius 1 (quads): a square block and four ring blocks, transfinite
@@ -223,9 +225,21 @@ def boundary_points(path, dim, samples=None):
     return np.concatenate(pts), float(np.linalg.norm(hi - lo)), sides
 
 
-def measure(shape, path):
+def curved(shape, x):
+    """Mask of the points x nearest to a curved part of the shape's boundary."""
+    if shape == "plate":
+        return np.abs(np.hypot(x[:, 0], x[:, 1]) - 0.5) < distance(shape, x) + 1e-3
+    if shape == "cylinder":
+        rho, z = np.hypot(x[:, 0], x[:, 1]), x[:, 2]
+        return np.abs(rho - 1.0) < np.minimum(np.abs(z), np.abs(z - 1.0))
+    return np.ones(len(x), dtype=bool)
+
+
+def measure(shape, path, only="all"):
     dim = DIM[shape]
     x, diag, sides = boundary_points(path, dim)
+    if only == "curved":
+        x = x[curved(shape, x)]
     d = distance(shape, x) / diag
     return {"file": path, "rms": float(np.sqrt(np.mean(d * d))), "max": float(d.max()), "sides": sides}
 
@@ -234,8 +248,11 @@ def main(argv):
     if len(argv) >= 5 and argv[0] == "make":
         print(json.dumps(make(argv[1], int(argv[2]), argv[3], argv[4])))
     elif len(argv) >= 3 and argv[0] == "measure":
-        for p in argv[2:]:
-            print(json.dumps(measure(argv[1], p)))
+        only, files = "all", argv[2:]
+        if files[0] == "--only":
+            only, files = files[1], files[2:]
+        for p in files:
+            print(json.dumps(measure(argv[1], p, only)))
     else:
         raise SystemExit(__doc__)
 
