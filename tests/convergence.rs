@@ -721,7 +721,9 @@ fn unstructured_boundary_convergence() {
                 .arg(&cad),
         );
         let made: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-        study.elements.push(made["elements"].as_u64().unwrap() as usize);
+        study
+            .elements
+            .push(made["elements"].as_u64().unwrap() as usize);
         for mode in ["position", "smooth"] {
             let o = CurveOptions {
                 order: 2,
@@ -754,7 +756,9 @@ fn unstructured_boundary_convergence() {
                         for b in a + 1..corners.len() {
                             let (xa, xb) = (corners[a], corners[b]);
                             if hole(xa) < 1e-9 && hole(xb) < 1e-9 {
-                                h = h.max(((xa[0] - xb[0]).powi(2) + (xa[1] - xb[1]).powi(2)).sqrt());
+                                h = h.max(
+                                    ((xa[0] - xb[0]).powi(2) + (xa[1] - xb[1]).powi(2)).sqrt(),
+                                );
                             }
                         }
                     }
@@ -787,7 +791,10 @@ fn unstructured_boundary_convergence() {
     );
     for (s, p) in study.errors["smooth"].iter().zip(&study.errors["position"]) {
         let (s, p) = (s.unwrap(), p.unwrap());
-        assert!(p > 5.0 * s, "plate hole: smooth {s:.3e} vs position {p:.3e}");
+        assert!(
+            p > 5.0 * s,
+            "plate hole: smooth {s:.3e} vs position {p:.3e}"
+        );
     }
     let reference: BTreeMap<String, Study> =
         serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();

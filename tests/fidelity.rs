@@ -98,8 +98,16 @@ fn curved_boundary_within_five_times_gmsh_with_cad() {
                 max / gmsh.1,
                 gmsh.1
             );
-            assert!(*rms <= 5.0 * gmsh.0, "{shape} order {order}: RMS {rms:.3e} vs Gmsh {:.3e}", gmsh.0);
-            assert!(*max <= 5.0 * gmsh.1, "{shape} order {order}: max {max:.3e} vs Gmsh {:.3e}", gmsh.1);
+            assert!(
+                *rms <= 5.0 * gmsh.0,
+                "{shape} order {order}: RMS {rms:.3e} vs Gmsh {:.3e}",
+                gmsh.0
+            );
+            assert!(
+                *max <= 5.0 * gmsh.1,
+                "{shape} order {order}: max {max:.3e} vs Gmsh {:.3e}",
+                gmsh.1
+            );
         }
     }
 }
@@ -121,8 +129,16 @@ fn energy_fit_keeps_the_boundary() {
         curve(&linear, &en, &["--fit", "energy"]);
         let m = measure(shape, &[&ls, &en], "all");
         let ((rms0, max0), (rms1, max1)) = (m[0], m[1]);
-        println!("{shape}: least squares RMS {rms0:.3e} max {max0:.3e}; energy RMS {rms1:.3e} max {max1:.3e}");
-        assert!(rms1 <= 1.5 * rms0, "{shape}: energy RMS {rms1:.3e} vs {rms0:.3e}");
-        assert!(max1 <= 1.5 * max0, "{shape}: energy max {max1:.3e} vs {max0:.3e}");
+        println!(
+            "{shape}: least squares RMS {rms0:.3e} max {max0:.3e}; energy RMS {rms1:.3e} max {max1:.3e}"
+        );
+        assert!(
+            rms1 <= 1.5 * rms0,
+            "{shape}: energy RMS {rms1:.3e} vs {rms0:.3e}"
+        );
+        assert!(
+            max1 <= 1.5 * max0,
+            "{shape}: energy max {max1:.3e} vs {max0:.3e}"
+        );
     }
 }

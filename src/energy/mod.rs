@@ -22,7 +22,7 @@
 //! S_e = h_e² Σ_q w_q f(M_q),   f(M) = (‖M‖²_F + ‖M⁻¹‖²_F) / (2d) − 1,   M_q = J_e(u_q) J⁰_e(u_q)⁻¹,
 //!
 //! with J_e the Jacobian of the curved element's map, J⁰_e that of the straight input element at
-//! the same reference point, u_q, w_q a 3^d Gauss rule on [0,1]^d (weights summing to 1), and
+//! the same reference point, u_q, w_q a 3^d Gauss rule on \[0,1\]^d (weights summing to 1), and
 //! h_e² a length² ([`EnergyScale`]: the mean input element volume^{2/d} for every element by
 //! default, or each element's own). f is the standard symmetric Dirichlet energy (the paper's
 //! eq. 11 is garbled) normalised so that its minimum, 0, is attained exactly when M is a
