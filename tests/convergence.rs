@@ -9,6 +9,8 @@
 //! so regressions and improvements both show). Run with `POLYSPLINE_WRITE_REFERENCE=1` to
 //! rewrite that file, and with `--nocapture` to see the table and the written meshes.
 
+mod common;
+
 use polyspline::fit::{FitParams, FitTargets, FitWeights, SmoothParams};
 use polyspline::io::read_raw;
 use polyspline::mesh::MeshOptions;
@@ -686,5 +688,125 @@ fn smooth_targets_converge() {
             "{}: no feature vertices on a smooth surface",
             shape.name
         );
+    }
+}
+
+/// Unstructured boundaries: the plate with a hole of `scripts/fidelity_shapes.py` (Gmsh's
+/// frontal-Delaunay quads, recombined, so the hole's vertices are irregular and most elements
+/// there are Q2) at three levels, each halving the mesh size, curved with default features and
+/// the `smooth` and `position` fits. The error is the largest distance of the written boundary
+/// from the hole's circle over the points near it (the straight sides are another matter). The
+/// smooth fit converges at second order or better and beats the chords; the errors are compared
+/// with `tests/data/convergence/unstructured.json` as above (rewritten with
+/// `POLYSPLINE_WRITE_REFERENCE=1`).
+#[test]
+fn unstructured_boundary_convergence() {
+    if !common::have_gmsh("unstructured_boundary_convergence (Gmsh makes its meshes)") {
+        return;
+    }
+    let script = concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/fidelity_shapes.py");
+    let hole = |x: [f64; 3]| ((x[0] * x[0] + x[1] * x[1]).sqrt() - 0.5).abs();
+    let near_hole = |x: [f64; 3]| (x[0] * x[0] + x[1] * x[1]).sqrt() < 0.75;
+    let mut study = Study::default();
+    for level in 1..=3 {
+        let (input, cad) = (
+            dir().join(format!("plate_{level}.msh")),
+            dir().join(format!("plate_{level}_cad.msh")),
+        );
+        let out = common::run_ok(
+            common::python()
+                .arg(script)
+                .args(["make", "plate", &level.to_string()])
+                .arg(&input)
+                .arg(&cad),
+        );
+        let made: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        study
+            .elements
+            .push(made["elements"].as_u64().unwrap() as usize);
+        for mode in ["position", "smooth"] {
+            let o = CurveOptions {
+                order: 2,
+                geometry: Geometry::SplineFitted,
+                fit: if mode == "smooth" {
+                    FitParams::smooth()
+                } else {
+                    FitParams::default()
+                },
+                line_search_mode: LineSearchMode::Local,
+                ..Default::default()
+            };
+            let path = dir().join(format!("plate_{level}_{mode}.msh"));
+            let r = curve(&input, &path, &o).unwrap();
+            assert_eq!(r.invalid_elements, 0);
+            let ho = HighOrderMesh::from_raw(read_raw(&path).unwrap()).unwrap();
+            let (_, err) = boundary_error(&ho, &|x| hole(x), &|x| near_hole(x), 16);
+            study.errors.entry(mode.into()).or_default().push(Some(err));
+            if mode == "smooth" {
+                // Largest boundary edge on the hole (order-2 output: vertex nodes at corners).
+                let mut h = 0.0f64;
+                let npe = ho.nodes_per_element();
+                for e in 0..ho.n_elements() {
+                    let el = ho.element(e);
+                    let corners: Vec<[f64; 3]> = (0..npe)
+                        .filter(|&n| lattice_point(2, 2, n).iter().all(|&c| c != 1))
+                        .map(|n| ho.nodes[el[n] as usize])
+                        .collect();
+                    for a in 0..corners.len() {
+                        for b in a + 1..corners.len() {
+                            let (xa, xb) = (corners[a], corners[b]);
+                            if hole(xa) < 1e-9 && hole(xb) < 1e-9 {
+                                h = h.max(
+                                    ((xa[0] - xb[0]).powi(2) + (xa[1] - xb[1]).powi(2)).sqrt(),
+                                );
+                            }
+                        }
+                    }
+                }
+                study.h.push(h);
+            }
+        }
+    }
+    let o = orders(&study.h, &study.errors["smooth"]);
+    println!(
+        "plate hole: elements {:?}, h {:?}, smooth {:?}, position {:?}, smooth orders {o:?}",
+        study.elements, study.h, study.errors["smooth"], study.errors["position"]
+    );
+    let path =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/convergence/unstructured.json");
+    if std::env::var("POLYSPLINE_WRITE_REFERENCE").is_ok() {
+        let mut all = BTreeMap::new();
+        all.insert("plate", &study);
+        std::fs::write(&path, serde_json::to_string_pretty(&all).unwrap()).unwrap();
+    }
+    // Measured: orders −1.1 and 2.0. At level 1 every hole element is Q2 and the two-ring
+    // targets put its boundary within 1.3× Gmsh-with-CAD; from level 2 on, the frontal mesh
+    // is regular enough at the hole for spline elements, whose least-squares boundary does not
+    // interpolate the vertices (deviation 2.4e-5 of the diagonal) and converges at second
+    // order. Asserted: at least second order from level 2 to 3, and a clear gain over the
+    // chords at every level.
+    assert!(
+        *o.last().unwrap() >= 1.8,
+        "plate hole: smooth converges at order {o:?}"
+    );
+    for (s, p) in study.errors["smooth"].iter().zip(&study.errors["position"]) {
+        let (s, p) = (s.unwrap(), p.unwrap());
+        assert!(
+            p > 5.0 * s,
+            "plate hole: smooth {s:.3e} vs position {p:.3e}"
+        );
+    }
+    let reference: BTreeMap<String, Study> =
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap();
+    let r = &reference["plate"];
+    assert_eq!(study.elements, r.elements, "Gmsh made different meshes");
+    for (mode, errs) in &study.errors {
+        for (level, (g, w)) in errs.iter().zip(&r.errors[mode]).enumerate() {
+            let (g, w) = (g.unwrap(), w.unwrap());
+            assert!(
+                (g / w - 1.0).abs() < 0.2,
+                "plate {mode} level {level}: error {g:.3e}, reference {w:.3e}"
+            );
+        }
     }
 }

@@ -293,7 +293,10 @@ pub(crate) fn minimize(
     let n_colors = color.iter().map(|&c| c as usize + 1).max().unwrap_or(0);
     let mut by_color: Vec<Vec<u32>> = vec![Vec::new(); n_colors];
     for (i, &c) in color.iter().enumerate() {
-        by_color[c as usize].push(i as u32);
+        // Boundary control points stay where the least-squares fit put them.
+        if !energy.frozen[i] {
+            by_color[c as usize].push(i as u32);
+        }
     }
     let locals = Locals::new(energy);
     let support = &locals.support;

@@ -4,8 +4,16 @@
 //! **Inputs:** a spline space ([`FitSpace`]), the linear mesh it was built from, the
 //! least-squares fit's parameters and solution C*, [`EnergyParams`], a start C that is certified
 //! valid (the least-squares result after its line search), and a [`Certifier`].
-//! **Output:** control points C with Q(C) ≤ Q(start), every element certified valid, and an
-//! [`EnergyInfo`].
+//! **Output:** control points C with Q(C) ≤ Q(start), every element certified valid, the
+//! boundary unchanged, and an [`EnergyInfo`].
+//!
+//! **The boundary is the fit's.** The degeneration energy knows nothing of the surface the
+//! boundary approximates: left free, it trades the boundary's accuracy (tens of times the
+//! fit's distance from the true surface) for a slightly better Jacobian. The control points
+//! that carry the boundary (a non-zero extraction weight at a Bernstein point of a boundary
+//! facet) are therefore kept where the least-squares fit put them (zero gradient for L-BFGS,
+//! no local problem for the coloured solver); only interior control points move, so the
+//! boundary of the result is the fit's exactly.
 //!
 //! **Energy.** Q(C) = (D + R)(C) − (D + R)(C*) + w_e Σ_e S_e(C), where D + R is the fit's
 //! quadratic (normal equations K, F of [`crate::fit`]; written relative to its unconstrained
@@ -289,6 +297,10 @@ pub struct Energy<'a> {
     pub(crate) rows: Vec<ElementRows>,
     /// Smallest input element size vol^{1/d}.
     h_min: f64,
+    /// Control points that carry the boundary (a non-zero extraction weight at a Bernstein
+    /// point of a boundary facet); the minimisers keep them where the least-squares fit put
+    /// them, so the boundary stays the fit's (see the module docs).
+    pub(crate) frozen: Vec<bool>,
 }
 
 impl<'a> Energy<'a> {
@@ -385,6 +397,26 @@ impl<'a> Energy<'a> {
                 (pinv, vol.abs(), ElementRows { ids, r })
             })
             .collect();
+        let mut frozen = vec![false; c0.len()];
+        for (e, (_, _, rows)) in per_element.iter().enumerate() {
+            let m = rows.ids.len();
+            for side in 0..2 * dim {
+                if topo.neighbor(e, side) != crate::mesh::topology::NONE {
+                    continue;
+                }
+                let (k, at) = (side / 2, 2 * (side % 2));
+                for a in 0..nb {
+                    if [a % 3, (a / 3) % 3, a / 9][k] != at {
+                        continue;
+                    }
+                    for (j, &id) in rows.ids.iter().enumerate() {
+                        if rows.r[a * m + j] != 0.0 {
+                            frozen[id as usize] = true;
+                        }
+                    }
+                }
+            }
+        }
         let mut pinv = Vec::with_capacity(nq * per_element.len());
         let mut scale = Vec::with_capacity(per_element.len());
         let mut rows = Vec::with_capacity(per_element.len());
@@ -416,11 +448,17 @@ impl<'a> Energy<'a> {
             scale,
             rows,
             h_min,
+            frozen,
         })
     }
 
     pub fn n_elements(&self) -> usize {
         self.rows.len()
+    }
+
+    /// Whether control point `i` carries the boundary and is therefore kept fixed.
+    pub fn is_frozen(&self, i: usize) -> bool {
+        self.frozen[i]
     }
 
     /// The distinct control points element e depends on (sorted).
@@ -590,6 +628,19 @@ impl<'a> Energy<'a> {
         ls + s
     }
 
+    /// [`Energy::value_and_gradient`] with the gradient of the frozen (boundary) control points
+    /// zeroed: the gradient of Q restricted to the free control points, so no L-BFGS direction
+    /// (built from these gradients and the steps they make) ever moves the boundary.
+    fn value_and_free_gradient(&self, cps: &[[f64; 3]], grad: &mut [[f64; 3]]) -> f64 {
+        let q = self.value_and_gradient(cps, grad);
+        for (g, &f) in grad.iter_mut().zip(&self.frozen) {
+            if f {
+                *g = [0.0; 3];
+            }
+        }
+        q
+    }
+
     /// Per-element certified lower bounds of det J for control points `cps`.
     pub(crate) fn bounds(
         &self,
@@ -755,7 +806,7 @@ fn lbfgs(
     let n = start.len();
     let mut x = start.to_vec();
     let mut g = vec![[0.0; 3]; n];
-    let mut f = energy.value_and_gradient(&x, &mut g);
+    let mut f = energy.value_and_free_gradient(&x, &mut g);
     let mut info = EnergyInfo::start(EnergySolver::Lbfgs, energy.weight, f);
     info.evaluations = 1;
     let g0 = max_abs(&g);
@@ -808,7 +859,7 @@ fn lbfgs(
         for _ in 0..=params.max_backtracks {
             let xn = axpy(&x, alpha, &d);
             let mut gn = vec![[0.0; 3]; n];
-            let fnew = energy.value_and_gradient(&xn, &mut gn);
+            let fnew = energy.value_and_free_gradient(&xn, &mut gn);
             info.evaluations += 1;
             if fnew.is_finite() && fnew <= f + 1e-4 * alpha * slope {
                 if validity.accepts(energy, &xn) {

@@ -34,6 +34,23 @@
 //! its boundary side pushed through its inner side, while isotropic cells see the correction
 //! only on their boundary side.
 //!
+//! **Two-ring height functions.** The one-ring quadric leaves an error of order h⁴ with a large
+//! constant (on a circle of 14 segments, 1.8 % of the chord's sagitta) and of order h³ where
+//! the ring is irregular, which is what Q2 elements at irregular vertices interpolate. Each
+//! smooth vertex's model is therefore refitted over the boundary vertices within two rings
+//! (2D: two neighbours each way along the boundary; 3D: over boundary faces, the second ring
+//! reached only through smooth vertices, so never across a feature) as a height function
+//!
+//!   η(ξ) = s_κ(ξ) + Σ c_m m(ξ),   s_κ the height of the circle/sphere of curvature κ,
+//!
+//! with the monomials m of degree 1–4 (2D: through up to four points; 3D: least squares over at
+//! least 20 points, degree 1–3 over at least 12), κ updated from the isotropic part of the
+//! fitted quadratic and the frame re-tilted by the linear terms, as for the quadric. The model
+//! is then exact on circles and spheres at any resolution and accurate to higher order
+//! elsewhere; its quadratic part is the vertex's H and normal, the rest ([`HigherModel`]) adds
+//! g(ξ_p) − Σ_j φ_j g(ξ_j) along the normal. Too few points, points that are not a graph over
+//! the tangent plane, or a singular system keep the one-ring quadric.
+//!
 //! With detected sharp features ([`SmoothTargets::build_with_features`]) the vertices on
 //! features take their models per patch and along feature curves instead
 //! ([`super::features::FeatureModels`]), so no model averages across a feature; samples inside
@@ -114,6 +131,76 @@ pub struct SmoothTargets {
     pub blended_vertices: usize,
     /// Models of the feature vertices per patch and curve, with features.
     feature_models: Option<FeatureModels>,
+    /// The cubic and quartic terms of a smooth vertex's height function over two rings
+    /// ([`HigherModel`]); interior vertices share their source's.
+    higher: Vec<Option<HigherModel>>,
+}
+
+/// The cubic and quartic part of a vertex's height function over its model's tangent frame
+/// (the quadratic part is the [`VertexModel`]'s H, in the same frame).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct HigherModel {
+    /// The vertex the height function is centred on.
+    origin: [f64; 3],
+    /// Tangent frame (t₂ = 0 in 2D).
+    t: [[f64; 3]; 2],
+    /// Length scale ℓ of the coefficients: g(ξ, ζ) = ℓ Σ c_i m_i(ξ/ℓ, ζ/ℓ).
+    scale: f64,
+    /// Coefficients of the monomials u³, u²w, uw², w³, u⁴, u³w, u²w², uw³, w⁴.
+    c: [f64; 9],
+    /// Scaled curvature κℓ of the circle (2D) or sphere (3D) whose height above its tangent
+    /// plane, minus its quadratic part, is added to the polynomial (see [`sphere_height`]).
+    kappa: f64,
+}
+
+/// Height above its tangent plane of the circle or sphere of curvature `kappa` touching the
+/// plane at the origin, at squared distance `r2` from the origin (scaled units), when it has
+/// one: κr²/(1 + √(1 − κ²r²)).
+fn sphere_height(kappa: f64, r2: f64) -> Option<f64> {
+    let d = 1.0 - kappa * kappa * r2;
+    (d >= 0.0).then(|| kappa * r2 / (1.0 + d.sqrt()))
+}
+
+impl HigherModel {
+    fn height(&self, x: [f64; 3]) -> f64 {
+        let y = sub(x, self.origin);
+        let (u, w) = (
+            dot(y, self.t[0]) / self.scale,
+            dot(y, self.t[1]) / self.scale,
+        );
+        let m = &monomials(u, w)[5..];
+        let r2 = u * u + w * w;
+        // Beyond the sphere's reach (far from the vertex) only its quadratic part is kept.
+        let sphere = sphere_height(self.kappa, r2).map_or(0.0, |h| h - 0.5 * self.kappa * r2);
+        self.scale * (sphere + m.iter().zip(&self.c).map(|(a, b)| a * b).sum::<f64>())
+    }
+
+    /// g(ξ_p) − Σ φ g(ξ_j): the cubic and quartic terms' share of the correction's length
+    /// along the normal (the linear terms cancel as for H).
+    fn correction(&self, p: [f64; 3], xs: &[[f64; 3]], phi: f64) -> f64 {
+        self.height(p) - xs.iter().map(|x| phi * self.height(*x)).sum::<f64>()
+    }
+}
+
+/// The monomials u, w, u², uw, w², u³, u²w, uw², w³, u⁴, u³w, u²w², uw³, w⁴ of a height fit.
+fn monomials(u: f64, w: f64) -> [f64; 14] {
+    let (u2, w2) = (u * u, w * w);
+    [
+        u,
+        w,
+        u2,
+        u * w,
+        w2,
+        u2 * u,
+        u2 * w,
+        u * w2,
+        w2 * w,
+        u2 * u2,
+        u2 * u * w,
+        u2 * w2,
+        u * w2 * w,
+        w2 * w2,
+    ]
 }
 
 impl SmoothTargets {
@@ -195,6 +282,29 @@ impl SmoothTargets {
                     }
                 }
             });
+        // Second pass: height functions of degree up to four over two rings of boundary
+        // vertices, reached through smooth vertices only (so never across a feature).
+        let mut higher: Vec<Option<HigherModel>> = vec![None; nv];
+        {
+            let models_ref = &models;
+            let ell_ref = &ell;
+            let fan_ref = &fan;
+            let refined: Vec<Option<(VertexModel, HigherModel)>> = (0..nv)
+                .into_par_iter()
+                .with_min_len(1024)
+                .map(|v| {
+                    let m = models_ref[v]?;
+                    let ring = two_ring(mesh, topo, fan_ref, models_ref, v as u32);
+                    refine_model(mesh.dim, mesh.coords[v], &m, &ring, ell_ref[v])
+                })
+                .collect();
+            for (v, r) in refined.into_iter().enumerate() {
+                if let Some((m, h)) = r {
+                    models[v] = Some(m);
+                    higher[v] = Some(h);
+                }
+            }
+        }
         let smooth_vertices = models.iter().filter(|m| m.is_some()).count();
         let feature_vertices =
             topo.vertex_on_boundary.iter().filter(|&&b| b).count() - smooth_vertices;
@@ -265,6 +375,7 @@ impl SmoothTargets {
                     if g > 0.0 {
                         let m = models[s].expect("sources have models");
                         models[v] = Some(VertexModel { weight: g, ..m });
+                        higher[v] = higher[s];
                         blended_vertices += 1;
                     }
                 }
@@ -282,6 +393,7 @@ impl SmoothTargets {
             feature_vertices,
             blended_vertices,
             feature_models,
+            higher,
         }
     }
 
@@ -354,6 +466,7 @@ impl SmoothTargets {
             let mut delta = [0.0; 3];
             let mut wsum = 0.0;
             for &k in ks {
+                let higher = self.models[k].and(self.higher.get(k).copied().flatten());
                 let model = self.models[k].as_ref().or_else(|| {
                     let f = self.feature_models.as_ref()?;
                     match at {
@@ -362,7 +475,11 @@ impl SmoothTargets {
                     }
                 });
                 if let Some(model) = model {
-                    let c = model.correction(p, xs, phi);
+                    let mut c = model.correction(p, xs, phi);
+                    if let Some(hm) = higher {
+                        let g = hm.correction(p, xs, phi);
+                        c = add(c, model.normal.map(|n| g * n));
+                    }
                     let w = phi * model.weight;
                     delta = add(delta, c.map(|ci| w * ci));
                     wsum += phi;
@@ -530,6 +647,202 @@ fn fit_quadric(n0: [f64; 3], pts: &[[f64; 3]], scale: f64) -> Option<([f64; 3], 
     // The quadric was fitted in the frame before the last tilt; use that frame's normal so H
     // and n belong together (H n = 0).
     Some((cross(t1, t2), h))
+}
+
+/// The boundary vertices within two rings of the smooth boundary vertex `v` (2D: along the
+/// boundary chain; 3D: over boundary faces), the second ring reached only through vertices that
+/// have a model, so no ring crosses a sharp feature. `v` itself is not included.
+fn two_ring(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    fan: &[Vec<u32>],
+    models: &[Option<VertexModel>],
+    v: u32,
+) -> Vec<[f64; 3]> {
+    let mut ring: Vec<u32> = Vec::new();
+    let mut first: Vec<u32> = Vec::new();
+    for &f in &fan[v as usize] {
+        first.extend(
+            topo.facet_vertices(f as usize)
+                .iter()
+                .copied()
+                .filter(|&w| w != v),
+        );
+    }
+    first.sort_unstable();
+    first.dedup();
+    ring.extend(&first);
+    for &u in &first {
+        if models[u as usize].is_none() {
+            continue;
+        }
+        for &f in &fan[u as usize] {
+            ring.extend(
+                topo.facet_vertices(f as usize)
+                    .iter()
+                    .copied()
+                    .filter(|&w| w != v),
+            );
+        }
+    }
+    ring.sort_unstable();
+    ring.dedup();
+    ring.iter().map(|&w| mesh.coords[w as usize]).collect()
+}
+
+/// Refit the model `m` of the vertex at `x` as a height function of degree up to four over its
+/// two-ring points `pts` (relative scale `ell`): 2D u, u², u³, u⁴ through up to four points;
+/// 3D all 14 monomials of degree 1–4 by least squares over at least 20 points, or those of
+/// degree 1–3 over at least 12. The frame is re-tilted by the linear terms and the fit
+/// repeated, as for the quadric. `None` (keep `m`) with too few points, where the points are
+/// not a graph over the tangent plane (slope above 1), or when the system is singular.
+fn refine_model(
+    dim: usize,
+    x: [f64; 3],
+    m: &VertexModel,
+    pts: &[[f64; 3]],
+    ell: f64,
+) -> Option<(VertexModel, HigherModel)> {
+    if !(ell > 0.0) {
+        return None;
+    }
+    let used: &[usize] = if dim == 2 {
+        match pts.len() {
+            0..=2 => return None,
+            3 => &[0, 2, 5],
+            _ => &[0, 2, 5, 9],
+        }
+    } else if pts.len() >= 20 {
+        &[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13]
+    } else if pts.len() >= 12 {
+        &[0, 1, 2, 3, 4, 5, 6, 7, 8]
+    } else {
+        return None;
+    };
+    let frame_of = |n: [f64; 3]| -> ([f64; 3], [f64; 3]) {
+        if dim == 2 {
+            ([n[1], -n[0], 0.0], [0.0; 3])
+        } else {
+            tangent_frame(n)
+        }
+    };
+    let mut n = m.normal;
+    // Scaled mean curvature of the quadric: the sphere (circle) part of the height function,
+    // which makes the model exact on spheres and circles however coarse the ring.
+    let trace = m.h[0][0] + m.h[1][1] + m.h[2][2];
+    let mut kappa = 2.0 * trace / (dim - 1) as f64 * ell;
+    let mut fitted = None;
+    for _ in 0..4 {
+        let (t1, t2) = frame_of(n);
+        let k = used.len();
+        let mut ata = vec![vec![0.0; k]; k];
+        let mut atb = vec![0.0; k];
+        for p in pts {
+            let y = sub(*p, x);
+            let (u, w, h) = (dot(y, t1) / ell, dot(y, t2) / ell, dot(y, n) / ell);
+            if h.abs() > u.hypot(w) {
+                return None;
+            }
+            if sphere_height(kappa, u * u + w * w).is_none() {
+                kappa = 0.0;
+            }
+        }
+        for p in pts {
+            let y = sub(*p, x);
+            let (u, w) = (dot(y, t1) / ell, dot(y, t2) / ell);
+            let h = dot(y, n) / ell - sphere_height(kappa, u * u + w * w).unwrap_or(0.0);
+            let all = monomials(u, w);
+            for i in 0..k {
+                for j in 0..k {
+                    ata[i][j] += all[used[i]] * all[used[j]];
+                }
+                atb[i] += all[used[i]] * h;
+            }
+        }
+        let sol = solve_n(ata, atb)?;
+        let mut c = [0.0; 14];
+        for (i, &u) in used.iter().enumerate() {
+            c[u] = sol[i];
+        }
+        if c[0].hypot(c[1]) > 1.0 {
+            return None;
+        }
+        fitted = Some((n, t1, t2, c, kappa));
+        // Move the isotropic part of the quadratic remainder into the sphere.
+        kappa += 2.0 * (c[2] + c[4]) / (dim - 1) as f64;
+        let nn = sub(n, add(t1.map(|v| c[0] * v), t2.map(|v| c[1] * v)));
+        let l = norm(nn);
+        n = nn.map(|v| v / l);
+    }
+    // The polynomial belongs to the frame it was fitted in (before the last tilt).
+    let (n, t1, t2, c, kappa) = fitted?;
+    // Quadratic part: the sphere's κr²/2 and the polynomial's.
+    let q = [
+        (c[2] + 0.5 * kappa) / ell,
+        c[3] / ell,
+        (c[4] + if dim == 2 { 0.0 } else { 0.5 * kappa }) / ell,
+    ];
+    let mut h = [[0.0; 3]; 3];
+    for (mat, w) in [
+        (outer(t1, t1), q[0]),
+        (sym_outer(t1, t2), 0.5 * q[1]),
+        (outer(t2, t2), q[2]),
+    ] {
+        for i in 0..3 {
+            for j in 0..3 {
+                h[i][j] += w * mat[i][j];
+            }
+        }
+    }
+    let mut hc = [0.0; 9];
+    hc.copy_from_slice(&c[5..]);
+    Some((
+        VertexModel {
+            normal: n,
+            h,
+            weight: m.weight,
+        },
+        HigherModel {
+            origin: x,
+            t: [t1, t2],
+            scale: ell,
+            c: hc,
+            kappa,
+        },
+    ))
+}
+
+/// Gaussian elimination with partial pivoting; `None` when nearly singular.
+fn solve_n(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Option<Vec<f64>> {
+    let n = b.len();
+    let scale = (0..n).map(|i| a[i][i].abs()).fold(0.0, f64::max);
+    if !(scale > 0.0) {
+        return None;
+    }
+    for c in 0..n {
+        let p = (c..n).max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))?;
+        if !(a[p][c].abs() > 1e-10 * scale) {
+            return None;
+        }
+        a.swap(c, p);
+        b.swap(c, p);
+        for r in c + 1..n {
+            let f = a[r][c] / a[c][c];
+            for k in c..n {
+                a[r][k] -= f * a[c][k];
+            }
+            b[r] -= f * b[c];
+        }
+    }
+    let mut x = vec![0.0; n];
+    for r in (0..n).rev() {
+        let mut s = b[r];
+        for k in r + 1..n {
+            s -= a[r][k] * x[k];
+        }
+        x[r] = s / a[r][r];
+    }
+    Some(x)
 }
 
 fn tangent_frame(n: [f64; 3]) -> ([f64; 3], [f64; 3]) {
