@@ -294,7 +294,7 @@ impl SmoothTargets {
                 .with_min_len(1024)
                 .map(|v| {
                     let m = models_ref[v]?;
-                    let ring = two_ring(mesh, topo, fan_ref, models_ref, v as u32);
+                    let ring = two_ring(mesh, topo, fan_ref, models_ref, v as u32, cos_max);
                     refine_model(mesh.dim, mesh.coords[v], &m, &ring, ell_ref[v])
                 })
                 .collect();
@@ -384,6 +384,8 @@ impl SmoothTargets {
         if let Some(f) = &feature_models {
             for (&v, m) in &f.in_plane {
                 models[v as usize] = Some(*m);
+                // The height function was fitted over the plane, not along the in-plane curve.
+                higher[v as usize] = None;
             }
         }
         SmoothTargets {
@@ -658,7 +660,31 @@ fn two_ring(
     fan: &[Vec<u32>],
     models: &[Option<VertexModel>],
     v: u32,
+    cos_max: f64,
 ) -> Vec<[f64; 3]> {
+    // A model-carrying vertex next to a feature (a rim vertex whose fan model spans a gentle
+    // crease) would bring in the facets across it: in 3D the second ring keeps only facets
+    // within the feature angle of v's normal.
+    let n_v = models[v as usize].map(|m| m.normal);
+    let facing = |f: usize| -> bool {
+        let (Some(n), 3) = (n_v, mesh.dim) else {
+            return true;
+        };
+        let fv = topo.facet_vertices(f);
+        if fv.len() < 4 {
+            return true;
+        }
+        let c = |i: usize| mesh.coords[fv[i] as usize];
+        let d1 = sub(c(2), c(0));
+        let d2 = sub(c(3), c(1));
+        let nf = [
+            d1[1] * d2[2] - d1[2] * d2[1],
+            d1[2] * d2[0] - d1[0] * d2[2],
+            d1[0] * d2[1] - d1[1] * d2[0],
+        ];
+        let l = norm(nf);
+        l > 0.0 && dot(nf, n).abs() >= cos_max * l
+    };
     let mut ring: Vec<u32> = Vec::new();
     let mut first: Vec<u32> = Vec::new();
     for &f in &fan[v as usize] {
@@ -671,12 +697,17 @@ fn two_ring(
     }
     first.sort_unstable();
     first.dedup();
+    // Next to a feature (a first-ring vertex without a smooth model) the height function's
+    // ring would be one-sided and cut by the feature: keep the one-ring quadric there.
+    if first.iter().any(|&u| models[u as usize].is_none()) {
+        return Vec::new();
+    }
     ring.extend(&first);
     for &u in &first {
         if models[u as usize].is_none() {
             continue;
         }
-        for &f in &fan[u as usize] {
+        for &f in fan[u as usize].iter().filter(|&&f| facing(f as usize)) {
             ring.extend(
                 topo.facet_vertices(f as usize)
                     .iter()
@@ -706,6 +737,8 @@ fn refine_model(
     if !(ell > 0.0) {
         return None;
     }
+    const CUBIC: &[usize] = &[0, 1, 2, 3, 4, 5, 6, 7, 8];
+    const QUARTIC: &[usize] = &[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13];
     let used: &[usize] = if dim == 2 {
         match pts.len() {
             0..=2 => return None,
@@ -713,12 +746,32 @@ fn refine_model(
             _ => &[0, 2, 5, 9],
         }
     } else if pts.len() >= 20 {
-        &[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13]
+        QUARTIC
     } else if pts.len() >= 12 {
-        &[0, 1, 2, 3, 4, 5, 6, 7, 8]
+        CUBIC
     } else {
         return None;
     };
+    // A ring with too few distinct rows in one direction (an extruded wall a few cells
+    // across) leaves the quartic undetermined: fall back to the cubic before the quadric.
+    if used.len() == QUARTIC.len() {
+        if let Some(r) = refine_with(dim, x, m, pts, ell, QUARTIC) {
+            return Some(r);
+        }
+        return refine_with(dim, x, m, pts, ell, CUBIC);
+    }
+    refine_with(dim, x, m, pts, ell, used)
+}
+
+/// [`refine_model`] with the monomials `used`.
+fn refine_with(
+    dim: usize,
+    x: [f64; 3],
+    m: &VertexModel,
+    pts: &[[f64; 3]],
+    ell: f64,
+    used: &[usize],
+) -> Option<(VertexModel, HigherModel)> {
     let frame_of = |n: [f64; 3]| -> ([f64; 3], [f64; 3]) {
         if dim == 2 {
             ([n[1], -n[0], 0.0], [0.0; 3])
@@ -821,7 +874,9 @@ fn solve_n(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Option<Vec<f64>> {
     }
     for c in 0..n {
         let p = (c..n).max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))?;
-        if !(a[p][c].abs() > 1e-10 * scale) {
+        // Relative to the unit-scaled monomials' Gram matrix: a smaller pivot means a
+        // direction the points do not determine, whose coefficient would be noise.
+        if !(a[p][c].abs() > 1e-8 * scale) {
             return None;
         }
         a.swap(c, p);
