@@ -47,7 +47,7 @@
 //! least 20 points, degree 1–3 over at least 12), κ updated from the isotropic part of the
 //! fitted quadratic and the frame re-tilted by the linear terms, as for the quadric. The model
 //! is then exact on circles and spheres at any resolution and accurate to higher order
-//! elsewhere; its quadratic part is the vertex's H and normal, the rest ([`HigherModel`]) adds
+//! elsewhere; its quadratic part is the vertex's H and normal, the rest (`HigherModel`) adds
 //! g(ξ_p) − Σ_j φ_j g(ξ_j) along the normal. Too few points, points that are not a graph over
 //! the tangent plane, or a singular system keep the one-ring quadric.
 //!
