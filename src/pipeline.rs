@@ -325,7 +325,9 @@ pub fn curve_in_memory_with_progress(
 
 /// The options no stage can run with are refused before reading: the output order and the
 /// elastic parameters when the method is elastic.
-fn check_options(options: &CurveOptions) -> Result<(usize, Option<ElasticParams>), CurveError> {
+pub(crate) fn check_options(
+    options: &CurveOptions,
+) -> Result<(usize, Option<ElasticParams>), CurveError> {
     let order = options.subdivide.unwrap_or(options.order);
     if options.subdivide.is_some() && options.order != 1 {
         return Err(CurveError::Options(

@@ -24,7 +24,7 @@ use crate::io::read_mesh;
 use crate::mesh::Topology;
 use crate::pipeline::{CurveError, CurveOptions, CurveReport, Geometry, LineSearchMode, Method};
 use crate::quality::sample_det_jacobian;
-use crate::sample::{BezierElements, HighOrderMesh, MAX_ORDER, sample};
+use crate::sample::{BezierElements, HighOrderMesh, sample};
 use crate::spline::{SplineSpace, kinks};
 use crate::validity::CpuCertifier;
 use crate::validity::blend::{BlendShare, Blended, blend_search_shared};
@@ -174,18 +174,8 @@ pub fn curve(
     options: &CurveOptions,
 ) -> Result<Option<Gathered>, CurveError> {
     check_supported(options)?;
-    let order = options.subdivide.unwrap_or(options.order);
-    if options.subdivide.is_some() && options.order != 1 {
-        return Err(CurveError::Options(
-            "--subdivide gives order-1 output; use it with --order 1".into(),
-        ));
-    }
-    crate::params::check_curve(options).map_err(|e| CurveError::Options(e.to_string()))?;
-    if !(1..=MAX_ORDER).contains(&order) {
-        return Err(CurveError::Options(format!(
-            "order {order} is out of range 1..={MAX_ORDER}"
-        )));
-    }
+    // The serial job's option checks (elastic is refused above, so no elastic parameters).
+    let (order, _) = crate::pipeline::check_options(options)?;
     let (rank, size) = (comm.rank(), comm.size());
     let start = Instant::now();
     let mut timings = BTreeMap::new();
