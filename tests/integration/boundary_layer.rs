@@ -4,7 +4,7 @@
 //! (`validity::blend`) against a fitted map made of garbage; Gmsh's Jacobian ratios of the
 //! written files against the straight-sided elevation.
 
-mod common;
+use crate::common;
 
 use polyspline::fit::{FitParams, FitTargets, FitWeights};
 use polyspline::mesh::generate::{extrude, grid_2d};

@@ -2,7 +2,7 @@
 //! checked, the sampled output represents the spline geometry exactly, and bad output paths
 //! lose nothing.
 
-mod common;
+use crate::common;
 
 use polyspline::io::read_raw;
 use polyspline::mesh::generate::{grid_2d, grid_3d, uniform};

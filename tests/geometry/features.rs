@@ -3,7 +3,7 @@
 //! feature handling, measured against their analytic surfaces, and checked by Gmsh's
 //! Jacobians (`tests/external/gmsh_probe.py`).
 
-mod common;
+use crate::common;
 
 use polyspline::mesh::features::{FeatureOptions, FeatureParams};
 use polyspline::pipeline::{CurveOptions, Geometry, curve, curve_in_memory};

@@ -12,7 +12,7 @@
 //!
 //! Skipped visibly without Gmsh's Python module (a failure under `CI=true`).
 
-mod common;
+use crate::common;
 
 use serde_json::Value;
 use std::path::{Path, PathBuf};

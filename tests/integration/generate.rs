@@ -79,7 +79,7 @@ fn generate_command_writes_a_mesh_info_reads_back() {
 // ---------------------------------------------------------------------------------------------
 // Boundary-layer O-grids and C-grids (`generate ogrid|cgrid`).
 
-mod common;
+use crate::common;
 
 use polyspline::mesh::LinearMesh;
 use polyspline::mesh::generate::boundary_layer::{

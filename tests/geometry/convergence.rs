@@ -9,7 +9,7 @@
 //! so regressions and improvements both show). Run with `POLYSPLINE_WRITE_REFERENCE=1` to
 //! rewrite that file, and with `--nocapture` to see the table and the written meshes.
 
-mod common;
+use crate::common;
 
 use polyspline::fit::{FitParams, FitTargets, FitWeights, SmoothParams};
 use polyspline::io::read_raw;

@@ -1,7 +1,7 @@
 //! Sampling and high-order output: conforming numbering, exact reproduction of the element
 //! maps, and the files read back by Gmsh itself.
 
-mod common;
+use crate::common;
 
 use polyspline::io::gmsh_write::{MshVersion, write_msh};
 use polyspline::io::vtu_write::{VtuCells, VtuEncoding, write_vtu, write_vtu_cells};

@@ -2,7 +2,7 @@
 //! kernel against its CPU twin, the f64 reference and independent oracles on lavapipe or a
 //! hardware GPU. A missing adapter fails under `CI=true` and is a printed skip elsewhere.
 
-mod common;
+use crate::common;
 
 use polyspline::cpu;
 use polyspline::gpu::{self, AdapterChoice, GpuContext, Precision};
@@ -751,7 +751,7 @@ fn curve_gpu_matches_cpu() {
 }
 
 /// The 1M-hex grid: GPU evaluation (order-2 sampling) and certification, checked against the
-/// CPU on a sample of elements. Run by hand: `cargo test --release --test gpu -- --ignored`.
+/// CPU on a sample of elements. Run by hand: `cargo test --release --test cross_validation -- --ignored`.
 #[test]
 #[ignore = "large: run with --release -- --ignored --nocapture"]
 fn million_hex_gpu_sampling_and_certification() {

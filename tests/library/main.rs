@@ -1,0 +1,14 @@
+//! Tests of the library's public API: topology, the spline space, the fit, the energy, the
+//! node orderings against Gmsh's and VTK's tables, and the shipped meshes' documented counts.
+//! One test binary; `cargo test --release --test library spline::` runs one module.
+
+#[path = "../common/mod.rs"]
+mod common;
+
+mod energy;
+mod fit;
+mod generated_meshes;
+mod node_ordering;
+mod real_meshes;
+mod spline;
+mod topology;
