@@ -3,6 +3,7 @@
 //! hardware GPU. A missing adapter fails under `CI=true` and is a printed skip elsewhere.
 
 use crate::common;
+use crate::executors;
 
 use polyspline::cpu;
 use polyspline::gpu::{self, AdapterChoice, GpuContext, Precision};
@@ -45,7 +46,7 @@ use polyspline::io::read_mesh;
 use polyspline::mesh::generate::{grid_2d, grid_3d, star_2d, uniform};
 use polyspline::mesh::{LinearMesh, MeshOptions, Topology};
 use polyspline::sample::{eval_net, sample};
-use polyspline::solve::{CgParams, LinOp, pcg};
+use polyspline::solve::{CgParams, LinOp};
 use polyspline::spline::SplineSpace;
 use polyspline::validity::{Certifier, det_jacobian_bernstein, det_jacobian_bounds};
 use std::path::PathBuf;
@@ -247,10 +248,14 @@ fn evaluate_reproduces_affine_maps() {
     }
 }
 
+/// Order 2–4 sampling, one body per executor: the same elements and boundary, nodes within
+/// the evaluation tolerance of each node's largest element.
 #[test]
 fn gpu_sampling_matches_cpu_sampling() {
+    const TEST: &str = "gpu_sampling_matches_cpu_sampling";
     for prec in [Precision::F32, Precision::F64] {
         let Some(ctx) = context(prec) else { return };
+        let executors = executors::cpu_and_gpu(&ctx);
         for (name, mesh) in meshes() {
             if mesh.n_elements() > 20_000 {
                 continue;
@@ -258,10 +263,24 @@ fn gpu_sampling_matches_cpu_sampling() {
             let topo = Topology::build(&mesh);
             let s = SplineSpace::build(&mesh, &topo);
             for p in 2..=4 {
-                let want = sample(&s, &mesh, &topo, p);
-                let got = gpu::evaluate::sample(&ctx, &s, &mesh, &topo, p).unwrap();
-                assert_eq!(got.elements, want.elements);
-                assert_eq!(got.boundary, want.boundary);
+                let [want, got] = executors::on_each(&executors, |x| {
+                    x.sample(&s, &mesh, &topo, p)
+                        .unwrap_or_else(|e| panic!("{name} {prec:?} p={p} {}: {e}", x.name()))
+                });
+                let outputs = || {
+                    let case = format!("{name}.{prec:?}.p{p}");
+                    executors::dump(TEST, &case, &[("cpu", &want), ("gpu", &got)])
+                };
+                assert!(
+                    got.elements == want.elements,
+                    "{name} {prec:?} p={p}: element numbering differs; {}",
+                    outputs()
+                );
+                assert!(
+                    got.boundary == want.boundary,
+                    "{name} {prec:?} p={p}: boundary differs; {}",
+                    outputs()
+                );
                 // Each node's tolerance from the largest element containing it.
                 let mut h = vec![0.0f64; want.nodes.len()];
                 for e in 0..want.n_elements() {
@@ -274,7 +293,8 @@ fn gpu_sampling_matches_cpu_sampling() {
                     let err = (0..3).map(|k| (g[k] - w[k]).abs()).fold(0.0, f64::max);
                     assert!(
                         err <= tol_eval(prec) * h[i] + ABS_ROUND * norm(*w),
-                        "{name} {prec:?} p={p} node {i}: {g:?} vs {w:?}"
+                        "{name} {prec:?} p={p} node {i}: {g:?} vs {w:?}; {}",
+                        outputs()
                     );
                 }
             }
@@ -436,10 +456,14 @@ fn spmv_matches_cpu_and_row_sums() {
     }
 }
 
+/// Point-Jacobi PCG, one body per executor: each solution's residual checked in f64, the two
+/// solutions within 1e-5 of each other, and in f64 the same iteration count give or take.
 #[test]
 fn gpu_cg_matches_cpu_cg() {
+    const TEST: &str = "gpu_cg_matches_cpu_cg";
     for prec in [Precision::F32, Precision::F64] {
         let Some(ctx) = context(prec) else { return };
+        let executors = executors::cpu_and_gpu(&ctx);
         for (name, mesh) in meshes().into_iter().take(6) {
             let (k, b) = normal_system(&mesh);
             // The GPU solver is point-Jacobi PCG; compare it with the same CPU algorithm.
@@ -448,26 +472,45 @@ fn gpu_cg_matches_cpu_cg() {
                 preconditioner: polyspline::solve::CgPreconditioner::Jacobi,
                 ..Default::default()
             };
-            let mut want = vec![[0.0; 3]; k.n];
-            let ci = pcg(&k, &b, &mut want, &params, |_, _| {}).unwrap();
-            let mut got = vec![[0.0; 3]; k.n];
-            let gi = gpu::cg::pcg(&ctx, &k, &b, &mut got, &params, |_, _| {})
-                .unwrap_or_else(|e| panic!("{name} {prec:?}: {e}"));
-            // Independent check of the residual in f64.
-            let mut ax = vec![[0.0; 3]; k.n];
-            k.apply(&got, &mut ax);
-            for c in 0..3 {
-                let bn = b.iter().map(|v| v[c] * v[c]).sum::<f64>().sqrt();
-                let rn = b
-                    .iter()
-                    .zip(&ax)
-                    .map(|(b, a)| (b[c] - a[c]).powi(2))
-                    .sum::<f64>()
-                    .sqrt();
-                assert!(
-                    rn <= 1e-9 * bn + 1e-300,
-                    "{name} {prec:?}: residual {rn:e} vs |b| {bn:e}"
-                );
+            let [(want, ci), (got, gi)] = executors::on_each(&executors, |x| {
+                let mut sol = vec![[0.0; 3]; k.n];
+                let info = x
+                    .pcg(&k, &b, &mut sol, &params, &mut |_, _| {})
+                    .unwrap_or_else(|e| panic!("{name} {prec:?} {}: {e}", x.name()));
+                (sol, info)
+            });
+            let outputs = || {
+                let case = format!("{name}.{prec:?}");
+                let (ci, gi) = (executors::Debugged(ci), executors::Debugged(gi));
+                executors::dump(
+                    TEST,
+                    &case,
+                    &[
+                        ("cpu", &want),
+                        ("gpu", &got),
+                        ("cpu.info", &ci),
+                        ("gpu.info", &gi),
+                    ],
+                )
+            };
+            // Independent check of each residual in f64.
+            for (executor, sol) in [("cpu", &want), ("gpu", &got)] {
+                let mut ax = vec![[0.0; 3]; k.n];
+                k.apply(sol, &mut ax);
+                for c in 0..3 {
+                    let bn = b.iter().map(|v| v[c] * v[c]).sum::<f64>().sqrt();
+                    let rn = b
+                        .iter()
+                        .zip(&ax)
+                        .map(|(b, a)| (b[c] - a[c]).powi(2))
+                        .sum::<f64>()
+                        .sqrt();
+                    assert!(
+                        rn <= 1e-9 * bn + 1e-300,
+                        "{name} {prec:?} {executor}: residual {rn:e} vs |b| {bn:e}; {}",
+                        outputs()
+                    );
+                }
             }
             let xn = want
                 .iter()
@@ -484,12 +527,14 @@ fn gpu_cg_matches_cpu_cg() {
                 .sqrt();
             assert!(
                 dn <= 1e-5 * xn,
-                "{name} {prec:?}: solutions differ by {dn:e} (|x| {xn:e})"
+                "{name} {prec:?}: solutions differ by {dn:e} (|x| {xn:e}); {}",
+                outputs()
             );
             if prec == Precision::F64 {
                 assert!(
                     gi.iterations.abs_diff(ci.iterations) <= 3 + ci.iterations / 20,
-                    "{name}: {gi:?} vs {ci:?}"
+                    "{name}: {gi:?} vs {ci:?}; {}",
+                    outputs()
                 );
             }
         }
@@ -664,57 +709,65 @@ fn backend_gpu_without_adapter_is_a_clear_error() {
     );
 }
 
-/// The full `curve` job on the GPU (lavapipe, f32 and f64) and the CPU: same structure, nodes
-/// within the evaluation tolerance of the CG solution's difference, every element certified.
+/// The full `curve` job on the GPU (lavapipe, f32 and f64) and the CPU, one body per backend:
+/// same structure, nodes within the evaluation tolerance of the CG solution's difference,
+/// every element certified. Both outputs stay in `target/tmp/cross_validation/` and the
+/// assertion messages name them.
 #[test]
 fn curve_gpu_matches_cpu() {
     use polyspline::gpu::Backend;
     use polyspline::pipeline::{CurveOptions, Geometry, LineSearchMode, curve};
+    const TEST: &str = "curve_gpu_matches_cpu";
+    let mut gpus = Vec::new();
     for prec in [Precision::F32, Precision::F64] {
         let Some(ctx) = context(prec) else { return };
-        let ctx = std::sync::Arc::new(ctx);
-        for mesh in [
-            "mfem/cylinder-hex.mesh",
-            "sfepy/hsphere8.vtk",
-            "su2-testcases/n0012_113-33.su2",
-        ] {
-            let input = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-                .join("meshes/real")
-                .join(mesh);
-            let run = |backend: Backend, tag: &str| {
-                let out = std::env::temp_dir().join(format!(
-                    "polyspline_gpu_{tag}_{}.vtu",
-                    mesh.replace('/', "_")
-                ));
-                let opts = CurveOptions {
-                    order: 3,
-                    geometry: Geometry::SplineFitted,
-                    // Tight, so the two solutions differ by the solver's rounding only.
-                    fit: polyspline::fit::FitParams {
-                        cg: CgParams {
-                            rel_tol: 1e-10,
-                            ..Default::default()
-                        },
+        gpus.push((prec, std::sync::Arc::new(ctx)));
+    }
+    for mesh in [
+        "mfem/cylinder-hex.mesh",
+        "sfepy/hsphere8.vtk",
+        "su2-testcases/n0012_113-33.su2",
+    ] {
+        let input = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+            .join("meshes/real")
+            .join(mesh);
+        let run = |backend: Backend, case: &str| {
+            let name = polyspline::executor::executor(&backend).name();
+            let out = executors::output_path(TEST, case, name, "vtu");
+            let opts = CurveOptions {
+                order: 3,
+                geometry: Geometry::SplineFitted,
+                // Tight, so the two solutions differ by the solver's rounding only.
+                fit: polyspline::fit::FitParams {
+                    cg: CgParams {
+                        rel_tol: 1e-10,
                         ..Default::default()
                     },
-                    line_search_mode: LineSearchMode::Local,
-                    backend,
                     ..Default::default()
-                };
-                let r = curve(&input, &out, &opts).unwrap();
-                let ho = polyspline::sample::HighOrderMesh::from_raw(
-                    polyspline::io::read_raw(&out).unwrap(),
-                )
-                .unwrap();
-                (r, ho)
+                },
+                line_search_mode: LineSearchMode::Local,
+                backend,
+                ..Default::default()
             };
-            let (rc, hc) = run(Backend::Cpu, "cpu");
-            let (rg, hg) = run(Backend::Gpu(ctx.clone()), "gpu");
-            assert_eq!(rg.backend, "gpu");
+            let r = curve(&input, &out, &opts)
+                .unwrap_or_else(|e| panic!("{mesh} {name}: {e}; output {}", out.display()));
+            assert_eq!(r.backend, name, "{mesh}");
+            assert_eq!(r.invalid_elements, 0, "{mesh} {name}: {}", out.display());
+            let ho = polyspline::sample::HighOrderMesh::from_raw(
+                polyspline::io::read_raw(&out).unwrap(),
+            )
+            .unwrap();
+            (r, ho, out)
+        };
+        let (rc, hc, pc) = run(Backend::Cpu, mesh);
+        for (prec, ctx) in &gpus {
+            let (rg, hg, pg) = run(Backend::Gpu(ctx.clone()), &format!("{mesh}.{prec:?}"));
+            let outputs = format!("outputs: {} and {}", pc.display(), pg.display());
             assert_eq!(rg.adapter.as_ref().unwrap().name, ctx.adapter.name);
-            assert_eq!(rc.backend, "cpu");
-            assert_eq!(hc.elements, hg.elements, "{mesh}");
-            assert_eq!(rg.invalid_elements, 0);
+            assert!(
+                hc.elements == hg.elements,
+                "{mesh}: elements differ; {outputs}"
+            );
             let (lo, hi) = read_mesh(&input, &MeshOptions::default())
                 .unwrap()
                 .bounding_box();
@@ -730,7 +783,7 @@ fn curve_gpu_matches_cpu() {
             if rc.damped_control_points == rg.damped_control_points {
                 assert!(
                     worst <= 1e-5 * diag,
-                    "{mesh} {prec:?}: nodes differ by {worst:e} (diagonal {diag:e})"
+                    "{mesh} {prec:?}: nodes differ by {worst:e} (diagonal {diag:e}); {outputs}"
                 );
             } else {
                 // The certified line search is a discrete decision per element (lower bound >
@@ -740,7 +793,7 @@ fn curve_gpu_matches_cpu() {
                 let (a, b) = (rc.damped_control_points, rg.damped_control_points);
                 assert!(
                     a.abs_diff(b) * 20 <= a.max(b),
-                    "{mesh} {prec:?}: damped {a} vs {b}"
+                    "{mesh} {prec:?}: damped {a} vs {b}; {outputs}"
                 );
                 println!(
                     "{mesh} {prec:?}: damped control points {a} (CPU) vs {b} (GPU), nodes differ by {worst:e}"
@@ -895,19 +948,20 @@ fn local_newton_matches_twin_and_local_problem() {
     }
 }
 
-/// The coloured energy solver with the GPU's local derivatives: every accepted iterate is
-/// certified valid, Q falls, and it ends where the CPU solver ends (the derivatives differ only
-/// by rounding).
+/// The coloured energy solver, one body per executor (the GPU computes the local
+/// derivatives): every accepted iterate is certified valid, Q falls, and the GPU ends where
+/// the CPU ends (the derivatives differ only by rounding).
 #[test]
 fn colored_energy_with_gpu_derivatives_matches_cpu() {
     use polyspline::energy::{Energy, EnergyParams, EnergySolver, Validity, minimize_on};
-    use polyspline::executor::{CpuExecutor, GpuExecutor};
     use polyspline::validity::CpuCertifier;
+    const TEST: &str = "colored_energy_with_gpu_derivatives_matches_cpu";
     for prec in [Precision::F32, Precision::F64] {
         let Some(ctx) = context(prec) else { continue };
         if ctx.precision != prec {
             continue;
         }
+        let executors = executors::cpu_and_gpu(&ctx);
         let m = star_2d(4);
         let t = Topology::build(&m);
         let s = SplineSpace::build(&m, &t);
@@ -921,22 +975,42 @@ fn colored_energy_with_gpu_derivatives_matches_cpu() {
         let e = Energy::new(&s, &m, &t, &fit, &c_star, &params).unwrap();
         let start = s.control_points.clone();
         let v = Validity::for_start(&e, &CpuCertifier, 6, &[], &start).unwrap();
-        let (_, cpu) = minimize_on(&e, &v, &start, &params, &CpuExecutor, &mut |_| {}).unwrap();
-        let (_, gpu) = minimize_on(&e, &v, &start, &params, &GpuExecutor::new(&ctx), &mut |c| {
-            for el in 0..s.n_elements() {
-                let b = det_jacobian_bounds(2, &s.element_bezier_with(el, c), 6);
-                assert!(b.certified_positive(), "element {el} not certified");
-            }
-        })
-        .unwrap();
-        assert!(gpu.final_energy < gpu.initial_energy, "{gpu:?}");
+        let [(xc, cpu), (xg, gpu)] = executors::on_each(&executors, |x| {
+            let (c, info) = minimize_on(&e, &v, &start, &params, x, &mut |c| {
+                for el in 0..s.n_elements() {
+                    let b = det_jacobian_bounds(2, &s.element_bezier_with(el, c), 6);
+                    assert!(
+                        b.certified_positive(),
+                        "{}: element {el} not certified",
+                        x.name()
+                    );
+                }
+            })
+            .unwrap_or_else(|err| panic!("{prec:?} {}: {err}", x.name()));
+            assert!(
+                info.final_energy < info.initial_energy,
+                "{}: {info:?}",
+                x.name()
+            );
+            (c, info)
+        });
         let tol = if prec == Precision::F64 { 1e-9 } else { 1e-3 };
         assert!(
             (gpu.final_energy - cpu.final_energy).abs()
                 <= tol * (cpu.initial_energy - cpu.final_energy),
-            "{prec:?}: GPU {} vs CPU {}",
+            "{prec:?}: GPU {} vs CPU {}; {}",
             gpu.final_energy,
-            cpu.final_energy
+            cpu.final_energy,
+            executors::dump(
+                TEST,
+                &format!("{prec:?}"),
+                &[
+                    ("cpu", &xc),
+                    ("gpu", &xg),
+                    ("cpu.info", &executors::Debugged(&cpu)),
+                    ("gpu.info", &executors::Debugged(&gpu)),
+                ],
+            )
         );
     }
 }
