@@ -20,9 +20,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 fn scratch(name: &str) -> PathBuf {
-    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("clients");
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
+    common::scratch_in("clients", name)
 }
 
 /// The 2D disc as a linear input file, written once per run of this binary (the tests run in

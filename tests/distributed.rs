@@ -6,6 +6,8 @@
 
 mod common;
 
+use common::dist;
+
 use polyspline::sample::HighOrderMesh;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -14,9 +16,7 @@ use std::process::Command;
 const BIN: &str = env!("CARGO_BIN_EXE_polyspline");
 
 fn scratch(name: &str) -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("distributed");
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
+    common::scratch_in("distributed", name)
 }
 
 /// `mpirun` with what CI's containers need: more ranks than cores, and root.
@@ -59,10 +59,6 @@ fn diagonal(m: &HighOrderMesh) -> f64 {
         }
     }
     (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f64>().sqrt()
-}
-
-fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
-    (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>().sqrt()
 }
 
 /// Largest distance between corresponding nodes of corresponding elements and boundary

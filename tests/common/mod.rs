@@ -142,3 +142,43 @@ pub fn gmsh_det_range(file: &Path, jobs_file: &Path) -> Option<(f64, f64, bool)>
         three_d,
     ))
 }
+
+/// `target/tmp/<dir>/<name>`, the directory created: where a test module writes its files.
+pub fn scratch_in(dir: &str, name: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+/// Every bundled real mesh (`meshes/real/<source>/<file>`), sorted.
+pub fn real_meshes() -> Vec<PathBuf> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("meshes/real");
+    let mut out = Vec::new();
+    for d in std::fs::read_dir(root).unwrap() {
+        let d = d.unwrap().path();
+        if d.is_dir() {
+            for f in std::fs::read_dir(d).unwrap() {
+                out.push(f.unwrap().path());
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+/// The `polyspline` binary of this build.
+pub fn polyspline() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_polyspline"))
+}
+
+/// `mesh` written as it is (order 1) to `path`, in the format of its extension.
+pub fn write_linear(mesh: &polyspline::mesh::LinearMesh, path: &Path) {
+    let topo = polyspline::mesh::Topology::build(mesh);
+    let linear = polyspline::sample::sample(mesh, mesh, &topo, 1);
+    polyspline::pipeline::write_high_order(&linear, path, &Default::default(), &[]).unwrap();
+}
+
+/// Euclidean distance.
+pub fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
+    (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>().sqrt()
+}

@@ -2,7 +2,7 @@
 //! kernel against its CPU twin, the f64 reference and independent oracles on lavapipe or a
 //! hardware GPU. A missing adapter fails under `CI=true` and is a printed skip elsewhere.
 
-use crate::common;
+use crate::common::{self, real_meshes};
 use crate::executors;
 
 use polyspline::cpu;
@@ -60,21 +60,6 @@ fn context(prec: Precision) -> Option<GpuContext> {
             None
         }
     }
-}
-
-fn real_meshes() -> Vec<PathBuf> {
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("meshes/real");
-    let mut out = Vec::new();
-    for d in std::fs::read_dir(root).unwrap() {
-        let d = d.unwrap().path();
-        if d.is_dir() {
-            for f in std::fs::read_dir(d).unwrap() {
-                out.push(f.unwrap().path());
-            }
-        }
-    }
-    out.sort();
-    out
 }
 
 /// Generated meshes (2D, 3D, irregular) and every real mesh that reads.

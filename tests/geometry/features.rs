@@ -3,17 +3,14 @@
 //! feature handling, measured against their analytic surfaces, and checked by Gmsh's
 //! Jacobians (`tests/external/gmsh_probe.py`).
 
-use crate::common;
+use crate::common::{self, polyspline, write_linear};
 
 use polyspline::mesh::features::{FeatureOptions, FeatureParams};
 use polyspline::pipeline::{CurveOptions, Geometry, curve, curve_in_memory};
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 fn scratch(name: &str) -> PathBuf {
-    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("features");
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
+    common::scratch_in("features", name)
 }
 
 fn have_gmsh() -> bool {
@@ -315,10 +312,6 @@ fn snap_boundary_puts_feature_vertices_back() {
     assert!(g.planarity_max < 1e-14, "{g:?}");
 }
 
-fn polyspline() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_polyspline"))
-}
-
 /// An L-shaped domain of three unit quads (Gmsh 2.2 ASCII): six polygon corners, five of them
 /// convex, one re-entrant; the re-entrant corner (node 5, 0-based 4) lies between two quads.
 fn l_shape() -> PathBuf {
@@ -421,13 +414,6 @@ fn plot_shows_corners_and_bad_edits_are_refused() {
         .unwrap();
     assert_eq!(out.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&out.stderr).contains("/nonexistent/edits.txt"));
-}
-
-/// Write a linear mesh as MSH 4.1.
-fn write_linear(mesh: &polyspline::mesh::LinearMesh, path: &Path) {
-    let topo = polyspline::mesh::Topology::build(mesh);
-    let linear = polyspline::sample::sample(mesh, mesh, &topo, 1);
-    polyspline::pipeline::write_high_order(&linear, path, &Default::default(), &[]).unwrap();
 }
 
 /// RMS and max of `distance` over the nodes of the output boundary facets.

@@ -1,15 +1,15 @@
 //! Bad input gets a one-line error naming the file, the place and the problem, exit status 1,
 //! and never a panic.
 
+use crate::common;
+
 use polyspline::io::Format;
 use polyspline::mesh::{LinearMesh, MeshOptions, Topology};
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
 fn scratch(name: &str) -> PathBuf {
-    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("bad_input");
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
+    common::scratch_in("bad_input", name)
 }
 
 fn real(rel: &str) -> PathBuf {

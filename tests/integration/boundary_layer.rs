@@ -4,14 +4,12 @@
 //! (`validity::blend`) against a fitted map made of garbage; Gmsh's Jacobian ratios of the
 //! written files against the straight-sided elevation.
 
-use crate::common;
+use crate::common::{self, write_linear};
 
 use polyspline::fit::{FitParams, FitTargets, FitWeights};
 use polyspline::mesh::generate::{extrude, grid_2d};
 use polyspline::mesh::{LinearMesh, Topology};
-use polyspline::pipeline::{
-    CurveOptions, LineSearchMode, OutputOptions, curve_in_memory, write_high_order,
-};
+use polyspline::pipeline::{CurveOptions, LineSearchMode, curve_in_memory};
 use polyspline::sample::BezierElements;
 use polyspline::validity::blend::{BlendParams, Blended, blend_search, entity_ids};
 use polyspline::validity::{CpuCertifier, det_jacobian_bounds};
@@ -22,13 +20,6 @@ fn out_dir() -> PathBuf {
     let d = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("boundary_layer");
     std::fs::create_dir_all(&d).unwrap();
     d
-}
-
-/// Write a linear mesh as MSH 4.1.
-fn write_linear(mesh: &LinearMesh, path: &Path) {
-    let topo = Topology::build(mesh);
-    let linear = polyspline::sample::sample(mesh, mesh, &topo, 1);
-    write_high_order(&linear, path, &OutputOptions::default(), &[]).unwrap();
 }
 
 /// `mesh` as the reader sees it (orientation normalised), or `None` when the reader refuses

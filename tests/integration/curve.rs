@@ -16,22 +16,11 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 fn scratch(name: &str) -> PathBuf {
-    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("curve");
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
+    common::scratch_in("curve", name)
 }
 
 fn real_meshes() -> Vec<PathBuf> {
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("meshes/real");
-    let mut out = Vec::new();
-    for d in std::fs::read_dir(&root).unwrap().flatten() {
-        if d.path().is_dir() {
-            for f in std::fs::read_dir(d.path()).unwrap().flatten() {
-                out.push(f.path());
-            }
-        }
-    }
-    out.sort();
+    let out = common::real_meshes();
     assert_eq!(out.len(), 15, "the bundled real meshes");
     out
 }

@@ -79,7 +79,7 @@ fn generate_command_writes_a_mesh_info_reads_back() {
 // ---------------------------------------------------------------------------------------------
 // Boundary-layer O-grids and C-grids (`generate ogrid|cgrid`).
 
-use crate::common;
+use crate::common::{self, dist, polyspline};
 
 use polyspline::mesh::LinearMesh;
 use polyspline::mesh::generate::boundary_layer::{
@@ -99,10 +99,6 @@ fn tagged_vertices(m: &LinearMesh, tag: i32) -> Vec<u32> {
     v.sort_unstable();
     v.dedup();
     v
-}
-
-fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
 
 /// Check one 2D boundary-layer mesh against its options: validity, counts, wall and far-field
@@ -309,10 +305,6 @@ fn analytic_wall_distance_matches_offsets() {
     assert!(yt(1.0).abs() < 1e-15);
     assert!((naca.distance([2.0, 0.0]) - 1.0).abs() < 1e-12);
     assert!((naca.distance([-0.5, 0.0]) - 0.5).abs() < 1e-12);
-}
-
-fn polyspline() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_polyspline"))
 }
 
 #[test]

@@ -243,9 +243,7 @@ fn subdivision_gives_linear_elements_on_the_geometry() {
 }
 
 fn scratch(name: &str) -> PathBuf {
-    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("high_order");
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
+    common::scratch_in("high_order", name)
 }
 
 /// Random probes: (element, reference point) and the position the element's multilinear map

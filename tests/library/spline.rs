@@ -2,6 +2,7 @@
 //! single-element reproduction, C⁰/C¹ across facets (matched through shared vertices),
 //! classification by hand, the design's worked numbers, and invariance under relabelling.
 
+use crate::common::dist;
 use polyspline::mesh::generate::{extrude, grid_2d, grid_3d, l_shape, star_2d, uniform};
 use polyspline::mesh::topology::{HEX_VERTEX_PARAMS, NONE};
 use polyspline::mesh::{LinearMesh, MeshOptions, Topology};
@@ -52,10 +53,6 @@ fn multilinear(mesh: &LinearMesh, e: usize, u: [f64; 3]) -> [f64; 3] {
         }
     }
     x
-}
-
-fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
 
 /// Parameter coordinates of vertex `v` in element `e`.
