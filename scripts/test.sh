@@ -10,13 +10,16 @@
 #     in a virtual environment of their own, .venv-tests (re-used while the requirements are
 #     unchanged). The tests find it through POLYSPLINE_PYTHON.
 #  3. `cargo test --release --all-targets` (or `cargo test --release ARGS…` when given
-#     arguments). A test whose checker is missing skips visibly
+#     arguments, e.g. `--test integration curve::`): the library's unit tests and the test
+#     binaries by kind, library, integration, geometry, cross_validation and clients
+#     (docs/architecture.md). A test whose checker is missing skips visibly
 #     (a failure under CI=true) and appends a line to target/test-skips.log.
 #  4. Lints, without arguments only: `cargo fmt --check`, `cargo clippy --all-targets -- -D
 #     warnings` and `cargo doc --no-deps` with RUSTDOCFLAGS=-D warnings (both with --release),
 #     each a pass/fail line in the summary (a failure fails the run; its output is in
 #     target/lint-NAME.log).
-#  5. Without arguments, also Open MPI and the distributed tests (`--features mpi`).
+#  5. Without arguments, also Open MPI and the distributed test binary (`--features mpi`,
+#     which it requires, so step 3 does not build it).
 set -uo pipefail
 cd "$(dirname "$0")/.."
 root=$PWD
