@@ -37,6 +37,11 @@
 //! Traps: keywords and set names are case-insensitive; `**` starts a comment line; keyword
 //! lines may also continue after a trailing comma; set members may name undefined elements
 //! (ignored, as for node sets).
+//!
+//! Parts: [`read`] runs the keyword loop (parts, assembly, modes); `lines` splits lines,
+//! fields and keyword parameters; `records` reads the data lines of each kept keyword;
+//! `element_types` knows the element types and their faces; `finish` maps ids and builds
+//! the mesh.
 
 mod element_types;
 mod finish;

@@ -23,6 +23,10 @@
 //! When a block id and a side-set id are equal and both are named, the side-set name is kept
 //! in [`RawMesh::tag_names`]. Node sets, maps (`node_num_map`, `elem_num_map`: connectivity
 //! and side sets use internal numbering), attributes and results are ignored.
+//!
+//! Parts: `netcdf` parses the container and gives typed views of its variables;
+//! `family` maps element types to kinds and side tables; this module reads the coordinates,
+//! the element blocks and the side sets, in that order.
 
 mod family;
 mod netcdf;

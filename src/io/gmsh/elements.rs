@@ -7,7 +7,7 @@
 //! not define is an error at that line (byte offset in binary sections).
 
 use super::nodes::NodeMap;
-use super::{Reader, Version, capped, parse_tok, to_i32};
+use super::{Reader, Version, capped, to_i32};
 use crate::io::raw::{Location, ParseError};
 
 impl Reader<'_> {
@@ -35,30 +35,30 @@ impl Reader<'_> {
         nodes: &NodeMap,
         version: Version,
     ) -> Result<(), ParseError> {
-        let n = parse_tok::<u64>(&mut self.c, &|| "number of elements".into())?;
+        let n = self.c.parse_or::<u64>(|| "number of elements".into())?;
         for i in 0..n {
             let c = &mut self.c;
-            let id = parse_tok::<u64>(c, &|| format!("number of element {} of {n}", i + 1))?;
+            let id = c.parse_or::<u64>(|| format!("number of element {} of {n}", i + 1))?;
             let loc = c.location();
-            let ty = parse_tok::<i64>(c, &|| format!("type of element {id}"))?;
+            let ty = c.parse_or::<i64>(|| format!("type of element {id}"))?;
             let bi = self.blocks.index(ty, loc)?;
             let npe = self.blocks.list[bi].1.nodes_per_cell;
             let physical;
             if version == Version::V1 {
-                let p = parse_tok::<i64>(c, &|| format!("physical region of element {id}"))?;
+                let p = c.parse_or::<i64>(|| format!("physical region of element {id}"))?;
                 physical = to_i32(p, c, "physical tag")?;
-                parse_tok::<i64>(c, &|| format!("elementary region of element {id}"))?;
-                let nn = parse_tok::<u64>(c, &|| format!("node count of element {id}"))?;
+                c.parse_or::<i64>(|| format!("elementary region of element {id}"))?;
+                let nn = c.parse_or::<u64>(|| format!("node count of element {id}"))?;
                 if nn != npe as u64 {
                     return Err(c.error(format!(
                         "element {id} of Gmsh type {ty} has {npe} nodes, but the file says {nn}"
                     )));
                 }
             } else {
-                let ntags = parse_tok::<u64>(c, &|| format!("number of tags of element {id}"))?;
+                let ntags = c.parse_or::<u64>(|| format!("number of tags of element {id}"))?;
                 let mut first = 0;
                 for j in 0..ntags {
-                    let t = parse_tok::<i64>(c, &|| format!("tag {} of element {id}", j + 1))?;
+                    let t = c.parse_or::<i64>(|| format!("tag {} of element {id}", j + 1))?;
                     if j == 0 {
                         first = to_i32(t, c, "physical tag")?;
                     }
@@ -67,8 +67,7 @@ impl Reader<'_> {
             }
             let block = &mut self.blocks.list[bi].1;
             for k in 0..npe {
-                let t =
-                    parse_tok::<u64>(c, &|| format!("node {} of {npe} of element {id}", k + 1))?;
+                let t = c.parse_or::<u64>(|| format!("node {} of {npe} of element {id}", k + 1))?;
                 let Some(v) = nodes.get(t) else {
                     return Err(c.error(format!(
                         "element {id} refers to node {t}, which $Nodes does not define"
@@ -83,7 +82,7 @@ impl Reader<'_> {
     }
 
     pub(super) fn elements_v2_binary(&mut self, nodes: &NodeMap) -> Result<(), ParseError> {
-        let n = parse_tok::<u64>(&mut self.c, &|| "number of elements".into())?;
+        let n = self.c.parse_or::<u64>(|| "number of elements".into())?;
         self.c.skip_line();
         let mut b = self.bin();
         let mut read = 0u64;
@@ -152,11 +151,11 @@ impl Reader<'_> {
         version: Version,
     ) -> Result<(), ParseError> {
         let c = &mut self.c;
-        let blocks = parse_tok::<u64>(c, &|| "number of element entity blocks".into())?;
-        let total = parse_tok::<u64>(c, &|| "number of elements".into())?;
+        let blocks = c.parse_or::<u64>(|| "number of element entity blocks".into())?;
+        let total = c.parse_or::<u64>(|| "number of elements".into())?;
         if version == Version::V41 {
-            parse_tok::<u64>(c, &|| "minimum element tag".into())?;
-            parse_tok::<u64>(c, &|| "maximum element tag".into())?;
+            c.parse_or::<u64>(|| "minimum element tag".into())?;
+            c.parse_or::<u64>(|| "maximum element tag".into())?;
         }
         let mut read = 0u64;
         for blk in 0..blocks {
@@ -164,15 +163,15 @@ impl Reader<'_> {
             let what = |s: &'static str| move || format!("{s} of element block {}", blk + 1);
             let (dim, etag);
             if version == Version::V41 {
-                dim = parse_tok::<i64>(c, &what("entity dimension"))?;
-                etag = parse_tok::<i64>(c, &what("entity tag"))?;
+                dim = c.parse_or::<i64>(what("entity dimension"))?;
+                etag = c.parse_or::<i64>(what("entity tag"))?;
             } else {
-                etag = parse_tok::<i64>(c, &what("entity tag"))?;
-                dim = parse_tok::<i64>(c, &what("entity dimension"))?;
+                etag = c.parse_or::<i64>(what("entity tag"))?;
+                dim = c.parse_or::<i64>(what("entity dimension"))?;
             }
-            let ty = parse_tok::<i64>(c, &what("element type"))?;
+            let ty = c.parse_or::<i64>(what("element type"))?;
             let type_loc = c.location();
-            let count = parse_tok::<u64>(c, &what("number of elements"))?;
+            let count = c.parse_or::<u64>(what("number of elements"))?;
             let physical = match (i32::try_from(dim), i32::try_from(etag)) {
                 (Ok(d), Ok(t)) => self.physical_of(d, t),
                 _ => 0,
@@ -186,7 +185,7 @@ impl Reader<'_> {
                 .nodes
                 .reserve(capped(count, remaining, 2 * (npe + 1)).saturating_mul(npe));
             for i in 0..count {
-                let id = parse_tok::<u64>(c, &|| {
+                let id = c.parse_or::<u64>(|| {
                     format!(
                         "tag of element {} of {count} in element block {}",
                         i + 1,
@@ -195,9 +194,8 @@ impl Reader<'_> {
                 })?;
                 let loc = c.location();
                 for k in 0..npe {
-                    let t = parse_tok::<u64>(c, &|| {
-                        format!("node {} of {npe} of element {id}", k + 1)
-                    })?;
+                    let t =
+                        c.parse_or::<u64>(|| format!("node {} of {npe} of element {id}", k + 1))?;
                     let Some(v) = nodes.get(t) else {
                         return Err(c.error(format!(
                             "element {id} refers to node {t}, which $Nodes does not define"

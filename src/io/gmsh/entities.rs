@@ -6,7 +6,7 @@
 //! element blocks are tagged.
 
 use super::binary::Bin;
-use super::{Reader, Version, f64_tok, parse_tok, to_i32};
+use super::{Reader, Version, to_i32};
 use crate::io::raw::ParseError;
 
 impl Reader<'_> {
@@ -61,16 +61,16 @@ impl Reader<'_> {
     ) -> Result<(), ParseError> {
         let c = &mut self.c;
         if partitioned {
-            let _parts = parse_tok::<u64>(c, &|| "number of partitions".into())?;
-            let ghosts = parse_tok::<u64>(c, &|| "number of ghost entities".into())?;
+            let _parts = c.parse_or::<u64>(|| "number of partitions".into())?;
+            let ghosts = c.parse_or::<u64>(|| "number of ghost entities".into())?;
             for _ in 0..ghosts {
-                parse_tok::<i64>(c, &|| "ghost entity tag".into())?;
-                parse_tok::<i64>(c, &|| "ghost entity partition".into())?;
+                c.parse_or::<i64>(|| "ghost entity tag".into())?;
+                c.parse_or::<i64>(|| "ghost entity partition".into())?;
             }
         }
         let mut counts = [0u64; 4];
         for (d, n) in counts.iter_mut().enumerate() {
-            *n = parse_tok::<u64>(&mut self.c, &|| {
+            *n = self.c.parse_or::<u64>(|| {
                 format!(
                     "number of {} entities",
                     ["point", "curve", "surface", "volume"][d]
@@ -83,19 +83,19 @@ impl Reader<'_> {
                 let c = &mut self.c;
                 let what =
                     |s: &'static str| move || format!("{s} of entity {} of dimension {dim}", k + 1);
-                let tag = parse_tok::<i64>(c, &what("tag"))?;
+                let tag = c.parse_or::<i64>(what("tag"))?;
                 let tag = to_i32(tag, c, "entity tag")?;
                 let mut parent = None;
                 if partitioned {
-                    let pdim = parse_tok::<i64>(c, &what("parent dimension"))?;
-                    let ptag = parse_tok::<i64>(c, &what("parent tag"))?;
+                    let pdim = c.parse_or::<i64>(what("parent dimension"))?;
+                    let ptag = c.parse_or::<i64>(what("parent tag"))?;
                     parent = Some((
                         to_i32(pdim, c, "dimension")?,
                         to_i32(ptag, c, "entity tag")?,
                     ));
-                    let np = parse_tok::<u64>(c, &what("number of partitions"))?;
+                    let np = c.parse_or::<u64>(what("number of partitions"))?;
                     for _ in 0..np {
-                        parse_tok::<i64>(c, &what("partition"))?;
+                        c.parse_or::<i64>(what("partition"))?;
                     }
                 }
                 let nbox = if version == Version::V41 && dim == 0 {
@@ -104,20 +104,20 @@ impl Reader<'_> {
                     6
                 };
                 for _ in 0..nbox {
-                    f64_tok(c, &what("bounding box coordinate"))?;
+                    c.f64_or(what("bounding box coordinate"))?;
                 }
-                let nphys = parse_tok::<u64>(c, &what("number of physical tags"))?;
+                let nphys = c.parse_or::<u64>(what("number of physical tags"))?;
                 let mut first = 0;
                 for j in 0..nphys {
-                    let p = parse_tok::<i64>(c, &what("physical tag"))?;
+                    let p = c.parse_or::<i64>(what("physical tag"))?;
                     if j == 0 {
                         first = to_i32(p, c, "physical tag")?;
                     }
                 }
                 if dim > 0 {
-                    let nb = parse_tok::<u64>(c, &what("number of bounding entities"))?;
+                    let nb = c.parse_or::<u64>(what("number of bounding entities"))?;
                     for _ in 0..nb {
-                        parse_tok::<i64>(c, &what("bounding entity tag"))?;
+                        c.parse_or::<i64>(what("bounding entity tag"))?;
                     }
                 }
                 self.record_entity(dim, tag, first, parent);

@@ -38,6 +38,11 @@
 //! headers (`2.0 0 8`); parametric coordinates after the node coordinates in MSH 4 (skipped);
 //! MSH 2 binary element blocks (type, count, tag count) followed by records; counts in headers
 //! are never trusted for allocation beyond what the remaining input can hold.
+//!
+//! Parts: this module reads `$MeshFormat` and `$PhysicalNames` and runs the section loop;
+//! `entities`, `nodes` and `elements` read their sections in every version and encoding;
+//! `binary` decodes binary data with bounds checks; `element_types` maps type numbers to
+//! cell kinds.
 
 mod binary;
 mod element_types;
@@ -85,24 +90,6 @@ struct Reader<'a> {
     entity_physical: HashMap<(i32, i32), i32>,
     /// Parent (dimension, tag) of each partitioned entity that has no physical tag itself.
     partition_parent: HashMap<(i32, i32), (i32, i32)>,
-}
-
-/// Parse a token as `T`, with a lazily built description for the error message.
-fn parse_tok<T: std::str::FromStr>(
-    c: &mut TextCursor,
-    what: &dyn Fn() -> String,
-) -> Result<T, ParseError> {
-    match c.next_token() {
-        Some(t) => t.parse::<T>().map_err(|_| c.expected(&what(), t)),
-        None => Err(c.error(format!("unexpected end of file while reading {}", what()))),
-    }
-}
-
-fn f64_tok(c: &mut TextCursor, what: &dyn Fn() -> String) -> Result<f64, ParseError> {
-    match c.next_token() {
-        Some(t) => parse_f64(t).ok_or_else(|| c.expected(&what(), t)),
-        None => Err(c.error(format!("unexpected end of file while reading {}", what()))),
-    }
 }
 
 /// Reserve for `count` items, but never more than the input could possibly hold (every item
@@ -270,8 +257,9 @@ impl<'a> Reader<'a> {
                 "MSH version {vt} is not supported (supported: 1, 2.0-2.2, 4.0, 4.1)"
             )));
         };
-        let file_type =
-            parse_tok::<i64>(&mut self.c, &|| "file type (0 = ASCII, 1 = binary)".into())?;
+        let file_type = self
+            .c
+            .parse_or::<i64>(|| "file type (0 = ASCII, 1 = binary)".into())?;
         let binary = match file_type {
             0 => false,
             1 => true,
@@ -281,7 +269,7 @@ impl<'a> Reader<'a> {
                 )));
             }
         };
-        let data_size = parse_tok::<i64>(&mut self.c, &|| "data size".into())?;
+        let data_size = self.c.parse_or::<i64>(|| "data size".into())?;
         let mut format = Format {
             version,
             binary,
@@ -332,11 +320,15 @@ impl<'a> Reader<'a> {
     }
 
     fn physical_names(&mut self) -> Result<(), ParseError> {
-        let n = parse_tok::<u64>(&mut self.c, &|| "number of physical names".into())?;
+        let n = self
+            .c
+            .parse_or::<u64>(|| "number of physical names".into())?;
         for i in 0..n {
             let what = || format!("physical name {} of {n}", i + 1);
-            let dim = parse_tok::<i64>(&mut self.c, &|| format!("dimension of {}", what()))?;
-            let tag = parse_tok::<i64>(&mut self.c, &|| format!("tag of {}", what()))?;
+            let dim = self
+                .c
+                .parse_or::<i64>(|| format!("dimension of {}", what()))?;
+            let tag = self.c.parse_or::<i64>(|| format!("tag of {}", what()))?;
             let tag = to_i32(tag, &self.c, "physical tag")?;
             let _ = dim;
             let rest = self.c.next_line().unwrap_or("").trim();

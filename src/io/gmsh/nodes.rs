@@ -5,7 +5,7 @@
 //! Invariants: a tag defined twice is an error at its second definition; MSH 4 parametric
 //! coordinates are skipped; reservations are capped by what the remaining input can hold.
 
-use super::{Reader, Version, capped, f64_tok, parse_tok};
+use super::{Reader, Version, capped};
 use crate::io::raw::{Location, ParseError};
 use std::collections::HashMap;
 
@@ -101,20 +101,18 @@ impl Reader<'_> {
     }
 
     pub(super) fn nodes_v2_ascii(&mut self, tags: &mut Vec<u64>) -> Result<(), ParseError> {
-        let n = parse_tok::<u64>(&mut self.c, &|| "number of nodes".into())?;
+        let n = self.c.parse_or::<u64>(|| "number of nodes".into())?;
         let remaining = self.c.data().len() - self.c.pos();
         let cap = capped(n, remaining, 8);
         tags.reserve(cap);
         self.reserve_points(cap);
         for i in 0..n {
             let c = &mut self.c;
-            let tag = parse_tok::<u64>(c, &|| format!("tag of node {} of {n}", i + 1))?;
+            let tag = c.parse_or::<u64>(|| format!("tag of node {} of {n}", i + 1))?;
             let loc = c.location();
             let mut p = [0.0; 3];
             for (k, x) in p.iter_mut().enumerate() {
-                *x = f64_tok(c, &|| {
-                    format!("{} coordinate of node {tag}", ["x", "y", "z"][k])
-                })?;
+                *x = c.f64_or(|| format!("{} coordinate of node {tag}", ["x", "y", "z"][k]))?;
             }
             tags.push(tag);
             self.push_point(p, loc);
@@ -123,7 +121,7 @@ impl Reader<'_> {
     }
 
     pub(super) fn nodes_v2_binary(&mut self, tags: &mut Vec<u64>) -> Result<(), ParseError> {
-        let n = parse_tok::<u64>(&mut self.c, &|| "number of nodes".into())?;
+        let n = self.c.parse_or::<u64>(|| "number of nodes".into())?;
         self.c.skip_line();
         let mut b = self.bin();
         let start = b.pos;
@@ -151,11 +149,11 @@ impl Reader<'_> {
         version: Version,
     ) -> Result<(), ParseError> {
         let c = &mut self.c;
-        let blocks = parse_tok::<u64>(c, &|| "number of node entity blocks".into())?;
-        let total = parse_tok::<u64>(c, &|| "number of nodes".into())?;
+        let blocks = c.parse_or::<u64>(|| "number of node entity blocks".into())?;
+        let total = c.parse_or::<u64>(|| "number of nodes".into())?;
         if version == Version::V41 {
-            parse_tok::<u64>(c, &|| "minimum node tag".into())?;
-            parse_tok::<u64>(c, &|| "maximum node tag".into())?;
+            c.parse_or::<u64>(|| "minimum node tag".into())?;
+            c.parse_or::<u64>(|| "maximum node tag".into())?;
         }
         let remaining = c.data().len() - c.pos();
         let cap = capped(total, remaining, 8);
@@ -166,14 +164,14 @@ impl Reader<'_> {
             let what = |s: &'static str| move || format!("{s} of node block {}", blk + 1);
             let (dim, parametric, count);
             if version == Version::V41 {
-                dim = parse_tok::<i64>(c, &what("entity dimension"))?;
-                parse_tok::<i64>(c, &what("entity tag"))?;
+                dim = c.parse_or::<i64>(what("entity dimension"))?;
+                c.parse_or::<i64>(what("entity tag"))?;
             } else {
-                parse_tok::<i64>(c, &what("entity tag"))?;
-                dim = parse_tok::<i64>(c, &what("entity dimension"))?;
+                c.parse_or::<i64>(what("entity tag"))?;
+                dim = c.parse_or::<i64>(what("entity dimension"))?;
             }
-            parametric = parse_tok::<i64>(c, &what("parametric flag"))?;
-            count = parse_tok::<u64>(c, &what("number of nodes"))?;
+            parametric = c.parse_or::<i64>(what("parametric flag"))?;
+            count = c.parse_or::<u64>(what("number of nodes"))?;
             if !(0..=3).contains(&dim) {
                 return Err(c.error(format!("entity dimension {dim} is not 0, 1, 2 or 3")));
             }
@@ -181,7 +179,7 @@ impl Reader<'_> {
             let first = tags.len();
             if version == Version::V41 {
                 for i in 0..count {
-                    let t = parse_tok::<u64>(c, &|| {
+                    let t = c.parse_or::<u64>(|| {
                         format!("node tag {} of {count} in node block {}", i + 1, blk + 1)
                     })?;
                     tags.push(t);
@@ -192,7 +190,7 @@ impl Reader<'_> {
                 let tag = if version == Version::V41 {
                     tags[first + i as usize]
                 } else {
-                    let t = parse_tok::<u64>(c, &|| {
+                    let t = c.parse_or::<u64>(|| {
                         format!("node tag {} of {count} in node block {}", i + 1, blk + 1)
                     })?;
                     tags.push(t);
@@ -201,15 +199,13 @@ impl Reader<'_> {
                 let mut p = [0.0; 3];
                 let mut loc = Location::File;
                 for (k, x) in p.iter_mut().enumerate() {
-                    *x = f64_tok(c, &|| {
-                        format!("{} coordinate of node {tag}", ["x", "y", "z"][k])
-                    })?;
+                    *x = c.f64_or(|| format!("{} coordinate of node {tag}", ["x", "y", "z"][k]))?;
                     if k == 0 {
                         loc = c.location();
                     }
                 }
                 for _ in 0..nparam {
-                    f64_tok(c, &|| format!("parametric coordinate of node {tag}"))?;
+                    c.f64_or(|| format!("parametric coordinate of node {tag}"))?;
                 }
                 self.push_point(p, loc);
             }

@@ -23,6 +23,10 @@
 //! optional component count before its `LOOKUP_TABLE` line; binary blocks may contain newline
 //! bytes. Errors inside binary blocks name byte offsets; errors in the text between them name
 //! lines as a text editor counts them (every newline byte, including those in binary data).
+//!
+//! Parts: this module runs the keyword loop (`Legacy::parse`); `values` reads the header
+//! and the ASCII or binary values of a section; `sections` reads each section; `cells`
+//! (cell types, the cell list) and `scalar` (data types) are shared with the XML reader.
 
 mod cells;
 mod scalar;

@@ -24,6 +24,10 @@
 //! Locations: values of `ascii` arrays are located by line; raw appended data by byte offset in
 //! the file; inline base64 data by the line of its `DataArray`; appended base64 data by the byte
 //! offset where its encoded block starts.
+//!
+//! Parts: `xml` parses the XML and locates every array; `decode` turns an array's text or
+//! appended block into bytes; `piece` turns bytes into values and a piece into points, cells
+//! and tags; [`read`] joins the pieces.
 
 mod decode;
 mod piece;

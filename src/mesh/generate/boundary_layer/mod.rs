@@ -30,6 +30,10 @@
 //! Points around the wall: uniform in the parameter angle θ of (cos θ, t·sin θ) for the ellipse
 //! and the circle; cosine spacing in arc length on each airfoil surface (clustered at the leading
 //! and trailing edges) for the airfoil.
+//!
+//! Parts: `wall` (the analytic walls), `spacing` (distances along a wall-normal line and
+//! the far-field blend), `grids` (the O- and C-grid layouts); this module checks the options
+//! and assembles, extrudes and checks the mesh.
 
 mod grids;
 mod spacing;
