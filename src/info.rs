@@ -145,7 +145,21 @@ impl MeshInfo {
 
 impl fmt::Display for MeshInfo {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        let row = |f: &mut fmt::Formatter<'_>, k: &str, v: String| writeln!(f, "{k:<22}{v}");
+        self.fmt_sizes_and_tags(f)?;
+        self.fmt_structure(f)?;
+        self.fmt_problems(f)?;
+        self.fmt_features(f)
+    }
+}
+
+/// One `key value` row of the table.
+fn row(f: &mut fmt::Formatter<'_>, k: &str, v: String) -> fmt::Result {
+    writeln!(f, "{k:<22}{v}")
+}
+
+impl MeshInfo {
+    /// Dimension, counts of elements, vertices, edges, faces and boundary facets, and tags.
+    fn fmt_sizes_and_tags(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         row(f, "dimension", self.dimension.to_string())?;
         row(
             f,
@@ -191,6 +205,12 @@ impl fmt::Display for MeshInfo {
                 .collect();
             row(f, "element tags", tags.join(", "))?;
         }
+        Ok(())
+    }
+
+    /// Components, orientation, irregularity, the spline space, valences, the bounding box
+    /// and the element quality.
+    fn fmt_structure(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         row(f, "components", self.components.to_string())?;
         row(f, "reoriented", self.reoriented.to_string())?;
         if self.invalid_elements > 0 {
@@ -238,6 +258,11 @@ impl fmt::Display for MeshInfo {
                 self.min_scaled_jacobian, self.min_scaled_jacobian_element
             ),
         )?;
+        Ok(())
+    }
+
+    /// Non-manifold parts, duplicates and what the reader dropped or ignored.
+    fn fmt_problems(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         let nm = self.non_manifold_facets + self.non_manifold_edges + self.non_manifold_vertices;
         row(
             f,
@@ -279,6 +304,11 @@ impl fmt::Display for MeshInfo {
                 .collect();
             row(f, "ignored cells", c.join(", "))?;
         }
+        Ok(())
+    }
+
+    /// The sharp features, when they were detected.
+    fn fmt_features(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         if let Some(s) = &self.features {
             let what = if self.dimension == 2 {
                 format!("{} corners", s.feature_corners)

@@ -147,256 +147,343 @@ pub fn write_msh_named(
     volume_name: &str,
     w: &mut impl Write,
 ) -> io::Result<()> {
-    let d = mesh.dim;
-    let p = mesh.order;
-    let groups = groups(mesh, volume_name);
-    let vol_order = to_indices(p, &if d == 2 { gmsh_quad(p) } else { gmsh_hex(p) });
-    let bnd_order = to_indices(p, &if d == 2 { gmsh_line(p) } else { gmsh_quad(p) });
-    let vol_type = gmsh_type(d, p).ok_or_else(|| unsupported(d, p))? as i32;
-    let bnd_type = gmsh_type(d - 1, p).ok_or_else(|| unsupported(d - 1, p))? as i32;
-    let nodes_of = |g: &Group, i: usize| -> Vec<u32> {
-        if g.dim == d {
-            let e = mesh.element(i);
-            vol_order.iter().map(|&k| e[k]).collect()
-        } else {
-            let n = mesh.nodes_per_facet();
-            let f = &mesh.boundary[i * n..(i + 1) * n];
-            bnd_order.iter().map(|&k| f[k]).collect()
-        }
-    };
-    let type_of = |g: &Group| if g.dim == d { vol_type } else { bnd_type };
-    let n_elements = mesh.n_elements() + mesh.n_boundary();
-
-    let (vstr, ftype) = match version {
-        MshVersion::V22 => ("2.2", binary as i32),
-        MshVersion::V41 => ("4.1", binary as i32),
-    };
-    writeln!(w, "$MeshFormat\n{vstr} {ftype} 8")?;
-    if binary {
-        w.i32(1)?;
-        writeln!(w)?;
-    }
-    writeln!(w, "$EndMeshFormat")?;
-    writeln!(w, "$PhysicalNames\n{}", groups.len())?;
-    for g in &groups {
-        writeln!(
-            w,
-            "{} {} \"{}\"",
-            g.dim,
-            g.physical,
-            g.name.replace('"', "'")
-        )?;
-    }
-    writeln!(w, "$EndPhysicalNames")?;
-
+    let msh = Msh::new(mesh, binary, volume_name)?;
+    msh.header(version, w)?;
     match version {
         MshVersion::V41 => {
-            // Entities with bounding boxes of their elements' nodes.
-            // In parallel: min and max are exact, so the result does not depend on the split.
-            let bbox = |g: &Group| {
-                use rayon::prelude::*;
-                let npf = mesh.nodes_per_facet();
-                let empty = || ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-                let (lo, hi) = g
-                    .members
-                    .par_iter()
-                    .fold(empty, |(mut lo, mut hi), &i| {
-                        let ids = if g.dim == d {
-                            mesh.element(i)
-                        } else {
-                            &mesh.boundary[i * npf..(i + 1) * npf]
-                        };
-                        for &n in ids {
-                            let x = mesh.nodes[n as usize];
-                            for k in 0..3 {
-                                lo[k] = lo[k].min(x[k]);
-                                hi[k] = hi[k].max(x[k]);
-                            }
-                        }
-                        (lo, hi)
-                    })
-                    .reduce(empty, |(a, b), (c, e)| {
-                        (
-                            std::array::from_fn(|k| a[k].min(c[k])),
-                            std::array::from_fn(|k| b[k].max(e[k])),
-                        )
-                    });
-                [lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]]
-            };
-            let mut count = [0u64; 4];
-            for g in &groups {
-                count[g.dim] += 1;
-            }
-            writeln!(w, "$Entities")?;
-            if binary {
-                for c in count {
-                    w.u64(c)?;
-                }
-                for dim in 1..=3 {
-                    for g in groups.iter().filter(|g| g.dim == dim) {
-                        w.i32(g.entity)?;
-                        for v in bbox(g) {
-                            w.f64(v)?;
-                        }
-                        w.u64(1)?;
-                        w.i32(g.physical)?;
-                        w.u64(0)?;
-                    }
-                }
-                writeln!(w)?;
-            } else {
-                writeln!(w, "{} {} {} {}", count[0], count[1], count[2], count[3])?;
-                for dim in 1..=3 {
-                    for g in groups.iter().filter(|g| g.dim == dim) {
-                        let b = bbox(g);
-                        writeln!(
-                            w,
-                            "{} {} {} {} {} {} {} 1 {} 0",
-                            g.entity, b[0], b[1], b[2], b[3], b[4], b[5], g.physical
-                        )?;
-                    }
-                }
-            }
-            writeln!(w, "$EndEntities")?;
-
-            // All nodes in one block on the first volume entity.
-            let nn = mesh.nodes.len() as u64;
-            let vol_entity = groups.iter().find(|g| g.dim == d).map_or(1, |g| g.entity);
-            writeln!(w, "$Nodes")?;
-            if binary {
-                for v in [1, nn, 1.min(nn), nn] {
-                    w.u64(v)?;
-                }
-                w.i32(d as i32)?;
-                w.i32(vol_entity)?;
-                w.i32(0)?;
-                w.u64(nn)?;
-                for i in 1..=nn {
-                    w.u64(i)?;
-                }
-                for x in &mesh.nodes {
-                    for &c in x {
-                        w.f64(c)?;
-                    }
-                }
-                writeln!(w)?;
-            } else {
-                writeln!(w, "1 {nn} {} {nn}", 1.min(nn))?;
-                writeln!(w, "{d} {vol_entity} 0 {nn}")?;
-                write_lines(w, mesh.nodes.len(), |i, out| {
-                    out.extend_from_slice(itoa::Buffer::new().format(i + 1).as_bytes());
-                })?;
-                write_lines(w, mesh.nodes.len(), |i, out| {
-                    for (k, &c) in mesh.nodes[i].iter().enumerate() {
-                        if k > 0 {
-                            out.push(b' ');
-                        }
-                        out.extend_from_slice(zmij::Buffer::new().format(c).as_bytes());
-                    }
-                })?;
-            }
-            writeln!(w, "$EndNodes")?;
-
-            writeln!(w, "$Elements")?;
-            let ne = n_elements as u64;
-            if binary {
-                for v in [groups.len() as u64, ne, 1.min(ne), ne] {
-                    w.u64(v)?;
-                }
-            } else {
-                writeln!(w, "{} {ne} {} {ne}", groups.len(), 1.min(ne))?;
-            }
-            let mut tag = 1u64;
-            for g in &groups {
-                if binary {
-                    w.i32(g.dim as i32)?;
-                    w.i32(g.entity)?;
-                    w.i32(type_of(g))?;
-                    w.u64(g.members.len() as u64)?;
-                } else {
-                    writeln!(
-                        w,
-                        "{} {} {} {}",
-                        g.dim,
-                        g.entity,
-                        type_of(g),
-                        g.members.len()
-                    )?;
-                }
-                if binary {
-                    for &i in &g.members {
-                        w.u64(tag)?;
-                        for n in nodes_of(g, i) {
-                            w.u64(n as u64 + 1)?;
-                        }
-                        tag += 1;
-                    }
-                } else {
-                    write_lines(w, g.members.len(), |k, out| {
-                        let mut b = itoa::Buffer::new();
-                        out.extend_from_slice(b.format(tag + k as u64).as_bytes());
-                        for n in nodes_of(g, g.members[k]) {
-                            out.push(b' ');
-                            out.extend_from_slice(b.format(n as u64 + 1).as_bytes());
-                        }
-                    })?;
-                    tag += g.members.len() as u64;
-                }
-            }
-            if binary {
-                writeln!(w)?;
-            }
-            writeln!(w, "$EndElements")?;
+            msh.entities_v41(w)?;
+            msh.nodes_v41(w)?;
+            msh.elements_v41(w)?;
         }
         MshVersion::V22 => {
-            writeln!(w, "$Nodes\n{}", mesh.nodes.len())?;
-            for (i, x) in mesh.nodes.iter().enumerate() {
-                if binary {
-                    w.i32(i as i32 + 1)?;
-                    for &c in x {
-                        w.f64(c)?;
-                    }
-                } else {
-                    writeln!(w, "{} {} {} {}", i + 1, x[0], x[1], x[2])?;
-                }
-            }
-            if binary {
-                writeln!(w)?;
-            }
-            writeln!(w, "$EndNodes\n$Elements\n{n_elements}")?;
-            let mut tag = 1i32;
-            for g in &groups {
-                if binary && !g.members.is_empty() {
-                    w.i32(type_of(g))?;
-                    w.i32(g.members.len() as i32)?;
-                    w.i32(2)?;
-                }
-                for &i in &g.members {
-                    let nodes = nodes_of(g, i);
-                    if binary {
-                        w.i32(tag)?;
-                        w.i32(g.physical)?;
-                        w.i32(g.entity)?;
-                        for n in nodes {
-                            w.i32(n as i32 + 1)?;
-                        }
-                    } else {
-                        write!(w, "{tag} {} 2 {} {}", type_of(g), g.physical, g.entity)?;
-                        for n in nodes {
-                            write!(w, " {}", n + 1)?;
-                        }
-                        writeln!(w)?;
-                    }
-                    tag += 1;
-                }
-            }
-            if binary {
-                writeln!(w)?;
-            }
-            writeln!(w, "$EndElements")?;
+            msh.nodes_v22(w)?;
+            msh.elements_v22(w)?;
         }
     }
     Ok(())
+}
+
+/// What every section of one output file needs: the mesh, its physical groups, and the Gmsh
+/// types and node orders of its elements and facets.
+struct Msh<'m> {
+    mesh: &'m HighOrderMesh,
+    binary: bool,
+    groups: Vec<Group>,
+    /// Dimension of the elements (facets have `d - 1`).
+    d: usize,
+    vol_order: Vec<usize>,
+    bnd_order: Vec<usize>,
+    vol_type: i32,
+    bnd_type: i32,
+}
+
+impl<'m> Msh<'m> {
+    fn new(mesh: &'m HighOrderMesh, binary: bool, volume_name: &str) -> io::Result<Self> {
+        let d = mesh.dim;
+        let p = mesh.order;
+        let groups = groups(mesh, volume_name);
+        let vol_order = to_indices(p, &if d == 2 { gmsh_quad(p) } else { gmsh_hex(p) });
+        let bnd_order = to_indices(p, &if d == 2 { gmsh_line(p) } else { gmsh_quad(p) });
+        let vol_type = gmsh_type(d, p).ok_or_else(|| unsupported(d, p))? as i32;
+        let bnd_type = gmsh_type(d - 1, p).ok_or_else(|| unsupported(d - 1, p))? as i32;
+        Ok(Msh {
+            mesh,
+            binary,
+            groups,
+            d,
+            vol_order,
+            bnd_order,
+            vol_type,
+            bnd_type,
+        })
+    }
+
+    /// Node indices (0-based) of member `i` of group `g`, in Gmsh's order.
+    fn nodes_of(&self, g: &Group, i: usize) -> Vec<u32> {
+        let mesh = self.mesh;
+        if g.dim == self.d {
+            let e = mesh.element(i);
+            self.vol_order.iter().map(|&k| e[k]).collect()
+        } else {
+            let n = mesh.nodes_per_facet();
+            let f = &mesh.boundary[i * n..(i + 1) * n];
+            self.bnd_order.iter().map(|&k| f[k]).collect()
+        }
+    }
+
+    fn type_of(&self, g: &Group) -> i32 {
+        if g.dim == self.d {
+            self.vol_type
+        } else {
+            self.bnd_type
+        }
+    }
+
+    fn n_elements(&self) -> usize {
+        self.mesh.n_elements() + self.mesh.n_boundary()
+    }
+
+    /// `$MeshFormat` and `$PhysicalNames`.
+    fn header(&self, version: MshVersion, w: &mut impl Write) -> io::Result<()> {
+        let binary = self.binary;
+        let (vstr, ftype) = match version {
+            MshVersion::V22 => ("2.2", binary as i32),
+            MshVersion::V41 => ("4.1", binary as i32),
+        };
+        writeln!(w, "$MeshFormat\n{vstr} {ftype} 8")?;
+        if binary {
+            w.i32(1)?;
+            writeln!(w)?;
+        }
+        writeln!(w, "$EndMeshFormat")?;
+        writeln!(w, "$PhysicalNames\n{}", self.groups.len())?;
+        for g in &self.groups {
+            writeln!(
+                w,
+                "{} {} \"{}\"",
+                g.dim,
+                g.physical,
+                g.name.replace('"', "'")
+            )?;
+        }
+        writeln!(w, "$EndPhysicalNames")
+    }
+
+    /// Bounding box `[min x, y, z, max x, y, z]` of the nodes of group `g`'s members. In
+    /// parallel: min and max are exact, so the result does not depend on the split.
+    fn bbox(&self, g: &Group) -> [f64; 6] {
+        use rayon::prelude::*;
+        let mesh = self.mesh;
+        let d = self.d;
+        let npf = mesh.nodes_per_facet();
+        let empty = || ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        let (lo, hi) = g
+            .members
+            .par_iter()
+            .fold(empty, |(mut lo, mut hi), &i| {
+                let ids = if g.dim == d {
+                    mesh.element(i)
+                } else {
+                    &mesh.boundary[i * npf..(i + 1) * npf]
+                };
+                for &n in ids {
+                    let x = mesh.nodes[n as usize];
+                    for k in 0..3 {
+                        lo[k] = lo[k].min(x[k]);
+                        hi[k] = hi[k].max(x[k]);
+                    }
+                }
+                (lo, hi)
+            })
+            .reduce(empty, |(a, b), (c, e)| {
+                (
+                    std::array::from_fn(|k| a[k].min(c[k])),
+                    std::array::from_fn(|k| b[k].max(e[k])),
+                )
+            });
+        [lo[0], lo[1], lo[2], hi[0], hi[1], hi[2]]
+    }
+
+    /// MSH 4.1 `$Entities`: one entity per physical group, with the bounding box of its
+    /// elements' nodes.
+    fn entities_v41(&self, w: &mut impl Write) -> io::Result<()> {
+        let groups = &self.groups;
+        let mut count = [0u64; 4];
+        for g in groups {
+            count[g.dim] += 1;
+        }
+        writeln!(w, "$Entities")?;
+        if self.binary {
+            for c in count {
+                w.u64(c)?;
+            }
+            for dim in 1..=3 {
+                for g in groups.iter().filter(|g| g.dim == dim) {
+                    w.i32(g.entity)?;
+                    for v in self.bbox(g) {
+                        w.f64(v)?;
+                    }
+                    w.u64(1)?;
+                    w.i32(g.physical)?;
+                    w.u64(0)?;
+                }
+            }
+            writeln!(w)?;
+        } else {
+            writeln!(w, "{} {} {} {}", count[0], count[1], count[2], count[3])?;
+            for dim in 1..=3 {
+                for g in groups.iter().filter(|g| g.dim == dim) {
+                    let b = self.bbox(g);
+                    writeln!(
+                        w,
+                        "{} {} {} {} {} {} {} 1 {} 0",
+                        g.entity, b[0], b[1], b[2], b[3], b[4], b[5], g.physical
+                    )?;
+                }
+            }
+        }
+        writeln!(w, "$EndEntities")
+    }
+
+    /// MSH 4.1 `$Nodes`: all nodes in one block on the first volume entity.
+    fn nodes_v41(&self, w: &mut impl Write) -> io::Result<()> {
+        let mesh = self.mesh;
+        let d = self.d;
+        let nn = mesh.nodes.len() as u64;
+        let vol_entity = self
+            .groups
+            .iter()
+            .find(|g| g.dim == d)
+            .map_or(1, |g| g.entity);
+        writeln!(w, "$Nodes")?;
+        if self.binary {
+            for v in [1, nn, 1.min(nn), nn] {
+                w.u64(v)?;
+            }
+            w.i32(d as i32)?;
+            w.i32(vol_entity)?;
+            w.i32(0)?;
+            w.u64(nn)?;
+            for i in 1..=nn {
+                w.u64(i)?;
+            }
+            for x in &mesh.nodes {
+                for &c in x {
+                    w.f64(c)?;
+                }
+            }
+            writeln!(w)?;
+        } else {
+            writeln!(w, "1 {nn} {} {nn}", 1.min(nn))?;
+            writeln!(w, "{d} {vol_entity} 0 {nn}")?;
+            write_lines(w, mesh.nodes.len(), |i, out| {
+                out.extend_from_slice(itoa::Buffer::new().format(i + 1).as_bytes());
+            })?;
+            write_lines(w, mesh.nodes.len(), |i, out| {
+                for (k, &c) in mesh.nodes[i].iter().enumerate() {
+                    if k > 0 {
+                        out.push(b' ');
+                    }
+                    out.extend_from_slice(zmij::Buffer::new().format(c).as_bytes());
+                }
+            })?;
+        }
+        writeln!(w, "$EndNodes")
+    }
+
+    /// MSH 4.1 `$Elements`: one block per physical group, element tags 1, 2, ... in group
+    /// order.
+    fn elements_v41(&self, w: &mut impl Write) -> io::Result<()> {
+        let binary = self.binary;
+        let groups = &self.groups;
+        writeln!(w, "$Elements")?;
+        let ne = self.n_elements() as u64;
+        if binary {
+            for v in [groups.len() as u64, ne, 1.min(ne), ne] {
+                w.u64(v)?;
+            }
+        } else {
+            writeln!(w, "{} {ne} {} {ne}", groups.len(), 1.min(ne))?;
+        }
+        let mut tag = 1u64;
+        for g in groups {
+            if binary {
+                w.i32(g.dim as i32)?;
+                w.i32(g.entity)?;
+                w.i32(self.type_of(g))?;
+                w.u64(g.members.len() as u64)?;
+            } else {
+                writeln!(
+                    w,
+                    "{} {} {} {}",
+                    g.dim,
+                    g.entity,
+                    self.type_of(g),
+                    g.members.len()
+                )?;
+            }
+            if binary {
+                for &i in &g.members {
+                    w.u64(tag)?;
+                    for n in self.nodes_of(g, i) {
+                        w.u64(n as u64 + 1)?;
+                    }
+                    tag += 1;
+                }
+            } else {
+                write_lines(w, g.members.len(), |k, out| {
+                    let mut b = itoa::Buffer::new();
+                    out.extend_from_slice(b.format(tag + k as u64).as_bytes());
+                    for n in self.nodes_of(g, g.members[k]) {
+                        out.push(b' ');
+                        out.extend_from_slice(b.format(n as u64 + 1).as_bytes());
+                    }
+                })?;
+                tag += g.members.len() as u64;
+            }
+        }
+        if binary {
+            writeln!(w)?;
+        }
+        writeln!(w, "$EndElements")
+    }
+
+    /// MSH 2.2 `$Nodes`.
+    fn nodes_v22(&self, w: &mut impl Write) -> io::Result<()> {
+        let binary = self.binary;
+        writeln!(w, "$Nodes\n{}", self.mesh.nodes.len())?;
+        for (i, x) in self.mesh.nodes.iter().enumerate() {
+            if binary {
+                w.i32(i as i32 + 1)?;
+                for &c in x {
+                    w.f64(c)?;
+                }
+            } else {
+                writeln!(w, "{} {} {} {}", i + 1, x[0], x[1], x[2])?;
+            }
+        }
+        if binary {
+            writeln!(w)?;
+        }
+        writeln!(w, "$EndNodes")
+    }
+
+    /// MSH 2.2 `$Elements`: tags (physical, entity) on every element; in binary one block
+    /// header per group.
+    fn elements_v22(&self, w: &mut impl Write) -> io::Result<()> {
+        let binary = self.binary;
+        writeln!(w, "$Elements\n{}", self.n_elements())?;
+        let mut tag = 1i32;
+        for g in &self.groups {
+            if binary && !g.members.is_empty() {
+                w.i32(self.type_of(g))?;
+                w.i32(g.members.len() as i32)?;
+                w.i32(2)?;
+            }
+            for &i in &g.members {
+                let nodes = self.nodes_of(g, i);
+                if binary {
+                    w.i32(tag)?;
+                    w.i32(g.physical)?;
+                    w.i32(g.entity)?;
+                    for n in nodes {
+                        w.i32(n as i32 + 1)?;
+                    }
+                } else {
+                    write!(w, "{tag} {} 2 {} {}", self.type_of(g), g.physical, g.entity)?;
+                    for n in nodes {
+                        write!(w, " {}", n + 1)?;
+                    }
+                    writeln!(w)?;
+                }
+                tag += 1;
+            }
+        }
+        if binary {
+            writeln!(w)?;
+        }
+        writeln!(w, "$EndElements")
+    }
 }
 
 /// Write `n` lines, line `i` made by `line(i, buffer)` (without its newline): formatted in

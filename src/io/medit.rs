@@ -102,13 +102,6 @@ fn capped(count: usize, per_record: usize, remaining: usize) -> usize {
         .min(remaining / 2 + per_record)
 }
 
-/// Next token, or an end-of-file error naming what was expected (the text is built only on
-/// failure, keeping the per-token path free of allocations).
-fn token<'a>(c: &mut TextCursor<'a>, what: impl Fn() -> String) -> Result<&'a str, ParseError> {
-    c.next_token()
-        .ok_or_else(|| c.error(format!("unexpected end of file while reading {}", what())))
-}
-
 /// Read a section's record count (a non-negative integer).
 fn read_count(c: &mut TextCursor, keyword: &str) -> Result<usize, ParseError> {
     let what = format!("the number of records after \"{keyword}\"");
@@ -192,7 +185,7 @@ pub fn read(data: &[u8]) -> Result<RawMesh, ParseError> {
                 c.error(format!("the count of \"{keyword}\" records is too large"))
             })?;
             for _ in 0..total {
-                let t = token(&mut c, || format!("a \"{keyword}\" record"))?;
+                let t = c.token_or(|| format!("a \"{keyword}\" record"))?;
                 if super::text::parse_f64(t).is_none() {
                     return Err(c.expected(&format!("a number in section \"{keyword}\""), t));
                 }
@@ -263,7 +256,7 @@ fn read_vertices(c: &mut TextCursor, dim: usize, mesh: &mut RawMesh) -> Result<(
             }
         }
         // The vertex reference is a label that polyspline does not use.
-        let t = token(c, || format!("reference number of vertex {}", i + 1))?;
+        let t = c.token_or(|| format!("reference number of vertex {}", i + 1))?;
         if t.parse::<i64>().is_err() {
             return Err(c.expected(&format!("reference number of vertex {}", i + 1), t));
         }
@@ -314,7 +307,7 @@ fn read_cells(
             block.nodes.push(v.saturating_sub(1));
         }
         let what = || format!("reference number of record {} in \"{keyword}\"", i + 1);
-        let t = token(c, what)?;
+        let t = c.token_or(what)?;
         let r: i32 = t.parse().map_err(|_| c.expected(&what(), t))?;
         block.tags.push(r);
     }

@@ -46,13 +46,6 @@ fn geometry(code: i64) -> Option<(CellKind, usize)> {
 /// Per-geometry accumulators so that each kind ends up in one block.
 type Blocks = [Option<RawBlock>; 8];
 
-/// Next token, or an end-of-file error naming what was expected (the text is built only on
-/// failure, keeping the per-token path free of allocations).
-fn token<'a>(c: &mut TextCursor<'a>, what: impl Fn() -> String) -> Result<&'a str, ParseError> {
-    c.next_token()
-        .ok_or_else(|| c.error(format!("unexpected end of file while reading {}", what())))
-}
-
 /// Read a count that must be a non-negative integer.
 fn read_count(c: &mut TextCursor, what: &str) -> Result<usize, ParseError> {
     let t = c.expect_token(what)?;
@@ -81,7 +74,7 @@ fn read_cells(c: &mut TextCursor, section: &str, blocks: &mut Blocks) -> Result<
             .parse()
             .map_err(|_| c.expected(&format!("the attribute of {what} {} of {n}", i + 1), t))?;
         let gw = || format!("the geometry code of {what} {}", i + 1);
-        let t = token(c, gw)?;
+        let t = c.token_or(gw)?;
         let g: i64 = t.parse().map_err(|_| c.expected(&gw(), t))?;
         let Some((kind, nv)) = geometry(g) else {
             return Err(c.error(format!(
@@ -92,7 +85,7 @@ fn read_cells(c: &mut TextCursor, section: &str, blocks: &mut Blocks) -> Result<
         let b = blocks[g as usize].get_or_insert_with(|| RawBlock::new(kind, nv));
         for k in 0..nv {
             let vw = || format!("vertex {} of {what} {}", k + 1, i + 1);
-            let t = token(c, vw)?;
+            let t = c.token_or(vw)?;
             let v: i64 = t.parse().map_err(|_| c.expected(&vw(), t))?;
             b.nodes.push(v);
         }
@@ -228,7 +221,7 @@ fn read_vertices(c: &mut TextCursor, mesh: &mut RawMesh) -> Result<(), ParseErro
         let mut p = [0.0; 3];
         for (k, x) in p.iter_mut().take(vdim).enumerate() {
             let what = || format!("the {} coordinate of vertex {} of {n}", AXES[k], i + 1);
-            let t = token(c, what)?;
+            let t = c.token_or(what)?;
             *x = parse_f64(t).ok_or_else(|| c.expected(&what(), t))?;
             if k == 0 {
                 mesh.point_locations.push(c.location());

@@ -172,6 +172,28 @@ impl<'a> TextCursor<'a> {
         }
     }
 
+    /// Next token, or an error at the last token's line naming what was expected when the
+    /// input ends. `what` is called only on failure, so the per-token path allocates nothing.
+    pub fn token_or(&mut self, what: impl FnOnce() -> String) -> Result<&'a str, ParseError> {
+        match self.next_token() {
+            Some(t) => Ok(t),
+            None => Err(self.error(format!("unexpected end of file while reading {}", what()))),
+        }
+    }
+
+    /// Parse the next token as `T`; [`TextCursor::token_or`] with a parse check.
+    pub fn parse_or<T: FromStr>(&mut self, what: impl Fn() -> String) -> Result<T, ParseError> {
+        let t = self.token_or(&what)?;
+        t.parse::<T>().map_err(|_| self.expected(&what(), t))
+    }
+
+    /// Parse the next token as f64 (Fortran `D` exponents too); [`TextCursor::token_or`] with
+    /// a parse check.
+    pub fn f64_or(&mut self, what: impl Fn() -> String) -> Result<f64, ParseError> {
+        let t = self.token_or(&what)?;
+        parse_f64(t).ok_or_else(|| self.expected(&what(), t))
+    }
+
     /// Parse the next token as `T`.
     pub fn parse<T: FromStr>(&mut self, what: &str) -> Result<T, ParseError> {
         let t = self.expect_token(what)?;

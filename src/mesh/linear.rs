@@ -12,7 +12,7 @@
 //! * lower-dimensional cells of the file are kept only as tagged facets (lines in 2D, quads in
 //!   3D) for boundary conditions; the boundary itself comes from [`crate::mesh::Topology`].
 
-use crate::io::raw::{CellKind, Location, ParseError, RawMesh};
+use crate::io::raw::{CellKind, Location, ParseError, RawBlock, RawMesh};
 use crate::mesh::vec3::{norm, sub};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
@@ -228,7 +228,9 @@ impl LinearMesh {
     }
 
     /// Build a checked, oriented mesh from what a reader found. Errors name the place in the
-    /// file (from the raw block's locations) and the problem.
+    /// file (from the raw block's locations) and the problem. The checks run in this order:
+    /// cell kinds, node indices (in file order), coordinates of the used nodes, the extent,
+    /// planarity of 2D meshes, then orientation.
     pub fn from_raw(raw: RawMesh, options: &MeshOptions) -> Result<LinearMesh, ParseError> {
         // Pick the element kind: hexes if any, else quads.
         let n_hex = raw.count(&CellKind::Hexahedron);
@@ -247,178 +249,25 @@ impl LinearMesh {
         } else {
             0
         };
-        // Cells of the volume dimension (or higher) that are not our element kind.
-        let mut unsupported: BTreeMap<CellKind, usize> = BTreeMap::new();
-        for b in &blocks {
-            let k = b.kind();
-            let bad = match k.dim() {
-                Some(d) => {
-                    (dim == 0 && d >= 2)
-                        || (dim > 0 && d >= dim && d <= 3 && *k != element_kind(dim))
-                }
-                None => true,
-            };
-            if bad && !b.is_empty() {
-                *unsupported.entry(k.clone()).or_default() += b.len();
-            }
-        }
-        if !unsupported.is_empty() {
-            let found: Vec<String> = unsupported
-                .iter()
-                .map(|(k, n)| format!("{n} {}", k.plural()))
-                .collect();
-            let have = match dim {
-                3 => format!(" (besides {n_hex} hexahedra)"),
-                2 => format!(" (besides {n_quad} quadrilaterals)"),
-                _ => String::new(),
-            };
-            return Err(ParseError::new(
-                Location::File,
-                format!(
-                    "found {}{have}; polyspline curves linear quad (2D) and hex (3D) meshes",
-                    found.join(", ")
-                ),
-            ));
-        }
-        if dim == 0 {
-            return Err(ParseError::new(
-                Location::File,
-                if points.is_empty() {
-                    "the mesh is empty: no nodes and no quadrilateral or hexahedral elements".into()
-                } else {
-                    format!(
-                        "the mesh has {} nodes but no quadrilateral or hexahedral elements",
-                        points.len()
-                    )
-                },
-            ));
-        }
-
-        let npe = if dim == 2 { 4 } else { 8 };
-        let npf = if dim == 2 { 2 } else { 4 };
-        let facet_kind = if dim == 2 {
-            CellKind::Line
-        } else {
-            CellKind::Quad
-        };
+        check_cell_kinds(&blocks, dim, n_hex, n_quad, points.len())?;
+        let n_elements = if dim == 3 { n_hex } else { n_quad };
+        let Cells {
+            mut elements,
+            element_locations,
+            element_tags,
+            tagged_facets,
+            facet_tags,
+            ignored_cells,
+        } = Cells::collect(&blocks, dim, points.len(), n_elements)?;
         let n_points = points.len();
-        let check_index = |v: i64, loc: Location, what: &str| -> Result<u32, ParseError> {
-            if v < 0 || v as usize >= n_points {
-                Err(ParseError::new(
-                    loc,
-                    format!(
-                        "{what} refers to node {} (0-based index {v}), but the file defines {n_points} nodes",
-                        v + 1
-                    ),
-                ))
-            } else {
-                Ok(v as u32)
-            }
-        };
-
-        let mut elements: Vec<u32> =
-            Vec::with_capacity(npe * if dim == 3 { n_hex } else { n_quad });
-        let mut element_locations: Vec<Location> = Vec::new();
-        let mut element_tags: Vec<i32> = Vec::new();
-        let mut any_element_tags = false;
-        let mut tagged_facets: Vec<u32> = Vec::new();
-        let mut facet_tags: Vec<i32> = Vec::new();
-        let mut ignored_cells: BTreeMap<String, usize> = BTreeMap::new();
-        let ek = element_kind(dim);
-        for b in &blocks {
-            let k = b.kind();
-            if *k == ek {
-                if !b.tags.is_empty() {
-                    any_element_tags = true;
-                }
-                for c in 0..b.len() {
-                    let loc = b.location(c);
-                    for &v in &b.nodes[c * npe..(c + 1) * npe] {
-                        elements.push(check_index(v, loc, "element")?);
-                    }
-                    element_locations.push(loc);
-                    element_tags.push(b.tags.get(c).copied().unwrap_or(0));
-                }
-            } else if *k == facet_kind && !b.tags.is_empty() {
-                for c in 0..b.len() {
-                    if b.tags[c] == 0 {
-                        continue;
-                    }
-                    let loc = b.location(c);
-                    for &v in &b.nodes[c * npf..(c + 1) * npf] {
-                        tagged_facets.push(check_index(v, loc, "boundary cell")?);
-                    }
-                    facet_tags.push(b.tags[c]);
-                }
-            } else if !b.is_empty() {
-                *ignored_cells.entry(k.plural()).or_default() += b.len();
-            }
-        }
-        if !any_element_tags {
-            element_tags.clear();
-        }
-
-        // Keep only used vertices (in file order) and check their coordinates.
-        let mut new_index = vec![u32::MAX; n_points];
-        for &v in elements.iter() {
-            new_index[v as usize] = 0;
-        }
-        let mut coords = Vec::with_capacity(n_points);
-        for (i, p) in points.iter().enumerate() {
-            if new_index[i] == u32::MAX {
-                continue;
-            }
-            if let Some(k) = p.iter().position(|c| !c.is_finite()) {
-                let loc = point_locations.get(i).copied().unwrap_or_default();
-                return Err(ParseError::new(
-                    loc,
-                    format!(
-                        "node {} has a non-finite {} coordinate ({})",
-                        i + 1,
-                        ["x", "y", "z"][k],
-                        p[k]
-                    ),
-                ));
-            }
-            if let Some(k) = p.iter().position(|c| c.abs() > MAX_COORDINATE) {
-                let loc = point_locations.get(i).copied().unwrap_or_default();
-                return Err(ParseError::new(
-                    loc,
-                    format!(
-                        "node {} has its {} coordinate {:e} out of range (|x| ≤ {MAX_COORDINATE:e}, so that Jacobians cannot overflow); rescale the mesh",
-                        i + 1,
-                        ["x", "y", "z"][k],
-                        p[k]
-                    ),
-                ));
-            }
-            new_index[i] = coords.len() as u32;
-            coords.push(*p);
-        }
-        // The extent: a mesh this small has Jacobians that underflow to zero.
-        if let Some(first) = coords.first() {
-            let (mut lo, mut hi) = (*first, *first);
-            for p in &coords {
-                for k in 0..3 {
-                    lo[k] = lo[k].min(p[k]);
-                    hi[k] = hi[k].max(p[k]);
-                }
-            }
-            let extent = (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f64::max);
-            if extent > 0.0 && extent < MIN_EXTENT {
-                return Err(ParseError::new(
-                    Location::File,
-                    format!(
-                        "the mesh's extent {extent:e} is out of range (at least {MIN_EXTENT:e}, so that Jacobians cannot underflow); rescale the mesh"
-                    ),
-                ));
-            }
-        }
+        let (mut coords, new_index) = used_coordinates(&points, &point_locations, &elements)?;
+        check_extent(&coords)?;
         let unused_vertices = n_points - coords.len();
         for v in elements.iter_mut() {
             *v = new_index[*v as usize];
         }
         // Facets touching unused vertices cannot be boundary facets of the elements: drop them.
+        let npf = if dim == 2 { 2 } else { 4 };
         let mut kept_facets = Vec::with_capacity(tagged_facets.len());
         let mut kept_tags = Vec::with_capacity(facet_tags.len());
         for (f, &tag) in tagged_facets.chunks(npf).zip(&facet_tags) {
@@ -427,7 +276,6 @@ impl LinearMesh {
                 kept_tags.push(tag);
             }
         }
-
         if dim == 2 {
             let z0 = coords[0][2];
             if let Some((i, p)) = coords.iter().enumerate().find(|(_, p)| p[2] != z0) {
@@ -551,4 +399,225 @@ fn element_kind(dim: usize) -> CellKind {
     } else {
         CellKind::Quad
     }
+}
+
+/// Refuse cells of the volume dimension (or higher) that are not the element kind of `dim`
+/// (0: neither quads nor hexes were found, which is refused too).
+fn check_cell_kinds(
+    blocks: &[RawBlock],
+    dim: usize,
+    n_hex: usize,
+    n_quad: usize,
+    n_points: usize,
+) -> Result<(), ParseError> {
+    // Cells of the volume dimension (or higher) that are not our element kind.
+    let mut unsupported: BTreeMap<CellKind, usize> = BTreeMap::new();
+    for b in blocks {
+        let k = b.kind();
+        let bad = match k.dim() {
+            Some(d) => {
+                (dim == 0 && d >= 2) || (dim > 0 && d >= dim && d <= 3 && *k != element_kind(dim))
+            }
+            None => true,
+        };
+        if bad && !b.is_empty() {
+            *unsupported.entry(k.clone()).or_default() += b.len();
+        }
+    }
+    if !unsupported.is_empty() {
+        let found: Vec<String> = unsupported
+            .iter()
+            .map(|(k, n)| format!("{n} {}", k.plural()))
+            .collect();
+        let have = match dim {
+            3 => format!(" (besides {n_hex} hexahedra)"),
+            2 => format!(" (besides {n_quad} quadrilaterals)"),
+            _ => String::new(),
+        };
+        return Err(ParseError::new(
+            Location::File,
+            format!(
+                "found {}{have}; polyspline curves linear quad (2D) and hex (3D) meshes",
+                found.join(", ")
+            ),
+        ));
+    }
+    if dim == 0 {
+        return Err(ParseError::new(
+            Location::File,
+            if n_points == 0 {
+                "the mesh is empty: no nodes and no quadrilateral or hexahedral elements".into()
+            } else {
+                format!(
+                    "the mesh has {} nodes but no quadrilateral or hexahedral elements",
+                    n_points
+                )
+            },
+        ));
+    }
+    Ok(())
+}
+
+/// The cells polyspline keeps from a raw mesh, node indices checked but not yet renumbered.
+struct Cells {
+    elements: Vec<u32>,
+    element_locations: Vec<Location>,
+    /// One per element, or empty when no element block has tags.
+    element_tags: Vec<i32>,
+    /// Facets of dimension `dim - 1` with a nonzero tag.
+    tagged_facets: Vec<u32>,
+    facet_tags: Vec<i32>,
+    /// Plural kind name → count of the cells that are neither.
+    ignored_cells: BTreeMap<String, usize>,
+}
+
+impl Cells {
+    /// Elements of the kind of `dim` and tagged facets of dimension `dim - 1`; a node index
+    /// outside `0..n_points` is an error at its cell.
+    fn collect(
+        blocks: &[RawBlock],
+        dim: usize,
+        n_points: usize,
+        n_elements: usize,
+    ) -> Result<Cells, ParseError> {
+        let npe = if dim == 2 { 4 } else { 8 };
+        let npf = if dim == 2 { 2 } else { 4 };
+        let facet_kind = if dim == 2 {
+            CellKind::Line
+        } else {
+            CellKind::Quad
+        };
+        let check_index = |v: i64, loc: Location, what: &str| -> Result<u32, ParseError> {
+            if v < 0 || v as usize >= n_points {
+                Err(ParseError::new(
+                    loc,
+                    format!(
+                        "{what} refers to node {} (0-based index {v}), but the file defines {n_points} nodes",
+                        v + 1
+                    ),
+                ))
+            } else {
+                Ok(v as u32)
+            }
+        };
+        let mut elements: Vec<u32> = Vec::with_capacity(npe * n_elements);
+        let mut element_locations: Vec<Location> = Vec::new();
+        let mut element_tags: Vec<i32> = Vec::new();
+        let mut any_element_tags = false;
+        let mut tagged_facets: Vec<u32> = Vec::new();
+        let mut facet_tags: Vec<i32> = Vec::new();
+        let mut ignored_cells: BTreeMap<String, usize> = BTreeMap::new();
+        let ek = element_kind(dim);
+        for b in blocks {
+            let k = b.kind();
+            if *k == ek {
+                if !b.tags.is_empty() {
+                    any_element_tags = true;
+                }
+                for c in 0..b.len() {
+                    let loc = b.location(c);
+                    for &v in &b.nodes[c * npe..(c + 1) * npe] {
+                        elements.push(check_index(v, loc, "element")?);
+                    }
+                    element_locations.push(loc);
+                    element_tags.push(b.tags.get(c).copied().unwrap_or(0));
+                }
+            } else if *k == facet_kind && !b.tags.is_empty() {
+                for c in 0..b.len() {
+                    if b.tags[c] == 0 {
+                        continue;
+                    }
+                    let loc = b.location(c);
+                    for &v in &b.nodes[c * npf..(c + 1) * npf] {
+                        tagged_facets.push(check_index(v, loc, "boundary cell")?);
+                    }
+                    facet_tags.push(b.tags[c]);
+                }
+            } else if !b.is_empty() {
+                *ignored_cells.entry(k.plural()).or_default() += b.len();
+            }
+        }
+        if !any_element_tags {
+            element_tags.clear();
+        }
+
+        Ok(Cells {
+            elements,
+            element_locations,
+            element_tags,
+            tagged_facets,
+            facet_tags,
+            ignored_cells,
+        })
+    }
+}
+
+/// The coordinates of the nodes `elements` use, in file order, and the map from file index
+/// to new index (`u32::MAX` for unused nodes). Non-finite or huge coordinates are errors.
+fn used_coordinates(
+    points: &[[f64; 3]],
+    point_locations: &[Location],
+    elements: &[u32],
+) -> Result<(Vec<[f64; 3]>, Vec<u32>), ParseError> {
+    let n_points = points.len();
+    let mut new_index = vec![u32::MAX; n_points];
+    for &v in elements.iter() {
+        new_index[v as usize] = 0;
+    }
+    let mut coords = Vec::with_capacity(n_points);
+    for (i, p) in points.iter().enumerate() {
+        if new_index[i] == u32::MAX {
+            continue;
+        }
+        if let Some(k) = p.iter().position(|c| !c.is_finite()) {
+            let loc = point_locations.get(i).copied().unwrap_or_default();
+            return Err(ParseError::new(
+                loc,
+                format!(
+                    "node {} has a non-finite {} coordinate ({})",
+                    i + 1,
+                    ["x", "y", "z"][k],
+                    p[k]
+                ),
+            ));
+        }
+        if let Some(k) = p.iter().position(|c| c.abs() > MAX_COORDINATE) {
+            let loc = point_locations.get(i).copied().unwrap_or_default();
+            return Err(ParseError::new(
+                loc,
+                format!(
+                    "node {} has its {} coordinate {:e} out of range (|x| ≤ {MAX_COORDINATE:e}, so that Jacobians cannot overflow); rescale the mesh",
+                    i + 1,
+                    ["x", "y", "z"][k],
+                    p[k]
+                ),
+            ));
+        }
+        new_index[i] = coords.len() as u32;
+        coords.push(*p);
+    }
+    Ok((coords, new_index))
+}
+
+/// A mesh this small has Jacobians that underflow to zero.
+fn check_extent(coords: &[[f64; 3]]) -> Result<(), ParseError> {
+    if let Some(first) = coords.first() {
+        let (mut lo, mut hi) = (*first, *first);
+        for p in coords {
+            for k in 0..3 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+        let extent = (0..3).map(|k| hi[k] - lo[k]).fold(0.0, f64::max);
+        if extent > 0.0 && extent < MIN_EXTENT {
+            return Err(ParseError::new(
+                Location::File,
+                format!(
+                    "the mesh's extent {extent:e} is out of range (at least {MIN_EXTENT:e}, so that Jacobians cannot underflow); rescale the mesh"
+                ),
+            ));
+        }
+    }
+    Ok(())
 }

@@ -221,158 +221,38 @@ impl Topology {
         let nsides = 2 * dim;
         let elems = &mesh.elements;
 
-        // Edges: sort (key, slot) pairs; one slot per local edge.
-        let local_edges: Vec<[usize; 2]> = if dim == 2 {
-            QUAD_SIDES.to_vec()
-        } else {
-            HEX_EDGES.to_vec()
-        };
-        let nle = local_edges.len();
-        let mut keys: Vec<(u64, u32)> = (0..ne * nle)
-            .into_par_iter()
-            .map(|slot| {
-                let (e, l) = (slot / nle, slot % nle);
-                let a = elems[e * npe + local_edges[l][0]];
-                let b = elems[e * npe + local_edges[l][1]];
-                let (lo, hi) = if a < b { (a, b) } else { (b, a) };
-                (((lo as u64) << 32) | hi as u64, slot as u32)
-            })
-            .collect();
-        keys.par_sort_unstable();
-        let mut edges = Vec::new();
-        let mut edge_valence = Vec::new();
-        let mut element_edges = vec![NONE; ne * nle];
-        for (i, &(k, slot)) in keys.iter().enumerate() {
-            if i == 0 || keys[i - 1].0 != k {
-                edges.push([(k >> 32) as u32, k as u32]);
-                edge_valence.push(0);
-            }
-            let id = edges.len() - 1;
-            element_edges[slot as usize] = id as u32;
-            edge_valence[id] += 1;
-        }
-        drop(keys);
-
+        let (edges, edge_valence, element_edges) = unique_edges(elems, dim, ne, npe);
         // Facets: edges in 2D (already unique), faces in 3D.
-        let mut faces = Vec::new();
-        let mut element_faces = Vec::new();
-        let facet_of_slot: &[u32];
-        let n_facets;
-        if dim == 3 {
-            let mut keys: Vec<([u32; 4], u32)> = (0..ne * 6)
-                .into_par_iter()
-                .map(|slot| {
-                    let (e, l) = (slot / 6, slot % 6);
-                    let mut k = HEX_SIDES[l].map(|c| elems[e * 8 + c]);
-                    k.sort_unstable();
-                    (k, slot as u32)
-                })
-                .collect();
-            keys.par_sort_unstable();
-            element_faces = vec![NONE; ne * 6];
-            for (i, &(k, slot)) in keys.iter().enumerate() {
-                if i == 0 || keys[i - 1].0 != k {
-                    let (e, l) = (slot as usize / 6, slot as usize % 6);
-                    faces.push(HEX_SIDES[l].map(|c| elems[e * 8 + c]));
-                }
-                element_faces[slot as usize] = (faces.len() - 1) as u32;
-            }
-            n_facets = faces.len();
-            facet_of_slot = &element_faces;
+        let (faces, element_faces) = if dim == 3 {
+            unique_faces(elems, ne)
         } else {
-            n_facets = edges.len();
-            facet_of_slot = &element_edges;
-        }
-
-        // Facet → elements, element → neighbours.
-        let mut facet_elements = vec![[NONE, NONE]; n_facets];
-        let mut facet_sides = vec![[u8::MAX, u8::MAX]; n_facets];
-        let mut facet_count = vec![0u32; n_facets];
-        for (slot, &f) in facet_of_slot.iter().enumerate() {
-            let f = f as usize;
-            let c = facet_count[f] as usize;
-            if c < 2 {
-                facet_elements[f][c] = (slot / nsides) as u32;
-                facet_sides[f][c] = (slot % nsides) as u8;
-            }
-            facet_count[f] += 1;
-        }
-        let mut non_manifold = NonManifold::default();
-        let mut element_neighbors = vec![NONE; ne * nsides];
-        for f in 0..n_facets {
-            if facet_count[f] > 2 {
-                non_manifold.facets.push(f as u32);
-                continue;
-            }
-            let [a, b] = facet_elements[f];
-            if b != NONE {
-                let [sa, sb] = facet_sides[f];
-                element_neighbors[a as usize * nsides + sa as usize] = b;
-                element_neighbors[b as usize * nsides + sb as usize] = a;
-            }
-        }
-        let boundary_facets: Vec<u32> = (0..n_facets as u32)
-            .filter(|&f| facet_count[f as usize] == 1)
-            .collect();
-
-        // Boundary vertices and edges.
-        let mut vertex_on_boundary = vec![false; nv];
-        let mut edge_on_boundary = vec![false; edges.len()];
-        for &f in &boundary_facets {
-            let [e, _] = facet_elements[f as usize];
-            let side = facet_sides[f as usize][0] as usize;
-            let e = e as usize;
-            if dim == 2 {
-                edge_on_boundary[f as usize] = true;
-                for &c in &QUAD_SIDES[side] {
-                    vertex_on_boundary[elems[e * 4 + c] as usize] = true;
-                }
-            } else {
-                for &c in &HEX_SIDES[side] {
-                    vertex_on_boundary[elems[e * 8 + c] as usize] = true;
-                }
-                for (l, le) in HEX_EDGES.iter().enumerate() {
-                    if HEX_SIDES[side].contains(&le[0]) && HEX_SIDES[side].contains(&le[1]) {
-                        edge_on_boundary[element_edges[e * 12 + l] as usize] = true;
-                    }
-                }
-            }
-        }
-
-        // Vertex → elements (counting sort).
-        let mut vertex_offsets = vec![0u32; nv + 1];
-        for &v in elems {
-            vertex_offsets[v as usize + 1] += 1;
-        }
-        for v in 0..nv {
-            vertex_offsets[v + 1] += vertex_offsets[v];
-        }
-        let mut fill = vertex_offsets.clone();
-        let mut vertex_elements = vec![0u32; elems.len()];
-        for (i, &v) in elems.iter().enumerate() {
-            vertex_elements[fill[v as usize] as usize] = (i / npe) as u32;
-            fill[v as usize] += 1;
-        }
-        drop(fill);
-
-        // Components: union-find over interior facets.
-        let mut uf = UnionFind::new(ne);
-        for (f, fe) in facet_elements.iter().enumerate() {
-            if fe[1] != NONE && facet_count[f] == 2 {
-                uf.union(fe[0] as usize, fe[1] as usize);
-            }
-        }
-        let mut comp_id = vec![NONE; ne];
-        let mut element_component = vec![0u32; ne];
-        let mut n_components = 0;
-        for (e, c) in element_component.iter_mut().enumerate() {
-            let r = uf.find(e);
-            if comp_id[r] == NONE {
-                comp_id[r] = n_components as u32;
-                n_components += 1;
-            }
-            *c = comp_id[r];
-        }
+            (Vec::new(), Vec::new())
+        };
+        let (facet_of_slot, n_facets): (&[u32], usize) = if dim == 3 {
+            (&element_faces, faces.len())
+        } else {
+            (&element_edges, edges.len())
+        };
+        let Adjacency {
+            facet_elements,
+            facet_sides,
+            facet_count,
+            element_neighbors,
+            boundary_facets,
+            non_manifold,
+        } = Adjacency::new(facet_of_slot, n_facets, nsides, ne);
+        let (vertex_on_boundary, edge_on_boundary) = boundary_marks(
+            dim,
+            elems,
+            nv,
+            edges.len(),
+            &boundary_facets,
+            &facet_elements,
+            &facet_sides,
+            &element_edges,
+        );
+        let (vertex_offsets, vertex_elements) = vertex_elements(elems, nv, npe);
+        let (element_component, n_components) = components(ne, &facet_elements, &facet_count);
 
         let mut topo = Topology {
             dim,
@@ -559,4 +439,207 @@ impl UnionFind {
         self.parent[b] = a as u32;
         self.size[a] += self.size[b];
     }
+}
+
+/// The unique edges (sorted vertex pairs, in order of their key), each edge's valence
+/// (elements around it) and the edge of each element's local edge slot.
+fn unique_edges(
+    elems: &[u32],
+    dim: usize,
+    ne: usize,
+    npe: usize,
+) -> (Vec<[u32; 2]>, Vec<u32>, Vec<u32>) {
+    // Sort (key, slot) pairs; one slot per local edge.
+    let local_edges: Vec<[usize; 2]> = if dim == 2 {
+        QUAD_SIDES.to_vec()
+    } else {
+        HEX_EDGES.to_vec()
+    };
+    let nle = local_edges.len();
+    let mut keys: Vec<(u64, u32)> = (0..ne * nle)
+        .into_par_iter()
+        .map(|slot| {
+            let (e, l) = (slot / nle, slot % nle);
+            let a = elems[e * npe + local_edges[l][0]];
+            let b = elems[e * npe + local_edges[l][1]];
+            let (lo, hi) = if a < b { (a, b) } else { (b, a) };
+            (((lo as u64) << 32) | hi as u64, slot as u32)
+        })
+        .collect();
+    keys.par_sort_unstable();
+    let mut edges = Vec::new();
+    let mut edge_valence = Vec::new();
+    let mut element_edges = vec![NONE; ne * nle];
+    for (i, &(k, slot)) in keys.iter().enumerate() {
+        if i == 0 || keys[i - 1].0 != k {
+            edges.push([(k >> 32) as u32, k as u32]);
+            edge_valence.push(0);
+        }
+        let id = edges.len() - 1;
+        element_edges[slot as usize] = id as u32;
+        edge_valence[id] += 1;
+    }
+    (edges, edge_valence, element_edges)
+}
+
+/// The unique faces of a hex mesh (in order of their sorted vertex keys, each with the
+/// vertices of its first element side) and the face of each element side slot.
+fn unique_faces(elems: &[u32], ne: usize) -> (Vec<[u32; 4]>, Vec<u32>) {
+    let mut faces = Vec::new();
+    let mut keys: Vec<([u32; 4], u32)> = (0..ne * 6)
+        .into_par_iter()
+        .map(|slot| {
+            let (e, l) = (slot / 6, slot % 6);
+            let mut k = HEX_SIDES[l].map(|c| elems[e * 8 + c]);
+            k.sort_unstable();
+            (k, slot as u32)
+        })
+        .collect();
+    keys.par_sort_unstable();
+    let mut element_faces = vec![NONE; ne * 6];
+    for (i, &(k, slot)) in keys.iter().enumerate() {
+        if i == 0 || keys[i - 1].0 != k {
+            let (e, l) = (slot as usize / 6, slot as usize % 6);
+            faces.push(HEX_SIDES[l].map(|c| elems[e * 8 + c]));
+        }
+        element_faces[slot as usize] = (faces.len() - 1) as u32;
+    }
+    (faces, element_faces)
+}
+
+/// Facet ↔ element adjacency.
+struct Adjacency {
+    facet_elements: Vec<[u32; 2]>,
+    facet_sides: Vec<[u8; 2]>,
+    /// Elements around each facet (more than 2: non-manifold).
+    facet_count: Vec<u32>,
+    element_neighbors: Vec<u32>,
+    boundary_facets: Vec<u32>,
+    non_manifold: NonManifold,
+}
+
+impl Adjacency {
+    /// Facet → elements and element → neighbours from the facet of each element side slot.
+    fn new(facet_of_slot: &[u32], n_facets: usize, nsides: usize, ne: usize) -> Adjacency {
+        let mut facet_elements = vec![[NONE, NONE]; n_facets];
+        let mut facet_sides = vec![[u8::MAX, u8::MAX]; n_facets];
+        let mut facet_count = vec![0u32; n_facets];
+        for (slot, &f) in facet_of_slot.iter().enumerate() {
+            let f = f as usize;
+            let c = facet_count[f] as usize;
+            if c < 2 {
+                facet_elements[f][c] = (slot / nsides) as u32;
+                facet_sides[f][c] = (slot % nsides) as u8;
+            }
+            facet_count[f] += 1;
+        }
+        let mut non_manifold = NonManifold::default();
+        let mut element_neighbors = vec![NONE; ne * nsides];
+        for f in 0..n_facets {
+            if facet_count[f] > 2 {
+                non_manifold.facets.push(f as u32);
+                continue;
+            }
+            let [a, b] = facet_elements[f];
+            if b != NONE {
+                let [sa, sb] = facet_sides[f];
+                element_neighbors[a as usize * nsides + sa as usize] = b;
+                element_neighbors[b as usize * nsides + sb as usize] = a;
+            }
+        }
+        let boundary_facets: Vec<u32> = (0..n_facets as u32)
+            .filter(|&f| facet_count[f as usize] == 1)
+            .collect();
+
+        Adjacency {
+            facet_elements,
+            facet_sides,
+            facet_count,
+            element_neighbors,
+            boundary_facets,
+            non_manifold,
+        }
+    }
+}
+
+/// Which vertices and edges lie on the boundary facets.
+#[allow(clippy::too_many_arguments)]
+fn boundary_marks(
+    dim: usize,
+    elems: &[u32],
+    nv: usize,
+    n_edges: usize,
+    boundary_facets: &[u32],
+    facet_elements: &[[u32; 2]],
+    facet_sides: &[[u8; 2]],
+    element_edges: &[u32],
+) -> (Vec<bool>, Vec<bool>) {
+    let mut vertex_on_boundary = vec![false; nv];
+    let mut edge_on_boundary = vec![false; n_edges];
+    for &f in boundary_facets {
+        let [e, _] = facet_elements[f as usize];
+        let side = facet_sides[f as usize][0] as usize;
+        let e = e as usize;
+        if dim == 2 {
+            edge_on_boundary[f as usize] = true;
+            for &c in &QUAD_SIDES[side] {
+                vertex_on_boundary[elems[e * 4 + c] as usize] = true;
+            }
+        } else {
+            for &c in &HEX_SIDES[side] {
+                vertex_on_boundary[elems[e * 8 + c] as usize] = true;
+            }
+            for (l, le) in HEX_EDGES.iter().enumerate() {
+                if HEX_SIDES[side].contains(&le[0]) && HEX_SIDES[side].contains(&le[1]) {
+                    edge_on_boundary[element_edges[e * 12 + l] as usize] = true;
+                }
+            }
+        }
+    }
+
+    (vertex_on_boundary, edge_on_boundary)
+}
+
+/// Vertex → elements as offsets and a flat list (counting sort, elements in order).
+fn vertex_elements(elems: &[u32], nv: usize, npe: usize) -> (Vec<u32>, Vec<u32>) {
+    let mut vertex_offsets = vec![0u32; nv + 1];
+    for &v in elems {
+        vertex_offsets[v as usize + 1] += 1;
+    }
+    for v in 0..nv {
+        vertex_offsets[v + 1] += vertex_offsets[v];
+    }
+    let mut fill = vertex_offsets.clone();
+    let mut vertex_elements = vec![0u32; elems.len()];
+    for (i, &v) in elems.iter().enumerate() {
+        vertex_elements[fill[v as usize] as usize] = (i / npe) as u32;
+        fill[v as usize] += 1;
+    }
+    drop(fill);
+
+    (vertex_offsets, vertex_elements)
+}
+
+/// Connected components: union-find over interior (two-element) facets; components are
+/// numbered in order of their first element.
+fn components(ne: usize, facet_elements: &[[u32; 2]], facet_count: &[u32]) -> (Vec<u32>, usize) {
+    let mut uf = UnionFind::new(ne);
+    for (f, fe) in facet_elements.iter().enumerate() {
+        if fe[1] != NONE && facet_count[f] == 2 {
+            uf.union(fe[0] as usize, fe[1] as usize);
+        }
+    }
+    let mut comp_id = vec![NONE; ne];
+    let mut element_component = vec![0u32; ne];
+    let mut n_components = 0;
+    for (e, c) in element_component.iter_mut().enumerate() {
+        let r = uf.find(e);
+        if comp_id[r] == NONE {
+            comp_id[r] = n_components as u32;
+            n_components += 1;
+        }
+        *c = comp_id[r];
+    }
+
+    (element_component, n_components)
 }

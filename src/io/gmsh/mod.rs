@@ -1,0 +1,352 @@
+//! Gmsh MSH reader.
+//!
+//! Variants read:
+//! * MSH 4.1, ASCII and binary (binary `size_t` has the width given by the header's data-size,
+//!   4 or 8 bytes);
+//! * MSH 4.0, ASCII (Gmsh itself writes 4.0 only in ASCII; 4.0 binary is refused);
+//! * MSH 2.0, 2.1 and 2.2, ASCII and binary;
+//! * MSH 1 (`$NOD` / `$ELM`, ASCII).
+//!
+//! Binary files are read in either byte order: the integer `1` after the `$MeshFormat` line
+//! says which.
+//!
+//! Sections: `$MeshFormat`, `$PhysicalNames` (into [`RawMesh::tag_names`]), `$Entities` and
+//! `$PartitionedEntities` (physical tags per entity), `$Nodes`, `$Elements`. Every other section
+//! (`$Periodic`, `$NodeData`, `$ElementData`, `$Comments`, ...) is skipped up to its `$End` line.
+//!
+//! Tags: each cell's tag is its physical group. In MSH 1/2 that is the first integer tag of the
+//! element; in MSH 4 it is the first physical tag of the entity the element block belongs to
+//! (a partitioned entity without physical tags uses its parent's), and 0 ("no tag") when the
+//! entity has none. Physical names are keyed by (dimension, tag) in the file but by tag alone in
+//! [`RawMesh::tag_names`]; when two dimensions use the same tag number with different names,
+//! the names are joined with " / ".
+//!
+//! Element types: 15 (point), 1, 2, 3, 4, 5, 6, 7 (linear line, triangle, quadrilateral,
+//! tetrahedron, hexahedron, prism, pyramid) become the matching [`CellKind`]; every other type
+//! Gmsh defines (high-order, serendipity, incomplete) becomes [`CellKind::Other`] named like
+//! "9-node quadrilateral (Gmsh type 10)" with its node count, so it is read and reported rather
+//! than silently dropped. Unknown type numbers and polygons/polyhedra (no fixed node count) are
+//! errors.
+//!
+//! Node tags may be sparse and in any order (MSH 4 files written after renumbering or
+//! partitioning have gaps); they are mapped to 0-based positions with a dense table when the
+//! largest tag is at most about ten times the node count, with a hash map otherwise. A node tag
+//! defined twice, or an element naming a tag `$Nodes` does not define, is an error at that line
+//! (byte offset in binary sections).
+//!
+//! Traps handled: physical tags on only some entities (hopr's `70degCone_3D.msh`); MSH 2.0
+//! headers (`2.0 0 8`); parametric coordinates after the node coordinates in MSH 4 (skipped);
+//! MSH 2 binary element blocks (type, count, tag count) followed by records; counts in headers
+//! are never trusted for allocation beyond what the remaining input can hold.
+//!
+//! Parts: this module reads `$MeshFormat` and `$PhysicalNames` and runs the section loop;
+//! `entities`, `nodes` and `elements` read their sections in every version and encoding;
+//! `binary` decodes binary data with bounds checks; `element_types` maps type numbers to
+//! cell kinds.
+
+mod binary;
+mod element_types;
+mod elements;
+mod entities;
+mod nodes;
+
+use super::raw::{Location, ParseError, RawMesh};
+use super::text::{TextCursor, parse_f64};
+use binary::Bin;
+use element_types::Blocks;
+use nodes::NodeMap;
+use std::collections::HashMap;
+
+/// Parse a Gmsh `.msh` file held in memory.
+pub fn read(data: &[u8]) -> Result<RawMesh, ParseError> {
+    Reader::new(data).run()
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Version {
+    V1,
+    V2,
+    V40,
+    V41,
+}
+
+/// What `$MeshFormat` said.
+#[derive(Clone, Copy, Debug)]
+struct Format {
+    version: Version,
+    binary: bool,
+    big_endian: bool,
+    /// Width of `size_t` in MSH 4 binary files.
+    size_t: usize,
+}
+
+struct Reader<'a> {
+    c: TextCursor<'a>,
+    format: Option<Format>,
+    mesh: RawMesh,
+    nodes: Option<NodeMap>,
+    blocks: Blocks,
+    /// First physical tag (0 if none) of each (dimension, entity tag).
+    entity_physical: HashMap<(i32, i32), i32>,
+    /// Parent (dimension, tag) of each partitioned entity that has no physical tag itself.
+    partition_parent: HashMap<(i32, i32), (i32, i32)>,
+}
+
+/// Reserve for `count` items, but never more than the input could possibly hold (every item
+/// takes at least `min_bytes` bytes).
+fn capped(count: u64, remaining: usize, min_bytes: usize) -> usize {
+    usize::try_from(count)
+        .unwrap_or(usize::MAX)
+        .min(remaining / min_bytes.max(1))
+}
+
+fn to_i32(v: i64, c: &TextCursor, what: &str) -> Result<i32, ParseError> {
+    i32::try_from(v).map_err(|_| c.error(format!("{what} {v} is out of range")))
+}
+
+impl<'a> Reader<'a> {
+    fn new(data: &'a [u8]) -> Self {
+        Reader {
+            c: TextCursor::new(data),
+            format: None,
+            mesh: RawMesh::default(),
+            nodes: None,
+            blocks: Blocks::default(),
+            entity_physical: HashMap::new(),
+            partition_parent: HashMap::new(),
+        }
+    }
+
+    fn run(mut self) -> Result<RawMesh, ParseError> {
+        let mut any_section = false;
+        while let Some(tok) = self.c.next_token() {
+            let Some(name) = tok.strip_prefix('$') else {
+                return Err(self.c.expected(
+                    if any_section {
+                        "a section header such as $Nodes"
+                    } else {
+                        "$MeshFormat at the start of a Gmsh file"
+                    },
+                    tok,
+                ));
+            };
+            let line = self.c.line();
+            if !any_section && name != "MeshFormat" && name != "NOD" && name != "NOE" {
+                return Err(self
+                    .c
+                    .expected("$MeshFormat at the start of a Gmsh file", tok));
+            }
+            any_section = true;
+            match name {
+                "MeshFormat" => self.mesh_format()?,
+                "NOD" | "NOE" => {
+                    if self.format.is_none() {
+                        self.format = Some(Format {
+                            version: Version::V1,
+                            binary: false,
+                            big_endian: false,
+                            size_t: 8,
+                        });
+                    }
+                    self.nodes_section(name)?
+                }
+                "ELM" => self.elements_section(name, line)?,
+                "PhysicalNames" => self.physical_names()?,
+                "Entities" => self.entities(false)?,
+                "PartitionedEntities" => self.entities(true)?,
+                "Nodes" => self.nodes_section(name)?,
+                "Elements" => self.elements_section(name, line)?,
+                _ if name.len() >= 3 && name.as_bytes()[..3].eq_ignore_ascii_case(b"End") => {
+                    return Err(self.c.error(format!(
+                        "unexpected {tok} without a matching ${}",
+                        name.get(3..).unwrap_or("")
+                    )));
+                }
+                _ => self.skip_section(name, line)?,
+            }
+        }
+        if !any_section {
+            return Err(ParseError::new(
+                Location::File,
+                "empty file: expected a Gmsh mesh starting with $MeshFormat",
+            ));
+        }
+        let mut mesh = self.mesh;
+        for (_, mut block) in self.blocks.list {
+            // Tag 0 means "no tag"; a block without any tag has none.
+            if block.tags.iter().all(|&t| t == 0) {
+                block.tags.clear();
+            }
+            mesh.push_block(block);
+        }
+        Ok(mesh)
+    }
+
+    fn format(&self) -> Format {
+        self.format.unwrap_or(Format {
+            version: Version::V2,
+            binary: false,
+            big_endian: false,
+            size_t: 8,
+        })
+    }
+
+    /// Consume `$End<name>` (MSH 1 spells it `$ENDNOD`).
+    fn expect_end(&mut self, name: &str) -> Result<(), ParseError> {
+        let want = format!("$End{name}");
+        match self.c.next_token() {
+            Some(t) if t.eq_ignore_ascii_case(&want) => Ok(()),
+            Some(t) => Err(self
+                .c
+                .expected(&format!("{want} (or fewer entries than declared)"), t)),
+            None => Err(self
+                .c
+                .error(format!("unexpected end of file: missing {want}"))),
+        }
+    }
+
+    /// A reader for binary data starting at the cursor.
+    fn bin(&self) -> Bin<'a> {
+        let f = self.format();
+        Bin {
+            data: self.c.data(),
+            pos: self.c.pos(),
+            big_endian: f.big_endian,
+            size_t: f.size_t,
+        }
+    }
+
+    fn skip_section(&mut self, name: &str, line: usize) -> Result<(), ParseError> {
+        let data = self.c.data();
+        let start = self.c.pos();
+        let needle_len = 4 + name.len();
+        let mut i = start;
+        // Look for `$End<name>` at the start of a line.
+        while let Some(off) = data[i..].iter().position(|&b| b == b'\n') {
+            let s = i + off + 1;
+            let rest = &data[s..];
+            if rest.len() >= needle_len
+                && &rest[..4] == b"$End"
+                && &rest[4..needle_len] == name.as_bytes()
+            {
+                self.c.seek_forward(s + needle_len);
+                return Ok(());
+            }
+            i = s;
+        }
+        Err(ParseError::at_line(
+            line,
+            format!("section ${name} has no matching $End{name} line"),
+        ))
+    }
+
+    fn mesh_format(&mut self) -> Result<(), ParseError> {
+        if self.format.is_some() {
+            return Err(self.c.error("second $MeshFormat section"));
+        }
+        let vt = self.c.expect_token("MSH version number")?;
+        let v = parse_f64(vt).ok_or_else(|| self.c.expected("MSH version number", vt))?;
+        let version = if (2.0..3.0).contains(&v) {
+            Version::V2
+        } else if (4.0..4.05).contains(&v) {
+            Version::V40
+        } else if (4.05..5.0).contains(&v) {
+            Version::V41
+        } else {
+            return Err(self.c.error(format!(
+                "MSH version {vt} is not supported (supported: 1, 2.0-2.2, 4.0, 4.1)"
+            )));
+        };
+        let file_type = self
+            .c
+            .parse_or::<i64>(|| "file type (0 = ASCII, 1 = binary)".into())?;
+        let binary = match file_type {
+            0 => false,
+            1 => true,
+            _ => {
+                return Err(self.c.error(format!(
+                    "file type {file_type} is not 0 (ASCII) or 1 (binary)"
+                )));
+            }
+        };
+        let data_size = self.c.parse_or::<i64>(|| "data size".into())?;
+        let mut format = Format {
+            version,
+            binary,
+            big_endian: false,
+            size_t: 8,
+        };
+        if binary {
+            match version {
+                Version::V40 => {
+                    return Err(self.c.error(
+                        "MSH 4.0 binary files are not supported; write MSH 4.1 or 2.2 instead",
+                    ));
+                }
+                Version::V41 if data_size == 4 || data_size == 8 => {
+                    format.size_t = data_size as usize
+                }
+                Version::V2 if data_size == 8 => {}
+                _ => {
+                    return Err(self.c.error(format!(
+                        "binary data size {data_size} is not supported (expected 8{})",
+                        if version == Version::V41 { " or 4" } else { "" }
+                    )));
+                }
+            }
+            // The binary integer 1 on the next line tells the byte order.
+            self.c.skip_line();
+            let mut bin = self.bin();
+            let at = bin.pos;
+            let b = bin.take(4, &|| {
+                "the binary integer 1 that gives the byte order".into()
+            })?;
+            format.big_endian = match b {
+                [1, 0, 0, 0] => false,
+                [0, 0, 0, 1] => true,
+                _ => {
+                    return Err(ParseError::at_byte(
+                        at,
+                        format!(
+                            "expected the binary integer 1 after the binary MSH header, found bytes {b:02x?}"
+                        ),
+                    ));
+                }
+            };
+            self.c.seek_forward(bin.pos);
+        }
+        self.format = Some(format);
+        self.expect_end("MeshFormat")
+    }
+
+    fn physical_names(&mut self) -> Result<(), ParseError> {
+        let n = self
+            .c
+            .parse_or::<u64>(|| "number of physical names".into())?;
+        for i in 0..n {
+            let what = || format!("physical name {} of {n}", i + 1);
+            let dim = self
+                .c
+                .parse_or::<i64>(|| format!("dimension of {}", what()))?;
+            let tag = self.c.parse_or::<i64>(|| format!("tag of {}", what()))?;
+            let tag = to_i32(tag, &self.c, "physical tag")?;
+            let _ = dim;
+            let rest = self.c.next_line().unwrap_or("").trim();
+            let name = rest
+                .strip_prefix('"')
+                .and_then(|r| r.strip_suffix('"'))
+                .unwrap_or(rest);
+            let entry = self.mesh.tag_names.entry(tag).or_default();
+            if entry.is_empty() {
+                *entry = name.to_string();
+            } else if entry.split(" / ").all(|e| e != name) {
+                entry.push_str(" / ");
+                entry.push_str(name);
+            }
+        }
+        self.expect_end("PhysicalNames")
+    }
+}
+
+#[cfg(test)]
+mod tests;
