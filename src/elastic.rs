@@ -19,7 +19,8 @@
 //! up to the CG tolerance.
 
 use crate::fit::assembly::atomic_add;
-use crate::quality::lagrange_1d;
+use crate::math::lagrange::lagrange_1d;
+use crate::math::quadrature::gauss_legendre;
 use crate::sample::HighOrderMesh;
 use crate::sample::ordering::lattice_point;
 use crate::solve::{CgError, CgInfo, CgParams, LinOp, Preconditioner, pcg_coupled};
@@ -111,35 +112,6 @@ fn lame(young: f64, poisson: f64) -> Result<(f64, f64), ElasticError> {
     let lambda = young * poisson / ((1.0 + poisson) * (1.0 - 2.0 * poisson));
     let mu = young / (2.0 * (1.0 + poisson));
     Ok((lambda, mu))
-}
-
-/// Gauss–Legendre points and weights on [0, 1] (n points, exact to degree 2n − 1).
-pub fn gauss_legendre(n: usize) -> (Vec<f64>, Vec<f64>) {
-    let (mut xs, mut ws) = (Vec::with_capacity(n), Vec::with_capacity(n));
-    for i in 0..n {
-        // Newton on P_n from the Chebyshev-like guess; converges in a few steps.
-        let mut x = (std::f64::consts::PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
-        let mut dp = 1.0;
-        for _ in 0..100 {
-            let (mut p0, mut p1) = (1.0, x);
-            for k in 2..=n {
-                let p2 = ((2 * k - 1) as f64 * x * p1 - (k - 1) as f64 * p0) / k as f64;
-                p0 = p1;
-                p1 = p2;
-            }
-            let pn = if n == 0 { 1.0 } else { p1 };
-            let pm = if n == 1 { 1.0 } else { p0 };
-            dp = n as f64 * (x * pn - pm) / (x * x - 1.0);
-            let dx = pn / dp;
-            x -= dx;
-            if dx.abs() < 1e-15 {
-                break;
-            }
-        }
-        xs.push(0.5 * (1.0 - x));
-        ws.push(1.0 / ((1.0 - x * x) * dp * dp));
-    }
-    (xs, ws)
 }
 
 /// Reference derivatives of the (p+1)^d Lagrange basis at the Gauss points, with weights.

@@ -26,6 +26,7 @@ pub mod fit;
 pub mod gpu;
 pub mod info;
 pub mod io;
+pub mod math;
 pub mod mesh;
 pub mod params;
 pub mod pipeline;

@@ -18,7 +18,8 @@
 //! certified ([`crate::validity::det_jacobian_bounds`] above its threshold).
 
 use super::{Energy, EnergyInfo, EnergyParams, EnergySolver, EnergyStop, Mat3, Validity};
-use super::{dirichlet, inv3, mul3, transpose};
+use super::dirichlet;
+use crate::math::linalg::{inv3, mul3, transpose};
 use crate::validity::det_jacobian_bounds;
 use rayon::prelude::*;
 
@@ -284,7 +285,7 @@ pub(crate) fn minimize(
     params: &EnergyParams,
     executor: &dyn crate::executor::Executor,
     observe: &mut dyn FnMut(&[[f64; 3]]),
-) -> Result<(Vec<[f64; 3]>, EnergyInfo), crate::gpu::GpuError> {
+) -> Result<(Vec<[f64; 3]>, EnergyInfo), crate::executor::ExecutorError> {
     let n = start.len();
     let dim = energy.dim;
     let nb = energy.nb;

@@ -50,9 +50,11 @@ pub mod colored;
 
 use crate::fit::{FitParams, FitSpace, NormalMatrix};
 use crate::mesh::{LinearMesh, Topology};
-use crate::sample::multilinear;
+use crate::math::bernstein::{bernstein2, bernstein2_derivative, elevated_net};
+pub use crate::math::linalg::Mat3;
+use crate::math::linalg::{inv3, mul3, norm2, transpose};
+use crate::math::quadrature::GAUSS3;
 use crate::solve::LinOp;
-use crate::spline::knots::{bernstein, bernstein_derivative};
 use crate::validity::Certifier;
 use rayon::prelude::*;
 use std::time::Instant;
@@ -192,60 +194,6 @@ pub enum EnergyError {
     Gpu(String),
 }
 
-/// 3-point Gauss rule on [0, 1] (exact to degree 5).
-const GAUSS3: [(f64, f64); 3] = [
-    (0.112_701_665_379_258_31, 5.0 / 18.0),
-    (0.5, 8.0 / 18.0),
-    (0.887_298_334_620_741_7, 5.0 / 18.0),
-];
-
-pub type Mat3 = [[f64; 3]; 3];
-
-pub(crate) fn det3(m: &Mat3) -> f64 {
-    m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
-        - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
-}
-
-/// Inverse and determinant.
-pub(crate) fn inv3(m: &Mat3) -> (Mat3, f64) {
-    let det = det3(m);
-    let s = 1.0 / det;
-    let mut r = [[0.0; 3]; 3];
-    for i in 0..3 {
-        for j in 0..3 {
-            let (a, b) = ((j + 1) % 3, (j + 2) % 3);
-            let (c, d) = ((i + 1) % 3, (i + 2) % 3);
-            r[i][j] = s * (m[a][c] * m[b][d] - m[a][d] * m[b][c]);
-        }
-    }
-    (r, det)
-}
-
-pub(crate) fn mul3(a: &Mat3, b: &Mat3) -> Mat3 {
-    let mut r = [[0.0; 3]; 3];
-    for i in 0..3 {
-        for j in 0..3 {
-            r[i][j] = a[i][0] * b[0][j] + a[i][1] * b[1][j] + a[i][2] * b[2][j];
-        }
-    }
-    r
-}
-
-pub(crate) fn transpose(a: &Mat3) -> Mat3 {
-    let mut r = [[0.0; 3]; 3];
-    for i in 0..3 {
-        for j in 0..3 {
-            r[i][j] = a[j][i];
-        }
-    }
-    r
-}
-
-fn norm2(a: &Mat3) -> f64 {
-    a.iter().flatten().map(|x| x * x).sum()
-}
-
 /// Symmetric Dirichlet density f(M) (M embedded as 3×3 with M₃₃ = 1 in 2D, which the `−6`
 /// accounts for) and, when `grad` is given, ∂f/∂M. +∞ when det M ≤ 0.
 pub fn dirichlet(dim: usize, m: &Mat3, grad: Option<&mut Mat3>) -> f64 {
@@ -341,8 +289,8 @@ impl<'a> Energy<'a> {
                         if dim == 2 { 0.0 } else { GAUSS3[qz].0 },
                     ];
                     let w = GAUSS3[qx].1 * GAUSS3[qy].1 * if dim == 2 { 1.0 } else { GAUSS3[qz].1 };
-                    let b = u.map(bernstein);
-                    let db = u.map(bernstein_derivative);
+                    let b = u.map(bernstein2);
+                    let db = u.map(bernstein2_derivative);
                     let mut g = [[0.0; 27]; 3];
                     for c in 0..nz {
                         for bb in 0..3 {
@@ -368,12 +316,7 @@ impl<'a> Energy<'a> {
             .into_par_iter()
             .map(|e| {
                 // The straight element's degree-elevated net: its multilinear map at the lattice.
-                let x = mesh.element_coords(e);
-                let mut net = [[0.0; 3]; 27];
-                for (a, p) in net.iter_mut().enumerate().take(nb) {
-                    let l = [a % 3, (a / 3) % 3, a / 9];
-                    *p = multilinear(dim, &x, l.map(|c| c as f64 / 2.0));
-                }
+                let net = elevated_net(dim, &mesh.element_coords(e));
                 let mut pinv = Vec::with_capacity(nq);
                 let mut vol = 0.0;
                 for q in 0..nq {

@@ -4,21 +4,15 @@
 use super::{GpuContext, GpuError, ITEM_WORKGROUP, anchor, bytes_to_reals, groups, reals_to_bytes};
 use crate::mesh::{LinearMesh, Topology};
 use crate::sample::ordering::{Lattice, lattice_index, lattice_point};
-use crate::sample::{BezierElements, HighOrderMesh, sample_with};
+use crate::math::BezierElements;
+use crate::sample::{HighOrderMesh, sample_with};
 use rayon::prelude::*;
+
+/// The uniform block lives beside the CPU twin, which both sides fill the same way.
+pub use crate::cpu::evaluate::Params;
 
 pub const SOURCE: &str = include_str!("../../shaders/evaluate.wgsl");
 
-/// Uniform block of `evaluate.wgsl`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct Params {
-    pub dim: u32,
-    pub n_queries: u32,
-    pub with_derivs: u32,
-    pub _pad: u32,
-}
-const _: () = assert!(std::mem::size_of::<Params>() == 16);
 
 /// Points (and derivatives d/du, d/dv, d/dw when asked for) per query, in f64.
 #[derive(Clone, Debug, Default)]

@@ -13,18 +13,11 @@ use super::{
 use crate::validity::{Certifier, DetBounds, det_jacobian_bounds};
 use rayon::prelude::*;
 
+/// The uniform block lives beside the CPU twin, which both sides fill the same way.
+pub use crate::cpu::jacobian_check::Params;
+
 pub const SOURCE: &str = include_str!("../../shaders/jacobian_check.wgsl");
 
-/// Uniform block of `jacobian_check.wgsl`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct Params {
-    pub dim: u32,
-    pub n_elements: u32,
-    pub _pad0: u32,
-    pub _pad1: u32,
-}
-const _: () = assert!(std::mem::size_of::<Params>() == 16);
 
 /// Roundings along the longest path of one det J coefficient (product weights, three factor
 /// products, sums of up to 18·18 terms per component), generously counted: the arithmetic

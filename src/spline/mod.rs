@@ -305,7 +305,7 @@ impl SplineSpace {
     }
 }
 
-impl crate::sample::BezierElements for SplineSpace {
+impl crate::math::BezierElements for SplineSpace {
     fn dim(&self) -> usize {
         self.dim
     }

@@ -32,7 +32,7 @@
 
 use super::{Certifier, DetBounds, bernstein_min_bounds, certify_screened, det_jacobian_bernstein};
 use crate::mesh::{LinearMesh, Topology, vec3};
-use crate::sample::BezierElements;
+use crate::math::BezierElements;
 use rayon::prelude::*;
 
 /// Bernstein nets, 9 (2D) or 27 (3D) points, index 9z + 3y + x.

@@ -355,7 +355,7 @@ mod tests {
     /// det J of the Bézier map at `t` by central differences of the map (independent of the
     /// Bernstein algebra).
     fn det_fd(dim: usize, net: &[[f64; 3]; 27], t: [f64; 3]) -> f64 {
-        crate::validity::tests::det_fd(dim, &|u| crate::sample::eval_net(dim, net, u), t)
+        crate::validity::tests::det_fd(dim, &|u| crate::math::bernstein::eval_net(dim, net, u), t)
     }
 
     #[test]
