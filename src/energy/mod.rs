@@ -47,6 +47,12 @@
 //! summed in element order, so values and iterates do not depend on the thread count.
 
 pub mod colored;
+mod lbfgs;
+mod params;
+
+pub use params::{
+    EnergyError, EnergyInfo, EnergyParams, EnergyScale, EnergySolver, EnergyStop,
+};
 
 use crate::fit::{FitParams, FitSpace, NormalMatrix};
 use crate::mesh::{LinearMesh, Topology};
@@ -58,141 +64,6 @@ use crate::solve::LinOp;
 use crate::validity::Certifier;
 use rayon::prelude::*;
 use std::time::Instant;
-
-/// Which minimiser runs (`--energy-solver`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
-#[serde(rename_all = "snake_case")]
-pub enum EnergySolver {
-    /// Global L-BFGS with a certified Armijo line search.
-    #[default]
-    Lbfgs,
-    /// Coloured local Newton (one control point at a time, a colour in parallel).
-    Colored,
-}
-
-/// The length² that makes S_e comparable with D.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum EnergyScale {
-    /// h_e² of each element: every element weighs by its size, like D.
-    Element,
-    /// h̄² = (mean element volume)^{2/d} for every element: every element weighs the same,
-    /// so thin boundary-layer cells count as much as large ones.
-    #[default]
-    Mean,
-}
-
-/// Parameters of the energy minimisation.
-#[derive(Clone, Copy, Debug, serde::Serialize)]
-pub struct EnergyParams {
-    /// w_e, the weight of the degeneration energy against D + R.
-    pub weight: f64,
-    pub scale: EnergyScale,
-    pub solver: EnergySolver,
-    /// L-BFGS iterations, or coloured sweeps, at most.
-    pub max_iterations: usize,
-    /// Stop L-BFGS when an iteration lowers Q by less than this fraction of Q.
-    pub rel_tol: f64,
-    /// Stop the coloured solver when a sweep lowers Q by less than this fraction of Q.
-    pub sweep_tol: f64,
-    /// Stop when ‖∇Q‖∞ falls below this fraction of its initial value (L-BFGS).
-    pub grad_tol: f64,
-    /// L-BFGS memory (pairs kept).
-    pub history: usize,
-    /// Halvings of a step before giving up on it.
-    pub max_backtracks: usize,
-    /// Newton steps per control point and sweep (coloured solver).
-    pub local_iterations: usize,
-}
-
-impl Default for EnergyParams {
-    fn default() -> Self {
-        EnergyParams {
-            weight: 1.0,
-            scale: EnergyScale::default(),
-            solver: EnergySolver::Lbfgs,
-            max_iterations: 200,
-            rel_tol: 1e-6,
-            sweep_tol: 1e-3,
-            grad_tol: 1e-6,
-            history: 8,
-            max_backtracks: 30,
-            local_iterations: 2,
-        }
-    }
-}
-
-/// Why the minimisation stopped.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum EnergyStop {
-    /// The decrease per iteration fell below `rel_tol`.
-    Stalled,
-    /// The gradient fell below `grad_tol`.
-    Gradient,
-    /// `max_iterations` reached.
-    MaxIterations,
-    /// No certified step lowering Q was found along the search direction.
-    LineSearch,
-}
-
-/// What the minimisation did.
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct EnergyInfo {
-    pub solver: EnergySolver,
-    pub weight: f64,
-    /// L-BFGS iterations or coloured sweeps.
-    pub iterations: usize,
-    pub stop: EnergyStop,
-    /// Q at the start (the least-squares result) and at the end.
-    pub initial_energy: f64,
-    pub final_energy: f64,
-    /// Σ_e S_e (without the weight) at the start and at the end.
-    pub initial_degeneration: f64,
-    pub final_degeneration: f64,
-    /// Energy evaluations (L-BFGS) or local Newton steps tried (coloured).
-    pub evaluations: usize,
-    /// Steps shortened because an element lost its certificate.
-    pub uncertified_trials: usize,
-    /// Number of colours (coloured solver).
-    pub colors: Option<usize>,
-    pub seconds: f64,
-}
-
-impl EnergyInfo {
-    /// Nothing done yet, at energy `q`.
-    fn start(solver: EnergySolver, weight: f64, q: f64) -> Self {
-        EnergyInfo {
-            solver,
-            weight,
-            iterations: 0,
-            stop: EnergyStop::MaxIterations,
-            initial_energy: q,
-            final_energy: q,
-            initial_degeneration: 0.0,
-            final_degeneration: 0.0,
-            evaluations: 0,
-            uncertified_trials: 0,
-            colors: None,
-            seconds: 0.0,
-        }
-    }
-}
-
-/// Why the energy cannot be minimised from the given start.
-#[derive(Clone, Debug, thiserror::Error)]
-pub enum EnergyError {
-    #[error(
-        "the degeneration energy is infinite at the start: element {element} has det J ≤ 0 at a quadrature point"
-    )]
-    InfiniteStart { element: usize },
-    #[error("the start is not certified valid on element {element}")]
-    UncertifiedStart { element: usize },
-    #[error("energy weight must be finite and non-negative, got {0}")]
-    Weight(f64),
-    #[error("GPU: {0}")]
-    Gpu(String),
-}
 
 /// Symmetric Dirichlet density f(M) (M embedded as 3×3 with M₃₃ = 1 in 2D, which the `−6`
 /// accounts for) and, when `grad` is given, ∂f/∂M. +∞ when det M ≤ 0.
@@ -244,7 +115,7 @@ pub struct Energy<'a> {
     pub(crate) scale: Vec<f64>,
     pub(crate) rows: Vec<ElementRows>,
     /// Smallest input element size vol^{1/d}.
-    h_min: f64,
+    pub(crate) h_min: f64,
     /// Control points that carry the boundary (a non-zero extraction weight at a Bernstein
     /// point of a boundary facet); the minimisers keep them where the least-squares fit put
     /// them, so the boundary stays the fit's (see the module docs).
@@ -574,7 +445,7 @@ impl<'a> Energy<'a> {
     /// [`Energy::value_and_gradient`] with the gradient of the frozen (boundary) control points
     /// zeroed: the gradient of Q restricted to the free control points, so no L-BFGS direction
     /// (built from these gradients and the steps they make) ever moves the boundary.
-    fn value_and_free_gradient(&self, cps: &[[f64; 3]], grad: &mut [[f64; 3]]) -> f64 {
+    pub(crate) fn value_and_free_gradient(&self, cps: &[[f64; 3]], grad: &mut [[f64; 3]]) -> f64 {
         let q = self.value_and_gradient(cps, grad);
         for (g, &f) in grad.iter_mut().zip(&self.frozen) {
             if f {
@@ -660,31 +531,6 @@ impl Validity<'_> {
     }
 }
 
-fn dot(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
-    a.par_chunks(4096)
-        .zip(b.par_chunks(4096))
-        .map(|(a, b)| {
-            a.iter()
-                .zip(b)
-                .map(|(x, y)| x[0] * y[0] + x[1] * y[1] + x[2] * y[2])
-                .sum::<f64>()
-        })
-        .collect::<Vec<f64>>()
-        .iter()
-        .sum()
-}
-
-fn max_abs(a: &[[f64; 3]]) -> f64 {
-    a.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()))
-}
-
-fn axpy(x: &[[f64; 3]], a: f64, d: &[[f64; 3]]) -> Vec<[f64; 3]> {
-    x.iter()
-        .zip(d)
-        .map(|(x, d)| [x[0] + a * d[0], x[1] + a * d[1], x[2] + a * d[2]])
-        .collect()
-}
-
 /// Minimise Q from `start` with the solver in `params`; `observe` sees every accepted iterate.
 pub fn minimize(
     energy: &Energy,
@@ -724,7 +570,7 @@ pub fn minimize_on(
         return Err(EnergyError::InfiniteStart { element: e });
     }
     let (c, mut info) = match params.solver {
-        EnergySolver::Lbfgs => lbfgs(energy, validity, start, params, observe),
+        EnergySolver::Lbfgs => lbfgs::lbfgs(energy, validity, start, params, observe),
         EnergySolver::Colored => {
             colored::minimize(energy, validity, start, params, executor, observe)
                 .map_err(|e| EnergyError::Gpu(e.to_string()))?
@@ -734,117 +580,4 @@ pub fn minimize_on(
     info.final_degeneration = deg(&c).1;
     info.seconds = t.elapsed().as_secs_f64();
     Ok((c, info))
-}
-
-/// An L-BFGS pair (s, y, 1 / sᵀy).
-type Pair = (Vec<[f64; 3]>, Vec<[f64; 3]>, f64);
-
-fn lbfgs(
-    energy: &Energy,
-    validity: &Validity,
-    start: &[[f64; 3]],
-    params: &EnergyParams,
-    observe: &mut dyn FnMut(&[[f64; 3]]),
-) -> (Vec<[f64; 3]>, EnergyInfo) {
-    let n = start.len();
-    let mut x = start.to_vec();
-    let mut g = vec![[0.0; 3]; n];
-    let mut f = energy.value_and_free_gradient(&x, &mut g);
-    let mut info = EnergyInfo::start(EnergySolver::Lbfgs, energy.weight, f);
-    info.evaluations = 1;
-    let g0 = max_abs(&g);
-    // First step: move the furthest control point by a tenth of the smallest element size.
-    let h_min = energy.h_min;
-    // (s, y, 1 / sᵀy) pairs, oldest first.
-    let mut hist: std::collections::VecDeque<Pair> = Default::default();
-    while info.iterations < params.max_iterations {
-        if max_abs(&g) <= params.grad_tol * g0 {
-            info.stop = EnergyStop::Gradient;
-            break;
-        }
-        // Two-loop recursion.
-        let mut d: Vec<[f64; 3]> = g.iter().map(|v| v.map(|x| -x)).collect();
-        let mut alphas = Vec::with_capacity(hist.len());
-        for (s, y, rho) in hist.iter().rev() {
-            let a = rho * dot(s, &d);
-            d = axpy(&d, -a, y);
-            alphas.push(a);
-        }
-        if let Some((s, y, _)) = hist.back() {
-            let gamma = dot(s, y) / dot(y, y);
-            for v in d.iter_mut() {
-                for c in v.iter_mut() {
-                    *c *= gamma;
-                }
-            }
-        } else {
-            let scale = 0.1 * h_min / max_abs(&d).max(f64::MIN_POSITIVE);
-            for v in d.iter_mut() {
-                for c in v.iter_mut() {
-                    *c *= scale;
-                }
-            }
-        }
-        for ((s, y, rho), a) in hist.iter().zip(alphas.iter().rev()) {
-            let b = rho * dot(y, &d);
-            d = axpy(&d, a - b, s);
-        }
-        let mut slope = dot(&g, &d);
-        if !(slope < 0.0) {
-            hist.clear();
-            let scale = 0.1 * h_min / max_abs(&g).max(f64::MIN_POSITIVE);
-            d = g.iter().map(|v| v.map(|x| -scale * x)).collect();
-            slope = dot(&g, &d);
-        }
-        // Armijo backtracking; a trial counts only when every element stays certified.
-        let mut alpha = 1.0;
-        let mut accepted = None;
-        for _ in 0..=params.max_backtracks {
-            let xn = axpy(&x, alpha, &d);
-            let mut gn = vec![[0.0; 3]; n];
-            let fnew = energy.value_and_free_gradient(&xn, &mut gn);
-            info.evaluations += 1;
-            if fnew.is_finite() && fnew <= f + 1e-4 * alpha * slope {
-                if validity.accepts(energy, &xn) {
-                    accepted = Some((xn, gn, fnew));
-                    break;
-                }
-                info.uncertified_trials += 1;
-            }
-            alpha *= 0.5;
-        }
-        let Some((xn, gn, fnew)) = accepted else {
-            info.stop = EnergyStop::LineSearch;
-            break;
-        };
-        info.iterations += 1;
-        observe(&xn);
-        let s: Vec<[f64; 3]> = xn
-            .iter()
-            .zip(&x)
-            .map(|(a, b)| [a[0] - b[0], a[1] - b[1], a[2] - b[2]])
-            .collect();
-        let y: Vec<[f64; 3]> = gn
-            .iter()
-            .zip(&g)
-            .map(|(a, b)| [a[0] - b[0], a[1] - b[1], a[2] - b[2]])
-            .collect();
-        let sy = dot(&s, &y);
-        if sy > 1e-12 * dot(&y, &y).sqrt() * dot(&s, &s).sqrt() {
-            if hist.len() == params.history.max(1) {
-                hist.pop_front();
-            }
-            hist.push_back((s, y, 1.0 / sy));
-        }
-        let decrease = f - fnew;
-        x = xn;
-        g = gn;
-        f = fnew;
-        if decrease <= params.rel_tol * f.abs().max(f64::MIN_POSITIVE) {
-            info.stop = EnergyStop::Stalled;
-            break;
-        }
-    }
-    info.final_energy = f;
-    (x, info)
 }
