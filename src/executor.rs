@@ -12,8 +12,8 @@
 use crate::energy::colored::{LocalDerivatives, LocalProblem};
 use crate::fit::NormalMatrix;
 use crate::gpu::{Backend, GpuContext, GpuError};
-use crate::mesh::{LinearMesh, Topology};
 use crate::math::BezierElements;
+use crate::mesh::{LinearMesh, Topology};
 use crate::sample::HighOrderMesh;
 use crate::solve::{CgError, CgInfo, CgParams};
 use crate::validity::Certifier;

@@ -4,8 +4,8 @@ use crate::energy::colored::{LocalDerivatives, LocalProblem};
 use crate::executor::{Executor, ExecutorError};
 use crate::fit::NormalMatrix;
 use crate::gpu::GpuError;
+use crate::math::{BezierElements, BezierNet};
 use crate::mesh::{LinearMesh, Topology};
-use crate::math::BezierElements;
 use crate::sample::HighOrderMesh;
 use crate::solve::{CgError, CgInfo, CgParams};
 use crate::validity::{Certifier, CpuCertifier, DetBounds};
@@ -18,7 +18,7 @@ impl Certifier for CpuExecutor {
         &self,
         dim: usize,
         elements: &[usize],
-        net: &(dyn Fn(usize) -> [[f64; 3]; 27] + Sync),
+        net: &(dyn Fn(usize) -> BezierNet + Sync),
         max_depth: usize,
     ) -> Vec<DetBounds> {
         CpuCertifier.certify(dim, elements, net, max_depth)

@@ -50,16 +50,15 @@ pub mod colored;
 mod lbfgs;
 mod params;
 
-pub use params::{
-    EnergyError, EnergyInfo, EnergyParams, EnergyScale, EnergySolver, EnergyStop,
-};
+use crate::math::BezierNet;
+pub use params::{EnergyError, EnergyInfo, EnergyParams, EnergyScale, EnergySolver, EnergyStop};
 
 use crate::fit::{FitParams, FitSpace, NormalMatrix};
-use crate::mesh::{LinearMesh, Topology};
 use crate::math::bernstein::{bernstein2, bernstein2_derivative, elevated_net};
 pub use crate::math::linalg::Mat3;
 use crate::math::linalg::{inv3, mul3, norm2, transpose};
 use crate::math::quadrature::GAUSS3;
+use crate::mesh::{LinearMesh, Topology};
 use crate::solve::LinOp;
 use crate::validity::Certifier;
 use rayon::prelude::*;
@@ -285,7 +284,7 @@ impl<'a> Energy<'a> {
     }
 
     /// Bernstein net of element e for control points `cps` (from the cached rows).
-    pub(crate) fn net(&self, e: usize, cps: &[[f64; 3]]) -> [[f64; 3]; 27] {
+    pub(crate) fn net(&self, e: usize, cps: &[[f64; 3]]) -> BezierNet {
         let ElementRows { ids, r } = &self.rows[e];
         let m = ids.len();
         let mut net = [[0.0; 3]; 27];
@@ -304,19 +303,14 @@ impl<'a> Energy<'a> {
     }
 
     /// M_q = J(u_q) P_q of element e with Bernstein net `net`.
-    pub(crate) fn m_at(&self, e: usize, q: usize, net: &[[f64; 3]; 27]) -> Mat3 {
+    pub(crate) fn m_at(&self, e: usize, q: usize, net: &BezierNet) -> Mat3 {
         let j = jacobian(self.dim, self.nb, net, &self.dbq[q]);
         mul3(&j, &self.pinv[e * self.nq() + q])
     }
 
     /// w_e S_e of element e with Bernstein net `net`; with `grad`, ∂(w_e S_e)/∂B is added into
     /// it (nb × 3).
-    fn element_energy(
-        &self,
-        e: usize,
-        net: &[[f64; 3]; 27],
-        mut grad: Option<&mut [[f64; 3]; 27]>,
-    ) -> f64 {
+    fn element_energy(&self, e: usize, net: &BezierNet, mut grad: Option<&mut BezierNet>) -> f64 {
         let nq = self.nq();
         let mut s = 0.0;
         for q in 0..nq {
@@ -472,7 +466,7 @@ impl<'a> Energy<'a> {
 }
 
 /// J = Σ_a B_a ⊗ ∇b_a (J₃₃ = 1 in 2D).
-pub(crate) fn jacobian(dim: usize, nb: usize, net: &[[f64; 3]; 27], db: &[[f64; 27]; 3]) -> Mat3 {
+pub(crate) fn jacobian(dim: usize, nb: usize, net: &BezierNet, db: &[[f64; 27]; 3]) -> Mat3 {
     let mut j = [[0.0; 3]; 3];
     for a in 0..nb {
         for i in 0..dim {

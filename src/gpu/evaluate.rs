@@ -2,9 +2,9 @@
 //! and the GPU sampling stage built on it. CPU twin: [`crate::cpu::evaluate`].
 
 use super::{GpuContext, GpuError, ITEM_WORKGROUP, anchor, bytes_to_reals, groups, reals_to_bytes};
+use crate::math::{BezierElements, BezierNet};
 use crate::mesh::{LinearMesh, Topology};
 use crate::sample::ordering::{Lattice, lattice_index, lattice_point};
-use crate::math::BezierElements;
 use crate::sample::{HighOrderMesh, sample_with};
 use rayon::prelude::*;
 
@@ -12,7 +12,6 @@ use rayon::prelude::*;
 pub use crate::cpu::evaluate::Params;
 
 pub const SOURCE: &str = include_str!("../../shaders/evaluate.wgsl");
-
 
 /// Points (and derivatives d/du, d/dv, d/dw when asked for) per query, in f64.
 #[derive(Clone, Debug, Default)]
@@ -37,7 +36,7 @@ pub const EVALUATE_TOL_F64: f64 = 64.0 * f64::EPSILON;
 pub fn evaluate(
     ctx: &GpuContext,
     dim: usize,
-    nets: &(dyn Fn(usize) -> [[f64; 3]; 27] + Sync),
+    nets: &(dyn Fn(usize) -> BezierNet + Sync),
     xi: &[[f64; 3]],
     queries: &[(u32, u32)],
     with_derivs: bool,
@@ -80,7 +79,7 @@ pub fn evaluate(
             end += 1;
         }
         let chunk = &order[start..end];
-        let local_nets: Vec<([f64; 3], [[f64; 3]; 27])> = elems
+        let local_nets: Vec<([f64; 3], BezierNet)> = elems
             .par_iter()
             .map(|&e| {
                 let net = nets(e as usize);

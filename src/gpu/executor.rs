@@ -7,8 +7,8 @@ use super::{GpuContext, GpuError};
 use crate::energy::colored::{LocalDerivatives, LocalProblem};
 use crate::executor::{Executor, ExecutorError};
 use crate::fit::NormalMatrix;
+use crate::math::{BezierElements, BezierNet};
 use crate::mesh::{LinearMesh, Topology};
-use crate::math::BezierElements;
 use crate::sample::HighOrderMesh;
 use crate::solve::{CgError, CgInfo, CgParams};
 use crate::validity::{Certifier, DetBounds};
@@ -35,7 +35,7 @@ impl Certifier for GpuExecutor<'_> {
         &self,
         dim: usize,
         elements: &[usize],
-        net: &(dyn Fn(usize) -> [[f64; 3]; 27] + Sync),
+        net: &(dyn Fn(usize) -> BezierNet + Sync),
         max_depth: usize,
     ) -> Vec<DetBounds> {
         self.certifier.certify(dim, elements, net, max_depth)

@@ -11,7 +11,6 @@ pub use crate::cpu::local_newton::Params;
 
 pub const SOURCE: &str = include_str!("../../shaders/local_newton.wgsl");
 
-
 /// The kernel's inputs in binding order: coefficients (4 per problem), point ranges, points
 /// (13 per point).
 pub fn pack(problems: &[LocalProblem]) -> (Vec<f64>, Vec<[u32; 2]>, Vec<f64>) {

@@ -54,10 +54,16 @@ mod tests {
             let (xs, ws) = gauss_legendre(n);
             let q = |k: i32| -> f64 { xs.iter().zip(&ws).map(|(x, w)| w * x.powi(k)).sum() };
             for k in 0..2 * n as i32 {
-                assert!((q(k) - 1.0 / (k + 1) as f64).abs() < 1e-14, "n {n} degree {k}");
+                assert!(
+                    (q(k) - 1.0 / (k + 1) as f64).abs() < 1e-14,
+                    "n {n} degree {k}"
+                );
             }
             let k = 2 * n as i32;
-            assert!((q(k) - 1.0 / (k + 1) as f64).abs() > 1e-12, "n {n} degree {k}");
+            assert!(
+                (q(k) - 1.0 / (k + 1) as f64).abs() > 1e-12,
+                "n {n} degree {k}"
+            );
         }
         let (xs, ws) = gauss_legendre(3);
         let mut sorted: Vec<(f64, f64)> = xs.into_iter().zip(ws).collect();

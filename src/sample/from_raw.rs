@@ -63,10 +63,7 @@ impl HighOrderMesh {
                     if order.is_some_and(|o| o != p) {
                         return Err(ParseError::new(
                             b.location(0),
-                            format!(
-                                "elements of orders {} and {p} in one mesh",
-                                order.unwrap()
-                            ),
+                            format!("elements of orders {} and {p} in one mesh", order.unwrap()),
                         ));
                     }
                     order = Some(p);

@@ -22,8 +22,8 @@ pub mod ordering;
 
 // The Bézier basis lives in the foundation layer; these re-exports keep the paths that the
 // integration tests use (`polyspline::sample::{eval_net, multilinear, BezierElements}`).
-pub use crate::math::bernstein::{BezierElements, BezierNet, bernstein2, eval_net, multilinear};
 use crate::math::bernstein::elevated_net;
+pub use crate::math::bernstein::{BezierElements, BezierNet, bernstein2, eval_net, multilinear};
 use crate::mesh::topology::{HEX_EDGES, HEX_VERTEX_PARAMS, QUAD_SIDES};
 use crate::mesh::{LinearMesh, Topology};
 use ordering::{Lattice, lattice_index, lattice_point};

@@ -3,9 +3,9 @@
 //! foundation's ([`crate::math::bernstein`]).
 
 use super::extraction::Extraction;
+use crate::math::bernstein::BezierNet;
 use crate::math::bernstein::bernstein2 as bernstein;
 pub use crate::math::bernstein::{eval_net, eval_net_with_derivatives};
-use crate::math::bernstein::BezierNet;
 
 /// The Bézier net of element `e` for control point positions `cps`.
 pub fn bezier_net(ext: &Extraction, e: usize, cps: &[[f64; 3]]) -> BezierNet {

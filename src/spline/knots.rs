@@ -8,7 +8,9 @@
 //! (stencil slots 0, 1, 2, or Lagrange values at 0, ½, 1) to the three Bernstein coefficients.
 //! The element extraction operator is the tensor product of three of these (x fastest).
 
-use crate::math::bernstein::{bernstein2 as bernstein, bernstein2_derivative as bernstein_derivative};
+use crate::math::bernstein::{
+    bernstein2 as bernstein, bernstein2_derivative as bernstein_derivative,
+};
 
 /// The 1D basis of one element direction.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
