@@ -17,10 +17,10 @@
 
 use crate::elastic::ElasticParams;
 use crate::fit::{FitParams, FitTargets, FitWeights, SmoothParams};
+use crate::math::lagrange::lagrange_1d;
 use crate::mesh::topology::NONE;
 use crate::mesh::{LinearMesh, Topology};
 use crate::pipeline::{CurveError, CurveOptions, Curved, Geometry, Method, curve_in_memory};
-use crate::quality::lagrange_1d;
 use crate::sample::HighOrderMesh;
 use crate::sample::ordering::{Lattice, lattice_point};
 use rayon::prelude::*;

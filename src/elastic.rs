@@ -19,7 +19,8 @@
 //! up to the CG tolerance.
 
 use crate::fit::assembly::atomic_add;
-use crate::quality::lagrange_1d;
+use crate::math::lagrange::lagrange_1d;
+use crate::math::quadrature::gauss_legendre;
 use crate::sample::HighOrderMesh;
 use crate::sample::ordering::lattice_point;
 use crate::solve::{CgError, CgInfo, CgParams, LinOp, Preconditioner, pcg_coupled};
@@ -111,35 +112,6 @@ fn lame(young: f64, poisson: f64) -> Result<(f64, f64), ElasticError> {
     let lambda = young * poisson / ((1.0 + poisson) * (1.0 - 2.0 * poisson));
     let mu = young / (2.0 * (1.0 + poisson));
     Ok((lambda, mu))
-}
-
-/// Gauss–Legendre points and weights on [0, 1] (n points, exact to degree 2n − 1).
-pub fn gauss_legendre(n: usize) -> (Vec<f64>, Vec<f64>) {
-    let (mut xs, mut ws) = (Vec::with_capacity(n), Vec::with_capacity(n));
-    for i in 0..n {
-        // Newton on P_n from the Chebyshev-like guess; converges in a few steps.
-        let mut x = (std::f64::consts::PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
-        let mut dp = 1.0;
-        for _ in 0..100 {
-            let (mut p0, mut p1) = (1.0, x);
-            for k in 2..=n {
-                let p2 = ((2 * k - 1) as f64 * x * p1 - (k - 1) as f64 * p0) / k as f64;
-                p0 = p1;
-                p1 = p2;
-            }
-            let pn = if n == 0 { 1.0 } else { p1 };
-            let pm = if n == 1 { 1.0 } else { p0 };
-            dp = n as f64 * (x * pn - pm) / (x * x - 1.0);
-            let dx = pn / dp;
-            x -= dx;
-            if dx.abs() < 1e-15 {
-                break;
-            }
-        }
-        xs.push(0.5 * (1.0 - x));
-        ws.push(1.0 / ((1.0 - x * x) * dp * dp));
-    }
-    (xs, ws)
 }
 
 /// Reference derivatives of the (p+1)^d Lagrange basis at the Gauss points, with weights.
@@ -412,23 +384,12 @@ impl Preconditioner for BlockSgs<'_> {
     }
 }
 
-/// Solve the elasticity problem on the order-p mesh `reference` with the displacements of the
-/// nodes in `prescribed` fixed (`None`: free). Returns the displacement of every node.
-pub fn solve_displacement(
-    reference: &HighOrderMesh,
-    prescribed: &[Option<[f64; 3]>],
-    params: &ElasticParams,
-) -> Result<(Vec<[f64; 3]>, ElasticInfo), ElasticError> {
-    let (dim, p) = (reference.dim, reference.order);
-    if !(1..=MAX_ELASTIC_ORDER).contains(&p) {
-        return Err(ElasticError::Order(p));
-    }
-    let (lambda, mu) = lame(params.young, params.poisson)?;
-    let start = Instant::now();
-    let nn = reference.nodes.len();
-    assert_eq!(prescribed.len(), nn);
-    const FIXED: u32 = u32::MAX;
-    let mut free = vec![FIXED; nn];
+/// Marks a prescribed node in the free numbering.
+const FIXED: u32 = u32::MAX;
+
+/// Free numbering of the nodes: the free index of each node, or [`FIXED`]; and the count.
+fn free_numbering(prescribed: &[Option<[f64; 3]>]) -> (Vec<u32>, usize) {
+    let mut free = vec![FIXED; prescribed.len()];
     let mut nf = 0u32;
     for (n, slot) in free.iter_mut().enumerate() {
         if prescribed[n].is_none() {
@@ -436,11 +397,13 @@ pub fn solve_displacement(
             nf += 1;
         }
     }
-    let nf = nf as usize;
-    let npe = reference.nodes_per_element();
-    let ne = reference.n_elements();
+    (free, nf as usize)
+}
 
-    // Pattern: row (free node) → sorted free nodes of the elements around it.
+/// Block sparsity of K_ff: row (free node) → sorted free nodes of the elements around it, as
+/// CSR `indptr`, `indices`.
+fn pattern(reference: &HighOrderMesh, free: &[u32], nf: usize) -> (Vec<usize>, Vec<u32>) {
+    let ne = reference.n_elements();
     let mut count = vec![0usize; nf + 1];
     for &n in &reference.elements {
         let f = free[n as usize];
@@ -481,13 +444,26 @@ pub fn solve_displacement(
     for r in &rows {
         indptr.push(indptr.last().unwrap() + r.len());
     }
-    let indices: Vec<u32> = rows.into_iter().flatten().collect();
+    (indptr, rows.into_iter().flatten().collect())
+}
+
+/// Assemble K_ff on the pattern and the load −K_fb u_b (element matrices in parallel, atomic
+/// adds into the shared blocks).
+fn assemble(
+    reference: &HighOrderMesh,
+    prescribed: &[Option<[f64; 3]>],
+    free: &[u32],
+    (indptr, indices): (Vec<usize>, Vec<u32>),
+    (lambda, mu): (f64, f64),
+) -> (BlockMatrix, Vec<[f64; 3]>) {
+    let (dim, p) = (reference.dim, reference.order);
+    let nf = indptr.len() - 1;
+    let npe = reference.nodes_per_element();
     let dd = dim * dim;
     let values: Vec<AtomicU64> = (0..indices.len() * dd).map(|_| AtomicU64::new(0)).collect();
     let rhs: Vec<[AtomicU64; 3]> = (0..nf).map(|_| Default::default()).collect();
-
     let quad = Quadrature::new(dim, p);
-    (0..ne).into_par_iter().for_each(|e| {
+    (0..reference.n_elements()).into_par_iter().for_each(|e| {
         let ids = reference.element(e);
         if ids.iter().all(|&n| free[n as usize] == FIXED) {
             return;
@@ -544,6 +520,27 @@ pub fn solve_displacement(
         .iter()
         .map(|r| std::array::from_fn(|i| f64::from_bits(r[i].load(Ordering::Relaxed))))
         .collect();
+    (matrix, b)
+}
+
+/// Solve the elasticity problem on the order-p mesh `reference` with the displacements of the
+/// nodes in `prescribed` fixed (`None`: free). Returns the displacement of every node.
+pub fn solve_displacement(
+    reference: &HighOrderMesh,
+    prescribed: &[Option<[f64; 3]>],
+    params: &ElasticParams,
+) -> Result<(Vec<[f64; 3]>, ElasticInfo), ElasticError> {
+    let (dim, p) = (reference.dim, reference.order);
+    if !(1..=MAX_ELASTIC_ORDER).contains(&p) {
+        return Err(ElasticError::Order(p));
+    }
+    let material = lame(params.young, params.poisson)?;
+    let start = Instant::now();
+    let nn = reference.nodes.len();
+    assert_eq!(prescribed.len(), nn);
+    let (free, nf) = free_numbering(prescribed);
+    let csr = pattern(reference, &free, nf);
+    let (matrix, b) = assemble(reference, prescribed, &free, csr, material);
     let assembly_seconds = start.elapsed().as_secs_f64();
 
     let solve_start = Instant::now();

@@ -12,13 +12,23 @@
 use crate::energy::colored::{LocalDerivatives, LocalProblem};
 use crate::fit::NormalMatrix;
 use crate::gpu::{Backend, GpuContext, GpuError};
+use crate::math::BezierElements;
 use crate::mesh::{LinearMesh, Topology};
-use crate::sample::{BezierElements, HighOrderMesh};
+use crate::sample::HighOrderMesh;
 use crate::solve::{CgError, CgInfo, CgParams};
 use crate::validity::Certifier;
 
 pub use crate::cpu::executor::CpuExecutor;
 pub use crate::gpu::executor::GpuExecutor;
+
+/// A failure of an executor's work as the callers above the seam see it: they match on it or
+/// print it, and never name a device type (the energy, for one, knows only `&dyn Executor`).
+#[derive(Debug, thiserror::Error)]
+pub enum ExecutorError {
+    /// The device failed (lost, out of memory, a mapping error); the message is the device's.
+    #[error(transparent)]
+    Device(#[from] GpuError),
+}
 
 /// Where the heavy work runs (see the module docs).
 pub trait Executor: Certifier {
@@ -57,7 +67,7 @@ pub trait Executor: Certifier {
         &self,
         dim: usize,
         problems: &[LocalProblem],
-    ) -> Result<Option<Vec<LocalDerivatives>>, GpuError>;
+    ) -> Result<Option<Vec<LocalDerivatives>>, ExecutorError>;
 
     /// Batches the device failed and the CPU computed instead (0 on the CPU).
     fn fallbacks(&self) -> usize {

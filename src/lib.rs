@@ -7,6 +7,9 @@
 //! (io/)    (mesh/)        (mesh/)      (spline/)       (fit/)  (validity/)  (sample/)   (io/)
 //! ```
 //!
+//! Under all of them, the foundation layer [`math`]: Bernstein and Lagrange bases, Gauss rules,
+//! 3-vectors and 3×3 matrices on glam.
+//!
 //! ```no_run
 //! use polyspline::{io::read_mesh, mesh::{MeshOptions, Topology}};
 //! let mesh = read_mesh("meshes/real/mfem/cylinder-hex.mesh".as_ref(), &MeshOptions::default())?;
@@ -26,6 +29,7 @@ pub mod fit;
 pub mod gpu;
 pub mod info;
 pub mod io;
+pub mod math;
 pub mod mesh;
 pub mod params;
 pub mod pipeline;

@@ -4,7 +4,7 @@
 //! Input: layers of [`HighOrderMesh`]es (a linear mesh is an order-1 one) and point sets.
 //! Output: one SVG document, y axis pointing up, scaled to the union of the layers.
 
-use crate::quality::lagrange_1d;
+use crate::math::lagrange::lagrange_1d;
 use crate::sample::HighOrderMesh;
 use std::fmt::Write;
 

@@ -7,29 +7,11 @@
 //! sampled measure, not a certificate: `sample_det_jacobian` may miss a negative region smaller
 //! than the sample spacing. The certified bound of quadratic Bézier elements lives with the fit.
 
+// The equispaced Lagrange basis is the foundation's; re-exported for the callers of this path.
+pub use crate::math::lagrange::lagrange_1d;
 use crate::sample::HighOrderMesh;
 use rayon::prelude::*;
 use serde::Serialize;
-
-/// 1D Lagrange basis on the equispaced nodes 0, 1/p, …, 1: values and derivatives at `t`.
-pub fn lagrange_1d(p: usize, t: f64, values: &mut [f64], derivs: &mut [f64]) {
-    let nodes: Vec<f64> = (0..=p).map(|i| i as f64 / p as f64).collect();
-    for i in 0..=p {
-        let mut v = 1.0;
-        let mut d = 0.0;
-        for j in 0..=p {
-            if j == i {
-                continue;
-            }
-            let denom = nodes[i] - nodes[j];
-            // Product rule: d/dt Π (t - x_j)/(x_i - x_j).
-            d = d * (t - nodes[j]) / denom + v / denom;
-            v *= (t - nodes[j]) / denom;
-        }
-        values[i] = v;
-        derivs[i] = d;
-    }
-}
 
 /// Quality of one element.
 #[derive(Clone, Copy, Debug, Serialize)]

@@ -1,7 +1,28 @@
 //! CPU twin of `shaders/cg.wgsl`: second reduction stage with α/β, and the vector updates.
 
 use super::{Real, Vec4};
-pub use crate::gpu::cg::{CgKernelParams, CgState};
+
+/// Uniform block of `cg.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct CgKernelParams {
+    pub n: u32,
+    pub n_partials: u32,
+    pub max_iters: u32,
+    pub _pad: u32,
+}
+const _: () = assert!(std::mem::size_of::<CgKernelParams>() == 16);
+
+/// `State` of cg.wgsl.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct CgState {
+    pub iterations: u32,
+    pub done: u32,
+    pub breakdown: u32,
+    pub _pad: u32,
+}
+const _: () = assert!(std::mem::size_of::<CgState>() == 16);
 
 /// Workgroup size of the finalize entry points.
 pub const WG: usize = 256;

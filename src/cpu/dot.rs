@@ -1,7 +1,17 @@
 //! CPU twin of `shaders/dot.wgsl` (first reduction stage).
 
 use super::{Real, Vec4};
-pub use crate::gpu::cg::DotParams;
+
+/// Uniform block of `dot.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct DotParams {
+    pub n: u32,
+    pub _pad0: u32,
+    pub _pad1: u32,
+    pub _pad2: u32,
+}
+const _: () = assert!(std::mem::size_of::<DotParams>() == 16);
 
 /// Workgroup size of the shader.
 pub const WG: usize = 256;

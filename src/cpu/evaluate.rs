@@ -1,7 +1,17 @@
 //! CPU twin of `shaders/evaluate.wgsl`.
 
 use super::{Real, Vec4};
-pub use crate::gpu::evaluate::Params;
+
+/// Uniform block of `evaluate.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct Params {
+    pub dim: u32,
+    pub n_queries: u32,
+    pub with_derivs: u32,
+    pub _pad: u32,
+}
+const _: () = assert!(std::mem::size_of::<Params>() == 16);
 
 fn bernstein2<T: Real>(t: T) -> [T; 3] {
     let s = T::of(1.0) - t;

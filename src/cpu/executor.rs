@@ -1,11 +1,12 @@
 //! The CPU reference [`Executor`]: f64 throughout, in parallel with rayon.
 
 use crate::energy::colored::{LocalDerivatives, LocalProblem};
-use crate::executor::Executor;
+use crate::executor::{Executor, ExecutorError};
 use crate::fit::NormalMatrix;
 use crate::gpu::GpuError;
+use crate::math::{BezierElements, BezierNet};
 use crate::mesh::{LinearMesh, Topology};
-use crate::sample::{BezierElements, HighOrderMesh};
+use crate::sample::HighOrderMesh;
 use crate::solve::{CgError, CgInfo, CgParams};
 use crate::validity::{Certifier, CpuCertifier, DetBounds};
 
@@ -17,7 +18,7 @@ impl Certifier for CpuExecutor {
         &self,
         dim: usize,
         elements: &[usize],
-        net: &(dyn Fn(usize) -> [[f64; 3]; 27] + Sync),
+        net: &(dyn Fn(usize) -> BezierNet + Sync),
         max_depth: usize,
     ) -> Vec<DetBounds> {
         CpuCertifier.certify(dim, elements, net, max_depth)
@@ -54,7 +55,7 @@ impl Executor for CpuExecutor {
         &self,
         _dim: usize,
         _problems: &[LocalProblem],
-    ) -> Result<Option<Vec<LocalDerivatives>>, GpuError> {
+    ) -> Result<Option<Vec<LocalDerivatives>>, ExecutorError> {
         Ok(None)
     }
 }

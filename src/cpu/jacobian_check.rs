@@ -1,7 +1,17 @@
 //! CPU twin of `shaders/jacobian_check.wgsl`.
 
 use super::{Real, Vec4};
-pub use crate::gpu::jacobian_check::Params;
+
+/// Uniform block of `jacobian_check.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct Params {
+    pub dim: u32,
+    pub n_elements: u32,
+    pub _pad0: u32,
+    pub _pad1: u32,
+}
+const _: () = assert!(std::mem::size_of::<Params>() == 16);
 
 type U3 = [usize; 3];
 

@@ -2,7 +2,17 @@
 //! local problem at the current position.
 
 use super::Real;
-pub use crate::gpu::local_newton::Params;
+
+/// Uniform block of `local_newton.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct Params {
+    pub dim: u32,
+    pub n_problems: u32,
+    pub _pad0: u32,
+    pub _pad1: u32,
+}
+const _: () = assert!(std::mem::size_of::<Params>() == 16);
 
 type M3<T> = [[T; 3]; 3];
 

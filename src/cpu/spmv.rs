@@ -1,7 +1,17 @@
 //! CPU twin of `shaders/spmv.wgsl`.
 
 use super::{Real, Vec4};
-pub use crate::gpu::cg::SpmvParams;
+
+/// Uniform block of `spmv.wgsl`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct SpmvParams {
+    pub n_rows: u32,
+    pub row_base: u32,
+    pub _pad0: u32,
+    pub _pad1: u32,
+}
+const _: () = assert!(std::mem::size_of::<SpmvParams>() == 16);
 
 /// One invocation per row `r` of the block.
 pub fn spmv<T: Real>(

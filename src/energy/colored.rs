@@ -17,8 +17,10 @@
 //! needed); each step is halved until L_i decreases (Armijo) and every support element stays
 //! certified ([`crate::validity::det_jacobian_bounds`] above its threshold).
 
+use super::dirichlet;
 use super::{Energy, EnergyInfo, EnergyParams, EnergySolver, EnergyStop, Mat3, Validity};
-use super::{dirichlet, inv3, mul3, transpose};
+use crate::math::BezierNet;
+use crate::math::linalg::{inv3, mul3, transpose};
 use crate::validity::det_jacobian_bounds;
 use rayon::prelude::*;
 
@@ -217,7 +219,7 @@ impl Locals {
         &self,
         energy: &Energy,
         x: &[[f64; 3]],
-        nets: &[[[f64; 3]; 27]],
+        nets: &[BezierNet],
         i: usize,
     ) -> LocalProblem {
         let (k, c0) = (&energy.k, energy.space.control_points());
@@ -264,7 +266,7 @@ impl Locals {
 /// The local problems of control points `which` at control points `x`.
 pub fn local_problems(energy: &Energy, x: &[[f64; 3]], which: &[usize]) -> Vec<LocalProblem> {
     let locals = Locals::new(energy);
-    let nets: Vec<[[f64; 3]; 27]> = (0..energy.n_elements())
+    let nets: Vec<BezierNet> = (0..energy.n_elements())
         .into_par_iter()
         .map(|e| energy.net(e, x))
         .collect();
@@ -284,7 +286,7 @@ pub(crate) fn minimize(
     params: &EnergyParams,
     executor: &dyn crate::executor::Executor,
     observe: &mut dyn FnMut(&[[f64; 3]]),
-) -> Result<(Vec<[f64; 3]>, EnergyInfo), crate::gpu::GpuError> {
+) -> Result<(Vec<[f64; 3]>, EnergyInfo), crate::executor::ExecutorError> {
     let n = start.len();
     let dim = energy.dim;
     let nb = energy.nb;
@@ -301,7 +303,7 @@ pub(crate) fn minimize(
     let locals = Locals::new(energy);
     let support = &locals.support;
     let mut x = start.to_vec();
-    let mut nets: Vec<[[f64; 3]; 27]> = (0..energy.n_elements())
+    let mut nets: Vec<BezierNet> = (0..energy.n_elements())
         .into_par_iter()
         .map(|e| energy.net(e, &x))
         .collect();

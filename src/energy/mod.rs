@@ -47,204 +47,22 @@
 //! summed in element order, so values and iterates do not depend on the thread count.
 
 pub mod colored;
+mod lbfgs;
+mod params;
+
+use crate::math::BezierNet;
+pub use params::{EnergyError, EnergyInfo, EnergyParams, EnergyScale, EnergySolver, EnergyStop};
 
 use crate::fit::{FitParams, FitSpace, NormalMatrix};
+use crate::math::bernstein::{bernstein2, bernstein2_derivative, elevated_net};
+pub use crate::math::linalg::Mat3;
+use crate::math::linalg::{inv3, mul3, norm2, transpose};
+use crate::math::quadrature::GAUSS3;
 use crate::mesh::{LinearMesh, Topology};
-use crate::sample::multilinear;
 use crate::solve::LinOp;
-use crate::spline::knots::{bernstein, bernstein_derivative};
 use crate::validity::Certifier;
 use rayon::prelude::*;
 use std::time::Instant;
-
-/// Which minimiser runs (`--energy-solver`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
-#[serde(rename_all = "snake_case")]
-pub enum EnergySolver {
-    /// Global L-BFGS with a certified Armijo line search.
-    #[default]
-    Lbfgs,
-    /// Coloured local Newton (one control point at a time, a colour in parallel).
-    Colored,
-}
-
-/// The length² that makes S_e comparable with D.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum EnergyScale {
-    /// h_e² of each element: every element weighs by its size, like D.
-    Element,
-    /// h̄² = (mean element volume)^{2/d} for every element: every element weighs the same,
-    /// so thin boundary-layer cells count as much as large ones.
-    #[default]
-    Mean,
-}
-
-/// Parameters of the energy minimisation.
-#[derive(Clone, Copy, Debug, serde::Serialize)]
-pub struct EnergyParams {
-    /// w_e, the weight of the degeneration energy against D + R.
-    pub weight: f64,
-    pub scale: EnergyScale,
-    pub solver: EnergySolver,
-    /// L-BFGS iterations, or coloured sweeps, at most.
-    pub max_iterations: usize,
-    /// Stop L-BFGS when an iteration lowers Q by less than this fraction of Q.
-    pub rel_tol: f64,
-    /// Stop the coloured solver when a sweep lowers Q by less than this fraction of Q.
-    pub sweep_tol: f64,
-    /// Stop when ‖∇Q‖∞ falls below this fraction of its initial value (L-BFGS).
-    pub grad_tol: f64,
-    /// L-BFGS memory (pairs kept).
-    pub history: usize,
-    /// Halvings of a step before giving up on it.
-    pub max_backtracks: usize,
-    /// Newton steps per control point and sweep (coloured solver).
-    pub local_iterations: usize,
-}
-
-impl Default for EnergyParams {
-    fn default() -> Self {
-        EnergyParams {
-            weight: 1.0,
-            scale: EnergyScale::default(),
-            solver: EnergySolver::Lbfgs,
-            max_iterations: 200,
-            rel_tol: 1e-6,
-            sweep_tol: 1e-3,
-            grad_tol: 1e-6,
-            history: 8,
-            max_backtracks: 30,
-            local_iterations: 2,
-        }
-    }
-}
-
-/// Why the minimisation stopped.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum EnergyStop {
-    /// The decrease per iteration fell below `rel_tol`.
-    Stalled,
-    /// The gradient fell below `grad_tol`.
-    Gradient,
-    /// `max_iterations` reached.
-    MaxIterations,
-    /// No certified step lowering Q was found along the search direction.
-    LineSearch,
-}
-
-/// What the minimisation did.
-#[derive(Clone, Debug, serde::Serialize)]
-pub struct EnergyInfo {
-    pub solver: EnergySolver,
-    pub weight: f64,
-    /// L-BFGS iterations or coloured sweeps.
-    pub iterations: usize,
-    pub stop: EnergyStop,
-    /// Q at the start (the least-squares result) and at the end.
-    pub initial_energy: f64,
-    pub final_energy: f64,
-    /// Σ_e S_e (without the weight) at the start and at the end.
-    pub initial_degeneration: f64,
-    pub final_degeneration: f64,
-    /// Energy evaluations (L-BFGS) or local Newton steps tried (coloured).
-    pub evaluations: usize,
-    /// Steps shortened because an element lost its certificate.
-    pub uncertified_trials: usize,
-    /// Number of colours (coloured solver).
-    pub colors: Option<usize>,
-    pub seconds: f64,
-}
-
-impl EnergyInfo {
-    /// Nothing done yet, at energy `q`.
-    fn start(solver: EnergySolver, weight: f64, q: f64) -> Self {
-        EnergyInfo {
-            solver,
-            weight,
-            iterations: 0,
-            stop: EnergyStop::MaxIterations,
-            initial_energy: q,
-            final_energy: q,
-            initial_degeneration: 0.0,
-            final_degeneration: 0.0,
-            evaluations: 0,
-            uncertified_trials: 0,
-            colors: None,
-            seconds: 0.0,
-        }
-    }
-}
-
-/// Why the energy cannot be minimised from the given start.
-#[derive(Clone, Debug, thiserror::Error)]
-pub enum EnergyError {
-    #[error(
-        "the degeneration energy is infinite at the start: element {element} has det J ≤ 0 at a quadrature point"
-    )]
-    InfiniteStart { element: usize },
-    #[error("the start is not certified valid on element {element}")]
-    UncertifiedStart { element: usize },
-    #[error("energy weight must be finite and non-negative, got {0}")]
-    Weight(f64),
-    #[error("GPU: {0}")]
-    Gpu(String),
-}
-
-/// 3-point Gauss rule on [0, 1] (exact to degree 5).
-const GAUSS3: [(f64, f64); 3] = [
-    (0.112_701_665_379_258_31, 5.0 / 18.0),
-    (0.5, 8.0 / 18.0),
-    (0.887_298_334_620_741_7, 5.0 / 18.0),
-];
-
-pub type Mat3 = [[f64; 3]; 3];
-
-pub(crate) fn det3(m: &Mat3) -> f64 {
-    m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
-        - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
-        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0])
-}
-
-/// Inverse and determinant.
-pub(crate) fn inv3(m: &Mat3) -> (Mat3, f64) {
-    let det = det3(m);
-    let s = 1.0 / det;
-    let mut r = [[0.0; 3]; 3];
-    for i in 0..3 {
-        for j in 0..3 {
-            let (a, b) = ((j + 1) % 3, (j + 2) % 3);
-            let (c, d) = ((i + 1) % 3, (i + 2) % 3);
-            r[i][j] = s * (m[a][c] * m[b][d] - m[a][d] * m[b][c]);
-        }
-    }
-    (r, det)
-}
-
-pub(crate) fn mul3(a: &Mat3, b: &Mat3) -> Mat3 {
-    let mut r = [[0.0; 3]; 3];
-    for i in 0..3 {
-        for j in 0..3 {
-            r[i][j] = a[i][0] * b[0][j] + a[i][1] * b[1][j] + a[i][2] * b[2][j];
-        }
-    }
-    r
-}
-
-pub(crate) fn transpose(a: &Mat3) -> Mat3 {
-    let mut r = [[0.0; 3]; 3];
-    for i in 0..3 {
-        for j in 0..3 {
-            r[i][j] = a[j][i];
-        }
-    }
-    r
-}
-
-fn norm2(a: &Mat3) -> f64 {
-    a.iter().flatten().map(|x| x * x).sum()
-}
 
 /// Symmetric Dirichlet density f(M) (M embedded as 3×3 with M₃₃ = 1 in 2D, which the `−6`
 /// accounts for) and, when `grad` is given, ∂f/∂M. +∞ when det M ≤ 0.
@@ -296,7 +114,7 @@ pub struct Energy<'a> {
     pub(crate) scale: Vec<f64>,
     pub(crate) rows: Vec<ElementRows>,
     /// Smallest input element size vol^{1/d}.
-    h_min: f64,
+    pub(crate) h_min: f64,
     /// Control points that carry the boundary (a non-zero extraction weight at a Bernstein
     /// point of a boundary facet); the minimisers keep them where the least-squares fit put
     /// them, so the boundary stays the fit's (see the module docs).
@@ -341,8 +159,8 @@ impl<'a> Energy<'a> {
                         if dim == 2 { 0.0 } else { GAUSS3[qz].0 },
                     ];
                     let w = GAUSS3[qx].1 * GAUSS3[qy].1 * if dim == 2 { 1.0 } else { GAUSS3[qz].1 };
-                    let b = u.map(bernstein);
-                    let db = u.map(bernstein_derivative);
+                    let b = u.map(bernstein2);
+                    let db = u.map(bernstein2_derivative);
                     let mut g = [[0.0; 27]; 3];
                     for c in 0..nz {
                         for bb in 0..3 {
@@ -368,12 +186,7 @@ impl<'a> Energy<'a> {
             .into_par_iter()
             .map(|e| {
                 // The straight element's degree-elevated net: its multilinear map at the lattice.
-                let x = mesh.element_coords(e);
-                let mut net = [[0.0; 3]; 27];
-                for (a, p) in net.iter_mut().enumerate().take(nb) {
-                    let l = [a % 3, (a / 3) % 3, a / 9];
-                    *p = multilinear(dim, &x, l.map(|c| c as f64 / 2.0));
-                }
+                let net = elevated_net(dim, &mesh.element_coords(e));
                 let mut pinv = Vec::with_capacity(nq);
                 let mut vol = 0.0;
                 for q in 0..nq {
@@ -471,7 +284,7 @@ impl<'a> Energy<'a> {
     }
 
     /// Bernstein net of element e for control points `cps` (from the cached rows).
-    pub(crate) fn net(&self, e: usize, cps: &[[f64; 3]]) -> [[f64; 3]; 27] {
+    pub(crate) fn net(&self, e: usize, cps: &[[f64; 3]]) -> BezierNet {
         let ElementRows { ids, r } = &self.rows[e];
         let m = ids.len();
         let mut net = [[0.0; 3]; 27];
@@ -490,19 +303,14 @@ impl<'a> Energy<'a> {
     }
 
     /// M_q = J(u_q) P_q of element e with Bernstein net `net`.
-    pub(crate) fn m_at(&self, e: usize, q: usize, net: &[[f64; 3]; 27]) -> Mat3 {
+    pub(crate) fn m_at(&self, e: usize, q: usize, net: &BezierNet) -> Mat3 {
         let j = jacobian(self.dim, self.nb, net, &self.dbq[q]);
         mul3(&j, &self.pinv[e * self.nq() + q])
     }
 
     /// w_e S_e of element e with Bernstein net `net`; with `grad`, ∂(w_e S_e)/∂B is added into
     /// it (nb × 3).
-    fn element_energy(
-        &self,
-        e: usize,
-        net: &[[f64; 3]; 27],
-        mut grad: Option<&mut [[f64; 3]; 27]>,
-    ) -> f64 {
+    fn element_energy(&self, e: usize, net: &BezierNet, mut grad: Option<&mut BezierNet>) -> f64 {
         let nq = self.nq();
         let mut s = 0.0;
         for q in 0..nq {
@@ -631,7 +439,7 @@ impl<'a> Energy<'a> {
     /// [`Energy::value_and_gradient`] with the gradient of the frozen (boundary) control points
     /// zeroed: the gradient of Q restricted to the free control points, so no L-BFGS direction
     /// (built from these gradients and the steps they make) ever moves the boundary.
-    fn value_and_free_gradient(&self, cps: &[[f64; 3]], grad: &mut [[f64; 3]]) -> f64 {
+    pub(crate) fn value_and_free_gradient(&self, cps: &[[f64; 3]], grad: &mut [[f64; 3]]) -> f64 {
         let q = self.value_and_gradient(cps, grad);
         for (g, &f) in grad.iter_mut().zip(&self.frozen) {
             if f {
@@ -658,7 +466,7 @@ impl<'a> Energy<'a> {
 }
 
 /// J = Σ_a B_a ⊗ ∇b_a (J₃₃ = 1 in 2D).
-pub(crate) fn jacobian(dim: usize, nb: usize, net: &[[f64; 3]; 27], db: &[[f64; 27]; 3]) -> Mat3 {
+pub(crate) fn jacobian(dim: usize, nb: usize, net: &BezierNet, db: &[[f64; 27]; 3]) -> Mat3 {
     let mut j = [[0.0; 3]; 3];
     for a in 0..nb {
         for i in 0..dim {
@@ -717,31 +525,6 @@ impl Validity<'_> {
     }
 }
 
-fn dot(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
-    a.par_chunks(4096)
-        .zip(b.par_chunks(4096))
-        .map(|(a, b)| {
-            a.iter()
-                .zip(b)
-                .map(|(x, y)| x[0] * y[0] + x[1] * y[1] + x[2] * y[2])
-                .sum::<f64>()
-        })
-        .collect::<Vec<f64>>()
-        .iter()
-        .sum()
-}
-
-fn max_abs(a: &[[f64; 3]]) -> f64 {
-    a.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()))
-}
-
-fn axpy(x: &[[f64; 3]], a: f64, d: &[[f64; 3]]) -> Vec<[f64; 3]> {
-    x.iter()
-        .zip(d)
-        .map(|(x, d)| [x[0] + a * d[0], x[1] + a * d[1], x[2] + a * d[2]])
-        .collect()
-}
-
 /// Minimise Q from `start` with the solver in `params`; `observe` sees every accepted iterate.
 pub fn minimize(
     energy: &Energy,
@@ -781,7 +564,7 @@ pub fn minimize_on(
         return Err(EnergyError::InfiniteStart { element: e });
     }
     let (c, mut info) = match params.solver {
-        EnergySolver::Lbfgs => lbfgs(energy, validity, start, params, observe),
+        EnergySolver::Lbfgs => lbfgs::lbfgs(energy, validity, start, params, observe),
         EnergySolver::Colored => {
             colored::minimize(energy, validity, start, params, executor, observe)
                 .map_err(|e| EnergyError::Gpu(e.to_string()))?
@@ -791,117 +574,4 @@ pub fn minimize_on(
     info.final_degeneration = deg(&c).1;
     info.seconds = t.elapsed().as_secs_f64();
     Ok((c, info))
-}
-
-/// An L-BFGS pair (s, y, 1 / sᵀy).
-type Pair = (Vec<[f64; 3]>, Vec<[f64; 3]>, f64);
-
-fn lbfgs(
-    energy: &Energy,
-    validity: &Validity,
-    start: &[[f64; 3]],
-    params: &EnergyParams,
-    observe: &mut dyn FnMut(&[[f64; 3]]),
-) -> (Vec<[f64; 3]>, EnergyInfo) {
-    let n = start.len();
-    let mut x = start.to_vec();
-    let mut g = vec![[0.0; 3]; n];
-    let mut f = energy.value_and_free_gradient(&x, &mut g);
-    let mut info = EnergyInfo::start(EnergySolver::Lbfgs, energy.weight, f);
-    info.evaluations = 1;
-    let g0 = max_abs(&g);
-    // First step: move the furthest control point by a tenth of the smallest element size.
-    let h_min = energy.h_min;
-    // (s, y, 1 / sᵀy) pairs, oldest first.
-    let mut hist: std::collections::VecDeque<Pair> = Default::default();
-    while info.iterations < params.max_iterations {
-        if max_abs(&g) <= params.grad_tol * g0 {
-            info.stop = EnergyStop::Gradient;
-            break;
-        }
-        // Two-loop recursion.
-        let mut d: Vec<[f64; 3]> = g.iter().map(|v| v.map(|x| -x)).collect();
-        let mut alphas = Vec::with_capacity(hist.len());
-        for (s, y, rho) in hist.iter().rev() {
-            let a = rho * dot(s, &d);
-            d = axpy(&d, -a, y);
-            alphas.push(a);
-        }
-        if let Some((s, y, _)) = hist.back() {
-            let gamma = dot(s, y) / dot(y, y);
-            for v in d.iter_mut() {
-                for c in v.iter_mut() {
-                    *c *= gamma;
-                }
-            }
-        } else {
-            let scale = 0.1 * h_min / max_abs(&d).max(f64::MIN_POSITIVE);
-            for v in d.iter_mut() {
-                for c in v.iter_mut() {
-                    *c *= scale;
-                }
-            }
-        }
-        for ((s, y, rho), a) in hist.iter().zip(alphas.iter().rev()) {
-            let b = rho * dot(y, &d);
-            d = axpy(&d, a - b, s);
-        }
-        let mut slope = dot(&g, &d);
-        if !(slope < 0.0) {
-            hist.clear();
-            let scale = 0.1 * h_min / max_abs(&g).max(f64::MIN_POSITIVE);
-            d = g.iter().map(|v| v.map(|x| -scale * x)).collect();
-            slope = dot(&g, &d);
-        }
-        // Armijo backtracking; a trial counts only when every element stays certified.
-        let mut alpha = 1.0;
-        let mut accepted = None;
-        for _ in 0..=params.max_backtracks {
-            let xn = axpy(&x, alpha, &d);
-            let mut gn = vec![[0.0; 3]; n];
-            let fnew = energy.value_and_free_gradient(&xn, &mut gn);
-            info.evaluations += 1;
-            if fnew.is_finite() && fnew <= f + 1e-4 * alpha * slope {
-                if validity.accepts(energy, &xn) {
-                    accepted = Some((xn, gn, fnew));
-                    break;
-                }
-                info.uncertified_trials += 1;
-            }
-            alpha *= 0.5;
-        }
-        let Some((xn, gn, fnew)) = accepted else {
-            info.stop = EnergyStop::LineSearch;
-            break;
-        };
-        info.iterations += 1;
-        observe(&xn);
-        let s: Vec<[f64; 3]> = xn
-            .iter()
-            .zip(&x)
-            .map(|(a, b)| [a[0] - b[0], a[1] - b[1], a[2] - b[2]])
-            .collect();
-        let y: Vec<[f64; 3]> = gn
-            .iter()
-            .zip(&g)
-            .map(|(a, b)| [a[0] - b[0], a[1] - b[1], a[2] - b[2]])
-            .collect();
-        let sy = dot(&s, &y);
-        if sy > 1e-12 * dot(&y, &y).sqrt() * dot(&s, &s).sqrt() {
-            if hist.len() == params.history.max(1) {
-                hist.pop_front();
-            }
-            hist.push_back((s, y, 1.0 / sy));
-        }
-        let decrease = f - fnew;
-        x = xn;
-        g = gn;
-        f = fnew;
-        if decrease <= params.rel_tol * f.abs().max(f64::MIN_POSITIVE) {
-            info.stop = EnergyStop::Stalled;
-            break;
-        }
-    }
-    info.final_energy = f;
-    (x, info)
 }

@@ -33,8 +33,8 @@ pub mod smooth;
 
 pub use smooth::{SmoothParams, SmoothTargets};
 
+use crate::math::bernstein::bernstein2;
 use crate::mesh::{LinearMesh, Topology, vec3};
-use crate::sample::bernstein2;
 use crate::solve::{CgError, CgInfo, CgParams, LinOp, pcg};
 use rayon::prelude::*;
 use std::collections::HashMap;

@@ -15,6 +15,9 @@
 use super::{
     GpuContext, GpuError, ITEM_WORKGROUP, Precision, bytes_to_reals, groups, reals_to_bytes,
 };
+pub use crate::cpu::cg::{CgKernelParams, CgState};
+pub use crate::cpu::dot::DotParams;
+pub use crate::cpu::spmv::SpmvParams;
 use crate::fit::NormalMatrix;
 use crate::solve::{CgError, CgInfo, CgParams, LinOp};
 
@@ -38,46 +41,6 @@ pub const SPMV_TOL_F32: f64 = 160.0 * f32::EPSILON as f64;
 /// The same for f64 kernels.
 pub const SPMV_TOL_F64: f64 = 160.0 * f64::EPSILON;
 
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct SpmvParams {
-    pub n_rows: u32,
-    pub row_base: u32,
-    pub _pad0: u32,
-    pub _pad1: u32,
-}
-const _: () = assert!(std::mem::size_of::<SpmvParams>() == 16);
-
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct DotParams {
-    pub n: u32,
-    pub _pad0: u32,
-    pub _pad1: u32,
-    pub _pad2: u32,
-}
-const _: () = assert!(std::mem::size_of::<DotParams>() == 16);
-
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct CgKernelParams {
-    pub n: u32,
-    pub n_partials: u32,
-    pub max_iters: u32,
-    pub _pad: u32,
-}
-const _: () = assert!(std::mem::size_of::<CgKernelParams>() == 16);
-
-/// `State` of cg.wgsl.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct CgState {
-    pub iterations: u32,
-    pub done: u32,
-    pub breakdown: u32,
-    pub _pad: u32,
-}
-const _: () = assert!(std::mem::size_of::<CgState>() == 16);
 /// Scalars of cg.wgsl: rz, rr, target², α, β, pᵀAp, each a vec4.
 pub const SCALARS: usize = 6 * 4;
 
@@ -208,10 +171,17 @@ fn from_vec4(v: &[f64]) -> Vec<[f64; 3]> {
 }
 
 /// The normal matrix on the GPU as a [`LinOp`]: `apply` uploads x, runs spmv.wgsl, reads y.
+///
+/// A device failure inside [`LinOp::apply`] (which cannot return an error) does not panic: the
+/// first error is kept, `y` is filled with NaN (so a CG loop on the operator stops at its next
+/// curvature test instead of iterating on garbage), later applications do not touch the device,
+/// and [`GpuOperator::pcg`] / [`GpuOperator::device_error`] turn it into
+/// [`CgError::Device`].
 pub struct GpuOperator<'a> {
     ctx: &'a GpuContext,
     matrix: GpuMatrix,
     pipeline: wgpu::ComputePipeline,
+    failed: std::sync::Mutex<Option<GpuError>>,
 }
 
 impl<'a> GpuOperator<'a> {
@@ -220,6 +190,7 @@ impl<'a> GpuOperator<'a> {
             ctx,
             matrix: GpuMatrix::new(ctx, a)?,
             pipeline: ctx.pipeline(SPMV_SOURCE, "spmv"),
+            failed: std::sync::Mutex::new(None),
         })
     }
 
@@ -245,16 +216,52 @@ impl<'a> GpuOperator<'a> {
     pub fn n_blocks(&self) -> usize {
         self.matrix.n_blocks()
     }
+
+    /// The device failure an earlier [`LinOp::apply`] met, as a solver error (`Ok` if none).
+    pub fn device_error(&self) -> Result<(), CgError> {
+        match &*self.failed.lock().unwrap_or_else(|e| e.into_inner()) {
+            Some(e) => Err(CgError::Device(e.to_string())),
+            None => Ok(()),
+        }
+    }
+
+    /// Record a device failure (the first one is kept).
+    fn fail(&self, e: GpuError) {
+        let mut slot = self.failed.lock().unwrap_or_else(|e| e.into_inner());
+        slot.get_or_insert(e);
+    }
+
+    /// [`crate::solve::pcg`] on this operator; a device failure during the solve is
+    /// [`CgError::Device`], whatever the loop made of the NaN it saw.
+    pub fn pcg(
+        &self,
+        b: &[[f64; 3]],
+        x: &mut [[f64; 3]],
+        params: &CgParams,
+        progress: impl FnMut(usize, f64),
+    ) -> Result<CgInfo, CgError> {
+        let r = crate::solve::pcg(self, b, x, params, progress);
+        self.device_error()?;
+        r
+    }
 }
 
 impl LinOp for GpuOperator<'_> {
     fn nrows(&self) -> usize {
         self.matrix.n
     }
-    /// Panics if the device fails (use [`GpuOperator::try_apply`] to handle it).
+    /// y = A x on the device; on a device failure y is NaN and the error is kept (see the
+    /// type's docs).
     fn apply(&self, x: &[[f64; 3]], y: &mut [[f64; 3]]) {
-        let r = self.try_apply(x).expect("GPU SpMV failed");
-        y.copy_from_slice(&r);
+        let result = if self.device_error().is_err() {
+            None
+        } else {
+            self.try_apply(x).map_err(|e| self.fail(e)).ok()
+        };
+        match result {
+            Some(r) => y.copy_from_slice(&r),
+            None => y.fill([f64::NAN; 3]),
+        }
     }
     fn diagonal(&self) -> Vec<f64> {
         self.matrix.diag.clone()
@@ -271,6 +278,186 @@ fn dot3(a: &[[f64; 3]], b: &[[f64; 3]]) -> [f64; 3] {
     s
 }
 
+/// The pipelines, buffers and bind groups of one GPU CG solve: everything that does not
+/// change between refinement rounds.
+struct CgKernels<'c> {
+    ctx: &'c GpuContext,
+    n: usize,
+    matrix: GpuMatrix,
+    pipelines: [wgpu::ComputePipeline; 6],
+    /// x (the inner correction d), r, z, p, Ap, 1/diag, partials, scalars, state.
+    buffers: [wgpu::Buffer; 9],
+    spmv_binds: Vec<wgpu::BindGroup>,
+    dot_pap: wgpu::BindGroup,
+    dot_rz: wgpu::BindGroup,
+    staging: wgpu::Buffer,
+}
+
+impl<'c> CgKernels<'c> {
+    fn new(ctx: &'c GpuContext, a: &NormalMatrix, inv: &[f64]) -> Result<Self, GpuError> {
+        let (n, prec) = (a.n, ctx.precision);
+        let sz = prec.size() as u64;
+        let vbytes = 4 * sz * n as u64;
+        let matrix = GpuMatrix::new(ctx, a)?;
+        let pipelines = [
+            ctx.pipeline(SPMV_SOURCE, "spmv"),
+            ctx.pipeline(DOT_SOURCE, "dot_partial"),
+            ctx.pipeline(CG_SOURCE, "finalize_alpha"),
+            ctx.pipeline(CG_SOURCE, "update_xr"),
+            ctx.pipeline(CG_SOURCE, "finalize_beta"),
+            ctx.pipeline(CG_SOURCE, "update_p"),
+        ];
+        let buffers = [
+            ctx.storage_zeroed("x", vbytes),
+            ctx.storage_zeroed("r", vbytes),
+            ctx.storage_zeroed("z", vbytes),
+            ctx.storage_zeroed("p", vbytes),
+            ctx.storage_zeroed("ap", vbytes),
+            ctx.storage(
+                "inv_diag",
+                &reals_to_bytes(prec, inv.iter().copied()),
+                false,
+            ),
+            ctx.storage_zeroed("partials", 2 * 4 * sz * DOT_WORKGROUPS as u64),
+            ctx.storage_zeroed("scalars", SCALARS as u64 * sz),
+            ctx.storage_zeroed("state", 16),
+        ];
+        let [_, r, z, p, ap, _, partials, _, _] = &buffers;
+        let dot_params = ctx.uniform(
+            "dot params",
+            &DotParams {
+                n: n as u32,
+                ..Default::default()
+            },
+        );
+        let dot = &pipelines[1];
+        let spmv_binds = matrix.bind(ctx, &pipelines[0], p, ap);
+        let dot_pap = ctx.bind(dot, &[(0, &dot_params), (1, p), (2, ap), (3, partials)]);
+        let dot_rz = ctx.bind(dot, &[(0, &dot_params), (1, r), (2, z), (3, partials)]);
+        let staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("cg state"),
+            size: 16 + SCALARS as u64 * sz,
+            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        Ok(CgKernels {
+            ctx,
+            n,
+            matrix,
+            pipelines,
+            buffers,
+            spmv_binds,
+            dot_pap,
+            dot_rz,
+            staging,
+        })
+    }
+
+    /// One inner solve A d = `res` from d = 0 (z = p = `zv`, scalars `sc`), in batches of
+    /// [`CG_BATCH`] iterations; `batch` sees the state and scalars after each batch and may stop
+    /// the solve with an error. Returns the final state and d.
+    fn solve(
+        &self,
+        res: &[[f64; 3]],
+        zv: &[[f64; 3]],
+        sc: Vec<f64>,
+        max_iters: u32,
+        mut batch: impl FnMut(&CgState, &[f64]) -> Result<(), CgError>,
+    ) -> Result<(CgState, Vec<[f64; 3]>), CgError> {
+        let dev = |e: GpuError| CgError::Device(e.to_string());
+        let (ctx, n, prec) = (self.ctx, self.n, self.ctx.precision);
+        let sz = prec.size() as u64;
+        let vbytes = 4 * sz * n as u64;
+        let [xd, r, z, p, ap, invb, partials, scalars, state] = &self.buffers;
+        let [_, _, fin_a, upd_xr, fin_b, upd_p] = &self.pipelines;
+        let q = &ctx.queue;
+        q.write_buffer(xd, 0, &vec![0u8; vbytes as usize]);
+        q.write_buffer(r, 0, &vec4_bytes(prec, res));
+        q.write_buffer(z, 0, &vec4_bytes(prec, zv));
+        q.write_buffer(p, 0, &vec4_bytes(prec, zv));
+        q.write_buffer(scalars, 0, &reals_to_bytes(prec, sc.into_iter()));
+        q.write_buffer(state, 0, bytemuck::bytes_of(&CgState::default()));
+        let cgp = ctx.uniform(
+            "cg params",
+            &CgKernelParams {
+                n: n as u32,
+                n_partials: DOT_WORKGROUPS,
+                max_iters,
+                _pad: 0,
+            },
+        );
+        let fa = ctx.bind(fin_a, &[(0, &cgp), (1, scalars), (2, state), (3, partials)]);
+        let fb = ctx.bind(fin_b, &[(0, &cgp), (1, scalars), (2, state), (3, partials)]);
+        let uxr = ctx.bind(
+            upd_xr,
+            &[
+                (0, &cgp),
+                (1, scalars),
+                (4, xd),
+                (5, r),
+                (6, z),
+                (7, p),
+                (8, ap),
+                (9, invb),
+            ],
+        );
+        let up = ctx.bind(upd_p, &[(0, &cgp), (1, scalars), (6, z), (7, p)]);
+        let st = loop {
+            let mut enc = ctx.device.create_command_encoder(&Default::default());
+            {
+                let mut pass = enc.begin_compute_pass(&Default::default());
+                for _ in 0..CG_BATCH {
+                    self.encode_iteration(&mut pass, [&fa, &uxr, &fb, &up]);
+                }
+            }
+            enc.copy_buffer_to_buffer(state, 0, &self.staging, 0, 16);
+            enc.copy_buffer_to_buffer(scalars, 0, &self.staging, 16, SCALARS as u64 * sz);
+            q.submit([enc.finish()]);
+            let bytes = ctx.map_read(&self.staging).map_err(dev)?;
+            let st: CgState = *bytemuck::from_bytes(&bytes[..16]);
+            batch(&st, &bytes_to_reals(prec, &bytes[16..]))?;
+            if st.done != 0 {
+                break st;
+            }
+        };
+        let d = from_vec4(&bytes_to_reals(
+            prec,
+            &ctx.read_back(xd, vbytes).map_err(dev)?,
+        ));
+        Ok((st, d))
+    }
+
+    /// One CG iteration: Ap, pᵀAp, α and the x/r/z update, rᵀz, β and the p update.
+    fn encode_iteration(&self, pass: &mut wgpu::ComputePass<'_>, binds: [&wgpu::BindGroup; 4]) {
+        let [spmv, dot, fin_a, upd_xr, fin_b, upd_p] = &self.pipelines;
+        let [fa, uxr, fb, up] = binds;
+        let lanes = groups(self.n, ITEM_WORKGROUP);
+        self.matrix.encode(pass, spmv, &self.spmv_binds);
+        for (pipeline, bind, groups) in [
+            (dot, &self.dot_pap, DOT_WORKGROUPS),
+            (fin_a, fa, 1),
+            (upd_xr, uxr, lanes),
+            (dot, &self.dot_rz, DOT_WORKGROUPS),
+            (fin_b, fb, 1),
+            (upd_p, up, lanes),
+        ] {
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, bind, &[]);
+            pass.dispatch_workgroups(groups, 1, 1);
+        }
+    }
+}
+
+/// r = b − A x in f64.
+fn residual(a: &NormalMatrix, b: &[[f64; 3]], x: &[[f64; 3]], res: &mut [[f64; 3]]) {
+    a.apply(x, res);
+    for (r, b) in res.iter_mut().zip(b) {
+        for k in 0..3 {
+            r[k] = b[k] - r[k];
+        }
+    }
+}
+
 /// Jacobi-PCG for `a` x = b with the iteration on the GPU (see the module docs). Same
 /// contract as [`crate::solve::pcg`]; a device failure is [`CgError::Device`].
 pub fn pcg(
@@ -281,7 +468,6 @@ pub fn pcg(
     params: &CgParams,
     mut progress: impl FnMut(usize, f64),
 ) -> Result<CgInfo, CgError> {
-    let dev = |e: GpuError| CgError::Device(e.to_string());
     let n = a.n;
     assert_eq!(b.len(), n);
     assert_eq!(x.len(), n);
@@ -290,46 +476,7 @@ pub fn pcg(
         return Err(CgError::BadDiagonal { row, value });
     }
     let inv: Vec<f64> = diag.iter().map(|d| 1.0 / d).collect();
-    let prec = ctx.precision;
-    let sz = prec.size() as u64;
-    let vbytes = 4 * sz * n as u64;
-    let matrix = GpuMatrix::new(ctx, a).map_err(dev)?;
-    let spmv = ctx.pipeline(SPMV_SOURCE, "spmv");
-    let dot = ctx.pipeline(DOT_SOURCE, "dot_partial");
-    let fin_a = ctx.pipeline(CG_SOURCE, "finalize_alpha");
-    let upd_xr = ctx.pipeline(CG_SOURCE, "update_xr");
-    let fin_b = ctx.pipeline(CG_SOURCE, "finalize_beta");
-    let upd_p = ctx.pipeline(CG_SOURCE, "update_p");
-    let xd = ctx.storage_zeroed("x", vbytes);
-    let r = ctx.storage_zeroed("r", vbytes);
-    let z = ctx.storage_zeroed("z", vbytes);
-    let p = ctx.storage_zeroed("p", vbytes);
-    let ap = ctx.storage_zeroed("ap", vbytes);
-    let invb = ctx.storage(
-        "inv_diag",
-        &reals_to_bytes(prec, inv.iter().copied()),
-        false,
-    );
-    let partials = ctx.storage_zeroed("partials", 2 * 4 * sz * DOT_WORKGROUPS as u64);
-    let scalars = ctx.storage_zeroed("scalars", SCALARS as u64 * sz);
-    let state = ctx.storage_zeroed("state", 16);
-    let dot_params = ctx.uniform(
-        "dot params",
-        &DotParams {
-            n: n as u32,
-            ..Default::default()
-        },
-    );
-    let spmv_binds = matrix.bind(ctx, &spmv, &p, &ap);
-    let dot_pap = ctx.bind(&dot, &[(0, &dot_params), (1, &p), (2, &ap), (3, &partials)]);
-    let dot_rz = ctx.bind(&dot, &[(0, &dot_params), (1, &r), (2, &z), (3, &partials)]);
-    let staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
-        label: Some("cg state"),
-        size: 16 + SCALARS as u64 * sz,
-        usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-        mapped_at_creation: false,
-    });
-
+    let kernels = CgKernels::new(ctx, a, &inv).map_err(|e| CgError::Device(e.to_string()))?;
     let bnorm = dot3(b, b).map(f64::sqrt);
     let target: [f64; 3] = std::array::from_fn(|k| (params.rel_tol * bnorm[k]).max(params.abs_tol));
     let rel = |rr: [f64; 3]| -> f64 {
@@ -343,7 +490,7 @@ pub fn pcg(
             })
             .fold(0.0, f64::max)
     };
-    let inner_reduction = match prec {
+    let inner_reduction = match ctx.precision {
         Precision::F32 => F32_INNER_REDUCTION,
         Precision::F64 => 0.0,
     };
@@ -351,12 +498,7 @@ pub fn pcg(
     let mut res = vec![[0.0; 3]; n];
     for _round in 0..MAX_REFINEMENTS {
         // f64 residual of the current iterate.
-        a.apply(x, &mut res);
-        for (r, b) in res.iter_mut().zip(b) {
-            for k in 0..3 {
-                r[k] = b[k] - r[k];
-            }
-        }
+        residual(a, b, x, &mut res);
         let rr = dot3(&res, &res);
         if (0..3).all(|k| rr[k].sqrt() <= target[k]) {
             return Ok(CgInfo {
@@ -383,11 +525,6 @@ pub fn pcg(
             .collect();
         let rz = dot3(&res, &zv);
         let rr_scaled = dot3(&res, &res);
-        let q = &ctx.queue;
-        q.write_buffer(&xd, 0, &vec![0u8; vbytes as usize]);
-        q.write_buffer(&r, 0, &vec4_bytes(prec, &res));
-        q.write_buffer(&z, 0, &vec4_bytes(prec, &zv));
-        q.write_buffer(&p, 0, &vec4_bytes(prec, &zv));
         let mut sc = vec![0.0f64; SCALARS];
         for k in 0..3 {
             sc[k] = rz[k];
@@ -399,71 +536,8 @@ pub fn pcg(
                 (target[k] / scale[k]).max(inner_reduction).powi(2)
             };
         }
-        q.write_buffer(&scalars, 0, &reals_to_bytes(prec, sc.into_iter()));
-        q.write_buffer(&state, 0, bytemuck::bytes_of(&CgState::default()));
-        let cgp = ctx.uniform(
-            "cg params",
-            &CgKernelParams {
-                n: n as u32,
-                n_partials: DOT_WORKGROUPS,
-                max_iters: (params.max_iters - total).min(u32::MAX as usize) as u32,
-                _pad: 0,
-            },
-        );
-        let fa = ctx.bind(
-            &fin_a,
-            &[(0, &cgp), (1, &scalars), (2, &state), (3, &partials)],
-        );
-        let fb = ctx.bind(
-            &fin_b,
-            &[(0, &cgp), (1, &scalars), (2, &state), (3, &partials)],
-        );
-        let uxr = ctx.bind(
-            &upd_xr,
-            &[
-                (0, &cgp),
-                (1, &scalars),
-                (4, &xd),
-                (5, &r),
-                (6, &z),
-                (7, &p),
-                (8, &ap),
-                (9, &invb),
-            ],
-        );
-        let up = ctx.bind(&upd_p, &[(0, &cgp), (1, &scalars), (6, &z), (7, &p)]);
-        let st = loop {
-            let mut enc = ctx.device.create_command_encoder(&Default::default());
-            {
-                let mut pass = enc.begin_compute_pass(&Default::default());
-                for _ in 0..CG_BATCH {
-                    matrix.encode(&mut pass, &spmv, &spmv_binds);
-                    pass.set_pipeline(&dot);
-                    pass.set_bind_group(0, &dot_pap, &[]);
-                    pass.dispatch_workgroups(DOT_WORKGROUPS, 1, 1);
-                    pass.set_pipeline(&fin_a);
-                    pass.set_bind_group(0, &fa, &[]);
-                    pass.dispatch_workgroups(1, 1, 1);
-                    pass.set_pipeline(&upd_xr);
-                    pass.set_bind_group(0, &uxr, &[]);
-                    pass.dispatch_workgroups(groups(n, ITEM_WORKGROUP), 1, 1);
-                    pass.set_pipeline(&dot);
-                    pass.set_bind_group(0, &dot_rz, &[]);
-                    pass.dispatch_workgroups(DOT_WORKGROUPS, 1, 1);
-                    pass.set_pipeline(&fin_b);
-                    pass.set_bind_group(0, &fb, &[]);
-                    pass.dispatch_workgroups(1, 1, 1);
-                    pass.set_pipeline(&upd_p);
-                    pass.set_bind_group(0, &up, &[]);
-                    pass.dispatch_workgroups(groups(n, ITEM_WORKGROUP), 1, 1);
-                }
-            }
-            enc.copy_buffer_to_buffer(&state, 0, &staging, 0, 16);
-            enc.copy_buffer_to_buffer(&scalars, 0, &staging, 16, SCALARS as u64 * sz);
-            q.submit([enc.finish()]);
-            let bytes = ctx.map_read(&staging).map_err(dev)?;
-            let st: CgState = *bytemuck::from_bytes(&bytes[..16]);
-            let sc = bytes_to_reals(prec, &bytes[16..]);
+        let max_iters = (params.max_iters - total).min(u32::MAX as usize) as u32;
+        let (st, d) = kernels.solve(&res, &zv, sc, max_iters, |st, sc| {
             if st.breakdown > 0 {
                 return Err(CgError::NotPositiveDefinite {
                     iteration: total + st.breakdown as usize - 1,
@@ -472,14 +546,8 @@ pub fn pcg(
             }
             let rr_now: [f64; 3] = std::array::from_fn(|k| sc[4 + k] * scale[k] * scale[k]);
             progress(total + st.iterations as usize, rel(rr_now));
-            if st.done != 0 {
-                break st;
-            }
-        };
-        let d = from_vec4(&bytes_to_reals(
-            prec,
-            &ctx.read_back(&xd, vbytes).map_err(dev)?,
-        ));
+            Ok(())
+        })?;
         for (x, d) in x.iter_mut().zip(&d) {
             for k in 0..3 {
                 x[k] += d[k] * scale[k];
@@ -491,12 +559,7 @@ pub fn pcg(
         }
         total += st.iterations as usize;
     }
-    a.apply(x, &mut res);
-    for (r, b) in res.iter_mut().zip(b) {
-        for k in 0..3 {
-            r[k] = b[k] - r[k];
-        }
-    }
+    residual(a, b, x, &mut res);
     let rr = dot3(&res, &res);
     if (0..3).all(|k| rr[k].sqrt() <= target[k]) {
         return Ok(CgInfo {

@@ -2,23 +2,16 @@
 //! and the GPU sampling stage built on it. CPU twin: [`crate::cpu::evaluate`].
 
 use super::{GpuContext, GpuError, ITEM_WORKGROUP, anchor, bytes_to_reals, groups, reals_to_bytes};
+use crate::math::{BezierElements, BezierNet};
 use crate::mesh::{LinearMesh, Topology};
 use crate::sample::ordering::{Lattice, lattice_index, lattice_point};
-use crate::sample::{BezierElements, HighOrderMesh, sample_with};
+use crate::sample::{HighOrderMesh, sample_with};
 use rayon::prelude::*;
 
-pub const SOURCE: &str = include_str!("../../shaders/evaluate.wgsl");
+/// The uniform block lives beside the CPU twin, which both sides fill the same way.
+pub use crate::cpu::evaluate::Params;
 
-/// Uniform block of `evaluate.wgsl`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct Params {
-    pub dim: u32,
-    pub n_queries: u32,
-    pub with_derivs: u32,
-    pub _pad: u32,
-}
-const _: () = assert!(std::mem::size_of::<Params>() == 16);
+pub const SOURCE: &str = include_str!("../../shaders/evaluate.wgsl");
 
 /// Points (and derivatives d/du, d/dv, d/dw when asked for) per query, in f64.
 #[derive(Clone, Debug, Default)]
@@ -43,7 +36,7 @@ pub const EVALUATE_TOL_F64: f64 = 64.0 * f64::EPSILON;
 pub fn evaluate(
     ctx: &GpuContext,
     dim: usize,
-    nets: &(dyn Fn(usize) -> [[f64; 3]; 27] + Sync),
+    nets: &(dyn Fn(usize) -> BezierNet + Sync),
     xi: &[[f64; 3]],
     queries: &[(u32, u32)],
     with_derivs: bool,
@@ -86,7 +79,7 @@ pub fn evaluate(
             end += 1;
         }
         let chunk = &order[start..end];
-        let local_nets: Vec<([f64; 3], [[f64; 3]; 27])> = elems
+        let local_nets: Vec<([f64; 3], BezierNet)> = elems
             .par_iter()
             .map(|&e| {
                 let net = nets(e as usize);

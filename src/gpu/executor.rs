@@ -5,10 +5,11 @@
 use super::jacobian_check::GpuCertifier;
 use super::{GpuContext, GpuError};
 use crate::energy::colored::{LocalDerivatives, LocalProblem};
-use crate::executor::Executor;
+use crate::executor::{Executor, ExecutorError};
 use crate::fit::NormalMatrix;
+use crate::math::{BezierElements, BezierNet};
 use crate::mesh::{LinearMesh, Topology};
-use crate::sample::{BezierElements, HighOrderMesh};
+use crate::sample::HighOrderMesh;
 use crate::solve::{CgError, CgInfo, CgParams};
 use crate::validity::{Certifier, DetBounds};
 
@@ -34,7 +35,7 @@ impl Certifier for GpuExecutor<'_> {
         &self,
         dim: usize,
         elements: &[usize],
-        net: &(dyn Fn(usize) -> [[f64; 3]; 27] + Sync),
+        net: &(dyn Fn(usize) -> BezierNet + Sync),
         max_depth: usize,
     ) -> Vec<DetBounds> {
         self.certifier.certify(dim, elements, net, max_depth)
@@ -75,8 +76,12 @@ impl Executor for GpuExecutor<'_> {
         &self,
         dim: usize,
         problems: &[LocalProblem],
-    ) -> Result<Option<Vec<LocalDerivatives>>, GpuError> {
-        super::local_newton::local_newton(self.ctx(), dim, problems).map(Some)
+    ) -> Result<Option<Vec<LocalDerivatives>>, ExecutorError> {
+        Ok(Some(super::local_newton::local_newton(
+            self.ctx(),
+            dim,
+            problems,
+        )?))
     }
 
     fn fallbacks(&self) -> usize {

@@ -10,21 +10,14 @@
 use super::{
     GpuContext, GpuError, ITEM_WORKGROUP, Precision, anchor, bytes_to_reals, groups, reals_to_bytes,
 };
+use crate::math::BezierNet;
 use crate::validity::{Certifier, DetBounds, det_jacobian_bounds};
 use rayon::prelude::*;
 
-pub const SOURCE: &str = include_str!("../../shaders/jacobian_check.wgsl");
+/// The uniform block lives beside the CPU twin, which both sides fill the same way.
+pub use crate::cpu::jacobian_check::Params;
 
-/// Uniform block of `jacobian_check.wgsl`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct Params {
-    pub dim: u32,
-    pub n_elements: u32,
-    pub _pad0: u32,
-    pub _pad1: u32,
-}
-const _: () = assert!(std::mem::size_of::<Params>() == 16);
+pub const SOURCE: &str = include_str!("../../shaders/jacobian_check.wgsl");
 
 /// Roundings along the longest path of one det J coefficient (product weights, three factor
 /// products, sums of up to 18·18 terms per component), generously counted: the arithmetic
@@ -71,7 +64,7 @@ pub fn jacobian_check(
     ctx: &GpuContext,
     dim: usize,
     elements: &[usize],
-    net: &(dyn Fn(usize) -> [[f64; 3]; 27] + Sync),
+    net: &(dyn Fn(usize) -> BezierNet + Sync),
 ) -> Result<Vec<(CoefBounds, f64)>, GpuError> {
     let prec = ctx.precision;
     let sz = prec.size() as u64;
@@ -81,7 +74,7 @@ pub fn jacobian_check(
     let pipeline = ctx.pipeline(SOURCE, "jacobian_check");
     let mut out = Vec::with_capacity(elements.len());
     for chunk in elements.chunks(max_e) {
-        let anchored: Vec<[[f64; 3]; 27]> = chunk
+        let anchored: Vec<BezierNet> = chunk
             .par_iter()
             .map(|&e| {
                 let net = net(e);
@@ -138,7 +131,7 @@ pub fn certify(
     ctx: &GpuContext,
     dim: usize,
     elements: &[usize],
-    net: &(dyn Fn(usize) -> [[f64; 3]; 27] + Sync),
+    net: &(dyn Fn(usize) -> BezierNet + Sync),
     max_depth: usize,
 ) -> Result<Vec<DetBounds>, GpuError> {
     let coefs = jacobian_check(ctx, dim, elements, net)?;
@@ -180,7 +173,7 @@ impl Certifier for GpuCertifier<'_> {
         &self,
         dim: usize,
         elements: &[usize],
-        net: &(dyn Fn(usize) -> [[f64; 3]; 27] + Sync),
+        net: &(dyn Fn(usize) -> BezierNet + Sync),
         max_depth: usize,
     ) -> Vec<DetBounds> {
         match certify(self.ctx, dim, elements, net, max_depth) {

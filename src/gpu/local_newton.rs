@@ -6,18 +6,10 @@ use super::{GpuContext, GpuError, ITEM_WORKGROUP, bytes_to_reals, reals_to_bytes
 pub use crate::energy::colored::LocalDerivatives;
 use crate::energy::colored::LocalProblem;
 
-pub const SOURCE: &str = include_str!("../../shaders/local_newton.wgsl");
+/// The uniform block lives beside the CPU twin, which both sides fill the same way.
+pub use crate::cpu::local_newton::Params;
 
-/// Uniform block of `local_newton.wgsl`.
-#[repr(C)]
-#[derive(Clone, Copy, Debug, Default, bytemuck::Pod, bytemuck::Zeroable)]
-pub struct Params {
-    pub dim: u32,
-    pub n_problems: u32,
-    pub _pad0: u32,
-    pub _pad1: u32,
-}
-const _: () = assert!(std::mem::size_of::<Params>() == 16);
+pub const SOURCE: &str = include_str!("../../shaders/local_newton.wgsl");
 
 /// The kernel's inputs in binding order: coefficients (4 per problem), point ranges, points
 /// (13 per point).

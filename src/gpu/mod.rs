@@ -17,6 +17,7 @@ pub mod jacobian_check;
 pub mod local_newton;
 pub mod reflect;
 
+use crate::math::BezierNet;
 use wgpu::util::DeviceExt;
 
 /// Floating-point type of the kernels (`--precision`).
@@ -452,6 +453,6 @@ pub(crate) fn groups(n: usize, size: usize) -> u32 {
 
 /// Anchor of a Bézier net: its centre control point (index 4 in 2D, 13 in 3D). Kernels see
 /// net − anchor, so f32 rounding scales with the element's size, not with its coordinates.
-pub fn anchor(dim: usize, net: &[[f64; 3]; 27]) -> [f64; 3] {
+pub fn anchor(dim: usize, net: &BezierNet) -> [f64; 3] {
     net[if dim == 2 { 4 } else { 13 }]
 }

@@ -1,27 +1,27 @@
-//! Small 3-vector helpers on `[f64; 3]` shared by the geometry code (features, kinks, smooth
-//! boundary targets, element checks).
+//! 3-vector helpers on `[f64; 3]` for the geometry code that still stores and computes on
+//! arrays (features, kinks, smooth boundary targets, element checks, the fit's rows and the
+//! validity blend). They are thin wrappers over glam's `DVec3` ([`crate::math::linalg`]),
+//! whose `dot`, `cross` and `length` round exactly like the written-out formulas; new code
+//! should compute on `DVec3` directly and keep arrays at its storage boundary.
+
+use crate::math::linalg::{self, DVec3};
 
 pub(crate) fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] + b[0], a[1] + b[1], a[2] + b[2]]
+    (DVec3::from(a) + DVec3::from(b)).into()
 }
 pub(crate) fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+    (DVec3::from(a) - DVec3::from(b)).into()
 }
 pub(crate) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+    DVec3::from(a).dot(DVec3::from(b))
 }
 pub(crate) fn norm(a: [f64; 3]) -> f64 {
-    dot(a, a).sqrt()
+    DVec3::from(a).length()
 }
 /// `a` scaled to unit length (the zero vector stays zero).
 pub(crate) fn unit(a: [f64; 3]) -> [f64; 3] {
-    let l = norm(a);
-    if l > 0.0 { a.map(|c| c / l) } else { a }
+    linalg::unit(DVec3::from(a)).into()
 }
 pub(crate) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
+    DVec3::from(a).cross(DVec3::from(b)).into()
 }

@@ -20,6 +20,10 @@
 
 pub mod ordering;
 
+// The Bézier basis lives in the foundation layer; these re-exports keep the paths that the
+// integration tests use (`polyspline::sample::{eval_net, multilinear, BezierElements}`).
+use crate::math::bernstein::elevated_net;
+pub use crate::math::bernstein::{BezierElements, BezierNet, bernstein2, eval_net, multilinear};
 use crate::mesh::topology::{HEX_EDGES, HEX_VERTEX_PARAMS, QUAD_SIDES};
 use crate::mesh::{LinearMesh, Topology};
 use ordering::{Lattice, lattice_index, lattice_point};
@@ -28,14 +32,6 @@ use std::collections::BTreeMap;
 
 /// Largest output order.
 pub const MAX_ORDER: usize = 10;
-
-/// Elements that are tensor-product quadratic Bézier maps of \[0,1\]^d.
-pub trait BezierElements: Sync {
-    fn dim(&self) -> usize;
-    fn n_elements(&self) -> usize;
-    /// Bernstein control points of element `e`, index 9z + 3y + x (the first 9 in 2D).
-    fn bezier_net(&self, e: usize) -> [[f64; 3]; 27];
-}
 
 impl BezierElements for LinearMesh {
     fn dim(&self) -> usize {
@@ -46,68 +42,9 @@ impl BezierElements for LinearMesh {
     }
     /// The multilinear map degree-elevated to quadratic: its Bernstein points are its values on
     /// the half lattice {0, ½, 1}^d.
-    fn bezier_net(&self, e: usize) -> [[f64; 3]; 27] {
-        let x = self.element_coords(e);
-        let mut net = [[0.0; 3]; 27];
-        let nz = if self.dim == 2 { 1 } else { 3 };
-        for c in 0..nz {
-            for b in 0..3 {
-                for a in 0..3 {
-                    let t = [a as f64 / 2.0, b as f64 / 2.0, c as f64 / 2.0];
-                    net[9 * c + 3 * b + a] = multilinear(self.dim, &x, t);
-                }
-            }
-        }
-        net
+    fn bezier_net(&self, e: usize) -> BezierNet {
+        elevated_net(self.dim, &self.element_coords(e))
     }
-}
-
-/// Bilinear (2D) or trilinear (3D) interpolation of element corners at `t`.
-pub fn multilinear(dim: usize, x: &[[f64; 3]; 8], t: [f64; 3]) -> [f64; 3] {
-    let mut out = [0.0; 3];
-    let n = if dim == 2 { 4 } else { 8 };
-    for (c, p) in HEX_VERTEX_PARAMS.iter().enumerate().take(n) {
-        let mut w = 1.0;
-        for k in 0..dim {
-            w *= if p[k] == 1 { t[k] } else { 1.0 - t[k] };
-        }
-        for k in 0..3 {
-            out[k] += w * x[c][k];
-        }
-    }
-    out
-}
-
-/// Quadratic Bernstein values at `t`.
-#[inline]
-pub fn bernstein2(t: f64) -> [f64; 3] {
-    let s = 1.0 - t;
-    [s * s, 2.0 * s * t, t * t]
-}
-
-/// Evaluate a quadratic Bézier net at `xi`.
-pub fn eval_net(dim: usize, net: &[[f64; 3]; 27], xi: [f64; 3]) -> [f64; 3] {
-    let bu = bernstein2(xi[0]);
-    let bv = bernstein2(xi[1]);
-    let bw = if dim == 2 {
-        [1.0, 0.0, 0.0]
-    } else {
-        bernstein2(xi[2])
-    };
-    let nz = if dim == 2 { 1 } else { 3 };
-    let mut out = [0.0; 3];
-    for c in 0..nz {
-        for b in 0..3 {
-            for a in 0..3 {
-                let w = bu[a] * bv[b] * bw[c];
-                let p = net[9 * c + 3 * b + a];
-                for k in 0..3 {
-                    out[k] += w * p[k];
-                }
-            }
-        }
-    }
-    out
 }
 
 /// A conforming high-order quad or hex mesh.
@@ -657,131 +594,4 @@ pub fn sample_with<T: Copy + Default + Send + Sync>(
     (ho, nodes)
 }
 
-/// Reading a high-order mesh back from a file's [`RawMesh`].
-mod from_raw {
-    use super::HighOrderMesh;
-    use super::ordering::{gmsh_hex, gmsh_line, gmsh_quad, lattice_index, vtk_hex, vtk_quad};
-    use crate::io::raw::{CellKind, Location, NodeConvention, ParseError, RawMesh};
-
-    /// Node order and dimension/order of a block's cells, if they are lines, quads or hexes.
-    fn shape(kind: &CellKind) -> Option<(usize, usize, NodeConvention)> {
-        match kind {
-            CellKind::Line => Some((1, 1, NodeConvention::Gmsh)),
-            CellKind::Quad => Some((2, 1, NodeConvention::Gmsh)),
-            CellKind::Hexahedron => Some((3, 1, NodeConvention::Gmsh)),
-            CellKind::Lagrange {
-                dim,
-                order,
-                convention,
-            } => Some((*dim, *order, *convention)),
-            _ => None,
-        }
-    }
-
-    /// File node s of a cell → lattice index, for the convention.
-    fn permutation(dim: usize, p: usize, convention: NodeConvention) -> Vec<usize> {
-        let order = match (dim, convention) {
-            (1, _) => gmsh_line(p),
-            (2, NodeConvention::Gmsh) => gmsh_quad(p),
-            (2, NodeConvention::Vtk) => vtk_quad(p),
-            (3, NodeConvention::Gmsh) => gmsh_hex(p),
-            _ => vtk_hex(p),
-        };
-        order.iter().map(|&l| lattice_index(p, l)).collect()
-    }
-
-    impl HighOrderMesh {
-        /// Build a high-order mesh from a file's cells: the quads or hexes of one order (linear
-        /// or Lagrange) are the elements, lines or quads of the same order with tags the
-        /// boundary. Errors name the place and the problem.
-        pub fn from_raw(raw: RawMesh) -> Result<HighOrderMesh, ParseError> {
-            let dim = raw
-                .blocks
-                .iter()
-                .filter_map(|b| shape(b.kind()).map(|s| s.0))
-                .max()
-                .filter(|&d| d >= 2)
-                .ok_or_else(|| {
-                    ParseError::new(Location::File, "no quadrilateral or hexahedral elements")
-                })?;
-            let mut order = None;
-            let mut mesh = HighOrderMesh {
-                dim,
-                ..Default::default()
-            };
-            let n_points = raw.points.len();
-            for want_dim in [dim, dim - 1] {
-                for b in &raw.blocks {
-                    let Some((d, p, conv)) = shape(b.kind()) else {
-                        continue;
-                    };
-                    if d != want_dim || b.is_empty() {
-                        continue;
-                    }
-                    if want_dim == dim {
-                        if order.is_some_and(|o| o != p) {
-                            return Err(ParseError::new(
-                                b.location(0),
-                                format!(
-                                    "elements of orders {} and {p} in one mesh",
-                                    order.unwrap()
-                                ),
-                            ));
-                        }
-                        order = Some(p);
-                    } else if Some(p) != order {
-                        continue;
-                    }
-                    let perm = permutation(d, p, conv);
-                    let (target, tags) = if d == dim {
-                        (&mut mesh.elements, &mut mesh.element_tags)
-                    } else {
-                        (&mut mesh.boundary, &mut mesh.boundary_tags)
-                    };
-                    let npc = b.nodes_per_cell;
-                    for c in 0..b.len() {
-                        let cell = &b.nodes[c * npc..(c + 1) * npc];
-                        let mut lattice = vec![0u32; npc];
-                        for (s, &n) in cell.iter().enumerate() {
-                            if n < 0 || n as usize >= n_points {
-                                return Err(ParseError::new(
-                                    b.location(c),
-                                    format!(
-                                        "cell refers to node {}, but the file defines {n_points} nodes",
-                                        n + 1
-                                    ),
-                                ));
-                            }
-                            lattice[perm[s]] = n as u32;
-                        }
-                        target.extend_from_slice(&lattice);
-                        tags.push(b.tags.get(c).copied().unwrap_or(0));
-                    }
-                }
-            }
-            mesh.order = order.unwrap_or(1);
-            if let Some((i, k)) = raw
-                .points
-                .iter()
-                .enumerate()
-                .find_map(|(i, p)| p.iter().position(|c| !c.is_finite()).map(|k| (i, k)))
-            {
-                let loc = raw.point_locations.get(i).copied().unwrap_or_default();
-                return Err(ParseError::new(
-                    loc,
-                    format!(
-                        "node {} has a non-finite coordinate {}",
-                        i + 1,
-                        ["x", "y", "z"][k]
-                    ),
-                ));
-            }
-            mesh.nodes = raw.points;
-            mesh.tag_names = raw.tag_names;
-            if mesh.element_tags.iter().all(|&t| t == 0) {
-                mesh.element_tags.clear();
-            }
-            Ok(mesh)
-        }
-    }
-}
+mod from_raw;

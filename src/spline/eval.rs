@@ -1,14 +1,14 @@
-//! Evaluation of Bézier elements: nets, points, parametric derivatives, basis rows (CPU, f64).
-//!
-//! A Bézier net is the 3^d Bernstein control points of one element, x fastest
-//! (index 9z + 3y + x; a quad uses the first 9 entries). Parameters are (u, v, w) ∈ `[0,1]`^d;
-//! the w entry of a quad is ignored.
+//! Bézier elements of the spline space: an element's net from the control points, and the
+//! rows of global basis functions (CPU, f64). Points and derivatives of a net are the
+//! foundation's ([`crate::math::bernstein`]).
 
 use super::extraction::Extraction;
-use super::knots::{bernstein, bernstein_derivative};
+use crate::math::bernstein::BezierNet;
+use crate::math::bernstein::bernstein2 as bernstein;
+pub use crate::math::bernstein::{eval_net, eval_net_with_derivatives};
 
 /// The Bézier net of element `e` for control point positions `cps`.
-pub fn bezier_net(ext: &Extraction, e: usize, cps: &[[f64; 3]]) -> [[f64; 3]; 27] {
+pub fn bezier_net(ext: &Extraction, e: usize, cps: &[[f64; 3]]) -> BezierNet {
     let n = ext.n_local();
     // Positions of the local nodes.
     let mut p = [[0.0f64; 3]; 27];
@@ -44,70 +44,6 @@ pub fn bezier_net(ext: &Extraction, e: usize, cps: &[[f64; 3]]) -> [[f64; 3]; 27
         p = q;
     }
     p
-}
-
-/// Tensor Bernstein values at `u` (3^d entries used).
-pub fn bernstein_values(dim: usize, u: [f64; 3]) -> [f64; 27] {
-    let b = [bernstein(u[0]), bernstein(u[1]), bernstein(u[2])];
-    let mut out = [0.0; 27];
-    let n = if dim == 2 { 9 } else { 27 };
-    for (i, o) in out.iter_mut().enumerate().take(n) {
-        let z = if dim == 2 { 1.0 } else { b[2][i / 9] };
-        *o = b[0][i % 3] * b[1][(i / 3) % 3] * z;
-    }
-    out
-}
-
-/// Point of a Bézier net at `u`.
-pub fn eval_net(dim: usize, net: &[[f64; 3]; 27], u: [f64; 3]) -> [f64; 3] {
-    let b = bernstein_values(dim, u);
-    let n = if dim == 2 { 9 } else { 27 };
-    let mut x = [0.0; 3];
-    for i in 0..n {
-        for c in 0..3 {
-            x[c] += b[i] * net[i][c];
-        }
-    }
-    x
-}
-
-/// Point and parametric derivatives of a Bézier net at `u`: `d[k]` is ∂x/∂u_k
-/// (`d[2]` is zero for a quad).
-pub fn eval_net_with_derivatives(
-    dim: usize,
-    net: &[[f64; 3]; 27],
-    u: [f64; 3],
-) -> ([f64; 3], [[f64; 3]; 3]) {
-    let b = [bernstein(u[0]), bernstein(u[1]), bernstein(u[2])];
-    let db = [
-        bernstein_derivative(u[0]),
-        bernstein_derivative(u[1]),
-        bernstein_derivative(u[2]),
-    ];
-    let n = if dim == 2 { 9 } else { 27 };
-    let mut x = [0.0; 3];
-    let mut d = [[0.0; 3]; 3];
-    for (i, p) in net.iter().enumerate().take(n) {
-        let a = [i % 3, (i / 3) % 3, i / 9];
-        let (bz, dbz) = if dim == 2 {
-            (1.0, 0.0)
-        } else {
-            (b[2][a[2]], db[2][a[2]])
-        };
-        let v = b[0][a[0]] * b[1][a[1]] * bz;
-        let g = [
-            db[0][a[0]] * b[1][a[1]] * bz,
-            b[0][a[0]] * db[1][a[1]] * bz,
-            b[0][a[0]] * b[1][a[1]] * dbz,
-        ];
-        for c in 0..3 {
-            x[c] += v * p[c];
-            for k in 0..3 {
-                d[k][c] += g[k] * p[c];
-            }
-        }
-    }
-    (x, d)
 }
 
 /// The global basis functions that are non-zero on element `e` at `u`, as

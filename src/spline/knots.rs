@@ -8,6 +8,10 @@
 //! (stencil slots 0, 1, 2, or Lagrange values at 0, ½, 1) to the three Bernstein coefficients.
 //! The element extraction operator is the tensor product of three of these (x fastest).
 
+use crate::math::bernstein::{
+    bernstein2 as bernstein, bernstein2_derivative as bernstein_derivative,
+};
+
 /// The 1D basis of one element direction.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 #[repr(u8)]
@@ -79,19 +83,6 @@ impl Op1d {
     pub fn is_spline(self) -> bool {
         self != Op1d::Lagrange
     }
-}
-
-/// Quadratic Bernstein polynomials `(1−t)², 2t(1−t), t²`.
-#[inline]
-pub fn bernstein(t: f64) -> [f64; 3] {
-    let s = 1.0 - t;
-    [s * s, 2.0 * t * s, t * t]
-}
-
-/// Derivatives of [`bernstein`].
-#[inline]
-pub fn bernstein_derivative(t: f64) -> [f64; 3] {
-    [-2.0 * (1.0 - t), 2.0 - 4.0 * t, 2.0 * t]
 }
 
 #[cfg(test)]

@@ -34,6 +34,7 @@ pub mod knots;
 pub mod q2;
 pub mod stencil;
 
+use crate::math::BezierNet;
 pub use classify::{ElementClass, Q2Reason};
 pub use extraction::{ElementRows, Extraction, ExtractionCsr};
 pub use knots::Op1d;
@@ -280,12 +281,12 @@ impl SplineSpace {
     }
 
     /// The 3^d Bernstein control points of element `e` (x fastest; a quad uses 9).
-    pub fn element_bezier(&self, e: usize) -> [[f64; 3]; 27] {
+    pub fn element_bezier(&self, e: usize) -> BezierNet {
         eval::bezier_net(&self.extraction, e, &self.control_points)
     }
 
     /// The Bernstein control points of element `e` for other control point positions.
-    pub fn element_bezier_with(&self, e: usize, control_points: &[[f64; 3]]) -> [[f64; 3]; 27] {
+    pub fn element_bezier_with(&self, e: usize, control_points: &[[f64; 3]]) -> BezierNet {
         eval::bezier_net(&self.extraction, e, control_points)
     }
 
@@ -305,14 +306,14 @@ impl SplineSpace {
     }
 }
 
-impl crate::sample::BezierElements for SplineSpace {
+impl crate::math::BezierElements for SplineSpace {
     fn dim(&self) -> usize {
         self.dim
     }
     fn n_elements(&self) -> usize {
         self.classes.len()
     }
-    fn bezier_net(&self, e: usize) -> [[f64; 3]; 27] {
+    fn bezier_net(&self, e: usize) -> BezierNet {
         self.element_bezier(e)
     }
 }

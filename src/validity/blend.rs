@@ -31,8 +31,8 @@
 //! elevation is certified valid, whatever the fit does.
 
 use super::{Certifier, DetBounds, bernstein_min_bounds, certify_screened, det_jacobian_bernstein};
+use crate::math::BezierElements;
 use crate::mesh::{LinearMesh, Topology, vec3};
-use crate::sample::BezierElements;
 use rayon::prelude::*;
 
 /// Bernstein nets, 9 (2D) or 27 (3D) points, index 9z + 3y + x.

@@ -6,13 +6,14 @@
 //! matters for a decision (at most the element's target) it is the exact certificate's.
 
 use super::{DetBounds, certify_screened, det_jacobian_bounds};
+use crate::math::BezierNet;
 use crate::mesh::{LinearMesh, Topology};
 
 /// Certified det J bounds of every element of a Bézier source.
 pub fn certify_elements(
     dim: usize,
     n_elements: usize,
-    net: impl Fn(usize) -> [[f64; 3]; 27] + Sync,
+    net: impl Fn(usize) -> BezierNet + Sync,
     max_depth: usize,
 ) -> Vec<DetBounds> {
     use rayon::prelude::*;
@@ -30,7 +31,7 @@ pub trait Certifier: Sync {
         &self,
         dim: usize,
         elements: &[usize],
-        net: &(dyn Fn(usize) -> [[f64; 3]; 27] + Sync),
+        net: &(dyn Fn(usize) -> BezierNet + Sync),
         max_depth: usize,
     ) -> Vec<DetBounds>;
 }
@@ -43,7 +44,7 @@ impl Certifier for CpuCertifier {
         &self,
         dim: usize,
         elements: &[usize],
-        net: &(dyn Fn(usize) -> [[f64; 3]; 27] + Sync),
+        net: &(dyn Fn(usize) -> BezierNet + Sync),
         max_depth: usize,
     ) -> Vec<DetBounds> {
         use rayon::prelude::*;
@@ -61,7 +62,7 @@ pub fn certify_mesh(
     certifier: &dyn Certifier,
     dim: usize,
     n_elements: usize,
-    net: &(dyn Fn(usize) -> [[f64; 3]; 27] + Sync),
+    net: &(dyn Fn(usize) -> BezierNet + Sync),
     depth: usize,
     target: &(dyn Fn(usize) -> f64 + Sync),
 ) -> Vec<DetBounds> {

@@ -10,6 +10,7 @@
 use super::blend;
 use super::certificate::{Certifier, CpuCertifier};
 use super::{DetBounds, certify_screened};
+use crate::math::BezierNet;
 use crate::mesh::LinearMesh;
 
 /// How the fitted step is shortened where it would invalidate elements.
@@ -129,7 +130,7 @@ fn worst(bounds: &[DetBounds], n: usize) -> Vec<WorstElement> {
 pub fn line_search(
     dim: usize,
     n_elements: usize,
-    net: impl Fn(usize, &[[f64; 3]]) -> [[f64; 3]; 27] + Sync,
+    net: impl Fn(usize, &[[f64; 3]]) -> BezierNet + Sync,
     c0: &[[f64; 3]],
     c_star: &[[f64; 3]],
     thresholds: &[f64],
@@ -153,7 +154,7 @@ pub fn line_search_with(
     certifier: &dyn Certifier,
     dim: usize,
     n_elements: usize,
-    net: impl Fn(usize, &[[f64; 3]]) -> [[f64; 3]; 27] + Sync,
+    net: impl Fn(usize, &[[f64; 3]]) -> BezierNet + Sync,
     c0: &[[f64; 3]],
     c_star: &[[f64; 3]],
     thresholds: &[f64],
@@ -243,7 +244,7 @@ pub struct LocalSearchInfo {
 pub fn local_line_search(
     dim: usize,
     n_elements: usize,
-    net: impl Fn(usize, &[[f64; 3]]) -> [[f64; 3]; 27] + Sync,
+    net: impl Fn(usize, &[[f64; 3]]) -> BezierNet + Sync,
     support: impl Fn(usize) -> Vec<u32> + Sync,
     c0: &[[f64; 3]],
     c_star: &[[f64; 3]],
@@ -269,7 +270,7 @@ pub fn local_line_search_with(
     certifier: &dyn Certifier,
     dim: usize,
     n_elements: usize,
-    net: impl Fn(usize, &[[f64; 3]]) -> [[f64; 3]; 27] + Sync,
+    net: impl Fn(usize, &[[f64; 3]]) -> BezierNet + Sync,
     support: impl Fn(usize) -> Vec<u32> + Sync,
     c0: &[[f64; 3]],
     c_star: &[[f64; 3]],
@@ -385,7 +386,7 @@ pub fn certified_step(
     mode: LineSearchMode,
     dim: usize,
     n_elements: usize,
-    net: impl Fn(usize, &[[f64; 3]]) -> [[f64; 3]; 27] + Sync,
+    net: impl Fn(usize, &[[f64; 3]]) -> BezierNet + Sync,
     support: impl Fn(usize) -> Vec<u32> + Sync,
     c0: &[[f64; 3]],
     c_star: &[[f64; 3]],
@@ -473,7 +474,7 @@ mod local_search_tests {
 
     /// A row of quads of width 1 + x(c_{e+1}) − x(c_e), height 1: element e depends on
     /// control points e and e + 1 and is valid iff its width is positive.
-    fn row_net(e: usize, cps: &[[f64; 3]]) -> [[f64; 3]; 27] {
+    fn row_net(e: usize, cps: &[[f64; 3]]) -> BezierNet {
         let w = 1.0 + cps[e + 1][0] - cps[e][0];
         let mut net = [[0.0; 3]; 27];
         for j in 0..3 {

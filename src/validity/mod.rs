@@ -23,6 +23,7 @@ pub mod line_search;
 pub mod screen;
 pub mod snap;
 
+use crate::math::BezierNet;
 pub use certificate::{Certifier, CpuCertifier, certify_elements};
 pub use line_search::{
     LineSearchInfo, LineSearchMode, LineSearchParams, LocalSearchInfo, ValidityError, WorstElement,
@@ -230,7 +231,7 @@ fn convolve(a: &[f64], na: [usize; 3], b: &[f64], nb: [usize; 3], out: &mut [f64
 /// Computed in scaled coefficients (c_ijk · C(n0,i)C(n1,j)C(n2,k), see [`Bernstein::mul`]):
 /// the partial derivatives are scaled once, the products are plain convolutions on fixed-size
 /// arrays, and det J is unscaled once at the end.
-pub fn det_jacobian_bernstein(dim: usize, net: &[[f64; 3]; 27]) -> Bernstein {
+pub fn det_jacobian_bernstein(dim: usize, net: &BezierNet) -> Bernstein {
     // Scaled partial derivative d of coordinate c: degree 1 in direction d (coefficients
     // 2 ΔP), 2 elsewhere (binomials 1, 2, 1); 18 coefficients in 3D, 6 in 2D.
     let partial = |d: usize, c: usize| -> [f64; 18] {
@@ -444,7 +445,7 @@ impl DetBounds {
 
 /// Certified bounds of min det J, subdividing up to `max_depth` times (each time halving the
 /// direction of the largest degree, cycling) where the coefficients do not decide the sign.
-pub fn det_jacobian_bounds(dim: usize, net: &[[f64; 3]; 27], max_depth: usize) -> DetBounds {
+pub fn det_jacobian_bounds(dim: usize, net: &BezierNet, max_depth: usize) -> DetBounds {
     bernstein_min_bounds(dim, det_jacobian_bernstein(dim, net), max_depth)
 }
 
@@ -452,7 +453,7 @@ pub fn det_jacobian_bounds(dim: usize, net: &[[f64; 3]; 27], max_depth: usize) -
 mod tests {
     use super::*;
 
-    fn net_of(dim: usize, f: impl Fn([f64; 3]) -> [f64; 3]) -> [[f64; 3]; 27] {
+    fn net_of(dim: usize, f: impl Fn([f64; 3]) -> [f64; 3]) -> BezierNet {
         // Bernstein points of a map that is quadratic per direction: interpolate at 0, ½, 1
         // and convert (middle coefficient = 2 f(½) − (f(0) + f(1))/2).
         let mut net = [[0.0; 3]; 27];

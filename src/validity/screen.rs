@@ -29,6 +29,7 @@
 //! reported minimum and the worst elements are those of the exact certificate.
 
 use super::{Certifier, DetBounds};
+use crate::math::BezierNet;
 use rayon::prelude::*;
 
 /// Elements certified exactly per refinement batch in [`Screened::refine_smallest`].
@@ -40,7 +41,7 @@ const SCREEN_ROUNDINGS: f64 = 128.0;
 
 /// Screen bound of one element (see the module docs): `lower` ≤ every Bernstein coefficient of
 /// det J (so ≤ min det J), `upper` = the smallest corner value of det J.
-pub fn screen_bounds(dim: usize, net: &[[f64; 3]; 27]) -> DetBounds {
+pub fn screen_bounds(dim: usize, net: &BezierNet) -> DetBounds {
     let at = |i: usize, j: usize, k: usize| net[i + 3 * j + 9 * k];
     let nz = if dim == 2 { 1 } else { 3 };
     let nc = if dim == 2 { 2 } else { 3 };
@@ -167,7 +168,7 @@ pub fn certify_screened(
     certifier: &dyn Certifier,
     dim: usize,
     elements: &[usize],
-    net: &(dyn Fn(usize) -> [[f64; 3]; 27] + Sync),
+    net: &(dyn Fn(usize) -> BezierNet + Sync),
     max_depth: usize,
     target: &(dyn Fn(usize) -> f64 + Sync),
 ) -> Screened {
@@ -204,7 +205,7 @@ impl Screened {
         certifier: &dyn Certifier,
         dim: usize,
         elements: &[usize],
-        net: &(dyn Fn(usize) -> [[f64; 3]; 27] + Sync),
+        net: &(dyn Fn(usize) -> BezierNet + Sync),
         max_depth: usize,
         k: usize,
     ) {
@@ -273,7 +274,7 @@ mod tests {
 
     /// A unit cube (square), affinely sheared and scaled, with every Bézier point moved by up
     /// to `amp`.
-    fn random_net(rng: &mut Rng, dim: usize, amp: f64) -> [[f64; 3]; 27] {
+    fn random_net(rng: &mut Rng, dim: usize, amp: f64) -> BezierNet {
         let mut a = [[0.0; 3]; 3];
         for (r, row) in a.iter_mut().enumerate() {
             for (c, x) in row.iter_mut().enumerate() {
@@ -354,8 +355,8 @@ mod tests {
 
     /// det J of the Bézier map at `t` by central differences of the map (independent of the
     /// Bernstein algebra).
-    fn det_fd(dim: usize, net: &[[f64; 3]; 27], t: [f64; 3]) -> f64 {
-        crate::validity::tests::det_fd(dim, &|u| crate::sample::eval_net(dim, net, u), t)
+    fn det_fd(dim: usize, net: &BezierNet, t: [f64; 3]) -> f64 {
+        crate::validity::tests::det_fd(dim, &|u| crate::math::bernstein::eval_net(dim, net, u), t)
     }
 
     #[test]
@@ -363,7 +364,7 @@ mod tests {
         let mut rng = Rng(12345);
         for dim in [2, 3] {
             // Mixed batch: straight, mildly and strongly curved, and folded elements.
-            let nets: Vec<[[f64; 3]; 27]> = (0..300)
+            let nets: Vec<BezierNet> = (0..300)
                 .map(|i| random_net(&mut rng, dim, [0.0, 0.01, 0.1, 0.5, 0.9][i % 5]))
                 .collect();
             let all: Vec<usize> = (0..nets.len()).collect();
