@@ -34,6 +34,7 @@ use super::{Certifier, DetBounds, bernstein_min_bounds, certify_screened, det_ja
 use crate::mesh::{LinearMesh, Topology, vec3};
 use crate::sample::BezierElements;
 use rayon::prelude::*;
+use std::sync::OnceLock;
 
 /// Bernstein nets, 9 (2D) or 27 (3D) points, index 9z + 3y + x.
 pub type Net = [[f64; 3]; 27];
@@ -217,6 +218,10 @@ pub struct Blended<'a> {
     pub factors: Vec<f32>,
     /// Elements with a factor below 2 on one of their points.
     reduced: Vec<bool>,
+    /// Each element's straight, target and fitted nets, computed when first blended: the
+    /// search blends a rejected element's neighbourhood again every round, and the target
+    /// map's smooth corrections and the spline's evaluation cost more than the blend itself.
+    references: Vec<OnceLock<Box<(Net, Net, Net)>>>,
 }
 
 /// Factor of the fitted map.
@@ -239,6 +244,7 @@ impl<'a> Blended<'a> {
             ids: EntityIds::new(mesh, topo),
             factors,
             reduced: Vec::new(),
+            references: (0..fitted.n_elements()).map(|_| OnceLock::new()).collect(),
         };
         b.refresh();
         b
@@ -271,13 +277,18 @@ impl<'a> Blended<'a> {
 
     /// Blended net of element `e` under `factors`.
     fn net_with(&self, e: usize, factors: &[f32], reduced: bool) -> Net {
-        let f = self.fitted.bezier_net(e);
         if !reduced || factors.is_empty() {
-            return f;
+            return self.fitted.bezier_net(e);
         }
-        let (s, t) = (self.straight.bezier_net(e), self.target.bezier_net(e));
+        let (s, t, f) = &**self.references[e].get_or_init(|| {
+            Box::new((
+                self.straight.bezier_net(e),
+                self.target.bezier_net(e),
+                self.fitted.bezier_net(e),
+            ))
+        });
         let ids = self.ids.of(e);
-        let mut out = f;
+        let mut out = *f;
         for i in 0..self.points() {
             let x = factors[ids[i] as usize] as f64;
             if x >= 2.0 {
