@@ -40,7 +40,7 @@ impl LinOp for NormalMatrix {
 }
 
 /// Sample points of one element: lattice point, Bernstein values b_i and derivatives b'_ij.
-pub(super) struct Samples {
+struct Samples {
     dim: usize,
     /// Per sample: the 3^d lattice coordinates in {0,1,2}.
     points: Vec<[usize; 3]>,
@@ -100,7 +100,7 @@ impl Samples {
 }
 
 /// Corner number (VTK order) of a lattice point with coordinates in {0, 2}.
-pub(super) fn corner_of(l: [usize; 3]) -> usize {
+fn corner_of(l: [usize; 3]) -> usize {
     const TABLE: [usize; 8] = [0, 1, 3, 2, 4, 5, 7, 6];
     TABLE[l[0] / 2 + 2 * (l[1] / 2) + 4 * (l[2] / 2)]
 }

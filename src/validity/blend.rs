@@ -351,16 +351,12 @@ pub fn blend_search_shared(
     params: &BlendParams,
     share: &dyn BlendShare,
 ) -> Result<BlendInfo, BlendError> {
-    let n = blended.n_elements();
-    let dim = blended.dim();
-    let np = blended.points();
+    let (n, dim, np) = (blended.n_elements(), blended.dim(), blended.points());
     let depth = params.certificate_depth;
     let all: Vec<usize> = (0..n).collect();
     let mine: &[usize] = share.mine().unwrap_or(&all);
     let mut owned = vec![share.mine().is_none(); n];
-    for &e in mine {
-        owned[e] = true;
-    }
+    mine.iter().for_each(|&e| owned[e] = true);
     let (straight_lower, reference) = straight_reference(certifier, blended, depth, mine, share)?;
     let straight_ratio: Vec<f64> = reference.iter().map(|r| r.0).collect();
     let mut sorted = share.concat(mine.iter().map(|&e| straight_ratio[e]).collect());
