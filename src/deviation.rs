@@ -66,11 +66,9 @@ fn cross(a: V3, b: V3) -> V3 {
     ]
 }
 
-/// The distance from `x` to a planar quad (corners within 10⁻¹² of its diameter of one plane)
-/// when `x` projects inside it: then it is the distance to the plane. `None` otherwise (a
-/// curved patch, or `x` beside the quad). Most queries are of this kind (points of flat
-/// boundary faces over their own facet), and it spares them the Gauss–Newton iteration.
-fn planar_inside_distance(x: V3, c: &[V3; 4]) -> Option<f64> {
+/// The unit normal of a quad with cyclic corners `c` when it is planar (corners within 10⁻¹²
+/// of its diameter of one plane), oriented by its diagonals; `None` for a curved patch.
+fn plane_normal(c: &[V3; 4]) -> Option<V3> {
     let n = cross(sub(c[2], c[0]), sub(c[3], c[1]));
     let nn = norm(n);
     let diameter = norm(sub(c[2], c[0])).max(norm(sub(c[3], c[1])));
@@ -81,20 +79,64 @@ fn planar_inside_distance(x: V3, c: &[V3; 4]) -> Option<f64> {
     let off = (1..4)
         .map(|i| dot(n, sub(c[i], c[0])).abs())
         .fold(0.0, f64::max);
-    if off > 1e-12 * diameter {
-        return None;
-    }
-    // Inside: on the inner side of every edge (the diagonals' normal orients a convex quad's
-    // edges all the same way; a non-convex quad fails for some inside points and falls back).
-    let inside = (0..4).all(|i| {
+    (off <= 1e-12 * diameter).then_some(n)
+}
+
+/// Whether a planar quad with unit normal `n` is strictly convex (every corner turns the way
+/// the diagonals' normal orients it).
+fn is_convex(c: &[V3; 4], n: V3) -> bool {
+    (0..4).all(|i| {
+        let a = sub(c[(i + 1) % 4], c[i]);
+        let b = sub(c[(i + 2) % 4], c[(i + 1) % 4]);
+        dot(cross(a, b), n) > 0.0
+    })
+}
+
+/// Whether `x` projects inside the planar quad `c` with unit normal `n`: on the inner side of
+/// every edge (the diagonals' normal orients a convex quad's edges all the same way; a
+/// non-convex quad fails for some inside points and falls back).
+fn projects_inside(x: V3, c: &[V3; 4], n: V3) -> bool {
+    (0..4).all(|i| {
         let e = sub(c[(i + 1) % 4], c[i]);
         dot(cross(e, sub(x, c[i])), n) >= 0.0
-    });
-    inside.then(|| dot(n, sub(x, c[0])).abs())
+    })
+}
+
+/// The distance from `x` to a planar quad when `x` projects inside it: then it is the distance
+/// to the plane. `None` otherwise (a curved patch, or `x` beside the quad). Most queries are of
+/// this kind (points of flat boundary faces over their own facet), and it spares them the
+/// Gauss–Newton iteration.
+#[cfg(test)]
+fn planar_inside_distance(x: V3, c: &[V3; 4]) -> Option<f64> {
+    let n = plane_normal(c)?;
+    projects_inside(x, c, n).then(|| dot(n, sub(x, c[0])).abs())
 }
 
 /// Distance from `x` to the bilinear patch with cyclic corners `c`.
+#[cfg(test)]
 fn bilinear_distance(x: V3, c: &[V3; 4]) -> f64 {
+    let plane = plane_normal(c).map(|n| (n, is_convex(c, n)));
+    quad_distance(x, c, plane)
+}
+
+/// [`bilinear_distance`] given the quad's plane, when planar: its unit normal and whether it is
+/// convex. Over a planar quad the distance is the plane's; beside a convex planar quad the
+/// nearest point is on an edge; otherwise (curved or non-convex) the better of the edges and a
+/// Gauss–Newton projection.
+fn quad_distance(x: V3, c: &[V3; 4], plane: Option<(V3, bool)>) -> f64 {
+    let edges = || {
+        (0..4)
+            .map(|i| segment_distance(x, c[i], c[(i + 1) % 4]))
+            .fold(f64::INFINITY, f64::min)
+    };
+    if let Some((n, convex)) = plane {
+        if projects_inside(x, c, n) {
+            return dot(n, sub(x, c[0])).abs();
+        }
+        if convex {
+            return edges();
+        }
+    }
     let s = |u: f64, v: f64| -> V3 {
         std::array::from_fn(|k| {
             (1.0 - u) * (1.0 - v) * c[0][k]
@@ -103,12 +145,7 @@ fn bilinear_distance(x: V3, c: &[V3; 4]) -> f64 {
                 + (1.0 - u) * v * c[3][k]
         })
     };
-    if let Some(d) = planar_inside_distance(x, c) {
-        return d;
-    }
-    let mut best = (0..4)
-        .map(|i| segment_distance(x, c[i], c[(i + 1) % 4]))
-        .fold(f64::INFINITY, f64::min);
+    let mut best = edges();
     // Gauss–Newton on |S(u, v) − x|², clamped to the unit square.
     let (mut u, mut v) = (0.5, 0.5);
     for _ in 0..10 {
@@ -144,6 +181,10 @@ fn bilinear_distance(x: V3, c: &[V3; 4]) -> f64 {
 struct BoundaryTree<'a> {
     mesh: &'a LinearMesh,
     facets: Vec<&'a [u32]>,
+    /// Each facet's box: a lower bound of its distance, checked before computing it.
+    boxes: Vec<(V3, V3)>,
+    /// Each quad facet's plane when planar: unit normal and convexity ([`quad_distance`]).
+    planes: Vec<Option<(V3, bool)>>,
     /// Nodes in depth-first order; node 0 is the root.
     nodes: Vec<TreeNode>,
     /// Facet ids, permuted so that every node's facets are contiguous.
@@ -204,9 +245,19 @@ impl<'a> BoundaryTree<'a> {
             });
             Self::split(&boxes, &mut order, 0, 0, &mut nodes);
         }
+        let planes = facets
+            .iter()
+            .map(|f| {
+                let c: [V3; 4] = std::array::from_fn(|i| mesh.coords[f[i % f.len()] as usize]);
+                let n = plane_normal(&c).filter(|_| f.len() == 4)?;
+                Some((n, is_convex(&c, n)))
+            })
+            .collect();
         BoundaryTree {
             mesh,
             facets,
+            boxes,
+            planes,
             nodes,
             order,
         }
@@ -266,7 +317,7 @@ impl<'a> BoundaryTree<'a> {
         if self.facets[f].len() == 2 {
             segment_distance(x, c(0), c(1))
         } else {
-            bilinear_distance(x, &[c(0), c(1), c(2), c(3)])
+            quad_distance(x, &[c(0), c(1), c(2), c(3)], self.planes[f])
         }
     }
 
@@ -309,7 +360,9 @@ impl<'a> BoundaryTree<'a> {
             let node = &self.nodes[at as usize];
             if node.end > 0 {
                 for &f in &self.order[node.start as usize..node.end as usize] {
-                    best = best.min(self.facet_distance(x, f as usize));
+                    if box_distance(x, &self.boxes[f as usize]) < best {
+                        best = best.min(self.facet_distance(x, f as usize));
+                    }
                 }
                 continue;
             }

@@ -121,17 +121,35 @@ enum Matrix {
     Own(Box<Local>),
 }
 
-/// Assemble K.
-pub fn assemble_matrix(space: &dyn FitSpace, blocks: &ElementBlocks) -> NormalMatrix {
+/// The element matrices of K: each element's columns (`elem_cols[elem_ptr[e]..]`, in the
+/// pattern's node order for pattern elements) and its matrix, shared by the elements of one
+/// (pattern, weight mask) through `table`.
+struct ElementMatrices {
+    kinds: Vec<Matrix>,
+    elem_ptr: Vec<usize>,
+    elem_cols: Vec<u32>,
+    table_index: Vec<u32>,
+    table: Vec<Vec<f64>>,
+}
+
+impl ElementMatrices {
+    fn matrix(&self, e: usize) -> &[f64] {
+        match &self.kinds[e] {
+            Matrix::Shared(_) => &self.table[self.table_index[e] as usize],
+            Matrix::Own(l) => &l.k,
+        }
+    }
+}
+
+/// 1. Pattern keys (or own matrices), the element columns, flat, and the shared table.
+fn element_matrices(space: &dyn FitSpace, blocks: &ElementBlocks) -> ElementMatrices {
     let ne = space.n_elements();
-    let n = space.control_points().len();
     let nb = if space.dim() == 2 { 9 } else { 27 };
     let g_of = |e: usize| -> Vec<f64> {
         let (gd, gr) = &blocks.cache[&blocks.masks[e]];
         gd.iter().zip(gr).map(|(a, b)| a + b).collect()
     };
 
-    // 1. Pattern keys (or own matrices) and the element columns, flat.
     let kinds: Vec<Matrix> = (0..ne)
         .into_par_iter()
         .map_init(Vec::new, |ids, e| match space.element_pattern(e, ids) {
@@ -196,16 +214,27 @@ pub fn assemble_matrix(space: &dyn FitSpace, blocks: &ElementBlocks) -> NormalMa
             k
         })
         .collect();
-    let matrix_of = |e: usize| -> &[f64] {
-        match &kinds[e] {
-            Matrix::Shared(_) => &table[table_index[e] as usize],
-            Matrix::Own(l) => &l.k,
-        }
-    };
+    ElementMatrices {
+        kinds,
+        elem_ptr,
+        elem_cols,
+        table_index,
+        table,
+    }
+}
 
-    // 2. Incidence: control point → (element, local index), in element order.
+/// 2. Incidence: control point c's (element, local index) pairs are
+/// `start[c]..start[c + 1]` of `inc_elem` and `inc_local`, in element order.
+struct Incidence {
+    start: Vec<usize>,
+    inc_elem: Vec<u32>,
+    inc_local: Vec<u16>,
+}
+
+fn incidence(elem_cols: &[u32], elem_ptr: &[usize], n: usize) -> Incidence {
+    let ne = elem_ptr.len() - 1;
     let mut start = vec![0usize; n + 1];
-    for &c in &elem_cols {
+    for &c in elem_cols {
         start[c as usize + 1] += 1;
     }
     for c in 0..n {
@@ -227,10 +256,23 @@ pub fn assemble_matrix(space: &dyn FitSpace, blocks: &ElementBlocks) -> NormalMa
             *f += 1;
         }
     }
-    drop(fill);
+    Incidence {
+        start,
+        inc_elem,
+        inc_local,
+    }
+}
+
+/// Assemble K.
+pub fn assemble_matrix(space: &dyn FitSpace, blocks: &ElementBlocks) -> NormalMatrix {
+    let n = space.control_points().len();
+    let em = element_matrices(space, blocks);
+    let (elem_ptr, elem_cols) = (&em.elem_ptr, &em.elem_cols);
+    let matrix_of = |e: usize| em.matrix(e);
+    let inc = incidence(elem_cols, elem_ptr, n);
     let incident = |c: usize| {
-        let r = start[c]..start[c + 1];
-        inc_elem[r.clone()].iter().zip(&inc_local[r])
+        let r = inc.start[c]..inc.start[c + 1];
+        inc.inc_elem[r.clone()].iter().zip(&inc.inc_local[r])
     };
 
     // 3. Rows. `mark[j] == c` once column j is in row c; at most ~32 markers are made per pass

@@ -30,99 +30,21 @@
 //! with every element certified: the guarantee holds for every input whose straight
 //! elevation is certified valid, whatever the fit does.
 
+mod entities;
+mod shape;
+
+pub use entities::{EntityIds, entity_ids};
+use shape::{corner_ratio, hadamard_upper};
+pub use shape::{lattice_scaled_jacobian, max_det_bound};
+
 use super::{Certifier, DetBounds, bernstein_min_bounds, certify_screened, det_jacobian_bernstein};
 use crate::math::BezierElements;
 use crate::mesh::{LinearMesh, Topology, vec3};
 use rayon::prelude::*;
+use std::sync::OnceLock;
 
 /// Bernstein nets, 9 (2D) or 27 (3D) points, index 9z + 3y + x.
 pub type Net = [[f64; 3]; 27];
-
-/// Global ids of the mesh entities of an element's 3^d Bernstein points: vertices first
-/// (ids 0..nv), then edges, faces (3D) and cells.
-pub struct EntityIds<'a> {
-    mesh: &'a LinearMesh,
-    topo: &'a Topology,
-}
-
-impl<'a> EntityIds<'a> {
-    pub fn new(mesh: &'a LinearMesh, topo: &'a Topology) -> Self {
-        EntityIds { mesh, topo }
-    }
-
-    /// Number of entities (the length of a λ vector).
-    pub fn len(&self) -> usize {
-        self.topo.n_vertices
-            + self.topo.edges.len()
-            + self.topo.faces.len()
-            + self.mesh.n_elements()
-    }
-
-    /// Whether the mesh has no entity.
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
-
-    /// Entity ids of the Bernstein points of element `e` (the first 3^d entries).
-    pub fn of(&self, e: usize) -> [u32; 27] {
-        entity_ids(self.mesh, self.topo, e)
-    }
-}
-
-/// See [`EntityIds::of`].
-pub fn entity_ids(mesh: &LinearMesh, topo: &Topology, e: usize) -> [u32; 27] {
-    use crate::mesh::topology::HEX_VERTEX_PARAMS;
-    let dim = mesh.dim;
-    let n = if dim == 2 { 9 } else { 27 };
-    let verts = mesh.element(e);
-    let nv = topo.n_vertices as u32;
-    let ne = topo.edges.len() as u32;
-    let nf = topo.faces.len() as u32;
-    let edges_per = if dim == 2 { 4 } else { 12 };
-    let mut out = [u32::MAX; 27];
-    for (i, slot) in out.iter_mut().enumerate().take(n) {
-        let l = [i % 3, (i / 3) % 3, i / 9];
-        // The coordinates at ½ (no allocation: this runs for every point of every judged
-        // element).
-        let (mut ones, mut n_ones) = ([0usize; 3], 0);
-        for k in 0..dim {
-            if l[k] == 1 {
-                ones[n_ones] = k;
-                n_ones += 1;
-            }
-        }
-        *slot = match (dim, n_ones) {
-            (_, 0) => {
-                let c = HEX_VERTEX_PARAMS
-                    .iter()
-                    .take(1 << dim)
-                    .position(|p| (0..dim).all(|k| 2 * p[k] as usize == l[k]))
-                    .expect("corner of the lattice");
-                verts[c]
-            }
-            (2, 1) => {
-                // Quad edges are its sides: side 2j + s where coordinate j (≠ the edge's
-                // direction) equals s.
-                let j = 1 - ones[0];
-                nv + topo.element_edges[edges_per * e + 2 * j + l[j] / 2]
-            }
-            (3, 1) => {
-                // Hex edge 4k + a + 2b, (a, b) the other two coordinates in axis order.
-                let k = ones[0];
-                let others = [(k + 1) % 3, (k + 2) % 3];
-                let (a, b) = (others[0].min(others[1]), others[0].max(others[1]));
-                let local = 4 * k + l[a] / 2 + 2 * (l[b] / 2);
-                nv + topo.element_edges[edges_per * e + local]
-            }
-            (3, 2) => {
-                let j = (0..3).find(|&j| l[j] != 1).expect("one coordinate off 1");
-                nv + ne + topo.element_faces[6 * e + 2 * j + l[j] / 2]
-            }
-            _ => nv + ne + nf + e as u32,
-        };
-    }
-    out
-}
 
 /// Parameters of [`blend_search`].
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
@@ -217,6 +139,10 @@ pub struct Blended<'a> {
     pub factors: Vec<f32>,
     /// Elements with a factor below 2 on one of their points.
     reduced: Vec<bool>,
+    /// Each element's straight, target and fitted nets, computed when first blended: the
+    /// search blends a rejected element's neighbourhood again every round, and the target
+    /// map's smooth corrections and the spline's evaluation cost more than the blend itself.
+    references: Vec<OnceLock<Box<(Net, Net, Net)>>>,
 }
 
 /// Factor of the fitted map.
@@ -239,6 +165,7 @@ impl<'a> Blended<'a> {
             ids: EntityIds::new(mesh, topo),
             factors,
             reduced: Vec::new(),
+            references: (0..fitted.n_elements()).map(|_| OnceLock::new()).collect(),
         };
         b.refresh();
         b
@@ -271,13 +198,18 @@ impl<'a> Blended<'a> {
 
     /// Blended net of element `e` under `factors`.
     fn net_with(&self, e: usize, factors: &[f32], reduced: bool) -> Net {
-        let f = self.fitted.bezier_net(e);
         if !reduced || factors.is_empty() {
-            return f;
+            return self.fitted.bezier_net(e);
         }
-        let (s, t) = (self.straight.bezier_net(e), self.target.bezier_net(e));
+        let (s, t, f) = &**self.references[e].get_or_init(|| {
+            Box::new((
+                self.straight.bezier_net(e),
+                self.target.bezier_net(e),
+                self.fitted.bezier_net(e),
+            ))
+        });
         let ids = self.ids.of(e);
-        let mut out = f;
+        let mut out = *f;
         for i in 0..self.points() {
             let x = factors[ids[i] as usize] as f64;
             if x >= 2.0 {
@@ -303,106 +235,6 @@ impl BezierElements for Blended<'_> {
     fn bezier_net(&self, e: usize) -> Net {
         self.net_with(e, &self.factors, self.is_reduced(e))
     }
-}
-
-/// Largest Bernstein coefficient of det J: an upper bound of max det J over the element.
-pub fn max_det_bound(dim: usize, net: &Net) -> f64 {
-    det_jacobian_bernstein(dim, net)
-        .coef
-        .iter()
-        .copied()
-        .fold(f64::NEG_INFINITY, f64::max)
-}
-
-/// Smallest scaled Jacobian det J / (|J₁| |J₂| (|J₃|)) of a quadratic Bézier element over the
-/// lattice {0, ½, 1}^d (sampled, not certified: a shape measure, not a validity test).
-///
-/// The columns ∂x/∂ξ_k at the lattice are tensor products of 1-D operators (values B and
-/// derivatives D of the quadratic Bernstein basis at 0, ½, 1), applied one axis at a time.
-pub fn lattice_scaled_jacobian(dim: usize, net: &Net) -> f64 {
-    const B: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.25, 0.5, 0.25], [0.0, 0.0, 1.0]];
-    const D: [[f64; 3]; 3] = [[-2.0, 2.0, 0.0], [-1.0, 0.0, 1.0], [0.0, -2.0, 2.0]];
-    let n = if dim == 2 { 9 } else { 27 };
-    // `m` along `axis`: out[.., i, ..] = Σ_a m[i][a] src[.., a, ..].
-    let along = |src: &Net, axis: usize, m: &[[f64; 3]; 3]| -> Net {
-        let stride = [1, 3, 9][axis];
-        let mut out = [[0.0f64; 3]; 27];
-        for (o, slot) in out.iter_mut().enumerate().take(n) {
-            let i = (o / stride) % 3;
-            let base = o - i * stride;
-            let (p0, p1, p2) = (src[base], src[base + stride], src[base + 2 * stride]);
-            *slot = std::array::from_fn(|q| m[i][0] * p0[q] + m[i][1] * p1[q] + m[i][2] * p2[q]);
-        }
-        out
-    };
-    let z = |src: Net, m: &[[f64; 3]; 3]| if dim == 2 { src } else { along(&src, 2, m) };
-    let bx = along(net, 0, &B);
-    let cols = [
-        z(along(&along(net, 0, &D), 1, &B), &B),
-        z(along(&bx, 1, &D), &B),
-        if dim == 2 {
-            [[0.0; 3]; 27]
-        } else {
-            along(&along(&bx, 1, &B), 2, &D)
-        },
-    ];
-    let mut min = f64::INFINITY;
-    for p in 0..n {
-        let jac = [cols[0][p], cols[1][p], cols[2][p]];
-        let sj = if dim == 2 {
-            let det = jac[0][0] * jac[1][1] - jac[0][1] * jac[1][0];
-            det / (vec3::norm(jac[0]) * vec3::norm(jac[1]))
-        } else {
-            let det = vec3::dot(vec3::cross(jac[0], jac[1]), jac[2]);
-            det / (vec3::norm(jac[0]) * vec3::norm(jac[1]) * vec3::norm(jac[2]))
-        };
-        min = min.min(if sj.is_nan() { -1.0 } else { sj });
-    }
-    min
-}
-
-/// An upper bound of max det J: the product over directions of the largest Bernstein
-/// coefficient norm of the column ∂x/∂ξ_k (Hadamard's inequality; cheap, loose when sheared).
-fn hadamard_upper(dim: usize, net: &Net) -> f64 {
-    let nz = if dim == 2 { 1 } else { 3 };
-    let mut m = [0.0f64; 3];
-    for k in 0..nz {
-        for j in 0..3 {
-            for i in 0..3 {
-                let p = net[i + 3 * j + 9 * k];
-                let mut d = |dir: usize, q: [f64; 3]| {
-                    let v = vec3::sub(q, p);
-                    m[dir] = m[dir].max(2.0 * vec3::norm(v));
-                };
-                if i < 2 {
-                    d(0, net[i + 1 + 3 * j + 9 * k]);
-                }
-                if j < 2 {
-                    d(1, net[i + 3 * (j + 1) + 9 * k]);
-                }
-                if dim == 3 && k < 2 {
-                    d(2, net[i + 3 * j + 9 * (k + 1)]);
-                }
-            }
-        }
-    }
-    if dim == 2 {
-        m[0] * m[1]
-    } else {
-        m[0] * m[1] * m[2]
-    }
-}
-
-/// Jacobian ratio of a straight element from its corner values of det J (exact for quads,
-/// whose det J is affine in each coordinate).
-fn corner_ratio(mesh: &LinearMesh, e: usize) -> f64 {
-    let npe = mesh.nodes_per_element();
-    let x = mesh.element_coords(e);
-    let (mut jac, mut scaled) = ([0.0; 8], [0.0; 8]);
-    crate::mesh::linear::corner_jacobians(mesh.dim, &x[..npe], &mut jac[..npe], &mut scaled[..npe]);
-    let lo = jac[..npe].iter().copied().fold(f64::INFINITY, f64::min);
-    let hi = jac[..npe].iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    lo / hi
 }
 
 /// A straight element's Jacobian ratio (from its corners) and lattice scaled Jacobian.
@@ -519,16 +351,12 @@ pub fn blend_search_shared(
     params: &BlendParams,
     share: &dyn BlendShare,
 ) -> Result<BlendInfo, BlendError> {
-    let n = blended.n_elements();
-    let dim = blended.dim();
-    let np = blended.points();
+    let (n, dim, np) = (blended.n_elements(), blended.dim(), blended.points());
     let depth = params.certificate_depth;
     let all: Vec<usize> = (0..n).collect();
     let mine: &[usize] = share.mine().unwrap_or(&all);
     let mut owned = vec![share.mine().is_none(); n];
-    for &e in mine {
-        owned[e] = true;
-    }
+    mine.iter().for_each(|&e| owned[e] = true);
     let (straight_lower, reference) = straight_reference(certifier, blended, depth, mine, share)?;
     let straight_ratio: Vec<f64> = reference.iter().map(|r| r.0).collect();
     let mut sorted = share.concat(mine.iter().map(|&e| straight_ratio[e]).collect());
@@ -617,52 +445,23 @@ pub fn blend_search_shared(
     }
     let mut reduced = vec![false; if bad.is_empty() { 0 } else { n }];
     if params.global && !bad.is_empty() {
-        // Bisection on one factor in [0, 2]; 0 (straight) is accepted.
-        let (mut lo, mut hi) = (0.0f32, FITTED);
-        for _ in 0..2 * params.max_bisections.max(1) {
-            let mid = 0.5 * (lo + hi);
-            factors.fill(mid);
-            reduced.fill(true);
-            let r = judge(blended, &factors, &reduced, mine);
-            info.rounds += 1;
-            if share.sum(r.iter().filter(|r| !r.1).count()) == 0 {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
-        factors.fill(lo);
-        reduced.fill(true);
-        let r = judge(blended, &factors, &reduced, mine);
+        let r = global_bisection(
+            &judge,
+            blended,
+            &mut factors,
+            params,
+            mine,
+            share,
+            &mut info,
+        );
         for (&e, r) in mine.iter().zip(&r) {
             lower[e] = r.2;
         }
+        reduced.fill(true);
         bad.clear();
     }
     while !bad.is_empty() {
-        let mut touched = vec![false; factors.len()];
-        for &e in &bad {
-            // Down to the target map first: a mix of fitted and target points can fail where
-            // neither map does, and giving up the target map's curvature is the last resort.
-            let ids = blended.ids.of(e);
-            let above = ids[..np].iter().any(|&id| factors[id as usize] > 1.0);
-            for &id in &ids[..np] {
-                let id = id as usize;
-                if !touched[id] && (!above || factors[id] > 1.0) {
-                    touched[id] = true;
-                    factors[id] = reduce(factors[id], params.max_bisections);
-                }
-            }
-        }
-        // Elements sharing a changed point contain one of the rejected elements' vertices.
-        let mut recheck: Vec<usize> = bad
-            .iter()
-            .flat_map(|&e| blended.ids.mesh.element(e).to_vec())
-            .flat_map(|v| blended.ids.topo.elements_at_vertex(v as usize).to_vec())
-            .map(|e| e as usize)
-            .collect();
-        recheck.sort_unstable();
-        recheck.dedup();
+        let mut recheck = reduce_rejected(blended, &mut factors, &bad, params.max_bisections);
         for &e in &recheck {
             reduced[e] = blended.ids.of(e)[..np]
                 .iter()
@@ -693,6 +492,77 @@ pub fn blend_search_shared(
     info.min_det_lower_bound = share.min(info.min_det_lower_bound);
     info.min_factor = share.min(info.min_factor);
     Ok(info)
+}
+
+/// What the search learns of an element: (certified valid, accepted, certified lower bound).
+type Judged = (bool, bool, f64);
+
+/// The search's judge: the verdicts on `elements` of the blend with `factors`, `reduced`
+/// marking the elements with a point below the fitted map.
+type Judge<'j> = dyn Fn(&Blended, &[f32], &[bool], &[usize]) -> Vec<Judged> + 'j;
+
+/// Global mode: bisection on one factor in [0, 2] for the whole mesh (0, the straight
+/// elevation, is accepted). Leaves the factor found in `factors` and returns the verdicts on
+/// `mine` there.
+fn global_bisection(
+    judge: &Judge,
+    blended: &Blended,
+    factors: &mut [f32],
+    params: &BlendParams,
+    mine: &[usize],
+    share: &dyn BlendShare,
+    info: &mut BlendInfo,
+) -> Vec<Judged> {
+    let reduced = vec![true; blended.n_elements()];
+    let (mut lo, mut hi) = (0.0f32, FITTED);
+    for _ in 0..2 * params.max_bisections.max(1) {
+        let mid = 0.5 * (lo + hi);
+        factors.fill(mid);
+        let r = judge(blended, factors, &reduced, mine);
+        info.rounds += 1;
+        if share.sum(r.iter().filter(|r| !r.1).count()) == 0 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    factors.fill(lo);
+    judge(blended, factors, &reduced, mine)
+}
+
+/// One round's reduction: the factors of the rejected elements `bad` lowered ([`reduce`]);
+/// returns the elements to judge again (sorted), those sharing a changed point.
+fn reduce_rejected(
+    blended: &Blended,
+    factors: &mut [f32],
+    bad: &[usize],
+    max_bisections: usize,
+) -> Vec<usize> {
+    let np = blended.points();
+    let mut touched = vec![false; factors.len()];
+    for &e in bad {
+        // Down to the target map first: a mix of fitted and target points can fail where
+        // neither map does, and giving up the target map's curvature is the last resort.
+        let ids = blended.ids.of(e);
+        let above = ids[..np].iter().any(|&id| factors[id as usize] > 1.0);
+        for &id in &ids[..np] {
+            let id = id as usize;
+            if !touched[id] && (!above || factors[id] > 1.0) {
+                touched[id] = true;
+                factors[id] = reduce(factors[id], max_bisections);
+            }
+        }
+    }
+    // Elements sharing a changed point contain one of the rejected elements' vertices.
+    let mut recheck: Vec<usize> = bad
+        .iter()
+        .flat_map(|&e| blended.ids.mesh.element(e).to_vec())
+        .flat_map(|v| blended.ids.topo.elements_at_vertex(v as usize).to_vec())
+        .map(|e| e as usize)
+        .collect();
+    recheck.sort_unstable();
+    recheck.dedup();
+    recheck
 }
 
 /// Fill the reduction counts and the worst reduced elements of `info`.

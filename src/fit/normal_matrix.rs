@@ -1,0 +1,419 @@
+//! The fit's normal matrix K = Σ_e E_eᵀ G_e E_e: the sample points and weights that make the
+//! element blocks G_e (one per weight mask), the assembled CSR form ([`NormalMatrix`], built by
+//! [`super::assembly`]) and the matrix-free product ([`MatrixFree`]).
+
+use super::*;
+
+/// The symmetric matrix K in CSR form, applied to 3-component vectors.
+pub struct NormalMatrix {
+    pub n: usize,
+    pub indptr: Vec<usize>,
+    pub indices: Vec<u32>,
+    pub data: Vec<f64>,
+}
+
+impl LinOp for NormalMatrix {
+    fn nrows(&self) -> usize {
+        self.n
+    }
+    fn apply(&self, x: &[[f64; 3]], y: &mut [[f64; 3]]) {
+        y.par_iter_mut()
+            .enumerate()
+            .with_min_len(256)
+            .for_each(|(r, y)| {
+                let (lo, hi) = (self.indptr[r], self.indptr[r + 1]);
+                *y = crate::solve::row_dot(&self.indices[lo..hi], &self.data[lo..hi], x);
+            });
+    }
+    fn diagonal(&self) -> Vec<f64> {
+        (0..self.n)
+            .map(|r| {
+                (self.indptr[r]..self.indptr[r + 1])
+                    .find(|&k| self.indices[k] as usize == r)
+                    .map_or(0.0, |k| self.data[k])
+            })
+            .collect()
+    }
+    fn csr(&self) -> Option<(&[usize], &[u32], &[f64])> {
+        Some((&self.indptr, &self.indices, &self.data))
+    }
+}
+
+/// Sample points of one element: lattice point, Bernstein values b_i and derivatives b'_ij.
+struct Samples {
+    dim: usize,
+    /// Per sample: the 3^d lattice coordinates in {0,1,2}.
+    points: Vec<[usize; 3]>,
+    values: Vec<[f64; 27]>,
+    derivs: Vec<[[f64; 27]; 3]>,
+}
+
+impl Samples {
+    fn new(dim: usize) -> Self {
+        let n = if dim == 2 { 9 } else { 27 };
+        let nz = if dim == 2 { 1 } else { 3 };
+        let db = |t: f64| [-2.0 * (1.0 - t), 2.0 * (1.0 - 2.0 * t), 2.0 * t];
+        let mut s = Samples {
+            dim,
+            points: Vec::new(),
+            values: Vec::new(),
+            derivs: Vec::new(),
+        };
+        for i in 0..n {
+            let l = [i % 3, (i / 3) % 3, i / 9];
+            let t = l.map(|c| c as f64 / 2.0);
+            let b = [
+                bernstein2(t[0]),
+                bernstein2(t[1]),
+                if dim == 2 {
+                    [1.0, 0.0, 0.0]
+                } else {
+                    bernstein2(t[2])
+                },
+            ];
+            let d = [db(t[0]), db(t[1]), db(t[2])];
+            let mut v = [0.0; 27];
+            let mut dv = [[0.0; 27]; 3];
+            for c in 0..nz {
+                for bb in 0..3 {
+                    for a in 0..3 {
+                        let o = a + 3 * bb + 9 * c;
+                        v[o] = b[0][a] * b[1][bb] * b[2][c];
+                        dv[0][o] = d[0][a] * b[1][bb] * b[2][c];
+                        dv[1][o] = b[0][a] * d[1][bb] * b[2][c];
+                        if dim == 3 {
+                            dv[2][o] = b[0][a] * b[1][bb] * d[2][c];
+                        }
+                    }
+                }
+            }
+            s.points.push(l);
+            s.values.push(v);
+            s.derivs.push(dv);
+        }
+        s
+    }
+
+    fn is_corner(&self, i: usize) -> bool {
+        self.points[i][..self.dim].iter().all(|&c| c != 1)
+    }
+}
+
+/// Corner number (VTK order) of a lattice point with coordinates in {0, 2}.
+fn corner_of(l: [usize; 3]) -> usize {
+    const TABLE: [usize; 8] = [0, 1, 3, 2, 4, 5, 7, 6];
+    TABLE[l[0] / 2 + 2 * (l[1] / 2) + 4 * (l[2] / 2)]
+}
+
+/// The per-element blocks G_e = G^d_e + G^r_e of the normal equations on the Bernstein points.
+/// They depend on an element only through which of its corners are boundary vertices and
+/// which samples lie on sharp features (the position weights), so one block per pattern is
+/// kept.
+pub struct ElementBlocks {
+    /// Per element: bit c (c < 8) for a boundary corner c, bit 8 + i for a sample i that takes
+    /// the feature weight.
+    pub masks: Vec<u64>,
+    /// (G^d, G^r), row-major 3^d × 3^d, per mask.
+    pub cache: HashMap<u64, (Vec<f64>, Vec<f64>)>,
+}
+
+/// Position weight of sample `i` (lattice point `l`) of an element with weight mask `mask`.
+pub(super) fn sample_weight(
+    w: &FitWeights,
+    mask: u64,
+    i: usize,
+    l: [usize; 3],
+    corner: bool,
+) -> f64 {
+    size_scale(mask) * sample_weight_unscaled(w, mask, i, l, corner)
+}
+
+/// Bit offset of an element's size level in its weight mask.
+const LEVEL_SHIFT: u32 = 48;
+
+/// The weight factor 4^k of size level k (bits 48.. of the mask; see [`size_levels`]).
+fn size_scale(mask: u64) -> f64 {
+    let k = (mask >> LEVEL_SHIFT) as i32;
+    (4.0f64).powi(k)
+}
+
+/// The size level stored in a weight mask.
+pub fn mask_level(mask: u64) -> u16 {
+    (mask >> LEVEL_SHIFT) as u16
+}
+
+fn sample_weight_unscaled(w: &FitWeights, mask: u64, i: usize, l: [usize; 3], corner: bool) -> f64 {
+    if mask & (1 << (8 + i)) != 0 {
+        w.feature
+    } else if !corner {
+        w.midpoint
+    } else if mask & (1 << corner_of(l)) != 0 {
+        w.boundary_corner
+    } else {
+        w.corner
+    }
+}
+
+/// Size levels below this many halvings of the largest element's size get no extra weight, so
+/// meshes whose element sizes vary by less than 2^`LEVEL_DEAD_ZONE` keep plain weights.
+const LEVEL_DEAD_ZONE: f64 = 2.0;
+
+/// Per element, the size level k = max(0, ⌊log₂(h_max / h_e)⌋ − `LEVEL_DEAD_ZONE`), h_e the
+/// element's shortest edge: its samples are weighted by 4^k ≈ (h_max / h_e)², so the fit
+/// balances errors relative to the size of the element they distort. With plain weights the
+/// least-squares error of a large far-field cell leaks into the thin boundary-layer cells next
+/// to it (on a C-grid with wall cells 10⁻⁵ and far-field cells 10² long, errors of 10⁻² in cells
+/// 10⁻⁵ thin).
+pub fn size_levels(mesh: &LinearMesh) -> Vec<u16> {
+    let edges: &[[usize; 2]] = if mesh.dim == 2 {
+        &[[0, 1], [1, 2], [2, 3], [3, 0]]
+    } else {
+        &crate::mesh::topology::HEX_EDGES
+    };
+    let h: Vec<f64> = (0..mesh.n_elements())
+        .into_par_iter()
+        .map(|e| {
+            let x = mesh.element_coords(e);
+            edges
+                .iter()
+                .map(|&[a, b]| vec3::norm(vec3::sub(x[a], x[b])))
+                .fold(f64::INFINITY, f64::min)
+        })
+        .collect();
+    let hmax = h.iter().copied().fold(0.0, f64::max);
+    h.par_iter()
+        .map(|&he| {
+            if he > 0.0 && hmax > 0.0 {
+                ((hmax / he).log2().floor() - LEVEL_DEAD_ZONE).clamp(0.0, MAX_LEVEL as f64) as u16
+            } else {
+                0
+            }
+        })
+        .collect()
+}
+
+/// Largest size level (4^k stays far inside f64's range).
+const MAX_LEVEL: u16 = 200;
+
+/// Per control point, 2^−k with k the largest size level of the elements using it, or `None`
+/// when every level is 0. The fit solves D K D y = D b with D = diag(2^−k) and δ = D y: the
+/// same iterates under (block) Jacobi preconditioning, but the residual that stops CG then
+/// weighs every control point relative to its own elements' size, so far-field rows do not
+/// stop it before the boundary-layer rows have converged (powers of 2 keep K's values exact).
+pub(super) fn control_point_scales(space: &dyn FitSpace, levels: &[u16]) -> Option<Vec<f64>> {
+    if levels.iter().all(|&l| l == 0) {
+        return None;
+    }
+    let mut k = vec![0u16; space.control_points().len()];
+    let (mut offsets, mut cols, mut weights) = (Vec::new(), Vec::new(), Vec::new());
+    for (e, &l) in levels.iter().enumerate() {
+        if l == 0 {
+            continue;
+        }
+        space.element_rows(e, &mut offsets, &mut cols, &mut weights);
+        for &c in &cols {
+            let slot = &mut k[c as usize];
+            *slot = (*slot).max(l);
+        }
+    }
+    Some(k.iter().map(|&k| (0.5f64).powi(k as i32)).collect())
+}
+
+impl NormalMatrix {
+    /// K ← D K D for the diagonal D = diag(`d`).
+    pub fn scale_symmetric(&mut self, d: &[f64]) {
+        let (indptr, indices) = (&self.indptr, &self.indices);
+        crate::solve::block_jacobi::split_at_offsets(&mut self.data, indptr)
+            .into_par_iter()
+            .enumerate()
+            .for_each(|(r, row)| {
+                let cols = &indices[indptr[r]..indptr[r + 1]];
+                for (v, &c) in row.iter_mut().zip(cols) {
+                    *v *= d[r] * d[c as usize];
+                }
+            });
+    }
+}
+
+impl ElementBlocks {
+    pub fn new(space: &dyn FitSpace, mesh: &LinearMesh, topo: &Topology, w: &FitWeights) -> Self {
+        Self::with_features(space, mesh, topo, w, None)
+    }
+
+    /// [`ElementBlocks::new`], with the feature samples of `features` weighted by
+    /// [`FitWeights::feature`].
+    pub fn with_features(
+        space: &dyn FitSpace,
+        mesh: &LinearMesh,
+        topo: &Topology,
+        w: &FitWeights,
+        features: Option<&crate::mesh::features::Features>,
+    ) -> Self {
+        let dim = space.dim();
+        let nb = if dim == 2 { 9 } else { 27 };
+        let samples = Samples::new(dim);
+        let g_of = |mask: u64| -> (Vec<f64>, Vec<f64>) {
+            let mut gd = vec![0.0; nb * nb];
+            let mut gr = vec![0.0; nb * nb];
+            for i in 0..nb {
+                let corner = samples.is_corner(i);
+                let wd = sample_weight(w, mask, i, samples.points[i], corner);
+                let wr = size_scale(mask)
+                    * if corner {
+                        w.frame_corner
+                    } else {
+                        w.frame_midpoint
+                    };
+                let b = &samples.values[i];
+                for r in 0..nb {
+                    for c in 0..nb {
+                        gd[r * nb + c] += wd * b[r] * b[c];
+                        for j in 0..dim {
+                            let d = &samples.derivs[i][j];
+                            gr[r * nb + c] += wr * d[r] * d[c];
+                        }
+                    }
+                }
+            }
+            (gd, gr)
+        };
+        let levels = size_levels(mesh);
+        let masks: Vec<u64> = (0..space.n_elements())
+            .map(|e| {
+                let mut m = 0u64;
+                for (c, &v) in mesh.element(e).iter().enumerate() {
+                    if topo.vertex_on_boundary[v as usize] {
+                        m |= 1 << c;
+                    }
+                }
+                if let Some(f) = features {
+                    m |= features::sample_mask(f, mesh, e) << 8;
+                }
+                m | (levels[e] as u64) << LEVEL_SHIFT
+            })
+            .collect();
+        let mut cache = HashMap::new();
+        for &m in &masks {
+            cache.entry(m).or_insert_with(|| g_of(m));
+        }
+        ElementBlocks { masks, cache }
+    }
+}
+
+/// K applied without assembling it: y = Σ_e E_eᵀ G_e E_e x, element by element (the
+/// alternative to [`NormalMatrix`]; see BENCHMARKS.md for the measured comparison).
+pub struct MatrixFree<'a> {
+    pub space: &'a dyn FitSpace,
+    pub blocks: ElementBlocks,
+    /// Explicit extraction rows per element (offsets, columns, weights).
+    rows: Vec<(Vec<usize>, Vec<u32>, Vec<f64>)>,
+}
+
+impl<'a> MatrixFree<'a> {
+    pub fn new(
+        space: &'a dyn FitSpace,
+        mesh: &LinearMesh,
+        topo: &Topology,
+        w: &FitWeights,
+    ) -> Self {
+        let rows = (0..space.n_elements())
+            .into_par_iter()
+            .map(|e| {
+                let (mut o, mut c, mut w) = (Vec::new(), Vec::new(), Vec::new());
+                space.element_rows(e, &mut o, &mut c, &mut w);
+                (o, c, w)
+            })
+            .collect();
+        MatrixFree {
+            space,
+            blocks: ElementBlocks::new(space, mesh, topo, w),
+            rows,
+        }
+    }
+}
+
+impl LinOp for MatrixFree<'_> {
+    fn nrows(&self) -> usize {
+        self.space.control_points().len()
+    }
+    fn apply(&self, x: &[[f64; 3]], y: &mut [[f64; 3]]) {
+        let n = self.nrows();
+        let nb = if self.space.dim() == 2 { 9 } else { 27 };
+        let sum = (0..self.rows.len())
+            .into_par_iter()
+            .fold(
+                || vec![[0.0; 3]; n],
+                |mut acc, e| {
+                    let (o, c, w) = &self.rows[e];
+                    let mut b = [[0.0; 3]; 27];
+                    for i in 0..nb {
+                        for k in o[i]..o[i + 1] {
+                            let xc = x[c[k] as usize];
+                            for d in 0..3 {
+                                b[i][d] += w[k] * xc[d];
+                            }
+                        }
+                    }
+                    let (gd, gr) = &self.blocks.cache[&self.blocks.masks[e]];
+                    for i in 0..nb {
+                        let mut z = [0.0; 3];
+                        for j in 0..nb {
+                            let g = gd[i * nb + j] + gr[i * nb + j];
+                            for d in 0..3 {
+                                z[d] += g * b[j][d];
+                            }
+                        }
+                        for k in o[i]..o[i + 1] {
+                            let t = &mut acc[c[k] as usize];
+                            for d in 0..3 {
+                                t[d] += w[k] * z[d];
+                            }
+                        }
+                    }
+                    acc
+                },
+            )
+            .reduce(
+                || vec![[0.0; 3]; n],
+                |mut a, b| {
+                    for (p, q) in a.iter_mut().zip(&b) {
+                        for d in 0..3 {
+                            p[d] += q[d];
+                        }
+                    }
+                    a
+                },
+            );
+        y.copy_from_slice(&sum);
+    }
+    fn diagonal(&self) -> Vec<f64> {
+        let n = self.nrows();
+        let nb = if self.space.dim() == 2 { 9 } else { 27 };
+        let mut diag = vec![0.0; n];
+        for (e, (o, c, w)) in self.rows.iter().enumerate() {
+            let (gd, gr) = &self.blocks.cache[&self.blocks.masks[e]];
+            // diag_c = Σ_e Σ_ij R_ic G_ij R_jc
+            let mut cols: Vec<u32> = c.clone();
+            cols.sort_unstable();
+            cols.dedup();
+            for &col in &cols {
+                let r: Vec<f64> = (0..nb)
+                    .map(|i| {
+                        (o[i]..o[i + 1])
+                            .filter(|&k| c[k] == col)
+                            .map(|k| w[k])
+                            .sum()
+                    })
+                    .collect();
+                let mut s = 0.0;
+                for i in 0..nb {
+                    for j in 0..nb {
+                        s += r[i] * (gd[i * nb + j] + gr[i * nb + j]) * r[j];
+                    }
+                }
+                diag[col as usize] += s;
+            }
+        }
+        diag
+    }
+}

@@ -1,0 +1,106 @@
+//! Shape measures of quadratic Bézier elements used by the blend's quality test: bounds of
+//! max det J, the lattice scaled Jacobian, and the straight element's Jacobian ratio.
+
+use super::Net;
+use crate::mesh::{LinearMesh, vec3};
+use crate::validity::det_jacobian_bernstein;
+
+/// Largest Bernstein coefficient of det J: an upper bound of max det J over the element.
+pub fn max_det_bound(dim: usize, net: &Net) -> f64 {
+    det_jacobian_bernstein(dim, net)
+        .coef
+        .iter()
+        .copied()
+        .fold(f64::NEG_INFINITY, f64::max)
+}
+
+/// Smallest scaled Jacobian det J / (|J₁| |J₂| (|J₃|)) of a quadratic Bézier element over the
+/// lattice {0, ½, 1}^d (sampled, not certified: a shape measure, not a validity test).
+///
+/// The columns ∂x/∂ξ_k at the lattice are tensor products of 1-D operators (values B and
+/// derivatives D of the quadratic Bernstein basis at 0, ½, 1), applied one axis at a time.
+pub fn lattice_scaled_jacobian(dim: usize, net: &Net) -> f64 {
+    const B: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.25, 0.5, 0.25], [0.0, 0.0, 1.0]];
+    const D: [[f64; 3]; 3] = [[-2.0, 2.0, 0.0], [-1.0, 0.0, 1.0], [0.0, -2.0, 2.0]];
+    let n = if dim == 2 { 9 } else { 27 };
+    // `m` along `axis`: out[.., i, ..] = Σ_a m[i][a] src[.., a, ..].
+    let along = |src: &Net, axis: usize, m: &[[f64; 3]; 3]| -> Net {
+        let stride = [1, 3, 9][axis];
+        let mut out = [[0.0f64; 3]; 27];
+        for (o, slot) in out.iter_mut().enumerate().take(n) {
+            let i = (o / stride) % 3;
+            let base = o - i * stride;
+            let (p0, p1, p2) = (src[base], src[base + stride], src[base + 2 * stride]);
+            *slot = std::array::from_fn(|q| m[i][0] * p0[q] + m[i][1] * p1[q] + m[i][2] * p2[q]);
+        }
+        out
+    };
+    let z = |src: Net, m: &[[f64; 3]; 3]| if dim == 2 { src } else { along(&src, 2, m) };
+    let bx = along(net, 0, &B);
+    let cols = [
+        z(along(&along(net, 0, &D), 1, &B), &B),
+        z(along(&bx, 1, &D), &B),
+        if dim == 2 {
+            [[0.0; 3]; 27]
+        } else {
+            along(&along(&bx, 1, &B), 2, &D)
+        },
+    ];
+    let mut min = f64::INFINITY;
+    for p in 0..n {
+        let jac = [cols[0][p], cols[1][p], cols[2][p]];
+        let sj = if dim == 2 {
+            let det = jac[0][0] * jac[1][1] - jac[0][1] * jac[1][0];
+            det / (vec3::norm(jac[0]) * vec3::norm(jac[1]))
+        } else {
+            let det = vec3::dot(vec3::cross(jac[0], jac[1]), jac[2]);
+            det / (vec3::norm(jac[0]) * vec3::norm(jac[1]) * vec3::norm(jac[2]))
+        };
+        min = min.min(if sj.is_nan() { -1.0 } else { sj });
+    }
+    min
+}
+
+/// An upper bound of max det J: the product over directions of the largest Bernstein
+/// coefficient norm of the column ∂x/∂ξ_k (Hadamard's inequality; cheap, loose when sheared).
+pub(super) fn hadamard_upper(dim: usize, net: &Net) -> f64 {
+    let nz = if dim == 2 { 1 } else { 3 };
+    let mut m = [0.0f64; 3];
+    for k in 0..nz {
+        for j in 0..3 {
+            for i in 0..3 {
+                let p = net[i + 3 * j + 9 * k];
+                let mut d = |dir: usize, q: [f64; 3]| {
+                    let v = vec3::sub(q, p);
+                    m[dir] = m[dir].max(2.0 * vec3::norm(v));
+                };
+                if i < 2 {
+                    d(0, net[i + 1 + 3 * j + 9 * k]);
+                }
+                if j < 2 {
+                    d(1, net[i + 3 * (j + 1) + 9 * k]);
+                }
+                if dim == 3 && k < 2 {
+                    d(2, net[i + 3 * j + 9 * (k + 1)]);
+                }
+            }
+        }
+    }
+    if dim == 2 {
+        m[0] * m[1]
+    } else {
+        m[0] * m[1] * m[2]
+    }
+}
+
+/// Jacobian ratio of a straight element from its corner values of det J (exact for quads,
+/// whose det J is affine in each coordinate).
+pub(super) fn corner_ratio(mesh: &LinearMesh, e: usize) -> f64 {
+    let npe = mesh.nodes_per_element();
+    let x = mesh.element_coords(e);
+    let (mut jac, mut scaled) = ([0.0; 8], [0.0; 8]);
+    crate::mesh::linear::corner_jacobians(mesh.dim, &x[..npe], &mut jac[..npe], &mut scaled[..npe]);
+    let lo = jac[..npe].iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = jac[..npe].iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    lo / hi
+}
