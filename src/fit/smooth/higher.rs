@@ -92,10 +92,12 @@ pub(super) fn two_ring(
 ) -> Vec<[f64; 3]> {
     // A model-carrying vertex next to a feature (a rim vertex whose fan model spans a gentle
     // crease) would bring in the facets across it: in 3D the second ring keeps only facets
-    // within the feature angle of v's normal.
-    let n_v = models[v as usize].map(|m| m.normal);
-    let facing = |f: usize| -> bool {
-        let (Some(n), 3) = (n_v, mesh.dim) else {
+    // within the feature angle of the normal of the first-ring vertex u they are reached
+    // through. Against u's normal, not v's: on a coarse smooth surface (45° between facets)
+    // the second ring's facets turn from v's normal by more than the feature angle, but from
+    // u's only by half a facet's turning, as on any smooth surface.
+    let facing = |f: usize, u: u32| -> bool {
+        let (Some(n), 3) = (models[u as usize].map(|m| m.normal), mesh.dim) else {
             return true;
         };
         let fv = topo.facet_vertices(f);
@@ -135,7 +137,7 @@ pub(super) fn two_ring(
         if models[u as usize].is_none() {
             continue;
         }
-        for &f in fan[u as usize].iter().filter(|&&f| facing(f as usize)) {
+        for &f in fan[u as usize].iter().filter(|&&f| facing(f as usize, u)) {
             ring.extend(
                 topo.facet_vertices(f as usize)
                     .iter()
