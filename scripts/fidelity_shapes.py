@@ -14,6 +14,11 @@ usage:
       `--only curved`, only the points nearest to a curved part of the surface count (the hole
       of the plate, the side of the cylinder; every point of the other shapes).
 
+  fidelity_shapes.py locate SHAPE FILE.msh [FILE.msh ...]
+      Prints one JSON object per file: where its boundary error is (max and RMS per kind of
+      lattice point, corner / edge midpoint / side midpoint or face centre / in between, for
+      the sides that interpolate their corners and for the others) and the worst point.
+
 Shapes (all with Gmsh 4.15's Python API; MSH 2.2 output):
   disk      O-grid disk of radius 1 (quads): a square block and four ring blocks, transfinite
   torus     O-grid torus (hexes): that disk, radius 0.5, revolved about the z axis at distance 1
@@ -174,13 +179,19 @@ def distance(shape, x):
 def boundary_points(path, dim, samples=None):
     """Points sampled on every boundary side of the elements of dimension `dim` in `path` (the
     file's own Lagrange map, via Gmsh's basis functions); also the bounding-box diagonal."""
+    sides, diag = boundary_sides(path, dim, samples)
+    return np.concatenate([x for _, x in sides]), diag, len(sides)
+
+
+def boundary_sides(path, dim, samples=None):
+    """Per boundary side of `path`: (element index, its sample points, in lattice order); and
+    the bounding-box diagonal."""
     import gmsh
 
     gmsh.initialize(["-nopopup"])
     gmsh.option.setNumber("General.Terminal", 0)
     gmsh.open(path)
     pts = []
-    sides = 0
     tags, coords, _ = gmsh.model.mesh.getNodes()
     coords = np.asarray(coords).reshape(-1, 3)
     index = {int(t): i for i, t in enumerate(tags)}
@@ -219,10 +230,9 @@ def boundary_points(path, dim, samples=None):
         for key, owners in keys.items():
             if len(owners) == 1:
                 e, si = owners[0]
-                pts.append(x[e, si * per_side : (si + 1) * per_side])
-                sides += 1
+                pts.append((e, x[e, si * per_side : (si + 1) * per_side]))
     gmsh.finalize()
-    return np.concatenate(pts), float(np.linalg.norm(hi - lo)), sides
+    return pts, float(np.linalg.norm(hi - lo))
 
 
 def curved(shape, x):
@@ -244,6 +254,35 @@ def measure(shape, path, only="all"):
     return {"file": path, "rms": float(np.sqrt(np.mean(d * d))), "max": float(d.max()), "sides": sides}
 
 
+def locate(shape, path):
+    """Where the boundary error of `path` is: per kind of lattice point (c corners, e edge
+    midpoints in 3D, m side midpoint (2D) or f face centre (3D), i in between), max and RMS,
+    separately for sides that interpolate their corners (|d| < 1e-13 there: Gmsh-with-CAD and
+    our Q2 elements) and the others (our spline elements); and the worst point."""
+    dim = DIM[shape]
+    s = 17 if dim == 2 else 9
+    sides, diag = boundary_sides(path, dim, s)
+    k1 = ["c"] + ["i"] * (s // 2 - 1) + ["m"] + ["i"] * (s // 2 - 1) + ["c"]
+    if dim == 2:
+        kind = np.array(k1)
+    else:
+        names = {"cc": "c", "cm": "e", "mc": "e", "mm": "f"}
+        kind = np.array([names.get(a + b, "i") for a in k1 for b in k1])
+    d = np.array([distance(shape, x) / diag for _, x in sides])
+    interp = d[:, kind == "c"].max(axis=1) < 1e-13
+    out = {"file": path, "sides": len(sides), "interpolating_sides": int(interp.sum())}
+    for name, sel in (("interpolating", interp), ("other", ~interp)):
+        if sel.any():
+            out[name] = {
+                k: {"max": float(d[sel][:, kind == k].max()), "rms": float(np.sqrt(np.mean(d[sel][:, kind == k] ** 2)))}
+                for k in ("c", "e", "m", "f", "i") if (kind == k).any()
+            }
+    j, p = np.unravel_index(d.argmax(), d.shape)
+    out["worst"] = {"element": int(sides[j][0]), "kind": str(kind[p]), "at": sides[j][1][p].round(4).tolist(),
+                    "interpolating": bool(interp[j]), "distance": float(d[j, p])}
+    return out
+
+
 def main(argv):
     if len(argv) >= 5 and argv[0] == "make":
         print(json.dumps(make(argv[1], int(argv[2]), argv[3], argv[4])))
@@ -253,6 +292,9 @@ def main(argv):
             only, files = files[1], files[2:]
         for p in files:
             print(json.dumps(measure(argv[1], p, only)))
+    elif len(argv) >= 3 and argv[0] == "locate":
+        for p in argv[2:]:
+            print(json.dumps(locate(argv[1], p)))
     else:
         raise SystemExit(__doc__)
 

@@ -58,11 +58,17 @@
 //! chains) take in-plane models from the patch's rim instead of their flat fan model, and in
 //! 3D are no sources for the interior vertices.
 
+mod higher;
+mod one_ring;
+
 use super::features::{BoundaryEntity, FeatureModels};
 use crate::mesh::features::Features;
 use crate::mesh::topology::{HEX_EDGES, HEX_VERTEX_PARAMS, NONE};
-use crate::mesh::vec3::{add, cross, dot, norm, sub};
+use crate::mesh::vec3::{add, dot, norm, sub};
 use crate::mesh::{LinearMesh, Topology};
+use higher::{HigherModel, refine_model, two_ring};
+use one_ring::matvec;
+pub(super) use one_ring::{fan_model, fit_parabola};
 use rayon::prelude::*;
 use std::cmp::Reverse;
 use std::collections::BinaryHeap;
@@ -136,73 +142,6 @@ pub struct SmoothTargets {
     higher: Vec<Option<HigherModel>>,
 }
 
-/// The cubic and quartic part of a vertex's height function over its model's tangent frame
-/// (the quadratic part is the [`VertexModel`]'s H, in the same frame).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub(crate) struct HigherModel {
-    /// The vertex the height function is centred on.
-    origin: [f64; 3],
-    /// Tangent frame (t₂ = 0 in 2D).
-    t: [[f64; 3]; 2],
-    /// Length scale ℓ of the coefficients: g(ξ, ζ) = ℓ Σ c_i m_i(ξ/ℓ, ζ/ℓ).
-    scale: f64,
-    /// Coefficients of the monomials u³, u²w, uw², w³, u⁴, u³w, u²w², uw³, w⁴.
-    c: [f64; 9],
-    /// Scaled curvature κℓ of the circle (2D) or sphere (3D) whose height above its tangent
-    /// plane, minus its quadratic part, is added to the polynomial (see [`sphere_height`]).
-    kappa: f64,
-}
-
-/// Height above its tangent plane of the circle or sphere of curvature `kappa` touching the
-/// plane at the origin, at squared distance `r2` from the origin (scaled units), when it has
-/// one: κr²/(1 + √(1 − κ²r²)).
-fn sphere_height(kappa: f64, r2: f64) -> Option<f64> {
-    let d = 1.0 - kappa * kappa * r2;
-    (d >= 0.0).then(|| kappa * r2 / (1.0 + d.sqrt()))
-}
-
-impl HigherModel {
-    fn height(&self, x: [f64; 3]) -> f64 {
-        let y = sub(x, self.origin);
-        let (u, w) = (
-            dot(y, self.t[0]) / self.scale,
-            dot(y, self.t[1]) / self.scale,
-        );
-        let m = &monomials(u, w)[5..];
-        let r2 = u * u + w * w;
-        // Beyond the sphere's reach (far from the vertex) only its quadratic part is kept.
-        let sphere = sphere_height(self.kappa, r2).map_or(0.0, |h| h - 0.5 * self.kappa * r2);
-        self.scale * (sphere + m.iter().zip(&self.c).map(|(a, b)| a * b).sum::<f64>())
-    }
-
-    /// g(ξ_p) − Σ φ g(ξ_j): the cubic and quartic terms' share of the correction's length
-    /// along the normal (the linear terms cancel as for H).
-    fn correction(&self, p: [f64; 3], xs: &[[f64; 3]], phi: f64) -> f64 {
-        self.height(p) - xs.iter().map(|x| phi * self.height(*x)).sum::<f64>()
-    }
-}
-
-/// The monomials u, w, u², uw, w², u³, u²w, uw², w³, u⁴, u³w, u²w², uw³, w⁴ of a height fit.
-fn monomials(u: f64, w: f64) -> [f64; 14] {
-    let (u2, w2) = (u * u, w * w);
-    [
-        u,
-        w,
-        u2,
-        u * w,
-        w2,
-        u2 * u,
-        u2 * w,
-        u * w2,
-        w2 * w,
-        u2 * u2,
-        u2 * u * w,
-        u2 * w2,
-        u * w2 * w,
-        w2 * w2,
-    ]
-}
-
 impl SmoothTargets {
     /// Reconstruct the boundary models of `mesh` (quads or hexes) with topology `topo`.
     pub fn build(mesh: &LinearMesh, topo: &Topology, params: &SmoothParams) -> SmoothTargets {
@@ -219,8 +158,6 @@ impl SmoothTargets {
     ) -> SmoothTargets {
         let nv = mesh.n_vertices();
         let cos_max = params.feature_angle_deg.to_radians().cos();
-        let mut models: Vec<Option<VertexModel>> = vec![None; nv];
-        let mut ell = vec![0.0; nv];
         // Boundary fans: facets at each boundary vertex.
         let mut fan: Vec<Vec<u32>> = vec![Vec::new(); nv];
         for &f in &topo.boundary_facets {
@@ -228,83 +165,8 @@ impl SmoothTargets {
                 fan[v as usize].push(f);
             }
         }
-        let mut non_manifold = vec![false; nv];
-        for &v in &topo.non_manifold.vertices {
-            non_manifold[v as usize] = true;
-        }
-        let x = |v: u32| mesh.coords[v as usize];
-        // Each boundary vertex's model depends only on its fan: in parallel.
-        models
-            .par_iter_mut()
-            .zip(ell.par_iter_mut())
-            .enumerate()
-            .with_min_len(1024)
-            .for_each(|(v, (model, ell))| {
-                if !topo.vertex_on_boundary[v]
-                    || non_manifold[v]
-                    || features.is_some_and(|f| f.vertex_mask[v])
-                {
-                    return;
-                }
-                let xv = mesh.coords[v];
-                if mesh.dim == 2 {
-                    if fan[v].len() != 2 {
-                        return;
-                    }
-                    let other = |f: u32| {
-                        let e = topo.edges[f as usize];
-                        if e[0] as usize == v { e[1] } else { e[0] }
-                    };
-                    let (a, b) = (x(other(fan[v][0])), x(other(fan[v][1])));
-                    let (ua, ub) = (sub(a, xv), sub(b, xv));
-                    let (la, lb) = (norm(ua), norm(ub));
-                    if la == 0.0 || lb == 0.0 {
-                        return;
-                    }
-                    *ell = 0.5 * (la + lb);
-                    // Turning angle between the edges ≤ 2 × the feature angle.
-                    let cos_turn = -dot(ua, ub) / (la * lb);
-                    if cos_turn < (2.0 * params.feature_angle_deg.to_radians()).cos() {
-                        return;
-                    }
-                    *model = fit_parabola(xv, a, b).map(|(normal, h)| VertexModel {
-                        normal,
-                        h,
-                        weight: 1.0,
-                    });
-                } else {
-                    if fan[v].len() < 3 {
-                        return;
-                    }
-                    if let Some((m, l)) = fan_model(mesh, topo, v as u32, &fan[v], cos_max) {
-                        *ell = l;
-                        *model = m;
-                    }
-                }
-            });
-        // Second pass: height functions of degree up to four over two rings of boundary
-        // vertices, reached through smooth vertices only (so never across a feature).
-        let mut higher: Vec<Option<HigherModel>> = vec![None; nv];
-        {
-            let models_ref = &models;
-            let ell_ref = &ell;
-            let fan_ref = &fan;
-            let refined: Vec<Option<(VertexModel, HigherModel)>> = (0..nv)
-                .into_par_iter()
-                .with_min_len(1024)
-                .map(|v| {
-                    let m = models_ref[v]?;
-                    let ring = two_ring(mesh, topo, fan_ref, models_ref, v as u32, cos_max);
-                    refine_model(mesh.dim, mesh.coords[v], &m, &ring, ell_ref[v])
-                })
-                .collect();
-            for (v, r) in refined.into_iter().enumerate() {
-                if let Some((m, h)) = r {
-                    models[v] = Some(m);
-                    higher[v] = Some(h);
-                }
-            }
-        }
+        let (mut models, ell) = one_ring_models(mesh, topo, params, features, &fan);
+        let mut higher = two_ring_models(mesh, topo, &fan, &mut models, &ell, cos_max);
         let smooth_vertices = models.iter().filter(|m| m.is_some()).count();
         let feature_vertices =
             topo.vertex_on_boundary.iter().filter(|&&b| b).count() - smooth_vertices;
@@ -319,68 +181,19 @@ impl SmoothTargets {
                     .is_some_and(|f| f.in_plane.contains_key(&(v as u32)))
         };
 
-        // Interior vertices inherit the nearest smooth boundary vertex's model (Dijkstra along
-        // mesh edges from the smooth boundary vertices, cut off at decay · ℓ).
-        let mut blended_vertices = 0;
-        if params.decay > 0.0 {
-            let mut offsets = vec![0u32; nv + 1];
-            for e in &topo.edges {
-                offsets[e[0] as usize + 1] += 1;
-                offsets[e[1] as usize + 1] += 1;
-            }
-            for i in 0..nv {
-                offsets[i + 1] += offsets[i];
-            }
-            let mut fill = offsets.clone();
-            let mut adj = vec![0u32; offsets[nv] as usize];
-            for e in &topo.edges {
-                for (a, b) in [(e[0], e[1]), (e[1], e[0])] {
-                    adj[fill[a as usize] as usize] = b;
-                    fill[a as usize] += 1;
-                }
-            }
-            let mut dist = vec![f64::INFINITY; nv];
-            let mut source = vec![NONE; nv];
-            let mut heap = BinaryHeap::new();
-            for v in 0..nv {
-                if models[v].is_some() && !in_plane_3d(v) {
-                    dist[v] = 0.0;
-                    source[v] = v as u32;
-                    heap.push(Reverse((0u64, v as u32)));
-                }
-            }
-            while let Some(Reverse((d_bits, v))) = heap.pop() {
-                let d = f64::from_bits(d_bits);
-                if d > dist[v as usize] {
-                    continue;
-                }
-                let s = source[v as usize] as usize;
-                let cutoff = params.decay * ell[s];
-                for &w in &adj[offsets[v as usize] as usize..offsets[v as usize + 1] as usize] {
-                    if topo.vertex_on_boundary[w as usize] {
-                        continue;
-                    }
-                    let nd = d + norm(sub(x(w), x(v)));
-                    if nd < cutoff && nd < dist[w as usize] {
-                        dist[w as usize] = nd;
-                        source[w as usize] = s as u32;
-                        heap.push(Reverse((nd.to_bits(), w)));
-                    }
-                }
-            }
-            for v in 0..nv {
-                if !topo.vertex_on_boundary[v] && source[v] != NONE {
-                    let s = source[v] as usize;
-                    let g = 1.0 - dist[v] / (params.decay * ell[s]);
-                    if g > 0.0 {
-                        let m = models[s].expect("sources have models");
-                        models[v] = Some(VertexModel { weight: g, ..m });
-                        higher[v] = higher[s];
-                        blended_vertices += 1;
-                    }
-                }
-            }
-        }
+        let blended_vertices = if params.decay > 0.0 {
+            inherit_interior(
+                mesh,
+                topo,
+                params.decay,
+                &ell,
+                &in_plane_3d,
+                &mut models,
+                &mut higher,
+            )
+        } else {
+            0
+        };
         if let Some(f) = &feature_models {
             for (&v, m) in &f.in_plane {
                 models[v as usize] = Some(*m);
@@ -519,444 +332,187 @@ impl SmoothTargets {
     }
 }
 
-/// The 3D model at vertex `v` from the boundary faces `faces` around it, with the fan's length
-/// scale ℓ; `None` when the fan is degenerate, has fewer than 5 neighbour vertices, or a face
-/// normal is more than acos(`cos_max`) from the fan normal (the model is `None` when the
-/// quadric fit fails).
-pub(super) fn fan_model(
+/// First pass: the one-ring model of each smooth boundary vertex (2D parabola, 3D quadric over
+/// its fan `fan`) and its length scale ℓ; `None` at feature, non-manifold or degenerate
+/// vertices and in the interior.
+fn one_ring_models(
     mesh: &LinearMesh,
     topo: &Topology,
-    v: u32,
-    faces: &[u32],
-    cos_max: f64,
-) -> Option<(Option<VertexModel>, f64)> {
-    let x = |w: u32| mesh.coords[w as usize];
-    let mut area = [0.0; 3];
-    let mut normals = Vec::with_capacity(faces.len());
-    let mut nb: Vec<u32> = Vec::new();
-    let mut total_area = 0.0;
-    for &f in faces {
-        let q = topo.faces[f as usize];
-        let a = cross(sub(x(q[2]), x(q[0])), sub(x(q[3]), x(q[1])));
-        area = add(area, a);
-        let l = norm(a);
-        total_area += 0.5 * l;
-        normals.push(a.map(|c| c / l.max(f64::MIN_POSITIVE)));
-        nb.extend(q.iter().copied().filter(|&w| w != v));
+    params: &SmoothParams,
+    features: Option<&Features>,
+    fan: &[Vec<u32>],
+) -> (Vec<Option<VertexModel>>, Vec<f64>) {
+    let nv = mesh.n_vertices();
+    let cos_max = params.feature_angle_deg.to_radians().cos();
+    let mut models: Vec<Option<VertexModel>> = vec![None; nv];
+    let mut ell = vec![0.0; nv];
+    let mut non_manifold = vec![false; nv];
+    for &v in &topo.non_manifold.vertices {
+        non_manifold[v as usize] = true;
     }
-    nb.sort_unstable();
-    nb.dedup();
-    let la = norm(area);
-    if la == 0.0 || nb.len() < 5 {
-        return None;
-    }
-    let n0 = area.map(|c| c / la);
-    if normals.iter().any(|nf| dot(*nf, n0) < cos_max) {
-        return None;
-    }
-    let ell = (total_area / faces.len() as f64).sqrt();
-    let pts: Vec<[f64; 3]> = nb.iter().map(|&w| sub(x(w), x(v))).collect();
-    let model = fit_quadric(n0, &pts, ell).map(|(normal, h)| VertexModel {
-        normal,
-        h,
-        weight: 1.0,
-    });
-    Some((model, ell))
-}
-
-/// 2D model at x through its boundary neighbours a and b: (normal, H).
-pub(super) fn fit_parabola(
-    x: [f64; 3],
-    a: [f64; 3],
-    b: [f64; 3],
-) -> Option<([f64; 3], [[f64; 3]; 3])> {
-    let (ua, ub) = (sub(a, x), sub(b, x));
-    let d = sub(ub, ua);
-    let l = norm(d);
-    let mut t = d.map(|c| c / l);
-    let mut fitted = None;
-    for _ in 0..3 {
-        let n = [-t[1], t[0], 0.0];
-        let (xa, ya, xb, yb) = (dot(ua, t), dot(ua, n), dot(ub, t), dot(ub, n));
-        let det = xa * xb * xb - xb * xa * xa;
-        if !(xa < 0.0 && xb > 0.0) || det.abs() < 1e-300 {
-            return None;
-        }
-        let c1 = (ya * xb * xb - yb * xa * xa) / det;
-        let c2 = (xa * yb - xb * ya) / det;
-        if c1.abs() > 1.0 {
-            return None;
-        }
-        fitted = Some((t, c2));
-        // Tilt the frame to the parabola's tangent at x and fit again.
-        let tn = add(t, n.map(|c| c1 * c));
-        let ln = norm(tn);
-        t = tn.map(|c| c / ln);
-    }
-    let (t, c2) = fitted?;
-    let n = [-t[1], t[0], 0.0];
-    let h = outer(t, t).map(|r| r.map(|c| c2 * c));
-    Some((n, h))
-}
-
-/// 3D model: least-squares quadric height over the tangent plane of normal n0 through the
-/// neighbour offsets `pts` (relative to the vertex); `scale` ~ the edge length.
-fn fit_quadric(n0: [f64; 3], pts: &[[f64; 3]], scale: f64) -> Option<([f64; 3], [[f64; 3]; 3])> {
-    let mut n = n0;
-    let mut q = [0.0; 3];
-    let mut frame = tangent_frame(n);
-    for _ in 0..3 {
-        frame = tangent_frame(n);
-        let (t1, t2) = frame;
-        // Unknowns (a, b, c, d, e) of η = aξ² + bξζ + cζ² + dξ + eζ in scaled coordinates.
-        let mut ata = [[0.0; 5]; 5];
-        let mut atb = [0.0; 5];
-        for p in pts {
-            let (u, v, h) = (dot(*p, t1) / scale, dot(*p, t2) / scale, dot(*p, n) / scale);
-            let row = [u * u, u * v, v * v, u, v];
-            for i in 0..5 {
-                for j in 0..5 {
-                    ata[i][j] += row[i] * row[j];
+    let x = |v: u32| mesh.coords[v as usize];
+    // Each boundary vertex's model depends only on its fan: in parallel.
+    models
+        .par_iter_mut()
+        .zip(ell.par_iter_mut())
+        .enumerate()
+        .with_min_len(1024)
+        .for_each(|(v, (model, ell))| {
+            if !topo.vertex_on_boundary[v]
+                || non_manifold[v]
+                || features.is_some_and(|f| f.vertex_mask[v])
+            {
+                return;
+            }
+            let xv = mesh.coords[v];
+            if mesh.dim == 2 {
+                if fan[v].len() != 2 {
+                    return;
                 }
-                atb[i] += row[i] * h;
+                let other = |f: u32| {
+                    let e = topo.edges[f as usize];
+                    if e[0] as usize == v { e[1] } else { e[0] }
+                };
+                let (a, b) = (x(other(fan[v][0])), x(other(fan[v][1])));
+                let (ua, ub) = (sub(a, xv), sub(b, xv));
+                let (la, lb) = (norm(ua), norm(ub));
+                if la == 0.0 || lb == 0.0 {
+                    return;
+                }
+                *ell = 0.5 * (la + lb);
+                // Turning angle between the edges ≤ 2 × the feature angle.
+                let cos_turn = -dot(ua, ub) / (la * lb);
+                if cos_turn < (2.0 * params.feature_angle_deg.to_radians()).cos() {
+                    return;
+                }
+                *model = fit_parabola(xv, a, b).map(|(normal, h)| VertexModel {
+                    normal,
+                    h,
+                    weight: 1.0,
+                });
+            } else {
+                if fan[v].len() < 3 {
+                    return;
+                }
+                if let Some((m, l)) = fan_model(mesh, topo, v as u32, &fan[v], cos_max) {
+                    *ell = l;
+                    *model = m;
+                }
             }
-        }
-        let s = solve5(ata, atb)?;
-        // Back to unscaled: η = (a/scale) ξ² + …, slopes unchanged.
-        q = [s[0] / scale, s[1] / scale, s[2] / scale];
-        let (d, e) = (s[3], s[4]);
-        if d.hypot(e) > 1.0 {
-            return None;
-        }
-        let nn = sub(n, add(t1.map(|c| d * c), t2.map(|c| e * c)));
-        let l = norm(nn);
-        n = nn.map(|c| c / l);
-    }
-    let (t1, t2) = frame;
-    let mut h = [[0.0; 3]; 3];
-    let parts = [
-        (outer(t1, t1), q[0]),
-        (sym_outer(t1, t2), 0.5 * q[1]),
-        (outer(t2, t2), q[2]),
-    ];
-    for (m, w) in parts {
-        for i in 0..3 {
-            for j in 0..3 {
-                h[i][j] += w * m[i][j];
-            }
-        }
-    }
-    // The quadric was fitted in the frame before the last tilt; use that frame's normal so H
-    // and n belong together (H n = 0).
-    Some((cross(t1, t2), h))
+        });
+    (models, ell)
 }
 
-/// The boundary vertices within two rings of the smooth boundary vertex `v` (2D: along the
-/// boundary chain; 3D: over boundary faces), the second ring reached only through vertices that
-/// have a model, so no ring crosses a sharp feature. `v` itself is not included.
-fn two_ring(
+/// Second pass: height functions of degree up to four over two rings of boundary vertices,
+/// reached through smooth vertices only (so never across a feature). Replaces the refined
+/// vertices' `models` and returns their [`HigherModel`]s.
+fn two_ring_models(
     mesh: &LinearMesh,
     topo: &Topology,
     fan: &[Vec<u32>],
-    models: &[Option<VertexModel>],
-    v: u32,
+    models: &mut [Option<VertexModel>],
+    ell: &[f64],
     cos_max: f64,
-) -> Vec<[f64; 3]> {
-    // A model-carrying vertex next to a feature (a rim vertex whose fan model spans a gentle
-    // crease) would bring in the facets across it: in 3D the second ring keeps only facets
-    // within the feature angle of v's normal.
-    let n_v = models[v as usize].map(|m| m.normal);
-    let facing = |f: usize| -> bool {
-        let (Some(n), 3) = (n_v, mesh.dim) else {
-            return true;
-        };
-        let fv = topo.facet_vertices(f);
-        if fv.len() < 4 {
-            return true;
+) -> Vec<Option<HigherModel>> {
+    let nv = mesh.n_vertices();
+    let mut higher: Vec<Option<HigherModel>> = vec![None; nv];
+    let models_ref = &*models;
+    let refined: Vec<Option<(VertexModel, HigherModel)>> = (0..nv)
+        .into_par_iter()
+        .with_min_len(1024)
+        .map(|v| {
+            let m = models_ref[v]?;
+            let ring = two_ring(mesh, topo, fan, models_ref, v as u32, cos_max);
+            refine_model(mesh.dim, mesh.coords[v], &m, &ring, ell[v])
+        })
+        .collect();
+    for (v, r) in refined.into_iter().enumerate() {
+        if let Some((m, h)) = r {
+            models[v] = Some(m);
+            higher[v] = Some(h);
         }
-        let c = |i: usize| mesh.coords[fv[i] as usize];
-        let d1 = sub(c(2), c(0));
-        let d2 = sub(c(3), c(1));
-        let nf = [
-            d1[1] * d2[2] - d1[2] * d2[1],
-            d1[2] * d2[0] - d1[0] * d2[2],
-            d1[0] * d2[1] - d1[1] * d2[0],
-        ];
-        let l = norm(nf);
-        l > 0.0 && dot(nf, n).abs() >= cos_max * l
-    };
-    let mut ring: Vec<u32> = Vec::new();
-    let mut first: Vec<u32> = Vec::new();
-    for &f in &fan[v as usize] {
-        first.extend(
-            topo.facet_vertices(f as usize)
-                .iter()
-                .copied()
-                .filter(|&w| w != v),
-        );
     }
-    first.sort_unstable();
-    first.dedup();
-    // Next to a feature (a first-ring vertex without a smooth model) the height function's
-    // ring would be one-sided and cut by the feature: keep the one-ring quadric there.
-    if first.iter().any(|&u| models[u as usize].is_none()) {
-        return Vec::new();
+    higher
+}
+
+/// Interior vertices inherit the nearest smooth boundary vertex's model (Dijkstra along mesh
+/// edges from the smooth boundary vertices that are not `in_plane_3d`, cut off at decay · ℓ)
+/// with weight γ = 1 − d / (decay · ℓ), and its [`HigherModel`]; returns how many did.
+fn inherit_interior(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    decay: f64,
+    ell: &[f64],
+    in_plane_3d: &dyn Fn(usize) -> bool,
+    models: &mut [Option<VertexModel>],
+    higher: &mut [Option<HigherModel>],
+) -> usize {
+    let nv = mesh.n_vertices();
+    let x = |v: u32| mesh.coords[v as usize];
+    let mut blended_vertices = 0;
+    let mut offsets = vec![0u32; nv + 1];
+    for e in &topo.edges {
+        offsets[e[0] as usize + 1] += 1;
+        offsets[e[1] as usize + 1] += 1;
     }
-    ring.extend(&first);
-    for &u in &first {
-        if models[u as usize].is_none() {
+    for i in 0..nv {
+        offsets[i + 1] += offsets[i];
+    }
+    let mut fill = offsets.clone();
+    let mut adj = vec![0u32; offsets[nv] as usize];
+    for e in &topo.edges {
+        for (a, b) in [(e[0], e[1]), (e[1], e[0])] {
+            adj[fill[a as usize] as usize] = b;
+            fill[a as usize] += 1;
+        }
+    }
+    let mut dist = vec![f64::INFINITY; nv];
+    let mut source = vec![NONE; nv];
+    let mut heap = BinaryHeap::new();
+    for v in 0..nv {
+        if models[v].is_some() && !in_plane_3d(v) {
+            dist[v] = 0.0;
+            source[v] = v as u32;
+            heap.push(Reverse((0u64, v as u32)));
+        }
+    }
+    while let Some(Reverse((d_bits, v))) = heap.pop() {
+        let d = f64::from_bits(d_bits);
+        if d > dist[v as usize] {
             continue;
         }
-        for &f in fan[u as usize].iter().filter(|&&f| facing(f as usize)) {
-            ring.extend(
-                topo.facet_vertices(f as usize)
-                    .iter()
-                    .copied()
-                    .filter(|&w| w != v),
-            );
-        }
-    }
-    ring.sort_unstable();
-    ring.dedup();
-    ring.iter().map(|&w| mesh.coords[w as usize]).collect()
-}
-
-/// Refit the model `m` of the vertex at `x` as a height function of degree up to four over its
-/// two-ring points `pts` (relative scale `ell`): 2D u, u², u³, u⁴ through up to four points;
-/// 3D all 14 monomials of degree 1–4 by least squares over at least 20 points, or those of
-/// degree 1–3 over at least 12. The frame is re-tilted by the linear terms and the fit
-/// repeated, as for the quadric. `None` (keep `m`) with too few points, where the points are
-/// not a graph over the tangent plane (slope above 1), or when the system is singular.
-fn refine_model(
-    dim: usize,
-    x: [f64; 3],
-    m: &VertexModel,
-    pts: &[[f64; 3]],
-    ell: f64,
-) -> Option<(VertexModel, HigherModel)> {
-    if !(ell > 0.0) {
-        return None;
-    }
-    const CUBIC: &[usize] = &[0, 1, 2, 3, 4, 5, 6, 7, 8];
-    const QUARTIC: &[usize] = &[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13];
-    let used: &[usize] = if dim == 2 {
-        match pts.len() {
-            0..=2 => return None,
-            3 => &[0, 2, 5],
-            _ => &[0, 2, 5, 9],
-        }
-    } else if pts.len() >= 20 {
-        QUARTIC
-    } else if pts.len() >= 12 {
-        CUBIC
-    } else {
-        return None;
-    };
-    // A ring with too few distinct rows in one direction (an extruded wall a few cells
-    // across) leaves the quartic undetermined: fall back to the cubic before the quadric.
-    if used.len() == QUARTIC.len() {
-        if let Some(r) = refine_with(dim, x, m, pts, ell, QUARTIC) {
-            return Some(r);
-        }
-        return refine_with(dim, x, m, pts, ell, CUBIC);
-    }
-    refine_with(dim, x, m, pts, ell, used)
-}
-
-/// [`refine_model`] with the monomials `used`.
-fn refine_with(
-    dim: usize,
-    x: [f64; 3],
-    m: &VertexModel,
-    pts: &[[f64; 3]],
-    ell: f64,
-    used: &[usize],
-) -> Option<(VertexModel, HigherModel)> {
-    let frame_of = |n: [f64; 3]| -> ([f64; 3], [f64; 3]) {
-        if dim == 2 {
-            ([n[1], -n[0], 0.0], [0.0; 3])
-        } else {
-            tangent_frame(n)
-        }
-    };
-    let mut n = m.normal;
-    // Scaled mean curvature of the quadric: the sphere (circle) part of the height function,
-    // which makes the model exact on spheres and circles however coarse the ring.
-    let trace = m.h[0][0] + m.h[1][1] + m.h[2][2];
-    let mut kappa = 2.0 * trace / (dim - 1) as f64 * ell;
-    let mut fitted = None;
-    for _ in 0..4 {
-        let (t1, t2) = frame_of(n);
-        let k = used.len();
-        let mut ata = vec![vec![0.0; k]; k];
-        let mut atb = vec![0.0; k];
-        for p in pts {
-            let y = sub(*p, x);
-            let (u, w, h) = (dot(y, t1) / ell, dot(y, t2) / ell, dot(y, n) / ell);
-            if h.abs() > u.hypot(w) {
-                return None;
+        let s = source[v as usize] as usize;
+        let cutoff = decay * ell[s];
+        for &w in &adj[offsets[v as usize] as usize..offsets[v as usize + 1] as usize] {
+            if topo.vertex_on_boundary[w as usize] {
+                continue;
             }
-            if sphere_height(kappa, u * u + w * w).is_none() {
-                kappa = 0.0;
-            }
-        }
-        for p in pts {
-            let y = sub(*p, x);
-            let (u, w) = (dot(y, t1) / ell, dot(y, t2) / ell);
-            let h = dot(y, n) / ell - sphere_height(kappa, u * u + w * w).unwrap_or(0.0);
-            let all = monomials(u, w);
-            for i in 0..k {
-                for j in 0..k {
-                    ata[i][j] += all[used[i]] * all[used[j]];
-                }
-                atb[i] += all[used[i]] * h;
-            }
-        }
-        let sol = solve_n(ata, atb)?;
-        let mut c = [0.0; 14];
-        for (i, &u) in used.iter().enumerate() {
-            c[u] = sol[i];
-        }
-        if c[0].hypot(c[1]) > 1.0 {
-            return None;
-        }
-        fitted = Some((n, t1, t2, c, kappa));
-        // Move the isotropic part of the quadratic remainder into the sphere.
-        kappa += 2.0 * (c[2] + c[4]) / (dim - 1) as f64;
-        let nn = sub(n, add(t1.map(|v| c[0] * v), t2.map(|v| c[1] * v)));
-        let l = norm(nn);
-        n = nn.map(|v| v / l);
-    }
-    // The polynomial belongs to the frame it was fitted in (before the last tilt).
-    let (n, t1, t2, c, kappa) = fitted?;
-    // Quadratic part: the sphere's κr²/2 and the polynomial's.
-    let q = [
-        (c[2] + 0.5 * kappa) / ell,
-        c[3] / ell,
-        (c[4] + if dim == 2 { 0.0 } else { 0.5 * kappa }) / ell,
-    ];
-    let mut h = [[0.0; 3]; 3];
-    for (mat, w) in [
-        (outer(t1, t1), q[0]),
-        (sym_outer(t1, t2), 0.5 * q[1]),
-        (outer(t2, t2), q[2]),
-    ] {
-        for i in 0..3 {
-            for j in 0..3 {
-                h[i][j] += w * mat[i][j];
+            let nd = d + norm(sub(x(w), x(v)));
+            if nd < cutoff && nd < dist[w as usize] {
+                dist[w as usize] = nd;
+                source[w as usize] = s as u32;
+                heap.push(Reverse((nd.to_bits(), w)));
             }
         }
     }
-    let mut hc = [0.0; 9];
-    hc.copy_from_slice(&c[5..]);
-    Some((
-        VertexModel {
-            normal: n,
-            h,
-            weight: m.weight,
-        },
-        HigherModel {
-            origin: x,
-            t: [t1, t2],
-            scale: ell,
-            c: hc,
-            kappa,
-        },
-    ))
-}
-
-/// Gaussian elimination with partial pivoting; `None` when nearly singular.
-fn solve_n(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Option<Vec<f64>> {
-    let n = b.len();
-    let scale = (0..n).map(|i| a[i][i].abs()).fold(0.0, f64::max);
-    if !(scale > 0.0) {
-        return None;
-    }
-    for c in 0..n {
-        let p = (c..n).max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))?;
-        // Relative to the unit-scaled monomials' Gram matrix: a smaller pivot means a
-        // direction the points do not determine, whose coefficient would be noise.
-        if !(a[p][c].abs() > 1e-8 * scale) {
-            return None;
-        }
-        a.swap(c, p);
-        b.swap(c, p);
-        for r in c + 1..n {
-            let f = a[r][c] / a[c][c];
-            for k in c..n {
-                a[r][k] -= f * a[c][k];
+    for v in 0..nv {
+        if !topo.vertex_on_boundary[v] && source[v] != NONE {
+            let s = source[v] as usize;
+            let g = 1.0 - dist[v] / (decay * ell[s]);
+            if g > 0.0 {
+                let m = models[s].expect("sources have models");
+                models[v] = Some(VertexModel { weight: g, ..m });
+                higher[v] = higher[s];
+                blended_vertices += 1;
             }
-            b[r] -= f * b[c];
         }
     }
-    let mut x = vec![0.0; n];
-    for r in (0..n).rev() {
-        let mut s = b[r];
-        for k in r + 1..n {
-            s -= a[r][k] * x[k];
-        }
-        x[r] = s / a[r][r];
-    }
-    Some(x)
-}
-
-fn tangent_frame(n: [f64; 3]) -> ([f64; 3], [f64; 3]) {
-    let a = if n[0].abs() < 0.6 {
-        [1.0, 0.0, 0.0]
-    } else {
-        [0.0, 1.0, 0.0]
-    };
-    let t1 = cross(n, a);
-    let l = norm(t1);
-    let t1 = t1.map(|c| c / l);
-    (t1, cross(n, t1))
-}
-
-/// Gaussian elimination with partial pivoting on a 5×5 system; None when nearly singular.
-fn solve5(mut a: [[f64; 5]; 5], mut b: [f64; 5]) -> Option<[f64; 5]> {
-    let scale = (0..5).map(|i| a[i][i].abs()).fold(0.0, f64::max);
-    if scale == 0.0 {
-        return None;
-    }
-    for c in 0..5 {
-        let p = (c..5).max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))?;
-        if a[p][c].abs() < 1e-9 * scale {
-            return None;
-        }
-        a.swap(c, p);
-        b.swap(c, p);
-        for r in c + 1..5 {
-            let f = a[r][c] / a[c][c];
-            for k in c..5 {
-                a[r][k] -= f * a[c][k];
-            }
-            b[r] -= f * b[c];
-        }
-    }
-    let mut x = [0.0; 5];
-    for r in (0..5).rev() {
-        let mut s = b[r];
-        for k in r + 1..5 {
-            s -= a[r][k] * x[k];
-        }
-        x[r] = s / a[r][r];
-    }
-    Some(x)
-}
-
-fn outer(a: [f64; 3], b: [f64; 3]) -> [[f64; 3]; 3] {
-    a.map(|ai| b.map(|bj| ai * bj))
-}
-fn sym_outer(a: [f64; 3], b: [f64; 3]) -> [[f64; 3]; 3] {
-    let (m, n) = (outer(a, b), outer(b, a));
-    std::array::from_fn(|i| std::array::from_fn(|j| m[i][j] + n[i][j]))
-}
-fn matvec(m: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
-    m.map(|r| dot(r, v))
+    blended_vertices
 }
 
 #[cfg(test)]
 mod tests {
+    use super::one_ring::fit_quadric;
     use super::*;
 
     /// On a circle sampled unevenly (neighbouring spacings in ratio 1 : 1.5), the corrected

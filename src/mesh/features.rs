@@ -26,9 +26,14 @@
 //! Invariants: feature edges are boundary edges; [`Features::vertex_mask`] is true exactly at
 //! the vertices of feature edges (3D) or at corners (2D); every boundary facet has one patch.
 
+mod angles;
+mod planes;
+
 use crate::mesh::topology::NONE;
-use crate::mesh::vec3::{add, cross, dot, norm, sub};
+use crate::mesh::vec3::{cross, dot, norm, sub};
 use crate::mesh::{LinearMesh, Topology};
+use angles::{corners_2d, creases_3d};
+use planes::{planar_patches, straight_chains};
 use std::path::{Path, PathBuf};
 
 /// What counts as a sharp feature.
@@ -223,152 +228,21 @@ impl Features {
         edits: &[FeatureEdit],
         edits_path: &Path,
     ) -> Result<Features, FeatureError> {
-        let nv = mesh.n_vertices();
-        let nb = topo.boundary_facets.len();
         let bad = |line: usize, what: String| FeatureError::Line {
             path: edits_path.to_owned(),
             line,
             what,
         };
-        let tag = |i: usize| topo.boundary_facet_tags.get(i).copied().unwrap_or(0);
-        let mut vertex_mask = vec![false; nv];
-        let mut edge_mask = vec![false; topo.edges.len()];
-        // Boundary facets at each vertex (2D) or edge (3D), as indices into boundary_facets.
-        if topo.dim == 2 {
-            let by_angle = corners_2d(mesh, topo, params.angle_deg);
-            let mut at: Vec<Vec<usize>> = vec![Vec::new(); nv];
-            for (i, &f) in topo.boundary_facets.iter().enumerate() {
-                for &v in topo.facet_vertices(f as usize) {
-                    at[v as usize].push(i);
-                }
-            }
-            for v in 0..nv {
-                match at[v][..] {
-                    [] => {}
-                    [i, j] => {
-                        vertex_mask[v] = by_angle[v] || (params.tags && tag(i) != tag(j));
-                    }
-                    _ => vertex_mask[v] = true,
-                }
-            }
-            for ed in edits {
-                let &[v] = &ed.vertices[..] else {
-                    return Err(bad(
-                        ed.line,
-                        "a 2D mesh's features are corners: give one vertex id".into(),
-                    ));
-                };
-                if v as usize >= nv || !topo.vertex_on_boundary[v as usize] {
-                    return Err(bad(
-                        ed.line,
-                        format!("vertex {v} is not a boundary vertex of the mesh ({nv} vertices)"),
-                    ));
-                }
-                vertex_mask[v as usize] = ed.add;
-            }
+        let (vertex_mask, edge_mask) = if topo.dim == 2 {
+            (
+                corner_mask_2d(mesh, topo, params, edits, &bad)?,
+                vec![false; topo.edges.len()],
+            )
         } else {
-            let mut normal = vec![[0.0; 3]; nb];
-            for (i, &f) in topo.boundary_facets.iter().enumerate() {
-                let q = topo.faces[f as usize];
-                let x = |k: usize| mesh.coords[q[k] as usize];
-                let n = cross(sub(x(2), x(0)), sub(x(3), x(1)));
-                let l = norm(n);
-                normal[i] = if l > 0.0 { n.map(|c| c / l) } else { n };
-            }
-            let mut edge_facets: Vec<Vec<usize>> = vec![Vec::new(); topo.edges.len()];
-            for (i, &f) in topo.boundary_facets.iter().enumerate() {
-                let fe = topo.facet_elements[f as usize][0] as usize;
-                let side = topo.facet_sides[f as usize][0] as usize;
-                for ed in face_edges(topo, fe, side) {
-                    edge_facets[ed as usize].push(i);
-                }
-            }
-            let by_angle = creases_3d(mesh, topo, &normal, &edge_facets, params.angle_deg);
-            for (ed, fs) in edge_facets.iter().enumerate() {
-                edge_mask[ed] = match fs[..] {
-                    [] => false,
-                    [i, j] => by_angle[ed] || (params.tags && tag(i) != tag(j)),
-                    _ => true,
-                };
-            }
-            for ed in edits {
-                let &[a, b] = &ed.vertices[..] else {
-                    return Err(bad(
-                        ed.line,
-                        "a 3D mesh's features are edges: give two vertex ids".into(),
-                    ));
-                };
-                let key = [a.min(b), a.max(b)];
-                let id = topo
-                    .edges
-                    .binary_search(&key)
-                    .ok()
-                    .filter(|&id| topo.edge_on_boundary[id]);
-                let Some(id) = id else {
-                    return Err(bad(
-                        ed.line,
-                        format!(
-                            "vertices {a} and {b} are not the ends of a boundary edge of the mesh"
-                        ),
-                    ));
-                };
-                edge_mask[id] = ed.add;
-            }
-            for (ed, &m) in edge_mask.iter().enumerate() {
-                if m {
-                    for v in topo.edges[ed] {
-                        vertex_mask[v as usize] = true;
-                    }
-                }
-            }
-        }
-
-        // Patches: union boundary facets across non-feature edges (3D) / vertices (2D).
-        let mut uf: Vec<u32> = (0..nb as u32).collect();
-        fn find(uf: &mut [u32], mut i: u32) -> u32 {
-            while uf[i as usize] != i {
-                uf[i as usize] = uf[uf[i as usize] as usize];
-                i = uf[i as usize];
-            }
-            i
-        }
-        let mut joined: Vec<u32> = vec![NONE; if topo.dim == 2 { nv } else { topo.edges.len() }];
-        for (i, &f) in topo.boundary_facets.iter().enumerate() {
-            let keys: Vec<u32> = if topo.dim == 2 {
-                topo.facet_vertices(f as usize)
-                    .iter()
-                    .copied()
-                    .filter(|&v| !vertex_mask[v as usize])
-                    .collect()
-            } else {
-                let fe = topo.facet_elements[f as usize][0] as usize;
-                let side = topo.facet_sides[f as usize][0] as usize;
-                face_edges(topo, fe, side)
-                    .into_iter()
-                    .filter(|&ed| !edge_mask[ed as usize])
-                    .collect()
-            };
-            for k in keys {
-                let j = joined[k as usize];
-                if j == NONE {
-                    joined[k as usize] = i as u32;
-                } else {
-                    let (a, b) = (find(&mut uf, i as u32), find(&mut uf, j));
-                    uf[a.max(b) as usize] = a.min(b);
-                }
-            }
-        }
-        let mut facet_patch = vec![NONE; nb];
-        let mut n_patches = 0;
-        for i in 0..nb {
-            let r = find(&mut uf, i as u32) as usize;
-            if facet_patch[r] == NONE {
-                facet_patch[r] = n_patches as u32;
-                n_patches += 1;
-            }
-            facet_patch[i] = facet_patch[r];
-        }
-
+            edge_masks_3d(mesh, topo, params, edits, &bad)?
+        };
+        let (facet_patch, n_patches) = patches(topo, &vertex_mask, &edge_mask);
+        let nv = mesh.n_vertices();
         let (lo, hi) = mesh.bounding_box();
         let tol = 1e-6 * norm(sub(hi, lo));
         let planes = if topo.dim == 3 {
@@ -491,6 +365,176 @@ impl Features {
     }
 }
 
+/// A bad edit at a 1-based line of the edits file.
+type BadEdit<'a> = dyn Fn(usize, String) -> FeatureError + 'a;
+
+/// 2D: the corners (per vertex) by angle, tags and non-manifold fans, then `edits`.
+fn corner_mask_2d(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    params: &FeatureParams,
+    edits: &[FeatureEdit],
+    bad: &BadEdit,
+) -> Result<Vec<bool>, FeatureError> {
+    let nv = mesh.n_vertices();
+    let tag = |i: usize| topo.boundary_facet_tags.get(i).copied().unwrap_or(0);
+    let mut vertex_mask = vec![false; nv];
+    let by_angle = corners_2d(mesh, topo, params.angle_deg);
+    let mut at: Vec<Vec<usize>> = vec![Vec::new(); nv];
+    for (i, &f) in topo.boundary_facets.iter().enumerate() {
+        for &v in topo.facet_vertices(f as usize) {
+            at[v as usize].push(i);
+        }
+    }
+    for v in 0..nv {
+        match at[v][..] {
+            [] => {}
+            [i, j] => {
+                vertex_mask[v] = by_angle[v] || (params.tags && tag(i) != tag(j));
+            }
+            _ => vertex_mask[v] = true,
+        }
+    }
+    for ed in edits {
+        let &[v] = &ed.vertices[..] else {
+            return Err(bad(
+                ed.line,
+                "a 2D mesh's features are corners: give one vertex id".into(),
+            ));
+        };
+        if v as usize >= nv || !topo.vertex_on_boundary[v as usize] {
+            return Err(bad(
+                ed.line,
+                format!("vertex {v} is not a boundary vertex of the mesh ({nv} vertices)"),
+            ));
+        }
+        vertex_mask[v as usize] = ed.add;
+    }
+    Ok(vertex_mask)
+}
+
+/// 3D: the feature edges (per topology edge) by angle, tags and non-manifold edges, then
+/// `edits`; and the vertices on them.
+fn edge_masks_3d(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    params: &FeatureParams,
+    edits: &[FeatureEdit],
+    bad: &BadEdit,
+) -> Result<(Vec<bool>, Vec<bool>), FeatureError> {
+    let nv = mesh.n_vertices();
+    let nb = topo.boundary_facets.len();
+    let tag = |i: usize| topo.boundary_facet_tags.get(i).copied().unwrap_or(0);
+    let mut vertex_mask = vec![false; nv];
+    let mut edge_mask = vec![false; topo.edges.len()];
+    let mut normal = vec![[0.0; 3]; nb];
+    for (i, &f) in topo.boundary_facets.iter().enumerate() {
+        let q = topo.faces[f as usize];
+        let x = |k: usize| mesh.coords[q[k] as usize];
+        let n = cross(sub(x(2), x(0)), sub(x(3), x(1)));
+        let l = norm(n);
+        normal[i] = if l > 0.0 { n.map(|c| c / l) } else { n };
+    }
+    let mut edge_facets: Vec<Vec<usize>> = vec![Vec::new(); topo.edges.len()];
+    for (i, &f) in topo.boundary_facets.iter().enumerate() {
+        let fe = topo.facet_elements[f as usize][0] as usize;
+        let side = topo.facet_sides[f as usize][0] as usize;
+        for ed in face_edges(topo, fe, side) {
+            edge_facets[ed as usize].push(i);
+        }
+    }
+    let by_angle = creases_3d(mesh, topo, &normal, &edge_facets, params.angle_deg);
+    for (ed, fs) in edge_facets.iter().enumerate() {
+        edge_mask[ed] = match fs[..] {
+            [] => false,
+            [i, j] => by_angle[ed] || (params.tags && tag(i) != tag(j)),
+            _ => true,
+        };
+    }
+    for ed in edits {
+        let &[a, b] = &ed.vertices[..] else {
+            return Err(bad(
+                ed.line,
+                "a 3D mesh's features are edges: give two vertex ids".into(),
+            ));
+        };
+        let key = [a.min(b), a.max(b)];
+        let id = topo
+            .edges
+            .binary_search(&key)
+            .ok()
+            .filter(|&id| topo.edge_on_boundary[id]);
+        let Some(id) = id else {
+            return Err(bad(
+                ed.line,
+                format!("vertices {a} and {b} are not the ends of a boundary edge of the mesh"),
+            ));
+        };
+        edge_mask[id] = ed.add;
+    }
+    for (ed, &m) in edge_mask.iter().enumerate() {
+        if m {
+            for v in topo.edges[ed] {
+                vertex_mask[v as usize] = true;
+            }
+        }
+    }
+    Ok((vertex_mask, edge_mask))
+}
+
+/// The patch of each boundary facet and the number of patches: boundary facets joined across
+/// non-feature edges (3D) or vertices (2D), by union-find.
+fn patches(topo: &Topology, vertex_mask: &[bool], edge_mask: &[bool]) -> (Vec<u32>, usize) {
+    let nv = vertex_mask.len();
+    let nb = topo.boundary_facets.len();
+    // Patches: union boundary facets across non-feature edges (3D) / vertices (2D).
+    let mut uf: Vec<u32> = (0..nb as u32).collect();
+    fn find(uf: &mut [u32], mut i: u32) -> u32 {
+        while uf[i as usize] != i {
+            uf[i as usize] = uf[uf[i as usize] as usize];
+            i = uf[i as usize];
+        }
+        i
+    }
+    let mut joined: Vec<u32> = vec![NONE; if topo.dim == 2 { nv } else { topo.edges.len() }];
+    for (i, &f) in topo.boundary_facets.iter().enumerate() {
+        let keys: Vec<u32> = if topo.dim == 2 {
+            topo.facet_vertices(f as usize)
+                .iter()
+                .copied()
+                .filter(|&v| !vertex_mask[v as usize])
+                .collect()
+        } else {
+            let fe = topo.facet_elements[f as usize][0] as usize;
+            let side = topo.facet_sides[f as usize][0] as usize;
+            face_edges(topo, fe, side)
+                .into_iter()
+                .filter(|&ed| !edge_mask[ed as usize])
+                .collect()
+        };
+        for k in keys {
+            let j = joined[k as usize];
+            if j == NONE {
+                joined[k as usize] = i as u32;
+            } else {
+                let (a, b) = (find(&mut uf, i as u32), find(&mut uf, j));
+                uf[a.max(b) as usize] = a.min(b);
+            }
+        }
+    }
+    let mut facet_patch = vec![NONE; nb];
+    let mut n_patches = 0;
+    for i in 0..nb {
+        let r = find(&mut uf, i as u32) as usize;
+        if facet_patch[r] == NONE {
+            facet_patch[r] = n_patches as u32;
+            n_patches += 1;
+        }
+        facet_patch[i] = facet_patch[r];
+    }
+    (facet_patch, n_patches)
+}
+
 /// Topology edge ids of local side `side` of hex `e`.
 pub fn face_edges(topo: &Topology, e: usize, side: usize) -> Vec<u32> {
     use crate::mesh::topology::HEX_EDGES;
@@ -509,228 +553,6 @@ pub fn face_edges(topo: &Topology, e: usize, side: usize) -> Vec<u32> {
 /// A turning above the feature angle is a crease only where it is more than this many times
 /// the turning next to it.
 pub const CONCENTRATION: f64 = 4.0;
-
-/// Whether a turning of `theta` degrees (signed, positive where the boundary is convex) is a
-/// crease at `angle_deg`, given the signed turnings `beside` of the neighbouring edges across
-/// (3D) or vertices along the boundary (2D), `None` where unknown. A smooth boundary sampled
-/// coarsely turns by a lot everywhere, but smoothly: the next edge or vertex turns the same
-/// way by a comparable angle. A crease concentrates its turning on one line with flatter
-/// facets beside it. So the turning must exceed `angle_deg` and [`CONCENTRATION`] × the
-/// smaller part of it that a neighbour turning the same way explains.
-fn concentrated(theta: f64, beside: [Option<f64>; 2], angle_deg: f64) -> bool {
-    if theta.abs().is_nan() || theta.abs() <= angle_deg {
-        return false;
-    }
-    let explained = beside
-        .iter()
-        .map(|b| b.map_or(0.0, |b| (b * theta.signum()).clamp(0.0, theta.abs())))
-        .fold(f64::INFINITY, f64::min);
-    theta.abs() > CONCENTRATION * explained
-}
-
-fn centroid(xs: &[[f64; 3]]) -> [f64; 3] {
-    let s = xs.iter().fold([0.0; 3], |a, &x| add(a, x));
-    s.map(|c| c / xs.len() as f64)
-}
-
-/// 2D corners by angle: per vertex, whether it lies on two boundary edges and the boundary
-/// turns there by a [`concentrated`] angle above `angle_deg`.
-fn corners_2d(mesh: &LinearMesh, topo: &Topology, angle_deg: f64) -> Vec<bool> {
-    let nv = mesh.n_vertices();
-    let x = |v: u32| mesh.coords[v as usize];
-    // Boundary edges oriented with their element on the left, so the sign of the turning
-    // says convex (positive) or re-entrant whatever the elements' own orientation.
-    let (mut prev, mut next, mut count) = (vec![NONE; nv], vec![NONE; nv], vec![0u32; nv]);
-    for &f in &topo.boundary_facets {
-        let [mut p, mut q] = topo.edges[f as usize];
-        let e = topo.facet_elements[f as usize][0] as usize;
-        let c = centroid(&mesh.element_coords(e)[..4]);
-        let (dq, dc) = (sub(x(q), x(p)), sub(c, x(p)));
-        if dq[0] * dc[1] - dq[1] * dc[0] < 0.0 {
-            std::mem::swap(&mut p, &mut q);
-        }
-        next[p as usize] = q;
-        prev[q as usize] = p;
-        count[p as usize] += 1;
-        count[q as usize] += 1;
-    }
-    let turning: Vec<Option<f64>> = (0..nv)
-        .map(|v| {
-            if count[v] != 2 || prev[v] == NONE || next[v] == NONE {
-                return None;
-            }
-            let d1 = sub(mesh.coords[v], x(prev[v]));
-            let d2 = sub(x(next[v]), mesh.coords[v]);
-            Some(
-                (d1[0] * d2[1] - d1[1] * d2[0])
-                    .atan2(dot(d1, d2))
-                    .to_degrees(),
-            )
-        })
-        .collect();
-    (0..nv)
-        .map(|v| {
-            turning[v].is_some_and(|t| {
-                let beside = [prev[v], next[v]].map(|w| turning[w as usize]);
-                concentrated(t, beside, angle_deg)
-            })
-        })
-        .collect()
-}
-
-/// 3D creases by angle: per edge, whether it lies on two boundary faces whose unit normals
-/// `normal` turn by a [`concentrated`] angle above `angle_deg`, against the edges opposite
-/// it in those two faces. `edge_facets` lists the boundary facets (indices into
-/// `topo.boundary_facets`) of each edge.
-fn creases_3d(
-    mesh: &LinearMesh,
-    topo: &Topology,
-    normal: &[[f64; 3]],
-    edge_facets: &[Vec<usize>],
-    angle_deg: f64,
-) -> Vec<bool> {
-    let x = |v: u32| mesh.coords[v as usize];
-    // Outward normals (away from the element's centroid) and face centres.
-    let mut out = normal.to_vec();
-    let mut centre = vec![[0.0; 3]; normal.len()];
-    for (i, &f) in topo.boundary_facets.iter().enumerate() {
-        centre[i] = centroid(&topo.faces[f as usize].map(x));
-        let inside = centroid(&mesh.element_coords(topo.facet_elements[f as usize][0] as usize));
-        if dot(out[i], sub(inside, centre[i])) > 0.0 {
-            out[i] = out[i].map(|c| -c);
-        }
-    }
-    let turning: Vec<Option<f64>> = edge_facets
-        .iter()
-        .map(|fs| match fs[..] {
-            [i, j] => {
-                let t = dot(out[i], out[j]).clamp(-1.0, 1.0).acos().to_degrees();
-                // Convex where face j bends below face i's plane.
-                Some(if dot(out[i], sub(centre[j], centre[i])) > 0.0 {
-                    -t
-                } else {
-                    t
-                })
-            }
-            _ => None,
-        })
-        .collect();
-    let opposite = |i: usize, ed: usize| -> Option<usize> {
-        let [a, b] = topo.edges[ed];
-        let q = topo.faces[topo.boundary_facets[i] as usize];
-        let rest: Vec<u32> = q.into_iter().filter(|&v| v != a && v != b).collect();
-        let &[c, d] = &rest[..] else { return None };
-        topo.edges.binary_search(&[c.min(d), c.max(d)]).ok()
-    };
-    edge_facets
-        .iter()
-        .enumerate()
-        .map(|(ed, fs)| match (&fs[..], turning[ed]) {
-            (&[i, j], Some(t)) => {
-                let beside = [i, j].map(|k| opposite(k, ed).and_then(|o| turning[o]));
-                concentrated(t, beside, angle_deg)
-            }
-            _ => false,
-        })
-        .collect()
-}
-
-/// 2D: the lines (unit normal with zero z, offset) of the boundary chains whose vertices all
-/// lie within `tol` of their least-squares line; a chain of one edge is straight.
-fn straight_chains(
-    mesh: &LinearMesh,
-    topo: &Topology,
-    facet_patch: &[u32],
-    n_patches: usize,
-    tol: f64,
-) -> Vec<Option<([f64; 3], f64)>> {
-    // Per chain: the vertex count and sums of x, y (each edge's two ends).
-    let mut sums = vec![[0.0f64; 3]; n_patches];
-    for (i, &f) in topo.boundary_facets.iter().enumerate() {
-        for v in topo.edges[f as usize] {
-            let x = mesh.coords[v as usize];
-            let s = &mut sums[facet_patch[i] as usize];
-            *s = [s[0] + 1.0, s[1] + x[0], s[2] + x[1]];
-        }
-    }
-    let centre: Vec<[f64; 2]> = sums.iter().map(|s| [s[1] / s[0], s[2] / s[0]]).collect();
-    let mut moments = vec![[0.0f64; 3]; n_patches];
-    for (i, &f) in topo.boundary_facets.iter().enumerate() {
-        let p = facet_patch[i] as usize;
-        for v in topo.edges[f as usize] {
-            let x = mesh.coords[v as usize];
-            let (dx, dy) = (x[0] - centre[p][0], x[1] - centre[p][1]);
-            let m = &mut moments[p];
-            *m = [m[0] + dx * dx, m[1] + dx * dy, m[2] + dy * dy];
-        }
-    }
-    let mut lines: Vec<Option<([f64; 3], f64)>> = (0..n_patches)
-        .map(|p| {
-            let [xx, xy, yy] = moments[p];
-            // The principal direction of the chain's points; its normal.
-            let phi = 0.5 * (2.0 * xy).atan2(xx - yy);
-            let n = [-phi.sin(), phi.cos(), 0.0];
-            (xx + yy > 0.0).then(|| (n, n[0] * centre[p][0] + n[1] * centre[p][1]))
-        })
-        .collect();
-    for (i, &f) in topo.boundary_facets.iter().enumerate() {
-        let p = facet_patch[i] as usize;
-        if let Some((n, d)) = lines[p]
-            && topo.edges[f as usize]
-                .iter()
-                .any(|&v| (dot(n, mesh.coords[v as usize]) - d).abs() > tol)
-        {
-            lines[p] = None;
-        }
-    }
-    lines
-}
-
-/// Planes of the patches whose vertices are all within `tol` of their area-weighted plane.
-fn planar_patches(
-    mesh: &LinearMesh,
-    topo: &Topology,
-    facet_patch: &[u32],
-    n_patches: usize,
-    tol: f64,
-) -> Vec<Option<([f64; 3], f64)>> {
-    let mut area = vec![[0.0; 3]; n_patches];
-    let mut centre = vec![[0.0; 4]; n_patches];
-    for (i, &f) in topo.boundary_facets.iter().enumerate() {
-        let q = topo.faces[f as usize];
-        let x = |k: usize| mesh.coords[q[k] as usize];
-        let p = facet_patch[i] as usize;
-        let n = cross(sub(x(2), x(0)), sub(x(3), x(1)));
-        area[p] = add(area[p], n);
-        for k in 0..4 {
-            for c in 0..3 {
-                centre[p][c] += x(k)[c];
-            }
-            centre[p][3] += 1.0;
-        }
-    }
-    let mut planes: Vec<Option<([f64; 3], f64)>> = (0..n_patches)
-        .map(|p| {
-            let l = norm(area[p]);
-            (l > 0.0).then(|| {
-                let n = area[p].map(|c| c / l);
-                let c = [0, 1, 2].map(|k| centre[p][k] / centre[p][3]);
-                (n, dot(n, c))
-            })
-        })
-        .collect();
-    for (i, &f) in topo.boundary_facets.iter().enumerate() {
-        let p = facet_patch[i] as usize;
-        if let Some((n, d)) = planes[p]
-            && topo.faces[f as usize]
-                .iter()
-                .any(|&v| (dot(n, mesh.coords[v as usize]) - d).abs() > tol)
-        {
-            planes[p] = None;
-        }
-    }
-    planes
-}
 
 #[cfg(test)]
 mod tests {

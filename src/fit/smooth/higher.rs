@@ -1,0 +1,331 @@
+//! Two-ring height functions of the smooth boundary vertices (see the parent module's docs):
+//! the boundary vertices within two rings of a smooth vertex ([`two_ring`]), the least-squares
+//! refit of its model as a circle/sphere part plus monomials of degree 1–4 ([`refine_model`]),
+//! and the cubic and quartic remainder each sample correction adds ([`HigherModel`]).
+//!
+//! Input: the one-ring models of [`super::one_ring`]. Output: per vertex, a refined
+//! [`VertexModel`] (same weight, H and normal of the height function's quadratic part) and its
+//! [`HigherModel`], or `None` where the one-ring model is kept.
+
+use super::VertexModel;
+use super::one_ring::{outer, sym_outer, tangent_frame};
+use crate::mesh::vec3::{add, dot, norm, sub};
+use crate::mesh::{LinearMesh, Topology};
+
+/// The cubic and quartic part of a vertex's height function over its model's tangent frame
+/// (the quadratic part is the [`VertexModel`]'s H, in the same frame).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct HigherModel {
+    /// The vertex the height function is centred on.
+    origin: [f64; 3],
+    /// Tangent frame (t₂ = 0 in 2D).
+    t: [[f64; 3]; 2],
+    /// Length scale ℓ of the coefficients: g(ξ, ζ) = ℓ Σ c_i m_i(ξ/ℓ, ζ/ℓ).
+    scale: f64,
+    /// Coefficients of the monomials u³, u²w, uw², w³, u⁴, u³w, u²w², uw³, w⁴.
+    c: [f64; 9],
+    /// Scaled curvature κℓ of the circle (2D) or sphere (3D) whose height above its tangent
+    /// plane, minus its quadratic part, is added to the polynomial (see [`sphere_height`]).
+    kappa: f64,
+}
+
+/// Height above its tangent plane of the circle or sphere of curvature `kappa` touching the
+/// plane at the origin, at squared distance `r2` from the origin (scaled units), when it has
+/// one: κr²/(1 + √(1 − κ²r²)).
+fn sphere_height(kappa: f64, r2: f64) -> Option<f64> {
+    let d = 1.0 - kappa * kappa * r2;
+    (d >= 0.0).then(|| kappa * r2 / (1.0 + d.sqrt()))
+}
+
+impl HigherModel {
+    fn height(&self, x: [f64; 3]) -> f64 {
+        let y = sub(x, self.origin);
+        let (u, w) = (
+            dot(y, self.t[0]) / self.scale,
+            dot(y, self.t[1]) / self.scale,
+        );
+        let m = &monomials(u, w)[5..];
+        let r2 = u * u + w * w;
+        // Beyond the sphere's reach (far from the vertex) only its quadratic part is kept.
+        let sphere = sphere_height(self.kappa, r2).map_or(0.0, |h| h - 0.5 * self.kappa * r2);
+        self.scale * (sphere + m.iter().zip(&self.c).map(|(a, b)| a * b).sum::<f64>())
+    }
+
+    /// g(ξ_p) − Σ φ g(ξ_j): the cubic and quartic terms' share of the correction's length
+    /// along the normal (the linear terms cancel as for H).
+    pub(super) fn correction(&self, p: [f64; 3], xs: &[[f64; 3]], phi: f64) -> f64 {
+        self.height(p) - xs.iter().map(|x| phi * self.height(*x)).sum::<f64>()
+    }
+}
+
+/// The monomials u, w, u², uw, w², u³, u²w, uw², w³, u⁴, u³w, u²w², uw³, w⁴ of a height fit.
+fn monomials(u: f64, w: f64) -> [f64; 14] {
+    let (u2, w2) = (u * u, w * w);
+    [
+        u,
+        w,
+        u2,
+        u * w,
+        w2,
+        u2 * u,
+        u2 * w,
+        u * w2,
+        w2 * w,
+        u2 * u2,
+        u2 * u * w,
+        u2 * w2,
+        u * w2 * w,
+        w2 * w2,
+    ]
+}
+
+/// The boundary vertices within two rings of the smooth boundary vertex `v` (2D: along the
+/// boundary chain; 3D: over boundary faces), the second ring reached only through vertices that
+/// have a model, so no ring crosses a sharp feature. `v` itself is not included.
+pub(super) fn two_ring(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    fan: &[Vec<u32>],
+    models: &[Option<VertexModel>],
+    v: u32,
+    cos_max: f64,
+) -> Vec<[f64; 3]> {
+    // A model-carrying vertex next to a feature (a rim vertex whose fan model spans a gentle
+    // crease) would bring in the facets across it: in 3D the second ring keeps only facets
+    // within the feature angle of the normal of the first-ring vertex u they are reached
+    // through. Against u's normal, not v's: on a coarse smooth surface (45° between facets)
+    // the second ring's facets turn from v's normal by more than the feature angle, but from
+    // u's only by half a facet's turning, as on any smooth surface.
+    let facing = |f: usize, u: u32| -> bool {
+        let (Some(n), 3) = (models[u as usize].map(|m| m.normal), mesh.dim) else {
+            return true;
+        };
+        let fv = topo.facet_vertices(f);
+        if fv.len() < 4 {
+            return true;
+        }
+        let c = |i: usize| mesh.coords[fv[i] as usize];
+        let d1 = sub(c(2), c(0));
+        let d2 = sub(c(3), c(1));
+        let nf = [
+            d1[1] * d2[2] - d1[2] * d2[1],
+            d1[2] * d2[0] - d1[0] * d2[2],
+            d1[0] * d2[1] - d1[1] * d2[0],
+        ];
+        let l = norm(nf);
+        l > 0.0 && dot(nf, n).abs() >= cos_max * l
+    };
+    let mut ring: Vec<u32> = Vec::new();
+    let mut first: Vec<u32> = Vec::new();
+    for &f in &fan[v as usize] {
+        first.extend(
+            topo.facet_vertices(f as usize)
+                .iter()
+                .copied()
+                .filter(|&w| w != v),
+        );
+    }
+    first.sort_unstable();
+    first.dedup();
+    // Next to a feature (a first-ring vertex without a smooth model) the height function's
+    // ring would be one-sided and cut by the feature: keep the one-ring quadric there.
+    if first.iter().any(|&u| models[u as usize].is_none()) {
+        return Vec::new();
+    }
+    ring.extend(&first);
+    for &u in &first {
+        if models[u as usize].is_none() {
+            continue;
+        }
+        for &f in fan[u as usize].iter().filter(|&&f| facing(f as usize, u)) {
+            ring.extend(
+                topo.facet_vertices(f as usize)
+                    .iter()
+                    .copied()
+                    .filter(|&w| w != v),
+            );
+        }
+    }
+    ring.sort_unstable();
+    ring.dedup();
+    ring.iter().map(|&w| mesh.coords[w as usize]).collect()
+}
+
+/// Refit the model `m` of the vertex at `x` as a height function of degree up to four over its
+/// two-ring points `pts` (relative scale `ell`): 2D u, u², u³, u⁴ through up to four points;
+/// 3D all 14 monomials of degree 1–4 by least squares over at least 20 points, or those of
+/// degree 1–3 over at least 12. The frame is re-tilted by the linear terms and the fit
+/// repeated, as for the quadric. `None` (keep `m`) with too few points, where the points are
+/// not a graph over the tangent plane (slope above 1), or when the system is singular.
+pub(super) fn refine_model(
+    dim: usize,
+    x: [f64; 3],
+    m: &VertexModel,
+    pts: &[[f64; 3]],
+    ell: f64,
+) -> Option<(VertexModel, HigherModel)> {
+    if !(ell > 0.0) {
+        return None;
+    }
+    const CUBIC: &[usize] = &[0, 1, 2, 3, 4, 5, 6, 7, 8];
+    const QUARTIC: &[usize] = &[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13];
+    let used: &[usize] = if dim == 2 {
+        match pts.len() {
+            0..=2 => return None,
+            3 => &[0, 2, 5],
+            _ => &[0, 2, 5, 9],
+        }
+    } else if pts.len() >= 20 {
+        QUARTIC
+    } else if pts.len() >= 12 {
+        CUBIC
+    } else {
+        return None;
+    };
+    // A ring with too few distinct rows in one direction (an extruded wall a few cells
+    // across) leaves the quartic undetermined: fall back to the cubic before the quadric.
+    if used.len() == QUARTIC.len() {
+        if let Some(r) = refine_with(dim, x, m, pts, ell, QUARTIC) {
+            return Some(r);
+        }
+        return refine_with(dim, x, m, pts, ell, CUBIC);
+    }
+    refine_with(dim, x, m, pts, ell, used)
+}
+
+/// [`refine_model`] with the monomials `used`.
+fn refine_with(
+    dim: usize,
+    x: [f64; 3],
+    m: &VertexModel,
+    pts: &[[f64; 3]],
+    ell: f64,
+    used: &[usize],
+) -> Option<(VertexModel, HigherModel)> {
+    let frame_of = |n: [f64; 3]| -> ([f64; 3], [f64; 3]) {
+        if dim == 2 {
+            ([n[1], -n[0], 0.0], [0.0; 3])
+        } else {
+            tangent_frame(n)
+        }
+    };
+    let mut n = m.normal;
+    // Scaled mean curvature of the quadric: the sphere (circle) part of the height function,
+    // which makes the model exact on spheres and circles however coarse the ring.
+    let trace = m.h[0][0] + m.h[1][1] + m.h[2][2];
+    let mut kappa = 2.0 * trace / (dim - 1) as f64 * ell;
+    let mut fitted = None;
+    for _ in 0..4 {
+        let (t1, t2) = frame_of(n);
+        let k = used.len();
+        let mut ata = vec![vec![0.0; k]; k];
+        let mut atb = vec![0.0; k];
+        for p in pts {
+            let y = sub(*p, x);
+            let (u, w, h) = (dot(y, t1) / ell, dot(y, t2) / ell, dot(y, n) / ell);
+            if h.abs() > u.hypot(w) {
+                return None;
+            }
+            if sphere_height(kappa, u * u + w * w).is_none() {
+                kappa = 0.0;
+            }
+        }
+        for p in pts {
+            let y = sub(*p, x);
+            let (u, w) = (dot(y, t1) / ell, dot(y, t2) / ell);
+            let h = dot(y, n) / ell - sphere_height(kappa, u * u + w * w).unwrap_or(0.0);
+            let all = monomials(u, w);
+            for i in 0..k {
+                for j in 0..k {
+                    ata[i][j] += all[used[i]] * all[used[j]];
+                }
+                atb[i] += all[used[i]] * h;
+            }
+        }
+        let sol = solve_n(ata, atb)?;
+        let mut c = [0.0; 14];
+        for (i, &u) in used.iter().enumerate() {
+            c[u] = sol[i];
+        }
+        if c[0].hypot(c[1]) > 1.0 {
+            return None;
+        }
+        fitted = Some((n, t1, t2, c, kappa));
+        // Move the isotropic part of the quadratic remainder into the sphere.
+        kappa += 2.0 * (c[2] + c[4]) / (dim - 1) as f64;
+        let nn = sub(n, add(t1.map(|v| c[0] * v), t2.map(|v| c[1] * v)));
+        let l = norm(nn);
+        n = nn.map(|v| v / l);
+    }
+    // The polynomial belongs to the frame it was fitted in (before the last tilt).
+    let (n, t1, t2, c, kappa) = fitted?;
+    // Quadratic part: the sphere's κr²/2 and the polynomial's.
+    let q = [
+        (c[2] + 0.5 * kappa) / ell,
+        c[3] / ell,
+        (c[4] + if dim == 2 { 0.0 } else { 0.5 * kappa }) / ell,
+    ];
+    let mut h = [[0.0; 3]; 3];
+    for (mat, w) in [
+        (outer(t1, t1), q[0]),
+        (sym_outer(t1, t2), 0.5 * q[1]),
+        (outer(t2, t2), q[2]),
+    ] {
+        for i in 0..3 {
+            for j in 0..3 {
+                h[i][j] += w * mat[i][j];
+            }
+        }
+    }
+    let mut hc = [0.0; 9];
+    hc.copy_from_slice(&c[5..]);
+    Some((
+        VertexModel {
+            normal: n,
+            h,
+            weight: m.weight,
+        },
+        HigherModel {
+            origin: x,
+            t: [t1, t2],
+            scale: ell,
+            c: hc,
+            kappa,
+        },
+    ))
+}
+
+/// Gaussian elimination with partial pivoting; `None` when nearly singular.
+fn solve_n(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Option<Vec<f64>> {
+    let n = b.len();
+    let scale = (0..n).map(|i| a[i][i].abs()).fold(0.0, f64::max);
+    if !(scale > 0.0) {
+        return None;
+    }
+    for c in 0..n {
+        let p = (c..n).max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))?;
+        // Relative to the unit-scaled monomials' Gram matrix: a smaller pivot means a
+        // direction the points do not determine, whose coefficient would be noise.
+        if !(a[p][c].abs() > 1e-8 * scale) {
+            return None;
+        }
+        a.swap(c, p);
+        b.swap(c, p);
+        for r in c + 1..n {
+            let f = a[r][c] / a[c][c];
+            for k in c..n {
+                a[r][k] -= f * a[c][k];
+            }
+            b[r] -= f * b[c];
+        }
+    }
+    let mut x = vec![0.0; n];
+    for r in (0..n).rev() {
+        let mut s = b[r];
+        for k in r + 1..n {
+            s -= a[r][k] * x[k];
+        }
+        x[r] = s / a[r][r];
+    }
+    Some(x)
+}

@@ -1,0 +1,202 @@
+//! One-ring boundary models (see the parent module's docs): the 2D parabola through a vertex's
+//! two boundary neighbours ([`fit_parabola`]) and the 3D least-squares quadric over the
+//! vertices of the boundary faces around it ([`fan_model`]), with the small dense solves and
+//! tensor helpers they share with the two-ring refit.
+//!
+//! Input: a vertex and its neighbours' coordinates. Output: a unit normal and the curvature
+//! tensor H (H · normal = 0), or `None` for a degenerate or non-graph fan.
+
+use super::VertexModel;
+use crate::mesh::vec3::{add, cross, dot, norm, sub};
+use crate::mesh::{LinearMesh, Topology};
+
+/// The 3D model at vertex `v` from the boundary faces `faces` around it, with the fan's length
+/// scale ℓ; `None` when the fan is degenerate, has fewer than 5 neighbour vertices, or a face
+/// normal is more than acos(`cos_max`) from the fan normal (the model is `None` when the
+/// quadric fit fails).
+pub(in crate::fit) fn fan_model(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    v: u32,
+    faces: &[u32],
+    cos_max: f64,
+) -> Option<(Option<VertexModel>, f64)> {
+    let x = |w: u32| mesh.coords[w as usize];
+    let mut area = [0.0; 3];
+    let mut normals = Vec::with_capacity(faces.len());
+    let mut nb: Vec<u32> = Vec::new();
+    let mut total_area = 0.0;
+    for &f in faces {
+        let q = topo.faces[f as usize];
+        let a = cross(sub(x(q[2]), x(q[0])), sub(x(q[3]), x(q[1])));
+        area = add(area, a);
+        let l = norm(a);
+        total_area += 0.5 * l;
+        normals.push(a.map(|c| c / l.max(f64::MIN_POSITIVE)));
+        nb.extend(q.iter().copied().filter(|&w| w != v));
+    }
+    nb.sort_unstable();
+    nb.dedup();
+    let la = norm(area);
+    if la == 0.0 || nb.len() < 5 {
+        return None;
+    }
+    let n0 = area.map(|c| c / la);
+    if normals.iter().any(|nf| dot(*nf, n0) < cos_max) {
+        return None;
+    }
+    let ell = (total_area / faces.len() as f64).sqrt();
+    let pts: Vec<[f64; 3]> = nb.iter().map(|&w| sub(x(w), x(v))).collect();
+    let model = fit_quadric(n0, &pts, ell).map(|(normal, h)| VertexModel {
+        normal,
+        h,
+        weight: 1.0,
+    });
+    Some((model, ell))
+}
+
+/// 2D model at x through its boundary neighbours a and b: (normal, H).
+pub(in crate::fit) fn fit_parabola(
+    x: [f64; 3],
+    a: [f64; 3],
+    b: [f64; 3],
+) -> Option<([f64; 3], [[f64; 3]; 3])> {
+    let (ua, ub) = (sub(a, x), sub(b, x));
+    let d = sub(ub, ua);
+    let l = norm(d);
+    let mut t = d.map(|c| c / l);
+    let mut fitted = None;
+    for _ in 0..3 {
+        let n = [-t[1], t[0], 0.0];
+        let (xa, ya, xb, yb) = (dot(ua, t), dot(ua, n), dot(ub, t), dot(ub, n));
+        let det = xa * xb * xb - xb * xa * xa;
+        if !(xa < 0.0 && xb > 0.0) || det.abs() < 1e-300 {
+            return None;
+        }
+        let c1 = (ya * xb * xb - yb * xa * xa) / det;
+        let c2 = (xa * yb - xb * ya) / det;
+        if c1.abs() > 1.0 {
+            return None;
+        }
+        fitted = Some((t, c2));
+        // Tilt the frame to the parabola's tangent at x and fit again.
+        let tn = add(t, n.map(|c| c1 * c));
+        let ln = norm(tn);
+        t = tn.map(|c| c / ln);
+    }
+    let (t, c2) = fitted?;
+    let n = [-t[1], t[0], 0.0];
+    let h = outer(t, t).map(|r| r.map(|c| c2 * c));
+    Some((n, h))
+}
+
+/// 3D model: least-squares quadric height over the tangent plane of normal n0 through the
+/// neighbour offsets `pts` (relative to the vertex); `scale` ~ the edge length.
+pub(super) fn fit_quadric(
+    n0: [f64; 3],
+    pts: &[[f64; 3]],
+    scale: f64,
+) -> Option<([f64; 3], [[f64; 3]; 3])> {
+    let mut n = n0;
+    let mut q = [0.0; 3];
+    let mut frame = tangent_frame(n);
+    for _ in 0..3 {
+        frame = tangent_frame(n);
+        let (t1, t2) = frame;
+        // Unknowns (a, b, c, d, e) of η = aξ² + bξζ + cζ² + dξ + eζ in scaled coordinates.
+        let mut ata = [[0.0; 5]; 5];
+        let mut atb = [0.0; 5];
+        for p in pts {
+            let (u, v, h) = (dot(*p, t1) / scale, dot(*p, t2) / scale, dot(*p, n) / scale);
+            let row = [u * u, u * v, v * v, u, v];
+            for i in 0..5 {
+                for j in 0..5 {
+                    ata[i][j] += row[i] * row[j];
+                }
+                atb[i] += row[i] * h;
+            }
+        }
+        let s = solve5(ata, atb)?;
+        // Back to unscaled: η = (a/scale) ξ² + …, slopes unchanged.
+        q = [s[0] / scale, s[1] / scale, s[2] / scale];
+        let (d, e) = (s[3], s[4]);
+        if d.hypot(e) > 1.0 {
+            return None;
+        }
+        let nn = sub(n, add(t1.map(|c| d * c), t2.map(|c| e * c)));
+        let l = norm(nn);
+        n = nn.map(|c| c / l);
+    }
+    let (t1, t2) = frame;
+    let mut h = [[0.0; 3]; 3];
+    let parts = [
+        (outer(t1, t1), q[0]),
+        (sym_outer(t1, t2), 0.5 * q[1]),
+        (outer(t2, t2), q[2]),
+    ];
+    for (m, w) in parts {
+        for i in 0..3 {
+            for j in 0..3 {
+                h[i][j] += w * m[i][j];
+            }
+        }
+    }
+    // The quadric was fitted in the frame before the last tilt; use that frame's normal so H
+    // and n belong together (H n = 0).
+    Some((cross(t1, t2), h))
+}
+
+pub(super) fn tangent_frame(n: [f64; 3]) -> ([f64; 3], [f64; 3]) {
+    let a = if n[0].abs() < 0.6 {
+        [1.0, 0.0, 0.0]
+    } else {
+        [0.0, 1.0, 0.0]
+    };
+    let t1 = cross(n, a);
+    let l = norm(t1);
+    let t1 = t1.map(|c| c / l);
+    (t1, cross(n, t1))
+}
+
+/// Gaussian elimination with partial pivoting on a 5×5 system; None when nearly singular.
+fn solve5(mut a: [[f64; 5]; 5], mut b: [f64; 5]) -> Option<[f64; 5]> {
+    let scale = (0..5).map(|i| a[i][i].abs()).fold(0.0, f64::max);
+    if scale == 0.0 {
+        return None;
+    }
+    for c in 0..5 {
+        let p = (c..5).max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))?;
+        if a[p][c].abs() < 1e-9 * scale {
+            return None;
+        }
+        a.swap(c, p);
+        b.swap(c, p);
+        for r in c + 1..5 {
+            let f = a[r][c] / a[c][c];
+            for k in c..5 {
+                a[r][k] -= f * a[c][k];
+            }
+            b[r] -= f * b[c];
+        }
+    }
+    let mut x = [0.0; 5];
+    for r in (0..5).rev() {
+        let mut s = b[r];
+        for k in r + 1..5 {
+            s -= a[r][k] * x[k];
+        }
+        x[r] = s / a[r][r];
+    }
+    Some(x)
+}
+
+pub(super) fn outer(a: [f64; 3], b: [f64; 3]) -> [[f64; 3]; 3] {
+    a.map(|ai| b.map(|bj| ai * bj))
+}
+pub(super) fn sym_outer(a: [f64; 3], b: [f64; 3]) -> [[f64; 3]; 3] {
+    let (m, n) = (outer(a, b), outer(b, a));
+    std::array::from_fn(|i| std::array::from_fn(|j| m[i][j] + n[i][j]))
+}
+pub(super) fn matvec(m: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
+    m.map(|r| dot(r, v))
+}
