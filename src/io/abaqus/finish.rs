@@ -176,11 +176,8 @@ impl Facets<'_> {
         for (bi, b) in self.blocks.iter().enumerate() {
             owner.extend((0..b.ids.len()).map(|c| (bi as u32, c as u32)));
         }
-        let mut next_tag = first_tag;
         let mut facet_blocks: Vec<RawBlock> = Vec::new();
-        for surface in surfaces {
-            let tag = next_tag;
-            next_tag += 1;
+        for (tag, surface) in (first_tag..).zip(surfaces) {
             tag_names.insert(tag, surface.name.clone());
             for (ln, target, face) in &surface.faces {
                 let members: &[i64] = match target {

@@ -27,6 +27,9 @@
 //! Parts: `netcdf` parses the container and gives typed views of its variables;
 //! `family` maps element types to kinds and side tables; this module reads the coordinates,
 //! the element blocks and the side sets, in that order.
+//!
+//! [`CellKind`]: crate::io::raw::CellKind
+//! [`CellKind::Other`]: crate::io::raw::CellKind::Other
 
 mod family;
 mod netcdf;

@@ -43,6 +43,9 @@
 //! `entities`, `nodes` and `elements` read their sections in every version and encoding;
 //! `binary` decodes binary data with bounds checks; `element_types` maps type numbers to
 //! cell kinds.
+//!
+//! [`CellKind`]: crate::io::raw::CellKind
+//! [`CellKind::Other`]: crate::io::raw::CellKind::Other
 
 mod binary;
 mod element_types;

@@ -27,6 +27,9 @@
 //! Parts: this module runs the keyword loop (`Legacy::parse`); `values` reads the header
 //! and the ASCII or binary values of a section; `sections` reads each section; `cells`
 //! (cell types, the cell list) and `scalar` (data types) are shared with the XML reader.
+//!
+//! [`CellKind`]: crate::io::raw::CellKind
+//! [`CellKind::Other`]: crate::io::raw::CellKind::Other
 
 mod cells;
 mod scalar;
