@@ -1,20 +1,24 @@
 //! The `curve` job across MPI ranks (see `docs/distributed.md` for what is distributed and
 //! what is not yet).
 //!
-//! Input: the input mesh path, [`CurveOptions`] (the default IGA path: the certified blend of
-//! the least-squares fit, CPU backend) and a [`Comm`]. Output: on rank 0, the curved
-//! high-order mesh gathered from the ranks and a [`DistributedReport`]; `None` on the others.
+//! Input: the input mesh path (binary MSH 4.1), [`CurveOptions`] (the default IGA path: the
+//! certified blend of the least-squares fit, CPU backend) and a [`Comm`]. Output: on rank 0,
+//! the curved high-order mesh gathered from the ranks and a [`DistributedReport`]; `None` on
+//! the others.
 //!
-//! Stages per rank: read the whole input and build the topology, features, smooth targets and
-//! spline space (replicated: every rank computes the same); partition the elements along a
-//! Morton curve ([`super::partition`]); assemble the normal equations over its own elements
-//! only ([`crate::fit::partial`]); solve them with the distributed CG ([`super::cg`]); run the
-//! certified blend on its own elements, the ranks agreeing on the rejected elements of every
-//! round ([`crate::validity::blend::blend_search_shared`]); send its elements' final Bernstein
-//! nets to rank 0, which samples them with the serial, entity-based node numbering and writes
-//! the file. Invariant: the result equals the serial run's up to the CG tolerance (the
-//! distributed CG preconditions with point Jacobi instead of block Jacobi); the blend's
-//! factors are the serial search's for the same fitted map.
+//! Stages per rank: read its contiguous run of the file's elements and [`GHOST_DEPTH`] vertex
+//! rings of ghosts by offsets ([`super::read`]); build the topology, features, smooth targets
+//! and spline space on that sub-mesh with the serial stage functions
+//! ([`crate::pipeline::spline::SplineSetup`]); agree on the shared control points by keys of
+//! global entity ids ([`super::local`]); assemble the normal equations over its own elements
+//! with the whole mesh's size levels ([`crate::fit::partial`]); solve them with the
+//! distributed block-Jacobi CG ([`super::cg`]); run the certified blend on its own elements,
+//! the ranks agreeing on the rejected elements of every round in global ids
+//! ([`crate::validity::blend::blend_search_shared`]); send its elements' final Bernstein nets
+//! to rank 0, which reads the linear mesh, samples the nets with the serial, entity-based
+//! node numbering and writes the file. Invariant: the result equals the serial run's up to
+//! the CG tolerance (the block-Jacobi aggregates differ from the serial solver's); the
+//! blend's factors are the serial search's for the same fitted map.
 
 use super::cg::{Halo, LocalMatrix, pcg};
 use super::comm::Comm;
@@ -114,10 +118,12 @@ pub fn peak_memory_bytes() -> u64 {
         .map_or(0, |kb| kb * 1024)
 }
 
-/// Element nets gathered on rank 0, in element order.
+/// Element nets gathered on rank 0, in element order (the ranks' runs of elements follow
+/// each other in file order), `np` points of 3 doubles each.
 struct Nets {
     dim: usize,
-    nets: Vec<[[f64; 3]; 27]>,
+    np: usize,
+    flat: Vec<f64>,
 }
 
 impl BezierElements for Nets {
@@ -125,10 +131,15 @@ impl BezierElements for Nets {
         self.dim
     }
     fn n_elements(&self) -> usize {
-        self.nets.len()
+        self.flat.len() / (3 * self.np)
     }
     fn bezier_net(&self, e: usize) -> [[f64; 3]; 27] {
-        self.nets[e]
+        let mut n = [[0.0; 3]; 27];
+        let x = &self.flat[3 * self.np * e..3 * self.np * (e + 1)];
+        for (i, p) in x.chunks_exact(3).enumerate() {
+            n[i].copy_from_slice(p);
+        }
+        n
     }
 }
 
@@ -397,21 +408,10 @@ pub fn curve(
     // Rank 0: the serial sampling, numbering and checks on the gathered nets.
     let mesh = read_mesh(input, &options.mesh)?;
     let topo = Topology::build(&mesh);
-    let np = if mesh.dim == 2 { 9 } else { 27 };
-    let mut nets = Vec::with_capacity(mesh.n_elements());
-    for flat in &gathered {
-        for net in flat.chunks_exact(3 * np) {
-            let mut n = [[0.0; 3]; 27];
-            for (i, p) in net.chunks_exact(3).enumerate() {
-                n[i].copy_from_slice(p);
-            }
-            nets.push(n);
-        }
-    }
-    drop(gathered);
     let source = Nets {
         dim: mesh.dim,
-        nets,
+        np: if mesh.dim == 2 { 9 } else { 27 },
+        flat: gathered,
     };
     let mut ho = sample(&source, &mesh, &topo, order);
     drop(source);
