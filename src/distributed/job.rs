@@ -46,6 +46,8 @@ pub struct RankFigures {
     pub rank: usize,
     /// Elements this rank assembles, certifies and sends.
     pub elements: usize,
+    /// Ghost elements it read and built its setup on besides its own.
+    pub ghost_elements: usize,
     /// Control points its elements touch (the rows it holds), those it owns (counted in dot
     /// products), and those it shares with other ranks (its halo).
     pub control_points: usize,
@@ -247,7 +249,10 @@ fn run_share(
     let sizes = crate::fit::partial::element_sizes(mesh);
     let mut hmax = [sizes[..local.n_owned].iter().copied().fold(0.0, f64::max)];
     comm.max_f64(&mut hmax);
-    let levels = crate::fit::partial::size_levels_below(&sizes, hmax[0]);
+    // The ghosts' levels are left at 0: the scaling D of a control point is the largest
+    // level of the own elements using it here, then over the ranks sharing it.
+    let mut levels = crate::fit::partial::size_levels_below(&sizes, hmax[0]);
+    levels[local.n_owned..].fill(0);
     drop(sizes);
     let mine: Vec<usize> = (0..local.n_owned).collect();
     let fit_params = &setup.fit_params;
@@ -261,12 +266,22 @@ fn run_share(
         Some(&levels),
     );
     drop(levels);
-    if let Some(d) = &sys.scale {
-        sys.matrix.scale_symmetric(d);
-        for (r, &d) in sys.rhs.iter_mut().zip(d) {
-            *r = r.map(|x| d * x);
-        }
+    // D = 2^-k is exact, and D = 1 scales nothing: a rank without levels takes 1 everywhere.
+    let mut d_halo: Vec<f64> = match &sys.scale {
+        Some(d) => halo.global.iter().map(|&g| d[g as usize]).collect(),
+        None => vec![1.0; halo.len()],
+    };
+    super::local::min_over_halo(comm, &halo, &mut d_halo);
+    let mut d = vec![1.0; s.n_control_points()];
+    for (&g, &x) in halo.global.iter().zip(&d_halo) {
+        d[g as usize] = x;
     }
+    drop(d_halo);
+    sys.matrix.scale_symmetric(&d);
+    for (r, &d) in sys.rhs.iter_mut().zip(&d) {
+        *r = r.map(|x| d * x);
+    }
+    sys.scale = Some(d);
     let k = LocalMatrix::new(&sys.matrix, &halo);
     let b: Vec<[f64; 3]> = halo.global.iter().map(|&g| sys.rhs[g as usize]).collect();
     let scale = sys.scale.take();
@@ -382,6 +397,7 @@ pub fn curve(
     let figures = RankFigures {
         rank,
         elements: share.local.n_owned,
+        ghost_elements: share.local.mesh.n_elements() - share.local.n_owned,
         control_points: share.halo.len(),
         owned_control_points: share.halo.owned.iter().filter(|&&o| o).count(),
         shared_control_points: share.halo.shared(),
@@ -445,6 +461,9 @@ pub fn curve(
     }
     let deviation = crate::deviation::boundary_deviation(&mesh, &topo, &ho);
     laps.lap("quality");
+    // Rank 0's peak includes the sampling and checks of the whole output.
+    let mut all_figures = all_figures;
+    all_figures[0].peak_memory_bytes = peak_memory_bytes();
     let mut timings = laps.timings;
     timings.insert("total".into(), start.elapsed().as_secs_f64());
     let report = CurveReport {
@@ -534,6 +553,7 @@ fn gather_figures(comm: &dyn Comm, f: &RankFigures) -> Vec<RankFigures> {
         f.bytes_fit as f64,
         f.bytes_validity as f64,
         f.bytes_gather as f64,
+        f.ghost_elements as f64,
     ];
     v.extend(
         STAGES
@@ -556,9 +576,10 @@ fn gather_figures(comm: &dyn Comm, f: &RankFigures) -> Vec<RankFigures> {
             bytes_fit: v[8] as u64,
             bytes_validity: v[9] as u64,
             bytes_gather: v[10] as u64,
+            ghost_elements: v[11] as usize,
             timings: STAGES
                 .iter()
-                .zip(&v[11..])
+                .zip(&v[12..])
                 .map(|(s, &t)| (s.to_string(), t))
                 .collect(),
         })

@@ -19,10 +19,27 @@ use std::collections::{BTreeSet, HashMap};
 
 /// Vertex rings of ghosts around a rank's elements. The spline stencil of an element reaches
 /// its vertex one-ring; its class and the constrained Q2 elements' weights, the next ring;
-/// the size scaling D of a control point is the largest level of the elements using it, up to
-/// two rings away, whose own stencils need two more: 4 rings make every quantity of the own
-/// elements and their control points the serial run's.
-pub const GHOST_DEPTH: usize = 4;
+/// the smooth targets and features of its boundary vertices read their facet two-ring, whose
+/// facets belong to the same two element rings (a facet of the cut fringe of the ghost layer
+/// touches no vertex of a one-ring element). The size scaling D of a control point, the
+/// largest level of the elements using it, is agreed over the halo instead
+/// ([`min_over_halo`]), so no ghost's own stencil is needed.
+pub const GHOST_DEPTH: usize = 2;
+
+/// `v[i] ← min over the ranks sharing control point `halo.global[i]` of their values (one
+/// exchange with the neighbours).
+pub fn min_over_halo(comm: &dyn Comm, halo: &Halo, v: &mut [f64]) {
+    let mut send = vec![Vec::new(); comm.size()];
+    for (q, list) in &halo.neighbours {
+        send[*q] = list.iter().map(|&i| v[i as usize]).collect();
+    }
+    let recv = comm.exchange_f64(&send);
+    for (q, list) in &halo.neighbours {
+        for (&i, &x) in list.iter().zip(&recv[*q]) {
+            v[i as usize] = v[i as usize].min(x);
+        }
+    }
+}
 
 /// A control point's entity kind and the sorted global ids of the entity.
 pub type Key = [u64; 5];

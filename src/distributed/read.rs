@@ -579,3 +579,95 @@ fn read_share_inner(
         n_global,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::gmsh_write::{MshVersion, write_msh};
+    use crate::mesh::Topology;
+    use crate::mesh::generate::{Kind, generate};
+
+    /// A generated cylinder written as binary MSH 4.1, and the serial reader's mesh of it.
+    fn cylinder(name: &str) -> (std::path::PathBuf, LinearMesh) {
+        let mesh = generate(Kind::Cylinder, 6000);
+        let topo = Topology::build(&mesh);
+        let linear = crate::sample::sample(&mesh, &mesh, &topo, 1);
+        let dir = std::env::temp_dir().join(format!("polyspline-read-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join(name);
+        let mut f = std::io::BufWriter::new(File::create(&path).unwrap());
+        write_msh(&linear, MshVersion::V41, true, &mut f).unwrap();
+        drop(f);
+        let serial = crate::io::read_mesh(&path, &MeshOptions::default()).unwrap();
+        (path, serial)
+    }
+
+    #[test]
+    fn shares_partition_the_elements_with_the_serial_coordinates_and_exact_ghost_rings() {
+        let (path, serial) = cylinder("share.msh");
+        let topo = Topology::build(&serial);
+        let n = serial.n_elements();
+        let size = 4;
+        let mut seen = vec![0u8; n];
+        for rank in 0..size {
+            let depth = 2;
+            let l = read_share(&path, rank, size, depth, &MeshOptions::default()).unwrap();
+            assert_eq!(l.n_global as usize, n);
+            // Own elements: a contiguous run, the serial element's vertices (by coordinates)
+            // and tag, the serial orientation.
+            for (i, &g) in l.global_element.iter().enumerate() {
+                let g = g as usize;
+                if i < l.n_owned {
+                    seen[g] += 1;
+                }
+                assert_eq!(l.mesh.element_coords(i), serial.element_coords(g));
+                assert_eq!(l.mesh.element_tags.get(i), serial.element_tags.get(g));
+            }
+            // Ghosts: exactly the elements within `depth` vertex rings of the own ones.
+            let mut ring: std::collections::BTreeSet<usize> = l.global_element[..l.n_owned]
+                .iter()
+                .map(|&g| g as usize)
+                .collect();
+            for _ in 0..depth {
+                let verts: Vec<u32> = ring
+                    .iter()
+                    .flat_map(|&e| serial.element(e).to_vec())
+                    .collect();
+                for v in verts {
+                    let v = v as usize;
+                    for k in topo.vertex_offsets[v]..topo.vertex_offsets[v + 1] {
+                        ring.insert(topo.vertex_elements[k as usize] as usize);
+                    }
+                }
+            }
+            let mut have: Vec<usize> = l.global_element.iter().map(|&g| g as usize).collect();
+            have.sort_unstable();
+            assert_eq!(have, ring.into_iter().collect::<Vec<_>>());
+            // Only the nodes of these elements: fewer than the whole mesh's.
+            assert!(l.mesh.n_vertices() < serial.n_vertices());
+            assert_eq!(l.global_vertex.len(), l.mesh.n_vertices());
+            assert_eq!(l.mesh.tag_names, serial.tag_names);
+            // Tagged facets: those of the serial mesh whose vertices are all here.
+            assert!(l.mesh.facet_tags.len() <= serial.facet_tags.len());
+            assert!(!l.mesh.facet_tags.is_empty());
+        }
+        assert!(seen.iter().all(|&s| s == 1), "every element owned once");
+    }
+
+    #[test]
+    fn an_ascii_file_is_one_error_line() {
+        let mesh = generate(Kind::Cylinder, 100);
+        let topo = Topology::build(&mesh);
+        let linear = crate::sample::sample(&mesh, &mesh, &topo, 1);
+        let path =
+            std::env::temp_dir().join(format!("polyspline-ascii-{}.msh", std::process::id()));
+        let mut f = std::io::BufWriter::new(File::create(&path).unwrap());
+        write_msh(&linear, MshVersion::V41, false, &mut f).unwrap();
+        drop(f);
+        let e = read_share(&path, 0, 2, 1, &MeshOptions::default())
+            .err()
+            .expect("ASCII is refused")
+            .to_string();
+        assert!(e.contains("binary MSH 4.1") && !e.contains('\n'), "{e}");
+    }
+}
