@@ -81,7 +81,7 @@ pub fn touched(space: &SplineSpace, n_owned: usize) -> Vec<u32> {
 
 /// The halo of the own elements' control points (see the module docs): each rank sends the
 /// keys of its control points to the owners of its ghosts and keeps the keys it has in common
-/// with each. Returns the halo and the bytes of keys sent.
+/// with each.
 pub fn halo(comm: &dyn Comm, local: &LocalMesh, topo: &Topology, space: &SplineSpace) -> Halo {
     let (rank, size) = (comm.rank(), comm.size());
     let global = touched(space, local.n_owned);
