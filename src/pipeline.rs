@@ -26,7 +26,7 @@
 
 mod clock;
 mod report;
-mod spline;
+pub(crate) mod spline;
 
 use crate::elastic::{ElasticError, ElasticInfo, ElasticParams, elastic_analogy};
 use crate::energy::{EnergyError, EnergyParams};
@@ -360,7 +360,7 @@ pub(crate) fn check_options(
 }
 
 /// The topology of the input, which must be curvable (manifold, with a boundary).
-fn topology(input: &Path, mesh: &LinearMesh) -> Result<Topology, CurveError> {
+pub(crate) fn topology(input: &Path, mesh: &LinearMesh) -> Result<Topology, CurveError> {
     let topo = Topology::build(mesh);
     crate::mesh::manifold::check_curvable(mesh, &topo).map_err(|what| CurveError::NotCurvable {
         input: input.to_owned(),

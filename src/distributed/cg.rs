@@ -1,6 +1,6 @@
 //! The fit's normal equations solved across ranks: each rank holds the rows of the control
 //! points its elements touch, assembled from its own elements only, and the ranks run one
-//! Jacobi-preconditioned CG together.
+//! block-Jacobi-preconditioned CG together.
 //!
 //! Input: this rank's share K_s, F_s of the system ([`crate::fit::partial`]), the control
 //! points each rank touches ([`Halo`]). Output: the displacement δ on this rank's control
@@ -15,13 +15,19 @@
 //! (the lowest rank touching it), then sum over the ranks (one all-reduce of 3 values per dot
 //! product, two per iteration besides the stopping test's).
 //!
-//! **Preconditioner.** Point Jacobi on the summed diagonal. The serial solver's default is
-//! block Jacobi on aggregates of 64 control points; the iterates differ, the solution agrees
-//! to the tolerance (the stopping rule, ‖r‖ ≤ rel_tol ‖b‖ per coordinate, is the serial one).
+//! **Preconditioner.** Block Jacobi, as the serial solver's default
+//! ([`crate::solve::block_jacobi`]): the control points only this rank touches have complete
+//! rows in its share of K, so they are aggregated (64 per block, breadth-first over K's graph)
+//! and each diagonal block is factored; the shared control points, whose rows are split
+//! between ranks, get point Jacobi on their summed diagonal. The preconditioner is one SPD
+//! block-diagonal matrix across the ranks, applied locally without communication. The
+//! aggregates differ from the serial run's, so the iterates do too; the solution agrees to the
+//! tolerance (the stopping rule, ‖r‖ ≤ rel_tol ‖b‖ per coordinate, is the serial one).
 
 use super::comm::Comm;
 use crate::fit::NormalMatrix;
-use crate::solve::{CgError, CgInfo, CgParams};
+use crate::solve::block_jacobi::{BlockJacobi, DEFAULT_BLOCK};
+use crate::solve::{CgError, CgInfo, CgParams, Preconditioner};
 use rayon::prelude::*;
 
 /// The control points of this rank and how they are shared.
@@ -205,6 +211,83 @@ impl LocalMatrix {
     }
 }
 
+/// Block Jacobi on the rows only this rank touches, point Jacobi on the shared ones (see the
+/// module docs).
+struct LocalBlockJacobi {
+    /// Local rows of the blocks (the unshared control points), in the blocks' numbering.
+    interior: Vec<u32>,
+    blocks: Option<BlockJacobi>,
+    /// Summed diagonal (used on the shared rows).
+    diag: Vec<f64>,
+    shared: Vec<bool>,
+}
+
+impl LocalBlockJacobi {
+    fn new(k: &LocalMatrix, halo: &Halo, diag: Vec<f64>) -> Result<Self, CgError> {
+        let mut shared = vec![false; halo.len()];
+        for (_, l) in &halo.neighbours {
+            for &i in l {
+                shared[i as usize] = true;
+            }
+        }
+        let interior: Vec<u32> = (0..halo.len() as u32)
+            .filter(|&i| !shared[i as usize])
+            .collect();
+        let mut slot = vec![u32::MAX; halo.len()];
+        for (j, &i) in interior.iter().enumerate() {
+            slot[i as usize] = j as u32;
+        }
+        let mut indptr = vec![0usize];
+        let (mut indices, mut data) = (Vec::new(), Vec::new());
+        for &i in &interior {
+            let i = i as usize;
+            for j in k.indptr[i]..k.indptr[i + 1] {
+                let c = slot[k.indices[j] as usize];
+                if c != u32::MAX {
+                    indices.push(c);
+                    data.push(k.data[j]);
+                }
+            }
+            indptr.push(indices.len());
+        }
+        let blocks = if interior.is_empty() {
+            None
+        } else {
+            Some(
+                BlockJacobi::new(&indptr, &indices, &data, DEFAULT_BLOCK).map_err(|e| match e {
+                    CgError::BadDiagonal { row, value } => CgError::BadDiagonal {
+                        row: interior[row] as usize,
+                        value,
+                    },
+                    e => e,
+                })?,
+            )
+        };
+        Ok(LocalBlockJacobi {
+            interior,
+            blocks,
+            diag,
+            shared,
+        })
+    }
+
+    fn apply(&self, r: &[[f64; 3]], z: &mut [[f64; 3]]) {
+        for (i, ((z, r), d)) in z.iter_mut().zip(r).zip(&self.diag).enumerate() {
+            if self.shared[i] {
+                *z = r.map(|v| v / d);
+            }
+        }
+        if let Some(b) = &self.blocks {
+            let rs: Vec<[f64; 3]> = self.interior.iter().map(|&i| r[i as usize]).collect();
+            let mut zs = vec![[0.0; 3]; rs.len()];
+            b.apply(&rs, &mut zs);
+            for (&i, z_i) in self.interior.iter().zip(zs) {
+                z[i as usize] = z_i;
+            }
+        }
+    }
+}
+
 fn flat(v: &mut [[f64; 3]]) -> &mut [f64] {
     v.as_flattened_mut()
 }
@@ -243,11 +326,20 @@ pub fn pcg(
         k.apply(p, y);
         halo.sum_partials(comm, flat(y), 3);
     };
-    let precondition = |r: &[[f64; 3]], z: &mut [[f64; 3]]| {
-        for ((z, r), d) in z.iter_mut().zip(r).zip(&diag) {
-            *z = r.map(|v| v / d);
+    // A block that fails to factor fails the solve on every rank alike.
+    let m = LocalBlockJacobi::new(k, halo, diag);
+    let mut ok = [if m.is_ok() { 1.0 } else { 0.0 }];
+    comm.min_f64(&mut ok);
+    let m = match m {
+        Ok(_) if ok[0] < 1.0 => {
+            return Err(CgError::BadDiagonal {
+                row: 0,
+                value: f64::NAN,
+            });
         }
+        m => m?,
     };
+    let precondition = |r: &[[f64; 3]], z: &mut [[f64; 3]]| m.apply(r, z);
     let mut r = vec![[0.0; 3]; n];
     apply(x, &mut r);
     for (r, b) in r.iter_mut().zip(&b) {

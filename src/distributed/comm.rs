@@ -24,8 +24,9 @@ pub trait Comm {
     fn all_gather_f64(&self, v: &[f64]) -> Vec<Vec<f64>>;
     /// Personalised exchange: `send[q]` goes to rank q; returns what each rank sent here.
     fn exchange_f64(&self, send: &[Vec<f64>]) -> Vec<Vec<f64>>;
-    /// Every rank's `v` on `root` (indexed by rank); `None` on the other ranks.
-    fn gather_f64(&self, root: usize, v: &[f64]) -> Option<Vec<Vec<f64>>>;
+    /// Every rank's `v` on `root`, concatenated in rank order (one buffer, no copy per
+    /// rank); `None` on the other ranks.
+    fn gather_f64(&self, root: usize, v: &[f64]) -> Option<Vec<f64>>;
     /// Bytes this rank has sent so far.
     fn bytes_sent(&self) -> u64;
 }
@@ -53,8 +54,8 @@ impl Comm for Single {
     fn exchange_f64(&self, send: &[Vec<f64>]) -> Vec<Vec<f64>> {
         send.to_vec()
     }
-    fn gather_f64(&self, _root: usize, v: &[f64]) -> Option<Vec<Vec<f64>>> {
-        Some(vec![v.to_vec()])
+    fn gather_f64(&self, _root: usize, v: &[f64]) -> Option<Vec<f64>> {
+        Some(v.to_vec())
     }
     fn bytes_sent(&self) -> u64 {
         self.sent.get()
@@ -181,7 +182,7 @@ mod with_mpi {
             }
             split(buf, &recv_counts)
         }
-        fn gather_f64(&self, root: usize, v: &[f64]) -> Option<Vec<Vec<f64>>> {
+        fn gather_f64(&self, root: usize, v: &[f64]) -> Option<Vec<f64>> {
             let counts = self.counts_of(v.len());
             let proc = self.world.process_at_rank(root as i32);
             if self.rank() == root {
@@ -192,7 +193,7 @@ mod with_mpi {
                     let mut part = PartitionMut::new(&mut buf[..], &counts[..], &displs[..]);
                     proc.gather_varcount_into_root(v, &mut part);
                 }
-                Some(split(buf, &counts))
+                Some(buf)
             } else {
                 self.count(8 * v.len());
                 proc.gather_varcount_into(v);

@@ -1,34 +1,41 @@
 //! The `curve` job across MPI ranks (see `docs/distributed.md` for what is distributed and
 //! what is not yet).
 //!
-//! Input: the input mesh path, [`CurveOptions`] (the default IGA path: the certified blend of
-//! the least-squares fit, CPU backend) and a [`Comm`]. Output: on rank 0, the curved
-//! high-order mesh gathered from the ranks and a [`DistributedReport`]; `None` on the others.
+//! Input: the input mesh path (binary MSH 4.1), [`CurveOptions`] (the default IGA path: the
+//! certified blend of the least-squares fit, CPU backend) and a [`Comm`]. Output: on rank 0,
+//! the curved high-order mesh gathered from the ranks and a [`DistributedReport`]; `None` on
+//! the others.
 //!
-//! Stages per rank: read the whole input and build the topology, features, smooth targets and
-//! spline space (replicated: every rank computes the same); partition the elements along a
-//! Morton curve ([`super::partition`]); assemble the normal equations over its own elements
-//! only ([`crate::fit::partial`]); solve them with the distributed CG ([`super::cg`]); run the
-//! certified blend on its own elements, the ranks agreeing on the rejected elements of every
-//! round ([`crate::validity::blend::blend_search_shared`]); send its elements' final Bernstein
-//! nets to rank 0, which samples them with the serial, entity-based node numbering and writes
-//! the file. Invariant: the result equals the serial run's up to the CG tolerance (the
-//! distributed CG preconditions with point Jacobi instead of block Jacobi); the blend's
-//! factors are the serial search's for the same fitted map.
+//! Stages per rank: read its contiguous run of the file's elements and [`GHOST_DEPTH`] vertex
+//! rings of ghosts by offsets ([`super::read`]); build the topology, features, smooth targets
+//! and spline space on that sub-mesh with the serial stage functions
+//! ([`crate::pipeline::spline::SplineSetup`]); agree on the shared control points by keys of
+//! global entity ids ([`super::local`]); assemble the normal equations over its own elements
+//! with the whole mesh's size levels ([`crate::fit::partial`]); solve them with the
+//! distributed block-Jacobi CG ([`super::cg`]); run the certified blend on its own elements,
+//! the ranks agreeing on the rejected elements of every round in global ids
+//! ([`crate::validity::blend::blend_search_shared`]); send its elements' final Bernstein nets
+//! to rank 0, which reads the linear mesh, samples the nets with the serial, entity-based
+//! node numbering and writes the file. Invariant: the result equals the serial run's up to
+//! the CG tolerance (the block-Jacobi aggregates differ from the serial solver's); the
+//! blend's factors are the serial search's for the same fitted map.
 
 use super::cg::{Halo, LocalMatrix, pcg};
 use super::comm::Comm;
-use super::partition::Partition;
-use crate::fit::{FitParams, FitTargets};
+use super::local::{GHOST_DEPTH, LocalShare};
+use super::read::{LocalMesh, read_share};
 use crate::io::read_mesh;
 use crate::math::BezierElements;
 use crate::mesh::Topology;
-use crate::pipeline::{CurveError, CurveOptions, CurveReport, Geometry, LineSearchMode, Method};
+use crate::pipeline::spline::SplineSetup;
+use crate::pipeline::{
+    CurveError, CurveOptions, CurveReport, Geometry, Job, LineSearchMode, Method,
+};
 use crate::quality::sample_det_jacobian;
 use crate::sample::{HighOrderMesh, sample};
-use crate::spline::{SplineSpace, kinks};
+use crate::spline::{ElementClass, Q2Reason};
 use crate::validity::CpuCertifier;
-use crate::validity::blend::{BlendShare, Blended, blend_search_shared};
+use crate::validity::blend::{Blended, blend_search_shared};
 use serde::Serialize;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -40,6 +47,8 @@ pub struct RankFigures {
     pub rank: usize,
     /// Elements this rank assembles, certifies and sends.
     pub elements: usize,
+    /// Ghost elements it read and built its setup on besides its own.
+    pub ghost_elements: usize,
     /// Control points its elements touch (the rows it holds), those it owns (counted in dot
     /// products), and those it shares with other ranks (its halo).
     pub control_points: usize,
@@ -112,48 +121,12 @@ pub fn peak_memory_bytes() -> u64 {
         .map_or(0, |kb| kb * 1024)
 }
 
-/// [`BlendShare`] over a [`Comm`]: element lists travel as f64 (exact below 2⁵³).
-struct CommShare<'a> {
-    comm: &'a dyn Comm,
-    mine: &'a [usize],
-}
-
-impl BlendShare for CommShare<'_> {
-    fn mine(&self) -> Option<&[usize]> {
-        Some(self.mine)
-    }
-    fn union(&self, elements: Vec<usize>) -> Vec<usize> {
-        let v: Vec<f64> = elements.iter().map(|&e| e as f64).collect();
-        let mut all: Vec<usize> = self
-            .comm
-            .all_gather_f64(&v)
-            .concat()
-            .into_iter()
-            .map(|x| x as usize)
-            .collect();
-        all.sort_unstable();
-        all.dedup();
-        all
-    }
-    fn concat(&self, values: Vec<f64>) -> Vec<f64> {
-        self.comm.all_gather_f64(&values).concat()
-    }
-    fn sum(&self, v: usize) -> usize {
-        let mut x = [v as u64];
-        self.comm.sum_u64(&mut x);
-        x[0] as usize
-    }
-    fn min(&self, v: f64) -> f64 {
-        let mut x = [v];
-        self.comm.min_f64(&mut x);
-        x[0]
-    }
-}
-
-/// Element nets gathered on rank 0, in element order.
+/// Element nets gathered on rank 0, in element order (the ranks' runs of elements follow
+/// each other in file order), `np` points of 3 doubles each.
 struct Nets {
     dim: usize,
-    nets: Vec<[[f64; 3]; 27]>,
+    np: usize,
+    flat: Vec<f64>,
 }
 
 impl BezierElements for Nets {
@@ -161,11 +134,244 @@ impl BezierElements for Nets {
         self.dim
     }
     fn n_elements(&self) -> usize {
-        self.nets.len()
+        self.flat.len() / (3 * self.np)
     }
     fn bezier_net(&self, e: usize) -> [[f64; 3]; 27] {
-        self.nets[e]
+        let mut n = [[0.0; 3]; 27];
+        let x = &self.flat[3 * self.np * e..3 * self.np * (e + 1)];
+        for (i, p) in x.chunks_exact(3).enumerate() {
+            n[i].copy_from_slice(p);
+        }
+        n
     }
+}
+
+/// Seconds per stage, by name.
+struct Laps {
+    t: Instant,
+    timings: BTreeMap<String, f64>,
+}
+
+impl Laps {
+    fn lap(&mut self, name: &str) {
+        self.timings
+            .insert(name.to_string(), self.t.elapsed().as_secs_f64());
+        self.t = Instant::now();
+    }
+}
+
+/// What a rank has after its share of the setup, fit and blend.
+struct Share {
+    local: LocalMesh,
+    cg: crate::solve::CgInfo,
+    blend: crate::validity::blend::BlendInfo,
+    /// Own elements' final nets, flattened (3^d points × 3 doubles each).
+    nets: Vec<f64>,
+    /// Own control points (counted once over the ranks), spline, Q2 and kink elements.
+    counts: [usize; 4],
+    input_msj: f64,
+    halo: Halo,
+    nonzeros: usize,
+    bytes_fit: u64,
+    bytes_validity: u64,
+}
+
+/// The topology of a ghosted sub-mesh, checked curvable where the serial check would see the
+/// same thing: the non-manifold entities among the vertices of the own elements (the fringe of
+/// the ghost layer is cut out of the mesh and may look non-manifold).
+fn local_topology(input: &Path, local: &LocalMesh) -> Result<Topology, CurveError> {
+    let mesh = &local.mesh;
+    let topo = Topology::build(mesh);
+    let mut near = vec![false; mesh.n_vertices()];
+    for e in 0..local.n_owned {
+        for &v in mesh.element(e) {
+            near[v as usize] = true;
+        }
+    }
+    let nm = &topo.non_manifold;
+    let all_near = |vs: &[u32]| vs.iter().all(|&v| near[v as usize]);
+    let facet = |f: u32| -> Vec<u32> {
+        if topo.dim == 2 {
+            topo.edges[f as usize].to_vec()
+        } else {
+            topo.faces[f as usize].to_vec()
+        }
+    };
+    let bad = nm.facets.iter().filter(|&&f| all_near(&facet(f))).count()
+        + nm.edges
+            .iter()
+            .filter(|&&d| all_near(&topo.edges[d as usize]))
+            .count()
+        + nm.vertices.iter().filter(|&&v| near[v as usize]).count();
+    if bad > 0 {
+        return Err(CurveError::NotCurvable {
+            input: input.to_owned(),
+            what: format!(
+                "{bad} non-manifold facet(s), edge(s) or vertice(s) among elements {}..{} (run it on one process for the details)",
+                local.global_element.first().copied().unwrap_or(0),
+                local.global_element.first().copied().unwrap_or(0) + local.n_owned as u64
+            ),
+        });
+    }
+    Ok(topo)
+}
+
+/// This rank's read, setup, fit and certified blend (see the module docs).
+fn run_share(
+    comm: &dyn Comm,
+    input: &Path,
+    options: &CurveOptions,
+    laps: &mut Laps,
+) -> Result<Share, CurveError> {
+    let rank = comm.rank();
+    let local = read_share(input, rank, comm.size(), GHOST_DEPTH, &options.mesh)?;
+    laps.lap("read");
+    let mesh = &local.mesh;
+    let topo = local_topology(input, &local)?;
+    laps.lap("topology");
+    let mut msj = [mesh.min_scaled_jacobian().map_or(f64::INFINITY, |m| m.0)];
+    comm.min_f64(&mut msj);
+    let executor = crate::executor::executor(&options.backend);
+    let job = Job {
+        input,
+        options,
+        mesh,
+        topo: &topo,
+        executor: executor.as_ref(),
+    };
+    let setup = SplineSetup::new(&job)?;
+    let mut s = setup.build(&job, &[]);
+    laps.lap("spline");
+    let halo = super::local::halo(comm, &local, &topo, &s);
+    let bytes_partition = comm.bytes_sent();
+    laps.lap("partition");
+
+    // This rank's share of the fit, with the whole mesh's size levels.
+    let sizes = crate::fit::partial::element_sizes(mesh);
+    let mut hmax = [sizes[..local.n_owned].iter().copied().fold(0.0, f64::max)];
+    comm.max_f64(&mut hmax);
+    // The ghosts' levels are left at 0: the scaling D of a control point is the largest
+    // level of the own elements using it here, then over the ranks sharing it.
+    let mut levels = crate::fit::partial::size_levels_below(&sizes, hmax[0]);
+    levels[local.n_owned..].fill(0);
+    drop(sizes);
+    let mine: Vec<usize> = (0..local.n_owned).collect();
+    let fit_params = &setup.fit_params;
+    let mut sys = crate::fit::partial::partial_normal_equations_levelled(
+        &s,
+        mesh,
+        &topo,
+        fit_params,
+        setup.targets.as_ref(),
+        &mine,
+        Some(&levels),
+    );
+    drop(levels);
+    // D = 2^-k is exact, and D = 1 scales nothing: a rank without levels takes 1 everywhere.
+    let mut d_halo: Vec<f64> = match &sys.scale {
+        Some(d) => halo.global.iter().map(|&g| d[g as usize]).collect(),
+        None => vec![1.0; halo.len()],
+    };
+    super::local::min_over_halo(comm, &halo, &mut d_halo);
+    let mut d = vec![1.0; s.n_control_points()];
+    for (&g, &x) in halo.global.iter().zip(&d_halo) {
+        d[g as usize] = x;
+    }
+    drop(d_halo);
+    sys.matrix.scale_symmetric(&d);
+    for (r, &d) in sys.rhs.iter_mut().zip(&d) {
+        *r = r.map(|x| d * x);
+    }
+    sys.scale = Some(d);
+    let k = LocalMatrix::new(&sys.matrix, &halo);
+    let b: Vec<[f64; 3]> = halo.global.iter().map(|&g| sys.rhs[g as usize]).collect();
+    let scale = sys.scale.take();
+    drop(sys);
+    laps.lap("fit_assembly");
+    let mut delta = vec![[0.0; 3]; halo.len()];
+    let cg = pcg(comm, &halo, &k, &b, &mut delta, &fit_params.cg).map_err(|source| {
+        CurveError::Solve {
+            input: input.to_owned(),
+            source,
+        }
+    })?;
+    laps.lap("fit_cg");
+    let bytes_fit = comm.bytes_sent() - bytes_partition;
+    let mut c_star = s.control_points.clone();
+    for (i, &g) in halo.global.iter().enumerate() {
+        let g = g as usize;
+        let d = scale.as_ref().map_or(1.0, |d| d[g]);
+        for c in 0..3 {
+            c_star[g][c] += d * delta[i][c];
+        }
+    }
+    if let Some(f) = setup.used_features() {
+        crate::fit::features::project_onto_planes(&s, &topo, f, &mut c_star);
+    }
+    s.control_points = c_star;
+
+    // The certified blend, each rank judging its own elements.
+    let blend_params = options
+        .line_search
+        .blend(options.line_search_mode == LineSearchMode::Global);
+    let target_map = setup.target_map(&job);
+    let mut blended = Blended::new(mesh, &target_map, &s, mesh, &topo, Vec::new());
+    let share = LocalShare {
+        comm,
+        mine: &mine,
+        global: &local.global_element,
+        local_of: local
+            .global_element
+            .iter()
+            .enumerate()
+            .map(|(i, &g)| (g, i))
+            .collect(),
+        n_local: mesh.n_elements(),
+        n_global: local.n_global as usize,
+    };
+    let blend = blend_search_shared(&CpuCertifier, &mut blended, &blend_params, &share).map_err(
+        |source| CurveError::Blend {
+            input: input.to_owned(),
+            source,
+        },
+    )?;
+    drop(share);
+    laps.lap("validity");
+    let bytes_validity = comm.bytes_sent() - bytes_fit - bytes_partition;
+    let np = if mesh.dim == 2 { 9 } else { 27 };
+    let nets: Vec<f64> = mine
+        .iter()
+        .flat_map(|&e| {
+            let n = blended.bezier_net(e);
+            n[..np].iter().flatten().copied().collect::<Vec<_>>()
+        })
+        .collect();
+    let class = |c: &ElementClass| -> [usize; 3] {
+        [
+            matches!(c, ElementClass::Spline) as usize,
+            matches!(c, ElementClass::Q2(_)) as usize,
+            (*c == ElementClass::Q2(Q2Reason::BoundaryKink)) as usize,
+        ]
+    };
+    let mut counts = [halo.owned.iter().filter(|&&o| o).count(), 0, 0, 0];
+    for c in &s.classes[..local.n_owned] {
+        for (n, x) in counts[1..].iter_mut().zip(class(c)) {
+            *n += x;
+        }
+    }
+    let nonzeros = k.nonzeros();
+    Ok(Share {
+        local,
+        cg,
+        blend,
+        nets,
+        counts,
+        input_msj: msj[0],
+        halo,
+        nonzeros,
+        bytes_fit,
+        bytes_validity,
+    })
 }
 
 /// Run the distributed `curve` job on every rank of `comm` (see the module docs).
@@ -179,196 +385,57 @@ pub fn curve(
     let (order, _) = crate::pipeline::check_options(options)?;
     let (rank, size) = (comm.rank(), comm.size());
     let start = Instant::now();
-    let mut timings = BTreeMap::new();
-    let mut t = Instant::now();
-    let mut lap = |name: &str, timings: &mut BTreeMap<String, f64>| {
-        timings.insert(name.to_string(), t.elapsed().as_secs_f64());
-        t = Instant::now();
+    let mut laps = Laps {
+        t: Instant::now(),
+        timings: BTreeMap::new(),
     };
-    // Replicated setup: the same on every rank.
-    let mesh = read_mesh(input, &options.mesh)?;
-    lap("read", &mut timings);
-    let topo = Topology::build(&mesh);
-    crate::mesh::manifold::check_curvable(&mesh, &topo).map_err(|what| {
-        CurveError::NotCurvable {
-            input: input.to_owned(),
-            what,
-        }
-    })?;
-    lap("topology", &mut timings);
-    let input_msj = mesh.min_scaled_jacobian().map_or(f64::NAN, |m| m.0);
-    let features = Some(options.features.detect(&mesh, &topo)?).filter(|f| !f.is_empty());
-    let used = features.as_ref().filter(|_| !options.features.ignore);
-    let crease = used.map_or_else(Vec::new, |f| f.crease_elements(&topo));
-    let fit_params = FitParams {
-        features: used.cloned().map(std::sync::Arc::new),
-        ..options.fit.clone()
-    };
-    let kinks = match options.fit.targets {
-        FitTargets::Smooth(p) => {
-            let mut exclude = kinks::feature_vertices(&mesh, &topo, p.feature_angle_deg);
-            if let Some(f) = used {
-                for (x, &m) in exclude.iter_mut().zip(&f.vertex_mask) {
-                    *x |= m;
-                }
-            }
-            kinks::detect(&mesh, &topo, p.kink_angle_deg, &exclude)
-        }
-        _ => kinks::Kinks::default(),
-    };
-    let targets = crate::fit::smooth_targets(&mesh, &topo, &fit_params);
-    let blend_targets = match &targets {
-        None => crate::fit::smooth_targets(
-            &mesh,
-            &topo,
-            &FitParams {
-                targets: FitTargets::Smooth(Default::default()),
-                ..fit_params.clone()
-            },
-        ),
-        Some(_) => None,
-    };
-    let target_map = crate::fit::TargetMap {
-        mesh: &mesh,
-        topo: &topo,
-        smooth: targets.as_ref().or(blend_targets.as_ref()),
-    };
-    let demote = vec![false; mesh.n_elements()];
-    let mut s = SplineSpace::build_with_q2(
-        &mesh,
-        &topo,
-        &[
-            (&crease, crate::spline::Q2Reason::FeatureCrease),
-            (&kinks.elements, crate::spline::Q2Reason::BoundaryKink),
-            (&demote, crate::spline::Q2Reason::InvalidSplineMap),
-        ],
-    );
-    lap("spline", &mut timings);
-
-    // The partition and the control points every rank touches.
-    let partition = Partition::morton(&mesh, size);
-    let mine = &partition.elements[rank];
-    let mut touched: Vec<Vec<u32>> = vec![Vec::new(); size];
-    let mut rows = crate::spline::ElementRows::default();
-    for e in 0..mesh.n_elements() {
-        s.extraction.rows(e, &mut rows);
-        touched[partition.part[e] as usize].extend_from_slice(&rows.cols);
-    }
-    for list in &mut touched {
-        list.sort_unstable();
-        list.dedup();
-    }
-    let halo = Halo::new(rank, &touched, s.n_control_points());
-    drop(touched);
-    lap("partition", &mut timings);
-
-    // This rank's share of the fit, solved together.
-    let mut sys = crate::fit::partial::partial_normal_equations(
-        &s,
-        &mesh,
-        &topo,
-        &fit_params,
-        targets.as_ref(),
-        mine,
-    );
-    if let Some(d) = &sys.scale {
-        sys.matrix.scale_symmetric(d);
-        for (r, &d) in sys.rhs.iter_mut().zip(d) {
-            *r = r.map(|x| d * x);
-        }
-    }
-    let local = LocalMatrix::new(&sys.matrix, &halo);
-    let b: Vec<[f64; 3]> = halo.global.iter().map(|&g| sys.rhs[g as usize]).collect();
-    let scale = sys.scale.take();
-    drop(sys);
-    lap("fit_assembly", &mut timings);
-    let mut delta = vec![[0.0; 3]; halo.len()];
-    let cg = pcg(comm, &halo, &local, &b, &mut delta, &fit_params.cg).map_err(|source| {
-        CurveError::Solve {
-            input: input.to_owned(),
-            source,
-        }
-    })?;
-    lap("fit_cg", &mut timings);
-    let bytes_fit = comm.bytes_sent();
-    let mut c_star = s.control_points.clone();
-    for (i, &g) in halo.global.iter().enumerate() {
-        let g = g as usize;
-        let d = scale.as_ref().map_or(1.0, |d| d[g]);
-        for k in 0..3 {
-            c_star[g][k] += d * delta[i][k];
-        }
-    }
-    if let Some(f) = used {
-        crate::fit::features::project_onto_planes(&s, &topo, f, &mut c_star);
-    }
-    s.control_points = c_star;
-
-    // The certified blend, judged per rank.
-    let blend_params = options
-        .line_search
-        .blend(options.line_search_mode == LineSearchMode::Global);
-    let mut blended = Blended::new(&mesh, &target_map, &s, &mesh, &topo, Vec::new());
-    let share = CommShare { comm, mine };
-    let blend_info = blend_search_shared(&CpuCertifier, &mut blended, &blend_params, &share)
-        .map_err(|source| CurveError::Blend {
-            input: input.to_owned(),
-            source,
-        })?;
-    lap("validity", &mut timings);
-    let bytes_validity = comm.bytes_sent() - bytes_fit;
-
-    // Nets to rank 0, figures to rank 0.
-    let np = if mesh.dim == 2 { 9 } else { 27 };
-    let nets: Vec<f64> = mine
-        .iter()
-        .flat_map(|&e| {
-            let n = blended.bezier_net(e);
-            n[..np].iter().flatten().copied().collect::<Vec<_>>()
-        })
-        .collect();
-    let gathered = comm.gather_f64(0, &nets);
-    drop(nets);
-    lap("gather", &mut timings);
+    let share = run_share(comm, input, options, &mut laps)?;
+    let mut counts = share.counts.map(|c| c as u64);
+    comm.sum_u64(&mut counts);
+    let bytes_before = comm.bytes_sent();
+    let gathered = comm.gather_f64(0, &share.nets);
+    laps.lap("gather");
     let figures = RankFigures {
         rank,
-        elements: mine.len(),
-        control_points: halo.len(),
-        owned_control_points: halo.owned.iter().filter(|&&o| o).count(),
-        shared_control_points: halo.shared(),
-        neighbours: halo.neighbours.len(),
-        matrix_nonzeros: local.nonzeros(),
+        elements: share.local.n_owned,
+        ghost_elements: share.local.mesh.n_elements() - share.local.n_owned,
+        control_points: share.halo.len(),
+        owned_control_points: share.halo.owned.iter().filter(|&&o| o).count(),
+        shared_control_points: share.halo.shared(),
+        neighbours: share.halo.neighbours.len(),
+        matrix_nonzeros: share.nonzeros,
         bytes_sent: comm.bytes_sent(),
-        bytes_fit,
-        bytes_validity,
-        bytes_gather: comm.bytes_sent() - bytes_fit - bytes_validity,
+        bytes_fit: share.bytes_fit,
+        bytes_validity: share.bytes_validity,
+        bytes_gather: comm.bytes_sent() - bytes_before,
         peak_memory_bytes: peak_memory_bytes(),
-        timings: timings.clone(),
+        timings: laps.timings.clone(),
     };
+    let Share {
+        cg,
+        blend: blend_info,
+        input_msj,
+        ..
+    } = share;
     let all_figures = gather_figures(comm, &figures);
     let Some(gathered) = gathered else {
         return Ok(None);
     };
 
     // Rank 0: the serial sampling, numbering and checks on the gathered nets.
-    let mut net_of = vec![[[0.0; 3]; 27]; mesh.n_elements()];
-    for (q, flat) in gathered.iter().enumerate() {
-        for (k, &e) in partition.elements[q].iter().enumerate() {
-            for i in 0..np {
-                net_of[e][i].copy_from_slice(&flat[3 * (np * k + i)..3 * (np * k + i) + 3]);
-            }
-        }
-    }
-    drop(gathered);
+    let mesh = read_mesh(input, &options.mesh)?;
+    let topo = Topology::build(&mesh);
     let source = Nets {
         dim: mesh.dim,
-        nets: net_of,
+        np: if mesh.dim == 2 { 9 } else { 27 },
+        flat: gathered,
     };
     let mut ho = sample(&source, &mesh, &topo, order);
+    drop(source);
     if options.subdivide.is_some() {
         ho = ho.subdivided();
     }
-    lap("sample", &mut timings);
+    laps.lap("sample");
     let snapped = options.snap_boundary.then(|| {
         crate::pipeline::snap_boundary(&mesh, &topo, &mut ho, options.line_search.certificate_depth)
     });
@@ -394,7 +461,11 @@ pub fn curve(
         });
     }
     let deviation = crate::deviation::boundary_deviation(&mesh, &topo, &ho);
-    lap("quality", &mut timings);
+    laps.lap("quality");
+    // Rank 0's peak includes the sampling and checks of the whole output.
+    let mut all_figures = all_figures;
+    all_figures[0].peak_memory_bytes = peak_memory_bytes();
+    let mut timings = laps.timings;
     timings.insert("total".into(), start.elapsed().as_secs_f64());
     let report = CurveReport {
         input: input.to_owned(),
@@ -411,26 +482,14 @@ pub fn curve(
         output_nodes: ho.nodes.len(),
         output_elements: ho.n_elements(),
         boundary_facets: ho.n_boundary(),
-        control_points: s.n_control_points(),
-        spline_elements: s.n_spline_elements(),
-        q2_elements: s.n_q2_elements(),
+        control_points: counts[0] as usize,
+        spline_elements: counts[1] as usize,
+        q2_elements: counts[2] as usize,
         demoted_elements: 0,
-        kink_elements: s
-            .classes
-            .iter()
-            .filter(|c| {
-                **c == crate::spline::ElementClass::Q2(crate::spline::Q2Reason::BoundaryKink)
-            })
-            .count(),
+        kink_elements: counts[3] as usize,
         snapped_boundary_vertices: snapped,
-        features: features.as_ref().map(|f| {
-            let (vertex, planarity) = f.deviations(&mesh, &ho);
-            crate::mesh::features::FeatureReport {
-                found: f.summary(&options.features.params, &topo),
-                feature_vertex_deviation_max: vertex,
-                planarity_max: planarity,
-            }
-        }),
+        // The feature summary needs every rank's patches; not gathered yet.
+        features: None,
         fit_weights: Some(options.fit.weights),
         fit_targets: Some(options.fit.targets),
         cg_iterations: Some(cg.iterations),
@@ -495,6 +554,7 @@ fn gather_figures(comm: &dyn Comm, f: &RankFigures) -> Vec<RankFigures> {
         f.bytes_fit as f64,
         f.bytes_validity as f64,
         f.bytes_gather as f64,
+        f.ghost_elements as f64,
     ];
     v.extend(
         STAGES
@@ -517,9 +577,10 @@ fn gather_figures(comm: &dyn Comm, f: &RankFigures) -> Vec<RankFigures> {
             bytes_fit: v[8] as u64,
             bytes_validity: v[9] as u64,
             bytes_gather: v[10] as u64,
+            ghost_elements: v[11] as usize,
             timings: STAGES
                 .iter()
-                .zip(&v[11..])
+                .zip(&v[12..])
                 .map(|(s, &t)| (s.to_string(), t))
                 .collect(),
         })

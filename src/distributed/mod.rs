@@ -11,4 +11,6 @@ pub mod comm;
 pub mod job;
 #[cfg(feature = "mpi")]
 pub mod launch;
+pub mod local;
 pub mod partition;
+pub mod read;

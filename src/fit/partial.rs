@@ -57,6 +57,69 @@ pub struct PartialSystem {
     pub scale: Option<Vec<f64>>,
 }
 
+/// Shortest edge of each element (the size h_e of [`super::size_levels`]).
+pub fn element_sizes(mesh: &LinearMesh) -> Vec<f64> {
+    let edges: &[[usize; 2]] = if mesh.dim == 2 {
+        &[[0, 1], [1, 2], [2, 3], [3, 0]]
+    } else {
+        &crate::mesh::topology::HEX_EDGES
+    };
+    (0..mesh.n_elements())
+        .map(|e| {
+            let x = mesh.element_coords(e);
+            edges
+                .iter()
+                .map(|&[a, b]| crate::mesh::vec3::norm(crate::mesh::vec3::sub(x[a], x[b])))
+                .fold(f64::INFINITY, f64::min)
+        })
+        .collect()
+}
+
+/// [`super::size_levels`] with the largest size `hmax` given: a mesh that is part of a
+/// larger one takes the whole mesh's `hmax` so that its levels are the whole mesh's.
+pub fn size_levels_below(sizes: &[f64], hmax: f64) -> Vec<u16> {
+    sizes
+        .iter()
+        .map(|&he| {
+            if he > 0.0 && hmax > 0.0 {
+                ((hmax / he).log2().floor() - super::LEVEL_DEAD_ZONE)
+                    .clamp(0.0, super::MAX_LEVEL as f64) as u16
+            } else {
+                0
+            }
+        })
+        .collect()
+}
+
+/// `blocks` with the size levels `levels` in place of its own (the blocks of a level are
+/// 4^k times those of level 0, so they are rescaled exactly, by powers of 2).
+fn relevel(blocks: ElementBlocks, levels: &[u16]) -> ElementBlocks {
+    let low = (1u64 << super::LEVEL_SHIFT) - 1;
+    let masks: Vec<u64> = blocks
+        .masks
+        .iter()
+        .zip(levels)
+        .map(|(&m, &k)| (m & low) | ((k as u64) << super::LEVEL_SHIFT))
+        .collect();
+    let mut base: std::collections::HashMap<u64, (i32, &(Vec<f64>, Vec<f64>))> = Default::default();
+    for (m, g) in &blocks.cache {
+        base.entry(m & low)
+            .or_insert(((m >> super::LEVEL_SHIFT) as i32, g));
+    }
+    let mut cache = std::collections::HashMap::new();
+    for &m in &masks {
+        cache.entry(m).or_insert_with(|| {
+            let (k0, (gd, gr)) = base[&(m & low)];
+            let f = 4.0f64.powi((m >> super::LEVEL_SHIFT) as i32 - k0);
+            (
+                gd.iter().map(|x| f * x).collect(),
+                gr.iter().map(|x| f * x).collect(),
+            )
+        });
+    }
+    ElementBlocks { masks, cache }
+}
+
 /// The share of the fit's normal equations over `elements` (indices of `mesh`).
 pub fn partial_normal_equations(
     space: &dyn FitSpace,
@@ -66,13 +129,39 @@ pub fn partial_normal_equations(
     smooth: Option<&SmoothTargets>,
     elements: &[usize],
 ) -> PartialSystem {
-    let blocks = ElementBlocks::with_features(
+    partial_normal_equations_levelled(space, mesh, topo, params, smooth, elements, None)
+}
+
+/// [`partial_normal_equations`] with the size levels of the elements given (`None`: those of
+/// `mesh` itself, [`super::size_levels`]): a rank's sub-mesh passes the levels under the
+/// whole mesh's largest size ([`size_levels_below`]).
+pub fn partial_normal_equations_levelled(
+    space: &dyn FitSpace,
+    mesh: &LinearMesh,
+    topo: &Topology,
+    params: &FitParams,
+    smooth: Option<&SmoothTargets>,
+    elements: &[usize],
+    levels: Option<&[u16]>,
+) -> PartialSystem {
+    let mut blocks = ElementBlocks::with_features(
         space,
         mesh,
         topo,
         &params.weights,
         params.features.as_deref(),
     );
+    let own_levels;
+    let levels = match levels {
+        Some(l) => {
+            blocks = relevel(blocks, l);
+            l
+        }
+        None => {
+            own_levels = super::size_levels(mesh);
+            &own_levels
+        }
+    };
     let rhs = super::rhs::displacement_rhs_of(
         space,
         mesh,
@@ -91,6 +180,6 @@ pub fn partial_normal_equations(
         elements,
     };
     let matrix = super::assembly::assemble_matrix(&subset, &sub_blocks);
-    let scale = super::control_point_scales(space, &super::size_levels(mesh));
+    let scale = super::control_point_scales(space, levels);
     PartialSystem { matrix, rhs, scale }
 }

@@ -29,23 +29,23 @@ use crate::validity::line_search::{CertifiedStep, acceptance_thresholds, certifi
 use crate::validity::{DetBounds, LineSearchInfo, LineSearchMode, ValidityError};
 
 /// What the spline space and the fit are built from.
-pub(super) struct SplineSetup {
+pub(crate) struct SplineSetup {
     /// Sharp features found (`None` when there are none).
     pub features: Option<Features>,
     /// Elements made Q2 by feature creases and by kinks of boundary grid lines.
     crease: Vec<bool>,
     kinks: kinks::Kinks,
     /// The fit's parameters, with the features it keeps.
-    fit_params: FitParams,
+    pub(crate) fit_params: FitParams,
     /// The fit's smooth targets, shared by the fit and the blend's target map.
-    targets: Option<SmoothTargets>,
+    pub(crate) targets: Option<SmoothTargets>,
     /// The blend's middle state carries the smooth boundary whatever the fit's own targets
     /// (with the paper's chord targets it is built with the default reconstruction).
     blend_targets: Option<SmoothTargets>,
 }
 
 impl SplineSetup {
-    fn new(job: &Job) -> Result<Self, CurveError> {
+    pub(crate) fn new(job: &Job) -> Result<Self, CurveError> {
         let (options, mesh, topo) = (job.options, job.mesh, job.topo);
         let features = Some(options.features.detect(mesh, topo)?).filter(|f| !f.is_empty());
         let used = features.as_ref().filter(|_| !options.features.ignore);
@@ -96,12 +96,12 @@ impl SplineSetup {
     }
 
     /// The features the fit keeps (none with `--ignore-features`).
-    fn used_features(&self) -> Option<&Features> {
+    pub(crate) fn used_features(&self) -> Option<&Features> {
         self.fit_params.features.as_deref()
     }
 
     /// The spline space with the Q2 elements of creases, kinks and `demote`.
-    fn build(&self, job: &Job, demote: &[bool]) -> SplineSpace {
+    pub(crate) fn build(&self, job: &Job, demote: &[bool]) -> SplineSpace {
         SplineSpace::build_with_q2(
             job.mesh,
             job.topo,
@@ -114,7 +114,7 @@ impl SplineSetup {
     }
 
     /// The target map of the certified blend (its middle state).
-    pub(super) fn target_map<'a>(&'a self, job: &Job<'a>) -> TargetMap<'a> {
+    pub(crate) fn target_map<'a>(&'a self, job: &Job<'a>) -> TargetMap<'a> {
         TargetMap {
             mesh: job.mesh,
             topo: job.topo,

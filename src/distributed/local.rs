@@ -1,0 +1,203 @@
+//! What a rank's ghosted sub-mesh needs to agree with the other ranks: global keys of its
+//! control points, the halo built from them, the size levels under the whole mesh's largest
+//! element, and the certified blend's sharing in global element ids.
+//!
+//! Input: a [`LocalMesh`] (own elements, then ghosts), its topology and spline space.
+//! Output: the [`Halo`] of the control points the own elements touch (local ids of the space,
+//! increasing; per neighbour the shared ones in key order, the same order on both sides), the
+//! size levels, and a [`BlendShare`]. Invariant: a control point's key names the mesh entity it
+//! belongs to by global ids (element index in the file, node tags), so two ranks that build
+//! the same control point from their own ghosted sub-meshes give it the same key.
+
+use super::cg::Halo;
+use super::comm::Comm;
+use super::read::LocalMesh;
+use crate::mesh::Topology;
+use crate::spline::{ControlPoint, ElementRows, SplineSpace};
+use crate::validity::blend::BlendShare;
+use std::collections::{BTreeSet, HashMap};
+
+/// Vertex rings of ghosts around a rank's elements. The spline stencil of an element reaches
+/// its vertex one-ring; its class and the constrained Q2 elements' weights, the next ring;
+/// the smooth targets and features of its boundary vertices read their facet two-ring, whose
+/// facets belong to the same two element rings (a facet of the cut fringe of the ghost layer
+/// touches no vertex of a one-ring element). The size scaling D of a control point, the
+/// largest level of the elements using it, is agreed over the halo instead
+/// ([`min_over_halo`]), so no ghost's own stencil is needed.
+pub const GHOST_DEPTH: usize = 2;
+
+/// `v[i] ← min over the ranks sharing control point `halo.global[i]` of their values (one
+/// exchange with the neighbours).
+pub fn min_over_halo(comm: &dyn Comm, halo: &Halo, v: &mut [f64]) {
+    let mut send = vec![Vec::new(); comm.size()];
+    for (q, list) in &halo.neighbours {
+        send[*q] = list.iter().map(|&i| v[i as usize]).collect();
+    }
+    let recv = comm.exchange_f64(&send);
+    for (q, list) in &halo.neighbours {
+        for (&i, &x) in list.iter().zip(&recv[*q]) {
+            v[i as usize] = v[i as usize].min(x);
+        }
+    }
+}
+
+/// A control point's entity kind and the sorted global ids of the entity.
+pub type Key = [u64; 5];
+
+/// The global key of control point `cp` of the space built on `local`.
+pub fn key_of(cp: ControlPoint, local: &LocalMesh, topo: &Topology) -> Key {
+    let gv = |v: u32| local.global_vertex[v as usize];
+    let ge = |e: u32| local.global_element[e as usize];
+    let (kind, ids): (u64, Vec<u64>) = match cp {
+        ControlPoint::Cell(e) => (0, vec![ge(e)]),
+        ControlPoint::BFace(f) => (1, topo.faces[f as usize].iter().map(|&v| gv(v)).collect()),
+        ControlPoint::BEdge(d) => (2, topo.edges[d as usize].iter().map(|&v| gv(v)).collect()),
+        ControlPoint::BVertex(v) => (3, vec![gv(v)]),
+        ControlPoint::Q2Vertex(v) => (4, vec![gv(v)]),
+        ControlPoint::Q2Edge(d) => (5, topo.edges[d as usize].iter().map(|&v| gv(v)).collect()),
+        ControlPoint::Q2Face(f) => (6, topo.faces[f as usize].iter().map(|&v| gv(v)).collect()),
+        ControlPoint::Q2Centre(e) => (7, vec![ge(e)]),
+    };
+    let mut k = [0u64; 5];
+    k[0] = kind;
+    let mut ids = ids;
+    ids.sort_unstable();
+    k[1..1 + ids.len()].copy_from_slice(&ids);
+    k
+}
+
+/// The control points the own elements touch, increasing.
+pub fn touched(space: &SplineSpace, n_owned: usize) -> Vec<u32> {
+    let mut rows = ElementRows::default();
+    let mut t = Vec::new();
+    for e in 0..n_owned {
+        space.extraction.rows(e, &mut rows);
+        t.extend_from_slice(&rows.cols);
+    }
+    t.sort_unstable();
+    t.dedup();
+    t
+}
+
+/// The halo of the own elements' control points (see the module docs): each rank sends the
+/// keys of its control points to the owners of its ghosts and keeps the keys it has in common
+/// with each.
+pub fn halo(comm: &dyn Comm, local: &LocalMesh, topo: &Topology, space: &SplineSpace) -> Halo {
+    let (rank, size) = (comm.rank(), comm.size());
+    let global = touched(space, local.n_owned);
+    let mut by_key: Vec<(Key, u32)> = global
+        .iter()
+        .enumerate()
+        .map(|(i, &c)| {
+            (
+                key_of(space.control_point_keys[c as usize], local, topo),
+                i as u32,
+            )
+        })
+        .collect();
+    by_key.sort_unstable();
+    let starts = LocalMesh::starts(local.n_global, size);
+    let candidates: BTreeSet<usize> = local.global_element[local.n_owned..]
+        .iter()
+        .map(|&g| LocalMesh::owner(&starts, g))
+        .filter(|&q| q != rank)
+        .collect();
+    // Keys travel as f64 (node tags and element ids are below 2^53).
+    let flat: Vec<f64> = by_key
+        .iter()
+        .flat_map(|(k, _)| k.map(|x| x as f64))
+        .collect();
+    let mut send = vec![Vec::new(); size];
+    for &q in &candidates {
+        send[q] = flat.clone();
+    }
+    drop(flat);
+    let recv = comm.exchange_f64(&send);
+    drop(send);
+    let mut neighbours = Vec::new();
+    for (q, theirs) in recv.iter().enumerate() {
+        if q == rank || theirs.is_empty() || !candidates.contains(&q) {
+            continue;
+        }
+        let mut list = Vec::new();
+        let mut j = 0;
+        for k in theirs.chunks_exact(5) {
+            let k: Key = std::array::from_fn(|i| k[i] as u64);
+            while j < by_key.len() && by_key[j].0 < k {
+                j += 1;
+            }
+            if j < by_key.len() && by_key[j].0 == k {
+                list.push(by_key[j].1);
+                j += 1;
+            }
+        }
+        if !list.is_empty() {
+            neighbours.push((q, list));
+        }
+    }
+    let mut owned = vec![true; global.len()];
+    for (q, list) in &neighbours {
+        if *q < rank {
+            for &i in list {
+                owned[i as usize] = false;
+            }
+        }
+    }
+    Halo {
+        global,
+        owned,
+        neighbours,
+    }
+}
+
+/// [`BlendShare`] of a ghosted sub-mesh: element lists travel in global ids (as f64, exact
+/// below 2⁵³) and come back as the local ids of the elements this rank has (own or ghost).
+pub struct LocalShare<'a> {
+    pub comm: &'a dyn Comm,
+    pub mine: &'a [usize],
+    pub global: &'a [u64],
+    pub local_of: HashMap<u64, usize>,
+    /// Elements of the sub-mesh (own and ghosts) and of the whole mesh.
+    pub n_local: usize,
+    pub n_global: usize,
+}
+
+impl BlendShare for LocalShare<'_> {
+    fn mine(&self) -> Option<&[usize]> {
+        Some(self.mine)
+    }
+    fn union(&self, elements: Vec<usize>) -> Vec<usize> {
+        let v: Vec<f64> = elements.iter().map(|&e| self.global[e] as f64).collect();
+        let mut all: Vec<usize> = self
+            .comm
+            .all_gather_f64(&v)
+            .concat()
+            .into_iter()
+            .filter_map(|x| self.local_of.get(&(x as u64)).copied())
+            .collect();
+        all.sort_unstable();
+        all.dedup();
+        all
+    }
+    /// The blend concatenates the straight elements' ratios to take their 1st percentile at
+    /// index n/100 of the sorted list, n its own element count: the whole mesh's percentile
+    /// is returned so that it is found at the sub-mesh's index.
+    fn concat(&self, values: Vec<f64>) -> Vec<f64> {
+        let mut all = self.comm.all_gather_f64(&values).concat();
+        all.sort_by(f64::total_cmp);
+        match all.get(self.n_global / 100) {
+            Some(&p) => vec![p; self.n_local / 100 + 1],
+            None => Vec::new(),
+        }
+    }
+    fn sum(&self, v: usize) -> usize {
+        let mut x = [v as u64];
+        self.comm.sum_u64(&mut x);
+        x[0] as usize
+    }
+    fn min(&self, v: f64) -> f64 {
+        let mut x = [v];
+        self.comm.min_f64(&mut x);
+        x[0]
+    }
+}
