@@ -141,7 +141,8 @@ impl ElementMatrices {
     }
 }
 
-/// 1. Pattern keys (or own matrices), the element columns, flat, and the shared table.
+/// Step 1 of the assembly: pattern keys (or own matrices), the element columns, flat, and the
+/// shared table.
 fn element_matrices(space: &dyn FitSpace, blocks: &ElementBlocks) -> ElementMatrices {
     let ne = space.n_elements();
     let nb = if space.dim() == 2 { 9 } else { 27 };
@@ -223,7 +224,7 @@ fn element_matrices(space: &dyn FitSpace, blocks: &ElementBlocks) -> ElementMatr
     }
 }
 
-/// 2. Incidence: control point c's (element, local index) pairs are
+/// Step 2 of the assembly, the incidence: control point c's (element, local index) pairs are
 /// `start[c]..start[c + 1]` of `inc_elem` and `inc_local`, in element order.
 struct Incidence {
     start: Vec<usize>,
