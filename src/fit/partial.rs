@@ -82,8 +82,8 @@ pub fn size_levels_below(sizes: &[f64], hmax: f64) -> Vec<u16> {
         .iter()
         .map(|&he| {
             if he > 0.0 && hmax > 0.0 {
-                ((hmax / he).log2().floor() - super::LEVEL_DEAD_ZONE)
-                    .clamp(0.0, super::MAX_LEVEL as f64) as u16
+                ((hmax / he).log2().floor() - super::normal_matrix::LEVEL_DEAD_ZONE)
+                    .clamp(0.0, super::normal_matrix::MAX_LEVEL as f64) as u16
             } else {
                 0
             }
@@ -94,23 +94,23 @@ pub fn size_levels_below(sizes: &[f64], hmax: f64) -> Vec<u16> {
 /// `blocks` with the size levels `levels` in place of its own (the blocks of a level are
 /// 4^k times those of level 0, so they are rescaled exactly, by powers of 2).
 fn relevel(blocks: ElementBlocks, levels: &[u16]) -> ElementBlocks {
-    let low = (1u64 << super::LEVEL_SHIFT) - 1;
+    let low = (1u64 << super::normal_matrix::LEVEL_SHIFT) - 1;
     let masks: Vec<u64> = blocks
         .masks
         .iter()
         .zip(levels)
-        .map(|(&m, &k)| (m & low) | ((k as u64) << super::LEVEL_SHIFT))
+        .map(|(&m, &k)| (m & low) | ((k as u64) << super::normal_matrix::LEVEL_SHIFT))
         .collect();
     let mut base: std::collections::HashMap<u64, (i32, &(Vec<f64>, Vec<f64>))> = Default::default();
     for (m, g) in &blocks.cache {
         base.entry(m & low)
-            .or_insert(((m >> super::LEVEL_SHIFT) as i32, g));
+            .or_insert(((m >> super::normal_matrix::LEVEL_SHIFT) as i32, g));
     }
     let mut cache = std::collections::HashMap::new();
     for &m in &masks {
         cache.entry(m).or_insert_with(|| {
             let (k0, (gd, gr)) = base[&(m & low)];
-            let f = 4.0f64.powi((m >> super::LEVEL_SHIFT) as i32 - k0);
+            let f = 4.0f64.powi((m >> super::normal_matrix::LEVEL_SHIFT) as i32 - k0);
             (
                 gd.iter().map(|x| f * x).collect(),
                 gr.iter().map(|x| f * x).collect(),
