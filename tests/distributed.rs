@@ -26,6 +26,9 @@ fn mpirun(np: usize) -> Command {
     c.args(["--oversubscribe", "-np", &np.to_string()])
         .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
         .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+        // Waiting ranks yield their core: with more ranks than cores, busy polling starves
+        // the rank that is working.
+        .env("OMPI_MCA_mpi_yield_when_idle", "1")
         // One rayon thread per rank: the ranks share the machine's cores.
         .env("RAYON_NUM_THREADS", "1");
     c
