@@ -91,6 +91,9 @@ pub fn size_levels_below(sizes: &[f64], hmax: f64) -> Vec<u16> {
         .collect()
 }
 
+/// An element block's matrix and right-hand-side coefficients.
+type BlockPair = (Vec<f64>, Vec<f64>);
+
 /// `blocks` with the size levels `levels` in place of its own (the blocks of a level are
 /// 4^k times those of level 0, so they are rescaled exactly, by powers of 2).
 fn relevel(blocks: ElementBlocks, levels: &[u16]) -> ElementBlocks {
@@ -101,7 +104,8 @@ fn relevel(blocks: ElementBlocks, levels: &[u16]) -> ElementBlocks {
         .zip(levels)
         .map(|(&m, &k)| (m & low) | ((k as u64) << super::normal_matrix::LEVEL_SHIFT))
         .collect();
-    let mut base: std::collections::HashMap<u64, (i32, &(Vec<f64>, Vec<f64>))> = Default::default();
+    // Each mask's level and element matrices at the level it was assembled.
+    let mut base: std::collections::HashMap<u64, (i32, &BlockPair)> = Default::default();
     for (m, g) in &blocks.cache {
         base.entry(m & low)
             .or_insert(((m >> super::normal_matrix::LEVEL_SHIFT) as i32, g));
