@@ -208,11 +208,12 @@ fn unsupported_options_under_mpirun_fail_with_one_line_and_write_nothing() {
     assert!(!out.exists());
 }
 
-/// Largest peak memory of a rank at 4 ranks relative to the serial run's on the 60k-hex
-/// cylinder (measured 0.50–0.54: the slab partition's two ghost rings add 30–60 % elements
-/// at this size, and every process has MPI's fixed footprint; 0.42–0.45 with four rings at
-/// 300k hexes).
-const MEMORY_SHARE: f64 = 0.6;
+/// Largest peak memory of a rank at 4 ranks relative to the one-thread serial run's on the
+/// 60k-hex cylinder. Measured 0.58–0.63 (rank 0 highest: it also samples the whole output),
+/// against 0.74–0.92 when every rank read and set up the whole mesh: the slab partition's two
+/// ghost rings add 30–60 % elements at this size and every process has MPI's fixed footprint.
+/// The 0.45 of a 300k-hex mesh is not asserted here (BENCHMARKS.md has the measurement).
+const MEMORY_SHARE: f64 = 0.7;
 
 /// Run `cmd` to completion; its peak resident memory in bytes (`wait4`'s `ru_maxrss`, this
 /// child only).
@@ -250,7 +251,8 @@ fn every_rank_peaks_well_below_the_serial_memory() {
         "-o",
         input.to_str().unwrap(),
     ]));
-    let serial = peak_of(Command::new(BIN).args([
+    // One thread, as each rank has: the serial peak grows with rayon's threads.
+    let serial = peak_of(Command::new(BIN).env("RAYON_NUM_THREADS", "1").args([
         "curve",
         input.to_str().unwrap(),
         "-o",

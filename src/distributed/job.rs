@@ -216,6 +216,87 @@ fn local_topology(input: &Path, local: &LocalMesh) -> Result<Topology, CurveErro
     Ok(topo)
 }
 
+/// This rank's share of the fit: its rows of the normal equations with the whole mesh's size
+/// levels, the scaling agreed over the halo, the distributed block-Jacobi CG, and the fitted
+/// control points (projected onto planar patches) in `s`. Returns the CG's figures and the
+/// local matrix's stored entries.
+#[allow(clippy::too_many_arguments)]
+fn fit_share(
+    comm: &dyn Comm,
+    input: &Path,
+    local: &LocalMesh,
+    topo: &Topology,
+    setup: &SplineSetup,
+    s: &mut crate::spline::SplineSpace,
+    halo: &Halo,
+    mine: &[usize],
+    laps: &mut Laps,
+) -> Result<(crate::solve::CgInfo, usize), CurveError> {
+    let mesh = &local.mesh;
+    // This rank's share of the fit, with the whole mesh's size levels.
+    let sizes = crate::fit::partial::element_sizes(mesh);
+    let mut hmax = [sizes[..local.n_owned].iter().copied().fold(0.0, f64::max)];
+    comm.max_f64(&mut hmax);
+    // The ghosts' levels are left at 0: the scaling D of a control point is the largest
+    // level of the own elements using it here, then over the ranks sharing it.
+    let mut levels = crate::fit::partial::size_levels_below(&sizes, hmax[0]);
+    levels[local.n_owned..].fill(0);
+    drop(sizes);
+    let fit_params = &setup.fit_params;
+    let mut sys = crate::fit::partial::partial_normal_equations_levelled(
+        s,
+        mesh,
+        topo,
+        fit_params,
+        setup.targets.as_ref(),
+        mine,
+        Some(&levels),
+    );
+    drop(levels);
+    // D = 2^-k is exact, and D = 1 scales nothing: a rank without levels takes 1 everywhere.
+    let mut d_halo: Vec<f64> = match &sys.scale {
+        Some(d) => halo.global.iter().map(|&g| d[g as usize]).collect(),
+        None => vec![1.0; halo.len()],
+    };
+    super::local::min_over_halo(comm, halo, &mut d_halo);
+    let mut d = vec![1.0; s.n_control_points()];
+    for (&g, &x) in halo.global.iter().zip(&d_halo) {
+        d[g as usize] = x;
+    }
+    drop(d_halo);
+    sys.matrix.scale_symmetric(&d);
+    for (r, &d) in sys.rhs.iter_mut().zip(&d) {
+        *r = r.map(|x| d * x);
+    }
+    sys.scale = Some(d);
+    let k = LocalMatrix::new(&sys.matrix, halo);
+    let b: Vec<[f64; 3]> = halo.global.iter().map(|&g| sys.rhs[g as usize]).collect();
+    let scale = sys.scale.take();
+    drop(sys);
+    laps.lap("fit_assembly");
+    let mut delta = vec![[0.0; 3]; halo.len()];
+    let cg = pcg(comm, halo, &k, &b, &mut delta, &fit_params.cg).map_err(|source| {
+        CurveError::Solve {
+            input: input.to_owned(),
+            source,
+        }
+    })?;
+    laps.lap("fit_cg");
+    let mut c_star = s.control_points.clone();
+    for (i, &g) in halo.global.iter().enumerate() {
+        let g = g as usize;
+        let d = scale.as_ref().map_or(1.0, |d| d[g]);
+        for c in 0..3 {
+            c_star[g][c] += d * delta[i][c];
+        }
+    }
+    if let Some(f) = setup.used_features() {
+        crate::fit::features::project_onto_planes(s, topo, f, &mut c_star);
+    }
+    s.control_points = c_star;
+    Ok((cg, k.nonzeros()))
+}
+
 /// This rank's read, setup, fit and certified blend (see the module docs).
 fn run_share(
     comm: &dyn Comm,
@@ -246,69 +327,11 @@ fn run_share(
     let bytes_partition = comm.bytes_sent();
     laps.lap("partition");
 
-    // This rank's share of the fit, with the whole mesh's size levels.
-    let sizes = crate::fit::partial::element_sizes(mesh);
-    let mut hmax = [sizes[..local.n_owned].iter().copied().fold(0.0, f64::max)];
-    comm.max_f64(&mut hmax);
-    // The ghosts' levels are left at 0: the scaling D of a control point is the largest
-    // level of the own elements using it here, then over the ranks sharing it.
-    let mut levels = crate::fit::partial::size_levels_below(&sizes, hmax[0]);
-    levels[local.n_owned..].fill(0);
-    drop(sizes);
     let mine: Vec<usize> = (0..local.n_owned).collect();
-    let fit_params = &setup.fit_params;
-    let mut sys = crate::fit::partial::partial_normal_equations_levelled(
-        &s,
-        mesh,
-        &topo,
-        fit_params,
-        setup.targets.as_ref(),
-        &mine,
-        Some(&levels),
-    );
-    drop(levels);
-    // D = 2^-k is exact, and D = 1 scales nothing: a rank without levels takes 1 everywhere.
-    let mut d_halo: Vec<f64> = match &sys.scale {
-        Some(d) => halo.global.iter().map(|&g| d[g as usize]).collect(),
-        None => vec![1.0; halo.len()],
-    };
-    super::local::min_over_halo(comm, &halo, &mut d_halo);
-    let mut d = vec![1.0; s.n_control_points()];
-    for (&g, &x) in halo.global.iter().zip(&d_halo) {
-        d[g as usize] = x;
-    }
-    drop(d_halo);
-    sys.matrix.scale_symmetric(&d);
-    for (r, &d) in sys.rhs.iter_mut().zip(&d) {
-        *r = r.map(|x| d * x);
-    }
-    sys.scale = Some(d);
-    let k = LocalMatrix::new(&sys.matrix, &halo);
-    let b: Vec<[f64; 3]> = halo.global.iter().map(|&g| sys.rhs[g as usize]).collect();
-    let scale = sys.scale.take();
-    drop(sys);
-    laps.lap("fit_assembly");
-    let mut delta = vec![[0.0; 3]; halo.len()];
-    let cg = pcg(comm, &halo, &k, &b, &mut delta, &fit_params.cg).map_err(|source| {
-        CurveError::Solve {
-            input: input.to_owned(),
-            source,
-        }
-    })?;
-    laps.lap("fit_cg");
+    let (cg, nonzeros) = fit_share(
+        comm, input, &local, &topo, &setup, &mut s, &halo, &mine, laps,
+    )?;
     let bytes_fit = comm.bytes_sent() - bytes_partition;
-    let mut c_star = s.control_points.clone();
-    for (i, &g) in halo.global.iter().enumerate() {
-        let g = g as usize;
-        let d = scale.as_ref().map_or(1.0, |d| d[g]);
-        for c in 0..3 {
-            c_star[g][c] += d * delta[i][c];
-        }
-    }
-    if let Some(f) = setup.used_features() {
-        crate::fit::features::project_onto_planes(&s, &topo, f, &mut c_star);
-    }
-    s.control_points = c_star;
 
     // The certified blend, each rank judging its own elements.
     let blend_params = options
@@ -359,7 +382,6 @@ fn run_share(
             *n += x;
         }
     }
-    let nonzeros = k.nonzeros();
     Ok(Share {
         local,
         cg,
@@ -439,27 +461,7 @@ pub fn curve(
     let snapped = options.snap_boundary.then(|| {
         crate::pipeline::snap_boundary(&mesh, &topo, &mut ho, options.line_search.certificate_depth)
     });
-    let quality = sample_det_jacobian(&ho);
-    let min_sj = quality
-        .iter()
-        .map(|q| q.min_scaled_jacobian)
-        .fold(f64::INFINITY, f64::min);
-    let invalid: Vec<usize> = (0..quality.len())
-        .filter(|&e| !(quality[e].min_det_jacobian > 0.0))
-        .collect();
-    if !invalid.is_empty() {
-        return Err(CurveError::Invalid {
-            input: input.to_owned(),
-            what: "sampled output".into(),
-            count: invalid.len(),
-            first: invalid
-                .iter()
-                .take(8)
-                .map(|e| e.to_string())
-                .collect::<Vec<_>>()
-                .join(", "),
-        });
-    }
+    let min_sj = sampled_min_scaled_jacobian(input, &ho)?;
     let deviation = crate::deviation::boundary_deviation(&mesh, &topo, &ho);
     laps.lap("quality");
     // Rank 0's peak includes the sampling and checks of the whole output.
@@ -526,6 +528,33 @@ pub fn curve(
             per_rank: all_figures,
         },
     }))
+}
+
+/// The sampled check of the gathered output: every element's sampled det J positive (else
+/// the job fails naming the first elements), and the smallest sampled scaled Jacobian.
+fn sampled_min_scaled_jacobian(input: &Path, ho: &HighOrderMesh) -> Result<f64, CurveError> {
+    let quality = sample_det_jacobian(ho);
+    let min_sj = quality
+        .iter()
+        .map(|q| q.min_scaled_jacobian)
+        .fold(f64::INFINITY, f64::min);
+    let invalid: Vec<usize> = (0..quality.len())
+        .filter(|&e| !(quality[e].min_det_jacobian > 0.0))
+        .collect();
+    if !invalid.is_empty() {
+        return Err(CurveError::Invalid {
+            input: input.to_owned(),
+            what: "sampled output".into(),
+            count: invalid.len(),
+            first: invalid
+                .iter()
+                .take(8)
+                .map(|e| e.to_string())
+                .collect::<Vec<_>>()
+                .join(", "),
+        });
+    }
+    Ok(min_sj)
 }
 
 /// Stages whose seconds are reported per rank.

@@ -414,6 +414,51 @@ pub fn read_share(
     })
 }
 
+/// The coordinates of the nodes in `have`, in file order, read block by block in chunks (a
+/// chunk's coordinates are read only when one of its tags is needed). Fails when a needed node
+/// is not defined.
+fn read_coordinates(
+    r: &mut Reader,
+    ix: &Index,
+    have: &HashSet<u64>,
+) -> Result<(Vec<u64>, Vec<[f64; 3]>), ParseError> {
+    let mut global_vertex: Vec<u64> = Vec::with_capacity(have.len());
+    let mut points: Vec<[f64; 3]> = Vec::with_capacity(have.len());
+    let mut tag_buf = Vec::new();
+    let mut xyz_buf = Vec::new();
+    for b in &ix.nodes {
+        let mut done = 0u64;
+        while done < b.n {
+            let k = (b.n - done).min(CHUNK as u64) as usize;
+            r.seek(b.tags_at + 8 * done)?;
+            r.sizes(&mut tag_buf, k)?;
+            if tag_buf.iter().any(|t| have.contains(t)) {
+                r.seek(b.tags_at + 8 * b.n + 8 * done * b.stride as u64)?;
+                r.sizes(&mut xyz_buf, k * b.stride)?;
+                for (i, t) in tag_buf.iter().enumerate() {
+                    if have.contains(t) {
+                        let x = &xyz_buf[i * b.stride..i * b.stride + 3];
+                        global_vertex.push(*t);
+                        points.push([
+                            f64::from_bits(x[0]),
+                            f64::from_bits(x[1]),
+                            f64::from_bits(x[2]),
+                        ]);
+                    }
+                }
+            }
+            done += k as u64;
+        }
+    }
+    if global_vertex.len() != have.len() {
+        return Err(err(format!(
+            "{} node(s) used by the elements are not defined in $Nodes",
+            have.len() - global_vertex.len()
+        )));
+    }
+    Ok((global_vertex, points))
+}
+
 fn read_share_inner(
     path: &Path,
     rank: usize,
@@ -500,41 +545,7 @@ fn read_share_inner(
         }
     })?;
 
-    // The needed coordinates, in file order.
-    let mut global_vertex: Vec<u64> = Vec::with_capacity(have.len());
-    let mut points: Vec<[f64; 3]> = Vec::with_capacity(have.len());
-    let mut tag_buf = Vec::new();
-    let mut xyz_buf = Vec::new();
-    for b in &ix.nodes {
-        let mut done = 0u64;
-        while done < b.n {
-            let k = (b.n - done).min(CHUNK as u64) as usize;
-            r.seek(b.tags_at + 8 * done)?;
-            r.sizes(&mut tag_buf, k)?;
-            if tag_buf.iter().any(|t| have.contains(t)) {
-                r.seek(b.tags_at + 8 * b.n + 8 * done * b.stride as u64)?;
-                r.sizes(&mut xyz_buf, k * b.stride)?;
-                for (i, t) in tag_buf.iter().enumerate() {
-                    if have.contains(t) {
-                        let x = &xyz_buf[i * b.stride..i * b.stride + 3];
-                        global_vertex.push(*t);
-                        points.push([
-                            f64::from_bits(x[0]),
-                            f64::from_bits(x[1]),
-                            f64::from_bits(x[2]),
-                        ]);
-                    }
-                }
-            }
-            done += k as u64;
-        }
-    }
-    if global_vertex.len() != have.len() {
-        return Err(err(format!(
-            "{} node(s) used by the elements are not defined in $Nodes",
-            have.len() - global_vertex.len()
-        )));
-    }
+    let (global_vertex, points) = read_coordinates(&mut r, &ix, &have)?;
     drop(have);
     let local: HashMap<u64, i64> = global_vertex
         .iter()
