@@ -33,7 +33,7 @@ mod rhs;
 pub mod smooth;
 
 pub use normal_matrix::{ElementBlocks, MatrixFree, NormalMatrix, mask_level, size_levels};
-use normal_matrix::{control_point_scales, sample_weight};
+use normal_matrix::{LEVEL_DEAD_ZONE, LEVEL_SHIFT, MAX_LEVEL, control_point_scales, sample_weight};
 pub use smooth::{SmoothParams, SmoothTargets};
 
 use crate::math::bernstein::bernstein2;

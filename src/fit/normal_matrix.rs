@@ -129,7 +129,7 @@ pub(super) fn sample_weight(
 }
 
 /// Bit offset of an element's size level in its weight mask.
-const LEVEL_SHIFT: u32 = 48;
+pub(crate) const LEVEL_SHIFT: u32 = 48;
 
 /// The weight factor 4^k of size level k (bits 48.. of the mask; see [`size_levels`]).
 fn size_scale(mask: u64) -> f64 {
@@ -156,7 +156,7 @@ fn sample_weight_unscaled(w: &FitWeights, mask: u64, i: usize, l: [usize; 3], co
 
 /// Size levels below this many halvings of the largest element's size get no extra weight, so
 /// meshes whose element sizes vary by less than 2^`LEVEL_DEAD_ZONE` keep plain weights.
-const LEVEL_DEAD_ZONE: f64 = 2.0;
+pub(crate) const LEVEL_DEAD_ZONE: f64 = 2.0;
 
 /// Per element, the size level k = max(0, ⌊log₂(h_max / h_e)⌋ − `LEVEL_DEAD_ZONE`), h_e the
 /// element's shortest edge: its samples are weighted by 4^k ≈ (h_max / h_e)², so the fit
@@ -193,7 +193,7 @@ pub fn size_levels(mesh: &LinearMesh) -> Vec<u16> {
 }
 
 /// Largest size level (4^k stays far inside f64's range).
-const MAX_LEVEL: u16 = 200;
+pub(crate) const MAX_LEVEL: u16 = 200;
 
 /// Per control point, 2^−k with k the largest size level of the elements using it, or `None`
 /// when every level is 0. The fit solves D K D y = D b with D = diag(2^−k) and δ = D y: the
