@@ -213,6 +213,8 @@ const MEMORY_SHARE: f64 = 0.6;
 
 /// Run `cmd` to completion; its peak resident memory in bytes (`wait4`'s `ru_maxrss`, this
 /// child only).
+// The child is reaped by `wait4` below (for its rusage), not by `Child::wait`.
+#[allow(clippy::zombie_processes)]
 fn peak_of(cmd: &mut Command) -> u64 {
     let child = cmd
         .stdout(std::process::Stdio::null())
@@ -223,6 +225,7 @@ fn peak_of(cmd: &mut Command) -> u64 {
     // SAFETY: an all-zero rusage is valid; wait4 reaps exactly this child, which std's Child
     // never waits for afterwards (it is dropped unwaited).
     let mut usage: libc::rusage = unsafe { std::mem::zeroed() };
+    // SAFETY: `status` and `usage` are valid for writes and the pid is our own unreaped child.
     let pid = unsafe { libc::wait4(child.id() as i32, &mut status, 0, &mut usage) };
     assert_eq!(pid, child.id() as i32);
     assert!(libc::WIFEXITED(status) && libc::WEXITSTATUS(status) == 0);

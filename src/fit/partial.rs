@@ -101,7 +101,9 @@ fn relevel(blocks: ElementBlocks, levels: &[u16]) -> ElementBlocks {
         .zip(levels)
         .map(|(&m, &k)| (m & low) | ((k as u64) << super::LEVEL_SHIFT))
         .collect();
-    let mut base: std::collections::HashMap<u64, (i32, &(Vec<f64>, Vec<f64>))> = Default::default();
+    // Per mask without its level: the level of one cached block and its (data, frame) pair.
+    type Base<'a> = std::collections::HashMap<u64, (i32, &'a (Vec<f64>, Vec<f64>))>;
+    let mut base: Base = Default::default();
     for (m, g) in &blocks.cache {
         base.entry(m & low)
             .or_insert(((m >> super::LEVEL_SHIFT) as i32, g));
