@@ -9,7 +9,7 @@
 //! Stages per rank: read its contiguous run of the file's elements and [`GHOST_DEPTH`] vertex
 //! rings of ghosts by offsets ([`super::read`]); build the topology, features, smooth targets
 //! and spline space on that sub-mesh with the serial stage functions
-//! ([`crate::pipeline::spline::SplineSetup`]); agree on the shared control points by keys of
+//! (`crate::pipeline::spline::SplineSetup`); agree on the shared control points by keys of
 //! global entity ids ([`super::local`]); assemble the normal equations over its own elements
 //! with the whole mesh's size levels ([`crate::fit::partial`]); solve them with the
 //! distributed block-Jacobi CG ([`super::cg`]); run the certified blend on its own elements,

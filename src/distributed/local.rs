@@ -26,7 +26,7 @@ use std::collections::{BTreeSet, HashMap};
 /// ([`min_over_halo`]), so no ghost's own stencil is needed.
 pub const GHOST_DEPTH: usize = 2;
 
-/// `v[i] ← min over the ranks sharing control point `halo.global[i]` of their values (one
+/// `v[i]` ← min over the ranks sharing control point `halo.global[i]` of their values (one
 /// exchange with the neighbours).
 pub fn min_over_halo(comm: &dyn Comm, halo: &Halo, v: &mut [f64]) {
     let mut send = vec![Vec::new(); comm.size()];

@@ -13,7 +13,7 @@
 //! `determinant` expands along the first column (x·(y×z)) and its `inverse` scales by a
 //! reciprocal, `normalize` multiplies by a reciprocal length: those differ in the last bit
 //! from the row expansion and divisions the outputs were defined with, so [`det3`], [`inv3`]
-//! and [`unit`] keep the explicit formulas.
+//! and [`unit()`] keep the explicit formulas.
 
 pub use glam::{DMat3, DVec3};
 
