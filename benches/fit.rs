@@ -40,8 +40,8 @@ fn fit(c: &mut Criterion) {
         });
         let (k, rhs) = assemble(&s, &m, &t, &w);
         let mf = MatrixFree::new(&s, &m, &t, &w);
-        let x: Vec<[f64; 3]> = (0..k.n).map(|i| [i as f64, 1.0, 0.5]).collect();
-        let mut y = vec![[0.0; 3]; k.n];
+        let x: Vec<[f64; 3]> = (0..k.n()).map(|i| [i as f64, 1.0, 0.5]).collect();
+        let mut y = vec![[0.0; 3]; k.n()];
         group.bench_with_input(BenchmarkId::new("apply_assembled", ne), &ne, |b, _| {
             b.iter(|| k.apply(&x, &mut y))
         });
@@ -50,7 +50,7 @@ fn fit(c: &mut Criterion) {
         });
         group.bench_with_input(BenchmarkId::new("cg_assembled", ne), &ne, |b, _| {
             b.iter(|| {
-                let mut d = vec![[0.0; 3]; k.n];
+                let mut d = vec![[0.0; 3]; k.n()];
                 black_box(pcg(&k, &rhs, &mut d, &CgParams::default(), |_, _| {}).unwrap())
             })
         });

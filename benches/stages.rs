@@ -80,7 +80,7 @@ fn stages(c: &mut Criterion) {
             };
             group.bench_function(id(name), |b| {
                 b.iter(|| {
-                    let mut x = vec![[0.0; 3]; k.n];
+                    let mut x = vec![[0.0; 3]; k.n()];
                     black_box(pcg(&k, &rhs, &mut x, &params, |_, _| {}).unwrap())
                 })
             });
@@ -90,12 +90,12 @@ fn stages(c: &mut Criterion) {
         group.bench_function(id("cg_block_jacobi_generic"), |b| {
             let params = CgParams::default();
             b.iter(|| {
-                let mut x = vec![[0.0; 3]; k.n];
+                let mut x = vec![[0.0; 3]; k.n()];
                 let pre = preconditioner(&k, &params).unwrap();
                 black_box(pcg_with(&k, pre.as_ref(), &rhs, &mut x, &params, |_, _| {}).unwrap())
             })
         });
-        let mut delta = vec![[0.0; 3]; k.n];
+        let mut delta = vec![[0.0; 3]; k.n()];
         pcg(&k, &rhs, &mut delta, &CgParams::default(), |_, _| {}).unwrap();
         drop(k);
         let mut fitted = space.clone();

@@ -17,6 +17,8 @@
 //! exact up to the bilinear projection, which takes the better of a Gauss–Newton projection and
 //! the four edges).
 
+use crate::math::lagrange::lagrange_values;
+use crate::math::linalg::DVec3;
 use crate::mesh::{LinearMesh, Topology};
 use crate::sample::HighOrderMesh;
 use rayon::prelude::*;
@@ -34,61 +36,48 @@ pub struct BoundaryDeviation {
 
 type V3 = [f64; 3];
 
-fn sub(a: V3, b: V3) -> V3 {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-fn dot(a: V3, b: V3) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-fn norm(a: V3) -> f64 {
-    dot(a, a).sqrt()
+/// The glam vector of a stored point.
+#[inline]
+fn v(a: V3) -> DVec3 {
+    DVec3::from_array(a)
 }
 
 fn segment_distance(x: V3, a: V3, b: V3) -> f64 {
-    let ab = sub(b, a);
-    let l2 = dot(ab, ab);
+    let (x, a) = (v(x), v(a));
+    let ab = v(b) - a;
+    let l2 = ab.dot(ab);
     let t = if l2 > 0.0 {
-        (dot(sub(x, a), ab) / l2).clamp(0.0, 1.0)
+        ((x - a).dot(ab) / l2).clamp(0.0, 1.0)
     } else {
         0.0
     };
-    norm(sub(
-        x,
-        [a[0] + t * ab[0], a[1] + t * ab[1], a[2] + t * ab[2]],
-    ))
-}
-
-fn cross(a: V3, b: V3) -> V3 {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
+    (x - (a + t * ab)).length()
 }
 
 /// The unit normal of a quad with cyclic corners `c` when it is planar (corners within 10⁻¹²
 /// of its diameter of one plane), oriented by its diagonals; `None` for a curved patch.
 fn plane_normal(c: &[V3; 4]) -> Option<V3> {
-    let n = cross(sub(c[2], c[0]), sub(c[3], c[1]));
-    let nn = norm(n);
-    let diameter = norm(sub(c[2], c[0])).max(norm(sub(c[3], c[1])));
+    let (d0, d1) = (v(c[2]) - v(c[0]), v(c[3]) - v(c[1]));
+    let n = d0.cross(d1);
+    let nn = n.length();
+    let diameter = d0.length().max(d1.length());
     if !(nn > 0.0) {
         return None;
     }
-    let n = n.map(|v| v / nn);
+    let n = n / nn;
     let off = (1..4)
-        .map(|i| dot(n, sub(c[i], c[0])).abs())
+        .map(|i| n.dot(v(c[i]) - v(c[0])).abs())
         .fold(0.0, f64::max);
-    (off <= 1e-12 * diameter).then_some(n)
+    (off <= 1e-12 * diameter).then_some(n.to_array())
 }
 
 /// Whether a planar quad with unit normal `n` is strictly convex (every corner turns the way
 /// the diagonals' normal orients it).
 fn is_convex(c: &[V3; 4], n: V3) -> bool {
     (0..4).all(|i| {
-        let a = sub(c[(i + 1) % 4], c[i]);
-        let b = sub(c[(i + 2) % 4], c[(i + 1) % 4]);
-        dot(cross(a, b), n) > 0.0
+        let a = v(c[(i + 1) % 4]) - v(c[i]);
+        let b = v(c[(i + 2) % 4]) - v(c[(i + 1) % 4]);
+        a.cross(b).dot(v(n)) > 0.0
     })
 }
 
@@ -97,8 +86,8 @@ fn is_convex(c: &[V3; 4], n: V3) -> bool {
 /// non-convex quad fails for some inside points and falls back).
 fn projects_inside(x: V3, c: &[V3; 4], n: V3) -> bool {
     (0..4).all(|i| {
-        let e = sub(c[(i + 1) % 4], c[i]);
-        dot(cross(e, sub(x, c[i])), n) >= 0.0
+        let e = v(c[(i + 1) % 4]) - v(c[i]);
+        e.cross(v(x) - v(c[i])).dot(v(n)) >= 0.0
     })
 }
 
@@ -109,7 +98,7 @@ fn projects_inside(x: V3, c: &[V3; 4], n: V3) -> bool {
 #[cfg(test)]
 fn planar_inside_distance(x: V3, c: &[V3; 4]) -> Option<f64> {
     let n = plane_normal(c)?;
-    projects_inside(x, c, n).then(|| dot(n, sub(x, c[0])).abs())
+    projects_inside(x, c, n).then(|| v(n).dot(v(x) - v(c[0])).abs())
 }
 
 /// Distance from `x` to the bilinear patch with cyclic corners `c`.
@@ -131,40 +120,43 @@ fn quad_distance(x: V3, c: &[V3; 4], plane: Option<(V3, bool)>) -> f64 {
     };
     if let Some((n, convex)) = plane {
         if projects_inside(x, c, n) {
-            return dot(n, sub(x, c[0])).abs();
+            return v(n).dot(v(x) - v(c[0])).abs();
         }
         if convex {
             return edges();
         }
     }
-    let s = |u: f64, v: f64| -> V3 {
-        std::array::from_fn(|k| {
-            (1.0 - u) * (1.0 - v) * c[0][k]
-                + u * (1.0 - v) * c[1][k]
-                + u * v * c[2][k]
-                + (1.0 - u) * v * c[3][k]
-        })
+    let s = |u: f64, w: f64| -> DVec3 {
+        DVec3::from_array(std::array::from_fn(|k| {
+            (1.0 - u) * (1.0 - w) * c[0][k]
+                + u * (1.0 - w) * c[1][k]
+                + u * w * c[2][k]
+                + (1.0 - u) * w * c[3][k]
+        }))
     };
+    let xv = v(x);
     let mut best = edges();
     // Gauss–Newton on |S(u, v) − x|², clamped to the unit square.
-    let (mut u, mut v) = (0.5, 0.5);
+    let (mut u, mut w) = (0.5, 0.5);
     for _ in 0..10 {
-        let r = sub(s(u, v), x);
-        let su: V3 =
-            std::array::from_fn(|k| (1.0 - v) * (c[1][k] - c[0][k]) + v * (c[2][k] - c[3][k]));
-        let sv: V3 =
-            std::array::from_fn(|k| (1.0 - u) * (c[3][k] - c[0][k]) + u * (c[2][k] - c[1][k]));
-        let (a, b, d) = (dot(su, su), dot(su, sv), dot(sv, sv));
+        let r = s(u, w) - xv;
+        let su = DVec3::from_array(std::array::from_fn(|k| {
+            (1.0 - w) * (c[1][k] - c[0][k]) + w * (c[2][k] - c[3][k])
+        }));
+        let sv = DVec3::from_array(std::array::from_fn(|k| {
+            (1.0 - u) * (c[3][k] - c[0][k]) + u * (c[2][k] - c[1][k])
+        }));
+        let (a, b, d) = (su.dot(su), su.dot(sv), sv.dot(sv));
         let det = a * d - b * b;
         if !(det > 0.0) {
             break;
         }
-        let (gu, gv) = (dot(su, r), dot(sv, r));
+        let (gu, gv) = (su.dot(r), sv.dot(r));
         let du = (d * gu - b * gv) / det;
         let dv = (a * gv - b * gu) / det;
         u = (u - du).clamp(0.0, 1.0);
-        v = (v - dv).clamp(0.0, 1.0);
-        best = best.min(norm(sub(s(u, v), x)));
+        w = (w - dv).clamp(0.0, 1.0);
+        best = best.min((s(u, w) - xv).length());
         if du.abs() + dv.abs() < 1e-14 {
             break;
         }
@@ -207,7 +199,7 @@ const LEAF: usize = 4;
 /// anything inside it.
 fn box_distance(x: V3, (lo, hi): &(V3, V3)) -> f64 {
     let d: V3 = std::array::from_fn(|k| (lo[k] - x[k]).max(x[k] - hi[k]).max(0.0));
-    norm(d)
+    v(d).length()
 }
 
 fn union(a: (V3, V3), b: &(V3, V3)) -> (V3, V3) {
@@ -382,26 +374,10 @@ impl<'a> BoundaryTree<'a> {
     }
 }
 
-/// Lagrange basis on the equispaced nodes i/p of [0, 1], at `t`.
-fn lagrange_1d(p: usize, t: f64) -> Vec<f64> {
-    (0..=p)
-        .map(|i| {
-            let ti = i as f64 / p as f64;
-            (0..=p)
-                .filter(|&j| j != i)
-                .map(|j| {
-                    let tj = j as f64 / p as f64;
-                    (t - tj) / (ti - tj)
-                })
-                .product()
-        })
-        .collect()
-}
-
 /// Bounding-box diagonal of `mesh` (positive).
 fn diagonal(mesh: &LinearMesh) -> f64 {
     let (lo, hi) = mesh.bounding_box();
-    norm(sub(hi, lo)).max(f64::MIN_POSITIVE)
+    (v(hi) - v(lo)).length().max(f64::MIN_POSITIVE)
 }
 
 /// Vertex deviation alone: (max, rms) distance of the output's boundary vertex nodes from the
@@ -411,7 +387,8 @@ pub fn vertex_deviation(mesh: &LinearMesh, topo: &Topology, ho: &HighOrderMesh) 
     let (mut max, mut sum, mut n) = (0.0f64, 0.0, 0usize);
     for (v, &b) in topo.vertex_on_boundary.iter().enumerate() {
         if b {
-            let d = norm(sub(mesh.coords[v], ho.nodes[v])) / diagonal;
+            let d = (DVec3::from_array(mesh.coords[v]) - DVec3::from_array(ho.nodes[v])).length()
+                / diagonal;
             max = max.max(d);
             sum += d * d;
             n += 1;
@@ -445,7 +422,7 @@ pub fn boundary_deviation(
     let p = ho.order;
     let q = 2 * p;
     let basis: Vec<Vec<f64>> = (0..=q)
-        .map(|i| lagrange_1d(p, i as f64 / q as f64))
+        .map(|i| lagrange_values(p, i as f64 / q as f64))
         .collect();
     let facet_dim = ho.dim - 1;
     let (node_max, sample_max) = ho
@@ -542,7 +519,7 @@ mod tests {
                             + u * v * trap[2][k]
                             + (1.0 - u) * v * trap[3][k]
                     });
-                    sampled = sampled.min(norm(sub(x, p)));
+                    sampled = sampled.min((DVec3::from_array(x) - DVec3::from_array(p)).length());
                 }
             }
             let d = bilinear_distance(x, &trap);
@@ -589,18 +566,6 @@ mod tests {
                 assert!((tree.distance_below(x, f64::INFINITY) - exhaustive).abs() <= tol);
                 let own = (rand() * tree.facets.len() as f64) as usize;
                 assert!((tree.distance_from(x, own) - exhaustive).abs() <= tol);
-            }
-        }
-    }
-
-    #[test]
-    fn lagrange_basis_interpolates() {
-        for p in 1..=6 {
-            for i in 0..=p {
-                let b = lagrange_1d(p, i as f64 / p as f64);
-                for (j, v) in b.iter().enumerate() {
-                    assert!((v - (i == j) as u8 as f64).abs() < 1e-12);
-                }
             }
         }
     }

@@ -166,12 +166,12 @@ impl LocalMatrix {
         let mut data = Vec::new();
         for &g in &halo.global {
             let g = g as usize;
-            for j in k.indptr[g]..k.indptr[g + 1] {
+            for j in k.indptr()[g]..k.indptr()[g + 1] {
                 let c = halo
-                    .local(k.indices[j])
+                    .local(k.indices()[j])
                     .expect("a column of this rank's share is one of its control points");
                 indices.push(c as u32);
-                data.push(k.data[j]);
+                data.push(k.data()[j]);
             }
             indptr.push(indices.len());
         }
@@ -433,12 +433,7 @@ mod tests {
             }
             indptr.push(indices.len());
         }
-        let k = NormalMatrix {
-            n,
-            indptr,
-            indices,
-            data,
-        };
+        let k = NormalMatrix::new(n, indptr, indices, data);
         let halo = Halo::new(0, &[(0..n as u32).collect()], n);
         let local = LocalMatrix::new(&k, &halo);
         let b: Vec<[f64; 3]> = (0..n).map(|i| [1.0, i as f64, -2.0]).collect();

@@ -206,9 +206,9 @@ impl Locals {
         let k = &energy.k;
         let kii = (0..n)
             .map(|i| {
-                (k.indptr[i]..k.indptr[i + 1])
-                    .find(|&p| k.indices[p] as usize == i)
-                    .map_or(0.0, |p| k.data[p])
+                (k.indptr()[i]..k.indptr()[i + 1])
+                    .find(|&p| k.indices()[p] as usize == i)
+                    .map_or(0.0, |p| k.data()[p])
             })
             .collect();
         Locals { support, kii }
@@ -225,10 +225,10 @@ impl Locals {
         let (k, c0) = (&energy.k, energy.space.control_points());
         let (nb, nq) = (energy.nb, energy.nq());
         let mut kd = [0.0; 3];
-        for p in k.indptr[i]..k.indptr[i + 1] {
-            let j = k.indices[p] as usize;
+        for p in k.indptr()[i]..k.indptr()[i + 1] {
+            let j = k.indices()[p] as usize;
             for c in 0..3 {
-                kd[c] += k.data[p] * (x[j][c] - c0[j][c]);
+                kd[c] += k.data()[p] * (x[j][c] - c0[j][c]);
             }
         }
         let b = [0, 1, 2].map(|c| kd[c] - energy.rhs[i][c]);

@@ -337,10 +337,5 @@ pub fn assemble_matrix(space: &dyn FitSpace, blocks: &ElementBlocks) -> NormalMa
                 }
             },
         );
-    NormalMatrix {
-        n,
-        indptr,
-        indices,
-        data,
-    }
+    NormalMatrix::new(n, indptr, indices, data)
 }

@@ -410,7 +410,7 @@ pub fn fit_with_targets(
     }
     let assembly_seconds = t.elapsed().as_secs_f64();
     let t = std::time::Instant::now();
-    let mut delta = vec![[0.0; 3]; k.n];
+    let mut delta = vec![[0.0; 3]; k.n()];
     let cg = solve(&k, &rhs, &mut delta, &params.cg)?;
     if let Some(d) = &scale {
         for (x, &d) in delta.iter_mut().zip(d) {
@@ -428,8 +428,8 @@ pub fn fit_with_targets(
         c,
         FitInfo {
             cg,
-            unknowns: k.n,
-            nonzeros: k.data.len(),
+            unknowns: k.n(),
+            nonzeros: k.data().len(),
             assembly_seconds,
             solve_seconds,
         },

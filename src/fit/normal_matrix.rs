@@ -4,38 +4,82 @@
 
 use super::*;
 
-/// The symmetric matrix K in CSR form, applied to 3-component vectors.
+/// The symmetric matrix K in CSR form (a [`sprs::CsMatI`] with `u32` column indices and
+/// `usize` row offsets, columns sorted within each row), applied to 3-component vectors.
 pub struct NormalMatrix {
-    pub n: usize,
-    pub indptr: Vec<usize>,
-    pub indices: Vec<u32>,
-    pub data: Vec<f64>,
+    mat: sprs::CsMatI<f64, u32, usize>,
+}
+
+impl NormalMatrix {
+    /// The n×n matrix of the CSR arrays `indptr` (n + 1 row offsets), `indices` (columns,
+    /// strictly increasing within each row) and `data`.
+    ///
+    /// # Panics
+    /// If the arrays do not describe a valid n×n CSR structure: they are built by this crate,
+    /// so a failure is a bug, not bad input.
+    pub fn new(n: usize, indptr: Vec<usize>, indices: Vec<u32>, data: Vec<f64>) -> Self {
+        NormalMatrix {
+            mat: sprs::CsMatI::new((n, n), indptr, indices, data),
+        }
+    }
+
+    /// The number of rows (= columns).
+    pub fn n(&self) -> usize {
+        self.mat.rows()
+    }
+
+    /// The n + 1 row offsets into [`Self::indices`] and [`Self::data`].
+    pub fn indptr(&self) -> &[usize] {
+        self.mat.indptr().into_raw_storage()
+    }
+
+    /// The column of each stored entry, row by row.
+    pub fn indices(&self) -> &[u32] {
+        self.mat.indices()
+    }
+
+    /// The value of each stored entry, row by row.
+    pub fn data(&self) -> &[f64] {
+        self.mat.data()
+    }
+
+    /// The stored values, for in-place rescaling (the structure stays fixed).
+    pub fn data_mut(&mut self) -> &mut [f64] {
+        self.mat.data_mut()
+    }
+
+    /// The underlying sparse matrix.
+    pub fn as_sprs(&self) -> &sprs::CsMatI<f64, u32, usize> {
+        &self.mat
+    }
 }
 
 impl LinOp for NormalMatrix {
     fn nrows(&self) -> usize {
-        self.n
+        self.n()
     }
     fn apply(&self, x: &[[f64; 3]], y: &mut [[f64; 3]]) {
+        let (indptr, indices, data) = (self.indptr(), self.indices(), self.data());
         y.par_iter_mut()
             .enumerate()
             .with_min_len(256)
             .for_each(|(r, y)| {
-                let (lo, hi) = (self.indptr[r], self.indptr[r + 1]);
-                *y = crate::solve::row_dot(&self.indices[lo..hi], &self.data[lo..hi], x);
+                let (lo, hi) = (indptr[r], indptr[r + 1]);
+                *y = crate::solve::row_dot(&indices[lo..hi], &data[lo..hi], x);
             });
     }
     fn diagonal(&self) -> Vec<f64> {
-        (0..self.n)
+        let (indptr, indices, data) = (self.indptr(), self.indices(), self.data());
+        (0..self.n())
             .map(|r| {
-                (self.indptr[r]..self.indptr[r + 1])
-                    .find(|&k| self.indices[k] as usize == r)
-                    .map_or(0.0, |k| self.data[k])
+                (indptr[r]..indptr[r + 1])
+                    .find(|&k| indices[k] as usize == r)
+                    .map_or(0.0, |k| data[k])
             })
             .collect()
     }
     fn csr(&self) -> Option<(&[usize], &[u32], &[f64])> {
-        Some((&self.indptr, &self.indices, &self.data))
+        Some((self.indptr(), self.indices(), self.data()))
     }
 }
 
@@ -222,16 +266,20 @@ pub(super) fn control_point_scales(space: &dyn FitSpace, levels: &[u16]) -> Opti
 impl NormalMatrix {
     /// K ← D K D for the diagonal D = diag(`d`).
     pub fn scale_symmetric(&mut self, d: &[f64]) {
-        let (indptr, indices) = (&self.indptr, &self.indices);
-        crate::solve::block_jacobi::split_at_offsets(&mut self.data, indptr)
-            .into_par_iter()
-            .enumerate()
-            .for_each(|(r, row)| {
-                let cols = &indices[indptr[r]..indptr[r + 1]];
-                for (v, &c) in row.iter_mut().zip(cols) {
-                    *v *= d[r] * d[c as usize];
-                }
-            });
+        // `modify` lends the three CSR arrays at once, so the values can be scaled row by row
+        // in parallel next to the column indices; the structure itself is left unchanged.
+        self.mat.modify(|indptr, indices, data| {
+            let (indptr, indices) = (&*indptr, &*indices);
+            crate::solve::block_jacobi::split_at_offsets(data, indptr)
+                .into_par_iter()
+                .enumerate()
+                .for_each(|(r, row)| {
+                    let cols = &indices[indptr[r]..indptr[r + 1]];
+                    for (v, &c) in row.iter_mut().zip(cols) {
+                        *v *= d[r] * d[c as usize];
+                    }
+                });
+        });
     }
 }
 

@@ -64,30 +64,33 @@ pub struct GpuMatrix {
 impl GpuMatrix {
     pub fn new(ctx: &GpuContext, a: &NormalMatrix) -> Result<GpuMatrix, GpuError> {
         let sz = ctx.precision.size() as u64;
-        let vec_bytes = 4 * sz * a.n as u64;
-        if vec_bytes > ctx.max_binding() || a.n > ctx.max_workgroups() as usize * ITEM_WORKGROUP {
+        let vec_bytes = 4 * sz * a.n() as u64;
+        if vec_bytes > ctx.max_binding() || a.n() > ctx.max_workgroups() as usize * ITEM_WORKGROUP {
             return Err(GpuError::TooLarge(format!(
                 "{} unknowns need {vec_bytes} bytes per vector (binding limit {})",
-                a.n,
+                a.n(),
                 ctx.max_binding()
             )));
         }
         let max_nnz = (ctx.max_binding() / sz.max(4)) as usize;
         let mut blocks = Vec::new();
         let mut r0 = 0;
-        while r0 < a.n {
+        while r0 < a.n() {
             let mut r1 = r0 + 1;
-            while r1 < a.n && a.indptr[r1 + 1] - a.indptr[r0] <= max_nnz {
+            while r1 < a.n() && a.indptr()[r1 + 1] - a.indptr()[r0] <= max_nnz {
                 r1 += 1;
             }
-            let (k0, k1) = (a.indptr[r0], a.indptr[r1]);
+            let (k0, k1) = (a.indptr()[r0], a.indptr()[r1]);
             if k1 - k0 > max_nnz {
                 return Err(GpuError::TooLarge(format!(
                     "row {r0} has {} entries",
                     k1 - k0
                 )));
             }
-            let indptr: Vec<u32> = a.indptr[r0..=r1].iter().map(|&k| (k - k0) as u32).collect();
+            let indptr: Vec<u32> = a.indptr()[r0..=r1]
+                .iter()
+                .map(|&k| (k - k0) as u32)
+                .collect();
             blocks.push(Block {
                 params: ctx.uniform(
                     "spmv params",
@@ -99,10 +102,10 @@ impl GpuMatrix {
                     },
                 ),
                 indptr: ctx.storage("indptr", bytemuck::cast_slice(&indptr), false),
-                indices: ctx.storage("indices", bytemuck::cast_slice(&a.indices[k0..k1]), false),
+                indices: ctx.storage("indices", bytemuck::cast_slice(&a.indices()[k0..k1]), false),
                 data: ctx.storage(
                     "data",
-                    &reals_to_bytes(ctx.precision, a.data[k0..k1].iter().copied()),
+                    &reals_to_bytes(ctx.precision, a.data()[k0..k1].iter().copied()),
                     false,
                 ),
                 n_rows: r1 - r0,
@@ -110,7 +113,7 @@ impl GpuMatrix {
             r0 = r1;
         }
         Ok(GpuMatrix {
-            n: a.n,
+            n: a.n(),
             blocks,
             diag: a.diagonal(),
         })
@@ -295,7 +298,7 @@ struct CgKernels<'c> {
 
 impl<'c> CgKernels<'c> {
     fn new(ctx: &'c GpuContext, a: &NormalMatrix, inv: &[f64]) -> Result<Self, GpuError> {
-        let (n, prec) = (a.n, ctx.precision);
+        let (n, prec) = (a.n(), ctx.precision);
         let sz = prec.size() as u64;
         let vbytes = 4 * sz * n as u64;
         let matrix = GpuMatrix::new(ctx, a)?;
@@ -468,7 +471,7 @@ pub fn pcg(
     params: &CgParams,
     mut progress: impl FnMut(usize, f64),
 ) -> Result<CgInfo, CgError> {
-    let n = a.n;
+    let n = a.n();
     assert_eq!(b.len(), n);
     assert_eq!(x.len(), n);
     let diag = a.diagonal();

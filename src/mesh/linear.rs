@@ -13,7 +13,7 @@
 //!   3D) for boundary conditions; the boundary itself comes from [`crate::mesh::Topology`].
 
 use crate::io::raw::{CellKind, Location, ParseError, RawBlock, RawMesh};
-use crate::mesh::vec3::{norm, sub};
+use crate::math::linalg::DVec3;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 
@@ -98,9 +98,10 @@ const DEGENERATE_REL_TOL: f64 = 1e-12;
 /// How many offending elements an error message lists.
 const MAX_LISTED: usize = 8;
 
-fn det3(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> f64 {
-    a[0] * (b[1] * c[2] - b[2] * c[1]) - a[1] * (b[0] * c[2] - b[2] * c[0])
-        + a[2] * (b[0] * c[1] - b[1] * c[0])
+// Not `a.dot(b.cross(c))`: that adds a₁(b₂c₀ − b₀c₂) where this subtracts a₁(b₀c₂ − b₂c₀),
+// equal except for the sign of an exact zero, which would change the verdict's input bits.
+fn det3(a: DVec3, b: DVec3, c: DVec3) -> f64 {
+    a.x * (b.y * c.z - b.z * c.y) - a.y * (b.x * c.z - b.z * c.x) + a.z * (b.x * c.y - b.y * c.x)
 }
 
 /// Corner Jacobians of an element and the scaled ones (divided by the lengths of the corner's
@@ -108,21 +109,23 @@ fn det3(a: [f64; 3], b: [f64; 3], c: [f64; 3]) -> f64 {
 pub fn corner_jacobians(dim: usize, x: &[[f64; 3]], jac: &mut [f64], scaled: &mut [f64]) {
     if dim == 2 {
         for i in 0..4 {
-            let a = sub(x[(i + 1) % 4], x[i]);
-            let b = sub(x[(i + 3) % 4], x[i]);
-            let j = a[0] * b[1] - a[1] * b[0];
+            let p = DVec3::from_array(x[i]);
+            let a = DVec3::from_array(x[(i + 1) % 4]) - p;
+            let b = DVec3::from_array(x[(i + 3) % 4]) - p;
+            let j = a.x * b.y - a.y * b.x;
             jac[i] = j;
-            let s = norm(a) * norm(b);
+            let s = a.length() * b.length();
             scaled[i] = if s > 0.0 { j / s } else { 0.0 };
         }
     } else {
         for (i, nb) in HEX_CORNER_NEIGHBOURS.iter().enumerate() {
-            let a = sub(x[nb[0]], x[i]);
-            let b = sub(x[nb[1]], x[i]);
-            let c = sub(x[nb[2]], x[i]);
+            let p = DVec3::from_array(x[i]);
+            let a = DVec3::from_array(x[nb[0]]) - p;
+            let b = DVec3::from_array(x[nb[1]]) - p;
+            let c = DVec3::from_array(x[nb[2]]) - p;
             let j = det3(a, b, c);
             jac[i] = j;
-            let s = norm(a) * norm(b) * norm(c);
+            let s = a.length() * b.length() * c.length();
             scaled[i] = if s > 0.0 { j / s } else { 0.0 };
         }
     }

@@ -4,7 +4,7 @@
 //! whose `dot`, `cross` and `length` round exactly like the written-out formulas; new code
 //! should compute on `DVec3` directly and keep arrays at its storage boundary.
 
-use crate::math::linalg::{self, DVec3};
+use crate::math::linalg::DVec3;
 
 pub(crate) fn add(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     (DVec3::from(a) + DVec3::from(b)).into()
@@ -17,10 +17,6 @@ pub(crate) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
 }
 pub(crate) fn norm(a: [f64; 3]) -> f64 {
     DVec3::from(a).length()
-}
-/// `a` scaled to unit length (the zero vector stays zero).
-pub(crate) fn unit(a: [f64; 3]) -> [f64; 3] {
-    linalg::unit(DVec3::from(a)).into()
 }
 pub(crate) fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     DVec3::from(a).cross(DVec3::from(b)).into()

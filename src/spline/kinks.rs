@@ -37,8 +37,8 @@
 //! Vertices inside planar boundary patches are never kinks: a planar patch is reproduced
 //! exactly by any map that keeps its vertices in the plane, whatever its grid lines do.
 
+use crate::math::linalg::{DVec3, unit};
 use crate::mesh::topology::NONE;
-use crate::mesh::vec3::{add, cross, dot, norm, sub, unit};
 use crate::mesh::{LinearMesh, Topology};
 
 /// Edge-length ratio along a grid line above which its vertex is a kink.
@@ -67,7 +67,7 @@ pub struct Kinks {
 /// through it, each as (vertex before, vertex after).
 #[derive(Clone, Copy, Debug)]
 struct Fan {
-    normal: [f64; 3],
+    normal: DVec3,
     lines: [[u32; 2]; 2],
     planar: bool,
 }
@@ -87,13 +87,14 @@ pub fn detect(mesh: &LinearMesh, topo: &Topology, angle_deg: f64, exclude: &[boo
     }
     let fans = regular_fans(mesh, topo);
     let excluded = |v: usize| exclude.get(v).copied().unwrap_or(false);
-    let x = |v: u32| mesh.coords[v as usize];
+    let x = |v: u32| DVec3::from_array(mesh.coords[v as usize]);
     // Turning of the line through `v` that arrives from `a` and leaves to `b`.
     let turning = |v: usize, a: u32, b: u32| -> f64 {
         let n = fans[v].as_ref().unwrap().normal;
-        let d1 = tangential(sub(mesh.coords[v], x(a)), n);
-        let d2 = tangential(sub(x(b), mesh.coords[v]), n);
-        dot(n, cross(d1, d2)).atan2(dot(d1, d2))
+        let xv = DVec3::from_array(mesh.coords[v]);
+        let d1 = tangential(xv - x(a), n);
+        let d2 = tangential(x(b) - xv, n);
+        n.dot(d1.cross(d2)).atan2(d1.dot(d2))
     };
     // Turning at `w` of its line that contains the edge w–`towards`, oriented to leave to it.
     let neighbour_turning = |w: u32, towards: u32, leaving: bool| -> Option<f64> {
@@ -118,16 +119,15 @@ pub fn detect(mesh: &LinearMesh, topo: &Topology, angle_deg: f64, exclude: &[boo
         if excluded(v) || fan.planar {
             continue;
         }
-        let xv = mesh.coords[v];
+        let xv = DVec3::from_array(mesh.coords[v]);
         // Normal turning of the line a–v–b: change of the edges' elevation over the tangent
         // plane.
-        let elevation = |d: [f64; 3]| dot(fan.normal, unit(d)).clamp(-1.0, 1.0).asin();
-        let normal_turning =
-            |[a, b]: [u32; 2]| (elevation(sub(xv, x(a))) - elevation(sub(x(b), xv))).abs();
+        let elevation = |d: DVec3| fan.normal.dot(unit(d)).clamp(-1.0, 1.0).asin();
+        let normal_turning = |[a, b]: [u32; 2]| (elevation(xv - x(a)) - elevation(x(b) - xv)).abs();
         let nu = normal_turning(fan.lines[0]).max(normal_turning(fan.lines[1]));
         let threshold = nu.clamp(min_threshold, max_threshold);
         for [a, b] in fan.lines {
-            let (la, lb) = (norm(sub(xv, x(a))), norm(sub(x(b), xv)));
+            let (la, lb) = ((xv - x(a)).length(), (x(b) - xv).length());
             let spacing = la.max(lb) > SPACING_RATIO * la.min(lb);
             let kv = turning(v, a, b);
             let around = [
@@ -183,22 +183,22 @@ pub fn feature_vertices(mesh: &LinearMesh, topo: &Topology, angle_deg: f64) -> V
         return vec![false; nv];
     }
     let mut out = topo.non_manifold_vertex_mask();
-    let normals: Vec<[f64; 3]> = topo
+    let normals: Vec<DVec3> = topo
         .boundary_facets
         .iter()
         .map(|&f| unit(facet_normal(mesh, topo, f as usize)))
         .collect();
-    let mut vertex_normal = vec![[0.0; 3]; nv];
+    let mut vertex_normal = vec![DVec3::ZERO; nv];
     for (i, &f) in topo.boundary_facets.iter().enumerate() {
         for &v in topo.facet_vertices(f as usize) {
-            vertex_normal[v as usize] = add(vertex_normal[v as usize], normals[i]);
+            vertex_normal[v as usize] += normals[i];
         }
     }
     let cos_max = angle_deg.to_radians().cos();
     for (i, &f) in topo.boundary_facets.iter().enumerate() {
         for &v in topo.facet_vertices(f as usize) {
             let n = unit(vertex_normal[v as usize]);
-            if dot(n, normals[i]).is_nan() || dot(n, normals[i]) < cos_max {
+            if n.dot(normals[i]).is_nan() || n.dot(normals[i]) < cos_max {
                 out[v as usize] = true;
             }
         }
@@ -220,12 +220,12 @@ fn regular_fans(mesh: &LinearMesh, topo: &Topology) -> Vec<Option<Fan>> {
             }
             // The two neighbours of v in each quad.
             let mut pairs = [[0u32; 2]; 4];
-            let mut normal = [0.0; 3];
+            let mut normal = DVec3::ZERO;
             for (p, &f) in pairs.iter_mut().zip(faces) {
                 let q = topo.facet_vertices(f as usize);
                 let i = q.iter().position(|&w| w as usize == v)?;
                 *p = [q[(i + 3) % 4], q[(i + 1) % 4]];
-                normal = add(normal, unit(facet_normal(mesh, topo, f as usize)));
+                normal += unit(facet_normal(mesh, topo, f as usize));
             }
             let mut ws: Vec<u32> = pairs.iter().flatten().copied().collect();
             ws.sort_unstable();
@@ -247,14 +247,14 @@ fn regular_fans(mesh: &LinearMesh, topo: &Topology) -> Vec<Option<Fan>> {
             let a1 = ws.iter().copied().find(|&u| u != ws[0] && u != o0)?;
             let lines = [[ws[0], o0], [a1, opposite(a1)?]];
             let normal = unit(normal);
-            let xv = mesh.coords[v];
+            let xv = DVec3::from_array(mesh.coords[v]);
             let mut size = 0.0f64;
             let mut height = 0.0f64;
             for &f in faces {
                 for &w in topo.facet_vertices(f as usize) {
-                    let d = sub(mesh.coords[w as usize], xv);
-                    size = size.max(norm(d));
-                    height = height.max(dot(d, normal).abs());
+                    let d = DVec3::from_array(mesh.coords[w as usize]) - xv;
+                    size = size.max(d.length());
+                    height = height.max(d.dot(normal).abs());
                 }
             }
             Some(Fan {
@@ -267,27 +267,26 @@ fn regular_fans(mesh: &LinearMesh, topo: &Topology) -> Vec<Option<Fan>> {
 }
 
 /// Normal of boundary facet `f` (length ≈ twice its area), pointing out of its element.
-fn facet_normal(mesh: &LinearMesh, topo: &Topology, f: usize) -> [f64; 3] {
+fn facet_normal(mesh: &LinearMesh, topo: &Topology, f: usize) -> DVec3 {
     let q = topo.facet_vertices(f);
-    let x = |i: usize| mesh.coords[q[i] as usize];
-    let n = cross(sub(x(2), x(0)), sub(x(3), x(1)));
+    let x = |i: usize| DVec3::from_array(mesh.coords[q[i] as usize]);
+    let n = (x(2) - x(0)).cross(x(3) - x(1));
     let e = topo.facet_elements[f][0];
     if e == NONE {
         return n;
     }
-    let centre = mesh
-        .element(e as usize)
-        .iter()
-        .fold([0.0; 3], |s, &v| add(s, mesh.coords[v as usize]));
+    let centre = mesh.element(e as usize).iter().fold(DVec3::ZERO, |s, &v| {
+        s + DVec3::from_array(mesh.coords[v as usize])
+    });
     let k = mesh.element(e as usize).len() as f64;
-    let face_centre = (0..4).fold([0.0; 3], |s, i| add(s, x(i)));
-    let out = sub(face_centre.map(|c| c / 4.0), centre.map(|c| c / k));
-    if dot(n, out) < 0.0 { n.map(|c| -c) } else { n }
+    let face_centre = (0..4).fold(DVec3::ZERO, |s, i| s + x(i));
+    let out = face_centre / 4.0 - centre / k;
+    if n.dot(out) < 0.0 { -n } else { n }
 }
 
-fn tangential(d: [f64; 3], n: [f64; 3]) -> [f64; 3] {
-    let s = dot(d, n);
-    sub(d, n.map(|c| s * c))
+fn tangential(d: DVec3, n: DVec3) -> DVec3 {
+    let s = d.dot(n);
+    d - s * n
 }
 
 #[cfg(test)]
@@ -398,7 +397,7 @@ mod tests {
         let mut mesh = grid_3d(&s, &s, &s);
         for p in &mut mesh.coords {
             let inf = p.iter().fold(0.0f64, |m, c| m.max(c.abs()));
-            let l = norm(*p);
+            let l = DVec3::from_array(*p).length();
             if l > 0.0 {
                 *p = p.map(|c| c * inf / l);
             }

@@ -410,19 +410,19 @@ fn spmv_matches_cpu_and_row_sums() {
         for (name, mesh) in meshes().into_iter().take(6) {
             let (k, _) = normal_system(&mesh);
             let op = GpuOperator::new(&ctx, &k).unwrap();
-            let x: Vec<[f64; 3]> = (0..k.n)
+            let x: Vec<[f64; 3]> = (0..k.n())
                 .map(|i| [1.0, (i % 7) as f64 - 3.0, ((i * 31) % 11) as f64 / 11.0])
                 .collect();
-            let mut want = vec![[0.0; 3]; k.n];
+            let mut want = vec![[0.0; 3]; k.n()];
             k.apply(&x, &mut want);
             let got = op.try_apply(&x).unwrap();
             let tol = match prec {
                 Precision::F32 => SPMV_TOL_F32,
                 Precision::F64 => SPMV_TOL_F64,
             };
-            for r in 0..k.n {
-                let scale: f64 = (k.indptr[r]..k.indptr[r + 1])
-                    .map(|j| k.data[j].abs() * 3.0f64.max(1.0))
+            for r in 0..k.n() {
+                let scale: f64 = (k.indptr()[r]..k.indptr()[r + 1])
+                    .map(|j| k.data()[j].abs() * 3.0f64.max(1.0))
                     .sum();
                 for c in 0..3 {
                     assert!(
@@ -433,10 +433,12 @@ fn spmv_matches_cpu_and_row_sums() {
                     );
                 }
                 // Oracle: with x = 1 in lane 0, y is the row sum.
-                let sum: f64 = (k.indptr[r]..k.indptr[r + 1]).map(|j| k.data[j]).sum();
+                let sum: f64 = (k.indptr()[r]..k.indptr()[r + 1])
+                    .map(|j| k.data()[j])
+                    .sum();
                 assert!((got[r][0] - sum).abs() <= tol * scale);
             }
-            assert_eq!(op.nrows(), k.n);
+            assert_eq!(op.nrows(), k.n());
         }
     }
 }
@@ -458,7 +460,7 @@ fn gpu_cg_matches_cpu_cg() {
                 ..Default::default()
             };
             let [(want, ci), (got, gi)] = executors::on_each(&executors, |x| {
-                let mut sol = vec![[0.0; 3]; k.n];
+                let mut sol = vec![[0.0; 3]; k.n()];
                 let info = x
                     .pcg(&k, &b, &mut sol, &params, &mut |_, _| {})
                     .unwrap_or_else(|e| panic!("{name} {prec:?} {}: {e}", x.name()));
@@ -480,7 +482,7 @@ fn gpu_cg_matches_cpu_cg() {
             };
             // Independent check of each residual in f64.
             for (executor, sol) in [("cpu", &want), ("gpu", &got)] {
-                let mut ax = vec![[0.0; 3]; k.n];
+                let mut ax = vec![[0.0; 3]; k.n()];
                 k.apply(sol, &mut ax);
                 for c in 0..3 {
                     let bn = b.iter().map(|v| v[c] * v[c]).sum::<f64>().sqrt();
@@ -543,7 +545,7 @@ fn cg_twins_solve_the_system() {
         m
     };
     let (k, b) = normal_system(&mesh);
-    let n = k.n;
+    let n = k.n();
     let inv: Vec<f64> = k.diagonal().iter().map(|d| 1.0 / d).collect();
     let v4 =
         |v: &[[f64; 3]]| -> Vec<[f64; 4]> { v.iter().map(|x| [x[0], x[1], x[2], 0.0]).collect() };
@@ -575,7 +577,7 @@ fn cg_twins_solve_the_system() {
         max_iters: 10_000,
         _pad: 0,
     };
-    let indptr: Vec<u32> = k.indptr.iter().map(|&v| v as u32).collect();
+    let indptr: Vec<u32> = k.indptr().iter().map(|&v| v as u32).collect();
     let sp = cpu::spmv::SpmvParams {
         n_rows: n as u32,
         row_base: 0,
@@ -588,7 +590,7 @@ fn cg_twins_solve_the_system() {
     };
     let mut partials = vec![[0.0; 4]; 8];
     for _ in 0..5000 {
-        cpu::spmv::spmv(&sp, &indptr, &k.indices, &k.data, &p, &mut ap);
+        cpu::spmv::spmv(&sp, &indptr, k.indices(), k.data(), &p, &mut ap);
         cpu::dot::dot_partial(&dp, &p, &ap, &mut partials, 4);
         finalize_alpha(&kp, &mut sc, &mut st, &partials);
         update_xr(&kp, &sc, &mut x, &mut r, &mut z, &p, &ap, &inv);

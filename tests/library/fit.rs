@@ -154,9 +154,9 @@ fn jacobi_and_block_jacobi_solve_the_normal_equations() {
                 preconditioner: pre,
                 ..Default::default()
             };
-            let mut x = vec![[0.0; 3]; k.n];
+            let mut x = vec![[0.0; 3]; k.n()];
             let info = pcg(&k, &b, &mut x, &params, |_, _| {}).unwrap();
-            let mut kx = vec![[0.0; 3]; k.n];
+            let mut kx = vec![[0.0; 3]; k.n()];
             k.apply(&x, &mut kx);
             for d in 0..3 {
                 let bn: f64 = b.iter().map(|v| v[d] * v[d]).sum::<f64>().sqrt();
@@ -260,12 +260,12 @@ fn row_parallel_assembly_matches_the_matrix_free_operator() {
                 .install(|| assemble(&s, &m, &t, &w))
         };
         let ((k, b), (k2, b2)) = (on(1), on(2));
-        assert_eq!(k.indptr, k2.indptr);
-        assert_eq!(k.indices, k2.indices);
+        assert_eq!(k.indptr(), k2.indptr());
+        assert_eq!(k.indices(), k2.indices());
         assert!(
-            k.data
+            k.data()
                 .iter()
-                .zip(&k2.data)
+                .zip(k2.data())
                 .all(|(a, b)| a.to_bits() == b.to_bits())
         );
         assert!(
@@ -273,8 +273,8 @@ fn row_parallel_assembly_matches_the_matrix_free_operator() {
                 .zip(&b2)
                 .all(|(a, b)| a.map(f64::to_bits) == b.map(f64::to_bits))
         );
-        for r in 0..k.n {
-            let cols = &k.indices[k.indptr[r]..k.indptr[r + 1]];
+        for r in 0..k.n() {
+            let cols = &k.indices()[k.indptr()[r]..k.indptr()[r + 1]];
             assert!(
                 cols.windows(2).all(|p| p[0] < p[1]),
                 "row {r} not sorted/unique"
