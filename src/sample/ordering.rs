@@ -12,7 +12,7 @@
 //!   toward increasing lattice index, faces i=0, i=p, j=0, j=p, k=0, k=p each lexicographic, then
 //!   the interior lexicographic (not recursive).
 //!
-//! The tables in `tests/node_ordering.rs`, produced by Gmsh 4.15 and VTK 9.7 themselves, are the
+//! The tables in `tests/library/node_ordering.rs`, produced by Gmsh 4.15 and VTK 9.7 themselves, are the
 //! tests' oracle.
 
 /// A lattice point of an order-p element (the third entry is 0 in 2D).
