@@ -449,7 +449,7 @@ fn elastic_stage(
 
 /// The sampled quality of the output (every element must have det J > 0 on the lattice of
 /// order 2P: a last check beyond the certificate) and its boundary distances from the input.
-fn quality_stage(
+pub(crate) fn quality_stage(
     job: &Job,
     ho: &HighOrderMesh,
 ) -> Result<(f64, crate::deviation::BoundaryDeviation), CurveError> {

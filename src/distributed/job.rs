@@ -31,7 +31,6 @@ use crate::pipeline::spline::SplineSetup;
 use crate::pipeline::{
     CurveError, CurveOptions, CurveReport, Geometry, Job, LineSearchMode, Method,
 };
-use crate::quality::sample_det_jacobian;
 use crate::sample::{HighOrderMesh, sample};
 use crate::spline::{ElementClass, Q2Reason};
 use crate::validity::CpuCertifier;
@@ -461,8 +460,15 @@ pub fn curve(
     let snapped = options.snap_boundary.then(|| {
         crate::pipeline::snap_boundary(&mesh, &topo, &mut ho, options.line_search.certificate_depth)
     });
-    let min_sj = sampled_min_scaled_jacobian(input, &ho)?;
-    let deviation = crate::deviation::boundary_deviation(&mesh, &topo, &ho);
+    let executor = crate::executor::executor(&options.backend);
+    let job = Job {
+        input,
+        options,
+        mesh: &mesh,
+        topo: &topo,
+        executor: executor.as_ref(),
+    };
+    let (min_sj, deviation) = crate::pipeline::quality_stage(&job, &ho)?;
     laps.lap("quality");
     // Rank 0's peak includes the sampling and checks of the whole output.
     let mut all_figures = all_figures;
@@ -528,33 +534,6 @@ pub fn curve(
             per_rank: all_figures,
         },
     }))
-}
-
-/// The sampled check of the gathered output: every element's sampled det J positive (else
-/// the job fails naming the first elements), and the smallest sampled scaled Jacobian.
-fn sampled_min_scaled_jacobian(input: &Path, ho: &HighOrderMesh) -> Result<f64, CurveError> {
-    let quality = sample_det_jacobian(ho);
-    let min_sj = quality
-        .iter()
-        .map(|q| q.min_scaled_jacobian)
-        .fold(f64::INFINITY, f64::min);
-    let invalid: Vec<usize> = (0..quality.len())
-        .filter(|&e| !(quality[e].min_det_jacobian > 0.0))
-        .collect();
-    if !invalid.is_empty() {
-        return Err(CurveError::Invalid {
-            input: input.to_owned(),
-            what: "sampled output".into(),
-            count: invalid.len(),
-            first: invalid
-                .iter()
-                .take(8)
-                .map(|e| e.to_string())
-                .collect::<Vec<_>>()
-                .join(", "),
-        });
-    }
-    Ok(min_sj)
 }
 
 /// Stages whose seconds are reported per rank.
