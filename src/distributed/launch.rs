@@ -29,9 +29,9 @@ pub enum Outcome {
 }
 
 /// Run `curve` distributed: initialise MPI, run the job, write the output (and the JSON
-/// report) on rank 0, finalise MPI. An error on a rank other than 0 ends that process with
-/// status 1 after MPI is finalised (rank 0 reports the error line: every failure of the
-/// replicated setup, the CG or the blend happens on all ranks alike).
+/// report) on rank 0, finalise MPI. An error on a rank other than 0 ends that process after
+/// MPI is finalised, silently: with status 0 for an option error (rank 0 has the same one and
+/// reports it), else with status 1.
 pub fn curve(
     input: &Path,
     output: &Path,
@@ -47,6 +47,10 @@ pub fn curve(
     drop(comm);
     drop(universe);
     match result {
+        // Option errors are the same on every rank: rank 0 prints the line and sets the job's
+        // status. The others end quietly, since an early non-zero exit lets the launcher kill
+        // rank 0 before it has printed.
+        Err(CurveError::Options(_)) if rank != 0 => std::process::exit(0),
         Err(_) if rank != 0 => std::process::exit(1),
         r => r,
     }
