@@ -5,7 +5,7 @@
 //!
 //! Invariants: both return the same kind of result (certified bounds, a CG solution to the
 //! requested tolerance, nodes in the same order); a device failure is a typed error
-//! ([`GpuError`], or [`CgError::Device`] from the solve), never a panic; where the GPU
+//! ([`ExecutorError`], or [`CgError::Device`] from the solve), never a panic; where the GPU
 //! executor hands work back to the CPU it counts it ([`Executor::fallbacks`]) and the report
 //! says so.
 
@@ -41,7 +41,8 @@ pub trait Executor: Certifier {
     }
 
     /// Solve `k` x = `b` by preconditioned CG from `x`, calling `progress(iteration,
-    /// relative residual)` as it goes.
+    /// relative residual)` as it goes. The error is the solver seam's [`CgError`]: besides
+    /// breakdowns it carries a device failure as [`CgError::Device`].
     fn pcg(
         &self,
         k: &NormalMatrix,
@@ -58,7 +59,7 @@ pub trait Executor: Certifier {
         mesh: &LinearMesh,
         topo: &Topology,
         p: usize,
-    ) -> Result<HighOrderMesh, GpuError>;
+    ) -> Result<HighOrderMesh, ExecutorError>;
 
     /// Value, gradient and Hessian of each local energy problem at its current point, or
     /// `None` where the caller computes them itself (the CPU reference does so inside its

@@ -152,7 +152,7 @@ pub enum CurveError {
     #[error("{}: GPU: {source}", input.display())]
     Gpu {
         input: PathBuf,
-        source: crate::gpu::GpuError,
+        source: crate::executor::ExecutorError,
     },
     #[error("{}: fit: {source}", input.display())]
     Solve { input: PathBuf, source: CgError },

@@ -3,7 +3,6 @@
 use crate::energy::colored::{LocalDerivatives, LocalProblem};
 use crate::executor::{Executor, ExecutorError};
 use crate::fit::NormalMatrix;
-use crate::gpu::GpuError;
 use crate::math::{BezierElements, BezierNet};
 use crate::mesh::{LinearMesh, Topology};
 use crate::sample::HighOrderMesh;
@@ -47,7 +46,7 @@ impl Executor for CpuExecutor {
         mesh: &LinearMesh,
         topo: &Topology,
         p: usize,
-    ) -> Result<HighOrderMesh, GpuError> {
+    ) -> Result<HighOrderMesh, ExecutorError> {
         Ok(crate::sample::sample(source, mesh, topo, p))
     }
 

@@ -18,9 +18,9 @@
 //!   coplanar vertices), so every step of the line search keeps them there.
 
 use super::smooth::{VertexModel, fan_model, fit_parabola};
+use crate::math::linalg::DVec3;
 use crate::mesh::features::Features;
 use crate::mesh::topology::HEX_VERTEX_PARAMS;
-use crate::mesh::vec3::{add, dot, norm, sub};
 use crate::mesh::{LinearMesh, Topology};
 use crate::spline::{ControlPoint, SplineSpace};
 use std::cmp::Reverse;
@@ -79,7 +79,7 @@ impl FeatureModels {
             }
             return out;
         }
-        let x = |v: u32| mesh.coords[v as usize];
+        let x = |v: u32| DVec3::from(mesh.coords[v as usize]);
         let mut fan: HashMap<u32, Vec<(u32, u32)>> = HashMap::new();
         for (i, &f) in topo.boundary_facets.iter().enumerate() {
             let p = features.facet_patch[i];
@@ -156,7 +156,7 @@ impl FeatureModels {
         along: &HashMap<u32, Vec<u32>>,
         decay: f64,
     ) {
-        let x = |v: u32| mesh.coords[v as usize];
+        let x = |v: u32| DVec3::from(mesh.coords[v as usize]);
         let mut adj: HashMap<u32, Vec<u32>> = HashMap::new();
         let mut plane_of: HashMap<u32, [f64; 3]> = HashMap::new();
         let mut rim: Vec<(u32, u32)> = Vec::new();
@@ -189,7 +189,7 @@ impl FeatureModels {
             let (Some(m), Some((n, _))) = (self.curve.get(&v), features.planes[p as usize]) else {
                 continue;
             };
-            if dot(m.normal, n).abs() > 1e-6 {
+            if DVec3::from(m.normal).dot(n.into()).abs() > 1e-6 {
                 continue;
             }
             self.patch.insert((v, p), *m);
@@ -199,7 +199,7 @@ impl FeatureModels {
         }
         let ell = |s: u32| {
             let nbs = &along[&s];
-            nbs.iter().map(|&w| norm(sub(x(w), x(s)))).sum::<f64>() / nbs.len() as f64
+            nbs.iter().map(|&w| (x(w) - x(s)).length()).sum::<f64>() / nbs.len() as f64
         };
         while let Some(Reverse((bits, v))) = heap.pop() {
             let (d, s) = best[&v];
@@ -211,7 +211,7 @@ impl FeatureModels {
                 if !plane_of.contains_key(&w) {
                     continue;
                 }
-                let nd = d + norm(sub(x(w), x(v)));
+                let nd = d + (x(w) - x(v)).length();
                 if nd < cutoff && best.get(&w).is_none_or(|&(old, _)| nd < old) {
                     best.insert(w, (nd, s));
                     heap.push(Reverse((nd.to_bits(), w)));
@@ -263,18 +263,18 @@ fn flat(n: [f64; 3]) -> VertexModel {
 
 /// The parabola through x and its feature-curve neighbours a, b, as a model in their plane
 /// (zero curvature when the three are collinear).
-fn curve_model(x: [f64; 3], a: [f64; 3], b: [f64; 3]) -> Option<VertexModel> {
-    let (ua, ub) = (sub(a, x), sub(b, x));
-    let d = sub(ub, ua);
-    let l = norm(d);
+fn curve_model(x: DVec3, a: DVec3, b: DVec3) -> Option<VertexModel> {
+    let (ua, ub) = (a - x, b - x);
+    let d = ub - ua;
+    let l = d.length();
     if l == 0.0 {
         return None;
     }
-    let t = d.map(|c| c / l);
+    let t = d / l;
     // In-plane normal: the part of ua + ub across the chord direction.
-    let s = add(ua, ub);
-    let off = sub(s, t.map(|c| c * dot(s, t)));
-    let lo = norm(off);
+    let s = ua + ub;
+    let off = s - t * s.dot(t);
+    let lo = off.length();
     if lo <= 1e-12 * l {
         return Some(VertexModel {
             normal: [0.0; 3],
@@ -282,10 +282,12 @@ fn curve_model(x: [f64; 3], a: [f64; 3], b: [f64; 3]) -> Option<VertexModel> {
             weight: 1.0,
         });
     }
-    let n = off.map(|c| c / lo);
-    let to2 = |u: [f64; 3]| [dot(u, t), dot(u, n), 0.0];
+    let n = off / lo;
+    let to2 = |u: DVec3| [u.dot(t), u.dot(n), 0.0];
     let (n2, h2) = fit_parabola([0.0; 3], to2(ua), to2(ub))?;
-    let back = |u: [f64; 3]| add(t.map(|c| c * u[0]), n.map(|c| c * u[1]));
+    let back = |u: [f64; 3]| (t * u[0] + n * u[1]).into();
+    // H = Σ_pq b_p h2_pq b_qᵀ summed entry by entry in this order (a DMat3 expression would
+    // group the products differently and round differently).
     let basis = [t, n];
     let mut h = [[0.0; 3]; 3];
     for i in 0..3 {
@@ -378,9 +380,10 @@ pub fn project_onto_planes(
             .collect();
         // Planes that coincide (two straight chains on one line, split by a tag change) leave
         // the intersection undefined: one of them is the constraint.
-        if let Some(x) = project(*c, &planes).or_else(|| project(*c, &planes[..1])) {
+        let p = DVec3::from(*c);
+        if let Some(x) = project(p, &planes).or_else(|| project(p, &planes[..1])) {
             moved += 1;
-            *c = x;
+            *c = x.into();
         }
     }
     moved
@@ -388,24 +391,25 @@ pub fn project_onto_planes(
 
 /// The nearest point to x on the intersection of up to three planes n·y = d (None when their
 /// normals are dependent, e.g. more than three planes or parallel ones).
-fn project(x: [f64; 3], planes: &[([f64; 3], f64)]) -> Option<[f64; 3]> {
+fn project(x: DVec3, planes: &[([f64; 3], f64)]) -> Option<DVec3> {
     let m = planes.len();
     if m > 3 {
         return None;
     }
     // y = x + Nᵀ λ with (N Nᵀ) λ = d − N x.
+    let n = |i: usize| DVec3::from(planes[i].0);
     let mut g = [[0.0; 3]; 3];
     let mut r = [0.0; 3];
     for i in 0..m {
         for j in 0..m {
-            g[i][j] = dot(planes[i].0, planes[j].0);
+            g[i][j] = n(i).dot(n(j));
         }
-        r[i] = planes[i].1 - dot(planes[i].0, x);
+        r[i] = planes[i].1 - n(i).dot(x);
     }
     let lambda = solve_small(g, r, m)?;
     let mut y = x;
-    for i in 0..m {
-        y = add(y, planes[i].0.map(|c| c * lambda[i]));
+    for (i, l) in lambda.iter().enumerate().take(m) {
+        y += n(i) * *l;
     }
     Some(y)
 }
@@ -448,14 +452,14 @@ mod tests {
     fn curve_model_follows_a_circle_in_space() {
         // Circle of radius 2 in the tilted plane spanned by e1 and (0, 1, 1)/√2.
         let s = std::f64::consts::FRAC_1_SQRT_2;
-        let c = |t: f64| [2.0 * t.cos(), 2.0 * t.sin() * s, 2.0 * t.sin() * s];
+        let c = |t: f64| DVec3::new(2.0 * t.cos(), 2.0 * t.sin() * s, 2.0 * t.sin() * s);
         let (a, x, b) = (c(0.0), c(0.2), c(0.45));
         let m = curve_model(x, a, b).unwrap();
-        let p = [0.0, 1.0, 2.0].map(|k: f64| 0.5 * (x[k as usize] + b[k as usize]));
-        let q = add(p, m.correction(p, &[x, b], 0.5));
-        let (ep, eq) = ((norm(p) - 2.0).abs(), (norm(q) - 2.0).abs());
+        let p = 0.5 * (x + b);
+        let q = p + DVec3::from(m.correction(p.into(), &[x.into(), b.into()], 0.5));
+        let (ep, eq) = ((p.length() - 2.0).abs(), (q.length() - 2.0).abs());
         assert!(eq < 0.05 * ep, "chord {ep}, corrected {eq}");
-        let line = curve_model([1.0, 1.0, 1.0], [0.0; 3], [3.0, 3.0, 3.0]).unwrap();
+        let line = curve_model(DVec3::ONE, DVec3::ZERO, DVec3::splat(3.0)).unwrap();
         let p = [2.0; 3];
         assert_eq!(line.correction(p, &[[1.0; 3], [3.0; 3]], 0.5), [0.0; 3]);
     }
@@ -463,13 +467,16 @@ mod tests {
     /// Projection onto one plane, two planes (their line) and three (their point).
     #[test]
     fn projection_onto_plane_intersections() {
-        let x = [1.0, 2.0, 3.0];
+        let x = DVec3::new(1.0, 2.0, 3.0);
         let px = ([1.0, 0.0, 0.0], 0.0);
         let py = ([0.0, 1.0, 0.0], 0.5);
         let pz = ([0.0, 0.0, 1.0], -1.0);
-        assert_eq!(project(x, &[px]).unwrap(), [0.0, 2.0, 3.0]);
-        assert_eq!(project(x, &[px, py]).unwrap(), [0.0, 0.5, 3.0]);
-        assert_eq!(project(x, &[px, py, pz]).unwrap(), [0.0, 0.5, -1.0]);
+        assert_eq!(project(x, &[px]).unwrap(), DVec3::from([0.0, 2.0, 3.0]));
+        assert_eq!(project(x, &[px, py]).unwrap(), DVec3::from([0.0, 0.5, 3.0]));
+        assert_eq!(
+            project(x, &[px, py, pz]).unwrap(),
+            DVec3::from([0.0, 0.5, -1.0])
+        );
         assert!(project(x, &[px, px]).is_none());
     }
 }

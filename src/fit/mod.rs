@@ -36,8 +36,10 @@ pub use normal_matrix::{ElementBlocks, MatrixFree, NormalMatrix, mask_level, siz
 use normal_matrix::{control_point_scales, sample_weight};
 pub use smooth::{SmoothParams, SmoothTargets};
 
+use crate::math::BezierNet;
 use crate::math::bernstein::bernstein2;
-use crate::mesh::{LinearMesh, Topology, vec3};
+use crate::math::linalg::DVec3;
+use crate::mesh::{LinearMesh, Topology};
 use crate::solve::{CgError, CgInfo, CgParams, LinOp, pcg};
 use rayon::prelude::*;
 use std::collections::HashMap;
@@ -57,7 +59,7 @@ pub trait FitSpace: Sync {
         weights: &mut Vec<f64>,
     );
     /// Bernstein net of element `e` for the control points `cps`.
-    fn bezier_net_with(&self, e: usize, cps: &[[f64; 3]]) -> [[f64; 3]; 27];
+    fn bezier_net_with(&self, e: usize, cps: &[[f64; 3]]) -> BezierNet;
     /// When E_e is a matrix shared by every element with the same key times the selection of
     /// 3^d distinct control points (in local-node order), return the key and write the
     /// control points into `ids`; the assembly then computes one local matrix per key.
@@ -67,12 +69,12 @@ pub trait FitSpace: Sync {
     }
     /// Append E_eᵀ f to `out` as (control point, value) pairs (a control point may repeat),
     /// for f one 3-vector per Bernstein point. The default expands the explicit rows.
-    fn add_transposed(&self, e: usize, f: &[[f64; 3]; 27], out: &mut Vec<(u32, [f64; 3])>) {
+    fn add_transposed(&self, e: usize, f: &BezierNet, out: &mut Vec<(u32, [f64; 3])>) {
         let (mut offsets, mut cols, mut weights) = (Vec::new(), Vec::new(), Vec::new());
         self.element_rows(e, &mut offsets, &mut cols, &mut weights);
         for i in 0..offsets.len() - 1 {
             for k in offsets[i]..offsets[i + 1] {
-                out.push((cols[k], f[i].map(|v| weights[k] * v)));
+                out.push((cols[k], (DVec3::from(f[i]) * weights[k]).into()));
             }
         }
     }
@@ -310,23 +312,17 @@ impl crate::sample::BezierElements for TargetMap<'_> {
     fn n_elements(&self) -> usize {
         self.mesh.n_elements()
     }
-    fn bezier_net(&self, e: usize) -> [[f64; 3]; 27] {
+    fn bezier_net(&self, e: usize) -> BezierNet {
         let dim = self.mesh.dim;
         let mut v = rhs::multilinear_lattice(dim, &self.mesh.element_coords(e));
         if let Some(t) = self.smooth {
             let shift = t.corrections_at(self.mesh, self.topo, e, &v);
             for (p, s) in v.iter_mut().zip(shift) {
-                *p = vec3::add(*p, s);
+                *p = (DVec3::from(*p) + DVec3::from(s)).into();
             }
         }
         // Values at {0, ½, 1} to Bernstein points, line by line: b₁ = 2 v(½) − (v₀ + v₁)/2.
-        rhs::map_lines(dim, &mut v, |[a, m, c]| {
-            [
-                a,
-                std::array::from_fn(|k| 2.0 * m[k] - 0.5 * (a[k] + c[k])),
-                c,
-            ]
-        });
+        rhs::map_lines(dim, &mut v, |[a, m, c]| [a, m * 2.0 - (a + c) * 0.5, c]);
         v
     }
 }
@@ -459,30 +455,27 @@ impl FitSpace for crate::spline::SplineSpace {
         *cols = rows.cols;
         *weights = rows.weights;
     }
-    fn bezier_net_with(&self, e: usize, cps: &[[f64; 3]]) -> [[f64; 3]; 27] {
+    fn bezier_net_with(&self, e: usize, cps: &[[f64; 3]]) -> BezierNet {
         self.element_bezier_with(e, cps)
     }
     /// By sum factorisation: E_e = (M_z ⊗ M_y ⊗ M_x) N_e with N_e the local nodes' control
     /// point entries, so E_eᵀ f applies the transposed 1D matrices direction by direction
     /// (3 · 3^d · 3 multiply-adds each) and then N_eᵀ, instead of expanding the rows.
-    fn add_transposed(&self, e: usize, f: &[[f64; 3]; 27], out: &mut Vec<(u32, [f64; 3])>) {
+    fn add_transposed(&self, e: usize, f: &BezierNet, out: &mut Vec<(u32, [f64; 3])>) {
         let x = &self.extraction;
         let m = x.matrices(e);
         let n = x.n_local();
-        let mut t = *f;
+        let mut t = f.map(DVec3::from);
         for (d, md) in m.iter().enumerate().take(self.dim) {
             let stride = [1, 3, 9][d];
-            let mut u = [[0.0; 3]; 27];
+            let mut u = [DVec3::ZERO; 27];
             for (o, u) in u.iter_mut().enumerate().take(n) {
                 let l = (o / stride) % 3;
                 let base = o - l * stride;
                 for (b, row) in md.iter().enumerate() {
                     let w = row[l];
                     if w != 0.0 {
-                        let v = t[base + b * stride];
-                        for c in 0..3 {
-                            u[c] += w * v[c];
-                        }
+                        *u += t[base + b * stride] * w;
                     }
                 }
             }
@@ -490,7 +483,7 @@ impl FitSpace for crate::spline::SplineSpace {
         }
         for (l, &node) in x.element_nodes(e).iter().enumerate() {
             for (g, w) in x.node_entries(node) {
-                out.push((g, t[l].map(|v| w * v)));
+                out.push((g, (t[l] * w).into()));
             }
         }
     }

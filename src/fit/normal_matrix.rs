@@ -202,6 +202,20 @@ fn sample_weight_unscaled(w: &FitWeights, mask: u64, i: usize, l: [usize; 3], co
 /// meshes whose element sizes vary by less than 2^`LEVEL_DEAD_ZONE` keep plain weights.
 pub(super) const LEVEL_DEAD_ZONE: f64 = 2.0;
 
+/// The shortest edge of element `e` (h_e of [`size_levels`]).
+pub(super) fn shortest_edge(mesh: &LinearMesh, e: usize) -> f64 {
+    let edges: &[[usize; 2]] = if mesh.dim == 2 {
+        &[[0, 1], [1, 2], [2, 3], [3, 0]]
+    } else {
+        &crate::mesh::topology::HEX_EDGES
+    };
+    let x = mesh.element_coords(e).map(DVec3::from);
+    edges
+        .iter()
+        .map(|&[a, b]| (x[a] - x[b]).length())
+        .fold(f64::INFINITY, f64::min)
+}
+
 /// Per element, the size level k = max(0, ⌊log₂(h_max / h_e)⌋ − `LEVEL_DEAD_ZONE`), h_e the
 /// element's shortest edge: its samples are weighted by 4^k ≈ (h_max / h_e)², so the fit
 /// balances errors relative to the size of the element they distort. With plain weights the
@@ -209,20 +223,9 @@ pub(super) const LEVEL_DEAD_ZONE: f64 = 2.0;
 /// to it (on a C-grid with wall cells 10⁻⁵ and far-field cells 10² long, errors of 10⁻² in cells
 /// 10⁻⁵ thin).
 pub fn size_levels(mesh: &LinearMesh) -> Vec<u16> {
-    let edges: &[[usize; 2]] = if mesh.dim == 2 {
-        &[[0, 1], [1, 2], [2, 3], [3, 0]]
-    } else {
-        &crate::mesh::topology::HEX_EDGES
-    };
     let h: Vec<f64> = (0..mesh.n_elements())
         .into_par_iter()
-        .map(|e| {
-            let x = mesh.element_coords(e);
-            edges
-                .iter()
-                .map(|&[a, b]| vec3::norm(vec3::sub(x[a], x[b])))
-                .fold(f64::INFINITY, f64::min)
-        })
+        .map(|e| shortest_edge(mesh, e))
         .collect();
     let hmax = h.iter().copied().fold(0.0, f64::max);
     h.par_iter()
@@ -393,29 +396,21 @@ impl LinOp for MatrixFree<'_> {
                 || vec![[0.0; 3]; n],
                 |mut acc, e| {
                     let (o, c, w) = &self.rows[e];
-                    let mut b = [[0.0; 3]; 27];
+                    let mut b = [DVec3::ZERO; 27];
                     for i in 0..nb {
                         for k in o[i]..o[i + 1] {
-                            let xc = x[c[k] as usize];
-                            for d in 0..3 {
-                                b[i][d] += w[k] * xc[d];
-                            }
+                            b[i] += DVec3::from(x[c[k] as usize]) * w[k];
                         }
                     }
                     let (gd, gr) = &self.blocks.cache[&self.blocks.masks[e]];
                     for i in 0..nb {
-                        let mut z = [0.0; 3];
+                        let mut z = DVec3::ZERO;
                         for j in 0..nb {
-                            let g = gd[i * nb + j] + gr[i * nb + j];
-                            for d in 0..3 {
-                                z[d] += g * b[j][d];
-                            }
+                            z += b[j] * (gd[i * nb + j] + gr[i * nb + j]);
                         }
                         for k in o[i]..o[i + 1] {
                             let t = &mut acc[c[k] as usize];
-                            for d in 0..3 {
-                                t[d] += w[k] * z[d];
-                            }
+                            *t = (DVec3::from(*t) + z * w[k]).into();
                         }
                     }
                     acc

@@ -10,6 +10,7 @@
 //! that of the serial fit.
 
 use super::{ElementBlocks, FitParams, FitSpace, NormalMatrix, SmoothTargets};
+use crate::math::BezierNet;
 use crate::mesh::{LinearMesh, Topology};
 
 /// A [`FitSpace`] restricted to some of its elements (local index i is element `elements[i]`).
@@ -38,13 +39,13 @@ impl FitSpace for Subset<'_> {
         self.inner
             .element_rows(self.elements[e], offsets, cols, weights)
     }
-    fn bezier_net_with(&self, e: usize, cps: &[[f64; 3]]) -> [[f64; 3]; 27] {
+    fn bezier_net_with(&self, e: usize, cps: &[[f64; 3]]) -> BezierNet {
         self.inner.bezier_net_with(self.elements[e], cps)
     }
     fn element_pattern(&self, e: usize, ids: &mut Vec<u32>) -> Option<u64> {
         self.inner.element_pattern(self.elements[e], ids)
     }
-    fn add_transposed(&self, e: usize, f: &[[f64; 3]; 27], out: &mut Vec<(u32, [f64; 3])>) {
+    fn add_transposed(&self, e: usize, f: &BezierNet, out: &mut Vec<(u32, [f64; 3])>) {
         self.inner.add_transposed(self.elements[e], f, out)
     }
 }
@@ -59,19 +60,8 @@ pub struct PartialSystem {
 
 /// Shortest edge of each element (the size h_e of [`super::size_levels`]).
 pub fn element_sizes(mesh: &LinearMesh) -> Vec<f64> {
-    let edges: &[[usize; 2]] = if mesh.dim == 2 {
-        &[[0, 1], [1, 2], [2, 3], [3, 0]]
-    } else {
-        &crate::mesh::topology::HEX_EDGES
-    };
     (0..mesh.n_elements())
-        .map(|e| {
-            let x = mesh.element_coords(e);
-            edges
-                .iter()
-                .map(|&[a, b]| crate::mesh::vec3::norm(crate::mesh::vec3::sub(x[a], x[b])))
-                .fold(f64::INFINITY, f64::min)
-        })
+        .map(|e| super::normal_matrix::shortest_edge(mesh, e))
         .collect()
 }
 

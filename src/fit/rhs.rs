@@ -19,30 +19,24 @@
 //! the thread count.
 
 use super::{FitSpace, FitWeights, SmoothTargets, sample_weight};
+use crate::math::Lattice;
+use crate::math::linalg::DVec3;
 use crate::mesh::topology::HEX_VERTEX_PARAMS;
-use crate::mesh::vec3::{add, sub};
 use crate::mesh::{LinearMesh, Topology};
 use rayon::prelude::*;
 
 /// Elements per batch (bounds the temporary (control point, value) pairs).
 const RHS_BATCH: usize = 1 << 16;
 
-type Lattice = [[f64; 3]; 27];
-
 /// Apply `f` to every line of the 3^`dim` lattice `v`, direction by direction (x, y, z).
-pub(super) fn map_lines(dim: usize, v: &mut Lattice, f: impl Fn([[f64; 3]; 3]) -> [[f64; 3]; 3]) {
+pub(super) fn map_lines(dim: usize, v: &mut Lattice, f: impl Fn([DVec3; 3]) -> [DVec3; 3]) {
     let n = 3usize.pow(dim as u32);
     for s in [1, 3, 9].into_iter().take(dim) {
         for b in (0..n).filter(|i| (i / s) % 3 == 0) {
-            let out = f([v[b], v[b + s], v[b + 2 * s]]);
-            (v[b], v[b + s], v[b + 2 * s]) = (out[0], out[1], out[2]);
+            let out = f([v[b], v[b + s], v[b + 2 * s]].map(DVec3::from));
+            (v[b], v[b + s], v[b + 2 * s]) = (out[0].into(), out[1].into(), out[2].into());
         }
     }
-}
-
-/// α a + β b.
-fn lin(alpha: f64, a: [f64; 3], beta: f64, b: [f64; 3]) -> [f64; 3] {
-    std::array::from_fn(|c| alpha * a[c] + beta * b[c])
 }
 
 /// The multilinear map of the corners `x` at the lattice: midpoints of the lines.
@@ -51,7 +45,7 @@ pub(super) fn multilinear_lattice(dim: usize, x: &[[f64; 3]; 8]) -> Lattice {
     for (c, pc) in HEX_VERTEX_PARAMS.iter().enumerate().take(1 << dim) {
         p[2 * (pc[0] as usize + 3 * pc[1] as usize + 9 * pc[2] as usize)] = x[c];
     }
-    map_lines(dim, &mut p, |[a, _, c]| [a, lin(0.5, a, 0.5, c), c]);
+    map_lines(dim, &mut p, |[a, _, c]| [a, a * 0.5 + c * 0.5, c]);
     p
 }
 
@@ -89,13 +83,13 @@ pub(super) fn displacement_rhs_of(
         if let Some(t) = smooth {
             let shift = t.corrections_at(mesh, topo, e, &r);
             for (p, s) in r.iter_mut().zip(shift) {
-                *p = add(*p, s);
+                *p = (DVec3::from(*p) + DVec3::from(s)).into();
             }
         }
         // The initial map at the samples: B B⁰.
         let mut x0 = space.bezier_net_with(e, c0);
         map_lines(dim, &mut x0, |[a, b, c]| {
-            [a, add(lin(0.25, a, 0.25, c), b.map(|b| 0.5 * b)), c]
+            [a, (a * 0.25 + c * 0.25) + b * 0.5, c]
         });
         for (i, (r, x0)) in r.iter_mut().zip(&x0).enumerate().take(nb) {
             let l = [i % 3, (i / 3) % 3, i / 9];
@@ -104,16 +98,12 @@ pub(super) fn displacement_rhs_of(
             *r = if wd == 0.0 {
                 [0.0; 3]
             } else {
-                sub(*r, *x0).map(|d| wd * d)
+                ((DVec3::from(*r) - DVec3::from(*x0)) * wd).into()
             };
         }
         // Bᵀ: B₁ᵀ on every line.
         map_lines(dim, &mut r, |[a, b, c]| {
-            [
-                lin(1.0, a, 0.25, b),
-                b.map(|b| 0.5 * b),
-                lin(0.25, b, 1.0, c),
-            ]
+            [a + b * 0.25, b * 0.5, b * 0.25 + c]
         });
         space.add_transposed(e, &r, acc);
     };
@@ -127,9 +117,8 @@ pub(super) fn displacement_rhs_of(
             .collect();
         for f in chunks {
             for (i, f) in f {
-                for k in 0..3 {
-                    rhs[i as usize][k] += f[k];
-                }
+                let r = &mut rhs[i as usize];
+                *r = (DVec3::from(*r) + DVec3::from(f)).into();
             }
         }
     }

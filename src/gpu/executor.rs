@@ -2,8 +2,8 @@
 //! where the device fails (counted in [`Executor::fallbacks`]); the CG solve, sampling and the
 //! local derivatives return the device's error instead.
 
+use super::GpuContext;
 use super::jacobian_check::GpuCertifier;
-use super::{GpuContext, GpuError};
 use crate::energy::colored::{LocalDerivatives, LocalProblem};
 use crate::executor::{Executor, ExecutorError};
 use crate::fit::NormalMatrix;
@@ -68,8 +68,8 @@ impl Executor for GpuExecutor<'_> {
         mesh: &LinearMesh,
         topo: &Topology,
         p: usize,
-    ) -> Result<HighOrderMesh, GpuError> {
-        super::evaluate::sample(self.ctx(), source, mesh, topo, p)
+    ) -> Result<HighOrderMesh, ExecutorError> {
+        Ok(super::evaluate::sample(self.ctx(), source, mesh, topo, p)?)
     }
 
     fn local_derivatives(

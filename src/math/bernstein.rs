@@ -16,6 +16,11 @@ use crate::mesh::topology::HEX_VERTEX_PARAMS;
 /// The Bernstein control points of a quadratic element (see the module docs).
 pub type BezierNet = [[f64; 3]; 27];
 
+/// One 3-vector per point of the sample lattice {0, ½, 1}^d of an element, in [`BezierNet`]
+/// order (index 9z + 3y + x): the fit's samples, targets and weighted residuals before they
+/// are pulled back to Bernstein points.
+pub type Lattice = [[f64; 3]; 27];
+
 /// Elements that are tensor-product quadratic Bézier maps of \[0,1\]^d.
 pub trait BezierElements: Sync {
     fn dim(&self) -> usize;

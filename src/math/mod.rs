@@ -2,9 +2,10 @@
 //! other module may use, and that uses nothing of the pipeline (only the mesh's corner
 //! numbering, [`crate::mesh::topology::HEX_VERTEX_PARAMS`], which fixes what "corner c" means).
 //!
-//! * [`bernstein`]: quadratic Bernstein polynomials, the [`BezierNet`] of an element and the
-//!   [`BezierElements`] trait through which the spline space, the straight input, the fit's
-//!   targets and the validity blends hand their element maps to sampling and certification.
+//! * [`bernstein`]: quadratic Bernstein polynomials, the [`BezierNet`] of an element, the
+//!   [`Lattice`] of its values at {0, ½, 1}^d, and the [`BezierElements`] trait through which
+//!   the spline space, the straight input, the fit's targets and the validity blends hand
+//!   their element maps to sampling and certification.
 //! * [`lagrange`]: the equispaced Lagrange basis of order-p output elements.
 //! * [`quadrature`]: Gauss–Legendre rules on \[0, 1\].
 //! * [`linalg`]: 3-vectors and 3×3 matrices on glam (`DVec3`, `DMat3`), with the formulas
@@ -19,4 +20,4 @@ pub mod lagrange;
 pub mod linalg;
 pub mod quadrature;
 
-pub use bernstein::{BezierElements, BezierNet};
+pub use bernstein::{BezierElements, BezierNet, Lattice};

@@ -29,8 +29,8 @@
 mod angles;
 mod planes;
 
+use crate::math::linalg::{DVec3, unit};
 use crate::mesh::topology::NONE;
-use crate::mesh::vec3::{cross, dot, norm, sub};
 use crate::mesh::{LinearMesh, Topology};
 use angles::{corners_2d, creases_3d};
 use planes::{planar_patches, straight_chains};
@@ -244,7 +244,7 @@ impl Features {
         let (facet_patch, n_patches) = patches(topo, &vertex_mask, &edge_mask);
         let nv = mesh.n_vertices();
         let (lo, hi) = mesh.bounding_box();
-        let tol = 1e-6 * norm(sub(hi, lo));
+        let tol = 1e-6 * (DVec3::from(hi) - DVec3::from(lo)).length();
         let planes = if topo.dim == 3 {
             planar_patches(mesh, topo, &facet_patch, n_patches, tol)
         } else {
@@ -312,17 +312,20 @@ impl Features {
     /// the bounding-box diagonal (see [`FeatureReport`]).
     pub fn deviations(&self, mesh: &LinearMesh, ho: &crate::sample::HighOrderMesh) -> (f64, f64) {
         let (lo, hi) = mesh.bounding_box();
-        let diag = norm(sub(hi, lo)).max(f64::MIN_POSITIVE);
+        let diag = (DVec3::from(hi) - DVec3::from(lo))
+            .length()
+            .max(f64::MIN_POSITIVE);
         let vertex = (0..mesh.n_vertices())
             .filter(|&v| self.vertex_mask[v])
-            .map(|v| norm(sub(ho.nodes[v], mesh.coords[v])))
+            .map(|v| (DVec3::from(ho.nodes[v]) - DVec3::from(mesh.coords[v])).length())
             .fold(0.0, f64::max);
         let npf = ho.nodes_per_facet();
         let mut planarity = 0.0f64;
         for (i, &p) in self.facet_patch.iter().enumerate() {
             if let Some(Some((n, d))) = self.planes.get(p as usize) {
                 for &k in &ho.boundary[i * npf..(i + 1) * npf] {
-                    planarity = planarity.max((dot(*n, ho.nodes[k as usize]) - d).abs());
+                    let x = DVec3::from(ho.nodes[k as usize]);
+                    planarity = planarity.max((DVec3::from(*n).dot(x) - d).abs());
                 }
             }
         }
@@ -427,13 +430,11 @@ fn edge_masks_3d(
     let tag = |i: usize| topo.boundary_facet_tags.get(i).copied().unwrap_or(0);
     let mut vertex_mask = vec![false; nv];
     let mut edge_mask = vec![false; topo.edges.len()];
-    let mut normal = vec![[0.0; 3]; nb];
+    let mut normal = vec![DVec3::ZERO; nb];
     for (i, &f) in topo.boundary_facets.iter().enumerate() {
         let q = topo.faces[f as usize];
-        let x = |k: usize| mesh.coords[q[k] as usize];
-        let n = cross(sub(x(2), x(0)), sub(x(3), x(1)));
-        let l = norm(n);
-        normal[i] = if l > 0.0 { n.map(|c| c / l) } else { n };
+        let x = |k: usize| DVec3::from(mesh.coords[q[k] as usize]);
+        normal[i] = unit((x(2) - x(0)).cross(x(3) - x(1)));
     }
     let mut edge_facets: Vec<Vec<usize>> = vec![Vec::new(); topo.edges.len()];
     for (i, &f) in topo.boundary_facets.iter().enumerate() {
@@ -670,7 +671,7 @@ mod tests {
         for (i, &e) in topo.boundary_facets.iter().enumerate() {
             let (n, d) = f.planes[f.facet_patch[i] as usize].expect("straight");
             for v in topo.edges[e as usize] {
-                assert!((dot(n, mesh.coords[v as usize]) - d).abs() < 1e-15);
+                assert!((DVec3::from(n).dot(mesh.coords[v as usize].into()) - d).abs() < 1e-15);
             }
         }
         // Each corner is one quad's own corner: nothing to demote.

@@ -5,8 +5,8 @@
 //! edge (3D), whether the turning there makes a feature.
 
 use super::CONCENTRATION;
+use crate::math::linalg::DVec3;
 use crate::mesh::topology::NONE;
-use crate::mesh::vec3::{add, dot, sub};
 use crate::mesh::{LinearMesh, Topology};
 
 /// Whether a turning of `theta` degrees (signed, positive where the boundary is convex) is a
@@ -27,16 +27,16 @@ fn concentrated(theta: f64, beside: [Option<f64>; 2], angle_deg: f64) -> bool {
     theta.abs() > CONCENTRATION * explained
 }
 
-fn centroid(xs: &[[f64; 3]]) -> [f64; 3] {
-    let s = xs.iter().fold([0.0; 3], |a, &x| add(a, x));
-    s.map(|c| c / xs.len() as f64)
+fn centroid(xs: &[[f64; 3]]) -> DVec3 {
+    let s = xs.iter().fold(DVec3::ZERO, |a, &x| a + DVec3::from(x));
+    s / xs.len() as f64
 }
 
 /// 2D corners by angle: per vertex, whether it lies on two boundary edges and the boundary
 /// turns there by a [`concentrated`] angle above `angle_deg`.
 pub(super) fn corners_2d(mesh: &LinearMesh, topo: &Topology, angle_deg: f64) -> Vec<bool> {
     let nv = mesh.n_vertices();
-    let x = |v: u32| mesh.coords[v as usize];
+    let x = |v: u32| DVec3::from(mesh.coords[v as usize]);
     // Boundary edges oriented with their element on the left, so the sign of the turning
     // says convex (positive) or re-entrant whatever the elements' own orientation.
     let (mut prev, mut next, mut count) = (vec![NONE; nv], vec![NONE; nv], vec![0u32; nv]);
@@ -44,7 +44,7 @@ pub(super) fn corners_2d(mesh: &LinearMesh, topo: &Topology, angle_deg: f64) -> 
         let [mut p, mut q] = topo.edges[f as usize];
         let e = topo.facet_elements[f as usize][0] as usize;
         let c = centroid(&mesh.element_coords(e)[..4]);
-        let (dq, dc) = (sub(x(q), x(p)), sub(c, x(p)));
+        let (dq, dc) = (x(q) - x(p), c - x(p));
         if dq[0] * dc[1] - dq[1] * dc[0] < 0.0 {
             std::mem::swap(&mut p, &mut q);
         }
@@ -58,13 +58,9 @@ pub(super) fn corners_2d(mesh: &LinearMesh, topo: &Topology, angle_deg: f64) -> 
             if count[v] != 2 || prev[v] == NONE || next[v] == NONE {
                 return None;
             }
-            let d1 = sub(mesh.coords[v], x(prev[v]));
-            let d2 = sub(x(next[v]), mesh.coords[v]);
-            Some(
-                (d1[0] * d2[1] - d1[1] * d2[0])
-                    .atan2(dot(d1, d2))
-                    .to_degrees(),
-            )
+            let d1 = x(v as u32) - x(prev[v]);
+            let d2 = x(next[v]) - x(v as u32);
+            Some((d1.x * d2.y - d1.y * d2.x).atan2(d1.dot(d2)).to_degrees())
         })
         .collect();
     (0..nv)
@@ -84,28 +80,28 @@ pub(super) fn corners_2d(mesh: &LinearMesh, topo: &Topology, angle_deg: f64) -> 
 pub(super) fn creases_3d(
     mesh: &LinearMesh,
     topo: &Topology,
-    normal: &[[f64; 3]],
+    normal: &[DVec3],
     edge_facets: &[Vec<usize>],
     angle_deg: f64,
 ) -> Vec<bool> {
     let x = |v: u32| mesh.coords[v as usize];
     // Outward normals (away from the element's centroid) and face centres.
     let mut out = normal.to_vec();
-    let mut centre = vec![[0.0; 3]; normal.len()];
+    let mut centre = vec![DVec3::ZERO; normal.len()];
     for (i, &f) in topo.boundary_facets.iter().enumerate() {
         centre[i] = centroid(&topo.faces[f as usize].map(x));
         let inside = centroid(&mesh.element_coords(topo.facet_elements[f as usize][0] as usize));
-        if dot(out[i], sub(inside, centre[i])) > 0.0 {
-            out[i] = out[i].map(|c| -c);
+        if out[i].dot(inside - centre[i]) > 0.0 {
+            out[i] = -out[i];
         }
     }
     let turning: Vec<Option<f64>> = edge_facets
         .iter()
         .map(|fs| match fs[..] {
             [i, j] => {
-                let t = dot(out[i], out[j]).clamp(-1.0, 1.0).acos().to_degrees();
+                let t = out[i].dot(out[j]).clamp(-1.0, 1.0).acos().to_degrees();
                 // Convex where face j bends below face i's plane.
-                Some(if dot(out[i], sub(centre[j], centre[i])) > 0.0 {
+                Some(if out[i].dot(centre[j] - centre[i]) > 0.0 {
                     -t
                 } else {
                     t

@@ -4,7 +4,7 @@
 //! Input: the patch of each boundary facet. Output: per patch, `Some((unit normal, offset))`
 //! of the plane or line n·x = offset, or `None`.
 
-use crate::mesh::vec3::{add, cross, dot, norm, sub};
+use crate::math::linalg::{DVec3, unit};
 use crate::mesh::{LinearMesh, Topology};
 
 /// 2D: the lines (unit normal with zero z, offset) of the boundary chains whose vertices all
@@ -57,28 +57,25 @@ pub(super) fn planar_patches(
     n_patches: usize,
     tol: f64,
 ) -> Vec<Option<([f64; 3], f64)>> {
-    let mut area = vec![[0.0; 3]; n_patches];
-    let mut centre = vec![[0.0; 4]; n_patches];
+    // Per patch: the summed area vector, and the sum and count of its facets' corners.
+    let mut area = vec![DVec3::ZERO; n_patches];
+    let mut centre = vec![(DVec3::ZERO, 0.0); n_patches];
     for (i, &f) in topo.boundary_facets.iter().enumerate() {
         let q = topo.faces[f as usize];
-        let x = |k: usize| mesh.coords[q[k] as usize];
+        let x = |k: usize| DVec3::from(mesh.coords[q[k] as usize]);
         let p = facet_patch[i] as usize;
-        let n = cross(sub(x(2), x(0)), sub(x(3), x(1)));
-        area[p] = add(area[p], n);
+        area[p] += (x(2) - x(0)).cross(x(3) - x(1));
         for k in 0..4 {
-            for c in 0..3 {
-                centre[p][c] += x(k)[c];
-            }
-            centre[p][3] += 1.0;
+            centre[p].0 += x(k);
+            centre[p].1 += 1.0;
         }
     }
     let mut planes: Vec<Option<([f64; 3], f64)>> = (0..n_patches)
         .map(|p| {
-            let l = norm(area[p]);
-            (l > 0.0).then(|| {
-                let n = area[p].map(|c| c / l);
-                let c = [0, 1, 2].map(|k| centre[p][k] / centre[p][3]);
-                (n, dot(n, c))
+            (area[p].length() > 0.0).then(|| {
+                let n = unit(area[p]);
+                let c = centre[p].0 / centre[p].1;
+                (n.into(), n.dot(c))
             })
         })
         .collect();
@@ -102,7 +99,7 @@ fn drop_off_fits(
             && topo
                 .facet_vertices(f as usize)
                 .iter()
-                .any(|&v| (dot(n, mesh.coords[v as usize]) - d).abs() > tol)
+                .any(|&v| (DVec3::from(n).dot(mesh.coords[v as usize].into()) - d).abs() > tol)
         {
             fits[p] = None;
         }
