@@ -20,7 +20,7 @@
 use super::dirichlet;
 use super::{Energy, EnergyInfo, EnergyParams, EnergySolver, EnergyStop, Mat3, Validity};
 use crate::math::BezierNet;
-use crate::math::linalg::{inv3, mul3, transpose};
+use crate::math::linalg::{DMat3, DVec3, from_dmat3, inverse, to_dmat3};
 use crate::validity::det_jacobian_bounds;
 use rayon::prelude::*;
 
@@ -61,6 +61,7 @@ const LOCAL_BACKTRACKS: usize = 12;
 #[derive(Clone, Copy, Debug)]
 pub struct LocalPoint {
     pub w: f64,
+    /// Stored by rows ([`Mat3`]): the GPU uploads it as it is.
     pub m: Mat3,
     pub psi: [f64; 3],
 }
@@ -106,7 +107,9 @@ impl LocalProblem {
                     m[i][j] += v[i] * p.psi[j];
                 }
             }
-            let mut gm = [[0.0; 3]; 3];
+            let m = to_dmat3(&m);
+            let psi = DVec3::from(p.psi);
+            let mut gm = DMat3::ZERO;
             let f = dirichlet(d, &m, grad.as_ref().map(|_| &mut gm));
             if !f.is_finite() {
                 return f64::INFINITY;
@@ -114,23 +117,24 @@ impl LocalProblem {
             l += p.w * f;
             if let Some((g, h)) = grad.as_mut() {
                 for i in 0..d {
-                    g[i] += p.w * (0..3).map(|j| gm[i][j] * p.psi[j]).sum::<f64>();
+                    g[i] += p.w * gm.row(i).dot(psi);
                 }
                 // ∂G/∂v_k with dM = e_k ψᵀ: dG = (dM − dT)/d, T = AᵀAAᵀ, dA = −A dM A.
-                let (a, _) = inv3(&m);
-                let at = transpose(&a);
+                let (a, _) = inverse(&m);
+                let at = a.transpose();
                 for k in 0..d {
                     let mut dm = [[0.0; 3]; 3];
                     dm[k] = p.psi;
-                    let da = mul3(&mul3(&a, &dm), &a).map(|r| r.map(|x| -x));
-                    let dat = transpose(&da);
-                    let t1 = mul3(&mul3(&dat, &a), &at);
-                    let t2 = mul3(&mul3(&at, &da), &at);
-                    let t3 = mul3(&mul3(&at, &a), &dat);
+                    let dm = to_dmat3(&dm);
+                    let da = -(a * dm * a);
+                    let dat = da.transpose();
+                    let r = dm - dat * a * at - at * da * at - at * a * dat;
                     for i in 0..d {
-                        let mut s = 0.0;
+                        // Summed from +0.0 as written: glam's `dot` starts from the first
+                        // product, which differs in the sign of an all-zero sum.
+                        let (row, mut s) = (r.row(i), 0.0);
                         for j in 0..3 {
-                            s += (dm[i][j] - t1[i][j] - t2[i][j] - t3[i][j]) * p.psi[j];
+                            s += row[j] * p.psi[j];
                         }
                         h[i][k] += p.w * s / d as f64;
                     }
@@ -246,10 +250,10 @@ impl Locals {
                     }
                 }
                 let p = &energy.pinv[e * nq + q];
-                let psi = [0, 1, 2].map(|j| (0..3).map(|l| p[l][j] * phi[l]).sum());
+                let psi = [0, 1, 2].map(|j| p.col(j).dot(DVec3::from(phi)));
                 points.push(LocalPoint {
                     w: energy.qw[q] * energy.scale[e],
-                    m: energy.m_at(e, q, &nets[e]),
+                    m: from_dmat3(&energy.m_at(e, q, &nets[e])),
                     psi,
                 });
             }
@@ -438,7 +442,7 @@ mod tests {
                     },
                     LocalPoint {
                         w: 0.6,
-                        m: transpose(&m),
+                        m: crate::math::linalg::transpose(&m),
                         psi: [-0.3, 0.4, if dim == 2 { 0.0 } else { 0.9 }],
                     },
                 ],

@@ -56,7 +56,7 @@ pub use params::{EnergyError, EnergyInfo, EnergyParams, EnergyScale, EnergySolve
 use crate::fit::{FitParams, FitSpace, NormalMatrix};
 use crate::math::bernstein::{bernstein2, bernstein2_derivative, elevated_net};
 pub use crate::math::linalg::Mat3;
-use crate::math::linalg::{inv3, mul3, norm2, transpose};
+use crate::math::linalg::{DMat3, DVec3, inverse, norm2_rows};
 use crate::math::quadrature::GAUSS3;
 use crate::mesh::{LinearMesh, Topology};
 use crate::solve::LinOp;
@@ -66,22 +66,18 @@ use std::time::Instant;
 
 /// Symmetric Dirichlet density f(M) (M embedded as 3×3 with M₃₃ = 1 in 2D, which the `−6`
 /// accounts for) and, when `grad` is given, ∂f/∂M. +∞ when det M ≤ 0.
-pub fn dirichlet(dim: usize, m: &Mat3, grad: Option<&mut Mat3>) -> f64 {
-    let (a, det) = inv3(m);
+pub fn dirichlet(dim: usize, m: &DMat3, grad: Option<&mut DMat3>) -> f64 {
+    let (a, det) = inverse(m);
     if !(det > 0.0) {
         return f64::INFINITY;
     }
     let d = dim as f64;
-    let f = (norm2(m) + norm2(&a) - 6.0) / (2.0 * d);
+    let f = (norm2_rows(m) + norm2_rows(&a) - 6.0) / (2.0 * d);
     if let Some(g) = grad {
         // ∂‖M⁻¹‖²/∂M = −2 M⁻ᵀ M⁻¹ M⁻ᵀ.
-        let at = transpose(&a);
-        let t = mul3(&mul3(&at, &a), &at);
-        for i in 0..3 {
-            for j in 0..3 {
-                g[i][j] = (m[i][j] - t[i][j]) / d;
-            }
-        }
+        let at = a.transpose();
+        let t = at * a * at;
+        *g = (*m - t) / d;
     }
     f
 }
@@ -109,7 +105,7 @@ pub struct Energy<'a> {
     pub(crate) qw: Vec<f64>,
     pub(crate) dbq: Vec<[[f64; 27]; 3]>,
     /// Per element and quadrature point: P = J⁰⁻¹ (flattened element-major).
-    pub(crate) pinv: Vec<Mat3>,
+    pub(crate) pinv: Vec<DMat3>,
     /// Per element: w_e h_e².
     pub(crate) scale: Vec<f64>,
     pub(crate) rows: Vec<ElementRows>,
@@ -182,7 +178,7 @@ impl<'a> Energy<'a> {
             }
         }
         let nq = qw.len();
-        let per_element: Vec<(Vec<Mat3>, f64, ElementRows)> = (0..space.n_elements())
+        let per_element: Vec<(Vec<DMat3>, f64, ElementRows)> = (0..space.n_elements())
             .into_par_iter()
             .map(|e| {
                 // The straight element's degree-elevated net: its multilinear map at the lattice.
@@ -191,7 +187,7 @@ impl<'a> Energy<'a> {
                 let mut vol = 0.0;
                 for q in 0..nq {
                     let j0 = jacobian(dim, nb, &net, &dbq[q]);
-                    let (p, det) = inv3(&j0);
+                    let (p, det) = inverse(&j0);
                     vol += qw[q] * det;
                     pinv.push(p);
                 }
@@ -303,9 +299,9 @@ impl<'a> Energy<'a> {
     }
 
     /// M_q = J(u_q) P_q of element e with Bernstein net `net`.
-    pub(crate) fn m_at(&self, e: usize, q: usize, net: &BezierNet) -> Mat3 {
+    pub(crate) fn m_at(&self, e: usize, q: usize, net: &BezierNet) -> DMat3 {
         let j = jacobian(self.dim, self.nb, net, &self.dbq[q]);
-        mul3(&j, &self.pinv[e * self.nq() + q])
+        j * self.pinv[e * self.nq() + q]
     }
 
     /// w_e S_e of element e with Bernstein net `net`; with `grad`, ∂(w_e S_e)/∂B is added into
@@ -315,7 +311,7 @@ impl<'a> Energy<'a> {
         let mut s = 0.0;
         for q in 0..nq {
             let m = self.m_at(e, q, net);
-            let mut g = [[0.0; 3]; 3];
+            let mut g = DMat3::ZERO;
             let f = dirichlet(self.dim, &m, grad.as_ref().map(|_| &mut g));
             if !f.is_finite() {
                 return f64::INFINITY;
@@ -324,16 +320,13 @@ impl<'a> Energy<'a> {
             if let Some(out) = grad.as_deref_mut() {
                 // H = w_q (∂f/∂M) Pᵀ; ∂/∂B_a = H ∇b_a.
                 let p = &self.pinv[e * nq + q];
-                let mut h = mul3(&g, &transpose(p));
-                for row in h.iter_mut() {
-                    for x in row.iter_mut() {
-                        *x *= self.qw[q] * self.scale[e];
-                    }
-                }
+                let h = g * p.transpose() * (self.qw[q] * self.scale[e]);
+                let rows = [h.row(0), h.row(1), h.row(2)];
                 let db = &self.dbq[q];
                 for a in 0..self.nb {
+                    let dba = DVec3::new(db[0][a], db[1][a], db[2][a]);
                     for i in 0..self.dim {
-                        out[a][i] += h[i][0] * db[0][a] + h[i][1] * db[1][a] + h[i][2] * db[2][a];
+                        out[a][i] += rows[i].dot(dba);
                     }
                 }
             }
@@ -466,19 +459,20 @@ impl<'a> Energy<'a> {
 }
 
 /// J = Σ_a B_a ⊗ ∇b_a (J₃₃ = 1 in 2D).
-pub(crate) fn jacobian(dim: usize, nb: usize, net: &BezierNet, db: &[[f64; 27]; 3]) -> Mat3 {
-    let mut j = [[0.0; 3]; 3];
+pub(crate) fn jacobian(dim: usize, nb: usize, net: &BezierNet, db: &[[f64; 27]; 3]) -> DMat3 {
+    // Column k is ∂x/∂u_k.
+    let mut j = [DVec3::ZERO; 3];
     for a in 0..nb {
         for i in 0..dim {
-            for k in 0..dim {
-                j[i][k] += net[a][i] * db[k][a];
+            for (k, col) in j.iter_mut().enumerate().take(dim) {
+                col[i] += net[a][i] * db[k][a];
             }
         }
     }
     if dim == 2 {
         j[2][2] = 1.0;
     }
-    j
+    DMat3::from_cols(j[0], j[1], j[2])
 }
 
 /// How the minimisers decide that a candidate keeps the mesh valid: element e is accepted when

@@ -3,8 +3,8 @@
 //! Geometry stores points as `[f64; 3]` (files, meshes, GPU buffers); [`DVec3`] is the same
 //! three f64 (`From`/`Into` both ways, no copy beyond the value), so code converts at its API
 //! and computes on glam. Matrices are glam's column-major [`DMat3`]; [`Mat3`] (row-major
-//! `[[f64; 3]; 3]`, `m[row][col]`) is the storage form of the energy's per-point matrices and
-//! the GPU's local problems, with [`to_dmat3`]/[`from_dmat3`] between the two.
+//! `[[f64; 3]; 3]`, `m[row][col]`) is the storage form of the GPU's local problems (their
+//! buffers hold the rows), with [`to_dmat3`]/[`from_dmat3`] between the two.
 //!
 //! **Rounding.** glam's `dot`, `cross`, `length` and the matrix product compute exactly the
 //! textbook formulas in the textbook order (checked against glam 0.34's `dvec3.rs`/`dmat3.rs`:
@@ -13,7 +13,7 @@
 //! `determinant` expands along the first column (x·(y×z)) and its `inverse` scales by a
 //! reciprocal, `normalize` multiplies by a reciprocal length: those differ in the last bit
 //! from the row expansion and divisions the outputs were defined with, so [`det3`], [`inv3`]
-//! and [`unit()`] keep the explicit formulas.
+//! (and [`inverse`], its form on a `DMat3`) and [`unit()`] keep the explicit formulas.
 
 pub use glam::{DMat3, DVec3};
 
@@ -72,6 +72,19 @@ pub fn transpose(a: &Mat3) -> Mat3 {
 #[inline]
 pub fn norm2(a: &Mat3) -> f64 {
     a.iter().flatten().map(|x| x * x).sum()
+}
+
+/// [`inv3`] of a glam matrix: the same cofactor formula, not glam's `inverse`.
+#[inline]
+pub fn inverse(m: &DMat3) -> (DMat3, f64) {
+    let (r, det) = inv3(&from_dmat3(m));
+    (to_dmat3(&r), det)
+}
+
+/// [`norm2`] of a glam matrix: summed by rows, as for the row-major form.
+#[inline]
+pub fn norm2_rows(m: &DMat3) -> f64 {
+    norm2(&from_dmat3(m))
 }
 
 /// `a` scaled to unit length by division (the zero vector stays zero).

@@ -1,6 +1,6 @@
-//! 3-vector helpers on `[f64; 3]` for the geometry code that still stores and computes on
-//! arrays (features, kinks, smooth boundary targets, element checks, the fit's rows and the
-//! validity blend). They are thin wrappers over glam's `DVec3` ([`crate::math::linalg`]),
+//! 3-vector helpers on `[f64; 3]` for the code that still computes on arrays: the smooth
+//! boundary targets (`fit/smooth*.rs`) and the validity blend (`validity/blend*.rs`). They
+//! are thin wrappers over glam's `DVec3` ([`crate::math::linalg`]),
 //! whose `dot`, `cross` and `length` round exactly like the written-out formulas; new code
 //! should compute on `DVec3` directly and keep arrays at its storage boundary.
 
