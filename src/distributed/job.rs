@@ -25,7 +25,7 @@ use super::comm::Comm;
 use super::local::{GHOST_DEPTH, LocalShare};
 use super::read::{LocalMesh, read_share};
 use crate::io::read_mesh;
-use crate::math::BezierElements;
+use crate::math::{BezierElements, BezierNet};
 use crate::mesh::Topology;
 use crate::pipeline::spline::SplineSetup;
 use crate::pipeline::{
@@ -135,7 +135,7 @@ impl BezierElements for Nets {
     fn n_elements(&self) -> usize {
         self.flat.len() / (3 * self.np)
     }
-    fn bezier_net(&self, e: usize) -> [[f64; 3]; 27] {
+    fn bezier_net(&self, e: usize) -> BezierNet {
         let mut n = [[0.0; 3]; 27];
         let x = &self.flat[3 * self.np * e..3 * self.np * (e + 1)];
         for (i, p) in x.chunks_exact(3).enumerate() {

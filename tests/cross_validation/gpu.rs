@@ -7,6 +7,7 @@ use crate::executors;
 
 use polyspline::cpu;
 use polyspline::gpu::{self, AdapterChoice, GpuContext, Precision};
+use polyspline::math::BezierNet;
 
 /// Every shader parses and validates, at both precisions.
 #[test]
@@ -84,7 +85,7 @@ fn meshes() -> Vec<(String, LinearMesh)> {
 }
 
 /// Largest distance of a control point from the element's anchor.
-fn size(dim: usize, net: &[[f64; 3]; 27]) -> f64 {
+fn size(dim: usize, net: &BezierNet) -> f64 {
     let a = gpu::anchor(dim, net);
     net.iter()
         .flat_map(|p| (0..3).map(move |k| (p[k] - a[k]).abs()))
@@ -206,7 +207,7 @@ fn evaluate_reproduces_affine_maps() {
     let f = |t: [f64; 3]| -> [f64; 3] {
         std::array::from_fn(|k| c[k] + (0..3).map(|j| a[j][k] * t[j]).sum::<f64>())
     };
-    let net: [[f64; 3]; 27] = std::array::from_fn(|o| {
+    let net: BezierNet = std::array::from_fn(|o| {
         f([
             (o % 3) as f64 / 2.0,
             (o / 3 % 3) as f64 / 2.0,
@@ -381,7 +382,7 @@ fn jacobian_check_affine_oracle() {
     let det = a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1])
         - a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0])
         + a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0]);
-    let net: [[f64; 3]; 27] = std::array::from_fn(|o| {
+    let net: BezierNet = std::array::from_fn(|o| {
         let t = [
             (o % 3) as f64 / 2.0,
             (o / 3 % 3) as f64 / 2.0,

@@ -239,7 +239,7 @@ impl BezierElements for Garbage<'_> {
     fn n_elements(&self) -> usize {
         self.mesh.n_elements()
     }
-    fn bezier_net(&self, e: usize) -> [[f64; 3]; 27] {
+    fn bezier_net(&self, e: usize) -> polyspline::math::BezierNet {
         let mut net = self.mesh.bezier_net(e);
         let ids = entity_ids(self.mesh, self.topo, e);
         let n = if self.mesh.dim == 2 { 9 } else { 27 };

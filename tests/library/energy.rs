@@ -7,6 +7,7 @@
 use polyspline::energy::colored::color_control_points;
 use polyspline::energy::{Energy, EnergyParams, EnergyScale, EnergySolver, Validity, minimize};
 use polyspline::fit::{FitParams, FitSpace, FitWeights};
+use polyspline::math::BezierNet;
 use polyspline::mesh::generate::{extrude, grid_2d, star_2d, uniform};
 use polyspline::mesh::{LinearMesh, Topology};
 use polyspline::pipeline::{CurveOptions, curve_in_memory};
@@ -154,7 +155,7 @@ impl FitSpace for OwnNets {
         *c = (0..nb).map(|a| (e * nb + a) as u32).collect();
         *w = vec![1.0; nb];
     }
-    fn bezier_net_with(&self, e: usize, cps: &[[f64; 3]]) -> [[f64; 3]; 27] {
+    fn bezier_net_with(&self, e: usize, cps: &[[f64; 3]]) -> BezierNet {
         let mut n = [[0.0; 3]; 27];
         n[..self.nb()].copy_from_slice(&cps[e * self.nb()..(e + 1) * self.nb()]);
         n

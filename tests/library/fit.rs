@@ -200,7 +200,7 @@ fn transposed_extraction_by_sum_factorisation_matches_the_rows() {
         let n = s.control_points().len();
         let nb = if s.dim() == 2 { 9 } else { 27 };
         for e in 0..s.n_elements() {
-            let f: [[f64; 3]; 27] = std::array::from_fn(|i| {
+            let f: polyspline::math::BezierNet = std::array::from_fn(|i| {
                 let x = (e * 31 + i) as f64;
                 [x.sin(), x.cos(), (0.3 * x).sin()]
             });
