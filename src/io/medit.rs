@@ -317,19 +317,8 @@ fn read_cells(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::io::test_util::{block, count, real};
     use crate::mesh::{LinearMesh, MeshOptions};
-
-    fn real(path: &str) -> Vec<u8> {
-        std::fs::read(format!("{}/{path}", env!("CARGO_MANIFEST_DIR"))).unwrap()
-    }
-
-    fn count(m: &RawMesh, k: &CellKind) -> usize {
-        m.count(k)
-    }
-
-    fn block<'a>(m: &'a RawMesh, k: &CellKind) -> &'a RawBlock {
-        m.block(k).unwrap()
-    }
 
     /// Two unit squares side by side, both count layouts, comments, same-line Dimension.
     const TWO_QUADS_SAME_LINE: &str = "MeshVersionFormatted 2

@@ -352,19 +352,8 @@ pub fn read(data: &[u8]) -> Result<RawMesh, ParseError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::io::test_util::{block, count, real};
     use crate::mesh::{LinearMesh, MeshOptions};
-
-    fn real(path: &str) -> Vec<u8> {
-        std::fs::read(format!("{}/{path}", env!("CARGO_MANIFEST_DIR"))).unwrap()
-    }
-
-    fn count(m: &RawMesh, k: &CellKind) -> usize {
-        m.count(k)
-    }
-
-    fn block<'a>(m: &'a RawMesh, k: &CellKind) -> &'a RawBlock {
-        m.block(k).unwrap()
-    }
 
     #[test]
     fn hand_written_two_quads() {

@@ -32,6 +32,27 @@ pub mod vtk;
 pub mod vtu;
 pub mod vtu_write;
 
+/// Helpers shared by the readers' unit tests.
+#[cfg(test)]
+pub(crate) mod test_util {
+    use super::raw::{CellKind, RawBlock, RawMesh};
+
+    /// The bytes of the repository file `path` (relative to its root).
+    pub fn real(path: &str) -> Vec<u8> {
+        std::fs::read(format!("{}/{path}", env!("CARGO_MANIFEST_DIR"))).unwrap()
+    }
+
+    /// The number of cells of kind `k`.
+    pub fn count(m: &RawMesh, k: &CellKind) -> usize {
+        m.count(k)
+    }
+
+    /// The block of kind `k`, which must exist.
+    pub fn block<'a>(m: &'a RawMesh, k: &CellKind) -> &'a RawBlock {
+        m.block(k).unwrap()
+    }
+}
+
 use crate::mesh::{LinearMesh, MeshOptions};
 pub use raw::{CellKind, Location, NodeConvention, ParseError, RawBlock, RawMesh};
 use std::path::{Path, PathBuf};
