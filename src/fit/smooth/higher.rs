@@ -225,7 +225,7 @@ fn refine_with(
         let (t1, t2) = frame_of(n);
         for (y, q) in ys.iter().zip(uwh.iter_mut()) {
             let (u, w, h) = (y.dot(t1) / ell, y.dot(t2) / ell, y.dot(n) / ell);
-            if h.abs() > u.hypot(w) {
+            if steeper(h, u, w) {
                 return None;
             }
             if sphere_height(kappa, u * u + w * w).is_none() {
@@ -286,35 +286,67 @@ fn refine_with(
     ))
 }
 
+/// Whether |h| > hypot(u, w) (the point is no graph over the tangent plane), deciding on the
+/// squares where they are clear by far more than their rounding and with `hypot` only near
+/// the tie, so the answer is `hypot`'s, at a fraction of its cost.
+fn steeper(h: f64, u: f64, w: f64) -> bool {
+    let (h2, r2) = (h * h, u * u + w * w);
+    // Scaled ring coordinates are of order 1: no overflow or underflow below these bounds.
+    if r2 > 1e-200 && r2 < 1e200 && h2 < 1e200 {
+        if h2 > r2 * (1.0 + 1e-12) {
+            return true;
+        }
+        if h2 < r2 * (1.0 - 1e-12) {
+            return false;
+        }
+    }
+    h.abs() > u.hypot(w)
+}
+
 /// The normal equations of the height fit with the monomials `used` over the scaled points
-/// `uwh` (tangential u, w and height h), less the sphere of curvature `kappa`. Only the upper
+/// `uwh` (tangential u, w and height h), less the sphere of curvature `kappa`.
+fn normal_equations(uwh: &[[f64; 3]], kappa: f64, used: &[usize]) -> Normal {
+    // The term counts in use, as constants, so that the loops unroll.
+    match used.len() {
+        3 => normal_equations_k::<3>(uwh, kappa, used),
+        4 => normal_equations_k::<4>(uwh, kappa, used),
+        9 => normal_equations_k::<9>(uwh, kappa, used),
+        14 => normal_equations_k::<14>(uwh, kappa, used),
+        _ => normal_equations_k::<MAX_TERMS>(uwh, kappa, used),
+    }
+}
+
+/// [`normal_equations`] with `K` ≥ `used.len()` terms (the rest zero). Only the upper
 /// triangle is summed and then mirrored: the products commute exactly, so the matrix is the
 /// one the full double loop gives.
-fn normal_equations(uwh: &[[f64; 3]], kappa: f64, used: &[usize]) -> Normal {
-    let k = used.len();
-    let mut ata = [[0.0; MAX_TERMS]; MAX_TERMS];
-    let mut atb = [0.0; MAX_TERMS];
+fn normal_equations_k<const K: usize>(uwh: &[[f64; 3]], kappa: f64, used: &[usize]) -> Normal {
+    let k = used.len().min(K);
+    let mut ata = [[0.0; K]; K];
+    let mut atb = [0.0; K];
     for &[u, w, h] in uwh {
         let h = h - sphere_height(kappa, u * u + w * w).unwrap_or(0.0);
         let all = monomials(u, w);
-        let mut mu = [0.0; MAX_TERMS];
+        let mut mu = [0.0; K];
         for (m, &i) in mu.iter_mut().zip(used) {
             *m = all[i];
         }
-        for i in 0..k {
+        for i in 0..K {
             let mi = mu[i];
-            for j in i..k {
+            for j in i..K {
                 ata[i][j] += mi * mu[j];
             }
             atb[i] += mi * h;
         }
     }
+    let mut full = [[0.0; MAX_TERMS]; MAX_TERMS];
+    let mut rhs = [0.0; MAX_TERMS];
     for i in 0..k {
-        for j in 0..i {
-            ata[i][j] = ata[j][i];
+        for j in 0..k {
+            full[i][j] = if j >= i { ata[i][j] } else { ata[j][i] };
         }
+        rhs[i] = atb[i];
     }
-    (ata, atb)
+    (full, rhs)
 }
 
 /// Gaussian elimination with partial pivoting on the leading `n` × `n` block; `None` when
