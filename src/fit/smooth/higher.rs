@@ -79,6 +79,13 @@ fn monomials(u: f64, w: f64) -> [f64; 14] {
     ]
 }
 
+/// Reusable buffers of [`two_ring`] (one per worker, so the rings allocate nothing).
+#[derive(Default)]
+pub(super) struct RingScratch {
+    first: Vec<u32>,
+    ring: Vec<u32>,
+}
+
 /// The boundary vertices within two rings of the smooth boundary vertex `v` (2D: along the
 /// boundary chain; 3D: over boundary faces), the second ring reached only through vertices that
 /// have a model, so no ring crosses a sharp feature. `v` itself is not included.
@@ -89,6 +96,7 @@ pub(super) fn two_ring(
     models: &[Option<VertexModel>],
     v: u32,
     cos_max: f64,
+    scratch: &mut RingScratch,
 ) -> Vec<[f64; 3]> {
     // A model-carrying vertex next to a feature (a rim vertex whose fan model spans a gentle
     // crease) would bring in the facets across it: in 3D the second ring keeps only facets
@@ -109,8 +117,9 @@ pub(super) fn two_ring(
         let l = nf.length();
         l > 0.0 && nf.dot(n.into()).abs() >= cos_max * l
     };
-    let mut ring: Vec<u32> = Vec::new();
-    let mut first: Vec<u32> = Vec::new();
+    let RingScratch { first, ring } = scratch;
+    first.clear();
+    ring.clear();
     for &f in &fan[v as usize] {
         first.extend(
             topo.facet_vertices(f as usize)
@@ -126,8 +135,8 @@ pub(super) fn two_ring(
     if first.iter().any(|&u| models[u as usize].is_none()) {
         return Vec::new();
     }
-    ring.extend(&first);
-    for &u in &first {
+    ring.extend_from_slice(first);
+    for &u in first.iter() {
         if models[u as usize].is_none() {
             continue;
         }
