@@ -62,12 +62,11 @@ mod higher;
 mod one_ring;
 
 use super::features::{BoundaryEntity, FeatureModels};
+use crate::math::linalg::DVec3;
 use crate::mesh::features::Features;
 use crate::mesh::topology::{HEX_EDGES, HEX_VERTEX_PARAMS, NONE};
-use crate::mesh::vec3::{add, dot, norm, sub};
 use crate::mesh::{LinearMesh, Topology};
-use higher::{HigherModel, refine_model, two_ring};
-use one_ring::matvec;
+use higher::{HigherModel, RingScratch, refine_model, two_ring};
 pub(super) use one_ring::{fan_model, fit_parabola};
 use rayon::prelude::*;
 use std::cmp::Reverse;
@@ -114,13 +113,15 @@ pub struct VertexModel {
 impl VertexModel {
     /// The model's displacement c(p) of the point p = Σ φ_j x_j of an entity (see module docs).
     pub(crate) fn correction(&self, p: [f64; 3], xs: &[[f64; 3]], phi: f64) -> [f64; 3] {
+        let p = DVec3::from(p);
+        let h = self.h.map(DVec3::from);
         let mut s = 0.0;
         for x in xs {
-            let y = sub(*x, p);
-            let hy = matvec(&self.h, y);
-            s += phi * dot(y, hy);
+            let y = DVec3::from(*x) - p;
+            let hy = DVec3::new(h[0].dot(y), h[1].dot(y), h[2].dot(y));
+            s += phi * y.dot(hy);
         }
-        self.normal.map(|n| -s * n)
+        (-s * DVec3::from(self.normal)).into()
     }
 }
 
@@ -278,7 +279,7 @@ impl SmoothTargets {
             let on_boundary = at.is_some();
             let p = lattice[i];
             let phi = 1.0 / len as f64;
-            let mut delta = [0.0; 3];
+            let mut delta = DVec3::ZERO;
             let mut wsum = 0.0;
             for &k in ks {
                 let higher = self.models[k].and(self.higher.get(k).copied().flatten());
@@ -290,20 +291,20 @@ impl SmoothTargets {
                     }
                 });
                 if let Some(model) = model {
-                    let mut c = model.correction(p, xs, phi);
+                    let mut c = DVec3::from(model.correction(p, xs, phi));
                     if let Some(hm) = higher {
                         let g = hm.correction(p, xs, phi);
-                        c = add(c, model.normal.map(|n| g * n));
+                        c += g * DVec3::from(model.normal);
                     }
                     let w = phi * model.weight;
-                    delta = add(delta, c.map(|ci| w * ci));
+                    delta += w * c;
                     wsum += phi;
                 }
             }
             if on_boundary && wsum > 0.0 {
-                delta = delta.map(|d| d / wsum);
+                delta /= wsum;
             }
-            *slot = delta;
+            *slot = delta.into();
         }
         out
     }
@@ -374,14 +375,15 @@ fn one_ring_models(
                     if e[0] as usize == v { e[1] } else { e[0] }
                 };
                 let (a, b) = (x(other(fan[v][0])), x(other(fan[v][1])));
-                let (ua, ub) = (sub(a, xv), sub(b, xv));
-                let (la, lb) = (norm(ua), norm(ub));
+                let xd = DVec3::from(xv);
+                let (ua, ub) = (DVec3::from(a) - xd, DVec3::from(b) - xd);
+                let (la, lb) = (ua.length(), ub.length());
                 if la == 0.0 || lb == 0.0 {
                     return;
                 }
                 *ell = 0.5 * (la + lb);
                 // Turning angle between the edges ≤ 2 × the feature angle.
-                let cos_turn = -dot(ua, ub) / (la * lb);
+                let cos_turn = -ua.dot(ub) / (la * lb);
                 if cos_turn < (2.0 * params.feature_angle_deg.to_radians()).cos() {
                     return;
                 }
@@ -420,9 +422,9 @@ fn two_ring_models(
     let refined: Vec<Option<(VertexModel, HigherModel)>> = (0..nv)
         .into_par_iter()
         .with_min_len(1024)
-        .map(|v| {
+        .map_init(RingScratch::default, |scratch, v| {
             let m = models_ref[v]?;
-            let ring = two_ring(mesh, topo, fan, models_ref, v as u32, cos_max);
+            let ring = two_ring(mesh, topo, fan, models_ref, v as u32, cos_max, scratch);
             refine_model(mesh.dim, mesh.coords[v], &m, &ring, ell[v])
         })
         .collect();
@@ -448,7 +450,7 @@ fn inherit_interior(
     higher: &mut [Option<HigherModel>],
 ) -> usize {
     let nv = mesh.n_vertices();
-    let x = |v: u32| mesh.coords[v as usize];
+    let x = |v: u32| DVec3::from(mesh.coords[v as usize]);
     let mut blended_vertices = 0;
     let mut offsets = vec![0u32; nv + 1];
     for e in &topo.edges {
@@ -487,7 +489,7 @@ fn inherit_interior(
             if topo.vertex_on_boundary[w as usize] {
                 continue;
             }
-            let nd = d + norm(sub(x(w), x(v)));
+            let nd = d + (x(w) - x(v)).length();
             if nd < cutoff && nd < dist[w as usize] {
                 dist[w as usize] = nd;
                 source[w as usize] = s as u32;
@@ -514,6 +516,7 @@ fn inherit_interior(
 mod tests {
     use super::one_ring::fit_quadric;
     use super::*;
+    use crate::mesh::vec3::{add, norm, sub};
 
     /// On a circle sampled unevenly (neighbouring spacings in ratio 1 : 1.5), the corrected
     /// chord midpoint converges to the circle at third order or better; the chord at second.

@@ -9,7 +9,7 @@
 
 use super::VertexModel;
 use super::one_ring::{outer, sym_outer, tangent_frame};
-use crate::mesh::vec3::{add, dot, norm, sub};
+use crate::math::linalg::{DVec3, unit};
 use crate::mesh::{LinearMesh, Topology};
 
 /// The cubic and quartic part of a vertex's height function over its model's tangent frame
@@ -39,10 +39,10 @@ fn sphere_height(kappa: f64, r2: f64) -> Option<f64> {
 
 impl HigherModel {
     fn height(&self, x: [f64; 3]) -> f64 {
-        let y = sub(x, self.origin);
+        let y = DVec3::from(x) - DVec3::from(self.origin);
         let (u, w) = (
-            dot(y, self.t[0]) / self.scale,
-            dot(y, self.t[1]) / self.scale,
+            y.dot(self.t[0].into()) / self.scale,
+            y.dot(self.t[1].into()) / self.scale,
         );
         let m = &monomials(u, w)[5..];
         let r2 = u * u + w * w;
@@ -79,6 +79,13 @@ fn monomials(u: f64, w: f64) -> [f64; 14] {
     ]
 }
 
+/// Reusable buffers of [`two_ring`] (one per worker, so the rings allocate nothing).
+#[derive(Default)]
+pub(super) struct RingScratch {
+    first: Vec<u32>,
+    ring: Vec<u32>,
+}
+
 /// The boundary vertices within two rings of the smooth boundary vertex `v` (2D: along the
 /// boundary chain; 3D: over boundary faces), the second ring reached only through vertices that
 /// have a model, so no ring crosses a sharp feature. `v` itself is not included.
@@ -89,6 +96,7 @@ pub(super) fn two_ring(
     models: &[Option<VertexModel>],
     v: u32,
     cos_max: f64,
+    scratch: &mut RingScratch,
 ) -> Vec<[f64; 3]> {
     // A model-carrying vertex next to a feature (a rim vertex whose fan model spans a gentle
     // crease) would bring in the facets across it: in 3D the second ring keeps only facets
@@ -104,19 +112,14 @@ pub(super) fn two_ring(
         if fv.len() < 4 {
             return true;
         }
-        let c = |i: usize| mesh.coords[fv[i] as usize];
-        let d1 = sub(c(2), c(0));
-        let d2 = sub(c(3), c(1));
-        let nf = [
-            d1[1] * d2[2] - d1[2] * d2[1],
-            d1[2] * d2[0] - d1[0] * d2[2],
-            d1[0] * d2[1] - d1[1] * d2[0],
-        ];
-        let l = norm(nf);
-        l > 0.0 && dot(nf, n).abs() >= cos_max * l
+        let c = |i: usize| DVec3::from(mesh.coords[fv[i] as usize]);
+        let nf = (c(2) - c(0)).cross(c(3) - c(1));
+        let l = nf.length();
+        l > 0.0 && nf.dot(n.into()).abs() >= cos_max * l
     };
-    let mut ring: Vec<u32> = Vec::new();
-    let mut first: Vec<u32> = Vec::new();
+    let RingScratch { first, ring } = scratch;
+    first.clear();
+    ring.clear();
     for &f in &fan[v as usize] {
         first.extend(
             topo.facet_vertices(f as usize)
@@ -132,8 +135,8 @@ pub(super) fn two_ring(
     if first.iter().any(|&u| models[u as usize].is_none()) {
         return Vec::new();
     }
-    ring.extend(&first);
-    for &u in &first {
+    ring.extend_from_slice(first);
+    for &u in first.iter() {
         if models[u as usize].is_none() {
             continue;
         }
@@ -193,6 +196,12 @@ pub(super) fn refine_model(
     refine_with(dim, x, m, pts, ell, used)
 }
 
+/// Most monomials a height fit uses (all of degree 1–4 in 3D).
+const MAX_TERMS: usize = 14;
+
+/// The normal equations AᵀA c = Aᵀb of a height fit over at most [`MAX_TERMS`] monomials.
+type Normal = ([[f64; MAX_TERMS]; MAX_TERMS], [f64; MAX_TERMS]);
+
 /// [`refine_model`] with the monomials `used`.
 fn refine_with(
     dim: usize,
@@ -202,48 +211,40 @@ fn refine_with(
     ell: f64,
     used: &[usize],
 ) -> Option<(VertexModel, HigherModel)> {
-    let frame_of = |n: [f64; 3]| -> ([f64; 3], [f64; 3]) {
+    let frame_of = |n: DVec3| -> (DVec3, DVec3) {
         if dim == 2 {
-            ([n[1], -n[0], 0.0], [0.0; 3])
+            (DVec3::new(n.y, -n.x, 0.0), DVec3::ZERO)
         } else {
-            tangent_frame(n)
+            let (t1, t2) = tangent_frame(n.into());
+            (t1.into(), t2.into())
         }
     };
-    let mut n = m.normal;
+    let x = DVec3::from(x);
+    // The points relative to the vertex, computed once for the four frame updates.
+    let ys: Vec<DVec3> = pts.iter().map(|&p| DVec3::from(p) - x).collect();
+    let mut n = DVec3::from(m.normal);
     // Scaled mean curvature of the quadric: the sphere (circle) part of the height function,
     // which makes the model exact on spheres and circles however coarse the ring.
     let trace = m.h[0][0] + m.h[1][1] + m.h[2][2];
     let mut kappa = 2.0 * trace / (dim - 1) as f64 * ell;
     let mut fitted = None;
+    let k = used.len();
+    let mut uwh = vec![[0.0; 3]; ys.len()];
     for _ in 0..4 {
         let (t1, t2) = frame_of(n);
-        let k = used.len();
-        let mut ata = vec![vec![0.0; k]; k];
-        let mut atb = vec![0.0; k];
-        for p in pts {
-            let y = sub(*p, x);
-            let (u, w, h) = (dot(y, t1) / ell, dot(y, t2) / ell, dot(y, n) / ell);
-            if h.abs() > u.hypot(w) {
+        for (y, q) in ys.iter().zip(uwh.iter_mut()) {
+            let (u, w, h) = (y.dot(t1) / ell, y.dot(t2) / ell, y.dot(n) / ell);
+            if steeper(h, u, w) {
                 return None;
             }
             if sphere_height(kappa, u * u + w * w).is_none() {
                 kappa = 0.0;
             }
+            *q = [u, w, h];
         }
-        for p in pts {
-            let y = sub(*p, x);
-            let (u, w) = (dot(y, t1) / ell, dot(y, t2) / ell);
-            let h = dot(y, n) / ell - sphere_height(kappa, u * u + w * w).unwrap_or(0.0);
-            let all = monomials(u, w);
-            for i in 0..k {
-                for j in 0..k {
-                    ata[i][j] += all[used[i]] * all[used[j]];
-                }
-                atb[i] += all[used[i]] * h;
-            }
-        }
-        let sol = solve_n(ata, atb)?;
-        let mut c = [0.0; 14];
+        let (ata, atb) = normal_equations(&uwh, kappa, used);
+        let sol = solve_n(ata, atb, k)?;
+        let mut c = [0.0; MAX_TERMS];
         for (i, &u) in used.iter().enumerate() {
             c[u] = sol[i];
         }
@@ -253,12 +254,11 @@ fn refine_with(
         fitted = Some((n, t1, t2, c, kappa));
         // Move the isotropic part of the quadratic remainder into the sphere.
         kappa += 2.0 * (c[2] + c[4]) / (dim - 1) as f64;
-        let nn = sub(n, add(t1.map(|v| c[0] * v), t2.map(|v| c[1] * v)));
-        let l = norm(nn);
-        n = nn.map(|v| v / l);
+        n = unit(n - (c[0] * t1 + c[1] * t2));
     }
     // The polynomial belongs to the frame it was fitted in (before the last tilt).
     let (n, t1, t2, c, kappa) = fitted?;
+    let (t1, t2): ([f64; 3], [f64; 3]) = (t1.into(), t2.into());
     // Quadratic part: the sphere's κr²/2 and the polynomial's.
     let q = [
         (c[2] + 0.5 * kappa) / ell,
@@ -281,12 +281,12 @@ fn refine_with(
     hc.copy_from_slice(&c[5..]);
     Some((
         VertexModel {
-            normal: n,
+            normal: n.into(),
             h,
             weight: m.weight,
         },
         HigherModel {
-            origin: x,
+            origin: x.into(),
             t: [t1, t2],
             scale: ell,
             c: hc,
@@ -295,9 +295,76 @@ fn refine_with(
     ))
 }
 
-/// Gaussian elimination with partial pivoting; `None` when nearly singular.
-fn solve_n(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Option<Vec<f64>> {
-    let n = b.len();
+/// Whether |h| > hypot(u, w) (the point is no graph over the tangent plane), deciding on the
+/// squares where they are clear by far more than their rounding and with `hypot` only near
+/// the tie, so the answer is `hypot`'s, at a fraction of its cost.
+fn steeper(h: f64, u: f64, w: f64) -> bool {
+    let (h2, r2) = (h * h, u * u + w * w);
+    // Scaled ring coordinates are of order 1: no overflow or underflow below these bounds.
+    if r2 > 1e-200 && r2 < 1e200 && h2 < 1e200 {
+        if h2 > r2 * (1.0 + 1e-12) {
+            return true;
+        }
+        if h2 < r2 * (1.0 - 1e-12) {
+            return false;
+        }
+    }
+    h.abs() > u.hypot(w)
+}
+
+/// The normal equations of the height fit with the monomials `used` over the scaled points
+/// `uwh` (tangential u, w and height h), less the sphere of curvature `kappa`.
+fn normal_equations(uwh: &[[f64; 3]], kappa: f64, used: &[usize]) -> Normal {
+    // The term counts in use, as constants, so that the loops unroll.
+    match used.len() {
+        3 => normal_equations_k::<3>(uwh, kappa, used),
+        4 => normal_equations_k::<4>(uwh, kappa, used),
+        9 => normal_equations_k::<9>(uwh, kappa, used),
+        14 => normal_equations_k::<14>(uwh, kappa, used),
+        _ => normal_equations_k::<MAX_TERMS>(uwh, kappa, used),
+    }
+}
+
+/// [`normal_equations`] with `K` ≥ `used.len()` terms (the rest zero). Only the upper
+/// triangle is summed and then mirrored: the products commute exactly, so the matrix is the
+/// one the full double loop gives.
+fn normal_equations_k<const K: usize>(uwh: &[[f64; 3]], kappa: f64, used: &[usize]) -> Normal {
+    let k = used.len().min(K);
+    let mut ata = [[0.0; K]; K];
+    let mut atb = [0.0; K];
+    for &[u, w, h] in uwh {
+        let h = h - sphere_height(kappa, u * u + w * w).unwrap_or(0.0);
+        let all = monomials(u, w);
+        let mut mu = [0.0; K];
+        for (m, &i) in mu.iter_mut().zip(used) {
+            *m = all[i];
+        }
+        for i in 0..K {
+            let mi = mu[i];
+            for j in i..K {
+                ata[i][j] += mi * mu[j];
+            }
+            atb[i] += mi * h;
+        }
+    }
+    let mut full = [[0.0; MAX_TERMS]; MAX_TERMS];
+    let mut rhs = [0.0; MAX_TERMS];
+    for i in 0..k {
+        for j in 0..k {
+            full[i][j] = if j >= i { ata[i][j] } else { ata[j][i] };
+        }
+        rhs[i] = atb[i];
+    }
+    (full, rhs)
+}
+
+/// Gaussian elimination with partial pivoting on the leading `n` × `n` block; `None` when
+/// nearly singular.
+fn solve_n(
+    mut a: [[f64; MAX_TERMS]; MAX_TERMS],
+    mut b: [f64; MAX_TERMS],
+    n: usize,
+) -> Option<[f64; MAX_TERMS]> {
     let scale = (0..n).map(|i| a[i][i].abs()).fold(0.0, f64::max);
     if !(scale > 0.0) {
         return None;
@@ -319,7 +386,7 @@ fn solve_n(mut a: Vec<Vec<f64>>, mut b: Vec<f64>) -> Option<Vec<f64>> {
             b[r] -= f * b[c];
         }
     }
-    let mut x = vec![0.0; n];
+    let mut x = [0.0; MAX_TERMS];
     for r in (0..n).rev() {
         let mut s = b[r];
         for k in r + 1..n {

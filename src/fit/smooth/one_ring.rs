@@ -7,7 +7,7 @@
 //! tensor H (H · normal = 0), or `None` for a degenerate or non-graph fan.
 
 use super::VertexModel;
-use crate::mesh::vec3::{add, cross, dot, norm, sub};
+use crate::math::linalg::{DVec3, unit};
 use crate::mesh::{LinearMesh, Topology};
 
 /// The 3D model at vertex `v` from the boundary faces `faces` around it, with the fan's length
@@ -21,33 +21,33 @@ pub(in crate::fit) fn fan_model(
     faces: &[u32],
     cos_max: f64,
 ) -> Option<(Option<VertexModel>, f64)> {
-    let x = |w: u32| mesh.coords[w as usize];
-    let mut area = [0.0; 3];
+    let x = |w: u32| DVec3::from(mesh.coords[w as usize]);
+    let mut area = DVec3::ZERO;
     let mut normals = Vec::with_capacity(faces.len());
     let mut nb: Vec<u32> = Vec::new();
     let mut total_area = 0.0;
     for &f in faces {
         let q = topo.faces[f as usize];
-        let a = cross(sub(x(q[2]), x(q[0])), sub(x(q[3]), x(q[1])));
-        area = add(area, a);
-        let l = norm(a);
+        let a = (x(q[2]) - x(q[0])).cross(x(q[3]) - x(q[1]));
+        area += a;
+        let l = a.length();
         total_area += 0.5 * l;
-        normals.push(a.map(|c| c / l.max(f64::MIN_POSITIVE)));
+        normals.push(a / l.max(f64::MIN_POSITIVE));
         nb.extend(q.iter().copied().filter(|&w| w != v));
     }
     nb.sort_unstable();
     nb.dedup();
-    let la = norm(area);
+    let la = area.length();
     if la == 0.0 || nb.len() < 5 {
         return None;
     }
-    let n0 = area.map(|c| c / la);
-    if normals.iter().any(|nf| dot(*nf, n0) < cos_max) {
+    let n0 = area / la;
+    if normals.iter().any(|nf| nf.dot(n0) < cos_max) {
         return None;
     }
     let ell = (total_area / faces.len() as f64).sqrt();
-    let pts: Vec<[f64; 3]> = nb.iter().map(|&w| sub(x(w), x(v))).collect();
-    let model = fit_quadric(n0, &pts, ell).map(|(normal, h)| VertexModel {
+    let pts: Vec<[f64; 3]> = nb.iter().map(|&w| (x(w) - x(v)).into()).collect();
+    let model = fit_quadric(n0.into(), &pts, ell).map(|(normal, h)| VertexModel {
         normal,
         h,
         weight: 1.0,
@@ -61,14 +61,13 @@ pub(in crate::fit) fn fit_parabola(
     a: [f64; 3],
     b: [f64; 3],
 ) -> Option<([f64; 3], [[f64; 3]; 3])> {
-    let (ua, ub) = (sub(a, x), sub(b, x));
-    let d = sub(ub, ua);
-    let l = norm(d);
-    let mut t = d.map(|c| c / l);
+    let x = DVec3::from(x);
+    let (ua, ub) = (DVec3::from(a) - x, DVec3::from(b) - x);
+    let mut t = unit(ub - ua);
     let mut fitted = None;
     for _ in 0..3 {
-        let n = [-t[1], t[0], 0.0];
-        let (xa, ya, xb, yb) = (dot(ua, t), dot(ua, n), dot(ub, t), dot(ub, n));
+        let n = DVec3::new(-t.y, t.x, 0.0);
+        let (xa, ya, xb, yb) = (ua.dot(t), ua.dot(n), ub.dot(t), ub.dot(n));
         let det = xa * xb * xb - xb * xa * xa;
         if !(xa < 0.0 && xb > 0.0) || det.abs() < 1e-300 {
             return None;
@@ -80,11 +79,10 @@ pub(in crate::fit) fn fit_parabola(
         }
         fitted = Some((t, c2));
         // Tilt the frame to the parabola's tangent at x and fit again.
-        let tn = add(t, n.map(|c| c1 * c));
-        let ln = norm(tn);
-        t = tn.map(|c| c / ln);
+        t = unit(t + c1 * n);
     }
     let (t, c2) = fitted?;
+    let t: [f64; 3] = t.into();
     let n = [-t[1], t[0], 0.0];
     let h = outer(t, t).map(|r| r.map(|c| c2 * c));
     Some((n, h))
@@ -97,17 +95,18 @@ pub(super) fn fit_quadric(
     pts: &[[f64; 3]],
     scale: f64,
 ) -> Option<([f64; 3], [[f64; 3]; 3])> {
-    let mut n = n0;
+    let mut n = DVec3::from(n0);
     let mut q = [0.0; 3];
-    let mut frame = tangent_frame(n);
+    let mut frame = tangent_frame(n.into());
     for _ in 0..3 {
-        frame = tangent_frame(n);
-        let (t1, t2) = frame;
+        frame = tangent_frame(n.into());
+        let (t1, t2) = (DVec3::from(frame.0), DVec3::from(frame.1));
         // Unknowns (a, b, c, d, e) of η = aξ² + bξζ + cζ² + dξ + eζ in scaled coordinates.
         let mut ata = [[0.0; 5]; 5];
         let mut atb = [0.0; 5];
         for p in pts {
-            let (u, v, h) = (dot(*p, t1) / scale, dot(*p, t2) / scale, dot(*p, n) / scale);
+            let p = DVec3::from(*p);
+            let (u, v, h) = (p.dot(t1) / scale, p.dot(t2) / scale, p.dot(n) / scale);
             let row = [u * u, u * v, v * v, u, v];
             for i in 0..5 {
                 for j in 0..5 {
@@ -123,9 +122,7 @@ pub(super) fn fit_quadric(
         if d.hypot(e) > 1.0 {
             return None;
         }
-        let nn = sub(n, add(t1.map(|c| d * c), t2.map(|c| e * c)));
-        let l = norm(nn);
-        n = nn.map(|c| c / l);
+        n = unit(n - (d * t1 + e * t2));
     }
     let (t1, t2) = frame;
     let mut h = [[0.0; 3]; 3];
@@ -143,19 +140,14 @@ pub(super) fn fit_quadric(
     }
     // The quadric was fitted in the frame before the last tilt; use that frame's normal so H
     // and n belong together (H n = 0).
-    Some((cross(t1, t2), h))
+    Some((DVec3::from(t1).cross(DVec3::from(t2)).into(), h))
 }
 
 pub(super) fn tangent_frame(n: [f64; 3]) -> ([f64; 3], [f64; 3]) {
-    let a = if n[0].abs() < 0.6 {
-        [1.0, 0.0, 0.0]
-    } else {
-        [0.0, 1.0, 0.0]
-    };
-    let t1 = cross(n, a);
-    let l = norm(t1);
-    let t1 = t1.map(|c| c / l);
-    (t1, cross(n, t1))
+    let n = DVec3::from(n);
+    let a = if n.x.abs() < 0.6 { DVec3::X } else { DVec3::Y };
+    let t1 = unit(n.cross(a));
+    (t1.into(), n.cross(t1).into())
 }
 
 /// Gaussian elimination with partial pivoting on a 5×5 system; None when nearly singular.
@@ -196,7 +188,4 @@ pub(super) fn outer(a: [f64; 3], b: [f64; 3]) -> [[f64; 3]; 3] {
 pub(super) fn sym_outer(a: [f64; 3], b: [f64; 3]) -> [[f64; 3]; 3] {
     let (m, n) = (outer(a, b), outer(b, a));
     std::array::from_fn(|i| std::array::from_fn(|j| m[i][j] + n[i][j]))
-}
-pub(super) fn matvec(m: &[[f64; 3]; 3], v: [f64; 3]) -> [f64; 3] {
-    m.map(|r| dot(r, v))
 }

@@ -34,56 +34,109 @@ impl<'a> EntityIds<'a> {
     }
 }
 
-/// See [`EntityIds::of`].
-pub fn entity_ids(mesh: &LinearMesh, topo: &Topology, e: usize) -> [u32; 27] {
+/// Where a lattice point of a quadratic element sits: which local entity of the element.
+#[derive(Clone, Copy)]
+enum Slot {
+    /// Local vertex.
+    Corner(u8),
+    /// Local edge (the element's `element_edges` entry).
+    Edge(u8),
+    /// Local face of a hex (its `element_faces` entry).
+    Face(u8),
+    /// The cell itself.
+    Cell,
+}
+
+/// The [`Slot`] of every lattice point {0, ½, 1}^d (index 9z + 3y + x) of a quad (`dim` 2)
+/// or hex (3); unused entries are [`Slot::Cell`]. Depends on nothing but the element type, so
+/// it is computed once, not for every point of every judged element.
+const fn slots(dim: usize) -> [Slot; 27] {
     use crate::mesh::topology::HEX_VERTEX_PARAMS;
-    let dim = mesh.dim;
     let n = if dim == 2 { 9 } else { 27 };
-    let verts = mesh.element(e);
-    let nv = topo.n_vertices as u32;
-    let ne = topo.edges.len() as u32;
-    let nf = topo.faces.len() as u32;
-    let edges_per = if dim == 2 { 4 } else { 12 };
-    let mut out = [u32::MAX; 27];
-    for (i, slot) in out.iter_mut().enumerate().take(n) {
+    let mut out = [Slot::Cell; 27];
+    let mut i = 0;
+    while i < n {
         let l = [i % 3, (i / 3) % 3, i / 9];
-        // The coordinates at ½ (no allocation: this runs for every point of every judged
-        // element).
+        // The coordinates at ½.
         let (mut ones, mut n_ones) = ([0usize; 3], 0);
-        for k in 0..dim {
+        let mut k = 0;
+        while k < dim {
             if l[k] == 1 {
                 ones[n_ones] = k;
                 n_ones += 1;
             }
+            k += 1;
         }
-        *slot = match (dim, n_ones) {
+        out[i] = match (dim, n_ones) {
             (_, 0) => {
-                let c = HEX_VERTEX_PARAMS
-                    .iter()
-                    .take(1 << dim)
-                    .position(|p| (0..dim).all(|k| 2 * p[k] as usize == l[k]))
-                    .expect("corner of the lattice");
-                verts[c]
+                let mut c = 0;
+                loop {
+                    let p = HEX_VERTEX_PARAMS[c];
+                    let mut all = true;
+                    let mut k = 0;
+                    while k < dim {
+                        all &= 2 * p[k] as usize == l[k];
+                        k += 1;
+                    }
+                    if all {
+                        break;
+                    }
+                    c += 1;
+                }
+                Slot::Corner(c as u8)
             }
             (2, 1) => {
                 // Quad edges are its sides: side 2j + s where coordinate j (≠ the edge's
                 // direction) equals s.
                 let j = 1 - ones[0];
-                nv + topo.element_edges[edges_per * e + 2 * j + l[j] / 2]
+                Slot::Edge((2 * j + l[j] / 2) as u8)
             }
             (3, 1) => {
                 // Hex edge 4k + a + 2b, (a, b) the other two coordinates in axis order.
                 let k = ones[0];
-                let others = [(k + 1) % 3, (k + 2) % 3];
-                let (a, b) = (others[0].min(others[1]), others[0].max(others[1]));
-                let local = 4 * k + l[a] / 2 + 2 * (l[b] / 2);
-                nv + topo.element_edges[edges_per * e + local]
+                let (o1, o2) = ((k + 1) % 3, (k + 2) % 3);
+                let (a, b) = if o1 < o2 { (o1, o2) } else { (o2, o1) };
+                Slot::Edge((4 * k + l[a] / 2 + 2 * (l[b] / 2)) as u8)
             }
             (3, 2) => {
-                let j = (0..3).find(|&j| l[j] != 1).expect("one coordinate off 1");
-                nv + ne + topo.element_faces[6 * e + 2 * j + l[j] / 2]
+                let j = if l[0] != 1 {
+                    0
+                } else if l[1] != 1 {
+                    1
+                } else {
+                    2
+                };
+                Slot::Face((2 * j + l[j] / 2) as u8)
             }
-            _ => nv + ne + nf + e as u32,
+            _ => Slot::Cell,
+        };
+        i += 1;
+    }
+    out
+}
+
+const SLOTS_2D: [Slot; 27] = slots(2);
+const SLOTS_3D: [Slot; 27] = slots(3);
+
+/// See [`EntityIds::of`].
+pub fn entity_ids(mesh: &LinearMesh, topo: &Topology, e: usize) -> [u32; 27] {
+    let dim = mesh.dim;
+    let (n, table, edges_per) = if dim == 2 {
+        (9, &SLOTS_2D, 4)
+    } else {
+        (27, &SLOTS_3D, 12)
+    };
+    let verts = mesh.element(e);
+    let nv = topo.n_vertices as u32;
+    let ne = topo.edges.len() as u32;
+    let nf = topo.faces.len() as u32;
+    let mut out = [u32::MAX; 27];
+    for (slot, kind) in out.iter_mut().zip(table).take(n) {
+        *slot = match *kind {
+            Slot::Corner(c) => verts[c as usize],
+            Slot::Edge(k) => nv + topo.element_edges[edges_per * e + k as usize],
+            Slot::Face(k) => nv + ne + topo.element_faces[6 * e + k as usize],
+            Slot::Cell => nv + ne + nf + e as u32,
         };
     }
     out
