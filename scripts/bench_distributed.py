@@ -56,6 +56,8 @@ def serial_run(tmp, mesh, env):
           f"{s['cg_iterations']} CG iterations (serial, block Jacobi); peak {int(kb) / 1024:.0f} MB, "
           f"CPU {float(user) + float(sys_):.2f} s; wall: fit assembly {t.get('fit_assembly', 0):.2f} s, "
           f"CG {t.get('fit_cg', 0):.2f} s, validity {t['validity']:.2f} s, total {t['total']:.2f} s")
+    s["cpu_s"] = float(user) + float(sys_)
+    s["peak_bytes"] = int(kb) * 1024
     return s, int(kb) * 1024
 
 
@@ -88,6 +90,8 @@ def summary(r, n, partition, serial):
         "gather_bytes_sum": tot("bytes_gather"), "bytes_max": mx("bytes_sent"),
         "cg_iterations": r["cg_iterations"], "serial_cg_iterations": serial["cg_iterations"],
         "peak_max": mx("peak_memory_bytes"), "total_s": r["timings"]["total"],
+        "serial": {k: serial[k] for k in ["elements", "cpu_s", "peak_bytes", "timings",
+                                          "cg_iterations"]},
     }
     print(f"summary: {n} ranks, {partition}: ghosts {s['ghosts_sum']} = {s['ghost_share']:.3f} × "
           f"own elements (max {s['ghosts_max']} on a rank), halo {s['shared_sum']} shared control "
@@ -105,7 +109,12 @@ def main():
                     choices=["morton", "file-order"])
     ap.add_argument("--threads", type=int, default=1, help="rayon threads per process")
     ap.add_argument("--json", help="write the summaries here")
+    ap.add_argument("--model", nargs="+", metavar="JSON",
+                    help="print the model at 10^8 hexes from these summaries (no runs)")
     args = ap.parse_args()
+    if args.model:
+        model([s for f in args.model for s in json.load(open(f))])
+        return
     env = dict(os.environ, RAYON_NUM_THREADS=str(args.threads),
                OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1",
                OMPI_MCA_mpi_yield_when_idle="1")
@@ -132,6 +141,60 @@ def main():
             summaries.append(summary(r, n, partition, serial))
     if args.json:
         json.dump(summaries, open(args.json, "w"), indent=1)
+
+
+def model(runs, hexes=1e8, ranks=(64, 128, 256, 512, 1024)):
+    """Time and memory per rank at `hexes` hexes from the measured Morton runs.
+
+    Per-hex costs: the serial run's CPU time and peak memory divided by its hexes, the CPU
+    time split over the stages in proportion to their wall times (one thread); the CG's
+    share per iteration. Halo and ghosts: s = c n^(2/3) shared control points and
+    g = k n^(2/3) ghost elements for n hexes per rank (surface over volume), c and k the
+    largest measured over the Morton runs (an interior rank of a large job has more
+    neighbours than the measured ones: c and k are scaled by 6 faces / the measured
+    neighbours, at most 3). Network: 10 GB/s, 2 us per reduction step (log2 P steps, 3
+    all-reduces per CG iteration). CG iterations: the largest measured.
+    """
+    import math
+    m = [r for r in runs if r["partition"] == "morton"]
+    if not m:
+        sys.exit("no Morton runs in the summaries")
+    s = m[0]["serial"]
+    t = s["timings"]
+    stages = {k: t.get(k, 0.0) for k in ["read", "topology", "spline", "fit_assembly", "fit_cg",
+                                         "validity", "sample", "quality", "write"]}
+    wall = sum(stages.values())
+    per_hex = {k: s["cpu_s"] * v / wall / s["elements"] for k, v in stages.items()}
+    cg_iter = per_hex.pop("fit_cg") / s["cg_iterations"]
+    mem_hex = s["peak_bytes"] / s["elements"]
+    scale = lambda r: min(3.0, 6.0 / max(r["neighbours_max"], 1))
+    c = max(r["shared_max"] / r["elements_max"] ** (2 / 3) * scale(r) for r in m)
+    k = max(r["ghosts_max"] / r["elements_max"] ** (2 / 3) * scale(r) for r in m)
+    iters = max(r["cg_iterations"] for r in m)
+    print(f"per hex (CPU, from {s['elements']} hexes serial): "
+          + ", ".join(f"{a} {v * 1e6:.2f} us" for a, v in per_hex.items())
+          + f"; CG iteration {cg_iter * 1e6:.3f} us; memory {mem_hex / 1e3:.2f} KB")
+    print(f"halo: s = {c:.1f} n^(2/3) shared control points, ghosts = {k:.1f} n^(2/3) elements; "
+          f"{iters} CG iterations")
+    print()
+    print("| ranks P | hexes per rank n | ghosts (share) | shared points s | CG iteration: compute / halo / "
+          "reductions | CG total | whole job per rank | memory per rank | nets to rank 0 |")
+    print("|---|---|---|---|---|---|---|---|---|")
+    for p in ranks:
+        n = hexes / p
+        g = k * n ** (2 / 3)
+        sh = c * n ** (2 / 3)
+        comp = n * cg_iter
+        halo = 24 * sh / 10e9
+        red = 3 * 2e-6 * math.log2(p)
+        cg = iters * (comp + halo + red)
+        setup = (n + g) * (per_hex["read"] + per_hex["topology"] + per_hex["spline"])
+        own = n * (per_hex["fit_assembly"] + per_hex["validity"])
+        job = setup + own + cg
+        mem = mem_hex * (n + g)
+        print(f"| {p} | {n / 1e6:.2f}M | {g / 1e3:.0f}k ({g / n:.2f}) | {sh / 1e3:.0f}k | "
+              f"{comp * 1e3:.1f} ms / {halo * 1e3:.2f} ms / {red * 1e3:.3f} ms | {cg:.0f} s | "
+              f"{job:.0f} s | {mem / 1e9:.2f} GB | {648 * hexes / 1e9:.0f} GB |")
 
 
 if __name__ == "__main__":
