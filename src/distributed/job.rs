@@ -23,7 +23,8 @@
 use super::cg::{Halo, LocalMatrix, pcg};
 use super::comm::Comm;
 use super::local::{GHOST_DEPTH, LocalShare};
-use super::read::{LocalMesh, read_share};
+use super::read::LocalMesh;
+use super::share::read_share;
 use crate::io::read_mesh;
 use crate::math::{BezierElements, BezierNet};
 use crate::mesh::Topology;
@@ -145,6 +146,17 @@ impl BezierElements for Nets {
     }
 }
 
+/// The nets of `flat` (one per id, in the order of `ids`) reordered by increasing id.
+fn in_file_order(flat: Vec<f64>, ids: &[f64]) -> Vec<f64> {
+    let per = flat.len() / ids.len().max(1);
+    let mut out = vec![0.0; flat.len()];
+    for (net, &g) in flat.chunks_exact(per.max(1)).zip(ids) {
+        let g = g as usize;
+        out[g * per..(g + 1) * per].copy_from_slice(net);
+    }
+    out
+}
+
 /// Seconds per stage, by name.
 struct Laps {
     t: Instant,
@@ -206,9 +218,9 @@ fn local_topology(input: &Path, local: &LocalMesh) -> Result<Topology, CurveErro
         return Err(CurveError::NotCurvable {
             input: input.to_owned(),
             what: format!(
-                "{bad} non-manifold facet(s), edge(s) or vertice(s) among elements {}..{} (run it on one process for the details)",
-                local.global_element.first().copied().unwrap_or(0),
-                local.global_element.first().copied().unwrap_or(0) + local.n_owned as u64
+                "{bad} non-manifold facet(s), edge(s) or vertice(s) among the {} elements of rank {} (run it on one process for the details)",
+                local.n_owned,
+                local.owner.first().copied().unwrap_or(0)
             ),
         });
     }
@@ -303,8 +315,7 @@ fn run_share(
     options: &CurveOptions,
     laps: &mut Laps,
 ) -> Result<Share, CurveError> {
-    let rank = comm.rank();
-    let local = read_share(input, rank, comm.size(), GHOST_DEPTH, &options.mesh)?;
+    let local = read_share(comm, input, GHOST_DEPTH, &options.mesh)?;
     laps.lap("read");
     let mesh = &local.mesh;
     let topo = local_topology(input, &local)?;
@@ -415,6 +426,13 @@ pub fn curve(
     comm.sum_u64(&mut counts);
     let bytes_before = comm.bytes_sent();
     let gathered = comm.gather_f64(0, &share.nets);
+    // The ranks own Morton parts, not runs of the file: their global ids put the nets back in
+    // the file's order.
+    let own_ids: Vec<f64> = share.local.global_element[..share.local.n_owned]
+        .iter()
+        .map(|&g| g as f64)
+        .collect();
+    let gathered_ids = comm.gather_f64(0, &own_ids);
     laps.lap("gather");
     let figures = RankFigures {
         rank,
@@ -439,9 +457,10 @@ pub fn curve(
         ..
     } = share;
     let all_figures = gather_figures(comm, &figures);
-    let Some(gathered) = gathered else {
+    let (Some(gathered), Some(ids)) = (gathered, gathered_ids) else {
         return Ok(None);
     };
+    let gathered = in_file_order(gathered, &ids);
 
     // Rank 0: the serial sampling, numbering and checks on the gathered nets.
     let mesh = read_mesh(input, &options.mesh)?;

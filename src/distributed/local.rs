@@ -96,10 +96,9 @@ pub fn halo(comm: &dyn Comm, local: &LocalMesh, topo: &Topology, space: &SplineS
         })
         .collect();
     by_key.sort_unstable();
-    let starts = LocalMesh::starts(local.n_global, size);
-    let candidates: BTreeSet<usize> = local.global_element[local.n_owned..]
+    let candidates: BTreeSet<usize> = local.owner[local.n_owned..]
         .iter()
-        .map(|&g| LocalMesh::owner(&starts, g))
+        .map(|&q| q as usize)
         .filter(|&q| q != rank)
         .collect();
     // Keys travel as f64 (node tags and element ids are below 2^53).

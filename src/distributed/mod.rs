@@ -1,7 +1,8 @@
 //! Curving across MPI ranks (`--features mpi`, `mpirun -np N polyspline curve …`).
 //!
 //! [`comm`] is the communication layer (rsmpi over the system MPI, or one process),
-//! [`partition`] the element partition along a Morton curve, [`cg`] the fit's CG across ranks
+//! [`read`] and [`share`] each rank's share of the input (its Morton part of the elements
+//! and the ghosts around it), [`partition`] the element partition along a Morton curve, [`cg`] the fit's CG across ranks
 //! (halo exchange of shared control points, global reductions), [`job`] the `curve` job
 //! stage by stage. `docs/distributed.md` states what is distributed, what is replicated on
 //! every rank so far, and the measured volumes.
@@ -14,3 +15,4 @@ pub mod launch;
 pub mod local;
 pub mod partition;
 pub mod read;
+pub mod share;

@@ -1,19 +1,21 @@
-//! One rank's share of a binary MSH 4.1 file, read by offsets, with ghost layers.
+//! Reading a binary MSH 4.1 file by offsets: runs of elements, ghost rings, and a rank's
+//! ghosted sub-mesh.
 //!
-//! Input: the path of a binary (little-endian, 8-byte `size_t`) MSH 4.1 file, the rank, the
-//! number of ranks and the ghost depth g. Output: a [`LocalMesh`]: the rank's contiguous run
-//! of the file's elements (hexes in 3D, quads in 2D, in file order: ranks r gets elements
-//! ⌊rN/P⌋ … ⌊(r+1)N/P⌋ − 1), then the ghost elements within g vertex rings of them, the
-//! tagged boundary facets whose vertices are all present, and only the nodes these use, with
-//! the global id of every element (its index among the file's elements) and vertex (its node
-//! tag).
+//! Input: the path of a binary (little-endian, 8-byte `size_t`) MSH 4.1 file of linear hexes
+//! (3D) or quads (2D) ([`MshFile::open`]). Outputs: a contiguous run of the file's elements
+//! ([`MshFile::run`]); the elements within g vertex rings of a set of elements
+//! ([`MshFile::ghosts`]); the coordinates of a set of nodes; and a [`LocalMesh`]: given own
+//! elements, ghosts and the ghosts' owners, the tagged boundary facets whose vertices are all
+//! present and only the nodes these use, with the global id of every element (its index among
+//! the file's elements) and vertex (its node tag). [`super::share`] decides which elements a
+//! rank owns.
 //!
 //! How it reads: one pass over the section headers records where each node and element block
-//! starts (its records are skipped by seeking); the rank's own elements are read at their
-//! offsets; each ghost ring is one streamed pass over the element blocks in chunks, keeping
-//! the elements that touch a node of the previous rings; the tagged facets are one streamed
-//! pass; the coordinates one streamed pass over the node blocks keeping the needed tags. No
-//! rank ever holds more than its elements, ghosts and their nodes, plus one chunk.
+//! starts (its records are skipped by seeking); a run is read at its offsets; each ghost ring
+//! is one streamed pass over the element blocks in chunks, keeping the elements that touch a
+//! node of the previous rings; the tagged facets are one streamed pass; the coordinates one
+//! streamed pass over the node blocks keeping the needed tags. No rank ever holds more than
+//! its elements, ghosts and their nodes, plus one chunk.
 //!
 //! Invariant: the local mesh is what the serial reader ([`crate::io::read_mesh`]) makes of
 //! the file restricted to these elements: the same element tags (the entity's first physical
@@ -68,6 +70,8 @@ pub struct LocalMesh {
     pub n_owned: usize,
     /// Global element id (index among the file's elements) of each local element.
     pub global_element: Vec<u64>,
+    /// Rank owning each local element (this rank for the own ones).
+    pub owner: Vec<u32>,
     /// Global vertex id (node tag) of each local vertex.
     pub global_vertex: Vec<u64>,
     /// Elements in the whole file.
@@ -82,8 +86,8 @@ impl LocalMesh {
             .collect()
     }
 
-    /// The rank owning global element `g` under [`LocalMesh::starts`].
-    pub fn owner(starts: &[u64], g: u64) -> usize {
+    /// The rank whose run under [`LocalMesh::starts`] holds global element `g`.
+    pub fn run_of(starts: &[u64], g: u64) -> usize {
         starts.partition_point(|&s| s <= g) - 1
     }
 }
@@ -198,87 +202,69 @@ fn open(path: &Path) -> Result<Reader, ParseError> {
     })
 }
 
-/// The header pass: format, names, entities' physical tags, and the blocks' offsets.
-fn index(path: &Path) -> Result<Index, ParseError> {
-    let mut r = open(path)?;
-    let mut ix = Index::default();
-    let mut physical: HashMap<(i32, i32), i32> = HashMap::new();
-    let mut format = false;
-    while let Some(l) = r.token_line()? {
-        match l.as_str() {
-            "$MeshFormat" => {
-                let head = r.line()?.unwrap_or_default();
-                let f: Vec<&str> = head.split_whitespace().collect();
-                if f.len() != 3 || f[0] != "4.1" || f[1] != "1" || f[2] != "8" {
-                    return Err(err(format!(
-                        "the rank-local reader reads binary MSH 4.1 with 8-byte size_t; this file's format line is '{head}' (convert it with gmsh -format msh41 -bin, or run on one process)"
-                    )));
-                }
-                if r.i32()? != 1 {
-                    return Err(err("big-endian MSH files are not supported"));
-                }
-                r.expect_end("MeshFormat")?;
-                format = true;
-            }
-            "$PhysicalNames" => {
-                let n: usize = r
-                    .line()?
-                    .and_then(|l| l.parse().ok())
-                    .ok_or_else(|| err("bad $PhysicalNames count"))?;
-                for _ in 0..n {
-                    let l = r.line()?.unwrap_or_default();
-                    let mut it = l.splitn(3, char::is_whitespace);
-                    let _dim = it.next();
-                    let tag: i32 = it
-                        .next()
-                        .and_then(|t| t.parse().ok())
-                        .ok_or_else(|| err(format!("bad physical name line '{l}'")))?;
-                    let rest = it.next().unwrap_or("").trim();
-                    let name = rest
-                        .strip_prefix('"')
-                        .and_then(|r| r.strip_suffix('"'))
-                        .unwrap_or(rest);
-                    let entry = ix.tag_names.entry(tag).or_default();
-                    if entry.is_empty() {
-                        *entry = name.to_string();
-                    } else if entry.split(" / ").all(|e| e != name) {
-                        entry.push_str(" / ");
-                        entry.push_str(name);
-                    }
-                }
-                r.expect_end("PhysicalNames")?;
-            }
-            "$Entities" => {
-                let mut counts = [0u64; 4];
-                for c in &mut counts {
-                    *c = r.size()?;
-                }
-                for (dim, &count) in counts.iter().enumerate() {
-                    for _ in 0..count {
-                        let tag = r.i32()?;
-                        r.skip(if dim == 0 { 24 } else { 48 })?;
-                        let nphys = r.size()?;
-                        let mut first = 0;
-                        for k in 0..nphys {
-                            let p = r.i32()?;
-                            if k == 0 {
-                                first = p;
-                            }
-                        }
-                        if dim > 0 {
-                            let nb = r.size()?;
-                            r.skip(4 * nb)?;
-                        }
-                        physical.insert((dim as i32, tag), first);
-                    }
-                }
-                r.expect_end("Entities")?;
-            }
+/// The sections before `$Nodes`, as bytes, with the format checked: what the rank-local
+/// reader can read, and no partitioned file.
+fn head(r: &mut Reader) -> Result<Vec<u8>, ParseError> {
+    let mut head = Vec::new();
+    let mut buf = Vec::new();
+    loop {
+        buf.clear();
+        if r.r.read_until(b'\n', &mut buf).map_err(io_err)? == 0 {
+            return Err(err("no $Nodes section"));
+        }
+        let line = String::from_utf8_lossy(&buf);
+        match line.trim() {
+            "$Nodes" => break,
             "$PartitionedEntities" => {
                 return Err(err(
                     "a partitioned MSH file: give the partition files IN_1.msh … IN_N.msh as IN.msh (one per rank)",
                 ));
             }
+            "$MeshFormat" if head.is_empty() => {
+                head.extend_from_slice(&buf);
+                buf.clear();
+                r.r.read_until(b'\n', &mut buf).map_err(io_err)?;
+                let line = String::from_utf8_lossy(&buf);
+                let f: Vec<&str> = line.split_whitespace().collect();
+                if f.len() != 3 || f[0] != "4.1" || f[1] != "1" || f[2] != "8" {
+                    return Err(err(format!(
+                        "the rank-local reader reads binary MSH 4.1 with 8-byte size_t; this file's format line is '{}' (convert it with gmsh -format msh41 -bin, or run on one process)",
+                        line.trim()
+                    )));
+                }
+                head.extend_from_slice(&buf);
+                let one = r.bytes::<4>()?;
+                if i32::from_le_bytes(one) != 1 {
+                    return Err(err("big-endian MSH files are not supported"));
+                }
+                head.extend_from_slice(&one);
+                continue;
+            }
+            _ => {}
+        }
+        head.extend_from_slice(&buf);
+    }
+    Ok(head)
+}
+
+/// The header pass: format, names, entities' physical tags (parsed by the serial reader's
+/// [`crate::io::gmsh::header_tags`]), and the blocks' offsets.
+fn index(path: &Path) -> Result<Index, ParseError> {
+    let mut r = open(path)?;
+    let head = head(&mut r)?;
+    if !head.starts_with(b"$MeshFormat") {
+        return Err(err("no $MeshFormat section"));
+    }
+    let tags = crate::io::gmsh::header_tags(&head)?;
+    drop(head);
+    let mut ix = Index {
+        tag_names: tags.tag_names,
+        ..Index::default()
+    };
+    // `head` stopped at the `$Nodes` line.
+    let mut next = Some("$Nodes".to_string());
+    while let Some(l) = next {
+        match l.as_str() {
             "$Nodes" => {
                 let blocks = r.size()?;
                 let _n = r.size()?;
@@ -311,7 +297,7 @@ fn index(path: &Path) -> Result<Index, ParseError> {
                     let data_at = r.pos()?;
                     ix.elements.push(ElementBlock {
                         kind,
-                        physical: physical.get(&(dim, tag)).copied().unwrap_or(0),
+                        physical: tags.entities.physical_of(dim, tag),
                         n,
                         npe,
                         data_at,
@@ -333,9 +319,7 @@ fn index(path: &Path) -> Result<Index, ParseError> {
             }
             other => return Err(err(format!("unexpected line '{other}' between sections"))),
         }
-    }
-    if !format {
-        return Err(err("no $MeshFormat section"));
+        next = r.token_line()?;
     }
     Ok(ix)
 }
@@ -398,22 +382,6 @@ fn read_range(
     Ok(())
 }
 
-/// Read this rank's share with `depth` vertex rings of ghosts (see the module docs).
-pub fn read_share(
-    path: &Path,
-    rank: usize,
-    size: usize,
-    depth: usize,
-    options: &MeshOptions,
-) -> Result<LocalMesh, crate::io::ReadError> {
-    read_share_inner(path, rank, size, depth, options).map_err(|source| {
-        crate::io::ReadError::Parse {
-            path: path.to_owned(),
-            source,
-        }
-    })
-}
-
 /// The coordinates of the nodes in `have`, in file order, read block by block in chunks (a
 /// chunk's coordinates are read only when one of its tags is needed). Fails when a needed node
 /// is not defined.
@@ -459,136 +427,190 @@ fn read_coordinates(
     Ok((global_vertex, points))
 }
 
-fn read_share_inner(
-    path: &Path,
-    rank: usize,
-    size: usize,
-    depth: usize,
-    options: &MeshOptions,
-) -> Result<LocalMesh, ParseError> {
-    let ix = index(path)?;
-    let count = |k: i32| -> u64 {
-        ix.elements
-            .iter()
-            .filter(|b| b.kind == k)
-            .map(|b| b.n)
-            .sum()
-    };
-    let (kind, facet_kind, npe, dim) = if count(5) > 0 {
-        (5, 3, 8, 3)
-    } else if count(3) > 0 {
-        (3, 1, 4, 2)
-    } else {
-        return Err(err("no hexahedra or quadrilaterals in the file"));
-    };
-    for b in &ix.elements {
-        let bad = match dim {
-            3 => matches!(b.kind, 4..=7 | 11..=14 | 16..=19),
-            _ => matches!(b.kind, 2 | 9 | 10 | 16),
-        } && b.kind != kind;
-        if bad && b.n > 0 {
-            return Err(err(format!(
-                "element type {} next to the {}: polyspline curves linear quad (2D) and hex (3D) meshes",
-                b.kind,
-                if dim == 3 {
-                    "hexahedra"
-                } else {
-                    "quadrilaterals"
-                }
-            )));
-        }
-    }
-    let n_global = count(kind);
-    let starts = LocalMesh::starts(n_global, size);
-    let (lo, hi) = (starts[rank], starts[rank + 1]);
-    let mut r = open(path)?;
+/// Elements read from the file: global index, physical tag and node tags of each.
+#[derive(Debug, Default)]
+pub struct Elements {
+    pub global: Vec<u64>,
+    pub tags: Vec<i32>,
+    /// `npe` node tags per element.
+    pub nodes: Vec<u64>,
+}
 
-    // Own elements, then the ghost rings.
-    let mut global_element: Vec<u64> = Vec::new();
-    let mut tags: Vec<i32> = Vec::new();
-    let mut nodes: Vec<u64> = Vec::new();
-    read_range(&mut r, &ix, kind, lo, hi, |g, p, v| {
-        global_element.push(g);
-        tags.push(p);
-        nodes.extend_from_slice(v);
-    })?;
-    let n_owned = global_element.len();
-    let mut have: HashSet<u64> = nodes.iter().copied().collect();
-    let mut ghost: HashSet<u64> = HashSet::new();
-    for _ in 0..depth {
-        let before = global_element.len();
-        stream(&mut r, &ix, kind, |g, p, v| {
-            if (lo..hi).contains(&g) || ghost.contains(&g) {
-                return;
+impl Elements {
+    fn push(&mut self, g: u64, p: i32, v: &[u64]) {
+        self.global.push(g);
+        self.tags.push(p);
+        self.nodes.extend_from_slice(v);
+    }
+}
+
+/// An indexed binary MSH 4.1 file of hexes (3D) or quads (2D), read by offsets.
+pub struct MshFile {
+    r: Reader,
+    ix: Index,
+    /// Gmsh types of the cells and of their facets.
+    kind: i32,
+    facet_kind: i32,
+    /// Nodes per cell.
+    pub npe: usize,
+    dim: usize,
+    /// Cells in the whole file.
+    pub n_global: u64,
+}
+
+impl MshFile {
+    /// Index the file and check it holds only quads or only hexes among its cells.
+    pub fn open(path: &Path) -> Result<MshFile, ParseError> {
+        let ix = index(path)?;
+        let count = |k: i32| -> u64 {
+            ix.elements
+                .iter()
+                .filter(|b| b.kind == k)
+                .map(|b| b.n)
+                .sum()
+        };
+        let (kind, facet_kind, npe, dim) = if count(5) > 0 {
+            (5, 3, 8, 3)
+        } else if count(3) > 0 {
+            (3, 1, 4, 2)
+        } else {
+            return Err(err("no hexahedra or quadrilaterals in the file"));
+        };
+        for b in &ix.elements {
+            let bad = match dim {
+                3 => matches!(b.kind, 4..=7 | 11..=14 | 16..=19),
+                _ => matches!(b.kind, 2 | 9 | 10 | 16),
+            } && b.kind != kind;
+            if bad && b.n > 0 {
+                return Err(err(format!(
+                    "element type {} next to the {}: polyspline curves linear quad (2D) and hex (3D) meshes",
+                    b.kind,
+                    if dim == 3 {
+                        "hexahedra"
+                    } else {
+                        "quadrilaterals"
+                    }
+                )));
             }
-            if v.iter().any(|t| have.contains(t)) {
-                ghost.insert(g);
-                global_element.push(g);
-                tags.push(p);
-                nodes.extend_from_slice(v);
+        }
+        let n_global = count(kind);
+        Ok(MshFile {
+            r: open(path)?,
+            ix,
+            kind,
+            facet_kind,
+            npe,
+            dim,
+            n_global,
+        })
+    }
+
+    /// Cells `lo..hi` (file order), read at their offsets.
+    pub fn run(&mut self, lo: u64, hi: u64) -> Result<Elements, ParseError> {
+        let mut out = Elements::default();
+        read_range(&mut self.r, &self.ix, self.kind, lo, hi, |g, p, v| {
+            out.push(g, p, v)
+        })?;
+        Ok(out)
+    }
+
+    /// The cells within `depth` vertex rings of `own` and not in it: one streamed pass over
+    /// the cell blocks per ring, keeping the cells that touch a node of the previous rings.
+    pub fn ghosts(&mut self, own: &Elements, depth: usize) -> Result<Elements, ParseError> {
+        let mut have: HashSet<u64> = own.nodes.iter().copied().collect();
+        let mut seen: HashSet<u64> = own.global.iter().copied().collect();
+        let mut out = Elements::default();
+        for _ in 0..depth {
+            let before = out.global.len();
+            stream(&mut self.r, &self.ix, self.kind, |g, p, v| {
+                if !seen.contains(&g) && v.iter().any(|t| have.contains(t)) {
+                    seen.insert(g);
+                    out.push(g, p, v);
+                }
+            })?;
+            if out.global.len() == before {
+                break;
+            }
+            have.extend(out.nodes[self.npe * before..].iter().copied());
+        }
+        Ok(out)
+    }
+
+    /// The coordinates of the nodes in `have`, in file order (see [`read_coordinates`]).
+    pub fn coordinates(
+        &mut self,
+        have: &HashSet<u64>,
+    ) -> Result<(Vec<u64>, Vec<[f64; 3]>), ParseError> {
+        read_coordinates(&mut self.r, &self.ix, have)
+    }
+
+    /// The [`LocalMesh`] of `own` then `ghosts` (`owner`: the rank of each ghost), with the
+    /// tagged facets whose nodes are all present and the coordinates of the nodes used.
+    pub fn local_mesh(
+        &mut self,
+        own: Elements,
+        ghosts: Elements,
+        owner: Vec<u32>,
+        rank: usize,
+        options: &MeshOptions,
+    ) -> Result<LocalMesh, ParseError> {
+        let n_owned = own.global.len();
+        let (mut global_element, mut tags, mut nodes) = (own.global, own.tags, own.nodes);
+        global_element.extend_from_slice(&ghosts.global);
+        tags.extend_from_slice(&ghosts.tags);
+        nodes.extend_from_slice(&ghosts.nodes);
+        drop(ghosts);
+        let mut owners = vec![rank as u32; n_owned];
+        owners.extend_from_slice(&owner);
+        let have: HashSet<u64> = nodes.iter().copied().collect();
+
+        // Tagged facets among the present nodes.
+        let mut facets: Vec<u64> = Vec::new();
+        let mut facet_tags: Vec<i32> = Vec::new();
+        stream(&mut self.r, &self.ix, self.facet_kind, |_, p, v| {
+            if p != 0 && v.iter().all(|t| have.contains(t)) {
+                facets.extend_from_slice(v);
+                facet_tags.push(p);
             }
         })?;
-        if global_element.len() == before {
-            break;
-        }
-        have.extend(nodes[npe * before..].iter().copied());
+
+        let (global_vertex, points) = read_coordinates(&mut self.r, &self.ix, &have)?;
+        drop(have);
+        let local: HashMap<u64, i64> = global_vertex
+            .iter()
+            .enumerate()
+            .map(|(i, &t)| (t, i as i64))
+            .collect();
+        let (cell, facet) = if self.dim == 3 {
+            (CellKind::Hexahedron, CellKind::Quad)
+        } else {
+            (CellKind::Quad, CellKind::Line)
+        };
+        let mut block = RawBlock::new(cell, self.npe);
+        block.nodes = nodes.iter().map(|t| local[t]).collect();
+        block.tags = tags;
+        drop(nodes);
+        let mut fblock = RawBlock::new(facet, self.npe / 2);
+        fblock.nodes = facets.iter().map(|t| local[t]).collect();
+        fblock.tags = facet_tags;
+        let raw = RawMesh {
+            points,
+            point_locations: Vec::new(),
+            declared_dim: Some(3),
+            blocks: vec![block, fblock],
+            tag_names: self.ix.tag_names.clone(),
+        };
+        let mesh = LinearMesh::from_raw(raw, options)?;
+        debug_assert_eq!(mesh.unused_vertices, 0);
+        Ok(LocalMesh {
+            mesh,
+            n_owned,
+            global_element,
+            owner: owners,
+            global_vertex,
+            n_global: self.n_global,
+        })
     }
-    drop(ghost);
-
-    // Tagged facets among the present nodes.
-    let mut facets: Vec<u64> = Vec::new();
-    let mut facet_tags: Vec<i32> = Vec::new();
-    stream(&mut r, &ix, facet_kind, |_, p, v| {
-        if p != 0 && v.iter().all(|t| have.contains(t)) {
-            facets.extend_from_slice(v);
-            facet_tags.push(p);
-        }
-    })?;
-
-    let (global_vertex, points) = read_coordinates(&mut r, &ix, &have)?;
-    drop(have);
-    let local: HashMap<u64, i64> = global_vertex
-        .iter()
-        .enumerate()
-        .map(|(i, &t)| (t, i as i64))
-        .collect();
-    let mut block = RawBlock::new(
-        if dim == 3 {
-            CellKind::Hexahedron
-        } else {
-            CellKind::Quad
-        },
-        npe,
-    );
-    block.nodes = nodes.iter().map(|t| local[t]).collect();
-    block.tags = tags;
-    drop(nodes);
-    let mut fblock = RawBlock::new(
-        if dim == 3 {
-            CellKind::Quad
-        } else {
-            CellKind::Line
-        },
-        npe / 2,
-    );
-    fblock.nodes = facets.iter().map(|t| local[t]).collect();
-    fblock.tags = facet_tags;
-    let raw = RawMesh {
-        points,
-        point_locations: Vec::new(),
-        declared_dim: Some(3),
-        blocks: vec![block, fblock],
-        tag_names: ix.tag_names,
-    };
-    let mesh = LinearMesh::from_raw(raw, options)?;
-    debug_assert_eq!(mesh.unused_vertices, 0);
-    Ok(LocalMesh {
-        mesh,
-        n_owned,
-        global_element,
-        global_vertex,
-        n_global,
-    })
 }
 
 #[cfg(test)]
@@ -613,6 +635,21 @@ mod tests {
         (path, serial)
     }
 
+    /// Rank `rank`'s run of `size` with `depth` rings of ghosts, the ghosts' owners by runs.
+    fn read_run(path: &Path, rank: usize, size: usize, depth: usize) -> LocalMesh {
+        let mut f = MshFile::open(path).unwrap();
+        let starts = LocalMesh::starts(f.n_global, size);
+        let own = f.run(starts[rank], starts[rank + 1]).unwrap();
+        let ghosts = f.ghosts(&own, depth).unwrap();
+        let owner = ghosts
+            .global
+            .iter()
+            .map(|&g| LocalMesh::run_of(&starts, g) as u32)
+            .collect();
+        f.local_mesh(own, ghosts, owner, rank, &MeshOptions::default())
+            .unwrap()
+    }
+
     #[test]
     fn shares_partition_the_elements_with_the_serial_coordinates_and_exact_ghost_rings() {
         let (path, serial) = cylinder("share.msh");
@@ -622,7 +659,7 @@ mod tests {
         let mut seen = vec![0u8; n];
         for rank in 0..size {
             let depth = 2;
-            let l = read_share(&path, rank, size, depth, &MeshOptions::default()).unwrap();
+            let l = read_run(&path, rank, size, depth);
             assert_eq!(l.n_global as usize, n);
             // Own elements: a contiguous run, the serial element's vertices (by coordinates)
             // and tag, the serial orientation.
@@ -675,7 +712,7 @@ mod tests {
         let mut f = std::io::BufWriter::new(File::create(&path).unwrap());
         write_msh(&linear, MshVersion::V41, false, &mut f).unwrap();
         drop(f);
-        let e = read_share(&path, 0, 2, 1, &MeshOptions::default())
+        let e = MshFile::open(&path)
             .err()
             .expect("ASCII is refused")
             .to_string();

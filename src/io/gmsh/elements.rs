@@ -173,7 +173,7 @@ impl Reader<'_> {
             let type_loc = c.location();
             let count = c.parse_or::<u64>(what("number of elements"))?;
             let physical = match (i32::try_from(dim), i32::try_from(etag)) {
-                (Ok(d), Ok(t)) => self.physical_of(d, t),
+                (Ok(d), Ok(t)) => self.entities.physical_of(d, t),
                 _ => 0,
             };
             let bi = self.blocks.index(ty, type_loc)?;
@@ -232,7 +232,7 @@ impl Reader<'_> {
             let etag = b.i32(&what)?;
             let ty = b.i32(&what)?;
             let count = b.size(&what)?;
-            let physical = self.physical_of(dim, etag);
+            let physical = self.entities.physical_of(dim, etag);
             let bi = self
                 .blocks
                 .index(i64::from(ty), Location::Byte(header_at))?;

@@ -1,13 +1,38 @@
 //! `$Entities` and `$PartitionedEntities` (MSH 4): the physical tag of each entity.
 //!
-//! Input: the section body, ASCII or binary. Output: `Reader::entity_physical` (first physical
-//! tag of each (dimension, entity tag), 0 when none) and `Reader::partition_parent` (the parent
-//! of each partitioned entity without physical tags), read by [`Reader::physical_of`] when
-//! element blocks are tagged.
+//! Input: the section body, ASCII or binary. Output: [`EntityTags`] (first physical tag of
+//! each (dimension, entity tag), 0 when none, and the parent of each partitioned entity
+//! without physical tags), read by [`EntityTags::physical_of`] when element blocks are tagged.
 
 use super::binary::Bin;
 use super::{Reader, Version, to_i32};
 use crate::io::raw::ParseError;
+use std::collections::HashMap;
+
+/// The physical tag of every entity of `$Entities` and `$PartitionedEntities`.
+#[derive(Clone, Debug, Default)]
+pub struct EntityTags {
+    /// First physical tag (0 if none) of each (dimension, entity tag).
+    physical: HashMap<(i32, i32), i32>,
+    /// Parent (dimension, tag) of each partitioned entity that has no physical tag itself.
+    parent: HashMap<(i32, i32), (i32, i32)>,
+}
+
+impl EntityTags {
+    /// Physical tag of the elements of entity (dim, tag): its first physical tag, else its
+    /// partition parent's, else 0.
+    pub fn physical_of(&self, dim: i32, tag: i32) -> i32 {
+        match self.physical.get(&(dim, tag)) {
+            Some(&p) if p != 0 => p,
+            _ => self
+                .parent
+                .get(&(dim, tag))
+                .and_then(|parent| self.physical.get(parent))
+                .copied()
+                .unwrap_or(0),
+        }
+    }
+}
 
 impl Reader<'_> {
     /// `$Entities` or `$PartitionedEntities`: remember the first physical tag of each entity.
@@ -43,14 +68,14 @@ impl Reader<'_> {
         first_phys: i32,
         parent: Option<(i32, i32)>,
     ) {
-        self.entity_physical.insert((dim, tag), first_phys);
+        self.entities.physical.insert((dim, tag), first_phys);
         // A partition entity inherits its parent's physical group only from a parent of the
         // same dimension (partition interfaces have the volume or surface as parent).
         if let Some(p) = parent
             && first_phys == 0
             && p.0 == dim
         {
-            self.partition_parent.insert((dim, tag), p);
+            self.entities.parent.insert((dim, tag), p);
         }
     }
 
@@ -172,18 +197,5 @@ impl Reader<'_> {
             }
         }
         Ok(())
-    }
-
-    /// Physical tag of the elements of entity (dim, tag).
-    pub(super) fn physical_of(&self, dim: i32, tag: i32) -> i32 {
-        match self.entity_physical.get(&(dim, tag)) {
-            Some(&p) if p != 0 => p,
-            _ => self
-                .partition_parent
-                .get(&(dim, tag))
-                .and_then(|parent| self.entity_physical.get(parent))
-                .copied()
-                .unwrap_or(0),
-        }
     }
 }

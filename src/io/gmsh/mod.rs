@@ -57,12 +57,35 @@ use super::raw::{Location, ParseError, RawMesh};
 use super::text::{TextCursor, parse_f64};
 use binary::Bin;
 use element_types::Blocks;
+pub use entities::EntityTags;
 use nodes::NodeMap;
-use std::collections::HashMap;
+use std::collections::BTreeMap;
 
 /// Parse a Gmsh `.msh` file held in memory.
 pub fn read(data: &[u8]) -> Result<RawMesh, ParseError> {
     Reader::new(data).run()
+}
+
+/// The physical names and the entities' physical tags of a MSH file's header.
+#[derive(Debug, Default)]
+pub struct HeaderTags {
+    /// As [`RawMesh::tag_names`].
+    pub tag_names: BTreeMap<i32, String>,
+    pub entities: EntityTags,
+}
+
+/// Parse the sections of a MSH file that come before `$Nodes` (`$MeshFormat`,
+/// `$PhysicalNames`, `$Entities`, `$PartitionedEntities`, and any other, skipped), given as the
+/// file's first bytes: the readers that do not hold the whole file use it for the physical
+/// names and tags, so that they name and tag as [`read`] does. Error locations are those of the
+/// file.
+pub fn header_tags(head: &[u8]) -> Result<HeaderTags, ParseError> {
+    let mut r = Reader::new(head);
+    r.sections()?;
+    Ok(HeaderTags {
+        tag_names: r.mesh.tag_names,
+        entities: r.entities,
+    })
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -89,10 +112,8 @@ struct Reader<'a> {
     mesh: RawMesh,
     nodes: Option<NodeMap>,
     blocks: Blocks,
-    /// First physical tag (0 if none) of each (dimension, entity tag).
-    entity_physical: HashMap<(i32, i32), i32>,
-    /// Parent (dimension, tag) of each partitioned entity that has no physical tag itself.
-    partition_parent: HashMap<(i32, i32), (i32, i32)>,
+    /// The physical tag of each entity.
+    entities: EntityTags,
 }
 
 /// Reserve for `count` items, but never more than the input could possibly hold (every item
@@ -115,12 +136,25 @@ impl<'a> Reader<'a> {
             mesh: RawMesh::default(),
             nodes: None,
             blocks: Blocks::default(),
-            entity_physical: HashMap::new(),
-            partition_parent: HashMap::new(),
+            entities: EntityTags::default(),
         }
     }
 
     fn run(mut self) -> Result<RawMesh, ParseError> {
+        self.sections()?;
+        let mut mesh = self.mesh;
+        for (_, mut block) in self.blocks.list {
+            // Tag 0 means "no tag"; a block without any tag has none.
+            if block.tags.iter().all(|&t| t == 0) {
+                block.tags.clear();
+            }
+            mesh.push_block(block);
+        }
+        Ok(mesh)
+    }
+
+    /// Read every section of the input.
+    fn sections(&mut self) -> Result<(), ParseError> {
         let mut any_section = false;
         while let Some(tok) = self.c.next_token() {
             let Some(name) = tok.strip_prefix('$') else {
@@ -174,15 +208,7 @@ impl<'a> Reader<'a> {
                 "empty file: expected a Gmsh mesh starting with $MeshFormat",
             ));
         }
-        let mut mesh = self.mesh;
-        for (_, mut block) in self.blocks.list {
-            // Tag 0 means "no tag"; a block without any tag has none.
-            if block.tags.iter().all(|&t| t == 0) {
-                block.tags.clear();
-            }
-            mesh.push_block(block);
-        }
-        Ok(mesh)
+        Ok(())
     }
 
     fn format(&self) -> Format {
