@@ -65,11 +65,13 @@ def main():
                     for k, v in medians(home).items():
                         results[who].setdefault(k, []).append(v)
             print(f"round {r + 1} done", flush=True)
-    print(f"{'benchmark (median of per-run medians)':<48}{'A ms':>10}{'B ms':>10}{'B/A':>7}")
+    print(f"{'benchmark (median of per-run medians)':<44}{'A ms':>9}{'B ms':>9}{'B/A':>6}"
+          f"  {'per-round B/A':<20}")
     for k in sorted(results["A"]):
-        a = statistics.median(results["A"][k]) / 1e6
-        b = statistics.median(results["B"].get(k, [float("nan")])) / 1e6
-        print(f"{k:<48}{a:>10.3f}{b:>10.3f}{b / a:>7.2f}")
+        ra, rb = results["A"][k], results["B"].get(k, [float("nan")])
+        a, b = statistics.median(ra) / 1e6, statistics.median(rb) / 1e6
+        rounds = " ".join(f"{y / x:.2f}" for x, y in zip(ra, rb))
+        print(f"{k:<44}{a:>9.3f}{b:>9.3f}{b / a:>6.2f}  {rounds}")
 
 
 if __name__ == "__main__":
