@@ -339,7 +339,11 @@ fn morton_shares(path: &Path, np: usize) -> Vec<(u64, u64)> {
                     .map(|&v| raw.points[v as usize][k])
                     .sum::<f64>()
                     / 8.0;
-                let scale = if hi[k] > lo[k] { top / (hi[k] - lo[k]) } else { 0.0 };
+                let scale = if hi[k] > lo[k] {
+                    top / (hi[k] - lo[k])
+                } else {
+                    0.0
+                };
                 let q = ((c - lo[k]) * scale).round().max(0.0) as u64;
                 for b in 0..21 {
                     key |= ((q >> b) & 1) << (3 * b + k);
@@ -381,9 +385,9 @@ fn morton_shares(path: &Path, np: usize) -> Vec<(u64, u64)> {
 /// ghost share is bounded by 0.8 × the runs'. The largest part's cuts: a half disc and half
 /// the rectangle (π/2 + 2 ≈ 3.6) against a middle slab's two discs (2π ≈ 6.3), 0.57 ×: its
 /// ghosts are bounded by 0.75 × (the rings' fringe at the curved wall adds to the smaller).
-/// Measured at 57,591 hexes: 0.338 against 0.464 in total (0.73), 5,912 against 8,962 at most
-/// (0.66).
-const MORTON_TOTAL_RATIO: f64 = 0.0;
+/// Measured on this 12,288-hex mesh: 0.458 against 0.750 in total (0.61), 1,408 against 3,072
+/// at most (0.46); at 57,591 hexes 0.338 against 0.464 (0.73) and 5,912 against 8,962 (0.66).
+const MORTON_TOTAL_RATIO: f64 = 0.8;
 const MORTON_LARGEST_RATIO: f64 = 0.75;
 
 #[test]
@@ -404,18 +408,20 @@ fn the_morton_repartition_owns_and_ghosts_as_computed_from_the_file() {
     let mut got = Vec::new();
     for (np, partition) in [(2, "morton"), (4, "morton"), (4, "file-order")] {
         let report = scratch(&format!("repartition_{np}_{partition}.json"));
-        common::run_ok(mpirun(np).env("POLYSPLINE_PARTITION", partition).args([
-            BIN,
-            "curve",
-            input.to_str().unwrap(),
-            "-o",
-            scratch(&format!("repartition_{np}_{partition}.msh"))
-                .to_str()
-                .unwrap(),
-            "--report",
-            report.to_str().unwrap(),
-            "-q",
-        ]));
+        common::run_ok(
+            mpirun(np).env("POLYSPLINE_PARTITION", partition).args([
+                BIN,
+                "curve",
+                input.to_str().unwrap(),
+                "-o",
+                scratch(&format!("repartition_{np}_{partition}.msh"))
+                    .to_str()
+                    .unwrap(),
+                "--report",
+                report.to_str().unwrap(),
+                "-q",
+            ]),
+        );
         let shares = shares_of(&report);
         if partition == "morton" {
             assert_eq!(shares, morton_shares(&input, np), "{np} ranks");
@@ -435,5 +441,8 @@ fn the_morton_repartition_owns_and_ghosts_as_computed_from_the_file() {
         largest(runs)
     );
     assert!(total(morton) <= MORTON_TOTAL_RATIO * total(runs), "{got:?}");
-    assert!(largest(morton) <= MORTON_LARGEST_RATIO * largest(runs), "{got:?}");
+    assert!(
+        largest(morton) <= MORTON_LARGEST_RATIO * largest(runs),
+        "{got:?}"
+    );
 }

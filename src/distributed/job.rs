@@ -127,6 +127,10 @@ struct Nets {
     dim: usize,
     np: usize,
     flat: Vec<f64>,
+    /// Position in `flat` of each element's net (the ranks' nets come in rank order, each
+    /// rank's Morton part in increasing element order): an index rather than a reordered copy,
+    /// which would double rank 0's largest buffer.
+    row: Vec<u32>,
 }
 
 impl BezierElements for Nets {
@@ -138,6 +142,7 @@ impl BezierElements for Nets {
     }
     fn bezier_net(&self, e: usize) -> BezierNet {
         let mut n = [[0.0; 3]; 27];
+        let e = self.row[e] as usize;
         let x = &self.flat[3 * self.np * e..3 * self.np * (e + 1)];
         for (i, p) in x.chunks_exact(3).enumerate() {
             n[i].copy_from_slice(p);
@@ -146,15 +151,13 @@ impl BezierElements for Nets {
     }
 }
 
-/// The nets of `flat` (one per id, in the order of `ids`) reordered by increasing id.
-fn in_file_order(flat: Vec<f64>, ids: &[f64]) -> Vec<f64> {
-    let per = flat.len() / ids.len().max(1);
-    let mut out = vec![0.0; flat.len()];
-    for (net, &g) in flat.chunks_exact(per.max(1)).zip(ids) {
-        let g = g as usize;
-        out[g * per..(g + 1) * per].copy_from_slice(net);
+/// The position of each element's net among the gathered ones, from the gathered ids.
+fn rows_of(ids: &[f64]) -> Vec<u32> {
+    let mut row = vec![0u32; ids.len()];
+    for (i, &g) in ids.iter().enumerate() {
+        row[g as usize] = i as u32;
     }
-    out
+    row
 }
 
 /// Seconds per stage, by name.
@@ -460,7 +463,8 @@ pub fn curve(
     let (Some(gathered), Some(ids)) = (gathered, gathered_ids) else {
         return Ok(None);
     };
-    let gathered = in_file_order(gathered, &ids);
+    let row = rows_of(&ids);
+    drop(ids);
 
     // Rank 0: the serial sampling, numbering and checks on the gathered nets.
     let mesh = read_mesh(input, &options.mesh)?;
@@ -469,6 +473,7 @@ pub fn curve(
         dim: mesh.dim,
         np: if mesh.dim == 2 { 9 } else { 27 },
         flat: gathered,
+        row,
     };
     let mut ho = sample(&source, &mesh, &topo, order);
     drop(source);

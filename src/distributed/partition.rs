@@ -72,11 +72,12 @@ fn cuts(ne: u64, n: usize) -> Vec<u64> {
         .collect()
 }
 
-/// The sort value at each cut of [`cuts`] (`u128::MAX` for an empty part at the end), by
-/// bisection over the 128-bit values: `count(t)` must return, for each threshold candidate,
-/// how many elements of the whole mesh have a sort value ≤ it (each rank counts its own and
-/// the counts are summed across ranks: 128 reductions of n − 1 counts, whatever the mesh
-/// size). Element with sort value v is in part `thresholds.partition_point(|&t| t <= v)`.
+/// The sort value at each cut (position ⌈k ne / n⌉, k = 1 … n − 1; `u128::MAX` for an
+/// empty part at the end), by bisection over the 128-bit values: `count(t)` must return, for
+/// each threshold candidate, how many elements of the whole mesh have a sort value ≤ it (each
+/// rank counts its own and the counts are summed across ranks: 128 reductions of n − 1 counts,
+/// whatever the mesh size). Element with sort value v is in part
+/// `thresholds.partition_point(|&t| t <= v)`.
 pub fn thresholds(ne: u64, n: usize, mut count: impl FnMut(&[u128]) -> Vec<u64>) -> Vec<u128> {
     let cuts = cuts(ne, n);
     // Invariant: the wanted value t_k (the smallest t with count(t) > cut_k) is in lo..=hi.

@@ -536,7 +536,8 @@ impl MshFile {
         Ok(out)
     }
 
-    /// The coordinates of the nodes in `have`, in file order (see [`read_coordinates`]).
+    /// The coordinates of the nodes in `have`, in file order; fails when a needed node is not
+    /// defined.
     pub fn coordinates(
         &mut self,
         have: &HashSet<u64>,
