@@ -141,3 +141,52 @@ pub fn entity_ids(mesh: &LinearMesh, topo: &Topology, e: usize) -> [u32; 27] {
     }
     out
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mesh::generate::{extrude, star_2d};
+    use crate::mesh::topology::HEX_VERTEX_PARAMS;
+    use std::collections::HashMap;
+
+    /// The multilinear point of lattice point `i` ({0, ½, 1}^d) of element `e`.
+    fn position(mesh: &LinearMesh, e: usize, i: usize) -> [i64; 3] {
+        let x = mesh.element_coords(e);
+        let l = [i % 3, (i / 3) % 3, i / 9].map(|c| c as f64 / 2.0);
+        let mut p = [0.0; 3];
+        for (c, pc) in HEX_VERTEX_PARAMS.iter().enumerate().take(1 << mesh.dim) {
+            let w: f64 = (0..mesh.dim)
+                .map(|k| if pc[k] == 1 { l[k] } else { 1.0 - l[k] })
+                .product();
+            for k in 0..3 {
+                p[k] += w * x[c][k];
+            }
+        }
+        // Rounded, so that the same point reached from two elements compares equal.
+        p.map(|c| (c * 1e9).round() as i64)
+    }
+
+    /// On meshes whose elements meet in every orientation (a valence-5 star and its
+    /// extrusion), the ids are a bijection with the lattice points' positions: every element
+    /// on an entity names it at the same point, and no two entities share a point.
+    #[test]
+    fn ids_name_each_shared_lattice_point_once() {
+        let star = star_2d(5);
+        for mesh in [star.clone(), extrude(&star, &[0.0, 0.3, 0.7])] {
+            let topo = Topology::build(&mesh);
+            let ids = EntityIds::new(&mesh, &topo);
+            let np = if mesh.dim == 2 { 9 } else { 27 };
+            let (mut at, mut named) = (HashMap::new(), HashMap::new());
+            for e in 0..mesh.n_elements() {
+                let of = ids.of(e);
+                for (i, &id) in of[..np].iter().enumerate() {
+                    assert!((id as usize) < ids.len(), "element {e} point {i}");
+                    let p = position(&mesh, e, i);
+                    assert_eq!(*at.entry(id).or_insert(p), p, "id {id} at two points");
+                    assert_eq!(*named.entry(p).or_insert(id), id, "point {p:?} has two ids");
+                }
+            }
+            assert_eq!(at.len(), ids.len(), "every entity is some element's point");
+        }
+    }
+}
