@@ -143,6 +143,20 @@ impl Samples {
     }
 }
 
+/// Whether every corner of the edge, face or cell whose midpoint is lattice point `l` is a
+/// boundary corner in `mask`: the boundary sides' midpoints (and the few interior edges or
+/// faces spanned by boundary vertices), which take [`FitWeights::boundary_midpoint`].
+fn boundary_midpoint(mask: u64, l: [usize; 3]) -> bool {
+    let mut c = l;
+    let free: Vec<usize> = (0..3).filter(|&j| l[j] == 1).collect();
+    (0..1usize << free.len()).all(|b| {
+        for (k, &j) in free.iter().enumerate() {
+            c[j] = 2 * ((b >> k) & 1);
+        }
+        mask & (1 << corner_of(c)) != 0
+    })
+}
+
 /// Corner number (VTK order) of a lattice point with coordinates in {0, 2}.
 fn corner_of(l: [usize; 3]) -> usize {
     const TABLE: [usize; 8] = [0, 1, 3, 2, 4, 5, 7, 6];
@@ -190,7 +204,11 @@ fn sample_weight_unscaled(w: &FitWeights, mask: u64, i: usize, l: [usize; 3], co
     if mask & (1 << (8 + i)) != 0 {
         w.feature
     } else if !corner {
-        w.midpoint
+        if boundary_midpoint(mask, l) {
+            w.boundary_midpoint
+        } else {
+            w.midpoint
+        }
     } else if mask & (1 << corner_of(l)) != 0 {
         w.boundary_corner
     } else {
