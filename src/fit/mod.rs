@@ -87,8 +87,9 @@ pub struct FitWeights {
     pub boundary_corner: f64,
     /// Position weight at edge/face midpoints and element centres inside the mesh.
     pub midpoint: f64,
-    /// Position weight at midpoints of edges and faces whose corners are all boundary
-    /// vertices (the boundary sides' midpoints, where the smooth targets lie on the surface).
+    /// Position weight at midpoints of edges, faces and cells whose corners are all boundary
+    /// vertices: the boundary sides' midpoints, where the smooth targets lie on the surface,
+    /// and the few interior edges, faces or cells spanned by boundary vertices alone.
     pub boundary_midpoint: f64,
     /// Frame (first derivative) weight at corners.
     pub frame_corner: f64,

@@ -144,15 +144,14 @@ impl Samples {
 }
 
 /// Whether every corner of the edge, face or cell whose midpoint is lattice point `l` is a
-/// boundary corner in `mask`: the boundary sides' midpoints (and the few interior edges or
-/// faces spanned by boundary vertices), which take [`FitWeights::boundary_midpoint`].
+/// boundary corner in `mask`: the boundary sides' midpoints (and the few interior edges, faces
+/// or cells spanned by boundary vertices alone), which take [`FitWeights::boundary_midpoint`].
+/// Called per sample in the right-hand side's assembly, so without allocation.
 fn boundary_midpoint(mask: u64, l: [usize; 3]) -> bool {
-    let mut c = l;
-    let free: Vec<usize> = (0..3).filter(|&j| l[j] == 1).collect();
-    (0..1usize << free.len()).all(|b| {
-        for (k, &j) in free.iter().enumerate() {
-            c[j] = 2 * ((b >> k) & 1);
-        }
+    (0..8usize).all(|b| {
+        // Corner b's coordinate j is 0 or 2 where l[j] = 1; the other coordinates are l's.
+        let c: [usize; 3] =
+            std::array::from_fn(|j| if l[j] == 1 { 2 * ((b >> j) & 1) } else { l[j] });
         mask & (1 << corner_of(c)) != 0
     })
 }
@@ -481,5 +480,27 @@ impl LinOp for MatrixFree<'_> {
             }
         }
         diag
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A hexahedron whose bottom face (VTK corners 0–3, z = 0) is on the boundary: its edge
+    /// midpoints and face centre there are boundary midpoints; the midpoints of the vertical
+    /// edges, the side faces' centres and the cell centre are not.
+    #[test]
+    fn boundary_midpoints_are_those_spanned_by_boundary_corners() {
+        let mask = 0b1111;
+        for l in [[1, 0, 0], [2, 1, 0], [1, 2, 0], [0, 1, 0], [1, 1, 0]] {
+            assert!(boundary_midpoint(mask, l), "{l:?}");
+        }
+        for l in [[0, 0, 1], [1, 0, 1], [1, 1, 1], [1, 1, 2], [1, 0, 2]] {
+            assert!(!boundary_midpoint(mask, l), "{l:?}");
+        }
+        // One boundary corner (VTK 1 at lattice (2, 0, 0)) spans no midpoint.
+        assert!(!boundary_midpoint(0b10, [1, 0, 0]));
+        assert!(!boundary_midpoint(0b10, [2, 1, 0]));
     }
 }
