@@ -112,6 +112,7 @@ pub fn check_fit(p: &FitParams) -> Result<(), ParamError> {
         ("--w-corner", w.corner),
         ("--w-boundary-corner", w.boundary_corner),
         ("--w-midpoint", w.midpoint),
+        ("--w-boundary-midpoint", w.boundary_midpoint),
         ("--w-frame-corner", w.frame_corner),
         ("--w-frame-midpoint", w.frame_midpoint),
         ("--w-feature", w.feature),

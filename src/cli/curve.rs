@@ -50,16 +50,21 @@ pub(super) struct Args {
     /// Position weight at element corners on the boundary (overrides the preset).
     #[arg(long)]
     w_boundary_corner: Option<f64>,
-    /// Position weight at edge/face midpoints and element centres (overrides the preset).
+    /// Position weight at edge/face midpoints and element centres inside the mesh (overrides
+    /// the preset).
     #[arg(long)]
     w_midpoint: Option<f64>,
+    /// Position weight at midpoints of boundary edges and faces (overrides the preset).
+    #[arg(long)]
+    w_boundary_midpoint: Option<f64>,
     /// Frame (derivative) weight at corners (overrides the preset).
     #[arg(long)]
     w_frame_corner: Option<f64>,
     /// Frame weight at midpoints and centres (overrides the preset).
     #[arg(long)]
     w_frame_midpoint: Option<f64>,
-    /// Position weight at element corners on sharp-feature vertices (default 10).
+    /// Position weight at samples on sharp features (overrides the preset: 100 with `--fit
+    /// smooth`, 10 otherwise).
     #[arg(long)]
     w_feature: Option<f64>,
     #[command(flatten)]
@@ -179,6 +184,7 @@ impl Args {
             (&mut weights.corner, self.w_corner),
             (&mut weights.boundary_corner, self.w_boundary_corner),
             (&mut weights.midpoint, self.w_midpoint),
+            (&mut weights.boundary_midpoint, self.w_boundary_midpoint),
             (&mut weights.frame_corner, self.w_frame_corner),
             (&mut weights.frame_midpoint, self.w_frame_midpoint),
             (&mut weights.feature, self.w_feature),

@@ -143,6 +143,19 @@ impl Samples {
     }
 }
 
+/// Whether every corner of the edge, face or cell whose midpoint is lattice point `l` is a
+/// boundary corner in `mask`: the boundary sides' midpoints (and the few interior edges, faces
+/// or cells spanned by boundary vertices alone), which take [`FitWeights::boundary_midpoint`].
+/// Called per sample in the right-hand side's assembly, so without allocation.
+fn boundary_midpoint(mask: u64, l: [usize; 3]) -> bool {
+    (0..8usize).all(|b| {
+        // Corner b's coordinate j is 0 or 2 where l[j] = 1; the other coordinates are l's.
+        let c: [usize; 3] =
+            std::array::from_fn(|j| if l[j] == 1 { 2 * ((b >> j) & 1) } else { l[j] });
+        mask & (1 << corner_of(c)) != 0
+    })
+}
+
 /// Corner number (VTK order) of a lattice point with coordinates in {0, 2}.
 fn corner_of(l: [usize; 3]) -> usize {
     const TABLE: [usize; 8] = [0, 1, 3, 2, 4, 5, 7, 6];
@@ -190,7 +203,11 @@ fn sample_weight_unscaled(w: &FitWeights, mask: u64, i: usize, l: [usize; 3], co
     if mask & (1 << (8 + i)) != 0 {
         w.feature
     } else if !corner {
-        w.midpoint
+        if boundary_midpoint(mask, l) {
+            w.boundary_midpoint
+        } else {
+            w.midpoint
+        }
     } else if mask & (1 << corner_of(l)) != 0 {
         w.boundary_corner
     } else {
@@ -458,5 +475,27 @@ impl LinOp for MatrixFree<'_> {
             }
         }
         diag
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A hexahedron whose bottom face (VTK corners 0–3, z = 0) is on the boundary: its edge
+    /// midpoints and face centre there are boundary midpoints; the midpoints of the vertical
+    /// edges, the side faces' centres and the cell centre are not.
+    #[test]
+    fn boundary_midpoints_are_those_spanned_by_boundary_corners() {
+        let mask = 0b1111;
+        for l in [[1, 0, 0], [2, 1, 0], [1, 2, 0], [0, 1, 0], [1, 1, 0]] {
+            assert!(boundary_midpoint(mask, l), "{l:?}");
+        }
+        for l in [[0, 0, 1], [1, 0, 1], [1, 1, 1], [1, 1, 2], [1, 0, 2]] {
+            assert!(!boundary_midpoint(mask, l), "{l:?}");
+        }
+        // One boundary corner (VTK 1 at lattice (2, 0, 0)) spans no midpoint.
+        assert!(!boundary_midpoint(0b10, [1, 0, 0]));
+        assert!(!boundary_midpoint(0b10, [2, 1, 0]));
     }
 }

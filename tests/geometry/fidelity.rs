@@ -5,8 +5,9 @@
 //! dense lattice of parameter points on every boundary side) from the exact surface, against
 //! Gmsh's own order-2 mesh of the same linear mesh with its nodes on the CAD.
 //!
-//! * on the curved parts of the boundary (where the shapes' unstructured regions are, every
-//!   element Q2 on the ball), ours is within 5× Gmsh-with-CAD, RMS and max, at both orders;
+//! * on the whole boundary ours is within 5× Gmsh-with-CAD at both orders: RMS and max on the
+//!   O-grid disk, torus and cylinder and the unstructured plate and ball (every element Q2 on
+//!   the ball), RMS only on the finer plate and cylinder;
 //! * `--fit energy` never leaves the boundary more than 1.5× further from the surface than the
 //!   least-squares fit it starts from (RMS and max).
 //!
@@ -73,29 +74,41 @@ fn curve(input: &Path, output: &Path, args: &[&str]) {
     );
 }
 
-/// Ours within 5× Gmsh-with-CAD (RMS and max) on the curved boundary, orders 2 and 3: the disk,
-/// plate and ball at level 1, and the O-grid torus at level 2 (1,536 hexes), whose second-ring
-/// height functions need facets turning by more than the feature angle from the vertex's normal
-/// (22.5° per cell around the tube).
+/// Ours within 5× Gmsh-with-CAD on the whole boundary, orders 2 and 3: RMS and max on the
+/// O-grid disk (levels 1 and 2), the plate and ball at level 1, the O-grid torus at level 2
+/// (1,536 hexes; its second-ring height functions need facets turning by more than the feature
+/// angle from the vertex's normal, 22.5° per cell around the tube) and the O-grid cylinder at
+/// level 1 (sharp rims between the exact caps and the side); RMS only on the plate and the
+/// cylinder at level 2, whose max is 7× and 9× (short runs of spline sides between the plate's
+/// Q2 elements, the cylinder's side next to the rims).
 #[test]
-fn curved_boundary_within_five_times_gmsh_with_cad() {
-    if !common::have_gmsh("curved_boundary_within_five_times_gmsh_with_cad") {
+fn boundary_within_five_times_gmsh_with_cad() {
+    if !common::have_gmsh("boundary_within_five_times_gmsh_with_cad") {
         return;
     }
-    for (shape, level) in [("disk", 1), ("plate", 1), ("ball", 1), ("torus", 2)] {
+    for (shape, level, check_max) in [
+        ("disk", 1, true),
+        ("disk", 2, true),
+        ("plate", 1, true),
+        ("ball", 1, true),
+        ("torus", 2, true),
+        ("cylinder", 1, true),
+        ("plate", 2, false),
+        ("cylinder", 2, false),
+    ] {
         let (linear, cad) = make(shape, level);
         let mut files = vec![cad.clone()];
         for order in ["2", "3"] {
-            let out = dir().join(format!("{shape}_o{order}.msh"));
+            let out = dir().join(format!("{shape}_{level}_o{order}.msh"));
             curve(&linear, &out, &["--order", order]);
             files.push(out);
         }
         let refs: Vec<&Path> = files.iter().map(|p| p.as_path()).collect();
-        let m = measure(shape, &refs, "curved");
+        let m = measure(shape, &refs, "all");
         let (gmsh, ours) = (m[0], &m[1..]);
         for (order, (rms, max)) in [2, 3].iter().zip(ours) {
             println!(
-                "{shape} order {order}: RMS {rms:.3e} ({:.2}× Gmsh-with-CAD {:.3e}), max {max:.3e} ({:.2}× {:.3e})",
+                "{shape} level {level} order {order}: RMS {rms:.3e} ({:.2}× Gmsh-with-CAD {:.3e}), max {max:.3e} ({:.2}× {:.3e})",
                 rms / gmsh.0,
                 gmsh.0,
                 max / gmsh.1,
@@ -103,12 +116,12 @@ fn curved_boundary_within_five_times_gmsh_with_cad() {
             );
             assert!(
                 *rms <= 5.0 * gmsh.0,
-                "{shape} order {order}: RMS {rms:.3e} vs Gmsh {:.3e}",
+                "{shape} level {level} order {order}: RMS {rms:.3e} vs Gmsh {:.3e}",
                 gmsh.0
             );
             assert!(
-                *max <= 5.0 * gmsh.1,
-                "{shape} order {order}: max {max:.3e} vs Gmsh {:.3e}",
+                !check_max || *max <= 5.0 * gmsh.1,
+                "{shape} level {level} order {order}: max {max:.3e} vs Gmsh {:.3e}",
                 gmsh.1
             );
         }
