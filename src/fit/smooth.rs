@@ -62,6 +62,7 @@ mod higher;
 mod one_ring;
 
 use super::features::{BoundaryEntity, FeatureModels};
+use crate::math::Lattice;
 use crate::math::linalg::DVec3;
 use crate::mesh::features::Features;
 use crate::mesh::topology::{HEX_EDGES, HEX_VERTEX_PARAMS, NONE};
@@ -220,12 +221,7 @@ impl SmoothTargets {
 
     /// Displacements of the 3^d sample targets of element `e` from the multilinear points
     /// (index 9z + 3y + x of the lattice {0, ½, 1}^d; zero at corners).
-    pub fn element_corrections(
-        &self,
-        mesh: &LinearMesh,
-        topo: &Topology,
-        e: usize,
-    ) -> [[f64; 3]; 27] {
+    pub fn element_corrections(&self, mesh: &LinearMesh, topo: &Topology, e: usize) -> Lattice {
         let lattice = super::rhs::multilinear_lattice(self.dim, &mesh.element_coords(e));
         self.corrections_at(mesh, topo, e, &lattice)
     }
@@ -237,8 +233,8 @@ impl SmoothTargets {
         mesh: &LinearMesh,
         topo: &Topology,
         e: usize,
-        lattice: &[[f64; 3]; 27],
-    ) -> [[f64; 3]; 27] {
+        lattice: &Lattice,
+    ) -> Lattice {
         let dim = self.dim;
         let n = if dim == 2 { 9 } else { 27 };
         let verts = mesh.element(e);
@@ -516,7 +512,6 @@ fn inherit_interior(
 mod tests {
     use super::one_ring::fit_quadric;
     use super::*;
-    use crate::mesh::vec3::{add, norm, sub};
 
     /// On a circle sampled unevenly (neighbouring spacings in ratio 1 : 1.5), the corrected
     /// chord midpoint converges to the circle at third order or better; the chord at second.
@@ -534,8 +529,11 @@ mod tests {
             };
             let (a, b) = (c(t1), c(t2));
             let p = [0.5 * (a[0] + b[0]), 0.5 * (a[1] + b[1]), 0.0];
-            let q = add(p, m.correction(p, &[a, b], 0.5));
-            errs.push(((norm(q) - 1.0).abs(), (norm(p) - 1.0).abs()));
+            let q = DVec3::from(p) + DVec3::from(m.correction(p, &[a, b], 0.5));
+            errs.push((
+                (q.length() - 1.0).abs(),
+                (DVec3::from(p).length() - 1.0).abs(),
+            ));
         }
         for w in errs.windows(2) {
             assert!(w[0].0 / w[1].0 > 7.0, "{errs:?}");
@@ -558,7 +556,7 @@ mod tests {
             (0.1, 0.1),
             (-0.1, -0.12),
         ] {
-            pts.push(sub(g(u, v), x0));
+            pts.push((DVec3::from(g(u, v)) - DVec3::from(x0)).into());
         }
         let n0 = [0.0, 0.0, 1.0];
         let (n, h) = fit_quadric(n0, &pts, 0.1).unwrap();
@@ -568,11 +566,11 @@ mod tests {
             weight: 1.0,
         };
         let xs = [g(0.0, 0.0), g(0.1, 0.0), g(0.1, 0.1), g(0.0, 0.1)];
-        let mut p = [0.0; 3];
-        for x in xs {
-            p = add(p, x.map(|c| 0.25 * c));
-        }
-        let q = add(p, m.correction(p, &xs, 0.25));
+        let p: [f64; 3] = xs
+            .iter()
+            .fold(DVec3::ZERO, |p, x| p + 0.25 * DVec3::from(*x))
+            .into();
+        let q: [f64; 3] = (DVec3::from(p) + DVec3::from(m.correction(p, &xs, 0.25))).into();
         let on = g(q[0], q[1]);
         assert!((q[2] - on[2]).abs() < 1e-5, "{q:?} vs {on:?}");
         assert!((p[2] - g(p[0], p[1])[2]).abs() > 1e-3);

@@ -5,7 +5,6 @@ pub mod generate;
 pub mod linear;
 pub mod manifold;
 pub mod topology;
-pub(crate) mod vec3;
 
 pub use linear::{InvalidElement, InvalidKind, LinearMesh, MeshOptions};
 pub use topology::Topology;

@@ -38,13 +38,14 @@ use shape::{corner_ratio, hadamard_upper};
 pub use shape::{lattice_scaled_jacobian, max_det_bound};
 
 use super::{Certifier, DetBounds, bernstein_min_bounds, certify_screened, det_jacobian_bernstein};
-use crate::math::BezierElements;
-use crate::mesh::{LinearMesh, Topology, vec3};
+use crate::math::linalg::DVec3;
+use crate::math::{BezierElements, BezierNet};
+use crate::mesh::{LinearMesh, Topology};
 use rayon::prelude::*;
 use std::sync::OnceLock;
 
 /// Bernstein nets, 9 (2D) or 27 (3D) points, index 9z + 3y + x.
-pub type Net = [[f64; 3]; 27];
+pub type Net = BezierNet;
 
 /// Parameters of [`blend_search`].
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
@@ -587,14 +588,14 @@ fn summarise(blended: &Blended, info: &mut BlendInfo, lower: &[f64], owned: &[bo
             let mut h = f64::INFINITY;
             for a in 0..nc {
                 for c in a + 1..nc {
-                    h = h.min(vec3::norm(vec3::sub(x[a], x[c])));
+                    h = h.min((DVec3::from(x[a]) - DVec3::from(x[c])).length());
                 }
             }
             let (mut min_factor, mut withheld) = (FITTED as f64, 0.0f64);
             for i in 0..np {
                 let l = blended.factors[ids[i] as usize] as f64;
                 min_factor = min_factor.min(l);
-                withheld = withheld.max(vec3::norm(vec3::sub(f[i], b[i])));
+                withheld = withheld.max((DVec3::from(f[i]) - DVec3::from(b[i])).length());
             }
             let centroid =
                 std::array::from_fn(|k| x[..nc].iter().map(|p| p[k]).sum::<f64>() / nc as f64);
@@ -674,10 +675,11 @@ mod tests {
                 };
                 let (c0, c1, c2) = (col(0), col(1), col(2));
                 let sj = if dim == 2 {
-                    (c0[0] * c1[1] - c0[1] * c1[0]) / (vec3::norm(c0) * vec3::norm(c1))
+                    (c0[0] * c1[1] - c0[1] * c1[0])
+                        / (DVec3::from(c0).length() * DVec3::from(c1).length())
                 } else {
-                    vec3::dot(vec3::cross(c0, c1), c2)
-                        / (vec3::norm(c0) * vec3::norm(c1) * vec3::norm(c2))
+                    let [c0, c1, c2] = [c0, c1, c2].map(DVec3::from);
+                    c0.cross(c1).dot(c2) / (c0.length() * c1.length() * c2.length())
                 };
                 expected = expected.min(sj);
             }

@@ -2,7 +2,8 @@
 //! max det J, the lattice scaled Jacobian, and the straight element's Jacobian ratio.
 
 use super::Net;
-use crate::mesh::{LinearMesh, vec3};
+use crate::math::linalg::DVec3;
+use crate::mesh::LinearMesh;
 use crate::validity::det_jacobian_bernstein;
 
 /// Largest Bernstein coefficient of det J: an upper bound of max det J over the element.
@@ -49,12 +50,13 @@ pub fn lattice_scaled_jacobian(dim: usize, net: &Net) -> f64 {
     let mut min = f64::INFINITY;
     for p in 0..n {
         let jac = [cols[0][p], cols[1][p], cols[2][p]];
+        let [j0, j1, j2] = jac.map(DVec3::from);
         let sj = if dim == 2 {
             let det = jac[0][0] * jac[1][1] - jac[0][1] * jac[1][0];
-            det / (vec3::norm(jac[0]) * vec3::norm(jac[1]))
+            det / (j0.length() * j1.length())
         } else {
-            let det = vec3::dot(vec3::cross(jac[0], jac[1]), jac[2]);
-            det / (vec3::norm(jac[0]) * vec3::norm(jac[1]) * vec3::norm(jac[2]))
+            let det = j0.cross(j1).dot(j2);
+            det / (j0.length() * j1.length() * j2.length())
         };
         min = min.min(if sj.is_nan() { -1.0 } else { sj });
     }
@@ -71,8 +73,8 @@ pub(super) fn hadamard_upper(dim: usize, net: &Net) -> f64 {
             for i in 0..3 {
                 let p = net[i + 3 * j + 9 * k];
                 let mut d = |dir: usize, q: [f64; 3]| {
-                    let v = vec3::sub(q, p);
-                    m[dir] = m[dir].max(2.0 * vec3::norm(v));
+                    let v = DVec3::from(q) - DVec3::from(p);
+                    m[dir] = m[dir].max(2.0 * v.length());
                 };
                 if i < 2 {
                     d(0, net[i + 1 + 3 * j + 9 * k]);
