@@ -14,3 +14,5 @@ pub mod launch;
 pub mod local;
 pub mod partition;
 pub mod read;
+pub mod sample;
+pub mod write;
