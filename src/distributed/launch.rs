@@ -18,6 +18,23 @@ pub fn launched_size() -> Option<usize> {
         .find_map(|v| std::env::var(v).ok()?.parse().ok())
 }
 
+/// This process's rank in the MPI job, from the launcher's environment, or `None` outside one.
+pub fn launched_rank() -> Option<usize> {
+    ["OMPI_COMM_WORLD_RANK", "PMI_RANK", "PMIX_RANK"]
+        .iter()
+        .find_map(|v| std::env::var(v).ok()?.parse().ok())
+}
+
+/// Under mpirun with several ranks, end a rank other than 0 quietly (status 0) on an error
+/// every rank finds before the job starts (an output path, an option): rank 0 prints the
+/// one error line and sets the job's status. Returns the error on rank 0 and outside mpirun.
+pub fn quiet_unless_rank_0<E>(e: E) -> E {
+    if distributed() && launched_rank().is_some_and(|r| r != 0) {
+        std::process::exit(0);
+    }
+    e
+}
+
 /// Whether `curve` should run distributed: under an MPI launcher with more than one rank.
 pub fn distributed() -> bool {
     launched_size().is_some_and(|n| n > 1)
