@@ -323,11 +323,12 @@ fn unsupported_options_under_mpirun_fail_with_one_line_and_write_nothing() {
 }
 
 /// Largest peak memory of a rank at 4 ranks relative to the one-thread serial run's on the
-/// 60k-hex cylinder. Measured 0.58–0.63 (rank 0 highest: it also samples the whole output),
-/// against 0.74–0.92 when every rank read and set up the whole mesh: the slab partition's two
-/// ghost rings add 30–60 % elements at this size and every process has MPI's fixed footprint.
-/// The 0.45 of a 300k-hex mesh is not asserted here (BENCHMARKS.md has the measurement).
-const MEMORY_SHARE: f64 = 0.7;
+/// 60k-hex cylinder. Every rank samples and writes only its own elements; measured 0.58–0.60
+/// for all four ranks alike (rank 0 no longer higher), against 0.74–0.92 when every rank read
+/// and set up the whole mesh. At this size the fixed footprint of a process (≈ 70 MB: the
+/// binary and MPI) and the slab partition's two ghost rings (30–60 % more elements) dominate,
+/// so the 0.45 × is not reachable here; BENCHMARKS.md has the 292k-hex measurement.
+const MEMORY_SHARE: f64 = 0.65;
 
 /// Run `cmd` to completion; its peak resident memory in bytes (`wait4`'s `ru_maxrss`, this
 /// child only).
@@ -393,8 +394,7 @@ fn every_rank_peaks_well_below_the_serial_memory() {
         .collect();
     let ratio: Vec<f64> = peaks.iter().map(|&p| p as f64 / serial as f64).collect();
     eprintln!("serial peak {serial} B; per rank / serial at 4 ranks: {ratio:.3?}");
-    // Every rank, rank 0 too (it also samples and writes the whole output,
-    // docs/distributed.md), well below the serial peak.
+    // Every rank, rank 0 too, well below the serial peak.
     for (q, &x) in ratio.iter().enumerate() {
         assert!(
             x <= MEMORY_SHARE,

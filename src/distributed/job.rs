@@ -2,9 +2,9 @@
 //! what is not yet).
 //!
 //! Input: the input mesh path (binary MSH 4.1), [`CurveOptions`] (the default IGA path: the
-//! certified blend of the least-squares fit, CPU backend) and a [`Comm`]. Output: on rank 0,
-//! the curved high-order mesh gathered from the ranks and a [`DistributedReport`]; `None` on
-//! the others.
+//! certified blend of the least-squares fit, CPU backend) and a [`Comm`]. Output: on every
+//! rank, its share of the sampled output in global node tags ([`RankOutput`], written
+//! collectively by [`super::write`]) and the [`DistributedReport`].
 //!
 //! Stages per rank: read its contiguous run of the file's elements and [`GHOST_DEPTH`] vertex
 //! rings of ghosts by offsets ([`super::read`]); build the topology, features, smooth targets
@@ -14,9 +14,9 @@
 //! with the whole mesh's size levels ([`crate::fit::partial`]); solve them with the
 //! distributed block-Jacobi CG ([`super::cg`]); run the certified blend on its own elements,
 //! the ranks agreeing on the rejected elements of every round in global ids
-//! ([`crate::validity::blend::blend_search_shared`]); send its elements' final Bernstein nets
-//! to rank 0, which reads the linear mesh, samples the nets with the serial, entity-based
-//! node numbering and writes the file. Invariant: the result equals the serial run's up to
+//! ([`crate::validity::blend::blend_search_shared`]); sample its own elements with a global
+//! node numbering ([`super::sample`]) and check them; no rank reads or holds the whole mesh.
+//! Invariant: the result equals the serial run's up to
 //! the CG tolerance (the block-Jacobi aggregates differ from the serial solver's); the
 //! blend's factors are the serial search's for the same fitted map.
 
@@ -57,7 +57,7 @@ pub struct RankFigures {
     pub matrix_nonzeros: usize,
     /// Bytes it sent (halo exchanges, reductions, gathers), in all and by stage: the fit
     /// (CG halo exchanges and reductions), the certified blend (rejected elements, counts),
-    /// and the nets sent to rank 0.
+    /// and the sampling (node tags and positions asked of and sent to their owners).
     pub bytes_sent: u64,
     pub bytes_fit: u64,
     pub bytes_validity: u64,

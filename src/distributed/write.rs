@@ -532,10 +532,9 @@ fn write_parts(
     write_at(file, l.nodes_at, |w| plan.node_block(out, w))?;
     for g in (0..plan.groups.len()).filter(|&g| plan.groups[g].dim == plan.d) {
         write_at(file, l.volume_at[g], |w| {
-            let mut tag = l.first_tag[g] + l.before[g];
-            for e in (0..out.elements.len() / npe).filter(|&e| plan.vol_group(out, e) == g) {
+            let mine = (0..out.elements.len() / npe).filter(|&e| plan.vol_group(out, e) == g);
+            for (tag, e) in (l.first_tag[g] + l.before[g]..).zip(mine) {
                 plan.record(tag, &out.elements[e * npe..(e + 1) * npe], w)?;
-                tag += 1;
             }
             Ok(())
         })?;
