@@ -118,11 +118,33 @@ fn mpirun_1_2_4_ranks_equal_the_serial_run() {
     ]));
     let serial = read(&serial_out);
     let diag = diagonal(&serial);
-    for np in [1usize, 2, 4] {
-        let out = scratch(&format!("np{np}.msh"));
-        let report = scratch(&format!("np{np}.json"));
+    let serial_report: Value = {
+        let path = scratch("serial.json");
+        common::run_ok(Command::new(BIN).args([
+            "curve",
+            input.to_str().unwrap(),
+            "-o",
+            scratch("serial_again.msh").to_str().unwrap(),
+            "--report",
+            path.to_str().unwrap(),
+            "-q",
+        ]));
+        serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap()
+    };
+    // ASCII and binary: the ranks write one file collectively, each part at its offset.
+    for (np, binary) in [
+        (1usize, false),
+        (2, false),
+        (4, false),
+        (2, true),
+        (4, true),
+    ] {
+        let name = format!("np{np}{}", if binary { "_bin" } else { "" });
+        let out = scratch(&format!("{name}.msh"));
+        let report = scratch(&format!("{name}.json"));
         let _ = std::fs::remove_file(&out);
-        common::run_ok(mpirun(np).args([
+        let mut cmd = mpirun(np);
+        cmd.args([
             BIN,
             "curve",
             input.to_str().unwrap(),
@@ -131,16 +153,24 @@ fn mpirun_1_2_4_ranks_equal_the_serial_run() {
             "--report",
             report.to_str().unwrap(),
             "-q",
-        ]));
+        ]);
+        if binary {
+            cmd.arg("--binary");
+        }
+        common::run_ok(&mut cmd);
         let d = read(&out);
         let worst = compare(&serial, &d);
         assert!(
             worst <= 1e-6 * diag,
-            "{np} ranks: a node is {worst:.3e} from the serial run's (diagonal {diag:.3})"
+            "{name}: a node is {worst:.3e} from the serial run's (diagonal {diag:.3})"
         );
         let r: Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
         assert_eq!(r["invalid_elements"], 0);
         assert!(r["min_det_jacobian_bound"].as_f64().unwrap() > 0.0);
+        // The report's global figures are the serial run's.
+        for key in ["output_nodes", "output_elements", "boundary_facets"] {
+            assert_eq!(r[key], serial_report[key], "{name}: {key}");
+        }
         if np > 1 {
             // The shares partition the elements; every rank has work and a halo.
             assert_eq!(r["ranks"], np);
@@ -153,6 +183,11 @@ fn mpirun_1_2_4_ranks_equal_the_serial_run() {
                 assert!(f["shared_control_points"].as_u64().unwrap() > 0, "{f}");
                 assert!(f["bytes_sent"].as_u64().unwrap() > 0, "{f}");
             }
+            // Each entity counted once over the ranks, as the serial run counts it.
+            assert_eq!(
+                r["damped_control_points"], serial_report["damped_control_points"],
+                "{name}"
+            );
         } else {
             // One rank is the serial job itself: the same file, byte for byte.
             assert_eq!(
@@ -163,7 +198,86 @@ fn mpirun_1_2_4_ranks_equal_the_serial_run() {
         // Gmsh's own Jacobians: every element valid.
         if let Some((min, _, hex)) = common::gmsh_det_range(&out, &scratch("jobs.json")) {
             assert!(hex);
-            assert!(min > 0.0, "{np} ranks: Gmsh's smallest det J is {min}");
+            assert!(min > 0.0, "{name}: Gmsh's smallest det J is {min}");
+        }
+        // No temporary is left beside the output.
+        assert_eq!(temporaries(&out), 0, "{name}");
+    }
+}
+
+/// Temporaries (`.NAME.*.tmp`) beside `out`.
+fn temporaries(out: &Path) -> usize {
+    let name = out.file_name().unwrap().to_string_lossy().to_string();
+    std::fs::read_dir(out.parent().unwrap())
+        .unwrap()
+        .filter(|e| {
+            let n = e
+                .as_ref()
+                .unwrap()
+                .file_name()
+                .to_string_lossy()
+                .to_string();
+            n.starts_with(&format!(".{name}.")) && n.ends_with(".tmp")
+        })
+        .count()
+}
+
+/// The error lines of a failed run (status non-zero, no panic).
+fn error_lines(o: &std::process::Output) -> Vec<String> {
+    assert!(!o.status.success());
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!err.contains("panicked"), "{err}");
+    err.lines()
+        .filter(|l| l.starts_with("polyspline: error:"))
+        .map(str::to_string)
+        .collect()
+}
+
+#[test]
+fn unwritable_or_unsupported_outputs_under_mpirun_fail_with_one_line() {
+    if !have_mpirun() {
+        return;
+    }
+    let input = scratch("outputs.msh");
+    common::run_ok(Command::new(BIN).args([
+        "generate",
+        "cylinder",
+        "--elements",
+        "200",
+        "--binary",
+        "-o",
+        input.to_str().unwrap(),
+    ]));
+    let missing = scratch("no-such-dir").join("out.msh");
+    let vtu = scratch("out.vtu");
+    let _ = std::fs::remove_file(&vtu);
+    let onto_input = input.clone();
+    let cases: [(&Path, &str); 3] = [
+        (&missing, "does not exist"),
+        (&vtu, "other than .msh"),
+        (&onto_input, "input"),
+    ];
+    for (out, what) in cases {
+        let before = std::fs::read(&input).unwrap();
+        let o = mpirun(2)
+            .args([
+                BIN,
+                "curve",
+                input.to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+            ])
+            .output()
+            .unwrap();
+        let lines = error_lines(&o);
+        assert_eq!(lines.len(), 1, "{}: {lines:?}", out.display());
+        assert!(lines[0].contains(what), "{lines:?}");
+        if out != input {
+            assert!(!out.exists(), "{}", out.display());
+        }
+        assert_eq!(std::fs::read(&input).unwrap(), before);
+        if out.parent().unwrap().is_dir() {
+            assert_eq!(temporaries(out), 0);
         }
     }
 }
@@ -209,11 +323,12 @@ fn unsupported_options_under_mpirun_fail_with_one_line_and_write_nothing() {
 }
 
 /// Largest peak memory of a rank at 4 ranks relative to the one-thread serial run's on the
-/// 60k-hex cylinder. Measured 0.58–0.63 (rank 0 highest: it also samples the whole output),
-/// against 0.74–0.92 when every rank read and set up the whole mesh: the slab partition's two
-/// ghost rings add 30–60 % elements at this size and every process has MPI's fixed footprint.
-/// The 0.45 of a 300k-hex mesh is not asserted here (BENCHMARKS.md has the measurement).
-const MEMORY_SHARE: f64 = 0.7;
+/// 60k-hex cylinder. Every rank samples and writes only its own elements; measured 0.58–0.60
+/// for all four ranks alike (rank 0 no longer higher), against 0.74–0.92 when every rank read
+/// and set up the whole mesh. At this size the fixed footprint of a process (≈ 70 MB: the
+/// binary and MPI) and the slab partition's two ghost rings (30–60 % more elements) dominate,
+/// so the 0.45 × is not reachable here; BENCHMARKS.md has the 292k-hex measurement.
+const MEMORY_SHARE: f64 = 0.65;
 
 /// Run `cmd` to completion; its peak resident memory in bytes (`wait4`'s `ru_maxrss`, this
 /// child only).
@@ -279,8 +394,7 @@ fn every_rank_peaks_well_below_the_serial_memory() {
         .collect();
     let ratio: Vec<f64> = peaks.iter().map(|&p| p as f64 / serial as f64).collect();
     eprintln!("serial peak {serial} B; per rank / serial at 4 ranks: {ratio:.3?}");
-    // Every rank, rank 0 too (it also samples and writes the whole output,
-    // docs/distributed.md), well below the serial peak.
+    // Every rank, rank 0 too, well below the serial peak.
     for (q, &x) in ratio.iter().enumerate() {
         assert!(
             x <= MEMORY_SHARE,

@@ -272,9 +272,15 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
     let outputs: Vec<&Path> = std::iter::once(output.as_path())
         .chain(report.as_deref())
         .collect();
-    check_outputs(&outputs, &inputs)?;
-    polyspline::params::check_kink_angle(args.kink_angle)?;
-    let backend = args.backend.resolve(args.precision)?;
+    let prechecks = || -> anyhow::Result<_> {
+        check_outputs(&outputs, &inputs)?;
+        polyspline::params::check_kink_angle(args.kink_angle)?;
+        Ok(args.backend.resolve(args.precision)?)
+    };
+    // Under mpirun every rank finds the same error: one line, from rank 0.
+    #[cfg(feature = "mpi")]
+    let prechecks = || prechecks().map_err(polyspline::distributed::launch::quiet_unless_rank_0);
+    let backend = prechecks()?;
     let quiet = args.quiet;
     let options = args.options(backend);
     // Under mpirun with several ranks: the distributed job (docs/distributed.md).

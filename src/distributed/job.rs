@@ -2,9 +2,9 @@
 //! what is not yet).
 //!
 //! Input: the input mesh path (binary MSH 4.1), [`CurveOptions`] (the default IGA path: the
-//! certified blend of the least-squares fit, CPU backend) and a [`Comm`]. Output: on rank 0,
-//! the curved high-order mesh gathered from the ranks and a [`DistributedReport`]; `None` on
-//! the others.
+//! certified blend of the least-squares fit, CPU backend) and a [`Comm`]. Output: on every
+//! rank, its share of the sampled output in global node tags ([`RankOutput`], written
+//! collectively by [`super::write`]) and the [`DistributedReport`].
 //!
 //! Stages per rank: read its contiguous run of the file's elements and [`GHOST_DEPTH`] vertex
 //! rings of ghosts by offsets ([`super::read`]); build the topology, features, smooth targets
@@ -14,9 +14,9 @@
 //! with the whole mesh's size levels ([`crate::fit::partial`]); solve them with the
 //! distributed block-Jacobi CG ([`super::cg`]); run the certified blend on its own elements,
 //! the ranks agreeing on the rejected elements of every round in global ids
-//! ([`crate::validity::blend::blend_search_shared`]); send its elements' final Bernstein nets
-//! to rank 0, which reads the linear mesh, samples the nets with the serial, entity-based
-//! node numbering and writes the file. Invariant: the result equals the serial run's up to
+//! ([`crate::validity::blend::blend_search_shared`]); sample its own elements with a global
+//! node numbering ([`super::sample`]) and check them; no rank reads or holds the whole mesh.
+//! Invariant: the result equals the serial run's up to
 //! the CG tolerance (the block-Jacobi aggregates differ from the serial solver's); the
 //! blend's factors are the serial search's for the same fitted map.
 
@@ -24,15 +24,13 @@ use super::cg::{Halo, LocalMatrix, pcg};
 use super::comm::Comm;
 use super::local::{GHOST_DEPTH, LocalShare};
 use super::read::LocalMesh;
+use super::sample::{RankOutput, sample_share};
 use super::share::read_share;
-use crate::io::read_mesh;
-use crate::math::{BezierElements, BezierNet};
 use crate::mesh::Topology;
 use crate::pipeline::spline::SplineSetup;
 use crate::pipeline::{
     CurveError, CurveOptions, CurveReport, Geometry, Job, LineSearchMode, Method,
 };
-use crate::sample::{HighOrderMesh, sample};
 use crate::spline::{ElementClass, Q2Reason};
 use crate::validity::CpuCertifier;
 use crate::validity::blend::{Blended, blend_search_shared};
@@ -60,7 +58,7 @@ pub struct RankFigures {
     pub matrix_nonzeros: usize,
     /// Bytes it sent (halo exchanges, reductions, gathers), in all and by stage: the fit
     /// (CG halo exchanges and reductions), the certified blend (rejected elements, counts),
-    /// and the nets sent to rank 0.
+    /// and the sampling (node tags and positions asked of and sent to their owners).
     pub bytes_sent: u64,
     pub bytes_fit: u64,
     pub bytes_validity: u64,
@@ -81,9 +79,11 @@ pub struct DistributedReport {
     pub per_rank: Vec<RankFigures>,
 }
 
-/// What rank 0 holds at the end.
-pub struct Gathered {
-    pub mesh: HighOrderMesh,
+/// What every rank holds at the end: its share of the output and the report.
+pub struct Finished {
+    pub output: RankOutput,
+    /// The input's names of tags (the output's group names).
+    pub tag_names: BTreeMap<i32, String>,
     pub report: DistributedReport,
 }
 
@@ -106,6 +106,12 @@ fn check_supported(options: &CurveOptions) -> Result<(), CurveError> {
     if options.backend.gpu().is_some() {
         return unsupported("the GPU backend");
     }
+    if options.subdivide.is_some() {
+        return unsupported("--subdivide");
+    }
+    if options.snap_boundary {
+        return unsupported("--snap-boundary");
+    }
     Ok(())
 }
 
@@ -119,45 +125,6 @@ pub fn peak_memory_bytes() -> u64 {
                 .and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
         })
         .map_or(0, |kb| kb * 1024)
-}
-
-/// Element nets gathered on rank 0, in element order (the ranks' runs of elements follow
-/// each other in file order), `np` points of 3 doubles each.
-struct Nets {
-    dim: usize,
-    np: usize,
-    flat: Vec<f64>,
-    /// Position in `flat` of each element's net (the ranks' nets come in rank order, each
-    /// rank's Morton part in increasing element order): an index rather than a reordered copy,
-    /// which would double rank 0's largest buffer.
-    row: Vec<u32>,
-}
-
-impl BezierElements for Nets {
-    fn dim(&self) -> usize {
-        self.dim
-    }
-    fn n_elements(&self) -> usize {
-        self.flat.len() / (3 * self.np)
-    }
-    fn bezier_net(&self, e: usize) -> BezierNet {
-        let mut n = [[0.0; 3]; 27];
-        let e = self.row[e] as usize;
-        let x = &self.flat[3 * self.np * e..3 * self.np * (e + 1)];
-        for (i, p) in x.chunks_exact(3).enumerate() {
-            n[i].copy_from_slice(p);
-        }
-        n
-    }
-}
-
-/// The position of each element's net among the gathered ones, from the gathered ids.
-fn rows_of(ids: &[f64]) -> Vec<u32> {
-    let mut row = vec![0u32; ids.len()];
-    for (i, &g) in ids.iter().enumerate() {
-        row[g as usize] = i as u32;
-    }
-    row
 }
 
 /// Seconds per stage, by name.
@@ -179,8 +146,8 @@ struct Share {
     local: LocalMesh,
     cg: crate::solve::CgInfo,
     blend: crate::validity::blend::BlendInfo,
-    /// Own elements' final nets, flattened (3^d points × 3 doubles each).
-    nets: Vec<f64>,
+    /// This rank's share of the sampled output, in global node tags.
+    output: RankOutput,
     /// Own control points (counted once over the ranks), spline, Q2 and kink elements.
     counts: [usize; 4],
     input_msj: f64,
@@ -188,6 +155,9 @@ struct Share {
     nonzeros: usize,
     bytes_fit: u64,
     bytes_validity: u64,
+    bytes_sample: u64,
+    /// Control points this rank owns whose blend factor was reduced.
+    damped_owned: usize,
 }
 
 /// The topology of a ghosted sub-mesh, checked curvable where the serial check would see the
@@ -316,6 +286,7 @@ fn run_share(
     comm: &dyn Comm,
     input: &Path,
     options: &CurveOptions,
+    order: usize,
     laps: &mut Laps,
 ) -> Result<Share, CurveError> {
     let local = read_share(comm, input, GHOST_DEPTH, &options.mesh)?;
@@ -374,14 +345,12 @@ fn run_share(
     drop(share);
     laps.lap("validity");
     let bytes_validity = comm.bytes_sent() - bytes_fit - bytes_partition;
-    let np = if mesh.dim == 2 { 9 } else { 27 };
-    let nets: Vec<f64> = mine
-        .iter()
-        .flat_map(|&e| {
-            let n = blended.bezier_net(e);
-            n[..np].iter().flatten().copied().collect::<Vec<_>>()
-        })
-        .collect();
+    let damped_owned = damped_owned(&local, &blended);
+    let bytes_before = comm.bytes_sent();
+    let mut output = sample_share(comm, &local, &topo, &blended, order);
+    super::sample::to_file_order(comm, &local, &mut output);
+    let bytes_sample = comm.bytes_sent() - bytes_before;
+    laps.lap("sample");
     let class = |c: &ElementClass| -> [usize; 3] {
         [
             matches!(c, ElementClass::Spline) as usize,
@@ -399,46 +368,76 @@ fn run_share(
         local,
         cg,
         blend,
-        nets,
+        output,
         counts,
         input_msj: msj[0],
         halo,
         nonzeros,
         bytes_fit,
         bytes_validity,
+        bytes_sample,
+        damped_owned,
     })
 }
 
-/// Run the distributed `curve` job on every rank of `comm` (see the module docs).
+/// Blend entities (vertices, edges, faces, cells) this rank owns whose factor was reduced: an
+/// entity is owned by the rank of the lowest global element containing it (every element
+/// containing an entity of an own element is in the sub-mesh), so the sum over the ranks
+/// counts each entity once, as the serial report does.
+fn damped_owned(local: &LocalMesh, blended: &Blended) -> usize {
+    if blended.factors.is_empty() {
+        return 0;
+    }
+    let d = local.mesh.dim;
+    let np = if d == 2 { 9 } else { 27 };
+    let mut lowest = vec![u64::MAX; blended.factors.len()];
+    for e in 0..local.mesh.n_elements() {
+        let g = local.global_element[e];
+        for &id in &blended.ids.of(e)[..np] {
+            let l = &mut lowest[id as usize];
+            *l = (*l).min(g);
+        }
+    }
+    let first = local.global_element.first().copied().unwrap_or(0);
+    let last = first + local.n_owned as u64;
+    lowest
+        .iter()
+        .zip(&blended.factors)
+        .filter(|&(&g, &f)| (first..last).contains(&g) && f < crate::validity::blend::FITTED)
+        .count()
+}
+
+/// Run the distributed `curve` job on every rank of `comm` (see the module docs): every rank
+/// returns its share of the output and the report (the same on every rank).
 pub fn curve(
     comm: &dyn Comm,
     input: &Path,
     options: &CurveOptions,
-) -> Result<Option<Gathered>, CurveError> {
+) -> Result<Finished, CurveError> {
     check_supported(options)?;
     // The serial job's option checks (elastic is refused above, so no elastic parameters).
     let (order, _) = crate::pipeline::check_options(options)?;
-    let (rank, size) = (comm.rank(), comm.size());
+    let size = comm.size();
     let start = Instant::now();
     let mut laps = Laps {
         t: Instant::now(),
         timings: BTreeMap::new(),
     };
-    let share = run_share(comm, input, options, &mut laps)?;
+    let share = run_share(comm, input, options, order, &mut laps)?;
+    let quality = global_quality(comm, input, &share)?;
     let mut counts = share.counts.map(|c| c as u64);
+    let out = &share.output;
+    let npf = (order + 1).pow(out.dim as u32 - 1);
+    let mut sizes = [
+        out.node_tags.len() as u64,
+        (out.boundary.len() / npf) as u64,
+        share.damped_owned as u64,
+    ];
     comm.sum_u64(&mut counts);
-    let bytes_before = comm.bytes_sent();
-    let gathered = comm.gather_f64(0, &share.nets);
-    // The ranks own Morton parts, not runs of the file: their global ids put the nets back in
-    // the file's order.
-    let own_ids: Vec<f64> = share.local.global_element[..share.local.n_owned]
-        .iter()
-        .map(|&g| g as f64)
-        .collect();
-    let gathered_ids = comm.gather_f64(0, &own_ids);
-    laps.lap("gather");
+    comm.sum_u64(&mut sizes);
+    laps.lap("quality");
     let figures = RankFigures {
-        rank,
+        rank: comm.rank(),
         elements: share.local.n_owned,
         ghost_elements: share.local.mesh.n_elements() - share.local.n_owned,
         control_points: share.halo.len(),
@@ -449,78 +448,37 @@ pub fn curve(
         bytes_sent: comm.bytes_sent(),
         bytes_fit: share.bytes_fit,
         bytes_validity: share.bytes_validity,
-        bytes_gather: comm.bytes_sent() - bytes_before,
+        bytes_gather: share.bytes_sample,
         peak_memory_bytes: peak_memory_bytes(),
         timings: laps.timings.clone(),
     };
-    let Share {
-        cg,
-        blend: blend_info,
-        input_msj,
-        ..
-    } = share;
     let all_figures = gather_figures(comm, &figures);
-    let (Some(gathered), Some(ids)) = (gathered, gathered_ids) else {
-        return Ok(None);
-    };
-    let row = rows_of(&ids);
-    drop(ids);
-
-    // Rank 0: the serial sampling, numbering and checks on the gathered nets.
-    let mesh = read_mesh(input, &options.mesh)?;
-    let topo = Topology::build(&mesh);
-    let source = Nets {
-        dim: mesh.dim,
-        np: if mesh.dim == 2 { 9 } else { 27 },
-        flat: gathered,
-        row,
-    };
-    let mut ho = sample(&source, &mesh, &topo, order);
-    drop(source);
-    if options.subdivide.is_some() {
-        ho = ho.subdivided();
-    }
-    laps.lap("sample");
-    let snapped = options.snap_boundary.then(|| {
-        crate::pipeline::snap_boundary(&mesh, &topo, &mut ho, options.line_search.certificate_depth)
-    });
-    let executor = crate::executor::executor(&options.backend);
-    let job = Job {
-        input,
-        options,
-        mesh: &mesh,
-        topo: &topo,
-        executor: executor.as_ref(),
-    };
-    let (min_sj, deviation) = crate::pipeline::quality_stage(&job, &ho)?;
-    laps.lap("quality");
-    // Rank 0's peak includes the sampling and checks of the whole output.
-    let mut all_figures = all_figures;
-    all_figures[0].peak_memory_bytes = peak_memory_bytes();
     let mut timings = laps.timings;
     timings.insert("total".into(), start.elapsed().as_secs_f64());
+    let (cg, blend_info) = (share.cg, share.blend);
     let report = CurveReport {
         input: input.to_owned(),
         output: PathBuf::new(),
-        dimension: mesh.dim,
-        elements: mesh.n_elements(),
-        order: ho.order,
+        dimension: out.dim,
+        elements: share.local.n_global as usize,
+        order,
         subdivide: options.subdivide,
         geometry: options.geometry,
         method: options.method.name(),
         elastic: None,
         // The distributed job runs on the CPU only.
         gpu_fallbacks: None,
-        output_nodes: ho.nodes.len(),
-        output_elements: ho.n_elements(),
-        boundary_facets: ho.n_boundary(),
+        output_nodes: sizes[0] as usize,
+        output_elements: share.local.n_global as usize,
+        boundary_facets: sizes[1] as usize,
         control_points: counts[0] as usize,
         spline_elements: counts[1] as usize,
         q2_elements: counts[2] as usize,
         demoted_elements: 0,
         kink_elements: counts[3] as usize,
-        snapped_boundary_vertices: snapped,
-        // The feature summary needs every rank's patches; not gathered yet.
+        snapped_boundary_vertices: None,
+        // The feature summary needs every rank's patches (a patch may cross ranks): not
+        // gathered yet.
         features: None,
         fit_weights: Some(options.fit.weights),
         fit_targets: Some(options.fit.targets),
@@ -530,7 +488,7 @@ pub fn curve(
         line_search_mode: options.line_search_mode,
         line_search_alpha: Some(0.5 * blend_info.min_factor),
         invalid_at_full_step: blend_info.invalid_at_full_step,
-        damped_control_points: blend_info.reduced_points,
+        damped_control_points: sizes[2] as usize,
         line_search: None,
         reduced_elements: blend_info.reduced_elements,
         min_det_jacobian_bound: Some(blend_info.min_det_lower_bound),
@@ -538,30 +496,101 @@ pub fn curve(
         energy: None,
         energy_skipped: None,
         invalid_elements: 0,
-        input_min_scaled_jacobian: input_msj,
-        min_scaled_jacobian: min_sj,
-        bounding_box_diagonal: deviation.diagonal,
-        boundary_vertex_deviation_max: deviation.vertex_max,
-        boundary_vertex_deviation_rms: deviation.vertex_rms,
-        boundary_node_distance_max: deviation.node_max,
-        boundary_sample_distance_max: deviation.sample_max,
+        input_min_scaled_jacobian: share.input_msj,
+        min_scaled_jacobian: quality.min_sj,
+        bounding_box_diagonal: quality.diagonal,
+        boundary_vertex_deviation_max: quality.vertex_max,
+        boundary_vertex_deviation_rms: quality.vertex_rms,
+        // Distances to the whole linear boundary need every rank's boundary: not measured
+        // under mpirun (null in the report).
+        boundary_node_distance_max: f64::NAN,
+        boundary_sample_distance_max: f64::NAN,
         timings,
         backend: "cpu".into(),
         adapter: None,
         gpu_precision: None,
     };
-    Ok(Some(Gathered {
-        mesh: ho,
+    Ok(Finished {
+        tag_names: share.local.mesh.tag_names.clone(),
+        output: share.output,
         report: DistributedReport {
             curve: report,
             ranks: size,
             per_rank: all_figures,
         },
-    }))
+    })
+}
+
+/// The output's quality over all ranks.
+struct Quality {
+    min_sj: f64,
+    diagonal: f64,
+    vertex_max: f64,
+    vertex_rms: f64,
+}
+
+/// The sampled check over all ranks (an error on every rank when an element is invalid), the
+/// input's bounding-box diagonal and the boundary vertices' deviation relative to it.
+fn global_quality(comm: &dyn Comm, input: &Path, share: &Share) -> Result<Quality, CurveError> {
+    let out = &share.output;
+    let invalid = comm.all_gather_f64(
+        &out.invalid_elements
+            .iter()
+            .map(|&e| e as f64)
+            .collect::<Vec<_>>(),
+    );
+    let invalid: Vec<usize> = invalid.concat().iter().map(|&e| e as usize).collect();
+    if !invalid.is_empty() {
+        return Err(CurveError::Invalid {
+            input: input.to_owned(),
+            what: "sampled output".into(),
+            count: invalid.len(),
+            first: invalid
+                .iter()
+                .take(8)
+                .map(|e| e.to_string())
+                .collect::<Vec<_>>()
+                .join(", "),
+        });
+    }
+    let mesh = &share.local.mesh;
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for e in 0..share.local.n_owned {
+        for &v in mesh.element(e) {
+            let x = mesh.coords[v as usize];
+            for k in 0..3 {
+                lo[k] = lo[k].min(x[k]);
+                hi[k] = hi[k].max(x[k]);
+            }
+        }
+    }
+    let (vmax, vsum, vn) = out.vertex_deviation;
+    let mut mins = [lo[0], lo[1], lo[2], out.min_scaled_jacobian];
+    let mut maxs = [hi[0], hi[1], hi[2], vmax];
+    let mut sums = [vsum, vn as f64];
+    comm.min_f64(&mut mins);
+    comm.max_f64(&mut maxs);
+    comm.sum_f64(&mut sums);
+    let diagonal = (0..3)
+        .map(|k| (maxs[k] - mins[k]).powi(2))
+        .sum::<f64>()
+        .sqrt()
+        .max(f64::MIN_POSITIVE);
+    Ok(Quality {
+        min_sj: mins[3],
+        diagonal,
+        vertex_max: maxs[3] / diagonal,
+        vertex_rms: if sums[1] > 0.0 {
+            (sums[0] / sums[1]).sqrt() / diagonal
+        } else {
+            0.0
+        },
+    })
 }
 
 /// Stages whose seconds are reported per rank.
-const STAGES: [&str; 8] = [
+const STAGES: [&str; 9] = [
     "read",
     "topology",
     "spline",
@@ -569,7 +598,8 @@ const STAGES: [&str; 8] = [
     "fit_assembly",
     "fit_cg",
     "validity",
-    "gather",
+    "sample",
+    "quality",
 ];
 
 /// Every rank's figures on every rank (a few numbers each).

@@ -4,7 +4,10 @@
 
 use super::comm::{Comm, Mpi};
 use super::job::{DistributedReport, curve as curve_job};
-use crate::pipeline::{CurveError, CurveOptions, prepare_high_order};
+use super::write::{WriteOptions, write_collective};
+use crate::io::gmsh_write::MshVersion;
+use crate::io::high_order::OutputFormat;
+use crate::pipeline::{CurveError, CurveOptions};
 use std::path::Path;
 
 /// The number of ranks of the MPI job this process belongs to, from the launcher's
@@ -13,6 +16,23 @@ pub fn launched_size() -> Option<usize> {
     ["OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "PMIX_SIZE"]
         .iter()
         .find_map(|v| std::env::var(v).ok()?.parse().ok())
+}
+
+/// This process's rank in the MPI job, from the launcher's environment, or `None` outside one.
+pub fn launched_rank() -> Option<usize> {
+    ["OMPI_COMM_WORLD_RANK", "PMI_RANK", "PMIX_RANK"]
+        .iter()
+        .find_map(|v| std::env::var(v).ok()?.parse().ok())
+}
+
+/// Under mpirun with several ranks, end a rank other than 0 quietly (status 0) on an error
+/// every rank finds before the job starts (an output path, an option): rank 0 prints the
+/// one error line and sets the job's status. Returns the error on rank 0 and outside mpirun.
+pub fn quiet_unless_rank_0<E>(e: E) -> E {
+    if distributed() && launched_rank().is_some_and(|r| r != 0) {
+        std::process::exit(0);
+    }
+    e
 }
 
 /// Whether `curve` should run distributed: under an MPI launcher with more than one rank.
@@ -28,8 +48,8 @@ pub enum Outcome {
     Share,
 }
 
-/// Run `curve` distributed: initialise MPI, run the job, write the output (and the JSON
-/// report) on rank 0, finalise MPI. An error on a rank other than 0 ends that process after
+/// Run `curve` distributed: initialise MPI, run the job, write the output collectively (and
+/// the JSON report on rank 0), finalise MPI. An error on a rank other than 0 ends that process after
 /// MPI is finalised, silently: with status 0 for an option error (rank 0 has the same one and
 /// reports it), else with status 1.
 pub fn curve(
@@ -56,6 +76,25 @@ pub fn curve(
     }
 }
 
+/// The output options the collective writer takes: one MSH 4.1 file (ASCII or binary).
+fn check_output(output: &Path, options: &CurveOptions) -> Result<(), CurveError> {
+    let refuse = |what: &str| {
+        Err(CurveError::Options(format!(
+            "{what} is not available under mpirun yet (docs/distributed.md); run it on one process"
+        )))
+    };
+    if OutputFormat::from_path(output) != Some(OutputFormat::Msh) {
+        return refuse("an output other than .msh");
+    }
+    if options.output.msh_version != MshVersion::V41 {
+        return refuse("--msh-version 2.2");
+    }
+    if options.output.vtu_boundary.is_some() {
+        return refuse("--vtu-boundary");
+    }
+    Ok(())
+}
+
 fn run(
     comm: &dyn Comm,
     input: &Path,
@@ -64,12 +103,24 @@ fn run(
     report: Option<&Path>,
     inputs: &[&Path],
 ) -> Result<Outcome, CurveError> {
-    let Some(gathered) = curve_job(comm, input, options)? else {
+    check_output(output, options)?;
+    let finished = curve_job(comm, input, options)?;
+    let t = std::time::Instant::now();
+    let write_options = WriteOptions {
+        binary: options.output.binary,
+        volume_name: &options.output.volume_name,
+        tag_names: &finished.tag_names,
+    };
+    let pending = match write_collective(comm, &finished.output, output, inputs, &write_options) {
+        Ok(p) => p,
+        // Rank 0 prints the error line; the others end quietly (see [`curve`]).
+        Err(e) if comm.rank() == 0 => return Err(e.into()),
+        Err(e) => return Err(CurveError::Options(e.to_string())),
+    };
+    let Some(pending) = pending else {
         return Ok(Outcome::Share);
     };
-    let t = std::time::Instant::now();
-    let pending = prepare_high_order(&gathered.mesh, output, &options.output, inputs)?;
-    let mut r = gathered.report;
+    let mut r = finished.report;
     r.curve.output = output.to_owned();
     r.curve
         .timings

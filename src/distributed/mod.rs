@@ -15,4 +15,6 @@ pub mod launch;
 pub mod local;
 pub mod partition;
 pub mod read;
+pub mod sample;
 pub mod share;
+pub mod write;

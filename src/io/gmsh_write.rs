@@ -50,7 +50,6 @@ pub const DEFAULT_VOLUME_NAME: &str = "fluid";
 /// ids; an unnamed region is `volume_name` when it is the only one, else `region_<tag>` (a
 /// region whose tag is also a boundary tag counts as unnamed).
 fn groups(mesh: &HighOrderMesh, volume_name: &str) -> Vec<Group> {
-    let d = mesh.dim;
     let by_tag = |tags: &[i32], n: usize| {
         let mut by: BTreeMap<i32, Vec<usize>> = BTreeMap::new();
         for i in 0..n {
@@ -60,13 +59,62 @@ fn groups(mesh: &HighOrderMesh, volume_name: &str) -> Vec<Group> {
         }
         by
     };
-    let mut out = Vec::new();
+    let mut bnd = by_tag(&mesh.boundary_tags, mesh.n_boundary());
+    let mut vol = by_tag(&mesh.element_tags, mesh.n_elements());
+    group_plan(
+        mesh.dim,
+        bnd.keys().copied(),
+        vol.keys().copied(),
+        &mesh.tag_names,
+        volume_name,
+    )
+    .into_iter()
+    .map(|g| {
+        let members = if g.dim == mesh.dim {
+            vol.remove(&g.tag)
+        } else {
+            bnd.remove(&g.tag)
+        };
+        Group {
+            dim: g.dim,
+            entity: g.entity,
+            physical: g.physical,
+            name: g.name,
+            members: members.unwrap_or_default(),
+        }
+    })
+    .collect()
+}
 
-    let bnd = by_tag(&mesh.boundary_tags, mesh.n_boundary());
-    let bnd_tags: std::collections::BTreeSet<i32> = bnd.keys().copied().collect();
-    let bnd_fresh = bnd.keys().copied().max().unwrap_or(0) + 1;
-    let only_untagged = bnd.len() == 1 && bnd.contains_key(&0);
-    for (k, (tag, members)) in bnd.into_iter().enumerate() {
+/// One physical group of [`group_plan`]: the tag (boundary or region, 0 = untagged) whose
+/// members it holds, and its dimension, entity tag, physical id and name.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct PlannedGroup {
+    pub dim: usize,
+    pub tag: i32,
+    pub entity: i32,
+    pub physical: i32,
+    pub name: String,
+}
+
+/// The physical groups of a mesh of dimension `d` whose boundary facets carry the tags
+/// `boundary_tags` and whose elements the tags `element_tags` (each non-negative, increasing,
+/// 0 = untagged), in the order [`write_msh`] writes them (see `groups`). It needs only the
+/// tags present, so ranks that each hold part of a mesh agree on it once they have agreed on
+/// the tags.
+pub fn group_plan(
+    d: usize,
+    boundary_tags: impl Iterator<Item = i32>,
+    element_tags: impl Iterator<Item = i32>,
+    tag_names: &BTreeMap<i32, String>,
+    volume_name: &str,
+) -> Vec<PlannedGroup> {
+    let mut out = Vec::new();
+    let bnd: Vec<i32> = boundary_tags.collect();
+    let bnd_tags: std::collections::BTreeSet<i32> = bnd.iter().copied().collect();
+    let bnd_fresh = bnd.iter().copied().max().unwrap_or(0) + 1;
+    let only_untagged = bnd == [0];
+    for (k, &tag) in bnd.iter().enumerate() {
         let (physical, name) = if tag == 0 {
             let name = if only_untagged {
                 "boundary"
@@ -75,38 +123,37 @@ fn groups(mesh: &HighOrderMesh, volume_name: &str) -> Vec<Group> {
             };
             (bnd_fresh, name.to_string())
         } else {
-            let name = mesh
-                .tag_names
+            let name = tag_names
                 .get(&tag)
                 .cloned()
                 .unwrap_or_else(|| format!("boundary_{tag}"));
             (tag, name)
         };
-        out.push(Group {
+        out.push(PlannedGroup {
             dim: d - 1,
+            tag,
             entity: k as i32 + 1,
             physical,
             name,
-            members,
         });
     }
     let bnd_ids: std::collections::BTreeSet<i32> = out.iter().map(|g| g.physical).collect();
     let bnd_max = bnd_ids.iter().copied().max().unwrap_or(0);
 
-    let vol = by_tag(&mesh.element_tags, mesh.n_elements());
-    let clash = vol.keys().any(|t| *t > 0 && bnd_ids.contains(t));
+    let vol: Vec<i32> = element_tags.collect();
+    let clash = vol.iter().any(|t| *t > 0 && bnd_ids.contains(t));
     let shift = if clash { bnd_max } else { 0 };
-    let vol_max = vol.keys().copied().max().unwrap_or(0);
+    let vol_max = vol.iter().copied().max().unwrap_or(0);
     let vol_fresh = (vol_max + shift).max(bnd_max) + 1;
     let single = vol.len() == 1;
-    for (k, (tag, members)) in vol.into_iter().enumerate() {
+    for (k, &tag) in vol.iter().enumerate() {
         let physical = if tag == 0 { vol_fresh } else { tag + shift };
         // Tag names are one map for boundary and region tags: a name of a tag that is also a
         // boundary tag belongs to the boundary group.
         let named = if tag == 0 || bnd_tags.contains(&tag) {
             None
         } else {
-            mesh.tag_names.get(&tag).cloned()
+            tag_names.get(&tag).cloned()
         };
         let name = named.unwrap_or_else(|| {
             if single {
@@ -117,12 +164,12 @@ fn groups(mesh: &HighOrderMesh, volume_name: &str) -> Vec<Group> {
                 format!("region_{tag}")
             }
         });
-        out.push(Group {
+        out.push(PlannedGroup {
             dim: d,
+            tag,
             entity: k as i32 + 1,
             physical,
             name,
-            members,
         });
     }
     out

@@ -179,6 +179,12 @@ impl PendingFile {
         &self.path
     }
 
+    /// The temporary holding the content until [`PendingFile::commit`] (other processes of
+    /// a job write their parts of it by offset).
+    pub fn temp_path(&self) -> Option<&Path> {
+        self.temp.as_deref()
+    }
+
     /// Rename the temporary over the target and sync the directory.
     pub fn commit(mut self) -> Result<(), WriteError> {
         let path = self.path.clone();

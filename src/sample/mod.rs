@@ -437,7 +437,7 @@ impl<'a> Owners<'a> {
 }
 
 /// Boundary facets in their outward frames: (p+1)^(d−1) node ids each.
-fn boundary_facets(mesh: &LinearMesh, topo: &Topology, num: &Numbering) -> Vec<u32> {
+pub(crate) fn boundary_facets(mesh: &LinearMesh, topo: &Topology, num: &Numbering) -> Vec<u32> {
     let (d, p) = (mesh.dim, num.p);
     let npf = (p + 1).pow(d as u32 - 1);
     let mut boundary = vec![0u32; topo.boundary_facets.len() * npf];
