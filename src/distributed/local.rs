@@ -165,18 +165,17 @@ impl BlendShare for LocalShare<'_> {
     fn mine(&self) -> Option<&[usize]> {
         Some(self.mine)
     }
-    fn union(&self, elements: Vec<usize>) -> Vec<usize> {
+    fn union(&self, elements: Vec<usize>) -> (Vec<usize>, bool) {
         let v: Vec<f64> = elements.iter().map(|&e| self.global[e] as f64).collect();
-        let mut all: Vec<usize> = self
-            .comm
-            .all_gather_f64(&v)
-            .concat()
+        let gathered = self.comm.all_gather_f64(&v).concat();
+        let any = !gathered.is_empty();
+        let mut all: Vec<usize> = gathered
             .into_iter()
             .filter_map(|x| self.local_of.get(&(x as u64)).copied())
             .collect();
         all.sort_unstable();
         all.dedup();
-        all
+        (all, any)
     }
     /// The blend concatenates the straight elements' ratios to take their 1st percentile at
     /// index n/100 of the sorted list, n its own element count: the whole mesh's percentile

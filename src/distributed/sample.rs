@@ -237,7 +237,11 @@ pub fn to_file_order(comm: &dyn Comm, local: &LocalMesh, out: &mut RankOutput) {
         s.push(g as f64);
         s.push(out.element_tags.get(e).map_or(0.0, |&t| t as f64));
         s.extend_from_slice(&out.element_boxes[e]);
-        s.extend(out.elements[e * npe..(e + 1) * npe].iter().map(|&t| t as f64));
+        s.extend(
+            out.elements[e * npe..(e + 1) * npe]
+                .iter()
+                .map(|&t| t as f64),
+        );
     }
     out.elements = Vec::new();
     out.element_boxes = Vec::new();

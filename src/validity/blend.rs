@@ -261,10 +261,11 @@ fn straight_reference(
         .filter(|(_, b)| !(b.lower > 0.0))
         .map(|(&e, _)| e)
         .collect();
-    let bad = share.union(bad);
-    if !bad.is_empty() {
+    let n_bad = share.sum(bad.len());
+    let (bad, any_bad) = share.union(bad);
+    if any_bad {
         return Err(BlendError::StraightInvalid {
-            count: bad.len(),
+            count: n_bad,
             first: bad.into_iter().take(8).collect(),
         });
     }
@@ -289,8 +290,10 @@ fn straight_reference(
 pub trait BlendShare {
     /// The elements this process judges (`None`: all).
     fn mine(&self) -> Option<&[usize]>;
-    /// The union of every process's `elements`, sorted.
-    fn union(&self, elements: Vec<usize>) -> Vec<usize>;
+    /// The union of every process's `elements`: the members this process holds, sorted, and
+    /// whether the union is non-empty anywhere (every process gets the same flag, so loops
+    /// and early returns on it stay collective).
+    fn union(&self, elements: Vec<usize>) -> (Vec<usize>, bool);
     /// Every process's `values`, concatenated.
     fn concat(&self, values: Vec<f64>) -> Vec<f64>;
     /// The sum of every process's `v`.
@@ -306,8 +309,9 @@ impl BlendShare for Alone {
     fn mine(&self) -> Option<&[usize]> {
         None
     }
-    fn union(&self, elements: Vec<usize>) -> Vec<usize> {
-        elements
+    fn union(&self, elements: Vec<usize>) -> (Vec<usize>, bool) {
+        let any = !elements.is_empty();
+        (elements, any)
     }
     fn concat(&self, values: Vec<f64>) -> Vec<f64> {
         values
@@ -433,7 +437,7 @@ pub fn blend_search_shared(
     for (&e, r) in mine.iter().zip(&first) {
         lower[e] = r.2;
     }
-    let mut bad: Vec<usize> = share.union(
+    let (mut bad, mut any_bad) = share.union(
         mine.iter()
             .zip(&first)
             .filter(|(_, r)| !r.1)
@@ -441,11 +445,11 @@ pub fn blend_search_shared(
             .collect(),
     );
     let mut factors = Vec::new();
-    if !bad.is_empty() {
+    if any_bad {
         factors = vec![FITTED; blended.ids.len()];
     }
-    let mut reduced = vec![false; if bad.is_empty() { 0 } else { n }];
-    if params.global && !bad.is_empty() {
+    let mut reduced = vec![false; if any_bad { n } else { 0 }];
+    if params.global && any_bad {
         let r = global_bisection(
             &judge,
             blended,
@@ -460,8 +464,11 @@ pub fn blend_search_shared(
         }
         reduced.fill(true);
         bad.clear();
+        any_bad = false;
     }
-    while !bad.is_empty() {
+    // Until no process has a rejected element: a process whose own elements are all accepted
+    // still takes part in every round's exchange.
+    while any_bad {
         let mut recheck = reduce_rejected(blended, &mut factors, &bad, params.max_bisections);
         for &e in &recheck {
             reduced[e] = blended.ids.of(e)[..np]
@@ -484,7 +491,7 @@ pub fn blend_search_shared(
                 mine_bad.push(e);
             }
         }
-        bad = share.union(mine_bad);
+        (bad, any_bad) = share.union(mine_bad);
     }
     blended.factors = factors;
     blended.refresh();
