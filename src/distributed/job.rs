@@ -390,20 +390,22 @@ fn damped_owned(local: &LocalMesh, blended: &Blended) -> usize {
     }
     let d = local.mesh.dim;
     let np = if d == 2 { 9 } else { 27 };
-    let mut lowest = vec![u64::MAX; blended.factors.len()];
+    // Each entity is counted by the rank holding the lowest global element around it (its
+    // local index is kept: own elements come first, whatever the partition).
+    let mut lowest = vec![(u64::MAX, usize::MAX); blended.factors.len()];
     for e in 0..local.mesh.n_elements() {
         let g = local.global_element[e];
         for &id in &blended.ids.of(e)[..np] {
             let l = &mut lowest[id as usize];
-            *l = (*l).min(g);
+            if g < l.0 {
+                *l = (g, e);
+            }
         }
     }
-    let first = local.global_element.first().copied().unwrap_or(0);
-    let last = first + local.n_owned as u64;
     lowest
         .iter()
         .zip(&blended.factors)
-        .filter(|&(&g, &f)| (first..last).contains(&g) && f < crate::validity::blend::FITTED)
+        .filter(|&(&(_, e), &f)| e < local.n_owned && f < crate::validity::blend::FITTED)
         .count()
 }
 
