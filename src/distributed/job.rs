@@ -6,8 +6,9 @@
 //! rank, its share of the sampled output in global node tags ([`RankOutput`], written
 //! collectively by [`super::write`]) and the [`DistributedReport`].
 //!
-//! Stages per rank: read its contiguous run of the file's elements and [`GHOST_DEPTH`] vertex
-//! rings of ghosts by offsets ([`super::read`]); build the topology, features, smooth targets
+//! Stages per rank: read its contiguous run of the file's elements by offsets, move the
+//! elements to their Morton parts and read [`GHOST_DEPTH`] vertex rings of ghosts
+//! ([`super::share`], [`super::read`]); build the topology, features, smooth targets
 //! and spline space on that sub-mesh with the serial stage functions
 //! (`pipeline::spline::SplineSetup`); agree on the shared control points by keys of
 //! global entity ids ([`super::local`]); assemble the normal equations over its own elements
@@ -15,7 +16,8 @@
 //! distributed block-Jacobi CG ([`super::cg`]); run the certified blend on its own elements,
 //! the ranks agreeing on the rejected elements of every round in global ids
 //! ([`crate::validity::blend::blend_search_shared`]); sample its own elements with a global
-//! node numbering ([`super::sample`]) and check them; no rank reads or holds the whole mesh.
+//! node numbering ([`super::sample`]), check them and route them back to their file runs for
+//! the collective write; no rank reads or holds the whole mesh.
 //! Invariant: the result equals the serial run's up to
 //! the CG tolerance (the block-Jacobi aggregates differ from the serial solver's); the
 //! blend's factors are the serial search's for the same fitted map.
