@@ -34,6 +34,22 @@ fn mpirun(np: usize) -> Command {
     c
 }
 
+/// A generated cylinder of about `elements` hexes as binary MSH 4.1 (what the ranks read by
+/// offsets), in the scratch directory under `name`.
+fn binary_cylinder(name: &str, elements: usize) -> PathBuf {
+    let input = scratch(name);
+    common::run_ok(Command::new(BIN).args([
+        "generate",
+        "cylinder",
+        "--elements",
+        &elements.to_string(),
+        "--binary",
+        "-o",
+        input.to_str().unwrap(),
+    ]));
+    input
+}
+
 fn have_mpirun() -> bool {
     let ok = Command::new("mpirun")
         .arg("--version")
@@ -105,16 +121,7 @@ fn mpirun_1_2_4_ranks_equal_the_serial_run() {
         return;
     }
     // Binary MSH 4.1: each rank reads its share of it by offsets.
-    let input = scratch("cylinder.msh");
-    common::run_ok(Command::new(BIN).args([
-        "generate",
-        "cylinder",
-        "--elements",
-        "1500",
-        "--binary",
-        "-o",
-        input.to_str().unwrap(),
-    ]));
+    let input = binary_cylinder("cylinder.msh", 1500);
     let serial_out = scratch("serial.msh");
     common::run_ok(Command::new(BIN).args([
         "curve",
@@ -251,16 +258,7 @@ fn unwritable_or_unsupported_outputs_under_mpirun_fail_with_one_line() {
     if !have_mpirun() {
         return;
     }
-    let input = scratch("outputs.msh");
-    common::run_ok(Command::new(BIN).args([
-        "generate",
-        "cylinder",
-        "--elements",
-        "200",
-        "--binary",
-        "-o",
-        input.to_str().unwrap(),
-    ]));
+    let input = binary_cylinder("outputs.msh", 200);
     let missing = scratch("no-such-dir").join("out.msh");
     let vtu = scratch("out.vtu");
     let _ = std::fs::remove_file(&vtu);
@@ -369,16 +367,7 @@ fn every_rank_peaks_well_below_the_serial_memory() {
     if !have_mpirun() {
         return;
     }
-    let input = scratch("memory.msh");
-    common::run_ok(Command::new(BIN).args([
-        "generate",
-        "cylinder",
-        "--elements",
-        "60000",
-        "--binary",
-        "-o",
-        input.to_str().unwrap(),
-    ]));
+    let input = binary_cylinder("memory.msh", 60000);
     // One thread, as each rank has: the serial peak grows with rayon's threads.
     let serial = peak_of(Command::new(BIN).env("RAYON_NUM_THREADS", "1").args([
         "curve",
@@ -522,16 +511,7 @@ fn the_morton_repartition_owns_and_ghosts_as_computed_from_the_file() {
     if !have_mpirun() {
         return;
     }
-    let input = scratch("repartition.msh");
-    common::run_ok(Command::new(BIN).args([
-        "generate",
-        "cylinder",
-        "--elements",
-        "12000",
-        "--binary",
-        "-o",
-        input.to_str().unwrap(),
-    ]));
+    let input = binary_cylinder("repartition.msh", 12000);
     let mut got = Vec::new();
     for (np, partition) in [(2, "morton"), (4, "morton"), (4, "file-order")] {
         let report = scratch(&format!("repartition_{np}_{partition}.json"));

@@ -24,7 +24,7 @@
 
 use super::comm::Comm;
 use super::sample::RankOutput;
-use crate::io::gmsh_write::{PlannedGroup, group_plan};
+use crate::io::gmsh_write::{PlannedGroup, group_plan, write_format_and_names};
 use crate::io::output::{PendingFile, WriteBin, WriteError};
 use crate::sample::ordering::{gmsh_hex, gmsh_line, gmsh_quad, gmsh_type, to_indices};
 use std::collections::{BTreeMap, BTreeSet};
@@ -126,18 +126,11 @@ impl Plan {
     /// `$MeshFormat`, `$PhysicalNames`, `$Entities` and the `$Nodes` header.
     fn header(&self, w: &mut impl Write) -> io::Result<()> {
         let binary = self.binary;
-        writeln!(w, "$MeshFormat\n4.1 {} 8", binary as i32)?;
-        if binary {
-            w.i32(1)?;
-            writeln!(w)?;
-        }
-        writeln!(w, "$EndMeshFormat")?;
-        writeln!(w, "$PhysicalNames\n{}", self.groups.len())?;
-        for g in &self.groups {
-            let name = g.name.replace('"', "'");
-            writeln!(w, "{} {} \"{name}\"", g.dim, g.physical)?;
-        }
-        writeln!(w, "$EndPhysicalNames")?;
+        let names = self
+            .groups
+            .iter()
+            .map(|g| (g.dim, g.physical, g.name.as_str()));
+        write_format_and_names(w, "4.1", binary, names)?;
         let mut count = [0u64; 4];
         for g in &self.groups {
             count[g.dim] += 1;

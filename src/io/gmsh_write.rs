@@ -97,6 +97,28 @@ pub struct PlannedGroup {
     pub name: String,
 }
 
+/// `$MeshFormat` (version `vstr`, ASCII or binary with its endianness marker) and
+/// `$PhysicalNames` of `groups` as (dimension, physical id, name): the header of the serial
+/// and of the collective (`distributed::write`) MSH writers alike.
+pub(crate) fn write_format_and_names<'a>(
+    w: &mut impl Write,
+    vstr: &str,
+    binary: bool,
+    groups: impl ExactSizeIterator<Item = (usize, i32, &'a str)>,
+) -> io::Result<()> {
+    writeln!(w, "$MeshFormat\n{vstr} {} 8", binary as i32)?;
+    if binary {
+        w.i32(1)?;
+        writeln!(w)?;
+    }
+    writeln!(w, "$EndMeshFormat")?;
+    writeln!(w, "$PhysicalNames\n{}", groups.len())?;
+    for (dim, physical, name) in groups {
+        writeln!(w, "{dim} {physical} \"{}\"", name.replace('"', "'"))?;
+    }
+    writeln!(w, "$EndPhysicalNames")
+}
+
 /// The physical groups of a mesh of dimension `d` whose boundary facets carry the tags
 /// `boundary_tags` and whose elements the tags `element_tags` (each non-negative, increasing,
 /// 0 = untagged), in the order [`write_msh`] writes them (see `groups`). It needs only the
@@ -272,28 +294,15 @@ impl<'m> Msh<'m> {
 
     /// `$MeshFormat` and `$PhysicalNames`.
     fn header(&self, version: MshVersion, w: &mut impl Write) -> io::Result<()> {
-        let binary = self.binary;
-        let (vstr, ftype) = match version {
-            MshVersion::V22 => ("2.2", binary as i32),
-            MshVersion::V41 => ("4.1", binary as i32),
+        let vstr = match version {
+            MshVersion::V22 => "2.2",
+            MshVersion::V41 => "4.1",
         };
-        writeln!(w, "$MeshFormat\n{vstr} {ftype} 8")?;
-        if binary {
-            w.i32(1)?;
-            writeln!(w)?;
-        }
-        writeln!(w, "$EndMeshFormat")?;
-        writeln!(w, "$PhysicalNames\n{}", self.groups.len())?;
-        for g in &self.groups {
-            writeln!(
-                w,
-                "{} {} \"{}\"",
-                g.dim,
-                g.physical,
-                g.name.replace('"', "'")
-            )?;
-        }
-        writeln!(w, "$EndPhysicalNames")
+        let names = self
+            .groups
+            .iter()
+            .map(|g| (g.dim, g.physical, g.name.as_str()));
+        write_format_and_names(w, vstr, self.binary, names)
     }
 
     /// Bounding box `[min x, y, z, max x, y, z]` of the nodes of group `g`'s members. In
