@@ -212,9 +212,9 @@ fn union(a: (V3, V3), b: &(V3, V3)) -> (V3, V3) {
 const EMPTY_BOX: (V3, V3) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
 
 impl<'a> BoundaryTree<'a> {
-    fn new(mesh: &'a LinearMesh, topo: &'a Topology) -> Self {
-        let facets: Vec<&[u32]> = topo
-            .boundary_facets
+    /// The tree of the topology facets `facets` (the whole boundary: `topo.boundary_facets`).
+    fn new(mesh: &'a LinearMesh, topo: &'a Topology, facets: &[u32]) -> Self {
+        let facets: Vec<&[u32]> = facets
             .iter()
             .map(|&f| topo.facet_vertices(f as usize))
             .collect();
@@ -397,25 +397,20 @@ pub fn vertex_deviation(mesh: &LinearMesh, topo: &Topology, ho: &HighOrderMesh) 
     (max, if n > 0 { (sum / n as f64).sqrt() } else { 0.0 })
 }
 
-/// The three measures of `ho` against the input `mesh` (see the module docs).
-pub fn boundary_deviation(
+/// The largest distances (absolute: node, sample; see the module docs) of the boundary facets
+/// of `ho` from the linear boundary made of the topology facets `facets` of `mesh`: output
+/// facet i lies over `facets[over[i]]` (`usize::MAX`: unknown). A share of a mesh passes the
+/// facets of its sub-mesh that are boundary facets of the whole mesh, around its own ones.
+pub fn facet_distances(
     mesh: &LinearMesh,
     topo: &Topology,
+    facets: &[u32],
     ho: &HighOrderMesh,
-) -> BoundaryDeviation {
-    let diagonal = diagonal(mesh);
-    let (vertex_max, vertex_rms) = vertex_deviation(mesh, topo, ho);
-    let grid = BoundaryTree::new(mesh, topo);
-    // Output boundary facet f lies over input boundary facet f (both in the topology's order),
-    // unless the output was subdivided: then every facet is searched for from scratch.
+    over: &[usize],
+) -> (f64, f64) {
+    let grid = BoundaryTree::new(mesh, topo, facets);
     let npf = ho.nodes_per_facet();
-    let own = |f: usize| {
-        if ho.n_boundary() == topo.boundary_facets.len() {
-            f
-        } else {
-            usize::MAX
-        }
-    };
+    let own = |f: usize| over[f];
     // Facet points on the lattice of order 2p (p = 1: the midpoints too). The even lattice
     // points are the facet's nodes (the Lagrange basis is exactly 1 and 0 there, so the
     // interpolated point is the node itself), so one pass gives both maxima.
@@ -459,6 +454,25 @@ pub fn boundary_deviation(
             (node, sample)
         })
         .reduce(|| (0.0, 0.0), |a, b| (a.0.max(b.0), a.1.max(b.1)));
+    (node_max, sample_max)
+}
+
+/// The three measures of `ho` against the input `mesh` (see the module docs).
+pub fn boundary_deviation(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    ho: &HighOrderMesh,
+) -> BoundaryDeviation {
+    let diagonal = diagonal(mesh);
+    let (vertex_max, vertex_rms) = vertex_deviation(mesh, topo, ho);
+    // Output boundary facet f lies over input boundary facet f (both in the topology's order),
+    // unless the output was subdivided: then every facet is searched for from scratch.
+    let over: Vec<usize> = if ho.n_boundary() == topo.boundary_facets.len() {
+        (0..ho.n_boundary()).collect()
+    } else {
+        vec![usize::MAX; ho.n_boundary()]
+    };
+    let (node_max, sample_max) = facet_distances(mesh, topo, &topo.boundary_facets, ho, &over);
     let (node_max, sample_max) = (node_max / diagonal, sample_max / diagonal);
     BoundaryDeviation {
         diagonal,
@@ -544,7 +558,7 @@ mod tests {
         ];
         for mesh in &meshes {
             let topo = Topology::build(mesh);
-            let tree = BoundaryTree::new(mesh, &topo);
+            let tree = BoundaryTree::new(mesh, &topo, &topo.boundary_facets);
             let (lo, hi) = mesh.bounding_box();
             let mut seed = 12345u64;
             let mut rand = || {

@@ -62,6 +62,12 @@ fn remove_temporaries_on_signals() {
                 continue;
             }
             let removed = polyspline::io::output::remove_registered_temporaries();
+            // A rank of a failed MPI job, ending after the job's one error line: the launcher
+            // stops the ranks that are still finishing; that is not news.
+            #[cfg(feature = "mpi")]
+            if polyspline::distributed::launch::failed() {
+                std::process::exit(1);
+            }
             let name = match sig {
                 libc::SIGINT => "SIGINT",
                 libc::SIGTERM => "SIGTERM",

@@ -191,6 +191,39 @@ fn mpirun_1_2_4_ranks_equal_the_serial_run() {
         for key in ["output_nodes", "output_elements", "boundary_facets"] {
             assert_eq!(r[key], serial_report[key], "{name}: {key}");
         }
+        // The feature summary over the ranks: each entity counted once, the patches that
+        // cross ranks joined; the distances from the input's linear boundary, the maxima over
+        // the ranks of what each measures against the boundary near its own facets. Figures
+        // of the output, so equal up to its own difference from the serial output.
+        let (f, sf) = (&r["features"], &serial_report["features"]);
+        assert!(sf["feature_edges"].as_u64().unwrap() > 0, "{sf}");
+        for key in [
+            "feature_edges",
+            "feature_corners",
+            "feature_vertices",
+            "patches",
+            "planar_patches",
+            "crease_elements",
+        ] {
+            assert_eq!(f[key], sf[key], "{name}: features.{key}");
+        }
+        let close = |a: &Value, b: &Value, what: &str| {
+            let (a, b) = (a.as_f64().unwrap(), b.as_f64().unwrap());
+            assert!((a - b).abs() <= 1e-6, "{name}: {what} {a:e} against {b:e}");
+        };
+        for key in ["feature_vertex_deviation_max", "planarity_max"] {
+            close(&f[key], &sf[key], key);
+        }
+        for key in [
+            "boundary_node_distance_max",
+            "boundary_sample_distance_max",
+            "boundary_vertex_deviation_max",
+            "boundary_vertex_deviation_rms",
+            "bounding_box_diagonal",
+        ] {
+            assert!(serial_report[key].as_f64().unwrap() > 0.0, "{key}");
+            close(&r[key], &serial_report[key], key);
+        }
         if np > 1 {
             // The shares partition the elements; every rank has work and a halo.
             assert_eq!(r["ranks"], np);
@@ -227,6 +260,9 @@ fn mpirun_1_2_4_ranks_equal_the_serial_run() {
 
 /// Temporaries (`.NAME.*.tmp`) beside `out`.
 fn temporaries(out: &Path) -> usize {
+    if !out.parent().unwrap().is_dir() {
+        return 0;
+    }
     let name = out.file_name().unwrap().to_string_lossy().to_string();
     std::fs::read_dir(out.parent().unwrap())
         .unwrap()
@@ -263,10 +299,13 @@ fn unwritable_or_unsupported_outputs_under_mpirun_fail_with_one_line() {
     let vtu = scratch("out.vtu");
     let _ = std::fs::remove_file(&vtu);
     let onto_input = input.clone();
-    let cases: [(&Path, &str); 3] = [
+    let unknown = scratch("out.xyz");
+    let cases: [(&Path, &str); 4] = [
         (&missing, "does not exist"),
         (&vtu, "other than .msh"),
         (&onto_input, "input"),
+        // Found before MPI starts, by every rank: printed once all the same.
+        (&unknown, "unknown output format"),
     ];
     for (out, what) in cases {
         let before = std::fs::read(&input).unwrap();
@@ -331,6 +370,83 @@ fn unsupported_options_under_mpirun_fail_with_one_line_and_write_nothing() {
     assert!(lines[0].contains("--fit energy"), "{err}");
     assert!(!err.contains("panicked"), "{err}");
     assert!(!out.exists());
+}
+
+/// `input` with its bytes patched by `edit` (the binary MSH 4.1 layout: a node block's
+/// coordinates end right before `$EndNodes`, an element block's node tags right before
+/// `$EndElements`), written as `name`.
+fn corrupted(input: &Path, name: &str, edit: impl Fn(&mut Vec<u8>)) -> PathBuf {
+    let mut bytes = std::fs::read(input).unwrap();
+    edit(&mut bytes);
+    let path = scratch(name);
+    std::fs::write(&path, bytes).unwrap();
+    path
+}
+
+fn find(bytes: &[u8], what: &[u8]) -> usize {
+    bytes
+        .windows(what.len())
+        .position(|w| w == what)
+        .unwrap_or_else(|| panic!("{} not found", String::from_utf8_lossy(what)))
+}
+
+/// A defect that only the ranks holding part of the mesh find (a NaN coordinate of the last
+/// node, at the top rim; an element of the last run naming an undefined node), and a file cut
+/// inside its elements (found by every rank while indexing): every rank stops (no rank waits
+/// in a collective: `timeout` turns a hang into a failure), the job's status is non-zero, the
+/// error is printed once and names the file and the problem, and nothing is written.
+#[test]
+fn a_bad_share_of_the_input_stops_every_rank_with_one_error_line() {
+    if !have_mpirun() {
+        return;
+    }
+    let input = binary_cylinder("defects.msh", 1500);
+    let nan = corrupted(&input, "nan.msh", |b| {
+        let at = find(b, b"\n$EndNodes");
+        b[at - 24..at - 16].copy_from_slice(&f64::NAN.to_le_bytes());
+    });
+    let undefined = corrupted(&input, "undefined.msh", |b| {
+        let at = find(b, b"\n$EndElements");
+        b[at - 8..at].copy_from_slice(&1_000_000_000u64.to_le_bytes());
+    });
+    let truncated = corrupted(&input, "truncated.msh", |b| {
+        let (from, to) = (find(b, b"$Elements"), find(b, b"$EndElements"));
+        b.truncate(from + (to - from) * 3 / 4);
+    });
+    let cases: [(&Path, &str); 3] = [
+        (&nan, "non-finite x coordinate"),
+        (&undefined, "not defined in $Nodes"),
+        (&truncated, "end of the file"),
+    ];
+    for np in [2usize, 4] {
+        for (bad, what) in cases {
+            let out = scratch(&format!("defect_np{np}.msh"));
+            let _ = std::fs::remove_file(&out);
+            let mut cmd = Command::new("timeout");
+            cmd.args(["120", "mpirun", "--oversubscribe", "-np", &np.to_string()])
+                .envs(mpirun(np).get_envs().filter_map(|(k, v)| Some((k, v?))))
+                .args([
+                    BIN,
+                    "curve",
+                    bad.to_str().unwrap(),
+                    "-o",
+                    out.to_str().unwrap(),
+                ]);
+            let o = cmd.output().unwrap();
+            let name = bad.file_name().unwrap().to_string_lossy();
+            assert_ne!(o.status.code(), Some(124), "{name} at {np} ranks: hung");
+            let lines = error_lines(&o);
+            assert_eq!(lines.len(), 1, "{name} at {np} ranks: {lines:?}");
+            assert!(
+                lines[0].contains(&*name) && lines[0].contains(what),
+                "{name} at {np} ranks: {lines:?}"
+            );
+            let err = String::from_utf8_lossy(&o.stderr);
+            assert!(!err.contains("interrupted"), "{err}");
+            assert!(!out.exists(), "{name} at {np} ranks");
+            assert_eq!(temporaries(&out), 0);
+        }
+    }
 }
 
 /// Largest peak memory of a rank at 4 ranks relative to the one-thread serial run's on the

@@ -256,13 +256,6 @@ impl Args {
 }
 
 pub(super) fn run(args: Args) -> anyhow::Result<()> {
-    // Every output path is checked before any work, against the inputs and each other.
-    if OutputFormat::from_path(&args.output).is_none() {
-        anyhow::bail!(
-            "{}: unknown output format; use .msh (Gmsh) or .vtu (VTK)",
-            args.output.display()
-        );
-    }
     let mesh = args.mesh.clone();
     let output = args.output.clone();
     let report = args.report.clone();
@@ -272,7 +265,14 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
     let outputs: Vec<&Path> = std::iter::once(output.as_path())
         .chain(report.as_deref())
         .collect();
+    // Every output path is checked before any work, against the inputs and each other.
     let prechecks = || -> anyhow::Result<_> {
+        if OutputFormat::from_path(&output).is_none() {
+            anyhow::bail!(
+                "{}: unknown output format; use .msh (Gmsh) or .vtu (VTK)",
+                output.display()
+            );
+        }
         check_outputs(&outputs, &inputs)?;
         polyspline::params::check_kink_angle(args.kink_angle)?;
         Ok(args.backend.resolve(args.precision)?)

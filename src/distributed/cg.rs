@@ -12,8 +12,10 @@
 //! sharing a control point exchange their partial values and add them **in rank order**, so
 //! every copy is bit-identical (a different order per rank would let the copies drift apart
 //! by rounding over the iterations). Dot products count each control point once, on its owner
-//! (the lowest rank touching it), then sum over the ranks (one all-reduce of 3 values per dot
-//! product, two per iteration besides the stopping test's).
+//! (the lowest rank touching it), then sum over the ranks (one all-reduce of 3 values for p·Kp, one of
+//! 6 for r·z and the stopping test's r·r together: two per iteration). The halo exchange
+//! needs no counts (the lists are the same on both sides), so an iteration is 3 collectives:
+//! on oversubscribed or loaded nodes each one waits for every rank to be scheduled.
 //!
 //! **Preconditioner.** Block Jacobi, as the serial solver's default
 //! ([`crate::solve::block_jacobi`]): the control points only this rank touches have complete
@@ -112,7 +114,9 @@ impl Halo {
                 .flat_map(|&i| v[w * i as usize..w * (i as usize + 1)].to_vec())
                 .collect();
         }
-        let recv = comm.exchange_f64(&send);
+        // The lists are the same on both sides: no counts to exchange (one collective per
+        // product, which matters when the ranks wait on each other).
+        let recv = comm.exchange_symmetric_f64(&send);
         let mine = v.to_vec();
         v.fill(0.0);
         // Rank order: the neighbours below this rank, this rank, the neighbours above.
@@ -135,8 +139,8 @@ impl Halo {
         }
     }
 
-    /// Σ over owned control points of a·b per coordinate, summed over the ranks.
-    fn dot(&self, comm: &dyn Comm, a: &[[f64; 3]], b: &[[f64; 3]]) -> [f64; 3] {
+    /// Σ over owned control points of a·b per coordinate, on this rank.
+    fn local_dot(&self, a: &[[f64; 3]], b: &[[f64; 3]]) -> [f64; 3] {
         let mut s = [0.0f64; 3];
         for ((x, y), &o) in a.iter().zip(b).zip(&self.owned) {
             if o {
@@ -145,8 +149,28 @@ impl Halo {
                 }
             }
         }
+        s
+    }
+
+    /// Σ over owned control points of a·b per coordinate, summed over the ranks.
+    fn dot(&self, comm: &dyn Comm, a: &[[f64; 3]], b: &[[f64; 3]]) -> [f64; 3] {
+        let mut s = self.local_dot(a, b);
         comm.sum_f64(&mut s);
         s
+    }
+
+    /// The dot products a·b and c·d in one reduction (each component's sum is the one
+    /// [`Halo::dot`] would give: the reduction is element-wise).
+    fn dot2(
+        &self,
+        comm: &dyn Comm,
+        (a, b): (&[[f64; 3]], &[[f64; 3]]),
+        (c, d): (&[[f64; 3]], &[[f64; 3]]),
+    ) -> ([f64; 3], [f64; 3]) {
+        let (x, y) = (self.local_dot(a, b), self.local_dot(c, d));
+        let mut s = [x[0], x[1], x[2], y[0], y[1], y[2]];
+        comm.sum_f64(&mut s);
+        ([s[0], s[1], s[2]], [s[3], s[4], s[5]])
     }
 }
 
@@ -364,8 +388,7 @@ pub fn pcg(
     let mut z = vec![[0.0; 3]; n];
     precondition(&r, &mut z);
     let mut p = z.clone();
-    let mut rz = halo.dot(comm, &r, &z);
-    let mut rr = halo.dot(comm, &r, &r);
+    let (mut rz, mut rr) = halo.dot2(comm, (&r, &z), (&r, &r));
     let mut ap = vec![[0.0; 3]; n];
     let mut it = 0;
     while (0..3).any(|c| running(rr, c)) {
@@ -397,7 +420,7 @@ pub fn pcg(
             }
         }
         precondition(&r, &mut z);
-        let rz_new = halo.dot(comm, &r, &z);
+        let (rz_new, rr_new) = halo.dot2(comm, (&r, &z), (&r, &r));
         let beta: [f64; 3] =
             std::array::from_fn(|c| if rz[c] > 0.0 { rz_new[c] / rz[c] } else { 0.0 });
         for (p, z) in p.iter_mut().zip(&z) {
@@ -406,7 +429,7 @@ pub fn pcg(
             }
         }
         rz = rz_new;
-        rr = halo.dot(comm, &r, &r);
+        rr = rr_new;
         it += 1;
     }
     Ok(CgInfo {

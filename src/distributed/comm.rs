@@ -7,6 +7,46 @@
 //! communication volume.
 
 use std::cell::Cell;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+/// The lowest rank whose stage failed, as the first failed [`agree`] found it (`usize::MAX`:
+/// none yet). The launcher lets that rank print the job's one error line.
+static FAILING_RANK: AtomicUsize = AtomicUsize::new(usize::MAX);
+
+/// Agree on a stage's outcome across the ranks: one min-reduce of the failing ranks. When no
+/// rank failed, `r` is returned unchanged; when any did, every rank returns an error (its own,
+/// or `elsewhere(q)` with q the lowest failing rank), so no rank goes on into a collective the
+/// failed ones will never join. Every stage boundary where a rank can fail alone (a read, a
+/// check of its share) ends in one call of this, on every rank.
+pub fn agree<T, E>(
+    comm: &dyn Comm,
+    r: Result<T, E>,
+    elsewhere: impl FnOnce(usize) -> E,
+) -> Result<T, E> {
+    let mut lowest = [if r.is_err() {
+        comm.rank() as f64
+    } else {
+        f64::INFINITY
+    }];
+    comm.min_f64(&mut lowest);
+    if lowest[0].is_finite() {
+        let q = lowest[0] as usize;
+        // Only the first failure counts: later stages do not run.
+        let _ = FAILING_RANK.compare_exchange(usize::MAX, q, Ordering::Relaxed, Ordering::Relaxed);
+        return match r {
+            Ok(_) => Err(elsewhere(q)),
+            e => e,
+        };
+    }
+    r
+}
+
+/// The rank that found the job's first error, agreed over the ranks by [`agree`]; `None` when
+/// no agreed stage failed (an error every rank finds alike is then printed by rank 0).
+pub fn failing_rank() -> Option<usize> {
+    let q = FAILING_RANK.load(Ordering::Relaxed);
+    (q != usize::MAX).then_some(q)
+}
 
 /// Collective communication among the ranks of a job.
 pub trait Comm {
@@ -24,6 +64,11 @@ pub trait Comm {
     fn all_gather_f64(&self, v: &[f64]) -> Vec<Vec<f64>>;
     /// Personalised exchange: `send[q]` goes to rank q; returns what each rank sent here.
     fn exchange_f64(&self, send: &[Vec<f64>]) -> Vec<Vec<f64>>;
+    /// [`Comm::exchange_f64`] when every pair of ranks sends each other as many values (a
+    /// halo's lists are the same on both sides): the counts need not be exchanged first.
+    fn exchange_symmetric_f64(&self, send: &[Vec<f64>]) -> Vec<Vec<f64>> {
+        self.exchange_f64(send)
+    }
     /// Every rank's `v` on `root`, concatenated in rank order (one buffer, no copy per
     /// rank); `None` on the other ranks.
     fn gather_f64(&self, root: usize, v: &[f64]) -> Option<Vec<f64>>;
@@ -181,6 +226,21 @@ mod with_mpi {
                 self.world.all_to_all_varcount_into(&sp, &mut rp);
             }
             split(buf, &recv_counts)
+        }
+        fn exchange_symmetric_f64(&self, send: &[Vec<f64>]) -> Vec<Vec<f64>> {
+            let n = self.size();
+            assert_eq!(send.len(), n);
+            let counts: Vec<i32> = send.iter().map(|s| s.len() as i32).collect();
+            let flat: Vec<f64> = send.concat();
+            self.count(8 * (flat.len() - send[self.rank()].len()));
+            let displs = Self::displacements(&counts);
+            let mut buf = vec![0.0f64; flat.len()];
+            {
+                let sp = Partition::new(&flat[..], &counts[..], &displs[..]);
+                let mut rp = PartitionMut::new(&mut buf[..], &counts[..], &displs[..]);
+                self.world.all_to_all_varcount_into(&sp, &mut rp);
+            }
+            split(buf, &counts)
         }
         fn gather_f64(&self, root: usize, v: &[f64]) -> Option<Vec<f64>> {
             let counts = self.counts_of(v.len());

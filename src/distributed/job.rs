@@ -65,8 +65,11 @@ pub struct RankFigures {
     pub bytes_fit: u64,
     pub bytes_validity: u64,
     pub bytes_gather: u64,
-    /// Peak resident memory of the process (VmHWM), bytes.
+    /// Peak resident memory of the process (VmHWM), bytes, before the write.
     pub peak_memory_bytes: u64,
+    /// The peak (VmHWM) at the end of each stage: the stage that raised it is where the
+    /// memory is spent.
+    pub peak_memory_by_stage: BTreeMap<String, u64>,
     /// Seconds per stage.
     pub timings: BTreeMap<String, f64>,
 }
@@ -129,16 +132,26 @@ pub fn peak_memory_bytes() -> u64 {
         .map_or(0, |kb| kb * 1024)
 }
 
-/// Seconds per stage, by name.
+/// [`super::comm::agree`] for a stage of the job: the ranks that did not fail stop with an
+/// error the launcher does not print (the lowest failing rank prints its own).
+fn agree<T>(comm: &dyn Comm, r: Result<T, CurveError>) -> Result<T, CurveError> {
+    super::comm::agree(comm, r, |q| {
+        CurveError::Options(format!("stopped: rank {q} failed"))
+    })
+}
+
+/// Seconds per stage, and the peak memory at the end of each, by name.
 struct Laps {
     t: Instant,
     timings: BTreeMap<String, f64>,
+    peaks: BTreeMap<String, u64>,
 }
 
 impl Laps {
     fn lap(&mut self, name: &str) {
         self.timings
             .insert(name.to_string(), self.t.elapsed().as_secs_f64());
+        self.peaks.insert(name.to_string(), peak_memory_bytes());
         self.t = Instant::now();
     }
 }
@@ -160,6 +173,8 @@ struct Share {
     bytes_sample: u64,
     /// Control points this rank owns whose blend factor was reduced.
     damped_owned: usize,
+    /// The whole mesh's feature summary (deviations absolute), when any rank found features.
+    features: Option<crate::mesh::features::FeatureReport>,
 }
 
 /// The topology of a ghosted sub-mesh, checked curvable where the serial check would see the
@@ -294,7 +309,8 @@ fn run_share(
     let local = read_share(comm, input, GHOST_DEPTH, &options.mesh)?;
     laps.lap("read");
     let mesh = &local.mesh;
-    let topo = local_topology(input, &local)?;
+    // Checks of a rank's own share fail on that rank alone: agreed before the next collective.
+    let topo = agree(comm, local_topology(input, &local))?;
     laps.lap("topology");
     let mut msj = [mesh.min_scaled_jacobian().map_or(f64::INFINITY, |m| m.0)];
     comm.min_f64(&mut msj);
@@ -306,7 +322,7 @@ fn run_share(
         topo: &topo,
         executor: executor.as_ref(),
     };
-    let setup = SplineSetup::new(&job)?;
+    let setup = agree(comm, SplineSetup::new(&job))?;
     let mut s = setup.build(&job, &[]);
     laps.lap("spline");
     let halo = super::local::halo(comm, &local, &topo, &s);
@@ -338,19 +354,43 @@ fn run_share(
         n_local: mesh.n_elements(),
         n_global: local.n_global as usize,
     };
-    let blend = blend_search_shared(&CpuCertifier, &mut blended, &blend_params, &share).map_err(
-        |source| CurveError::Blend {
-            input: input.to_owned(),
-            source,
-        },
-    )?;
+    let blend =
+        blend_search_shared(&CpuCertifier, &mut blended, &blend_params, &share).map_err(|source| {
+            CurveError::Blend {
+                input: input.to_owned(),
+                source,
+            }
+        });
+    let blend = agree(comm, blend)?;
     drop(share);
     laps.lap("validity");
     let bytes_validity = comm.bytes_sent() - bytes_fit - bytes_partition;
     let damped_owned = damped_owned(&local, &blended);
     let bytes_before = comm.bytes_sent();
-    let mut output = sample_share(comm, &local, &topo, &blended, order);
+    let mut output = sample_share(
+        comm,
+        &local,
+        &topo,
+        &blended,
+        order,
+        setup.features.as_ref(),
+    );
     super::sample::to_file_order(comm, &local, &mut output);
+    // The serial report's feature summary when any rank found features (absolute
+    // deviations here; relative to the diagonal in `curve`).
+    let mut any = [f64::from(u8::from(setup.features.is_some()))];
+    comm.max_f64(&mut any);
+    let features = (any[0] > 0.0).then(|| {
+        super::features::feature_report(
+            comm,
+            &local,
+            &topo,
+            setup.features.as_ref(),
+            &options.features.params,
+            output.feature_deviation,
+            1.0,
+        )
+    });
     let bytes_sample = comm.bytes_sent() - bytes_before;
     laps.lap("sample");
     let class = |c: &ElementClass| -> [usize; 3] {
@@ -379,6 +419,7 @@ fn run_share(
         bytes_validity,
         bytes_sample,
         damped_owned,
+        features,
     })
 }
 
@@ -426,6 +467,7 @@ pub fn curve(
     let mut laps = Laps {
         t: Instant::now(),
         timings: BTreeMap::new(),
+        peaks: BTreeMap::new(),
     };
     let share = run_share(comm, input, options, order, &mut laps)?;
     let quality = global_quality(comm, input, &share)?;
@@ -454,6 +496,7 @@ pub fn curve(
         bytes_validity: share.bytes_validity,
         bytes_gather: share.bytes_sample,
         peak_memory_bytes: peak_memory_bytes(),
+        peak_memory_by_stage: laps.peaks.clone(),
         timings: laps.timings.clone(),
     };
     let all_figures = gather_figures(comm, &figures);
@@ -481,9 +524,11 @@ pub fn curve(
         demoted_elements: 0,
         kink_elements: counts[3] as usize,
         snapped_boundary_vertices: None,
-        // The feature summary needs every rank's patches (a patch may cross ranks): not
-        // gathered yet.
-        features: None,
+        features: share.features.map(|mut f| {
+            f.feature_vertex_deviation_max /= quality.diagonal;
+            f.planarity_max /= quality.diagonal;
+            f
+        }),
         fit_weights: Some(options.fit.weights),
         fit_targets: Some(options.fit.targets),
         cg_iterations: Some(cg.iterations),
@@ -505,10 +550,8 @@ pub fn curve(
         bounding_box_diagonal: quality.diagonal,
         boundary_vertex_deviation_max: quality.vertex_max,
         boundary_vertex_deviation_rms: quality.vertex_rms,
-        // Distances to the whole linear boundary need every rank's boundary: not measured
-        // under mpirun (null in the report).
-        boundary_node_distance_max: f64::NAN,
-        boundary_sample_distance_max: f64::NAN,
+        boundary_node_distance_max: quality.node_max,
+        boundary_sample_distance_max: quality.sample_max,
         timings,
         backend: "cpu".into(),
         adapter: None,
@@ -531,6 +574,8 @@ struct Quality {
     diagonal: f64,
     vertex_max: f64,
     vertex_rms: f64,
+    node_max: f64,
+    sample_max: f64,
 }
 
 /// The sampled check over all ranks (an error on every rank when an element is invalid), the
@@ -571,7 +616,8 @@ fn global_quality(comm: &dyn Comm, input: &Path, share: &Share) -> Result<Qualit
     }
     let (vmax, vsum, vn) = out.vertex_deviation;
     let mut mins = [lo[0], lo[1], lo[2], out.min_scaled_jacobian];
-    let mut maxs = [hi[0], hi[1], hi[2], vmax];
+    let (node, sample) = out.boundary_distance;
+    let mut maxs = [hi[0], hi[1], hi[2], vmax, node, sample];
     let mut sums = [vsum, vn as f64];
     comm.min_f64(&mut mins);
     comm.max_f64(&mut maxs);
@@ -585,6 +631,8 @@ fn global_quality(comm: &dyn Comm, input: &Path, share: &Share) -> Result<Qualit
         min_sj: mins[3],
         diagonal,
         vertex_max: maxs[3] / diagonal,
+        node_max: maxs[4] / diagonal,
+        sample_max: maxs[5] / diagonal,
         vertex_rms: if sums[1] > 0.0 {
             (sums[0] / sums[1]).sqrt() / diagonal
         } else {
@@ -627,6 +675,11 @@ fn gather_figures(comm: &dyn Comm, f: &RankFigures) -> Vec<RankFigures> {
             .iter()
             .map(|s| f.timings.get(*s).copied().unwrap_or(0.0)),
     );
+    v.extend(
+        STAGES
+            .iter()
+            .map(|s| f.peak_memory_by_stage.get(*s).copied().unwrap_or(0) as f64),
+    );
     comm.all_gather_f64(&v)
         .into_iter()
         .enumerate()
@@ -648,6 +701,11 @@ fn gather_figures(comm: &dyn Comm, f: &RankFigures) -> Vec<RankFigures> {
                 .iter()
                 .zip(&v[12..])
                 .map(|(s, &t)| (s.to_string(), t))
+                .collect(),
+            peak_memory_by_stage: STAGES
+                .iter()
+                .zip(&v[12 + STAGES.len()..])
+                .map(|(s, &m)| (s.to_string(), m as u64))
                 .collect(),
         })
         .collect()

@@ -49,9 +49,11 @@ pub enum Outcome {
 }
 
 /// Run `curve` distributed: initialise MPI, run the job, write the output collectively (and
-/// the JSON report on rank 0), finalise MPI. An error on a rank other than 0 ends that process after
-/// MPI is finalised, silently: with status 0 for an option error (rank 0 has the same one and
-/// reports it), else with status 1.
+/// the JSON report on rank 0), finalise MPI. On an error every rank ends with status 1 and
+/// the job prints one error line: the lowest rank whose stage failed prints it (agreed by
+/// [`super::comm::agree`]), or rank 0 for an error every rank finds alike (an option, the
+/// output, the solve). The line is printed before MPI is finalised, and the ranks wait for
+/// each other there, so no rank's exit lets the launcher kill the printing rank first.
 pub fn curve(
     input: &Path,
     output: &Path,
@@ -64,17 +66,41 @@ pub fn curve(
     let comm = Mpi::new(universe.world());
     let rank = comm.rank();
     let result = run(&comm, input, output, options, report, inputs);
+    let failed = result.is_err();
+    if failed {
+        FAILED.store(true, std::sync::atomic::Ordering::Relaxed);
+    }
+    if let Err(e) = &result
+        && rank == super::comm::failing_rank().unwrap_or(0)
+    {
+        eprintln!(
+            "polyspline: error: {}",
+            crate::io::raw::one_line(&e.to_string(), MAX_ERROR_CHARS)
+        );
+    }
+    // Every rank is here (an error is agreed or alike on every rank): the line is out before
+    // any rank ends.
+    let mut done = [0u64];
+    comm.sum_u64(&mut done);
     drop(comm);
     drop(universe);
-    match result {
-        // Option errors are the same on every rank: rank 0 prints the line and sets the job's
-        // status. The others end quietly, since an early non-zero exit lets the launcher kill
-        // rank 0 before it has printed.
-        Err(CurveError::Options(_)) if rank != 0 => std::process::exit(0),
-        Err(_) if rank != 0 => std::process::exit(1),
-        r => r,
+    if failed {
+        std::process::exit(1);
     }
+    result
 }
+
+/// Set once this rank knows the job failed (its error line is printed or is another rank's).
+static FAILED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Whether this process is a rank of a distributed job that failed and is ending: the launcher
+/// may stop it with a signal before it exits, which needs no message of its own.
+pub fn failed() -> bool {
+    FAILED.load(std::sync::atomic::Ordering::Relaxed)
+}
+
+/// Longest error line (characters after the prefix), as the serial command's.
+const MAX_ERROR_CHARS: usize = 2000;
 
 /// The output options the collective writer takes: one MSH 4.1 file (ASCII or binary).
 fn check_output(output: &Path, options: &CurveOptions) -> Result<(), CurveError> {
@@ -111,12 +137,8 @@ fn run(
         volume_name: &options.output.volume_name,
         tag_names: &finished.tag_names,
     };
-    let pending = match write_collective(comm, &finished.output, output, inputs, &write_options) {
-        Ok(p) => p,
-        // Rank 0 prints the error line; the others end quietly (see [`curve`]).
-        Err(e) if comm.rank() == 0 => return Err(e.into()),
-        Err(e) => return Err(CurveError::Options(e.to_string())),
-    };
+    // Its errors are alike on every rank (one sum); rank 0 prints the line (see [`curve`]).
+    let pending = write_collective(comm, &finished.output, output, inputs, &write_options)?;
     let Some(pending) = pending else {
         return Ok(Outcome::Share);
     };

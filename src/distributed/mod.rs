@@ -9,6 +9,7 @@
 
 pub mod cg;
 pub mod comm;
+pub mod features;
 pub mod job;
 #[cfg(feature = "mpi")]
 pub mod launch;

@@ -577,6 +577,16 @@ impl MshFile {
 
         let (global_vertex, points) = read_coordinates(&mut self.r, &self.ix, &have)?;
         drop(have);
+        // Named by the file's node tag (the mesh check below knows only local indices).
+        for (p, &t) in points.iter().zip(&global_vertex) {
+            if let Some(k) = p.iter().position(|c| !c.is_finite()) {
+                return Err(err(format!(
+                    "node {t} has a non-finite {} coordinate ({})",
+                    ["x", "y", "z"][k],
+                    p[k]
+                )));
+            }
+        }
         let local: HashMap<u64, i64> = global_vertex
             .iter()
             .enumerate()

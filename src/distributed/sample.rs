@@ -25,6 +25,7 @@ use super::comm::Comm;
 use super::read::LocalMesh;
 use crate::math::BezierElements;
 use crate::mesh::Topology;
+use crate::mesh::features::Features;
 use crate::sample::ordering::{Lattice, lattice_point};
 use crate::sample::{HighOrderMesh, Numbering, eval_net};
 
@@ -55,6 +56,12 @@ pub struct RankOutput {
     /// Largest and summed squared distance of the owned boundary vertex nodes from their
     /// input vertices, and their count.
     pub vertex_deviation: (f64, f64, usize),
+    /// Largest distance of the own boundary facets' nodes and sampled points from the input's
+    /// linear boundary (absolute; [`crate::deviation::facet_distances`]).
+    pub boundary_distance: (f64, f64),
+    /// Largest distance of an owned feature vertex node from its input vertex, and of an own
+    /// boundary facet's node from its planar patch's plane (absolute; 0 without features).
+    pub feature_deviation: (f64, f64),
 }
 
 /// Owner element of every local node id: its global index, its local index and the node's
@@ -91,6 +98,7 @@ pub fn sample_share(
     topo: &Topology,
     source: &dyn BezierElements,
     p: usize,
+    features: Option<&Features>,
 ) -> RankOutput {
     let (rank, size) = (comm.rank(), comm.size());
     let mesh = &local.mesh;
@@ -175,6 +183,10 @@ pub fn sample_share(
     let vertex_deviation = vertex_deviation(local, topo, &owned, &xyz);
     let (boundary, boundary_tags, boundary_keys, boundary_ids) =
         own_boundary(local, topo, &num, &tag);
+    let (xyz, boundary_distance) = boundary_distance(local, topo, p, xyz, &boundary_ids);
+    let feature_deviation = features.map_or((0.0, 0.0), |f| {
+        feature_deviation(local, topo, f, &owned, &xyz, &boundary_ids)
+    });
     let boxes = |ids: &[u32], n: usize| -> Vec<[f64; 6]> {
         ids.chunks_exact(n)
             .map(|c| {
@@ -217,7 +229,96 @@ pub fn sample_share(
         min_scaled_jacobian: quality.0,
         invalid_elements: quality.1.iter().map(|&e| local.global_element[e]).collect(),
         vertex_deviation,
+        boundary_distance,
+        feature_deviation,
     }
+}
+
+/// [`Features::deviations`] of this rank's share, absolute: the largest distance of an owned
+/// feature vertex node from its input vertex, and of an own boundary facet's node (local ids
+/// `ids`, in the order of `topo.boundary_facets`) from its patch's plane.
+fn feature_deviation(
+    local: &LocalMesh,
+    topo: &Topology,
+    f: &Features,
+    owned: &[u32],
+    xyz: &[[f64; 3]],
+    ids: &[u32],
+) -> (f64, f64) {
+    let mesh = &local.mesh;
+    let nv = mesh.n_vertices();
+    let dist = |a: [f64; 3], b: [f64; 3]| (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>().sqrt();
+    let vertex = owned
+        .iter()
+        .map(|&id| id as usize)
+        .filter(|&v| v < nv && f.vertex_mask[v])
+        .map(|v| dist(xyz[v], mesh.coords[v]))
+        .fold(0.0, f64::max);
+    let own: Vec<usize> = topo
+        .boundary_facets
+        .iter()
+        .enumerate()
+        .filter(|&(_, &fc)| (topo.facet_elements[fc as usize][0] as usize) < local.n_owned)
+        .map(|(i, _)| i)
+        .collect();
+    let npf = if own.is_empty() {
+        1
+    } else {
+        ids.len() / own.len()
+    };
+    let mut planarity = 0.0f64;
+    for (k, &i) in own.iter().enumerate() {
+        if let Some(Some((n, d))) = f.planes.get(f.facet_patch[i] as usize) {
+            for &id in &ids[k * npf..(k + 1) * npf] {
+                let x = xyz[id as usize];
+                let s: f64 = (0..3).map(|c| n[c] * x[c]).sum();
+                planarity = planarity.max((s - d).abs());
+            }
+        }
+    }
+    (vertex, planarity)
+}
+
+/// [`crate::deviation::facet_distances`] of the own boundary facets (local node ids `ids`,
+/// positions `xyz`, handed back) against the sub-mesh's facets that are boundary facets of
+/// the whole mesh near them: those of the elements touching an own element's vertex, whose
+/// every neighbour is in the sub-mesh (2 vertex rings), so none of them is a cut face of the
+/// ghost fringe. A curved node lies within a fraction of its element's size of its own
+/// facet, so its nearest linear facet is among these.
+fn boundary_distance(
+    local: &LocalMesh,
+    topo: &Topology,
+    p: usize,
+    xyz: Vec<[f64; 3]>,
+    ids: &[u32],
+) -> (Vec<[f64; 3]>, (f64, f64)) {
+    let mesh = &local.mesh;
+    let mut near = vec![false; mesh.n_vertices()];
+    for e in 0..local.n_owned {
+        for &v in mesh.element(e) {
+            near[v as usize] = true;
+        }
+    }
+    let mut facets = Vec::new();
+    let mut over = Vec::new();
+    for &f in &topo.boundary_facets {
+        let e = topo.facet_elements[f as usize][0] as usize;
+        if mesh.element(e).iter().any(|&v| near[v as usize]) {
+            if e < local.n_owned {
+                over.push(facets.len());
+            }
+            facets.push(f);
+        }
+    }
+    let ho = HighOrderMesh {
+        dim: mesh.dim,
+        order: p,
+        nodes: xyz,
+        boundary: ids.to_vec(),
+        ..Default::default()
+    };
+    let d = crate::deviation::facet_distances(mesh, topo, &facets, &ho, &over);
+    (ho.nodes, d)
 }
 
 /// Move the sampled elements to the rank whose run of the file holds them

@@ -27,7 +27,7 @@
 use super::comm::Comm;
 use super::partition::{Grid, sort_value, thresholds};
 use super::read::{Elements, LocalMesh, MshFile};
-use crate::io::raw::ParseError;
+use crate::io::raw::{Location, ParseError};
 use crate::mesh::MeshOptions;
 use std::collections::{HashMap, HashSet};
 use std::path::Path;
@@ -43,24 +43,43 @@ pub fn read_share(
         path: path.to_owned(),
         source,
     };
-    // Every rank reads the same header and checks the same things before the first
-    // collective, so a bad file is refused on every rank alike.
-    let mut file = MshFile::open(path).map_err(wrap)?;
+    // Each step that can fail on one rank alone (a truncated or corrupt run of the file, a
+    // node missing or not finite among its share's) is agreed before the next collective, so
+    // every rank stops together with the failing rank's error.
+    let elsewhere = |q: usize| wrap(ParseError::new(Location::File, format!("rank {q} failed")));
+    let mut file = agree_with(comm, MshFile::open(path).map_err(wrap), elsewhere)?;
     let (rank, size) = (comm.rank(), comm.size());
     let starts = LocalMesh::starts(file.n_global, size);
     let (lo, hi) = (starts[rank], starts[rank + 1]);
-    let run = file.run(lo, hi).map_err(wrap)?;
+    let run = agree_with(comm, file.run(lo, hi).map_err(wrap), elsewhere)?;
     let part = if file_order() {
         vec![rank as u32; run.global.len()]
     } else {
-        morton_parts(comm, &mut file, &run).map_err(wrap)?
+        let have: HashSet<u64> = run.nodes.iter().copied().collect();
+        let coords = agree_with(comm, file.coordinates(&have).map_err(wrap), elsewhere)?;
+        drop(have);
+        morton_parts(comm, &file, &run, coords)
     };
     let own = route(comm, &run, &part, file.npe);
     drop(run);
-    let ghosts = file.ghosts(&own, depth).map_err(wrap)?;
+    let ghosts = agree_with(comm, file.ghosts(&own, depth).map_err(wrap), elsewhere)?;
     let owner = ghost_owners(comm, &starts, lo, &part, &ghosts.global);
-    file.local_mesh(own, ghosts, owner, rank, options)
-        .map_err(wrap)
+    drop(part);
+    agree_with(
+        comm,
+        file.local_mesh(own, ghosts, owner, rank, options)
+            .map_err(wrap),
+        elsewhere,
+    )
+}
+
+/// [`super::comm::agree`] for a read step.
+fn agree_with<T>(
+    comm: &dyn Comm,
+    r: Result<T, crate::io::ReadError>,
+    elsewhere: impl FnOnce(usize) -> crate::io::ReadError,
+) -> Result<T, crate::io::ReadError> {
+    super::comm::agree(comm, r, elsewhere)
 }
 
 /// `POLYSPLINE_PARTITION=file-order`: keep the runs of the file as the partition (no
@@ -70,14 +89,14 @@ fn file_order() -> bool {
 }
 
 /// The Morton part of every element of `run` (see the module docs, step 2).
+/// `coords`: the tags and coordinates of the run's nodes.
 fn morton_parts(
     comm: &dyn Comm,
-    file: &mut MshFile,
+    file: &MshFile,
     run: &Elements,
-) -> Result<Vec<u32>, ParseError> {
-    let have: HashSet<u64> = run.nodes.iter().copied().collect();
-    let (tags, points) = file.coordinates(&have)?;
-    drop(have);
+    coords: (Vec<u64>, Vec<[f64; 3]>),
+) -> Vec<u32> {
+    let (tags, points) = coords;
     let mut lo = [f64::INFINITY; 3];
     let mut hi = [f64::NEG_INFINITY; 3];
     for p in &points {
@@ -110,10 +129,10 @@ fn morton_parts(
         comm.sum_u64(&mut c);
         c
     });
-    Ok(values
+    values
         .iter()
         .map(|v| cut.partition_point(|&t| t <= *v) as u32)
-        .collect())
+        .collect()
 }
 
 /// Send every element of `run` to the rank of its part; the elements received, in increasing
