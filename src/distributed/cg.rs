@@ -206,6 +206,37 @@ impl LocalMatrix {
         }
     }
 
+    /// [`LocalMatrix::new`] taking `k` apart instead of copying it: its rows outside
+    /// `halo.global` are empty and the local numbering keeps the global order, so the
+    /// entries stay where they are and only the columns are renumbered (the assembled share
+    /// is the largest array a rank holds; a copy would double it at the fit's peak).
+    pub fn from_matrix(k: NormalMatrix, halo: &Halo) -> LocalMatrix {
+        let touched: usize = halo
+            .global
+            .iter()
+            .map(|&g| k.indptr()[g as usize + 1] - k.indptr()[g as usize])
+            .sum();
+        if touched != k.data().len() {
+            return LocalMatrix::new(&k, halo);
+        }
+        let (global_ptr, mut indices, data) = k.into_parts();
+        let mut indptr = Vec::with_capacity(halo.len() + 1);
+        indptr.push(0);
+        indptr.extend(halo.global.iter().map(|&g| global_ptr[g as usize + 1]));
+        drop(global_ptr);
+        for c in &mut indices {
+            *c = halo
+                .local(*c)
+                .expect("a column of this rank's share is one of its control points")
+                as u32;
+        }
+        LocalMatrix {
+            indptr,
+            indices,
+            data,
+        }
+    }
+
     pub fn nonzeros(&self) -> usize {
         self.data.len()
     }
@@ -473,5 +504,27 @@ mod tests {
                 assert!((y[c] - b[c]).abs() < 1e-10, "{y:?} vs {b:?}");
             }
         }
+    }
+
+    #[test]
+    fn a_share_taken_apart_is_the_copied_local_matrix() {
+        // Rows 1 and 3 empty (control points of other ranks); this rank touches 0, 2 and 4.
+        let (indptr, indices, data) = (
+            vec![0, 2, 2, 5, 5, 7],
+            vec![0u32, 2, 0, 2, 4, 2, 4],
+            vec![4.0, -1.0, -1.0, 5.0, -2.0, -2.0, 6.0],
+        );
+        let halo = Halo::new(0, &[vec![0, 2, 4]], 5);
+        let copy = LocalMatrix::new(
+            &NormalMatrix::new(5, indptr.clone(), indices.clone(), data.clone()),
+            &halo,
+        );
+        let parts = LocalMatrix::from_matrix(NormalMatrix::new(5, indptr, indices, data), &halo);
+        assert_eq!(copy.indptr, vec![0, 2, 5, 7]);
+        assert_eq!(copy.indices, vec![0, 1, 0, 1, 2, 1, 2]);
+        assert_eq!(
+            (&parts.indptr, &parts.indices, &parts.data),
+            (&copy.indptr, &copy.indices, &copy.data)
+        );
     }
 }

@@ -270,10 +270,10 @@ fn fit_share(
         *r = r.map(|x| d * x);
     }
     sys.scale = Some(d);
-    let k = LocalMatrix::new(&sys.matrix, halo);
     let b: Vec<[f64; 3]> = halo.global.iter().map(|&g| sys.rhs[g as usize]).collect();
     let scale = sys.scale.take();
-    drop(sys);
+    drop(sys.rhs);
+    let k = LocalMatrix::from_matrix(sys.matrix, halo);
     laps.lap("fit_assembly");
     let mut delta = vec![[0.0; 3]; halo.len()];
     let cg = pcg(comm, halo, &k, &b, &mut delta, &fit_params.cg).map_err(|source| {

@@ -43,6 +43,12 @@ impl NormalMatrix {
         self.mat.data()
     }
 
+    /// The CSR arrays (row offsets, columns, values), without copying them.
+    pub fn into_parts(self) -> (Vec<usize>, Vec<u32>, Vec<f64>) {
+        let (indptr, indices, data) = self.mat.into_raw_storage();
+        (indptr, indices, data)
+    }
+
     /// The stored values, for in-place rescaling (the structure stays fixed).
     pub fn data_mut(&mut self) -> &mut [f64] {
         self.mat.data_mut()
