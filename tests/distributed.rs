@@ -1,8 +1,10 @@
 //! The distributed `curve` (`--features mpi`) under `mpirun --oversubscribe -np 1, 2, 4`
 //! against the serial run of the same input: the same element count, node coordinates within
 //! 1e-6 of the bounding-box diagonal element by element, the same boundary facets and groups,
-//! every element valid by Gmsh's own Jacobians, and a report whose per-rank shares add up;
-//! each rank's peak memory against the serial run's on a larger mesh.
+//! every element valid by Gmsh's own Jacobians, and a report whose per-rank shares add up and
+//! whose feature summary and boundary distances are the serial run's; each rank's peak memory
+//! against the serial run's on a larger mesh; a defect in one rank's share of the input stops
+//! every rank with one error line.
 #![cfg(feature = "mpi")]
 
 mod common;

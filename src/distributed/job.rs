@@ -470,7 +470,7 @@ pub fn curve(
         peaks: BTreeMap::new(),
     };
     let share = run_share(comm, input, options, order, &mut laps)?;
-    let quality = global_quality(comm, input, &share)?;
+    let quality = super::sample::global_quality(comm, input, &share.local, &share.output)?;
     let mut counts = share.counts.map(|c| c as u64);
     let out = &share.output;
     let npf = (order + 1).pow(out.dim as u32 - 1);
@@ -564,79 +564,6 @@ pub fn curve(
             curve: report,
             ranks: size,
             per_rank: all_figures,
-        },
-    })
-}
-
-/// The output's quality over all ranks.
-struct Quality {
-    min_sj: f64,
-    diagonal: f64,
-    vertex_max: f64,
-    vertex_rms: f64,
-    node_max: f64,
-    sample_max: f64,
-}
-
-/// The sampled check over all ranks (an error on every rank when an element is invalid), the
-/// input's bounding-box diagonal and the boundary vertices' deviation relative to it.
-fn global_quality(comm: &dyn Comm, input: &Path, share: &Share) -> Result<Quality, CurveError> {
-    let out = &share.output;
-    let invalid = comm.all_gather_f64(
-        &out.invalid_elements
-            .iter()
-            .map(|&e| e as f64)
-            .collect::<Vec<_>>(),
-    );
-    let invalid: Vec<usize> = invalid.concat().iter().map(|&e| e as usize).collect();
-    if !invalid.is_empty() {
-        return Err(CurveError::Invalid {
-            input: input.to_owned(),
-            what: "sampled output".into(),
-            count: invalid.len(),
-            first: invalid
-                .iter()
-                .take(8)
-                .map(|e| e.to_string())
-                .collect::<Vec<_>>()
-                .join(", "),
-        });
-    }
-    let mesh = &share.local.mesh;
-    let mut lo = [f64::INFINITY; 3];
-    let mut hi = [f64::NEG_INFINITY; 3];
-    for e in 0..share.local.n_owned {
-        for &v in mesh.element(e) {
-            let x = mesh.coords[v as usize];
-            for k in 0..3 {
-                lo[k] = lo[k].min(x[k]);
-                hi[k] = hi[k].max(x[k]);
-            }
-        }
-    }
-    let (vmax, vsum, vn) = out.vertex_deviation;
-    let mut mins = [lo[0], lo[1], lo[2], out.min_scaled_jacobian];
-    let (node, sample) = out.boundary_distance;
-    let mut maxs = [hi[0], hi[1], hi[2], vmax, node, sample];
-    let mut sums = [vsum, vn as f64];
-    comm.min_f64(&mut mins);
-    comm.max_f64(&mut maxs);
-    comm.sum_f64(&mut sums);
-    let diagonal = (0..3)
-        .map(|k| (maxs[k] - mins[k]).powi(2))
-        .sum::<f64>()
-        .sqrt()
-        .max(f64::MIN_POSITIVE);
-    Ok(Quality {
-        min_sj: mins[3],
-        diagonal,
-        vertex_max: maxs[3] / diagonal,
-        node_max: maxs[4] / diagonal,
-        sample_max: maxs[5] / diagonal,
-        vertex_rms: if sums[1] > 0.0 {
-            (sums[0] / sums[1]).sqrt() / diagonal
-        } else {
-            0.0
         },
     })
 }

@@ -321,6 +321,83 @@ fn boundary_distance(
     (ho.nodes, d)
 }
 
+/// The output's quality over all ranks.
+pub(super) struct Quality {
+    pub min_sj: f64,
+    pub diagonal: f64,
+    pub vertex_max: f64,
+    pub vertex_rms: f64,
+    pub node_max: f64,
+    pub sample_max: f64,
+}
+
+/// The sampled check over all ranks (an error on every rank when an element is invalid), the
+/// input's bounding-box diagonal and the boundary vertices' deviation relative to it.
+pub(super) fn global_quality(
+    comm: &dyn Comm,
+    input: &std::path::Path,
+    local: &LocalMesh,
+    out: &RankOutput,
+) -> Result<Quality, crate::pipeline::CurveError> {
+    let invalid = comm.all_gather_f64(
+        &out.invalid_elements
+            .iter()
+            .map(|&e| e as f64)
+            .collect::<Vec<_>>(),
+    );
+    let invalid: Vec<usize> = invalid.concat().iter().map(|&e| e as usize).collect();
+    if !invalid.is_empty() {
+        return Err(crate::pipeline::CurveError::Invalid {
+            input: input.to_owned(),
+            what: "sampled output".into(),
+            count: invalid.len(),
+            first: invalid
+                .iter()
+                .take(8)
+                .map(|e| e.to_string())
+                .collect::<Vec<_>>()
+                .join(", "),
+        });
+    }
+    let mesh = &local.mesh;
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    for e in 0..local.n_owned {
+        for &v in mesh.element(e) {
+            let x = mesh.coords[v as usize];
+            for k in 0..3 {
+                lo[k] = lo[k].min(x[k]);
+                hi[k] = hi[k].max(x[k]);
+            }
+        }
+    }
+    let (vmax, vsum, vn) = out.vertex_deviation;
+    let mut mins = [lo[0], lo[1], lo[2], out.min_scaled_jacobian];
+    let (node, sample) = out.boundary_distance;
+    let mut maxs = [hi[0], hi[1], hi[2], vmax, node, sample];
+    let mut sums = [vsum, vn as f64];
+    comm.min_f64(&mut mins);
+    comm.max_f64(&mut maxs);
+    comm.sum_f64(&mut sums);
+    let diagonal = (0..3)
+        .map(|k| (maxs[k] - mins[k]).powi(2))
+        .sum::<f64>()
+        .sqrt()
+        .max(f64::MIN_POSITIVE);
+    Ok(Quality {
+        min_sj: mins[3],
+        diagonal,
+        vertex_max: maxs[3] / diagonal,
+        node_max: maxs[4] / diagonal,
+        sample_max: maxs[5] / diagonal,
+        vertex_rms: if sums[1] > 0.0 {
+            (sums[0] / sums[1]).sqrt() / diagonal
+        } else {
+            0.0
+        },
+    })
+}
+
 /// Move the sampled elements to the rank whose run of the file holds them
 /// ([`LocalMesh::starts`]), in increasing global index, so that the collective write lays
 /// the elements out in the file's order and with the serial run's element tags whatever the
