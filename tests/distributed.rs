@@ -454,10 +454,10 @@ fn a_bad_share_of_the_input_stops_every_rank_with_one_error_line() {
 /// Largest peak memory of a rank at 4 ranks relative to the one-thread serial run's on the
 /// 98k-hex cylinder. Every rank holds its part and 2 ghost rings, and its share of K once
 /// (taken apart into the local numbering, not copied); the fit's CG, whose preconditioner
-/// blocks are the last large arrays, is each rank's peak. Measured here 0.48–0.495 (serial
-/// peak 422 MB), and 0.456 with `/usr/bin/time` around each process (serial 448 MB: the
-/// serial peak varies by ≈ 6 % between runs); 0.51 by `/usr/bin/time` before K's share
-/// stopped being copied. The fixed footprint of a process (the binary and MPI, ≈ 75 MB) is a
+/// blocks are the last large arrays, is each rank's peak. Measured here 0.48–0.495 and
+/// 0.43–0.44 in two runs (serial peaks 422 and 474 MB: the serial peak varies by up to 12 %
+/// between runs), 0.456 with `/usr/bin/time` around each process (serial 448 MB); 0.51 by
+/// `/usr/bin/time` before K's share stopped being copied. The fixed footprint of a process (the binary and MPI, ≈ 75 MB) is a
 /// sixth of the serial peak at this size; at 292k hexes the ranks peak at 0.40 × the serial
 /// run (BENCHMARKS.md).
 const MEMORY_SHARE: f64 = 0.55;
