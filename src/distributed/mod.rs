@@ -18,3 +18,4 @@ pub mod read;
 pub mod sample;
 pub mod share;
 pub mod write;
+pub mod write_parts;
