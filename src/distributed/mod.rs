@@ -15,6 +15,7 @@ pub mod launch;
 pub mod local;
 pub mod partition;
 pub mod read;
+pub mod read_parts;
 pub mod sample;
 pub mod share;
 pub mod write;

@@ -43,6 +43,10 @@ pub fn read_share(
         path: path.to_owned(),
         source,
     };
+    // Gmsh's partitioned files: each rank reads its parts (`super::read_parts`).
+    if super::read_parts::is_partitioned(path) {
+        return super::read_parts::read_parts_share(comm, path, depth, options).map_err(wrap);
+    }
     // Every rank reads the same header and checks the same things before the first
     // collective, so a bad file is refused on every rank alike.
     let mut file = MshFile::open(path).map_err(wrap)?;
@@ -118,7 +122,7 @@ fn morton_parts(
 
 /// Send every element of `run` to the rank of its part; the elements received, in increasing
 /// global index (step 3). Indices and node tags travel as f64 (exact below 2⁵³).
-fn route(comm: &dyn Comm, run: &Elements, part: &[u32], npe: usize) -> Elements {
+pub(super) fn route(comm: &dyn Comm, run: &Elements, part: &[u32], npe: usize) -> Elements {
     let mut send = vec![Vec::new(); comm.size()];
     for (i, &q) in part.iter().enumerate() {
         let s = &mut send[q as usize];
