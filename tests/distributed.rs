@@ -694,3 +694,143 @@ fn partitioned_output_refusals_are_one_line_and_write_nothing() {
     assert!(!scratch("refuse_1.msh").exists());
     assert!(!scratch("refuse_dir_2.msh").exists());
 }
+
+/// Gmsh's own partitioner on `input`: `parts` split MSH 4.1 files `NAME_1 … NAME_parts` beside
+/// `name` (`tests/external/gmsh_parts.py partition`); `None` (a visible skip) without Gmsh.
+fn gmsh_partition(input: &Path, parts: usize, name: &str, binary: bool) -> Option<Vec<PathBuf>> {
+    if !common::have_gmsh("Gmsh's partitioned files were not made") {
+        return None;
+    }
+    let base = scratch(&format!("{name}.msh"));
+    common::run_ok(
+        common::python()
+            .arg(concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/tests/external/gmsh_parts.py"
+            ))
+            .arg("partition")
+            .arg(input)
+            .arg(parts.to_string())
+            .arg(&base)
+            .arg(if binary { "1" } else { "0" }),
+    );
+    let files: Vec<PathBuf> = (1..=parts)
+        .map(|k| scratch(&format!("{name}_{k}.msh")))
+        .collect();
+    assert!(files.iter().all(|f| f.is_file()));
+    Some(files)
+}
+
+#[test]
+fn gmsh_partitioned_input_curves_as_the_unpartitioned_mesh() {
+    if !have_mpirun() {
+        return;
+    }
+    let input = binary_cylinder("gpin.msh", 1500);
+    let serial_out = scratch("gpin_serial.msh");
+    common::run_ok(Command::new(BIN).args([
+        "curve",
+        input.to_str().unwrap(),
+        "-o",
+        serial_out.to_str().unwrap(),
+        "--cg-tol",
+        CG_TOL,
+        "-q",
+    ]));
+    let serial = read(&serial_out);
+    let diag = diagonal(&serial);
+    // 3 binary parts on 2 and 4 ranks (a rank reads 1 or 2 parts, or none), 5 ASCII parts
+    // on 3 ranks written as 3 partitioned files.
+    let Some(binary_parts) = gmsh_partition(&input, 3, "gpin_b", true) else {
+        return;
+    };
+    let Some(ascii_parts) = gmsh_partition(&input, 5, "gpin_a", false) else {
+        return;
+    };
+    for (np, parts, split) in [
+        (2usize, &binary_parts, false),
+        (4, &binary_parts, false),
+        (3, &ascii_parts, true),
+    ] {
+        let name = format!("gpin_np{np}{}", if split { "_split" } else { "" });
+        let out = scratch(&format!("{name}.msh"));
+        let mut cmd = mpirun(np);
+        // Any part names the set; the last one here.
+        cmd.args([BIN, "curve"])
+            .arg(parts.last().unwrap())
+            .arg("-o")
+            .arg(&out)
+            .args(["--cg-tol", CG_TOL, "-q"]);
+        if split {
+            cmd.arg("--partitioned");
+        }
+        common::run_ok(&mut cmd);
+        if split {
+            let files: Vec<PathBuf> = (1..=np)
+                .map(|k| scratch(&format!("{name}_{k}.msh")))
+                .collect();
+            if let Some(g) = gmsh_compare_parts(&serial_out, &files) {
+                assert_parts_are_the_serial_mesh(&name, &g, np);
+            }
+            continue;
+        }
+        let worst = compare(&serial, &read(&out));
+        assert!(
+            worst <= 1e-6 * diag,
+            "{name}: a node is {worst:.3e} from the serial run's (diagonal {diag:.3})"
+        );
+        if let Some((min, _, hex)) = common::gmsh_det_range(&out, &scratch("gpin_jobs.json")) {
+            assert!(hex);
+            assert!(min > 0.0, "{name}: Gmsh's smallest det J is {min}");
+        }
+    }
+}
+
+#[test]
+fn bad_partitioned_inputs_fail_with_one_line_on_every_rank() {
+    if !have_mpirun() {
+        return;
+    }
+    let input = binary_cylinder("gbad.msh", 300);
+    let Some(three) = gmsh_partition(&input, 3, "gbad3", true) else {
+        return;
+    };
+    let Some(two) = gmsh_partition(&input, 2, "gbad2", true) else {
+        return;
+    };
+    let dir = scratch("gbad_sets");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let copy = |from: &Path, to: &str| std::fs::copy(from, dir.join(to)).unwrap();
+    // A missing part: 1 and 2 of 3.
+    copy(&three[0], "missing_1.msh");
+    copy(&three[1], "missing_2.msh");
+    // Mismatched counts: part 2 of a 2-part set among parts of a 3-part set.
+    copy(&three[0], "mixed_1.msh");
+    copy(&two[1], "mixed_2.msh");
+    copy(&three[2], "mixed_3.msh");
+    // A single (unpartitioned) file in place of part 2.
+    copy(&three[0], "plain_1.msh");
+    copy(&input, "plain_2.msh");
+    copy(&three[2], "plain_3.msh");
+    for (first, np, what) in [
+        ("missing_1.msh", 2usize, "missing"),
+        ("mixed_1.msh", 3, "not of one partitioned mesh"),
+        ("plain_1.msh", 2, "not a Gmsh partition"),
+        ("plain_1.msh", 4, "not a Gmsh partition"),
+    ] {
+        let out = dir.join("out.msh");
+        let o = mpirun(np)
+            .args([BIN, "curve"])
+            .arg(dir.join(first))
+            .arg("-o")
+            .arg(&out)
+            .arg("-q")
+            .output()
+            .unwrap();
+        let lines = error_lines(&o);
+        assert_eq!(lines.len(), 1, "{first} on {np}: {lines:?}");
+        assert!(lines[0].contains(what), "{first} on {np}: {lines:?}");
+        assert!(!out.exists(), "{first} on {np}");
+    }
+}

@@ -80,7 +80,10 @@ impl<'a> Cur<'a> {
             return None;
         }
         let rest = &self.b[self.at..];
-        let n = rest.iter().position(|&c| c == b'\n').map_or(rest.len(), |i| i + 1);
+        let n = rest
+            .iter()
+            .position(|&c| c == b'\n')
+            .map_or(rest.len(), |i| i + 1);
         self.at += n;
         Some(rest[..n].trim_ascii())
     }
@@ -377,7 +380,10 @@ pub fn part_names(path: &Path) -> Result<(Vec<PathBuf>, BTreeMap<i32, String>), 
         return Err(err(format!("{k} partitions")));
     }
     let base = path.with_file_name(base);
-    let parts = super::write_parts::part_paths(&base.with_extension(path.extension().unwrap_or_default()), k as usize);
+    let parts = super::write_parts::part_paths(
+        &base.with_extension(path.extension().unwrap_or_default()),
+        k as usize,
+    );
     if !parts.iter().any(|p| p.file_name() == path.file_name()) {
         return Err(err(format!(
             "this part's number is not among the {k} partitions its header declares"
@@ -396,7 +402,7 @@ pub fn part_names(path: &Path) -> Result<(Vec<PathBuf>, BTreeMap<i32, String>), 
 fn agree<T>(comm: &dyn Comm, r: Result<T, ParseError>) -> Result<T, ParseError> {
     let msg: Vec<f64> = match &r {
         Ok(_) => Vec::new(),
-        Err(e) => e.to_string().bytes().map(|b| b as f64).collect(),
+        Err(e) => e.message.bytes().map(|b| b as f64).collect(),
     };
     let all = comm.all_gather_f64(&msg);
     match all.iter().position(|m| !m.is_empty()) {
@@ -404,10 +410,7 @@ fn agree<T>(comm: &dyn Comm, r: Result<T, ParseError>) -> Result<T, ParseError> 
         Some(q) if q == comm.rank() => r,
         Some(q) => {
             let text: Vec<u8> = all[q].iter().map(|&b| b as u8).collect();
-            Err(err(format!(
-                "(rank {q}) {}",
-                String::from_utf8_lossy(&text)
-            )))
+            Err(err(String::from_utf8_lossy(&text)))
         }
     }
 }
@@ -430,7 +433,8 @@ fn read_mine(comm: &dyn Comm, parts: &[PathBuf]) -> Result<Read, ParseError> {
     let (lo, hi) = (rank * k / size, (rank + 1) * k / size);
     let mut data = Vec::new();
     let read = (lo..hi).try_for_each(|i| {
-        let d = read_part(&parts[i]).map_err(|e| err(format!("{}: {e}", parts[i].display())))?;
+        let d = read_part(&parts[i])
+            .map_err(|e| err(format!("{}: {}", parts[i].display(), e.message)))?;
         if d.partitions != k as u64 {
             return Err(err(format!(
                 "{} declares {} partitions, {} declares {k}: the parts are not of one partitioned mesh",
@@ -466,7 +470,9 @@ fn read_mine(comm: &dyn Comm, parts: &[PathBuf]) -> Result<Read, ParseError> {
             if !ghost {
                 r.cells.global.push(t);
                 r.cells.tags.push(p);
-                r.cells.nodes.extend_from_slice(&cells.nodes[i * npe..(i + 1) * npe]);
+                r.cells
+                    .nodes
+                    .extend_from_slice(&cells.nodes[i * npe..(i + 1) * npe]);
             }
         }
         for (i, &(t, p, _)) in facets.items.iter().enumerate() {
@@ -649,11 +655,7 @@ fn ghost_rings(comm: &dyn Comm, own: &Elements, npe: usize, depth: usize) -> (El
 
 /// Ask the homes of `nodes` for what they filed under them: `filed[q]` is what rank q sent
 /// to this rank's directory, `lookup` the records filed under a node (collective).
-fn ask_homes(
-    comm: &dyn Comm,
-    nodes: &[u64],
-    lookup: impl Fn(u64) -> Vec<f64>,
-) -> Vec<Vec<f64>> {
+fn ask_homes(comm: &dyn Comm, nodes: &[u64], lookup: impl Fn(u64) -> Vec<f64>) -> Vec<Vec<f64>> {
     let size = comm.size();
     let mut ask = vec![Vec::new(); size];
     for &t in nodes {
@@ -700,7 +702,12 @@ fn facets_and_coordinates(
     let mut nodes: Vec<u64> = have.iter().copied().collect();
     nodes.sort_unstable();
     let got = ask_homes(comm, &nodes, |t| {
-        under.get(&t).into_iter().flatten().flat_map(|c| c.iter().copied()).collect()
+        under
+            .get(&t)
+            .into_iter()
+            .flatten()
+            .flat_map(|c| c.iter().copied())
+            .collect()
     });
     let mut list: Vec<&[f64]> = got
         .iter()
@@ -785,8 +792,7 @@ pub fn read_parts_share(
     let mut owners = vec![comm.rank() as u32; n_owned];
     owners.extend_from_slice(&owner);
     let have: HashSet<u64> = nodes.iter().copied().collect();
-    let (facet_tags, facet_nodes, global_vertex, points) =
-        facets_and_coordinates(comm, &r, &have)?;
+    let (facet_tags, facet_nodes, global_vertex, points) = facets_and_coordinates(comm, &r, &have)?;
     drop(have);
     let local: HashMap<u64, i64> = global_vertex
         .iter()

@@ -121,7 +121,11 @@ fn gather_part(comm: &dyn Comm, plan: &Plan, out: &RankOutput) -> Part {
         s.push((first_tag[g] + places[i].0) as f64);
         s.push(g as f64);
         s.extend_from_slice(&out.boundary_boxes[i]);
-        s.extend(out.boundary[i * npf..(i + 1) * npf].iter().map(|&x| x as f64));
+        s.extend(
+            out.boundary[i * npf..(i + 1) * npf]
+                .iter()
+                .map(|&x| x as f64),
+        );
     }
     let recv = comm.exchange_f64(&send);
     drop(send);
