@@ -13,6 +13,7 @@ pub mod job;
 #[cfg(feature = "mpi")]
 pub mod launch;
 pub mod local;
+pub mod part_file;
 pub mod partition;
 pub mod read;
 pub mod read_parts;
