@@ -576,7 +576,8 @@ fn gmsh_compare_parts(serial: &Path, parts: &[PathBuf]) -> Option<Value> {
 /// Check what Gmsh makes of the parts against the serial file: one conforming mesh (each
 /// node tag at one position, as many distinct nodes as the serial file), the serial
 /// elements by tag with their nodes within 1e-6 of the diagonal, the same groups and
-/// counts, every element valid by Gmsh's minDetJac, and `np` partitions.
+/// counts, every element valid by Gmsh's minDetJac, `np` partitions, and every boundary
+/// facet in the part of the element it bounds.
 fn assert_parts_are_the_serial_mesh(name: &str, g: &Value, np: usize) {
     assert_eq!(g["distinct_nodes"], g["serial_nodes"], "{name}: {g}");
     assert_eq!(g["mismatched_duplicates"], 0, "{name}: {g}");
@@ -585,6 +586,7 @@ fn assert_parts_are_the_serial_mesh(name: &str, g: &Value, np: usize) {
     assert_eq!(g["extra"], 0, "{name}: {g}");
     assert_eq!(g["groups"], g["serial_groups"], "{name}: {g}");
     assert_eq!(g["partitions"], np, "{name}: {g}");
+    assert_eq!(g["facets_off_part"], 0, "{name}: {g}");
     let worst = g["max_distance"].as_f64().unwrap();
     let diag = g["diagonal"].as_f64().unwrap();
     assert!(

@@ -5,7 +5,7 @@
 //! names of all the parts and the physical names, from one part's header ([`part_names`]);
 //! and a part's hexahedra, quadrilaterals and lines (Gmsh tag, physical tag as the serial
 //! reader assigns it, whether the element's entity is one of Gmsh's ghost entities, node
-//! tags) and its nodes (tags, coordinates) ([`read_part`]). [`super::read_parts`] distributes
+//! tags) and its nodes (tags, coordinates) (`read_part`). [`super::read_parts`] distributes
 //! the parts over the ranks.
 
 use crate::io::raw::{Location, ParseError};

@@ -23,7 +23,7 @@
 //! serial ones) and the boundary facets bounding them, sorted by tag.
 //!
 //! Communication: the groups and boundary-facet places of the single-file writer
-//! ([`super::write::plan`], [`super::write::facet_places`]); each boundary facet travels to the
+//! (`write::plan`, `write::facet_places`); each boundary facet travels to the
 //! rank whose run holds its element ((8 + its nodes) × 8 B); the coordinates of the nodes a
 //! part uses but its rank does not own come through a directory by node tag (rank t mod P):
 //! 32 B per owned node in, 8 B per asked node and 24 B per answer; one all-gather of every

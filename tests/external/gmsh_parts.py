@@ -7,7 +7,8 @@
       distance between the nodes of the element with the same tag in both (node by node, in
       Gmsh's order), element tags missing on either side, the number of partitions, the
       physical groups (dim, tag, name, number of elements) of both, the smallest minDetJac
-      of the merged mesh's volume elements, and the serial mesh's bounding-box diagonal.
+      of the merged mesh's volume elements, how many boundary facets are not in the part of
+      an element they bound, and the serial mesh's bounding-box diagonal.
   gmsh_parts.py partition IN N OUT BINARY
       Opens IN, partitions it into N parts with Gmsh's partitioner and writes them as split
       MSH 4.1 files OUT_1 ... OUT_N (BINARY = 1: binary).
@@ -83,6 +84,25 @@ def compare(serial, parts):
         b = np.array([s_xyz[int(n)] for n in s_elems[tag][1]])
         worst = max(worst, float(np.linalg.norm(a - b, axis=1).max()))
     dim = gmsh.model.getDimension()
+    # Each boundary facet in the part of an element it bounds: its nodes among the nodes of
+    # that part's volume elements.
+    part_nodes = {}
+    for _, e in gmsh.model.getEntities(dim):
+        for p in gmsh.model.getPartitions(dim, e):
+            for en in gmsh.model.mesh.getElements(dim, e)[2]:
+                part_nodes.setdefault(int(p), set()).update(int(n) for n in en)
+    facets_off_part = 0
+    for _, e in gmsh.model.getEntities(dim - 1):
+        parts = gmsh.model.getPartitions(dim - 1, e)
+        if len(parts) != 1:
+            continue
+        own = part_nodes.get(int(parts[0]), set())
+        _, tags, nodes = gmsh.model.mesh.getElements(dim - 1, e)
+        for t, ns in zip(tags, nodes):
+            k = len(ns) // max(len(t), 1)
+            facets_off_part += sum(
+                not set(int(n) for n in ns[i * k:(i + 1) * k]) <= own for i in range(len(t))
+            )
     min_det = float("inf")
     for t, et, _ in zip(*gmsh.model.mesh.getElements(dim)):
         if len(et):
@@ -102,6 +122,7 @@ def compare(serial, parts):
         "groups": groups(),
         "serial_groups": s_groups,
         "min_det_jac": min_det,
+        "facets_off_part": facets_off_part,
         "diagonal": diag,
     }))
 
