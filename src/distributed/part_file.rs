@@ -375,3 +375,69 @@ pub fn part_names(path: &Path) -> Result<(Vec<PathBuf>, BTreeMap<i32, String>), 
     }
     Ok((parts, tag_names))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A two-part ASCII set in Gmsh's layout: one hexahedron per part (tags 2 and 3, tag 1 a
+    /// boundary quad of part 1), the shared face's nodes in both parts.
+    fn part(k: usize) -> String {
+        let (tag, nodes, quad) = if k == 1 {
+            (2, [1, 2, 3, 4, 5, 6, 7, 8], "2 6 3 1\n1 1 2 3 4\n")
+        } else {
+            (3, [5, 6, 7, 8, 9, 10, 11, 12], "")
+        };
+        let mut s = String::from(
+            "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$PhysicalNames\n2\n2 7 \"wall\"\n3 9 \"fluid\"\n$EndPhysicalNames\n$Entities\n0 0 1 1\n1 0 0 0 1 1 0 1 7 0\n1 0 0 0 1 1 2 1 9 0\n$EndEntities\n$PartitionedEntities\n2\n0\n0 0 1 2\n6 2 1 1 1 0 0 0 1 1 0 1 7 0\n4 3 1 1 1 0 0 0 1 1 1 1 9 0\n5 3 1 1 2 0 0 1 1 1 2 1 9 0\n$EndPartitionedEntities\n",
+        );
+        let z0 = if k == 1 { 0.0 } else { 1.0 };
+        s += &format!("$Nodes\n1 8 {} {}\n3 {} 0 8\n", nodes[0], nodes[7], 3 + k);
+        for n in nodes {
+            s += &format!("{n}\n");
+        }
+        for i in 0..8 {
+            let (x, y, z) = ((i % 2) as f64, ((i / 2) % 2) as f64, z0 + (i / 4) as f64);
+            s += &format!("{x} {y} {z}\n");
+        }
+        let blocks = if quad.is_empty() { 1 } else { 2 };
+        s += &format!("$EndNodes\n$Elements\n{blocks} {blocks} 1 3\n{quad}");
+        s += &format!("3 {} 5 1\n{tag}", 3 + k);
+        for n in nodes {
+            s += &format!(" {n}");
+        }
+        s += "\n$EndElements\n";
+        s
+    }
+
+    #[test]
+    fn a_part_is_read_with_its_tags_names_and_physical_groups() {
+        let dir = std::env::temp_dir().join(format!("polyspline-parts-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        for k in 1..=2 {
+            std::fs::write(dir.join(format!("m_{k}.msh")), part(k)).unwrap();
+        }
+        let first = dir.join("m_2.msh");
+        assert!(is_partitioned(&first));
+        let (names, tags) = part_names(&first).unwrap();
+        assert_eq!(names, vec![dir.join("m_1.msh"), dir.join("m_2.msh")]);
+        assert_eq!(tags.get(&9).map(String::as_str), Some("fluid"));
+        let p = read_part(&names[0]).unwrap();
+        assert_eq!(p.partitions, 2);
+        assert_eq!(p.hexes.items, vec![(2, 9, false)]);
+        assert_eq!(p.hexes.nodes, (1..=8).collect::<Vec<u64>>());
+        assert_eq!(p.quads.items, vec![(1, 7, false)]);
+        assert_eq!(p.node_tags.len(), 8);
+        assert_eq!(p.node_coords[7], [1.0, 1.0, 1.0]);
+        // A missing part, and a name without the part number.
+        std::fs::remove_file(&names[0]).unwrap();
+        let e = part_names(&first).err().unwrap().to_string();
+        assert!(e.contains("missing") && !e.contains('\n'), "{e}");
+        std::fs::write(dir.join("plain.msh"), part(2)).unwrap();
+        let e = part_names(&dir.join("plain.msh"))
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains("NAME_<k>"), "{e}");
+    }
+}

@@ -16,6 +16,9 @@
 //! the rank whose run holds it (one request and one answer of 8 B per ghost); (6) the tagged
 //! facets and the coordinates ([`MshFile::local_mesh`]).
 //!
+//! Gmsh's partitioned files (`$PartitionedEntities`) go to [`super::read_parts`] instead,
+//! which reads each rank's parts and joins the same steps from the Morton partition on.
+//!
 //! `POLYSPLINE_PARTITION=file-order` skips steps 2 and 3 (each rank owns its run), for
 //! comparison.
 //!

@@ -518,3 +518,21 @@ pub fn write_all(
     }
     Ok((rank == 0).then_some(report))
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn part_names_follow_gmsh() {
+        assert_eq!(
+            part_path(Path::new("dir/out.msh"), 3),
+            PathBuf::from("dir/out_3.msh")
+        );
+        assert_eq!(part_path(Path::new("out"), 1), PathBuf::from("out_1"));
+        assert_eq!(
+            part_paths(Path::new("a.b.msh"), 2),
+            vec![PathBuf::from("a.b_1.msh"), PathBuf::from("a.b_2.msh")]
+        );
+    }
+}
