@@ -805,8 +805,8 @@ fn bad_partitioned_inputs_fail_with_one_line_on_every_rank() {
     std::fs::create_dir_all(&dir).unwrap();
     let copy = |from: &Path, to: &str| std::fs::copy(from, dir.join(to)).unwrap();
     // A missing part: 1 and 2 of 3.
-    copy(&three[0], "missing_1.msh");
-    copy(&three[1], "missing_2.msh");
+    copy(&three[0], "gone_1.msh");
+    copy(&three[1], "gone_2.msh");
     // Mismatched counts: part 2 of a 2-part set among parts of a 3-part set.
     copy(&three[0], "mixed_1.msh");
     copy(&two[1], "mixed_2.msh");
@@ -816,7 +816,7 @@ fn bad_partitioned_inputs_fail_with_one_line_on_every_rank() {
     copy(&input, "plain_2.msh");
     copy(&three[2], "plain_3.msh");
     for (first, np, what) in [
-        ("missing_1.msh", 2usize, "missing"),
+        ("gone_1.msh", 2usize, "is missing"),
         ("mixed_1.msh", 3, "not of one partitioned mesh"),
         ("plain_1.msh", 2, "not a Gmsh partition"),
         ("plain_1.msh", 4, "not a Gmsh partition"),
@@ -833,6 +833,9 @@ fn bad_partitioned_inputs_fail_with_one_line_on_every_rank() {
         let lines = error_lines(&o);
         assert_eq!(lines.len(), 1, "{first} on {np}: {lines:?}");
         assert!(lines[0].contains(what), "{first} on {np}: {lines:?}");
+        // The other ranks end quietly: no rank is stopped by the launcher.
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!err.contains("interrupted"), "{first} on {np}: {err}");
         assert!(!out.exists(), "{first} on {np}");
     }
 }

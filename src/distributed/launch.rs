@@ -72,6 +72,11 @@ pub fn curve(
         // status. The others end quietly, since an early non-zero exit lets the launcher kill
         // rank 0 before it has printed.
         Err(CurveError::Options(_)) if rank != 0 => std::process::exit(0),
+        // Every read error of a partitioned input is agreed by all ranks
+        // (`read_parts`): rank 0 prints it, the others end quietly for the same reason.
+        Err(CurveError::Read(_)) if rank != 0 && super::read_parts::is_partitioned(input) => {
+            std::process::exit(0)
+        }
         Err(_) if rank != 0 => std::process::exit(1),
         r => r,
     }

@@ -5,7 +5,7 @@
 //! and the ghosts around it; [`read_parts`] and [`part_file`] the same from Gmsh's
 //! partitioned files), [`partition`] the element partition along a Morton curve, [`cg`] the fit's CG across ranks
 //! (halo exchange of shared control points, global reductions), [`job`] the `curve` job
-//! stage by stage, [`write`] the one output file written collectively and [`write_parts`]
+//! stage by stage, [`mod@write`] the one output file written collectively and [`write_parts`]
 //! Gmsh's partitioned output (one file per rank). `docs/distributed.md` states what is distributed, what is replicated on
 //! every rank so far, and the measured volumes.
 
