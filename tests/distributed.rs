@@ -674,3 +674,289 @@ fn the_morton_repartition_owns_and_ghosts_as_computed_from_the_file() {
         "{got:?}"
     );
 }
+
+/// Gmsh's view of the partitioned files `parts` against the single `serial` file
+/// (`tests/external/gmsh_parts.py compare`); `None` (a visible skip) without Gmsh outside CI.
+fn gmsh_compare_parts(serial: &Path, parts: &[PathBuf]) -> Option<Value> {
+    if !common::have_gmsh("the partitioned files were not read by Gmsh") {
+        return None;
+    }
+    let out = common::run_ok(
+        common::python()
+            .arg(concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/tests/external/gmsh_parts.py"
+            ))
+            .arg("compare")
+            .arg(serial)
+            .args(parts),
+    );
+    Some(serde_json::from_slice(&out.stdout).unwrap())
+}
+
+/// Check what Gmsh makes of the parts against the serial file: one conforming mesh (each
+/// node tag at one position, as many distinct nodes as the serial file), the serial
+/// elements by tag with their nodes within 1e-6 of the diagonal, the same groups and
+/// counts, every element valid by Gmsh's minDetJac, `np` partitions, and every boundary
+/// facet in the part of the element it bounds.
+fn assert_parts_are_the_serial_mesh(name: &str, g: &Value, np: usize) {
+    assert_eq!(g["distinct_nodes"], g["serial_nodes"], "{name}: {g}");
+    assert_eq!(g["mismatched_duplicates"], 0, "{name}: {g}");
+    assert_eq!(g["counts"], g["serial_counts"], "{name}: {g}");
+    assert_eq!(g["missing"], 0, "{name}: {g}");
+    assert_eq!(g["extra"], 0, "{name}: {g}");
+    assert_eq!(g["groups"], g["serial_groups"], "{name}: {g}");
+    assert_eq!(g["partitions"], np, "{name}: {g}");
+    assert_eq!(g["facets_off_part"], 0, "{name}: {g}");
+    let worst = g["max_distance"].as_f64().unwrap();
+    let diag = g["diagonal"].as_f64().unwrap();
+    assert!(
+        worst <= 1e-6 * diag,
+        "{name}: a node is {worst:.3e} from the serial run's (diagonal {diag:.3})"
+    );
+    let min = g["min_det_jac"].as_f64().unwrap();
+    assert!(min > 0.0, "{name}: Gmsh's smallest det J is {min}");
+}
+
+#[test]
+fn partitioned_output_is_read_by_gmsh_as_the_serial_mesh() {
+    if !have_mpirun() {
+        return;
+    }
+    let input = binary_cylinder("parts_in.msh", 1500);
+    let serial_out = scratch("parts_serial.msh");
+    common::run_ok(Command::new(BIN).args([
+        "curve",
+        input.to_str().unwrap(),
+        "-o",
+        serial_out.to_str().unwrap(),
+        "--cg-tol",
+        CG_TOL,
+        "-q",
+    ]));
+    for (np, binary) in [(2usize, false), (4, true)] {
+        let name = format!("parts_np{np}{}", if binary { "_bin" } else { "" });
+        let out = scratch(&format!("{name}.msh"));
+        let parts: Vec<PathBuf> = (1..=np)
+            .map(|k| scratch(&format!("{name}_{k}.msh")))
+            .collect();
+        for p in parts.iter().chain([&out]) {
+            let _ = std::fs::remove_file(p);
+        }
+        let mut cmd = mpirun(np);
+        cmd.args([
+            BIN,
+            "curve",
+            input.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--partitioned",
+            "--cg-tol",
+            CG_TOL,
+            "-q",
+        ]);
+        if binary {
+            cmd.arg("--binary");
+        }
+        common::run_ok(&mut cmd);
+        // One file per rank and nothing else: no single file, no temporary.
+        assert!(!out.exists(), "{name}");
+        assert!(!scratch(&format!("{name}_{}.msh", np + 1)).exists());
+        for p in &parts {
+            assert!(p.is_file(), "{}", p.display());
+            assert_eq!(temporaries(p), 0, "{}", p.display());
+            let head = std::fs::read(p).unwrap();
+            let text = String::from_utf8_lossy(&head[..head.len().min(4096)]);
+            assert!(text.contains("$PartitionedEntities"), "{}", p.display());
+            assert_eq!(text.contains("4.1 1 8"), binary, "{}", p.display());
+        }
+        if let Some(g) = gmsh_compare_parts(&serial_out, &parts) {
+            assert_parts_are_the_serial_mesh(&name, &g, np);
+        }
+    }
+}
+
+#[test]
+fn partitioned_output_refusals_are_one_line_and_write_nothing() {
+    if !have_mpirun() {
+        return;
+    }
+    let input = binary_cylinder("refuse_2.msh", 200);
+    // One process: one line, no file.
+    let out = scratch("refuse_one.msh");
+    let o = mpirun(1)
+        .args([BIN, "curve", input.to_str().unwrap(), "-o"])
+        .arg(&out)
+        .arg("--partitioned")
+        .output()
+        .unwrap();
+    let lines = error_lines(&o);
+    assert_eq!(lines.len(), 1, "{lines:?}");
+    assert!(lines[0].contains("--partitioned"), "{lines:?}");
+    assert!(!scratch("refuse_one_1.msh").exists());
+    // A part that would replace the input (`refuse_2.msh` is part 2 of `refuse.msh`), and a
+    // part whose path is a directory: one line from rank 0, the input untouched.
+    let before = std::fs::read(&input).unwrap();
+    let dir_part = scratch("refuse_dir_1.msh");
+    let _ = std::fs::create_dir_all(&dir_part);
+    for (target, what) in [
+        (scratch("refuse.msh"), "input"),
+        (scratch("refuse_dir.msh"), "directory"),
+    ] {
+        let o = mpirun(2)
+            .args([BIN, "curve", input.to_str().unwrap(), "-o"])
+            .arg(&target)
+            .arg("--partitioned")
+            .output()
+            .unwrap();
+        let lines = error_lines(&o);
+        assert_eq!(lines.len(), 1, "{what}: {lines:?}");
+        assert!(lines[0].contains(what), "{what}: {lines:?}");
+    }
+    assert_eq!(std::fs::read(&input).unwrap(), before);
+    assert!(!scratch("refuse_1.msh").exists());
+    assert!(!scratch("refuse_dir_2.msh").exists());
+}
+
+/// Gmsh's own partitioner on `input`: `parts` split MSH 4.1 files `NAME_1 … NAME_parts` beside
+/// `name` (`tests/external/gmsh_parts.py partition`); `None` (a visible skip) without Gmsh.
+fn gmsh_partition(input: &Path, parts: usize, name: &str, binary: bool) -> Option<Vec<PathBuf>> {
+    if !common::have_gmsh("Gmsh's partitioned files were not made") {
+        return None;
+    }
+    let base = scratch(&format!("{name}.msh"));
+    common::run_ok(
+        common::python()
+            .arg(concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/tests/external/gmsh_parts.py"
+            ))
+            .arg("partition")
+            .arg(input)
+            .arg(parts.to_string())
+            .arg(&base)
+            .arg(if binary { "1" } else { "0" }),
+    );
+    let files: Vec<PathBuf> = (1..=parts)
+        .map(|k| scratch(&format!("{name}_{k}.msh")))
+        .collect();
+    assert!(files.iter().all(|f| f.is_file()));
+    Some(files)
+}
+
+#[test]
+fn gmsh_partitioned_input_curves_as_the_unpartitioned_mesh() {
+    if !have_mpirun() {
+        return;
+    }
+    let input = binary_cylinder("gpin.msh", 1500);
+    let serial_out = scratch("gpin_serial.msh");
+    common::run_ok(Command::new(BIN).args([
+        "curve",
+        input.to_str().unwrap(),
+        "-o",
+        serial_out.to_str().unwrap(),
+        "--cg-tol",
+        CG_TOL,
+        "-q",
+    ]));
+    let serial = read(&serial_out);
+    let diag = diagonal(&serial);
+    // 3 binary parts on 2 and 4 ranks (a rank reads 1 or 2 parts, or none), 5 ASCII parts
+    // on 3 ranks written as 3 partitioned files.
+    let Some(binary_parts) = gmsh_partition(&input, 3, "gpin_b", true) else {
+        return;
+    };
+    let Some(ascii_parts) = gmsh_partition(&input, 5, "gpin_a", false) else {
+        return;
+    };
+    for (np, parts, split) in [
+        (2usize, &binary_parts, false),
+        (4, &binary_parts, false),
+        (3, &ascii_parts, true),
+    ] {
+        let name = format!("gpin_np{np}{}", if split { "_split" } else { "" });
+        let out = scratch(&format!("{name}.msh"));
+        let mut cmd = mpirun(np);
+        // Any part names the set; the last one here.
+        cmd.args([BIN, "curve"])
+            .arg(parts.last().unwrap())
+            .arg("-o")
+            .arg(&out)
+            .args(["--cg-tol", CG_TOL, "-q"]);
+        if split {
+            cmd.arg("--partitioned");
+        }
+        common::run_ok(&mut cmd);
+        if split {
+            let files: Vec<PathBuf> = (1..=np)
+                .map(|k| scratch(&format!("{name}_{k}.msh")))
+                .collect();
+            if let Some(g) = gmsh_compare_parts(&serial_out, &files) {
+                assert_parts_are_the_serial_mesh(&name, &g, np);
+            }
+            continue;
+        }
+        let worst = compare(&serial, &read(&out));
+        assert!(
+            worst <= 1e-6 * diag,
+            "{name}: a node is {worst:.3e} from the serial run's (diagonal {diag:.3})"
+        );
+        if let Some((min, _, hex)) = common::gmsh_det_range(&out, &scratch("gpin_jobs.json")) {
+            assert!(hex);
+            assert!(min > 0.0, "{name}: Gmsh's smallest det J is {min}");
+        }
+    }
+}
+
+#[test]
+fn bad_partitioned_inputs_fail_with_one_line_on_every_rank() {
+    if !have_mpirun() {
+        return;
+    }
+    let input = binary_cylinder("gbad.msh", 300);
+    let Some(three) = gmsh_partition(&input, 3, "gbad3", true) else {
+        return;
+    };
+    let Some(two) = gmsh_partition(&input, 2, "gbad2", true) else {
+        return;
+    };
+    let dir = scratch("gbad_sets");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let copy = |from: &Path, to: &str| std::fs::copy(from, dir.join(to)).unwrap();
+    // A missing part: 1 and 2 of 3.
+    copy(&three[0], "gone_1.msh");
+    copy(&three[1], "gone_2.msh");
+    // Mismatched counts: part 2 of a 2-part set among parts of a 3-part set.
+    copy(&three[0], "mixed_1.msh");
+    copy(&two[1], "mixed_2.msh");
+    copy(&three[2], "mixed_3.msh");
+    // A single (unpartitioned) file in place of part 2.
+    copy(&three[0], "plain_1.msh");
+    copy(&input, "plain_2.msh");
+    copy(&three[2], "plain_3.msh");
+    for (first, np, what) in [
+        ("gone_1.msh", 2usize, "is missing"),
+        ("mixed_1.msh", 3, "not of one partitioned mesh"),
+        ("plain_1.msh", 2, "not a Gmsh partition"),
+        ("plain_1.msh", 4, "not a Gmsh partition"),
+    ] {
+        let out = dir.join("out.msh");
+        let o = mpirun(np)
+            .args([BIN, "curve"])
+            .arg(dir.join(first))
+            .arg("-o")
+            .arg(&out)
+            .arg("-q")
+            .output()
+            .unwrap();
+        let lines = error_lines(&o);
+        assert_eq!(lines.len(), 1, "{first} on {np}: {lines:?}");
+        assert!(lines[0].contains(what), "{first} on {np}: {lines:?}");
+        // The other ranks end quietly: no rank is stopped by the launcher.
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(!err.contains("interrupted"), "{first} on {np}: {err}");
+        assert!(!out.exists(), "{first} on {np}");
+    }
+}

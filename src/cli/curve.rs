@@ -116,6 +116,10 @@ pub(super) struct Args {
     /// Binary Gmsh output.
     #[arg(long)]
     binary: bool,
+    /// Under mpirun: write Gmsh's partitioned MSH 4.1 files OUT_1.msh … OUT_N.msh (one per
+    /// rank, read by Gmsh as one mesh) instead of one file (docs/distributed.md).
+    #[arg(long)]
+    partitioned: bool,
     /// How VTU data arrays are stored.
     #[arg(long, value_enum, default_value_t = VtuEncoding::Base64)]
     vtu_encoding: VtuEncoding,
@@ -262,7 +266,11 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
     let mut inputs: Vec<&Path> = vec![&mesh];
     let edits = args.features.feature_edits.clone();
     inputs.extend(edits.as_deref());
-    let outputs: Vec<&Path> = std::iter::once(output.as_path())
+    let partitioned = args.partitioned;
+    let parts = partitioned_outputs(&output, partitioned)?;
+    let outputs: Vec<&Path> = parts
+        .iter()
+        .map(PathBuf::as_path)
         .chain(report.as_deref())
         .collect();
     // Every output path is checked before any work, against the inputs and each other.
@@ -287,10 +295,26 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
     #[cfg(feature = "mpi")]
     if polyspline::distributed::launch::distributed() {
         use polyspline::distributed::launch::{Outcome, curve};
-        if let Outcome::Written(r) = curve(&mesh, &output, &options, report.as_deref(), &inputs)? {
+        let written = curve(
+            &mesh,
+            &output,
+            &options,
+            report.as_deref(),
+            &inputs,
+            partitioned,
+        )?;
+        if let Outcome::Written(r) = written {
+            let what = if partitioned {
+                format!(
+                    "{} … {}",
+                    parts[0].display(),
+                    parts[parts.len() - 1].display()
+                )
+            } else {
+                output.display().to_string()
+            };
             eprintln!(
-                "wrote {}: {} elements of order {}, {} nodes, {} boundary facets, on {} ranks ({:.3} s)",
-                output.display(),
+                "wrote {what}: {} elements of order {}, {} nodes, {} boundary facets, on {} ranks ({:.3} s)",
                 r.curve.output_elements,
                 r.curve.order,
                 r.curve.output_nodes,
@@ -323,6 +347,23 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
     }
     print_summary(&r);
     Ok(())
+}
+
+/// The output files: `OUTPUT`, or with `--partitioned` Gmsh's part names `OUT_1 … OUT_N` for
+/// the N ranks of the MPI job (which must have more than one rank).
+fn partitioned_outputs(output: &Path, partitioned: bool) -> anyhow::Result<Vec<PathBuf>> {
+    if !partitioned {
+        return Ok(vec![output.to_owned()]);
+    }
+    #[cfg(feature = "mpi")]
+    if polyspline::distributed::launch::distributed() {
+        let n = polyspline::distributed::launch::launched_size().unwrap_or(1);
+        return Ok(polyspline::distributed::write_parts::part_paths(output, n));
+    }
+    anyhow::bail!(
+        "{}: --partitioned writes one file per MPI rank and needs mpirun with 2 or more ranks (a build with --features mpi); on one process, drop it to write one file",
+        output.display()
+    )
 }
 
 /// The lines on stderr after a successful run (the JSON report holds the same figures).

@@ -60,12 +60,13 @@ pub fn curve(
     options: &CurveOptions,
     report: Option<&Path>,
     inputs: &[&Path],
+    partitioned: bool,
 ) -> Result<Outcome, CurveError> {
     let universe = mpi::initialize()
         .ok_or_else(|| CurveError::Options("MPI was initialised already in this process".into()))?;
     let comm = Mpi::new(universe.world());
     let rank = comm.rank();
-    let result = run(&comm, input, output, options, report, inputs);
+    let result = run(&comm, input, output, options, report, inputs, partitioned);
     let failed = result.is_err();
     if failed {
         FAILED.store(true, std::sync::atomic::Ordering::Relaxed);
@@ -128,6 +129,7 @@ fn run(
     options: &CurveOptions,
     report: Option<&Path>,
     inputs: &[&Path],
+    partitioned: bool,
 ) -> Result<Outcome, CurveError> {
     check_output(output, options)?;
     let finished = curve_job(comm, input, options)?;
@@ -137,6 +139,19 @@ fn run(
         volume_name: &options.output.volume_name,
         tag_names: &finished.tag_names,
     };
+    if partitioned {
+        let r = super::write_parts::write_all(
+            comm,
+            &finished.output,
+            finished.report,
+            output,
+            report,
+            inputs,
+            &write_options,
+            t,
+        )?;
+        return Ok(r.map_or(Outcome::Share, |r| Outcome::Written(Box::new(r))));
+    }
     // Its errors are alike on every rank (one sum); rank 0 prints the line (see [`curve`]).
     let pending = write_collective(comm, &finished.output, output, inputs, &write_options)?;
     let Some(pending) = pending else {

@@ -2,9 +2,11 @@
 //!
 //! [`comm`] is the communication layer (rsmpi over the system MPI, or one process),
 //! [`read`] and [`share`] each rank's share of the input (its Morton part of the elements
-//! and the ghosts around it), [`partition`] the element partition along a Morton curve, [`cg`] the fit's CG across ranks
+//! and the ghosts around it; [`read_parts`] and [`part_file`] the same from Gmsh's
+//! partitioned files), [`partition`] the element partition along a Morton curve, [`cg`] the fit's CG across ranks
 //! (halo exchange of shared control points, global reductions), [`job`] the `curve` job
-//! stage by stage. `docs/distributed.md` states what is distributed, what is replicated on
+//! stage by stage, [`mod@write`] the one output file written collectively and [`write_parts`]
+//! Gmsh's partitioned output (one file per rank). `docs/distributed.md` states what is distributed, what is replicated on
 //! every rank so far, and the measured volumes.
 
 pub mod cg;
@@ -14,8 +16,11 @@ pub mod job;
 #[cfg(feature = "mpi")]
 pub mod launch;
 pub mod local;
+pub mod part_file;
 pub mod partition;
 pub mod read;
+pub mod read_parts;
 pub mod sample;
 pub mod share;
 pub mod write;
+pub mod write_parts;

@@ -45,6 +45,9 @@ pub struct RankOutput {
     pub boundary: Vec<u64>,
     pub boundary_tags: Vec<i32>,
     pub boundary_keys: Vec<[u64; 4]>,
+    /// Global index of the own element each boundary facet bounds (a partitioned write
+    /// puts the facet in that element's part).
+    pub boundary_elements: Vec<u64>,
     /// Bounding box `[min x, y, z, max x, y, z]` of each own element's and boundary facet's
     /// nodes (for the entities' boxes of the MSH file).
     pub element_boxes: Vec<[f64; 6]>,
@@ -187,6 +190,13 @@ pub fn sample_share(
     let feature_deviation = features.map_or((0.0, 0.0), |f| {
         feature_deviation(local, topo, f, &owned, &xyz, &boundary_ids)
     });
+    let boundary_elements = topo
+        .boundary_facets
+        .iter()
+        .map(|&f| topo.facet_elements[f as usize][0] as usize)
+        .filter(|&e| e < local.n_owned)
+        .map(|e| local.global_element[e])
+        .collect();
     let boxes = |ids: &[u32], n: usize| -> Vec<[f64; 6]> {
         ids.chunks_exact(n)
             .map(|c| {
@@ -224,6 +234,7 @@ pub fn sample_share(
         boundary,
         boundary_tags,
         boundary_keys,
+        boundary_elements,
         element_boxes,
         boundary_boxes,
         min_scaled_jacobian: quality.0,

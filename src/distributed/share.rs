@@ -16,6 +16,9 @@
 //! the rank whose run holds it (one request and one answer of 8 B per ghost); (6) the tagged
 //! facets and the coordinates ([`MshFile::local_mesh`]).
 //!
+//! Gmsh's partitioned files (`$PartitionedEntities`) go to [`super::read_parts`] instead,
+//! which reads each rank's parts and joins the same steps from the Morton partition on.
+//!
 //! `POLYSPLINE_PARTITION=file-order` skips steps 2 and 3 (each rank owns its run), for
 //! comparison.
 //!
@@ -43,6 +46,11 @@ pub fn read_share(
         path: path.to_owned(),
         source,
     };
+    // Gmsh's partitioned files: each rank reads its parts (`super::read_parts`, whose errors
+    // are agreed like the ones below).
+    if super::read_parts::is_partitioned(path) {
+        return super::read_parts::read_parts_share(comm, path, depth, options).map_err(wrap);
+    }
     // Each step that can fail on one rank alone (a truncated or corrupt run of the file, a
     // node missing or not finite among its share's) is agreed before the next collective, so
     // every rank stops together with the failing rank's error.
@@ -137,7 +145,7 @@ fn morton_parts(
 
 /// Send every element of `run` to the rank of its part; the elements received, in increasing
 /// global index (step 3). Indices and node tags travel as f64 (exact below 2⁵³).
-fn route(comm: &dyn Comm, run: &Elements, part: &[u32], npe: usize) -> Elements {
+pub(super) fn route(comm: &dyn Comm, run: &Elements, part: &[u32], npe: usize) -> Elements {
     let mut send = vec![Vec::new(); comm.size()];
     for (i, &q) in part.iter().enumerate() {
         let s = &mut send[q as usize];

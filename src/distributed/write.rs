@@ -35,7 +35,7 @@ use std::path::{Path, PathBuf};
 
 /// Counts the bytes written to it.
 #[derive(Default)]
-struct Counter(u64);
+pub(super) struct Counter(u64);
 
 impl Write for Counter {
     fn write(&mut self, b: &[u8]) -> io::Result<usize> {
@@ -65,7 +65,7 @@ impl Write for At<'_> {
 }
 
 /// Byte size of what `f` writes.
-fn size_of(f: impl FnOnce(&mut Counter) -> io::Result<()>) -> u64 {
+pub(super) fn size_of(f: impl FnOnce(&mut Counter) -> io::Result<()>) -> u64 {
     let mut c = Counter::default();
     f(&mut c).expect("counting never fails");
     c.0
@@ -83,30 +83,30 @@ fn write_at(
 }
 
 /// Non-negative tag (a reader takes no other as an id): the serial writer's rule.
-fn clamp(t: i32) -> i32 {
+pub(super) fn clamp(t: i32) -> i32 {
     t.max(0)
 }
 
 /// What every rank agrees on before writing: the groups, their global member counts and
 /// boxes, the node count and tag range, and the formats of the records.
-struct Plan {
-    binary: bool,
-    d: usize,
-    groups: Vec<PlannedGroup>,
+pub(super) struct Plan {
+    pub(super) binary: bool,
+    pub(super) d: usize,
+    pub(super) groups: Vec<PlannedGroup>,
     /// Members of each group on each rank (`[rank][group]`).
-    counts: Vec<Vec<u64>>,
-    bbox: Vec<[f64; 6]>,
+    pub(super) counts: Vec<Vec<u64>>,
+    pub(super) bbox: Vec<[f64; 6]>,
     /// Owned nodes per rank, the smallest and largest node tag.
     nodes: Vec<u64>,
     tag_range: [u64; 2],
     vol_order: Vec<usize>,
     bnd_order: Vec<usize>,
-    vol_type: i32,
-    bnd_type: i32,
+    pub(super) vol_type: i32,
+    pub(super) bnd_type: i32,
 }
 
 impl Plan {
-    fn group_of(&self, boundary: bool, tag: i32) -> usize {
+    pub(super) fn group_of(&self, boundary: bool, tag: i32) -> usize {
         let dim = if boundary { self.d - 1 } else { self.d };
         self.groups
             .iter()
@@ -115,16 +115,35 @@ impl Plan {
     }
 
     /// The group of own element `e`.
-    fn vol_group(&self, out: &RankOutput, e: usize) -> usize {
+    pub(super) fn vol_group(&self, out: &RankOutput, e: usize) -> usize {
         self.group_of(false, out.element_tags.get(e).copied().unwrap_or(0))
     }
 
-    fn total(&self, g: usize) -> u64 {
+    pub(super) fn total(&self, g: usize) -> u64 {
         self.counts.iter().map(|c| c[g]).sum()
     }
 
-    /// `$MeshFormat`, `$PhysicalNames`, `$Entities` and the `$Nodes` header.
-    fn header(&self, w: &mut impl Write) -> io::Result<()> {
+    /// The element tag of each group's first record (groups in order, tags from 1).
+    pub(super) fn first_tags(&self) -> Vec<u64> {
+        (0..self.groups.len())
+            .scan(1u64, |t, g| {
+                let s = *t;
+                *t += self.total(g);
+                Some(s)
+            })
+            .collect()
+    }
+
+    /// Members of each group on the ranks before `rank`.
+    pub(super) fn before(&self, rank: usize) -> Vec<u64> {
+        (0..self.groups.len())
+            .map(|g| self.counts[..rank].iter().map(|c| c[g]).sum())
+            .collect()
+    }
+
+    /// `$MeshFormat`, `$PhysicalNames` and `$Entities` (one entity per group, with its box
+    /// over all ranks).
+    pub(super) fn entities(&self, w: &mut impl Write) -> io::Result<()> {
         let binary = self.binary;
         let names = self
             .groups
@@ -166,12 +185,17 @@ impl Plan {
         if binary {
             writeln!(w)?;
         }
-        writeln!(w, "$EndEntities")?;
+        writeln!(w, "$EndEntities")
+    }
+
+    /// `$MeshFormat`, `$PhysicalNames`, `$Entities` and the `$Nodes` header.
+    fn header(&self, w: &mut impl Write) -> io::Result<()> {
+        self.entities(w)?;
         writeln!(w, "$Nodes")?;
         let blocks = self.nodes.iter().filter(|&&n| n > 0).count() as u64;
         let nn: u64 = self.nodes.iter().sum();
         let [lo, hi] = self.tag_range;
-        if binary {
+        if self.binary {
             for v in [blocks, nn, lo, hi] {
                 w.u64(v)?;
             }
@@ -257,7 +281,7 @@ impl Plan {
     }
 
     /// One element record: its tag and node tags (lattice order, reordered to Gmsh's).
-    fn record(&self, tag: u64, nodes: &[u64], w: &mut impl Write) -> io::Result<()> {
+    pub(super) fn record(&self, tag: u64, nodes: &[u64], w: &mut impl Write) -> io::Result<()> {
         // No nodes: the tag alone (its size is what a record's tag adds).
         let order: &[usize] = if nodes.is_empty() {
             &[]
@@ -290,7 +314,7 @@ impl Plan {
 }
 
 /// The groups every rank agrees on, with counts, boxes and node figures (collective).
-fn plan(
+pub(super) fn plan(
     comm: &dyn Comm,
     out: &RankOutput,
     tag_names: &BTreeMap<i32, String>,
@@ -385,7 +409,7 @@ fn plan(
 /// the group's facets, byte offset from the group's first record), and the byte size of
 /// every group's boundary records, from every rank's sort keys and record sizes without the
 /// tag (collective; the boundary only).
-fn facet_places(
+pub(super) fn facet_places(
     comm: &dyn Comm,
     plan: &Plan,
     out: &RankOutput,
@@ -450,16 +474,8 @@ fn layout(comm: &dyn Comm, plan: &Plan, out: &RankOutput) -> Layout {
     let rank = comm.rank();
     let npe = (out.order + 1).pow(out.dim as u32);
     let ng = plan.groups.len();
-    let first_tag: Vec<u64> = (0..ng)
-        .scan(1u64, |t, g| {
-            let s = *t;
-            *t += plan.total(g);
-            Some(s)
-        })
-        .collect();
-    let before: Vec<u64> = (0..ng)
-        .map(|g| plan.counts[..rank].iter().map(|c| c[g]).sum())
-        .collect();
+    let first_tag = plan.first_tags();
+    let before = plan.before(rank);
     // This rank's volume record bytes per group (with their tags), and its node block's.
     let mut bytes = vec![0f64; ng + 1];
     let mut seen = vec![0u64; ng];
@@ -556,7 +572,7 @@ pub struct WriteOptions<'a> {
 }
 
 /// Bytes as f64 (one each) from rank 0 to every rank.
-fn broadcast_bytes(comm: &dyn Comm, bytes: &[u8]) -> Vec<u8> {
+pub(super) fn broadcast_bytes(comm: &dyn Comm, bytes: &[u8]) -> Vec<u8> {
     let v: Vec<f64> = bytes.iter().map(|&b| b as f64).collect();
     comm.all_gather_f64(if comm.rank() == 0 { &v } else { &[] })[0]
         .iter()
@@ -620,7 +636,7 @@ pub fn write_collective(
     }
 }
 
-fn elsewhere(path: &Path, what: &str) -> WriteError {
+pub(super) fn elsewhere(path: &Path, what: &str) -> WriteError {
     WriteError::Refused {
         path: path.to_owned(),
         what: what.into(),

@@ -1,0 +1,443 @@
+//! One part of a Gmsh partitioned MSH 4.1 mesh (`NAME_<k>.msh`, as Gmsh writes them with
+//! `Mesh.PartitionSplitMeshFiles=1`), ASCII or binary, parsed whole.
+//!
+//! Input: a part's path. Outputs: whether a file is such a part ([`is_partitioned`]); the
+//! names of all the parts and the physical names, from one part's header ([`part_names`]);
+//! and a part's hexahedra, quadrilaterals and lines (Gmsh tag, physical tag as the serial
+//! reader assigns it, whether the element's entity is one of Gmsh's ghost entities, node
+//! tags) and its nodes (tags, coordinates) (`read_part`). [`super::read_parts`] distributes
+//! the parts over the ranks.
+
+use crate::io::raw::{Location, ParseError};
+use std::collections::{BTreeMap, HashSet};
+use std::path::{Path, PathBuf};
+
+fn err(what: impl Into<String>) -> ParseError {
+    ParseError::new(Location::File, what)
+}
+
+/// Whether the MSH file at `path` is a Gmsh partition (`$PartitionedEntities` before
+/// `$Nodes`); false for any other file and for an unreadable one (its reader reports that).
+pub fn is_partitioned(path: &Path) -> bool {
+    use std::io::BufRead;
+    let Ok(f) = std::fs::File::open(path) else {
+        return false;
+    };
+    let mut r = std::io::BufReader::new(f);
+    let mut buf = Vec::new();
+    for _ in 0..100_000 {
+        buf.clear();
+        match r.read_until(b'\n', &mut buf) {
+            Ok(0) | Err(_) => return false,
+            Ok(_) => {}
+        }
+        match buf.trim_ascii() {
+            b"$PartitionedEntities" => return true,
+            b"$Nodes" | b"$Elements" => return false,
+            _ => {}
+        }
+    }
+    false
+}
+
+/// A byte cursor over an MSH 4.1 file, ASCII or binary (little-endian, 8-byte `size_t`).
+struct Cur<'a> {
+    b: &'a [u8],
+    at: usize,
+    binary: bool,
+}
+
+impl<'a> Cur<'a> {
+    fn eof() -> ParseError {
+        err("the file ends inside a section")
+    }
+    /// The next line, trimmed (`None` at the end).
+    fn line(&mut self) -> Option<&'a [u8]> {
+        if self.at >= self.b.len() {
+            return None;
+        }
+        let rest = &self.b[self.at..];
+        let n = rest
+            .iter()
+            .position(|&c| c == b'\n')
+            .map_or(rest.len(), |i| i + 1);
+        self.at += n;
+        Some(rest[..n].trim_ascii())
+    }
+    fn token(&mut self) -> Result<&'a str, ParseError> {
+        while self.at < self.b.len() && self.b[self.at].is_ascii_whitespace() {
+            self.at += 1;
+        }
+        let s = self.at;
+        while self.at < self.b.len() && !self.b[self.at].is_ascii_whitespace() {
+            self.at += 1;
+        }
+        if s == self.at {
+            return Err(Self::eof());
+        }
+        std::str::from_utf8(&self.b[s..self.at]).map_err(|_| err("a number is not text"))
+    }
+    fn raw<const N: usize>(&mut self) -> Result<[u8; N], ParseError> {
+        let s = self.b.get(self.at..self.at + N).ok_or_else(Self::eof)?;
+        self.at += N;
+        Ok(s.try_into().unwrap())
+    }
+    fn parse<T: std::str::FromStr>(&mut self) -> Result<T, ParseError> {
+        let t = self.token()?;
+        t.parse()
+            .map_err(|_| err(format!("'{t}' is not a number where one is expected")))
+    }
+    fn size(&mut self) -> Result<u64, ParseError> {
+        if self.binary {
+            Ok(u64::from_le_bytes(self.raw::<8>()?))
+        } else {
+            self.parse()
+        }
+    }
+    fn int(&mut self) -> Result<i32, ParseError> {
+        if self.binary {
+            Ok(i32::from_le_bytes(self.raw::<4>()?))
+        } else {
+            self.parse()
+        }
+    }
+    fn real(&mut self) -> Result<f64, ParseError> {
+        if self.binary {
+            Ok(f64::from_le_bytes(self.raw::<8>()?))
+        } else {
+            self.parse()
+        }
+    }
+    /// Skip to the line after `$End<name>`.
+    fn skip_section(&mut self, name: &str) -> Result<(), ParseError> {
+        let end = format!("\n$End{name}");
+        let rest = &self.b[self.at.saturating_sub(1)..];
+        let i = rest
+            .windows(end.len())
+            .position(|w| w == end.as_bytes())
+            .ok_or_else(|| err(format!("${name} has no $End{name}")))?;
+        self.at = self.at.saturating_sub(1) + i + 1;
+        self.line();
+        Ok(())
+    }
+}
+
+/// Elements of one Gmsh type read from a part: Gmsh tag, physical tag, whether its entity
+/// is a ghost entity, and node tags.
+#[derive(Default)]
+pub(super) struct Records {
+    pub items: Vec<(u64, i32, bool)>,
+    pub nodes: Vec<u64>,
+}
+
+/// What a rank reads of one part: its hexahedra, quadrilaterals and lines, and its nodes.
+#[derive(Default)]
+pub(super) struct PartData {
+    /// The number of partitions its header declares.
+    pub partitions: u64,
+    pub hexes: Records,
+    pub quads: Records,
+    pub lines: Records,
+    pub node_tags: Vec<u64>,
+    pub node_coords: Vec<[f64; 3]>,
+}
+
+/// The head of the file (the sections before `$Nodes`) and the offset of `$Nodes`' body.
+fn split_head(b: &[u8]) -> Result<(&[u8], usize), ParseError> {
+    let mut c = Cur {
+        b,
+        at: 0,
+        binary: false,
+    };
+    let mut partitioned = false;
+    loop {
+        let start = c.at;
+        match c.line() {
+            None => return Err(err("no $Nodes section")),
+            Some(b"$Nodes") => {
+                if !partitioned {
+                    return Err(err(
+                        "not a Gmsh partition (no $PartitionedEntities): give one part of a partitioned mesh (NAME_1.msh … NAME_K.msh), or a single binary MSH 4.1 file",
+                    ));
+                }
+                return Ok((&b[..start], c.at));
+            }
+            Some(b"$PartitionedEntities") => partitioned = true,
+            Some(_) => {}
+        }
+    }
+}
+
+/// The format line: (binary, ok) for MSH 4.1 with 8-byte `size_t`.
+fn format_of(head: &[u8]) -> Result<bool, ParseError> {
+    let mut c = Cur {
+        b: head,
+        at: 0,
+        binary: false,
+    };
+    while let Some(l) = c.line() {
+        if l == b"$MeshFormat" {
+            let f = String::from_utf8_lossy(c.line().unwrap_or_default()).to_string();
+            let v: Vec<&str> = f.split_whitespace().collect();
+            if v.len() != 3 || v[0] != "4.1" || v[2] != "8" {
+                return Err(err(format!(
+                    "partitioned input must be MSH 4.1 with 8-byte size_t; this part's format line is '{f}'"
+                )));
+            }
+            let binary = v[1] == "1";
+            if binary && c.raw::<4>().map(i32::from_le_bytes)? != 1 {
+                return Err(err("big-endian MSH files are not supported"));
+            }
+            return Ok(binary);
+        }
+    }
+    Err(err("no $MeshFormat section"))
+}
+
+/// The number of partitions and the ghost entities (dim is the mesh's, tags listed) of
+/// `$PartitionedEntities`.
+fn partition_header(head: &[u8], binary: bool) -> Result<(u64, HashSet<i32>), ParseError> {
+    let mut c = Cur {
+        b: head,
+        at: 0,
+        binary: false,
+    };
+    while let Some(l) = c.line() {
+        if l == b"$PartitionedEntities" {
+            c.binary = binary;
+            let parts = c.size()?;
+            let ghosts = c.size()?;
+            let mut tags = HashSet::new();
+            for _ in 0..ghosts {
+                tags.insert(c.int()?);
+                let _partition = c.int()?;
+            }
+            return Ok((parts, tags));
+        }
+    }
+    Err(err("no $PartitionedEntities section"))
+}
+
+/// Parse one part (see [`PartData`]).
+pub(super) fn read_part(path: &Path) -> Result<PartData, ParseError> {
+    let bytes = std::fs::read(path).map_err(|e| err(format!("read failed: {e}")))?;
+    let (head, nodes_at) = split_head(&bytes)?;
+    let binary = format_of(head)?;
+    let (partitions, ghosts) = partition_header(head, binary)?;
+    let tags = crate::io::gmsh::header_tags(head)?;
+    let mut d = PartData {
+        partitions,
+        ..PartData::default()
+    };
+    let mut c = Cur {
+        b: &bytes,
+        at: nodes_at,
+        binary,
+    };
+    read_nodes(&mut c, &mut d)?;
+    c.binary = false;
+    c.skip_section("Nodes")?;
+    while let Some(l) = c.line() {
+        let l = String::from_utf8_lossy(l).to_string();
+        if l == "$Elements" {
+            c.binary = binary;
+            read_elements(&mut c, &mut d, &tags.entities, &ghosts)?;
+            c.binary = false;
+            c.skip_section("Elements")?;
+        } else if let Some(name) = l.strip_prefix('$') {
+            c.skip_section(name)?;
+        }
+    }
+    Ok(d)
+}
+
+fn read_nodes(c: &mut Cur, d: &mut PartData) -> Result<(), ParseError> {
+    let blocks = c.size()?;
+    let _n = c.size()?;
+    let _lo = c.size()?;
+    let _hi = c.size()?;
+    for _ in 0..blocks {
+        let dim = c.int()?;
+        let _tag = c.int()?;
+        let parametric = c.int()?;
+        let n = c.size()? as usize;
+        let first = d.node_tags.len();
+        for _ in 0..n {
+            d.node_tags.push(c.size()?);
+        }
+        let extra = if parametric != 0 { dim.max(0) } else { 0 };
+        for _ in first..first + n {
+            d.node_coords.push([c.real()?, c.real()?, c.real()?]);
+            for _ in 0..extra {
+                c.real()?;
+            }
+        }
+    }
+    Ok(())
+}
+
+fn read_elements(
+    c: &mut Cur,
+    d: &mut PartData,
+    entities: &crate::io::gmsh::EntityTags,
+    ghosts: &HashSet<i32>,
+) -> Result<(), ParseError> {
+    let blocks = c.size()?;
+    for _ in 0..3 {
+        c.size()?;
+    }
+    for _ in 0..blocks {
+        let dim = c.int()?;
+        let entity = c.int()?;
+        let kind = c.int()?;
+        let n = c.size()?;
+        let (npe, into) = match kind {
+            1 => (2, Some(&mut d.lines)),
+            3 => (4, Some(&mut d.quads)),
+            5 => (8, Some(&mut d.hexes)),
+            15 => (1, None),
+            _ => {
+                return Err(err(format!(
+                    "element type {kind} in a partitioned input: polyspline curves linear quad (2D) and hex (3D) meshes"
+                )));
+            }
+        };
+        let physical = entities.physical_of(dim, entity);
+        let ghost = ghosts.contains(&entity);
+        let mut sink = Records::default();
+        let r = into.unwrap_or(&mut sink);
+        for _ in 0..n {
+            r.items.push((c.size()?, physical, ghost));
+            for _ in 0..npe {
+                r.nodes.push(c.size()?);
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The sections before `$Nodes` of the file at `path` (read line by line, not the whole file).
+fn head_of(path: &Path) -> Result<Vec<u8>, ParseError> {
+    use std::io::BufRead;
+    let f = std::fs::File::open(path).map_err(|e| err(format!("read failed: {e}")))?;
+    let mut r = std::io::BufReader::new(f);
+    let mut head = Vec::new();
+    let mut buf = Vec::new();
+    loop {
+        buf.clear();
+        if r.read_until(b'\n', &mut buf)
+            .map_err(|e| err(format!("read failed: {e}")))?
+            == 0
+        {
+            return Err(err("no $Nodes section"));
+        }
+        if buf.trim_ascii() == b"$Nodes" {
+            return Ok(head);
+        }
+        head.extend_from_slice(&buf);
+    }
+}
+
+/// The names `NAME_1.EXT … NAME_K.EXT` of the parts of the mesh that `path` (`NAME_<k>.EXT`)
+/// is a part of, K from its `$PartitionedEntities`, and the names of its physical groups
+/// (every rank reads them from this part, whether it reads any part or not).
+pub fn part_names(path: &Path) -> Result<(Vec<PathBuf>, BTreeMap<i32, String>), ParseError> {
+    let head = head_of(path)?;
+    let tag_names = crate::io::gmsh::header_tags(&head)?.tag_names;
+    let binary = format_of(&head)?;
+    let (k, _) = partition_header(&head, binary)?;
+    let stem = path.file_stem().unwrap_or_default().to_string_lossy();
+    let base = stem
+        .rsplit_once('_')
+        .filter(|(_, n)| !n.is_empty() && n.bytes().all(|c| c.is_ascii_digit()))
+        .map(|(b, _)| b.to_string())
+        .ok_or_else(|| {
+            err("a partitioned input is named as Gmsh names its parts, NAME_<k>.msh (k = 1 … the number of partitions)")
+        })?;
+    if k == 0 || k > 1 << 20 {
+        return Err(err(format!("{k} partitions")));
+    }
+    let base = path.with_file_name(base);
+    let parts = super::write_parts::part_paths(
+        &base.with_extension(path.extension().unwrap_or_default()),
+        k as usize,
+    );
+    if !parts.iter().any(|p| p.file_name() == path.file_name()) {
+        return Err(err(format!(
+            "this part's number is not among the {k} partitions its header declares"
+        )));
+    }
+    if let Some(missing) = parts.iter().find(|p| !p.is_file()) {
+        return Err(err(format!(
+            "part {} of the {k} partitions is missing",
+            missing.display()
+        )));
+    }
+    Ok((parts, tag_names))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A two-part ASCII set in Gmsh's layout: one hexahedron per part (tags 2 and 3, tag 1 a
+    /// boundary quad of part 1), the shared face's nodes in both parts.
+    fn part(k: usize) -> String {
+        let (tag, nodes, quad) = if k == 1 {
+            (2, [1, 2, 3, 4, 5, 6, 7, 8], "2 6 3 1\n1 1 2 3 4\n")
+        } else {
+            (3, [5, 6, 7, 8, 9, 10, 11, 12], "")
+        };
+        let mut s = String::from(
+            "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$PhysicalNames\n2\n2 7 \"wall\"\n3 9 \"fluid\"\n$EndPhysicalNames\n$Entities\n0 0 1 1\n1 0 0 0 1 1 0 1 7 0\n1 0 0 0 1 1 2 1 9 0\n$EndEntities\n$PartitionedEntities\n2\n0\n0 0 1 2\n6 2 1 1 1 0 0 0 1 1 0 1 7 0\n4 3 1 1 1 0 0 0 1 1 1 1 9 0\n5 3 1 1 2 0 0 1 1 1 2 1 9 0\n$EndPartitionedEntities\n",
+        );
+        let z0 = if k == 1 { 0.0 } else { 1.0 };
+        s += &format!("$Nodes\n1 8 {} {}\n3 {} 0 8\n", nodes[0], nodes[7], 3 + k);
+        for n in nodes {
+            s += &format!("{n}\n");
+        }
+        for i in 0..8 {
+            let (x, y, z) = ((i % 2) as f64, ((i / 2) % 2) as f64, z0 + (i / 4) as f64);
+            s += &format!("{x} {y} {z}\n");
+        }
+        let blocks = if quad.is_empty() { 1 } else { 2 };
+        s += &format!("$EndNodes\n$Elements\n{blocks} {blocks} 1 3\n{quad}");
+        s += &format!("3 {} 5 1\n{tag}", 3 + k);
+        for n in nodes {
+            s += &format!(" {n}");
+        }
+        s += "\n$EndElements\n";
+        s
+    }
+
+    #[test]
+    fn a_part_is_read_with_its_tags_names_and_physical_groups() {
+        let dir = std::env::temp_dir().join(format!("polyspline-parts-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        for k in 1..=2 {
+            std::fs::write(dir.join(format!("m_{k}.msh")), part(k)).unwrap();
+        }
+        let first = dir.join("m_2.msh");
+        assert!(is_partitioned(&first));
+        let (names, tags) = part_names(&first).unwrap();
+        assert_eq!(names, vec![dir.join("m_1.msh"), dir.join("m_2.msh")]);
+        assert_eq!(tags.get(&9).map(String::as_str), Some("fluid"));
+        let p = read_part(&names[0]).unwrap();
+        assert_eq!(p.partitions, 2);
+        assert_eq!(p.hexes.items, vec![(2, 9, false)]);
+        assert_eq!(p.hexes.nodes, (1..=8).collect::<Vec<u64>>());
+        assert_eq!(p.quads.items, vec![(1, 7, false)]);
+        assert_eq!(p.node_tags.len(), 8);
+        assert_eq!(p.node_coords[7], [1.0, 1.0, 1.0]);
+        // A missing part, and a name without the part number.
+        std::fs::remove_file(&names[0]).unwrap();
+        let e = part_names(&first).err().unwrap().to_string();
+        assert!(e.contains("missing") && !e.contains('\n'), "{e}");
+        std::fs::write(dir.join("plain.msh"), part(2)).unwrap();
+        let e = part_names(&dir.join("plain.msh"))
+            .err()
+            .unwrap()
+            .to_string();
+        assert!(e.contains("NAME_<k>"), "{e}");
+    }
+}

@@ -1,0 +1,472 @@
+//! Reading Gmsh's partitioned MSH 4.1 files (`IN_1.msh … IN_K.msh`, as Gmsh writes them with
+//! `Mesh.PartitionSplitMeshFiles=1`) across the ranks: each rank reads only its parts.
+//!
+//! Input: the path of one part (`NAME_<k>.msh`, ASCII or binary MSH 4.1 with
+//! `$PartitionedEntities`, linear hexes or quads), the communicator, the ghost depth g.
+//! Output: the same [`LocalMesh`] as [`super::share::read_share`] makes of a single file: the
+//! rank's Morton part of the elements (in increasing global index), then the ghosts within g
+//! vertex rings with the rank owning each, the tagged boundary facets among their nodes, and
+//! the coordinates of those nodes.
+//!
+//! Steps: (1) the part names come from the given part's name and its number of partitions K;
+//! every rank checks that all K exist (a missing part is one error on every rank); (2) rank r
+//! reads parts ⌊rK/P⌋ … ⌊(r+1)K/P⌋ − 1 whole (K may differ from P), keeping the cells of the
+//! partition entities (the cells of Gmsh's ghost entities are dropped: another part owns
+//! them), the tagged facets and the nodes; (3) global element ids: a cell's Gmsh tag minus the
+//! smallest cell tag, which needs the cell tags to be contiguous (Gmsh keeps the tags of the
+//! unpartitioned mesh, which numbers them so); a cell in two parts is one error; (4) the
+//! Morton partition of [`super::partition`] on the cells read, each moved to the rank of its
+//! part ([`super::share`]); (5) ghost rings, tagged facets and coordinates through directories
+//! by node tag (rank t mod P): every rank files its cells under the homes of their nodes, its
+//! facets under the home of their smallest node tag, its nodes under their home, then asks
+//! the homes of the nodes it has: per ring, the cells around them (not its own), then the
+//! facets and the coordinates.
+//!
+//! Every error is agreed on by all ranks before the next collective step (the first failing
+//! rank's message on every rank), so a bad part set never leaves a rank waiting.
+//! Invariant: the local mesh is what [`super::share::read_share`] makes of the unpartitioned
+//! file when the cells' tags follow the file's order (as Gmsh numbers them).
+
+use super::comm::Comm;
+pub use super::part_file::is_partitioned;
+use super::part_file::{part_names, read_part};
+use super::partition::{Grid, sort_value, thresholds};
+use super::read::{Elements, LocalMesh};
+use crate::io::raw::{CellKind, Location, ParseError, RawBlock, RawMesh};
+use crate::mesh::{LinearMesh, MeshOptions};
+use std::collections::{BTreeMap, HashMap, HashSet};
+use std::path::{Path, PathBuf};
+
+fn err(what: impl Into<String>) -> ParseError {
+    ParseError::new(Location::File, what)
+}
+
+/// Every rank's `r`, or on every rank the error of the lowest failing rank (collective).
+fn agree<T>(comm: &dyn Comm, r: Result<T, ParseError>) -> Result<T, ParseError> {
+    let msg: Vec<f64> = match &r {
+        Ok(_) => Vec::new(),
+        Err(e) => e.message.bytes().map(|b| b as f64).collect(),
+    };
+    let all = comm.all_gather_f64(&msg);
+    match all.iter().position(|m| !m.is_empty()) {
+        None => r,
+        Some(q) if q == comm.rank() => r,
+        Some(q) => {
+            let text: Vec<u8> = all[q].iter().map(|&b| b as u8).collect();
+            Err(err(String::from_utf8_lossy(&text)))
+        }
+    }
+}
+
+/// What the rank's parts hold, merged: cells, tagged facets and nodes.
+struct Read {
+    npe: usize,
+    cells: Elements,
+    /// Gmsh tag and physical tag of each facet, and its node tags.
+    facets: Vec<(u64, i32)>,
+    facet_nodes: Vec<u64>,
+    nodes: HashMap<u64, [f64; 3]>,
+    tag_names: BTreeMap<i32, String>,
+}
+
+/// Read the rank's parts (step 2 of the module docs); `three_d` from every rank's parts.
+fn read_mine(comm: &dyn Comm, parts: &[PathBuf]) -> Result<Read, ParseError> {
+    let (rank, size) = (comm.rank(), comm.size());
+    let k = parts.len();
+    let (lo, hi) = (rank * k / size, (rank + 1) * k / size);
+    let mut data = Vec::new();
+    let read = (lo..hi).try_for_each(|i| {
+        let d = read_part(&parts[i])
+            .map_err(|e| err(format!("{}: {}", parts[i].display(), e.message)))?;
+        if d.partitions != k as u64 {
+            return Err(err(format!(
+                "{} declares {} partitions, {} declares {k}: the parts are not of one partitioned mesh",
+                parts[i].display(),
+                d.partitions,
+                parts[0].display()
+            )));
+        }
+        data.push(d);
+        Ok(())
+    });
+    agree(comm, read)?;
+    let mut hex = [data.iter().any(|d| !d.hexes.items.is_empty()) as u64];
+    comm.sum_u64(&mut hex);
+    let three_d = hex[0] > 0;
+    let npe = if three_d { 8 } else { 4 };
+    let mut r = Read {
+        npe,
+        cells: Elements::default(),
+        facets: Vec::new(),
+        facet_nodes: Vec::new(),
+        nodes: HashMap::new(),
+        tag_names: BTreeMap::new(),
+    };
+    for d in data {
+        let (cells, facets) = if three_d {
+            (d.hexes, d.quads)
+        } else {
+            (d.quads, d.lines)
+        };
+        // Ghost cells are another part's: dropped.
+        for (i, &(t, p, ghost)) in cells.items.iter().enumerate() {
+            if !ghost {
+                r.cells.global.push(t);
+                r.cells.tags.push(p);
+                r.cells
+                    .nodes
+                    .extend_from_slice(&cells.nodes[i * npe..(i + 1) * npe]);
+            }
+        }
+        for (i, &(t, p, _)) in facets.items.iter().enumerate() {
+            if p != 0 {
+                r.facets.push((t, p));
+                r.facet_nodes
+                    .extend_from_slice(&facets.nodes[i * npe / 2..(i + 1) * npe / 2]);
+            }
+        }
+        r.nodes.extend(d.node_tags.into_iter().zip(d.node_coords));
+    }
+    Ok(r)
+}
+
+/// Global element ids: the cells' Gmsh tags less the smallest, checked contiguous (step 3);
+/// returns the number of cells in the mesh.
+fn global_ids(comm: &dyn Comm, cells: &mut Elements) -> Result<u64, ParseError> {
+    let mut lo = [cells.global.iter().copied().min().unwrap_or(u64::MAX) as f64];
+    let mut hi = [cells.global.iter().copied().max().unwrap_or(0) as f64];
+    let mut n = [cells.global.len() as u64];
+    comm.min_f64(&mut lo);
+    comm.max_f64(&mut hi);
+    comm.sum_u64(&mut n);
+    let (lo, hi, n) = (lo[0] as u64, hi[0] as u64, n[0]);
+    if n == 0 {
+        return Err(err("no hexahedra or quadrilaterals in the parts"));
+    }
+    if hi - lo + 1 != n {
+        return Err(err(format!(
+            "the parts' {n} cells have tags {lo} … {hi}: partitioned input needs the cells numbered contiguously, each in one part (as Gmsh numbers an unpartitioned mesh)"
+        )));
+    }
+    for g in &mut cells.global {
+        *g -= lo;
+    }
+    Ok(n)
+}
+
+/// The Morton part of every cell read (step 4), from the coordinates of its nodes.
+fn morton_parts(comm: &dyn Comm, r: &Read, n_global: u64) -> Result<Vec<u32>, ParseError> {
+    let corners = |i: usize| -> Option<Vec<[f64; 3]>> {
+        r.cells.nodes[i * r.npe..(i + 1) * r.npe]
+            .iter()
+            .map(|t| r.nodes.get(t).copied())
+            .collect()
+    };
+    let mut lo = [f64::INFINITY; 3];
+    let mut hi = [f64::NEG_INFINITY; 3];
+    let mut missing = false;
+    for i in 0..r.cells.global.len() {
+        match corners(i) {
+            Some(c) => {
+                for p in c {
+                    for k in 0..3 {
+                        lo[k] = lo[k].min(p[k]);
+                        hi[k] = hi[k].max(p[k]);
+                    }
+                }
+            }
+            None => missing = true,
+        }
+    }
+    agree(
+        comm,
+        if missing {
+            Err(err("a cell uses a node its part does not define"))
+        } else {
+            Ok(())
+        },
+    )?;
+    comm.min_f64(&mut lo);
+    comm.max_f64(&mut hi);
+    let grid = Grid::new(lo, hi);
+    let values: Vec<u128> = (0..r.cells.global.len())
+        .map(|i| sort_value(grid.key(&corners(i).unwrap()), r.cells.global[i]))
+        .collect();
+    let mut sorted = values.clone();
+    sorted.sort_unstable();
+    let cut = thresholds(n_global, comm.size(), |mid| {
+        let mut c: Vec<u64> = mid
+            .iter()
+            .map(|&m| sorted.partition_point(|&x| x <= m) as u64)
+            .collect();
+        comm.sum_u64(&mut c);
+        c
+    });
+    Ok(values
+        .iter()
+        .map(|v| cut.partition_point(|&t| t <= *v) as u32)
+        .collect())
+}
+
+fn home(t: u64, size: usize) -> usize {
+    (t % size as u64) as usize
+}
+
+/// The cells within `depth` vertex rings of `own` and not in it, with their owners (step 5):
+/// every rank files its cells under the homes of their nodes, then per ring asks the homes of
+/// its newest nodes for the cells around them. Collective (the same number of exchanges on
+/// every rank). Ids and tags travel as f64 (exact below 2⁵³).
+fn ghost_rings(comm: &dyn Comm, own: &Elements, npe: usize, depth: usize) -> (Elements, Vec<u32>) {
+    let (rank, size) = (comm.rank(), comm.size());
+    let rec = 3 + npe;
+    let mut send = vec![Vec::new(); size];
+    let mut homes = Vec::with_capacity(npe);
+    for i in 0..own.global.len() {
+        let nodes = &own.nodes[i * npe..(i + 1) * npe];
+        homes.clear();
+        homes.extend(nodes.iter().map(|&t| home(t, size)));
+        homes.sort_unstable();
+        homes.dedup();
+        for &q in &homes {
+            let s = &mut send[q];
+            s.push(own.global[i] as f64);
+            s.push(own.tags[i] as f64);
+            s.push(rank as f64);
+            s.extend(nodes.iter().map(|&t| t as f64));
+        }
+    }
+    let filed: Vec<f64> = comm.exchange_f64(&send).concat();
+    drop(send);
+    // The cells around each node filed here.
+    let mut around: HashMap<u64, Vec<u32>> = HashMap::new();
+    for (k, c) in filed.chunks_exact(rec).enumerate() {
+        for &t in &c[3..] {
+            if home(t as u64, size) == rank {
+                around.entry(t as u64).or_default().push(k as u32);
+            }
+        }
+    }
+    let mut have: HashSet<u64> = own.nodes.iter().copied().collect();
+    let mut seen: HashSet<u64> = own.global.iter().copied().collect();
+    let mut frontier: Vec<u64> = have.iter().copied().collect();
+    let (mut ghosts, mut owner) = (Elements::default(), Vec::new());
+    for _ in 0..depth {
+        let mut ask = vec![Vec::new(); size];
+        for &t in &frontier {
+            ask[home(t, size)].push(t as f64);
+        }
+        let asked = comm.exchange_f64(&ask);
+        let replies: Vec<Vec<f64>> = asked
+            .iter()
+            .enumerate()
+            .map(|(q, nodes)| {
+                let mut ks: Vec<u32> = nodes
+                    .iter()
+                    .flat_map(|&t| around.get(&(t as u64)).into_iter().flatten().copied())
+                    .filter(|&k| filed[k as usize * rec + 2] as usize != q)
+                    .collect();
+                ks.sort_unstable();
+                ks.dedup();
+                ks.iter()
+                    .flat_map(|&k| &filed[k as usize * rec..(k as usize + 1) * rec])
+                    .copied()
+                    .collect()
+            })
+            .collect();
+        drop(asked);
+        let got = comm.exchange_f64(&replies);
+        drop(replies);
+        frontier.clear();
+        for c in got.iter().flat_map(|g| g.chunks_exact(rec)) {
+            let g = c[0] as u64;
+            if seen.insert(g) {
+                ghosts.global.push(g);
+                ghosts.tags.push(c[1] as i32);
+                owner.push(c[2] as u32);
+                for &t in &c[3..] {
+                    let t = t as u64;
+                    ghosts.nodes.push(t);
+                    if have.insert(t) {
+                        frontier.push(t);
+                    }
+                }
+            }
+        }
+    }
+    (ghosts, owner)
+}
+
+/// Ask the homes of `nodes` for what they filed under them: `filed[q]` is what rank q sent
+/// to this rank's directory, `lookup` the records filed under a node (collective).
+fn ask_homes(comm: &dyn Comm, nodes: &[u64], lookup: impl Fn(u64) -> Vec<f64>) -> Vec<Vec<f64>> {
+    let size = comm.size();
+    let mut ask = vec![Vec::new(); size];
+    for &t in nodes {
+        ask[home(t, size)].push(t as f64);
+    }
+    let asked = comm.exchange_f64(&ask);
+    drop(ask);
+    let replies: Vec<Vec<f64>> = asked
+        .iter()
+        .map(|list| list.iter().flat_map(|&t| lookup(t as u64)).collect())
+        .collect();
+    comm.exchange_f64(&replies)
+}
+
+/// The tagged facets whose nodes are all in `have`, sorted by Gmsh tag, and the coordinates
+/// of the nodes of `have` (sorted by tag), through the directories (step 5).
+#[allow(clippy::type_complexity)]
+fn facets_and_coordinates(
+    comm: &dyn Comm,
+    r: &Read,
+    have: &HashSet<u64>,
+) -> Result<(Vec<i32>, Vec<u64>, Vec<u64>, Vec<[f64; 3]>), ParseError> {
+    let size = comm.size();
+    let npf = r.npe / 2;
+    // Facets filed under their smallest node, once per Gmsh tag.
+    let mut send = vec![Vec::new(); size];
+    for (i, &(t, p)) in r.facets.iter().enumerate() {
+        let nodes = &r.facet_nodes[i * npf..(i + 1) * npf];
+        let s = &mut send[home(*nodes.iter().min().unwrap(), size)];
+        s.push(t as f64);
+        s.push(p as f64);
+        s.extend(nodes.iter().map(|&x| x as f64));
+    }
+    let filed = comm.exchange_f64(&send).concat();
+    let mut by_tag: BTreeMap<u64, &[f64]> = BTreeMap::new();
+    for c in filed.chunks_exact(2 + npf) {
+        by_tag.entry(c[0] as u64).or_insert(c);
+    }
+    let mut under: HashMap<u64, Vec<&[f64]>> = HashMap::new();
+    for c in by_tag.values() {
+        let m = c[2..].iter().map(|&x| x as u64).min().unwrap();
+        under.entry(m).or_default().push(c);
+    }
+    let mut nodes: Vec<u64> = have.iter().copied().collect();
+    nodes.sort_unstable();
+    let got = ask_homes(comm, &nodes, |t| {
+        under
+            .get(&t)
+            .into_iter()
+            .flatten()
+            .flat_map(|c| c.iter().copied())
+            .collect()
+    });
+    let mut list: Vec<&[f64]> = got
+        .iter()
+        .flat_map(|g| g.chunks_exact(2 + npf))
+        .filter(|c| c[2..].iter().all(|&x| have.contains(&(x as u64))))
+        .collect();
+    list.sort_unstable_by_key(|c| c[0] as u64);
+    let facet_tags = list.iter().map(|c| c[1] as i32).collect();
+    let facet_nodes = list
+        .iter()
+        .flat_map(|c| c[2..].iter().map(|&x| x as u64))
+        .collect();
+    // Coordinates filed under their node, answered in the order asked.
+    let mut send = vec![Vec::new(); size];
+    for (&t, x) in &r.nodes {
+        let s = &mut send[home(t, size)];
+        s.push(t as f64);
+        s.extend_from_slice(x);
+    }
+    let filed = comm.exchange_f64(&send).concat();
+    let directory: HashMap<u64, [f64; 3]> = filed
+        .chunks_exact(4)
+        .map(|c| (c[0] as u64, [c[1], c[2], c[3]]))
+        .collect();
+    drop(filed);
+    let got = ask_homes(comm, &nodes, |t| {
+        directory.get(&t).map_or(vec![f64::NAN; 3], |x| x.to_vec())
+    });
+    let mut next = vec![0usize; size];
+    let mut points = Vec::with_capacity(nodes.len());
+    let mut missing = 0usize;
+    for &t in &nodes {
+        let q = home(t, size);
+        let x = &got[q][3 * next[q]..3 * next[q] + 3];
+        next[q] += 1;
+        missing += x[0].is_nan() as usize;
+        points.push([x[0], x[1], x[2]]);
+    }
+    let ok = if missing > 0 {
+        Err(err(format!(
+            "{missing} node(s) used by the cells are defined in no part"
+        )))
+    } else {
+        Ok(())
+    };
+    agree(comm, ok)?;
+    Ok((facet_tags, facet_nodes, nodes, points))
+}
+
+/// Read this rank's share of the partitioned mesh `path` is a part of, with `depth` vertex
+/// rings of ghosts (see the module docs). Collective.
+pub fn read_parts_share(
+    comm: &dyn Comm,
+    path: &Path,
+    depth: usize,
+    options: &MeshOptions,
+) -> Result<LocalMesh, ParseError> {
+    let (parts, tag_names) = agree(comm, part_names(path))?;
+    let mut r = read_mine(comm, &parts)?;
+    r.tag_names = tag_names;
+    let n_global = agree(comm, global_ids(comm, &mut r.cells))?;
+    let part = morton_parts(comm, &r, n_global)?;
+    let own = super::share::route(comm, &r.cells, &part, r.npe);
+    r.cells = Elements::default();
+    let twice = own.global.windows(2).find(|w| w[0] == w[1]);
+    agree(
+        comm,
+        twice.map_or(Ok(()), |w| {
+            Err(err(format!(
+                "the cell with tag offset {} is in two parts: the parts are not one partition",
+                w[0]
+            )))
+        }),
+    )?;
+    let (ghosts, owner) = ghost_rings(comm, &own, r.npe, depth);
+    let n_owned = own.global.len();
+    let (mut global_element, mut tags, mut nodes) = (own.global, own.tags, own.nodes);
+    global_element.extend_from_slice(&ghosts.global);
+    tags.extend_from_slice(&ghosts.tags);
+    nodes.extend_from_slice(&ghosts.nodes);
+    drop(ghosts);
+    let mut owners = vec![comm.rank() as u32; n_owned];
+    owners.extend_from_slice(&owner);
+    let have: HashSet<u64> = nodes.iter().copied().collect();
+    let (facet_tags, facet_nodes, global_vertex, points) = facets_and_coordinates(comm, &r, &have)?;
+    drop(have);
+    let local: HashMap<u64, i64> = global_vertex
+        .iter()
+        .enumerate()
+        .map(|(i, &t)| (t, i as i64))
+        .collect();
+    let (cell, facet) = if r.npe == 8 {
+        (CellKind::Hexahedron, CellKind::Quad)
+    } else {
+        (CellKind::Quad, CellKind::Line)
+    };
+    let mut block = RawBlock::new(cell, r.npe);
+    block.nodes = nodes.iter().map(|t| local[t]).collect();
+    block.tags = tags;
+    let mut fblock = RawBlock::new(facet, r.npe / 2);
+    fblock.nodes = facet_nodes.iter().map(|t| local[t]).collect();
+    fblock.tags = facet_tags;
+    let raw = RawMesh {
+        points,
+        point_locations: Vec::new(),
+        declared_dim: Some(3),
+        blocks: vec![block, fblock],
+        tag_names: r.tag_names,
+    };
+    let mesh = agree(comm, LinearMesh::from_raw(raw, options))?;
+    Ok(LocalMesh {
+        mesh,
+        n_owned,
+        global_element,
+        owner: owners,
+        global_vertex,
+        n_global,
+    })
+}
