@@ -51,6 +51,13 @@
 //! g(ξ_p) − Σ_j φ_j g(ξ_j) along the normal. Too few points, points that are not a graph over
 //! the tangent plane, or a singular system keep the one-ring quadric.
 //!
+//! **Coarse surfaces.** Where the normals of two smooth boundary vertices sharing a facet
+//! turn by more than 30° (a torus of eight cells around the tube), the two rings reach a
+//! quarter turn or more and no polynomial model follows the surface there. The 3D boundary
+//! edge midpoints and face centres at such vertices take circular arcs on the vertex normals
+//! instead ([`arcs`]; regular coarse vertices take their normal from the circles through their
+//! grid lines). The interior samples keep the models.
+//!
 //! With detected sharp features ([`SmoothTargets::build_with_features`]) the vertices on
 //! features take their models per patch and along feature curves instead
 //! ([`super::features::FeatureModels`]), so no model averages across a feature; samples inside

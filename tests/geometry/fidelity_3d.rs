@@ -106,7 +106,11 @@ fn coarse_torus_within_two_and_a_half_times_gmsh_with_cad() {
         );
     }
     let no_angle = dir().join("torus_1_o2_no_angle.msh");
-    curve(&linear, &no_angle, &["--order", "2", "--feature-angle", "180"]);
+    curve(
+        &linear,
+        &no_angle,
+        &["--order", "2", "--feature-angle", "180"],
+    );
     assert_eq!(
         std::fs::read(&files[1]).unwrap(),
         std::fs::read(&no_angle).unwrap(),
