@@ -55,7 +55,7 @@
 //! turn by more than 30° (a torus of eight cells around the tube), the two rings reach a
 //! quarter turn or more and no polynomial model follows the surface there. The 3D boundary
 //! edge midpoints and face centres at such vertices take circular arcs on the vertex normals
-//! instead ([`arcs`]; regular coarse vertices take their normal from the circles through their
+//! instead (`arcs`; regular coarse vertices take their normal from the circles through their
 //! grid lines). The interior samples keep the models.
 //!
 //! With detected sharp features ([`SmoothTargets::build_with_features`]) the vertices on
