@@ -57,11 +57,11 @@ fn circle_tangent(a: DVec3, v: DVec3, b: DVec3) -> Option<DVec3> {
 
 /// The normal at a regular vertex `v` (four boundary quads) from its two grid lines: the
 /// cross product of the tangents of the circles through each opposite pair of its edge
-/// neighbours, oriented along `n_ref`. Exact wherever the grid lines are circles (a torus's or
-/// any surface of revolution's meridians and parallels, a sphere's great or small circles),
-/// where the fan's and the quadric's normals are not (on an eight-cell torus tube they are
-/// off by up to 4°). `None` when the two tangents are (nearly) parallel or the normal turns
-/// from `n_ref` by more than 45°.
+/// neighbours, oriented along the unit normal `n_ref`. Exact wherever the grid lines are
+/// circles (a torus's or any surface of revolution's meridians and parallels, a sphere's
+/// great or small circles), where the fan's and the quadric's normals are not (on an
+/// eight-cell torus tube they are off by up to 4°). `None` when the two tangents are (nearly)
+/// parallel or the normal turns from `n_ref` by more than 45°.
 pub(super) fn grid_normal(v: DVec3, pairs: [(DVec3, DVec3); 2], n_ref: DVec3) -> Option<DVec3> {
     let t1 = circle_tangent(pairs[0].0, v, pairs[0].1)?;
     let t2 = circle_tangent(pairs[1].0, v, pairs[1].1)?;
@@ -127,6 +127,32 @@ mod tests {
             let r = (m - DVec3::new(0.0, 0.3, 0.0)).length();
             assert!((r - 2.0).abs() < 1e-12, "{t0} {t1}: {r}");
         }
+    }
+
+    /// On a coarse torus the grid lines' circles give the exact normal at every vertex
+    /// (pointing along the reference, whichever way that is); the average of the four quads'
+    /// normals turns from it by degrees off the equators.
+    #[test]
+    fn grid_normal_is_exact_on_a_coarse_torus() {
+        let (dpsi, dth) = (std::f64::consts::TAU / 16.0, std::f64::consts::TAU / 8.0);
+        let mut fan_worst = 0.0f64;
+        for j in 0..8 {
+            let th = j as f64 * dth;
+            let (v, n) = torus(0.3, th);
+            let p = |a: f64, b: f64| torus(0.3 + a * dpsi, th + b * dth).0;
+            let pairs = [(p(-1.0, 0.0), p(1.0, 0.0)), (p(0.0, -1.0), p(0.0, 1.0))];
+            for sign in [1.0, -1.0] {
+                let g = grid_normal(v, pairs, sign * unit(n + 0.3 * DVec3::Z)).unwrap();
+                assert!((g - sign * n).length() < 1e-12, "{th}: {g:?} vs {n:?}");
+            }
+            let quad = |a: f64, b: f64| {
+                let c = [p(0.0, 0.0), p(a, 0.0), p(a, b), p(0.0, b)];
+                (c[2] - c[0]).cross(c[3] - c[1]) * (a * b)
+            };
+            let fan = unit(quad(1.0, 1.0) + quad(-1.0, 1.0) + quad(1.0, -1.0) + quad(-1.0, -1.0));
+            fan_worst = fan_worst.max(fan.dot(n).abs().clamp(-1.0, 1.0).acos().to_degrees());
+        }
+        assert!(fan_worst > 1.0, "{fan_worst}");
     }
 
     /// On the eight-by-sixteen torus (45° around the tube per cell) with exact normals, the
