@@ -51,6 +51,13 @@
 //! g(ξ_p) − Σ_j φ_j g(ξ_j) along the normal. Too few points, points that are not a graph over
 //! the tangent plane, or a singular system keep the one-ring quadric.
 //!
+//! **Coarse surfaces.** Where the normals of two smooth boundary vertices sharing a facet
+//! turn by more than 30° (a torus of eight cells around the tube), the two rings reach a
+//! quarter turn or more and no polynomial model follows the surface there. The 3D boundary
+//! edge midpoints and face centres at such vertices take circular arcs on the vertex normals
+//! instead (`arcs`; regular coarse vertices take their normal from the circles through their
+//! grid lines). The interior samples keep the models.
+//!
 //! With detected sharp features ([`SmoothTargets::build_with_features`]) the vertices on
 //! features take their models per patch and along feature curves instead
 //! ([`super::features::FeatureModels`]), so no model averages across a feature; samples inside
@@ -58,6 +65,7 @@
 //! chains) take in-plane models from the patch's rim instead of their flat fan model, and in
 //! 3D are no sources for the interior vertices.
 
+mod arcs;
 mod higher;
 mod one_ring;
 
@@ -142,6 +150,9 @@ pub struct SmoothTargets {
     /// The cubic and quartic terms of a smooth vertex's height function over two rings
     /// ([`HigherModel`]); interior vertices share their source's.
     higher: Vec<Option<HigherModel>>,
+    /// 3D, with at least one coarse vertex ([`arcs`]), else empty: the normal of each smooth
+    /// boundary vertex, and whether it is coarse.
+    arc_normals: Vec<Option<([f64; 3], bool)>>,
 }
 
 impl SmoothTargets {
@@ -169,6 +180,7 @@ impl SmoothTargets {
         }
         let (mut models, ell) = one_ring_models(mesh, topo, params, features, &fan);
         let mut higher = two_ring_models(mesh, topo, &fan, &mut models, &ell, cos_max);
+        let arc_normals = coarse_normals(mesh, topo, &fan, &models);
         let smooth_vertices = models.iter().filter(|m| m.is_some()).count();
         let feature_vertices =
             topo.vertex_on_boundary.iter().filter(|&&b| b).count() - smooth_vertices;
@@ -211,6 +223,7 @@ impl SmoothTargets {
             blended_vertices,
             feature_models,
             higher,
+            arc_normals,
         }
     }
 
@@ -249,7 +262,7 @@ impl SmoothTargets {
             return out;
         }
         let x = mesh.element_coords(e);
-        let (mut xs, mut ks) = ([[0.0; 3]; 8], [0usize; 8]);
+        let (mut xs, mut ks, mut cs) = ([[0.0; 3]; 8], [0usize; 8], [0usize; 8]);
         for (i, slot) in out.iter_mut().enumerate().take(n) {
             let l = [i % 3, (i / 3) % 3, i / 9];
             let m = (0..dim).filter(|&k| l[k] == 1).count();
@@ -259,7 +272,7 @@ impl SmoothTargets {
             let mut len = 0;
             for (c, pc) in HEX_VERTEX_PARAMS.iter().enumerate().take(1 << dim) {
                 if (0..dim).all(|k| l[k] == 1 || 2 * pc[k] as usize == l[k]) {
-                    (xs[len], ks[len]) = (x[c], verts[c] as usize);
+                    (xs[len], ks[len], cs[len]) = (x[c], verts[c] as usize, c);
                     len += 1;
                 }
             }
@@ -300,9 +313,54 @@ impl SmoothTargets {
             if on_boundary && wsum > 0.0 {
                 delta /= wsum;
             }
+            if on_boundary
+                && !self.arc_normals.is_empty()
+                && let Some(d) = self.arc_target(xs, ks, &cs[..len], l)
+            {
+                delta = d;
+            }
             *slot = delta.into();
         }
         out
+    }
+
+    /// The target displacement from the vertex normals ([`arcs`]) of the 3D boundary edge
+    /// midpoint or face centre at lattice point `l` with corners `xs` (vertices `ks`, element
+    /// corners `cs`), when one of them is coarse and all are smooth boundary vertices.
+    fn arc_target(
+        &self,
+        xs: &[[f64; 3]],
+        ks: &[usize],
+        cs: &[usize],
+        l: [usize; 3],
+    ) -> Option<DVec3> {
+        let normals: Vec<([f64; 3], bool)> = ks
+            .iter()
+            .map(|&k| self.arc_normals[k])
+            .collect::<Option<_>>()?;
+        if !normals.iter().any(|&(_, coarse)| coarse) {
+            return None;
+        }
+        let (x, n) = (
+            |i: usize| DVec3::from(xs[i]),
+            |i: usize| DVec3::from(normals[i].0),
+        );
+        match ks.len() {
+            2 => arcs::edge_arc(x(0), x(1), n(0), n(1)),
+            4 => {
+                // Corners in the face's lattice order: index p₁ + 2 p₂ of their parameters
+                // along the face's two free directions.
+                let free: Vec<usize> = (0..3).filter(|&k| l[k] == 1).collect();
+                let (mut xf, mut nf) = ([DVec3::ZERO; 4], [DVec3::ZERO; 4]);
+                for (i, &c) in cs.iter().enumerate() {
+                    let p = HEX_VERTEX_PARAMS[c];
+                    let j = p[free[0]] as usize + 2 * p[free[1]] as usize;
+                    (xf[j], nf[j]) = (x(i), n(i));
+                }
+                arcs::face_arc(&xf, &nf)
+            }
+            _ => None,
+        }
     }
 
     /// The boundary facet or 3D boundary edge of element `e` at lattice point `l` (an edge
@@ -431,6 +489,82 @@ fn two_ring_models(
         }
     }
     higher
+}
+
+/// The normals of the smooth boundary vertices of a 3D mesh and whether each is coarse (a
+/// vertex sharing a boundary facet turns its normal by more than [`arcs::COARSE_TURN_DEG`]),
+/// or nothing when no vertex is coarse (the targets then come from the models alone).
+fn coarse_normals(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    fan: &[Vec<u32>],
+    models: &[Option<VertexModel>],
+) -> Vec<Option<([f64; 3], bool)>> {
+    if mesh.dim != 3 {
+        return Vec::new();
+    }
+    let cos_turn = arcs::COARSE_TURN_DEG.to_radians().cos();
+    let mut any = false;
+    let out: Vec<Option<([f64; 3], bool)>> = (0..mesh.n_vertices())
+        .map(|v| {
+            let n = models[v]?.normal;
+            let coarse = fan[v].iter().any(|&f| {
+                topo.facet_vertices(f as usize).iter().any(|&w| {
+                    models[w as usize]
+                        .is_some_and(|m| DVec3::from(m.normal).dot(n.into()).abs() < cos_turn)
+                })
+            });
+            any |= coarse;
+            // At a coarse regular vertex the grid lines' circles give the normal far more
+            // accurately than the fan (the arcs need it to a fraction of a degree).
+            let n = coarse
+                .then(|| grid_pairs(topo, &fan[v], v as u32))
+                .flatten()
+                .and_then(|pairs| {
+                    let x = |w: u32| DVec3::from(mesh.coords[w as usize]);
+                    let pairs = pairs.map(|(a, b)| (x(a), x(b)));
+                    arcs::grid_normal(x(v as u32), pairs, n.into())
+                })
+                .map_or(n, Into::into);
+            Some((n, coarse))
+        })
+        .collect();
+    if any { out } else { Vec::new() }
+}
+
+/// The two opposite pairs of edge neighbours of `v` (its grid lines) when its boundary fan
+/// `fan` is four quads around it, each neighbour in two of them.
+fn grid_pairs(topo: &Topology, fan: &[u32], v: u32) -> Option<[(u32, u32); 2]> {
+    if fan.len() != 4 {
+        return None;
+    }
+    // Per quad, the two edge neighbours of v.
+    let mut sides = [[0u32; 2]; 4];
+    for (s, &f) in sides.iter_mut().zip(fan) {
+        let q = topo.facet_vertices(f as usize);
+        let i = q.iter().position(|&w| w == v)?;
+        if q.len() != 4 {
+            return None;
+        }
+        *s = [q[(i + 1) % 4], q[(i + 3) % 4]];
+    }
+    let mut nbs: Vec<u32> = sides.iter().flatten().copied().collect();
+    nbs.sort_unstable();
+    nbs.dedup();
+    if nbs.len() != 4 {
+        return None;
+    }
+    // The opposite of a neighbour shares no quad with it.
+    let opposite = |w: u32| {
+        nbs.iter()
+            .copied()
+            .find(|&u| u != w && !sides.iter().any(|s| s.contains(&u) && s.contains(&w)))
+    };
+    let a = nbs[0];
+    let b = opposite(a)?;
+    let c = nbs.iter().copied().find(|&u| u != a && u != b)?;
+    let d = opposite(c)?;
+    Some([(a, b), (c, d)])
 }
 
 /// Interior vertices inherit the nearest smooth boundary vertex's model (Dijkstra along mesh

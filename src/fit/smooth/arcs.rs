@@ -1,0 +1,194 @@
+//! Boundary targets on coarse smooth surfaces from the vertex normals alone (see the parent
+//! module's docs): circular arcs along the boundary edges and across the boundary faces.
+//!
+//! Where neighbouring vertex normals turn by more than [`COARSE_TURN_DEG`] (a torus tube of
+//! eight cells, 45° per cell), the height functions of [`super::higher`] and the one-ring
+//! quadric are fitted to points a quarter-turn or more away, far outside the range where a
+//! polynomial follows the surface (edge-midpoint errors near 40 % of the chord's sagitta
+//! have been measured), while the vertex normals stay accurate (they are set by the nearest
+//! facets). There the boundary samples take their targets from the normals:
+//! * **edge midpoint** of a, b with normals n_a, n_b: the chord d = b − a projected onto each
+//!   tangent plane gives unit tangents t_a, t_b turning by φ; the target is the chord midpoint
+//!   moved by (|d| / 2) tan(φ / 4) along t_a − t_b, the midpoint of the circular arc with
+//!   those end tangents, so exact on any circle through a and b whose plane holds the normals
+//!   (a torus's tube and equators, a sphere's great circles) and of order |d|⁴ elsewhere;
+//! * **face centre**: the arcs across the face between the targets of opposite edge
+//!   midpoints (their normals the normalised sums of the end normals), averaged over the two
+//!   directions.
+//!
+//! Input: the corners and normals of one boundary entity. Output: the displacement of its
+//! sample from the multilinear point, or `None` (degenerate chord or normals) to keep the
+//! models' target. Normals may point either way: only the lines they span matter.
+
+use crate::math::linalg::{DVec3, unit};
+
+/// A smooth boundary vertex is coarse when the normal of a vertex it shares a boundary facet
+/// with turns from its own by more than this angle (degrees).
+pub(super) const COARSE_TURN_DEG: f64 = 30.0;
+
+/// Displacement of the edge midpoint (a + b) / 2 onto the circular arc from a to b whose
+/// tangents at a and b are the chord's projections onto the planes normal to `na` and `nb`.
+pub(super) fn edge_arc(a: DVec3, b: DVec3, na: DVec3, nb: DVec3) -> Option<DVec3> {
+    let d = b - a;
+    let l = d.length();
+    let (ta, tb) = (d - d.dot(na) * na, d - d.dot(nb) * nb);
+    let (la, lb) = (ta.length(), tb.length());
+    if !(l > 0.0 && la > 1e-6 * l && lb > 1e-6 * l) {
+        return None;
+    }
+    let (ta, tb) = (ta / la, tb / lb);
+    let s = ta - tb;
+    let ls = s.length();
+    if ls <= 1e-12 {
+        // Parallel tangents: the chord is the arc.
+        return Some(DVec3::ZERO);
+    }
+    let phi = ta.dot(tb).clamp(-1.0, 1.0).acos();
+    Some(0.5 * l * (0.25 * phi).tan() * (s / ls))
+}
+
+/// The tangent at `v` of the circle through `a`, `v` and `b` (unnormalised; `None` for
+/// coincident points): the chord directions weighted by the opposite chord's length.
+fn circle_tangent(a: DVec3, v: DVec3, b: DVec3) -> Option<DVec3> {
+    let (da, db) = (v - a, b - v);
+    let (la, lb) = (da.length(), db.length());
+    (la > 0.0 && lb > 0.0).then(|| lb / la * da + la / lb * db)
+}
+
+/// The normal at a regular vertex `v` (four boundary quads) from its two grid lines: the
+/// cross product of the tangents of the circles through each opposite pair of its edge
+/// neighbours, oriented along the unit normal `n_ref`. Exact wherever the grid lines are
+/// circles (a torus's or any surface of revolution's meridians and parallels, a sphere's
+/// great or small circles), where the fan's and the quadric's normals are not (on an
+/// eight-cell torus tube they are off by up to 4°). `None` when the two tangents are (nearly)
+/// parallel or the normal turns from `n_ref` by more than 45°.
+pub(super) fn grid_normal(v: DVec3, pairs: [(DVec3, DVec3); 2], n_ref: DVec3) -> Option<DVec3> {
+    let t1 = circle_tangent(pairs[0].0, v, pairs[0].1)?;
+    let t2 = circle_tangent(pairs[1].0, v, pairs[1].1)?;
+    let c = t1.cross(t2);
+    let l = c.length();
+    if !(l > 0.1 * t1.length() * t2.length()) {
+        return None;
+    }
+    let n = c / l;
+    let cos = n.dot(n_ref);
+    (cos.abs() > std::f64::consts::FRAC_1_SQRT_2).then(|| cos.signum() * n)
+}
+
+/// The normal halfway between `na` and `nb` (either orientation of `nb`).
+fn mid_normal(na: DVec3, nb: DVec3) -> Option<DVec3> {
+    let s = na + na.dot(nb).signum() * nb;
+    (s.length() > 1e-12).then(|| unit(s))
+}
+
+/// Displacement of the centre of the boundary quad with corners `x` and normals `n` (lattice
+/// order: corner i at (i mod 2, i / 2) of the face's parameters) from the corners' average.
+pub(super) fn face_arc(x: &[DVec3; 4], n: &[DVec3; 4]) -> Option<DVec3> {
+    let centre = 0.25 * (x[0] + x[1] + x[2] + x[3]);
+    let mut sum = DVec3::ZERO;
+    // Across from the midpoint of edge (i, j) to that of the opposite edge (k, l).
+    for [i, j, k, l] in [[0, 1, 2, 3], [0, 2, 1, 3]] {
+        let m1 = 0.5 * (x[i] + x[j]) + edge_arc(x[i], x[j], n[i], n[j])?;
+        let m2 = 0.5 * (x[k] + x[l]) + edge_arc(x[k], x[l], n[k], n[l])?;
+        let (n1, n2) = (mid_normal(n[i], n[j])?, mid_normal(n[k], n[l])?);
+        sum += 0.5 * (m1 + m2) + edge_arc(m1, m2, n1, n2)?;
+    }
+    Some(0.5 * sum - centre)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn torus(psi: f64, th: f64) -> (DVec3, DVec3) {
+        let (r0, r) = (1.0, 0.5);
+        let n = DVec3::new(th.cos() * psi.cos(), th.cos() * psi.sin(), th.sin());
+        let x = DVec3::new(
+            (r0 + r * th.cos()) * psi.cos(),
+            (r0 + r * th.cos()) * psi.sin(),
+            r * th.sin(),
+        );
+        (x, n)
+    }
+
+    fn torus_distance(x: DVec3) -> f64 {
+        ((x.x.hypot(x.y) - 1.0).hypot(x.z) - 0.5).abs()
+    }
+
+    /// On a circle (normals in its plane, either orientation) the edge target is exact
+    /// at any resolution; the chord midpoint is not.
+    #[test]
+    fn edge_arc_is_exact_on_circles() {
+        let c = |t: f64| DVec3::new(2.0 * t.cos(), 0.3, 2.0 * t.sin());
+        let nrm = |t: f64| DVec3::new(t.cos(), 0.0, t.sin());
+        for (t0, t1) in [(0.1, 0.9), (0.0, 1.6), (-0.2, 0.05)] {
+            let (a, b) = (c(t0), c(t1));
+            let m = 0.5 * (a + b) + edge_arc(a, b, nrm(t0), -nrm(t1)).unwrap();
+            let r = (m - DVec3::new(0.0, 0.3, 0.0)).length();
+            assert!((r - 2.0).abs() < 1e-12, "{t0} {t1}: {r}");
+        }
+    }
+
+    /// On a coarse torus the grid lines' circles give the exact normal at every vertex
+    /// (pointing along the reference, whichever way that is); the average of the four quads'
+    /// normals turns from it by degrees off the equators.
+    #[test]
+    fn grid_normal_is_exact_on_a_coarse_torus() {
+        let (dpsi, dth) = (std::f64::consts::TAU / 16.0, std::f64::consts::TAU / 8.0);
+        let mut fan_worst = 0.0f64;
+        for j in 0..8 {
+            let th = j as f64 * dth;
+            let (v, n) = torus(0.3, th);
+            let p = |a: f64, b: f64| torus(0.3 + a * dpsi, th + b * dth).0;
+            let pairs = [(p(-1.0, 0.0), p(1.0, 0.0)), (p(0.0, -1.0), p(0.0, 1.0))];
+            for sign in [1.0, -1.0] {
+                let g = grid_normal(v, pairs, sign * unit(n + 0.3 * DVec3::Z)).unwrap();
+                assert!((g - sign * n).length() < 1e-12, "{th}: {g:?} vs {n:?}");
+            }
+            let quad = |a: f64, b: f64| {
+                let c = [p(0.0, 0.0), p(a, 0.0), p(a, b), p(0.0, b)];
+                (c[2] - c[0]).cross(c[3] - c[1]) * (a * b)
+            };
+            let fan = unit(quad(1.0, 1.0) + quad(-1.0, 1.0) + quad(1.0, -1.0) + quad(-1.0, -1.0));
+            fan_worst = fan_worst.max(fan.dot(n).abs().clamp(-1.0, 1.0).acos().to_degrees());
+        }
+        assert!(fan_worst > 1.0, "{fan_worst}");
+    }
+
+    /// On the eight-by-sixteen torus (45° around the tube per cell) with exact normals, the
+    /// edge and face targets are within 2 % and 3 % of the chord's largest distance from the
+    /// torus.
+    #[test]
+    fn arcs_follow_a_coarse_torus() {
+        let (dpsi, dth) = (std::f64::consts::TAU / 16.0, std::f64::consts::TAU / 8.0);
+        let (mut worst_chord, mut worst_edge, mut worst_face) = (0.0f64, 0.0f64, 0.0f64);
+        for i in 0..16 {
+            for j in 0..8 {
+                let (ps, th) = (i as f64 * dpsi, j as f64 * dth);
+                let c = [
+                    torus(ps, th),
+                    torus(ps + dpsi, th),
+                    torus(ps, th + dth),
+                    torus(ps + dpsi, th + dth),
+                ];
+                let (x, n) = (c.map(|p| p.0), c.map(|p| p.1));
+                for (a, b) in [(0, 1), (0, 2)] {
+                    let m = 0.5 * (x[a] + x[b]);
+                    worst_chord = worst_chord.max(torus_distance(m));
+                    let e = m + edge_arc(x[a], x[b], n[a], n[b]).unwrap();
+                    worst_edge = worst_edge.max(torus_distance(e));
+                }
+                let f = 0.25 * (x[0] + x[1] + x[2] + x[3]) + face_arc(&x, &n).unwrap();
+                worst_face = worst_face.max(torus_distance(f));
+            }
+        }
+        assert!(
+            worst_edge < 0.02 * worst_chord,
+            "{worst_edge} vs {worst_chord}"
+        );
+        assert!(
+            worst_face < 0.03 * worst_chord,
+            "{worst_face} vs {worst_chord}"
+        );
+    }
+}
