@@ -285,12 +285,12 @@ pub fn curve_in_memory_with_progress(
         topo: &topo,
         executor: executor.as_ref(),
     };
-    let spline = match options.geometry {
+    let mut spline = match options.geometry {
         Geometry::Straight => None,
         _ => Some(spline::curve_spline(&job, &mut clock)?),
     };
     let mut ho = clock.run(Stage::Sample, || {
-        sample_stage(&job, spline.as_ref(), order, elastic.is_none())
+        sample_stage(&job, spline.as_mut(), order, elastic.is_none())
     })?;
     let snapped = options.snap_boundary.then(|| {
         let depth = options.line_search.certificate_depth;
@@ -374,7 +374,7 @@ pub(crate) fn topology(input: &Path, mesh: &LinearMesh) -> Result<Topology, Curv
 /// analogy instead, when there is one: `subdivide_now` is false then).
 fn sample_stage(
     job: &Job,
-    spline: Option<&(SplineSetup, SplineOutcome)>,
+    spline: Option<&mut (SplineSetup, SplineOutcome)>,
     order: usize,
     subdivide_now: bool,
 ) -> Result<HighOrderMesh, CurveError> {
@@ -382,11 +382,18 @@ fn sample_stage(
     let target_map;
     let blended;
     let source: &dyn BezierElements = match spline {
-        Some((setup, outcome)) => match &outcome.blend_factors {
+        Some((setup, outcome)) => match outcome.blend_factors.clone() {
             Some(factors) => {
                 target_map = setup.target_map(job);
+                // The search's nets: the reduced elements' target-map corrections once only.
+                let nets = outcome.blend_nets.take();
                 let space = &outcome.space;
-                blended = Blended::new(mesh, &target_map, space, mesh, topo, factors.clone());
+                blended = match nets {
+                    Some(c) => {
+                        Blended::with_cache(mesh, &target_map, space, mesh, topo, factors, c)
+                    }
+                    None => Blended::new(mesh, &target_map, space, mesh, topo, factors),
+                };
                 &blended
             }
             None => &outcome.space,

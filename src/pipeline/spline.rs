@@ -21,7 +21,7 @@ use crate::fit::{FitInfo, FitParams, FitTargets, SmoothTargets, TargetMap, fit_w
 use crate::mesh::features::Features;
 use crate::progress::{Progress, Stage};
 use crate::spline::{ElementRows, Q2Reason, SplineSpace, kinks};
-use crate::validity::blend::{BlendInfo, Blended, blend_search};
+use crate::validity::blend::{BlendInfo, Blended, NetCache, blend_search};
 use crate::validity::certificate::{
     MAX_DEMOTION_ROUNDS, certify_mesh, demote_with_rings, uncertified,
 };
@@ -130,6 +130,8 @@ pub(super) struct SplineOutcome {
     /// The certified blend's factors (least-squares fits): the map to sample is
     /// [`Blended`] of these; `None` samples `space` itself.
     pub blend_factors: Option<Vec<f32>>,
+    /// The blend search's nets, for sampling the same blend (taken by the sample stage).
+    pub blend_nets: Option<NetCache>,
     pub fit: Option<FitInfo>,
     pub blend: Option<BlendInfo>,
     pub line_search: Option<LineSearchInfo>,
@@ -147,7 +149,7 @@ impl SplineOutcome {
     /// A blended least-squares fit: the report's search figures are the blend's.
     fn blended(
         space: SplineSpace,
-        factors: Vec<f32>,
+        (factors, nets): (Vec<f32>, NetCache),
         fit: FitInfo,
         blend: BlendInfo,
         demoted: usize,
@@ -156,6 +158,7 @@ impl SplineOutcome {
         SplineOutcome {
             space,
             blend_factors: Some(factors),
+            blend_nets: Some(nets),
             fit: Some(fit),
             line_search: None,
             alpha: Some(0.5 * blend.min_factor),
@@ -243,6 +246,7 @@ fn fit_with_energy(
                 return Ok(SplineOutcome {
                     space,
                     blend_factors: None,
+                    blend_nets: None,
                     fit: Some(info),
                     blend: None,
                     line_search: step.global,
@@ -302,6 +306,7 @@ fn certify_initial(
     Ok(SplineOutcome {
         space,
         blend_factors: None,
+        blend_nets: None,
         fit: None,
         blend: None,
         line_search: None,
@@ -362,7 +367,7 @@ fn blend(
     job: &Job,
     setup: &SplineSetup,
     space: &SplineSpace,
-) -> Result<(Vec<f32>, BlendInfo), CurveError> {
+) -> Result<((Vec<f32>, NetCache), BlendInfo), CurveError> {
     let target_map = setup.target_map(job);
     let mut blended = Blended::new(job.mesh, &target_map, space, job.mesh, job.topo, Vec::new());
     let global = job.options.line_search_mode == LineSearchMode::Global;
@@ -375,7 +380,8 @@ fn blend(
         input: job.input.to_owned(),
         source,
     })?;
-    Ok((std::mem::take(&mut blended.factors), info))
+    let factors = std::mem::take(&mut blended.factors);
+    Ok(((factors, blended.into_cache()), info))
 }
 
 /// Certified bounds of the space's current map, exact where at most `target(e)`

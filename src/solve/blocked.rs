@@ -252,12 +252,42 @@ pub struct BlockedSystem {
     /// Packed lower Cholesky factor of aggregate a's diagonal block, from `factor_start[a]`.
     factors: Vec<f64>,
     factor_start: Vec<usize>,
+    /// Per row (new numbering), the even-rounded start of its factor row's envelope, counted
+    /// from the aggregate's first row: the entries before it are exact zeros (see
+    /// [`envelope_starts`]).
+    first: Vec<u32>,
 }
 
-/// One aggregate's step: x += α p, r −= α ap, z = (L Lᵀ)⁻¹ r; returns (rᵀz, rᵀr).
+/// Per row of every aggregate's packed factor, its first non-zero column rounded down to even.
+///
+/// Cholesky keeps a matrix's envelope: a zero of the block before a row's first coupling stays
+/// an exact (signed) zero in L, since each such entry is a zero minus products with zeros. The
+/// triangular solves skip those entries, which changes no bit: their products with finite
+/// values are signed zeros, and adding one to the forward solve's partial sums (which start at
+/// +0, so are never −0) or subtracting one in the backward solve leaves a non-zero value as it
+/// is and keeps a +0 at +0 (a −0 there would need r to be exactly −0 in that component). The
+/// start is rounded to even so that each kept product still goes to the same one of the forward
+/// solve's two partial sums.
+fn envelope_starts(start: &[usize], factors: &[f64], factor_start: &[usize]) -> Vec<u32> {
+    let mut first = vec![0u32; *start.last().unwrap_or(&0)];
+    for b in 0..start.len() - 1 {
+        let l = &factors[factor_start[b]..factor_start[b + 1]];
+        for i in 0..start[b + 1] - start[b] {
+            let ri = i * (i + 1) / 2;
+            let f = l[ri..ri + i].iter().position(|&v| v != 0.0).unwrap_or(i);
+            first[start[b] + i] = (f & !1) as u32;
+        }
+    }
+    first
+}
+
+/// One aggregate's step: x += α p, r −= α ap, z = (L Lᵀ)⁻¹ r; returns (rᵀz, rᵀr). Row i of
+/// L is read from column `first[i]` on (the envelope, [`envelope_starts`]).
 #[inline(always)]
+#[allow(clippy::too_many_arguments)]
 fn block_step(
     l: &[f64],
+    first: &[u32],
     alpha: V4,
     x: &mut [V4],
     r: &mut [V4],
@@ -277,9 +307,10 @@ fn block_step(
     // L y = r, row by row (two partial sums per row).
     for i in 0..m {
         let ri = i * (i + 1) / 2;
+        let f = first[i] as usize;
         let (mut s0, mut s1) = ([0.0; 4], [0.0; 4]);
-        let mut lk = l[ri..ri + i].chunks_exact(2);
-        let mut zk = z[..i].chunks_exact(2);
+        let mut lk = l[ri + f..ri + i].chunks_exact(2);
+        let mut zk = z[f..i].chunks_exact(2);
         for (lk, zk) in (&mut lk).zip(&mut zk) {
             for c in 0..4 {
                 s0[c] += lk[0] * zk[0][c];
@@ -302,7 +333,8 @@ fn block_step(
             z[i][c] /= d;
         }
         let zi = z[i];
-        for (zk, &lk) in z[..i].iter_mut().zip(&l[ri..ri + i]) {
+        let f = first[i] as usize;
+        for (zk, &lk) in z[f..i].iter_mut().zip(&l[ri + f..ri + i]) {
             for c in 0..4 {
                 zk[c] -= lk * zi[c];
             }
@@ -319,8 +351,10 @@ fn block_step(
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
+#[allow(clippy::too_many_arguments)]
 unsafe fn block_step_avx2(
     l: &[f64],
+    first: &[u32],
     alpha: V4,
     x: &mut [V4],
     r: &mut [V4],
@@ -328,7 +362,7 @@ unsafe fn block_step_avx2(
     p: &[V4],
     ap: &[V4],
 ) -> (V4, V4) {
-    block_step(l, alpha, x, r, z, p, ap)
+    block_step(l, first, alpha, x, r, z, p, ap)
 }
 
 impl BlockedSystem {
@@ -355,11 +389,13 @@ impl BlockedSystem {
                 }
             }
         })?;
+        let first = envelope_starts(start, &factors, &factor_start);
         Ok(BlockedSystem {
             agg,
             a,
             factors,
             factor_start,
+            first,
         })
     }
 
@@ -387,8 +423,8 @@ impl BlockedSystem {
             .map(|(b, ((x, r), z))| {
                 let (s, e) = (start[b], start[b + 1]);
                 let l = &self.factors[self.factor_start[b]..self.factor_start[b + 1]];
-                let (p, ap) = (&p[s..e], &ap[s..e]);
-                dispatch!(block_step_avx2, block_step(l, alpha, x, r, z, p, ap))
+                let (p, ap, first) = (&p[s..e], &ap[s..e], &self.first[s..e]);
+                dispatch!(block_step_avx2, block_step(l, first, alpha, x, r, z, p, ap))
             })
             .collect();
         let rz: Vec<V4> = partials.iter().map(|p| p.0).collect();
@@ -619,6 +655,39 @@ mod tests {
         let mut z: Vec<[f64; 3]> = want.iter().map(|w| w.map(|v| v * (1.0 + 1e-6))).collect();
         let warm = sys.solve(&b, &mut z, &params, |_, _| {}).unwrap();
         assert!(warm.iterations < info.iterations);
+    }
+
+    /// Skipping the factor rows' leading zeros changes no bit of the solve: the same system
+    /// with the whole rows read (envelope starts at 0) gives the same iterates.
+    #[test]
+    fn the_envelope_skip_gives_the_bits_of_the_full_triangular_solves() {
+        let a = laplacian(30, |x, y| 0.05 + 0.01 * ((3 * x + y) % 5) as f64);
+        let b = test_vector(900);
+        let skip = BlockedSystem::new(&a.0, &a.1, &a.2, 64).unwrap();
+        let full = BlockedSystem {
+            first: vec![0; skip.first.len()],
+            ..BlockedSystem::new(&a.0, &a.1, &a.2, 64).unwrap()
+        };
+        // The 5-point aggregates' factors do have leading zeros to skip.
+        let skipped: usize = skip.first.iter().map(|&f| f as usize).sum();
+        assert!(skipped > 1000, "{skipped}");
+        let params = CgParams {
+            rel_tol: 1e-12,
+            ..Default::default()
+        };
+        let run = |sys: &BlockedSystem| {
+            let mut x = vec![[0.0; 3]; 900];
+            let info = sys.solve(&b, &mut x, &params, |_, _| {}).unwrap();
+            (x, info.iterations, info.rel_residual.to_bits())
+        };
+        let (xs, is, rs) = run(&skip);
+        let (xf, it, rf) = run(&full);
+        assert_eq!((is, rs), (it, rf));
+        assert!(
+            xs.iter()
+                .zip(&xf)
+                .all(|(p, q)| p.map(f64::to_bits) == q.map(f64::to_bits))
+        );
     }
 
     #[test]

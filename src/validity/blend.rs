@@ -143,11 +143,20 @@ pub struct Blended<'a> {
     /// Each element's straight, target and fitted nets, computed when first blended: the
     /// search blends a rejected element's neighbourhood again every round, and the target
     /// map's smooth corrections and the spline's evaluation cost more than the blend itself.
-    references: Vec<OnceLock<Box<(Net, Net, Net)>>>,
+    references: NetCache,
 }
+
+/// The straight, target and fitted nets a [`Blended`] computed (only those of the elements it
+/// blended with a reduced factor), to hand to a later [`Blended`] of the same three maps
+/// ([`Blended::with_cache`]): sampling the certified blend then costs no target-map
+/// corrections again.
+pub struct NetCache(Vec<OnceLock<Box<(Net, Net, Net)>>>);
 
 /// Factor of the fitted map.
 pub const FITTED: f32 = 2.0;
+
+/// Elements judged together in one pass of the search (their nets held at once).
+const JUDGE_CHUNK: usize = 1 << 14;
 
 impl<'a> Blended<'a> {
     /// The blend with the factors `factors` (empty: the fitted map).
@@ -159,6 +168,28 @@ impl<'a> Blended<'a> {
         topo: &'a Topology,
         factors: Vec<f32>,
     ) -> Self {
+        let empty = NetCache((0..fitted.n_elements()).map(|_| OnceLock::new()).collect());
+        Self::with_cache(straight, target, fitted, mesh, topo, factors, empty)
+    }
+
+    /// [`Blended::new`] starting from the nets `cache` that a blend of the same straight,
+    /// target and fitted maps computed ([`Blended::into_cache`]); a cache of another element
+    /// count is not used.
+    pub fn with_cache(
+        straight: &'a (dyn BezierElements + 'a),
+        target: &'a (dyn BezierElements + 'a),
+        fitted: &'a (dyn BezierElements + 'a),
+        mesh: &'a LinearMesh,
+        topo: &'a Topology,
+        factors: Vec<f32>,
+        cache: NetCache,
+    ) -> Self {
+        let n = fitted.n_elements();
+        let references = if cache.0.len() == n {
+            cache
+        } else {
+            NetCache((0..n).map(|_| OnceLock::new()).collect())
+        };
         let mut b = Blended {
             straight,
             target,
@@ -166,10 +197,15 @@ impl<'a> Blended<'a> {
             ids: EntityIds::new(mesh, topo),
             factors,
             reduced: Vec::new(),
-            references: (0..fitted.n_elements()).map(|_| OnceLock::new()).collect(),
+            references,
         };
         b.refresh();
         b
+    }
+
+    /// The nets computed so far, for a later blend of the same maps.
+    pub fn into_cache(self) -> NetCache {
+        self.references
     }
 
     fn points(&self) -> usize {
@@ -197,12 +233,20 @@ impl<'a> Blended<'a> {
         self.reduced.get(e).copied().unwrap_or(false)
     }
 
+    /// The fitted map's net of element `e` (the search's copy where it made one).
+    fn fitted_net(&self, e: usize) -> Net {
+        match self.references.0[e].get() {
+            Some(r) => r.2,
+            None => self.fitted.bezier_net(e),
+        }
+    }
+
     /// Blended net of element `e` under `factors`.
     fn net_with(&self, e: usize, factors: &[f32], reduced: bool) -> Net {
         if !reduced || factors.is_empty() {
             return self.fitted.bezier_net(e);
         }
-        let (s, t, f) = &**self.references[e].get_or_init(|| {
+        let (s, t, f) = &**self.references.0[e].get_or_init(|| {
             Box::new((
                 self.straight.bezier_net(e),
                 self.target.bezier_net(e),
@@ -400,28 +444,29 @@ pub fn blend_search_shared(
         (true, lower >= need && shape(), lower.max(b.lower))
     };
     // `elements` sorted. The blended nets are built once per call (a reduced element's costs
-    // the target map's smooth corrections) and shared by the screen, the certificate and the
-    // quality test; the full-fit call (no factors) reads the fitted map directly instead of
-    // holding every element's net.
+    // the target map's smooth corrections, any other's the spline's evaluation) and shared by
+    // the screen, the certificate and the quality test, a chunk of elements at a time so that
+    // the full-fit call does not hold every element's net at once.
     let judge = |blended: &Blended, factors: &[f32], reduced: &[bool], elements: &[usize]| {
-        let nets: Vec<Net> = if factors.is_empty() {
-            Vec::new()
-        } else {
-            elements
-                .par_iter()
-                .map(|&e| blended.net_with(e, factors, reduced.get(e).copied().unwrap_or(false)))
-                .collect()
-        };
-        let net = |e: usize| match elements.binary_search(&e) {
-            Ok(i) if !nets.is_empty() => nets[i],
-            _ => blended.net_with(e, factors, reduced.get(e).copied().unwrap_or(false)),
-        };
-        let cert = certify_screened(certifier, dim, elements, &net, depth, &det_target);
-        elements
-            .par_iter()
-            .zip(&cert.bounds)
-            .map(|(&e, b)| accept(e, b, &net(e)))
-            .collect::<Vec<_>>()
+        let blend =
+            |e: usize| blended.net_with(e, factors, reduced.get(e).copied().unwrap_or(false));
+        let mut verdicts = Vec::with_capacity(elements.len());
+        for chunk in elements.chunks(JUDGE_CHUNK) {
+            let nets: Vec<Net> = chunk.par_iter().map(|&e| blend(e)).collect();
+            let net = |e: usize| match chunk.binary_search(&e) {
+                Ok(i) => nets[i],
+                _ => blend(e),
+            };
+            let cert = certify_screened(certifier, dim, chunk, &net, depth, &det_target);
+            verdicts.par_extend(
+                chunk
+                    .par_iter()
+                    .zip(&nets)
+                    .zip(&cert.bounds)
+                    .map(|((&e, n), b)| accept(e, b, n)),
+            );
+        }
+        verdicts
     };
     let first = judge(blended, &[], &[], mine);
     let mut info = BlendInfo {
@@ -588,7 +633,7 @@ fn summarise(blended: &Blended, info: &mut BlendInfo, lower: &[f64], owned: &[bo
             if !owned[e] || !blended.is_reduced(e) {
                 return None;
             }
-            let (b, f) = (blended.bezier_net(e), blended.fitted.bezier_net(e));
+            let (b, f) = (blended.bezier_net(e), blended.fitted_net(e));
             let ids = blended.ids.of(e);
             let x = mesh.element_coords(e);
             let nc = 1 << dim;
