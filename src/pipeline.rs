@@ -25,6 +25,7 @@
 //! job fails with [`CurveError::Invalid`] and writes nothing.
 
 mod clock;
+mod misfit;
 mod report;
 pub(crate) mod spline;
 

@@ -15,6 +15,7 @@
 //! - the unfitted spline map ([`certify_initial`]): certified as it is, or refused.
 
 use super::clock::Clock;
+use super::misfit;
 use super::{CurveError, Geometry, Job};
 use crate::energy::{EnergyError, EnergyInfo, EnergyParams};
 use crate::fit::{FitInfo, FitParams, FitTargets, SmoothTargets, TargetMap, fit_with_targets};
@@ -102,6 +103,16 @@ impl SplineSetup {
 
     /// The spline space with the Q2 elements of creases, kinks and `demote`.
     pub(crate) fn build(&self, job: &Job, demote: &[bool]) -> SplineSpace {
+        self.build_with_misfits(job, demote, &[])
+    }
+
+    /// [`SplineSetup::build`] with the boundary misfits of earlier fits (`misfit`) made Q2 too.
+    pub(crate) fn build_with_misfits(
+        &self,
+        job: &Job,
+        demote: &[bool],
+        misfit: &[bool],
+    ) -> SplineSpace {
         SplineSpace::build_with_q2(
             job.mesh,
             job.topo,
@@ -109,6 +120,7 @@ impl SplineSetup {
                 (&self.crease, Q2Reason::FeatureCrease),
                 (&self.kinks.elements, Q2Reason::BoundaryKink),
                 (demote, Q2Reason::InvalidSplineMap),
+                (misfit, Q2Reason::BoundaryMisfit),
             ],
         )
     }
@@ -201,7 +213,8 @@ fn fit_and_blend(
     clock: &mut Clock,
     mut space: SplineSpace,
 ) -> Result<SplineOutcome, CurveError> {
-    let (c_star, info) = fit(job, setup, clock, &space)?;
+    let mut misfit = Vec::new();
+    let (c_star, info) = fit_demoting_misfits(job, setup, clock, &mut space, &[], &mut misfit)?;
     space.control_points = c_star;
     let (factors, blend) = clock.run(Stage::Validity, || blend(job, setup, &space))?;
     Ok(SplineOutcome::blended(space, factors, info, blend, 0, None))
@@ -220,8 +233,10 @@ fn fit_with_energy(
     params: &EnergyParams,
 ) -> Result<SplineOutcome, CurveError> {
     let mut demote = vec![false; job.mesh.n_elements()];
+    let mut misfit = Vec::new();
     for round in 0.. {
-        let (c_star, info) = fit(job, setup, clock, &space)?;
+        let (c_star, info) =
+            fit_demoting_misfits(job, setup, clock, &mut space, &demote, &mut misfit)?;
         let (thresholds, step) = clock.run(Stage::Validity, || {
             let fraction = job.options.line_search.min_det_fraction;
             let thresholds =
@@ -266,7 +281,7 @@ fn fit_with_energy(
                 let bad = uncertified(&certify_space(job, &space, &|_| 0.0));
                 let is_q2 = |e: usize| !space.is_spline(e);
                 demote_with_rings(job.mesh, job.topo, &bad, round, &is_q2, &mut demote);
-                setup.build(job, &demote)
+                setup.build_with_misfits(job, &demote, &misfit)
             });
             continue;
         }
@@ -333,6 +348,46 @@ fn fit(
     clock.add(Stage::FitAssembly, info.assembly_seconds);
     clock.add(Stage::FitCg, info.solve_seconds);
     Ok((c_star, info))
+}
+
+/// [`fit`], then up to [`misfit::MISFIT_ROUNDS`] times: the spline elements whose boundary
+/// side stays far off its smooth targets ([`misfit::misfit_elements`]) join `misfit` (marks
+/// per element, kept across calls), the space is rebuilt with them (and `demote`) as Q2 and
+/// the fit repeated. Only with smooth targets and in 2D (on the 3D O-grid cylinder the
+/// elements marked next to the sharp rims leave the boundary further off, not closer); the
+/// rounds stop when no element is marked.
+fn fit_demoting_misfits(
+    job: &Job,
+    setup: &SplineSetup,
+    clock: &mut Clock,
+    space: &mut SplineSpace,
+    demote: &[bool],
+    misfit: &mut Vec<bool>,
+) -> Result<(Vec<[f64; 3]>, FitInfo), CurveError> {
+    let mut round = 0;
+    loop {
+        let (c_star, info) = fit(job, setup, clock, space)?;
+        let Some(targets) = setup.targets.as_ref() else {
+            return Ok((c_star, info));
+        };
+        if job.topo.dim != 2 || round == misfit::MISFIT_ROUNDS {
+            return Ok((c_star, info));
+        }
+        round += 1;
+        let marks = clock.run(Stage::Spline, || {
+            misfit::misfit_elements(job.mesh, job.topo, space, &c_star, targets)
+        });
+        if !marks.contains(&true) {
+            return Ok((c_star, info));
+        }
+        misfit.resize(job.mesh.n_elements(), false);
+        for (m, x) in misfit.iter_mut().zip(marks) {
+            *m |= x;
+        }
+        *space = clock.run(Stage::Spline, || {
+            setup.build_with_misfits(job, demote, misfit)
+        });
+    }
 }
 
 fn solve_fit(

@@ -1,0 +1,202 @@
+//! Post-fit Q2 choice: spline elements whose boundary side the least-squares fit leaves far
+//! from its smooth targets.
+//!
+//! Input: the mesh, its topology, the spline space, the fitted control points and the smooth
+//! targets. Output: a mark per element, set on spline elements to make constrained Q2 elements
+//! before the fit is repeated (the pipeline does this for a few rounds).
+//!
+//! A C¹ spline cannot bend a short run of boundary sides between Q2 elements (or next to an
+//! irregular stretch of the boundary grid) onto the surface: the run's side midpoints stay off
+//! their targets by many times what a Q2 element, which interpolates its targets, would leave
+//! between its nodes. Per boundary side of every element the check measures
+//! * d, the largest distance of the fitted map from the targets at the side's lattice points
+//!   {0, ½, 1}^(d−1) (a Q2 side whose nodes are its own has d ≈ 0);
+//! * e_Q, an estimate of a Q2 side's own error between its nodes: s³ / ℓ², with s the largest
+//!   target correction of the side (its sagitta) and ℓ its edge length. On a circle of
+//!   curvature κ, s = ℓ²κ / 8 and the interpolation error of the quadratic through three
+//!   points is about ℓ⁴κ³ / 500, which is s³ / ℓ² (Gmsh's order-2 sides on the CAD measure
+//!   this within 10 %).
+//!
+//! A boundary side of a spline element is *over* when d > `MISFIT_FACTOR` · e_Q +
+//! `MISFIT_FLOOR` · ℓ. An over side is a *seed* when also d > `NEIGHBOUR_FACTOR` times the
+//! smallest d of the boundary sides sharing a vertex with it, and the elements of the seeds
+//! and of every over side connected to a seed through over sides (sharing vertices) are
+//! marked. The neighbour rule keeps a boundary whose spline sides all fit alike (an O-grid
+//! ring, uniformly a few e_Q off) as it is: only runs that start next to a much better side are
+//! the spline space's local failures, and each is marked whole. Straight stretches (s = 0) are
+//! marked only above the floor, far below any visible deviation.
+
+use crate::fit::SmoothTargets;
+use crate::math::linalg::DVec3;
+use crate::mesh::topology::{HEX_VERTEX_PARAMS, NONE};
+use crate::mesh::{LinearMesh, Topology};
+use crate::spline::SplineSpace;
+use crate::spline::eval::eval_net;
+use rayon::prelude::*;
+
+/// A boundary side is a misfit above this many times the Q2 error estimate s³ / ℓ².
+pub(crate) const MISFIT_FACTOR: f64 = 2.0;
+
+/// ... and above this many times the smallest deviation of a boundary side sharing a vertex.
+pub(crate) const NEIGHBOUR_FACTOR: f64 = 3.0;
+
+/// Deviations below this fraction of the side's edge length are never misfits.
+pub(crate) const MISFIT_FLOOR: f64 = 1e-8;
+
+/// Fit-and-demote rounds after the first fit.
+pub(crate) const MISFIT_ROUNDS: usize = 3;
+
+/// One boundary side: its element, facet, deviation d and threshold from e_Q and the floor.
+struct Side {
+    element: u32,
+    facet: u32,
+    deviation: f64,
+    threshold: f64,
+}
+
+/// The lattice index (9z + 3y + x) of lattice point `l`.
+fn index(l: [usize; 3]) -> usize {
+    l[0] + 3 * l[1] + 9 * l[2]
+}
+
+/// The boundary sides of element `e` with their deviations from the targets.
+fn element_sides(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    space: &SplineSpace,
+    control_points: &[[f64; 3]],
+    targets: &SmoothTargets,
+    e: usize,
+    out: &mut Vec<Side>,
+) {
+    let dim = topo.dim;
+    let boundary: Vec<usize> = (0..2 * dim)
+        .filter(|&s| topo.facet_elements[topo.element_facet(e, s) as usize][1] == NONE)
+        .collect();
+    if boundary.is_empty() {
+        return;
+    }
+    let x = mesh.element_coords(e);
+    let corrections = targets.element_corrections(mesh, topo, e);
+    let net = space.element_bezier_with(e, control_points);
+    // The multilinear point of lattice point l: the average of the corners of the smallest
+    // entity containing it.
+    let multilinear = |l: [usize; 3]| {
+        let mut p = DVec3::ZERO;
+        let mut n = 0.0;
+        for (c, pc) in HEX_VERTEX_PARAMS.iter().enumerate().take(1 << dim) {
+            if (0..dim).all(|k| l[k] == 1 || 2 * pc[k] as usize == l[k]) {
+                p += DVec3::from(x[c]);
+                n += 1.0;
+            }
+        }
+        p / n
+    };
+    for s in boundary {
+        let (k, b) = (s / 2, 2 * (s % 2));
+        let (mut deviation, mut sagitta, mut length) = (0.0f64, 0.0f64, 0.0f64);
+        let n = if dim == 2 { 3 } else { 9 };
+        let others: Vec<usize> = (0..dim).filter(|&j| j != k).collect();
+        for i in 0..n {
+            let mut l = [0usize; 3];
+            l[k] = b;
+            l[others[0]] = i % 3;
+            if dim == 3 {
+                l[others[1]] = i / 3;
+            }
+            let c = DVec3::from(corrections[index(l)]);
+            let target = multilinear(l) + c;
+            let u = [l[0] as f64 / 2.0, l[1] as f64 / 2.0, l[2] as f64 / 2.0];
+            let fitted = DVec3::from(eval_net(dim, &net, u));
+            deviation = deviation.max((fitted - target).length());
+            sagitta = sagitta.max(c.length());
+            // Edge lengths: a corner and the next corner along each other direction.
+            for &j in &others {
+                if l[j] == 0 && l.iter().enumerate().all(|(m, &v)| m == k || v != 1) {
+                    let mut q = l;
+                    q[j] = 2;
+                    length = length.max((multilinear(q) - multilinear(l)).length());
+                }
+            }
+        }
+        let eq = if length > 0.0 {
+            sagitta.powi(3) / (length * length)
+        } else {
+            0.0
+        };
+        out.push(Side {
+            element: e as u32,
+            facet: topo.element_facet(e, s),
+            deviation,
+            threshold: MISFIT_FACTOR * eq + MISFIT_FLOOR * length,
+        });
+    }
+}
+
+/// Marks of the spline elements whose boundary side the fit leaves far off its targets (see
+/// the module docs); `control_points` are the fitted ones.
+pub(crate) fn misfit_elements(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    space: &SplineSpace,
+    control_points: &[[f64; 3]],
+    targets: &SmoothTargets,
+) -> Vec<bool> {
+    let ne = topo.n_elements;
+    let mut on_boundary = vec![false; ne];
+    for &f in &topo.boundary_facets {
+        on_boundary[topo.facet_elements[f as usize][0] as usize] = true;
+    }
+    let sides: Vec<Side> = (0..ne)
+        .into_par_iter()
+        .filter(|&e| on_boundary[e])
+        .flat_map_iter(|e| {
+            let mut out = Vec::new();
+            element_sides(mesh, topo, space, control_points, targets, e, &mut out);
+            out
+        })
+        .collect();
+    // The sides at each boundary vertex.
+    let mut sides_at: Vec<Vec<u32>> = vec![Vec::new(); mesh.n_vertices()];
+    for (i, side) in sides.iter().enumerate() {
+        for &v in topo.facet_vertices(side.facet as usize) {
+            sides_at[v as usize].push(i as u32);
+        }
+    }
+    let over =
+        |side: &Side| space.is_spline(side.element as usize) && side.deviation > side.threshold;
+    // Seeds: sides over their threshold and much worse than the best side sharing a vertex.
+    let mut stack: Vec<usize> = (0..sides.len())
+        .filter(|&i| {
+            let side = &sides[i];
+            let best = topo
+                .facet_vertices(side.facet as usize)
+                .iter()
+                .flat_map(|&v| &sides_at[v as usize])
+                .filter(|&&j| j as usize != i)
+                .map(|&j| sides[j as usize].deviation)
+                .fold(f64::INFINITY, f64::min);
+            over(side) && side.deviation > NEIGHBOUR_FACTOR * best
+        })
+        .collect();
+    // From the seeds along the boundary through every side over its threshold: a run of
+    // misfits is marked whole, not peeled from its ends one fit at a time.
+    let mut seen = vec![false; sides.len()];
+    for &i in &stack {
+        seen[i] = true;
+    }
+    let mut marks = vec![false; ne];
+    while let Some(i) = stack.pop() {
+        marks[sides[i].element as usize] = true;
+        for &v in topo.facet_vertices(sides[i].facet as usize) {
+            for &j in &sides_at[v as usize] {
+                let j = j as usize;
+                if !seen[j] && over(&sides[j]) {
+                    seen[j] = true;
+                    stack.push(j);
+                }
+            }
+        }
+    }
+    marks
+}
