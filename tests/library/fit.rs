@@ -376,3 +376,65 @@ fn right_hand_side_is_the_gradient_of_the_misfit() {
         }
     }
 }
+
+/// A fit started from given control points meets the same tolerance as from the initial map:
+/// from its own result it needs no iteration and returns it; from a perturbed result it comes
+/// back to it within the CG tolerance (on a graded mesh, where the unknowns are rescaled by
+/// size level, so the start must be carried into the scaled unknowns correctly).
+#[test]
+fn a_started_fit_reaches_the_same_control_points() {
+    use polyspline::fit::{FitParams, fit_with_targets, fit_with_targets_from, size_levels};
+    let real = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("meshes/real");
+    let m = read_mesh(
+        &real.join("trixi-juliacon2024-naca4412/NACA4412_2_2D_unique.inp"),
+        &MeshOptions::default(),
+    )
+    .unwrap();
+    assert!(size_levels(&m).iter().any(|&l| l > 0), "the mesh is graded");
+    let t = Topology::build(&m);
+    let s = SplineSpace::build(&m, &t);
+    let p = FitParams::smooth();
+    let targets = polyspline::fit::smooth_targets(&m, &t, &p);
+    fn solve(
+        k: &polyspline::fit::NormalMatrix,
+        b: &[[f64; 3]],
+        x: &mut [[f64; 3]],
+        cg: &polyspline::solve::CgParams,
+    ) -> Result<polyspline::solve::CgInfo, polyspline::solve::CgError> {
+        polyspline::solve::pcg(k, b, x, cg, |_, _| {})
+    }
+    let (cold, cold_info) = fit_with_targets(&s, &m, &t, &p, targets.as_ref(), solve).unwrap();
+    let (lo, hi) = m.bounding_box();
+    let diag = (0..3).map(|d| (hi[d] - lo[d]).powi(2)).sum::<f64>().sqrt();
+    let far = |a: &[[f64; 3]], b: &[[f64; 3]]| {
+        a.iter()
+            .zip(b)
+            .flat_map(|(a, b)| (0..3).map(move |d| (a[d] - b[d]).abs()))
+            .fold(0.0f64, f64::max)
+            / diag
+    };
+    let (again, info) =
+        fit_with_targets_from(&s, &m, &t, &p, targets.as_ref(), Some(&cold), solve).unwrap();
+    assert!(
+        info.cg.iterations <= 1,
+        "{} iterations from the solution",
+        info.cg.iterations
+    );
+    assert!(far(&again, &cold) < 1e-12, "{:e}", far(&again, &cold));
+    let nudged: Vec<[f64; 3]> = cold
+        .iter()
+        .enumerate()
+        .map(|(i, c)| [c[0] + 1e-3 * (i as f64 * 0.37).sin(), c[1], c[2]])
+        .collect();
+    let (back, info) =
+        fit_with_targets_from(&s, &m, &t, &p, targets.as_ref(), Some(&nudged), solve).unwrap();
+    assert!(info.cg.iterations > 0);
+    assert!(info.cg.iterations <= cold_info.cg.iterations + 10);
+    // Both stop at the same relative residual: as close to the converged fit as each other.
+    let mut tight = p.clone();
+    tight.cg.rel_tol = 1e-12;
+    let (exact, _) = fit_with_targets(&s, &m, &t, &tight, targets.as_ref(), solve).unwrap();
+    let (e_cold, e_back) = (far(&cold, &exact), far(&back, &exact));
+    assert!(e_cold < 1e-4 && e_back < 1e-4, "{e_cold:e} {e_back:e}");
+    assert!(e_back < 4.0 * e_cold, "{e_cold:e} {e_back:e}");
+}
