@@ -25,7 +25,7 @@
 //! job fails with [`CurveError::Invalid`] and writes nothing.
 
 mod clock;
-mod misfit;
+pub(crate) mod misfit;
 mod report;
 pub(crate) mod spline;
 

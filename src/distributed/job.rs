@@ -117,6 +117,11 @@ fn check_supported(options: &CurveOptions) -> Result<(), CurveError> {
     if options.snap_boundary {
         return unsupported("--snap-boundary");
     }
+    // The edits name vertices by their place in the file; a rank's sub-mesh numbers them
+    // otherwise, so they would hit other vertices.
+    if options.features.edits.is_some() {
+        return unsupported("--feature-edits");
+    }
     Ok(())
 }
 
@@ -298,6 +303,70 @@ fn fit_share(
     Ok((cg, k.nonzeros()))
 }
 
+/// The post-fit Q2 marks of the sub-mesh's elements (own and ghost) from the fitted control
+/// points of `s`, or `None` when no element of the mesh is marked (collective). Each rank
+/// measures the boundary sides of its own elements; every rank gathers all of them (a 2D
+/// boundary: a few hundred to a few thousand sides) and finds the same runs as the serial
+/// [`crate::pipeline::misfit::misfit_elements`], the vertices keyed by node tag.
+fn misfit_marks(
+    comm: &dyn Comm,
+    local: &LocalMesh,
+    topo: &Topology,
+    s: &crate::spline::SplineSpace,
+    targets: &crate::fit::SmoothTargets,
+) -> Option<Vec<bool>> {
+    use crate::pipeline::misfit::{SideFigures, boundary_sides, marked_sides};
+    let mesh = &local.mesh;
+    let mut own = vec![false; mesh.n_elements()];
+    own[..local.n_owned].fill(true);
+    let sides = boundary_sides(mesh, topo, s, &s.control_points, targets, &own);
+    // Per side: its element's global id, 4 vertex keys (-1: none), deviation, over.
+    const WIDTH: usize = 7;
+    let mut send = Vec::with_capacity(WIDTH * sides.len());
+    for side in &sides {
+        let f = side.figures(topo, s, |v| local.global_vertex[v as usize]);
+        send.push(local.global_element[side.element as usize] as f64);
+        send.extend(
+            f.vertices
+                .iter()
+                .map(|&k| if k == u64::MAX { -1.0 } else { k as f64 }),
+        );
+        send.push(f.deviation);
+        send.push(f64::from(u8::from(f.over)));
+    }
+    let all: Vec<f64> = comm.all_gather_f64(&send).concat();
+    let figures: Vec<SideFigures> = all
+        .chunks_exact(WIDTH)
+        .map(|c| SideFigures {
+            vertices: std::array::from_fn(|i| {
+                if c[1 + i] < 0.0 {
+                    u64::MAX
+                } else {
+                    c[1 + i] as u64
+                }
+            }),
+            deviation: c[5],
+            over: c[6] != 0.0,
+        })
+        .collect();
+    let marked: std::collections::HashSet<u64> = all
+        .chunks_exact(WIDTH)
+        .zip(marked_sides(&figures))
+        .filter(|(_, m)| *m)
+        .map(|(c, _)| c[0] as u64)
+        .collect();
+    if marked.is_empty() {
+        return None;
+    }
+    Some(
+        local
+            .global_element
+            .iter()
+            .map(|g| marked.contains(g))
+            .collect(),
+    )
+}
+
 /// This rank's read, setup, fit and certified blend (see the module docs).
 fn run_share(
     comm: &dyn Comm,
@@ -330,9 +399,28 @@ fn run_share(
     laps.lap("partition");
 
     let mine: Vec<usize> = (0..local.n_owned).collect();
-    let (cg, nonzeros) = fit_share(
+    let (mut cg, mut nonzeros) = fit_share(
         comm, input, &local, &topo, &setup, &mut s, &halo, &mine, laps,
     )?;
+    // The serial run's post-fit Q2 choice of 2D meshes (`pipeline::misfit`), its runs of
+    // misfit sides found over the whole boundary: mark, rebuild, refit.
+    let mut halo = halo;
+    if let Some(targets) = setup.targets.as_ref().filter(|_| topo.dim == 2) {
+        let mut misfit = vec![false; mesh.n_elements()];
+        for _ in 0..crate::pipeline::misfit::MISFIT_ROUNDS {
+            let Some(marks) = misfit_marks(comm, &local, &topo, &s, targets) else {
+                break;
+            };
+            for (m, x) in misfit.iter_mut().zip(marks) {
+                *m |= x;
+            }
+            s = setup.build_with_misfits(&job, &[], &misfit);
+            halo = super::local::halo(comm, &local, &topo, &s);
+            (cg, nonzeros) = fit_share(
+                comm, input, &local, &topo, &setup, &mut s, &halo, &mine, laps,
+            )?;
+        }
+    }
     let bytes_fit = comm.bytes_sent() - bytes_partition;
 
     // The certified blend, each rank judging its own elements.

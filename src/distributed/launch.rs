@@ -66,6 +66,14 @@ pub fn curve(
         .ok_or_else(|| CurveError::Options("MPI was initialised already in this process".into()))?;
     let comm = Mpi::new(universe.world());
     let rank = comm.rank();
+    // A panic is a bug, but on one rank it would leave the others waiting in a collective for
+    // ever: after its message, end the whole job.
+    let report_panic = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        report_panic(info);
+        use mpi::topology::Communicator;
+        mpi::topology::SimpleCommunicator::world().abort(70);
+    }));
     let result = run(&comm, input, output, options, report, inputs, partitioned);
     let failed = result.is_err();
     if failed {

@@ -23,8 +23,14 @@
 //! and of every over side connected to a seed through over sides (sharing vertices) are
 //! marked. The neighbour rule keeps a boundary whose spline sides all fit alike (an O-grid
 //! ring, uniformly a few e_Q off) as it is: only runs that start next to a much better side are
-//! the spline space's local failures, and each is marked whole. Straight stretches (s = 0) are
-//! marked only above the floor, far below any visible deviation.
+//! the spline space's local failures, and each is marked whole. A run of more than `MAX_RUN`
+//! sides is not marked: along a structured wall (a whole airfoil, cylinder or turbine blade)
+//! every spline side can be over the threshold by the spline's ordinary error constant, next
+//! to one Q2 element, and such a wall stays C¹. Straight stretches (s = 0) are marked only
+//! above the floor, far below any visible deviation.
+//!
+//! The marking is a function of the sides' figures alone ([`SideFigures`], vertices by key),
+//! so the distributed run gathers its ranks' sides and marks the same runs.
 
 use crate::fit::SmoothTargets;
 use crate::math::linalg::DVec3;
@@ -33,6 +39,7 @@ use crate::mesh::{LinearMesh, Topology};
 use crate::spline::SplineSpace;
 use crate::spline::eval::eval_net;
 use rayon::prelude::*;
+use std::collections::HashMap;
 
 /// A boundary side is a misfit above this many times the Q2 error estimate s³ / ℓ².
 pub(crate) const MISFIT_FACTOR: f64 = 2.0;
@@ -43,15 +50,22 @@ pub(crate) const NEIGHBOUR_FACTOR: f64 = 3.0;
 /// Deviations below this fraction of the side's edge length are never misfits.
 pub(crate) const MISFIT_FLOOR: f64 = 1e-8;
 
+/// Runs of more boundary sides than this are left to the spline: a long run over its
+/// threshold is the spline space's ordinary error along a structured wall (a whole airfoil or
+/// cylinder wall is such a run), not a local failure between Q2 elements, and making it Q2
+/// would trade the wall's C¹ continuity for little. The runs of the plate with a hole reach
+/// 23 sides at level 3.
+pub(crate) const MAX_RUN: usize = 32;
+
 /// Fit-and-demote rounds after the first fit.
 pub(crate) const MISFIT_ROUNDS: usize = 3;
 
 /// One boundary side: its element, facet, deviation d and threshold from e_Q and the floor.
-struct Side {
-    element: u32,
-    facet: u32,
-    deviation: f64,
-    threshold: f64,
+pub(crate) struct Side {
+    pub element: u32,
+    pub facet: u32,
+    pub deviation: f64,
+    pub threshold: f64,
 }
 
 /// The lattice index (9z + 3y + x) of lattice point `l`.
@@ -142,12 +156,35 @@ pub(crate) fn misfit_elements(
     control_points: &[[f64; 3]],
     targets: &SmoothTargets,
 ) -> Vec<bool> {
+    let all = vec![true; topo.n_elements];
+    let sides = boundary_sides(mesh, topo, space, control_points, targets, &all);
+    let figures: Vec<SideFigures> = sides
+        .iter()
+        .map(|side| side.figures(topo, space, u64::from))
+        .collect();
+    let mut marks = vec![false; topo.n_elements];
+    for (side, marked) in sides.iter().zip(marked_sides(&figures)) {
+        marks[side.element as usize] |= marked;
+    }
+    marks
+}
+
+/// The boundary sides of the elements in `which` (indexed by element), with their deviations.
+pub(crate) fn boundary_sides(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    space: &SplineSpace,
+    control_points: &[[f64; 3]],
+    targets: &SmoothTargets,
+    which: &[bool],
+) -> Vec<Side> {
     let ne = topo.n_elements;
     let mut on_boundary = vec![false; ne];
     for &f in &topo.boundary_facets {
-        on_boundary[topo.facet_elements[f as usize][0] as usize] = true;
+        let e = topo.facet_elements[f as usize][0] as usize;
+        on_boundary[e] = which[e];
     }
-    let sides: Vec<Side> = (0..ne)
+    (0..ne)
         .into_par_iter()
         .filter(|&e| on_boundary[e])
         .flat_map_iter(|e| {
@@ -155,48 +192,134 @@ pub(crate) fn misfit_elements(
             element_sides(mesh, topo, space, control_points, targets, e, &mut out);
             out
         })
-        .collect();
-    // The sides at each boundary vertex.
-    let mut sides_at: Vec<Vec<u32>> = vec![Vec::new(); mesh.n_vertices()];
-    for (i, side) in sides.iter().enumerate() {
-        for &v in topo.facet_vertices(side.facet as usize) {
-            sides_at[v as usize].push(i as u32);
+        .collect()
+}
+
+/// What the marking needs of one boundary side: its vertices by a key common to every
+/// process holding them (a vertex index, or a global node tag), its deviation and whether it
+/// is over its threshold on a spline element.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(crate) struct SideFigures {
+    /// The side's vertex keys; the first 2^(d−1) are used.
+    pub vertices: [u64; 4],
+    pub deviation: f64,
+    pub over: bool,
+}
+
+impl Side {
+    /// The side's [`SideFigures`], its vertices keyed by `key`.
+    pub(crate) fn figures(
+        &self,
+        topo: &Topology,
+        space: &SplineSpace,
+        key: impl Fn(u32) -> u64,
+    ) -> SideFigures {
+        let mut vertices = [u64::MAX; 4];
+        for (k, &v) in vertices
+            .iter_mut()
+            .zip(topo.facet_vertices(self.facet as usize))
+        {
+            *k = key(v);
+        }
+        SideFigures {
+            vertices,
+            deviation: self.deviation,
+            over: space.is_spline(self.element as usize) && self.deviation > self.threshold,
         }
     }
-    let over =
-        |side: &Side| space.is_spline(side.element as usize) && side.deviation > side.threshold;
+}
+
+/// Which of `sides` are marked: the seeds (over their threshold and more than
+/// `NEIGHBOUR_FACTOR` times worse than the best side sharing a vertex) and every over side
+/// connected to a seed through over sides. Independent of the sides' order.
+pub(crate) fn marked_sides(sides: &[SideFigures]) -> Vec<bool> {
+    let keys = |side: &SideFigures| {
+        side.vertices
+            .into_iter()
+            .filter(|&k| k != u64::MAX)
+            .collect::<Vec<_>>()
+    };
+    // The sides at each boundary vertex.
+    let mut sides_at: HashMap<u64, Vec<u32>> = HashMap::new();
+    for (i, side) in sides.iter().enumerate() {
+        for k in keys(side) {
+            sides_at.entry(k).or_default().push(i as u32);
+        }
+    }
+    let around = |i: usize| {
+        keys(&sides[i])
+            .into_iter()
+            .flat_map(|k| sides_at[&k].iter().map(|&j| j as usize))
+            .collect::<Vec<_>>()
+    };
     // Seeds: sides over their threshold and much worse than the best side sharing a vertex.
-    let mut stack: Vec<usize> = (0..sides.len())
+    let seeds: Vec<usize> = (0..sides.len())
         .filter(|&i| {
-            let side = &sides[i];
-            let best = topo
-                .facet_vertices(side.facet as usize)
-                .iter()
-                .flat_map(|&v| &sides_at[v as usize])
-                .filter(|&&j| j as usize != i)
-                .map(|&j| sides[j as usize].deviation)
+            let best = around(i)
+                .into_iter()
+                .filter(|&j| j != i)
+                .map(|j| sides[j].deviation)
                 .fold(f64::INFINITY, f64::min);
-            over(side) && side.deviation > NEIGHBOUR_FACTOR * best
+            sides[i].over && sides[i].deviation > NEIGHBOUR_FACTOR * best
         })
         .collect();
-    // From the seeds along the boundary through every side over its threshold: a run of
-    // misfits is marked whole, not peeled from its ends one fit at a time.
+    // From each seed along the boundary through every side over its threshold: a run of
+    // misfits is marked whole, not peeled from its ends one fit at a time; a run longer than
+    // `MAX_RUN` is not a local failure and is left as it is.
     let mut seen = vec![false; sides.len()];
-    for &i in &stack {
-        seen[i] = true;
-    }
-    let mut marks = vec![false; ne];
-    while let Some(i) = stack.pop() {
-        marks[sides[i].element as usize] = true;
-        for &v in topo.facet_vertices(sides[i].facet as usize) {
-            for &j in &sides_at[v as usize] {
-                let j = j as usize;
-                if !seen[j] && over(&sides[j]) {
+    let mut marked = vec![false; sides.len()];
+    for &seed in &seeds {
+        if seen[seed] {
+            continue;
+        }
+        seen[seed] = true;
+        let (mut run, mut stack) = (vec![seed], vec![seed]);
+        while let Some(i) = stack.pop() {
+            for j in around(i) {
+                if !seen[j] && sides[j].over {
                     seen[j] = true;
+                    run.push(j);
                     stack.push(j);
                 }
             }
         }
+        if run.len() <= MAX_RUN {
+            for i in run {
+                marked[i] = true;
+            }
+        }
     }
-    marks
+    marked
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A closed ring of `n` sides, side i from vertex i to i + 1, all over their threshold
+    /// except side 0, which fits 100 times better (a Q2 side).
+    fn ring(n: usize) -> Vec<SideFigures> {
+        (0..n)
+            .map(|i| SideFigures {
+                vertices: [i as u64, ((i + 1) % n) as u64, u64::MAX, u64::MAX],
+                deviation: if i == 0 { 0.01 } else { 1.0 },
+                over: i != 0,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_short_run_next_to_a_good_side_is_marked_whole_and_a_long_one_not() {
+        let short = marked_sides(&ring(MAX_RUN));
+        assert!(!short[0] && short[1..].iter().all(|&m| m), "{short:?}");
+        let long = marked_sides(&ring(MAX_RUN + 2));
+        assert!(long.iter().all(|&m| !m), "{long:?}");
+        // The marks are the sides', whatever their order (the distributed run gathers them
+        // rank by rank).
+        let mut sides = ring(MAX_RUN);
+        sides.reverse();
+        let mut reversed = marked_sides(&sides);
+        reversed.reverse();
+        assert_eq!(reversed, short);
+    }
 }

@@ -12,6 +12,8 @@
   gmsh_parts.py partition IN N OUT BINARY
       Opens IN, partitions it into N parts with Gmsh's partitioner and writes them as split
       MSH 4.1 files OUT_1 ... OUT_N (BINARY = 1: binary).
+  gmsh_parts.py convert IN OUT
+      Opens IN and writes it as one binary MSH 4.1 file OUT (what the ranks read by offsets).
 """
 
 import json
@@ -141,6 +143,11 @@ def main():
     gmsh.option.setNumber("General.Terminal", 0)
     if sys.argv[1] == "compare":
         compare(sys.argv[2], sys.argv[3:])
+    elif sys.argv[1] == "convert":
+        gmsh.open(sys.argv[2])
+        gmsh.option.setNumber("Mesh.MshFileVersion", 4.1)
+        gmsh.option.setNumber("Mesh.Binary", 1)
+        gmsh.write(sys.argv[3])
     else:
         partition(sys.argv[2], int(sys.argv[3]), sys.argv[4], int(sys.argv[5]))
     gmsh.finalize()
