@@ -348,30 +348,41 @@ fn unsupported_options_under_mpirun_fail_with_one_line_and_write_nothing() {
         "-o",
         input.to_str().unwrap(),
     ]));
-    let out = scratch("energy.msh");
-    let _ = std::fs::remove_file(&out);
-    let o = mpirun(2)
-        .args([
-            BIN,
-            "curve",
-            input.to_str().unwrap(),
-            "-o",
-            out.to_str().unwrap(),
-            "--fit",
-            "energy",
-        ])
-        .output()
-        .unwrap();
-    assert!(!o.status.success());
-    let err = String::from_utf8_lossy(&o.stderr);
-    let lines: Vec<&str> = err
-        .lines()
-        .filter(|l| l.starts_with("polyspline: error:"))
-        .collect();
-    assert_eq!(lines.len(), 1, "{err}");
-    assert!(lines[0].contains("--fit energy"), "{err}");
-    assert!(!err.contains("panicked"), "{err}");
-    assert!(!out.exists());
+    // Feature edits name vertices by their place in the file, which a rank's sub-mesh does
+    // not keep: refused rather than applied to other vertices.
+    let edits = scratch("edits.txt");
+    std::fs::write(&edits, "").unwrap();
+    for (args, what) in [
+        (vec!["--fit", "energy"], "--fit energy"),
+        (
+            vec!["--feature-edits", edits.to_str().unwrap()],
+            "--feature-edits",
+        ),
+    ] {
+        let out = scratch("unsupported.msh");
+        let _ = std::fs::remove_file(&out);
+        let o = mpirun(2)
+            .args([
+                BIN,
+                "curve",
+                input.to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+            ])
+            .args(&args)
+            .output()
+            .unwrap();
+        assert!(!o.status.success());
+        let err = String::from_utf8_lossy(&o.stderr);
+        let lines: Vec<&str> = err
+            .lines()
+            .filter(|l| l.starts_with("polyspline: error:"))
+            .collect();
+        assert_eq!(lines.len(), 1, "{err}");
+        assert!(lines[0].contains(what), "{err}");
+        assert!(!err.contains("panicked"), "{err}");
+        assert!(!out.exists());
+    }
 }
 
 /// `input` with its bytes patched by `edit` (the binary MSH 4.1 layout: a node block's
