@@ -325,6 +325,7 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
         }
         return Ok(());
     }
+    refuse_a_single_part(&mesh)?;
     let progress = polyspline::progress::Terminal::new(quiet);
     let r = curve_prepared(&mesh, &output, &options, &progress);
     progress.clear();
@@ -363,6 +364,35 @@ fn partitioned_outputs(output: &Path, partitioned: bool) -> anyhow::Result<Vec<P
     anyhow::bail!(
         "{}: --partitioned writes one file per MPI rank and needs mpirun with 2 or more ranks (a build with --features mpi); on one process, drop it to write one file",
         output.display()
+    )
+}
+
+/// One of Gmsh's split partition files (`NAME_k.msh` with `$PartitionedEntities`) on one
+/// process would be curved alone, as if it were the whole mesh, its cut faces taken for
+/// boundary: refused with one line.
+fn refuse_a_single_part(mesh: &Path) -> anyhow::Result<()> {
+    use polyspline::distributed::part_file::{is_partitioned, part_names};
+    let numbered = mesh
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .and_then(|s| s.rsplit_once('_'))
+        .is_some_and(|(_, k)| !k.is_empty() && k.bytes().all(|c| c.is_ascii_digit()));
+    if !numbered || !is_partitioned(mesh) {
+        return Ok(());
+    }
+    let set = match part_names(mesh) {
+        Ok((parts, _)) if parts.len() < 2 => return Ok(()),
+        Ok((parts, _)) => format!(
+            "one of the {} parts {} … {} of a partitioned mesh",
+            parts.len(),
+            parts[0].display(),
+            parts[parts.len() - 1].display()
+        ),
+        Err(e) => format!("a part of a partitioned mesh ({})", e.message),
+    };
+    anyhow::bail!(
+        "{}: {set}; curve the parts together under mpirun with 2 or more ranks (a build with --features mpi), or curve the unpartitioned mesh",
+        mesh.display()
     )
 }
 

@@ -278,3 +278,56 @@ fn mutated_files_never_panic() {
         }
     }
 }
+
+/// One of Gmsh's split partition files on one process would be curved alone, its cut faces
+/// taken for boundary: refused with one line naming the part set, and nothing written. The
+/// same mesh in one file (Gmsh's partitioned output unsplit, named without `_k`) curves.
+#[test]
+fn one_part_of_a_partitioned_mesh_is_refused_on_one_process() {
+    if !common::have_gmsh("Gmsh's partitioned files were not made") {
+        return;
+    }
+    let base = scratch("parted.msh");
+    common::run_ok(
+        common::python()
+            .arg(concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/tests/external/gmsh_parts.py"
+            ))
+            .arg("partition")
+            .arg(real("dealii/example.msh"))
+            .arg("3")
+            .arg(&base)
+            .arg("1"),
+    );
+    let part = scratch("parted_2.msh");
+    let out = scratch("parted_out.msh");
+    let _ = std::fs::remove_file(&out);
+    let o = Command::new(env!("CARGO_BIN_EXE_polyspline"))
+        .arg("curve")
+        .arg(&part)
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{stderr}");
+    assert_eq!(stderr.trim_end().lines().count(), 1, "{stderr}");
+    assert!(
+        stderr.contains("parted_2.msh") && stderr.contains("3 parts"),
+        "{stderr}"
+    );
+    assert!(!out.exists());
+    // Renamed without its number, the part is a mesh of its own and is not refused.
+    let alone = scratch("alone.msh");
+    std::fs::copy(&part, &alone).unwrap();
+    common::run_ok(
+        Command::new(env!("CARGO_BIN_EXE_polyspline"))
+            .arg("curve")
+            .arg(&alone)
+            .arg("-o")
+            .arg(&out)
+            .arg("-q"),
+    );
+    assert!(out.exists());
+}
