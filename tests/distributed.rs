@@ -339,15 +339,8 @@ fn unsupported_options_under_mpirun_fail_with_one_line_and_write_nothing() {
     if !have_mpirun() {
         return;
     }
-    let input = scratch("small.msh");
-    common::run_ok(Command::new(BIN).args([
-        "generate",
-        "cylinder",
-        "--elements",
-        "200",
-        "-o",
-        input.to_str().unwrap(),
-    ]));
+    // Binary MSH 4.1, which the ranks read: the refusal is the only reason to fail.
+    let input = binary_cylinder("small.msh", 200);
     // Feature edits name vertices by their place in the file, which a rank's sub-mesh does
     // not keep: refused rather than applied to other vertices.
     let edits = scratch("edits.txt");
