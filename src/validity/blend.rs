@@ -168,8 +168,9 @@ impl<'a> Blended<'a> {
         topo: &'a Topology,
         factors: Vec<f32>,
     ) -> Self {
-        let empty = NetCache((0..fitted.n_elements()).map(|_| OnceLock::new()).collect());
-        Self::with_cache(straight, target, fitted, mesh, topo, factors, empty)
+        // An empty cache fits no element count but 0: `with_cache` makes a fresh one.
+        let none = NetCache(Vec::new());
+        Self::with_cache(straight, target, fitted, mesh, topo, factors, none)
     }
 
     /// [`Blended::new`] starting from the nets `cache` that a blend of the same straight,

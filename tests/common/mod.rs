@@ -99,6 +99,22 @@ pub fn have_gmsh(skipped: &str) -> bool {
     python_has("gmsh", skipped)
 }
 
+/// `tests/external/gmsh_parts.py` with `args` (Gmsh's partitioner, its MSH 4.1 converter and
+/// its reader of partitioned files; see the script), run to success: its output. Needs Gmsh's
+/// Python module ([`have_gmsh`]).
+pub fn gmsh_parts<S: AsRef<std::ffi::OsStr>>(
+    args: impl IntoIterator<Item = S>,
+) -> std::process::Output {
+    run_ok(
+        python()
+            .arg(concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/tests/external/gmsh_parts.py"
+            ))
+            .args(args),
+    )
+}
+
 /// Run `cmd` and insist that it succeeds (its stderr is the failure message).
 pub fn run_ok(cmd: &mut Command) -> std::process::Output {
     let out = cmd.output().unwrap();

@@ -19,7 +19,7 @@ use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-fn dir() -> PathBuf {
+pub(super) fn dir() -> PathBuf {
     let d = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("fidelity");
     std::fs::create_dir_all(&d).unwrap();
     d
@@ -28,7 +28,7 @@ fn dir() -> PathBuf {
 const SCRIPT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/fidelity_shapes.py");
 
 /// The linear mesh and Gmsh's CAD order-2 mesh of `shape` at `level`.
-fn make(shape: &str, level: usize) -> (PathBuf, PathBuf) {
+pub(super) fn make(shape: &str, level: usize) -> (PathBuf, PathBuf) {
     let (linear, cad) = (
         dir().join(format!("{shape}_{level}.msh")),
         dir().join(format!("{shape}_{level}_cad.msh")),
@@ -45,7 +45,7 @@ fn make(shape: &str, level: usize) -> (PathBuf, PathBuf) {
 
 /// (RMS, max) boundary distance of each file from the exact `shape`, over the points selected
 /// by `--only` (`curved`: the curved part of the boundary; `all`).
-fn measure(shape: &str, files: &[&Path], only: &str) -> Vec<(f64, f64)> {
+pub(super) fn measure(shape: &str, files: &[&Path], only: &str) -> Vec<(f64, f64)> {
     let out = common::run_ok(
         common::python()
             .arg(SCRIPT)
@@ -62,7 +62,7 @@ fn measure(shape: &str, files: &[&Path], only: &str) -> Vec<(f64, f64)> {
         .collect()
 }
 
-fn curve(input: &Path, output: &Path, args: &[&str]) {
+pub(super) fn curve(input: &Path, output: &Path, args: &[&str]) {
     common::run_ok(
         Command::new(env!("CARGO_BIN_EXE_polyspline"))
             .arg("curve")

@@ -13,65 +13,10 @@
 //!
 //! Skipped visibly without Gmsh's Python module (a failure under `CI=true`).
 
+// The shapes, the curving and the measure are `fidelity`'s (same script, same directory).
+use super::fidelity::{curve, dir, make, measure};
 use crate::common;
-
-use serde_json::Value;
-use std::path::{Path, PathBuf};
-use std::process::Command;
-
-fn dir() -> PathBuf {
-    let d = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("fidelity_3d");
-    std::fs::create_dir_all(&d).unwrap();
-    d
-}
-
-const SCRIPT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/fidelity_shapes.py");
-
-/// The linear mesh and Gmsh's CAD order-2 mesh of `shape` at `level`.
-fn make(shape: &str, level: usize) -> (PathBuf, PathBuf) {
-    let (linear, cad) = (
-        dir().join(format!("{shape}_{level}.msh")),
-        dir().join(format!("{shape}_{level}_cad.msh")),
-    );
-    common::run_ok(
-        common::python()
-            .arg(SCRIPT)
-            .args(["make", shape, &level.to_string()])
-            .arg(&linear)
-            .arg(&cad),
-    );
-    (linear, cad)
-}
-
-/// (RMS, max) distance of each file's boundary from the exact `shape`.
-fn measure(shape: &str, files: &[&Path]) -> Vec<(f64, f64)> {
-    let out = common::run_ok(
-        common::python()
-            .arg(SCRIPT)
-            .args(["measure", shape, "--only", "all"])
-            .args(files),
-    );
-    String::from_utf8(out.stdout)
-        .unwrap()
-        .lines()
-        .map(|l| {
-            let v: Value = serde_json::from_str(l).unwrap();
-            (v["rms"].as_f64().unwrap(), v["max"].as_f64().unwrap())
-        })
-        .collect()
-}
-
-fn curve(input: &Path, output: &Path, args: &[&str]) {
-    common::run_ok(
-        Command::new(env!("CARGO_BIN_EXE_polyspline"))
-            .arg("curve")
-            .arg(input)
-            .arg("-o")
-            .arg(output)
-            .args(["--msh-version", "2.2"])
-            .args(args),
-    );
-}
+use std::path::Path;
 
 /// The coarse torus within 2.5× Gmsh-with-CAD (RMS and max) at orders 2 and 3, and curved
 /// alike with and without the angle-based crease detection.
@@ -88,7 +33,7 @@ fn coarse_torus_within_two_and_a_half_times_gmsh_with_cad() {
         files.push(out);
     }
     let refs: Vec<&Path> = files.iter().map(|p| p.as_path()).collect();
-    let m = measure("torus", &refs);
+    let m = measure("torus", &refs, "all");
     let (gmsh, ours) = (m[0], &m[1..]);
     for (order, (rms, max)) in [2, 3].iter().zip(ours) {
         println!(

@@ -288,18 +288,13 @@ fn one_part_of_a_partitioned_mesh_is_refused_on_one_process() {
         return;
     }
     let base = scratch("parted.msh");
-    common::run_ok(
-        common::python()
-            .arg(concat!(
-                env!("CARGO_MANIFEST_DIR"),
-                "/tests/external/gmsh_parts.py"
-            ))
-            .arg("partition")
-            .arg(real("dealii/example.msh"))
-            .arg("3")
-            .arg(&base)
-            .arg("1"),
-    );
+    common::gmsh_parts([
+        "partition".as_ref(),
+        real("dealii/example.msh").as_os_str(),
+        "3".as_ref(),
+        base.as_os_str(),
+        "1".as_ref(),
+    ]);
     let part = scratch("parted_2.msh");
     let out = scratch("parted_out.msh");
     let _ = std::fs::remove_file(&out);
