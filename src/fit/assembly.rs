@@ -323,6 +323,8 @@ pub fn assemble_matrix(space: &dyn FitSpace, blocks: &ElementBlocks) -> NormalMa
                 row_columns(mark, c, cols);
                 sort_columns(cols, bits);
                 row_cols.copy_from_slice(cols);
+                // Written before the sums read it: see `block_jacobi::factor_blocks`.
+                row_vals.fill(0.0);
                 for (p, &j) in cols.iter().enumerate() {
                     pos[j as usize] = p as u32;
                 }

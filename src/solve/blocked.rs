@@ -239,6 +239,19 @@ unsafe fn spmv_chunk_avx2(a: &TemplateMatrix, base: usize, x: &[V4], y: &mut [V4
     spmv_chunk(a, base, x, y)
 }
 
+/// `n` zero entries, written rather than allocated zeroed. A zeroed allocation is mapped on
+/// first touch, and when that touch is a read (the first step reads `r`, `p` and `ap` before
+/// anything writes them) the page is the shared zero page, whose copy-on-write at the first
+/// write then interrupts every core to flush its TLB (the turbine's main remaining such
+/// faults after `block_jacobi::factor_blocks` and the assembly were fixed).
+fn written_zeros(n: usize) -> Vec<V4> {
+    (0..n)
+        .into_par_iter()
+        .with_min_len(ROW_CHUNK)
+        .map(|_| [0.0; 4])
+        .collect()
+}
+
 fn sum(partials: &[V4]) -> V4 {
     partials
         .iter()
@@ -448,7 +461,7 @@ impl BlockedSystem {
         let bp: Vec<V4> = rows.par_iter().map(|&i| widen(&b[i as usize])).collect();
         let mut xp: Vec<V4> = rows.par_iter().map(|&i| widen(&x[i as usize])).collect();
         // r = b − A x (no product for the usual start x = 0).
-        let mut r = vec![[0.0; 4]; n];
+        let mut r = written_zeros(n);
         if xp.par_iter().any(|v| v.iter().any(|&c| c != 0.0)) {
             self.a.apply_dot(&xp, &mut r);
         }
@@ -467,9 +480,9 @@ impl BlockedSystem {
         let bnorm = sum(&bb).map(f64::sqrt);
         let stop = Stopping::new([bnorm[0], bnorm[1], bnorm[2]], params);
         let head = |v: V4| [v[0], v[1], v[2]];
-        let mut z = vec![[0.0; 4]; n];
-        let mut p = vec![[0.0; 4]; n];
-        let mut ap = vec![[0.0; 4]; n];
+        let mut z = written_zeros(n);
+        let mut p = written_zeros(n);
+        let mut ap = written_zeros(n);
         // z = M⁻¹ r (a zero step leaves x and r as they are).
         let (mut rz, mut rr) =
             self.update_and_precondition([0.0; 4], &mut xp, &mut r, &mut z, &p, &ap);
