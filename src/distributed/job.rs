@@ -619,6 +619,7 @@ pub fn curve(
         }),
         fit_weights: Some(options.fit.weights),
         fit_targets: Some(options.fit.targets),
+        fit_solver: Some(crate::fit::FitSolver::Cg),
         cg_iterations: Some(cg.iterations),
         matrix_nonzeros: Some(all_figures.iter().map(|f| f.matrix_nonzeros).sum()),
         cg_rel_residual: Some(cg.rel_residual),

@@ -198,10 +198,57 @@ pub enum FitTargets {
     Smooth(SmoothParams),
 }
 
+/// How the fit's normal equations are solved.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
+#[serde(rename_all = "snake_case")]
+pub enum FitSolver {
+    /// Sparse Cholesky for systems of at most [`FitSolver::DIRECT_2D`] (2D) or
+    /// [`FitSolver::DIRECT_3D`] (3D) control points on the CPU backend, CG otherwise. Both
+    /// solve the same system; CG stops at `--cg-tol`, the factorisation at rounding.
+    #[default]
+    Auto,
+    /// Preconditioned CG ([`crate::solve`]) on any size and backend.
+    Cg,
+    /// Sparse Cholesky ([`crate::solve::direct`]) on any size, on the CPU.
+    Cholesky,
+}
+
+impl FitSolver {
+    /// Largest 2D system [`FitSolver::Auto`] factors. Measured per `curve` run (both fits of
+    /// the post-fit Q2 round), CG against Cholesky: example.msh (2.1k control points) 55
+    /// against 17 ms, the ball (1.4k) 22 against 10, n0012 (3.8k) 14 against 11, hole8170
+    /// (11k) 108 against 87; the structured 15-16k meshes, where CG needs few iterations,
+    /// went the other way (NACA4412 .inp 37 against 45, the turbine 76 against 105).
+    pub const DIRECT_2D: usize = 12_000;
+    /// Largest 3D system [`FitSolver::Auto`] factors: 3D fill grows as n², and from 1.7k
+    /// control points (mfem/cylinder-hex, hsphere8, libmesh ex9, beam-sphere) the two were
+    /// within 15 % of each other; the 765 of su2 cylinder were solved in 8 against 14 ms.
+    pub const DIRECT_3D: usize = 1_000;
+
+    /// Whether this choice factors a `dim`-D system of `unknowns` control points; `cpu` says
+    /// whether the CG would run on the CPU (automatic choice keeps a GPU solve on the GPU).
+    pub fn factors(self, dim: usize, unknowns: usize, cpu: bool) -> bool {
+        match self {
+            FitSolver::Cg => false,
+            FitSolver::Cholesky => true,
+            FitSolver::Auto => {
+                cpu && unknowns
+                    <= if dim == 2 {
+                        Self::DIRECT_2D
+                    } else {
+                        Self::DIRECT_3D
+                    }
+            }
+        }
+    }
+}
+
 /// Fit parameters.
 #[derive(Clone, Debug)]
 pub struct FitParams {
     pub weights: FitWeights,
+    /// CG or sparse Cholesky ([`FitSolver`]); distributed runs always use CG.
+    pub solver: FitSolver,
     pub cg: CgParams,
     pub targets: FitTargets,
     /// Sharp features of the input: smooth targets are reconstructed per patch and feature
@@ -225,6 +272,7 @@ impl Default for FitParams {
     fn default() -> Self {
         FitParams {
             weights: FitWeights::position(),
+            solver: FitSolver::default(),
             cg: CgParams::default(),
             targets: FitTargets::Chords,
             features: None,
@@ -235,6 +283,8 @@ impl Default for FitParams {
 /// What the fit did.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct FitInfo {
+    /// The solver that ran: [`FitSolver::Cg`] or [`FitSolver::Cholesky`] (0 iterations).
+    pub solver: FitSolver,
     pub cg: CgInfo,
     pub unknowns: usize,
     pub nonzeros: usize,
@@ -483,6 +533,7 @@ pub fn fit_with_targets_from(
     Ok((
         c,
         FitInfo {
+            solver: FitSolver::Cg,
             cg,
             unknowns: k.n(),
             nonzeros: k.data().len(),

@@ -51,6 +51,9 @@ pub struct CurveReport {
     pub fit_weights: Option<FitWeights>,
     /// Fit targets (chords or smooth-boundary reconstruction), when fitted.
     pub fit_targets: Option<FitTargets>,
+    /// Solver of the fit: `cg`, or `cholesky` (then `cg_iterations` is 0 and
+    /// `cg_rel_residual` the factorisation's measured residual).
+    pub fit_solver: Option<crate::fit::FitSolver>,
     pub cg_iterations: Option<usize>,
     /// Stored entries of the normal-equation matrix (one matrix for x, y, z).
     pub matrix_nonzeros: Option<usize>,
@@ -170,6 +173,7 @@ impl CurveReport {
             }),
             fit_weights: fit.map(|_| options.fit.weights),
             fit_targets: fit.map(|_| options.fit.targets),
+            fit_solver: fit.map(|f| f.solver),
             cg_iterations: fit.map(|f| f.cg.iterations),
             matrix_nonzeros: fit.map(|f| f.nonzeros),
             cg_rel_residual: fit.map(|f| f.cg.rel_residual),

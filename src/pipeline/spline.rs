@@ -18,7 +18,9 @@ use super::clock::Clock;
 use super::misfit;
 use super::{CurveError, Geometry, Job};
 use crate::energy::{EnergyError, EnergyInfo, EnergyParams};
-use crate::fit::{FitInfo, FitParams, FitTargets, SmoothTargets, TargetMap, fit_with_targets_from};
+use crate::fit::{
+    FitInfo, FitParams, FitSolver, FitTargets, SmoothTargets, TargetMap, fit_with_targets_from,
+};
 use crate::mesh::features::Features;
 use crate::progress::{Progress, Stage};
 use crate::spline::{ElementRows, Q2Reason, SplineSpace, kinks};
@@ -418,6 +420,11 @@ fn solve_fit(
     start: Option<&[[f64; 3]]>,
     progress: &dyn Progress,
 ) -> Result<(Vec<[f64; 3]>, FitInfo), CurveError> {
+    let factors = setup.fit_params.solver.factors(
+        job.topo.dim,
+        space.control_points.len(),
+        matches!(job.options.backend, crate::gpu::Backend::Cpu),
+    );
     let (mut c_star, info) = fit_with_targets_from(
         space,
         job.mesh,
@@ -426,6 +433,16 @@ fn solve_fit(
         setup.targets.as_ref(),
         start,
         |k, rhs, x, cg| {
+            if factors {
+                return crate::solve::direct::cholesky(
+                    k.indptr(),
+                    k.indices(),
+                    k.data(),
+                    rhs,
+                    x,
+                    job.topo.dim,
+                );
+            }
             let mut report = |i, r| progress.cg(i, r);
             job.executor.pcg(k, rhs, x, cg, &mut report)
         },
@@ -434,6 +451,10 @@ fn solve_fit(
         input: job.input.to_owned(),
         source,
     })?;
+    let mut info = info;
+    if factors {
+        info.solver = FitSolver::Cholesky;
+    }
     if let Some(f) = setup.used_features() {
         crate::fit::features::project_onto_planes(space, job.topo, f, &mut c_star);
     }

@@ -14,9 +14,13 @@
 //! through [`blocked`]: unknowns renumbered by aggregates, rows stored by value template,
 //! vector updates, block solves and dot products fused into three passes per iteration.
 //! [`pcg_with`] is the generic loop (any operator, any preconditioner).
+//!
+//! [`direct`] solves the same assembled systems by sparse Cholesky instead (the fit's small
+//! systems, [`crate::fit::FitSolver`]), reporting through [`CgInfo`] with 0 iterations.
 
 pub mod block_jacobi;
 pub mod blocked;
+pub mod direct;
 
 pub use block_jacobi::BlockJacobi;
 pub use blocked::BlockedSystem;
@@ -121,6 +125,14 @@ pub enum CgError {
     NotPositiveDefinite { iteration: usize, curvature: f64 },
     #[error("the Jacobi preconditioner has a non-positive diagonal entry {value:.3e} at row {row}")]
     BadDiagonal { row: usize, value: f64 },
+    /// The sparse Cholesky solve ([`direct`]) met a non-positive pivot.
+    #[error(
+        "the sparse Cholesky factorisation met a non-positive pivot at unknown {pivot} (of the reordered matrix): the operator is not positive definite"
+    )]
+    NotPositiveDefinitePivot { pivot: usize },
+    /// The sparse Cholesky solve could not allocate or index its factor.
+    #[error("the sparse Cholesky factorisation failed: {0}")]
+    Factorisation(String),
     /// The GPU solver's device failed.
     #[error("the GPU solver failed: {0}")]
     Device(String),

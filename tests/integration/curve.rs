@@ -620,32 +620,98 @@ fn kink_angle_on_the_command_line() {
 
 /// The same input and options give the same bytes on any number of threads: every float
 /// reduction that decides the output (CG dot products, right-hand side, block-Jacobi
-/// aggregates) has a fixed order. The mesh is large enough for several parallel blocks.
+/// aggregates, the sparse Cholesky of small fits) has a fixed order. The cylinder is large
+/// enough for several parallel blocks (CG); the disc is a 2D fit small enough to be factored.
 #[test]
 fn output_does_not_depend_on_the_thread_count() {
     let exe = env!("CARGO_BIN_EXE_polyspline");
-    let input = scratch("threads_in.msh");
-    let ok = Command::new(exe)
-        .args(["generate", "cylinder", "--elements", "12000", "-o"])
-        .arg(&input)
-        .output()
-        .unwrap();
-    assert!(ok.status.success());
-    let mut files = Vec::new();
-    for threads in ["1", "3"] {
-        let out = scratch(&format!("threads_{threads}.msh"));
-        let o = Command::new(exe)
-            .env("RAYON_NUM_THREADS", threads)
-            .args([
-                "curve",
-                input.to_str().unwrap(),
-                "-o",
-                out.to_str().unwrap(),
-            ])
+    for (shape, elements) in [("cylinder", "12000"), ("disc", "3000")] {
+        let input = scratch(&format!("threads_{shape}_in.msh"));
+        let ok = Command::new(exe)
+            .args(["generate", shape, "--elements", elements, "-o"])
+            .arg(&input)
             .output()
             .unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        files.push(std::fs::read(&out).unwrap());
+        assert!(
+            ok.status.success(),
+            "{}",
+            String::from_utf8_lossy(&ok.stderr)
+        );
+        let mut files = Vec::new();
+        for threads in ["1", "3"] {
+            let out = scratch(&format!("threads_{shape}_{threads}.msh"));
+            let o = Command::new(exe)
+                .env("RAYON_NUM_THREADS", threads)
+                .args([
+                    "curve",
+                    input.to_str().unwrap(),
+                    "-o",
+                    out.to_str().unwrap(),
+                ])
+                .output()
+                .unwrap();
+            assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+            files.push(std::fs::read(&out).unwrap());
+        }
+        assert!(
+            files[0] == files[1],
+            "{shape}: outputs on 1 and 3 threads differ"
+        );
     }
-    assert!(files[0] == files[1], "outputs on 1 and 3 threads differ");
+}
+
+/// The fit's two solvers solve the same system. On a small unstructured 2D mesh (the ball:
+/// post-fit Q2 rounds, 1.4k control points) the automatic choice factors it, to a residual
+/// at rounding, and its output nodes are those of the CG fit to within what CG's relative
+/// residual of 1e-6 leaves (the same Q2 elements chosen, the same validity); a 3D mesh over
+/// the 3D limit stays with CG.
+#[test]
+fn cholesky_and_cg_fits_agree() {
+    use polyspline::fit::{FitParams, FitSolver};
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("meshes/real");
+    let input = root.join("dealii/unstructured_refined_ball.msh");
+    let mut runs = Vec::new();
+    for solver in [FitSolver::Auto, FitSolver::Cg] {
+        let out = scratch(&format!("solver_{solver:?}.msh"));
+        let o = CurveOptions {
+            fit: FitParams {
+                solver,
+                ..FitParams::smooth()
+            },
+            ..Default::default()
+        };
+        let r = curve(&input, &out, &o).unwrap();
+        assert_eq!(r.invalid_elements, 0);
+        runs.push((r, read_back(&out)));
+    }
+    let ((auto, a), (cg, c)) = (&runs[0], &runs[1]);
+    assert_eq!(auto.fit_solver, Some(FitSolver::Cholesky));
+    assert!(
+        auto.cg_rel_residual.unwrap() < 1e-12,
+        "{:?}",
+        auto.cg_rel_residual
+    );
+    assert_eq!(cg.fit_solver, Some(FitSolver::Cg));
+    assert!(cg.cg_iterations.unwrap() > 0);
+    assert_eq!(auto.q2_elements, cg.q2_elements);
+    assert_eq!(a.nodes.len(), c.nodes.len());
+    let diag = auto.bounding_box_diagonal;
+    let gap = a
+        .nodes
+        .iter()
+        .zip(&c.nodes)
+        .map(|(p, q)| (0..3).map(|k| (p[k] - q[k]).abs()).fold(0.0, f64::max))
+        .fold(0.0, f64::max);
+    assert!(
+        gap < 1e-5 * diag,
+        "nodes {:.2e} of the diagonal apart",
+        gap / diag
+    );
+    let hex = root.join("mfem/cylinder-hex.mesh");
+    let r = curve(&hex, &scratch("solver_hex.msh"), &Default::default()).unwrap();
+    assert_eq!(
+        r.fit_solver,
+        Some(FitSolver::Cg),
+        "1.7k control points in 3D"
+    );
 }
