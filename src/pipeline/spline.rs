@@ -425,7 +425,7 @@ fn solve_fit(
         space.control_points.len(),
         matches!(job.options.backend, crate::gpu::Backend::Cpu),
     );
-    let (mut c_star, info) = fit_with_targets_from(
+    let (mut c_star, mut info) = fit_with_targets_from(
         space,
         job.mesh,
         job.topo,
@@ -451,7 +451,6 @@ fn solve_fit(
         input: job.input.to_owned(),
         source,
     })?;
-    let mut info = info;
     if factors {
         info.solver = FitSolver::Cholesky;
     }

@@ -624,35 +624,28 @@ fn kink_angle_on_the_command_line() {
 /// enough for several parallel blocks (CG); the disc is a 2D fit small enough to be factored.
 #[test]
 fn output_does_not_depend_on_the_thread_count() {
-    let exe = env!("CARGO_BIN_EXE_polyspline");
     for (shape, elements) in [("cylinder", "12000"), ("disc", "3000")] {
         let input = scratch(&format!("threads_{shape}_in.msh"));
-        let ok = Command::new(exe)
-            .args(["generate", shape, "--elements", elements, "-o"])
-            .arg(&input)
-            .output()
-            .unwrap();
-        assert!(
-            ok.status.success(),
-            "{}",
-            String::from_utf8_lossy(&ok.stderr)
+        common::run_ok(
+            common::polyspline()
+                .args(["generate", shape, "--elements", elements, "-o"])
+                .arg(&input),
         );
-        let mut files = Vec::new();
-        for threads in ["1", "3"] {
-            let out = scratch(&format!("threads_{shape}_{threads}.msh"));
-            let o = Command::new(exe)
-                .env("RAYON_NUM_THREADS", threads)
-                .args([
-                    "curve",
-                    input.to_str().unwrap(),
-                    "-o",
-                    out.to_str().unwrap(),
-                ])
-                .output()
-                .unwrap();
-            assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-            files.push(std::fs::read(&out).unwrap());
-        }
+        let files: Vec<Vec<u8>> = ["1", "3"]
+            .into_iter()
+            .map(|threads| {
+                let out = scratch(&format!("threads_{shape}_{threads}.msh"));
+                common::run_ok(
+                    common::polyspline()
+                        .env("RAYON_NUM_THREADS", threads)
+                        .arg("curve")
+                        .arg(&input)
+                        .arg("-o")
+                        .arg(&out),
+                );
+                std::fs::read(&out).unwrap()
+            })
+            .collect();
         assert!(
             files[0] == files[1],
             "{shape}: outputs on 1 and 3 threads differ"
