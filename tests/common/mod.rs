@@ -194,6 +194,15 @@ pub fn write_linear(mesh: &polyspline::mesh::LinearMesh, path: &Path) {
     polyspline::pipeline::write_high_order(&linear, path, &Default::default(), &[]).unwrap();
 }
 
+/// Largest coordinate difference between matching points of `a` and `b` (node lists of two
+/// runs on the same mesh).
+pub fn max_coordinate_gap(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(p, q)| (0..3).map(|k| (p[k] - q[k]).abs()).fold(0.0, f64::max))
+        .fold(0.0, f64::max)
+}
+
 /// Euclidean distance.
 pub fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
     (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>().sqrt()

@@ -760,12 +760,7 @@ fn curve_gpu_matches_cpu() {
                 .unwrap()
                 .bounding_box();
             let diag = (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f64>().sqrt();
-            let worst = hc
-                .nodes
-                .iter()
-                .zip(&hg.nodes)
-                .map(|(a, b)| (0..3).map(|k| (a[k] - b[k]).abs()).fold(0.0, f64::max))
-                .fold(0.0, f64::max);
+            let worst = common::max_coordinate_gap(&hc.nodes, &hg.nodes);
             // Both solve the fit to rel_tol 1e-10; node positions then agree far below 1e-5 of
             // the diagonal.
             if rc.damped_control_points == rg.damped_control_points {
@@ -810,12 +805,7 @@ fn million_hex_gpu_sampling_and_certification() {
     let gpu_ho = gpu::evaluate::sample(&ctx, &s, &mesh, &topo, 2).unwrap();
     let t_gpu_sample = t.elapsed();
     assert_eq!(gpu_ho.elements, cpu_ho.elements);
-    let worst = cpu_ho
-        .nodes
-        .iter()
-        .zip(&gpu_ho.nodes)
-        .map(|(a, b)| (0..3).map(|k| (a[k] - b[k]).abs()).fold(0.0, f64::max))
-        .fold(0.0, f64::max);
+    let worst = common::max_coordinate_gap(&cpu_ho.nodes, &gpu_ho.nodes);
     assert!(
         worst <= EVALUATE_TOL_F32 * 1.0 / n as f64 * 2.0,
         "{worst:e}"

@@ -689,12 +689,7 @@ fn cholesky_and_cg_fits_agree() {
     assert_eq!(auto.q2_elements, cg.q2_elements);
     assert_eq!(a.nodes.len(), c.nodes.len());
     let diag = auto.bounding_box_diagonal;
-    let gap = a
-        .nodes
-        .iter()
-        .zip(&c.nodes)
-        .map(|(p, q)| (0..3).map(|k| (p[k] - q[k]).abs()).fold(0.0, f64::max))
-        .fold(0.0, f64::max);
+    let gap = common::max_coordinate_gap(&a.nodes, &c.nodes);
     assert!(
         gap < 1e-5 * diag,
         "nodes {:.2e} of the diagonal apart",
