@@ -17,9 +17,12 @@
 //!   planar. The initial control points lie on those planes already (vertex averages of
 //!   coplanar vertices), so every step of the line search keeps them there.
 
-use super::smooth::{VertexModel, fan_model, fit_parabola};
+use super::smooth::{
+    Height, HigherModel, RingScratch, VertexModel, fan_model, fit_parabola, refine_model,
+    refine_patch_model, two_ring_from,
+};
 use crate::math::linalg::DVec3;
-use crate::mesh::features::Features;
+use crate::mesh::features::{Features, RIM_Q2_MIN_ASPECT};
 use crate::mesh::topology::HEX_VERTEX_PARAMS;
 use crate::mesh::{LinearMesh, Topology};
 use crate::spline::{ControlPoint, SplineSpace};
@@ -33,6 +36,14 @@ pub struct FeatureModels {
     patch: HashMap<(u32, u32), VertexModel>,
     /// Vertex with two feature edges → the model of the feature curve through it.
     curve: HashMap<u32, VertexModel>,
+    /// The cubic and quartic terms of the patch models refitted as height functions over the
+    /// patch's two rings (see [`super::smooth`]), where they could be.
+    patch_higher: HashMap<(u32, u32), HigherModel>,
+    /// Curve models refitted as height functions over two neighbours each way along the
+    /// feature curve, for the samples on feature edges only (inside the mesh and in planar
+    /// patches the parabola is kept: at an ellipse's tip the refit's quartic follows the
+    /// curve's own points but not the cells a thousand times thinner next to it).
+    curve_higher: HashMap<u32, (VertexModel, HigherModel)>,
     /// Boundary facet id → patch (boundary facets at feature vertices).
     facet_patch: HashMap<u32, u32>,
     /// Boundary edge id → patch of its faces (non-feature edges at feature vertices).
@@ -54,13 +65,17 @@ pub(crate) enum BoundaryEntity {
 impl FeatureModels {
     /// Models at the feature vertices of `features`; `cos_max` bounds the angle between a
     /// patch's facet normals and the patch normal at a vertex (beyond it: no model); the
-    /// in-plane models of planar patches decay over `decay` × the rim's edge length.
+    /// in-plane models of planar patches decay over `decay` × the rim's edge length. `fan`
+    /// holds the boundary facets at each vertex and `smooth` the smooth vertices' models,
+    /// through which the patch models' second rings are reached.
     pub fn build(
         mesh: &LinearMesh,
         topo: &Topology,
         features: &Features,
         cos_max: f64,
         decay: f64,
+        fan_all: &[Vec<u32>],
+        smooth: &[Option<VertexModel>],
     ) -> FeatureModels {
         let mut out = FeatureModels {
             edge_mask: features.edge_mask.clone(),
@@ -100,6 +115,14 @@ impl FeatureModels {
                 }
             }
         }
+        // The shortest mesh edge at each vertex.
+        let mut shortest = vec![f64::INFINITY; mesh.n_vertices()];
+        for &[a, b] in &topo.edges {
+            let l = (x(a) - x(b)).length();
+            for w in [a, b] {
+                shortest[w as usize] = shortest[w as usize].min(l);
+            }
+        }
         // Quadric per patch, from that patch's faces at the vertex.
         for (&v, faces) in &fan {
             let mut patches: Vec<u32> = faces.iter().map(|&(_, p)| p).collect();
@@ -111,8 +134,35 @@ impl FeatureModels {
                     .filter(|&&(_, q)| q == p)
                     .map(|&(f, _)| f)
                     .collect();
-                if let Some((Some(model), _)) = fan_model(mesh, topo, v, &own, cos_max) {
-                    out.patch.insert((v, p), model);
+                // One-sided two rings over the patch: the quadric's one ring leaves the cells
+                // along a curved rim an O(h³) error the smooth vertices do not have, and a
+                // rim vertex of a wall has too few rows across for the quadric at all (its
+                // facets' normal then seeds the height function). Not next to thin cells
+                // (as for the curve models below): a boundary layer's cells follow the
+                // quadric and its inherited models, and fold under a more accurate wall.
+                let (quadric, seed, ell) = match fan_model(mesh, topo, v, &own, cos_max) {
+                    Some((Some(m), ell)) => (Some(m), Some(m), ell),
+                    Some((None, ell)) => (None, facets_normal(mesh, topo, &own).map(flat), ell),
+                    None => continue,
+                };
+                let seed = seed.filter(|_| shortest[v as usize] >= RIM_Q2_MIN_ASPECT * ell);
+                let ring = two_ring_from(
+                    mesh,
+                    topo,
+                    &own,
+                    fan_all,
+                    smooth,
+                    v,
+                    cos_max,
+                    &mut RingScratch::default(),
+                );
+                let refined =
+                    seed.and_then(|m| refine_patch_model(mesh.coords[v as usize], &m, &ring, ell));
+                if let Some((m, higher)) = refined {
+                    out.patch.insert((v, p), m);
+                    out.patch_higher.insert((v, p), higher);
+                } else if let Some(m) = quadric {
+                    out.patch.insert((v, p), m);
                 }
             }
         }
@@ -128,6 +178,14 @@ impl FeatureModels {
                 && let Some(m) = curve_model(x(v), x(a), x(b))
             {
                 out.curve.insert(v, m);
+                // Next to thin cells (a boundary layer's wall rim) the parabola is kept: their
+                // inner sides follow it, and a more accurate rim would fold them.
+                let along_len = 0.5 * ((x(a) - x(v)).length() + (x(b) - x(v)).length());
+                if shortest[v as usize] >= RIM_Q2_MIN_ASPECT * along_len
+                    && let Some(h) = curve_higher(&along, v, [a, b], &m, &x)
+                {
+                    out.curve_higher.insert(v, h);
+                }
             }
         }
         // A patch one element wide across the curve (the wall of a one-layer extrusion) has
@@ -238,18 +296,87 @@ impl FeatureModels {
 
     /// The model of vertex `k` for a sample on the boundary entity `at`.
     pub(crate) fn model(&self, k: u32, at: BoundaryEntity) -> Option<&VertexModel> {
+        match self.patch_of(at) {
+            None => self
+                .curve_higher
+                .get(&k)
+                .map(|(m, _)| m)
+                .or_else(|| self.curve.get(&k)),
+            Some(p) => self.patch.get(&(k, p?)),
+        }
+    }
+
+    /// The cubic and quartic terms of [`FeatureModels::model`], where it has them.
+    pub(crate) fn higher(&self, k: u32, at: Option<BoundaryEntity>) -> Option<&HigherModel> {
+        match at.map(|at| self.patch_of(at)) {
+            None => None,
+            Some(None) => self.curve_higher.get(&k).map(|(_, h)| h),
+            Some(Some(p)) => self.patch_higher.get(&(k, p?)),
+        }
+    }
+
+    /// `None` on a feature edge (curve models), else the patch of `at` if it has one.
+    fn patch_of(&self, at: BoundaryEntity) -> Option<Option<u32>> {
         match at {
-            BoundaryEntity::Edge(ed) if self.edge_mask[ed as usize] => self.curve.get(&k),
-            BoundaryEntity::Edge(ed) => {
-                let p = self.edge_patch.get(&ed)?;
-                self.patch.get(&(k, *p))
-            }
-            BoundaryEntity::Facet(f) => {
-                let p = self.facet_patch.get(&f)?;
-                self.patch.get(&(k, *p))
+            BoundaryEntity::Edge(ed) if self.edge_mask[ed as usize] => None,
+            BoundaryEntity::Edge(ed) => Some(self.edge_patch.get(&ed).copied()),
+            BoundaryEntity::Facet(f) => Some(self.facet_patch.get(&f).copied()),
+        }
+    }
+}
+
+/// The curve model `m` of `v` (neighbours `nbs` along the feature curve) refitted as a height
+/// function in the plane of v and its neighbours over up to two neighbours each way, circle
+/// part first (exact on circular rims, see [`super::smooth`]); `None` keeps the parabola.
+fn curve_higher(
+    along: &HashMap<u32, Vec<u32>>,
+    v: u32,
+    nbs: [u32; 2],
+    m: &VertexModel,
+    x: &impl Fn(u32) -> DVec3,
+) -> Option<(VertexModel, HigherModel)> {
+    let n = DVec3::from(m.normal);
+    if n == DVec3::ZERO {
+        return None;
+    }
+    let mut pts = vec![x(nbs[0]).into(), x(nbs[1]).into()];
+    for a in nbs {
+        if let Some([p, q]) = along
+            .get(&a)
+            .and_then(|l| <[u32; 2]>::try_from(&l[..]).ok())
+        {
+            let next = if p == v { q } else { p };
+            if next != v && !nbs.contains(&next) {
+                pts.push(x(next).into());
             }
         }
     }
+    let (ua, ub) = (x(nbs[0]) - x(v), x(nbs[1]) - x(v));
+    let b = ua.cross(ub);
+    let (lb, ell) = (b.length(), 0.5 * (ub - ua).length());
+    if !(lb > 0.0 && ell > 0.0) {
+        return None;
+    }
+    // Anisotropic: in a plane the conic is the circle, refitted until it converges.
+    let how = Height {
+        binormal: (b / lb).into(),
+        anisotropic: true,
+    };
+    refine_model(2, x(v).into(), m, &pts, ell, how)
+}
+
+/// The unit area-weighted normal of the boundary facets `faces`, if they have one.
+fn facets_normal(mesh: &LinearMesh, topo: &Topology, faces: &[u32]) -> Option<[f64; 3]> {
+    let x = |w: u32| DVec3::from(mesh.coords[w as usize]);
+    let area: DVec3 = faces
+        .iter()
+        .map(|&f| {
+            let q = topo.faces[f as usize];
+            (x(q[2]) - x(q[0])).cross(x(q[3]) - x(q[1]))
+        })
+        .sum();
+    let l = area.length();
+    (l > 0.0).then(|| (area / l).into())
 }
 
 /// A model without curvature (targets on the chords), of normal `n`.
@@ -478,5 +605,37 @@ mod tests {
             DVec3::from([0.0, 0.5, -1.0])
         );
         assert!(project(x, &[px, px]).is_none());
+    }
+    /// Along a circular feature curve (22.5° per edge, in a tilted plane) the refitted curve
+    /// model's chord-midpoint target is on the circle to rounding; the parabola's is not.
+    #[test]
+    fn curve_height_function_is_exact_on_circles() {
+        let s = std::f64::consts::FRAC_1_SQRT_2;
+        let dt = std::f64::consts::PI / 8.0;
+        let c = |i: u32| {
+            let t = i as f64 * dt;
+            DVec3::new(2.0 * t.cos(), 2.0 * t.sin() * s, 2.0 * t.sin() * s)
+        };
+        let mut along: HashMap<u32, Vec<u32>> = HashMap::new();
+        for i in 0..5u32 {
+            along.insert(
+                i,
+                [i.checked_sub(1), (i < 4).then_some(i + 1)]
+                    .into_iter()
+                    .flatten()
+                    .collect(),
+            );
+        }
+        let parabola = curve_model(c(2), c(1), c(3)).unwrap();
+        let (m, hm) = curve_higher(&along, 2, [1, 3], &parabola, &c).unwrap();
+        let p = 0.5 * (c(2) + c(3));
+        let xs = [c(2).into(), c(3).into()];
+        let before = p + DVec3::from(parabola.correction(p.into(), &xs, 0.5));
+        let after = p
+            + DVec3::from(m.correction(p.into(), &xs, 0.5))
+            + hm.correction(p.into(), &xs, 0.5) * DVec3::from(m.normal);
+        let (e0, e1) = ((before.length() - 2.0).abs(), (after.length() - 2.0).abs());
+        assert!(e1 < 1e-12, "height function {e1:e}");
+        assert!(e0 > 1e-5, "parabola {e0:e}");
     }
 }

@@ -51,6 +51,14 @@
 //! g(ξ_p) − Σ_j φ_j g(ξ_j) along the normal. Too few points, points that are not a graph over
 //! the tangent plane, or a singular system keep the one-ring quadric.
 //!
+//! **One-sided rings.** Next to a feature the ring stops at the feature's vertices (points of
+//! this side's surface). There the circle/sphere s_κ is replaced by the conic of the fitted
+//! curvature form (`higher::Height::ONE_SIDED`): the sphere of the mean curvature leaves
+//! quartic terms on a cylinder that a one-sided ring cannot cancel (the targets along an
+//! O-grid cylinder's rims were 12× Gmsh-with-CAD's distance; now within 1.1×). The feature
+//! vertices' own patch and curve models are refitted the same way
+//! ([`super::features::FeatureModels`]).
+//!
 //! **Coarse surfaces.** Where the normals of two smooth boundary vertices sharing a facet
 //! turn by more than 30° (a torus of eight cells around the tube), the two rings reach a
 //! quarter turn or more and no polynomial model follows the surface there. The 3D boundary
@@ -75,7 +83,10 @@ use crate::math::linalg::DVec3;
 use crate::mesh::features::Features;
 use crate::mesh::topology::{HEX_EDGES, HEX_VERTEX_PARAMS, NONE};
 use crate::mesh::{LinearMesh, Topology};
-use higher::{HigherModel, RingScratch, refine_model, two_ring};
+use higher::two_ring;
+pub(super) use higher::{
+    Height, HigherModel, RingScratch, refine_model, refine_patch_model, two_ring_from,
+};
 pub(super) use one_ring::{fan_model, fit_parabola};
 use rayon::prelude::*;
 use std::cmp::Reverse;
@@ -184,8 +195,8 @@ impl SmoothTargets {
         let smooth_vertices = models.iter().filter(|m| m.is_some()).count();
         let feature_vertices =
             topo.vertex_on_boundary.iter().filter(|&&b| b).count() - smooth_vertices;
-        let feature_models =
-            features.map(|f| FeatureModels::build(mesh, topo, f, cos_max, params.decay));
+        let feature_models = features
+            .map(|f| FeatureModels::build(mesh, topo, f, cos_max, params.decay, &fan, &models));
         // A 3D planar patch is its own 2D problem (its vertices take in-plane models below):
         // the cells next to it inherit from the curved boundary, not from the plane.
         let in_plane_3d = |v: usize| {
@@ -291,7 +302,13 @@ impl SmoothTargets {
             let mut delta = DVec3::ZERO;
             let mut wsum = 0.0;
             for &k in ks {
-                let higher = self.models[k].and(self.higher.get(k).copied().flatten());
+                let higher = match self.models[k] {
+                    Some(_) => self.higher.get(k).copied().flatten(),
+                    None => self
+                        .feature_models
+                        .as_ref()
+                        .and_then(|f| f.higher(k as u32, at).copied()),
+                };
                 let model = self.models[k].as_ref().or_else(|| {
                     let f = self.feature_models.as_ref()?;
                     match at {
@@ -479,7 +496,13 @@ fn two_ring_models(
         .map_init(RingScratch::default, |scratch, v| {
             let m = models_ref[v]?;
             let ring = two_ring(mesh, topo, fan, models_ref, v as u32, cos_max, scratch);
-            refine_model(mesh.dim, mesh.coords[v], &m, &ring, ell[v])
+            // Next to a feature the ring is one-sided (see `two_ring`).
+            let how = if scratch.one_sided(models_ref) {
+                Height::ONE_SIDED
+            } else {
+                Height::CENTRED
+            };
+            refine_model(mesh.dim, mesh.coords[v], &m, &ring, ell[v], how)
         })
         .collect();
     for (v, r) in refined.into_iter().enumerate() {
@@ -708,5 +731,49 @@ mod tests {
         let on = g(q[0], q[1]);
         assert!((q[2] - on[2]).abs() < 1e-5, "{q:?} vs {on:?}");
         assert!((p[2] - g(p[0], p[1])[2]).abs() > 1e-3);
+    }
+    /// A one-sided ring on a circular cylinder (a wall's rim vertex, and the vertex one row
+    /// above it), 22.5° per cell: the anisotropic conic makes the refitted models exact, so
+    /// face-centre and edge-midpoint targets lie on the cylinder to rounding; the one-ring
+    /// quadric cannot even be fitted at the rim vertex (only two rows across).
+    #[test]
+    fn one_sided_height_functions_are_exact_on_cylinders() {
+        let (dt, dz) = (std::f64::consts::PI / 8.0, 0.25);
+        let g = |i: i32, j: i32| [(i as f64 * dt).cos(), (i as f64 * dt).sin(), j as f64 * dz];
+        let flat = VertexModel {
+            normal: [1.0, 0.0, 0.0],
+            h: [[0.0; 3]; 3],
+            weight: 1.0,
+        };
+        let ring = |row: i32, rows: i32| -> Vec<[f64; 3]> {
+            (-2..=2)
+                .flat_map(|i| (0..rows).map(move |j| (i, j)))
+                .filter(|&(i, j)| (i, j) != (0, row))
+                .map(|(i, j)| g(i, j))
+                .collect()
+        };
+        let target = |m: &VertexModel, hm: &HigherModel, xs: &[[f64; 3]]| -> f64 {
+            let phi = 1.0 / xs.len() as f64;
+            let p: DVec3 = xs.iter().map(|&x| phi * DVec3::from(x)).sum();
+            let c = DVec3::from(m.correction(p.into(), xs, phi))
+                + hm.correction(p.into(), xs, phi) * DVec3::from(m.normal);
+            ((p + c).truncate().length() - 1.0).abs()
+        };
+        let chord = (g(0, 0)[0] + g(1, 0)[0]) / 2.0;
+        let chord_error = 1.0 - chord.hypot((g(0, 0)[1] + g(1, 0)[1]) / 2.0);
+        // The rim vertex: three rows, the quadratic remainder.
+        let (m, hm) = refine_patch_model(g(0, 0), &flat, &ring(0, 3), 0.3).unwrap();
+        let face = [g(0, 0), g(1, 0), g(1, 1), g(0, 1)];
+        let edge = [g(0, 0), g(1, 0)];
+        for xs in [&face[..], &edge[..]] {
+            let e = target(&m, &hm, xs);
+            assert!(e < 1e-9, "rim: {e:e} (chord {chord_error:e})");
+        }
+        // The vertex one row above: a smooth vertex whose ring stops at the rim.
+        let (m, hm) = refine_model(3, g(0, 1), &flat, &ring(1, 4), 0.3, Height::ONE_SIDED).unwrap();
+        let face = [g(0, 1), g(1, 1), g(1, 2), g(0, 2)];
+        let e = target(&m, &hm, &face);
+        assert!(e < 1e-9, "row above the rim: {e:e} (chord {chord_error:e})");
+        assert!(chord_error > 1e-2);
     }
 }

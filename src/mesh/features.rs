@@ -366,6 +366,73 @@ impl Features {
         }
         mark
     }
+
+    /// 3D: the elements with a boundary face on a curved feature curve (a feature edge at whose
+    /// ends the curve turns by more than [`CURVED_FEATURE_DEG`]), such as the cells along a
+    /// cylinder's rims, unless they are thin ([`RIM_Q2_MIN_ASPECT`]). They become constrained Q2 elements: a C¹ spline along a curved rim,
+    /// held at its vertices, leaves about four times the error of a quadratic interpolating
+    /// the rim's targets (the smooth targets are accurate there), and its cross-rim neighbour
+    /// is the other side of the crease, so the rim is only C⁰ anyway. Empty in 2D.
+    pub fn curved_feature_elements(&self, mesh: &LinearMesh, topo: &Topology) -> Vec<bool> {
+        let mut mark = vec![false; topo.n_elements];
+        if self.dim != 3 || self.edges.is_empty() {
+            return mark;
+        }
+        let x = |v: u32| DVec3::from(mesh.coords[v as usize]);
+        let mut along: std::collections::HashMap<u32, Vec<u32>> = Default::default();
+        for &ed in &self.edges {
+            let [a, b] = topo.edges[ed as usize];
+            along.entry(a).or_default().push(b);
+            along.entry(b).or_default().push(a);
+        }
+        let cos_straight = CURVED_FEATURE_DEG.to_radians().cos();
+        let turns = |v: u32| -> bool {
+            let Some(&[a, b]) = along.get(&v).map(|l| &l[..]) else {
+                return false;
+            };
+            let (da, db) = (
+                (x(v) - x(a)).normalize_or_zero(),
+                (x(b) - x(v)).normalize_or_zero(),
+            );
+            da.dot(db) < cos_straight
+        };
+        for &f in &topo.boundary_facets {
+            let e = topo.facet_elements[f as usize][0];
+            let side = topo.facet_sides[f as usize][0] as usize;
+            if !mark[e as usize]
+                && face_edges(topo, e as usize, side).into_iter().any(|ed| {
+                    self.edge_mask[ed as usize] && topo.edges[ed as usize].into_iter().any(turns)
+                })
+                && edge_aspect(mesh, topo, e as usize) >= RIM_Q2_MIN_ASPECT
+            {
+                mark[e as usize] = true;
+            }
+        }
+        mark
+    }
+}
+
+/// A feature curve turning by more than this angle (degrees) at a vertex is curved there
+/// ([`Features::curved_feature_elements`]).
+pub const CURVED_FEATURE_DEG: f64 = 1.0;
+
+/// Cells along a curved feature curve with a shortest-to-longest edge ratio below this keep
+/// their spline elements ([`Features::curved_feature_elements`]): a boundary-layer cell a
+/// thousand times thinner than long, with Q2 targets on its wall side and the spline on its
+/// inner side, folds (an extruded O-grid's wall went back to straight), while the spline
+/// moves the layer as a whole.
+pub const RIM_Q2_MIN_ASPECT: f64 = 0.1;
+
+/// Shortest over longest edge of hex `e`.
+fn edge_aspect(mesh: &LinearMesh, topo: &Topology, e: usize) -> f64 {
+    let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
+    for &ed in &topo.element_edges[e * 12..(e + 1) * 12] {
+        let [a, b] = topo.edges[ed as usize];
+        let l =
+            (DVec3::from(mesh.coords[a as usize]) - DVec3::from(mesh.coords[b as usize])).length();
+        (lo, hi) = (lo.min(l), hi.max(l));
+    }
+    if hi > 0.0 { lo / hi } else { 0.0 }
 }
 
 /// A bad edit at a 1-based line of the edits file.
@@ -754,5 +821,37 @@ mod tests {
         }
         let missing = read_edits(Path::new("/nonexistent/edits.txt")).unwrap_err();
         assert!(missing.to_string().starts_with("/nonexistent/edits.txt: "));
+    }
+    /// On an O-grid cylinder the cells with a face on a rim are marked (their rim is a curved
+    /// feature curve), and no others; a box's straight feature edges mark nothing.
+    #[test]
+    fn cells_along_curved_rims() {
+        let disc = crate::mesh::generate::butterfly_disc(4, 2);
+        let zs = uniform(3, 1.0 / 3.0);
+        let mesh = crate::mesh::generate::extrude(&disc, &zs);
+        let topo = Topology::build(&mesh);
+        let f = detect(&mesh, FeatureParams::default());
+        let marked = f.curved_feature_elements(&mesh, &topo);
+        let on_wall = |v: u32| {
+            let x = mesh.coords[v as usize];
+            (x[0].hypot(x[1]) - 1.0).abs() < 1e-9
+        };
+        let on_cap = |v: u32| {
+            let z = mesh.coords[v as usize][2];
+            z.abs() < 1e-9 || (z - 1.0).abs() < 1e-9
+        };
+        let mut n = 0;
+        for e in 0..mesh.n_elements() {
+            let vs = mesh.element(e);
+            let rim = vs.iter().filter(|&&v| on_wall(v) && on_cap(v)).count();
+            assert_eq!(marked[e], rim >= 2, "element {e}");
+            n += marked[e] as usize;
+        }
+        assert!(n > 0);
+        let bx = grid_3d(&uniform(3, 1.0), &uniform(3, 1.0), &uniform(3, 1.0));
+        let tb = Topology::build(&bx);
+        let fb = detect(&bx, FeatureParams::default());
+        assert!(!fb.edges.is_empty());
+        assert!(fb.curved_feature_elements(&bx, &tb).iter().all(|&m| !m));
     }
 }

@@ -53,7 +53,12 @@ impl SplineSetup {
         let (options, mesh, topo) = (job.options, job.mesh, job.topo);
         let features = Some(options.features.detect(mesh, topo)?).filter(|f| !f.is_empty());
         let used = features.as_ref().filter(|_| !options.features.ignore);
-        let crease = used.map_or_else(Vec::new, |f| f.crease_elements(topo));
+        let crease = used.map_or_else(Vec::new, |f| {
+            let mut c = f.crease_elements(topo);
+            let along = f.curved_feature_elements(mesh, topo);
+            c.iter_mut().zip(&along).for_each(|(c, &a)| *c |= a);
+            c
+        });
         let fit_params = FitParams {
             features: used.cloned().map(std::sync::Arc::new),
             ..options.fit.clone()

@@ -42,7 +42,8 @@ pub enum Q2Reason {
     RepeatedStencilEntry,
     /// Demoted by the caller: a sharp feature (crease) runs between this element and a
     /// neighbour ([`crate::mesh::features::Features::crease_elements`]), where the map must be
-    /// only C⁰.
+    /// only C⁰, or (3D) along a curved crease on one of its boundary faces
+    /// ([`crate::mesh::features::Features::curved_feature_elements`]).
     FeatureCrease,
     /// Demoted by the caller: the spline map of the element was not certified valid on the
     /// initial control points, so it takes its own Lagrange nodes (the input's shape).

@@ -282,7 +282,9 @@ fn gmsh_cylinder_keeps_its_rims_and_end_planes() {
 }
 
 /// `--snap-boundary` puts the feature vertices back onto the input exactly; the report's
-/// feature numbers agree with the independent measurement above (planes exact).
+/// feature numbers agree with the independent measurement above (planes exact). The cells
+/// along the hole's curved rims are Q2 and interpolate their vertices, and the straight box
+/// edges reproduce theirs, so without the snap they are off by rounding only.
 #[test]
 fn snap_boundary_puts_feature_vertices_back() {
     if !have_gmsh() {
@@ -297,7 +299,7 @@ fn snap_boundary_puts_feature_vertices_back() {
     assert_eq!((n.feature_edges, n.feature_corners, n.patches), (60, 8, 7));
     assert_eq!(n.planar_patches, 6);
     assert!(f.planarity_max < 1e-14, "{f:?}");
-    assert!(f.feature_vertex_deviation_max > 1e-6, "{f:?}");
+    assert!(f.feature_vertex_deviation_max < 1e-12, "{f:?}");
     let snapped = curve_in_memory(
         &input,
         &CurveOptions {

@@ -1,7 +1,15 @@
 //! Two-ring height functions of the smooth boundary vertices (see the parent module's docs):
 //! the boundary vertices within two rings of a smooth vertex ([`two_ring`]), the least-squares
-//! refit of its model as a circle/sphere part plus monomials of degree 1–4 ([`refine_model`]),
-//! and the cubic and quartic remainder each sample correction adds ([`HigherModel`]).
+//! refit of its model as a conic part plus monomials of degree 1–4 ([`refine_model`]), and the
+//! cubic and quartic remainder each sample correction adds ([`HigherModel`]).
+//!
+//! The conic part is the height of the quadric c η² − 2η + q(u, w) = 0 over the tangent plane,
+//! q = a u² + b uw + d w² the fitted curvature form (principal curvatures κ₁, κ₂) and
+//! c = (κ₁³ + κ₂³)/(κ₁² + κ₂²): the sphere when κ₁ = κ₂, the circular cylinder when one of them
+//! is 0, and on any surface a term the monomials correct from the fourth order on. A sphere of
+//! the mean curvature alone (c = κ, q = κ(u² + w²)) is exact on spheres only: on a cylinder it
+//! leaves quartic terms in the axial direction that a one-sided ring (a wall next to a rim)
+//! cannot cancel.
 //!
 //! Input: the one-ring models of [`super::one_ring`]. Output: per vertex, a refined
 //! [`VertexModel`] (same weight, H and normal of the height function's quadratic part) and its
@@ -24,17 +32,37 @@ pub(crate) struct HigherModel {
     scale: f64,
     /// Coefficients of the monomials u³, u²w, uw², w³, u⁴, u³w, u²w², uw³, w⁴.
     c: [f64; 9],
-    /// Scaled curvature κℓ of the circle (2D) or sphere (3D) whose height above its tangent
-    /// plane, minus its quadratic part, is added to the polynomial (see [`sphere_height`]).
-    kappa: f64,
+    /// Scaled curvature form (a, b, d) of the conic whose height above its tangent plane,
+    /// minus its quadratic part, is added to the polynomial (see [`conic_height`]).
+    form: [f64; 3],
 }
 
-/// Height above its tangent plane of the circle or sphere of curvature `kappa` touching the
-/// plane at the origin, at squared distance `r2` from the origin (scaled units), when it has
-/// one: κr²/(1 + √(1 − κ²r²)).
-fn sphere_height(kappa: f64, r2: f64) -> Option<f64> {
-    let d = 1.0 - kappa * kappa * r2;
-    (d >= 0.0).then(|| kappa * r2 / (1.0 + d.sqrt()))
+/// Height above its tangent plane of the conic with curvature form q = a u² + b uw + d w²
+/// (`form` = (a, b, d), scaled units) touching the plane at the origin, at (u, w), when it has
+/// one: q/(1 + √(1 − c q)) with c = (κ₁³ + κ₂³)/(κ₁² + κ₂²) from the form's eigenvalues κ
+/// (the circle or sphere κr²/(1 + √(1 − κ²r²)) when a = d = κ, b = 0).
+fn conic_height(form: [f64; 3], u: f64, w: f64) -> Option<f64> {
+    let [a, b, d] = form;
+    let q = a * u * u + b * u * w + d * w * w;
+    let (tr, det) = (a + d, a * d - 0.25 * b * b);
+    let squares = tr * tr - 2.0 * det;
+    let c = if squares > 0.0 {
+        tr * (tr * tr - 3.0 * det) / squares
+    } else {
+        0.0
+    };
+    let disc = 1.0 - c * q;
+    (disc >= 0.0).then(|| q / (1.0 + disc.sqrt()))
+}
+
+/// The curvature form of the 3×3 tensor `k` in the tangent frame (t₁, t₂).
+fn form_in(k: &[[f64; 3]; 3], t1: DVec3, t2: DVec3) -> [f64; 3] {
+    let kk = |a: DVec3, b: DVec3| -> f64 {
+        (0..3)
+            .map(|i| a[i] * (0..3).map(|j| k[i][j] * b[j]).sum::<f64>())
+            .sum()
+    };
+    [kk(t1, t1), 2.0 * kk(t1, t2), kk(t2, t2)]
 }
 
 impl HigherModel {
@@ -45,15 +73,16 @@ impl HigherModel {
             y.dot(self.t[1].into()) / self.scale,
         );
         let m = &monomials(u, w)[5..];
-        let r2 = u * u + w * w;
-        // Beyond the sphere's reach (far from the vertex) only its quadratic part is kept.
-        let sphere = sphere_height(self.kappa, r2).map_or(0.0, |h| h - 0.5 * self.kappa * r2);
-        self.scale * (sphere + m.iter().zip(&self.c).map(|(a, b)| a * b).sum::<f64>())
+        let [a, b, d] = self.form;
+        let q = a * u * u + b * u * w + d * w * w;
+        // Beyond the conic's reach (far from the vertex) only its quadratic part is kept.
+        let conic = conic_height(self.form, u, w).map_or(0.0, |h| h - 0.5 * q);
+        self.scale * (conic + m.iter().zip(&self.c).map(|(a, b)| a * b).sum::<f64>())
     }
 
     /// g(ξ_p) − Σ φ g(ξ_j): the cubic and quartic terms' share of the correction's length
     /// along the normal (the linear terms cancel as for H).
-    pub(super) fn correction(&self, p: [f64; 3], xs: &[[f64; 3]], phi: f64) -> f64 {
+    pub(in crate::fit) fn correction(&self, p: [f64; 3], xs: &[[f64; 3]], phi: f64) -> f64 {
         self.height(p) - xs.iter().map(|x| phi * self.height(*x)).sum::<f64>()
     }
 }
@@ -81,9 +110,17 @@ fn monomials(u: f64, w: f64) -> [f64; 14] {
 
 /// Reusable buffers of [`two_ring`] (one per worker, so the rings allocate nothing).
 #[derive(Default)]
-pub(super) struct RingScratch {
+pub(in crate::fit) struct RingScratch {
     first: Vec<u32>,
     ring: Vec<u32>,
+}
+
+impl RingScratch {
+    /// Whether the first ring of the last [`two_ring`] reached a vertex without a smooth
+    /// model (a feature), so that its ring is one-sided.
+    pub(super) fn one_sided(&self, models: &[Option<VertexModel>]) -> bool {
+        self.first.iter().any(|&u| models[u as usize].is_none())
+    }
 }
 
 /// The boundary vertices within two rings of the smooth boundary vertex `v` (2D: along the
@@ -92,6 +129,31 @@ pub(super) struct RingScratch {
 pub(super) fn two_ring(
     mesh: &LinearMesh,
     topo: &Topology,
+    fan: &[Vec<u32>],
+    models: &[Option<VertexModel>],
+    v: u32,
+    cos_max: f64,
+    scratch: &mut RingScratch,
+) -> Vec<[f64; 3]> {
+    two_ring_from(
+        mesh,
+        topo,
+        &fan[v as usize],
+        fan,
+        models,
+        v,
+        cos_max,
+        scratch,
+    )
+}
+
+/// [`two_ring`] whose first ring is that of the facets `own` at `v` (at a feature vertex: the
+/// facets of one patch), the second reached through the smooth vertices among them.
+#[allow(clippy::too_many_arguments)]
+pub(in crate::fit) fn two_ring_from(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    own: &[u32],
     fan: &[Vec<u32>],
     models: &[Option<VertexModel>],
     v: u32,
@@ -120,7 +182,7 @@ pub(super) fn two_ring(
     let RingScratch { first, ring } = scratch;
     first.clear();
     ring.clear();
-    for &f in &fan[v as usize] {
+    for &f in own {
         first.extend(
             topo.facet_vertices(f as usize)
                 .iter()
@@ -130,11 +192,9 @@ pub(super) fn two_ring(
     }
     first.sort_unstable();
     first.dedup();
-    // Next to a feature (a first-ring vertex without a smooth model) the height function's
-    // ring would be one-sided and cut by the feature: keep the one-ring quadric there.
-    if first.iter().any(|&u| models[u as usize].is_none()) {
-        return Vec::new();
-    }
+    // Next to a feature (a first-ring vertex without a smooth model) the ring is one-sided:
+    // the feature's vertices are points of this side's surface, but nothing beyond them is
+    // reached. The conic part keeps such a fit exact on cylinders (a wall next to a rim).
     ring.extend_from_slice(first);
     for &u in first.iter() {
         if models[u as usize].is_none() {
@@ -154,18 +214,44 @@ pub(super) fn two_ring(
     ring.iter().map(|&w| mesh.coords[w as usize]).collect()
 }
 
+/// How a height function is fitted: in which plane a curve (`dim` 2) lies, and which conic.
+#[derive(Clone, Copy, Debug)]
+pub(in crate::fit) struct Height {
+    /// Unit normal of the plane of a curve: the xy plane of a 2D mesh, a feature curve's own
+    /// plane in 3D (its tangent is n × binormal). Unused for surfaces.
+    pub binormal: [f64; 3],
+    /// The conic part follows the fitted curvature form (exact on cylinders) instead of the
+    /// sphere of its mean curvature (whose quartic terms the monomials correct best over a
+    /// ring around the vertex, but not over a one-sided one).
+    pub anisotropic: bool,
+}
+
+impl Height {
+    /// A 2D mesh's boundary, or a surface over a ring around the vertex.
+    pub const CENTRED: Height = Height {
+        binormal: [0.0, 0.0, 1.0],
+        anisotropic: false,
+    };
+    /// A surface over a ring on one side of the vertex (next to or on a feature).
+    pub const ONE_SIDED: Height = Height {
+        binormal: [0.0, 0.0, 1.0],
+        anisotropic: true,
+    };
+}
+
 /// Refit the model `m` of the vertex at `x` as a height function of degree up to four over its
 /// two-ring points `pts` (relative scale `ell`): 2D u, u², u³, u⁴ through up to four points;
 /// 3D all 14 monomials of degree 1–4 by least squares over at least 20 points, or those of
 /// degree 1–3 over at least 12. The frame is re-tilted by the linear terms and the fit
 /// repeated, as for the quadric. `None` (keep `m`) with too few points, where the points are
 /// not a graph over the tangent plane (slope above 1), or when the system is singular.
-pub(super) fn refine_model(
+pub(in crate::fit) fn refine_model(
     dim: usize,
     x: [f64; 3],
     m: &VertexModel,
     pts: &[[f64; 3]],
     ell: f64,
+    how: Height,
 ) -> Option<(VertexModel, HigherModel)> {
     if !(ell > 0.0) {
         return None;
@@ -188,13 +274,34 @@ pub(super) fn refine_model(
     // A ring with too few distinct rows in one direction (an extruded wall a few cells
     // across) leaves the quartic undetermined: fall back to the cubic before the quadric.
     if used.len() == QUARTIC.len() {
-        if let Some(r) = refine_with(dim, x, m, pts, ell, QUARTIC) {
+        if let Some(r) = refine_with(dim, x, m, pts, ell, QUARTIC, how) {
             return Some(r);
         }
-        return refine_with(dim, x, m, pts, ell, CUBIC);
+        return refine_with(dim, x, m, pts, ell, CUBIC, how);
     }
-    refine_with(dim, x, m, pts, ell, used)
+    refine_with(dim, x, m, pts, ell, used, how)
 }
+
+/// [`refine_model`] for a feature vertex's patch (a one-sided ring, anisotropic conic), whose
+/// ring may have only three rows across the feature (a wall's rim vertex): where the cubic is
+/// not determined, the conic plus a quadratic remainder over at least eight points.
+pub(in crate::fit) fn refine_patch_model(
+    x: [f64; 3],
+    m: &VertexModel,
+    pts: &[[f64; 3]],
+    ell: f64,
+) -> Option<(VertexModel, HigherModel)> {
+    const QUADRATIC: &[usize] = &[0, 1, 2, 3, 4];
+    let how = Height::ONE_SIDED;
+    refine_model(3, x, m, pts, ell, how).or_else(|| {
+        (pts.len() >= 8 && ell > 0.0)
+            .then(|| refine_with(3, x, m, pts, ell, QUADRATIC, how))
+            .flatten()
+    })
+}
+
+/// Most refit rounds with the anisotropic conic (see [`refine_with`]).
+const ANISOTROPIC_ROUNDS: usize = 64;
 
 /// Most monomials a height fit uses (all of degree 1–4 in 3D).
 const MAX_TERMS: usize = 14;
@@ -210,10 +317,20 @@ fn refine_with(
     pts: &[[f64; 3]],
     ell: f64,
     used: &[usize],
+    how: Height,
 ) -> Option<(VertexModel, HigherModel)> {
+    let binormal = DVec3::from(how.binormal);
+    // The form of the circle (2D) or sphere (3D) of scaled curvature κ.
+    let sphere = |kappa: f64| -> [f64; 3] {
+        if dim == 2 {
+            [kappa, 0.0, 0.0]
+        } else {
+            [kappa, 0.0, kappa]
+        }
+    };
     let frame_of = |n: DVec3| -> (DVec3, DVec3) {
         if dim == 2 {
-            (DVec3::new(n.y, -n.x, 0.0), DVec3::ZERO)
+            (n.cross(binormal), DVec3::ZERO)
         } else {
             let (t1, t2) = tangent_frame(n.into());
             (t1.into(), t2.into())
@@ -223,26 +340,44 @@ fn refine_with(
     // The points relative to the vertex, computed once for the four frame updates.
     let ys: Vec<DVec3> = pts.iter().map(|&p| DVec3::from(p) - x).collect();
     let mut n = DVec3::from(m.normal);
-    // Scaled mean curvature of the quadric: the sphere (circle) part of the height function,
-    // which makes the model exact on spheres and circles however coarse the ring.
+    // The conic part of the height function, which makes the model exact on circles and
+    // spheres (and, anisotropic, circular cylinders) however coarse the ring: isotropic, the
+    // scaled mean curvature κ of the quadric; anisotropic, its scaled curvature tensor 2ℓH,
+    // kept in world coordinates (the tangent frame of a tilted normal may turn about it).
     let trace = m.h[0][0] + m.h[1][1] + m.h[2][2];
     let mut kappa = 2.0 * trace / (dim - 1) as f64 * ell;
+    let mut k3 = m.h.map(|r| r.map(|v| 2.0 * ell * v));
     let mut fitted = None;
     let k = used.len();
     let mut uwh = vec![[0.0; 3]; ys.len()];
-    for _ in 0..4 {
+
+    // Over a one-sided ring the tilt and the conic's curvature trade off across the ring's
+    // rows and the anisotropic rounds converge slowly (a coarse cylinder's rim: 30 rounds to
+    // 1e-8 of the tilt): they run until the linear and quadratic remainders vanish.
+    let rounds = if how.anisotropic {
+        ANISOTROPIC_ROUNDS
+    } else {
+        4
+    };
+    for _ in 0..rounds {
         let (t1, t2) = frame_of(n);
+        let mut form = if how.anisotropic {
+            form_in(&k3, t1, t2)
+        } else {
+            sphere(kappa)
+        };
         for (y, q) in ys.iter().zip(uwh.iter_mut()) {
             let (u, w, h) = (y.dot(t1) / ell, y.dot(t2) / ell, y.dot(n) / ell);
             if steeper(h, u, w) {
                 return None;
             }
-            if sphere_height(kappa, u * u + w * w).is_none() {
+            if conic_height(form, u, w).is_none() {
+                form = [0.0; 3];
                 kappa = 0.0;
             }
             *q = [u, w, h];
         }
-        let (ata, atb) = normal_equations(&uwh, kappa, used);
+        let (ata, atb) = normal_equations(&uwh, form, used);
         let sol = solve_n(ata, atb, k)?;
         let mut c = [0.0; MAX_TERMS];
         for (i, &u) in used.iter().enumerate() {
@@ -251,19 +386,43 @@ fn refine_with(
         if c[0].hypot(c[1]) > 1.0 {
             return None;
         }
-        fitted = Some((n, t1, t2, c, kappa));
-        // Move the isotropic part of the quadratic remainder into the sphere.
-        kappa += 2.0 * (c[2] + c[4]) / (dim - 1) as f64;
+        fitted = Some((n, t1, t2, c, form));
+        if how.anisotropic && c[..5].iter().all(|r| r.abs() < 1e-13) {
+            break;
+        }
+        // Move the quadratic remainder into the conic (q/2 is its quadratic part): all of it,
+        // or its isotropic part into the sphere.
         n = unit(n - (c[0] * t1 + c[1] * t2));
+        if !how.anisotropic {
+            kappa += 2.0 * (c[2] + c[4]) / (dim - 1) as f64;
+            continue;
+        }
+        let next = [
+            form[0] + 2.0 * c[2],
+            form[1] + 2.0 * c[3],
+            form[2] + 2.0 * c[4],
+        ];
+        k3 = [[0.0; 3]; 3];
+        for (mat, w) in [
+            (outer(t1.into(), t1.into()), next[0]),
+            (sym_outer(t1.into(), t2.into()), 0.5 * next[1]),
+            (outer(t2.into(), t2.into()), next[2]),
+        ] {
+            for i in 0..3 {
+                for j in 0..3 {
+                    k3[i][j] += w * mat[i][j];
+                }
+            }
+        }
     }
     // The polynomial belongs to the frame it was fitted in (before the last tilt).
-    let (n, t1, t2, c, kappa) = fitted?;
+    let (n, t1, t2, c, form) = fitted?;
     let (t1, t2): ([f64; 3], [f64; 3]) = (t1.into(), t2.into());
-    // Quadratic part: the sphere's κr²/2 and the polynomial's.
+    // Quadratic part: the conic's q/2 and the polynomial's.
     let q = [
-        (c[2] + 0.5 * kappa) / ell,
-        c[3] / ell,
-        (c[4] + if dim == 2 { 0.0 } else { 0.5 * kappa }) / ell,
+        (c[2] + 0.5 * form[0]) / ell,
+        (c[3] + 0.5 * form[1]) / ell,
+        (c[4] + 0.5 * form[2]) / ell,
     ];
     let mut h = [[0.0; 3]; 3];
     for (mat, w) in [
@@ -290,7 +449,7 @@ fn refine_with(
             t: [t1, t2],
             scale: ell,
             c: hc,
-            kappa,
+            form,
         },
     ))
 }
@@ -313,27 +472,28 @@ fn steeper(h: f64, u: f64, w: f64) -> bool {
 }
 
 /// The normal equations of the height fit with the monomials `used` over the scaled points
-/// `uwh` (tangential u, w and height h), less the sphere of curvature `kappa`.
-fn normal_equations(uwh: &[[f64; 3]], kappa: f64, used: &[usize]) -> Normal {
+/// `uwh` (tangential u, w and height h), less the conic of curvature form `form`.
+fn normal_equations(uwh: &[[f64; 3]], form: [f64; 3], used: &[usize]) -> Normal {
     // The term counts in use, as constants, so that the loops unroll.
     match used.len() {
-        3 => normal_equations_k::<3>(uwh, kappa, used),
-        4 => normal_equations_k::<4>(uwh, kappa, used),
-        9 => normal_equations_k::<9>(uwh, kappa, used),
-        14 => normal_equations_k::<14>(uwh, kappa, used),
-        _ => normal_equations_k::<MAX_TERMS>(uwh, kappa, used),
+        3 => normal_equations_k::<3>(uwh, form, used),
+        4 => normal_equations_k::<4>(uwh, form, used),
+        5 => normal_equations_k::<5>(uwh, form, used),
+        9 => normal_equations_k::<9>(uwh, form, used),
+        14 => normal_equations_k::<14>(uwh, form, used),
+        _ => normal_equations_k::<MAX_TERMS>(uwh, form, used),
     }
 }
 
 /// [`normal_equations`] with `K` ≥ `used.len()` terms (the rest zero). Only the upper
 /// triangle is summed and then mirrored: the products commute exactly, so the matrix is the
 /// one the full double loop gives.
-fn normal_equations_k<const K: usize>(uwh: &[[f64; 3]], kappa: f64, used: &[usize]) -> Normal {
+fn normal_equations_k<const K: usize>(uwh: &[[f64; 3]], form: [f64; 3], used: &[usize]) -> Normal {
     let k = used.len().min(K);
     let mut ata = [[0.0; K]; K];
     let mut atb = [0.0; K];
     for &[u, w, h] in uwh {
-        let h = h - sphere_height(kappa, u * u + w * w).unwrap_or(0.0);
+        let h = h - conic_height(form, u, w).unwrap_or(0.0);
         let all = monomials(u, w);
         let mut mu = [0.0; K];
         for (m, &i) in mu.iter_mut().zip(used) {
