@@ -124,6 +124,7 @@ impl FeatureModels {
             }
         }
         // Quadric per patch, from that patch's faces at the vertex.
+        let mut scratch = RingScratch::default();
         for (&v, faces) in &fan {
             let mut patches: Vec<u32> = faces.iter().map(|&(_, p)| p).collect();
             patches.sort_unstable();
@@ -140,24 +141,25 @@ impl FeatureModels {
                 // facets' normal then seeds the height function). Not next to thin cells
                 // (as for the curve models below): a boundary layer's cells follow the
                 // quadric and its inherited models, and fold under a more accurate wall.
-                let (quadric, seed, ell) = match fan_model(mesh, topo, v, &own, cos_max) {
-                    Some((Some(m), ell)) => (Some(m), Some(m), ell),
-                    Some((None, ell)) => (None, facets_normal(mesh, topo, &own).map(flat), ell),
-                    None => continue,
+                let Some((quadric, ell, normal)) = fan_model(mesh, topo, v, &own, cos_max) else {
+                    continue;
                 };
-                let seed = seed.filter(|_| shortest[v as usize] >= RIM_Q2_MIN_ASPECT * ell);
-                let ring = two_ring_from(
-                    mesh,
-                    topo,
-                    &own,
-                    fan_all,
-                    smooth,
-                    v,
-                    cos_max,
-                    &mut RingScratch::default(),
-                );
-                let refined =
-                    seed.and_then(|m| refine_patch_model(mesh.coords[v as usize], &m, &ring, ell));
+                let seed = quadric.unwrap_or_else(|| flat(normal));
+                let refined = (shortest[v as usize] >= RIM_Q2_MIN_ASPECT * ell)
+                    .then(|| {
+                        let ring = two_ring_from(
+                            mesh,
+                            topo,
+                            &own,
+                            fan_all,
+                            smooth,
+                            v,
+                            cos_max,
+                            &mut scratch,
+                        );
+                        refine_patch_model(mesh.coords[v as usize], &seed, &ring, ell)
+                    })
+                    .flatten();
                 if let Some((m, higher)) = refined {
                     out.patch.insert((v, p), m);
                     out.patch_higher.insert((v, p), higher);
@@ -167,12 +169,7 @@ impl FeatureModels {
             }
         }
         // Curve models where a feature curve passes through (two feature edges).
-        let mut along: HashMap<u32, Vec<u32>> = HashMap::new();
-        for &ed in &features.edges {
-            let [a, b] = topo.edges[ed as usize];
-            along.entry(a).or_default().push(b);
-            along.entry(b).or_default().push(a);
-        }
+        let along = features.curve_neighbours(topo);
         for (&v, nbs) in &along {
             if let [a, b] = nbs[..]
                 && let Some(m) = curve_model(x(v), x(a), x(b))
@@ -363,20 +360,6 @@ fn curve_higher(
         anisotropic: true,
     };
     refine_model(2, x(v).into(), m, &pts, ell, how)
-}
-
-/// The unit area-weighted normal of the boundary facets `faces`, if they have one.
-fn facets_normal(mesh: &LinearMesh, topo: &Topology, faces: &[u32]) -> Option<[f64; 3]> {
-    let x = |w: u32| DVec3::from(mesh.coords[w as usize]);
-    let area: DVec3 = faces
-        .iter()
-        .map(|&f| {
-            let q = topo.faces[f as usize];
-            (x(q[2]) - x(q[0])).cross(x(q[3]) - x(q[1]))
-        })
-        .sum();
-    let l = area.length();
-    (l > 0.0).then(|| (area / l).into())
 }
 
 /// A model without curvature (targets on the chords), of normal `n`.

@@ -467,7 +467,7 @@ fn one_ring_models(
                 if fan[v].len() < 3 {
                     return;
                 }
-                if let Some((m, l)) = fan_model(mesh, topo, v as u32, &fan[v], cos_max) {
+                if let Some((m, l, _)) = fan_model(mesh, topo, v as u32, &fan[v], cos_max) {
                     *ell = l;
                     *model = m;
                 }

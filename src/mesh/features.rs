@@ -367,24 +367,32 @@ impl Features {
         mark
     }
 
-    /// 3D: the elements with a boundary face on a curved feature curve (a feature edge at whose
-    /// ends the curve turns by more than [`CURVED_FEATURE_DEG`]), such as the cells along a
-    /// cylinder's rims, unless they are thin ([`RIM_Q2_MIN_ASPECT`]). They become constrained Q2 elements: a C¹ spline along a curved rim,
-    /// held at its vertices, leaves about four times the error of a quadratic interpolating
-    /// the rim's targets (the smooth targets are accurate there), and its cross-rim neighbour
-    /// is the other side of the crease, so the rim is only C⁰ anyway. Empty in 2D.
-    pub fn curved_feature_elements(&self, mesh: &LinearMesh, topo: &Topology) -> Vec<bool> {
-        let mut mark = vec![false; topo.n_elements];
-        if self.dim != 3 || self.edges.is_empty() {
-            return mark;
-        }
-        let x = |v: u32| DVec3::from(mesh.coords[v as usize]);
+    /// Each feature vertex's neighbours along the feature edges (two where a feature curve
+    /// passes through, more or one at corners and ends).
+    pub fn curve_neighbours(&self, topo: &Topology) -> std::collections::HashMap<u32, Vec<u32>> {
         let mut along: std::collections::HashMap<u32, Vec<u32>> = Default::default();
         for &ed in &self.edges {
             let [a, b] = topo.edges[ed as usize];
             along.entry(a).or_default().push(b);
             along.entry(b).or_default().push(a);
         }
+        along
+    }
+
+    /// 3D: the elements with a boundary face on a curved feature curve (a feature edge at whose
+    /// ends the curve turns by more than [`CURVED_FEATURE_DEG`]), such as the cells along a
+    /// cylinder's rims, unless they are thin ([`RIM_Q2_MIN_ASPECT`]). They become constrained
+    /// Q2 elements: a C¹ spline along a curved rim, held at its vertices, leaves about four
+    /// times the error of a quadratic interpolating the rim's targets (the smooth targets are
+    /// accurate there), and its cross-rim neighbour is the other side of the crease, so the
+    /// rim is only C⁰ anyway. Empty in 2D.
+    pub fn curved_feature_elements(&self, mesh: &LinearMesh, topo: &Topology) -> Vec<bool> {
+        let mut mark = vec![false; topo.n_elements];
+        if self.dim != 3 || self.edges.is_empty() {
+            return mark;
+        }
+        let x = |v: u32| DVec3::from(mesh.coords[v as usize]);
+        let along = self.curve_neighbours(topo);
         let cos_straight = CURVED_FEATURE_DEG.to_radians().cos();
         let turns = |v: u32| -> bool {
             let Some(&[a, b]) = along.get(&v).map(|l| &l[..]) else {

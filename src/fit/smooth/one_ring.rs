@@ -11,16 +11,16 @@ use crate::math::linalg::{DVec3, unit};
 use crate::mesh::{LinearMesh, Topology};
 
 /// The 3D model at vertex `v` from the boundary faces `faces` around it, with the fan's length
-/// scale ℓ; `None` when the fan is degenerate, has fewer than 5 neighbour vertices, or a face
-/// normal is more than acos(`cos_max`) from the fan normal (the model is `None` when the
-/// quadric fit fails).
+/// scale ℓ and its unit area-weighted normal; `None` when the fan is degenerate, has fewer than
+/// 5 neighbour vertices, or a face normal is more than acos(`cos_max`) from the fan normal (the
+/// model is `None` when the quadric fit fails).
 pub(in crate::fit) fn fan_model(
     mesh: &LinearMesh,
     topo: &Topology,
     v: u32,
     faces: &[u32],
     cos_max: f64,
-) -> Option<(Option<VertexModel>, f64)> {
+) -> Option<(Option<VertexModel>, f64, [f64; 3])> {
     let x = |w: u32| DVec3::from(mesh.coords[w as usize]);
     let mut area = DVec3::ZERO;
     let mut normals = Vec::with_capacity(faces.len());
@@ -52,7 +52,7 @@ pub(in crate::fit) fn fan_model(
         h,
         weight: 1.0,
     });
-    Some((model, ell))
+    Some((model, ell, n0.into()))
 }
 
 /// 2D model at x through its boundary neighbours a and b: (normal, H).
