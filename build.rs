@@ -5,13 +5,13 @@
 //! `polyspline::gpu::shader_source` does), so a broken shader fails the build instead of a
 //! user's run. Each compute entry point's workgroup size and the bindings it uses (the layout
 //! wgpu derives for it) are written to `$OUT_DIR/shader_reflection.rs`, which
-//! `src/gpu/reflect.rs` includes and checks at compile time against what the host code assumes.
+//! `src/exec/gpu/reflect.rs` includes and checks at compile time against what the host code assumes.
 
 use naga::valid::{Capabilities, ValidationFlags, Validator};
 use std::fmt::Write as _;
 use std::path::Path;
 
-/// The precision substitution of `gpu::shader_source`.
+/// The precision substitution of `exec::gpu::shader_source`.
 const ALIAS_F32: &str = "alias real = f32;";
 const ALIAS_F64: &str = "alias real = f64;";
 

@@ -3,7 +3,7 @@
 // vector updates (update_xr: x += α p, r −= α Ap, z = D⁻¹ r; update_p: p = z + β p).
 // Components that have converged (rr ≤ target²) take α = 0 and keep their iterate, so
 // iterations batched past convergence change nothing and 0/0 never occurs.
-// CPU twin: src/cpu/cg.rs.
+// CPU twin: src/exec/cpu/cg.rs.
 alias real = f32;
 
 const WG: u32 = 256u;

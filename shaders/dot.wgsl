@@ -1,6 +1,6 @@
 // First stage of the dot products a·b and a·a on three right-hand sides: each workgroup
 // reduces a grid-strided share of the rows to one pair of partial sums. The second stage is in
-// cg.wgsl (finalize_alpha, finalize_beta). CPU twin: src/cpu/dot.rs.
+// cg.wgsl (finalize_alpha, finalize_beta). CPU twin: src/exec/cpu/dot.rs.
 alias real = f32;
 
 const WG: u32 = 256u;

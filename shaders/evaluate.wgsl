@@ -1,5 +1,5 @@
 // Evaluate tensor-product quadratic Bézier elements at parameters: points and parametric
-// derivatives. CPU twin: src/cpu/evaluate.rs (same loops, same binding order).
+// derivatives. CPU twin: src/exec/cpu/evaluate.rs (same loops, same binding order).
 //
 // Nets are element-anchored (the host subtracts an anchor point in f64 before upload and adds
 // it back to the points), so rounding scales with the element size.

@@ -3,7 +3,7 @@
 // the partial-derivative coefficients (for the host's rounding-error bound). This is the first
 // level of the certificate: min coefficient > 0 ⇒ det J > 0 on the whole element; the host
 // finishes inconclusive elements on the CPU by subdivision.
-// CPU twin: src/cpu/jacobian_check.rs (same loops, same binding order).
+// CPU twin: src/exec/cpu/jacobian_check.rs (same loops, same binding order).
 alias real = f32;
 
 struct Params {

@@ -1,6 +1,6 @@
 // Local Newton data of the coloured energy solver (src/energy/colored.rs): for each control
 // point's local problem, the energy's value, gradient and Hessian at the current position.
-// CPU twin: src/cpu/local_newton.rs (same loops, same binding order).
+// CPU twin: src/exec/cpu/local_newton.rs (same loops, same binding order).
 //
 // Problem p: L(v) = kii |v|^2 + 2 b.v + sum_q w_q f(M_q + v psi_q^T), f the symmetric Dirichlet
 // density (|M|^2 + |M^-1|^2 - 6) / (2d) (2D: M embedded with M_33 = 1), evaluated at v = 0.

@@ -1,5 +1,5 @@
 // y = A x for a block of rows of a CSR matrix, on three right-hand sides at once (x, y, z in
-// the first three lanes of a vec4). CPU twin: src/cpu/spmv.rs.
+// the first three lanes of a vec4). CPU twin: src/exec/cpu/spmv.rs.
 alias real = f32;
 
 struct Params {

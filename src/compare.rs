@@ -18,11 +18,12 @@
 use crate::elastic::ElasticParams;
 use crate::fit::{FitParams, FitTargets, FitWeights, SmoothParams};
 use crate::math::lagrange::lagrange_1d;
+use crate::mesh::HighOrderMesh;
+use crate::mesh::high_order::{Lattice, lattice_point};
 use crate::mesh::topology::NONE;
 use crate::mesh::{LinearMesh, Topology};
+use crate::params::ParamError;
 use crate::pipeline::{CurveError, CurveOptions, Curved, Geometry, Method, curve_in_memory};
-use crate::sample::HighOrderMesh;
-use crate::sample::ordering::{Lattice, lattice_point};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -185,6 +186,18 @@ pub struct CompareOptions {
     pub elastic: ElasticParams,
 }
 
+impl CompareOptions {
+    /// Every option of the job: the base options, and the same with the elastic method.
+    pub fn check(&self) -> Result<(), ParamError> {
+        self.base.check()?;
+        CurveOptions {
+            method: Method::Elastic(self.elastic),
+            ..self.base.clone()
+        }
+        .check()
+    }
+}
+
 /// One method's result.
 #[derive(Clone, Debug, Serialize)]
 pub struct CompareRow {
@@ -284,7 +297,9 @@ pub fn compare(input: &Path, options: &CompareOptions) -> Result<CompareReport, 
             "compare measures the order-P elements; --subdivide does not apply".into(),
         ));
     }
-    crate::params::check_compare(options).map_err(|e| CurveError::Options(e.to_string()))?;
+    options
+        .check()
+        .map_err(|e| CurveError::Options(e.to_string()))?;
     let mesh = crate::io::read_mesh(input, &options.base.mesh)?;
     // A bad feature edits file is an input error, not one method's failure.
     if options.base.features.edits.is_some() {

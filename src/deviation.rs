@@ -19,8 +19,8 @@
 
 use crate::math::lagrange::lagrange_values;
 use crate::math::linalg::DVec3;
+use crate::mesh::HighOrderMesh;
 use crate::mesh::{LinearMesh, Topology};
-use crate::sample::HighOrderMesh;
 use rayon::prelude::*;
 
 /// The three measures (relative to `diagonal`).

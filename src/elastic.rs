@@ -21,8 +21,9 @@
 use crate::fit::assembly::atomic_add;
 use crate::math::lagrange::lagrange_1d;
 use crate::math::quadrature::gauss_legendre;
-use crate::sample::HighOrderMesh;
-use crate::sample::ordering::lattice_point;
+use crate::mesh::HighOrderMesh;
+use crate::mesh::high_order::lattice_point;
+use crate::params::{ParamError, num};
 use crate::solve::{CgError, CgInfo, CgParams, LinOp, Preconditioner, pcg_coupled};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -66,6 +67,27 @@ impl Default for ElasticParams {
             cg: CgParams::default(),
             preconditioner: ElasticPreconditioner::BlockJacobi,
         }
+    }
+}
+
+impl ElasticParams {
+    /// A positive Young's modulus, a Poisson's ratio in (-1, 0.5), and the CG's parameters.
+    pub fn check(&self) -> Result<(), ParamError> {
+        if !(self.young.is_finite() && self.young > 0.0) {
+            return Err(ParamError::new(
+                "--young",
+                num(self.young),
+                "Young's modulus must be positive and finite",
+            ));
+        }
+        if !(self.poisson.is_finite() && self.poisson > -1.0 && self.poisson < 0.5) {
+            return Err(ParamError::new(
+                "--poisson",
+                num(self.poisson),
+                "Poisson's ratio must be in (-1, 0.5)",
+            ));
+        }
+        self.cg.check()
     }
 }
 

@@ -7,8 +7,12 @@
 //! (io/)    (mesh/)        (mesh/)      (spline/)       (fit/)  (validity/)  (sample/)   (io/)
 //! ```
 //!
-//! Under all of them, the foundation layer [`math`]: Bernstein and Lagrange bases, Gauss rules,
-//! 3-vectors and 3×3 matrices on glam.
+//! The modules stand on floors, each using only its own floor and those below it: foundation
+//! ([`math`], [`params`], [`progress`]) → [`mesh`] → [`io`] beside the algorithms ([`spline`],
+//! [`fit`], [`validity`], [`energy`], [`sample`], ...) → execution ([`exec`]: the CPU and GPU
+//! executors) → jobs ([`pipeline`], [`compare`], [`distributed`]) → the command line. Under
+//! all of them, the foundation [`math`]: Bernstein and Lagrange bases, Gauss rules, the
+//! reference element, 3-vectors and 3×3 matrices on glam.
 //!
 //! ```no_run
 //! use polyspline::{io::read_mesh, mesh::{MeshOptions, Topology}};
@@ -18,25 +22,40 @@
 //! # Ok::<(), polyspline::io::ReadError>(())
 //! ```
 
-pub mod compare;
-pub mod cpu;
-pub mod deviation;
-pub mod distributed;
-pub mod elastic;
-pub mod energy;
-pub mod executor;
-pub mod fit;
-pub mod gpu;
-pub mod info;
-pub mod io;
-pub mod math;
-pub mod mesh;
-pub mod params;
-pub mod pipeline;
-pub mod plot;
-pub mod progress;
-pub mod quality;
-pub mod sample;
-pub mod solve;
-pub mod spline;
-pub mod validity;
+// The floors, bottom up: a module uses only its own floor and those below it, and no two
+// top-level modules import each other (`scripts/check_floors.py` holds the table and the
+// `library` tests run it).
+
+// Foundation: what every floor may use.
+pub mod math; // Bernstein/Lagrange bases, Gauss rules, reference quad and hex, 3×3 algebra.
+pub mod params; // `ParamError` and the range checks every options struct validates itself with.
+pub mod progress; // The stages of the `curve` job and the receiver of their progress.
+
+// Mesh: the meshes themselves.
+pub mod mesh; // Raw reader output, linear and high-order meshes, topology, features, generators.
+
+// IO: files in and out (beside the algorithms, not above them).
+pub mod io; // Readers of eight mesh formats, the MSH and VTU writers and their node orderings.
+pub mod plot; // SVG drawings of 2D meshes.
+
+// Algorithms: the method, on meshes, knowing nothing of files, devices or jobs.
+pub mod deviation; // Deviation of the curved boundary from the input's linear boundary.
+pub mod elastic; // The elastic analogy (the baseline method).
+pub mod energy; // The degeneration energy and its minimisers, over a narrow `EnergyKernel`.
+pub mod fit; // Least-squares fit of the spline control points.
+pub mod info; // The `info` summary of a linear mesh.
+pub mod quality; // Sampled Jacobian quality of high-order elements.
+pub mod sample; // Sampling element maps into a conforming high-order mesh.
+pub mod solve; // Linear solvers: preconditioned CG and sparse Cholesky.
+pub mod spline; // The quadratic poly-spline space on the mesh.
+pub mod validity; // Certified det J bounds, line searches, the blend, snapping; over a `Certifier`.
+
+// Execution: where the heavy work runs.
+pub mod exec; // The `Executor` trait; the CPU reference with the kernels' CPU twins; the GPU.
+
+// Jobs: the stages composed into what a user runs.
+pub mod compare; // Every method on one mesh in one table.
+pub mod distributed; // The curve job on many processes (`--features mpi`).
+pub mod pipeline; // The `curve` job: its options, stages and report.
+
+// The command line (`src/cli/`, in the binary) is the top floor.

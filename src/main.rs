@@ -27,7 +27,7 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             // One bounded line, whatever the message quotes from the input.
-            let line = polyspline::io::raw::one_line(&e.to_string(), MAX_ERROR_CHARS);
+            let line = polyspline::mesh::raw::one_line(&e.to_string(), MAX_ERROR_CHARS);
             eprintln!("polyspline: error: {line}");
             ExitCode::FAILURE
         }

@@ -26,27 +26,26 @@
 
 mod clock;
 pub(crate) mod misfit;
+mod options;
 mod report;
 pub(crate) mod spline;
 
 use crate::elastic::{ElasticError, ElasticInfo, ElasticParams, elastic_analogy};
-use crate::energy::{EnergyError, EnergyParams};
-use crate::executor::Executor;
-use crate::fit::FitParams;
-use crate::gpu::Backend;
+use crate::energy::EnergyError;
+use crate::exec::Executor;
 use crate::io::output::{PendingFile, WriteError};
 use crate::io::{ReadError, read_mesh};
 use crate::math::BezierElements;
-use crate::mesh::{LinearMesh, MeshOptions, Topology};
+use crate::mesh::HighOrderMesh;
+use crate::mesh::{LinearMesh, Topology};
 use crate::progress::{Progress, Silent, Stage};
 use crate::quality::sample_det_jacobian;
-use crate::sample::{HighOrderMesh, MAX_ORDER, sample};
+use crate::sample::{MAX_ORDER, sample};
 use crate::solve::CgError;
+use crate::validity::ValidityError;
 use crate::validity::blend::{BlendError, Blended};
-use crate::validity::{LineSearchParams, ValidityError};
 use clock::Clock;
 use report::Finished;
-use serde::Serialize;
 use spline::{SplineOutcome, SplineSetup};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -56,85 +55,8 @@ pub use crate::io::high_order::{
 };
 pub use crate::validity::LineSearchMode;
 pub use crate::validity::snap::snap_boundary;
+pub use options::{CurveOptions, FeatureOptions, Geometry, Method};
 pub use report::CurveReport;
-
-/// What geometry to sample.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Geometry {
-    /// The input's straight-sided (bilinear/trilinear) elements at the requested order.
-    Straight,
-    /// The spline map from the initial control points (vertex averages), not fitted.
-    SplineInitial,
-    /// The spline map fitted by least squares with these weights, then certified.
-    SplineFitted,
-}
-
-/// How the interior of the curved mesh is placed.
-#[derive(Clone, Copy, Debug)]
-pub enum Method {
-    /// Sample the (fitted) spline map everywhere (the paper's method).
-    Iga,
-    /// Sample the spline only on the boundary; move the interior nodes of the straight order-P
-    /// mesh by linear elasticity (paper §2.5, the baseline).
-    Elastic(ElasticParams),
-}
-
-impl Method {
-    pub fn name(&self) -> &'static str {
-        match self {
-            Method::Iga => "iga",
-            Method::Elastic(_) => "elastic",
-        }
-    }
-}
-
-/// Options of the `curve` job.
-#[derive(Clone, Debug)]
-pub struct CurveOptions {
-    pub order: usize,
-    /// Order 1 output split into `subdivide`^d elements per input element.
-    pub subdivide: Option<usize>,
-    pub geometry: Geometry,
-    /// IGA everywhere, or the elastic analogy inside the IGA boundary.
-    pub method: Method,
-    /// Weights of the fit (used with [`Geometry::SplineFitted`]).
-    pub fit: FitParams,
-    pub line_search: LineSearchParams,
-    pub line_search_mode: LineSearchMode,
-    /// Move boundary vertex nodes back to the input vertices where that stays certified valid.
-    pub snap_boundary: bool,
-    /// Sharp features kept by the spline space and the fit (`docs/features.md`).
-    pub features: crate::mesh::features::FeatureOptions,
-    pub mesh: MeshOptions,
-    pub output: OutputOptions,
-    /// Executor of sampling, certification and the CG solve.
-    pub backend: Backend,
-    /// After the certified least-squares fit, minimise the element degeneration energy
-    /// ([`crate::energy`]); `None` (the default) keeps the least-squares result.
-    pub energy: Option<EnergyParams>,
-}
-
-impl Default for CurveOptions {
-    /// The CLI's defaults: order 2, the smooth-boundary fit, local line search, CPU backend.
-    fn default() -> Self {
-        CurveOptions {
-            order: 2,
-            subdivide: None,
-            geometry: Geometry::SplineFitted,
-            method: Method::Iga,
-            fit: FitParams::smooth(),
-            line_search: LineSearchParams::default(),
-            line_search_mode: LineSearchMode::Local,
-            snap_boundary: false,
-            features: Default::default(),
-            mesh: MeshOptions::default(),
-            output: OutputOptions::default(),
-            backend: Backend::default(),
-            energy: None,
-        }
-    }
-}
 
 /// Everything that can stop the `curve` job.
 #[derive(Debug, thiserror::Error)]
@@ -153,7 +75,7 @@ pub enum CurveError {
     #[error("{}: GPU: {source}", input.display())]
     Gpu {
         input: PathBuf,
-        source: crate::executor::ExecutorError,
+        source: crate::exec::ExecutorError,
     },
     #[error("{}: fit: {source}", input.display())]
     Solve { input: PathBuf, source: CgError },
@@ -278,7 +200,7 @@ pub fn curve_in_memory_with_progress(
     let mut clock = Clock::new(progress);
     let mesh = clock.run(Stage::Read, || read_mesh(input, &options.mesh))?;
     let topo = clock.run(Stage::Topology, || topology(input, &mesh))?;
-    let executor = crate::executor::executor(&options.backend);
+    let executor = crate::exec::executor(&options.backend);
     let job = Job {
         input,
         options,
@@ -336,7 +258,9 @@ pub(crate) fn check_options(
             "--subdivide gives order-1 output; use it with --order 1".into(),
         ));
     }
-    crate::params::check_curve(options).map_err(|e| CurveError::Options(e.to_string()))?;
+    options
+        .check()
+        .map_err(|e| CurveError::Options(e.to_string()))?;
     if !(1..=MAX_ORDER).contains(&order) {
         return Err(CurveError::Options(format!(
             "order {order} is out of range 1..={MAX_ORDER}"

@@ -5,8 +5,56 @@
 //! Output: one SVG document, y axis pointing up, scaled to the union of the layers.
 
 use crate::math::lagrange::lagrange_1d;
-use crate::sample::HighOrderMesh;
+use crate::mesh::HighOrderMesh;
+use crate::params::{ParamError, num};
 use std::fmt::Write;
+
+/// `plot --width`: pixels in [16, 100000].
+pub fn check_plot_width(width: f64) -> Result<(), ParamError> {
+    if width.is_finite() && (16.0..=100_000.0).contains(&width) {
+        Ok(())
+    } else {
+        Err(ParamError::new(
+            "--width",
+            num(width),
+            "must be a number of pixels in [16, 100000]",
+        ))
+    }
+}
+
+/// `plot --label`: at most one per drawn mesh.
+pub fn check_plot_labels(labels: usize, meshes: usize) -> Result<(), ParamError> {
+    if labels <= meshes {
+        Ok(())
+    } else {
+        Err(ParamError::new(
+            "--label",
+            format!("given {labels} times"),
+            format!(
+                "{meshes} meshes: give at most one label per mesh (MESH first, then each --overlay)"
+            ),
+        ))
+    }
+}
+
+/// `plot --window X0,Y0,X1,Y1`: four finite numbers spanning a rectangle of non-zero size.
+pub fn parse_window(text: &str) -> Result<[f64; 4], ParamError> {
+    let v: Vec<f64> = text
+        .split(',')
+        .map(|x| x.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| ParamError::new("--window", text, e.to_string()))?;
+    match v[..] {
+        [x0, y0, x1, y1] if x0 != x1 && y0 != y1 && v.iter().all(|x| x.is_finite()) => {
+            Ok([x0, y0, x1, y1])
+        }
+        _ => Err(ParamError::new(
+            "--window",
+            text,
+            "give four numbers X0,Y0,X1,Y1 of a rectangle of non-zero size",
+        )),
+    }
+}
 
 /// One thing to draw.
 pub enum Layer<'a> {
@@ -239,4 +287,18 @@ fn escape(s: &str) -> String {
     s.replace('&', "&amp;")
         .replace('<', "&lt;")
         .replace('>', "&gt;")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn window_width_and_labels_are_checked() {
+        assert!(parse_window("0,0,1,1").is_ok());
+        assert!(parse_window("0,0,0,1").is_err());
+        assert!(parse_window("0,0,1").is_err());
+        assert!(check_plot_width(f64::NAN).is_err());
+        assert!(check_plot_labels(3, 2).is_err());
+    }
 }

@@ -9,7 +9,7 @@
 
 // The equispaced Lagrange basis is the foundation's; re-exported for the callers of this path.
 pub use crate::math::lagrange::lagrange_1d;
-use crate::sample::HighOrderMesh;
+use crate::mesh::HighOrderMesh;
 use rayon::prelude::*;
 use serde::Serialize;
 

@@ -11,10 +11,11 @@
 mod common;
 
 use polyspline::io::gmsh_write::MshVersion;
+use polyspline::mesh::HighOrderMesh;
 use polyspline::mesh::Topology;
 use polyspline::mesh::generate::{Kind, generate};
 use polyspline::pipeline::{CurveOptions, OutputOptions, curve_in_memory, write_high_order};
-use polyspline::sample::{HighOrderMesh, sample};
+use polyspline::sample::sample;
 use serde_json::Value;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};

@@ -11,7 +11,7 @@ mod common;
 
 use common::dist;
 
-use polyspline::sample::HighOrderMesh;
+use polyspline::mesh::HighOrderMesh;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::Command;

@@ -2,8 +2,8 @@
 
 use super::{ElasticArgs, FeatureArgs};
 use polyspline::compare::{CompareOptions, compare};
+use polyspline::exec::gpu::BackendChoice;
 use polyspline::fit::FitParams;
-use polyspline::gpu::BackendChoice;
 use polyspline::mesh::MeshOptions;
 use polyspline::pipeline::CurveOptions;
 use polyspline::solve::CgParams;

@@ -2,8 +2,8 @@
 
 use super::{ElasticArgs, FeatureArgs};
 use polyspline::energy::{EnergyParams, EnergySolver};
+use polyspline::exec::gpu::{BackendChoice, Precision};
 use polyspline::fit::{FitParams, FitPreset, FitSolver, FitTargets, FitWeights, SmoothParams};
-use polyspline::gpu::{BackendChoice, Precision};
 use polyspline::io::gmsh_write::MshVersion;
 use polyspline::io::output::{check_outputs, prepare};
 use polyspline::io::vtu_write::VtuEncoding;
@@ -206,7 +206,7 @@ impl Args {
     }
 
     /// The library's options (unchecked: [`curve_prepared`] validates them).
-    fn options(self, backend: polyspline::gpu::Backend) -> CurveOptions {
+    fn options(self, backend: polyspline::exec::gpu::Backend) -> CurveOptions {
         CurveOptions {
             order: self.order,
             subdivide: self.subdivide,
@@ -288,7 +288,7 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
             );
         }
         check_outputs(&outputs, &inputs)?;
-        polyspline::params::check_kink_angle(args.kink_angle)?;
+        polyspline::fit::check_kink_angle(args.kink_angle)?;
         Ok(args.backend.resolve(args.precision)?)
     };
     // Under mpirun every rank finds the same error: one line, from rank 0.

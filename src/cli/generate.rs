@@ -84,7 +84,7 @@ impl BoundaryLayerArgs {
 
 pub(super) fn run(args: Args) -> anyhow::Result<()> {
     let output = &args.output;
-    polyspline::params::check_generate(args.kind, args.elements)?;
+    args.kind.check(args.elements)?;
     check_outputs(&[output], &[])?;
     let mesh = match args.kind {
         Shape::Benchmark(kind) => generate(kind, args.elements.unwrap_or_default()),

@@ -19,8 +19,9 @@ mod plot;
 use clap::{Parser, Subcommand};
 use polyspline::elastic::{ElasticParams, ElasticPreconditioner};
 use polyspline::io::read_raw;
-use polyspline::mesh::features::{FeatureOptions, FeatureParams};
-use polyspline::sample::HighOrderMesh;
+use polyspline::mesh::HighOrderMesh;
+use polyspline::mesh::features::FeatureParams;
+use polyspline::pipeline::FeatureOptions;
 use polyspline::solve::CgParams;
 use std::path::{Path, PathBuf};
 

@@ -4,8 +4,8 @@ use super::{FeatureArgs, read_high_order};
 use polyspline::io::output::{check_outputs, write_atomically};
 use polyspline::io::read_mesh;
 use polyspline::mesh::{MeshOptions, Topology};
-use polyspline::params::{check_plot_labels, check_plot_width, parse_window};
 use polyspline::plot::{Layer, render_svg_window};
+use polyspline::plot::{check_plot_labels, check_plot_width, parse_window};
 use std::path::{Path, PathBuf};
 
 #[derive(clap::Args)]

@@ -383,7 +383,7 @@ fn run_share(
     laps.lap("topology");
     let mut msj = [mesh.min_scaled_jacobian().map_or(f64::INFINITY, |m| m.0)];
     comm.min_f64(&mut msj);
-    let executor = crate::executor::executor(&options.backend);
+    let executor = crate::exec::executor(&options.backend);
     let job = Job {
         input,
         options,

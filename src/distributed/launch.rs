@@ -84,7 +84,7 @@ pub fn curve(
     {
         eprintln!(
             "polyspline: error: {}",
-            crate::io::raw::one_line(&e.to_string(), MAX_ERROR_CHARS)
+            crate::mesh::raw::one_line(&e.to_string(), MAX_ERROR_CHARS)
         );
     }
     // Every rank is here (an error is agreed or alike on every rank): the line is out before

@@ -8,7 +8,7 @@
 //! tags) and its nodes (tags, coordinates) (`read_part`). [`super::read_parts`] distributes
 //! the parts over the ranks.
 
-use crate::io::raw::{Location, ParseError};
+use crate::mesh::raw::{Location, ParseError};
 use std::collections::{BTreeMap, HashSet};
 use std::path::{Path, PathBuf};
 

@@ -21,7 +21,7 @@
 //! the file restricted to these elements: the same element tags (the entity's first physical
 //! tag), the same facet tags and group names, the same orientation fix per element.
 
-use crate::io::raw::{CellKind, Location, ParseError, RawBlock, RawMesh};
+use crate::mesh::raw::{CellKind, Location, ParseError, RawBlock, RawMesh};
 use crate::mesh::{LinearMesh, MeshOptions};
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::fs::File;

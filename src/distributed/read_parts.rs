@@ -32,7 +32,7 @@ pub use super::part_file::is_partitioned;
 use super::part_file::{part_names, read_part};
 use super::partition::{Grid, sort_value, thresholds};
 use super::read::{Elements, LocalMesh};
-use crate::io::raw::{CellKind, Location, ParseError, RawBlock, RawMesh};
+use crate::mesh::raw::{CellKind, Location, ParseError, RawBlock, RawMesh};
 use crate::mesh::{LinearMesh, MeshOptions};
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::path::{Path, PathBuf};

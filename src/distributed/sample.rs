@@ -24,10 +24,11 @@
 use super::comm::Comm;
 use super::read::LocalMesh;
 use crate::math::BezierElements;
+use crate::mesh::HighOrderMesh;
 use crate::mesh::Topology;
 use crate::mesh::features::Features;
-use crate::sample::ordering::{Lattice, lattice_point};
-use crate::sample::{HighOrderMesh, Numbering, eval_net};
+use crate::mesh::high_order::{Lattice, lattice_point};
+use crate::sample::{Numbering, eval_net};
 
 /// One rank's share of the output mesh, in global node tags.
 pub struct RankOutput {

@@ -30,8 +30,8 @@
 use super::comm::Comm;
 use super::partition::{Grid, sort_value, thresholds};
 use super::read::{Elements, LocalMesh, MshFile};
-use crate::io::raw::{Location, ParseError};
 use crate::mesh::MeshOptions;
+use crate::mesh::raw::{Location, ParseError};
 use std::collections::{HashMap, HashSet};
 use std::path::Path;
 

@@ -25,8 +25,8 @@
 use super::comm::Comm;
 use super::sample::RankOutput;
 use crate::io::gmsh_write::{PlannedGroup, group_plan, write_format_and_names};
+use crate::io::ordering::{gmsh_hex, gmsh_line, gmsh_quad, gmsh_type, to_indices};
 use crate::io::output::{PendingFile, WriteBin, WriteError};
-use crate::sample::ordering::{gmsh_hex, gmsh_line, gmsh_quad, gmsh_type, to_indices};
 use std::collections::{BTreeMap, BTreeSet};
 use std::fs::File;
 use std::io::{self, BufWriter, Write};

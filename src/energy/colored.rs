@@ -54,6 +54,38 @@ pub fn color_control_points(n: usize, element_ids: &[&[u32]]) -> Vec<u32> {
     color
 }
 
+/// What the coloured sweeps need of an executor, as the searches need a
+/// [`Certifier`](crate::validity::Certifier): the value, gradient and Hessian of each local
+/// problem at its current point, or `None` where the caller computes them itself inside its
+/// Newton loop ([`CpuEnergyKernel`]). The executors implement it (the GPU with its
+/// `local_newton` kernel), so the energy knows nothing of devices.
+pub trait EnergyKernel {
+    /// The derivatives of `problems` (of dimension `dim`), in their order.
+    fn local_derivatives(
+        &self,
+        dim: usize,
+        problems: &[LocalProblem],
+    ) -> Result<Option<Vec<LocalDerivatives>>, KernelError>;
+}
+
+/// A device failure under an [`EnergyKernel`], in the device's words.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct KernelError(pub String);
+
+/// The CPU reference: the sweeps compute every derivative themselves.
+pub struct CpuEnergyKernel;
+
+impl EnergyKernel for CpuEnergyKernel {
+    fn local_derivatives(
+        &self,
+        _dim: usize,
+        _problems: &[LocalProblem],
+    ) -> Result<Option<Vec<LocalDerivatives>>, KernelError> {
+        Ok(None)
+    }
+}
+
 /// Halvings of a local Newton step (2⁻¹² of it is below any useful move).
 const LOCAL_BACKTRACKS: usize = 12;
 
@@ -281,16 +313,16 @@ pub fn local_problems(energy: &Energy, x: &[[f64; 3]], which: &[usize]) -> Vec<L
 }
 
 /// Minimise by coloured sweeps (see the module docs).
-/// Each colour's first Newton step takes its derivatives from `executor` where it computes
+/// Each colour's first Newton step takes its derivatives from `kernel` where it computes
 /// them (the GPU's `local_newton` kernel; the line search and certificate stay on the CPU).
 pub(crate) fn minimize(
     energy: &Energy,
     validity: &Validity,
     start: &[[f64; 3]],
     params: &EnergyParams,
-    executor: &dyn crate::executor::Executor,
+    kernel: &dyn EnergyKernel,
     observe: &mut dyn FnMut(&[[f64; 3]]),
-) -> Result<(Vec<[f64; 3]>, EnergyInfo), crate::executor::ExecutorError> {
+) -> Result<(Vec<[f64; 3]>, EnergyInfo), KernelError> {
     let n = start.len();
     let dim = energy.dim;
     let nb = energy.nb;
@@ -320,7 +352,7 @@ pub(crate) fn minimize(
                 .par_iter()
                 .map(|&i| locals.problem(energy, &x, &nets, i as usize))
                 .collect();
-            let first = executor.local_derivatives(dim, &problems)?;
+            let first = kernel.local_derivatives(dim, &problems)?;
             let moves: Vec<(u32, [f64; 3], usize, usize)> = cps
                 .par_iter()
                 .zip(&problems)

@@ -51,6 +51,7 @@ mod lbfgs;
 mod params;
 
 use crate::math::BezierNet;
+pub use colored::{CpuEnergyKernel, EnergyKernel, KernelError};
 pub use params::{EnergyError, EnergyInfo, EnergyParams, EnergyScale, EnergySolver, EnergyStop};
 
 use crate::fit::{FitParams, FitSpace, NormalMatrix};
@@ -532,19 +533,19 @@ pub fn minimize(
         validity,
         start,
         params,
-        &crate::executor::CpuExecutor,
+        &colored::CpuEnergyKernel,
         observe,
     )
 }
 
-/// [`minimize`] on `executor`: the coloured solver takes its local derivatives from it where
+/// [`minimize`] on `kernel` (an executor): the coloured solver takes its local derivatives from it where
 /// it computes them (the GPU's `local_newton` kernel).
 pub fn minimize_on(
     energy: &Energy,
     validity: &Validity,
     start: &[[f64; 3]],
     params: &EnergyParams,
-    executor: &dyn crate::executor::Executor,
+    kernel: &dyn EnergyKernel,
     observe: &mut dyn FnMut(&[[f64; 3]]),
 ) -> Result<(Vec<[f64; 3]>, EnergyInfo), EnergyError> {
     let t = Instant::now();
@@ -560,7 +561,7 @@ pub fn minimize_on(
     let (c, mut info) = match params.solver {
         EnergySolver::Lbfgs => lbfgs::lbfgs(energy, validity, start, params, observe),
         EnergySolver::Colored => {
-            colored::minimize(energy, validity, start, params, executor, observe)
+            colored::minimize(energy, validity, start, params, kernel, observe)
                 .map_err(|e| EnergyError::Gpu(e.to_string()))?
         }
     };

@@ -1,5 +1,6 @@
 //! Parameters, outcome and errors of the energy minimisation.
 
+use crate::params::{ParamError, in_range};
 /// Which minimiser runs (`--energy-solver`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
 #[serde(rename_all = "snake_case")]
@@ -60,6 +61,16 @@ impl Default for EnergyParams {
             max_backtracks: 30,
             local_iterations: 2,
         }
+    }
+}
+
+impl EnergyParams {
+    /// Weight and tolerances in their ranges.
+    pub fn check(&self) -> Result<(), ParamError> {
+        in_range("--energy-weight", self.weight, 0.0, 1e12)?;
+        in_range("--energy-tol", self.rel_tol, 0.0, 1.0)?;
+        in_range("--energy-sweep-tol", self.sweep_tol, 0.0, 1.0)?;
+        in_range("energy gradient tolerance", self.grad_tol, 0.0, 1.0)
     }
 }
 

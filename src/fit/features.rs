@@ -22,8 +22,8 @@ use super::smooth::{
     refine_patch_model, two_ring_from,
 };
 use crate::math::linalg::DVec3;
+use crate::math::reference::HEX_VERTEX_PARAMS;
 use crate::mesh::features::{Features, RIM_Q2_MIN_ASPECT};
-use crate::mesh::topology::HEX_VERTEX_PARAMS;
 use crate::mesh::{LinearMesh, Topology};
 use crate::spline::{ControlPoint, SplineSpace};
 use std::cmp::Reverse;

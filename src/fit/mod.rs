@@ -32,6 +32,7 @@ pub mod partial;
 mod rhs;
 pub mod smooth;
 
+use crate::params::{ParamError, above, in_range};
 pub use normal_matrix::{ElementBlocks, MatrixFree, NormalMatrix, mask_level, size_levels};
 use normal_matrix::{control_point_scales, sample_weight};
 pub use smooth::{SmoothParams, SmoothTargets};
@@ -280,6 +281,41 @@ impl Default for FitParams {
     }
 }
 
+/// Largest fit weight; weights are relative, so this is no practical limit, but 1e308 would
+/// overflow the assembled matrix (weights multiply squared residuals).
+pub const MAX_WEIGHT: f64 = 1e12;
+
+/// `--kink-angle`: degrees in (0, 360] (180 and above turn the kink test off). The command line
+/// checks it with every fit, though only the smooth targets use it.
+pub fn check_kink_angle(deg: f64) -> Result<(), ParamError> {
+    above("--kink-angle", deg, 0.0, 360.0)
+}
+
+impl FitParams {
+    /// Weights (bounded by [`MAX_WEIGHT`]), CG and smooth-target parameters.
+    pub fn check(&self) -> Result<(), ParamError> {
+        let w = &self.weights;
+        for (option, v) in [
+            ("--w-corner", w.corner),
+            ("--w-boundary-corner", w.boundary_corner),
+            ("--w-midpoint", w.midpoint),
+            ("--w-boundary-midpoint", w.boundary_midpoint),
+            ("--w-frame-corner", w.frame_corner),
+            ("--w-frame-midpoint", w.frame_midpoint),
+            ("--w-feature", w.feature),
+        ] {
+            in_range(option, v, 0.0, MAX_WEIGHT)?;
+        }
+        self.cg.check()?;
+        if let FitTargets::Smooth(s) = &self.targets {
+            check_kink_angle(s.kink_angle_deg)?;
+            in_range("smooth feature angle", s.feature_angle_deg, 0.0, 180.0)?;
+            in_range("smooth decay", s.decay, 0.0, 1e6)?;
+        }
+        Ok(())
+    }
+}
+
 /// What the fit did.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct FitInfo {
@@ -370,14 +406,14 @@ pub fn normal_equations_with(
 /// written in Bernstein form. Every target depends only on its entity (its vertices and their
 /// models), so neighbours agree on shared points. It is the straight elevation plus the
 /// boundary's curvature carried into the layers next to it: the middle state of the certified
-/// blend (`crate::validity::blend`).
+/// blend of the validity stage.
 pub struct TargetMap<'a> {
     pub mesh: &'a LinearMesh,
     pub topo: &'a Topology,
     pub smooth: Option<&'a SmoothTargets>,
 }
 
-impl crate::sample::BezierElements for TargetMap<'_> {
+impl crate::math::BezierElements for TargetMap<'_> {
     fn dim(&self) -> usize {
         self.mesh.dim
     }
@@ -429,8 +465,8 @@ pub fn fit(
 }
 
 /// [`fit`] with the normal equations solved by `solve(matrix, rhs, delta, cg)` (the
-/// unknowns are displacements from the initial control points, starting at 0), e.g. the GPU
-/// solver `crate::gpu::cg::pcg`.
+/// unknowns are displacements from the initial control points, starting at 0), e.g. an
+/// executor's `pcg` (the GPU's).
 pub fn fit_with(
     space: &dyn FitSpace,
     mesh: &LinearMesh,

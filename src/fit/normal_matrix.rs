@@ -230,7 +230,7 @@ pub(super) fn shortest_edge(mesh: &LinearMesh, e: usize) -> f64 {
     let edges: &[[usize; 2]] = if mesh.dim == 2 {
         &[[0, 1], [1, 2], [2, 3], [3, 0]]
     } else {
-        &crate::mesh::topology::HEX_EDGES
+        &crate::math::reference::HEX_EDGES
     };
     let x = mesh.element_coords(e).map(DVec3::from);
     edges

@@ -1,5 +1,5 @@
 //! The fit's normal equations summed over a subset of the elements: one rank's share of
-//! K C = F in the distributed fit (`crate::distributed`).
+//! K C = F in the distributed fit (the job floor's `distributed` runs it on every rank).
 //!
 //! Input: the spline space, the mesh and its topology, the fit's parameters and smooth
 //! targets, and the elements of the share. Output: K_s = Σ_{e ∈ share} E_eᵀ G_e E_e and

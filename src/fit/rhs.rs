@@ -21,7 +21,7 @@
 use super::{FitSpace, FitWeights, SmoothTargets, sample_weight};
 use crate::math::Lattice;
 use crate::math::linalg::DVec3;
-use crate::mesh::topology::HEX_VERTEX_PARAMS;
+use crate::math::reference::HEX_VERTEX_PARAMS;
 use crate::mesh::{LinearMesh, Topology};
 use rayon::prelude::*;
 

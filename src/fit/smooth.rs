@@ -80,8 +80,9 @@ mod one_ring;
 use super::features::{BoundaryEntity, FeatureModels};
 use crate::math::Lattice;
 use crate::math::linalg::DVec3;
+use crate::math::reference::{HEX_EDGES, HEX_VERTEX_PARAMS};
 use crate::mesh::features::Features;
-use crate::mesh::topology::{HEX_EDGES, HEX_VERTEX_PARAMS, NONE};
+use crate::mesh::topology::NONE;
 use crate::mesh::{LinearMesh, Topology};
 use higher::two_ring;
 pub(super) use higher::{

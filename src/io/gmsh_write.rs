@@ -3,7 +3,7 @@
 //! Input: a high-order mesh (orders 1–10 for quads, 1–9 for hexes). Output: elements as
 //! Lagrange quads/hexes of the mesh's order (types 3/10/36/… and 5/12/92/…), the boundary facets
 //! as Lagrange lines/quads of the same order, nodes in Gmsh's order
-//! ([`crate::sample::ordering`]). Invariants, so that solvers read the file unchanged (PyFR's
+//! ([`crate::io::ordering`]). Invariants, so that solvers read the file unchanged (PyFR's
 //! importer is the strictest): every element and facet is in exactly one physical group, every
 //! group is named, physical ids are unique over all dimensions, and the volume group is named
 //! `fluid` (or the caller's name) when the input names no region. Boundary tags become groups
@@ -12,8 +12,8 @@
 //! entity per physical group in `$Entities`, as HOPR and other solvers' readers require.
 
 use super::output::WriteBin;
-use crate::sample::HighOrderMesh;
-use crate::sample::ordering::{gmsh_hex, gmsh_line, gmsh_quad, gmsh_type, to_indices};
+use crate::io::ordering::{gmsh_hex, gmsh_line, gmsh_quad, gmsh_type, to_indices};
+use crate::mesh::HighOrderMesh;
 use std::collections::BTreeMap;
 use std::io::{self, Write};
 

@@ -9,7 +9,8 @@
 use crate::io::gmsh_write::{DEFAULT_VOLUME_NAME, MshVersion, write_msh_named};
 use crate::io::output::{PendingFile, WriteError, write_atomically};
 use crate::io::vtu_write::{VtuCells, VtuEncoding, write_vtu_cells};
-use crate::sample::HighOrderMesh;
+use crate::mesh::HighOrderMesh;
+use crate::params::ParamError;
 use std::path::{Path, PathBuf};
 
 /// Output file options.
@@ -33,6 +34,21 @@ impl Default for OutputOptions {
             volume_name: DEFAULT_VOLUME_NAME.into(),
             vtu_boundary: None,
         }
+    }
+}
+
+impl OutputOptions {
+    /// `--volume-name`: non-empty, without quotes or line breaks (it is written into the file).
+    pub fn check(&self) -> Result<(), ParamError> {
+        let name = &self.volume_name;
+        if name.is_empty() || name.contains(['"', '\n', '\r']) {
+            return Err(ParamError::new(
+                "--volume-name",
+                format!("{name:?}"),
+                "must be non-empty, without quotes or line breaks",
+            ));
+        }
+        Ok(())
     }
 }
 

@@ -19,8 +19,8 @@
 //! is unknown and skipping it by guesswork could silently mis-read the rest of the file.
 //! Binary `.meshb` files are not read; a file that is not text gives an error saying so.
 
-use super::raw::{CellKind, Location, ParseError, RawBlock, RawMesh};
 use super::text::TextCursor;
+use crate::mesh::raw::{CellKind, Location, ParseError, RawBlock, RawMesh};
 
 /// Kinds of data in a record, for sections that are skipped.
 #[derive(Clone, Copy)]

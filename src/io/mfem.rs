@@ -25,8 +25,8 @@
 //! `vertex_parents`), NURBS and inline meshes, and one rank's piece of a parallel mesh.
 //! `#` starts a comment. `mfem_mesh_end` ends the mesh.
 
-use super::raw::{CellKind, Location, ParseError, RawBlock, RawMesh};
 use super::text::{TextCursor, parse_f64};
+use crate::mesh::raw::{CellKind, Location, ParseError, RawBlock, RawMesh};
 
 /// Geometry code -> (kind, vertex count).
 fn geometry(code: i64) -> Option<(CellKind, usize)> {

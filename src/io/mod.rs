@@ -18,14 +18,15 @@
 
 pub mod abaqus;
 pub mod exodus;
+mod from_raw;
 pub mod gmsh;
 pub mod gmsh_write;
 pub mod high_order;
 pub mod input;
 pub mod medit;
 pub mod mfem;
+pub mod ordering;
 pub mod output;
-pub mod raw;
 pub mod su2;
 pub mod text;
 pub mod vtk;
@@ -35,7 +36,7 @@ pub mod vtu_write;
 /// Helpers shared by the readers' unit tests.
 #[cfg(test)]
 pub(crate) mod test_util {
-    use super::raw::{CellKind, RawBlock, RawMesh};
+    use crate::mesh::raw::{CellKind, RawBlock, RawMesh};
 
     /// The bytes of the repository file `path` (relative to its root).
     pub fn real(path: &str) -> Vec<u8> {
@@ -53,8 +54,9 @@ pub(crate) mod test_util {
     }
 }
 
+use crate::mesh::features::{FeatureEdit, FeatureError, parse_edits};
+pub use crate::mesh::raw::{CellKind, Location, NodeConvention, ParseError, RawBlock, RawMesh};
 use crate::mesh::{LinearMesh, MeshOptions};
-pub use raw::{CellKind, Location, NodeConvention, ParseError, RawBlock, RawMesh};
 use std::path::{Path, PathBuf};
 
 /// A mesh file that could not be read or is not a mesh polyspline can curve.
@@ -180,6 +182,15 @@ pub fn read_raw(path: &Path) -> Result<RawMesh, ReadError> {
     })
 }
 
+/// Read a feature edits file (`--feature-edits`, [`parse_edits`]); the errors name the file.
+pub fn read_feature_edits(path: &Path) -> Result<Vec<FeatureEdit>, FeatureError> {
+    let text = input::read_regular_text(path).map_err(|source| FeatureError::Io {
+        path: path.to_owned(),
+        source,
+    })?;
+    parse_edits(&text, path)
+}
+
 /// Read a mesh file into a checked, orientation-normalised [`LinearMesh`].
 pub fn read_mesh(path: &Path, options: &MeshOptions) -> Result<LinearMesh, ReadError> {
     let raw = read_raw(path)?;
@@ -187,4 +198,14 @@ pub fn read_mesh(path: &Path, options: &MeshOptions) -> Result<LinearMesh, ReadE
         path: path.to_owned(),
         source,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    /// A missing edits file is an error naming the file.
+    #[test]
+    fn missing_feature_edits_file_is_named() {
+        let missing = super::read_feature_edits("/nonexistent/edits.txt".as_ref()).unwrap_err();
+        assert!(missing.to_string().starts_with("/nonexistent/edits.txt: "));
+    }
 }

@@ -16,8 +16,8 @@
 //! Multi-zone files (`NZONE=` greater than 1) are rejected with a clear error. Free-form
 //! deformation boxes (`FFD_NBOX=` and the rest of the file) are not mesh data and are skipped.
 
-use super::raw::{CellKind, Location, ParseError, RawBlock, RawMesh};
 use super::text::{TextCursor, parse_f64};
+use crate::mesh::raw::{CellKind, Location, ParseError, RawBlock, RawMesh};
 
 /// VTK cell types SU2 uses: (kind, node count).
 fn su2_type(t: u32) -> Option<(CellKind, usize)> {

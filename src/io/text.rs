@@ -4,7 +4,7 @@
 //! returns a [`ParseError`] at the line of the offending token, naming what was expected, so a
 //! user sees e.g. `line 42: expected node index, found "1.5e"`.
 
-use super::raw::{Location, ParseError};
+use crate::mesh::raw::{Location, ParseError};
 use std::str::FromStr;
 
 pub struct TextCursor<'a> {

@@ -4,7 +4,7 @@
 //! `.vtu`: MFEM refuses a file with cells of two dimensions) or the boundary facets only (a
 //! companion file, `--vtu-boundary`). Elements of order ≥ 2 are Lagrange quadrilaterals (70) or
 //! hexahedra (72) and boundary facets Lagrange curves (68) or quadrilaterals (70), nodes in
-//! VTK ≥ 9 order ([`crate::sample::ordering`]); order 1 uses the linear types 3/9/12. Both files
+//! VTK ≥ 9 order ([`crate::io::ordering`]); order 1 uses the linear types 3/9/12. Both files
 //! hold all the nodes, so node ids agree between them.
 //!
 //! File version: VTK ≥ 9 renumbers the edges of Lagrange hexahedra in files older than 2.1, so
@@ -16,8 +16,8 @@
 //! Cell data: `tag` (region tag of elements, boundary tag of facets, 0 = none). Encodings:
 //! ASCII, inline base64 (`binary`) with UInt64 headers, or raw appended data.
 
-use crate::sample::HighOrderMesh;
-use crate::sample::ordering::{gmsh_line, to_indices, vtk_hex, vtk_quad};
+use crate::io::ordering::{gmsh_line, to_indices, vtk_hex, vtk_quad};
+use crate::mesh::HighOrderMesh;
 use base64::Engine;
 use std::io::{self, Write};
 

@@ -11,7 +11,7 @@
 //! sums is part of the output: sampling, certification and the energy all depend on these
 //! exact f64 results, so the loops below are not to be reordered.
 
-use crate::mesh::topology::HEX_VERTEX_PARAMS;
+use super::reference::HEX_VERTEX_PARAMS;
 
 /// The Bernstein control points of a quadratic element (see the module docs).
 pub type BezierNet = [[f64; 3]; 27];

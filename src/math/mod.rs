@@ -1,6 +1,5 @@
 //! The foundation layer: polynomial bases, quadrature and small linear algebra that every
-//! other module may use, and that uses nothing of the pipeline (only the mesh's corner
-//! numbering, [`crate::mesh::topology::HEX_VERTEX_PARAMS`], which fixes what "corner c" means).
+//! other module may use, and that uses nothing above it.
 //!
 //! * [`bernstein`]: quadratic Bernstein polynomials, the [`BezierNet`] of an element, the
 //!   [`Lattice`] of its values at {0, ½, 1}^d, and the [`BezierElements`] trait through which
@@ -8,6 +7,7 @@
 //!   their element maps to sampling and certification.
 //! * [`lagrange`]: the equispaced Lagrange basis of order-p output elements.
 //! * [`quadrature`]: Gauss–Legendre rules on \[0, 1\].
+//! * [`reference`](mod@reference): the reference quad and hex, their corners, local sides and local edges.
 //! * [`linalg`]: 3-vectors and 3×3 matrices on glam (`DVec3`, `DMat3`), with the formulas
 //!   whose rounding the outputs depend on written out where glam's differ.
 //!
@@ -19,5 +19,6 @@ pub mod bernstein;
 pub mod lagrange;
 pub mod linalg;
 pub mod quadrature;
+pub mod reference;
 
 pub use bernstein::{BezierElements, BezierNet, Lattice};

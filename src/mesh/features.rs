@@ -1,7 +1,7 @@
 //! Sharp features of the boundary: feature edges, feature corners and smooth patches.
 //!
 //! Input: a [`LinearMesh`], its [`Topology`], [`FeatureParams`] and optional user edits
-//! ([`read_edits`]). Output: [`Features`].
+//! ([`parse_edits`]). Output: [`Features`].
 //!
 //! * **3D.** A boundary edge is a *feature edge* when the normals of its two boundary faces
 //!   differ by more than `angle_deg` (dihedral angle), when the two faces carry different
@@ -32,6 +32,7 @@ mod planes;
 use crate::math::linalg::{DVec3, unit};
 use crate::mesh::topology::NONE;
 use crate::mesh::{LinearMesh, Topology};
+use crate::params::{ParamError, in_range};
 use angles::{corners_2d, creases_3d};
 use planes::{planar_patches, straight_chains};
 use std::path::{Path, PathBuf};
@@ -65,25 +66,10 @@ impl FeatureParams {
     }
 }
 
-/// Feature detection as the CLI asks for it: parameters and an optional edits file.
-#[derive(Clone, Debug, Default, PartialEq)]
-pub struct FeatureOptions {
-    pub params: FeatureParams,
-    /// `--feature-edits FILE` (see [`read_edits`]).
-    pub edits: Option<PathBuf>,
-    /// Detect and measure the features (reports), but let neither the spline space nor the fit
-    /// use them: the smooth treatment, for comparisons.
-    pub ignore: bool,
-}
-
-impl FeatureOptions {
-    /// Read the edits file, if any, and detect the features of `mesh`.
-    pub fn detect(&self, mesh: &LinearMesh, topo: &Topology) -> Result<Features, FeatureError> {
-        crate::params::check_features(&self.params)?;
-        match &self.edits {
-            None => Ok(Features::detect_without_edits(mesh, topo, &self.params)),
-            Some(path) => Features::detect(mesh, topo, &self.params, &read_edits(path)?, path),
-        }
+impl FeatureParams {
+    /// `--feature-angle`: degrees in [0, 180].
+    pub fn check(&self) -> Result<(), ParamError> {
+        in_range("--feature-angle", self.angle_deg, 0.0, 180.0)
     }
 }
 
@@ -130,14 +116,11 @@ pub enum FeatureError {
     Params(#[from] crate::params::ParamError),
 }
 
-/// Read a feature edits file: one edit per line, `add i j` / `remove i j` (3D) or `add i` /
-/// `remove i` (2D); `#` starts a comment, blank lines are skipped. The ids are checked
-/// against the mesh by [`Features::detect`].
-pub fn read_edits(path: &Path) -> Result<Vec<FeatureEdit>, FeatureError> {
-    let text = crate::io::input::read_regular_text(path).map_err(|source| FeatureError::Io {
-        path: path.to_owned(),
-        source,
-    })?;
+/// The edits of a feature edits file's `text` (read from `path`, which the errors name): one
+/// edit per line, `add i j` / `remove i j` (3D) or `add i` / `remove i` (2D); `#` starts a
+/// comment, blank lines are skipped. The ids are checked against the mesh by
+/// [`Features::detect`].
+pub fn parse_edits(text: &str, path: &Path) -> Result<Vec<FeatureEdit>, FeatureError> {
     let mut edits = Vec::new();
     for (i, raw) in text.lines().enumerate() {
         let line = i + 1;
@@ -310,7 +293,7 @@ impl Features {
 
     /// (feature vertex deviation, planarity) of the sampled mesh `ho` of `mesh`, relative to
     /// the bounding-box diagonal (see [`FeatureReport`]).
-    pub fn deviations(&self, mesh: &LinearMesh, ho: &crate::sample::HighOrderMesh) -> (f64, f64) {
+    pub fn deviations(&self, mesh: &LinearMesh, ho: &crate::mesh::HighOrderMesh) -> (f64, f64) {
         let (lo, hi) = mesh.bounding_box();
         let diag = (DVec3::from(hi) - DVec3::from(lo))
             .length()
@@ -613,14 +596,14 @@ fn patches(topo: &Topology, vertex_mask: &[bool], edge_mask: &[bool]) -> (Vec<u3
 
 /// Topology edge ids of local side `side` of hex `e`.
 pub fn face_edges(topo: &Topology, e: usize, side: usize) -> Vec<u32> {
-    use crate::mesh::topology::HEX_EDGES;
+    use crate::math::reference::HEX_EDGES;
     let k = side / 2;
     let s = (side % 2) as u8;
     (0..12)
         .filter(|&le| {
             let [a, b] = HEX_EDGES[le];
-            crate::mesh::topology::HEX_VERTEX_PARAMS[a][k] == s
-                && crate::mesh::topology::HEX_VERTEX_PARAMS[b][k] == s
+            crate::math::reference::HEX_VERTEX_PARAMS[a][k] == s
+                && crate::math::reference::HEX_VERTEX_PARAMS[b][k] == s
         })
         .map(|le| topo.element_edges[e * 12 + le])
         .collect()
@@ -770,25 +753,6 @@ mod tests {
         assert_eq!(f.n_patches, 5);
     }
 
-    /// Write `text` to a file of its own (removed on drop).
-    struct Temp(PathBuf);
-    impl Drop for Temp {
-        fn drop(&mut self) {
-            let _ = std::fs::remove_file(&self.0);
-        }
-    }
-    fn write(text: &str) -> (Temp, PathBuf) {
-        use std::sync::atomic::{AtomicUsize, Ordering};
-        static N: AtomicUsize = AtomicUsize::new(0);
-        let path = std::env::temp_dir().join(format!(
-            "polyspline-edits-{}-{}.txt",
-            std::process::id(),
-            N.fetch_add(1, Ordering::Relaxed)
-        ));
-        std::fs::write(&path, text).unwrap();
-        (Temp(path.clone()), path)
-    }
-
     /// Edits add and remove edges; bad lines are refused with the file and line named.
     #[test]
     fn edits_file_adds_removes_and_reports_bad_lines() {
@@ -797,9 +761,10 @@ mod tests {
         let topo = Topology::build(&mesh);
         let p = FeatureParams::default();
         // Vertices 0–1 lie on a cube edge; 1–2 too; 5–6 is an edge of the bottom face's inside.
-        let (_d, path) = write("# edits\nremove 0 1\n\nadd 5 6  # a line on the bottom face\n");
-        let edits = read_edits(&path).unwrap();
-        let f = Features::detect(&mesh, &topo, &p, &edits, &path).unwrap();
+        let path = Path::new("edits.txt");
+        let text = "# edits\nremove 0 1\n\nadd 5 6  # a line on the bottom face\n";
+        let edits = parse_edits(text, path).unwrap();
+        let f = Features::detect(&mesh, &topo, &p, &edits, path).unwrap();
         let base = Features::detect_without_edits(&mesh, &topo, &p);
         assert_eq!(f.edges.len(), base.edges.len());
         let id = |a: u32, b: u32| topo.edges.binary_search(&[a, b]).unwrap();
@@ -817,9 +782,8 @@ mod tests {
             ("remove 0\n", ":1: a 3D mesh's features are edges"),
             ("add 0 1000\n", ":1: vertices 0 and 1000"),
         ] {
-            let (_d, path) = write(text);
-            let err = read_edits(&path)
-                .and_then(|e| Features::detect(&mesh, &topo, &p, &e, &path))
+            let err = parse_edits(text, path)
+                .and_then(|e| Features::detect(&mesh, &topo, &p, &e, path))
                 .unwrap_err()
                 .to_string();
             assert!(
@@ -827,8 +791,6 @@ mod tests {
                 "{text:?}: {err}"
             );
         }
-        let missing = read_edits(Path::new("/nonexistent/edits.txt")).unwrap_err();
-        assert!(missing.to_string().starts_with("/nonexistent/edits.txt: "));
     }
     /// On an O-grid cylinder the cells with a face on a rim are marked (their rim is a curved
     /// feature curve), and no others; a box's straight feature edges mark nothing.

@@ -6,6 +6,7 @@
 //! their whole outer boundary 1.
 
 use super::{LinearMesh, MeshOptions};
+use crate::params::ParamError;
 
 pub mod boundary_layer;
 pub use boundary_layer::{
@@ -414,6 +415,37 @@ impl clap::ValueEnum for Shape {
     }
 }
 
+/// Most elements the `generate` command makes (memory grows linearly, see docs/reliability.md).
+pub const MAX_GENERATED_ELEMENTS: usize = 10_000_000;
+
+impl Shape {
+    /// `generate SHAPE [--elements N]`: the element count belongs to the benchmark shapes (the
+    /// boundary-layer grids take `--around` and `--across`, checked by their generators).
+    pub fn check(self, elements: Option<usize>) -> Result<(), ParamError> {
+        match (self, elements) {
+            (Shape::Benchmark(_), Some(n)) => check_generated_elements(n),
+            (Shape::Ogrid | Shape::Cgrid, Some(n)) => Err(ParamError::new(
+                "--elements",
+                n,
+                "applies to disc, cylinder and torus; ogrid and cgrid take --around and --across",
+            )),
+            (_, None) => Ok(()),
+        }
+    }
+}
+
+/// `generate --elements N`: at least 1, at most [`MAX_GENERATED_ELEMENTS`].
+pub fn check_generated_elements(n: usize) -> Result<(), ParamError> {
+    if n == 0 || n > MAX_GENERATED_ELEMENTS {
+        return Err(ParamError::new(
+            "--elements",
+            n,
+            format!("must be in 1..={MAX_GENERATED_ELEMENTS}"),
+        ));
+    }
+    Ok(())
+}
+
 /// A mesh of `kind` with about `elements` elements (at least a few dozen).
 pub fn generate(kind: Kind, elements: usize) -> LinearMesh {
     // Disc: 3n² quads with m = n/2 ... n² + 4·n·m = 3n² for m = n/2.
@@ -436,5 +468,19 @@ pub fn generate(kind: Kind, elements: usize) -> LinearMesh {
             let n = ((elements as f64 / 9.0).cbrt().round() as usize).max(2);
             revolve(&butterfly_disc(n, (n / 2).max(1)), 3.0, 3 * n)
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn element_counts_are_checked_per_shape() {
+        assert!(check_generated_elements(0).is_err());
+        assert!(check_generated_elements(MAX_GENERATED_ELEMENTS + 1).is_err());
+        assert!(Shape::Benchmark(Kind::Disc).check(Some(100)).is_ok());
+        assert!(Shape::Ogrid.check(Some(100)).is_err());
+        assert!(Shape::Ogrid.check(None).is_ok());
     }
 }

@@ -12,8 +12,8 @@
 //! * lower-dimensional cells of the file are kept only as tagged facets (lines in 2D, quads in
 //!   3D) for boundary conditions; the boundary itself comes from [`crate::mesh::Topology`].
 
-use crate::io::raw::{CellKind, Location, ParseError, RawBlock, RawMesh};
 use crate::math::linalg::DVec3;
+use crate::mesh::raw::{CellKind, Location, ParseError, RawBlock, RawMesh};
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 

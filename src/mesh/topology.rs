@@ -3,13 +3,9 @@
 //! Input: a [`LinearMesh`]. Output: a [`Topology`] built by sorting entity keys (O(n log n)
 //! with a parallel sort, linear memory), with these conventions:
 //!
-//! * **Local sides.** Element sides are numbered by parametric direction and end:
-//!   side `2k + s` is the side where coordinate k equals s (quad: x0, x1, y0, y1; hex: x0, x1,
-//!   y0, y1, z0, z1). [`QUAD_SIDES`] / [`HEX_SIDES`] list their vertices, ordered so the side's
-//!   normal points out of the element.
-//! * **Local edges of a hex** (12) are numbered by direction then position: edge `4k + i` runs
-//!   along direction k, from its lower to its upper vertex ([`HEX_EDGES`]). A quad's edges are
-//!   its sides.
+//! * **Local sides and edges** are those of the reference element
+//!   ([`crate::math::reference`]): side `2k + s` is the side where coordinate k equals s, hex
+//!   edge `4k + i` runs along direction k. A quad's edges are its sides.
 //! * **Facets** are the (d−1)-entities: edges in 2D, faces in 3D. `facet_elements[f]` holds
 //!   the one or two elements on it (`NONE` for the outside) and `facet_sides` their local sides.
 //! * The boundary is computed from the topology alone: facets with one element. Boundary tags
@@ -19,53 +15,12 @@
 //!   recorded in [`NonManifold`], not repaired.
 
 use super::LinearMesh;
+use crate::math::reference::{HEX_EDGES, HEX_SIDES, QUAD_SIDES};
 use rayon::prelude::*;
 use std::collections::HashMap;
 
 /// Marks "no element" / "no entity".
 pub const NONE: u32 = u32::MAX;
-
-/// Quad sides in order x0, x1, y0, y1 (vertex pairs, counter-clockwise around the quad).
-pub const QUAD_SIDES: [[usize; 2]; 4] = [[3, 0], [1, 2], [0, 1], [2, 3]];
-
-/// Hex sides in order x0, x1, y0, y1, z0, z1 (vertex cycles with outward normal).
-pub const HEX_SIDES: [[usize; 4]; 6] = [
-    [0, 4, 7, 3],
-    [1, 2, 6, 5],
-    [0, 1, 5, 4],
-    [3, 7, 6, 2],
-    [0, 3, 2, 1],
-    [4, 5, 6, 7],
-];
-
-/// Hex edges: 4 along x, then 4 along y, then 4 along z, each from lower to upper vertex.
-/// Within a direction the edges are ordered by the other two coordinates (lower first).
-pub const HEX_EDGES: [[usize; 2]; 12] = [
-    [0, 1],
-    [3, 2],
-    [4, 5],
-    [7, 6],
-    [0, 3],
-    [1, 2],
-    [4, 7],
-    [5, 6],
-    [0, 4],
-    [1, 5],
-    [3, 7],
-    [2, 6],
-];
-
-/// Reference coordinates of the hex vertices (quad: the first four, z ignored).
-pub const HEX_VERTEX_PARAMS: [[u8; 3]; 8] = [
-    [0, 0, 0],
-    [1, 0, 0],
-    [1, 1, 0],
-    [0, 1, 0],
-    [0, 0, 1],
-    [1, 0, 1],
-    [1, 1, 1],
-    [0, 1, 1],
-];
 
 /// Configurations the curving cannot treat as a manifold mesh.
 #[derive(Clone, Debug, Default, serde::Serialize)]

@@ -34,7 +34,8 @@
 
 use crate::fit::SmoothTargets;
 use crate::math::linalg::DVec3;
-use crate::mesh::topology::{HEX_VERTEX_PARAMS, NONE};
+use crate::math::reference::HEX_VERTEX_PARAMS;
+use crate::mesh::topology::NONE;
 use crate::mesh::{LinearMesh, Topology};
 use crate::spline::SplineSpace;
 use crate::spline::eval::eval_net;

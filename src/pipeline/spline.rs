@@ -428,7 +428,7 @@ fn solve_fit(
     let factors = setup.fit_params.solver.factors(
         job.topo.dim,
         space.control_points.len(),
-        matches!(job.options.backend, crate::gpu::Backend::Cpu),
+        matches!(job.options.backend, crate::exec::gpu::Backend::Cpu),
     );
     let (mut c_star, mut info) = fit_with_targets_from(
         space,

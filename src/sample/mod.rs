@@ -18,17 +18,15 @@
 //! evaluates the nodes it owns (about p^d of its (p+1)^d), so the spline's extraction is
 //! applied once per element rather than once per node.
 
-pub mod ordering;
-
 // The Bézier basis lives in the foundation layer; these re-exports keep the paths that the
 // integration tests use (`polyspline::sample::{eval_net, multilinear, BezierElements}`).
 use crate::math::bernstein::elevated_net;
 pub use crate::math::bernstein::{BezierElements, BezierNet, bernstein2, eval_net, multilinear};
-use crate::mesh::topology::{HEX_EDGES, HEX_VERTEX_PARAMS, QUAD_SIDES};
+use crate::math::reference::{HEX_EDGES, HEX_VERTEX_PARAMS, QUAD_SIDES};
+use crate::mesh::HighOrderMesh;
+use crate::mesh::high_order::{Lattice, lattice_point};
 use crate::mesh::{LinearMesh, Topology};
-use ordering::{Lattice, lattice_index, lattice_point};
 use rayon::prelude::*;
-use std::collections::BTreeMap;
 
 /// Largest output order.
 pub const MAX_ORDER: usize = 10;
@@ -44,89 +42,6 @@ impl BezierElements for LinearMesh {
     /// the half lattice {0, ½, 1}^d.
     fn bezier_net(&self, e: usize) -> BezierNet {
         elevated_net(self.dim, &self.element_coords(e))
-    }
-}
-
-/// A conforming high-order quad or hex mesh.
-#[derive(Clone, Debug, Default)]
-pub struct HighOrderMesh {
-    pub dim: usize,
-    pub order: usize,
-    pub nodes: Vec<[f64; 3]>,
-    /// (order+1)^dim node ids per element, lattice order (i fastest).
-    pub elements: Vec<u32>,
-    /// Region tag per element, or empty.
-    pub element_tags: Vec<i32>,
-    /// (order+1)^(dim−1) node ids per boundary facet in lattice order of the facet's frame,
-    /// oriented with the outward normal (2D: counter-clockwise around the domain).
-    pub boundary: Vec<u32>,
-    /// Tag per boundary facet (0 = untagged).
-    pub boundary_tags: Vec<i32>,
-    pub tag_names: BTreeMap<i32, String>,
-}
-
-impl HighOrderMesh {
-    pub fn nodes_per_element(&self) -> usize {
-        (self.order + 1).pow(self.dim as u32)
-    }
-    pub fn nodes_per_facet(&self) -> usize {
-        (self.order + 1).pow(self.dim as u32 - 1)
-    }
-    pub fn n_elements(&self) -> usize {
-        self.elements.len() / self.nodes_per_element()
-    }
-    pub fn n_boundary(&self) -> usize {
-        self.boundary.len() / self.nodes_per_facet()
-    }
-    pub fn element(&self, e: usize) -> &[u32] {
-        let n = self.nodes_per_element();
-        &self.elements[e * n..(e + 1) * n]
-    }
-
-    /// Split every element of order k into k^d linear elements (and the boundary likewise):
-    /// a refined linear mesh whose nodes lie on the curved geometry.
-    pub fn subdivided(&self) -> HighOrderMesh {
-        let p = self.order;
-        // Each sub-cell keeps the lattice order of an order-1 element (i fastest), like every
-        // element of a HighOrderMesh.
-        let split = |cells: &[u32], dim: usize| -> Vec<u32> {
-            let per = (p + 1).pow(dim as u32);
-            let sub = p.pow(dim as u32);
-            let mut out = Vec::with_capacity(cells.len() / per * sub * (1 << dim));
-            for c in cells.chunks(per) {
-                for s in 0..sub {
-                    let base = lattice_point(p - 1, dim, s);
-                    for corner in 0..1usize << dim {
-                        let l: Lattice = std::array::from_fn(|k| {
-                            if k < dim {
-                                base[k] + (corner >> k & 1)
-                            } else {
-                                0
-                            }
-                        });
-                        out.push(c[lattice_index(p, l)]);
-                    }
-                }
-            }
-            out
-        };
-        let rep = |tags: &[i32], n: usize| -> Vec<i32> {
-            tags.iter()
-                .flat_map(|&t| std::iter::repeat_n(t, n))
-                .collect()
-        };
-        let per_e = p.pow(self.dim as u32);
-        let per_f = p.pow(self.dim as u32 - 1);
-        HighOrderMesh {
-            dim: self.dim,
-            order: 1,
-            nodes: self.nodes.clone(),
-            elements: split(&self.elements, self.dim),
-            element_tags: rep(&self.element_tags, per_e),
-            boundary: split(&self.boundary, self.dim - 1),
-            boundary_tags: rep(&self.boundary_tags, per_f),
-            tag_names: self.tag_names.clone(),
-        }
     }
 }
 
@@ -593,5 +508,3 @@ pub fn sample_with<T: Copy + Default + Send + Sync>(
     };
     (ho, nodes)
 }
-
-mod from_raw;

@@ -9,7 +9,7 @@
 //!
 //! The factorisation is faer's: an approximate minimum degree ordering, then a simplicial
 //! or supernodal L Lᵀ, whichever its flop estimate prefers. It runs on one thread: on the
-//! systems it is chosen for (see [`FitSolver`](crate::fit::FitSolver)) the parallel
+//! systems it is chosen for (by the fit's `FitSolver`) the parallel
 //! triangular solves were 5× slower than the serial ones on two cores, and a fit of a few
 //! thousand control points is factored in a few milliseconds. The cost of the ordering and
 //! the fill grow faster than CG's work (nested-dissection-like fill: about n^1.5 in 2D and

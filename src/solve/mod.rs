@@ -16,12 +16,13 @@
 //! [`pcg_with`] is the generic loop (any operator, any preconditioner).
 //!
 //! [`direct`] solves the same assembled systems by sparse Cholesky instead (the fit's small
-//! systems, [`crate::fit::FitSolver`]), reporting through [`CgInfo`] with 0 iterations.
+//! systems, chosen by the fit's `FitSolver`), reporting through [`CgInfo`] with 0 iterations.
 
 pub mod block_jacobi;
 pub mod blocked;
 pub mod direct;
 
+use crate::params::{ParamError, above, in_range};
 pub use block_jacobi::BlockJacobi;
 pub use blocked::BlockedSystem;
 use rayon::prelude::*;
@@ -58,7 +59,6 @@ impl Default for CgPreconditioner {
         }
     }
 }
-
 /// `--cg-preconditioner jacobi|block-jacobi` (block Jacobi with the default aggregate size).
 impl clap::ValueEnum for CgPreconditioner {
     fn value_variants<'a>() -> &'a [Self] {
@@ -97,6 +97,18 @@ impl Default for CgParams {
             max_iters: 10_000,
             preconditioner: CgPreconditioner::default(),
         }
+    }
+}
+
+impl CgParams {
+    /// Tolerances and iteration limit.
+    pub fn check(&self) -> Result<(), ParamError> {
+        above("--cg-tol", self.rel_tol, 0.0, 1.0)?;
+        in_range("CG absolute tolerance", self.abs_tol, 0.0, f64::MAX)?;
+        if self.max_iters == 0 {
+            return Err(ParamError::new("CG iterations", 0, "must be at least 1"));
+        }
+        Ok(())
     }
 }
 

@@ -19,8 +19,9 @@
 use super::ControlPoint;
 use super::classify::{ElementClass, corner_of};
 use super::knots::Op1d;
+use crate::math::reference::{HEX_EDGES, HEX_VERTEX_PARAMS};
 use crate::mesh::LinearMesh;
-use crate::mesh::topology::{HEX_EDGES, HEX_VERTEX_PARAMS, NONE, Topology};
+use crate::mesh::topology::{NONE, Topology};
 use rayon::prelude::*;
 
 /// Where a local Lagrange node of an element sits.

@@ -19,8 +19,9 @@
 //! linear in the number of elements.
 
 use super::classify::{Q2Reason, corner_of};
+use crate::math::reference::{HEX_EDGES, HEX_SIDES, QUAD_SIDES};
 use crate::mesh::LinearMesh;
-use crate::mesh::topology::{HEX_EDGES, HEX_SIDES, NONE, QUAD_SIDES, Topology};
+use crate::mesh::topology::{NONE, Topology};
 use rayon::prelude::*;
 
 /// A spline control point's mesh entity (`polyspline.md` §2.1).

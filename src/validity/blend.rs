@@ -329,7 +329,7 @@ fn straight_reference(
 }
 
 /// How [`blend_search_shared`] shares the search with other processes that judge the other
-/// elements (`crate::distributed`): each judges its own elements, and they agree on the
+/// elements (the distributed job): each judges its own elements, and they agree on the
 /// rejected elements of every round, from which each applies the same factor reductions to
 /// its copy of the factors, so the factors are those of the search over the whole mesh.
 pub trait BlendShare {

@@ -24,7 +24,7 @@ pub fn certify_elements(
 }
 
 /// Who computes certified det J bounds for a batch of elements: the CPU ([`CpuCertifier`]) or
-/// the GPU (`crate::gpu::jacobian_check::GpuCertifier`). Both return bounds that are certified.
+/// the GPU (the execution floor's `GpuCertifier`). Both return bounds that are certified.
 pub trait Certifier: Sync {
     /// Bounds of `elements`, in that order; `net(e)` is the Bézier net of element e.
     fn certify(

@@ -12,6 +12,7 @@ use super::certificate::{Certifier, CpuCertifier};
 use super::{DetBounds, certify_screened};
 use crate::math::BezierNet;
 use crate::mesh::LinearMesh;
+use crate::params::{ParamError, above, in_range};
 
 /// How the fitted step is shortened where it would invalidate elements.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
@@ -20,10 +21,10 @@ pub enum LineSearchMode {
     /// One α for all control points (paper §2.3).
     Global,
     /// A factor per control point, halved only around elements that are not certified
-    /// ([`local_line_search`]).
     #[value(
         help = "A factor per control point, halved only around elements that are not certified"
     )]
+    /// ([`local_line_search`]).
     Local,
 }
 
@@ -75,6 +76,34 @@ impl LineSearchParams {
             percentile_quality_fraction: self.percentile_quality_fraction,
             global,
         }
+    }
+}
+
+impl LineSearchParams {
+    /// Fractions in [0, 1], a tolerance in (0, 1], at most 1000 bisections.
+    pub fn check(&self) -> Result<(), ParamError> {
+        in_range("--min-det-fraction", self.min_det_fraction, 0.0, 1.0)?;
+        in_range(
+            "--min-quality-fraction",
+            self.min_quality_fraction,
+            0.0,
+            1.0,
+        )?;
+        in_range(
+            "--percentile-quality-fraction",
+            self.percentile_quality_fraction,
+            0.0,
+            1.0,
+        )?;
+        above("line-search tolerance", self.tolerance, 0.0, 1.0)?;
+        if self.max_bisections > 1000 {
+            return Err(ParamError::new(
+                "--max-bisections",
+                self.max_bisections,
+                "must be at most 1000",
+            ));
+        }
+        Ok(())
     }
 }
 

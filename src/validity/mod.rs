@@ -414,7 +414,7 @@ pub fn bernstein_min_bounds(dim: usize, b: Bernstein, max_depth: usize) -> DetBo
 
 /// Certified bounds of min det J of element `e` of a high-order Lagrange mesh.
 pub fn lagrange_element_bounds(
-    ho: &crate::sample::HighOrderMesh,
+    ho: &crate::mesh::HighOrderMesh,
     e: usize,
     max_depth: usize,
 ) -> DetBounds {

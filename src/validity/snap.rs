@@ -7,8 +7,8 @@
 //! ([`lagrange_element_bounds`]), and edge and face nodes never move.
 
 use super::lagrange_element_bounds;
+use crate::mesh::HighOrderMesh;
 use crate::mesh::{LinearMesh, Topology};
-use crate::sample::HighOrderMesh;
 
 /// Rounds of undoing snaps around elements that lose their certificate.
 const MAX_SNAP_ROUNDS: usize = 8;

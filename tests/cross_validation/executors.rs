@@ -6,10 +6,10 @@
 //! assertion message names the files both outputs were written to, under
 //! `target/tmp/cross_validation/<test>/`, so the two can be diffed or opened in Gmsh.
 
-use polyspline::executor::{CpuExecutor, Executor, GpuExecutor};
-use polyspline::gpu::GpuContext;
+use polyspline::exec::gpu::GpuContext;
+use polyspline::exec::{CpuExecutor, Executor, GpuExecutor};
 use polyspline::io::gmsh_write::{MshVersion, write_msh};
-use polyspline::sample::HighOrderMesh;
+use polyspline::mesh::HighOrderMesh;
 use std::fmt::Debug;
 use std::io::Write;
 use std::path::{Path, PathBuf};

@@ -5,8 +5,8 @@
 use crate::common::{self, real_meshes};
 use crate::executors;
 
-use polyspline::cpu;
-use polyspline::gpu::{self, AdapterChoice, GpuContext, Precision};
+use polyspline::exec::cpu;
+use polyspline::exec::gpu::{self, AdapterChoice, GpuContext, Precision};
 use polyspline::math::BezierNet;
 
 /// Every shader parses and validates, at both precisions.
@@ -39,10 +39,10 @@ fn shaders_validate_with_naga() {
     }
 }
 
+use polyspline::exec::gpu::cg::{GpuOperator, SPMV_TOL_F32, SPMV_TOL_F64};
+use polyspline::exec::gpu::evaluate::{EVALUATE_TOL_F32, EVALUATE_TOL_F64, lattice_params};
+use polyspline::exec::gpu::jacobian_check::rounding_bound;
 use polyspline::fit::{FitParams, assemble};
-use polyspline::gpu::cg::{GpuOperator, SPMV_TOL_F32, SPMV_TOL_F64};
-use polyspline::gpu::evaluate::{EVALUATE_TOL_F32, EVALUATE_TOL_F64, lattice_params};
-use polyspline::gpu::jacobian_check::rounding_bound;
 use polyspline::io::read_mesh;
 use polyspline::mesh::generate::{grid_2d, grid_3d, star_2d, uniform};
 use polyspline::mesh::{LinearMesh, MeshOptions, Topology};
@@ -703,7 +703,7 @@ fn backend_gpu_without_adapter_is_a_clear_error() {
 /// assertion messages name them.
 #[test]
 fn curve_gpu_matches_cpu() {
-    use polyspline::gpu::Backend;
+    use polyspline::exec::gpu::Backend;
     use polyspline::pipeline::{CurveOptions, Geometry, LineSearchMode, curve};
     const TEST: &str = "curve_gpu_matches_cpu";
     let mut gpus = Vec::new();
@@ -720,7 +720,7 @@ fn curve_gpu_matches_cpu() {
             .join("meshes/real")
             .join(mesh);
         let run = |backend: Backend, case: &str| {
-            let name = polyspline::executor::executor(&backend).name();
+            let name = polyspline::exec::executor(&backend).name();
             let out = executors::output_path(TEST, case, name, "vtu");
             let opts = CurveOptions {
                 order: 3,
@@ -741,10 +741,9 @@ fn curve_gpu_matches_cpu() {
                 .unwrap_or_else(|e| panic!("{mesh} {name}: {e}; output {}", out.display()));
             assert_eq!(r.backend, name, "{mesh}");
             assert_eq!(r.invalid_elements, 0, "{mesh} {name}: {}", out.display());
-            let ho = polyspline::sample::HighOrderMesh::from_raw(
-                polyspline::io::read_raw(&out).unwrap(),
-            )
-            .unwrap();
+            let ho =
+                polyspline::mesh::HighOrderMesh::from_raw(polyspline::io::read_raw(&out).unwrap())
+                    .unwrap();
             (r, ho, out)
         };
         let (rc, hc, pc) = run(Backend::Cpu, mesh);
@@ -839,10 +838,12 @@ fn million_hex_gpu_sampling_and_certification() {
 /// against its twin at the same precision, on local problems of real energy states.
 #[test]
 fn local_newton_matches_twin_and_local_problem() {
-    use polyspline::cpu::local_newton as twin;
     use polyspline::energy::colored::{LocalProblem, local_problems};
     use polyspline::energy::{Energy, EnergyParams};
-    use polyspline::gpu::local_newton::{LocalDerivatives, Params, local_newton, pack, unpack};
+    use polyspline::exec::cpu::local_newton as twin;
+    use polyspline::exec::gpu::local_newton::{
+        LocalDerivatives, Params, local_newton, pack, unpack,
+    };
     use polyspline::mesh::generate::extrude;
     let run_twin = |dim: usize, problems: &[LocalProblem], prec: Precision| {
         let (coefs, ranges, points) = pack(problems);

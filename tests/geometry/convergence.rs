@@ -13,11 +13,11 @@ use crate::common;
 
 use polyspline::fit::{FitParams, FitTargets, FitWeights, SmoothParams};
 use polyspline::io::read_raw;
+use polyspline::mesh::HighOrderMesh;
 use polyspline::mesh::MeshOptions;
+use polyspline::mesh::high_order::lattice_point;
 use polyspline::pipeline::{CurveOptions, CurveReport, Geometry, LineSearchMode, curve};
 use polyspline::quality::lagrange_1d;
-use polyspline::sample::HighOrderMesh;
-use polyspline::sample::ordering::lattice_point;
 use std::collections::{BTreeMap, HashMap};
 use std::f64::consts::PI;
 use std::io::Write;
@@ -337,7 +337,7 @@ fn options(mode: &str) -> CurveOptions {
         line_search_mode: LineSearchMode::Local,
         // The shapes are smooth; their coarse levels turn by up to 60° between facets, which
         // the default feature angle would take for sharp edges.
-        features: polyspline::mesh::features::FeatureOptions {
+        features: polyspline::pipeline::FeatureOptions {
             params: polyspline::mesh::features::FeatureParams::off(),
             ..Default::default()
         },

@@ -5,7 +5,8 @@
 
 use crate::common::{self, polyspline, write_linear};
 
-use polyspline::mesh::features::{FeatureOptions, FeatureParams};
+use polyspline::mesh::features::FeatureParams;
+use polyspline::pipeline::FeatureOptions;
 use polyspline::pipeline::{CurveOptions, Geometry, curve, curve_in_memory};
 use std::path::{Path, PathBuf};
 

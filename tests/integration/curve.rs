@@ -5,12 +5,13 @@
 use crate::common;
 
 use polyspline::io::read_raw;
+use polyspline::mesh::HighOrderMesh;
 use polyspline::mesh::generate::{grid_2d, grid_3d, uniform};
+use polyspline::mesh::high_order::lattice_point;
 use polyspline::mesh::{LinearMesh, MeshOptions, Topology};
 use polyspline::pipeline::{CurveError, CurveOptions, Geometry, LineSearchMode, curve};
 use polyspline::quality::{CheckReport, lagrange_1d};
-use polyspline::sample::ordering::lattice_point;
-use polyspline::sample::{HighOrderMesh, multilinear, sample};
+use polyspline::sample::{multilinear, sample};
 use polyspline::spline::SplineSpace;
 use std::path::{Path, PathBuf};
 use std::process::Command;

@@ -9,10 +9,11 @@ use polyspline::compare::facet_angle_jumps;
 use polyspline::elastic::{
     ElasticParams, ElasticPreconditioner, elastic_analogy, solve_displacement,
 };
+use polyspline::mesh::HighOrderMesh;
 use polyspline::mesh::generate::{grid_2d, grid_3d};
 use polyspline::mesh::{LinearMesh, Topology};
 use polyspline::pipeline::{CurveOptions, Geometry, Method, curve_in_memory};
-use polyspline::sample::{HighOrderMesh, sample};
+use polyspline::sample::sample;
 use polyspline::solve::CgParams;
 use std::ffi::OsString;
 use std::path::Path;
@@ -230,7 +231,7 @@ fn smooth_options(method: Method) -> CurveOptions {
         method,
         fit: polyspline::fit::FitParams::smooth(),
         line_search_mode: polyspline::pipeline::LineSearchMode::Local,
-        backend: polyspline::gpu::Backend::Cpu,
+        backend: polyspline::exec::gpu::Backend::Cpu,
         ..Default::default()
     }
 }

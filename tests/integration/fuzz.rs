@@ -242,7 +242,7 @@ fn check_message(msg: &str, context: &str) {
         "{context}: message of several lines: {msg:?}"
     );
     assert!(
-        msg.chars().count() <= polyspline::io::raw::MAX_MESSAGE_CHARS + 40,
+        msg.chars().count() <= polyspline::mesh::raw::MAX_MESSAGE_CHARS + 40,
         "{context}: message of {} characters",
         msg.chars().count()
     );

@@ -5,11 +5,12 @@ use crate::common;
 
 use polyspline::io::gmsh_write::{MshVersion, write_msh};
 use polyspline::io::vtu_write::{VtuCells, VtuEncoding, write_vtu, write_vtu_cells};
+use polyspline::math::reference::HEX_VERTEX_PARAMS;
+use polyspline::mesh::HighOrderMesh;
 use polyspline::mesh::generate::{extrude, grid_2d, grid_3d, star_2d, uniform};
-use polyspline::mesh::topology::HEX_VERTEX_PARAMS;
+use polyspline::mesh::high_order::lattice_point;
 use polyspline::mesh::{LinearMesh, MeshOptions, Topology};
-use polyspline::sample::ordering::lattice_point;
-use polyspline::sample::{HighOrderMesh, multilinear, sample};
+use polyspline::sample::{multilinear, sample};
 use std::collections::HashSet;
 use std::path::PathBuf;
 

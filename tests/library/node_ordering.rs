@@ -1,7 +1,8 @@
 //! Node orderings against the tables below, which Gmsh 4.15 and VTK 9.7 generated themselves
 //! (reference nodes from `gmsh.model.mesh.getElementProperties`, VTK's `PointIndexFromIJK`).
 
-use polyspline::sample::ordering::*;
+use polyspline::io::ordering::*;
+use polyspline::mesh::high_order::Lattice;
 
 const TABLES: &[(&str, usize, &[[usize; 3]])] = &[
     // Gmsh type 10 = quad9

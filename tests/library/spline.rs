@@ -3,8 +3,9 @@
 //! classification by hand, the design's worked numbers, and invariance under relabelling.
 
 use crate::common::dist;
+use polyspline::math::reference::HEX_VERTEX_PARAMS;
 use polyspline::mesh::generate::{extrude, grid_2d, grid_3d, l_shape, star_2d, uniform};
-use polyspline::mesh::topology::{HEX_VERTEX_PARAMS, NONE};
+use polyspline::mesh::topology::NONE;
 use polyspline::mesh::{LinearMesh, MeshOptions, Topology};
 use polyspline::spline::{ControlPoint, ElementClass, ElementRows, Q2Reason, SplineSpace};
 

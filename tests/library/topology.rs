@@ -1,8 +1,9 @@
 //! Topology and orientation on generated meshes whose counts follow from their construction.
 
 use polyspline::io::{CellKind, RawBlock, RawMesh};
+use polyspline::math::reference::{HEX_SIDES, QUAD_SIDES};
 use polyspline::mesh::generate::{extrude, grid_2d, grid_3d, l_shape, star_2d, uniform};
-use polyspline::mesh::topology::{HEX_SIDES, NONE, QUAD_SIDES};
+use polyspline::mesh::topology::NONE;
 use polyspline::mesh::{LinearMesh, MeshOptions, Topology};
 
 fn raw(points: Vec<[f64; 3]>, kind: CellKind, npc: usize, cells: &[&[i64]]) -> RawMesh {
@@ -122,13 +123,13 @@ fn hex_block_counts_and_outward_faces() {
     // Side tables: each side holds the vertices whose parameter in that direction is the side's.
     for (side, vs) in HEX_SIDES.iter().enumerate() {
         for &v in vs {
-            let p = polyspline::mesh::topology::HEX_VERTEX_PARAMS[v];
+            let p = polyspline::math::reference::HEX_VERTEX_PARAMS[v];
             assert_eq!(p[side / 2] as usize, side % 2);
         }
     }
     for (side, vs) in QUAD_SIDES.iter().enumerate() {
         for &v in vs {
-            let p = polyspline::mesh::topology::HEX_VERTEX_PARAMS[v];
+            let p = polyspline::math::reference::HEX_VERTEX_PARAMS[v];
             assert_eq!(p[side / 2] as usize, side % 2);
         }
     }
@@ -196,7 +197,7 @@ fn reversed_elements_are_reoriented() {
 
     let cube: Vec<[f64; 3]> = (0..8)
         .map(|i| {
-            let p = polyspline::mesh::topology::HEX_VERTEX_PARAMS[i];
+            let p = polyspline::math::reference::HEX_VERTEX_PARAMS[i];
             [p[0] as f64, p[1] as f64, p[2] as f64]
         })
         .collect();

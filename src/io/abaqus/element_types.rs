@@ -4,7 +4,7 @@
 //! fixes it, its node count; the facet kind and its local node indices. Every type not listed
 //! here is kept as a named [`CellKind::Other`].
 
-use crate::io::raw::CellKind;
+use crate::mesh::raw::CellKind;
 
 /// What an Abaqus element type is: its kind and, where the type fixes it, its node count.
 pub(super) fn element_kind(ty: &str) -> (CellKind, Option<usize>) {

@@ -8,7 +8,7 @@
 
 use super::element_types::element_face;
 use super::{ElementBlock, ElementSet, IdMap, Reader, Surface, SurfaceTarget};
-use crate::io::raw::{Location, ParseError, RawBlock, RawMesh};
+use crate::mesh::raw::{Location, ParseError, RawBlock, RawMesh};
 use std::collections::BTreeMap;
 
 impl Reader {

@@ -48,7 +48,7 @@ mod finish;
 mod lines;
 mod records;
 
-use super::raw::{CellKind, ParseError, RawMesh};
+use crate::mesh::raw::{CellKind, ParseError, RawMesh};
 use element_types::element_kind;
 use lines::{Keyword, Lines};
 use std::collections::HashMap;

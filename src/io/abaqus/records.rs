@@ -8,7 +8,7 @@
 
 use super::lines::{Lines, parse_float, parse_int, show};
 use super::{ElementSet, Reader, SurfaceTarget};
-use crate::io::raw::ParseError;
+use crate::mesh::raw::ParseError;
 
 impl Reader {
     pub(super) fn set_named(&mut self, name: &str, internal: bool) -> usize {

@@ -1,5 +1,5 @@
 use super::*;
-use crate::io::raw::{Location, RawBlock};
+use crate::mesh::raw::{Location, RawBlock};
 
 fn fixture(name: &str) -> Vec<u8> {
     let path = format!("{}/tests/data/abaqus/{name}", env!("CARGO_MANIFEST_DIR"));

@@ -4,7 +4,7 @@
 //! side number of a side set. Output: the [`CellKind`] of the block's cells and the facet kind
 //! and local nodes of each side (Exodus side numbering, 1-based in the file).
 
-use crate::io::raw::CellKind;
+use crate::mesh::raw::CellKind;
 
 /// Element families with their side tables.
 #[derive(Clone, Copy, PartialEq, Eq, Debug)]

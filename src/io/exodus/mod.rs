@@ -28,13 +28,13 @@
 //! `family` maps element types to kinds and side tables; this module reads the coordinates,
 //! the element blocks and the side sets, in that order.
 //!
-//! [`CellKind`]: crate::io::raw::CellKind
-//! [`CellKind::Other`]: crate::io::raw::CellKind::Other
+//! [`CellKind`]: crate::mesh::raw::CellKind
+//! [`CellKind::Other`]: crate::mesh::raw::CellKind::Other
 
 mod family;
 mod netcdf;
 
-use super::raw::{Location, ParseError, RawBlock, RawMesh};
+use crate::mesh::raw::{Location, ParseError, RawBlock, RawMesh};
 use family::Family;
 use netcdf::{NcType, NetCdf};
 use std::collections::BTreeMap;

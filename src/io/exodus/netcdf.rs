@@ -6,7 +6,7 @@
 //! errors name byte offsets and a corrupt header cannot cause a huge allocation; netCDF-4 (HDF5)
 //! and CDF-5 files are refused with a message.
 
-use crate::io::raw::ParseError;
+use crate::mesh::raw::ParseError;
 
 pub(super) const NC_DIMENSION: u32 = 10;
 pub(super) const NC_VARIABLE: u32 = 11;

@@ -1,5 +1,5 @@
 use super::*;
-use crate::io::raw::CellKind;
+use crate::mesh::raw::CellKind;
 
 const REAL: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),

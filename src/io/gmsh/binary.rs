@@ -5,7 +5,7 @@
 //! ran out. Invariant: no read goes past the end of the input, and [`Bin::room`] refuses a count
 //! whose records cannot fit in what is left, so no allocation follows an absurd header count.
 
-use crate::io::raw::ParseError;
+use crate::mesh::raw::ParseError;
 
 /// Little reader over the binary parts of a file. Every read is bounds-checked and fails with
 /// the byte offset where the data ran out.

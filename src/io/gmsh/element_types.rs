@@ -5,8 +5,8 @@
 //! defines becomes a named [`CellKind::Other`]), or the message saying why the type cannot be
 //! read. Invariant: [`Blocks`] holds one [`RawBlock`] per type, in order of first appearance.
 
-use crate::io::raw::{CellKind, Location, NodeConvention, ParseError, RawBlock};
-use crate::sample::ordering::gmsh_type_info;
+use crate::io::ordering::gmsh_type_info;
+use crate::mesh::raw::{CellKind, Location, NodeConvention, ParseError, RawBlock};
 
 // Element families, used to name the cell kinds polyspline does not handle itself.
 pub(super) const POINT: &str = "point";

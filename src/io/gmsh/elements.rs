@@ -1,14 +1,14 @@
 //! `$Elements` (MSH 2/4, ASCII and binary) and `$ELM` (MSH 1): cells, their nodes and tags.
 //!
 //! Input: the section body and the [`NodeMap`] of the `$Nodes` section before it. Output: one
-//! [`RawBlock`](crate::io::raw::RawBlock) per element type in `Reader::blocks`, node tags mapped
+//! [`RawBlock`](crate::mesh::raw::RawBlock) per element type in `Reader::blocks`, node tags mapped
 //! to 0-based positions, each cell tagged with its physical group (MSH 1/2: the first integer
 //! tag; MSH 4: the entity's physical tag). Invariant: an element naming a node tag `$Nodes` did
 //! not define is an error at that line (byte offset in binary sections).
 
 use super::nodes::NodeMap;
 use super::{Reader, Version, capped, to_i32};
-use crate::io::raw::{Location, ParseError};
+use crate::mesh::raw::{Location, ParseError};
 
 impl Reader<'_> {
     pub(super) fn elements_section(&mut self, name: &str, line: usize) -> Result<(), ParseError> {

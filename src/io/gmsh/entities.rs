@@ -6,7 +6,7 @@
 
 use super::binary::Bin;
 use super::{Reader, Version, to_i32};
-use crate::io::raw::ParseError;
+use crate::mesh::raw::ParseError;
 use std::collections::HashMap;
 
 /// The physical tag of every entity of `$Entities` and `$PartitionedEntities`.

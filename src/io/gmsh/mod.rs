@@ -44,8 +44,8 @@
 //! `binary` decodes binary data with bounds checks; `element_types` maps type numbers to
 //! cell kinds.
 //!
-//! [`CellKind`]: crate::io::raw::CellKind
-//! [`CellKind::Other`]: crate::io::raw::CellKind::Other
+//! [`CellKind`]: crate::mesh::raw::CellKind
+//! [`CellKind::Other`]: crate::mesh::raw::CellKind::Other
 
 mod binary;
 mod element_types;
@@ -53,8 +53,8 @@ mod elements;
 mod entities;
 mod nodes;
 
-use super::raw::{Location, ParseError, RawMesh};
 use super::text::{TextCursor, parse_f64};
+use crate::mesh::raw::{Location, ParseError, RawMesh};
 use binary::Bin;
 use element_types::Blocks;
 pub use entities::EntityTags;

@@ -6,7 +6,7 @@
 //! coordinates are skipped; reservations are capped by what the remaining input can hold.
 
 use super::{Reader, Version, capped};
-use crate::io::raw::{Location, ParseError};
+use crate::mesh::raw::{Location, ParseError};
 use std::collections::HashMap;
 
 /// Node tag -> 0-based position.

@@ -3,7 +3,7 @@
 
 use super::element_types::{ELEMENT_TYPES, element_type};
 use super::*;
-use crate::io::raw::{CellKind, NodeConvention, RawBlock};
+use crate::mesh::raw::{CellKind, NodeConvention, RawBlock};
 use crate::mesh::{LinearMesh, MeshOptions};
 use std::collections::BTreeMap;
 

@@ -6,7 +6,7 @@
 //! order; Lagrange hexahedra of files older than VTK 9 are renumbered into VTK 9 order; every
 //! other type is kept as a named [`CellKind::Other`].
 
-use crate::io::raw::{CellKind, Location, NodeConvention, ParseError, RawBlock, RawMesh};
+use crate::mesh::raw::{CellKind, Location, NodeConvention, ParseError, RawBlock, RawMesh};
 use std::borrow::Cow;
 
 pub(super) const PIXEL_TO_QUAD: [usize; 4] = [0, 1, 3, 2];

@@ -28,8 +28,8 @@
 //! and the ASCII or binary values of a section; `sections` reads each section; `cells`
 //! (cell types, the cell list) and `scalar` (data types) are shared with the XML reader.
 //!
-//! [`CellKind`]: crate::io::raw::CellKind
-//! [`CellKind::Other`]: crate::io::raw::CellKind::Other
+//! [`CellKind`]: crate::mesh::raw::CellKind
+//! [`CellKind::Other`]: crate::mesh::raw::CellKind::Other
 
 mod cells;
 mod scalar;
@@ -39,8 +39,8 @@ mod values;
 pub(crate) use cells::{CellList, tags_to_i32};
 pub(crate) use scalar::Scalar;
 
-use super::raw::{Location, ParseError, RawMesh};
 use super::text::TextCursor;
+use crate::mesh::raw::{Location, ParseError, RawMesh};
 
 /// Names of cell data arrays that hold cell tags, most preferred first.
 pub(crate) const TAG_ARRAYS: [&str; 7] = [

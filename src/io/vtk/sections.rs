@@ -7,7 +7,7 @@
 //! its end or refused with the line (or byte) where it went wrong.
 
 use super::{CellList, Legacy, Scalar, Section, TagCandidate, tag_priority};
-use crate::io::raw::{ParseError, RawMesh};
+use crate::mesh::raw::{ParseError, RawMesh};
 
 impl Legacy<'_> {
     pub(super) fn points(&mut self, mesh: &mut RawMesh) -> Result<(), ParseError> {

@@ -1,5 +1,5 @@
 use super::*;
-use crate::io::raw::{CellKind, NodeConvention};
+use crate::mesh::raw::{CellKind, NodeConvention};
 use std::path::Path;
 
 fn data(name: &str) -> Vec<u8> {

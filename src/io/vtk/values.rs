@@ -6,8 +6,8 @@
 //! ASCII array is an error naming how many of the declared values were found.
 
 use super::{Legacy, Scalar};
-use crate::io::raw::{Location, ParseError};
 use crate::io::text::parse_f64;
+use crate::mesh::raw::{Location, ParseError};
 
 impl<'a> Legacy<'a> {
     /// `# vtk DataFile Version x.y`, a title line and `ASCII` or `BINARY`.

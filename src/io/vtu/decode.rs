@@ -8,8 +8,8 @@
 //! their header declares.
 
 use super::{Appended, Array, Compressor, File, Format, Locs, line_at};
-use crate::io::raw::{Location, ParseError};
 use crate::io::vtk::Scalar;
+use crate::mesh::raw::{Location, ParseError};
 use base64::Engine;
 use base64::engine::general_purpose::STANDARD_PAD_INDIFFERENT;
 use std::borrow::Cow;

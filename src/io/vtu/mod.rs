@@ -14,7 +14,7 @@
 //! tags the `CellData` integer array with one component named (most preferred first)
 //! `gmsh:physical`, `CellEntityIds`, `medit:ref`, `mat_id`, `MaterialIds` or `attribute`.
 //! Cell types map as in the legacy reader ([`super::vtk`]): pixels and voxels are renumbered
-//! into quad/hex order; other types become [`CellKind::Other`](super::raw::CellKind::Other).
+//! into quad/hex order; other types become [`CellKind::Other`](crate::mesh::raw::CellKind::Other).
 //!
 //! Traps: raw appended data is not UTF-8 (or XML), so only the part before `<AppendedData` is
 //! parsed as XML; base64 writers encode the header and the data either as one stream (meshio,
@@ -33,8 +33,8 @@ mod decode;
 mod piece;
 mod xml;
 
-use super::raw::{Location, ParseError, RawMesh};
 use super::vtk::{CellList, Scalar};
+use crate::mesh::raw::{Location, ParseError, RawMesh};
 use std::borrow::Cow;
 use xml::parse_xml;
 

@@ -7,9 +7,9 @@
 //! the value that names it.
 
 use super::{Array, File, Format, Locs, Piece, line_at};
-use crate::io::raw::{Location, ParseError, RawMesh};
 use crate::io::text::parse_f64;
 use crate::io::vtk::{CellList, Scalar};
+use crate::mesh::raw::{Location, ParseError, RawMesh};
 
 /// Values of an ascii `DataArray`, with the line of each value if `lines`.
 pub(super) fn ascii_values<T>(

@@ -1,5 +1,5 @@
 use super::*;
-use crate::io::raw::CellKind;
+use crate::mesh::raw::CellKind;
 use std::path::Path;
 
 fn data(name: &str) -> Vec<u8> {
@@ -120,7 +120,7 @@ fn lagrange_cells_match_vtk() {
             &CellKind::Lagrange {
                 dim: 3,
                 order: 3,
-                convention: crate::io::raw::NodeConvention::Vtk
+                convention: crate::mesh::raw::NodeConvention::Vtk
             }
         );
         let got: Vec<i64> = m.blocks.iter().flat_map(|b| b.nodes.clone()).collect();

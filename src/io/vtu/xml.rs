@@ -7,8 +7,8 @@
 //! only the preferred tag array is kept; errors name the line of the element at fault.
 
 use super::{Appended, Array, Compressor, File, Format, Piece, line_at};
-use crate::io::raw::{Location, ParseError};
 use crate::io::vtk::{Scalar, tag_priority};
+use crate::mesh::raw::{Location, ParseError};
 use quick_xml::Reader;
 use quick_xml::events::{BytesStart, Event};
 use std::borrow::Cow;

@@ -51,7 +51,7 @@ enum Slot {
 /// or hex (3); unused entries are [`Slot::Cell`]. Depends on nothing but the element type, so
 /// it is computed once, not for every point of every judged element.
 const fn slots(dim: usize) -> [Slot; 27] {
-    use crate::mesh::topology::HEX_VERTEX_PARAMS;
+    use crate::math::reference::HEX_VERTEX_PARAMS;
     let n = if dim == 2 { 9 } else { 27 };
     let mut out = [Slot::Cell; 27];
     let mut i = 0;
@@ -145,8 +145,8 @@ pub fn entity_ids(mesh: &LinearMesh, topo: &Topology, e: usize) -> [u32; 27] {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::math::reference::HEX_VERTEX_PARAMS;
     use crate::mesh::generate::{extrude, star_2d};
-    use crate::mesh::topology::HEX_VERTEX_PARAMS;
     use std::collections::HashMap;
 
     /// The multilinear point of lattice point `i` ({0, ½, 1}^d) of element `e`.

@@ -1,11 +1,12 @@
 //! The CPU reference [`Executor`]: f64 throughout, in parallel with rayon.
 
 use crate::energy::colored::{LocalDerivatives, LocalProblem};
-use crate::executor::{Executor, ExecutorError};
+use crate::energy::{CpuEnergyKernel, EnergyKernel, KernelError};
+use crate::exec::{Executor, ExecutorError};
 use crate::fit::NormalMatrix;
 use crate::math::{BezierElements, BezierNet};
+use crate::mesh::HighOrderMesh;
 use crate::mesh::{LinearMesh, Topology};
-use crate::sample::HighOrderMesh;
 use crate::solve::{CgError, CgInfo, CgParams};
 use crate::validity::{Certifier, CpuCertifier, DetBounds};
 
@@ -49,12 +50,14 @@ impl Executor for CpuExecutor {
     ) -> Result<HighOrderMesh, ExecutorError> {
         Ok(crate::sample::sample(source, mesh, topo, p))
     }
+}
 
+impl EnergyKernel for CpuExecutor {
     fn local_derivatives(
         &self,
-        _dim: usize,
-        _problems: &[LocalProblem],
-    ) -> Result<Option<Vec<LocalDerivatives>>, ExecutorError> {
-        Ok(None)
+        dim: usize,
+        problems: &[LocalProblem],
+    ) -> Result<Option<Vec<LocalDerivatives>>, KernelError> {
+        CpuEnergyKernel.local_derivatives(dim, problems)
     }
 }

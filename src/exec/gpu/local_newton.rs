@@ -1,15 +1,15 @@
 //! `shaders/local_newton.wgsl`: value, gradient and Hessian of the coloured energy solver's
 //! local problems ([`crate::energy::colored::LocalProblem`]) at the current position, one
-//! invocation per control point. CPU twin: [`crate::cpu::local_newton`].
+//! invocation per control point. CPU twin: [`crate::exec::cpu::local_newton`].
 
 use super::{GpuContext, GpuError, ITEM_WORKGROUP, bytes_to_reals, reals_to_bytes};
 pub use crate::energy::colored::LocalDerivatives;
 use crate::energy::colored::LocalProblem;
 
 /// The uniform block lives beside the CPU twin, which both sides fill the same way.
-pub use crate::cpu::local_newton::Params;
+pub use crate::exec::cpu::local_newton::Params;
 
-pub const SOURCE: &str = include_str!("../../shaders/local_newton.wgsl");
+pub const SOURCE: &str = include_str!("../../../shaders/local_newton.wgsl");
 
 /// The kernel's inputs in binding order: coefficients (4 per problem), point ranges, points
 /// (13 per point).

@@ -39,7 +39,7 @@ impl fmt::Display for Location {
     }
 }
 
-/// A parse problem at a place in the file; [`crate::io::read_mesh`] adds the path.
+/// A parse problem at a place in the file; the reader's caller adds the path.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
 #[error("{location}: {message}")]
 pub struct ParseError {
@@ -119,7 +119,8 @@ pub enum CellKind {
     Other(String),
 }
 
-/// Whose node order a Lagrange cell follows (see [`crate::sample::ordering`]).
+/// Whose node order a Lagrange cell follows (the orderings are the readers' and writers',
+/// `io/ordering.rs`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum NodeConvention {
     Gmsh,

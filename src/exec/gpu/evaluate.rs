@@ -1,17 +1,18 @@
 //! `shaders/evaluate.wgsl`: Bézier nets → points and parametric derivatives at parameters,
-//! and the GPU sampling stage built on it. CPU twin: [`crate::cpu::evaluate`].
+//! and the GPU sampling stage built on it. CPU twin: [`crate::exec::cpu::evaluate`].
 
 use super::{GpuContext, GpuError, ITEM_WORKGROUP, anchor, bytes_to_reals, groups, reals_to_bytes};
 use crate::math::{BezierElements, BezierNet};
+use crate::mesh::HighOrderMesh;
+use crate::mesh::high_order::{Lattice, lattice_index, lattice_point};
 use crate::mesh::{LinearMesh, Topology};
-use crate::sample::ordering::{Lattice, lattice_index, lattice_point};
-use crate::sample::{HighOrderMesh, sample_with};
+use crate::sample::sample_with;
 use rayon::prelude::*;
 
 /// The uniform block lives beside the CPU twin, which both sides fill the same way.
-pub use crate::cpu::evaluate::Params;
+pub use crate::exec::cpu::evaluate::Params;
 
-pub const SOURCE: &str = include_str!("../../shaders/evaluate.wgsl");
+pub const SOURCE: &str = include_str!("../../../shaders/evaluate.wgsl");
 
 /// Points (and derivatives d/du, d/dv, d/dw when asked for) per query, in f64.
 #[derive(Clone, Debug, Default)]

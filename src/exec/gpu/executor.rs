@@ -5,11 +5,12 @@
 use super::GpuContext;
 use super::jacobian_check::GpuCertifier;
 use crate::energy::colored::{LocalDerivatives, LocalProblem};
-use crate::executor::{Executor, ExecutorError};
+use crate::energy::{EnergyKernel, KernelError};
+use crate::exec::{Executor, ExecutorError};
 use crate::fit::NormalMatrix;
 use crate::math::{BezierElements, BezierNet};
+use crate::mesh::HighOrderMesh;
 use crate::mesh::{LinearMesh, Topology};
-use crate::sample::HighOrderMesh;
 use crate::solve::{CgError, CgInfo, CgParams};
 use crate::validity::{Certifier, DetBounds};
 
@@ -42,6 +43,19 @@ impl Certifier for GpuExecutor<'_> {
     }
 }
 
+impl EnergyKernel for GpuExecutor<'_> {
+    /// The `local_newton` kernel; a device failure is the kernel's error.
+    fn local_derivatives(
+        &self,
+        dim: usize,
+        problems: &[LocalProblem],
+    ) -> Result<Option<Vec<LocalDerivatives>>, KernelError> {
+        super::local_newton::local_newton(self.ctx(), dim, problems)
+            .map(Some)
+            .map_err(|e| KernelError(ExecutorError::from(e).to_string()))
+    }
+}
+
 impl Executor for GpuExecutor<'_> {
     fn name(&self) -> &'static str {
         "gpu"
@@ -70,18 +84,6 @@ impl Executor for GpuExecutor<'_> {
         p: usize,
     ) -> Result<HighOrderMesh, ExecutorError> {
         Ok(super::evaluate::sample(self.ctx(), source, mesh, topo, p)?)
-    }
-
-    fn local_derivatives(
-        &self,
-        dim: usize,
-        problems: &[LocalProblem],
-    ) -> Result<Option<Vec<LocalDerivatives>>, ExecutorError> {
-        Ok(Some(super::local_newton::local_newton(
-            self.ctx(),
-            dim,
-            problems,
-        )?))
     }
 
     fn fallbacks(&self) -> usize {

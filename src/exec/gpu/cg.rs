@@ -1,6 +1,6 @@
 //! The CG pieces on the GPU: `shaders/spmv.wgsl` (CSR operator on three right-hand sides),
 //! `shaders/dot.wgsl` (first reduction stage), `shaders/cg.wgsl` (second stage with α/β, and
-//! the vector updates). CPU twins: [`crate::cpu::spmv`], [`crate::cpu::dot`], [`crate::cpu::cg`].
+//! the vector updates). CPU twins: [`crate::exec::cpu::spmv`], [`crate::exec::cpu::dot`], [`crate::exec::cpu::cg`].
 //!
 //! [`GpuOperator`] is a [`LinOp`] (one SpMV per `apply`, with an upload and a read-back), so
 //! the CPU's CG loop can run on it; [`pcg`] keeps the whole iteration on the GPU: every scalar
@@ -15,15 +15,15 @@
 use super::{
     GpuContext, GpuError, ITEM_WORKGROUP, Precision, bytes_to_reals, groups, reals_to_bytes,
 };
-pub use crate::cpu::cg::{CgKernelParams, CgState};
-pub use crate::cpu::dot::DotParams;
-pub use crate::cpu::spmv::SpmvParams;
+pub use crate::exec::cpu::cg::{CgKernelParams, CgState};
+pub use crate::exec::cpu::dot::DotParams;
+pub use crate::exec::cpu::spmv::SpmvParams;
 use crate::fit::NormalMatrix;
 use crate::solve::{CgError, CgInfo, CgParams, LinOp};
 
-pub const SPMV_SOURCE: &str = include_str!("../../shaders/spmv.wgsl");
-pub const DOT_SOURCE: &str = include_str!("../../shaders/dot.wgsl");
-pub const CG_SOURCE: &str = include_str!("../../shaders/cg.wgsl");
+pub const SPMV_SOURCE: &str = include_str!("../../../shaders/spmv.wgsl");
+pub const DOT_SOURCE: &str = include_str!("../../../shaders/dot.wgsl");
+pub const CG_SOURCE: &str = include_str!("../../../shaders/cg.wgsl");
 
 /// Iterations encoded per submit (one read-back of a few bytes per batch).
 pub const CG_BATCH: usize = 10;

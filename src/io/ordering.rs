@@ -15,23 +15,7 @@
 //! The tables in `tests/library/node_ordering.rs`, produced by Gmsh 4.15 and VTK 9.7 themselves, are the
 //! tests' oracle.
 
-/// A lattice point of an order-p element (the third entry is 0 in 2D).
-pub type Lattice = [usize; 3];
-
-/// Lattice index in polyspline's order (i fastest).
-pub fn lattice_index(p: usize, l: Lattice) -> usize {
-    l[0] + (p + 1) * (l[1] + (p + 1) * l[2])
-}
-
-/// The lattice point of lattice index `n`.
-pub fn lattice_point(p: usize, dim: usize, n: usize) -> Lattice {
-    let m = p + 1;
-    if dim == 2 {
-        [n % m, n / m, 0]
-    } else {
-        [n % m, (n / m) % m, n / (m * m)]
-    }
-}
+use crate::mesh::high_order::{Lattice, lattice_index};
 
 /// Gmsh node order of a quad of order `p` (p ≥ 1): lattice point of each Gmsh node.
 pub fn gmsh_quad(p: usize) -> Vec<Lattice> {

@@ -1,8 +1,9 @@
 //! Reading a high-order mesh back from a file's [`RawMesh`].
 
-use super::HighOrderMesh;
-use super::ordering::{gmsh_hex, gmsh_line, gmsh_quad, lattice_index, vtk_hex, vtk_quad};
-use crate::io::raw::{CellKind, Location, NodeConvention, ParseError, RawMesh};
+use super::ordering::{gmsh_hex, gmsh_line, gmsh_quad, vtk_hex, vtk_quad};
+use crate::mesh::HighOrderMesh;
+use crate::mesh::high_order::lattice_index;
+use crate::mesh::raw::{CellKind, Location, NodeConvention, ParseError, RawMesh};
 
 /// Node order and dimension/order of a block's cells, if they are lines, quads or hexes.
 fn shape(kind: &CellKind) -> Option<(usize, usize, NodeConvention)> {

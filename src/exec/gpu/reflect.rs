@@ -133,7 +133,7 @@ mod tests {
     use super::*;
 
     /// The reflected layouts are what the host binds: spot checks against the binding lists
-    /// in `gpu/` (the full check is wgpu's own validation when a bind group is created).
+    /// in `exec/gpu/` (the full check is wgpu's own validation when a bind group is created).
     #[test]
     fn reflection_matches_the_host_bindings() {
         let k = kernel("jacobian_check");

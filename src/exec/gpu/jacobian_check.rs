@@ -1,5 +1,5 @@
 //! `shaders/jacobian_check.wgsl`: Bernstein coefficients of det J per element → min/max, the
-//! first level of the det J certificate. CPU twin: [`crate::cpu::jacobian_check`].
+//! first level of the det J certificate. CPU twin: [`crate::exec::cpu::jacobian_check`].
 //!
 //! The kernel's result is made certified by a forward rounding-error bound
 //! ([`rounding_bound`]): an element is certified on the GPU when min coefficient − bound > 0;
@@ -15,9 +15,9 @@ use crate::validity::{Certifier, DetBounds, det_jacobian_bounds};
 use rayon::prelude::*;
 
 /// The uniform block lives beside the CPU twin, which both sides fill the same way.
-pub use crate::cpu::jacobian_check::Params;
+pub use crate::exec::cpu::jacobian_check::Params;
 
-pub const SOURCE: &str = include_str!("../../shaders/jacobian_check.wgsl");
+pub const SOURCE: &str = include_str!("../../../shaders/jacobian_check.wgsl");
 
 /// Roundings along the longest path of one det J coefficient (product weights, three factor
 /// products, sums of up to 18·18 terms per component), generously counted: the arithmetic

@@ -1,7 +1,9 @@
-//! The one CPU/GPU seam: an [`Executor`] certifies det J bounds (it is a [`Certifier`]), solves
-//! the fit's normal equations by PCG, samples Lagrange nodes and computes the energy's local
-//! derivatives. [`CpuExecutor`] (`src/cpu/`) is the reference; [`GpuExecutor`] (`src/gpu/`)
-//! runs the WGSL kernels. Stages take a `&dyn Executor` and never a GPU context.
+//! The execution floor, and its one CPU/GPU seam: an [`Executor`] certifies det J bounds (it
+//! is a [`Certifier`]), solves the fit's normal equations by PCG, samples Lagrange nodes and
+//! computes the energy's local derivatives (it is an [`EnergyKernel`]). [`CpuExecutor`]
+//! ([`cpu`]: the reference, beside the CPU twins of the kernels) and [`GpuExecutor`] ([`gpu`]:
+//! the WGSL kernels of `shaders/`) implement it. Stages take a `&dyn Executor` and never a GPU
+//! context; the algorithms below take only the narrow traits they need.
 //!
 //! Invariants: both return the same kind of result (certified bounds, a CG solution to the
 //! requested tolerance, nodes in the same order); a device failure is a typed error
@@ -9,20 +11,23 @@
 //! executor hands work back to the CPU it counts it ([`Executor::fallbacks`]) and the report
 //! says so.
 
-use crate::energy::colored::{LocalDerivatives, LocalProblem};
+pub mod cpu;
+pub mod gpu;
+
+use crate::energy::EnergyKernel;
+use crate::exec::gpu::{Backend, GpuContext, GpuError};
 use crate::fit::NormalMatrix;
-use crate::gpu::{Backend, GpuContext, GpuError};
 use crate::math::BezierElements;
+use crate::mesh::HighOrderMesh;
 use crate::mesh::{LinearMesh, Topology};
-use crate::sample::HighOrderMesh;
 use crate::solve::{CgError, CgInfo, CgParams};
 use crate::validity::Certifier;
 
-pub use crate::cpu::executor::CpuExecutor;
-pub use crate::gpu::executor::GpuExecutor;
+pub use crate::exec::cpu::executor::CpuExecutor;
+pub use crate::exec::gpu::executor::GpuExecutor;
 
 /// A failure of an executor's work as the callers above the seam see it: they match on it or
-/// print it, and never name a device type (the energy, for one, knows only `&dyn Executor`).
+/// print it, and never name a device type (the energy, for one, knows only its `EnergyKernel`).
 #[derive(Debug, thiserror::Error)]
 pub enum ExecutorError {
     /// The device failed (lost, out of memory, a mapping error); the message is the device's.
@@ -31,7 +36,7 @@ pub enum ExecutorError {
 }
 
 /// Where the heavy work runs (see the module docs).
-pub trait Executor: Certifier {
+pub trait Executor: Certifier + EnergyKernel {
     /// `cpu` or `gpu`.
     fn name(&self) -> &'static str;
 
@@ -60,15 +65,6 @@ pub trait Executor: Certifier {
         topo: &Topology,
         p: usize,
     ) -> Result<HighOrderMesh, ExecutorError>;
-
-    /// Value, gradient and Hessian of each local energy problem at its current point, or
-    /// `None` where the caller computes them itself (the CPU reference does so inside its
-    /// Newton loop).
-    fn local_derivatives(
-        &self,
-        dim: usize,
-        problems: &[LocalProblem],
-    ) -> Result<Option<Vec<LocalDerivatives>>, ExecutorError>;
 
     /// Batches the device failed and the CPU computed instead (0 on the CPU).
     fn fallbacks(&self) -> usize {

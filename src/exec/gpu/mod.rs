@@ -1,5 +1,5 @@
 //! The GPU executor: wgpu compute kernels from `shaders/`, each checked against its CPU twin
-//! in [`crate::cpu`] (see `docs/gpu.md`).
+//! in [`crate::exec::cpu`] (see `docs/gpu.md`).
 //!
 //! Only the binary and the test harness create a [`GpuContext`]; kernels take the context (its
 //! `device` and `queue`). Arrays larger than one storage binding (lavapipe: 128 MiB) are split
