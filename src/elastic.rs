@@ -34,7 +34,7 @@ use std::time::Instant;
 pub const MAX_ELASTIC_ORDER: usize = 6;
 
 /// Preconditioner of the elastic CG solve (`--elastic-preconditioner`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum ElasticPreconditioner {
     /// The inverse of the diagonal of K.

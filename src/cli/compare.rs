@@ -1,5 +1,6 @@
 //! `polyspline compare`: every method on one mesh, one table.
 
+use super::values;
 use super::{ElasticArgs, FeatureArgs};
 use polyspline::compare::{CompareOptions, compare};
 use polyspline::exec::gpu::BackendChoice;
@@ -29,8 +30,8 @@ pub(super) struct Args {
     allow_invalid: bool,
     /// Where sampling, certification and the fit's CG solve run (the elastic solve runs on
     /// the CPU).
-    #[arg(long, value_enum, default_value_t = BackendChoice::Cpu)]
-    backend: BackendChoice,
+    #[arg(long, value_enum, default_value_t = values::BackendChoice::Cpu)]
+    backend: values::BackendChoice,
     #[command(flatten)]
     features: FeatureArgs,
 }
@@ -49,7 +50,7 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
             mesh: MeshOptions {
                 allow_invalid: args.allow_invalid,
             },
-            backend: args.backend.resolve(None)?,
+            backend: BackendChoice::from(args.backend).resolve(None)?,
             features: args.features.options(),
             ..Default::default()
         },

@@ -1,16 +1,14 @@
 //! `polyspline curve`: the curved high-order mesh of a linear one, and its report.
 
+use super::values;
 use super::{ElasticArgs, FeatureArgs};
 use polyspline::energy::{EnergyParams, EnergySolver};
-use polyspline::exec::gpu::{BackendChoice, Precision};
+use polyspline::exec::gpu::BackendChoice;
 use polyspline::fit::{FitParams, FitPreset, FitSolver, FitTargets, FitWeights, SmoothParams};
-use polyspline::io::gmsh_write::MshVersion;
 use polyspline::io::output::{check_outputs, prepare};
-use polyspline::io::vtu_write::VtuEncoding;
 use polyspline::mesh::MeshOptions;
 use polyspline::pipeline::{
-    CurveOptions, CurveReport, Geometry, LineSearchMode, Method, OutputFormat, OutputOptions,
-    curve_prepared,
+    CurveOptions, CurveReport, Geometry, Method, OutputFormat, OutputOptions, curve_prepared,
 };
 use polyspline::solve::{CgParams, CgPreconditioner};
 use polyspline::validity::LineSearchParams;
@@ -35,13 +33,13 @@ pub(super) struct Args {
     /// `iga` samples the fitted spline everywhere; `elastic` (the paper's baseline, §2.5)
     /// puts the boundary nodes on the same fitted spline and moves the interior nodes of the
     /// straight order-P mesh by linear elasticity.
-    #[arg(long, value_enum, default_value_t = Method::Iga)]
-    method: Method,
+    #[arg(long, value_enum, default_value_t = values::Method::Iga)]
+    method: values::Method,
     #[command(flatten)]
     elastic: ElasticArgs,
     /// Fit of the spline control points (`smooth` is the default).
-    #[arg(long, value_enum, default_value_t = FitPreset::Smooth)]
-    fit: FitPreset,
+    #[arg(long, value_enum, default_value_t = values::FitPreset::Smooth)]
+    fit: values::FitPreset,
     #[command(flatten)]
     energy: EnergyArgs,
     /// Position weight at interior element corners (overrides the preset).
@@ -79,16 +77,16 @@ pub(super) struct Args {
     /// Solver of the fit's normal equations: `auto` factors small systems (at most 12,000
     /// control points in 2D, 1,000 in 3D) by sparse Cholesky on the CPU backend and solves
     /// the rest by CG; `cg` and `cholesky` force one (distributed runs always use CG).
-    #[arg(long, value_enum, default_value_t = FitSolver::default())]
-    fit_solver: FitSolver,
+    #[arg(long, value_enum, default_value_t = FitSolver::default().into())]
+    fit_solver: values::FitSolver,
     /// Relative tolerance of the conjugate-gradient solve.
     #[arg(long, default_value_t = 1e-6)]
     cg_tol: f64,
     /// Preconditioner of the fit's CG solve on the CPU: the diagonal, or exact inverses of
     /// the diagonal blocks on aggregates of 64 neighbouring control points (the GPU solver
     /// always uses the diagonal).
-    #[arg(long, value_enum, default_value_t = CgPreconditioner::default())]
-    cg_preconditioner: CgPreconditioner,
+    #[arg(long, value_enum, default_value_t = CgPreconditioner::default().into())]
+    cg_preconditioner: values::CgPreconditioner,
     /// Most bisections of the validity line search.
     #[arg(long, default_value_t = 30)]
     max_bisections: usize,
@@ -110,14 +108,14 @@ pub(super) struct Args {
     percentile_quality_fraction: f64,
     /// Shorten the fitted step per control point around invalid elements (`local`), or by
     /// one factor for the whole mesh as in the paper (`global`).
-    #[arg(long, value_enum, default_value_t = LineSearchMode::Local)]
-    line_search: LineSearchMode,
+    #[arg(long, value_enum, default_value_t = values::LineSearchMode::Local)]
+    line_search: values::LineSearchMode,
     /// With --order 1: split each element into K^d linear elements on the curved geometry.
     #[arg(long, value_name = "K")]
     subdivide: Option<usize>,
     /// Gmsh file version.
-    #[arg(long, value_enum, default_value_t = MshVersion::V41)]
-    msh_version: MshVersion,
+    #[arg(long, value_enum, default_value_t = values::MshVersion::V41)]
+    msh_version: values::MshVersion,
     /// Binary Gmsh output.
     #[arg(long)]
     binary: bool,
@@ -126,8 +124,8 @@ pub(super) struct Args {
     #[arg(long)]
     partitioned: bool,
     /// How VTU data arrays are stored.
-    #[arg(long, value_enum, default_value_t = VtuEncoding::Base64)]
-    vtu_encoding: VtuEncoding,
+    #[arg(long, value_enum, default_value_t = values::VtuEncoding::Base64)]
+    vtu_encoding: values::VtuEncoding,
     /// Name of the MSH volume physical group where the input names no region (PyFR reads
     /// its volume from a group named `fluid`).
     #[arg(long, default_value = "fluid", value_name = "NAME")]
@@ -145,19 +143,19 @@ pub(super) struct Args {
     /// Where sampling, certification and the CG solve run: `auto` uses a hardware GPU
     /// when there is one and the CPU otherwise (a software adapter such as lavapipe only
     /// with `gpu`).
-    #[arg(long, value_enum, default_value_t = BackendChoice::Auto)]
-    backend: BackendChoice,
+    #[arg(long, value_enum, default_value_t = values::BackendChoice::Auto)]
+    backend: values::BackendChoice,
     /// Float type of the GPU kernels (default: f64 where the adapter has it).
     #[arg(long, value_enum)]
-    precision: Option<Precision>,
+    precision: Option<values::Precision>,
 }
 
 /// Options of `--fit energy`.
 #[derive(clap::Args)]
 struct EnergyArgs {
     /// Minimiser of the degeneration energy: global L-BFGS, or coloured local Newton steps.
-    #[arg(long, value_enum, default_value_t = EnergySolver::Lbfgs)]
-    energy_solver: EnergySolver,
+    #[arg(long, value_enum, default_value_t = values::EnergySolver::Lbfgs)]
+    energy_solver: values::EnergySolver,
     /// Weight of the degeneration energy against the least-squares terms.
     #[arg(long, default_value_t = EnergyParams::default().weight)]
     energy_weight: f64,
@@ -176,7 +174,7 @@ impl EnergyArgs {
     fn params(&self) -> EnergyParams {
         EnergyParams {
             weight: self.energy_weight,
-            solver: self.energy_solver,
+            solver: self.energy_solver.into(),
             max_iterations: self.energy_max_iterations,
             rel_tol: self.energy_tol,
             sweep_tol: self.energy_sweep_tol,
@@ -188,7 +186,7 @@ impl EnergyArgs {
 impl Args {
     /// The preset's weights with the single weights given on the command line.
     fn weights(&self) -> FitWeights {
-        let mut weights = self.fit.weights();
+        let mut weights = FitPreset::from(self.fit).weights();
         for (slot, value) in [
             (&mut weights.corner, self.w_corner),
             (&mut weights.boundary_corner, self.w_boundary_corner),
@@ -212,24 +210,24 @@ impl Args {
             subdivide: self.subdivide,
             geometry: if self.straight {
                 Geometry::Straight
-            } else if self.fit == FitPreset::None {
+            } else if self.fit == values::FitPreset::None {
                 Geometry::SplineInitial
             } else {
                 Geometry::SplineFitted
             },
             method: match self.method {
-                Method::Elastic(_) => Method::Elastic(self.elastic.params(self.cg_tol)),
-                Method::Iga => Method::Iga,
+                values::Method::Elastic => Method::Elastic(self.elastic.params(self.cg_tol)),
+                values::Method::Iga => Method::Iga,
             },
             fit: FitParams {
                 weights: self.weights(),
-                solver: self.fit_solver,
+                solver: self.fit_solver.into(),
                 cg: CgParams {
                     rel_tol: self.cg_tol,
-                    preconditioner: self.cg_preconditioner,
+                    preconditioner: self.cg_preconditioner.into(),
                     ..Default::default()
                 },
-                targets: if self.fit.smooth_targets() {
+                targets: if FitPreset::from(self.fit).smooth_targets() {
                     FitTargets::Smooth(SmoothParams {
                         kink_angle_deg: self.kink_angle,
                         ..Default::default()
@@ -248,19 +246,19 @@ impl Args {
                 ..Default::default()
             },
             snap_boundary: self.snap_boundary,
-            line_search_mode: self.line_search,
+            line_search_mode: self.line_search.into(),
             mesh: MeshOptions {
                 allow_invalid: self.allow_invalid,
             },
             output: OutputOptions {
-                msh_version: self.msh_version,
+                msh_version: self.msh_version.into(),
                 binary: self.binary,
-                vtu_encoding: self.vtu_encoding,
+                vtu_encoding: self.vtu_encoding.into(),
                 volume_name: self.volume_name,
                 vtu_boundary: self.vtu_boundary,
             },
             backend,
-            energy: (self.fit == FitPreset::Energy).then(|| self.energy.params()),
+            energy: (self.fit == values::FitPreset::Energy).then(|| self.energy.params()),
         }
     }
 }
@@ -289,7 +287,8 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
         }
         check_outputs(&outputs, &inputs)?;
         polyspline::fit::check_kink_angle(args.kink_angle)?;
-        Ok(args.backend.resolve(args.precision)?)
+        let backend = BackendChoice::from(args.backend);
+        Ok(backend.resolve(args.precision.map(Into::into))?)
     };
     // Under mpirun every rank finds the same error: one line, from rank 0.
     #[cfg(feature = "mpi")]

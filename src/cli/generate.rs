@@ -1,5 +1,6 @@
 //! `polyspline generate`: synthetic linear meshes with curved boundaries.
 
+use super::values;
 use polyspline::io::output::check_outputs;
 use polyspline::mesh::Topology;
 use polyspline::mesh::generate::boundary_layer::{self, BoundaryLayer, Wall};
@@ -10,7 +11,7 @@ use std::path::PathBuf;
 #[derive(clap::Args)]
 pub(super) struct Args {
     #[arg(value_enum)]
-    kind: Shape,
+    kind: values::GenerateShape,
     /// Approximate number of elements (disc, cylinder, torus).
     #[arg(long, required_if_eq_any([("kind", "disc"), ("kind", "cylinder"), ("kind", "torus")]))]
     elements: Option<usize>,
@@ -30,7 +31,7 @@ pub(super) struct Args {
 struct BoundaryLayerArgs {
     /// Wall curve [default: ellipse for ogrid, naca for cgrid].
     #[arg(long, value_enum)]
-    wall: Option<Wall>,
+    wall: Option<values::WallShape>,
     /// Ellipse: minor/major semi-axis ratio (default 0.2); airfoil: maximum thickness over
     /// chord (default 0.12).
     #[arg(long)]
@@ -69,7 +70,10 @@ impl BoundaryLayerArgs {
             Wall::ELLIPSE
         };
         BoundaryLayer {
-            wall: self.wall.unwrap_or(default).with_thickness(self.thickness),
+            wall: self
+                .wall
+                .map_or(default, Wall::from)
+                .with_thickness(self.thickness),
             around: self.around,
             across: self.across,
             first_height: self.first_height,
@@ -84,12 +88,13 @@ impl BoundaryLayerArgs {
 
 pub(super) fn run(args: Args) -> anyhow::Result<()> {
     let output = &args.output;
-    args.kind.check(args.elements)?;
+    let shape = Shape::from(args.kind);
+    shape.check(args.elements)?;
     check_outputs(&[output], &[])?;
-    let mesh = match args.kind {
+    let mesh = match shape {
         Shape::Benchmark(kind) => generate(kind, args.elements.unwrap_or_default()),
         Shape::Ogrid | Shape::Cgrid => {
-            let cgrid = args.kind == Shape::Cgrid;
+            let cgrid = shape == Shape::Cgrid;
             let params = args.layer.params(cgrid);
             let made = if cgrid {
                 boundary_layer::cgrid(&params)

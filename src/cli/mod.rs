@@ -5,9 +5,10 @@
 //! prints, or an error for `main` to print as one bounded line (exit status 1; clap's own
 //! usage errors exit with 2).
 //!
-//! Invariant: no option is validated here; the library refuses bad values
-//! ([`polyspline::params`], and the generators and readers for their own inputs), so a caller
-//! of the library is refused as the command line is.
+//! Invariant: no option is validated here; the library refuses bad values (each options
+//! struct's `check`, over [`polyspline::params`], and the generators and readers for their own
+//! inputs), so a caller of the library is refused as the command line is. The enumerated
+//! values are spelled here ([`values`]), so the library carries no clap types.
 
 mod check;
 mod compare;
@@ -15,9 +16,10 @@ mod curve;
 mod generate;
 mod info;
 mod plot;
+mod values;
 
 use clap::{Parser, Subcommand};
-use polyspline::elastic::{ElasticParams, ElasticPreconditioner};
+use polyspline::elastic::ElasticParams;
 use polyspline::io::read_raw;
 use polyspline::mesh::HighOrderMesh;
 use polyspline::mesh::features::FeatureParams;
@@ -81,8 +83,8 @@ struct ElasticArgs {
     poisson: f64,
     /// Preconditioner of the elastic CG solve: the diagonal, the per-node d×d block inverse,
     /// or a symmetric block Gauss–Seidel sweep.
-    #[arg(long, value_enum, default_value_t = ElasticPreconditioner::BlockJacobi)]
-    elastic_preconditioner: ElasticPreconditioner,
+    #[arg(long, value_enum, default_value_t = values::ElasticPreconditioner::BlockJacobi)]
+    elastic_preconditioner: values::ElasticPreconditioner,
 }
 
 impl ElasticArgs {
@@ -94,7 +96,7 @@ impl ElasticArgs {
                 rel_tol: cg_tol,
                 ..Default::default()
             },
-            preconditioner: self.elastic_preconditioner,
+            preconditioner: self.elastic_preconditioner.into(),
         }
     }
 }

@@ -2,7 +2,7 @@
 
 use crate::params::{ParamError, in_range};
 /// Which minimiser runs (`--energy-solver`).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum EnergySolver {
     /// Global L-BFGS with a certified Armijo line search.

@@ -157,7 +157,7 @@ impl FitWeights {
 
 /// The fit presets of the command line (`--fit`): which weights and targets the least-squares
 /// fit uses, and whether the energy minimisation follows it.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum FitPreset {
     /// No fit: sample the initial spline map.
     None,
@@ -200,7 +200,7 @@ pub enum FitTargets {
 }
 
 /// How the fit's normal equations are solved.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum FitSolver {
     /// Sparse Cholesky for systems of at most [`FitSolver::DIRECT_2D`] (2D) or

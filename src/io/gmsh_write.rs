@@ -18,11 +18,9 @@ use std::collections::BTreeMap;
 use std::io::{self, Write};
 
 /// MSH format version to write (`--msh-version`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum MshVersion {
-    #[value(name = "4.1")]
     V41,
-    #[value(name = "2.2")]
     V22,
 }
 

@@ -22,7 +22,7 @@ use base64::Engine;
 use std::io::{self, Write};
 
 /// How the data arrays are stored (`--vtu-encoding`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum VtuEncoding {
     Ascii,
     Base64,

@@ -370,7 +370,7 @@ pub fn revolve(section: &LinearMesh, major: f64, segments: usize) -> LinearMesh 
 }
 
 /// Kinds of [`generate`]d benchmark meshes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Kind {
     /// 2D butterfly disc (valence-3 vertices).
     Disc,
@@ -387,32 +387,6 @@ pub enum Shape {
     Benchmark(Kind),
     Ogrid,
     Cgrid,
-}
-
-/// `disc`, `cylinder`, `torus`, `ogrid`, `cgrid`.
-impl clap::ValueEnum for Shape {
-    fn value_variants<'a>() -> &'a [Self] {
-        &[
-            Shape::Benchmark(Kind::Disc),
-            Shape::Benchmark(Kind::Cylinder),
-            Shape::Benchmark(Kind::Torus),
-            Shape::Ogrid,
-            Shape::Cgrid,
-        ]
-    }
-    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
-        use clap::builder::PossibleValue;
-        match self {
-            Shape::Benchmark(kind) => kind.to_possible_value(),
-            Shape::Ogrid => {
-                Some(PossibleValue::new("ogrid").help("Boundary-layer O-grid around `--wall`"))
-            }
-            Shape::Cgrid => Some(
-                PossibleValue::new("cgrid")
-                    .help("Boundary-layer C-grid around a NACA 00xx airfoil with a wake cut"),
-            ),
-        }
-    }
 }
 
 /// Most elements the `generate` command makes (memory grows linearly, see docs/reliability.md).

@@ -100,18 +100,6 @@ impl Default for CurveOptions {
     }
 }
 
-/// `--method iga|elastic`; `elastic` carries default material and solver parameters, which
-/// the caller replaces with its own.
-impl clap::ValueEnum for Method {
-    fn value_variants<'a>() -> &'a [Self] {
-        static VARIANTS: std::sync::OnceLock<[Method; 2]> = std::sync::OnceLock::new();
-        VARIANTS.get_or_init(|| [Method::Iga, Method::Elastic(ElasticParams::default())])
-    }
-    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
-        Some(clap::builder::PossibleValue::new(self.name()))
-    }
-}
-
 impl CurveOptions {
     /// Every option of the `curve` job, before any work (the order range is checked here too,
     /// with the option's own name: `--order` or `--subdivide`). The first option out of range

@@ -59,23 +59,6 @@ impl Default for CgPreconditioner {
         }
     }
 }
-/// `--cg-preconditioner jacobi|block-jacobi` (block Jacobi with the default aggregate size).
-impl clap::ValueEnum for CgPreconditioner {
-    fn value_variants<'a>() -> &'a [Self] {
-        &[
-            CgPreconditioner::Jacobi,
-            CgPreconditioner::BlockJacobi {
-                size: block_jacobi::DEFAULT_BLOCK,
-            },
-        ]
-    }
-    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
-        Some(clap::builder::PossibleValue::new(match self {
-            CgPreconditioner::Jacobi => "jacobi",
-            CgPreconditioner::BlockJacobi { .. } => "block-jacobi",
-        }))
-    }
-}
 
 /// CG parameters.
 #[derive(Clone, Copy, Debug)]

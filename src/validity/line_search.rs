@@ -15,15 +15,12 @@ use crate::mesh::LinearMesh;
 use crate::params::{ParamError, above, in_range};
 
 /// How the fitted step is shortened where it would invalidate elements.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum LineSearchMode {
     /// One α for all control points (paper §2.3).
     Global,
     /// A factor per control point, halved only around elements that are not certified
-    #[value(
-        help = "A factor per control point, halved only around elements that are not certified"
-    )]
     /// ([`local_line_search`]).
     Local,
 }

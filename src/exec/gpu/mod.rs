@@ -21,7 +21,7 @@ use crate::math::BezierNet;
 use wgpu::util::DeviceExt;
 
 /// Floating-point type of the kernels (`--precision`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Precision {
     /// f32 everywhere (portable); accuracy from element-anchored coordinates and displacement
@@ -360,7 +360,7 @@ pub enum Backend {
 
 /// The executor a caller asks for (`--backend`), resolved into a [`Backend`] by
 /// [`BackendChoice::resolve`].
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum BackendChoice {
     /// A hardware GPU when there is one, the CPU otherwise (never a software adapter).
     Auto,

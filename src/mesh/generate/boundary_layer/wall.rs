@@ -36,24 +36,6 @@ impl Wall {
     }
 }
 
-/// `--wall ellipse|circle|naca`, each with its default thickness.
-impl clap::ValueEnum for Wall {
-    fn value_variants<'a>() -> &'a [Self] {
-        &[Wall::ELLIPSE, Wall::Circle, Wall::NACA_0012]
-    }
-    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
-        use clap::builder::PossibleValue;
-        Some(match self {
-            Wall::Ellipse { .. } => {
-                PossibleValue::new("ellipse").help("Semi-axes 1 and `--thickness` (chord 2)")
-            }
-            Wall::Circle => PossibleValue::new("circle").help("Radius 1 (chord 2)"),
-            Wall::Naca { .. } => PossibleValue::new("naca")
-                .help("NACA 00xx of chord 1, thickness `--thickness`, closed trailing edge"),
-        })
-    }
-}
-
 /// NACA 4-digit half thickness in the parameter u = √x, and its u-derivative.
 pub(super) fn naca_half(t: f64, u: f64) -> (f64, f64) {
     let (u2, u3) = (u * u, u * u * u);
