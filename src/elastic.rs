@@ -11,8 +11,12 @@
 //! (isoparametric), (p+1)^d Gauss points per element, isotropic material (E, ν). Dirichlet
 //! nodes are eliminated: the unknowns are the free nodes' d displacement components, the matrix
 //! is a block CSR of d×d nodal blocks (assembled in parallel with atomic adds, like the fit's
-//! normal matrix), and K_ff u_f = −K_fb u_b is solved by [`crate::solve::pcg_coupled`] with a
-//! nodal block-Jacobi preconditioner (or pointwise Jacobi, for comparison).
+//! normal matrix), and K_ff u_f = −K_fb u_b is solved by sparse Cholesky
+//! ([`crate::solve::direct`]) while the factor fits [`CHOLESKY_MAX_FACTOR_ENTRIES`], otherwise
+//! by [`crate::solve::pcg_coupled`] with a nodal block-Jacobi preconditioner (or pointwise
+//! Jacobi, or symmetric block Gauss–Seidel). The factorisation is what makes boundary-layer
+//! meshes solvable at all: their thin cells make K as ill-conditioned as the square of the
+//! cells' aspect ratio.
 //!
 //! Invariants: with zero boundary displacement the mesh is unchanged (u = 0 exactly); a
 //! displacement that is linear in x on the boundary is reproduced exactly inside (patch test),
@@ -24,6 +28,7 @@ use crate::math::quadrature::gauss_legendre;
 use crate::mesh::HighOrderMesh;
 use crate::mesh::high_order::lattice_point;
 use crate::params::{ParamError, num};
+use crate::solve::direct::CholeskyPattern;
 use crate::solve::{CgError, CgInfo, CgParams, LinOp, Preconditioner, pcg_coupled};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -47,6 +52,32 @@ pub enum ElasticPreconditioner {
     BlockSgs,
 }
 
+/// How the elastic system is solved (`--elastic-solver`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ElasticSolver {
+    /// Sparse Cholesky when its factor fits [`CHOLESKY_MAX_FACTOR_ENTRIES`], CG otherwise.
+    Auto,
+    /// Preconditioned CG ([`ElasticPreconditioner`]).
+    Cg,
+    /// Sparse Cholesky whatever the size of its factor.
+    Cholesky,
+}
+
+/// Largest Cholesky factor `--elastic-solver auto` computes: 2.4 × 10⁸ entries (1.9 GB).
+///
+/// The elastic system of a boundary-layer mesh is as ill-conditioned as its cells are thin
+/// (condition number ∝ aspect ratio², 10⁸ for the 10⁴ aspect ratios of an airfoil's wall
+/// cells), which block-Jacobi CG does not overcome in any affordable number of iterations;
+/// the factorisation's cost does not depend on it. Every 2D mesh and the 3D meshes of up to
+/// some 10⁵ order-2 nodes stay under the bound; larger 3D systems take CG.
+pub const CHOLESKY_MAX_FACTOR_ENTRIES: usize = 240_000_000;
+
+/// Largest system `--elastic-solver auto` analyses for a factorisation at all (scalar
+/// unknowns): the ordering alone grows superlinearly, and beyond it the factor of a 3D
+/// system is far over [`CHOLESKY_MAX_FACTOR_ENTRIES`].
+const CHOLESKY_MAX_UNKNOWNS: usize = 6_000_000;
+
 /// Material and solver parameters.
 #[derive(Clone, Copy, Debug)]
 pub struct ElasticParams {
@@ -56,6 +87,10 @@ pub struct ElasticParams {
     pub poisson: f64,
     pub cg: CgParams,
     pub preconditioner: ElasticPreconditioner,
+    pub solver: ElasticSolver,
+    /// Jacobian-based stiffening exponent χ ≥ 0: the stiffness at a point is scaled by
+    /// |det J|^−χ of the straight mesh there (0: the paper's homogeneous material).
+    pub stiffening: f64,
 }
 
 impl Default for ElasticParams {
@@ -66,6 +101,8 @@ impl Default for ElasticParams {
             poisson: 0.49,
             cg: CgParams::default(),
             preconditioner: ElasticPreconditioner::BlockJacobi,
+            solver: ElasticSolver::Auto,
+            stiffening: 0.0,
         }
     }
 }
@@ -87,6 +124,13 @@ impl ElasticParams {
                 "Poisson's ratio must be in (-1, 0.5)",
             ));
         }
+        if !(self.stiffening.is_finite() && self.stiffening >= 0.0) {
+            return Err(ParamError::new(
+                "--elastic-stiffening",
+                num(self.stiffening),
+                "the stiffening exponent must be non-negative and finite",
+            ));
+        }
         self.cg.check()
     }
 }
@@ -97,6 +141,18 @@ pub struct ElasticInfo {
     pub young: f64,
     pub poisson: f64,
     pub preconditioner: ElasticPreconditioner,
+    /// The solver that ran: `cg`, or `cholesky` (then `cg.iterations` is 0 and
+    /// `cg.rel_residual` the residual measured after the solve).
+    pub solver: ElasticSolver,
+    /// Entries of the Cholesky factor (0 when CG ran).
+    pub factor_entries: usize,
+    /// Nodes moved back towards the straight mesh because an element of theirs was not
+    /// certified valid ([`hold_back_invalid`]); 0 when the elastic mesh is valid as solved.
+    pub held_back_nodes: usize,
+    /// Of those, nodes on the boundary: there the mesh leaves the prescribed boundary.
+    pub held_back_boundary_nodes: usize,
+    /// The smallest fraction of its elastic displacement a node kept (1 when none was held).
+    pub min_displacement_fraction: f64,
     /// Scalar unknowns (free nodes × d).
     pub unknowns: usize,
     /// Prescribed (boundary) nodes.
@@ -209,6 +265,7 @@ fn element_stiffness(
     x: &[[f64; 3]],
     lambda: f64,
     mu: f64,
+    stiffening: f64,
 ) -> Vec<f64> {
     let n = quad.n_nodes;
     let nd = n * dim;
@@ -233,7 +290,13 @@ fn element_stiffness(
                 g[a][i] = (0..dim).map(|c| inv[c][i] * rg[c]).sum();
             }
         }
-        let f = w * det.abs();
+        // Jacobian-based stiffening: the energy density weighted by |det J|^−χ, so that small
+        // (thin) cells are stiffer and move with the boundary instead of absorbing its motion.
+        let f = if stiffening == 0.0 {
+            w * det.abs()
+        } else {
+            w * det.abs().powf(1.0 - stiffening)
+        };
         for a in 0..n {
             for b in 0..n {
                 let dot: f64 = (0..dim).map(|i| g[a][i] * g[b][i]).sum();
@@ -271,6 +334,36 @@ impl BlockMatrix {
         let cols = &self.indices[self.indptr[row]..self.indptr[row + 1]];
         let at = cols.binary_search(&(row as u32)).expect("diagonal block");
         self.block(self.indptr[row] + at)
+    }
+}
+
+impl BlockMatrix {
+    /// The same matrix with one row and column per scalar unknown (`node · d + component`);
+    /// columns stay sorted since a block's columns are consecutive.
+    fn scalar_csr(&self) -> ScalarCsr {
+        let d = self.dim;
+        let n = self.nrows();
+        let nnz = self.indices.len() * d * d;
+        let mut out = ScalarCsr {
+            indptr: Vec::with_capacity(n * d + 1),
+            indices: Vec::with_capacity(nnz),
+            data: Vec::with_capacity(nnz),
+        };
+        out.indptr.push(0);
+        for r in 0..n {
+            for i in 0..d {
+                for k in self.indptr[r]..self.indptr[r + 1] {
+                    let c = self.indices[k] as usize;
+                    let b = self.block(k);
+                    for j in 0..d {
+                        out.indices.push((c * d + j) as u32);
+                        out.data.push(b[i * d + j]);
+                    }
+                }
+                out.indptr.push(out.indices.len());
+            }
+        }
+        out
     }
 }
 
@@ -476,7 +569,7 @@ fn assemble(
     prescribed: &[Option<[f64; 3]>],
     free: &[u32],
     (indptr, indices): (Vec<usize>, Vec<u32>),
-    (lambda, mu): (f64, f64),
+    (lambda, mu, stiffening): (f64, f64, f64),
 ) -> (BlockMatrix, Vec<[f64; 3]>) {
     let (dim, p) = (reference.dim, reference.order);
     let nf = indptr.len() - 1;
@@ -491,7 +584,7 @@ fn assemble(
             return;
         }
         let x: Vec<[f64; 3]> = ids.iter().map(|&n| reference.nodes[n as usize]).collect();
-        let k = element_stiffness(dim, &quad, &x, lambda, mu);
+        let k = element_stiffness(dim, &quad, &x, lambda, mu, stiffening);
         let nd = npe * dim;
         for (a, &na) in ids.iter().enumerate() {
             let r = free[na as usize];
@@ -556,7 +649,14 @@ pub fn solve_displacement(
     if !(1..=MAX_ELASTIC_ORDER).contains(&p) {
         return Err(ElasticError::Order(p));
     }
-    let material = lame(params.young, params.poisson)?;
+    let (lambda, mu) = lame(params.young, params.poisson)?;
+    if !(params.stiffening >= 0.0 && params.stiffening.is_finite()) {
+        return Err(ElasticError::Material(format!(
+            "the stiffening exponent must be non-negative and finite, got {}",
+            params.stiffening
+        )));
+    }
+    let material = (lambda, mu, params.stiffening);
     let start = Instant::now();
     let nn = reference.nodes.len();
     assert_eq!(prescribed.len(), nn);
@@ -567,21 +667,31 @@ pub fn solve_displacement(
 
     let solve_start = Instant::now();
     let mut u = vec![[0.0; 3]; nf];
-    let cg = if nf == 0 {
-        CgInfo {
+    let (cg, solver, factor_entries) = if nf == 0 {
+        let none = CgInfo {
             iterations: 0,
             rel_residual: 0.0,
-        }
+        };
+        (none, params.solver, 0)
     } else {
-        let nodal = NodalPreconditioner::new(&matrix, params.preconditioner)?;
-        if params.preconditioner == ElasticPreconditioner::BlockSgs {
-            let pre = BlockSgs {
-                k: &matrix,
-                dinv: nodal,
-            };
-            pcg_coupled(&matrix, &pre, &b, &mut u, &params.cg)?
-        } else {
-            pcg_coupled(&matrix, &nodal, &b, &mut u, &params.cg)?
+        let direct = match factorisation(&matrix, params.solver)? {
+            Some((scalar, pattern)) => {
+                let entries = pattern.factor_entries();
+                match solve_direct(&matrix, &scalar, pattern, &b, &mut u) {
+                    Ok(info) => Some((info, entries)),
+                    // `auto` falls back to CG when the factorisation breaks down.
+                    Err(_) if params.solver == ElasticSolver::Auto => None,
+                    Err(e) => return Err(e.into()),
+                }
+            }
+            None => None,
+        };
+        match direct {
+            Some((info, entries)) => (info, ElasticSolver::Cholesky, entries),
+            None => {
+                u.iter_mut().for_each(|x| *x = [0.0; 3]);
+                (solve_cg(&matrix, params, &b, &mut u)?, ElasticSolver::Cg, 0)
+            }
         }
     };
     let displacement = (0..nn)
@@ -596,6 +706,11 @@ pub fn solve_displacement(
             young: params.young,
             poisson: params.poisson,
             preconditioner: params.preconditioner,
+            solver,
+            factor_entries,
+            held_back_nodes: 0,
+            held_back_boundary_nodes: 0,
+            min_displacement_fraction: 1.0,
             unknowns: nf * dim,
             prescribed_nodes: nn - nf,
             nonzero_blocks: matrix.indices.len(),
@@ -604,6 +719,111 @@ pub fn solve_displacement(
             solve_seconds: solve_start.elapsed().as_secs_f64(),
         },
     ))
+}
+
+/// K_ff by block-preconditioned CG.
+fn solve_cg(
+    matrix: &BlockMatrix,
+    params: &ElasticParams,
+    b: &[[f64; 3]],
+    u: &mut [[f64; 3]],
+) -> Result<CgInfo, CgError> {
+    let nodal = NodalPreconditioner::new(matrix, params.preconditioner)?;
+    if params.preconditioner == ElasticPreconditioner::BlockSgs {
+        let pre = BlockSgs {
+            k: matrix,
+            dinv: nodal,
+        };
+        pcg_coupled(matrix, &pre, b, u, &params.cg)
+    } else {
+        pcg_coupled(matrix, &nodal, b, u, &params.cg)
+    }
+}
+
+/// The scalar CSR of K_ff (row and column `node · d + component`) and its Cholesky pattern,
+/// when `solver` asks for the factorisation or allows it at this size; `None` means CG.
+fn factorisation(
+    matrix: &BlockMatrix,
+    solver: ElasticSolver,
+) -> Result<Option<(ScalarCsr, CholeskyPattern)>, CgError> {
+    let unknowns = matrix.nrows() * matrix.dim;
+    let try_it = match solver {
+        ElasticSolver::Cg => false,
+        ElasticSolver::Cholesky => true,
+        ElasticSolver::Auto => unknowns <= CHOLESKY_MAX_UNKNOWNS,
+    };
+    if !try_it {
+        return Ok(None);
+    }
+    let scalar = matrix.scalar_csr();
+    let pattern = CholeskyPattern::new(&scalar.indptr, &scalar.indices)?;
+    if solver == ElasticSolver::Auto && pattern.factor_entries() > CHOLESKY_MAX_FACTOR_ENTRIES {
+        return Ok(None);
+    }
+    Ok(Some((scalar, pattern)))
+}
+
+/// K_ff u = b by sparse Cholesky, reported as [`CgInfo`] with 0 iterations and the relative
+/// residual ‖b − K u‖/‖b‖ measured afterwards.
+fn solve_direct(
+    matrix: &BlockMatrix,
+    scalar: &ScalarCsr,
+    pattern: CholeskyPattern,
+    b: &[[f64; 3]],
+    u: &mut [[f64; 3]],
+) -> Result<CgInfo, CgError> {
+    let d = matrix.dim;
+    // Symmetric diagonal scaling D^−½ K D^−½ (unit diagonal): the stiffening spreads the
+    // diagonal over many orders of magnitude, which the factorisation's pivots do not survive
+    // unscaled.
+    let scale: Vec<f64> = (0..scalar.indptr.len() - 1)
+        .map(|r| {
+            let at = scalar.indptr[r]
+                + scalar.indices[scalar.indptr[r]..scalar.indptr[r + 1]]
+                    .binary_search(&(r as u32))
+                    .expect("diagonal entry");
+            1.0 / scalar.data[at].sqrt()
+        })
+        .collect();
+    let mut data = scalar.data.clone();
+    for r in 0..scale.len() {
+        for k in scalar.indptr[r]..scalar.indptr[r + 1] {
+            data[k] *= scale[r] * scale[scalar.indices[k] as usize];
+        }
+    }
+    let factor = pattern.factor(&data)?;
+    drop(data);
+    let mut rhs = faer::Mat::<f64>::from_fn(b.len() * d, 1, |i, _| b[i / d][i % d] * scale[i]);
+    factor.solve_in_place(&mut rhs)?;
+    for (i, x) in u.iter_mut().enumerate() {
+        for c in 0..d {
+            x[c] = rhs[(i * d + c, 0)] * scale[i * d + c];
+        }
+    }
+    let mut ku = vec![[0.0; 3]; u.len()];
+    matrix.apply(u, &mut ku);
+    let (mut rr, mut bb) = (0.0f64, 0.0f64);
+    for (k, bi) in ku.iter().zip(b) {
+        for c in 0..d {
+            rr += (bi[c] - k[c]).powi(2);
+            bb += bi[c] * bi[c];
+        }
+    }
+    Ok(CgInfo {
+        iterations: 0,
+        rel_residual: if bb > 0.0 {
+            (rr / bb).sqrt()
+        } else {
+            rr.sqrt()
+        },
+    })
+}
+
+/// A scalar CSR matrix (sorted columns).
+struct ScalarCsr {
+    indptr: Vec<usize>,
+    indices: Vec<u32>,
+    data: Vec<f64>,
 }
 
 /// The elastic-analogy mesh: `straight` with its boundary nodes moved onto those of `curved`
@@ -631,4 +851,147 @@ pub fn elastic_analogy(
         };
     }
     Ok((out, info))
+}
+
+/// Halvings of a node's displacement before it is put back on the straight mesh.
+const MAX_HOLD_BACK_HALVINGS: u32 = 40;
+
+/// What [`hold_back_invalid`] changed.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct HoldBack {
+    /// Nodes whose displacement was shortened.
+    pub nodes: usize,
+    /// Of those, nodes on the boundary.
+    pub boundary_nodes: usize,
+    /// The smallest fraction of its displacement a node kept (1 when none was shortened).
+    pub min_fraction: f64,
+}
+
+/// Make every element of `moved` certified valid by moving nodes back along the straight line
+/// to their positions in `straight` (same numbering): each round halves the displacement of
+/// the interior nodes of every element that `certify` does not certify (of its boundary nodes
+/// only once its interior nodes are straight), then re-certifies the elements around those
+/// nodes. A node halved [`MAX_HOLD_BACK_HALVINGS`] times goes back to
+/// the straight mesh, so the loop ends with every element either certified or made only of
+/// straight nodes, which is the straight element itself.
+///
+/// Linear elasticity does not keep thin boundary-layer cells valid when the boundary moves by
+/// more than their height; this is the elastic analogy's counterpart of the IGA's blend from
+/// the straight elevation, so that both methods always give a certified mesh.
+///
+/// Returns the elements still uncertified (only straight elements that `certify` does not
+/// certify either; empty for a valid input) and what was held back.
+pub fn hold_back_invalid(
+    straight: &HighOrderMesh,
+    moved: &mut HighOrderMesh,
+    certify: impl Fn(&HighOrderMesh, usize) -> bool + Sync,
+) -> (Vec<usize>, HoldBack) {
+    let ne = moved.n_elements();
+    let mut bad: Vec<usize> = (0..ne)
+        .into_par_iter()
+        .filter(|&e| !certify(moved, e))
+        .collect();
+    if bad.is_empty() {
+        return (
+            bad,
+            HoldBack {
+                min_fraction: 1.0,
+                ..Default::default()
+            },
+        );
+    }
+    let nn = moved.nodes.len();
+    let incident = node_elements(moved);
+    let mut boundary = vec![false; nn];
+    for &n in &moved.boundary {
+        boundary[n as usize] = true;
+    }
+    let mut halvings = vec![0u32; nn];
+    let mut touched = vec![false; nn];
+    let mut mark = vec![false; ne];
+    let elastic = moved.nodes.clone();
+    while !bad.is_empty() {
+        // Interior nodes first: the boundary is the one the caller prescribed, and it moves
+        // only for an element whose interior nodes are all straight already.
+        let movable = |n: &u32| halvings[*n as usize] < MAX_HOLD_BACK_HALVINGS;
+        let mut nodes: Vec<u32> = Vec::new();
+        for &e in &bad {
+            let start = nodes.len();
+            let ids = moved.element(e);
+            nodes.extend(ids.iter().filter(|&n| !boundary[*n as usize] && movable(n)));
+            if nodes.len() == start {
+                nodes.extend(ids.iter().filter(|&n| movable(n)));
+            }
+        }
+        nodes.sort_unstable();
+        nodes.dedup();
+        if nodes.is_empty() {
+            // Every node of the remaining elements is straight already.
+            break;
+        }
+        let mut around = Vec::new();
+        for &n in &nodes {
+            let n = n as usize;
+            halvings[n] += 1;
+            touched[n] = true;
+            let f = fraction(halvings[n]);
+            moved.nodes[n] = std::array::from_fn(|k| {
+                straight.nodes[n][k] + f * (elastic[n][k] - straight.nodes[n][k])
+            });
+            for &e in &incident.1[incident.0[n]..incident.0[n + 1]] {
+                if !mark[e as usize] {
+                    mark[e as usize] = true;
+                    around.push(e as usize);
+                }
+            }
+        }
+        for &e in &around {
+            mark[e] = false;
+        }
+        let current: &HighOrderMesh = moved;
+        bad = around
+            .into_par_iter()
+            .filter(|&e| !certify(current, e))
+            .collect();
+    }
+    let held: Vec<usize> = (0..nn).filter(|&n| touched[n]).collect();
+    let info = HoldBack {
+        nodes: held.len(),
+        boundary_nodes: held.iter().filter(|&&n| boundary[n]).count(),
+        min_fraction: held
+            .iter()
+            .map(|&n| fraction(halvings[n]))
+            .fold(1.0, f64::min),
+    };
+    (bad, info)
+}
+
+/// The share of its displacement a node keeps after `halvings` halvings (0 at the last).
+fn fraction(halvings: u32) -> f64 {
+    if halvings >= MAX_HOLD_BACK_HALVINGS {
+        0.0
+    } else {
+        0.5f64.powi(halvings as i32)
+    }
+}
+
+/// For every node, the elements that contain it: CSR offsets and element ids.
+fn node_elements(ho: &HighOrderMesh) -> (Vec<usize>, Vec<u32>) {
+    let nn = ho.nodes.len();
+    let mut offsets = vec![0usize; nn + 1];
+    for &n in &ho.elements {
+        offsets[n as usize + 1] += 1;
+    }
+    for i in 0..nn {
+        offsets[i + 1] += offsets[i];
+    }
+    let mut fill = offsets.clone();
+    let mut ids = vec![0u32; ho.elements.len()];
+    for e in 0..ho.n_elements() {
+        for &n in ho.element(e) {
+            ids[fill[n as usize]] = e as u32;
+            fill[n as usize] += 1;
+        }
+    }
+    (offsets, ids)
 }

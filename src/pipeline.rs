@@ -360,8 +360,17 @@ fn elastic_stage(
     clock.add(Stage::ElasticAssembly, info.assembly_seconds);
     clock.add(Stage::ElasticCg, info.solve_seconds);
     let depth = job.options.line_search.certificate_depth;
+    let mut moved = moved;
+    let mut info = info;
     let bounds = clock.run(Stage::ElasticValidity, || {
         use rayon::prelude::*;
+        let certify = |ho: &HighOrderMesh, e: usize| {
+            crate::validity::lagrange_element_bounds(ho, e, depth).certified_positive()
+        };
+        let (_, held) = crate::elastic::hold_back_invalid(&straight, &mut moved, certify);
+        info.held_back_nodes = held.nodes;
+        info.held_back_boundary_nodes = held.boundary_nodes;
+        info.min_displacement_fraction = held.min_fraction;
         (0..moved.n_elements())
             .into_par_iter()
             .map(|e| crate::validity::lagrange_element_bounds(&moved, e, depth))

@@ -2,6 +2,7 @@
 
 use super::values;
 use super::{ElasticArgs, FeatureArgs};
+use polyspline::elastic::ElasticSolver;
 use polyspline::energy::{EnergyParams, EnergySolver};
 use polyspline::exec::gpu::BackendChoice;
 use polyspline::fit::{FitParams, FitPreset, FitSolver, FitTargets, FitWeights, SmoothParams};
@@ -449,10 +450,22 @@ fn print_summary(r: &CurveReport) {
         );
     }
     if let Some(e) = &r.elastic {
+        let solve = match e.solver {
+            ElasticSolver::Cholesky => {
+                format!("sparse Cholesky ({} factor entries)", e.factor_entries)
+            }
+            _ => format!("{} CG iterations ({:?})", e.cg.iterations, e.preconditioner),
+        };
         eprintln!(
-            "elastic: E {} nu {}, {} unknowns, {} CG iterations ({:?}), relative residual {:.2e}",
-            e.young, e.poisson, e.unknowns, e.cg.iterations, e.preconditioner, e.cg.rel_residual
+            "elastic: E {} nu {}, {} unknowns, {solve}, relative residual {:.2e}",
+            e.young, e.poisson, e.unknowns, e.cg.rel_residual
         );
+        if e.held_back_nodes > 0 {
+            eprintln!(
+                "elastic: {} nodes ({} on the boundary) moved back towards the straight mesh to keep every element valid (smallest kept share of the displacement {:.3})",
+                e.held_back_nodes, e.held_back_boundary_nodes, e.min_displacement_fraction
+            );
+        }
     }
     if let Some(n) = r.snapped_boundary_vertices {
         eprintln!(

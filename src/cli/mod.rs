@@ -85,6 +85,16 @@ struct ElasticArgs {
     /// or a symmetric block Gauss–Seidel sweep.
     #[arg(long, value_enum, default_value_t = values::ElasticPreconditioner::BlockJacobi)]
     elastic_preconditioner: values::ElasticPreconditioner,
+    /// Solver of the elastic system: `auto` factors it (sparse Cholesky) when the factor
+    /// stays under 2.4e8 entries and runs preconditioned CG otherwise; `cg` and `cholesky`
+    /// force one.
+    #[arg(long, value_enum, default_value_t = values::ElasticSolver::Auto)]
+    elastic_solver: values::ElasticSolver,
+    /// Jacobian-based stiffening exponent of the elastic analogy: the stiffness at a point
+    /// is scaled by |det J|^-CHI of the straight mesh, so small cells move with the boundary
+    /// (0: the paper's homogeneous material).
+    #[arg(long, default_value_t = 0.0, value_name = "CHI")]
+    elastic_stiffening: f64,
 }
 
 impl ElasticArgs {
@@ -97,6 +107,8 @@ impl ElasticArgs {
                 ..Default::default()
             },
             preconditioner: self.elastic_preconditioner.into(),
+            solver: self.elastic_solver.into(),
+            stiffening: self.elastic_stiffening,
         }
     }
 }

@@ -8,6 +8,7 @@
 //! compile; the help texts are the command line's own.
 
 use polyspline::elastic::ElasticPreconditioner as LibElasticPreconditioner;
+use polyspline::elastic::ElasticSolver as LibElasticSolver;
 use polyspline::energy::EnergySolver as LibEnergySolver;
 use polyspline::exec::gpu::{BackendChoice as LibBackendChoice, Precision as LibPrecision};
 use polyspline::fit::{FitPreset as LibFitPreset, FitSolver as LibFitSolver};
@@ -100,6 +101,18 @@ value_enum! {
             nodes with the d×d diagonal blocks inverted (SSOR with ω = 1; sequential, about one \
             matrix product)")]
         BlockSgs,
+    }
+}
+
+value_enum! {
+    /// `curve --elastic-solver`, `compare --elastic-solver`.
+    ElasticSolver => LibElasticSolver {
+        #[value(help = "Sparse Cholesky when its factor stays under 2.4e8 entries, CG otherwise")]
+        Auto,
+        #[value(help = "Preconditioned CG (--elastic-preconditioner)")]
+        Cg,
+        #[value(help = "Sparse Cholesky whatever the size of its factor")]
+        Cholesky,
     }
 }
 

@@ -18,7 +18,8 @@
 use super::{CgError, CgInfo};
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::sparse::linalg::cholesky::{
-    CholeskySymbolicParams, SymmetricOrdering, factorize_symbolic_cholesky,
+    CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering,
+    factorize_symbolic_cholesky,
 };
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMatRef};
 use faer::{Conj, Mat, Par, Side};
@@ -36,47 +37,9 @@ pub fn cholesky(
     let n = indptr.len() - 1;
     assert_eq!(b.len(), n);
     assert_eq!(x.len(), n);
-    let too_big = |_| CgError::Factorisation(format!("{n} unknowns, {} entries", data.len()));
-    let col_ptr: Vec<u32> = indptr
-        .iter()
-        .map(|&p| u32::try_from(p))
-        .collect::<Result<_, _>>()
-        .map_err(too_big)?;
-    let pattern = SymbolicSparseColMatRef::new_checked(n, n, &col_ptr, None, indices);
-    let a = SparseColMatRef::new(pattern, data);
-    let oom = |e: faer::sparse::FaerError| CgError::Factorisation(format!("{e:?}"));
-    let symbolic = factorize_symbolic_cholesky(
-        pattern,
-        Side::Lower,
-        SymmetricOrdering::Amd,
-        CholeskySymbolicParams::default(),
-    )
-    .map_err(oom)?;
-    let par = Par::Seq;
-    let mut l = vec![0.0; symbolic.len_val()];
-    let mut scratch = MemBuffer::try_new(
-        symbolic
-            .factorize_numeric_llt_scratch::<f64>(par, Default::default())
-            .or(symbolic.solve_in_place_scratch::<f64>(ncomp, par)),
-    )
-    .map_err(|_| oom(faer::sparse::FaerError::OutOfMemory))?;
-    let llt = symbolic
-        .factorize_numeric_llt(
-            &mut l,
-            a,
-            Side::Lower,
-            faer::linalg::cholesky::llt::factor::LltRegularization::default(),
-            par,
-            MemStack::new(&mut scratch),
-            Default::default(),
-        )
-        .map_err(|e| match e {
-            faer::linalg::solvers::LltError::NonPositivePivot { index } => {
-                CgError::NotPositiveDefinitePivot { pivot: index }
-            }
-        })?;
+    let factor = SparseCholesky::new(indptr, indices, data)?;
     let mut rhs = Mat::<f64>::from_fn(n, ncomp, |i, c| b[i][c]);
-    llt.solve_in_place_with_conj(Conj::No, rhs.as_mut(), par, MemStack::new(&mut scratch));
+    factor.solve_in_place(&mut rhs)?;
     for (i, xi) in x.iter_mut().enumerate() {
         for c in 0..ncomp {
             xi[c] = rhs[(i, c)];
@@ -86,6 +49,113 @@ pub fn cholesky(
         iterations: 0,
         rel_residual: relative_residual(indptr, indices, data, b, x, ncomp),
     })
+}
+
+/// The symbolic analysis of a symmetric sparsity pattern: the fill-reducing ordering and the
+/// size of the factor, known before any number is computed, so a caller can choose between
+/// the factorisation and an iterative solve by the memory the factor would take.
+pub struct CholeskyPattern {
+    symbolic: SymbolicCholesky<u32>,
+    col_ptr: Vec<u32>,
+    indices: Vec<u32>,
+}
+
+impl CholeskyPattern {
+    /// Analyse the pattern of a symmetric matrix given as CSR with sorted columns (the whole
+    /// matrix, both triangles).
+    pub fn new(indptr: &[usize], indices: &[u32]) -> Result<Self, CgError> {
+        let n = indptr.len() - 1;
+        let col_ptr: Vec<u32> = indptr
+            .iter()
+            .map(|&p| u32::try_from(p))
+            .collect::<Result<_, _>>()
+            .map_err(|_| {
+                CgError::Factorisation(format!("{n} unknowns, {} entries", indices.len()))
+            })?;
+        let pattern = SymbolicSparseColMatRef::new_checked(n, n, &col_ptr, None, indices);
+        let symbolic = factorize_symbolic_cholesky(
+            pattern,
+            Side::Lower,
+            SymmetricOrdering::Amd,
+            CholeskySymbolicParams::default(),
+        )
+        .map_err(oom)?;
+        Ok(CholeskyPattern {
+            symbolic,
+            col_ptr,
+            indices: indices.to_vec(),
+        })
+    }
+
+    /// Entries of the Cholesky factor L (each an f64).
+    pub fn factor_entries(&self) -> usize {
+        self.symbolic.len_val()
+    }
+
+    /// Factor the matrix with this pattern and the values `data` (CSR order).
+    pub fn factor(self, data: &[f64]) -> Result<SparseCholesky, CgError> {
+        let n = self.col_ptr.len() - 1;
+        let pattern =
+            SymbolicSparseColMatRef::new_checked(n, n, &self.col_ptr, None, &self.indices);
+        let a = SparseColMatRef::new(pattern, data);
+        let mut l = vec![0.0; self.symbolic.len_val()];
+        let mut scratch = MemBuffer::try_new(
+            self.symbolic
+                .factorize_numeric_llt_scratch::<f64>(PAR, Default::default()),
+        )
+        .map_err(|_| oom(faer::sparse::FaerError::OutOfMemory))?;
+        self.symbolic
+            .factorize_numeric_llt(
+                &mut l,
+                a,
+                Side::Lower,
+                faer::linalg::cholesky::llt::factor::LltRegularization::default(),
+                PAR,
+                MemStack::new(&mut scratch),
+                Default::default(),
+            )
+            .map_err(|e| match e {
+                faer::linalg::solvers::LltError::NonPositivePivot { index } => {
+                    CgError::NotPositiveDefinitePivot { pivot: index }
+                }
+            })?;
+        Ok(SparseCholesky {
+            symbolic: self.symbolic,
+            l,
+        })
+    }
+}
+
+/// A sparse Cholesky factor L Lᵀ = A of a symmetric positive definite matrix.
+pub struct SparseCholesky {
+    symbolic: SymbolicCholesky<u32>,
+    l: Vec<f64>,
+}
+
+impl SparseCholesky {
+    /// Analyse and factor A (CSR of the whole symmetric matrix, sorted columns).
+    pub fn new(indptr: &[usize], indices: &[u32], data: &[f64]) -> Result<Self, CgError> {
+        CholeskyPattern::new(indptr, indices)?.factor(data)
+    }
+
+    /// Overwrite each column of `rhs` (n rows) with A⁻¹ times it.
+    pub fn solve_in_place(&self, rhs: &mut Mat<f64>) -> Result<(), CgError> {
+        let mut scratch = MemBuffer::try_new(
+            self.symbolic
+                .solve_in_place_scratch::<f64>(rhs.ncols(), PAR),
+        )
+        .map_err(|_| oom(faer::sparse::FaerError::OutOfMemory))?;
+        let llt = LltRef::new(&self.symbolic, &self.l);
+        llt.solve_in_place_with_conj(Conj::No, rhs.as_mut(), PAR, MemStack::new(&mut scratch));
+        Ok(())
+    }
+}
+
+/// One thread: the parallel triangular solves were slower on two cores (module docs).
+const PAR: Par = Par::Seq;
+
+fn oom(e: faer::sparse::FaerError) -> CgError {
+    CgError::Factorisation(format!("{e:?}"))
 }
 
 /// max over the used components of ‖b − A x‖ / ‖b‖ (0 for a zero right-hand side).
