@@ -854,7 +854,7 @@ pub fn elastic_analogy(
 }
 
 /// Halvings of a node's displacement before it is put back on the straight mesh.
-const MAX_HOLD_BACK_HALVINGS: u32 = 40;
+pub const MAX_HOLD_BACK_HALVINGS: u32 = 40;
 
 /// What [`hold_back_invalid`] changed.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
