@@ -10,7 +10,8 @@
 //! Tags: the boundary elements of the k-th marker (k = 1..NMARK, in file order) get tag k, and
 //! `tag_names[k]` is the marker's name. Volume elements carry no tags.
 //!
-//! Traps: `%` starts a comment; `=` may or may not have spaces around it; blank lines may
+//! Traps: `MARKERTAG=`/`MARKERELEMS=` (no underscore) are read as `MARKER_TAG=`/`MARKER_ELEMS=`;
+//! `%` starts a comment; `=` may or may not have spaces around it; blank lines may
 //! appear anywhere; sections may come in any order, and elements usually come before the
 //! points, so node indices are range-checked later by `from_raw` using the element's line.
 //! Multi-zone files (`NZONE=` greater than 1) are rejected with a clear error. Free-form
@@ -259,7 +260,12 @@ pub fn read(data: &[u8]) -> Result<RawMesh, ParseError> {
                 ),
             ));
         };
-        let key = key.trim().to_ascii_uppercase();
+        let mut key = key.trim().to_ascii_uppercase();
+        // Some public SU2 meshes spell the marker keywords without the underscore, and SU2
+        // reads them.
+        if key == "MARKERTAG" || key == "MARKERELEMS" {
+            key.insert(6, '_');
+        }
         let value = value.trim();
         match key.as_str() {
             "NDIME" => {
@@ -403,6 +409,15 @@ MARKER_TAG=top
 MARKER_ELEMS=1
 3 4 3
 ";
+
+    /// `MARKERTAG=` (no underscore), as in public SU2 test meshes, names the marker.
+    #[test]
+    fn marker_tag_without_underscore() {
+        let text = TWO_QUADS.replace("MARKER_TAG=top", "MARKERTAG=top");
+        let m = read(text.as_bytes()).unwrap();
+        assert_eq!(m.tag_names[&2], "top");
+        assert_eq!(block(&m, &CellKind::Line).tags, vec![1, 1, 2]);
+    }
 
     #[test]
     fn hand_written_variants() {
