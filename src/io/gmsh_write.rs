@@ -25,14 +25,14 @@ pub enum MshVersion {
 }
 
 /// One physical group with its geometric entity.
-struct Group {
-    dim: usize,
+pub(crate) struct Group {
+    pub(crate) dim: usize,
     /// Entity tag (1-based per dimension).
-    entity: i32,
-    physical: i32,
-    name: String,
+    pub(crate) entity: i32,
+    pub(crate) physical: i32,
+    pub(crate) name: String,
     /// Element indices (into elements or boundary facets) in this group.
-    members: Vec<usize>,
+    pub(crate) members: Vec<usize>,
 }
 
 /// Name of the volume group when the input names no region (PyFR takes its volume from a
@@ -45,9 +45,10 @@ pub const DEFAULT_VOLUME_NAME: &str = "fluid";
 /// keep the input's tags as ids and its names (else `boundary_<tag>`); untagged facets get the
 /// next free id and the name `boundary` (nothing tagged) or `untagged`. Volume groups keep
 /// region tags unless one clashes with a boundary id, then all are shifted past the boundary
-/// ids; an unnamed region is `volume_name` when it is the only one, else `region_<tag>` (a
-/// region whose tag is also a boundary tag counts as unnamed).
-fn groups(mesh: &HighOrderMesh, volume_name: &str) -> Vec<Group> {
+/// ids; the unnamed regions (a region whose tag is also a boundary tag counts as unnamed) form
+/// one group named `volume_name`, joined by a region of that name if the input has one. Groups
+/// of one dimension and physical id are merged into one.
+pub(crate) fn groups(mesh: &HighOrderMesh, volume_name: &str) -> Vec<Group> {
     let by_tag = |tags: &[i32], n: usize| {
         let mut by: BTreeMap<i32, Vec<usize>> = BTreeMap::new();
         for i in 0..n {
@@ -59,29 +60,38 @@ fn groups(mesh: &HighOrderMesh, volume_name: &str) -> Vec<Group> {
     };
     let mut bnd = by_tag(&mesh.boundary_tags, mesh.n_boundary());
     let mut vol = by_tag(&mesh.element_tags, mesh.n_elements());
-    group_plan(
+    let mut out: Vec<Group> = Vec::new();
+    for g in group_plan(
         mesh.dim,
         bnd.keys().copied(),
         vol.keys().copied(),
         &mesh.tag_names,
         volume_name,
-    )
-    .into_iter()
-    .map(|g| {
+    ) {
         let members = if g.dim == mesh.dim {
             vol.remove(&g.tag)
         } else {
             bnd.remove(&g.tag)
-        };
-        Group {
-            dim: g.dim,
-            entity: g.entity,
-            physical: g.physical,
-            name: g.name,
-            members: members.unwrap_or_default(),
         }
-    })
-    .collect()
+        .unwrap_or_default();
+        match out
+            .iter_mut()
+            .find(|o| o.dim == g.dim && o.physical == g.physical)
+        {
+            Some(o) => {
+                o.members.extend(members);
+                o.members.sort_unstable();
+            }
+            None => out.push(Group {
+                dim: g.dim,
+                entity: g.entity,
+                physical: g.physical,
+                name: g.name,
+                members,
+            }),
+        }
+    }
+    out
 }
 
 /// One physical group of [`group_plan`]: the tag (boundary or region, 0 = untagged) whose
@@ -102,16 +112,23 @@ pub(crate) fn write_format_and_names<'a>(
     w: &mut impl Write,
     vstr: &str,
     binary: bool,
-    groups: impl ExactSizeIterator<Item = (usize, i32, &'a str)>,
+    groups: impl Iterator<Item = (usize, i32, &'a str)>,
 ) -> io::Result<()> {
+    // Several entities may share a physical group: its name is written once.
+    let mut names: Vec<(usize, i32, &str)> = Vec::new();
+    for g in groups {
+        if !names.iter().any(|n| n.0 == g.0 && n.1 == g.1) {
+            names.push(g);
+        }
+    }
     writeln!(w, "$MeshFormat\n{vstr} {} 8", binary as i32)?;
     if binary {
         w.i32(1)?;
         writeln!(w)?;
     }
     writeln!(w, "$EndMeshFormat")?;
-    writeln!(w, "$PhysicalNames\n{}", groups.len())?;
-    for (dim, physical, name) in groups {
+    writeln!(w, "$PhysicalNames\n{}", names.len())?;
+    for (dim, physical, name) in names {
         writeln!(w, "{dim} {physical} \"{}\"", name.replace('"', "'"))?;
     }
     writeln!(w, "$EndPhysicalNames")
@@ -165,25 +182,30 @@ pub fn group_plan(
     let shift = if clash { bnd_max } else { 0 };
     let vol_max = vol.iter().copied().max().unwrap_or(0);
     let vol_fresh = (vol_max + shift).max(bnd_max) + 1;
-    let single = vol.len() == 1;
-    for (k, &tag) in vol.iter().enumerate() {
-        let physical = if tag == 0 { vol_fresh } else { tag + shift };
-        // Tag names are one map for boundary and region tags: a name of a tag that is also a
-        // boundary tag belongs to the boundary group.
-        let named = if tag == 0 || bnd_tags.contains(&tag) {
+    // Tag names are one map for boundary and region tags: a name of a tag that is also a
+    // boundary tag belongs to the boundary group.
+    let named = |tag: i32| -> Option<String> {
+        if tag == 0 || bnd_tags.contains(&tag) {
             None
         } else {
             tag_names.get(&tag).cloned()
+        }
+    };
+    // The unnamed regions form one group named `volume_name` (PyFR reads its volume from one
+    // group), with a named region of that name if there is one.
+    let shared = vol
+        .iter()
+        .find(|&&t| named(t).as_deref() == Some(volume_name))
+        .or_else(|| vol.iter().find(|&&t| named(t).is_none()))
+        .map(|&t| if t == 0 { vol_fresh } else { t + shift });
+    for (k, &tag) in vol.iter().enumerate() {
+        let (physical, name) = match named(tag) {
+            Some(n) if n != volume_name => (tag + shift, n),
+            _ => (
+                shared.expect("an unnamed region or one of that name"),
+                volume_name.to_string(),
+            ),
         };
-        let name = named.unwrap_or_else(|| {
-            if single {
-                volume_name.to_string()
-            } else if tag == 0 {
-                "untagged".to_string()
-            } else {
-                format!("region_{tag}")
-            }
-        });
         out.push(PlannedGroup {
             dim: d,
             tag,
@@ -633,6 +655,21 @@ mod tests {
         assert_eq!(ids.len(), s.len());
     }
 
+    /// Several unnamed regions are one volume group of the volume name, as PyFR needs.
+    #[test]
+    fn unnamed_regions_merge_into_the_volume_group() {
+        let m = mesh(vec![3, 4, 3], vec![1], &[]);
+        let g = groups(&m, "air");
+        let vol: Vec<_> = g.iter().filter(|g| g.dim == 2).collect();
+        assert_eq!(vol.len(), 1);
+        assert_eq!(vol[0].name, "air");
+        assert_eq!(vol[0].members, vec![0, 1, 2]);
+        let mut out = Vec::new();
+        write_msh_named(&m, MshVersion::V41, false, "air", &mut out).unwrap();
+        let text = String::from_utf8(out).unwrap();
+        assert_eq!(text.matches("\"air\"").count(), 1, "{text}");
+    }
+
     #[test]
     fn named_and_several_regions_keep_their_names() {
         let m = mesh(vec![5, 6], vec![1], &[(5, "solid")]);
@@ -641,7 +678,7 @@ mod tests {
             vec![
                 (1, 1, "boundary_1".into()),
                 (2, 5, "solid".into()),
-                (2, 6, "region_6".into()),
+                (2, 6, "fluid".into()),
             ]
         );
         let one = mesh(vec![7, 7], vec![1], &[]);
