@@ -32,7 +32,8 @@ notes=()
 
 # 1. Debian packages.
 need=()
-for pkg in mesa-vulkan-drivers libvulkan1 libglu1-mesa libxcursor1 libxft2 libxinerama1; do
+# cgns-convert: the CGNS library's `cgnscheck`, which checks the CGNS files polyspline writes.
+for pkg in mesa-vulkan-drivers libvulkan1 libglu1-mesa libxcursor1 libxft2 libxinerama1 cgns-convert; do
     dpkg -s "$pkg" >/dev/null 2>&1 || need+=("$pkg")
 done
 if ! python3 -c 'import ensurepip, venv' >/dev/null 2>&1; then

@@ -280,11 +280,22 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
         .collect();
     // Every output path is checked before any work, against the inputs and each other.
     let prechecks = || -> anyhow::Result<_> {
-        if OutputFormat::from_path(&output).is_none() {
+        let Some(format) = OutputFormat::from_path(&output) else {
             anyhow::bail!(
-                "{}: unknown output format; use .msh (Gmsh) or .vtu (VTK)",
-                output.display()
+                "{}: {}",
+                output.display(),
+                polyspline::io::high_order::UNKNOWN_OUTPUT
             );
+        };
+        // An order the format cannot hold is refused before any work (the dimension is
+        // known only after reading; 3 is the stricter for Gmsh).
+        if let Some(why) = [2, 3]
+            .iter()
+            .filter_map(|&d| format.refuses(d, args.order))
+            .next()
+            .filter(|_| format != OutputFormat::Msh)
+        {
+            anyhow::bail!("{}: {why}", output.display());
         }
         check_outputs(&outputs, &inputs)?;
         polyspline::fit::check_kink_angle(args.kink_angle)?;

@@ -26,7 +26,9 @@ fn permutation(dim: usize, p: usize, convention: NodeConvention) -> Vec<usize> {
         (1, _) => gmsh_line(p),
         (2, NodeConvention::Gmsh) => gmsh_quad(p),
         (2, NodeConvention::Vtk) => vtk_quad(p),
+        (2, NodeConvention::Cgns) => crate::io::cgns::ordering::cgns_quad(p),
         (3, NodeConvention::Gmsh) => gmsh_hex(p),
+        (3, NodeConvention::Cgns) => crate::io::cgns::ordering::cgns_hex(p),
         _ => vtk_hex(p),
     };
     order.iter().map(|&l| lattice_index(p, l)).collect()

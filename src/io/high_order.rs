@@ -3,7 +3,8 @@
 //! file ([`write_high_order`], [`prepare_high_order`]).
 //!
 //! Input: a [`HighOrderMesh`] and a path. Output: the file in the format its extension names
-//! (`.msh`: [`crate::io::gmsh_write`], `.vtu`: [`crate::io::vtu_write`]), written through a
+//! (`.msh`: [`crate::io::gmsh_write`], `.vtu`: [`crate::io::vtu_write`], `.cgns`:
+//! [`crate::io::cgns::write`]), written through a
 //! synced temporary and renamed into place ([`crate::io::output`]); never onto an input.
 
 use crate::io::gmsh_write::{DEFAULT_VOLUME_NAME, MshVersion, write_msh_named};
@@ -52,11 +53,17 @@ impl OutputOptions {
     }
 }
 
+/// The message for an output path of no known format.
+pub const UNKNOWN_OUTPUT: &str = "unknown output format; use .msh (Gmsh), .vtu (VTK), .cgns (CGNS/HDF5) or .inp (Abaqus for Trixi.jl)";
+
 /// Output format from the file extension.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum OutputFormat {
     Msh,
     Vtu,
+    Cgns,
+    /// Abaqus for Trixi.jl (order 2).
+    Inp,
 }
 
 impl OutputFormat {
@@ -64,14 +71,39 @@ impl OutputFormat {
     pub fn require(path: &Path) -> Result<OutputFormat, WriteError> {
         OutputFormat::from_path(path).ok_or_else(|| WriteError::Unsupported {
             path: path.to_owned(),
-            what: "unknown output format; use .msh (Gmsh) or .vtu (VTK)".into(),
+            what: UNKNOWN_OUTPUT.into(),
         })
+    }
+
+    /// Why a mesh of dimension `dim` and order `order` cannot be written in this format, as
+    /// one line (checked before any work and again on the mesh).
+    pub fn refuses(self, dim: usize, order: usize) -> Option<String> {
+        let mesh = HighOrderMesh {
+            dim,
+            order,
+            ..Default::default()
+        };
+        self.unsupported(&mesh)
+    }
+
+    fn unsupported(self, mesh: &HighOrderMesh) -> Option<String> {
+        match self {
+            OutputFormat::Msh if mesh.dim == 3 && mesh.order > 9 => Some(format!(
+                "Gmsh has no hexahedron of order {}; the highest is 9 (use .vtu for order 10)",
+                mesh.order
+            )),
+            OutputFormat::Cgns => crate::io::cgns::write::unsupported(mesh),
+            OutputFormat::Inp => crate::io::abaqus_write::unsupported(mesh),
+            _ => None,
+        }
     }
 
     pub fn from_path(path: &Path) -> Option<OutputFormat> {
         match path.extension()?.to_str()?.to_ascii_lowercase().as_str() {
             "msh" => Some(OutputFormat::Msh),
             "vtu" => Some(OutputFormat::Vtu),
+            "cgns" => Some(OutputFormat::Cgns),
+            "inp" => Some(OutputFormat::Inp),
             _ => None,
         }
     }
@@ -98,13 +130,10 @@ pub fn prepare_high_order(
     inputs: &[&Path],
 ) -> Result<PendingFile, WriteError> {
     let format = OutputFormat::require(path)?;
-    if format == OutputFormat::Msh && mesh.dim == 3 && mesh.order > 9 {
+    if let Some(what) = format.unsupported(mesh) {
         return Err(WriteError::Unsupported {
             path: path.to_owned(),
-            what: format!(
-                "Gmsh has no hexahedron of order {}; the highest is 9 (use .vtu for order 10)",
-                mesh.order
-            ),
+            what,
         });
     }
     if let Some(bpath) = &options.vtu_boundary {
@@ -137,5 +166,7 @@ pub fn prepare_high_order(
             w,
         ),
         OutputFormat::Vtu => write_vtu_cells(mesh, options.vtu_encoding, VtuCells::Volume, w),
+        OutputFormat::Cgns => crate::io::cgns::write::write_cgns(mesh, &options.volume_name, w),
+        OutputFormat::Inp => crate::io::abaqus_write::write_abaqus(mesh, &options.volume_name, w),
     })
 }

@@ -14,11 +14,16 @@
 //! | VTK XML unstructured grid | `.vtu` | [`vtu`] |
 //! | SU2 | `.su2` | [`su2`] |
 //! | Abaqus | `.inp` | [`abaqus`] |
-//! | Exodus II (netCDF-3 classic / 64-bit offset) | `.exo`, `.e`, `.ex2`, `.exii`, `.g`, `.gen` | [`exodus`] |
+//! | Exodus II (netCDF-3 classic / 64-bit offset) | `.exo`, `.e`, `.ex2`, `.exii`, `.g` (netCDF header), `.gen` | [`exodus`] |
+//! | CGNS/HDF5 (ADF refused) | `.cgns`, `.hdf`, `.adf` | [`cgns`] |
+//! | Plot3D grids, formatted or Fortran unformatted | `.x`, `.xyz`, `.p3d`, `.g` (no netCDF header) | [`plot3d`] |
 
 pub mod abaqus;
+pub mod abaqus_write;
+pub mod cgns;
 pub mod exodus;
 mod from_raw;
+pub mod glue;
 pub mod gmsh;
 pub mod gmsh_write;
 pub mod high_order;
@@ -27,6 +32,7 @@ pub mod medit;
 pub mod mfem;
 pub mod ordering;
 pub mod output;
+pub mod plot3d;
 pub mod su2;
 pub mod text;
 pub mod vtk;
@@ -69,11 +75,11 @@ pub enum ReadError {
         source: std::io::Error,
     },
     #[error(
-        "{}: unknown mesh format {what}; supported: .msh (Gmsh 2/4), .mesh (Medit or MFEM), .vtk, .vtu, .su2, .inp (Abaqus), .exo (Exodus II)",
+        "{}: unknown mesh format {what}; supported: .msh (Gmsh 2/4), .mesh (Medit or MFEM), .vtk, .vtu, .su2, .inp (Abaqus), .exo (Exodus II), .cgns (CGNS/HDF5), .x/.xyz/.p3d/.g (Plot3D)",
         path.display()
     )]
     UnknownFormat { path: PathBuf, what: String },
-    #[error("{}: {}: {}", path.display(), source.location, source.message)]
+    #[error("{}: {source}", path.display())]
     Parse {
         path: PathBuf,
         #[source]
@@ -102,6 +108,8 @@ pub enum Format {
     Su2,
     Abaqus,
     Exodus,
+    Cgns,
+    Plot3d,
 }
 
 impl Format {
@@ -128,7 +136,13 @@ impl Format {
             "vtu" => Some(Format::Vtu),
             "su2" => Some(Format::Su2),
             "inp" => Some(Format::Abaqus),
-            "exo" | "e" | "ex2" | "exii" | "g" | "gen" => Some(Format::Exodus),
+            // `.g` is both Exodus's (a netCDF or HDF5 file) and Plot3D's.
+            "g" if head.starts_with(b"CDF") || cgns::container(head).is_some() => {
+                Some(Format::Exodus)
+            }
+            "g" | "x" | "xyz" | "p3d" => Some(Format::Plot3d),
+            "exo" | "e" | "ex2" | "exii" | "gen" => Some(Format::Exodus),
+            "cgns" | "hdf" | "adf" => Some(Format::Cgns),
             _ => {
                 // Unknown extension: recognise a few self-describing headers.
                 if starts(b"$MeshFormat") {
@@ -139,6 +153,8 @@ impl Format {
                     Some(Format::Vtk)
                 } else if head.starts_with(b"CDF\x01") || head.starts_with(b"CDF\x02") {
                     Some(Format::Exodus)
+                } else if cgns::container(head).is_some() {
+                    Some(Format::Cgns)
                 } else {
                     None
                 }
@@ -157,6 +173,8 @@ impl Format {
             Format::Su2 => su2::read(data),
             Format::Abaqus => abaqus::read(data),
             Format::Exodus => exodus::read(data),
+            Format::Cgns => cgns::read(data),
+            Format::Plot3d => plot3d::read(data),
         }
     }
 }

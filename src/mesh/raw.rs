@@ -27,6 +27,8 @@ pub enum Location {
     /// Nowhere in particular (for example, a problem with the whole file).
     #[default]
     File,
+    /// A node of a tree-structured file (CGNS), whose path the message starts with.
+    Tree,
 }
 
 impl fmt::Display for Location {
@@ -35,16 +37,26 @@ impl fmt::Display for Location {
             Location::Line(l) => write!(f, "line {l}"),
             Location::Byte(b) => write!(f, "byte {b}"),
             Location::File => write!(f, "file"),
+            Location::Tree => write!(f, "node"),
         }
     }
 }
 
 /// A parse problem at a place in the file; the reader's caller adds the path.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
-#[error("{location}: {message}")]
 pub struct ParseError {
     pub location: Location,
     pub message: String,
+}
+
+impl fmt::Display for ParseError {
+    /// `place: problem`; a [`Location::Tree`] message already starts with its node's path.
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self.location {
+            Location::Tree => f.write_str(&self.message),
+            l => write!(f, "{l}: {}", self.message),
+        }
+    }
 }
 
 /// Longest message a [`ParseError`] keeps (characters); the rest is cut with a note.
@@ -125,6 +137,9 @@ pub enum CellKind {
 pub enum NodeConvention {
     Gmsh,
     Vtk,
+    /// CGNS (`QUAD_9/16/25`, `HEXA_27/64/125`, in the order of the CGNS standard; the tables are
+    /// the CGNS reader's).
+    Cgns,
 }
 
 impl CellKind {

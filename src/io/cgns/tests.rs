@@ -1,0 +1,93 @@
+//! CGNS reader and writer tests on files written by Gmsh and the CGNS library
+//! (`tests/data/cgns/make_fixtures.py`).
+
+use super::*;
+use crate::io::test_util::{block, count, real};
+use crate::mesh::raw::CellKind;
+use crate::mesh::{LinearMesh, MeshOptions};
+
+fn names(m: &RawMesh, b: &RawBlock) -> Vec<(String, usize)> {
+    let mut by: BTreeMap<String, usize> = BTreeMap::new();
+    for t in &b.tags {
+        let name = m
+            .tag_names
+            .get(t)
+            .cloned()
+            .unwrap_or_else(|| format!("#{t}"));
+        *by.entry(name).or_default() += 1;
+    }
+    by.into_iter().collect()
+}
+
+#[test]
+fn gmsh_unstructured_hexes_with_families() {
+    let m = read(&real("tests/data/cgns/hex_box_gmsh.cgns")).unwrap();
+    assert_eq!(m.points.len(), 27);
+    assert_eq!(count(&m, &CellKind::Hexahedron), 8);
+    let q = block(&m, &CellKind::Quad);
+    assert_eq!(names(&m, q), vec![("far".into(), 16), ("wall".into(), 8)]);
+    // The volume family names the region.
+    let h = block(&m, &CellKind::Hexahedron);
+    assert_eq!(names(&m, h), vec![("fluid".into(), 8)]);
+    let lm = LinearMesh::from_raw(m, &MeshOptions::default()).unwrap();
+    assert_eq!(lm.n_elements(), 8);
+    assert_eq!(lm.facet_tags.len(), 24);
+}
+
+#[test]
+fn gmsh_unstructured_quads() {
+    let m = read(&real("tests/data/cgns/quads_gmsh.cgns")).unwrap();
+    assert_eq!(count(&m, &CellKind::Quad), 9);
+    let l = block(&m, &CellKind::Line);
+    assert_eq!(names(&m, l), vec![("bottom".into(), 3), ("rest".into(), 9)]);
+    let lm = LinearMesh::from_raw(m, &MeshOptions::default()).unwrap();
+    assert_eq!((lm.dim, lm.n_elements()), (2, 9));
+}
+
+/// Two structured zones joined by their 1-to-1 connectivity: the shared face's 9 vertices
+/// are one, the inlet face's 4 quads are named.
+#[test]
+fn structured_zones_joined_by_connectivity() {
+    let m = read(&real("tests/data/cgns/two_blocks_structured_gmsh.cgns")).unwrap();
+    assert_eq!(m.points.len(), 2 * 27 - 9);
+    assert_eq!(count(&m, &CellKind::Hexahedron), 16);
+    let q = block(&m, &CellKind::Quad);
+    assert!(
+        names(&m, q).contains(&("inlet".into(), 4)),
+        "{:?}",
+        names(&m, q)
+    );
+    let lm = LinearMesh::from_raw(m, &MeshOptions::default()).unwrap();
+    let topo = crate::mesh::Topology::build(&lm);
+    // A closed box of 2x1 by 2x2 faces of quads: 2(8 + 8 + 4) boundary faces.
+    assert_eq!(topo.boundary_facets.len(), 40);
+}
+
+/// Zones without connectivity (the CGNS library's plot3d_to_cgns) are glued where their
+/// vertices coincide.
+#[test]
+fn structured_zones_glued_at_coincident_vertices() {
+    let m = read(&real("tests/data/cgns/two_blocks_plot3d.cgns")).unwrap();
+    assert_eq!(m.points.len(), 45);
+    let lm = LinearMesh::from_raw(m, &MeshOptions::default()).unwrap();
+    let topo = crate::mesh::Topology::build(&lm);
+    assert_eq!(topo.boundary_facets.len(), 40);
+}
+
+#[test]
+fn adf_and_non_cgns_are_refused_in_one_line() {
+    let e = read(&real("tests/data/cgns/hex_box.adf")).unwrap_err();
+    assert!(e.message.contains("ADF"), "{e}");
+    let e = read(b"not a cgns file").unwrap_err();
+    assert!(e.message.contains("HDF5"), "{e}");
+}
+
+/// A forged zone size is refused with the node's path, before anything is allocated for it.
+#[test]
+fn errors_name_the_node_path() {
+    let mut data = real("tests/data/cgns/quads_gmsh.cgns");
+    // Truncate: the HDF5 structure is broken, and the error says so in one line.
+    data.truncate(data.len() / 2);
+    let e = read(&data).unwrap_err().to_string();
+    assert!(!e.contains('\n'), "{e}");
+}
