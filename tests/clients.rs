@@ -567,3 +567,34 @@ fn cli_volume_name_and_vtu_boundary() {
         assert!(!out.exists(), "{args:?}: output written");
     }
 }
+
+/// An input with several unnamed regions (MFEM element attributes 1 and 2): the volume group
+/// is one, named `fluid` (or `--volume-name`), and `pyfr import` finds its fluid elements.
+#[test]
+fn pyfr_finds_fluid_in_several_unnamed_regions() {
+    if !common::python_has(
+        "pyfr.readers.gmsh",
+        "pyfr_finds_fluid_in_several_unnamed_regions",
+    ) {
+        return;
+    }
+    let input = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/mfem/two_quads.mesh");
+    let bin = env!("CARGO_BIN_EXE_polyspline");
+    let msh = scratch("two_regions.msh");
+    common::run_ok(
+        std::process::Command::new(bin)
+            .args(["curve", "-q"])
+            .arg(&input)
+            .arg("-o")
+            .arg(&msh)
+            .args(["--msh-version", "2.2"]),
+    );
+    let text = std::fs::read_to_string(&msh).unwrap();
+    assert_eq!(text.matches("\"fluid\"").count(), 1, "{text:.400}");
+    let v = probe(
+        "pyfr",
+        &[msh.as_path(), msh.with_extension("pyfrm").as_path()],
+    );
+    let v = ok(&v[0], "two regions");
+    assert_eq!(v["eles"]["quad"].as_u64(), Some(2), "{v}");
+}

@@ -326,3 +326,39 @@ fn one_part_of_a_partitioned_mesh_is_refused_on_one_process() {
     );
     assert!(out.exists());
 }
+
+/// CGNS and Plot3D inputs that cannot be read, and orders the CGNS and Abaqus outputs cannot
+/// hold: one line naming the file and the problem, nothing written.
+#[test]
+fn cgns_plot3d_and_abaqus_refusals() {
+    let adf = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/cgns/hex_box.adf");
+    assert!(info_error(&adf).contains("ADF"));
+    let fake = write("fake.cgns", b"\x89HDF\r\n\x1a\nnot really");
+    assert!(info_error(&fake).contains("HDF5"));
+    let blanked = write(
+        "blanked.xyz",
+        b"1\n2 2 1\n0 1 0 1\n0 0 1 1\n0 0 0 0\n1 1 1 1\n",
+    );
+    assert!(info_error(&blanked).contains("IBLANK"));
+    let input = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/cgns/quads_gmsh.cgns");
+    for (name, order, what) in [
+        ("order5.cgns", "5", "up to order 4"),
+        ("order3.inp", "3", "quadratic elements only"),
+    ] {
+        let out = scratch(name);
+        let _ = std::fs::remove_file(&out);
+        let o = Command::new(env!("CARGO_BIN_EXE_polyspline"))
+            .args(["curve", "-q"])
+            .arg(&input)
+            .arg("-o")
+            .arg(&out)
+            .args(["--order", order])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+        assert!(err.contains(what) && err.contains(name), "{err}");
+        assert!(!out.exists(), "{name} written");
+    }
+}

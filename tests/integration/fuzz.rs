@@ -298,7 +298,7 @@ fn every_reader_survives_mutated_fixtures() {
     let corpus = corpus();
     let formats: std::collections::BTreeSet<String> =
         corpus.iter().map(|(_, f, _)| format!("{f:?}")).collect();
-    assert_eq!(formats.len(), 8, "fixtures of every format: {formats:?}");
+    assert_eq!(formats.len(), 10, "fixtures of every format: {formats:?}");
     let start = Instant::now();
     let (mut total, mut accepted) = (0usize, 0usize);
     // Largest peak allocation per byte of input, over the cases of at least 1 kB.

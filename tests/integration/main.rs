@@ -11,6 +11,7 @@ mod bad_input;
 mod boundary_layer;
 mod curve;
 mod elastic;
+mod formats;
 mod fuzz;
 mod generate;
 mod hardening;

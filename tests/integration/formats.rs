@@ -1,0 +1,179 @@
+//! The CGNS, Plot3D and Abaqus formats end to end through the binary, each checked by an
+//! independent tool: the CGNS library's `cgnscheck`, Gmsh's CGNS reader (which converts CGNS
+//! node order to its own, so every CGNS type is checked against Gmsh's ordering) and Gmsh's
+//! own Abaqus writer (whose C3D27/M3D9 node order our `.inp` must reproduce).
+
+use crate::common;
+
+use serde_json::Value;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn scratch(name: &str) -> PathBuf {
+    common::scratch_in("formats", name)
+}
+
+fn repo(rel: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join(rel)
+}
+
+/// `polyspline curve INPUT -o OUT --order P`, which must succeed.
+fn curve(input: &Path, out: &Path, order: usize) {
+    common::run_ok(
+        common::polyspline()
+            .args(["curve", "-q"])
+            .arg(input)
+            .arg("-o")
+            .arg(out)
+            .args(["--order", &order.to_string()]),
+    );
+}
+
+/// `tests/external/formats_check.py KIND OUT REF`: its JSON, or `None` (a visible skip)
+/// without Gmsh outside CI.
+fn check(kind: &str, out: &Path, reference: &Path) -> Option<Value> {
+    if !common::have_gmsh("the CGNS/Abaqus checks against Gmsh did not run") {
+        return None;
+    }
+    let o = common::run_ok(
+        common::python()
+            .arg(repo("tests/external/formats_check.py"))
+            .arg(kind)
+            .arg(out)
+            .arg(reference),
+    );
+    Some(serde_json::from_slice(&o.stdout).unwrap())
+}
+
+/// `cgnscheck FILE` passes without an error line; `false` (a visible skip) when the CGNS
+/// tools are missing outside CI.
+fn cgnscheck(file: &Path) -> bool {
+    let Ok(o) = Command::new("cgnscheck").arg(file).output() else {
+        common::skip(
+            &common::current_test(),
+            "cgnscheck (Debian's cgns-convert) is missing",
+        );
+        return false;
+    };
+    let text = String::from_utf8_lossy(&o.stdout).to_string() + &String::from_utf8_lossy(&o.stderr);
+    assert!(
+        o.status.success(),
+        "{}: cgnscheck failed: {text}",
+        file.display()
+    );
+    assert!(!text.contains("ERROR"), "{}: {text}", file.display());
+    true
+}
+
+/// Every CGNS element type we write (QUAD_4/9/16/25 with BAR_2..5 in 2D, HEXA_8/27/64/125
+/// with QUAD_n in 3D), on the real deal.II mesh converted to CGNS by Gmsh and on Gmsh's hex
+/// box: `cgnscheck` accepts the file, and Gmsh reads it with the same elements, node for node
+/// in its own order, as our MSH file of the same run (det J > 0 throughout).
+#[test]
+fn cgns_output_read_by_the_cgns_library_and_gmsh() {
+    for (label, input, dim) in [
+        ("example", repo("meshes/converted/example_dealii.cgns"), 2),
+        ("box", repo("tests/data/cgns/hex_box_gmsh.cgns"), 3),
+    ] {
+        for order in 1..=4 {
+            let out = scratch(&format!("{label}_{order}.cgns"));
+            let msh = scratch(&format!("{label}_{order}.msh"));
+            curve(&input, &out, order);
+            curve(&input, &msh, order);
+            if !cgnscheck(&out) {
+                return;
+            }
+            let Some(v) = check("cgns", &out, &msh) else {
+                return;
+            };
+            let ctx = format!("{label} order {order}: {v}");
+            for d in [dim, dim - 1] {
+                let r = &v[d.to_string()];
+                assert!(r["count"].as_u64().unwrap() > 0, "{ctx}");
+                assert_eq!(r["count"], r["ref_count"], "{ctx}");
+                assert!(r["gap"].as_f64().unwrap() < 1e-12, "{ctx}");
+            }
+            assert!(v["min_det_jac"].as_f64().unwrap() > 0.0, "{ctx}");
+        }
+    }
+}
+
+/// A real mesh converted to CGNS by Gmsh curves to the same mesh as its original Gmsh file:
+/// the same elements, and nodes at the same places.
+#[test]
+fn a_real_cgns_file_curves_like_its_source() {
+    let (a, b) = (scratch("real_cgns_3.msh"), scratch("real_msh_3.msh"));
+    curve(&repo("meshes/converted/example_dealii.cgns"), &a, 3);
+    curve(&repo("meshes/real/dealii/example.msh"), &b, 3);
+    let read = |p: &Path| {
+        polyspline::mesh::HighOrderMesh::from_raw(polyspline::io::read_raw(p).unwrap()).unwrap()
+    };
+    let (ma, mb) = (read(&a), read(&b));
+    assert_eq!((ma.n_elements(), ma.n_boundary()), (744, 184));
+    assert_eq!((mb.n_elements(), mb.n_boundary()), (744, 184));
+    let sorted = |m: &polyspline::mesh::HighOrderMesh| {
+        let mut v = m.nodes.clone();
+        v.sort_by(|p, q| p.partial_cmp(q).unwrap());
+        v
+    };
+    let gap = common::max_coordinate_gap(&sorted(&ma), &sorted(&mb));
+    assert!(gap < 1e-9, "node positions differ by {gap}");
+    if let Some((lo, _, _)) = common::gmsh_det_range(&a, &scratch("real_cgns_jobs.json")) {
+        assert!(lo > 0.0, "Gmsh's min det J {lo}");
+    }
+}
+
+/// The Plot3D fixture curves to a valid mesh whose boundary groups are named per grid face,
+/// without the two faces the grids share.
+#[test]
+fn plot3d_grids_curve_with_face_names() {
+    let out = scratch("two_blocks.msh");
+    curve(&repo("tests/data/plot3d/two_blocks.xyz"), &out, 2);
+    let text = std::fs::read_to_string(&out).unwrap();
+    for name in ["block1_imin", "block2_imax", "block1_kmax", "block2_jmin"] {
+        assert!(text.contains(&format!("\"{name}\"")), "{name} missing");
+    }
+    assert!(!text.contains("block1_imax") && !text.contains("block2_imin"));
+    if let Some((lo, _, _)) = common::gmsh_det_range(&out, &scratch("two_blocks_jobs.json")) {
+        assert!(lo > 0.0, "Gmsh's min det J {lo}");
+    }
+}
+
+/// Our Abaqus file has Gmsh's own C3D27 (3D) and M3D9 (2D) node order, read the way Trixi.jl
+/// reads it (one element a line, node sets with a trailing comma a line); each boundary group
+/// is a node set.
+#[test]
+fn abaqus_output_for_trixi() {
+    for (label, input, sets) in [
+        (
+            "box",
+            repo("tests/data/cgns/hex_box_gmsh.cgns"),
+            vec!["far", "wall"],
+        ),
+        (
+            "example",
+            repo("tests/data/cgns/quads_gmsh.cgns"),
+            vec!["bottom", "rest"],
+        ),
+    ] {
+        let (inp, msh) = (
+            scratch(&format!("{label}_2.inp")),
+            scratch(&format!("{label}_2.msh")),
+        );
+        curve(&input, &inp, 2);
+        curve(&input, &msh, 2);
+        let Some(v) = check("inp", &inp, &msh) else {
+            return;
+        };
+        assert!(v["count"].as_u64().unwrap() > 0, "{label}: {v}");
+        assert_eq!(v["count"], v["ref_count"], "{label}: {v}");
+        assert!(v["gap"].as_f64().unwrap() < 1e-12, "{label}: {v}");
+        let found: Vec<&str> = v["sets"]
+            .as_object()
+            .unwrap()
+            .keys()
+            .map(|k| k.as_str())
+            .collect();
+        assert_eq!(found, sets, "{label}");
+    }
+}
