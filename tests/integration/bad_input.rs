@@ -167,7 +167,7 @@ fn unreadable_paths_are_reported() {
     std::fs::create_dir_all(&dir).unwrap();
     let e = info_error(&dir);
     assert!(e.contains("cannot read"), "{e}");
-    let p = write("mesh.xyz", b"1 2 3\n");
+    let p = write("mesh.abc", b"1 2 3\n");
     let e = info_error(&p);
     assert!(e.contains("unknown mesh format"), "{e}");
 }
