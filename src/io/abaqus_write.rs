@@ -19,41 +19,27 @@
 //! faces (3D): it reads every node here but the interior ones.
 
 use crate::io::gmsh_write::groups;
-use crate::io::ordering::gmsh_quad;
+use crate::io::ordering::{gmsh_quad, vtk_hex};
 use crate::mesh::HighOrderMesh;
 use crate::mesh::high_order::{Lattice, lattice_index};
 use std::io::{self, Write};
 
-/// Abaqus C3D27 node order as lattice points (order 2).
-pub const C3D27: [Lattice; 27] = [
-    [0, 0, 0],
-    [2, 0, 0],
-    [2, 2, 0],
-    [0, 2, 0],
-    [0, 0, 2],
-    [2, 0, 2],
-    [2, 2, 2],
-    [0, 2, 2],
-    [1, 0, 0],
-    [2, 1, 0],
-    [1, 2, 0],
-    [0, 1, 0],
-    [1, 0, 2],
-    [2, 1, 2],
-    [1, 2, 2],
-    [0, 1, 2],
-    [0, 0, 1],
-    [2, 0, 1],
-    [2, 2, 1],
-    [0, 2, 1],
-    [1, 1, 1],
-    [1, 1, 0],
-    [1, 1, 2],
-    [1, 0, 1],
-    [2, 1, 1],
-    [1, 2, 1],
-    [0, 1, 1],
-];
+/// Abaqus C3D27 node order as lattice points: corners and mid-edge nodes as VTK's 27-node
+/// hexahedron, then the centre and the face centres z−, z+, y−, x+, y+, x−.
+pub fn c3d27() -> Vec<Lattice> {
+    let mut out = vtk_hex(2);
+    out.truncate(20);
+    out.extend([
+        [1, 1, 1],
+        [1, 1, 0],
+        [1, 1, 2],
+        [1, 0, 1],
+        [2, 1, 1],
+        [1, 2, 1],
+        [0, 1, 1],
+    ]);
+    out
+}
 
 /// Why a mesh cannot be written for Trixi.jl, as one line.
 pub fn unsupported(mesh: &HighOrderMesh) -> Option<String> {
@@ -103,7 +89,7 @@ pub fn write_abaqus(mesh: &HighOrderMesh, volume_name: &str, w: &mut impl Write)
     }
     writeln!(w, "******* E L E M E N T S *************")?;
     let (ty, order): (&str, Vec<Lattice>) = if d == 3 {
-        ("C3D27", C3D27.to_vec())
+        ("C3D27", c3d27())
     } else {
         ("M3D9", gmsh_quad(2))
     };
@@ -153,17 +139,18 @@ mod tests {
     /// Abaqus numbers them for.
     #[test]
     fn c3d27_is_a_permutation_with_abaqus_faces() {
+        let c = c3d27();
         let mut seen = [false; 27];
-        for l in C3D27 {
+        for &l in &c {
             let i = lattice_index(2, l);
             assert!(!seen[i]);
             seen[i] = true;
         }
-        assert_eq!(C3D27[20], [1, 1, 1]);
+        assert_eq!(c[20], [1, 1, 1]);
         // Faces 1–6: z−, z+, y−, x+, y+, x−.
         let faces = [(2, 0), (2, 2), (1, 0), (0, 2), (1, 2), (0, 0)];
         for (k, (axis, value)) in faces.iter().enumerate() {
-            assert_eq!(C3D27[21 + k][*axis], *value, "face {}", k + 1);
+            assert_eq!(c[21 + k][*axis], *value, "face {}", k + 1);
         }
     }
 

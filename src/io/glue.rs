@@ -205,7 +205,7 @@ impl Glue {
         let mut found = None;
         let mut pairs = Vec::new();
         self.near(h, |a, b, d| pairs.push((a, b, d)));
-        pairs.sort_by(|x, y| (x.0, x.1).cmp(&(y.0, y.1)));
+        pairs.sort_by_key(|x| (x.0, x.1));
         for (a, b, d) in pairs {
             let e = self.edge[a].min(self.edge[b]);
             if d < fraction * e && self.find(a) != self.find(b) {
@@ -238,4 +238,69 @@ impl Glue {
         }
         (id, points)
     }
+}
+
+/// The cells of a structured block of `n` vertices (nk = 1 in 2D) as corner lists, flattened:
+/// quadrilaterals (`cell_dim` 2) or hexahedra, corners (i,j,k), (i+1,j,k), (i+1,j+1,k),
+/// (i,j+1,k), then the same at k+1; vertex (i,j,k) is i + ni (j + nj k).
+pub fn structured_cells(n: [usize; 3], cell_dim: usize) -> Vec<usize> {
+    let id = |i: usize, j: usize, k: usize| i + n[0] * (j + n[1] * k);
+    let layers = if cell_dim == 3 { n[2] - 1 } else { 1 };
+    let mut out = Vec::with_capacity((n[0] - 1) * (n[1] - 1) * layers * (1 << cell_dim));
+    for k in 0..layers {
+        for j in 0..n[1] - 1 {
+            for i in 0..n[0] - 1 {
+                out.extend([
+                    id(i, j, k),
+                    id(i + 1, j, k),
+                    id(i + 1, j + 1, k),
+                    id(i, j + 1, k),
+                ]);
+                if cell_dim == 3 {
+                    out.extend([
+                        id(i, j, k + 1),
+                        id(i + 1, j, k + 1),
+                        id(i + 1, j + 1, k + 1),
+                        id(i, j + 1, k + 1),
+                    ]);
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The facets of a structured block on its plane `d = c` (0-based vertex index) over the
+/// cells `lo..hi` (0-based, exclusive) of the other directions, flattened (4 vertices a
+/// facet in 3D, 2 in 2D).
+pub fn structured_face(
+    n: [usize; 3],
+    cell_dim: usize,
+    d: usize,
+    c: usize,
+    lo: [usize; 3],
+    hi: [usize; 3],
+) -> Vec<usize> {
+    let others: Vec<usize> = (0..cell_dim).filter(|&a| a != d).collect();
+    let at = |a: usize, b: usize| {
+        let mut p = [0usize; 3];
+        p[d] = c;
+        p[others[0]] = a;
+        if let Some(&o) = others.get(1) {
+            p[o] = b;
+        }
+        p[0] + n[0] * (p[1] + n[1] * p[2])
+    };
+    let (b_lo, b_hi) = others.get(1).map_or((0, 1), |&o| (lo[o], hi[o]));
+    let mut out = Vec::new();
+    for b in b_lo..b_hi {
+        for a in lo[others[0]]..hi[others[0]] {
+            if cell_dim == 3 {
+                out.extend([at(a, b), at(a + 1, b), at(a + 1, b + 1), at(a, b + 1)]);
+            } else {
+                out.extend([at(a, 0), at(a + 1, 0)]);
+            }
+        }
+    }
+    out
 }

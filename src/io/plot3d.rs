@@ -17,7 +17,7 @@
 //! names, so every outer face that is not glued to another grid is tagged `block<k>_imin`,
 //! `block<k>_imax`, `_jmin`, ... (k from 1, in file order).
 
-use super::glue::{Glue, Part};
+use super::glue::{Glue, Part, structured_cells, structured_face};
 use crate::mesh::raw::{CellKind, Location, ParseError, RawBlock, RawMesh};
 use std::collections::HashMap;
 
@@ -383,7 +383,10 @@ fn assemble(grids: Vec<Grid>, dim: usize) -> Result<RawMesh, ParseError> {
         }
     }
     let corners = 1 << cell_dim;
-    let cells: Vec<Vec<usize>> = grids.iter().map(|g| cells_of(g.n, cell_dim)).collect();
+    let cells: Vec<Vec<usize>> = grids
+        .iter()
+        .map(|g| structured_cells(g.n, cell_dim))
+        .collect();
     let faces: Vec<Vec<(usize, Vec<usize>)>> =
         grids.iter().map(|g| face_facets(g.n, cell_dim)).collect();
     let parts: Vec<Part<'_>> = grids
@@ -486,62 +489,13 @@ fn assemble(grids: Vec<Grid>, dim: usize) -> Result<RawMesh, ParseError> {
     Ok(mesh)
 }
 
-/// Corner lists of a grid's cells.
-fn cells_of(n: [usize; 3], cell_dim: usize) -> Vec<usize> {
-    let id = |i: usize, j: usize, k: usize| i + n[0] * (j + n[1] * k);
-    let layers = if cell_dim == 3 { n[2] - 1 } else { 1 };
-    let mut out = Vec::with_capacity((n[0] - 1) * (n[1] - 1) * layers * (1 << cell_dim));
-    for k in 0..layers {
-        for j in 0..n[1] - 1 {
-            for i in 0..n[0] - 1 {
-                out.extend([
-                    id(i, j, k),
-                    id(i + 1, j, k),
-                    id(i + 1, j + 1, k),
-                    id(i, j + 1, k),
-                ]);
-                if cell_dim == 3 {
-                    out.extend([
-                        id(i, j, k + 1),
-                        id(i + 1, j, k + 1),
-                        id(i + 1, j + 1, k + 1),
-                        id(i, j + 1, k + 1),
-                    ]);
-                }
-            }
-        }
-    }
-    out
-}
-
 /// The facets of each outer face of a grid: (face number in [`FACES`], flattened facets).
 fn face_facets(n: [usize; 3], cell_dim: usize) -> Vec<(usize, Vec<usize>)> {
-    let id = |p: [usize; 3]| p[0] + n[0] * (p[1] + n[1] * p[2]);
+    let hi = [n[0] - 1, n[1] - 1, n[2].saturating_sub(1)];
     let mut out = Vec::new();
     for d in 0..cell_dim {
-        let others: Vec<usize> = (0..cell_dim).filter(|&a| a != d).collect();
         for (side, c) in [(0, 0), (1, n[d] - 1)] {
-            let mut f = Vec::new();
-            let at = |a: usize, b: usize| {
-                let mut p = [0usize; 3];
-                p[d] = c;
-                p[others[0]] = a;
-                if let Some(&o) = others.get(1) {
-                    p[o] = b;
-                }
-                id(p)
-            };
-            let bn = others.get(1).map_or(1, |&o| n[o] - 1);
-            for b in 0..bn {
-                for a in 0..n[others[0]] - 1 {
-                    if cell_dim == 3 {
-                        f.extend([at(a, b), at(a + 1, b), at(a + 1, b + 1), at(a, b + 1)]);
-                    } else {
-                        f.extend([at(a, 0), at(a + 1, 0)]);
-                    }
-                }
-            }
-            out.push((2 * d + side, f));
+            out.push((2 * d + side, structured_face(n, cell_dim, d, c, [0; 3], hi)));
         }
     }
     out

@@ -24,7 +24,7 @@
 //!   are refused.
 //!
 //! Errors are one line naming the node's path (`/Base/Zone1/GridCoordinates: ...`).
-//! Write: [`write`] (the curved mesh as one unstructured zone).
+//! Write: [`mod@write`] (the curved mesh as one unstructured zone).
 //!
 //! Parts: `tree` the HDF5 node tree and its memory bound, `zone` one zone, `ordering` the CGNS
 //! node orders, `write` the writer; this module the base, the families and the merge.

@@ -10,6 +10,8 @@
 
 use super::Tags;
 use super::tree::Node;
+use crate::io::glue;
+use crate::math::reference::{HEX_SIDES, QUAD_SIDES};
 use crate::mesh::raw::{CellKind, ParseError};
 use std::collections::{BTreeMap, HashMap, HashSet};
 
@@ -385,26 +387,15 @@ fn indices(n: &Node<'_>, names: &[&str]) -> Result<Option<(String, Vec<i64>)>, P
     Ok(None)
 }
 
-/// Local faces of a hexahedron (outward, VTK corner numbers) and edges of a quadrilateral.
-const HEX_FACES: [[usize; 4]; 6] = [
-    [0, 3, 2, 1],
-    [4, 5, 6, 7],
-    [0, 1, 5, 4],
-    [1, 2, 6, 5],
-    [2, 3, 7, 6],
-    [3, 0, 4, 7],
-];
-const QUAD_EDGES: [[usize; 2]; 4] = [[0, 1], [1, 2], [2, 3], [3, 0]];
-
 /// The facets of the zone's volume cells that no other cell of the zone shares.
 fn exterior_facets(zone: &Zone, cell_dim: usize) -> Vec<Vec<usize>> {
     let (kind, faces): (CellKind, Vec<&[usize]>) = if cell_dim == 3 {
         (
             CellKind::Hexahedron,
-            HEX_FACES.iter().map(|f| &f[..]).collect(),
+            HEX_SIDES.iter().map(|f| &f[..]).collect(),
         )
     } else {
-        (CellKind::Quad, QUAD_EDGES.iter().map(|f| &f[..]).collect())
+        (CellKind::Quad, QUAD_SIDES.iter().map(|f| &f[..]).collect())
     };
     let mut count: HashMap<Vec<usize>, (usize, Vec<usize>)> = HashMap::new();
     for b in zone.blocks.iter().filter(|b| b.kind == kind) {
@@ -527,79 +518,18 @@ fn zone_count(zone: &Zone) -> u64 {
 }
 
 fn structured_cells(zone: &mut Zone, cell_dim: usize, region: i32) {
-    let n = zone.ijk.expect("structured");
-    let id = |i: usize, j: usize, k: usize| i + n[0] * (j + n[1] * k);
+    let nodes = glue::structured_cells(zone.ijk.expect("structured"), cell_dim);
     let (kind, npc) = if cell_dim == 3 {
         (CellKind::Hexahedron, 8)
     } else {
         (CellKind::Quad, 4)
     };
-    let cells = (n[0] - 1) * (n[1] - 1) * n[2].saturating_sub(1).max(1);
-    let mut nodes = Vec::with_capacity(cells * npc);
-    for k in 0..n[2].saturating_sub(1).max(1) {
-        for j in 0..n[1] - 1 {
-            for i in 0..n[0] - 1 {
-                nodes.extend([
-                    id(i, j, k),
-                    id(i + 1, j, k),
-                    id(i + 1, j + 1, k),
-                    id(i, j + 1, k),
-                ]);
-                if cell_dim == 3 {
-                    nodes.extend([
-                        id(i, j, k + 1),
-                        id(i + 1, j, k + 1),
-                        id(i + 1, j + 1, k + 1),
-                        id(i, j + 1, k + 1),
-                    ]);
-                }
-            }
-        }
-    }
     zone.blocks.push(Cells {
         kind,
         npc,
-        tags: vec![region; cells],
+        tags: vec![region; nodes.len() / npc],
         nodes,
     });
-}
-
-/// The facets of a structured zone on the face `d = c` (0-based vertex index) over the cell
-/// ranges `lo..hi` (0-based, exclusive) of the other directions.
-fn face_facets(
-    zone: &Zone,
-    cell_dim: usize,
-    d: usize,
-    c: usize,
-    lo: [usize; 3],
-    hi: [usize; 3],
-) -> Vec<Vec<usize>> {
-    let others: Vec<usize> = (0..cell_dim).filter(|&a| a != d).collect();
-    let at = |a: usize, b: usize| {
-        let mut p = [0usize; 3];
-        p[d] = c;
-        p[others[0]] = a;
-        if others.len() > 1 {
-            p[others[1]] = b;
-        }
-        zone.flat(p).expect("in range")
-    };
-    let mut out = Vec::new();
-    let (b_lo, b_hi) = if others.len() > 1 {
-        (lo[others[1]], hi[others[1]])
-    } else {
-        (0, 1)
-    };
-    for b in b_lo..b_hi {
-        for a in lo[others[0]]..hi[others[0]] {
-            if others.len() > 1 {
-                out.push(vec![at(a, b), at(a + 1, b), at(a + 1, b + 1), at(a, b + 1)]);
-            } else {
-                out.push(vec![at(a, 0), at(a + 1, 0)]);
-            }
-        }
-    }
-    out
 }
 
 fn structured_bcs(
@@ -703,7 +633,12 @@ fn structured_bcs(
                 lo[a] = l as usize;
                 hi[a] = h as usize;
             }
-            let facets = face_facets(zone, cell_dim, d, c as usize - 1, lo, hi);
+            let n = zone.ijk.expect("structured");
+            let npf = if cell_dim == 3 { 4 } else { 2 };
+            let facets = glue::structured_face(n, cell_dim, d, c as usize - 1, lo, hi)
+                .chunks(npf)
+                .map(<[usize]>::to_vec)
+                .collect();
             add_facets(zone, cell_dim, facets, tag);
         }
     }
