@@ -12,6 +12,7 @@ use polyspline::pipeline::{
     CurveOptions, CurveReport, Geometry, Method, OutputFormat, OutputOptions, curve_prepared,
 };
 use polyspline::solve::{CgParams, CgPreconditioner};
+use polyspline::spline::{KnotIntervals, KnotParams};
 use polyspline::validity::LineSearchParams;
 use std::path::{Path, PathBuf};
 
@@ -75,6 +76,12 @@ pub(super) struct Args {
     /// this off.
     #[arg(long, default_value_t = 10.0, value_name = "DEG")]
     kink_angle: f64,
+    /// Knot intervals of the spline elements.
+    #[arg(long, value_enum, default_value_t = KnotIntervals::default().into())]
+    knot_intervals: values::KnotIntervals,
+    /// With graded knot intervals: the largest ratio of neighbouring intervals.
+    #[arg(long, default_value_t = KnotParams::default().max_ratio, value_name = "R")]
+    knot_max_ratio: f64,
     /// Solver of the fit's normal equations: `auto` factors small systems (at most 12,000
     /// control points in 2D, 1,000 in 3D) by sparse Cholesky on the CPU backend and solves
     /// the rest by CG; `cg` and `cholesky` force one (distributed runs always use CG).
@@ -237,6 +244,10 @@ impl Args {
                     FitTargets::Chords
                 },
                 ..Default::default()
+            },
+            knots: KnotParams {
+                intervals: self.knot_intervals.into(),
+                max_ratio: self.knot_max_ratio,
             },
             features: self.features.options(),
             line_search: LineSearchParams {

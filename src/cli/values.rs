@@ -18,6 +18,7 @@ use polyspline::mesh::generate::boundary_layer::Wall;
 use polyspline::mesh::generate::{Kind, Shape};
 use polyspline::solve::CgPreconditioner as LibCgPreconditioner;
 use polyspline::solve::block_jacobi::DEFAULT_BLOCK;
+use polyspline::spline::KnotIntervals as LibKnotIntervals;
 use polyspline::validity::LineSearchMode as LibLineSearchMode;
 
 /// A `ValueEnum` with the variants of a plain library enum, and `From` both ways.
@@ -62,6 +63,18 @@ value_enum! {
         #[value(help = "`smooth`, then the element degeneration energy minimised under the det J \
             certificate (paper §2.4, docs/energy.md)")]
         Energy,
+    }
+}
+
+value_enum! {
+    /// `curve --knot-intervals`.
+    KnotIntervals => LibKnotIntervals {
+        #[value(help = "Every knot interval 1 (the paper's construction)")]
+        Uniform,
+        #[value(help = "Knot intervals from the cells' extents, one ratio per knot surface: \
+            graded (boundary-layer) grids are reproduced exactly and stay C¹ (default; \
+            distributed runs use uniform)")]
+        Graded,
     }
 }
 

@@ -640,7 +640,8 @@ impl FitSpace for crate::spline::SplineSpace {
     fn element_pattern(&self, e: usize, ids: &mut Vec<u32>) -> Option<u64> {
         let x = &self.extraction;
         let nodes = x.element_nodes(e);
-        if nodes.iter().any(|&n| n as usize >= x.n_control) {
+        // The key names the 1D operators only: graded rows get their own matrices.
+        if !x.is_uniform(e) || nodes.iter().any(|&n| n as usize >= x.n_control) {
             return None;
         }
         let mut sorted = [0u32; 27];

@@ -18,6 +18,7 @@ use crate::mesh::features::{FeatureError, FeatureParams, Features};
 use crate::mesh::{LinearMesh, MeshOptions, Topology};
 use crate::params::ParamError;
 use crate::sample::MAX_ORDER;
+use crate::spline::KnotParams;
 use crate::validity::{LineSearchMode, LineSearchParams};
 use serde::Serialize;
 use std::path::PathBuf;
@@ -64,6 +65,9 @@ pub struct CurveOptions {
     pub method: Method,
     /// Weights of the fit (used with [`Geometry::SplineFitted`]).
     pub fit: FitParams,
+    /// Knot intervals of the spline space (graded by default; the distributed run uses
+    /// uniform knots, see `distributed::job`).
+    pub knots: KnotParams,
     pub line_search: LineSearchParams,
     pub line_search_mode: LineSearchMode,
     /// Move boundary vertex nodes back to the input vertices where that stays certified valid.
@@ -88,6 +92,7 @@ impl Default for CurveOptions {
             geometry: Geometry::SplineFitted,
             method: Method::Iga,
             fit: FitParams::smooth(),
+            knots: KnotParams::default(),
             line_search: LineSearchParams::default(),
             line_search_mode: LineSearchMode::Local,
             snap_boundary: false,
@@ -122,6 +127,7 @@ impl CurveOptions {
             ));
         }
         self.fit.check()?;
+        self.knots.check()?;
         self.features.params.check()?;
         self.line_search.check()?;
         if let Method::Elastic(e) = &self.method {

@@ -38,6 +38,10 @@ pub struct CurveReport {
     pub control_points: usize,
     pub spline_elements: usize,
     pub q2_elements: usize,
+    /// Knot intervals of the spline space (`uniform` or `graded`) and, when graded, the
+    /// figures of its knot surfaces (spline geometries).
+    pub knot_intervals: Option<crate::spline::KnotIntervals>,
+    pub knot_surfaces: Option<crate::spline::KnotSurfaceInfo>,
     /// Elements made Q2 because their initial spline map was not certified valid.
     pub demoted_elements: usize,
     /// Elements made Q2 because they touch a kink of a boundary grid line (smooth fit), counting
@@ -154,6 +158,10 @@ impl CurveReport {
             control_points: space.map_or(0, |s| s.n_control_points()),
             spline_elements: space.map_or(0, |s| s.n_spline_elements()),
             q2_elements: space.map_or(0, |s| s.n_q2_elements()),
+            knot_intervals: setup.map(|s| s.knot_intervals),
+            knot_surfaces: setup
+                .filter(|s| s.knot_intervals == crate::spline::KnotIntervals::Graded)
+                .map(|s| s.knot_info),
             demoted_elements: outcome.map_or(0, |o| o.demoted),
             // Counted in the built space: elements Q2 for other reasons already are not kinks'.
             kink_elements: space.map_or(0, |s| {

@@ -23,7 +23,7 @@ use crate::fit::{
 };
 use crate::mesh::features::Features;
 use crate::progress::{Progress, Stage};
-use crate::spline::{ElementRows, Q2Reason, SplineSpace, kinks};
+use crate::spline::{ElementRows, KnotSurfaceInfo, KnotWeights, Q2Reason, SplineSpace, kinks};
 use crate::validity::blend::{BlendInfo, Blended, NetCache, blend_search};
 use crate::validity::certificate::{
     MAX_DEMOTION_ROUNDS, certify_mesh, demote_with_rings, uncertified,
@@ -46,6 +46,12 @@ pub(crate) struct SplineSetup {
     /// The blend's middle state carries the smooth boundary whatever the fit's own targets
     /// (with the paper's chord targets it is built with the default reconstruction).
     blend_targets: Option<SmoothTargets>,
+    /// Knot weights of the spline space (`None`: uniform knots), fixed for all demotions.
+    knot_weights: Option<Vec<KnotWeights>>,
+    /// Figures of the knot surfaces.
+    pub(crate) knot_info: KnotSurfaceInfo,
+    /// The knot intervals used.
+    pub(crate) knot_intervals: crate::spline::KnotIntervals,
 }
 
 impl SplineSetup {
@@ -94,6 +100,7 @@ impl SplineSetup {
             ),
             _ => None,
         };
+        let (knot_weights, knot_info) = SplineSpace::knot_weights(mesh, topo, &options.knots);
         Ok(SplineSetup {
             features,
             crease,
@@ -101,6 +108,9 @@ impl SplineSetup {
             fit_params,
             targets,
             blend_targets,
+            knot_weights,
+            knot_info,
+            knot_intervals: options.knots.intervals,
         })
     }
 
@@ -121,7 +131,7 @@ impl SplineSetup {
         demote: &[bool],
         misfit: &[bool],
     ) -> SplineSpace {
-        SplineSpace::build_with_q2(
+        SplineSpace::build_with_knots(
             job.mesh,
             job.topo,
             &[
@@ -130,6 +140,7 @@ impl SplineSetup {
                 (demote, Q2Reason::InvalidSplineMap),
                 (misfit, Q2Reason::BoundaryMisfit),
             ],
+            self.knot_weights.as_deref(),
         )
     }
 

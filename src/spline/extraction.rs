@@ -8,7 +8,9 @@
 //! `E_e = (M_z ⊗ M_y ⊗ M_x) · W_e`
 //!
 //! * `M_k` is the 3×3 change of basis of direction k ([`Op1d::bernstein_matrix`]): a spline
-//!   knot case, or Lagrange→Bernstein for Q2 elements (`ops[e]`).
+//!   knot case, or Lagrange→Bernstein for Q2 elements (`ops[e]`); with non-uniform knot
+//!   intervals the spline cases take the element's weights (`knot_weights[e]`,
+//!   [`Op1d::bernstein_matrix_graded`]).
 //! * `W_e` has one row per local node (`local_nodes`, 3^d per element, x fastest). A value
 //!   below `n_control` is a control point taken with weight 1 (spline stencil entries, own Q2
 //!   nodes); a value `n_control + r` is constraint row r, a list of (control point, weight)
@@ -28,6 +30,9 @@ pub struct Extraction {
     pub n_control: usize,
     /// 1D basis of each element direction (the z entry of a quad is unused).
     pub ops: Vec<[Op1d; 3]>,
+    /// Knot weights `[α, β]` of each element direction
+    /// ([`Op1d::bernstein_matrix_graded`]); empty for uniform knots (`α = β = ½`).
+    pub knot_weights: Vec<[[f64; 2]; 3]>,
     /// 3^d local nodes per element: control point id, or `n_control` + constraint row.
     pub local_nodes: Vec<u32>,
     /// Constraint rows: entries `constraint_offsets[r]..constraint_offsets[r + 1]`.
@@ -122,12 +127,23 @@ impl Extraction {
     /// The three 1D Bernstein matrices of element `e` (x, y, z; identity for z in 2D).
     pub fn matrices(&self, e: usize) -> [[[f64; 3]; 3]; 3] {
         let ops = self.ops[e];
+        let w = self.knot_weights.get(e);
         std::array::from_fn(|k| {
             if k < self.dim {
-                ops[k].bernstein_matrix()
+                match w {
+                    Some(w) => ops[k].bernstein_matrix_graded(w[k]),
+                    None => ops[k].bernstein_matrix(),
+                }
             } else {
                 Op1d::BothEnds.bernstein_matrix()
             }
+        })
+    }
+
+    /// True when element `e`'s rows are those of uniform knots.
+    pub fn is_uniform(&self, e: usize) -> bool {
+        self.knot_weights.get(e).is_none_or(|w| {
+            (0..self.dim).all(|k| w[k] == [0.5, 0.5] || !self.ops[e][k].is_spline())
         })
     }
 

@@ -79,6 +79,30 @@ impl Op1d {
         }
     }
 
+    /// [`Op1d::bernstein_matrix`] with non-uniform knot intervals (`knot-intervals.md` §1):
+    /// `w = [α, β]` with `α = h₀/(h₋₁+h₀)` the weight of the left neighbour's control point
+    /// in the Bézier point at t = 0 and `β = h₁/(h₀+h₁)` the element's own weight in the one at
+    /// t = 1. `[½, ½]` gives [`Op1d::bernstein_matrix`]; the Q2 basis ignores `w`.
+    pub fn bernstein_matrix_graded(self, w: [f64; 2]) -> [[f64; 3]; 3] {
+        let [a, b] = w;
+        let left = [a, 1.0 - a, 0.0];
+        let right = [0.0, b, 1.0 - b];
+        match self {
+            Op1d::Interior => [left, [0.0, 1.0, 0.0], right],
+            Op1d::LeftEnd => [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], right],
+            Op1d::RightEnd => [left, [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            Op1d::BothEnds | Op1d::Lagrange => self.bernstein_matrix(),
+        }
+    }
+
+    /// The three basis functions at `t` with knot weights `w` (see
+    /// [`Op1d::bernstein_matrix_graded`]): Bernstein values times the matrix.
+    pub fn basis_graded(self, t: f64, w: [f64; 2]) -> [f64; 3] {
+        let m = self.bernstein_matrix_graded(w);
+        let b = bernstein(t);
+        std::array::from_fn(|j| (0..3).map(|i| b[i] * m[i][j]).sum())
+    }
+
     /// True for the four spline knot cases.
     pub fn is_spline(self) -> bool {
         self != Op1d::Lagrange
@@ -126,6 +150,38 @@ mod tests {
                     assert!(((a[j] - b[j]) / (2.0 * h) - d[j]).abs() < 1e-8);
                 }
             }
+        }
+    }
+
+    #[test]
+    fn graded_rows_reproduce_linear_functions_on_any_knots() {
+        // Knot intervals (h₋₁, h₀, h₁); Greville abscissae of the three B-splines in the
+        // span's coordinate t = x / h₀ are (-h₋₁/2, h₀/2, h₀ + h₁/2) / h₀, the cell centres.
+        for (hl, h0, hr) in [(1.0, 1.3, 1.69), (0.2, 1.0, 7.0), (1.0, 1.0, 1.0)] {
+            let w = [h0 / (hl + h0), hr / (h0 + hr)];
+            let g = [-0.5 * hl / h0, 0.5, 1.0 + 0.5 * hr / h0];
+            for op in [Op1d::Interior, Op1d::LeftEnd, Op1d::RightEnd] {
+                let mut c = g;
+                if op == Op1d::LeftEnd {
+                    c[0] = 0.0;
+                }
+                if op == Op1d::RightEnd {
+                    c[2] = 1.0;
+                }
+                for i in 0..=10 {
+                    let t = i as f64 / 10.0;
+                    let n = op.basis_graded(t, w);
+                    let x: f64 = (0..3).map(|j| n[j] * c[j]).sum();
+                    assert!((x - t).abs() < 1e-14, "{op:?} {hl} {h0} {hr} {t}: {x}");
+                    assert!((n.iter().sum::<f64>() - 1.0).abs() < 1e-14);
+                }
+            }
+        }
+        for op in ALL {
+            assert_eq!(
+                op.bernstein_matrix_graded([0.5, 0.5]),
+                op.bernstein_matrix()
+            );
         }
     }
 

@@ -12,7 +12,8 @@
 //! 2. [`stencil`]: every spline element's 3^d stencil is resolved topologically to entities
 //!    (`Cell`, `BFace`, `BEdge`, `BVertex`); elements with an ambiguous or repeated stencil
 //!    are demoted to Q2. Each direction's knot case follows from whether the element has a
-//!    neighbour on that side ([`knots`]).
+//!    neighbour on that side ([`knots`]); its knot intervals are uniform or graded
+//!    ([`intervals`]: one log-ratio per knot surface, passed in as weights).
 //! 3. Control points are created once per referenced entity and numbered by kind then id:
 //!    cells, boundary faces, boundary edges, boundary vertices; they start at vertex averages.
 //! 4. [`q2`]: the Q2 elements' own nodes (numbered after the spline control points) and the
@@ -21,7 +22,8 @@
 //! Invariants of the result:
 //! * the basis of a spline element is non-negative and sums to 1; the map is C¹ across
 //!   spline/spline facets and C⁰ across every facet;
-//! * the initial map reproduces affine images of uniform grids, and any single element's
+//! * the initial map reproduces affine images of uniform grids (of any tensor-product grid
+//!   with graded knot intervals), and any single element's
 //!   bilinear/trilinear map when it has no spline neighbours;
 //! * the result depends only on the topology and coordinates, not on the elements' local
 //!   vertex order (up to the matching reparametrisation of each element).
@@ -29,6 +31,7 @@
 pub mod classify;
 pub mod eval;
 pub mod extraction;
+pub mod intervals;
 pub mod kinks;
 pub mod knots;
 pub mod q2;
@@ -37,6 +40,7 @@ pub mod stencil;
 use crate::math::BezierNet;
 pub use classify::{ElementClass, Q2Reason};
 pub use extraction::{ElementRows, Extraction, ExtractionCsr};
+pub use intervals::{KnotIntervals, KnotParams, KnotSurfaceInfo, KnotWeights};
 pub use knots::Op1d;
 pub use stencil::Entity;
 
@@ -118,6 +122,41 @@ impl SplineSpace {
         topo: &Topology,
         demote: &[(&[bool], Q2Reason)],
     ) -> SplineSpace {
+        Self::build_with_knots(mesh, topo, demote, None)
+    }
+
+    /// The knot weights of `mesh` for `params` ([`intervals::knot_weights`]; `None` for
+    /// uniform knots), to pass to [`SplineSpace::build_with_knots`].
+    pub fn knot_weights(
+        mesh: &LinearMesh,
+        topo: &Topology,
+        params: &KnotParams,
+    ) -> (Option<Vec<KnotWeights>>, KnotSurfaceInfo) {
+        if params.intervals == KnotIntervals::Uniform {
+            return (None, KnotSurfaceInfo::default());
+        }
+        let spline: Vec<bool> = classify::classify(mesh, topo)
+            .iter()
+            .map(|c| c.is_spline())
+            .collect();
+        intervals::knot_weights(mesh, topo, &spline, params)
+    }
+
+    /// [`SplineSpace::build_with_q2`] with non-uniform knot intervals: `weights` (one entry
+    /// per element, from [`SplineSpace::knot_weights`]) or uniform knots (`None`).
+    pub fn build_with_knots(
+        mesh: &LinearMesh,
+        topo: &Topology,
+        demote: &[(&[bool], Q2Reason)],
+        weights: Option<&[KnotWeights]>,
+    ) -> SplineSpace {
+        if let Some(w) = weights {
+            assert_eq!(
+                w.len(),
+                topo.n_elements,
+                "one knot weight entry per element"
+            );
+        }
         let dim = topo.dim;
         assert!(dim == 2 || dim == 3, "quad or hex meshes only");
         let ne = topo.n_elements;
@@ -224,6 +263,7 @@ impl SplineSpace {
             topo,
             classes: &classes,
             ops: &ops,
+            knot_weights: weights,
             local_nodes: &mut local_nodes,
             n_spline_cp,
         }
@@ -244,6 +284,7 @@ impl SplineSpace {
                 dim,
                 n_control,
                 ops,
+                knot_weights: weights.map_or_else(Vec::new, <[_]>::to_vec),
                 local_nodes,
                 constraint_offsets: q2.constraint_offsets,
                 constraint_entries: q2.constraint_entries,

@@ -90,6 +90,8 @@ pub(crate) struct Q2Builder<'a> {
     pub topo: &'a Topology,
     pub classes: &'a [ElementClass],
     pub ops: &'a [[Op1d; 3]],
+    /// Knot weights of each element (`None`: uniform knots).
+    pub knot_weights: Option<&'a [[[f64; 2]; 3]]>,
     /// 3^d local nodes per element; for spline elements the stencil's control point ids.
     pub local_nodes: &'a mut [u32],
     /// Number of spline control points already numbered.
@@ -154,9 +156,13 @@ impl Q2Builder<'_> {
             }
         }
         let ops = self.ops[s as usize];
+        let w = self.knot_weights.map(|w| w[s as usize]);
         let b: [[f64; 3]; 3] = std::array::from_fn(|k| {
             if k < dim {
-                ops[k].basis(xi[k])
+                match w {
+                    Some(w) => ops[k].basis_graded(xi[k], w[k]),
+                    None => ops[k].basis(xi[k]),
+                }
             } else {
                 [1.0, 0.0, 0.0]
             }

@@ -16,3 +16,4 @@ mod fuzz;
 mod generate;
 mod hardening;
 mod high_order;
+mod knot_intervals;

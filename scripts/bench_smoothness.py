@@ -1,0 +1,95 @@
+#!/usr/bin/env python3
+"""Smoothness, held-back elements and cell quality of `curve` on the bundled real meshes, with
+graded and uniform knot intervals against the straight-sided elevation.
+
+usage: python3 scripts/bench_smoothness.py [--timeout S] [MESH ...]
+
+Builds nothing: run `cargo build --release` first. For each mesh (default: every file under
+meshes/real/), runs `curve` (order 2, default options) with `--knot-intervals graded` and
+`uniform`, and `curve --straight`, each writing MSH and a JSON report. Measures every written
+file with Gmsh alone (`tests/external/facet_angles.py`: the angle between the two elements'
+derivatives transversal to each interior facet at its centre, and Gmsh's Jacobian ratio per
+element); Python from $POLYSPLINE_PYTHON, else python3. Prints a Markdown table: held back
+(`reduced_elements` / `elements`), facet angle mean / p99 / max, min scaled Jacobian in → out
+(the report's), Gmsh's min Jacobian ratio, and the `curve` wall time (report total).
+"""
+import argparse
+import glob
+import json
+import os
+import subprocess
+import sys
+import tempfile
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+EXE = os.path.join(ROOT, "target", "release", "polyspline")
+PROBE = os.path.join(ROOT, "tests", "external", "facet_angles.py")
+PY = os.environ.get("POLYSPLINE_PYTHON") or "python3"
+
+
+def curve(mesh, out, report, extra, timeout):
+    cmd = [EXE, "curve", mesh, "-o", out, "--report", report] + extra
+    try:
+        p = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout)
+    except subprocess.TimeoutExpired:
+        return None, "timeout"
+    if p.returncode != 0:
+        return None, p.stderr.strip().splitlines()[-1] if p.stderr.strip() else "failed"
+    with open(report) as f:
+        return json.load(f), None
+
+
+def measure(files):
+    p = subprocess.run([PY, PROBE] + files, capture_output=True, text=True, check=True)
+    return json.loads(p.stdout)
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--timeout", type=float, default=900)
+    ap.add_argument("meshes", nargs="*")
+    a = ap.parse_args()
+    meshes = a.meshes or sorted(
+        f for f in glob.glob(os.path.join(ROOT, "meshes", "real", "*", "*"))
+        if not f.endswith(".md"))
+    tmp = tempfile.mkdtemp(prefix="smoothness-")
+    print("| mesh | knots | held back | facet angle mean / p99 / max | straight | "
+          "min scaled Jacobian in → out | Jacobian ratio min (straight) | curve s |")
+    print("|---|---|---:|---|---|---|---|---:|")
+    for mesh in meshes:
+        name = os.path.relpath(mesh, os.path.join(ROOT, "meshes", "real"))
+        base = os.path.join(tmp, name.replace("/", "_"))
+        runs = {}
+        for knots, extra in [("graded", []), ("uniform", ["--knot-intervals", "uniform"]),
+                             ("straight", ["--straight"])]:
+            out = base + "_" + knots + ".msh"
+            rep, err = curve(mesh, out, base + "_" + knots + ".json", extra, a.timeout)
+            runs[knots] = (out, rep, err)
+        if runs["straight"][1] is None:
+            print("| %s | | %s |" % (name, runs["straight"][2]))
+            continue
+        ok = [k for k in ("graded", "uniform", "straight") if runs[k][1] is not None]
+        try:
+            m = dict(zip(ok, measure([runs[k][0] for k in ok])))
+        except subprocess.CalledProcessError as e:
+            print("| %s | | Gmsh probe failed: %s |" % (name, e.stderr.strip()[-200:]))
+            continue
+        s = m["straight"]
+        for k in ("graded", "uniform"):
+            out, rep, err = runs[k]
+            if rep is None:
+                print("| %s | %s | %s |" % (name, k, err))
+                continue
+            g = m[k]
+            print("| %s | %s | %.0f %% | %.2f° / %.1f° / %.1f° | %.2f° / %.1f° / %.1f° | "
+                  "%.3f → %.3f | %.3f (%.3f) | %.2f |" % (
+                      name, k, 100.0 * rep["reduced_elements"] / rep["elements"],
+                      g["angle_mean"], g["angle_p99"], g["angle_max"],
+                      s["angle_mean"], s["angle_p99"], s["angle_max"],
+                      rep["input_min_scaled_jacobian"], rep["min_scaled_jacobian"],
+                      g["ratio_min"], s["ratio_min"], rep["timings"]["total"]))
+        sys.stdout.flush()
+
+
+if __name__ == "__main__":
+    main()
