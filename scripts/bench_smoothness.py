@@ -4,7 +4,7 @@ graded and uniform knot intervals against the straight-sided elevation.
 
 usage: python3 scripts/bench_smoothness.py [--timeout S] [MESH ...]
 
-Builds nothing: run `cargo build --release` first. For each mesh (default: every file under
+Builds nothing: run `cargo build --release` first ($POLYSPLINE_EXE overrides the binary). For each mesh (default: every file under
 meshes/real/), runs `curve` (order 2, default options) with `--knot-intervals graded` and
 `uniform`, and `curve --straight`, each writing MSH and a JSON report. Measures every written
 file with Gmsh alone (`tests/external/facet_angles.py`: the angle between the two elements'
@@ -22,7 +22,7 @@ import sys
 import tempfile
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-EXE = os.path.join(ROOT, "target", "release", "polyspline")
+EXE = os.environ.get("POLYSPLINE_EXE") or os.path.join(ROOT, "target", "release", "polyspline")
 PROBE = os.path.join(ROOT, "tests", "external", "facet_angles.py")
 PY = os.environ.get("POLYSPLINE_PYTHON") or "python3"
 
