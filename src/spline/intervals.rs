@@ -372,9 +372,11 @@ mod tests {
         assert_eq!(r0, r2);
         assert_eq!(f0, f2);
         u.union(0, 2, false);
-        assert!(!u.conflict[u.find(0).0 as usize]);
+        let r = u.find(0).0 as usize;
+        assert!(!u.conflict[r]);
         u.union(0, 2, true);
-        assert!(u.conflict[u.find(0).0 as usize]);
+        let r = u.find(0).0 as usize;
+        assert!(u.conflict[r]);
     }
 
     #[test]
