@@ -177,3 +177,91 @@ fn abaqus_output_for_trixi() {
         assert_eq!(found, sets, "{label}");
     }
 }
+
+/// The largest slot-by-slot distance between the nodes of matching elements of `a` and `b`
+/// (each element of `a` matched to the element of `b` with the nearest centroid; nodes in
+/// lattice order); infinite when the element counts differ.
+fn element_gap(a: &polyspline::mesh::HighOrderMesh, b: &polyspline::mesh::HighOrderMesh) -> f64 {
+    if a.n_elements() != b.n_elements() || a.order != b.order {
+        return f64::INFINITY;
+    }
+    let cells = |m: &polyspline::mesh::HighOrderMesh| -> Vec<Vec<[f64; 3]>> {
+        (0..m.n_elements())
+            .map(|e| m.element(e).iter().map(|&n| m.nodes[n as usize]).collect())
+            .collect()
+    };
+    let centroid = |c: &[[f64; 3]]| -> [f64; 3] {
+        let mut s = [0.0; 3];
+        for p in c {
+            for k in 0..3 {
+                s[k] += p[k] / c.len() as f64;
+            }
+        }
+        s
+    };
+    let dist = |p: [f64; 3], q: [f64; 3]| (0..3).map(|k| (p[k] - q[k]).abs()).fold(0.0, f64::max);
+    let (ca, cb) = (cells(a), cells(b));
+    let centres: Vec<[f64; 3]> = cb.iter().map(|c| centroid(c)).collect();
+    let mut gap = 0.0f64;
+    for c in &ca {
+        let x = centroid(c);
+        let nearest = (0..cb.len())
+            .min_by(|&i, &j| dist(x, centres[i]).total_cmp(&dist(x, centres[j])))
+            .unwrap();
+        for (p, q) in c.iter().zip(&cb[nearest]) {
+            gap = gap.max(dist(*p, *q));
+        }
+    }
+    gap
+}
+
+/// Our Abaqus output reads back, M3D9/C3D27 as quadratic Lagrange cells, as the same elements
+/// node for node as our MSH file of the same run; Gmsh's own Abaqus export of that MSH file
+/// (the oracle for the node order) reads the same; `check` certifies every element read
+/// from it.
+#[test]
+fn abaqus_output_reads_back() {
+    for (label, input, dim) in [
+        ("box", repo("tests/data/cgns/hex_box_gmsh.cgns"), 3),
+        ("example", repo("meshes/converted/example_dealii.cgns"), 2),
+    ] {
+        let (inp, msh) = (
+            scratch(&format!("readback_{label}.inp")),
+            scratch(&format!("readback_{label}.msh")),
+        );
+        curve(&input, &inp, 2);
+        curve(&input, &msh, 2);
+        let read = |p: &Path| {
+            polyspline::mesh::HighOrderMesh::from_raw(polyspline::io::read_raw(p).unwrap()).unwrap()
+        };
+        let (ours, reference) = (read(&inp), read(&msh));
+        assert_eq!((ours.dim, ours.order), (dim, 2), "{label}");
+        assert!(ours.n_elements() > 0, "{label}");
+        let gap = element_gap(&ours, &reference);
+        assert!(gap < 1e-12, "{label}: our .inp read back differs by {gap}");
+        let o = common::run_ok(common::polyspline().args(["check", "--json"]).arg(&inp));
+        let report: Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(report["invalid"], 0, "{label}: {report}");
+        assert_eq!(report["elements"], ours.n_elements(), "{label}: {report}");
+
+        let gmsh_inp = scratch(&format!("readback_{label}_gmsh.inp"));
+        if !common::have_gmsh("Gmsh's Abaqus export was not read back") {
+            continue;
+        }
+        let o = common::run_ok(
+            common::python()
+                .arg(repo("tests/external/formats_check.py"))
+                .arg("abaqus")
+                .arg(&msh)
+                .arg(&gmsh_inp),
+        );
+        let counts: Value = serde_json::from_slice(&o.stdout).unwrap();
+        let theirs = read(&gmsh_inp);
+        assert_eq!(counts[dim.to_string()], theirs.n_elements(), "{label}");
+        let gap = element_gap(&theirs, &reference);
+        assert!(
+            gap < 1e-12,
+            "{label}: Gmsh's .inp read back differs by {gap}"
+        );
+    }
+}
