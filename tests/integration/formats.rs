@@ -265,3 +265,107 @@ fn abaqus_output_reads_back() {
         );
     }
 }
+
+/// A real CGNS file of HOPR's repository, its HDF5 copy and the counts of
+/// `meshes/converted/SOURCES.md`.
+struct Hopr {
+    original: &'static str,
+    converted: &'static str,
+    hexes: usize,
+    /// Vertices after the zones are glued.
+    vertices: usize,
+    /// Boundary facets per name.
+    boundaries: &'static [(&'static str, usize)],
+}
+
+const HOPR: &[Hopr] = &[
+    Hopr {
+        original: "meshes/real/hopr/naca0012_omg.cgns",
+        converted: "meshes/converted/hopr_naca0012_omg.cgns",
+        hexes: 450,
+        vertices: 1020,
+        boundaries: &[
+            ("BC_airfoil", 50),
+            ("BC_mantle", 68),
+            ("BC_zMinus", 450),
+            ("BC_zPlus", 450),
+        ],
+    },
+    Hopr {
+        original: "meshes/real/hopr/spheremesh01.cgns",
+        converted: "meshes/converted/hopr_spheremesh01.cgns",
+        hexes: 113,
+        vertices: 152,
+        boundaries: &[
+            ("BC_inflow", 9),
+            ("BC_mantel", 24),
+            ("BC_outflow", 9),
+            ("BC_sphere", 6),
+        ],
+    },
+];
+
+/// HOPR's real CGNS files (an ANSA NACA 0012 O-mesh in one MIXED zone; a sphere mesh in three
+/// zones without connectivity, glued at coincident vertices) are stored as ADF: the originals
+/// are refused with one line naming the conversion; their HDF5 copies (`cgnsconvert -h`) read
+/// with the census counts, which h5py's independent count of the same file confirms (hexes,
+/// distinct vertex positions, boundary entries per name), and curve end to end (nothing is
+/// written unless every element is certified) to a mesh `check` finds valid.
+#[test]
+fn hopr_cgns_files_census_and_curve() {
+    let census = common::python_has("h5py", "the h5py census of the HOPR CGNS files");
+    for h in HOPR {
+        let o = common::polyspline()
+            .arg("info")
+            .arg(repo(h.original))
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+        assert!(
+            err.contains("ADF") && err.contains("cgnsconvert -h") && err.contains(h.original),
+            "{err}"
+        );
+
+        let raw = polyspline::io::read_raw(&repo(h.converted)).unwrap();
+        let count = |kind: &polyspline::io::CellKind| raw.block(kind).map_or(0, |b| b.len());
+        assert_eq!(
+            count(&polyspline::io::CellKind::Hexahedron),
+            h.hexes,
+            "{}",
+            h.converted
+        );
+        assert_eq!(raw.points.len(), h.vertices, "{}", h.converted);
+        let quads = raw.block(&polyspline::io::CellKind::Quad).unwrap();
+        for (name, n) in h.boundaries {
+            let (&tag, _) = raw
+                .tag_names
+                .iter()
+                .find(|(_, t)| t.as_str() == *name)
+                .unwrap_or_else(|| panic!("{}: no boundary {name}", h.converted));
+            let found = quads.tags.iter().filter(|&&t| t == tag).count();
+            assert_eq!(found, *n, "{}: boundary {name}", h.converted);
+        }
+        if census {
+            let o = common::run_ok(
+                common::python()
+                    .arg(repo("tests/external/cgns_census.py"))
+                    .arg(repo(h.converted)),
+            );
+            let v: Value = serde_json::from_slice(&o.stdout).unwrap();
+            assert_eq!(v["elements"]["HEXA_8"], h.hexes, "{v}");
+            assert_eq!(v["distinct_vertices"], h.vertices, "{v}");
+            for (name, n) in h.boundaries {
+                assert_eq!(v["boundaries"][name], *n, "{name}: {v}");
+            }
+        }
+
+        let out = scratch(&format!("hopr_{}.msh", h.hexes));
+        curve(&repo(h.converted), &out, 3);
+        let o = common::run_ok(common::polyspline().args(["check", "--json"]).arg(&out));
+        let report: Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(report["elements"], h.hexes, "{report}");
+        assert_eq!(report["invalid"], 0, "{report}");
+    }
+}
