@@ -369,3 +369,87 @@ fn hopr_cgns_files_census_and_curve() {
         assert_eq!(report["invalid"], 0, "{report}");
     }
 }
+
+/// An unformatted (Fortran records, big-endian, 4-byte markers, double precision) multi-grid
+/// Plot3D file of box grids: per grid its vertex counts and its lower x (the boxes span
+/// [x0, x0 + 1] × [0, 1]², vertices equispaced).
+fn plot3d_binary(name: &str, grids: &[([usize; 3], f64)]) -> PathBuf {
+    let mut out = Vec::new();
+    let mut record = |bytes: &[u8]| {
+        let n = (bytes.len() as u32).to_be_bytes();
+        out.extend_from_slice(&n);
+        out.extend_from_slice(bytes);
+        out.extend_from_slice(&n);
+    };
+    record(&(grids.len() as i32).to_be_bytes());
+    let dims: Vec<u8> = grids
+        .iter()
+        .flat_map(|(n, _)| n.iter().flat_map(|&v| (v as i32).to_be_bytes()))
+        .collect();
+    record(&dims);
+    for &(n, x0) in grids {
+        let mut bytes = Vec::new();
+        for c in 0..3 {
+            for k in 0..n[2] {
+                for j in 0..n[1] {
+                    for i in 0..n[0] {
+                        let t = [i, j, k][c] as f64 / (n[c] - 1) as f64;
+                        let v = if c == 0 { x0 + t } else { t };
+                        bytes.extend_from_slice(&v.to_be_bytes());
+                    }
+                }
+            }
+        }
+        record(&bytes);
+    }
+    let path = scratch(name);
+    std::fs::write(&path, out).unwrap();
+    path
+}
+
+/// A binary multi-grid Plot3D file: grids whose faces match are merged (the shared face's
+/// vertices once, every cell kept); a grid whose face is finer than its neighbour's (hanging
+/// vertices) or shifted by a fraction of an edge is refused with one line naming the file,
+/// the grid and the face.
+#[test]
+fn plot3d_binary_mismatched_faces() {
+    let matched = plot3d_binary("matched.x", &[([3, 3, 3], 0.0), ([3, 3, 3], 1.0)]);
+    let raw = polyspline::io::read_raw(&matched).unwrap();
+    assert_eq!(raw.points.len(), 27 + 27 - 9);
+    let hexes = raw.block(&polyspline::io::CellKind::Hexahedron).unwrap();
+    assert_eq!(hexes.len(), 16);
+    // The merged mesh is one body: its shared face is interior (no boundary group on it).
+    assert!(
+        !raw.tag_names
+            .values()
+            .any(|n| n == "block1_imax" || n == "block2_imin")
+    );
+
+    for (name, grids, what) in [
+        (
+            "finer.x",
+            vec![([3, 3, 3], 0.0), ([5, 5, 3], 1.0)],
+            "grid 1 face imax",
+        ),
+        (
+            "shifted.x",
+            vec![([3, 3, 3], 0.0), ([3, 3, 3], 1.003)],
+            "3.000e-3",
+        ),
+    ] {
+        let path = plot3d_binary(name, &grids);
+        let o = common::polyspline()
+            .arg("info")
+            .arg(&path)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{name}: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{name}: {err}");
+        assert!(!err.contains("panicked"), "{err}");
+        assert!(
+            err.contains(name) && err.contains(what) && err.contains("do not match"),
+            "{name}: {err}"
+        );
+    }
+}
