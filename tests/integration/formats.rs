@@ -68,7 +68,8 @@ fn cgnscheck(file: &Path) -> bool {
 /// Every CGNS element type we write (QUAD_4/9/16/25 with BAR_2..5 in 2D, HEXA_8/27/64/125
 /// with QUAD_n in 3D), on the real deal.II mesh converted to CGNS by Gmsh and on Gmsh's hex
 /// box: `cgnscheck` accepts the file, and Gmsh reads it with the same elements, node for node
-/// in its own order, as our MSH file of the same run (det J > 0 throughout).
+/// in its own order, as our MSH file of the same run (det J > 0 throughout), and with a
+/// physical group named after every boundary group of the input (from our `BC_t` families).
 #[test]
 fn cgns_output_read_by_the_cgns_library_and_gmsh() {
     for (label, input, dim) in [
@@ -94,6 +95,25 @@ fn cgns_output_read_by_the_cgns_library_and_gmsh() {
                 assert!(r["gap"].as_f64().unwrap() < 1e-12, "{ctx}");
             }
             assert!(v["min_det_jac"].as_f64().unwrap() > 0.0, "{ctx}");
+            // Gmsh makes a physical group of every boundary group of the input.
+            let raw = polyspline::io::read_raw(&input).unwrap();
+            let facet = if dim == 3 {
+                polyspline::io::CellKind::Quad
+            } else {
+                polyspline::io::CellKind::Line
+            };
+            let names: Vec<&str> = v["names"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|n| n.as_str().unwrap())
+                .collect();
+            let tags = &raw.block(&facet).unwrap().tags;
+            assert!(!tags.is_empty(), "{ctx}");
+            for t in tags {
+                let name = &raw.tag_names[t];
+                assert!(names.contains(&name.as_str()), "{ctx}: {name} missing");
+            }
         }
     }
 }
