@@ -141,7 +141,7 @@ pub enum NodeConvention {
     /// the CGNS reader's).
     Cgns,
     /// Abaqus (`M3D9`/`S9R5` 9-node quadrilaterals in Gmsh's order; `C3D27` as
-    /// [`crate::io::abaqus_write::c3d27`]).
+    /// the Abaqus writer's `c3d27` order).
     Abaqus,
 }
 
