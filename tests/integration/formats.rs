@@ -213,8 +213,8 @@ fn element_gap(a: &polyspline::mesh::HighOrderMesh, b: &polyspline::mesh::HighOr
     let centroid = |c: &[[f64; 3]]| -> [f64; 3] {
         let mut s = [0.0; 3];
         for p in c {
-            for k in 0..3 {
-                s[k] += p[k] / c.len() as f64;
+            for (s, x) in s.iter_mut().zip(p) {
+                *s += x / c.len() as f64;
             }
         }
         s
