@@ -24,11 +24,13 @@ fn shape(kind: &CellKind) -> Option<(usize, usize, NodeConvention)> {
 fn permutation(dim: usize, p: usize, convention: NodeConvention) -> Vec<usize> {
     let order = match (dim, convention) {
         (1, _) => gmsh_line(p),
-        (2, NodeConvention::Gmsh) => gmsh_quad(p),
+        (2, NodeConvention::Gmsh | NodeConvention::Abaqus) => gmsh_quad(p),
         (2, NodeConvention::Vtk) => vtk_quad(p),
         (2, NodeConvention::Cgns) => crate::io::cgns::ordering::cgns_quad(p),
         (3, NodeConvention::Gmsh) => gmsh_hex(p),
         (3, NodeConvention::Cgns) => crate::io::cgns::ordering::cgns_hex(p),
+        // Abaqus defines one 27-node hexahedron (order 2).
+        (3, NodeConvention::Abaqus) => crate::io::abaqus_write::c3d27(),
         _ => vtk_hex(p),
     };
     order.iter().map(|&l| lattice_index(p, l)).collect()

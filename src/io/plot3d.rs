@@ -13,7 +13,9 @@
 //! 1 everywhere), corners (i,j,k), (i+1,j,k), (i+1,j+1,k), (i,j+1,k) then the same at k+1;
 //! grids glued into one conforming mesh where their outer vertices coincide
 //! ([`crate::io::glue`]); a face that nearly meets another grid's vertices without matching
-//! them is refused, naming the grid, the face and the distance. Plot3D carries no boundary
+//! them is refused, naming the grid, the face and the distance, and so is a face whose cells
+//! do not match the other grid's where their vertices do (one face finer than the other:
+//! hanging vertices). Plot3D carries no boundary
 //! names, so every outer face that is not glued to another grid is tagged `block<k>_imin`,
 //! `block<k>_imax`, `_jmin`, ... (k from 1, in file order).
 
@@ -459,6 +461,8 @@ fn assemble(grids: Vec<Grid>, dim: usize) -> Result<RawMesh, ParseError> {
     let npf = corners / 2;
     let mut seen: HashMap<Vec<i64>, usize> = HashMap::new();
     let mut facets: Vec<(Vec<i64>, i32, Location)> = Vec::new();
+    // Per facet, its grid's first corner (for messages).
+    let mut first_corner: Vec<usize> = Vec::new();
     for (b, fs) in faces.iter().enumerate() {
         for (k, f) in fs {
             let tag = (b * 6 + k + 1) as i32;
@@ -468,8 +472,14 @@ fn assemble(grids: Vec<Grid>, dim: usize) -> Result<RawMesh, ParseError> {
                 key.sort_unstable();
                 *seen.entry(key).or_default() += 1;
                 facets.push((nodes, tag, grids[b].location));
+                first_corner.push(c[0]);
             }
         }
+    }
+    if grids.len() > 1 {
+        hanging(&grids, &faces, &facets, &first_corner, &seen, |b, v| {
+            id[offsets[b] + v]
+        })?;
     }
     let mut bnd = RawBlock::new(fkind, npf);
     for (nodes, tag, loc) in facets {
@@ -487,6 +497,68 @@ fn assemble(grids: Vec<Grid>, dim: usize) -> Result<RawMesh, ParseError> {
     }
     mesh.push_block(bnd);
     Ok(mesh)
+}
+
+/// Refuse a non-matching interface: an outer facet that no other grid shares although every
+/// corner of it is a vertex of one other grid. The other grid's face is finer there (its
+/// vertices hang on this facet's edges) or its cells are cut differently, so gluing at the
+/// coincident vertices would leave a mesh that is not conforming.
+fn hanging(
+    grids: &[Grid],
+    faces: &[Vec<(usize, Vec<usize>)>],
+    facets: &[(Vec<i64>, i32, Location)],
+    first_corner: &[usize],
+    seen: &HashMap<Vec<i64>, usize>,
+    merged: impl Fn(usize, usize) -> usize,
+) -> Result<(), ParseError> {
+    // The grids whose outer faces hold each merged vertex.
+    let mut owners: HashMap<usize, Vec<usize>> = HashMap::new();
+    for (b, fs) in faces.iter().enumerate() {
+        for (_, f) in fs {
+            for &v in f {
+                let o = owners.entry(merged(b, v)).or_default();
+                if !o.contains(&b) {
+                    o.push(b);
+                }
+            }
+        }
+    }
+    for ((nodes, tag, loc), &corner) in facets.iter().zip(first_corner) {
+        let mut key = nodes.clone();
+        key.sort_unstable();
+        if seen[&key] != 1 {
+            continue;
+        }
+        let b = (tag - 1) as usize / 6;
+        let holds = |g: usize| {
+            nodes
+                .iter()
+                .all(|&n| owners.get(&(n as usize)).is_some_and(|o| o.contains(&g)))
+        };
+        let Some(&other) = owners[&(nodes[0] as usize)]
+            .iter()
+            .find(|&&g| g != b && holds(g))
+        else {
+            continue;
+        };
+        let n = grids[b].n;
+        let ijk = [
+            corner % n[0] + 1,
+            corner / n[0] % n[1] + 1,
+            corner / (n[0] * n[1]) + 1,
+        ];
+        return Err(ParseError::new(
+            *loc,
+            format!(
+                "grid {} face {}: the cell face at vertex {ijk:?} has every corner on a vertex of grid {} but is not a cell face of grid {}; the grids' faces do not match (hanging vertices)",
+                b + 1,
+                FACES[(tag - 1) as usize % 6],
+                other + 1,
+                other + 1
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// The facets of each outer face of a grid: (face number in [`FACES`], flattened facets).

@@ -140,6 +140,9 @@ pub enum NodeConvention {
     /// CGNS (`QUAD_9/16/25`, `HEXA_27/64/125`, in the order of the CGNS standard; the tables are
     /// the CGNS reader's).
     Cgns,
+    /// Abaqus (`M3D9`/`S9R5` 9-node quadrilaterals in Gmsh's order; `C3D27` as
+    /// the Abaqus writer's `c3d27` order).
+    Abaqus,
 }
 
 impl CellKind {

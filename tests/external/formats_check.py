@@ -6,7 +6,7 @@
                                              between the nodes of matching elements (matched by
                                              centroid, compared slot by slot in Gmsh order),
                                              Gmsh's min/max det J of the volume elements, and
-                                             the physical group names.
+                                             the physical group and entity names.
     formats_check.py inp OUT.inp REF.msh     Gmsh writes REF.msh as Abaqus itself (its own
                                              C3D27/M3D9 node order); both .inp files are parsed
                                              the way Trixi.jl's standard-Abaqus reader parses
@@ -14,6 +14,9 @@
                                              `*NSET,NSET=` with a trailing comma a line); prints
                                              the largest slot-by-slot node distance between
                                              matching elements and the node sets found.
+    formats_check.py abaqus REF.msh OUT.inp  Gmsh writes REF.msh as Abaqus (its own export, the
+                                             oracle for our Abaqus reader); prints JSON with the
+                                             element count per dimension it saw.
 """
 import json
 import re
@@ -42,7 +45,8 @@ def elements_of(path, dim):
             Q = gmsh.model.mesh.getElementQualities(et, "maxDetJac")
             det = [min(det[0], float(q.min())), max(det[1], float(Q.max()))]
     names = sorted(gmsh.model.getPhysicalName(d, t) for d, t in gmsh.model.getPhysicalGroups())
-    return out, det, names
+    entities = sorted({gmsh.model.getEntityName(d, t) for d, t in gmsh.model.getEntities()} - {""})
+    return out, det, names, entities
 
 
 def largest_gap(a, b):
@@ -65,12 +69,13 @@ def cgns(out, ref):
     dim = gmsh.model.getDimension()
     result = {}
     for d in (dim, dim - 1):
-        a, det, names = elements_of(out, d)
-        b, _, _ = elements_of(ref, d)
+        a, det, names, entities = elements_of(out, d)
+        b = elements_of(ref, d)[0]
         result[str(d)] = {"count": len(a), "ref_count": len(b), "gap": largest_gap(a, b)}
         if d == dim:
             result["min_det_jac"], result["max_det_jac"] = det
             result["names"] = names
+            result["entities"] = entities
     print(json.dumps(result))
 
 
@@ -124,7 +129,14 @@ def inp(out, ref):
                       "sets": {k: len(v) for k, v in sets.items()}}))
 
 
+def abaqus(ref, out):
+    gmsh.open(ref)
+    counts = {str(d): sum(len(t) for t in gmsh.model.mesh.getElements(d)[1]) for d in (1, 2, 3)}
+    gmsh.write(out)
+    print(json.dumps(counts))
+
+
 gmsh.initialize()
 gmsh.option.setNumber("General.Terminal", 0)
-{"cgns": cgns, "inp": inp}[sys.argv[1]](sys.argv[2], sys.argv[3])
+{"cgns": cgns, "inp": inp, "abaqus": abaqus}[sys.argv[1]](sys.argv[2], sys.argv[3])
 gmsh.finalize()

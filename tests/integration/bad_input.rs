@@ -362,3 +362,57 @@ fn cgns_plot3d_and_abaqus_refusals() {
         assert!(!out.exists(), "{name} written");
     }
 }
+
+/// Malformed CGNS files (Gmsh's fixtures with one node broken by h5py, see
+/// `tests/data/cgns/make_malformed.py`): one line naming the file, the broken node's path in
+/// the CGNS tree and the problem, exit status 1, no panic.
+#[test]
+fn cgns_errors_name_the_node_path() {
+    let z = "/quads_gmsh.cgns/q_Part0";
+    let c = "/twoblock_s.cgns/fluid_V00001/ZoneGridConnectivity/S00002 (V00001 & V00002)";
+    let cases = [
+        (
+            "no_coordinate_y",
+            format!("{z}/GridCoordinates: no CoordinateY"),
+        ),
+        (
+            "short_coordinate",
+            format!("{z}/GridCoordinates/CoordinateX: 15 values; the zone has 16 vertices"),
+        ),
+        (
+            "huge_shape",
+            format!("{z}/GridCoordinates/CoordinateX: data of shape [1000000000000]"),
+        ),
+        (
+            "real_connectivity",
+            format!("{z}/4_S_1/ElementConnectivity: expected integer data"),
+        ),
+        (
+            "vertex_out_of_range",
+            format!("{z}/4_S_1/ElementConnectivity: element 13 refers to vertex 99"),
+        ),
+        (
+            "inverted_range",
+            format!("{z}/4_S_1: ElementRange [21, 13]"),
+        ),
+        ("unknown_type", format!("{z}/4_S_1: element type code 99")),
+        ("no_zone_type", format!("{z}: no ZoneType node")),
+        ("bc_outside", format!("{z}/ZoneBC/L_1: PointRange [1, 99]")),
+        (
+            "link",
+            format!("{z}/GridCoordinates: a link to a node in another file"),
+        ),
+        ("bad_transform", format!("{c}: Transform [1, 1, 3]")),
+        ("missing_donor", format!("{c}: donor zone \"nowhere\"")),
+        ("truncated", "/: unreadable children: HDF5".to_string()),
+    ];
+    for (name, expected) in cases {
+        let path = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+            .join(format!("tests/data/cgns/malformed/{name}.cgns"));
+        let err = info_error(&path);
+        assert!(
+            err.contains(&expected),
+            "{name}: expected {expected:?} in {err}"
+        );
+    }
+}

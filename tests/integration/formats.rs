@@ -68,7 +68,8 @@ fn cgnscheck(file: &Path) -> bool {
 /// Every CGNS element type we write (QUAD_4/9/16/25 with BAR_2..5 in 2D, HEXA_8/27/64/125
 /// with QUAD_n in 3D), on the real deal.II mesh converted to CGNS by Gmsh and on Gmsh's hex
 /// box: `cgnscheck` accepts the file, and Gmsh reads it with the same elements, node for node
-/// in its own order, as our MSH file of the same run (det J > 0 throughout).
+/// in its own order, as our MSH file of the same run (det J > 0 throughout), and with a
+/// physical group named after every boundary group of the input (from our `BC_t` families).
 #[test]
 fn cgns_output_read_by_the_cgns_library_and_gmsh() {
     for (label, input, dim) in [
@@ -94,6 +95,25 @@ fn cgns_output_read_by_the_cgns_library_and_gmsh() {
                 assert!(r["gap"].as_f64().unwrap() < 1e-12, "{ctx}");
             }
             assert!(v["min_det_jac"].as_f64().unwrap() > 0.0, "{ctx}");
+            // Gmsh makes a physical group of every boundary group of the input.
+            let raw = polyspline::io::read_raw(&input).unwrap();
+            let facet = if dim == 3 {
+                polyspline::io::CellKind::Quad
+            } else {
+                polyspline::io::CellKind::Line
+            };
+            let names: Vec<&str> = v["names"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|n| n.as_str().unwrap())
+                .collect();
+            let tags = &raw.block(&facet).unwrap().tags;
+            assert!(!tags.is_empty(), "{ctx}");
+            for t in tags {
+                let name = &raw.tag_names[t];
+                assert!(names.contains(&name.as_str()), "{ctx}: {name} missing");
+            }
         }
     }
 }
@@ -175,5 +195,281 @@ fn abaqus_output_for_trixi() {
             .map(|k| k.as_str())
             .collect();
         assert_eq!(found, sets, "{label}");
+    }
+}
+
+/// The largest slot-by-slot distance between the nodes of matching elements of `a` and `b`
+/// (each element of `a` matched to the element of `b` with the nearest centroid; nodes in
+/// lattice order); infinite when the element counts differ.
+fn element_gap(a: &polyspline::mesh::HighOrderMesh, b: &polyspline::mesh::HighOrderMesh) -> f64 {
+    if a.n_elements() != b.n_elements() || a.order != b.order {
+        return f64::INFINITY;
+    }
+    let cells = |m: &polyspline::mesh::HighOrderMesh| -> Vec<Vec<[f64; 3]>> {
+        (0..m.n_elements())
+            .map(|e| m.element(e).iter().map(|&n| m.nodes[n as usize]).collect())
+            .collect()
+    };
+    let centroid = |c: &[[f64; 3]]| -> [f64; 3] {
+        let mut s = [0.0; 3];
+        for p in c {
+            for (s, x) in s.iter_mut().zip(p) {
+                *s += x / c.len() as f64;
+            }
+        }
+        s
+    };
+    let dist = |p: [f64; 3], q: [f64; 3]| (0..3).map(|k| (p[k] - q[k]).abs()).fold(0.0, f64::max);
+    let (ca, cb) = (cells(a), cells(b));
+    let centres: Vec<[f64; 3]> = cb.iter().map(|c| centroid(c)).collect();
+    let mut gap = 0.0f64;
+    for c in &ca {
+        let x = centroid(c);
+        let nearest = (0..cb.len())
+            .min_by(|&i, &j| dist(x, centres[i]).total_cmp(&dist(x, centres[j])))
+            .unwrap();
+        for (p, q) in c.iter().zip(&cb[nearest]) {
+            gap = gap.max(dist(*p, *q));
+        }
+    }
+    gap
+}
+
+/// Our Abaqus output reads back, M3D9/C3D27 as quadratic Lagrange cells, as the same elements
+/// node for node as our MSH file of the same run; Gmsh's own Abaqus export of that MSH file
+/// (the oracle for the node order) reads the same; `check` certifies every element read
+/// from it.
+#[test]
+fn abaqus_output_reads_back() {
+    for (label, input, dim) in [
+        ("box", repo("tests/data/cgns/hex_box_gmsh.cgns"), 3),
+        ("example", repo("meshes/converted/example_dealii.cgns"), 2),
+    ] {
+        let (inp, msh) = (
+            scratch(&format!("readback_{label}.inp")),
+            scratch(&format!("readback_{label}.msh")),
+        );
+        curve(&input, &inp, 2);
+        curve(&input, &msh, 2);
+        let read = |p: &Path| {
+            polyspline::mesh::HighOrderMesh::from_raw(polyspline::io::read_raw(p).unwrap()).unwrap()
+        };
+        let (ours, reference) = (read(&inp), read(&msh));
+        assert_eq!((ours.dim, ours.order), (dim, 2), "{label}");
+        assert!(ours.n_elements() > 0, "{label}");
+        let gap = element_gap(&ours, &reference);
+        assert!(gap < 1e-12, "{label}: our .inp read back differs by {gap}");
+        let o = common::run_ok(common::polyspline().args(["check", "--json"]).arg(&inp));
+        let report: Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(report["invalid"], 0, "{label}: {report}");
+        assert_eq!(report["elements"], ours.n_elements(), "{label}: {report}");
+
+        let gmsh_inp = scratch(&format!("readback_{label}_gmsh.inp"));
+        if !common::have_gmsh("Gmsh's Abaqus export was not read back") {
+            continue;
+        }
+        let o = common::run_ok(
+            common::python()
+                .arg(repo("tests/external/formats_check.py"))
+                .arg("abaqus")
+                .arg(&msh)
+                .arg(&gmsh_inp),
+        );
+        let counts: Value = serde_json::from_slice(&o.stdout).unwrap();
+        let theirs = read(&gmsh_inp);
+        assert_eq!(counts[dim.to_string()], theirs.n_elements(), "{label}");
+        let gap = element_gap(&theirs, &reference);
+        assert!(
+            gap < 1e-12,
+            "{label}: Gmsh's .inp read back differs by {gap}"
+        );
+    }
+}
+
+/// A real CGNS file of HOPR's repository, its HDF5 copy and the counts of
+/// `meshes/converted/SOURCES.md`.
+struct Hopr {
+    original: &'static str,
+    converted: &'static str,
+    hexes: usize,
+    /// Vertices after the zones are glued.
+    vertices: usize,
+    /// Boundary facets per name.
+    boundaries: &'static [(&'static str, usize)],
+}
+
+const HOPR: &[Hopr] = &[
+    Hopr {
+        original: "meshes/real/hopr/naca0012_omg.cgns",
+        converted: "meshes/converted/hopr_naca0012_omg.cgns",
+        hexes: 450,
+        vertices: 1020,
+        boundaries: &[
+            ("BC_airfoil", 50),
+            ("BC_mantle", 68),
+            ("BC_zMinus", 450),
+            ("BC_zPlus", 450),
+        ],
+    },
+    Hopr {
+        original: "meshes/real/hopr/spheremesh01.cgns",
+        converted: "meshes/converted/hopr_spheremesh01.cgns",
+        hexes: 113,
+        vertices: 152,
+        boundaries: &[
+            ("BC_inflow", 9),
+            ("BC_mantel", 24),
+            ("BC_outflow", 9),
+            ("BC_sphere", 6),
+        ],
+    },
+];
+
+/// HOPR's real CGNS files (an ANSA NACA 0012 O-mesh in one MIXED zone; a sphere mesh in three
+/// zones without connectivity, glued at coincident vertices) are stored as ADF: the originals
+/// are refused with one line naming the conversion; their HDF5 copies (`cgnsconvert -h`) read
+/// with the census counts, which h5py's independent count of the same file confirms (hexes,
+/// distinct vertex positions, boundary entries per name), and curve end to end (nothing is
+/// written unless every element is certified) to a mesh `check` finds valid.
+#[test]
+fn hopr_cgns_files_census_and_curve() {
+    let census = common::python_has("h5py", "the h5py census of the HOPR CGNS files");
+    for h in HOPR {
+        let o = common::polyspline()
+            .arg("info")
+            .arg(repo(h.original))
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+        assert!(
+            err.contains("ADF") && err.contains("cgnsconvert -h") && err.contains(h.original),
+            "{err}"
+        );
+
+        let raw = polyspline::io::read_raw(&repo(h.converted)).unwrap();
+        let count = |kind: &polyspline::io::CellKind| raw.block(kind).map_or(0, |b| b.len());
+        assert_eq!(
+            count(&polyspline::io::CellKind::Hexahedron),
+            h.hexes,
+            "{}",
+            h.converted
+        );
+        assert_eq!(raw.points.len(), h.vertices, "{}", h.converted);
+        let quads = raw.block(&polyspline::io::CellKind::Quad).unwrap();
+        for (name, n) in h.boundaries {
+            let (&tag, _) = raw
+                .tag_names
+                .iter()
+                .find(|(_, t)| t.as_str() == *name)
+                .unwrap_or_else(|| panic!("{}: no boundary {name}", h.converted));
+            let found = quads.tags.iter().filter(|&&t| t == tag).count();
+            assert_eq!(found, *n, "{}: boundary {name}", h.converted);
+        }
+        if census {
+            let o = common::run_ok(
+                common::python()
+                    .arg(repo("tests/external/cgns_census.py"))
+                    .arg(repo(h.converted)),
+            );
+            let v: Value = serde_json::from_slice(&o.stdout).unwrap();
+            assert_eq!(v["elements"]["HEXA_8"], h.hexes, "{v}");
+            assert_eq!(v["distinct_vertices"], h.vertices, "{v}");
+            for (name, n) in h.boundaries {
+                assert_eq!(v["boundaries"][name], *n, "{name}: {v}");
+            }
+        }
+
+        let out = scratch(&format!("hopr_{}.msh", h.hexes));
+        curve(&repo(h.converted), &out, 3);
+        let o = common::run_ok(common::polyspline().args(["check", "--json"]).arg(&out));
+        let report: Value = serde_json::from_slice(&o.stdout).unwrap();
+        assert_eq!(report["elements"], h.hexes, "{report}");
+        assert_eq!(report["invalid"], 0, "{report}");
+    }
+}
+
+/// An unformatted (Fortran records, big-endian, 4-byte markers, double precision) multi-grid
+/// Plot3D file of box grids: per grid its vertex counts and its lower x (the boxes span
+/// [x0, x0 + 1] × [0, 1]², vertices equispaced).
+fn plot3d_binary(name: &str, grids: &[([usize; 3], f64)]) -> PathBuf {
+    let mut out = Vec::new();
+    let mut record = |bytes: &[u8]| {
+        let n = (bytes.len() as u32).to_be_bytes();
+        out.extend_from_slice(&n);
+        out.extend_from_slice(bytes);
+        out.extend_from_slice(&n);
+    };
+    record(&(grids.len() as i32).to_be_bytes());
+    let dims: Vec<u8> = grids
+        .iter()
+        .flat_map(|(n, _)| n.iter().flat_map(|&v| (v as i32).to_be_bytes()))
+        .collect();
+    record(&dims);
+    for &(n, x0) in grids {
+        let mut bytes = Vec::new();
+        for c in 0..3 {
+            for k in 0..n[2] {
+                for j in 0..n[1] {
+                    for i in 0..n[0] {
+                        let t = [i, j, k][c] as f64 / (n[c] - 1) as f64;
+                        let v = if c == 0 { x0 + t } else { t };
+                        bytes.extend_from_slice(&v.to_be_bytes());
+                    }
+                }
+            }
+        }
+        record(&bytes);
+    }
+    let path = scratch(name);
+    std::fs::write(&path, out).unwrap();
+    path
+}
+
+/// A binary multi-grid Plot3D file: grids whose faces match are merged (the shared face's
+/// vertices once, every cell kept); a grid whose face is finer than its neighbour's (hanging
+/// vertices) or shifted by a fraction of an edge is refused with one line naming the file,
+/// the grid and the face.
+#[test]
+fn plot3d_binary_mismatched_faces() {
+    let matched = plot3d_binary("matched.x", &[([3, 3, 3], 0.0), ([3, 3, 3], 1.0)]);
+    let raw = polyspline::io::read_raw(&matched).unwrap();
+    assert_eq!(raw.points.len(), 27 + 27 - 9);
+    let hexes = raw.block(&polyspline::io::CellKind::Hexahedron).unwrap();
+    assert_eq!(hexes.len(), 16);
+    // The merged mesh is one body: its shared face is interior (no boundary group on it).
+    assert!(
+        !raw.tag_names
+            .values()
+            .any(|n| n == "block1_imax" || n == "block2_imin")
+    );
+
+    for (name, grids, what) in [
+        (
+            "finer.x",
+            vec![([3, 3, 3], 0.0), ([5, 5, 3], 1.0)],
+            "grid 1 face imax",
+        ),
+        (
+            "shifted.x",
+            vec![([3, 3, 3], 0.0), ([3, 3, 3], 1.003)],
+            "3.000e-3",
+        ),
+    ] {
+        let path = plot3d_binary(name, &grids);
+        let o = common::polyspline()
+            .arg("info")
+            .arg(&path)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{name}: {err}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{name}: {err}");
+        assert!(!err.contains("panicked"), "{err}");
+        assert!(
+            err.contains(name) && err.contains(what) && err.contains("do not match"),
+            "{name}: {err}"
+        );
     }
 }

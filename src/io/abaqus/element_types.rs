@@ -1,7 +1,8 @@
 //! Abaqus element type names → [`CellKind`], and the faces of each kind in Abaqus numbering.
 //!
 //! Input: a `TYPE=` value, or a kind and a face number `Sn`. Output: the kind and, where the type
-//! fixes it, its node count; the facet kind and its local node indices. Every type not listed
+//! fixes it, its node count; the facet kind and its local node indices. The 9-node
+//! quadrilaterals and 27-node hexahedra are quadratic Lagrange cells; every type not listed
 //! here is kept as a named [`CellKind::Other`].
 
 use crate::mesh::raw::CellKind;
@@ -37,7 +38,8 @@ pub(super) fn element_kind(ty: &str) -> (CellKind, Option<usize>) {
                 8 => (CellKind::Hexahedron, Some(8)),
                 10 => other(Some(10), "tetrahedron"),
                 15 => other(Some(15), "wedge"),
-                20 | 27 => other(Some(n), "hexahedron"),
+                20 => other(Some(n), "hexahedron"),
+                27 => (abaqus_lagrange(3), Some(27)),
                 _ => other(None, ""),
             };
         }
@@ -52,7 +54,8 @@ pub(super) fn element_kind(ty: &str) -> (CellKind, Option<usize>) {
             3 => (CellKind::Triangle, Some(3)),
             4 => (CellKind::Quad, Some(4)),
             6 => other(Some(6), "triangle"),
-            8 | 9 => other(Some(n), "quadrilateral"),
+            8 => other(Some(n), "quadrilateral"),
+            9 => (abaqus_lagrange(2), Some(9)),
             _ => other(None, ""),
         };
     }
@@ -74,6 +77,16 @@ pub(super) fn element_kind(ty: &str) -> (CellKind, Option<usize>) {
         }
     }
     other(None, "")
+}
+
+/// The quadratic Lagrange cell of dimension `dim` in Abaqus node order (M3D9, S9R5: corners,
+/// mid-edge nodes, centre; C3D27: see [`crate::io::abaqus_write::c3d27`]).
+fn abaqus_lagrange(dim: usize) -> CellKind {
+    CellKind::Lagrange {
+        dim,
+        order: 2,
+        convention: crate::mesh::raw::NodeConvention::Abaqus,
+    }
 }
 
 /// Face (or edge) `face` (1-based) of an element as 0-based local node positions, with the

@@ -8,8 +8,11 @@
 //!   continues on the next line. Linear types become their [`CellKind`] (node order equals
 //!   VTK's): CPS4/CPE4/CAX4/S4/S4R/M3D4/R3D4/SFM3D4/... → quad, C3D8/C3D8R/C3D8I/C3D8H/SC8R →
 //!   hexahedron, CPS3/S3/STRI3/... → triangle, C3D4 → tetrahedron, C3D6 → wedge, C3D5 → pyramid,
-//!   T2D2/T3D2/B21/B31/... → line. Other types (C3D20, C3D27, CPS8, springs, ...) are reported
-//!   as [`CellKind::Other`] with the Abaqus type name.
+//!   T2D2/T3D2/B21/B31/... → line. The quadratic Lagrange types M3D9/M3D9R/S9R5 (9-node
+//!   quadrilaterals) and C3D27 (27-node hexahedra, the types our `.inp` output writes) become
+//!   [`CellKind::Lagrange`] of order 2 in [`NodeConvention::Abaqus`](crate::mesh::raw::NodeConvention::Abaqus)
+//!   order, read by `HighOrderMesh::from_raw` (and refused by the linear reader). Other types
+//!   (C3D20, CPS8, springs, ...) are reported as [`CellKind::Other`] with the Abaqus type name.
 //! * `*ELSET, ELSET=name[, GENERATE]`: element ids, `first, last[, step]` ranges, or names of
 //!   earlier element sets. Repeated definitions of one name add to the set.
 //! * `*SURFACE, TYPE=ELEMENT, NAME=name` lines `element_id_or_elset, Sn`: the faces become

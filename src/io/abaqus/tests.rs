@@ -147,6 +147,19 @@ fn element_kinds() {
     ] {
         assert_eq!(element_kind(ty), (kind, n), "{ty}");
     }
+    let quadratic = |dim| CellKind::Lagrange {
+        dim,
+        order: 2,
+        convention: crate::mesh::raw::NodeConvention::Abaqus,
+    };
+    for (ty, dim, n) in [
+        ("M3D9", 2, 9),
+        ("s9r5", 2, 9),
+        ("M3D9R", 2, 9),
+        ("C3D27", 3, 27),
+    ] {
+        assert_eq!(element_kind(ty), (quadratic(dim), Some(n)), "{ty}");
+    }
     let (k, n) = element_kind("C3D20R");
     assert_eq!(n, Some(20));
     assert!(

@@ -9,7 +9,8 @@
 //!   ([`super::ordering`]), element ids consecutive over the sections;
 //! * a `BC_t` per boundary group in `ZoneBC` (`PointRange` over its section's ids,
 //!   `GridLocation` `EdgeCenter`/`FaceCenter`) with a `FamilyName`, and a `Family_t` of that
-//!   name in the base; the volume sections' names and families are the volume groups'.
+//!   name in the base (holding a `FamilyName_t` of the same name, from which Gmsh makes its
+//!   physical group); the volume sections' names and families are the volume groups'.
 //!
 //! Groups and their names are those of the MSH writer ([`crate::io::gmsh_write`]): the input's
 //! tag names, `boundary`/`untagged` for untagged facets, the volume named `fluid` (or the
@@ -257,6 +258,10 @@ pub fn write_cgns(mesh: &HighOrderMesh, volume_name: &str, w: &mut impl Write) -
     for f in &families {
         let mut fam = node(f, "Family_t", "MT");
         fam.add_group(string_node("FamilyBC", "FamilyBC_t", "UserDefined").finish());
+        // The family names itself as its parent family: Gmsh's CGNS reader makes a physical
+        // group of a family's `FamilyName_t` (as Gmsh writes them), and our reader resolves
+        // it to the same name.
+        fam.add_group(string_node(f, "FamilyName_t", f).finish());
         base.add_group(fam.finish());
     }
     fb.add_group(base.finish());
