@@ -25,7 +25,14 @@ from typing import Any, Callable, Dict, Optional, Tuple
 
 import numpy as np
 
-from . import _polyspline
+# Mesa's Vulkan drivers print an error line while adapters are probed when the process has no
+# runtime directory (the command line does the same).
+if not os.environ.get("XDG_RUNTIME_DIR"):
+    import tempfile
+
+    os.environ["XDG_RUNTIME_DIR"] = tempfile.gettempdir()
+
+from . import _polyspline  # noqa: E402
 from .errors import (
     DeviceError,
     Error,
