@@ -30,7 +30,7 @@ const KINDS: [(&str, CellKind); 8] = [
 
 /// Values of type `T` from a buffer of native-endian bytes.
 fn values<T: bytemuck::Pod>(bytes: &[u8], what: &str) -> PyResult<Vec<T>> {
-    if bytes.len() % size_of::<T>() != 0 {
+    if !bytes.len().is_multiple_of(size_of::<T>()) {
         return Err(PyValueError::new_err(format!(
             "{what}: {} bytes is not a whole number of values",
             bytes.len()
@@ -42,15 +42,19 @@ fn values<T: bytemuck::Pod>(bytes: &[u8], what: &str) -> PyResult<Vec<T>> {
         .collect())
 }
 
+/// The Python layer's mesh tuple: points, blocks `(kind, nodes_per_cell, nodes, tags)`,
+/// tag names.
+type PyRawMesh = (
+    Vec<u8>,
+    Vec<(String, usize, Vec<u8>, Vec<u8>)>,
+    BTreeMap<i32, String>,
+);
+
 /// The [`RawMesh`] of the Python layer's tuple (module docs).
 pub(crate) fn raw_from_py(obj: &Bound<'_, PyAny>) -> PyResult<RawMesh> {
-    let (points, blocks, tag_names): (
-        Vec<u8>,
-        Vec<(String, usize, Vec<u8>, Vec<u8>)>,
-        BTreeMap<i32, String>,
-    ) = obj.extract()?;
+    let (points, blocks, tag_names): PyRawMesh = obj.extract()?;
     let coords: Vec<f64> = values(&points, "points")?;
-    if coords.len() % 3 != 0 {
+    if !coords.len().is_multiple_of(3) {
         return Err(PyValueError::new_err(
             "points: expected 3 coordinates per point",
         ));
@@ -69,7 +73,7 @@ pub(crate) fn raw_from_py(obj: &Bound<'_, PyAny>) -> PyResult<RawMesh> {
         let mut block = RawBlock::new(kind, nodes_per_cell);
         block.nodes = values(&nodes, "cells")?;
         block.tags = values(&tags, "tags")?;
-        if nodes_per_cell == 0 || block.nodes.len() % nodes_per_cell != 0 {
+        if nodes_per_cell == 0 || !block.nodes.len().is_multiple_of(nodes_per_cell) {
             return Err(PyValueError::new_err(format!(
                 "cells of type {name}: {} node ids is not a whole number of {nodes_per_cell}-node cells",
                 block.nodes.len()

@@ -22,7 +22,7 @@ use polyspline::pipeline::{CurveError, CurveReport};
 use polyspline::progress::{Progress, Stage};
 use pyo3::exceptions::{PyKeyboardInterrupt, PyTypeError};
 use pyo3::prelude::*;
-use pyo3::types::{PyBytes, PyDict};
+use pyo3::types::PyDict;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -330,6 +330,5 @@ fn _polyspline(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(option_defaults, m)?)?;
     m.add_class::<Curved>()?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
-    let _ = PyBytes::new(m.py(), b"");
     Ok(())
 }

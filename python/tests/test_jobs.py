@@ -96,3 +96,19 @@ def test_pyfr_imports_a_mesh_written_from_python(tmp_path):
         n = sum(int(d.shape[0]) for d in f["eles"].values())
         assert list(f["eles"]) == ["quad"]
     assert n == len(curved.cells)
+
+
+def test_sigint_during_the_job_stops_it_before_writing(tmp_path):
+    # SIGINT arrives while Rust runs with the GIL released: only the job's own check of
+    # Python's signals at its next stage can stop it before the output is written.
+    if not BIG.exists():
+        skip(f"{BIG} is not in this checkout")
+    out = tmp_path / "o.msh"
+    timer = threading.Timer(0.05, os.kill, (os.getpid(), signal.SIGINT))
+    timer.start()
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            polyspline.curve_file(BIG, out, order=4, backend="cpu")
+    finally:
+        timer.cancel()
+    assert not out.exists()
