@@ -14,11 +14,15 @@
 #     binaries by kind, library, integration, geometry, cross_validation and clients
 #     (docs/architecture.md). A test whose checker is missing skips visibly
 #     (a failure under CI=true) and appends a line to target/test-skips.log.
-#  4. Lints, without arguments only: `cargo fmt --check`, `cargo clippy --all-targets -- -D
-#     warnings` and `cargo doc --no-deps` with RUSTDOCFLAGS=-D warnings (both with --release),
-#     each a pass/fail line in the summary (a failure fails the run; its output is in
-#     target/lint-NAME.log).
-#  5. Without arguments, also Open MPI and the distributed test binary (`--features mpi`,
+#  4. Without arguments: the Python package (python/, docs/python.md), built with maturin
+#     (release, in the workspace's target directory, so the library is not compiled again) and
+#     installed into .venv-tests, then its pytest tests (python/tests/); their passes, failures
+#     and skips count in the summary below.
+#  5. Lints, without arguments only: `cargo fmt --all --check`, `cargo clippy --workspace
+#     --all-targets -- -D warnings` and `cargo doc --no-deps` with RUSTDOCFLAGS=-D warnings
+#     (both with --release), each a pass/fail line in the summary (a failure fails the run;
+#     its output is in target/lint-NAME.log).
+#  6. Without arguments, also Open MPI and the distributed test binary (`--features mpi`,
 #     which it requires, so step 3 does not build it).
 set -uo pipefail
 cd "$(dirname "$0")/.."
@@ -84,7 +88,35 @@ else
 fi
 status=${PIPESTATUS[0]}
 
-# 4. Lints: formatting, clippy and rustdoc, each with warnings denied.
+# 4. The Python package and its tests.
+py_passed=0
+py_failed=0
+if [ $# -eq 0 ]; then
+    pylog="$root/target/python-build.log"
+    pyout="$root/target/pytest-output.log"
+    if [ ! -x "$venv/bin/python" ]; then
+        notes+=("no $venv: the Python package was not built or tested")
+    elif ! VIRTUAL_ENV="$venv" "$venv/bin/python" -m maturin develop --release --quiet \
+        --manifest-path "$root/python/Cargo.toml" >"$pylog" 2>&1; then
+        tail -n 40 "$pylog"
+        echo "the Python package did not build (see target/python-build.log)"
+        py_failed=1
+    else
+        POLYSPLINE_BIN="$root/target/release/polyspline" "$venv/bin/python" -m pytest \
+            "$root/python/tests" -q -rs -p no:cacheprovider 2>&1 | tee "$pyout"
+        py_status=${PIPESTATUS[0]}
+        summary=$(grep -E '[0-9]+ (passed|failed|errors?|skipped).* in [0-9.]+s' "$pyout" | tail -n 1)
+        py_passed=$(grep -Eo '[0-9]+ passed' <<<"$summary" | grep -Eo '[0-9]+' || echo 0)
+        py_failed=$(grep -Eo '[0-9]+ (failed|errors?)' <<<"$summary" | awk '{s+=$1} END {print s+0}')
+        if [ "$py_status" != 0 ] && [ "$py_failed" = 0 ]; then
+            echo "pytest exited with status $py_status (see above)"
+            py_failed=1
+        fi
+    fi
+    [ "$py_failed" = 0 ] || status=1
+fi
+
+# 5. Lints: formatting, clippy and rustdoc, each with warnings denied.
 lints=()
 lint_failed=0
 lint() {
@@ -105,11 +137,11 @@ if [ $# -eq 0 ]; then
         fi
     done
     # --release: the build scripts' outputs of the test build are reused.
-    lint fmt cargo fmt --check
-    lint clippy cargo clippy --release --all-targets -- -D warnings
+    lint fmt cargo fmt --all --check
+    lint clippy cargo clippy --release --workspace --all-targets -- -D warnings
     lint doc env RUSTDOCFLAGS="-D warnings" cargo doc --release --no-deps
 fi
-# ---- 5. Distributed curving (feature `mpi`, docs/distributed.md) -------------------------
+# ---- 6. Distributed curving (feature `mpi`, docs/distributed.md) -------------------------
 # With no arguments: Open MPI and the headers rsmpi's bindings are generated from, then the
 # tests that run `mpirun --oversubscribe -np 1,2,4` against the serial result. Their results
 # count in the totals below.
@@ -131,7 +163,7 @@ if [ $# -eq 0 ]; then
     mpi_status=${PIPESTATUS[0]}
     [ "$mpi_status" = 0 ] || status=$mpi_status
 fi
-# ---- end of step 5 ------------------------------------------------------------------------
+# ---- end of step 6 ------------------------------------------------------------------------
 
 echo
 echo "== skipped checks =="
@@ -148,6 +180,9 @@ grep -E '^test .* \.\.\. ignored' "$out" || true
 
 passed=$(grep -Eo 'test result: [A-Za-z]+\. [0-9]+ passed' "$out" | grep -Eo '[0-9]+ passed' | awk '{s+=$1} END {print s+0}')
 failed=$(grep -Eo '[0-9]+ failed;' "$out" | awk '{s+=$1} END {print s+0}')
+# The Python package's pytest counts (step 4).
+passed=$((passed + py_passed))
+failed=$((failed + py_failed))
 if [ "$status" != 0 ] && [ "$failed" = 0 ]; then
     echo "cargo test exited with status $status (build error or crash; see above)"
     failed=1

@@ -2,7 +2,10 @@
 //!
 //! Input: a mesh path and [`CurveOptions`]. Output: the written high-order mesh file and a
 //! [`CurveReport`]. The output file is written atomically and never onto the input.
-//! [`curve_in_memory`] is the same job without writing (used by `compare`).
+//! [`curve_in_memory`] is the same job without writing (used by `compare`), and
+//! [`curve_raw_in_memory_with_progress`] the same on a mesh parsed elsewhere (the Python
+//! package's arrays). The receiver of progress may stop the job between stages
+//! ([`Progress::cancelled`]).
 //!
 //! The stages ([`Stage`]; each is one function returning a typed outcome, run by the stage clock
 //! that times it and announces it to the [`Progress`] receiver):
@@ -37,6 +40,7 @@ use crate::io::output::{PendingFile, WriteError};
 use crate::io::{ReadError, read_mesh};
 use crate::math::BezierElements;
 use crate::mesh::HighOrderMesh;
+use crate::mesh::raw::RawMesh;
 use crate::mesh::{LinearMesh, Topology};
 use crate::progress::{Progress, Silent, Stage};
 use crate::quality::sample_det_jacobian;
@@ -100,6 +104,9 @@ pub enum CurveError {
         count: usize,
         first: String,
     },
+    /// The receiver of progress asked the job to stop ([`Progress::cancelled`]).
+    #[error("interrupted; nothing was written")]
+    Cancelled,
 }
 
 impl CurveError {
@@ -163,6 +170,9 @@ pub fn curve_prepared(
     crate::io::output::check_outputs(&[output], &[input])?;
     let start = Instant::now();
     let Curved { ho, mut report, .. } = curve_in_memory_with_progress(input, options, progress)?;
+    if progress.cancelled() {
+        return Err(CurveError::Cancelled);
+    }
     progress.started(Stage::Write);
     let t = Instant::now();
     let pending = prepare_high_order(&ho, output, &options.output, &[input])?;
@@ -195,11 +205,41 @@ pub fn curve_in_memory_with_progress(
     options: &CurveOptions,
     progress: &dyn Progress,
 ) -> Result<Curved, CurveError> {
+    curve_mesh(input, options, progress, || read_mesh(input, &options.mesh))
+}
+
+/// [`curve_in_memory_with_progress`] of a mesh already parsed (by a caller that reads its
+/// own formats, or builds the mesh from arrays): `raw` is checked and oriented as a file's
+/// would be ([`LinearMesh::from_raw`]), and `name` stands for the file in every message
+/// (`<memory>`, for example). The report's `input` is `name`.
+pub fn curve_raw_in_memory_with_progress(
+    raw: RawMesh,
+    name: &Path,
+    options: &CurveOptions,
+    progress: &dyn Progress,
+) -> Result<Curved, CurveError> {
+    curve_mesh(name, options, progress, || {
+        LinearMesh::from_raw(raw, &options.mesh).map_err(|source| ReadError::Parse {
+            path: name.to_owned(),
+            source,
+        })
+    })
+}
+
+/// The job on the mesh `read` gives (its stage is [`Stage::Read`]).
+fn curve_mesh(
+    input: &Path,
+    options: &CurveOptions,
+    progress: &dyn Progress,
+    read: impl FnOnce() -> Result<LinearMesh, ReadError>,
+) -> Result<Curved, CurveError> {
     let (order, elastic) = check_options(options)?;
     let start = Instant::now();
     let mut clock = Clock::new(progress);
-    let mesh = clock.run(Stage::Read, || read_mesh(input, &options.mesh))?;
+    let mesh = clock.run(Stage::Read, read)?;
+    clock.check()?;
     let topo = clock.run(Stage::Topology, || topology(input, &mesh))?;
+    clock.check()?;
     let executor = crate::exec::executor(&options.backend);
     let job = Job {
         input,
@@ -212,9 +252,11 @@ pub fn curve_in_memory_with_progress(
         Geometry::Straight => None,
         _ => Some(spline::curve_spline(&job, &mut clock)?),
     };
+    clock.check()?;
     let mut ho = clock.run(Stage::Sample, || {
         sample_stage(&job, spline.as_mut(), order, elastic.is_none())
     })?;
+    clock.check()?;
     let snapped = options.snap_boundary.then(|| {
         let depth = options.line_search.certificate_depth;
         clock.run(Stage::Snap, || snap_boundary(&mesh, &topo, &mut ho, depth))
@@ -227,6 +269,7 @@ pub fn curve_in_memory_with_progress(
         }
         None => None,
     };
+    clock.check()?;
     let (min_scaled_jacobian, deviation) =
         clock.run(Stage::Quality, || quality_stage(&job, &ho))?;
     clock.set(Stage::Total, start.elapsed().as_secs_f64());

@@ -3,7 +3,8 @@
 //!
 //! The pipeline calls [`Progress::started`] and [`Progress::finished`] around every [`Stage`]
 //! it runs (the names of the report's `timings`), and [`Progress::cg`] on every CG iteration of
-//! the fit. [`Silent`] ignores them; [`Terminal`] draws an indicatif spinner on stderr naming
+//! the fit; it asks [`Progress::cancelled`] between stages and stops when told. [`Silent`]
+//! ignores them; [`Terminal`] draws an indicatif spinner on stderr naming
 //! the running stage (announced by the pipeline as it starts, so the label is the stage that
 //! really runs), and stays off when stderr is not a terminal.
 
@@ -114,6 +115,12 @@ pub trait Progress: Sync {
     fn finished(&self, _stage: Stage) {}
     /// The fit's CG solve reached `iteration` with relative residual `rel_residual`.
     fn cg(&self, _iteration: usize, _rel_residual: f64) {}
+    /// Whether the caller wants the job to stop: asked between stages (after every
+    /// [`Progress::finished`] and between the rounds of the fit and the certificate), where
+    /// the job then ends with `CurveError::Cancelled` and writes nothing.
+    fn cancelled(&self) -> bool {
+        false
+    }
 }
 
 /// No progress output.

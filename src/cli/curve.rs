@@ -1,4 +1,10 @@
 //! `polyspline curve`: the curved high-order mesh of a linear one, and its report.
+//!
+//! The options come in groups that the Python package shares (it builds them from keyword
+//! arguments with the same names, so both front ends validate and default alike):
+//! [`JobArgs`] (how to curve), [`OutputArgs`] (how to write) and [`FileArgs`] (the files).
+//! [`prepare_files`] refuses bad options and outputs before any work; [`curve_files`] runs
+//! the job on one process and writes the mesh and the report.
 
 use super::values;
 use super::{ElasticArgs, FeatureArgs};
@@ -11,6 +17,7 @@ use polyspline::mesh::MeshOptions;
 use polyspline::pipeline::{
     CurveOptions, CurveReport, Geometry, Method, OutputFormat, OutputOptions, curve_prepared,
 };
+use polyspline::progress::Progress;
 use polyspline::solve::{CgParams, CgPreconditioner};
 use polyspline::spline::{KnotIntervals, KnotParams};
 use polyspline::validity::LineSearchParams;
@@ -18,14 +25,38 @@ use std::path::{Path, PathBuf};
 
 #[derive(clap::Args)]
 pub(super) struct Args {
-    /// Input mesh file.
-    mesh: PathBuf,
-    /// Output file: .msh (Gmsh) or .vtu (VTK Lagrange cells).
-    #[arg(short, long)]
-    output: PathBuf,
+    #[command(flatten)]
+    files: FileArgs,
     /// No progress spinner on stderr (it is also off when stderr is not a terminal).
     #[arg(short, long)]
     quiet: bool,
+}
+
+/// The input, the outputs, and the options of the job and of the writers.
+#[derive(clap::Args)]
+pub(crate) struct FileArgs {
+    /// Input mesh file.
+    pub(crate) mesh: PathBuf,
+    /// Output file: .msh (Gmsh), .vtu (VTK Lagrange cells), .cgns (CGNS/HDF5) or .inp
+    /// (Abaqus for Trixi.jl).
+    #[arg(short, long)]
+    pub(crate) output: PathBuf,
+    /// Write a JSON report (sizes, timings) to this file.
+    #[arg(long, value_name = "FILE.json")]
+    pub(crate) report: Option<PathBuf>,
+    /// Under mpirun: write Gmsh's partitioned MSH 4.1 files OUT_1.msh … OUT_N.msh (one per
+    /// rank, read by Gmsh as one mesh) instead of one file (docs/distributed.md).
+    #[arg(long)]
+    partitioned: bool,
+    #[command(flatten)]
+    pub(crate) job: JobArgs,
+    #[command(flatten)]
+    pub(crate) out: OutputArgs,
+}
+
+/// How to curve: every option of the job but the files and the writers'.
+#[derive(clap::Args)]
+pub(crate) struct JobArgs {
     /// Order of the output elements (1-10; Gmsh hexes up to 9).
     #[arg(long, default_value_t = 2)]
     order: usize,
@@ -121,30 +152,6 @@ pub(super) struct Args {
     /// With --order 1: split each element into K^d linear elements on the curved geometry.
     #[arg(long, value_name = "K")]
     subdivide: Option<usize>,
-    /// Gmsh file version.
-    #[arg(long, value_enum, default_value_t = values::MshVersion::V41)]
-    msh_version: values::MshVersion,
-    /// Binary Gmsh output.
-    #[arg(long)]
-    binary: bool,
-    /// Under mpirun: write Gmsh's partitioned MSH 4.1 files OUT_1.msh … OUT_N.msh (one per
-    /// rank, read by Gmsh as one mesh) instead of one file (docs/distributed.md).
-    #[arg(long)]
-    partitioned: bool,
-    /// How VTU data arrays are stored.
-    #[arg(long, value_enum, default_value_t = values::VtuEncoding::Base64)]
-    vtu_encoding: values::VtuEncoding,
-    /// Name of the MSH volume physical group where the input names no region (PyFR reads
-    /// its volume from a group named `fluid`).
-    #[arg(long, default_value = "fluid", value_name = "NAME")]
-    volume_name: String,
-    /// Also write the boundary facets, with their tags, to this VTU file (the main VTU
-    /// holds the volume cells only).
-    #[arg(long, value_name = "FILE.vtu")]
-    vtu_boundary: Option<PathBuf>,
-    /// Write a JSON report (sizes, timings) to this file.
-    #[arg(long, value_name = "FILE.json")]
-    report: Option<PathBuf>,
     /// Keep tangled or degenerate input elements instead of failing.
     #[arg(long)]
     allow_invalid: bool,
@@ -156,6 +163,41 @@ pub(super) struct Args {
     /// Float type of the GPU kernels (default: f64 where the adapter has it).
     #[arg(long, value_enum)]
     precision: Option<values::Precision>,
+}
+
+/// How to write: the options of the output formats.
+#[derive(clap::Args)]
+pub(crate) struct OutputArgs {
+    /// Gmsh file version.
+    #[arg(long, value_enum, default_value_t = values::MshVersion::V41)]
+    msh_version: values::MshVersion,
+    /// Binary Gmsh output.
+    #[arg(long)]
+    binary: bool,
+    /// How VTU data arrays are stored.
+    #[arg(long, value_enum, default_value_t = values::VtuEncoding::Base64)]
+    vtu_encoding: values::VtuEncoding,
+    /// Name of the MSH volume physical group where the input names no region (PyFR reads
+    /// its volume from a group named `fluid`).
+    #[arg(long, default_value = "fluid", value_name = "NAME")]
+    volume_name: String,
+    /// Also write the boundary facets, with their tags, to this VTU file (the main VTU
+    /// holds the volume cells only).
+    #[arg(long, value_name = "FILE.vtu")]
+    pub(crate) vtu_boundary: Option<PathBuf>,
+}
+
+impl OutputArgs {
+    /// The library's output options (unchecked: the writers validate them).
+    pub(crate) fn options(self) -> OutputOptions {
+        OutputOptions {
+            msh_version: self.msh_version.into(),
+            binary: self.binary,
+            vtu_encoding: self.vtu_encoding.into(),
+            volume_name: self.volume_name,
+            vtu_boundary: self.vtu_boundary,
+        }
+    }
 }
 
 /// Options of `--fit energy`.
@@ -191,7 +233,16 @@ impl EnergyArgs {
     }
 }
 
-impl Args {
+impl JobArgs {
+    /// The library's options with the output options `output`, after the checks the library
+    /// leaves to its caller: the kink angle, and the backend (resolved here: `gpu` without
+    /// an adapter is an error).
+    pub(crate) fn resolve(self, output: OutputOptions) -> anyhow::Result<CurveOptions> {
+        polyspline::fit::check_kink_angle(self.kink_angle)?;
+        let backend = BackendChoice::from(self.backend).resolve(self.precision.map(Into::into))?;
+        Ok(self.options(backend, output))
+    }
+
     /// The preset's weights with the single weights given on the command line.
     fn weights(&self) -> FitWeights {
         let mut weights = FitPreset::from(self.fit).weights();
@@ -212,7 +263,11 @@ impl Args {
     }
 
     /// The library's options (unchecked: [`curve_prepared`] validates them).
-    fn options(self, backend: polyspline::exec::gpu::Backend) -> CurveOptions {
+    fn options(
+        self,
+        backend: polyspline::exec::gpu::Backend,
+        output: OutputOptions,
+    ) -> CurveOptions {
         CurveOptions {
             order: self.order,
             subdivide: self.subdivide,
@@ -262,13 +317,7 @@ impl Args {
             mesh: MeshOptions {
                 allow_invalid: self.allow_invalid,
             },
-            output: OutputOptions {
-                msh_version: self.msh_version.into(),
-                binary: self.binary,
-                vtu_encoding: self.vtu_encoding.into(),
-                volume_name: self.volume_name,
-                vtu_boundary: self.vtu_boundary,
-            },
+            output,
             backend,
             energy: (self.fit == values::FitPreset::Energy).then(|| self.energy.params()),
         }
@@ -276,63 +325,32 @@ impl Args {
 }
 
 pub(super) fn run(args: Args) -> anyhow::Result<()> {
-    let mesh = args.mesh.clone();
-    let output = args.output.clone();
-    let report = args.report.clone();
-    let mut inputs: Vec<&Path> = vec![&mesh];
-    let edits = args.features.feature_edits.clone();
-    inputs.extend(edits.as_deref());
-    let partitioned = args.partitioned;
-    let parts = partitioned_outputs(&output, partitioned)?;
-    let outputs: Vec<&Path> = parts
-        .iter()
-        .map(PathBuf::as_path)
-        .chain(report.as_deref())
-        .collect();
-    // Every output path is checked before any work, against the inputs and each other.
-    let prechecks = || -> anyhow::Result<_> {
-        let Some(format) = OutputFormat::from_path(&output) else {
-            anyhow::bail!(
-                "{}: {}",
-                output.display(),
-                polyspline::io::high_order::UNKNOWN_OUTPUT
-            );
-        };
-        // An order the format cannot hold is refused before any work (the dimension is
-        // known only after reading; 3 is the stricter for Gmsh).
-        if let Some(why) = [2, 3]
-            .iter()
-            .filter_map(|&d| format.refuses(d, args.order))
-            .next()
-            .filter(|_| format != OutputFormat::Msh)
-        {
-            anyhow::bail!("{}: {why}", output.display());
-        }
-        check_outputs(&outputs, &inputs)?;
-        polyspline::fit::check_kink_angle(args.kink_angle)?;
-        let backend = BackendChoice::from(args.backend);
-        Ok(backend.resolve(args.precision.map(Into::into))?)
-    };
-    // Under mpirun every rank finds the same error: one line, from rank 0.
-    #[cfg(feature = "mpi")]
-    let prechecks = || prechecks().map_err(polyspline::distributed::launch::quiet_unless_rank_0);
-    let backend = prechecks()?;
-    let quiet = args.quiet;
-    let options = args.options(backend);
+    let job = prepare_files(args.files)?;
     // Under mpirun with several ranks: the distributed job (docs/distributed.md).
     #[cfg(feature = "mpi")]
     if polyspline::distributed::launch::distributed() {
         use polyspline::distributed::launch::{Outcome, curve};
+        let Prepared {
+            mesh,
+            output,
+            report,
+            edits,
+            partitioned,
+            parts,
+            options,
+        } = &job;
+        let mut inputs: Vec<&Path> = vec![mesh];
+        inputs.extend(edits.as_deref());
         let written = curve(
-            &mesh,
-            &output,
-            &options,
+            mesh,
+            output,
+            options,
             report.as_deref(),
             &inputs,
-            partitioned,
+            *partitioned,
         )?;
         if let Outcome::Written(r) = written {
-            let what = if partitioned {
+            let what = if *partitioned {
                 format!(
                     "{} … {}",
                     parts[0].display(),
@@ -353,14 +371,98 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
         }
         return Ok(());
     }
-    refuse_a_single_part(&mesh)?;
-    let progress = polyspline::progress::Terminal::new(quiet);
-    let r = curve_prepared(&mesh, &output, &options, &progress);
+    let progress = polyspline::progress::Terminal::new(args.quiet);
+    let r = curve_files(&job, &progress);
     progress.clear();
-    let (r, pending_mesh) = r?;
-    // Both files are complete on disk before either replaces its target, so a full disk or a
-    // failing report leaves no mesh without its report.
-    let pending_report = match &report {
+    print_summary(&r?);
+    Ok(())
+}
+
+/// A `curve` job whose options and outputs passed every check that needs no work.
+pub(crate) struct Prepared {
+    mesh: PathBuf,
+    output: PathBuf,
+    report: Option<PathBuf>,
+    /// The feature edits file, another input no output may replace.
+    edits: Option<PathBuf>,
+    #[cfg_attr(not(feature = "mpi"), allow(dead_code))]
+    partitioned: bool,
+    /// The mesh files to write: `output`, or the parts of `--partitioned`.
+    #[cfg_attr(not(feature = "mpi"), allow(dead_code))]
+    parts: Vec<PathBuf>,
+    pub(crate) options: CurveOptions,
+}
+
+/// Refuse, before any work, what no run could write: an output of no known format or of an
+/// order its format cannot hold, outputs onto the inputs or each other, the checks
+/// [`JobArgs::resolve`] makes, and a backend that cannot start.
+pub(crate) fn prepare_files(args: FileArgs) -> anyhow::Result<Prepared> {
+    let FileArgs {
+        mesh,
+        output,
+        report,
+        partitioned,
+        job,
+        out,
+    } = args;
+    let edits = job.features.feature_edits.clone();
+    let prechecks = || -> anyhow::Result<_> {
+        let parts = partitioned_outputs(&output, partitioned)?;
+        let Some(format) = OutputFormat::from_path(&output) else {
+            anyhow::bail!(
+                "{}: {}",
+                output.display(),
+                polyspline::io::high_order::UNKNOWN_OUTPUT
+            );
+        };
+        // An order the format cannot hold is refused before any work (the dimension is
+        // known only after reading; 3 is the stricter for Gmsh).
+        if let Some(why) = [2, 3]
+            .iter()
+            .filter_map(|&d| format.refuses(d, job.order))
+            .next()
+            .filter(|_| format != OutputFormat::Msh)
+        {
+            anyhow::bail!("{}: {why}", output.display());
+        }
+        // Every output path is checked against the inputs and each other.
+        let mut inputs: Vec<&Path> = vec![&mesh];
+        inputs.extend(edits.as_deref());
+        let outputs: Vec<&Path> = parts
+            .iter()
+            .map(PathBuf::as_path)
+            .chain(report.as_deref())
+            .collect();
+        check_outputs(&outputs, &inputs)?;
+        Ok(parts)
+    };
+    // Under mpirun every rank finds the same error: one line, from rank 0.
+    #[cfg(feature = "mpi")]
+    let prechecks = || prechecks().map_err(polyspline::distributed::launch::quiet_unless_rank_0);
+    let parts = prechecks()?;
+    let options = job.resolve(out.options());
+    #[cfg(feature = "mpi")]
+    let options = options.map_err(polyspline::distributed::launch::quiet_unless_rank_0);
+    Ok(Prepared {
+        options: options?,
+        mesh,
+        output,
+        report,
+        edits,
+        partitioned,
+        parts,
+    })
+}
+
+/// Run a prepared job on this process, reporting to `progress`: the mesh and the report are
+/// both complete on disk before either replaces its target, so a full disk or a failing
+/// report leaves no mesh without its report.
+pub(crate) fn curve_files(job: &Prepared, progress: &dyn Progress) -> anyhow::Result<CurveReport> {
+    refuse_a_single_part(&job.mesh)?;
+    let mut inputs: Vec<&Path> = vec![&job.mesh];
+    inputs.extend(job.edits.as_deref());
+    let (r, pending_mesh) = curve_prepared(&job.mesh, &job.output, &job.options, progress)?;
+    let pending_report = match &job.report {
         Some(path) => {
             let json = serde_json::to_string_pretty(&r)?;
             Some(prepare(path, &inputs, |w| {
@@ -374,8 +476,7 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
     if let Some(p) = pending_report {
         p.commit()?;
     }
-    print_summary(&r);
-    Ok(())
+    Ok(r)
 }
 
 /// The output files: `OUTPUT`, or with `--partitioned` Gmsh's part names `OUT_1 … OUT_N` for

@@ -10,6 +10,7 @@
 //! inputs), so a caller of the library is refused as the command line is. The enumerated
 //! values are spelled here ([`values`]), so the library carries no clap types.
 
+mod args;
 mod check;
 mod compare;
 mod curve;
@@ -18,14 +19,11 @@ mod info;
 mod plot;
 mod values;
 
+use args::{ElasticArgs, FeatureArgs};
 use clap::{Parser, Subcommand};
-use polyspline::elastic::ElasticParams;
 use polyspline::io::read_raw;
 use polyspline::mesh::HighOrderMesh;
-use polyspline::mesh::features::FeatureParams;
-use polyspline::pipeline::FeatureOptions;
-use polyspline::solve::CgParams;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 #[derive(Parser)]
 #[command(
@@ -69,80 +67,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Generate(args) => generate::run(args),
         Command::Check(args) => check::run(args),
         Command::Plot(args) => plot::run(args),
-    }
-}
-
-/// Material and solver of the elastic analogy.
-#[derive(clap::Args)]
-struct ElasticArgs {
-    /// Young's modulus of the elastic analogy.
-    #[arg(long, default_value_t = 1.5)]
-    young: f64,
-    /// Poisson's ratio of the elastic analogy (below 0.5).
-    #[arg(long, default_value_t = 0.49)]
-    poisson: f64,
-    /// Preconditioner of the elastic CG solve: the diagonal, the per-node d×d block inverse,
-    /// or a symmetric block Gauss–Seidel sweep.
-    #[arg(long, value_enum, default_value_t = values::ElasticPreconditioner::BlockJacobi)]
-    elastic_preconditioner: values::ElasticPreconditioner,
-    /// Solver of the elastic system: `auto` factors it (sparse Cholesky) when the factor
-    /// stays under 2.4e8 entries and runs preconditioned CG otherwise; `cg` and `cholesky`
-    /// force one.
-    #[arg(long, value_enum, default_value_t = values::ElasticSolver::Auto)]
-    elastic_solver: values::ElasticSolver,
-    /// Jacobian-based stiffening exponent of the elastic analogy: the stiffness at a point
-    /// is scaled by |det J|^-CHI of the straight mesh, so small cells move with the boundary
-    /// (0: the paper's homogeneous material).
-    #[arg(long, default_value_t = 0.0, value_name = "CHI")]
-    elastic_stiffening: f64,
-}
-
-impl ElasticArgs {
-    fn params(&self, cg_tol: f64) -> ElasticParams {
-        ElasticParams {
-            young: self.young,
-            poisson: self.poisson,
-            cg: CgParams {
-                rel_tol: cg_tol,
-                ..Default::default()
-            },
-            preconditioner: self.elastic_preconditioner.into(),
-            solver: self.elastic_solver.into(),
-            stiffening: self.elastic_stiffening,
-        }
-    }
-}
-
-/// Sharp feature detection (`docs/features.md`).
-#[derive(clap::Args)]
-struct FeatureArgs {
-    /// Boundary facets whose normals differ by more than this angle (degrees; 2D: boundary
-    /// turning angle) meet at a sharp feature; 180 finds none by angle.
-    #[arg(long, default_value_t = 35.0, value_name = "DEG")]
-    feature_angle: f64,
-    /// Do not make the boundaries between differently tagged boundary regions features.
-    #[arg(long)]
-    no_feature_tags: bool,
-    /// Add or remove features: lines `add I J` / `remove I J` (3D edges) or `add I` /
-    /// `remove I` (2D corners), 0-based vertex ids.
-    #[arg(long, value_name = "FILE")]
-    feature_edits: Option<PathBuf>,
-    /// Detect and report the features but curve as if the boundary were smooth everywhere
-    /// (for comparisons).
-    #[arg(long)]
-    ignore_features: bool,
-}
-
-impl FeatureArgs {
-    fn options(&self) -> FeatureOptions {
-        FeatureOptions {
-            params: FeatureParams {
-                angle_deg: self.feature_angle,
-                tags: !self.no_feature_tags,
-            },
-            edits: self.feature_edits.clone(),
-            ignore: self.ignore_features,
-        }
     }
 }
 

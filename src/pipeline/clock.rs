@@ -4,6 +4,7 @@
 //! A stage that runs several times (the fit and the certificate after a demotion round) is
 //! timed as the sum of its runs.
 
+use super::CurveError;
 use crate::progress::{Progress, Stage};
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -34,6 +35,15 @@ impl<'p> Clock<'p> {
         self.add(stage, t.elapsed().as_secs_f64());
         self.progress.finished(stage);
         out
+    }
+
+    /// Stop here when the receiver of progress asks for it.
+    pub(crate) fn check(&self) -> Result<(), CurveError> {
+        if self.progress.cancelled() {
+            Err(CurveError::Cancelled)
+        } else {
+            Ok(())
+        }
     }
 
     /// Add `seconds` measured elsewhere (a part of a stage such as [`Stage::FitCg`]).

@@ -214,6 +214,7 @@ pub(super) fn curve_spline(
         let space = setup.build(job, &vec![false; job.mesh.n_elements()]);
         Ok::<_, CurveError>((setup, space))
     })?;
+    clock.check()?;
     let outcome = match (job.options.geometry, &job.options.energy) {
         (Geometry::SplineFitted, None) => fit_and_blend(job, &setup, clock, space)?,
         (Geometry::SplineFitted, Some(params)) => {
@@ -234,6 +235,7 @@ fn fit_and_blend(
 ) -> Result<SplineOutcome, CurveError> {
     let mut misfit = Vec::new();
     let (c_star, info) = fit_demoting_misfits(job, setup, clock, &mut space, &[], &mut misfit)?;
+    clock.check()?;
     space.control_points = c_star;
     let (factors, blend) = clock.run(Stage::Validity, || blend(job, setup, &space))?;
     Ok(SplineOutcome::blended(space, factors, info, blend, 0, None))
@@ -254,8 +256,10 @@ fn fit_with_energy(
     let mut demote = vec![false; job.mesh.n_elements()];
     let mut misfit = Vec::new();
     for round in 0.. {
+        clock.check()?;
         let (c_star, info) =
             fit_demoting_misfits(job, setup, clock, &mut space, &demote, &mut misfit)?;
+        clock.check()?;
         let (thresholds, step) = clock.run(Stage::Validity, || {
             let fraction = job.options.line_search.min_det_fraction;
             let thresholds =
@@ -387,6 +391,7 @@ fn fit_demoting_misfits(
     let mut round = 0;
     let mut start: Option<Vec<[f64; 3]>> = None;
     loop {
+        clock.check()?;
         let (c_star, info) = fit(job, setup, clock, space, start.as_deref())?;
         let Some(targets) = setup.targets.as_ref() else {
             return Ok((c_star, info));

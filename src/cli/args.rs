@@ -1,0 +1,83 @@
+//! Option groups several subcommands share (and the Python package's `curve`, which builds
+//! the same groups from keyword arguments): the elastic analogy and sharp features.
+
+use super::values;
+use polyspline::elastic::ElasticParams;
+use polyspline::mesh::features::FeatureParams;
+use polyspline::pipeline::FeatureOptions;
+use polyspline::solve::CgParams;
+use std::path::PathBuf;
+
+/// Material and solver of the elastic analogy.
+#[derive(clap::Args)]
+pub(crate) struct ElasticArgs {
+    /// Young's modulus of the elastic analogy.
+    #[arg(long, default_value_t = 1.5)]
+    young: f64,
+    /// Poisson's ratio of the elastic analogy (below 0.5).
+    #[arg(long, default_value_t = 0.49)]
+    poisson: f64,
+    /// Preconditioner of the elastic CG solve: the diagonal, the per-node d×d block inverse,
+    /// or a symmetric block Gauss–Seidel sweep.
+    #[arg(long, value_enum, default_value_t = values::ElasticPreconditioner::BlockJacobi)]
+    elastic_preconditioner: values::ElasticPreconditioner,
+    /// Solver of the elastic system: `auto` factors it (sparse Cholesky) when the factor
+    /// stays under 2.4e8 entries and runs preconditioned CG otherwise; `cg` and `cholesky`
+    /// force one.
+    #[arg(long, value_enum, default_value_t = values::ElasticSolver::Auto)]
+    elastic_solver: values::ElasticSolver,
+    /// Jacobian-based stiffening exponent of the elastic analogy: the stiffness at a point
+    /// is scaled by |det J|^-CHI of the straight mesh, so small cells move with the boundary
+    /// (0: the paper's homogeneous material).
+    #[arg(long, default_value_t = 0.0, value_name = "CHI")]
+    elastic_stiffening: f64,
+}
+
+impl ElasticArgs {
+    pub(crate) fn params(&self, cg_tol: f64) -> ElasticParams {
+        ElasticParams {
+            young: self.young,
+            poisson: self.poisson,
+            cg: CgParams {
+                rel_tol: cg_tol,
+                ..Default::default()
+            },
+            preconditioner: self.elastic_preconditioner.into(),
+            solver: self.elastic_solver.into(),
+            stiffening: self.elastic_stiffening,
+        }
+    }
+}
+
+/// Sharp feature detection (`docs/features.md`).
+#[derive(clap::Args)]
+pub(crate) struct FeatureArgs {
+    /// Boundary facets whose normals differ by more than this angle (degrees; 2D: boundary
+    /// turning angle) meet at a sharp feature; 180 finds none by angle.
+    #[arg(long, default_value_t = 35.0, value_name = "DEG")]
+    feature_angle: f64,
+    /// Do not make the boundaries between differently tagged boundary regions features.
+    #[arg(long)]
+    no_feature_tags: bool,
+    /// Add or remove features: lines `add I J` / `remove I J` (3D edges) or `add I` /
+    /// `remove I` (2D corners), 0-based vertex ids.
+    #[arg(long, value_name = "FILE")]
+    pub(crate) feature_edits: Option<PathBuf>,
+    /// Detect and report the features but curve as if the boundary were smooth everywhere
+    /// (for comparisons).
+    #[arg(long)]
+    ignore_features: bool,
+}
+
+impl FeatureArgs {
+    pub(crate) fn options(&self) -> FeatureOptions {
+        FeatureOptions {
+            params: FeatureParams {
+                angle_deg: self.feature_angle,
+                tags: !self.no_feature_tags,
+            },
+            edits: self.feature_edits.clone(),
+            ignore: self.ignore_features,
+        }
+    }
+}
