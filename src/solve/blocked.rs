@@ -758,7 +758,11 @@ mod tests {
         assert_eq!(da.map(f64::to_bits), dp.map(f64::to_bits));
         let bits = |v: &[[f64; 3]]| v.iter().map(|p| p.map(f64::to_bits)).collect::<Vec<_>>();
         assert_eq!(bits(&xa), bits(&xp));
-        assert!(ya.iter().zip(&yp).all(|(p, q)| p.map(f64::to_bits) == q.map(f64::to_bits)));
+        assert!(
+            ya.iter()
+                .zip(&yp)
+                .all(|(p, q)| p.map(f64::to_bits) == q.map(f64::to_bits))
+        );
     }
 
     #[test]

@@ -613,7 +613,10 @@ mod tests {
         // Its minimum, −¼ at t0 = ½, lies in [lower, upper], and upper (a value of det J that
         // the subdivision reached) proves the element invalid.
         let b = det_jacobian_bounds(2, &folded, 8);
-        assert!(b.lower <= -0.25 + 1e-12 && -0.25 <= b.upper + 1e-12, "{b:?}");
+        assert!(
+            b.lower <= -0.25 + 1e-12 && -0.25 <= b.upper + 1e-12,
+            "{b:?}"
+        );
         assert!(b.upper <= 0.0, "{b:?}");
         assert!(!b.certified_positive());
         // Strongly curved but valid: the coefficient bound alone may be negative; subdivision

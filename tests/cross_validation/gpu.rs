@@ -873,7 +873,11 @@ fn large_hex_gpu_sampling_and_certification(n: usize) {
     let gpu_b = gpu::jacobian_check::certify(&ctx, 3, &all, &|e| s.element_bezier(e), 6).unwrap();
     let t_gpu_cert = t.elapsed();
     for (e, (c, g)) in cpu_b.iter().zip(&gpu_b).enumerate() {
-        assert_eq!(c.certified_positive(), g.certified_positive(), "element {e}");
+        assert_eq!(
+            c.certified_positive(),
+            g.certified_positive(),
+            "element {e}"
+        );
         let net = s.element_bezier(e);
         let a = gpu::anchor(3, &net);
         let xmax = net

@@ -131,7 +131,11 @@ fn check_exits_3_on_inverted_elements_and_0_on_valid_ones() {
     let min = r["min_det_jacobian"].as_f64().unwrap();
     assert!(close(min, -2.0, 2.0), "{r}");
     // The table form gates the same way.
-    let out = common::polyspline().arg("check").arg(&bad).output().unwrap();
+    let out = common::polyspline()
+        .arg("check")
+        .arg(&bad)
+        .output()
+        .unwrap();
     assert_eq!(out.status.code(), Some(3));
     assert!(String::from_utf8_lossy(&out.stdout).contains("invalid elements      2"));
 
@@ -143,7 +147,10 @@ fn check_exits_3_on_inverted_elements_and_0_on_valid_ones() {
     assert_eq!(status, Some(0), "{r}");
     assert_eq!(r["invalid"], 0, "{r}");
     // min(1·1·(1 − 2/4), 2·1·(1 − 3.5/4)) = 0.25.
-    assert!(close(r["min_det_jacobian"].as_f64().unwrap(), 0.25, 1.0), "{r}");
+    assert!(
+        close(r["min_det_jacobian"].as_f64().unwrap(), 0.25, 1.0),
+        "{r}"
+    );
 
     // 3D: one hex inverted inside.
     let els = [
@@ -195,7 +202,10 @@ fn sampled_and_certified_det_j_match_the_closed_form() {
                 // and proves the others invalid (upper, a value of det J, is ≤ 0).
                 let b = lagrange_element_bounds(&ho, e, 12);
                 let tol = 1e-9 * want.abs().max(1.0);
-                assert!(b.lower <= want + tol && want <= b.upper + tol, "{ctx}, {b:?}");
+                assert!(
+                    b.lower <= want + tol && want <= b.upper + tol,
+                    "{ctx}, {b:?}"
+                );
                 assert_eq!(b.certified_positive(), want > 0.0, "{ctx}, {b:?}");
                 assert_eq!(b.upper <= 0.0, want <= 0.0, "{ctx}, {b:?}");
                 assert_eq!(q[e].min_det_jacobian > 0.0, want > 0.0, "{ctx}");
