@@ -24,7 +24,7 @@ fn main() -> ExitCode {
     remove_temporaries_on_signals();
     let cli = cli::Cli::parse();
     match cli::run(cli) {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(status) => ExitCode::from(status),
         Err(e) => {
             // One bounded line, whatever the message quotes from the input.
             let line = polyspline::mesh::raw::one_line(&e.to_string(), MAX_ERROR_CHARS);

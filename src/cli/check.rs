@@ -1,6 +1,10 @@
 //! `polyspline check`: validity and quality of a high-order mesh.
+//!
+//! Output: the report (a table, or JSON with `--json`) and the exit status: 0 when every
+//! element is valid, [`EXIT_INVALID_MESH`] when any has a sampled det J ≤ 0, so the command
+//! can gate a script or a CI step.
 
-use super::read_high_order;
+use super::{EXIT_INVALID_MESH, read_high_order};
 use polyspline::quality::CheckReport;
 use std::path::PathBuf;
 
@@ -13,12 +17,17 @@ pub(super) struct Args {
     json: bool,
 }
 
-pub(super) fn run(args: Args) -> anyhow::Result<()> {
+pub(super) fn run(args: Args) -> anyhow::Result<u8> {
     let ho = read_high_order(&args.mesh)?;
     let report = CheckReport::new(&ho);
+    let status = if report.invalid > 0 {
+        EXIT_INVALID_MESH
+    } else {
+        0
+    };
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
-        return Ok(());
+        return Ok(status);
     }
     println!("{:<22}{}", "mesh", args.mesh.display());
     println!(
@@ -34,5 +43,5 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
     );
     println!("{:<22}{:.6e}", "min det J", report.min_det_jacobian);
     println!("{:<22}{}", "method", report.method);
-    Ok(())
+    Ok(status)
 }

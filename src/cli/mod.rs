@@ -3,7 +3,8 @@
 //!
 //! Input: the process arguments (parsed by clap). Output: the job's files and the lines it
 //! prints, or an error for `main` to print as one bounded line (exit status 1; clap's own
-//! usage errors exit with 2).
+//! usage errors exit with 2). `check` exits with 3 ([`EXIT_INVALID_MESH`]) when it finds an
+//! invalid element.
 //!
 //! Invariant: no option is validated here; the library refuses bad values (each options
 //! struct's `check`, over [`polyspline::params`], and the generators and readers for their own
@@ -52,21 +53,28 @@ enum Command {
     /// (2D), a solid cylinder or a torus (3D), with valence-3 vertices/edges; or a
     /// boundary-layer O-grid (ellipse, circle, NACA 00xx) or C-grid (NACA 00xx with a wake cut).
     Generate(generate::Args),
-    /// Report the validity and quality of a high-order mesh (.msh or .vtu).
+    /// Report the validity and quality of a high-order mesh (.msh or .vtu). Exit status: 0 when
+    /// every element is valid, 3 when any element has a sampled det J ≤ 0, 1 on an error.
     Check(check::Args),
     /// Draw a 2D mesh (linear or high order) as SVG, with curved edges drawn as curves.
     Plot(plot::Args),
 }
 
-/// Run the parsed command.
-pub fn run(cli: Cli) -> anyhow::Result<()> {
+/// Exit status of `check` when the mesh has an invalid element (sampled det J ≤ 0): distinct
+/// from 1 (an error) and 2 (a usage error), so a script can tell a bad mesh from a failed run.
+pub const EXIT_INVALID_MESH: u8 = 3;
+
+/// Run the parsed command: the process's exit status on success (0, or
+/// [`EXIT_INVALID_MESH`] from `check`).
+pub fn run(cli: Cli) -> anyhow::Result<u8> {
+    let done = |r: anyhow::Result<()>| r.map(|()| 0);
     match cli.command {
-        Command::Info(args) => info::run(args),
-        Command::Curve(args) => curve::run(args),
-        Command::Compare(args) => compare::run(args),
-        Command::Generate(args) => generate::run(args),
+        Command::Info(args) => done(info::run(args)),
+        Command::Curve(args) => done(curve::run(args)),
+        Command::Compare(args) => done(compare::run(args)),
+        Command::Generate(args) => done(generate::run(args)),
         Command::Check(args) => check::run(args),
-        Command::Plot(args) => plot::run(args),
+        Command::Plot(args) => done(plot::run(args)),
     }
 }
 

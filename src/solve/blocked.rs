@@ -39,14 +39,20 @@ const ROW_CHUNK: usize = 512;
 /// (or two 128-bit) vector operation.
 pub type V4 = [f64; 4];
 
-/// Runs `f` compiled for AVX2 where the CPU has it (no FMA: each lane does the same IEEE
-/// multiplications and additions in the same order as the portable code, so results are
-/// identical on every x86-64 CPU).
+/// True when `POLYSPLINE_KERNELS=portable`: the solver then runs the portable kernels even on
+/// an AVX2 CPU (read once per matrix; for checking that both give the same bits).
+fn portable_from_env() -> bool {
+    std::env::var("POLYSPLINE_KERNELS").is_ok_and(|v| v == "portable")
+}
+
+/// Runs `f` compiled for AVX2 where the CPU has it and `$portable` is false (no FMA: each lane
+/// does the same IEEE multiplications and additions in the same order as the portable code, so
+/// results are identical on every x86-64 CPU; a test forces both and compares the bits).
 macro_rules! dispatch {
-    ($avx:ident, $generic:ident ( $($arg:expr),* )) => {{
+    ($portable:expr, $avx:ident, $generic:ident ( $($arg:expr),* )) => {{
         #[cfg(target_arch = "x86_64")]
         {
-            if std::is_x86_feature_detected!("avx2") {
+            if !$portable && std::is_x86_feature_detected!("avx2") {
                 // SAFETY: the CPU supports AVX2 (checked just above).
                 unsafe { $avx($($arg),*) }
             } else {
@@ -55,6 +61,7 @@ macro_rules! dispatch {
         }
         #[cfg(not(target_arch = "x86_64"))]
         {
+            let _ = $portable;
             $generic($($arg),*)
         }
     }};
@@ -70,6 +77,8 @@ pub struct TemplateMatrix {
     template: Vec<u32>,
     template_start: Vec<usize>,
     values: Vec<f64>,
+    /// Run the portable kernels even where AVX2 is available.
+    portable: bool,
 }
 
 /// A hash of a row's value sequence (four independent lanes, so it is not latency-bound).
@@ -185,6 +194,7 @@ impl TemplateMatrix {
             template,
             template_start,
             values,
+            portable: portable_from_env(),
         }
     }
 
@@ -212,7 +222,13 @@ impl TemplateMatrix {
         let partials: Vec<V4> = y
             .par_chunks_mut(ROW_CHUNK)
             .enumerate()
-            .map(|(k, y)| dispatch!(spmv_chunk_avx2, spmv_chunk(self, k * ROW_CHUNK, x, y)))
+            .map(|(k, y)| {
+                dispatch!(
+                    self.portable,
+                    spmv_chunk_avx2,
+                    spmv_chunk(self, k * ROW_CHUNK, x, y)
+                )
+            })
             .collect();
         sum(&partials)
     }
@@ -412,6 +428,12 @@ impl BlockedSystem {
         })
     }
 
+    /// Run the portable kernels (`true`) or the fastest the CPU has (`false`, the default
+    /// unless `POLYSPLINE_KERNELS=portable`). Both give the same bits.
+    pub fn set_portable_kernels(&mut self, portable: bool) {
+        self.a.portable = portable;
+    }
+
     /// The reordered matrix.
     pub fn matrix(&self) -> &TemplateMatrix {
         &self.a
@@ -437,7 +459,11 @@ impl BlockedSystem {
                 let (s, e) = (start[b], start[b + 1]);
                 let l = &self.factors[self.factor_start[b]..self.factor_start[b + 1]];
                 let (p, ap, first) = (&p[s..e], &ap[s..e], &self.first[s..e]);
-                dispatch!(block_step_avx2, block_step(l, first, alpha, x, r, z, p, ap))
+                dispatch!(
+                    self.a.portable,
+                    block_step_avx2,
+                    block_step(l, first, alpha, x, r, z, p, ap)
+                )
             })
             .collect();
         let rz: Vec<V4> = partials.iter().map(|p| p.0).collect();
@@ -699,6 +725,42 @@ mod tests {
         assert!(
             xs.iter()
                 .zip(&xf)
+                .all(|(p, q)| p.map(f64::to_bits) == q.map(f64::to_bits))
+        );
+    }
+
+    /// The portable and the AVX2 kernels give the same bits (on an AVX2 CPU; elsewhere both
+    /// runs are portable and the comparison is trivially true, which the message says).
+    #[test]
+    fn portable_kernels_give_the_bits_of_the_avx2_kernels() {
+        #[cfg(target_arch = "x86_64")]
+        if !std::is_x86_feature_detected!("avx2") {
+            println!("no AVX2 on this CPU: both runs use the portable kernels");
+        }
+        let a = laplacian(50, |x, y| 0.07 + 0.013 * ((2 * x + y) % 5) as f64);
+        let b = test_vector(2500);
+        let mut sys = BlockedSystem::new(&a.0, &a.1, &a.2, 32).unwrap();
+        let mut run = |portable: bool| {
+            sys.set_portable_kernels(portable);
+            let mut x = vec![[0.0; 3]; 2500];
+            let info = sys
+                .solve(&b, &mut x, &CgParams::default(), |_, _| {})
+                .unwrap();
+            let mut y = vec![[0.0; 4]; 2500];
+            let x4: Vec<V4> = x.iter().map(|p| [p[0], p[1], p[2], 0.0]).collect();
+            let dot = sys.matrix().apply_dot(&x4, &mut y);
+            (x, y, dot, info.iterations, info.rel_residual)
+        };
+        let (xa, ya, da, ia, ra) = run(false);
+        let (xp, yp, dp, ip, rp) = run(true);
+        assert!(ia > 10, "{ia} iterations");
+        assert_eq!((ia, ra.to_bits()), (ip, rp.to_bits()));
+        assert_eq!(da.map(f64::to_bits), dp.map(f64::to_bits));
+        let bits = |v: &[[f64; 3]]| v.iter().map(|p| p.map(f64::to_bits)).collect::<Vec<_>>();
+        assert_eq!(bits(&xa), bits(&xp));
+        assert!(
+            ya.iter()
+                .zip(&yp)
                 .all(|(p, q)| p.map(f64::to_bits) == q.map(f64::to_bits))
         );
     }

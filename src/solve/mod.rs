@@ -515,8 +515,9 @@ mod tests {
                 assert!((a[k] - w[k]).abs() < 1e-8);
             }
         }
-        // A zero right-hand side converges at once and stays zero.
-        assert_eq!(want[0][2], 0.0);
+        // The third right-hand side is zero: its solution is exactly zero (a column that
+        // converged at once is not updated, nor made NaN by a 0/0 step length).
+        assert!(x.iter().all(|a| a[2] == 0.0), "{:?}", &x[..3]);
     }
 
     /// The Laplacian as an assembled CSR matrix, so block Jacobi applies.

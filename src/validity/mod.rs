@@ -610,8 +610,14 @@ mod tests {
         assert!((b.lower - 1.0).abs() < 1e-12 && (b.upper - 1.0).abs() < 1e-12);
         // A folded square: det J = 1 − 5 t0 (1 − t0) is negative around t0 = ½.
         let folded = net_of(2, |t| [t[0], t[1] * (1.0 - 5.0 * t[0] * (1.0 - t[0])), 0.0]);
+        // Its minimum, −¼ at t0 = ½, lies in [lower, upper], and upper (a value of det J that
+        // the subdivision reached) proves the element invalid.
         let b = det_jacobian_bounds(2, &folded, 8);
-        assert!(b.upper <= 0.0 || b.lower <= 0.0);
+        assert!(
+            b.lower <= -0.25 + 1e-12 && -0.25 <= b.upper + 1e-12,
+            "{b:?}"
+        );
+        assert!(b.upper <= 0.0, "{b:?}");
         assert!(!b.certified_positive());
         // Strongly curved but valid: the coefficient bound alone may be negative; subdivision
         // must certify it.

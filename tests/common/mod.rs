@@ -166,6 +166,23 @@ pub fn scratch_in(dir: &str, name: &str) -> PathBuf {
     dir.join(name)
 }
 
+/// `target/tmp/<binary>/<test>/`, created: the calling test's own directory, so tests that
+/// run in parallel never share (or race on) a file. `<test>` is the harness's name of the
+/// running test (module path included), so call it from the test's own thread.
+pub fn test_dir() -> PathBuf {
+    let name = current_test().replace("::", "__");
+    let binary = std::env::current_exe()
+        .ok()
+        .and_then(|p| p.file_stem().map(|s| s.to_string_lossy().into_owned()))
+        .map(|s| s.split('-').next().unwrap_or("tests").to_string())
+        .unwrap_or_else(|| "tests".to_string());
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(binary)
+        .join(name);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
 /// Every bundled real mesh polyspline reads (`meshes/real/<source>/<file>`), sorted. CGNS
 /// files in the ADF container are left out: they are kept byte for byte as their source holds
 /// them, but only their HDF5 copies in `meshes/converted/` can be read.

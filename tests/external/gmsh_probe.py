@@ -2,11 +2,17 @@
 """Independent check of high-order mesh files with Gmsh's own reader and basis functions.
 
 usage: gmsh_probe.py JOBS.json
-JOBS.json: {"jobs": [{"file": "a.msh", "probes": [[element_index, u, v, w], ...]}, ...]} with
-element_index counting the volume elements (quads in 2D, hexes in 3D) in file order and
-(u, v, w) in [0,1]^d. Prints a JSON list, one object per job: {"elements", "type_name",
-"order", "points": [[x, y, z], ...], "min_det_jac", "max_det_jac", "boundary_elements",
-"physical_groups": {"dim tag": name}}. Determinants come from a Gauss rule of degree 2p+2.
+JOBS.json: {"jobs": [{"file": "a.msh", "probes": [[element_index, u, v, w], ...],
+"det_at": [[element_index, u, v, w], ...]}, ...]} with element_index counting the volume
+elements (quads in 2D, hexes in 3D) in file order, (u, v, w) in [0,1]^d and "det_at" optional.
+Prints a JSON list, one object per job: {"elements", "type_name", "order",
+"points": [[x, y, z], ...], "min_det_jac", "max_det_jac", "dets": [...], "boundary_elements",
+"physical_groups": {"dim tag": name}}. "min_det_jac"/"max_det_jac" come from a Gauss rule of
+degree 2p+2 and "dets" are at the "det_at" points; all are Gmsh's determinants with respect to
+its reference element [-1,1]^d. They are signed in 2D too: Gmsh's own 2D determinant is the
+length of the cross product (never negative), so a quad's is taken here from the first two
+rows of Gmsh's Jacobian matrix (dx/du dy/dv - dy/du dx/dv), which is negative for a mirrored
+(clockwise) quad.
 """
 import json
 import sys
@@ -15,7 +21,15 @@ import gmsh
 import numpy as np
 
 
-def probe(path, probes):
+def signed(dim, jacs, dets):
+    """Gmsh's determinants, with the sign of the in-plane Jacobian in 2D (see above)."""
+    if dim == 3:
+        return np.asarray(dets)
+    j = np.asarray(jacs).reshape(-1, 9)
+    return j[:, 0] * j[:, 4] - j[:, 1] * j[:, 3]
+
+
+def probe(path, probes, det_at):
     gmsh.clear()
     gmsh.open(path)
     dim = gmsh.model.getDimension()
@@ -35,7 +49,13 @@ def probe(path, probes):
             x += bf[k] * np.array(pos[int(conn[e][k])])
         points.append(x.tolist())
     loc, _ = gmsh.model.mesh.getIntegrationPoints(etype, "Gauss%d" % (2 * order + 2))
-    _, dets, _ = gmsh.model.mesh.getJacobians(etype, loc)
+    jacs, dets, _ = gmsh.model.mesh.getJacobians(etype, loc)
+    dets = signed(dim, jacs, dets)
+    at = []
+    for e, u, v, w in det_at:
+        local = [2 * u - 1, 2 * v - 1, 2 * w - 1 if dim == 3 else 0.0]
+        j, d, _ = gmsh.model.mesh.getJacobian(int(tags[0][e]), local)
+        at.append(float(signed(dim, j, d)[0]))
     _, btags, _ = gmsh.model.mesh.getElements(dim - 1)
     groups = {}
     for d, t in gmsh.model.getPhysicalGroups():
@@ -47,6 +67,7 @@ def probe(path, probes):
         "points": points,
         "min_det_jac": float(np.min(dets)),
         "max_det_jac": float(np.max(dets)),
+        "dets": at,
         "boundary_elements": int(sum(len(t) for t in btags)),
         "physical_groups": groups,
     }
@@ -56,7 +77,7 @@ def main():
     jobs = json.load(open(sys.argv[1]))["jobs"]
     gmsh.initialize()
     gmsh.option.setNumber("General.Terminal", 0)
-    print(json.dumps([probe(j["file"], j["probes"]) for j in jobs]))
+    print(json.dumps([probe(j["file"], j["probes"], j.get("det_at", [])) for j in jobs]))
     gmsh.finalize()
 
 

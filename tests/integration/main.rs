@@ -1,7 +1,7 @@
 //! End-to-end tests, mostly through the `polyspline` binary: `curve` on every real mesh,
 //! bad input and hardening (one bounded error line, no panic, no partial output), the readers'
 //! mutation fuzzer, `generate`, high-order output read back by Gmsh and VTK, the elastic method
-//! and boundary layers. One test binary; `cargo test --release --test integration curve::` runs
+//! boundary layers, and the validity check against closed-form Jacobians. One test binary; `cargo test --release --test integration curve::` runs
 //! one module.
 
 #[path = "../common/mod.rs"]
@@ -16,4 +16,5 @@ mod fuzz;
 mod generate;
 mod hardening;
 mod high_order;
+mod jacobian_oracle;
 mod knot_intervals;
