@@ -96,8 +96,10 @@ impl CgParams {
 }
 
 /// What CG achieved.
+#[deny(missing_docs)]
 #[derive(Clone, Copy, Debug, serde::Serialize)]
 pub struct CgInfo {
+    /// Iterations run (0 when a factorisation solved the system instead).
     pub iterations: usize,
     /// Largest ‖r‖/‖b‖ over the three components at the end.
     pub rel_residual: f64,
