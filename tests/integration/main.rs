@@ -1,8 +1,8 @@
 //! End-to-end tests, mostly through the `polyspline` binary: `curve` on every real mesh,
 //! bad input and hardening (one bounded error line, no panic, no partial output), the readers'
-//! mutation fuzzer, `generate`, high-order output read back by Gmsh and VTK, the elastic method
-//! boundary layers, and the `--report` JSON against its schema. One test binary; `cargo test --release --test integration curve::` runs
-//! one module.
+//! mutation fuzzer, `generate`, high-order output read back by Gmsh and VTK, the elastic method,
+//! boundary layers, and the `--report` JSON against its schema. One test binary;
+//! `cargo test --release --test integration curve::` runs one module.
 
 #[path = "../common/mod.rs"]
 mod common;
