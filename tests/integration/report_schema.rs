@@ -46,14 +46,22 @@ fn curve_reports_validate_against_the_documented_schema() {
         report_of("quads", d2, &[]).unwrap(),
         report_of("hexes", d3, &[]).unwrap(),
         report_of("elastic", d2, &["--method", "elastic"]).unwrap(),
-        report_of("energy", d2, &["--fit", "energy", "--line-search", "global"]).unwrap(),
+        report_of(
+            "energy",
+            d2,
+            &["--fit", "energy", "--line-search", "global"],
+        )
+        .unwrap(),
     ];
     // The per-rank objects are written only under mpirun (the distributed test binary).
     let mut may_miss = vec!["rank"];
     match report_of("gpu", d3, &["--backend", "gpu"]) {
         Ok(r) => reports.push(r),
         Err(e) if e.contains("no GPU adapter") || e.contains("no hardware GPU adapter") => {
-            common::skip(&test, &format!("the GPU report was not checked: {}", e.trim()));
+            common::skip(
+                &test,
+                &format!("the GPU report was not checked: {}", e.trim()),
+            );
             may_miss.push("adapter");
         }
         Err(e) => panic!("curve --backend gpu: {e}"),
