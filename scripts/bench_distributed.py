@@ -10,7 +10,7 @@ markdown table per run from the JSON reports (`per_rank`) and a summary line per
 Weak scaling (`--weak E`): a cylinder of about E × N hexes for each N, so each rank holds
 about E hexes.
 
-`--json OUT` writes the summaries (one object per run) for the model in BENCHMARKS.md.
+`--json OUT` writes the summaries (one object per run) for the model in docs/benchmarks-history.md.
 On a machine with fewer cores than ranks the wall times are not scaling figures: read the
 volumes (elements, ghosts, halo, bytes, CG iterations).
 

@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """Curve the real meshes with sharp edges and generated ones with features kept and ignored;
-print a markdown table of what `curve --report` measures (BENCHMARKS.md, "Sharp features").
+print a markdown table of what `curve --report` measures (docs/benchmarks-history.md, "Sharp features").
 
 usage: scripts/bench_features.py [POLYSPLINE] (default target/release/polyspline)
 """

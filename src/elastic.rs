@@ -135,11 +135,15 @@ impl ElasticParams {
     }
 }
 
-/// What the elastic solve did.
+/// What the elastic solve did (the `elastic` object of `curve --report`).
+#[deny(missing_docs)]
 #[derive(Clone, Copy, Debug, Serialize)]
 pub struct ElasticInfo {
+    /// Young's modulus of the pseudo-material.
     pub young: f64,
+    /// Poisson's ratio of the pseudo-material.
     pub poisson: f64,
+    /// CG preconditioner (`--elastic-preconditioner`).
     pub preconditioner: ElasticPreconditioner,
     /// The solver that ran: `cg`, or `cholesky` (then `cg.iterations` is 0 and
     /// `cg.rel_residual` the residual measured after the solve).
@@ -159,8 +163,11 @@ pub struct ElasticInfo {
     pub prescribed_nodes: usize,
     /// Stored d×d blocks of K_ff.
     pub nonzero_blocks: usize,
+    /// The solve's iterations and residual.
     pub cg: CgInfo,
+    /// Seconds spent assembling the stiffness matrix.
     pub assembly_seconds: f64,
+    /// Seconds spent solving.
     pub solve_seconds: f64,
 }
 

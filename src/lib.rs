@@ -35,7 +35,7 @@ pub mod progress; // The stages of the `curve` job and the receiver of their pro
 pub mod mesh; // Raw reader output, linear and high-order meshes, topology, features, generators.
 
 // IO: files in and out (beside the algorithms, not above them).
-pub mod io; // Readers of eight mesh formats, the MSH and VTU writers and their node orderings.
+pub mod io; // Readers of ten mesh formats; MSH, VTU, CGNS, Abaqus writers; node orderings.
 pub mod plot; // SVG drawings of 2D meshes.
 
 // Algorithms: the method, on meshes, knowing nothing of files, devices or jobs.

@@ -457,7 +457,7 @@ fn a_bad_share_of_the_input_stops_every_rank_with_one_error_line() {
 /// between runs), 0.456 with `/usr/bin/time` around each process (serial 448 MB); 0.51 by
 /// `/usr/bin/time` before K's share stopped being copied. The fixed footprint of a process (the binary and MPI, ≈ 75 MB) is a
 /// sixth of the serial peak at this size; at 292k hexes the ranks peak at 0.40 × the serial
-/// run (BENCHMARKS.md).
+/// run (docs/benchmarks-history.md).
 const MEMORY_SHARE: f64 = 0.55;
 
 /// Run `cmd` to completion; its peak resident memory in bytes (`wait4`'s `ru_maxrss`, this

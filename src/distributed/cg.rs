@@ -24,7 +24,8 @@
 //! between ranks, get point Jacobi on their summed diagonal. The preconditioner is one SPD
 //! block-diagonal matrix across the ranks, applied locally without communication. The
 //! aggregates differ from the serial run's, so the iterates do too; the solution agrees to the
-//! tolerance (the stopping rule, ‖r‖ ≤ rel_tol ‖b‖ per coordinate, is the serial one).
+//! tolerance: the loop and its stopping rule (‖r‖ ≤ rel_tol ‖b‖ per coordinate) are the serial
+//! solver's, [`crate::solve::cg_loop`], with the ranks' dot products as its reductions.
 
 use super::comm::Comm;
 use crate::fit::NormalMatrix;
@@ -358,7 +359,6 @@ pub fn pcg(
     x: &mut [[f64; 3]],
     params: &CgParams,
 ) -> Result<CgInfo, CgError> {
-    let n = halo.len();
     let mut b = b_partial.to_vec();
     halo.sum_partials(comm, flat(&mut b), 3);
     let mut diag = k.diagonal();
@@ -395,78 +395,28 @@ pub fn pcg(
         m => m?,
     };
     let precondition = |r: &[[f64; 3]], z: &mut [[f64; 3]]| m.apply(r, z);
-    let mut r = vec![[0.0; 3]; n];
-    apply(x, &mut r);
-    for (r, b) in r.iter_mut().zip(&b) {
-        for c in 0..3 {
-            r[c] = b[c] - r[c];
-        }
+    let ranks = OwnedRows { comm, halo };
+    crate::solve::cg_loop(&ranks, apply, precondition, &b, x, params, |_, _| {})
+}
+
+/// The dot products of the distributed CG: each control point counted on its owner, summed
+/// over the ranks (the serial solver's loop with these reductions, [`crate::solve::cg_loop`]).
+struct OwnedRows<'a> {
+    comm: &'a dyn Comm,
+    halo: &'a Halo,
+}
+
+impl crate::solve::Reductions for OwnedRows<'_> {
+    fn dot(&self, a: &[[f64; 3]], b: &[[f64; 3]]) -> [f64; 3] {
+        self.halo.dot(self.comm, a, b)
     }
-    let bnorm = halo.dot(comm, &b, &b).map(f64::sqrt);
-    let target: [f64; 3] = std::array::from_fn(|c| (params.rel_tol * bnorm[c]).max(params.abs_tol));
-    let rel = |rr: [f64; 3]| {
-        (0..3)
-            .map(|c| {
-                if bnorm[c] > 0.0 {
-                    rr[c].sqrt() / bnorm[c]
-                } else {
-                    rr[c].sqrt()
-                }
-            })
-            .fold(0.0, f64::max)
-    };
-    let running = |rr: [f64; 3], c: usize| rr[c].sqrt() > target[c];
-    let mut z = vec![[0.0; 3]; n];
-    precondition(&r, &mut z);
-    let mut p = z.clone();
-    let (mut rz, mut rr) = halo.dot2(comm, (&r, &z), (&r, &r));
-    let mut ap = vec![[0.0; 3]; n];
-    let mut it = 0;
-    while (0..3).any(|c| running(rr, c)) {
-        if it >= params.max_iters {
-            return Err(CgError::NoConvergence {
-                iterations: it,
-                rel_residual: rel(rr),
-                rel_tol: params.rel_tol,
-            });
-        }
-        apply(&p, &mut ap);
-        let pap = halo.dot(comm, &p, &ap);
-        let mut alpha = [0.0; 3];
-        for c in 0..3 {
-            if running(rr, c) {
-                if !(pap[c] > 0.0) {
-                    return Err(CgError::NotPositiveDefinite {
-                        iteration: it,
-                        curvature: pap[c],
-                    });
-                }
-                alpha[c] = rz[c] / pap[c];
-            }
-        }
-        for i in 0..n {
-            for c in 0..3 {
-                x[i][c] += alpha[c] * p[i][c];
-                r[i][c] -= alpha[c] * ap[i][c];
-            }
-        }
-        precondition(&r, &mut z);
-        let (rz_new, rr_new) = halo.dot2(comm, (&r, &z), (&r, &r));
-        let beta: [f64; 3] =
-            std::array::from_fn(|c| if rz[c] > 0.0 { rz_new[c] / rz[c] } else { 0.0 });
-        for (p, z) in p.iter_mut().zip(&z) {
-            for c in 0..3 {
-                p[c] = z[c] + beta[c] * p[c];
-            }
-        }
-        rz = rz_new;
-        rr = rr_new;
-        it += 1;
+    fn dot2(
+        &self,
+        ab: (&[[f64; 3]], &[[f64; 3]]),
+        cd: (&[[f64; 3]], &[[f64; 3]]),
+    ) -> crate::solve::Pair {
+        self.halo.dot2(self.comm, ab, cd)
     }
-    Ok(CgInfo {
-        iterations: it,
-        rel_residual: rel(rr),
-    })
 }
 
 #[cfg(test)]

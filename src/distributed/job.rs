@@ -42,28 +42,32 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// One rank's share of the work and of the communication.
+#[deny(missing_docs)]
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct RankFigures {
+    /// The rank.
     pub rank: usize,
     /// Elements this rank assembles, certifies and sends.
     pub elements: usize,
     /// Ghost elements it read and built its setup on besides its own.
     pub ghost_elements: usize,
-    /// Control points its elements touch (the rows it holds), those it owns (counted in dot
-    /// products), and those it shares with other ranks (its halo).
+    /// Control points its elements touch (the rows it holds).
     pub control_points: usize,
+    /// Control points it owns (counted in dot products).
     pub owned_control_points: usize,
+    /// Control points it shares with other ranks (its halo).
     pub shared_control_points: usize,
     /// Ranks it exchanges halo values with.
     pub neighbours: usize,
     /// Stored entries of its share of K (local numbering).
     pub matrix_nonzeros: usize,
-    /// Bytes it sent (halo exchanges, reductions, gathers), in all and by stage: the fit
-    /// (CG halo exchanges and reductions), the certified blend (rejected elements, counts),
-    /// and the sampling (node tags and positions asked of and sent to their owners).
+    /// Bytes it sent in all (halo exchanges, reductions, gathers).
     pub bytes_sent: u64,
+    /// Bytes sent by the fit (CG halo exchanges and reductions).
     pub bytes_fit: u64,
+    /// Bytes sent by the certified blend (rejected elements, counts).
     pub bytes_validity: u64,
+    /// Bytes sent by the sampling (node tags and positions asked of and sent to their owners).
     pub bytes_gather: u64,
     /// Peak resident memory of the process (VmHWM), bytes, before the write.
     pub peak_memory_bytes: u64,
@@ -75,12 +79,16 @@ pub struct RankFigures {
 }
 
 /// The report of a distributed `curve`: the serial report's figures for the whole mesh and
-/// every rank's share.
+/// every rank's share (`ranks` and `per_rank` in `docs/curve-report.schema.json`).
+#[deny(missing_docs)]
 #[derive(Clone, Debug, Serialize)]
 pub struct DistributedReport {
+    /// The serial report's fields, for the whole mesh.
     #[serde(flatten)]
     pub curve: CurveReport,
+    /// Number of ranks.
     pub ranks: usize,
+    /// Each rank's share.
     pub per_rank: Vec<RankFigures>,
 }
 

@@ -89,18 +89,24 @@ pub enum EnergyStop {
 }
 
 /// What the minimisation did.
+#[deny(missing_docs)]
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct EnergyInfo {
+    /// L-BFGS or the coloured local Newton.
     pub solver: EnergySolver,
+    /// Weight of the degeneration term (`--energy-weight`).
     pub weight: f64,
     /// L-BFGS iterations or coloured sweeps.
     pub iterations: usize,
+    /// Why it stopped.
     pub stop: EnergyStop,
-    /// Q at the start (the least-squares result) and at the end.
+    /// Q at the start (the least-squares result).
     pub initial_energy: f64,
+    /// Q at the end.
     pub final_energy: f64,
-    /// Σ_e S_e (without the weight) at the start and at the end.
+    /// Σ_e S_e (without the weight) at the start.
     pub initial_degeneration: f64,
+    /// Σ_e S_e (without the weight) at the end.
     pub final_degeneration: f64,
     /// Energy evaluations (L-BFGS) or local Newton steps tried (coloured).
     pub evaluations: usize,
@@ -108,6 +114,7 @@ pub struct EnergyInfo {
     pub uncertified_trials: usize,
     /// Number of colours (coloured solver).
     pub colors: Option<usize>,
+    /// Seconds spent minimising.
     pub seconds: f64,
 }
 

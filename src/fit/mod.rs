@@ -82,6 +82,7 @@ pub trait FitSpace: Sync {
 }
 
 /// Sample-point weights (they multiply squared residuals).
+#[deny(missing_docs)]
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct FitWeights {
     /// Position weight at element corners on interior vertices.

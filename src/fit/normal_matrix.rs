@@ -375,7 +375,7 @@ impl ElementBlocks {
 }
 
 /// K applied without assembling it: y = Σ_e E_eᵀ G_e E_e x, element by element (the
-/// alternative to [`NormalMatrix`]; see BENCHMARKS.md for the measured comparison).
+/// alternative to [`NormalMatrix`]; see docs/benchmarks-history.md for the measured comparison).
 pub struct MatrixFree<'a> {
     pub space: &'a dyn FitSpace,
     pub blocks: ElementBlocks,

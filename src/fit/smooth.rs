@@ -94,6 +94,7 @@ use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
 /// Parameters of the smooth-boundary reconstruction.
+#[deny(missing_docs)]
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct SmoothParams {
     /// A boundary vertex is a sharp feature (no model, chord targets) when a boundary facet at

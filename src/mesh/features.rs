@@ -74,8 +74,10 @@ impl FeatureParams {
 }
 
 /// What the features became in a curved mesh (the `features` object of `curve --report`).
+#[deny(missing_docs)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct FeatureReport {
+    /// What was found (its fields sit beside the two below in the JSON).
     #[serde(flatten)]
     pub found: FeatureSummary,
     /// Largest distance of an output node at a feature vertex from the input vertex, relative
@@ -187,13 +189,20 @@ pub struct Features {
 }
 
 /// What [`Features`] found, for `info` and reports.
+#[deny(missing_docs)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct FeatureSummary {
+    /// Angle (degrees) above which a boundary edge or vertex is a feature (`--feature-angle`).
     pub feature_angle_deg: f64,
+    /// Whether boundary tags of the input also delimit features.
     pub tags: bool,
+    /// Boundary edges marked as feature curves (3D; 0 in 2D).
     pub feature_edges: usize,
+    /// Feature corners: 2D corners, or 3D vertices where feature curves meet or end.
     pub feature_corners: usize,
+    /// Boundary vertices on a feature.
     pub feature_vertices: usize,
+    /// Smooth boundary patches the features cut the boundary into.
     pub patches: usize,
     /// Planar patches (3D) or straight chains (2D).
     pub planar_patches: usize,

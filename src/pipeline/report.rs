@@ -19,24 +19,42 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 
 /// What `curve` did, for `--report` and the terminal.
+///
+/// Its JSON form is a contract, documented field by field in `docs/curve-report.schema.json`
+/// (the `report_schema` integration test holds the two together). Distances called relative
+/// are relative to `bounding_box_diagonal`.
+#[deny(missing_docs)]
 #[derive(Clone, Debug, Serialize)]
 pub struct CurveReport {
+    /// The input mesh file, as given.
     pub input: PathBuf,
+    /// The written output file.
     pub output: PathBuf,
+    /// 2 (quadrilaterals) or 3 (hexahedra).
     pub dimension: usize,
+    /// Elements of the input mesh.
     pub elements: usize,
+    /// Order of the output's Lagrange elements.
     pub order: usize,
+    /// With `--subdivide K` (order 1 output): each element split into K^d linear elements.
     pub subdivide: Option<usize>,
+    /// What was sampled: straight elements, the initial or the fitted spline map.
     pub geometry: Geometry,
     /// `iga` or `elastic`.
     pub method: &'static str,
     /// The elastic solve, with `--method elastic`.
     pub elastic: Option<ElasticInfo>,
+    /// Nodes of the written mesh.
     pub output_nodes: usize,
+    /// Elements of the written mesh.
     pub output_elements: usize,
+    /// Boundary facets (edges in 2D, faces in 3D) of the written mesh.
     pub boundary_facets: usize,
+    /// Control points of the spline space (0 with `--straight`).
     pub control_points: usize,
+    /// Elements whose map is a spline element.
     pub spline_elements: usize,
+    /// Elements with a constrained Q2 map (irregular neighbourhoods, demoted or kink elements).
     pub q2_elements: usize,
     /// Knot intervals of the spline space (`uniform` or `graded`) and, when graded, the
     /// figures of its knot surfaces (spline geometries).
@@ -58,10 +76,13 @@ pub struct CurveReport {
     /// Solver of the fit: `cg`, or `cholesky` (then `cg_iterations` is 0 and
     /// `cg_rel_residual` the factorisation's measured residual).
     pub fit_solver: Option<crate::fit::FitSolver>,
+    /// CG iterations of the fit's solve (0 with Cholesky).
     pub cg_iterations: Option<usize>,
     /// Stored entries of the normal-equation matrix (one matrix for x, y, z).
     pub matrix_nonzeros: Option<usize>,
+    /// Relative residual of the fit's solve.
     pub cg_rel_residual: Option<f64>,
+    /// `--line-search`: one step for the whole mesh or one per control point.
     pub line_search_mode: LineSearchMode,
     /// Step of the certified search (1 = the full least-squares fit everywhere): with the
     /// blend of least-squares fits, half its smallest factor (0.5 = the target map, 0 = the
@@ -73,6 +94,7 @@ pub struct CurveReport {
     /// Points held back from the full step: shared Bernstein points of the certified blend
     /// (least-squares fits), or control points of the local search (`--fit energy`).
     pub damped_control_points: usize,
+    /// The global line search's outcome (`--fit energy --line-search global`).
     pub line_search: Option<LineSearchInfo>,
     /// Elements whose curving the certified blend reduced (some Bernstein point held back
     /// towards the straight elevation; `validity::blend`).
@@ -90,14 +112,16 @@ pub struct CurveReport {
     /// It is the exact Bernstein certificate's (the screen, `validity::screen`, decides only
     /// elements whose exact bound is larger).
     pub min_det_jacobian_bound: Option<f64>,
-    /// Minimum scaled Jacobian of the input (corners) and of the output (sampled).
+    /// Minimum scaled Jacobian of the input (at element corners).
     pub input_min_scaled_jacobian: f64,
+    /// Minimum scaled Jacobian of the output (sampled).
     pub min_scaled_jacobian: f64,
     /// Bounding-box diagonal of the input: the `boundary_*` distances below are relative to it.
     pub bounding_box_diagonal: f64,
     /// Distance of the output's boundary vertex nodes from the input's boundary vertices
-    /// (0 where `--snap-boundary` snapped them), max and rms.
+    /// (0 where `--snap-boundary` snapped them): the largest.
     pub boundary_vertex_deviation_max: f64,
+    /// The same distances' root mean square.
     pub boundary_vertex_deviation_rms: f64,
     /// Largest distance of any written boundary node (vertex, edge or face node) from the
     /// input's linear boundary: how far the curving moved the wall ([`crate::deviation`]).
@@ -106,9 +130,11 @@ pub struct CurveReport {
     pub boundary_sample_distance_max: f64,
     /// Seconds per stage, and `total`.
     pub timings: BTreeMap<String, f64>,
-    /// `cpu` or `gpu`; with `gpu`, the adapter and the kernels' precision.
+    /// `cpu` or `gpu`: where the heavy kernels ran.
     pub backend: String,
+    /// With `gpu`: the adapter in use.
     pub adapter: Option<AdapterReport>,
+    /// With `gpu`: the kernels' floating-point type.
     pub gpu_precision: Option<Precision>,
     /// With `gpu`: batches of work the device failed and the CPU did instead (the result is
     /// the same certified one; above 0, the device is unreliable or short of memory here).

@@ -13,7 +13,8 @@
 //! [`pcg`] on an assembled matrix with block Jacobi (the fit's default) runs the same method
 //! through [`blocked`]: unknowns renumbered by aggregates, rows stored by value template,
 //! vector updates, block solves and dot products fused into three passes per iteration.
-//! [`pcg_with`] is the generic loop (any operator, any preconditioner).
+//! [`pcg_with`] is the generic loop (any operator, any preconditioner): [`cg_loop`], which the
+//! distributed solver runs too, with its own [`Reductions`] (sums over the processes).
 //!
 //! [`direct`] solves the same assembled systems by sparse Cholesky instead (the fit's small
 //! systems, chosen by the fit's `FitSolver`), reporting through [`CgInfo`] with 0 iterations.
@@ -96,8 +97,10 @@ impl CgParams {
 }
 
 /// What CG achieved.
+#[deny(missing_docs)]
 #[derive(Clone, Copy, Debug, serde::Serialize)]
 pub struct CgInfo {
+    /// Iterations run (0 when a factorisation solved the system instead).
     pub iterations: usize,
     /// Largest ‖r‖/‖b‖ over the three components at the end.
     pub rel_residual: f64,
@@ -196,16 +199,18 @@ fn new_direction(p: &mut [[f64; 3]], z: &[[f64; 3]], beta: [f64; 3]) {
     });
 }
 
-/// The stopping rule and step lengths of the three per-component recurrences of [`pcg`].
-struct Stopping {
+/// The stopping rule and step lengths of the three per-component recurrences: one rule for
+/// [`cg_loop`] (serial and distributed), [`blocked`] and the GPU solver's host loop.
+pub struct Stopping {
     bnorm: [f64; 3],
-    /// ‖r‖ at which a component has converged.
-    target: [f64; 3],
+    /// ‖r‖ at which a component has converged: max(rel_tol·‖b‖, abs_tol).
+    pub target: [f64; 3],
     rel_tol: f64,
 }
 
 impl Stopping {
-    fn new(bnorm: [f64; 3], params: &CgParams) -> Self {
+    /// The rule for right-hand sides of norms `bnorm` (per component).
+    pub fn new(bnorm: [f64; 3], params: &CgParams) -> Self {
         Stopping {
             bnorm,
             target: std::array::from_fn(|k| (params.rel_tol * bnorm[k]).max(params.abs_tol)),
@@ -214,7 +219,7 @@ impl Stopping {
     }
 
     /// Largest ‖r‖/‖b‖ (‖r‖ where b = 0) from the squared norms rᵀr.
-    fn rel(&self, rr: [f64; 3]) -> f64 {
+    pub fn rel(&self, rr: [f64; 3]) -> f64 {
         (0..3)
             .map(|k| {
                 if self.bnorm[k] > 0.0 {
@@ -226,15 +231,19 @@ impl Stopping {
             .fold(0.0, f64::max)
     }
 
-    fn running(&self, rr: [f64; 3], k: usize) -> bool {
-        rr[k].sqrt() > self.target[k]
+    /// Whether component `k` of squared residual norms `rr` has not converged yet.
+    pub fn running(&self, rr: [f64; 3], k: usize) -> bool {
+        // A NaN residual keeps running (and fails), never converges.
+        !(rr[k].sqrt() <= self.target[k])
     }
 
-    fn converged(&self, rr: [f64; 3]) -> bool {
+    /// Whether every component has converged.
+    pub fn converged(&self, rr: [f64; 3]) -> bool {
         (0..3).all(|k| !self.running(rr, k))
     }
 
-    fn no_convergence(&self, iterations: usize, rr: [f64; 3]) -> CgError {
+    /// The error of a solve stopped after `iterations` at squared residual norms `rr`.
+    pub fn no_convergence(&self, iterations: usize, rr: [f64; 3]) -> CgError {
         CgError::NoConvergence {
             iterations,
             rel_residual: self.rel(rr),
@@ -359,32 +368,80 @@ pub fn pcg_with(
     b: &[[f64; 3]],
     x: &mut [[f64; 3]],
     params: &CgParams,
-    mut progress: impl FnMut(usize, f64),
+    progress: impl FnMut(usize, f64),
 ) -> Result<CgInfo, CgError> {
     let n = op.nrows();
     assert_eq!(b.len(), n);
     assert_eq!(x.len(), n);
-    let mut r = residual(op, b, x);
-    let stop = Stopping::new(dot3(b, b).map(f64::sqrt), params);
+    let apply = |v: &[[f64; 3]], y: &mut [[f64; 3]]| op.apply(v, y);
+    let precondition = |r: &[[f64; 3]], z: &mut [[f64; 3]]| pre.apply(r, z);
+    cg_loop(&Rows, apply, precondition, b, x, params, progress)
+}
+
+/// The dot products of a CG solve over the whole system, per component: the parameter that
+/// makes [`cg_loop`] the serial solver ([`Rows`]) or the solver of many processes (sums of
+/// each process's owned rows, reduced over the processes).
+pub trait Reductions {
+    /// aᵀb per component.
+    fn dot(&self, a: &[[f64; 3]], b: &[[f64; 3]]) -> [f64; 3];
+    /// (aᵀb, cᵀd): one reduction where the sums travel; each value is the one
+    /// [`Reductions::dot`] gives.
+    fn dot2(&self, ab: (&[[f64; 3]], &[[f64; 3]]), cd: (&[[f64; 3]], &[[f64; 3]])) -> Pair {
+        (self.dot(ab.0, ab.1), self.dot(cd.0, cd.1))
+    }
+}
+
+/// Two per-component dot products.
+pub type Pair = ([f64; 3], [f64; 3]);
+
+/// The dot products of one process: sums over all rows, in an order fixed by the data.
+pub struct Rows;
+
+impl Reductions for Rows {
+    fn dot(&self, a: &[[f64; 3]], b: &[[f64; 3]]) -> [f64; 3] {
+        dot3(a, b)
+    }
+}
+
+/// The one preconditioned CG loop of the three per-component recurrences, from `x`: the serial
+/// [`pcg_with`] and the distributed solver run it with their own operator, preconditioner and
+/// [`Reductions`]. The stopping rule is [`Stopping`]'s: ‖r‖ ≤ max(rel_tol·‖b‖, abs_tol) per
+/// component, ‖·‖ from `reduce`. `progress(iteration, rel_residual)` is called every iteration.
+pub fn cg_loop(
+    reduce: &dyn Reductions,
+    mut apply: impl FnMut(&[[f64; 3]], &mut [[f64; 3]]),
+    mut precondition: impl FnMut(&[[f64; 3]], &mut [[f64; 3]]),
+    b: &[[f64; 3]],
+    x: &mut [[f64; 3]],
+    params: &CgParams,
+    mut progress: impl FnMut(usize, f64),
+) -> Result<CgInfo, CgError> {
+    let n = b.len();
+    let mut r = vec![[0.0; 3]; n];
+    apply(x, &mut r);
+    r.par_iter_mut().zip(b.par_iter()).for_each(|(r, b)| {
+        for k in 0..3 {
+            r[k] = b[k] - r[k];
+        }
+    });
+    let stop = Stopping::new(reduce.dot(b, b).map(f64::sqrt), params);
     let mut z = vec![[0.0; 3]; n];
-    pre.apply(&r, &mut z);
+    precondition(&r, &mut z);
     let mut p = z.clone();
-    let mut rz = dot3(&r, &z);
-    let mut rr = dot3(&r, &r);
+    let (mut rz, mut rr) = reduce.dot2((&r, &z), (&r, &r));
     let mut ap = vec![[0.0; 3]; n];
     let mut it = 0;
     while !stop.converged(rr) {
         if it >= params.max_iters {
             return Err(stop.no_convergence(it, rr));
         }
-        op.apply(&p, &mut ap);
-        let alpha = stop.alpha(it, rr, rz, dot3(&p, &ap))?;
+        apply(&p, &mut ap);
+        let alpha = stop.alpha(it, rr, rz, reduce.dot(&p, &ap))?;
         advance(x, &mut r, &p, &ap, alpha);
-        pre.apply(&r, &mut z);
-        let rz_new = dot3(&r, &z);
+        precondition(&r, &mut z);
+        let (rz_new, rr_new) = reduce.dot2((&r, &z), (&r, &r));
         new_direction(&mut p, &z, Stopping::beta(rz, rz_new));
-        rz = rz_new;
-        rr = dot3(&r, &r);
+        (rz, rr) = (rz_new, rr_new);
         it += 1;
         progress(it, stop.rel(rr));
     }

@@ -81,8 +81,10 @@ impl Default for BlendParams {
 }
 
 /// An element whose curving was reduced.
+#[deny(missing_docs)]
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct ReducedElement {
+    /// Element index (0-based, input order).
     pub element: usize,
     /// Centroid of the input element.
     pub centroid: [f64; 3],
@@ -94,23 +96,26 @@ pub struct ReducedElement {
 }
 
 /// What [`blend_search`] did.
+#[deny(missing_docs)]
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct BlendInfo {
     /// Elements not certified valid at the full fit.
     pub invalid_at_full_step: usize,
     /// Elements certified valid at the full fit but below the quality bound.
     pub poor_at_full_step: usize,
-    /// The straight mesh's Jacobian ratio: smallest and 1st percentile (from element corners).
+    /// The straight mesh's smallest Jacobian ratio (from element corners).
     pub straight_ratio_min: f64,
+    /// The straight mesh's 1st-percentile Jacobian ratio (from element corners).
     pub straight_ratio_p1: f64,
     /// Rounds of reduction.
     pub rounds: usize,
     /// Elements with a point held back from the fitted map.
     pub reduced_elements: usize,
-    /// Shared Bernstein points held back from the fitted map (factor < 2), at or below the
-    /// target map (≤ 1), and back at the straight elevation (0).
+    /// Shared Bernstein points held back from the fitted map (factor < 2).
     pub reduced_points: usize,
+    /// Of those, points at or below the target map (factor ≤ 1).
     pub target_points: usize,
+    /// Of those, points back at the straight elevation (factor 0).
     pub straight_points: usize,
     /// Smallest factor (2 when nothing was reduced).
     pub min_factor: f64,

@@ -105,18 +105,24 @@ impl LineSearchParams {
 }
 
 /// One element and its certified lower bound of det J.
+#[deny(missing_docs)]
 #[derive(Clone, Copy, Debug, serde::Serialize)]
 pub struct WorstElement {
+    /// Element index (0-based, input order).
     pub element: usize,
+    /// Certified lower bound of det J.
     pub lower: f64,
+    /// Upper bound of det J.
     pub upper: f64,
 }
 
 /// Outcome of the line search.
+#[deny(missing_docs)]
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct LineSearchInfo {
     /// Step taken: 1 when the full fit is certified valid.
     pub alpha: f64,
+    /// Bisection steps made.
     pub bisections: usize,
     /// Elements not certified valid at α = 1.
     pub invalid_at_full_step: usize,

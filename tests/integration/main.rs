@@ -1,8 +1,9 @@
 //! End-to-end tests, mostly through the `polyspline` binary: `curve` on every real mesh,
 //! bad input and hardening (one bounded error line, no panic, no partial output), the readers'
-//! mutation fuzzer, `generate`, high-order output read back by Gmsh and VTK, the elastic method
-//! boundary layers, and the validity check against closed-form Jacobians. One test binary; `cargo test --release --test integration curve::` runs
-//! one module.
+//! mutation fuzzer, `generate`, high-order output read back by Gmsh and VTK, the elastic method,
+//! boundary layers, graded knot intervals, the validity check against closed-form Jacobians, and
+//! the `--report` JSON against its schema. One test binary;
+//! `cargo test --release --test integration curve::` runs one module.
 
 #[path = "../common/mod.rs"]
 mod common;
@@ -18,3 +19,4 @@ mod hardening;
 mod high_order;
 mod jacobian_oracle;
 mod knot_intervals;
+mod report_schema;

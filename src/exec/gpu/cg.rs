@@ -19,7 +19,7 @@ pub use crate::exec::cpu::cg::{CgKernelParams, CgState};
 pub use crate::exec::cpu::dot::DotParams;
 pub use crate::exec::cpu::spmv::SpmvParams;
 use crate::fit::NormalMatrix;
-use crate::solve::{CgError, CgInfo, CgParams, LinOp};
+use crate::solve::{CgError, CgInfo, CgParams, LinOp, Stopping};
 
 pub const SPMV_SOURCE: &str = include_str!("../../../shaders/spmv.wgsl");
 pub const DOT_SOURCE: &str = include_str!("../../../shaders/dot.wgsl");
@@ -480,19 +480,8 @@ pub fn pcg(
     }
     let inv: Vec<f64> = diag.iter().map(|d| 1.0 / d).collect();
     let kernels = CgKernels::new(ctx, a, &inv).map_err(|e| CgError::Device(e.to_string()))?;
-    let bnorm = dot3(b, b).map(f64::sqrt);
-    let target: [f64; 3] = std::array::from_fn(|k| (params.rel_tol * bnorm[k]).max(params.abs_tol));
-    let rel = |rr: [f64; 3]| -> f64 {
-        (0..3)
-            .map(|k| {
-                if bnorm[k] > 0.0 {
-                    rr[k].sqrt() / bnorm[k]
-                } else {
-                    rr[k].sqrt()
-                }
-            })
-            .fold(0.0, f64::max)
-    };
+    let stop = Stopping::new(dot3(b, b).map(f64::sqrt), params);
+    let rel = |rr: [f64; 3]| stop.rel(rr);
     let inner_reduction = match ctx.precision {
         Precision::F32 => F32_INNER_REDUCTION,
         Precision::F64 => 0.0,
@@ -503,7 +492,7 @@ pub fn pcg(
         // f64 residual of the current iterate.
         residual(a, b, x, &mut res);
         let rr = dot3(&res, &res);
-        if (0..3).all(|k| rr[k].sqrt() <= target[k]) {
+        if stop.converged(rr) {
             return Ok(CgInfo {
                 iterations: total,
                 rel_residual: rel(rr),
@@ -533,10 +522,10 @@ pub fn pcg(
             sc[k] = rz[k];
             sc[4 + k] = rr_scaled[k];
             // Converged components get target² = f32::MAX: never active.
-            sc[8 + k] = if rr[k].sqrt() <= target[k] {
+            sc[8 + k] = if !stop.running(rr, k) {
                 f32::MAX as f64
             } else {
-                (target[k] / scale[k]).max(inner_reduction).powi(2)
+                (stop.target[k] / scale[k]).max(inner_reduction).powi(2)
             };
         }
         let max_iters = (params.max_iters - total).min(u32::MAX as usize) as u32;
@@ -564,15 +553,11 @@ pub fn pcg(
     }
     residual(a, b, x, &mut res);
     let rr = dot3(&res, &res);
-    if (0..3).all(|k| rr[k].sqrt() <= target[k]) {
+    if stop.converged(rr) {
         return Ok(CgInfo {
             iterations: total,
             rel_residual: rel(rr),
         });
     }
-    Err(CgError::NoConvergence {
-        iterations: total,
-        rel_residual: rel(rr),
-        rel_tol: params.rel_tol,
-    })
+    Err(stop.no_convergence(total, rr))
 }

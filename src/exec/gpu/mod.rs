@@ -82,10 +82,14 @@ pub enum GpuError {
 }
 
 /// Name and type of the adapter in use, for reports.
+#[deny(missing_docs)]
 #[derive(Clone, Debug, PartialEq, Eq, serde::Serialize)]
 pub struct AdapterReport {
+    /// Adapter name as the driver reports it.
     pub name: String,
+    /// wgpu's device type (`DiscreteGpu`, `IntegratedGpu`, `VirtualGpu`, `Cpu`, `Other`).
     pub device_type: String,
+    /// Driver name and version.
     pub driver: String,
 }
 

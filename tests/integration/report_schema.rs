@@ -1,0 +1,83 @@
+//! The `curve --report` JSON against its documented contract, `docs/curve-report.schema.json`,
+//! with the `jsonschema` package as the oracle (`tests/external/report_schema.py`): reports of
+//! a 2D and a 3D real mesh, the elastic method, the energy fit with the global line search and
+//! (with an adapter) the GPU backend validate, and every object of the schema is closed and
+//! met in one of them, so a report field added without documenting it fails here.
+
+use crate::common::{self, polyspline, python, python_has, scratch_in};
+use std::path::{Path, PathBuf};
+
+const ROOT: &str = env!("CARGO_MANIFEST_DIR");
+
+/// `curve INPUT ARGS --report` into the scratch folder: the report's path, or the failing
+/// run's stderr.
+fn report_of(name: &str, input: &str, args: &[&str]) -> Result<PathBuf, String> {
+    let out = scratch_in("report_schema", &format!("{name}.msh"));
+    let report = out.with_extension("json");
+    let _ = std::fs::remove_file(&report);
+    let run = polyspline()
+        .arg("curve")
+        .arg(Path::new(ROOT).join(input))
+        .arg("-o")
+        .arg(&out)
+        .arg("--report")
+        .arg(&report)
+        .args(args)
+        .output()
+        .unwrap();
+    if run.status.success() {
+        Ok(report)
+    } else {
+        Err(String::from_utf8_lossy(&run.stderr).into_owned())
+    }
+}
+
+#[test]
+fn curve_reports_validate_against_the_documented_schema() {
+    let test = common::current_test();
+    if !python_has("jsonschema", &test) {
+        return;
+    }
+    let (d2, d3) = (
+        "meshes/real/dealii/example.msh",
+        "meshes/real/mfem/cylinder-hex.mesh",
+    );
+    let mut reports = vec![
+        report_of("quads", d2, &[]).unwrap(),
+        report_of("hexes", d3, &[]).unwrap(),
+        report_of("elastic", d2, &["--method", "elastic"]).unwrap(),
+        report_of(
+            "energy",
+            d2,
+            &["--fit", "energy", "--line-search", "global"],
+        )
+        .unwrap(),
+    ];
+    // The per-rank objects are written only under mpirun (the distributed test binary).
+    let mut may_miss = vec!["rank"];
+    match report_of("gpu", d3, &["--backend", "gpu"]) {
+        Ok(r) => reports.push(r),
+        Err(e) if e.contains("no GPU adapter") || e.contains("no hardware GPU adapter") => {
+            common::skip(
+                &test,
+                &format!("the GPU report was not checked: {}", e.trim()),
+            );
+            may_miss.push("adapter");
+        }
+        Err(e) => panic!("curve --backend gpu: {e}"),
+    }
+    let mut check = python();
+    check
+        .arg(Path::new(ROOT).join("tests/external/report_schema.py"))
+        .arg(Path::new(ROOT).join("docs/curve-report.schema.json"));
+    for m in may_miss {
+        check.args(["--may-miss", m]);
+    }
+    let out = check.args(&reports).output().unwrap();
+    assert!(
+        out.status.success(),
+        "the reports do not match docs/curve-report.schema.json:\n{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
