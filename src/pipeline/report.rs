@@ -56,9 +56,10 @@ pub struct CurveReport {
     pub spline_elements: usize,
     /// Elements with a constrained Q2 map (irregular neighbourhoods, demoted or kink elements).
     pub q2_elements: usize,
-    /// Knot intervals of the spline space (`uniform` or `graded`) and, when graded, the
-    /// figures of its knot surfaces (spline geometries).
+    /// Knot intervals of the spline space, `uniform` or `graded` (spline geometries).
     pub knot_intervals: Option<crate::spline::KnotIntervals>,
+    /// With graded knot intervals: the figures of the knot surfaces (surfaces, graded ones,
+    /// non-orientable ones given uniform knots, clamped ratios, the largest |ln ratio|).
     pub knot_surfaces: Option<crate::spline::KnotSurfaceInfo>,
     /// Elements made Q2 because their initial spline map was not certified valid.
     pub demoted_elements: usize,
