@@ -69,11 +69,11 @@ value_enum! {
 value_enum! {
     /// `curve --knot-intervals`.
     KnotIntervals => LibKnotIntervals {
-        #[value(help = "Every knot interval 1 (the paper's construction)")]
+        #[value(help = "Every knot interval 1 (the paper's construction; default)")]
         Uniform,
         #[value(help = "Knot intervals from the cells' extents, one ratio per knot surface: \
-            graded (boundary-layer) grids are reproduced exactly and stay C¹ (default; \
-            distributed runs use uniform)")]
+            graded (boundary-layer) grids are reproduced exactly and stay C¹ (distributed \
+            runs use uniform)")]
         Graded,
     }
 }

@@ -65,7 +65,7 @@ pub struct CurveOptions {
     pub method: Method,
     /// Weights of the fit (used with [`Geometry::SplineFitted`]).
     pub fit: FitParams,
-    /// Knot intervals of the spline space (graded by default; the distributed run uses
+    /// Knot intervals of the spline space (uniform by default; the distributed run uses
     /// uniform knots, see `distributed::job`).
     pub knots: KnotParams,
     pub line_search: LineSearchParams,

@@ -39,9 +39,9 @@ use serde::Serialize;
 #[serde(rename_all = "snake_case")]
 pub enum KnotIntervals {
     /// Every interval 1 (the paper's construction).
+    #[default]
     Uniform,
     /// From the cells' extents, one log-ratio per knot surface (graded grids reproduced).
-    #[default]
     Graded,
 }
 
@@ -56,7 +56,7 @@ pub struct KnotParams {
 impl Default for KnotParams {
     fn default() -> Self {
         KnotParams {
-            intervals: KnotIntervals::Graded,
+            intervals: KnotIntervals::Uniform,
             max_ratio: 16.0,
         }
     }

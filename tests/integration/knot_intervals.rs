@@ -9,7 +9,7 @@ use crate::common::{self, write_linear};
 use polyspline::mesh::LinearMesh;
 use polyspline::mesh::generate::{grid_2d, grid_3d};
 use polyspline::pipeline::{CurveOptions, Geometry, curve_in_memory};
-use polyspline::spline::KnotParams;
+use polyspline::spline::{KnotIntervals, KnotParams};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 
@@ -93,7 +93,11 @@ fn graded_structured_grids_are_reproduced_exactly() {
     ] {
         let path = scratch(&format!("{name}.msh"));
         write_linear(&mesh, &path);
-        let (gap, held, q2) = gap_to_straight(&path, KnotParams::default());
+        let graded = KnotParams {
+            intervals: KnotIntervals::Graded,
+            ..Default::default()
+        };
+        let (gap, held, q2) = gap_to_straight(&path, graded);
         eprintln!("{name}: graded knots: gap {gap:.2e} of the diagonal, {held} held back, {q2} Q2");
         assert!(
             gap < 1e-12,
@@ -144,7 +148,12 @@ fn graded_real_mesh_is_smooth_by_gmsh_and_keeps_its_cells() {
         scratch("naca_uniform.msh"),
         scratch("naca_straight.msh"),
     );
-    let r = curve_to(&input, &graded, &scratch("naca_graded.json"), &[]);
+    let r = curve_to(
+        &input,
+        &graded,
+        &scratch("naca_graded.json"),
+        &["--knot-intervals", "graded"],
+    );
     curve_to(
         &input,
         &uniform,
