@@ -348,6 +348,10 @@ fn unsupported_options_under_mpirun_fail_with_one_line_and_write_nothing() {
     for (args, what) in [
         (vec!["--fit", "energy"], "--fit energy"),
         (
+            vec!["--knot-intervals", "graded"],
+            "--knot-intervals graded",
+        ),
+        (
             vec!["--feature-edits", edits.to_str().unwrap()],
             "--feature-edits",
         ),

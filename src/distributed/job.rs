@@ -130,6 +130,11 @@ fn check_supported(options: &CurveOptions) -> Result<(), CurveError> {
     if options.features.edits.is_some() {
         return unsupported("--feature-edits");
     }
+    // Graded knot intervals average over whole knot surfaces, which cross the shares; the
+    // distributed run keeps uniform knots so that its result does not depend on the ranks.
+    if options.knots.intervals != crate::spline::KnotIntervals::Uniform {
+        return unsupported("--knot-intervals graded");
+    }
     Ok(())
 }
 
@@ -392,12 +397,6 @@ fn run_share(
     let mut msj = [mesh.min_scaled_jacobian().map_or(f64::INFINITY, |m| m.0)];
     comm.min_f64(&mut msj);
     let executor = crate::exec::executor(&options.backend);
-    // Graded knot intervals average over whole knot surfaces, which cross the shares: the
-    // distributed run keeps uniform knots so that its result does not depend on the ranks.
-    let options = &CurveOptions {
-        knots: crate::spline::KnotParams::uniform(),
-        ..options.clone()
-    };
     let job = Job {
         input,
         options,
@@ -623,7 +622,7 @@ pub fn curve(
         control_points: counts[0] as usize,
         spline_elements: counts[1] as usize,
         q2_elements: counts[2] as usize,
-        // Uniform knots on every rank (see `run_share`).
+        // Uniform knots on every rank (`check_supported`).
         knot_intervals: Some(crate::spline::KnotIntervals::Uniform),
         knot_surfaces: None,
         demoted_elements: 0,
