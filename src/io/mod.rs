@@ -15,7 +15,7 @@
 //! | SU2 | `.su2` | [`su2`] |
 //! | Abaqus | `.inp` | [`abaqus`] |
 //! | Exodus II (netCDF-3 classic / 64-bit offset) | `.exo`, `.e`, `.ex2`, `.exii`, `.g` (netCDF header), `.gen` | [`exodus`] |
-//! | CGNS/HDF5 (ADF refused) | `.cgns`, `.hdf`, `.adf` | [`cgns`] |
+//! | CGNS (HDF5 or ADF) | `.cgns`, `.hdf`, `.adf` | [`cgns`] |
 //! | Plot3D grids, formatted or Fortran unformatted | `.x`, `.xyz`, `.p3d`, `.g` (no netCDF header) | [`plot3d`] |
 
 pub mod abaqus;
@@ -75,7 +75,7 @@ pub enum ReadError {
         source: std::io::Error,
     },
     #[error(
-        "{}: unknown mesh format {what}; supported: .msh (Gmsh 2/4), .mesh (Medit or MFEM), .vtk, .vtu, .su2, .inp (Abaqus), .exo (Exodus II), .cgns (CGNS/HDF5), .x/.xyz/.p3d/.g (Plot3D)",
+        "{}: unknown mesh format {what}; supported: .msh (Gmsh 2/4), .mesh (Medit or MFEM), .vtk, .vtu, .su2, .inp (Abaqus), .exo (Exodus II), .cgns (CGNS, HDF5 or ADF), .x/.xyz/.p3d/.g (Plot3D)",
         path.display()
     )]
     UnknownFormat { path: PathBuf, what: String },

@@ -183,9 +183,7 @@ pub fn test_dir() -> PathBuf {
     dir
 }
 
-/// Every bundled real mesh polyspline reads (`meshes/real/<source>/<file>`), sorted. CGNS
-/// files in the ADF container are left out: they are kept byte for byte as their source holds
-/// them, but only their HDF5 copies in `meshes/converted/` can be read.
+/// Every bundled real mesh polyspline reads (`meshes/real/<source>/<file>`), sorted.
 pub fn real_meshes() -> Vec<PathBuf> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("meshes/real");
     let mut out = Vec::new();
@@ -194,10 +192,6 @@ pub fn real_meshes() -> Vec<PathBuf> {
         if d.is_dir() {
             for f in std::fs::read_dir(d).unwrap() {
                 let f = f.unwrap().path();
-                let head = std::fs::read(&f).map(|b| b[..b.len().min(64)].to_vec());
-                if polyspline::io::cgns::container(&head.unwrap_or_default()) == Some("adf") {
-                    continue;
-                }
                 out.push(f);
             }
         }

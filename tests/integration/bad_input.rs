@@ -331,8 +331,12 @@ fn one_part_of_a_partitioned_mesh_is_refused_on_one_process() {
 /// hold: one line naming the file and the problem, nothing written.
 #[test]
 fn cgns_plot3d_and_abaqus_refusals() {
-    let adf = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/cgns/hex_box.adf");
-    assert!(info_error(&adf).contains("ADF"));
+    let adf = std::fs::read(
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/cgns/hex_box.adf"),
+    )
+    .unwrap();
+    let cut = write("cut.adf", &adf[..adf.len() / 2]);
+    assert!(info_error(&cut).contains("past the end of the file"));
     let fake = write("fake.cgns", b"\x89HDF\r\n\x1a\nnot really");
     assert!(info_error(&fake).contains("HDF5"));
     let blanked = write(

@@ -22,7 +22,7 @@ fn scratch(name: &str) -> PathBuf {
 
 fn real_meshes() -> Vec<PathBuf> {
     let out = common::real_meshes();
-    assert_eq!(out.len(), 15, "the bundled real meshes");
+    assert_eq!(out.len(), 17, "the bundled real meshes");
     out
 }
 

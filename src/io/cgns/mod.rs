@@ -1,4 +1,4 @@
-//! CGNS input and output (CGNS/HDF5; the older ADF container is refused with one line).
+//! CGNS input and output (read: CGNS/HDF5 and the older ADF container; write: CGNS/HDF5).
 //!
 //! Read ([`read`]): the one `CGNSBase_t` that holds zones (cell dimension 2 or 3), and each of
 //! its `Zone_t`s:
@@ -26,9 +26,11 @@
 //! Errors are one line naming the node's path (`/Base/Zone1/GridCoordinates: ...`).
 //! Write: [`mod@write`] (the curved mesh as one unstructured zone).
 //!
-//! Parts: `tree` the HDF5 node tree and its memory bound, `zone` one zone, `ordering` the CGNS
-//! node orders, `write` the writer; this module the base, the families and the merge.
+//! Parts: `tree` the node tree (HDF5 or ADF) and its memory bound, `adf` the ADF container,
+//! `zone` one zone, `ordering` the CGNS node orders, `write` the writer; this module the base,
+//! the families and the merge.
 
+mod adf;
 pub mod ordering;
 mod tree;
 pub mod write;
@@ -58,10 +60,10 @@ impl Tags {
     }
 }
 
-/// Read a CGNS/HDF5 file held in memory.
+/// Read a CGNS file (HDF5 or ADF) held in memory.
 pub fn read(data: &[u8]) -> Result<RawMesh, ParseError> {
     let t = tree::Tree::open(data)?;
-    let root = t.root();
+    let root = t.root()?;
     let mut bases = Vec::new();
     for b in root.labelled("CGNSBase_t")? {
         if !b.labelled("Zone_t")?.is_empty() {

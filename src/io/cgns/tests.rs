@@ -74,12 +74,55 @@ fn structured_zones_glued_at_coincident_vertices() {
     assert_eq!(topo.boundary_facets.len(), 40);
 }
 
+/// The CGNS library's ADF copy of a file (`cgnsconvert -a`) reads as the HDF5 original:
+/// every coordinate bit for bit, every cell, tag and name.
 #[test]
-fn adf_and_non_cgns_are_refused_in_one_line() {
-    let e = read(&real("tests/data/cgns/hex_box.adf")).unwrap_err();
-    assert!(e.message.contains("ADF"), "{e}");
+fn adf_reads_as_its_hdf5_original() {
+    let adf = read(&real("tests/data/cgns/hex_box.adf")).unwrap();
+    let hdf5 = read(&real("tests/data/cgns/hex_box_gmsh.cgns")).unwrap();
+    assert_eq!(adf.points.len(), 27);
+    assert_eq!(format!("{adf:?}"), format!("{hdf5:?}"));
+}
+
+#[test]
+fn non_cgns_is_refused_in_one_line() {
     let e = read(b"not a cgns file").unwrap_err();
-    assert!(e.message.contains("HDF5"), "{e}");
+    assert!(
+        e.message.contains("HDF5") && e.message.contains("ADF"),
+        "{e}"
+    );
+    let e = read(b"\0\0\0\0ADF Database Version").unwrap_err();
+    assert!(e.message.contains("ADF"), "{e}");
+}
+
+/// A damaged ADF file (truncated anywhere, or any byte overwritten) gives a result or a
+/// one-line error, never a panic or an allocation beyond the file's size.
+#[test]
+fn damaged_adf_files_give_one_line_errors() {
+    let good = real("tests/data/cgns/hex_box.adf");
+    let check = |data: &[u8], what: &str| {
+        if let Err(e) = read(data) {
+            let e = e.to_string();
+            assert!(!e.contains('\n') && e.len() < 400, "{what}: {e}");
+        }
+    };
+    let mut failed = 0;
+    for cut in (0..good.len()).step_by(61) {
+        check(&good[..cut], &format!("cut at {cut}"));
+        failed += usize::from(read(&good[..cut]).is_err());
+    }
+    // Every truncation before the last node's data breaks the file.
+    assert!(failed > good.len() / 61 / 2, "{failed}");
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    for _ in 0..3000 {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        let mut bad = good.clone();
+        let at = (state % good.len() as u64) as usize;
+        bad[at] = (state >> 32) as u8;
+        check(&bad, &format!("byte {at} = {}", bad[at]));
+    }
 }
 
 /// A forged zone size is refused with the node's path, before anything is allocated for it.

@@ -1,18 +1,21 @@
-//! The CGNS node tree of a CGNS/HDF5 file, read through `hdf5-pure`.
+//! The CGNS node tree of a CGNS file, in either container: HDF5 (read through `hdf5-pure`)
+//! or ADF (read by [`super::adf`]).
 //!
-//! Input: the file's bytes. Output: [`Node`]s, each an HDF5 group with the attributes `name`,
-//! `label` (the SIDS type, `Zone_t`, ...) and `type` (the data type: `MT`, `I4`, `I8`, `R4`,
-//! `R8`, `C1`, `LK`), and its value in the dataset `" data"` (contiguous or chunked, deflated or
-//! not). Every error names the node's path (`/Base/Zone1/GridCoordinates`).
+//! Input: the file's bytes. Output: [`Node`]s, each with a name, a `label` (the SIDS type,
+//! `Zone_t`, ...), a data type (`MT`, `I4`, `I8`, `R4`, `R8`, `C1`, `LK`) and a value. In HDF5 a
+//! node is a group with the attributes `name`, `label` and `type` and its value in the dataset
+//! `" data"` (contiguous or chunked, deflated or not); in ADF a node header (the same fields)
+//! and its data chunks. Both present the same tree. Every error names the node's path
+//! (`/Base/Zone1/GridCoordinates`).
 //!
 //! Invariants:
 //! * memory is bounded by the file's size: before a value is read its declared element count
 //!   is checked against the bytes the file could hold for it (the file's size, or
 //!   [`MAX_DEFLATE_RATIO`] times it for a filtered dataset), so a forged shape cannot allocate
 //!   more than a constant times the input;
-//! * a link node (`LK`: a node stored in another file) is refused, never followed;
-//! * an ADF file (the older CGNS container) is refused with one line.
+//! * a link node (`LK`: a node stored in another file) is refused, never followed.
 
+use super::adf::{self, Adf};
 use crate::mesh::raw::{Location, ParseError};
 use hdf5_pure::{File, Group};
 
@@ -46,16 +49,28 @@ pub fn error(path: &str, message: impl std::fmt::Display) -> ParseError {
     ParseError::new(Location::Tree, format!("{path}: {message}"))
 }
 
-/// An open CGNS/HDF5 file.
+/// An open CGNS file.
 pub struct Tree {
-    file: File,
+    file: Container,
     len: usize,
+}
+
+/// The file's container.
+enum Container {
+    Hdf5(File),
+    Adf(Adf),
+}
+
+/// Where a node lives in its container.
+enum Handle {
+    Hdf5(Group),
+    Adf(adf::Header),
 }
 
 /// One node of the tree.
 pub struct Node<'a> {
     tree: &'a Tree,
-    group: Group,
+    handle: Handle,
     /// Path from the root, `/Base/Zone1` (the root itself is `/`).
     pub path: String,
     /// The node's name (the last component of its path).
@@ -63,25 +78,23 @@ pub struct Node<'a> {
 }
 
 impl Tree {
-    /// Open the HDF5 container of a CGNS file.
+    /// Open the container (HDF5 or ADF) of a CGNS file.
     pub fn open(data: &[u8]) -> Result<Tree, ParseError> {
-        match container(data) {
-            Some("hdf5") => {}
-            Some(_) => {
-                return Err(ParseError::new(
-                    Location::Byte(0),
-                    "a CGNS file in the ADF format; only CGNS/HDF5 is read (convert it with `cgnsconvert -h IN OUT`)",
-                ));
-            }
+        let file = match container(data) {
+            Some("hdf5") => Container::Hdf5(
+                File::from_bytes(data.to_vec())
+                    .map_err(|e| ParseError::new(Location::Byte(0), format!("HDF5: {e}")))?,
+            ),
+            Some(_) => Container::Adf(
+                Adf::open(data.to_vec()).map_err(|e| ParseError::new(Location::Byte(0), e))?,
+            ),
             None => {
                 return Err(ParseError::new(
                     Location::Byte(0),
-                    "not a CGNS/HDF5 file (no HDF5 signature)",
+                    "not a CGNS file (neither an HDF5 nor an ADF header)",
                 ));
             }
-        }
-        let file = File::from_bytes(data.to_vec())
-            .map_err(|e| ParseError::new(Location::Byte(0), format!("HDF5: {e}")))?;
+        };
         Ok(Tree {
             file,
             len: data.len(),
@@ -89,13 +102,17 @@ impl Tree {
     }
 
     /// The root node (`/`).
-    pub fn root(&self) -> Node<'_> {
-        Node {
+    pub fn root(&self) -> Result<Node<'_>, ParseError> {
+        let handle = match &self.file {
+            Container::Hdf5(f) => Handle::Hdf5(f.root()),
+            Container::Adf(a) => Handle::Adf(a.root().map_err(|e| error("/", e))?),
+        };
+        Ok(Node {
             tree: self,
-            group: self.file.root(),
+            handle,
             path: String::new(),
             name: String::new(),
-        }
+        })
     }
 }
 
@@ -114,9 +131,24 @@ impl<'a> Node<'a> {
         error(self.at(), message)
     }
 
-    fn attr(&self, key: &str) -> Result<String, ParseError> {
-        let attrs = self
-            .group
+    /// The ADF file of an ADF node (`None` for HDF5).
+    fn adf(&self) -> Option<(&'a Adf, &adf::Header)> {
+        match (&self.tree.file, &self.handle) {
+            (Container::Adf(a), Handle::Adf(h)) => Some((a, h)),
+            _ => None,
+        }
+    }
+
+    /// The HDF5 group of an HDF5 node.
+    fn group(&self) -> Option<&Group> {
+        match &self.handle {
+            Handle::Hdf5(g) => Some(g),
+            Handle::Adf(_) => None,
+        }
+    }
+
+    fn attr(&self, group: &Group, key: &str) -> Result<String, ParseError> {
+        let attrs = group
             .attrs()
             .map_err(|e| self.error(format!("unreadable attributes: {e}")))?;
         use hdf5_pure::AttrValue as A;
@@ -133,28 +165,47 @@ impl<'a> Node<'a> {
 
     /// The SIDS label (`Zone_t`, ...), empty when missing.
     pub fn label(&self) -> Result<String, ParseError> {
-        self.attr("label")
+        match &self.handle {
+            Handle::Hdf5(g) => self.attr(g, "label"),
+            Handle::Adf(h) => Ok(h.label.clone()),
+        }
     }
 
     /// The data type (`MT`, `I4`, `I8`, `R4`, `R8`, `C1`, `LK`).
     pub fn data_type(&self) -> Result<String, ParseError> {
-        self.attr("type")
+        match &self.handle {
+            Handle::Hdf5(g) => self.attr(g, "type"),
+            Handle::Adf(h) => Ok(h.data_type.clone()),
+        }
     }
 
-    /// The child nodes, sorted by name (HDF5 keeps no order the CGNS library relies on).
+    /// The child nodes, sorted by name (neither container keeps an order the CGNS library
+    /// relies on).
     pub fn children(&self) -> Result<Vec<Node<'a>>, ParseError> {
         if self.data_type()? == "LK" {
             return Err(self.error(
                 "a link to a node in another file; links are not followed (expand them with `cgnsconvert -l IN OUT`)",
             ));
         }
-        let mut out: Vec<Node<'a>> = self
-            .group
-            .iter_groups()
-            .map_err(|e| self.error(format!("unreadable children: {e}")))?
-            .map(|(name, group)| Node {
+        let handles: Vec<(String, Handle)> = match (&self.tree.file, &self.handle) {
+            (Container::Adf(a), Handle::Adf(h)) => a
+                .children(h)
+                .map_err(|e| self.error(e))?
+                .into_iter()
+                .map(|c| (c.name.clone(), Handle::Adf(c)))
+                .collect(),
+            (_, Handle::Hdf5(g)) => g
+                .iter_groups()
+                .map_err(|e| self.error(format!("unreadable children: {e}")))?
+                .map(|(name, group)| (name, Handle::Hdf5(group)))
+                .collect(),
+            _ => unreachable!("a node's handle matches its container"),
+        };
+        let mut out: Vec<Node<'a>> = handles
+            .into_iter()
+            .map(|(name, handle)| Node {
                 tree: self.tree,
-                group,
+                handle,
                 path: format!("{}/{name}", self.path),
                 name,
             })
@@ -187,8 +238,10 @@ impl<'a> Node<'a> {
 
     /// The `" data"` dataset and its shape, after the memory check (module docs).
     fn dataset(&self) -> Result<Option<(hdf5_pure::Dataset, Vec<usize>)>, ParseError> {
-        if !self
-            .group
+        let Some(group) = self.group() else {
+            return Ok(None);
+        };
+        if !group
             .datasets()
             .map_err(|e| self.error(format!("unreadable node: {e}")))?
             .iter()
@@ -196,8 +249,7 @@ impl<'a> Node<'a> {
         {
             return Ok(None);
         }
-        let d = self
-            .group
+        let d = group
             .dataset(" data")
             .map_err(|e| self.error(format!("unreadable data: {e}")))?;
         let shape: Vec<usize> = d
@@ -232,6 +284,15 @@ impl<'a> Node<'a> {
         if ty != "I4" && ty != "I8" {
             return Err(self.error(format!("expected integer data (I4 or I8), found {ty:?}")));
         }
+        if let Some((a, h)) = self.adf() {
+            let bytes = a.value(h).map_err(|e| self.error(e))?;
+            if bytes.is_empty() {
+                return Err(self.error("no data"));
+            }
+            // HDF5's shape is CGNS's dimensions reversed (C order); ADF keeps CGNS's.
+            let shape = h.dims.iter().rev().map(|&n| n as usize).collect();
+            return Ok((a.ints(&ty, &bytes), shape));
+        }
         let (d, shape) = self.dataset()?.ok_or_else(|| self.error("no data"))?;
         let v = d
             .read_i64()
@@ -245,6 +306,13 @@ impl<'a> Node<'a> {
         if ty != "R4" && ty != "R8" {
             return Err(self.error(format!("expected real data (R4 or R8), found {ty:?}")));
         }
+        if let Some((a, h)) = self.adf() {
+            let bytes = a.value(h).map_err(|e| self.error(e))?;
+            if bytes.is_empty() {
+                return Err(self.error("no data"));
+            }
+            return Ok(a.reals(&ty, &bytes));
+        }
         let (d, _) = self.dataset()?.ok_or_else(|| self.error("no data"))?;
         d.read_f64()
             .map_err(|e| self.error(format!("unreadable real data: {e}")))
@@ -256,12 +324,15 @@ impl<'a> Node<'a> {
         if ty != "C1" {
             return Err(self.error(format!("expected character data (C1), found {ty:?}")));
         }
-        let Some((d, _)) = self.dataset()? else {
-            return Ok(String::new());
+        let bytes = if let Some((a, h)) = self.adf() {
+            a.value(h).map_err(|e| self.error(e))?
+        } else {
+            let Some((d, _)) = self.dataset()? else {
+                return Ok(String::new());
+            };
+            d.read_raw()
+                .map_err(|e| self.error(format!("unreadable character data: {e}")))?
         };
-        let bytes = d
-            .read_raw()
-            .map_err(|e| self.error(format!("unreadable character data: {e}")))?;
         Ok(String::from_utf8_lossy(&bytes)
             .trim_end_matches(['\0', ' '])
             .to_string())
