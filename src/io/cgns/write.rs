@@ -166,6 +166,13 @@ pub fn write_cgns(mesh: &HighOrderMesh, volume_name: &str, w: &mut impl Write) -
         c.create_dataset(" data")
             .with_f64_data(&v)
             .with_shape(&[n_nodes as u64]);
+        // A length: exponent 1 of (mass, length, time, temperature, angle), as SIDS defines
+        // the coordinates (`cgnscheck` warns when a dimensional quantity has none).
+        let mut e = node("DimensionalExponents", "DimensionalExponents_t", "R8");
+        e.create_dataset(" data")
+            .with_f64_data(&[0.0, 1.0, 0.0, 0.0, 0.0])
+            .with_shape(&[5]);
+        c.add_group(e.finish());
         coords.add_group(c.finish());
     }
     zone.add_group(coords.finish());
