@@ -14,10 +14,11 @@ use polyspline::io::gmsh_write::MshVersion;
 use polyspline::mesh::HighOrderMesh;
 use polyspline::mesh::Topology;
 use polyspline::mesh::generate::{Kind, generate};
+use polyspline::mesh::high_order::{Lattice, lattice_index};
 use polyspline::pipeline::{CurveOptions, OutputOptions, curve_in_memory, write_high_order};
 use polyspline::sample::sample;
 use serde_json::Value;
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 
 fn scratch(name: &str) -> PathBuf {
@@ -207,12 +208,192 @@ fn lowercase_counts(v: &Value) -> BTreeMap<String, usize> {
         .collect()
 }
 
+/// The lattice point of a node at reference coordinates `r` in [0,1]^d of an order-`p` cell
+/// (a node off the lattice is a failure).
+fn lattice_at(r: &Value, p: usize, ctx: &str) -> Lattice {
+    let mut l = [0; 3];
+    for (k, x) in r.as_array().unwrap().iter().enumerate() {
+        let t = x.as_f64().unwrap() * p as f64;
+        assert!(
+            (t - t.round()).abs() < 1e-9 && t.round() >= 0.0,
+            "{ctx}: node at {r} is off the order-{p} lattice"
+        );
+        l[k] = t.round() as usize;
+    }
+    l
+}
+
+/// Largest coordinate of `ho`'s nodes in magnitude (at least 1): the scale of rounding.
+fn scale(ho: &HighOrderMesh) -> f64 {
+    ho.nodes
+        .iter()
+        .flatten()
+        .fold(1.0f64, |m, x| m.max(x.abs()))
+}
+
+/// A JSON point `[x, y(, z)]` against ours, to `tol` in each given coordinate.
+fn assert_point(ctx: &str, got: &Value, want: [f64; 3], tol: f64) {
+    let got = got.as_array().unwrap();
+    for (k, x) in got.iter().enumerate() {
+        let x = x.as_f64().unwrap();
+        assert!(
+            (x - want[k]).abs() <= tol,
+            "{ctx}: {got:?} where ours is {want:?} (tolerance {tol:e})"
+        );
+    }
+}
+
+/// PyFR's element node arrays (`geometry` of the probe, one entry per element type) against
+/// ours: PyFR's reference points name each node's lattice point in our element, and PyFR's
+/// coordinates there are ours, up to PyFR's own snapping of the elements it finds linear
+/// (within its `lintol` of the element's extent). Gmsh's map of the same file, evaluated at
+/// PyFR's reference points, is ours to rounding.
+fn assert_pyfr_nodes_are_ours(v: &Value, ho: &HighOrderMesh, ctx: &str) {
+    let p = ho.order;
+    let tol = 1e-12 * scale(ho);
+    let lintol = v["lintol"].as_f64().unwrap();
+    let geometry = v["geometry"].as_object().unwrap();
+    assert_eq!(geometry.len(), 1, "{ctx}: {:?}", geometry.keys());
+    for (etype, g) in geometry {
+        let ctx = format!("{ctx} {etype}");
+        // Where PyFR's node k sits in our element (from PyFR's reference points in [-1,1]^d).
+        let lattice: Vec<usize> = g["pts"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|r| {
+                let unit: Vec<f64> = r
+                    .as_array()
+                    .unwrap()
+                    .iter()
+                    .map(|x| (x.as_f64().unwrap() + 1.0) / 2.0)
+                    .collect();
+                lattice_index(p, lattice_at(&serde_json::json!(unit), p, &ctx))
+            })
+            .collect();
+        assert_eq!(lattice.len(), ho.nodes_per_element(), "{ctx}");
+        let (coords, gmsh, curved) = (
+            g["coords"].as_array().unwrap(),
+            g["gmsh"].as_array().unwrap(),
+            g["curved"].as_array().unwrap(),
+        );
+        assert_eq!(coords.len(), ho.n_elements(), "{ctx}");
+        // The slack of each node: PyFR moves the nodes of the elements it finds linear.
+        let mut slack = vec![0.0f64; ho.nodes.len()];
+        for (e, c) in curved.iter().enumerate() {
+            if !c.as_bool().unwrap() {
+                let nodes = ho.element(e);
+                let extent = (0..ho.dim)
+                    .map(|k| {
+                        let xs = nodes.iter().map(|&n| ho.nodes[n as usize][k]);
+                        xs.clone().fold(f64::MIN, f64::max) - xs.fold(f64::MAX, f64::min)
+                    })
+                    .fold(0.0, f64::max);
+                for &n in nodes {
+                    slack[n as usize] = slack[n as usize].max(lintol * extent);
+                }
+            }
+        }
+        for (e, (mine, theirs)) in coords.iter().zip(gmsh).enumerate() {
+            let nodes = ho.element(e);
+            for (k, &l) in lattice.iter().enumerate() {
+                let n = nodes[l] as usize;
+                let ctx = format!("{ctx}: element {e} node {k} (our lattice index {l})");
+                assert_point(
+                    &format!("{ctx}, PyFR"),
+                    &mine[k],
+                    ho.nodes[n],
+                    tol + slack[n],
+                );
+                assert_point(&format!("{ctx}, Gmsh"), &theirs[k], ho.nodes[n], tol);
+            }
+        }
+    }
+}
+
+/// meshio's points and cells against ours: the points are ours in our order, and each cell's
+/// node k is our element's (or boundary facet's) node at the lattice point of the reference
+/// coordinates that the probe took from the tool defining meshio's order for the cell type
+/// (Gmsh's element or VTK's cell). Volume cells come in our element order; boundary cells are
+/// found by their node set.
+fn assert_meshio_cells_are_ours(v: &Value, ho: &HighOrderMesh, ctx: &str) {
+    let p = ho.order;
+    let tol = 1e-14 * scale(ho);
+    let coords = v["coords"].as_array().unwrap();
+    assert_eq!(coords.len(), ho.nodes.len(), "{ctx}: points");
+    for (i, (got, &want)) in coords.iter().zip(&ho.nodes).enumerate() {
+        assert_point(&format!("{ctx}: point {i}"), got, want, tol);
+    }
+    let facets: HashMap<Vec<u32>, usize> = (0..ho.n_boundary())
+        .map(|f| {
+            let n = ho.nodes_per_facet();
+            let mut key = ho.boundary[f * n..(f + 1) * n].to_vec();
+            key.sort_unstable();
+            (key, f)
+        })
+        .collect();
+    let (mut elements, mut boundary) = (0, 0);
+    for block in v["blocks"].as_array().unwrap() {
+        let dim = block["dim"].as_u64().unwrap() as usize;
+        let ctx = format!("{ctx} {}", block["type"]);
+        let lattice: Vec<Lattice> = block["ref"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|r| lattice_at(r, p, &ctx))
+            .collect();
+        for cell in block["conn"].as_array().unwrap() {
+            let cell: Vec<u32> = cell
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|n| n.as_u64().unwrap() as u32)
+                .collect();
+            let (ours, what) = if dim == ho.dim {
+                elements += 1;
+                (
+                    ho.element(elements - 1),
+                    format!("element {}", elements - 1),
+                )
+            } else {
+                assert_eq!(dim + 1, ho.dim, "{ctx}");
+                boundary += 1;
+                let mut key = cell.clone();
+                key.sort_unstable();
+                let f = *facets
+                    .get(&key)
+                    .unwrap_or_else(|| panic!("{ctx}: cell {cell:?} is none of our facets"));
+                let n = ho.nodes_per_facet();
+                (&ho.boundary[f * n..(f + 1) * n], format!("facet {f}"))
+            };
+            let want: Vec<u32> = lattice
+                .iter()
+                .map(|&l| ours[l[0] + (p + 1) * (l[1] + (p + 1) * l[2])])
+                .collect();
+            assert_eq!(cell, want, "{ctx}: {what}");
+        }
+    }
+    assert!(
+        elements == ho.n_elements() || elements == 0,
+        "{ctx}: {elements} volume cells"
+    );
+    assert!(
+        boundary == ho.n_boundary() || boundary == 0,
+        "{ctx}: {boundary} boundary cells"
+    );
+    assert!(elements + boundary > 0, "{ctx}: no cells");
+}
+
 /// `pyfr import` reads every ASCII MSH we write with the default options, 2D and 3D, MSH 4.1
 /// and 2.2, at the orders PyFR has (1–4): element counts and boundary groups (names and
-/// faces) are ours. Beyond order 4 PyFR has no element type, and says so.
+/// faces) are ours, and so are the node coordinates of every element in PyFR's order (see
+/// [`assert_pyfr_nodes_are_ours`]), as Gmsh's map of the same file is at PyFR's reference
+/// points. Beyond order 4 PyFR has no element type, and says so.
 #[test]
 fn pyfr_imports_our_msh_files() {
-    if !common::python_has("pyfr.readers.gmsh", "pyfr_imports_our_msh_files") {
+    if !common::python_has("pyfr.readers.gmsh", "pyfr_imports_our_msh_files")
+        || !common::have_gmsh("pyfr_imports_our_msh_files")
+    {
         return;
     }
     let mut args: Vec<PathBuf> = Vec::new();
@@ -241,9 +422,8 @@ fn pyfr_imports_our_msh_files() {
                     .collect();
                 expect.push((
                     format!("{label} p={order} {version:?}"),
-                    order,
                     ety,
-                    ho.n_elements(),
+                    ho.clone(),
                     groups,
                 ));
             }
@@ -251,15 +431,20 @@ fn pyfr_imports_our_msh_files() {
     }
     let refs: Vec<&Path> = args.iter().map(PathBuf::as_path).collect();
     let results = probe("pyfr", &refs);
-    for (v, (ctx, order, ety, ne, groups)) in results.as_array().unwrap().iter().zip(&expect) {
-        if *order > 4 {
+    for (v, (ctx, ety, ho, groups)) in results.as_array().unwrap().iter().zip(&expect) {
+        if ho.order > 4 {
             let err = v["error"].as_str().unwrap_or_else(|| panic!("{ctx}: {v}"));
             assert!(err.contains("Unsupported element type"), "{ctx}: {err}");
             continue;
         }
         let v = ok(v, ctx);
-        assert_eq!(v["eles"][ety].as_u64(), Some(*ne as u64), "{ctx}");
+        assert_eq!(
+            v["eles"][ety].as_u64(),
+            Some(ho.n_elements() as u64),
+            "{ctx}"
+        );
         assert_eq!(&lowercase_counts(&v["bcs"]), groups, "{ctx}");
+        assert_pyfr_nodes_are_ours(v, ho, ctx);
     }
 }
 
@@ -320,11 +505,16 @@ fn mfem_reads_our_vtu_and_msh() {
 }
 
 /// meshio reads our MSH (4.1 and 2.2) with every cell and our named groups, and the VTU files
-/// whose node order no VTK version changed (2D, linear 3D, boundary files). A 3D Lagrange VTU
-/// (file version 2.2) is refused with an error, never misread.
+/// whose node order no VTK version changed (2D, linear 3D, boundary files), with our points
+/// and, node for node in meshio's order of each cell type, our cells (see
+/// [`assert_meshio_cells_are_ours`]). A 3D Lagrange VTU (file version 2.2) is refused with an
+/// error, never misread.
 #[test]
 fn meshio_reads_our_files() {
-    if !common::python_has("meshio", "meshio_reads_our_files") {
+    if !common::python_has("meshio", "meshio_reads_our_files")
+        || !common::have_gmsh("meshio_reads_our_files")
+        || !common::python_has("vtkmodules", "meshio_reads_our_files")
+    {
         return;
     }
     // Per file: cells, groups that must be there, whether meshio must refuse it.
@@ -341,7 +531,12 @@ fn meshio_reads_our_files() {
                     &format!("meshio_{label}_{order}_{version:?}.msh"),
                     version,
                 ));
-                expect.push((ho.n_elements() + ho.n_boundary(), groups.clone(), false));
+                expect.push((
+                    ho.n_elements() + ho.n_boundary(),
+                    groups.clone(),
+                    false,
+                    ho.clone(),
+                ));
             }
             let vtu = scratch(&format!("meshio_{label}_{order}.vtu"));
             let bvtu = scratch(&format!("meshio_{label}_{order}_boundary.vtu"));
@@ -351,14 +546,19 @@ fn meshio_reads_our_files() {
             };
             write_high_order(&ho, &vtu, &options, &[]).unwrap();
             files.push(vtu);
-            expect.push((ho.n_elements(), vec![], ho.dim == 3 && order >= 2));
+            expect.push((
+                ho.n_elements(),
+                vec![],
+                ho.dim == 3 && order >= 2,
+                ho.clone(),
+            ));
             files.push(bvtu);
-            expect.push((ho.n_boundary(), vec![], false));
+            expect.push((ho.n_boundary(), vec![], false, ho));
         }
     }
     let refs: Vec<&Path> = files.iter().map(PathBuf::as_path).collect();
     let results = probe("meshio", &refs);
-    for (v, (file, (cells, groups, refused))) in results
+    for (v, (file, (cells, groups, refused, ho))) in results
         .as_array()
         .unwrap()
         .iter()
@@ -387,6 +587,7 @@ fn meshio_reads_our_files() {
                 "{ctx}: no group {name}: {names:?}"
             );
         }
+        assert_meshio_cells_are_ours(v, ho, &ctx);
     }
 }
 

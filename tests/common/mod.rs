@@ -205,6 +205,31 @@ pub fn polyspline() -> Command {
     Command::new(env!("CARGO_BIN_EXE_polyspline"))
 }
 
+/// `polyspline curve INPUT -o OUT --report R ARGS…` with `R` = `OUT` with the extension
+/// `json` (the old `OUT` and `R` removed first): the command's output, and the report's path
+/// when the command succeeded.
+pub fn curve_with_report(
+    input: &Path,
+    out: &Path,
+    args: &[&str],
+) -> (std::process::Output, Option<PathBuf>) {
+    let report = out.with_extension("json");
+    let _ = std::fs::remove_file(out);
+    let _ = std::fs::remove_file(&report);
+    let run = polyspline()
+        .arg("curve")
+        .arg(input)
+        .arg("-o")
+        .arg(out)
+        .arg("--report")
+        .arg(&report)
+        .args(args)
+        .output()
+        .unwrap();
+    let ok = run.status.success();
+    (run, ok.then_some(report))
+}
+
 /// `mesh` written as it is (order 1) to `path`, in the format of its extension.
 pub fn write_linear(mesh: &polyspline::mesh::LinearMesh, path: &Path) {
     let topo = polyspline::mesh::Topology::build(mesh);

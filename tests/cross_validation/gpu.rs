@@ -798,49 +798,94 @@ fn curve_gpu_matches_cpu() {
                 .unwrap()
                 .bounding_box();
             let diag = (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f64>().sqrt();
-            let worst = common::max_coordinate_gap(&hc.nodes, &hg.nodes);
-            // Both solve the fit to rel_tol 1e-10; node positions then agree far below 1e-5 of
-            // the diagonal.
-            if rc.damped_control_points == rg.damped_control_points {
-                assert!(
-                    worst <= 1e-5 * diag,
-                    "{mesh} {prec:?}: nodes differ by {worst:e} (diagonal {diag:e}); {outputs}"
-                );
-            } else {
-                // The certified line search is a discrete decision per element (lower bound >
-                // threshold); solutions that differ by rounding flip a few near-threshold
-                // elements and so the damping of their control points. Both are certified;
-                // the damping must agree to a few percent.
-                let (a, b) = (rc.damped_control_points, rg.damped_control_points);
-                assert!(
-                    a.abs_diff(b) * 20 <= a.max(b),
-                    "{mesh} {prec:?}: damped {a} vs {b}; {outputs}"
-                );
-                // The nodes are still compared: away from the flipped elements they agree as
-                // in the equal case, and everywhere they stay within the damping's reach
-                // (a damped control point moves back toward the straight mesh, by less than
-                // the mesh's size).
-                let apart = hc
-                    .nodes
-                    .iter()
-                    .zip(&hg.nodes)
-                    .filter(|(p, q)| common::dist(**p, **q) > 1e-5 * diag)
-                    .count();
-                assert!(
-                    apart * 10 <= hc.nodes.len(),
-                    "{mesh} {prec:?}: {apart} of {} nodes differ; {outputs}",
-                    hc.nodes.len()
-                );
-                assert!(
-                    worst <= 0.05 * diag,
-                    "{mesh} {prec:?}: nodes differ by {worst:e} (diagonal {diag:e}); {outputs}"
-                );
-                println!(
-                    "{mesh} {prec:?}: damped control points {a} (CPU) vs {b} (GPU), nodes differ by {worst:e}"
-                );
-            }
+            runs_agree(
+                &format!("{mesh} {prec:?}"),
+                (rc.damped_control_points, &hc.nodes),
+                (rg.damped_control_points, &hg.nodes),
+                diag,
+                &outputs,
+            );
         }
     }
+}
+
+/// The CPU run (damped control points, nodes) and the GPU run of one mesh agree. Both solve the
+/// fit to rel_tol 1e-10, so with the same damping their nodes agree far below 1e-5 of the
+/// diagonal. The certified line search is a discrete decision per element (lower bound >
+/// threshold): solutions that differ by rounding may flip a few near-threshold elements and so
+/// the damping of their control points. Then the damping must agree to 5 %, at most a tenth of
+/// the nodes may differ by more than 1e-5 of the diagonal, and none by more than 5 % of it (a
+/// damped control point moves back toward the straight mesh, by less than the mesh's size).
+fn runs_agree(
+    ctx: &str,
+    (a, cpu): (usize, &[[f64; 3]]),
+    (b, gpu): (usize, &[[f64; 3]]),
+    diag: f64,
+    outputs: &str,
+) {
+    assert_eq!(cpu.len(), gpu.len(), "{ctx}: node counts; {outputs}");
+    let worst = common::max_coordinate_gap(cpu, gpu);
+    if a == b {
+        assert!(
+            worst <= 1e-5 * diag,
+            "{ctx}: nodes differ by {worst:e} (diagonal {diag:e}); {outputs}"
+        );
+        return;
+    }
+    assert!(
+        a.abs_diff(b) * 20 <= a.max(b),
+        "{ctx}: damped {a} vs {b}; {outputs}"
+    );
+    let apart = cpu
+        .iter()
+        .zip(gpu)
+        .filter(|(p, q)| common::dist(**p, **q) > 1e-5 * diag)
+        .count();
+    assert!(
+        apart * 10 <= cpu.len(),
+        "{ctx}: {apart} of {} nodes differ; {outputs}",
+        cpu.len()
+    );
+    assert!(
+        worst <= 0.05 * diag,
+        "{ctx}: nodes differ by {worst:e} (diagonal {diag:e}); {outputs}"
+    );
+    println!("{ctx}: damped control points {a} (CPU) vs {b} (GPU), nodes differ by {worst:e}");
+}
+
+/// [`runs_agree`] when the two runs damp different numbers of control points (which the
+/// lavapipe runs of [`curve_gpu_matches_cpu`] do not reach): the nodes are still compared.
+/// Runs made here: 100 nodes on a unit diagonal; a few moved within the damping's reach pass,
+/// too many moved, one moved too far, or too different a damping fail.
+#[test]
+fn cpu_gpu_comparison_with_differing_damping_compares_nodes() {
+    let cpu: Vec<[f64; 3]> = (0..100).map(|i| [i as f64 / 100.0, 0.0, 0.0]).collect();
+    let moved = |n: usize, by: f64| {
+        let mut g = cpu.clone();
+        for x in g.iter_mut().take(n) {
+            x[1] += by;
+        }
+        g
+    };
+    let fails = |a: usize, b: usize, gpu: Vec<[f64; 3]>| {
+        let cpu = cpu.clone();
+        std::panic::catch_unwind(move || runs_agree("made", (a, &cpu), (b, &gpu), 1.0, "")).is_err()
+    };
+    assert!(!fails(100, 98, moved(5, 0.01)), "a few nodes within reach");
+    assert!(!fails(100, 100, moved(100, 1e-7)), "same damping, rounding");
+    assert!(
+        fails(100, 98, moved(20, 0.01)),
+        "a fifth of the nodes moved"
+    );
+    assert!(
+        fails(100, 98, moved(1, 0.2)),
+        "one node beyond the damping's reach"
+    );
+    assert!(fails(100, 80, moved(0, 0.0)), "damping 20 % apart");
+    assert!(
+        fails(100, 100, moved(1, 1e-3)),
+        "same damping, one node off"
+    );
 }
 
 /// The n³-hex grid: GPU evaluation (order-2 sampling) and certification, checked against the

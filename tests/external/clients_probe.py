@@ -3,9 +3,16 @@
 each tool saw, as one JSON object on stdout.
 
 usage:
-  clients_probe.py pyfr MESH.msh OUT.pyfrm ...  PyFR's importer (`pyfr import`), then its file
+  clients_probe.py pyfr MESH.msh OUT.pyfrm ...  PyFR's importer (`pyfr import`), then its file:
+                                                counts, and per element type the node
+                                                coordinates of every element in PyFR's order,
+                                                PyFR's reference points and Gmsh's map of the
+                                                same file evaluated there
   clients_probe.py mfem MESH ...                PyMFEM: counts, attributes, volume, min det J
-  clients_probe.py meshio MESH ...              meshio: cells per type, physical groups
+  clients_probe.py meshio MESH ...              meshio: cells per type, physical groups, points,
+                                                and per cell block its connectivity and the
+                                                reference coordinates of its nodes in the
+                                                convention meshio uses for the type
   clients_probe.py pyhope MESH.msh DIR          PyHOPE converts MESH to HOPR HDF5 in DIR; counts,
                                                 boundary names, NGeo and the volume of its nodes
 
@@ -20,17 +27,23 @@ import sys
 import numpy as np
 
 
+# PyFR's default tolerance below which `pyfr import` snaps an element's nodes to its linear
+# interpolant (passed explicitly so that the tests know it).
+PYFR_LINTOL = 1e-5
+
+
 def pyfr(mesh, out):
     import h5py
 
     # PyFR's own command line, as a user runs it.
-    run = subprocess.run([sys.executable, "-m", "pyfr", "import", mesh, out],
-                         capture_output=True, text=True)
+    run = subprocess.run([sys.executable, "-m", "pyfr", "import", "-l", str(PYFR_LINTOL),
+                          mesh, out], capture_output=True, text=True)
     if run.returncode != 0:
         return {"error": f"pyfr import failed: {run.stderr.strip()[-2000:]}"}
     with h5py.File(out, "r") as f:
         codec = [c.decode() for c in f["codec"][:]]
-        eles, bcs, curved = {}, {}, 0
+        location = np.asarray(f["nodes"]["location"])
+        eles, bcs, curved, geometry = {}, {}, 0, {}
         for etype, data in f["eles"].items():
             eles[etype] = int(data.shape[0])
             curved += int(np.count_nonzero(data["curved"]))
@@ -41,8 +54,30 @@ def pyfr(mesh, out):
                 name = codec[int(c)]
                 if name.startswith("bc/"):
                     bcs[name[3:]] = bcs.get(name[3:], 0) + 1
+            pts = np.asarray(data.attrs["pts"], dtype=float)
+            coords = location[np.asarray(data["nodes"])]
+            geometry[etype] = {
+                "pts": pts.tolist(),
+                "coords": coords.tolist(),
+                "curved": np.asarray(data["curved"]).tolist(),
+                "gmsh": gmsh_at(mesh, pts, coords.shape[-1]).tolist(),
+            }
         return {"eles": eles, "bcs": bcs, "curved": curved,
-                "nodes": int(f["nodes"].shape[0])}
+                "nodes": int(f["nodes"].shape[0]), "lintol": PYFR_LINTOL,
+                "geometry": geometry}
+
+
+def gmsh_at(mesh, pts, ndim):
+    """Gmsh's own map of every volume element of `mesh` (file order) at the reference points
+    `pts` (Gmsh's quad/hex reference is PyFR's, [-1,1]^d): [element][point][coordinate]."""
+    import gmsh
+    from gmsh_volume import Volume, session
+
+    with session():
+        vol = Volume(mesh)
+        _, bf, _ = gmsh.model.mesh.getBasisFunctions(vol.etype, vol.local(pts), "Lagrange")
+        bf = np.asarray(bf).reshape(len(pts), vol.nnodes)
+        return np.einsum("pk,ekx->epx", bf, vol.coords(vol.conn))[..., :ndim]
 
 
 def mfem_probe(mesh):
@@ -75,10 +110,68 @@ def meshio_probe(mesh):
     # The format's own reader, so that its error (not meshio's generic one) is reported.
     m = meshio.vtu.read(mesh) if mesh.endswith(".vtu") else meshio.read(mesh)
     cells = {}
+    blocks = []
     for block in m.cells:
         cells[block.type] = cells.get(block.type, 0) + len(block.data)
+        blocks.append({"type": block.type, "dim": int(block.dim),
+                       "conn": np.asarray(block.data).tolist(),
+                       "ref": reference(mesh, block.type, len(block.data[0]))})
     groups = {name: [int(v[0]), int(v[1])] for name, v in m.field_data.items()}
-    return {"points": int(len(m.points)), "cells": cells, "groups": groups}
+    return {"points": int(len(m.points)), "cells": cells, "groups": groups,
+            "coords": np.asarray(m.points).tolist(), "blocks": blocks}
+
+
+def reference(mesh, mtype, nnodes):
+    """Reference coordinates in [0,1]^d of the nodes of meshio's cell type `mtype` read from
+    `mesh`, in the order meshio gives them, from the tool that defines that order: VTK's cell
+    for VTU files and for the MSH types meshio reorders to VTK's order (hexahedron27, ...),
+    Gmsh's element for the other MSH types."""
+    from meshio._vtk_common import meshio_to_vtk_type
+    from meshio.gmsh.common import _gmsh_to_meshio_order, _meshio_to_gmsh_type
+
+    ident = np.arange(nnodes)[None, :]
+    vtk_order = mesh.endswith(".vtu") or not np.array_equal(
+        _gmsh_to_meshio_order(mtype, ident), ident)
+    if vtk_order:
+        return vtk_reference(mesh, meshio_to_vtk_type[mtype], nnodes)
+    import gmsh
+    from gmsh_volume import session
+
+    with session():
+        props = gmsh.model.mesh.getElementProperties(_meshio_to_gmsh_type[mtype])
+    dim, n = props[1], props[3]
+    assert n == nnodes, (mtype, n, nnodes)
+    ref = np.asarray(props[4]).reshape(n, dim)
+    # Gmsh's line, quad and hex references are [-1,1]^d.
+    return ((ref + 1.0) / 2.0).tolist()
+
+
+def vtk_reference(mesh, vtk_type, nnodes):
+    """VTK's parametric coordinates ([0,1]^d) of the nodes of its cell type `vtk_type` with
+    `nnodes` points: a cell of that type as VTK's reader reads it from `mesh` (Lagrange cells
+    take their order from their point count), else VTK's fixed cell of the type."""
+    from vtkmodules.vtkCommonDataModel import vtkGenericCell
+
+    cell = None
+    if mesh.endswith(".vtu"):
+        from vtkmodules.vtkIOXML import vtkXMLUnstructuredGridReader
+
+        reader = vtkXMLUnstructuredGridReader()
+        reader.SetFileName(mesh)
+        reader.Update()
+        grid = reader.GetOutput()
+        for i in range(grid.GetNumberOfCells()):
+            if grid.GetCellType(i) == vtk_type:
+                cell = grid.GetCell(i)
+                break
+    if cell is None:
+        cell = vtkGenericCell()
+        cell.SetCellType(vtk_type)
+    n = cell.GetNumberOfPoints()
+    assert n == nnodes, (vtk_type, n, nnodes)
+    dim = cell.GetCellDimension()
+    pc = np.asarray(cell.GetParametricCoords()).reshape(n, 3)
+    return pc[:, :dim].tolist()
 
 
 def pyhope(mesh, out_dir):

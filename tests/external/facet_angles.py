@@ -18,28 +18,23 @@ import sys
 import gmsh
 import numpy as np
 
+from gmsh_volume import Volume, session
+
 
 def measure(path):
-    gmsh.clear()
-    gmsh.open(path)
-    dim = gmsh.model.getDimension()
-    types, tags, node_tags = gmsh.model.mesh.getElements(dim)
-    assert len(types) == 1, "one volume element type expected"
-    etype = types[0]
-    _, _, order, nnodes, ref, nprim = gmsh.model.mesh.getElementProperties(etype)
-    ref = np.array(ref).reshape(-1, dim)[:nprim]
-    conn = np.array(node_tags[0], dtype=np.int64).reshape(-1, nnodes)
+    vol = Volume(path)
+    dim, ref, conn = vol.dim, vol.ref, vol.conn
     ne = conn.shape[0]
     # Reference facets: (direction k, side value ±1, corner indices), centre coordinates.
     facets = []
     for k in range(dim):
         for s in (-1.0, 1.0):
-            corners = [i for i in range(nprim) if abs(ref[i][k] - s) < 1e-12]
+            corners = [i for i in range(vol.nprim) if abs(ref[i][k] - s) < 1e-12]
             centre = [0.0, 0.0, 0.0]
             centre[k] = s
             facets.append((k, s, corners, centre))
     loc = [c for f in facets for c in f[3]]
-    jac, _, _ = gmsh.model.mesh.getJacobians(etype, loc)
+    jac, _, _ = gmsh.model.mesh.getJacobians(vol.etype, loc)
     # Per element, per facet point: 3×3 matrix stored by column (d x / d u_k = column k).
     jac = np.array(jac).reshape(ne, len(facets), 3, 3)
     seen = {}
@@ -57,9 +52,7 @@ def measure(path):
             else:
                 seen[key] = d
     angles = np.array(angles) if angles else np.zeros(1)
-    gauss, _ = gmsh.model.mesh.getIntegrationPoints(etype, "Gauss%d" % (2 * order + 2))
-    _, dets, _ = gmsh.model.mesh.getJacobians(etype, gauss)
-    dets = np.array(dets).reshape(ne, -1)
+    dets = vol.gauss_dets(signed=False)
     ratio = dets.min(axis=1) / dets.max(axis=1)
     return {
         "file": path,
@@ -74,10 +67,8 @@ def measure(path):
 
 
 def main():
-    gmsh.initialize(["-nopopup"])
-    gmsh.option.setNumber("General.Terminal", 0)
-    out = [measure(p) for p in sys.argv[1:]]
-    gmsh.finalize()
+    with session():
+        out = [measure(p) for p in sys.argv[1:]]
     print(json.dumps(out))
 
 

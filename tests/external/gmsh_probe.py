@@ -9,10 +9,8 @@ Prints a JSON list, one object per job: {"elements", "type_name", "order",
 "points": [[x, y, z], ...], "min_det_jac", "max_det_jac", "dets": [...], "boundary_elements",
 "physical_groups": {"dim tag": name}}. "min_det_jac"/"max_det_jac" come from a Gauss rule of
 degree 2p+2 and "dets" are at the "det_at" points; all are Gmsh's determinants with respect to
-its reference element [-1,1]^d. They are signed in 2D too: Gmsh's own 2D determinant is the
-length of the cross product (never negative), so a quad's is taken here from the first two
-rows of Gmsh's Jacobian matrix (dx/du dy/dv - dy/du dx/dv), which is negative for a mirrored
-(clockwise) quad.
+its reference element [-1,1]^d, signed in 2D too (see gmsh_volume.py: a mirrored quad's are
+negative).
 """
 import json
 import sys
@@ -20,50 +18,31 @@ import sys
 import gmsh
 import numpy as np
 
-
-def signed(dim, jacs, dets):
-    """Gmsh's determinants, with the sign of the in-plane Jacobian in 2D (see above)."""
-    if dim == 3:
-        return np.asarray(dets)
-    j = np.asarray(jacs).reshape(-1, 9)
-    return j[:, 0] * j[:, 4] - j[:, 1] * j[:, 3]
+from gmsh_volume import Volume, session
 
 
 def probe(path, probes, det_at):
-    gmsh.clear()
-    gmsh.open(path)
-    dim = gmsh.model.getDimension()
-    types, tags, node_tags = gmsh.model.mesh.getElements(dim)
-    assert len(types) == 1, "one volume element type expected"
-    etype = types[0]
-    name, edim, order, nnodes, ref, _ = gmsh.model.mesh.getElementProperties(etype)
-    conn = np.array(node_tags[0], dtype=np.int64).reshape(-1, nnodes)
-    all_tags, coords, _ = gmsh.model.mesh.getNodes()
-    pos = {int(t): coords[3 * i:3 * i + 3] for i, t in enumerate(all_tags)}
+    vol = Volume(path)
+    dim = vol.dim
     points = []
     for e, u, v, w in probes:
-        local = [2 * u - 1, 2 * v - 1, 2 * w - 1 if dim == 3 else 0.0]
-        _, bf, _ = gmsh.model.mesh.getBasisFunctions(etype, local, "Lagrange")
-        x = np.zeros(3)
-        for k in range(nnodes):
-            x += bf[k] * np.array(pos[int(conn[e][k])])
-        points.append(x.tolist())
-    loc, _ = gmsh.model.mesh.getIntegrationPoints(etype, "Gauss%d" % (2 * order + 2))
-    jacs, dets, _ = gmsh.model.mesh.getJacobians(etype, loc)
-    dets = signed(dim, jacs, dets)
+        _, bf, _ = gmsh.model.mesh.getBasisFunctions(
+            vol.etype, vol.local([2 * u - 1, 2 * v - 1, 2 * w - 1][:dim]), "Lagrange")
+        points.append((np.asarray(bf) @ vol.coords(vol.conn[e])).tolist())
+    dets = vol.gauss_dets()
     at = []
     for e, u, v, w in det_at:
-        local = [2 * u - 1, 2 * v - 1, 2 * w - 1 if dim == 3 else 0.0]
-        j, d, _ = gmsh.model.mesh.getJacobian(int(tags[0][e]), local)
-        at.append(float(signed(dim, j, d)[0]))
+        j, d, _ = gmsh.model.mesh.getJacobian(
+            int(vol.tags[e]), vol.local([2 * u - 1, 2 * v - 1, 2 * w - 1][:dim]))
+        at.append(float(vol.signed(j, d)[0]))
     _, btags, _ = gmsh.model.mesh.getElements(dim - 1)
     groups = {}
     for d, t in gmsh.model.getPhysicalGroups():
         groups["%d %d" % (d, t)] = gmsh.model.getPhysicalName(d, t)
     return {
-        "elements": int(conn.shape[0]),
-        "type_name": name,
-        "order": int(order),
+        "elements": int(vol.conn.shape[0]),
+        "type_name": vol.name,
+        "order": vol.order,
         "points": points,
         "min_det_jac": float(np.min(dets)),
         "max_det_jac": float(np.max(dets)),
@@ -75,10 +54,9 @@ def probe(path, probes, det_at):
 
 def main():
     jobs = json.load(open(sys.argv[1]))["jobs"]
-    gmsh.initialize()
-    gmsh.option.setNumber("General.Terminal", 0)
-    print(json.dumps([probe(j["file"], j["probes"], j.get("det_at", [])) for j in jobs]))
-    gmsh.finalize()
+    with session():
+        out = [probe(j["file"], j["probes"], j.get("det_at", [])) for j in jobs]
+    print(json.dumps(out))
 
 
 if __name__ == "__main__":

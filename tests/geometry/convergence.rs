@@ -384,9 +384,8 @@ fn shapes() -> Vec<Shape> {
 }
 
 fn dir() -> PathBuf {
-    let d = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("convergence");
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    // The running test's own directory: tests run in parallel and share file names.
+    common::test_dir()
 }
 
 /// Errors per shape and mode (one per level), the mesh sizes h (largest boundary edge) and the

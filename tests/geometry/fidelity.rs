@@ -9,7 +9,8 @@
 //!   O-grid disk, torus and cylinder and the unstructured plate (three levels) and ball (every
 //!   element Q2 on the ball);
 //! * `--fit energy` never leaves the boundary more than 1.5× further from the surface than the
-//!   least-squares fit it starts from (RMS and max).
+//!   least-squares fit it starts from (RMS and max), and its output is valid by Gmsh's
+//!   Jacobians.
 //!
 //! Skipped visibly without Gmsh's Python module (a failure under `CI=true`).
 
@@ -20,9 +21,8 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 pub(super) fn dir() -> PathBuf {
-    let d = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("fidelity");
-    std::fs::create_dir_all(&d).unwrap();
-    d
+    // The running test's own directory: tests run in parallel and share file names.
+    common::test_dir()
 }
 
 const SCRIPT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/scripts/fidelity_shapes.py");
@@ -134,7 +134,7 @@ fn boundary_within_five_times_gmsh_with_cad() {
 
 /// `--fit energy` keeps the least-squares fit's boundary: within 1.5× (RMS and max) on the
 /// O-grid disk, the unstructured plate (levels 1 and 2: the energy starts from the fit with
-/// the misfit runs made Q2) and the ball.
+/// the misfit runs made Q2) and the ball; Gmsh finds its det J positive.
 #[test]
 fn energy_fit_keeps_the_boundary() {
     if !common::have_gmsh("energy_fit_keeps_the_boundary") {
@@ -160,6 +160,13 @@ fn energy_fit_keeps_the_boundary() {
         assert!(
             max1 <= 1.5 * max0,
             "{shape} level {level}: energy max {max1:.3e} vs {max0:.3e}"
+        );
+        // Valid by Gmsh's Jacobians, signed in 2D (a mirrored quad fails).
+        let jobs = dir().join(format!("{shape}_{level}_energy_jobs.json"));
+        let (lo, hi, _) = common::gmsh_det_range(&en, &jobs).expect("Gmsh checked above");
+        assert!(
+            lo > 0.0,
+            "{shape} level {level}: Gmsh finds the energy fit's det J in [{lo:e}, {hi:e}]"
         );
     }
 }

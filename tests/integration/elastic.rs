@@ -289,7 +289,7 @@ fn hold_back_makes_a_tangled_mesh_valid_and_touches_only_its_neighbourhood() {
 
 /// The elastic analogy on the boundary-layer C-grid around NACA 0012 (aspect ratios near
 /// 10⁴, where block-Jacobi CG stalls): the system is solved to rounding, the mesh is
-/// certified, and `compare` keeps every method.
+/// certified by us and valid by Gmsh's Jacobians, and `compare` keeps every method.
 #[test]
 fn elastic_analogy_runs_on_the_naca0012_boundary_layer_grid() {
     let out = polyspline_ok([
@@ -315,6 +315,13 @@ fn elastic_analogy_runs_on_the_naca0012_boundary_layer_grid() {
     assert_eq!(info.solver, ElasticSolver::Cholesky);
     assert!(info.cg.rel_residual < 1e-8, "{:e}", info.cg.rel_residual);
     assert!(el.report.min_det_jacobian_bound.unwrap() > 0.0);
+    // Valid by Gmsh's Jacobians too, signed (a mirrored quad fails).
+    let out = crate::common::test_dir().join("n0012_elastic.msh");
+    polyspline::pipeline::write_high_order(&el.ho, &out, &Default::default(), &[]).unwrap();
+    let jobs = out.with_extension("json");
+    if let Some((lo, hi, _)) = crate::common::gmsh_det_range(&out, &jobs) {
+        assert!(lo > 0.0, "Gmsh finds det J in [{lo:e}, {hi:e}]");
+    }
 }
 
 #[test]
@@ -591,7 +598,13 @@ fn curve_method_elastic_writes_a_valid_mesh_with_the_iga_boundary() {
     assert!((dev_e - dev_i).abs() <= 1e-6 * dev_i, "{dev_e} vs {dev_i}");
     assert_eq!(re["elastic"]["solver"], "cholesky");
     assert!(re["elastic"]["cg"]["rel_residual"].as_f64().unwrap() < 1e-10);
-    // The written file reads back as a valid order-3 mesh (our `check`).
+    // The written file reads back as a valid order-3 mesh: Gmsh's Jacobians, and our `check`.
+    if let Some((lo, hi, _)) = crate::common::gmsh_det_range(&out_e, &dir.join("jobs.json")) {
+        assert!(
+            lo > 0.0,
+            "Gmsh finds det J in [{lo:e}, {hi:e}] (signed in 2D)"
+        );
+    }
     let chk = polyspline_ok([OsString::from("check"), "--json".into(), out_e.into()]);
     let c: serde_json::Value = serde_json::from_slice(&chk.stdout).unwrap();
     assert_eq!(c["invalid"], 0);

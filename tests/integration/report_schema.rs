@@ -4,7 +4,7 @@
 //! (with an adapter) the GPU backend validate, and every object of the schema is closed and
 //! met in one of them, so a report field added without documenting it fails here.
 
-use crate::common::{self, polyspline, python, python_has, scratch_in};
+use crate::common::{self, python, python_has, scratch_in};
 use std::path::{Path, PathBuf};
 
 const ROOT: &str = env!("CARGO_MANIFEST_DIR");
@@ -13,23 +13,8 @@ const ROOT: &str = env!("CARGO_MANIFEST_DIR");
 /// run's stderr.
 fn report_of(name: &str, input: &str, args: &[&str]) -> Result<PathBuf, String> {
     let out = scratch_in("report_schema", &format!("{name}.msh"));
-    let report = out.with_extension("json");
-    let _ = std::fs::remove_file(&report);
-    let run = polyspline()
-        .arg("curve")
-        .arg(Path::new(ROOT).join(input))
-        .arg("-o")
-        .arg(&out)
-        .arg("--report")
-        .arg(&report)
-        .args(args)
-        .output()
-        .unwrap();
-    if run.status.success() {
-        Ok(report)
-    } else {
-        Err(String::from_utf8_lossy(&run.stderr).into_owned())
-    }
+    let (run, report) = common::curve_with_report(&Path::new(ROOT).join(input), &out, args);
+    report.ok_or_else(|| String::from_utf8_lossy(&run.stderr).into_owned())
 }
 
 #[test]
