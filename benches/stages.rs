@@ -73,6 +73,12 @@ fn stages(c: &mut Criterion) {
         for (name, pre) in [
             ("cg_block_jacobi", CgPreconditioner::default()),
             ("cg_jacobi", CgPreconditioner::Jacobi),
+            (
+                "cg_block_sgs",
+                CgPreconditioner::BlockSgs {
+                    size: polyspline::solve::block_jacobi::DEFAULT_BLOCK,
+                },
+            ),
         ] {
             let params = CgParams {
                 preconditioner: pre,

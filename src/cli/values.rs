@@ -186,6 +186,7 @@ value_enum! {
 pub(super) enum CgPreconditioner {
     Jacobi,
     BlockJacobi,
+    BlockSgs,
 }
 
 impl From<CgPreconditioner> for LibCgPreconditioner {
@@ -193,6 +194,9 @@ impl From<CgPreconditioner> for LibCgPreconditioner {
         match value {
             CgPreconditioner::Jacobi => LibCgPreconditioner::Jacobi,
             CgPreconditioner::BlockJacobi => LibCgPreconditioner::BlockJacobi {
+                size: DEFAULT_BLOCK,
+            },
+            CgPreconditioner::BlockSgs => LibCgPreconditioner::BlockSgs {
                 size: DEFAULT_BLOCK,
             },
         }
@@ -204,6 +208,7 @@ impl From<LibCgPreconditioner> for CgPreconditioner {
         match value {
             LibCgPreconditioner::Jacobi => CgPreconditioner::Jacobi,
             LibCgPreconditioner::BlockJacobi { .. } => CgPreconditioner::BlockJacobi,
+            LibCgPreconditioner::BlockSgs { .. } => CgPreconditioner::BlockSgs,
         }
     }
 }

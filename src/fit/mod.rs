@@ -15,8 +15,8 @@
 //! G_e = Σ_i w^d_i b_i b_iᵀ + Σ_i w^r_i Σ_j b'_ij b'_ijᵀ, one SPD matrix for the three
 //! coordinates. They are solved for the displacement δ = C − C0 (K δ = F − K C0), which keeps
 //! the right-hand side small and the iteration well scaled, by preconditioned CG
-//! ([`crate::solve::pcg`]: block Jacobi on aggregates by default, point Jacobi on request) on
-//! the assembled matrix.
+//! ([`crate::solve::pcg`]: block Jacobi on aggregates by default, symmetric block Gauss–Seidel
+//! on colour-ordered aggregates or point Jacobi on request) on the assembled matrix.
 //!
 //! **Targets.** [`FitTargets::Chords`] is the paper's P_e. [`FitTargets::Smooth`] moves the
 //! midpoint targets (edge midpoints, face and cell centres) from the chords onto a local

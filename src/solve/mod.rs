@@ -2,16 +2,17 @@
 //! right-hand sides (x, y, z coordinates) solved together.
 //!
 //! Input: a [`LinOp`] (assembled matrix, matrix-free operator, or a GPU operator), a
-//! preconditioner ([`CgPreconditioner`]: point Jacobi from the diagonal, or block Jacobi on
-//! aggregates of an assembled matrix, [`block_jacobi`]), right-hand sides `b` and a start `x`. Output: `x` with ‖b − A x‖ ≤ `rel_tol`·‖b‖ per
+//! preconditioner ([`CgPreconditioner`]: point Jacobi from the diagonal, block Jacobi on
+//! aggregates of an assembled matrix, [`block_jacobi`], or symmetric block Gauss–Seidel on
+//! colour-ordered aggregates, [`blocked`]), right-hand sides `b` and a start `x`. Output: `x` with ‖b − A x‖ ≤ `rel_tol`·‖b‖ per
 //! component (or ≤ `abs_tol`), and a [`CgInfo`]; or [`CgError::NoConvergence`] with the
 //! residuals reached. Each coordinate runs its own CG recurrence (its own α, β); they share the
 //! operator application, so the matrix is read once per iteration for all three.
 //! [`pcg_coupled`] is the variant for operators that couple the components of a node
 //! (elasticity): one recurrence over all unknowns, with a caller-supplied preconditioner.
 //!
-//! [`pcg`] on an assembled matrix with block Jacobi (the fit's default) runs the same method
-//! through [`blocked`]: unknowns renumbered by aggregates, rows stored by value template,
+//! [`pcg`] on an assembled matrix with block Jacobi (the fit's default) or block Gauss–Seidel
+//! runs through [`blocked`]: unknowns renumbered by aggregates, rows stored by value template,
 //! vector updates, block solves and dot products fused into three passes per iteration.
 //! [`pcg_with`] is the generic loop (any operator, any preconditioner): [`cg_loop`], which the
 //! distributed solver runs too, with its own [`Reductions`] (sums over the processes).
@@ -51,10 +52,17 @@ pub enum CgPreconditioner {
     /// Block Jacobi on aggregates of at most `size` neighbouring unknowns
     /// ([`BlockJacobi`]); point Jacobi for operators that are not assembled.
     BlockJacobi { size: usize },
+    /// Symmetric block Gauss–Seidel on the same aggregates, ordered by colour
+    /// ([`BlockedSystem::symmetric_gauss_seidel`]); point Jacobi for operators that are not
+    /// assembled.
+    BlockSgs { size: usize },
 }
 
 impl Default for CgPreconditioner {
     fn default() -> Self {
+        // Block Gauss–Seidel needs a third of the iterations on the fit's systems but its
+        // sweeps cost about five block-Jacobi iterations each (BENCHMARKS.md), so the fewer,
+        // cheaper passes stay the default.
         CgPreconditioner::BlockJacobi {
             size: block_jacobi::DEFAULT_BLOCK,
         }
@@ -308,9 +316,12 @@ pub fn preconditioner(
     params: &CgParams,
 ) -> Result<Box<dyn Preconditioner>, CgError> {
     match (params.preconditioner, op.csr()) {
-        (CgPreconditioner::BlockJacobi { size }, Some((indptr, indices, data))) => {
-            Ok(Box::new(BlockJacobi::new(indptr, indices, data, size)?))
-        }
+        // The generic loop has no sweeps: block Gauss–Seidel runs in [`pcg`] through
+        // [`BlockedSystem`], and is block Jacobi here.
+        (
+            CgPreconditioner::BlockJacobi { size } | CgPreconditioner::BlockSgs { size },
+            Some((indptr, indices, data)),
+        ) => Ok(Box::new(BlockJacobi::new(indptr, indices, data, size)?)),
         _ => Ok(Box::new(Jacobi::new(op)?)),
     }
 }
@@ -342,8 +353,8 @@ pub(crate) fn row_dot<const N: usize>(cols: &[u32], vals: &[f64], x: &[[f64; N]]
 
 /// Solve A x = b by preconditioned CG (the preconditioner of `params`), starting from `x`.
 /// `progress(iteration, rel_residual)` is called every iteration. An assembled operator
-/// ([`LinOp::csr`]) with block Jacobi is solved by [`BlockedSystem`], anything else by
-/// [`pcg_with`].
+/// ([`LinOp::csr`]) with block Jacobi or block Gauss–Seidel is solved by [`BlockedSystem`],
+/// anything else by [`pcg_with`].
 pub fn pcg(
     op: &dyn LinOp,
     b: &[[f64; 3]],
@@ -352,10 +363,15 @@ pub fn pcg(
     progress: impl FnMut(usize, f64),
 ) -> Result<CgInfo, CgError> {
     // An assembled matrix with block Jacobi takes the reordered, fused solver (same method).
-    if let (CgPreconditioner::BlockJacobi { size }, Some((indptr, indices, data))) =
-        (params.preconditioner, op.csr())
-    {
-        return BlockedSystem::new(indptr, indices, data, size)?.solve(b, x, params, progress);
+    match (params.preconditioner, op.csr()) {
+        (CgPreconditioner::BlockJacobi { size }, Some((indptr, indices, data))) => {
+            return BlockedSystem::new(indptr, indices, data, size)?.solve(b, x, params, progress);
+        }
+        (CgPreconditioner::BlockSgs { size }, Some((indptr, indices, data))) => {
+            return BlockedSystem::symmetric_gauss_seidel(indptr, indices, data, size)?
+                .solve(b, x, params, progress);
+        }
+        _ => {}
     }
     let pre = preconditioner(op, params)?;
     pcg_with(op, pre.as_ref(), b, x, params, progress)
