@@ -179,28 +179,54 @@ def generate(kind: str, *, output: "Optional[os.PathLike[str] | str]" = None,
     return mesh
 
 
-def read(path: "os.PathLike[str] | str"):
-    """Read a mesh file with polyspline's readers (every input format, and the high-order
-    files it writes) into a ``meshio.Mesh`` (meshio's node order)."""
-    import meshio
+def read(path: "os.PathLike[str] | str", *, arrays: bool = False):
+    """Read a mesh file with polyspline's readers (every input format: Gmsh MSH, VTU/VTK,
+    Medit, MFEM, Exodus, SU2, CGNS/HDF5, Abaqus; and the high-order files it writes).
 
+    Returns a ``meshio.Mesh`` (meshio's node order; tags in ``gmsh:physical``, names in
+    ``field_data``), or with ``arrays=True`` a dict of numpy arrays without meshio:
+    ``points`` (n × 3), ``cells`` and ``cell_tags`` ({meshio cell type: array}, Gmsh's node
+    order for high-order cells) and ``tag_names`` ({tag: name}).
+    """
     kind, data = _polyspline.read(os.fspath(path))
     if kind == "high_order":
-        return _Arrays(data).to_meshio()
+        mesh = _Arrays(data)
+        if not arrays:
+            return mesh.to_meshio()
+        cells, tags = {}, {}
+        for dim, conn, t in ((mesh.dim, mesh.cells, mesh.cell_tags),
+                             (mesh.dim - 1, mesh.facets, mesh.facet_tags)):
+            if len(conn):
+                name = _meshio_type(dim, conn.shape[1])
+                cells[name] = conn
+                tags[name] = t if len(t) else np.zeros(len(conn), dtype=np.int32)
+        return {"points": mesh.points, "cells": cells, "cell_tags": tags,
+                "tag_names": mesh.tag_names}
     points, blocks, tag_names = data
     points = np.frombuffer(points, dtype=np.float64).reshape(-1, 3)
     cells, tags = [], []
     for name, n, nodes, block_tags in blocks:
         data_ = np.frombuffer(nodes, dtype=np.int64).reshape(-1, n)
-        cells.append(meshio.CellBlock(name, data_))
         t = np.frombuffer(block_tags, dtype=np.int32)
+        cells.append((name, data_))
         tags.append(t if len(t) else np.zeros(len(data_), dtype=np.int32))
+    if arrays:
+        out_cells: Dict[str, np.ndarray] = {}
+        out_tags: Dict[str, np.ndarray] = {}
+        for (name, c), t in zip(cells, tags):
+            out_cells[name] = np.concatenate([out_cells[name], c]) if name in out_cells else c
+            out_tags[name] = np.concatenate([out_tags[name], t]) if name in out_tags else t
+        return {"points": points, "cells": out_cells, "cell_tags": out_tags,
+                "tag_names": dict(tag_names)}
+    import meshio
+
     dims = {"vertex": 0, "line": 1, "triangle": 2, "quad": 2}
     field_data = {}
     for tag, name in tag_names.items():
-        dim = next((dims.get(c.type, 3) for c, t in zip(cells, tags) if tag in t), 0)
+        dim = next((dims.get(c[0], 3) for c, t in zip(cells, tags) if tag in t), 0)
         field_data[name] = np.array([tag, dim])
-    return meshio.Mesh(points, cells, cell_data={"gmsh:physical": tags}, field_data=field_data)
+    return meshio.Mesh(points, [meshio.CellBlock(n, c) for n, c in cells],
+                       cell_data={"gmsh:physical": tags}, field_data=field_data)
 
 
 # --- input -----------------------------------------------------------------------------------
