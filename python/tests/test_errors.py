@@ -115,7 +115,7 @@ def test_a_cg_breakdown_is_a_solve_error(tmp_path):
     options = dict(fit_solver="cg", cg_tol=1e-300, backend="cpu")
     with pytest.raises(polyspline.SolveError) as e:
         polyspline.curve(EXAMPLE, **options)
-    assert "conjugate gradients" in str(e.value)
+    assert type(e.value).__name__ == "SolveError" and "conjugate gradients" in str(e.value)
     assert str(e.value) == cli_error("curve", EXAMPLE, "-o", tmp_path / "o.msh", "--fit-solver",
                                      "cg", "--cg-tol", "1e-300", "--backend", "cpu")
     with pytest.raises(polyspline.SolveError):

@@ -141,6 +141,6 @@ def test_ctrl_c_during_the_cg_solve_stops_within_a_fraction_of_a_second(tmp_path
         polyspline.curve_file(BIG, out, progress=progress, **options)
     latency = time.perf_counter() - sent["t"]
     assert not out.exists()
-    assert cg_seconds > 0.8, f"the solve is too short to tell ({cg_seconds:.2f} s)"
+    assert cg_seconds > 0.5, f"the solve is too short to tell ({cg_seconds:.2f} s)"
     assert latency < 0.2, f"stopped {latency:.3f} s after SIGINT (solve: {cg_seconds:.2f} s)"
     print(f"SIGINT latency {latency * 1000:.1f} ms, uninterrupted CG {cg_seconds:.2f} s")

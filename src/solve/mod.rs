@@ -713,9 +713,9 @@ mod tests {
             };
             let full = pcg(&op, &b, &mut vec![[0.0; 3]; 400], &params, |_, _| {}).unwrap();
             assert!(full.iterations > 10, "{pre:?}: {}", full.iterations);
-            let seen = std::cell::Cell::new(0);
+            let seen = std::cell::Cell::new(0usize);
             let monitor = Cancellable {
-                progress: |i, _| seen.set(i),
+                progress: |i: usize, _: f64| seen.set(i),
                 cancelled: || seen.get() >= 7,
             };
             let e = pcg(&op, &b, &mut vec![[0.0; 3]; 400], &params, monitor).unwrap_err();
