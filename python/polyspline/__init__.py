@@ -8,6 +8,9 @@ the GIL released; Ctrl-C stops a job between its stages.
   ``.write()``, ``.report``).
 * :func:`curve_file` is ``polyspline curve MESH -o OUTPUT`` and returns the report.
 * :func:`read` reads any mesh file polyspline reads into a ``meshio.Mesh``.
+* :func:`check` is ``polyspline check --json``: the sampled det J validity of a high-order
+  mesh (a path, a :class:`Curved` or :class:`Mesh`, or a ``meshio.Mesh``).
+* :func:`generate` is ``polyspline generate``: a synthetic linear :class:`Mesh`.
 * :func:`options` lists the option keywords and their defaults.
 
 The option keywords are the command line's ``curve`` options with ``_`` for ``-``
@@ -57,10 +60,12 @@ ProgressCallback = Callable[[Dict[str, Any]], None]
 def options(kind: str = "curve") -> Dict[str, Any]:
     """The option keywords and their defaults as the command line spells them (``None``: no
     default, ``False``: a flag). ``kind``: ``"curve"`` (:func:`curve`), ``"write"``
-    (:meth:`Curved.write`) or ``"curve_file"`` (:func:`curve_file`)."""
-    group = {"curve": "job", "write": "output", "curve_file": "file"}.get(kind)
+    (:meth:`Curved.write`), ``"curve_file"`` (:func:`curve_file`) or ``"generate"``
+    (:func:`generate`)."""
+    group = {"curve": "job", "write": "output", "curve_file": "file",
+             "generate": "generate"}.get(kind)
     if group is None:
-        raise ValueError(f"kind {kind!r}: expected 'curve', 'write' or 'curve_file'")
+        raise ValueError(f"kind {kind!r}: expected 'curve', 'write', 'curve_file' or 'generate'")
     out = dict(_polyspline.option_defaults(group))
     if group == "file":
         out.update(_polyspline.option_defaults("job"))
@@ -115,28 +120,113 @@ def curve(
     return Curved(_polyspline.curve_mesh(source, options, progress))
 
 
-def read(path: "os.PathLike[str] | str"):
-    """Read a mesh file with polyspline's readers (every input format, and the high-order
-    files it writes) into a ``meshio.Mesh`` (meshio's node order)."""
-    import meshio
+def check(mesh: Any, *, strict: bool = False) -> Dict[str, Any]:
+    """The validity and quality of a high-order mesh, as ``polyspline check MESH --json``:
+    det J sampled on every element (the same report, key for key).
 
+    ``mesh`` is a path (``.msh``, ``.vtu``... any file polyspline reads; the command line's
+    messages), a :class:`Curved` or :class:`Mesh`, or a ``meshio.Mesh`` (checked through a
+    temporary Gmsh file written by meshio, in meshio's node conventions). Returns a dict:
+    ``dimension``, ``elements``, ``order``, ``nodes``, ``boundary_facets``, ``invalid``
+    (elements with a sampled det J ≤ 0), ``min_scaled_jacobian``, ``min_det_jacobian``,
+    ``worst_element`` (0-based), ``method``. With ``strict=True`` an invalid element raises
+    :class:`ValidityError` instead (the command line's exit status 3).
+    """
+    if isinstance(mesh, Mesh):
+        report = json.loads(mesh._inner.check())
+        where = repr(mesh)
+    elif isinstance(mesh, (str, os.PathLike)):
+        report = json.loads(_polyspline.check(os.fspath(mesh)))
+        where = os.fspath(mesh)
+    elif hasattr(mesh, "cells") and hasattr(mesh, "points"):
+        import tempfile
+
+        import meshio
+
+        with tempfile.TemporaryDirectory() as tmp:
+            path = os.path.join(tmp, "mesh.msh")
+            meshio.write(path, mesh, file_format="gmsh")
+            report = json.loads(_polyspline.check(path))
+        where = "<meshio mesh>"
+    else:
+        raise TypeError("mesh: expected a path, a polyspline.Mesh or Curved, or a meshio.Mesh")
+    if strict and report["invalid"] > 0:
+        raise ValidityError(
+            f"{where}: {report['invalid']} element(s) with a sampled det J <= 0 "
+            f"(min det J {report['min_det_jacobian']:.6e}; worst element {report['worst_element']})"
+        )
+    return report
+
+
+def generate(kind: str, *, output: "Optional[os.PathLike[str] | str]" = None,
+             binary: bool = False, **options: Any) -> "Mesh":
+    """A synthetic linear mesh, as ``polyspline generate KIND``: ``"disc"`` (2D),
+    ``"cylinder"``, ``"torus"`` (``elements=N`` required), ``"ogrid"`` or ``"cgrid"``
+    (boundary-layer grids: ``wall``, ``thickness``, ``around``, ``across``, ``first_height``,
+    ``growth``, ``farfield``, ``layers``, ``span``, ``wake``). The keywords are the command
+    line's options (:func:`options` ``("generate")``), parsed and checked by the same code.
+
+    Returns the :class:`Mesh` (order 1; ``.info`` has its ``elements``, ``vertices``,
+    ``boundary_facets`` and, for O- and C-grids, the wall-normal ``spacing`` line); pass it
+    to :func:`curve` directly, or ``.to_meshio()``. With ``output``, it is also written as the
+    command line writes it (the same bytes; ``binary`` for binary MSH).
+    """
+    mesh = Mesh(_polyspline.generate(str(kind), options))
+    if output is not None:
+        mesh.write(output, binary=binary)
+    elif binary:
+        raise ValueError("binary: only with output")
+    return mesh
+
+
+def read(path: "os.PathLike[str] | str", *, arrays: bool = False):
+    """Read a mesh file with polyspline's readers (every input format: Gmsh MSH, VTU/VTK,
+    Medit, MFEM, Exodus, SU2, CGNS/HDF5, Abaqus; and the high-order files it writes).
+
+    Returns a ``meshio.Mesh`` (meshio's node order; tags in ``gmsh:physical``, names in
+    ``field_data``), or with ``arrays=True`` a dict of numpy arrays without meshio:
+    ``points`` (n × 3), ``cells`` and ``cell_tags`` ({meshio cell type: array}, Gmsh's node
+    order for high-order cells) and ``tag_names`` ({tag: name}).
+    """
     kind, data = _polyspline.read(os.fspath(path))
     if kind == "high_order":
-        return _Arrays(data).to_meshio()
+        mesh = _Arrays(data)
+        if not arrays:
+            return mesh.to_meshio()
+        cells, tags = {}, {}
+        for dim, conn, t in ((mesh.dim, mesh.cells, mesh.cell_tags),
+                             (mesh.dim - 1, mesh.facets, mesh.facet_tags)):
+            if len(conn):
+                name = _meshio_type(dim, conn.shape[1])
+                cells[name] = conn
+                tags[name] = t if len(t) else np.zeros(len(conn), dtype=np.int32)
+        return {"points": mesh.points, "cells": cells, "cell_tags": tags,
+                "tag_names": mesh.tag_names}
     points, blocks, tag_names = data
     points = np.frombuffer(points, dtype=np.float64).reshape(-1, 3)
     cells, tags = [], []
     for name, n, nodes, block_tags in blocks:
         data_ = np.frombuffer(nodes, dtype=np.int64).reshape(-1, n)
-        cells.append(meshio.CellBlock(name, data_))
         t = np.frombuffer(block_tags, dtype=np.int32)
+        cells.append((name, data_))
         tags.append(t if len(t) else np.zeros(len(data_), dtype=np.int32))
+    if arrays:
+        out_cells: Dict[str, np.ndarray] = {}
+        out_tags: Dict[str, np.ndarray] = {}
+        for (name, c), t in zip(cells, tags):
+            out_cells[name] = np.concatenate([out_cells[name], c]) if name in out_cells else c
+            out_tags[name] = np.concatenate([out_tags[name], t]) if name in out_tags else t
+        return {"points": points, "cells": out_cells, "cell_tags": out_tags,
+                "tag_names": dict(tag_names)}
+    import meshio
+
     dims = {"vertex": 0, "line": 1, "triangle": 2, "quad": 2}
     field_data = {}
     for tag, name in tag_names.items():
-        dim = next((dims.get(c.type, 3) for c, t in zip(cells, tags) if tag in t), 0)
+        dim = next((dims.get(c[0], 3) for c, t in zip(cells, tags) if tag in t), 0)
         field_data[name] = np.array([tag, dim])
-    return meshio.Mesh(points, cells, cell_data={"gmsh:physical": tags}, field_data=field_data)
+    return meshio.Mesh(points, [meshio.CellBlock(n, c) for n, c in cells],
+                       cell_data={"gmsh:physical": tags}, field_data=field_data)
 
 
 # --- input -----------------------------------------------------------------------------------
@@ -167,7 +257,9 @@ def _block(name: str, cells: Any, tags: Any = None) -> Tuple[str, int, bytes, by
 
 
 def _raw_of(mesh: Any):
-    """The extension's input tuple of a meshio mesh or a tuple of arrays."""
+    """The extension's input tuple of a :class:`Mesh`, a meshio mesh or a tuple of arrays."""
+    if isinstance(mesh, Mesh):
+        return mesh._raw()
     if hasattr(mesh, "cells") and hasattr(mesh, "points"):
         blocks = []
         for i, block in enumerate(mesh.cells):
@@ -267,20 +359,20 @@ class _Arrays:
         )
 
 
-class Curved(_Arrays):
-    """A curved high-order mesh and its report.
+class Mesh(_Arrays):
+    """A high-order (or, from :func:`generate`, linear) mesh held by polyspline.
 
     Attributes: ``points`` (n × 3 float64), ``cells`` (elements × (order+1)^dim, int64, Gmsh's
     node order), ``cell_tags`` (one region tag per element, or empty), ``facets`` (boundary
     facets × (order+1)^(dim-1), Gmsh's order, oriented outward), ``facet_tags`` (one tag per
-    facet, 0 for none), ``tag_names`` ({tag: name}), ``dim``, ``order``, ``report`` (a dict
-    with the keys of the command line's ``--report``).
+    facet, 0 for none), ``tag_names`` ({tag: name}), ``dim``, ``order``.
     """
 
     def __init__(self, inner: Any):
         super().__init__(inner.arrays("gmsh"))
         self._inner = inner
-        self.report: Dict[str, Any] = json.loads(inner.report_json)
+        #: What made it (:func:`generate`'s counts); :class:`Curved` has ``report`` instead.
+        self.info: Dict[str, Any] = json.loads(inner.report_json)
 
     def cells_vtk(self) -> Tuple[np.ndarray, np.ndarray]:
         """(cells, facets) in VTK's Lagrange node order (cell types 70 and 72, facets 68/70)."""
@@ -301,13 +393,33 @@ class Curved(_Arrays):
         .cgns, .inp), with the output options of :func:`options` ``("write")``."""
         self._inner.write(os.fspath(path), options)
 
+    def check(self, *, strict: bool = False) -> Dict[str, Any]:
+        """:func:`check` of this mesh."""
+        return check(self, strict=strict)
+
+    def _raw(self):
+        """The input tuple of :func:`curve` (a linear mesh: order 1)."""
+        if self.order != 1:
+            raise ValueError(f"mesh: order {self.order}; curve takes a linear mesh (order 1)")
+        return _raw_of((self.points, self.cells, self.facets, self.facet_tags, self.tag_names))
+
     def __repr__(self) -> str:
-        return (f"<polyspline.Curved {len(self.cells)} order-{self.order} "
+        return (f"<polyspline.{type(self).__name__} {len(self.cells)} order-{self.order} "
                 f"{'quads' if self.dim == 2 else 'hexes'}, {len(self.points)} nodes>")
+
+
+class Curved(Mesh):
+    """A curved high-order mesh and its report: a :class:`Mesh` with ``report``, a dict with
+    the keys of the command line's ``--report``."""
+
+    def __init__(self, inner: Any):
+        super().__init__(inner)
+        self.report: Dict[str, Any] = self.info
 
 
 __all__ = [
     "Curved",
+    "Mesh",
     "DeviceError",
     "Error",
     "InputError",
@@ -318,8 +430,10 @@ __all__ = [
     "ProgressCallback",
     "SolveError",
     "ValidityError",
+    "check",
     "curve",
     "curve_file",
+    "generate",
     "options",
     "read",
 ]

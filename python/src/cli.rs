@@ -1,6 +1,7 @@
-//! The command line's option groups of `curve`, compiled here from the same source files, so
-//! that the keyword arguments of `polyspline.curve` are the command line's options: the same
-//! names, defaults, parsing and checks.
+//! The command line's option groups of `curve` and `generate`, compiled here from the same
+//! source files, so that the keyword arguments of `polyspline.curve` and
+//! `polyspline.generate` are the command line's options: the same names, defaults, parsing
+//! and checks.
 
 // Only the option groups and the file job are used here; the rest of these files serves the
 // command line.
@@ -10,6 +11,9 @@ mod args;
 #[allow(dead_code)]
 #[path = "../../src/cli/curve.rs"]
 pub(crate) mod curve;
+#[allow(dead_code)]
+#[path = "../../src/cli/generate.rs"]
+pub(crate) mod generate;
 #[allow(dead_code)]
 #[path = "../../src/cli/values.rs"]
 mod values;

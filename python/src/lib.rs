@@ -1,14 +1,17 @@
 //! `polyspline._polyspline`: the extension module under the `polyspline` Python package.
 //!
-//! Input: option keywords (mapped onto the command line's option groups, [`cli`]), mesh paths,
+//! Input: option keywords (mapped onto the command line's option groups of `curve` and
+//! `generate`, [`cli`]), mesh paths,
 //! and meshes as raw little-endian buffers (points `f64 × 3`, cells `i64`, tags `i32`) that the
 //! Python layer (`python/polyspline/__init__.py`) makes from numpy arrays and meshio meshes.
-//! Output: the report as JSON text, and the curved mesh as a [`Curved`] object whose arrays
-//! are buffers in Gmsh's, VTK's or polyspline's lattice node order.
+//! Output: the report as JSON text (and `check`'s report, as `polyspline check --json`), and
+//! the curved or generated mesh as a [`Curved`] object whose arrays are buffers in Gmsh's,
+//! VTK's or polyspline's lattice node order.
 //!
-//! Invariants: the GIL is released while a job runs; at every progress event the job checks
-//! Python's signals (Ctrl-C) and calls the optional callback, and stops between stages when
-//! either raised, re-raising that exception; every library error becomes an exception of the
+//! Invariants: the GIL is released while a job runs; at every progress event (every stage and
+//! every CG iteration) the job checks Python's signals (Ctrl-C) and calls the optional
+//! callback, and stops when either raised (within one CG iteration during the fit's solve,
+//! else at the next stage), re-raising that exception; every library error becomes an exception of the
 //! `polyspline` hierarchy (`python/polyspline/errors.py`) with the command line's one-line
 //! message; unknown option keywords raise `TypeError`.
 
@@ -20,6 +23,7 @@ use cli::curve::{FileArgs, JobArgs, OutputArgs, curve_files, prepare_files};
 use polyspline::mesh::HighOrderMesh;
 use polyspline::pipeline::{CurveError, CurveReport};
 use polyspline::progress::{Progress, Stage};
+use polyspline::quality::CheckReport;
 use pyo3::exceptions::{PyKeyboardInterrupt, PyTypeError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -283,6 +287,13 @@ impl Curved {
         convert::arrays(py, &self.ho, ordering)
     }
 
+    /// `polyspline check --json` of this mesh, as JSON.
+    fn check(&self, py: Python<'_>) -> PyResult<String> {
+        let ho = &self.ho;
+        let report = py.detach(|| CheckReport::new(ho));
+        serde_json::to_string(&report).map_err(|e| error(py, "Error", e.to_string()))
+    }
+
     /// Write the mesh to `path` (format from the extension) with the output options of
     /// `polyspline curve`; atomically, as the command line writes.
     fn write(&self, py: Python<'_>, path: PathBuf, options: &Bound<'_, PyDict>) -> PyResult<()> {
@@ -299,6 +310,42 @@ impl Curved {
     }
 }
 
+/// `polyspline check MESH --json`: the sampled det J report of a high-order mesh file, as JSON.
+#[pyfunction]
+fn check(py: Python<'_>, path: PathBuf) -> PyResult<String> {
+    let result = py.detach(|| -> anyhow::Result<String> {
+        let raw = polyspline::io::read_raw(&path)?;
+        // The command line's reading of a high-order mesh (`cli::read_high_order`).
+        let ho = HighOrderMesh::from_raw(raw)
+            .map_err(|e| anyhow::anyhow!("{}: {}: {}", path.display(), e.location, e.message))?;
+        Ok(serde_json::to_string(&CheckReport::new(&ho))?)
+    });
+    result.map_err(|e| to_py_err(py, &e, "InputError"))
+}
+
+/// `polyspline generate KIND` with the options `options` (its keywords but `output` and
+/// `binary`, which belong to writing): the order-1 mesh it writes, and its counts as JSON.
+#[pyfunction]
+fn generate(py: Python<'_>, kind: String, options: &Bound<'_, PyDict>) -> PyResult<Curved> {
+    use cli::generate::{ShapeArgs, make};
+    let mut argv = vec![kind];
+    argv.extend(options::argv::<ShapeArgs>(py, options, &["kind"])?);
+    let args: ShapeArgs = options::parse(py, argv.into_iter().map(Into::into).collect())?;
+    let made = py
+        .detach(|| make(&args, Path::new("<generate>")))
+        .map_err(|e| to_py_err(py, &e, "ParameterError"))?;
+    let info = serde_json::json!({
+        "elements": made.elements,
+        "vertices": made.vertices,
+        "boundary_facets": made.boundary_facets,
+        "spacing": made.spacing,
+    });
+    Ok(Curved {
+        ho: made.mesh,
+        report: info.to_string(),
+    })
+}
+
 /// Read a mesh file with polyspline's readers: the tuple [`convert::raw_to_py`] makes.
 #[pyfunction]
 fn read<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyAny>> {
@@ -308,7 +355,7 @@ fn read<'py>(py: Python<'py>, path: PathBuf) -> PyResult<Bound<'py, PyAny>> {
     convert::raw_to_py(py, &raw)
 }
 
-/// The option names `kind` (`job`, `output` or `file`) takes, with their defaults as the
+/// The option names `kind` (`job`, `output`, `file` or `generate`) takes, with their defaults as the
 /// command line spells them (`None` for none), for the Python layer's signatures and docs.
 #[pyfunction]
 fn option_defaults<'py>(py: Python<'py>, kind: &str) -> PyResult<Bound<'py, PyDict>> {
@@ -316,6 +363,7 @@ fn option_defaults<'py>(py: Python<'py>, kind: &str) -> PyResult<Bound<'py, PyDi
         "job" => options::defaults::<JobArgs>(py),
         "output" => options::defaults::<OutputArgs>(py),
         "file" => options::defaults::<FileArgs>(py),
+        "generate" => options::defaults::<cli::generate::ShapeArgs>(py),
         _ => Err(PyTypeError::new_err(format!(
             "unknown option group {kind:?}"
         ))),
@@ -327,6 +375,8 @@ fn _polyspline(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(curve_file, m)?)?;
     m.add_function(wrap_pyfunction!(curve_mesh, m)?)?;
     m.add_function(wrap_pyfunction!(read, m)?)?;
+    m.add_function(wrap_pyfunction!(check, m)?)?;
+    m.add_function(wrap_pyfunction!(generate, m)?)?;
     m.add_function(wrap_pyfunction!(option_defaults, m)?)?;
     m.add_class::<Curved>()?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

@@ -64,7 +64,9 @@ def gmsh_jacobians(path):
     gmsh = need("gmsh")
     import numpy as np
 
-    gmsh.initialize(readConfigFiles=False)
+    # interruptible=False: otherwise Gmsh sets SIGINT to its default action for the rest of
+    # the process, and the Ctrl-C tests that run later would kill pytest.
+    gmsh.initialize(readConfigFiles=False, interruptible=False)
     try:
         gmsh.option.setNumber("General.Terminal", 0)
         gmsh.open(str(path))

@@ -11,6 +11,9 @@ CASES = [
     (HEXES, "out.vtu", {"order": 2}),
     (QUADS, "out.msh", {"order": 2, "fit": "position", "msh_version": "2.2", "binary": True}),
     (HEXES, "out.msh", {"order": 2, "kink_angle": 20.0, "snap_boundary": True, "volume_name": "air"}),
+    (HEXES, "out.cgns", {"order": 3}),
+    (QUADS, "out.inp", {"order": 2}),
+    (HEXES, "out.vtu", {"order": 2, "vtu_encoding": "ascii"}),
 ]
 
 

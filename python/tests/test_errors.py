@@ -75,3 +75,56 @@ def test_output_errors(tmp_path):
         c.write(tmp_path / "o.abc")
     with pytest.raises(polyspline.ParameterError):
         c.write(tmp_path / "o.msh", volume_name="")
+
+
+EXAMPLE = QUADS.parent.parent / "real" / "dealii" / "example.msh"
+
+
+def test_gpu_without_a_vulkan_driver_is_a_device_error(tmp_path):
+    # The Vulkan loader reads its driver list from the environment of the process: a fresh
+    # interpreter, and the command line, with a driver file that does not exist.
+    import os
+    import subprocess
+    import sys
+
+    from conftest import cli_path
+
+    env = dict(os.environ, VK_DRIVER_FILES=str(tmp_path / "none.json"),
+               VK_ICD_FILENAMES=str(tmp_path / "none.json"))
+    code = (
+        "import sys, polyspline\n"
+        "try:\n"
+        f"    polyspline.curve({str(QUADS)!r}, backend='gpu')\n"
+        "except polyspline.DeviceError as e:\n"
+        "    print(type(e).__name__, e, sep='|')\n"
+    )
+    run = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    name, message = run.stdout.strip().split("|")
+    cli = subprocess.run([str(cli_path()), "curve", str(QUADS), "-o", str(tmp_path / "o.msh"),
+                          "--backend", "gpu"], env=env, capture_output=True, text=True)
+    assert cli.returncode == 1
+    assert name == "DeviceError"
+    assert cli.stderr.strip() == "polyspline: error: " + message
+    assert "no GPU adapter" in message
+
+
+def test_a_cg_breakdown_is_a_solve_error(tmp_path):
+    # No option caps the CG iterations; a tolerance below rounding makes the residual vanish
+    # before convergence, and CG breaks down (pᵀAp = 0), as the command line reports.
+    options = dict(fit_solver="cg", cg_tol=1e-300, backend="cpu")
+    with pytest.raises(polyspline.SolveError) as e:
+        polyspline.curve(EXAMPLE, **options)
+    assert type(e.value).__name__ == "SolveError" and "conjugate gradients" in str(e.value)
+    assert str(e.value) == cli_error("curve", EXAMPLE, "-o", tmp_path / "o.msh", "--fit-solver",
+                                     "cg", "--cg-tol", "1e-300", "--backend", "cpu")
+    with pytest.raises(polyspline.SolveError):
+        polyspline.curve_file(EXAMPLE, tmp_path / "o.msh", **options)
+    assert not (tmp_path / "o.msh").exists()
+
+
+def test_every_error_class_is_in_the_hierarchy():
+    for cls in (polyspline.InputError, polyspline.NotCurvableError, polyspline.ParameterError,
+                polyspline.OutputError, polyspline.DeviceError, polyspline.SolveError,
+                polyspline.ValidityError):
+        assert issubclass(cls, polyspline.PolysplineError)

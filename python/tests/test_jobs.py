@@ -112,3 +112,35 @@ def test_sigint_during_the_job_stops_it_before_writing(tmp_path):
     finally:
         timer.cancel()
     assert not out.exists()
+
+
+def test_ctrl_c_during_the_cg_solve_stops_within_a_fraction_of_a_second(tmp_path):
+    # A CG-heavy fit (point Jacobi, tolerance 1e-14): the solve alone takes over a second. A
+    # SIGINT from another thread a few iterations in must stop the job within one iteration,
+    # not when the solve (and the fit stage) ends.
+    if not BIG.exists():
+        skip(f"{BIG} is not in this checkout")
+    options = dict(order=2, fit_solver="cg", cg_tol=1e-14, cg_preconditioner="jacobi",
+                   backend="cpu")
+    full = polyspline.curve_file(BIG, tmp_path / "full.msh", **options)
+    cg_seconds = full["timings"]["fit_cg"]
+    sent = {}
+
+    def interrupt():
+        sent["t"] = time.perf_counter()
+        os.kill(os.getpid(), signal.SIGINT)
+
+    def progress(e):
+        if e["event"] == "cg" and e["iteration"] == 10 and "timer" not in sent:
+            sent["timer"] = threading.Timer(0.05, interrupt)
+            sent["timer"].start()
+            sent["iteration"] = e["iteration"]
+
+    out = tmp_path / "o.msh"
+    with pytest.raises(KeyboardInterrupt):
+        polyspline.curve_file(BIG, out, progress=progress, **options)
+    latency = time.perf_counter() - sent["t"]
+    assert not out.exists()
+    assert cg_seconds > 0.5, f"the solve is too short to tell ({cg_seconds:.2f} s)"
+    assert latency < 0.2, f"stopped {latency:.3f} s after SIGINT (solve: {cg_seconds:.2f} s)"
+    print(f"SIGINT latency {latency * 1000:.1f} ms, uninterrupted CG {cg_seconds:.2f} s")

@@ -2,33 +2,51 @@
 
 use super::values;
 use polyspline::io::output::check_outputs;
-use polyspline::mesh::Topology;
 use polyspline::mesh::generate::boundary_layer::{self, BoundaryLayer, Wall};
 use polyspline::mesh::generate::{Shape, generate};
+use polyspline::mesh::{HighOrderMesh, Topology};
 use polyspline::pipeline::{OutputOptions, write_high_order};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 #[derive(clap::Args)]
 pub(super) struct Args {
-    #[arg(value_enum)]
-    kind: values::GenerateShape,
-    /// Approximate number of elements (disc, cylinder, torus).
-    #[arg(long, required_if_eq_any([("kind", "disc"), ("kind", "cylinder"), ("kind", "torus")]))]
-    elements: Option<usize>,
+    #[command(flatten)]
+    shape: ShapeArgs,
     /// Output file (.msh or .vtu).
     #[arg(short, long)]
     output: PathBuf,
     /// Binary Gmsh output.
     #[arg(long)]
     binary: bool,
+}
+
+/// The mesh to make (shared with the Python package's `generate`, which writes through the
+/// output options of `curve`).
+#[derive(clap::Args)]
+pub(crate) struct ShapeArgs {
+    #[arg(value_enum)]
+    kind: values::GenerateShape,
+    /// Approximate number of elements (disc, cylinder, torus).
+    #[arg(long, required_if_eq_any([("kind", "disc"), ("kind", "cylinder"), ("kind", "torus")]))]
+    elements: Option<usize>,
     #[command(flatten)]
     layer: BoundaryLayerArgs,
+}
+
+/// A generated mesh: its order-1 high-order form (what `generate` writes), the counts it
+/// reports, and the boundary layer's spacing line (O- and C-grids).
+pub(crate) struct Generated {
+    pub(crate) mesh: HighOrderMesh,
+    pub(crate) elements: usize,
+    pub(crate) vertices: usize,
+    pub(crate) boundary_facets: usize,
+    pub(crate) spacing: Option<String>,
 }
 
 /// Options of `generate ogrid|cgrid` (lengths in wall units: chord 2 for the ellipse and
 /// the circle, 1 for the airfoil).
 #[derive(clap::Args)]
-struct BoundaryLayerArgs {
+pub(crate) struct BoundaryLayerArgs {
     /// Wall curve [default: ellipse for ogrid, naca for cgrid].
     #[arg(long, value_enum)]
     wall: Option<values::WallShape>,
@@ -86,11 +104,11 @@ impl BoundaryLayerArgs {
     }
 }
 
-pub(super) fn run(args: Args) -> anyhow::Result<()> {
-    let output = &args.output;
+/// Make the mesh `args` describes; `name` prefixes the generator's errors (the output path).
+pub(crate) fn make(args: &ShapeArgs, name: &Path) -> anyhow::Result<Generated> {
     let shape = Shape::from(args.kind);
     shape.check(args.elements)?;
-    check_outputs(&[output], &[])?;
+    let mut spacing = None;
     let mesh = match shape {
         Shape::Benchmark(kind) => generate(kind, args.elements.unwrap_or_default()),
         Shape::Ogrid | Shape::Cgrid => {
@@ -101,9 +119,9 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
             } else {
                 boundary_layer::ogrid(&params)
             }
-            .map_err(|e| anyhow::anyhow!("{}: {e}", output.display()))?;
+            .map_err(|e| anyhow::anyhow!("{}: {e}", name.display()))?;
             let s = &made.spacing;
-            eprintln!(
+            spacing = Some(format!(
                 "wall-normal: {} cells from {:e} growing by {}, then {} cells by {:.4} to the far field; min scaled Jacobian {:.4}, max aspect ratio {:.4e}",
                 s.geometric_cells,
                 params.first_height,
@@ -112,23 +130,39 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
                 s.outer_growth,
                 made.mesh.min_scaled_jacobian().map_or(0.0, |m| m.0),
                 boundary_layer::max_aspect_ratio(&made.mesh),
-            );
+            ));
             made.mesh
         }
     };
     let topo = Topology::build(&mesh);
-    let linear = polyspline::sample::sample(&mesh, &mesh, &topo, 1);
+    Ok(Generated {
+        mesh: polyspline::sample::sample(&mesh, &mesh, &topo, 1),
+        elements: mesh.n_elements(),
+        vertices: mesh.n_vertices(),
+        boundary_facets: topo.boundary_facets.len(),
+        spacing,
+    })
+}
+
+pub(super) fn run(args: Args) -> anyhow::Result<()> {
+    let output = &args.output;
+    Shape::from(args.shape.kind).check(args.shape.elements)?;
+    check_outputs(&[output], &[])?;
+    let made = make(&args.shape, output)?;
+    if let Some(line) = &made.spacing {
+        eprintln!("{line}");
+    }
     let options = OutputOptions {
         binary: args.binary,
         ..Default::default()
     };
-    write_high_order(&linear, output, &options, &[])?;
+    write_high_order(&made.mesh, output, &options, &[])?;
     eprintln!(
         "wrote {}: {} elements, {} vertices, {} boundary facets",
         output.display(),
-        mesh.n_elements(),
-        mesh.n_vertices(),
-        topo.boundary_facets.len()
+        made.elements,
+        made.vertices,
+        made.boundary_facets
     );
     Ok(())
 }

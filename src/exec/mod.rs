@@ -45,8 +45,8 @@ pub trait Executor: Certifier + EnergyKernel {
         None
     }
 
-    /// Solve `k` x = `b` by preconditioned CG from `x`, calling `progress(iteration,
-    /// relative residual)` as it goes. The error is the solver seam's [`CgError`]: besides
+    /// Solve `k` x = `b` by preconditioned CG from `x`, telling `progress` every iteration
+    /// (it may stop the solve: [`CgError::Cancelled`]). The error is the solver seam's [`CgError`]: besides
     /// breakdowns it carries a device failure as [`CgError::Device`].
     fn pcg(
         &self,
@@ -54,7 +54,7 @@ pub trait Executor: Certifier + EnergyKernel {
         b: &[[f64; 3]],
         x: &mut [[f64; 3]],
         params: &CgParams,
-        progress: &mut dyn FnMut(usize, f64),
+        progress: &mut dyn crate::solve::CgMonitor,
     ) -> Result<CgInfo, CgError>;
 
     /// The order-`p` Lagrange nodes of `source`'s elements.

@@ -464,13 +464,21 @@ fn solve_fit(
                     job.topo.dim,
                 );
             }
-            let mut report = |i, r| progress.cg(i, r);
+            // Asked every iteration, so a cancelled job stops within one iteration rather
+            // than at the end of the solve.
+            let mut report = crate::solve::Cancellable {
+                progress: |i, r| progress.cg(i, r),
+                cancelled: || progress.cancelled(),
+            };
             job.executor.pcg(k, rhs, x, cg, &mut report)
         },
     )
-    .map_err(|source| CurveError::Solve {
-        input: job.input.to_owned(),
-        source,
+    .map_err(|source| match source {
+        crate::solve::CgError::Cancelled { .. } => CurveError::Cancelled,
+        source => CurveError::Solve {
+            input: job.input.to_owned(),
+            source,
+        },
     })?;
     if factors {
         info.solver = FitSolver::Cholesky;

@@ -788,7 +788,7 @@ impl BlockedSystem {
         b: &[[f64; 3]],
         x: &mut [[f64; 3]],
         params: &CgParams,
-        mut progress: impl FnMut(usize, f64),
+        mut progress: impl super::CgMonitor,
     ) -> Result<CgInfo, CgError> {
         let n = self.a.nrows();
         assert_eq!(b.len(), n);
@@ -850,7 +850,9 @@ impl BlockedSystem {
             rz = rz_new;
             rr = rr_new;
             it += 1;
-            progress(it, stop.rel(head(rr)));
+            if progress.iteration(it, stop.rel(head(rr))).is_break() {
+                return Err(CgError::Cancelled { iterations: it });
+            }
         }
         for (&i, xp) in rows.iter().zip(&xp) {
             x[i as usize] = [xp[0], xp[1], xp[2]];

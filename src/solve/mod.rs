@@ -17,6 +17,10 @@
 //! [`pcg_with`] is the generic loop (any operator, any preconditioner): [`cg_loop`], which the
 //! distributed solver runs too, with its own [`Reductions`] (sums over the processes).
 //!
+//! Every loop reports each iteration to a [`CgMonitor`] (a closure `|iteration, rel_residual|`
+//! is one), which may stop the solve: [`Cancellable`] stops it when the caller asks
+//! (Ctrl-C in the Python package), with [`CgError::Cancelled`], within one iteration.
+//!
 //! [`direct`] solves the same assembled systems by sparse Cholesky instead (the fit's small
 //! systems, chosen by the fit's `FitSolver`), reporting through [`CgInfo`] with 0 iterations.
 
@@ -28,6 +32,7 @@ use crate::params::{ParamError, above, in_range};
 pub use block_jacobi::BlockJacobi;
 pub use blocked::BlockedSystem;
 use rayon::prelude::*;
+use std::ops::ControlFlow;
 
 /// A symmetric positive definite operator on vectors of 3-component entries.
 pub trait LinOp: Sync {
@@ -142,6 +147,47 @@ pub enum CgError {
     /// The GPU solver's device failed.
     #[error("the GPU solver failed: {0}")]
     Device(String),
+    /// The [`CgMonitor`] stopped the solve (the caller cancelled the job).
+    #[error("conjugate gradients cancelled after {iterations} iterations")]
+    Cancelled { iterations: usize },
+}
+
+/// What a CG solve tells after every iteration (`iteration`, largest relative residual), and
+/// whether it goes on: [`ControlFlow::Break`] ends the solve with [`CgError::Cancelled`].
+/// Every closure `FnMut(usize, f64)` is a monitor that never stops the solve.
+pub trait CgMonitor {
+    fn iteration(&mut self, iteration: usize, rel_residual: f64) -> ControlFlow<()>;
+}
+
+impl<F: FnMut(usize, f64)> CgMonitor for F {
+    fn iteration(&mut self, iteration: usize, rel_residual: f64) -> ControlFlow<()> {
+        self(iteration, rel_residual);
+        ControlFlow::Continue(())
+    }
+}
+
+impl CgMonitor for &mut dyn CgMonitor {
+    fn iteration(&mut self, iteration: usize, rel_residual: f64) -> ControlFlow<()> {
+        (**self).iteration(iteration, rel_residual)
+    }
+}
+
+/// A monitor that reports to `progress` and stops the solve as soon as `cancelled()` is
+/// true (asked once per iteration, so it must be cheap).
+pub struct Cancellable<F, C> {
+    pub progress: F,
+    pub cancelled: C,
+}
+
+impl<F: FnMut(usize, f64), C: Fn() -> bool> CgMonitor for Cancellable<F, C> {
+    fn iteration(&mut self, iteration: usize, rel_residual: f64) -> ControlFlow<()> {
+        (self.progress)(iteration, rel_residual);
+        if (self.cancelled)() {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
+    }
 }
 
 /// Rows per partial sum of [`dot3`]: the summation order is fixed by the data, not by the
@@ -352,7 +398,7 @@ pub(crate) fn row_dot<const N: usize>(cols: &[u32], vals: &[f64], x: &[[f64; N]]
 }
 
 /// Solve A x = b by preconditioned CG (the preconditioner of `params`), starting from `x`.
-/// `progress(iteration, rel_residual)` is called every iteration. An assembled operator
+/// `progress` ([`CgMonitor`]) sees every iteration and may stop the solve. An assembled operator
 /// ([`LinOp::csr`]) with block Jacobi or block Gauss–Seidel is solved by [`BlockedSystem`],
 /// anything else by [`pcg_with`].
 pub fn pcg(
@@ -360,7 +406,7 @@ pub fn pcg(
     b: &[[f64; 3]],
     x: &mut [[f64; 3]],
     params: &CgParams,
-    progress: impl FnMut(usize, f64),
+    progress: impl CgMonitor,
 ) -> Result<CgInfo, CgError> {
     // An assembled matrix with block Jacobi takes the reordered, fused solver (same method).
     match (params.preconditioner, op.csr()) {
@@ -384,7 +430,7 @@ pub fn pcg_with(
     b: &[[f64; 3]],
     x: &mut [[f64; 3]],
     params: &CgParams,
-    progress: impl FnMut(usize, f64),
+    progress: impl CgMonitor,
 ) -> Result<CgInfo, CgError> {
     let n = op.nrows();
     assert_eq!(b.len(), n);
@@ -422,7 +468,8 @@ impl Reductions for Rows {
 /// The one preconditioned CG loop of the three per-component recurrences, from `x`: the serial
 /// [`pcg_with`] and the distributed solver run it with their own operator, preconditioner and
 /// [`Reductions`]. The stopping rule is [`Stopping`]'s: ‖r‖ ≤ max(rel_tol·‖b‖, abs_tol) per
-/// component, ‖·‖ from `reduce`. `progress(iteration, rel_residual)` is called every iteration.
+/// component, ‖·‖ from `reduce`. `progress` sees every iteration; when it breaks, the solve
+/// ends with [`CgError::Cancelled`] (x is the last iterate).
 pub fn cg_loop(
     reduce: &dyn Reductions,
     mut apply: impl FnMut(&[[f64; 3]], &mut [[f64; 3]]),
@@ -430,7 +477,7 @@ pub fn cg_loop(
     b: &[[f64; 3]],
     x: &mut [[f64; 3]],
     params: &CgParams,
-    mut progress: impl FnMut(usize, f64),
+    mut progress: impl CgMonitor,
 ) -> Result<CgInfo, CgError> {
     let n = b.len();
     let mut r = vec![[0.0; 3]; n];
@@ -459,7 +506,9 @@ pub fn cg_loop(
         new_direction(&mut p, &z, Stopping::beta(rz, rz_new));
         (rz, rr) = (rz_new, rr_new);
         it += 1;
-        progress(it, stop.rel(rr));
+        if progress.iteration(it, stop.rel(rr)).is_break() {
+            return Err(CgError::Cancelled { iterations: it });
+        }
     }
     Ok(CgInfo {
         iterations: it,
@@ -660,6 +709,38 @@ mod tests {
             its[1],
             its[0]
         );
+    }
+
+    /// A cancelled solve stops at the iteration where the monitor first says so, in both the
+    /// generic loop (point Jacobi) and the fused block Jacobi solver, where it would otherwise
+    /// run on to convergence.
+    #[test]
+    fn a_cancelled_solve_stops_at_once() {
+        let op = LapCsr::new(400);
+        let b = vec![[1.0, -2.0, 0.5]; 400];
+        for pre in [
+            CgPreconditioner::Jacobi,
+            CgPreconditioner::BlockJacobi { size: 16 },
+        ] {
+            let params = CgParams {
+                rel_tol: 1e-12,
+                preconditioner: pre,
+                ..Default::default()
+            };
+            let full = pcg(&op, &b, &mut vec![[0.0; 3]; 400], &params, |_, _| {}).unwrap();
+            assert!(full.iterations > 10, "{pre:?}: {}", full.iterations);
+            let seen = std::cell::Cell::new(0usize);
+            let monitor = Cancellable {
+                progress: |i: usize, _: f64| seen.set(i),
+                cancelled: || seen.get() >= 7,
+            };
+            let e = pcg(&op, &b, &mut vec![[0.0; 3]; 400], &params, monitor).unwrap_err();
+            assert!(
+                matches!(e, CgError::Cancelled { iterations: 7 }),
+                "{pre:?}: {e}"
+            );
+            assert_eq!(seen.get(), 7);
+        }
     }
 
     #[test]

@@ -36,7 +36,7 @@ impl Executor for CpuExecutor {
         b: &[[f64; 3]],
         x: &mut [[f64; 3]],
         params: &CgParams,
-        progress: &mut dyn FnMut(usize, f64),
+        progress: &mut dyn crate::solve::CgMonitor,
     ) -> Result<CgInfo, CgError> {
         crate::solve::pcg(k, b, x, params, progress)
     }

@@ -241,7 +241,7 @@ impl<'a> GpuOperator<'a> {
         b: &[[f64; 3]],
         x: &mut [[f64; 3]],
         params: &CgParams,
-        progress: impl FnMut(usize, f64),
+        progress: impl crate::solve::CgMonitor,
     ) -> Result<CgInfo, CgError> {
         let r = crate::solve::pcg(self, b, x, params, progress);
         self.device_error()?;
@@ -469,7 +469,7 @@ pub fn pcg(
     b: &[[f64; 3]],
     x: &mut [[f64; 3]],
     params: &CgParams,
-    mut progress: impl FnMut(usize, f64),
+    mut progress: impl crate::solve::CgMonitor,
 ) -> Result<CgInfo, CgError> {
     let n = a.n();
     assert_eq!(b.len(), n);
@@ -537,7 +537,10 @@ pub fn pcg(
                 });
             }
             let rr_now: [f64; 3] = std::array::from_fn(|k| sc[4 + k] * scale[k] * scale[k]);
-            progress(total + st.iterations as usize, rel(rr_now));
+            let iterations = total + st.iterations as usize;
+            if progress.iteration(iterations, rel(rr_now)).is_break() {
+                return Err(CgError::Cancelled { iterations });
+            }
             Ok(())
         })?;
         for (x, d) in x.iter_mut().zip(&d) {

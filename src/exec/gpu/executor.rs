@@ -71,7 +71,7 @@ impl Executor for GpuExecutor<'_> {
         b: &[[f64; 3]],
         x: &mut [[f64; 3]],
         params: &CgParams,
-        progress: &mut dyn FnMut(usize, f64),
+        progress: &mut dyn crate::solve::CgMonitor,
     ) -> Result<CgInfo, CgError> {
         super::cg::pcg(self.ctx(), k, b, x, params, progress)
     }
