@@ -618,6 +618,7 @@ mod tests {
             boundary: vec![0; 2 * boundary_tags.len()],
             boundary_tags,
             tag_names: names.iter().map(|(t, n)| (*t, n.to_string())).collect(),
+            periodic: Vec::new(),
         }
     }
 
