@@ -14,7 +14,7 @@
 //! The transform is found without knowing the correspondence: the translation between the
 //! centroids, else rotations built from frames that a rigid map carries from A to B (the
 //! area-weighted normal of the group and the principal axes of its vertex cloud, with either
-//! sign), each verified, the best kept.
+//! sign) that carry A's outward normal onto B's inward one, each verified, the best kept.
 
 use crate::math::linalg::DVec3;
 use crate::mesh::high_order::HighOrderMesh;
@@ -655,6 +655,19 @@ fn pair(
                         continue;
                     };
                     let r = rotation_between(fa, fb);
+                    // A periodic map carries the outward normal of A onto the inward normal
+                    // of B; a half turn that maps A onto B mirrored (and, in the plane, a
+                    // flip of z) carries it onto the outward one and is no periodicity.
+                    let rn = point(
+                        Rigid {
+                            rotation: r,
+                            translation: [0.0; 3],
+                        }
+                        .apply(a.normal.to_array()),
+                    );
+                    if rn.dot(b.normal) > 0.0 || (mesh.dim == 2 && r[2][2] < 0.0) {
+                        continue;
+                    }
                     let t = b.centroid
                         - point(
                             Rigid {
