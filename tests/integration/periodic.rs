@@ -41,7 +41,12 @@ fn sector(dim: usize, deg: f64, nr: usize, nt: usize) -> LinearMesh {
     if dim == 2 {
         for j in 0..nt {
             for i in 0..nr {
-                elements.extend([id(i, j, 0), id(i + 1, j, 0), id(i + 1, j + 1, 0), id(i, j + 1, 0)]);
+                elements.extend([
+                    id(i, j, 0),
+                    id(i + 1, j, 0),
+                    id(i + 1, j + 1, 0),
+                    id(i, j + 1, 0),
+                ]);
             }
         }
         for i in 0..nr {
@@ -56,7 +61,14 @@ fn sector(dim: usize, deg: f64, nr: usize, nt: usize) -> LinearMesh {
         for k in 0..nz {
             for j in 0..nt {
                 for i in 0..nr {
-                    let q = |k| [id(i, j, k), id(i + 1, j, k), id(i + 1, j + 1, k), id(i, j + 1, k)];
+                    let q = |k| {
+                        [
+                            id(i, j, k),
+                            id(i + 1, j, k),
+                            id(i + 1, j + 1, k),
+                            id(i, j + 1, k),
+                        ]
+                    };
                     elements.extend(q(k));
                     elements.extend(q(k + 1));
                 }
@@ -64,18 +76,58 @@ fn sector(dim: usize, deg: f64, nr: usize, nt: usize) -> LinearMesh {
         }
         for k in 0..nz {
             for i in 0..nr {
-                face(vec![id(i, 0, k), id(i + 1, 0, k), id(i + 1, 0, k + 1), id(i, 0, k + 1)], 1);
-                face(vec![id(i, nt, k), id(i + 1, nt, k), id(i + 1, nt, k + 1), id(i, nt, k + 1)], 2);
+                face(
+                    vec![
+                        id(i, 0, k),
+                        id(i + 1, 0, k),
+                        id(i + 1, 0, k + 1),
+                        id(i, 0, k + 1),
+                    ],
+                    1,
+                );
+                face(
+                    vec![
+                        id(i, nt, k),
+                        id(i + 1, nt, k),
+                        id(i + 1, nt, k + 1),
+                        id(i, nt, k + 1),
+                    ],
+                    2,
+                );
             }
             for j in 0..nt {
-                face(vec![id(0, j, k), id(0, j + 1, k), id(0, j + 1, k + 1), id(0, j, k + 1)], 3);
-                face(vec![id(nr, j, k), id(nr, j + 1, k), id(nr, j + 1, k + 1), id(nr, j, k + 1)], 4);
+                face(
+                    vec![
+                        id(0, j, k),
+                        id(0, j + 1, k),
+                        id(0, j + 1, k + 1),
+                        id(0, j, k + 1),
+                    ],
+                    3,
+                );
+                face(
+                    vec![
+                        id(nr, j, k),
+                        id(nr, j + 1, k),
+                        id(nr, j + 1, k + 1),
+                        id(nr, j, k + 1),
+                    ],
+                    4,
+                );
             }
         }
         for j in 0..nt {
             for i in 0..nr {
                 for (k, tag) in [(0, 5), (nz, 6)] {
-                    face(vec![id(i, j, k), id(i + 1, j, k), id(i + 1, j + 1, k), id(i, j + 1, k)], tag);
+                    face(
+                        vec![
+                            id(i, j, k),
+                            id(i + 1, j, k),
+                            id(i + 1, j + 1, k),
+                            id(i, j + 1, k),
+                        ],
+                        tag,
+                    );
                 }
             }
         }
@@ -87,7 +139,10 @@ fn sector(dim: usize, deg: f64, nr: usize, nt: usize) -> LinearMesh {
         elements,
         tagged_facets: facets,
         facet_tags: tags,
-        tag_names: (1..=6).zip(names).map(|(t, n)| (t, n.to_string())).collect(),
+        tag_names: (1..=6)
+            .zip(names)
+            .map(|(t, n)| (t, n.to_string()))
+            .collect(),
         ..Default::default()
     };
     raw.tag_names.retain(|t, _| dim == 3 || *t <= 4);
@@ -137,18 +192,30 @@ fn assert_exact_images(file: &Path, expect: usize) -> BTreeMap<String, Value> {
     assert_eq!(links.len(), expect, "{}: links {links:?}", file.display());
     let mut out = BTreeMap::new();
     for l in links {
-        let (pairs, nodes) = (l["pairs"].as_u64().unwrap(), l["entity_nodes"].as_u64().unwrap());
+        let (pairs, nodes) = (
+            l["pairs"].as_u64().unwrap(),
+            l["entity_nodes"].as_u64().unwrap(),
+        );
         assert!(pairs > 0 && pairs == nodes, "{}: {l}", file.display());
         assert_eq!(l["unpaired"], 0, "{}: {l}", file.display());
         let miss = l["max_mismatch"].as_f64().unwrap() / diag;
-        assert!(miss <= IMAGE_TOL, "{}: images miss by {miss:e} of the diagonal: {l}", file.display());
+        assert!(
+            miss <= IMAGE_TOL,
+            "{}: images miss by {miss:e} of the diagonal: {l}",
+            file.display()
+        );
         out.insert(l["name"].as_str().unwrap().to_string(), l.clone());
     }
     out
 }
 
 fn affine(l: &Value) -> Vec<f64> {
-    l["affine"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect()
+    l["affine"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect()
 }
 
 #[test]
@@ -169,14 +236,19 @@ fn turbine_images_are_exact_and_gmsh_pairs_every_node() {
         args.extend(["--periodic", "periodic_1:periodic_2"]);
         let report = curve(&input, &out, &args);
         let per = &report["periodic"];
-        assert!(per["written_mismatch"].as_f64().unwrap() <= IMAGE_TOL, "{name}: {per}");
+        assert!(
+            per["written_mismatch"].as_f64().unwrap() <= IMAGE_TOL,
+            "{name}: {per}"
+        );
         assert_eq!(per["pairs"][0]["kind"], "translation", "{name}");
         let links = assert_exact_images(&out, 1);
         let l = &links["periodic_2"];
         assert_eq!(l["master_name"], "periodic_1", "{name}");
         // The cascade's pitch: a translation by (0, -0.0575) (the file's markers to 3e-11).
         let a = affine(l);
-        let expect = [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, -0.0575, 0.0, 0.0, 1.0, 0.0];
+        let expect = [
+            1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, -0.0575, 0.0, 0.0, 1.0, 0.0,
+        ];
         for k in 0..12 {
             assert!((a[k] - expect[k]).abs() < 1e-6, "{name}: affine {a:?}");
         }
@@ -198,7 +270,12 @@ fn sectors_rotation_and_translation_are_exact_at_every_order() {
             .filter(|p| dim == 2 || [1, 2, 3, 5, 9].contains(p))
             .map(|p| vec!["--order".into(), p.to_string()])
             .collect();
-        runs.push(vec!["--order".into(), "1".into(), "--subdivide".into(), "4".into()]);
+        runs.push(vec![
+            "--order".into(),
+            "1".into(),
+            "--subdivide".into(),
+            "4".into(),
+        ]);
         for run in runs {
             let mut args: Vec<&str> = run.iter().map(String::as_str).collect();
             args.extend(["--periodic", "theta_lo:theta_hi"]);
@@ -214,7 +291,10 @@ fn sectors_rotation_and_translation_are_exact_at_every_order() {
             let links = assert_exact_images(&out, dim - 1);
             let a = affine(&links["theta_hi"]);
             for k in 0..12 {
-                assert!((a[k] - rotation[k]).abs() < 1e-9, "{dim}D {run:?}: affine {a:?}");
+                assert!(
+                    (a[k] - rotation[k]).abs() < 1e-9,
+                    "{dim}D {run:?}: affine {a:?}"
+                );
             }
             if dim == 3 {
                 assert_eq!(pairs[1]["kind"], "translation");
@@ -238,12 +318,19 @@ fn seam_facet_angle_is_no_worse_than_the_interior() {
     for dim in [2, 3] {
         let input = sector_file(dim, 30.0);
         let out = scratch_in("periodic", &format!("angle{dim}d.msh"));
-        curve(&input, &out, &["--order", "3", "--periodic", "theta_lo:theta_hi"]);
+        curve(
+            &input,
+            &out,
+            &["--order", "3", "--periodic", "theta_lo:theta_hi"],
+        );
         let p = probe(&out);
         let seam = p["seam_angle_max"].as_f64().unwrap();
         let interior = p["interior_angle_max"].as_f64().unwrap();
         assert!(p["seam_facets"].as_u64().unwrap() > 0, "{p}");
-        assert!(seam <= interior + 1e-6, "{dim}D: seam {seam}° > interior {interior}°");
+        assert!(
+            seam <= interior + 1e-6,
+            "{dim}D: seam {seam}° > interior {interior}°"
+        );
     }
 }
 
@@ -258,7 +345,11 @@ fn pyfr_import_connects_the_periodic_faces() {
     curve(
         &input,
         &out,
-        &["--periodic", "periodic_1:periodic_2", "--periodic-pyfr-names"],
+        &[
+            "--periodic",
+            "periodic_1:periodic_2",
+            "--periodic-pyfr-names",
+        ],
     );
     let pyfrm = out.with_extension("pyfrm");
     let _ = std::fs::remove_file(&pyfrm);
@@ -281,10 +372,18 @@ fn a_wrong_periodic_pair_is_refused_in_one_line() {
     let sector = sector_file(2, 30.0);
     for (input, pair, says) in [
         (&turbine, "periodic_1:airfoil", "cannot be images"),
-        (&turbine, "periodic_1:nosuch", "no boundary group named or tagged \"nosuch\""),
+        (
+            &turbine,
+            "periodic_1:nosuch",
+            "no boundary group named or tagged \"nosuch\"",
+        ),
         (&turbine, "periodic_1:4", "both sides"),
         // Same vertex counts, but the shroud is the hub scaled by 2: no rigid map.
-        (&sector, "hub:shroud", "no translation or rotation maps hub onto shroud: vertex"),
+        (
+            &sector,
+            "hub:shroud",
+            "no translation or rotation maps hub onto shroud: vertex",
+        ),
     ] {
         let out = scratch_in("periodic", "refused.msh");
         let _ = std::fs::remove_file(&out);
@@ -312,5 +411,8 @@ fn a_wrong_periodic_pair_is_refused_in_one_line() {
         .output()
         .unwrap();
     let err = String::from_utf8_lossy(&run.stderr);
-    assert!(!run.status.success() && err.trim().lines().count() == 1, "{err}");
+    assert!(
+        !run.status.success() && err.trim().lines().count() == 1,
+        "{err}"
+    );
 }
