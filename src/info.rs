@@ -64,6 +64,8 @@ pub struct MeshInfo {
     /// Sharp features, when detected (`docs/features.md`); `crease_elements` become
     /// `feature_crease` Q2 elements in `curve` (not counted in `q2_reasons`).
     pub features: Option<crate::mesh::features::FeatureSummary>,
+    /// Periodic pairs (`--periodic`) with their transforms; empty without.
+    pub periodic: Vec<crate::mesh::periodic::PeriodicSummary>,
 }
 
 impl MeshInfo {
@@ -139,6 +141,7 @@ impl MeshInfo {
             control_points: space.n_control_points(),
             q2_reasons,
             features: None,
+            periodic: Vec::new(),
         }
     }
 }
@@ -148,7 +151,11 @@ impl fmt::Display for MeshInfo {
         self.fmt_sizes_and_tags(f)?;
         self.fmt_structure(f)?;
         self.fmt_problems(f)?;
-        self.fmt_features(f)
+        self.fmt_features(f)?;
+        for p in &self.periodic {
+            row(f, "periodic", p.to_string())?;
+        }
+        Ok(())
     }
 }
 

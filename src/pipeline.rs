@@ -59,8 +59,8 @@ pub use crate::io::high_order::{
 };
 pub use crate::validity::LineSearchMode;
 pub use crate::validity::snap::snap_boundary;
-pub use options::{CurveOptions, FeatureOptions, Geometry, Method};
-pub use report::CurveReport;
+pub use options::{CurveOptions, FeatureOptions, Geometry, Method, PeriodicOptions};
+pub use report::{CurveReport, PeriodicReport};
 
 /// Everything that can stop the `curve` job.
 #[derive(Debug, thiserror::Error)]
@@ -92,6 +92,12 @@ pub enum CurveError {
     },
     #[error("{}: {source}", input.display())]
     Blend { input: PathBuf, source: BlendError },
+    /// A `--periodic` pair that names no boundary or whose sides are no images.
+    #[error("{}: {source}", input.display())]
+    Periodic {
+        input: PathBuf,
+        source: crate::mesh::periodic::PeriodicError,
+    },
     #[error("{}: {source}", input.display())]
     Validity {
         input: PathBuf,
@@ -239,6 +245,14 @@ fn curve_mesh(
     let mesh = clock.run(Stage::Read, read)?;
     clock.check()?;
     let topo = clock.run(Stage::Topology, || topology(input, &mesh))?;
+    let periodic = clock
+        .run(Stage::Topology, || {
+            crate::mesh::periodic::resolve(&mesh, &topo, &options.periodic.pairs)
+        })
+        .map_err(|source| CurveError::Periodic {
+            input: input.to_owned(),
+            source,
+        })?;
     clock.check()?;
     let executor = crate::exec::executor(&options.backend);
     let job = Job {
@@ -269,6 +283,12 @@ fn curve_mesh(
         }
         None => None,
     };
+    let seams = match periodic.is_empty() {
+        true => None,
+        false => Some(clock.run(Stage::Periodic, || {
+            periodic_stage(&job, &periodic, &mut ho, order)
+        })?),
+    };
     clock.check()?;
     let (min_scaled_jacobian, deviation) =
         clock.run(Stage::Quality, || quality_stage(&job, &ho))?;
@@ -280,6 +300,7 @@ fn curve_mesh(
         input_min_scaled_jacobian: mesh.min_scaled_jacobian().map_or(f64::NAN, |m| m.0),
         min_scaled_jacobian,
         deviation,
+        periodic: seams.map(|info| (periodic, info)),
     };
     let report = CurveReport::assemble(&job, spline.as_ref(), &done, clock.into_timings());
     Ok(Curved {
@@ -429,6 +450,41 @@ fn elastic_stage(
         None => moved,
     };
     Ok((moved, info, bound))
+}
+
+/// Periodic seams: pair the order-P nodes of each pair's sides on the straight mesh of the
+/// same order (the node numbering of every sampled mesh), move them so that the image side's
+/// nodes are exactly the transform of the master side's, and certify every element that holds
+/// a moved node ([`crate::mesh::periodic::make_images`]); nothing uncertified passes. With
+/// `--periodic-pyfr-names` the groups are renamed `periodic_<i>_l` / `periodic_<i>_r`.
+fn periodic_stage(
+    job: &Job,
+    pairs: &[crate::mesh::periodic::PeriodicPair],
+    ho: &mut HighOrderMesh,
+    order: usize,
+) -> Result<crate::mesh::periodic::ImageInfo, CurveError> {
+    let straight = sample(job.mesh, job.mesh, job.topo, order);
+    let links = crate::mesh::periodic::node_pairs(&straight, pairs).map_err(|source| {
+        CurveError::Periodic {
+            input: job.input.to_owned(),
+            source,
+        }
+    })?;
+    let depth = job.options.line_search.certificate_depth;
+    let (bad, info) = crate::mesh::periodic::make_images(ho, &links, |ho, e| {
+        crate::validity::lagrange_element_bounds(ho, e, depth).certified_positive()
+    });
+    if !bad.is_empty() {
+        return Err(CurveError::invalid(job.input, "periodic seam", &bad));
+    }
+    if job.options.periodic.pyfr_names {
+        for (i, p) in pairs.iter().enumerate() {
+            ho.tag_names.insert(p.master_tag, format!("periodic_{i}_l"));
+            ho.tag_names.insert(p.slave_tag, format!("periodic_{i}_r"));
+        }
+    }
+    ho.periodic = links;
+    Ok(info)
 }
 
 /// The sampled quality of the output (every element must have det J > 0 on the lattice of

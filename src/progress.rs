@@ -46,6 +46,9 @@ pub enum Stage {
     ElasticCg,
     /// The certificate of the elastic mesh's Lagrange elements.
     ElasticValidity,
+    /// Periodic seams: the image sides' nodes made the transform of the master sides', the
+    /// touched elements certified again.
+    Periodic,
     /// Sampled quality and boundary distances of the output.
     Quality,
     /// Writing the output file.
@@ -73,6 +76,7 @@ impl Stage {
             Stage::ElasticAssembly => "elastic_assembly",
             Stage::ElasticCg => "elastic_cg",
             Stage::ElasticValidity => "elastic_validity",
+            Stage::Periodic => "periodic",
             Stage::Quality => "quality",
             Stage::Write => "write",
             Stage::Total => "total",
@@ -93,6 +97,7 @@ impl Stage {
             Stage::ElasticSample | Stage::Elastic | Stage::ElasticAssembly | Stage::ElasticCg => {
                 "elastic analogy"
             }
+            Stage::Periodic => "periodic seams",
             Stage::Quality => "quality",
             Stage::Write => "writing",
             Stage::Total => "working",

@@ -4,7 +4,8 @@
 use super::values;
 use polyspline::elastic::ElasticParams;
 use polyspline::mesh::features::FeatureParams;
-use polyspline::pipeline::FeatureOptions;
+use polyspline::mesh::periodic::PeriodicSpec;
+use polyspline::pipeline::{FeatureOptions, PeriodicOptions};
 use polyspline::solve::CgParams;
 use std::path::PathBuf;
 
@@ -78,6 +79,29 @@ impl FeatureArgs {
             },
             edits: self.feature_edits.clone(),
             ignore: self.ignore_features,
+        }
+    }
+}
+
+/// Periodic boundary pairs (`docs/periodic.md`).
+#[derive(clap::Args)]
+pub(crate) struct PeriodicArgs {
+    /// Boundary A is periodic with boundary B (names or tags; repeatable): the transform, a
+    /// translation or a rotation, is found from the vertex positions and verified, and the
+    /// written nodes of B are exactly the transform of A's.
+    #[arg(long, value_name = "A:B")]
+    periodic: Vec<PeriodicSpec>,
+    /// Write pair i's groups as `periodic_<i>_l` (A) and `periodic_<i>_r` (B), the names
+    /// PyFR's importer pairs.
+    #[arg(long)]
+    periodic_pyfr_names: bool,
+}
+
+impl PeriodicArgs {
+    pub(crate) fn options(&self) -> PeriodicOptions {
+        PeriodicOptions {
+            pairs: self.periodic.clone(),
+            pyfr_names: self.periodic_pyfr_names,
         }
     }
 }

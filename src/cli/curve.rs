@@ -7,7 +7,7 @@
 //! the job on one process and writes the mesh and the report.
 
 use super::values;
-use super::{ElasticArgs, FeatureArgs};
+use super::{ElasticArgs, FeatureArgs, PeriodicArgs};
 use polyspline::elastic::ElasticSolver;
 use polyspline::energy::{EnergyParams, EnergySolver};
 use polyspline::exec::gpu::BackendChoice;
@@ -100,6 +100,8 @@ pub(crate) struct JobArgs {
     w_feature: Option<f64>,
     #[command(flatten)]
     features: FeatureArgs,
+    #[command(flatten)]
+    periodic: PeriodicArgs,
     /// With `--fit smooth`: elements at vertices where a boundary grid line kinks (its
     /// turning within the surface jumps by more than the normal turning of the vertex's
     /// grid lines, at least 1° and at most this angle in degrees) become Q2 elements, which
@@ -322,6 +324,7 @@ impl JobArgs {
             output,
             backend,
             energy: (self.fit == values::FitPreset::Energy).then(|| self.energy.params()),
+            periodic: self.periodic.options(),
         }
     }
 }

@@ -18,6 +18,10 @@ pub(super) struct Args {
     allow_invalid: bool,
     #[command(flatten)]
     features: FeatureArgs,
+    /// Check that boundary A is periodic with boundary B (names or tags; repeatable) and
+    /// report the transform.
+    #[arg(long, value_name = "A:B")]
+    periodic: Vec<polyspline::mesh::periodic::PeriodicSpec>,
 }
 
 pub(super) fn run(args: Args) -> anyhow::Result<()> {
@@ -30,6 +34,12 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
     let found = feature_options.detect(&linear, &topo)?;
     let mut info = MeshInfo::new(&linear, &topo);
     info.features = Some(found.summary(&feature_options.params, &topo));
+    let pairs = polyspline::mesh::periodic::resolve(&linear, &topo, &args.periodic)
+        .map_err(|e| anyhow::anyhow!("{}: {e}", args.mesh.display()))?;
+    let (lo, hi) = linear.bounding_box();
+    let diagonal =
+        ((hi[0] - lo[0]).powi(2) + (hi[1] - lo[1]).powi(2) + (hi[2] - lo[2]).powi(2)).sqrt();
+    info.periodic = pairs.iter().map(|p| p.summary(diagonal)).collect();
     if args.json {
         println!("{}", serde_json::to_string_pretty(&info)?);
     } else {

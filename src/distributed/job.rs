@@ -125,6 +125,11 @@ fn check_supported(options: &CurveOptions) -> Result<(), CurveError> {
     if options.snap_boundary {
         return unsupported("--snap-boundary");
     }
+    // The two sides of a periodic pair may fall on different ranks; the seam pass runs on the
+    // whole sampled mesh.
+    if !options.periodic.pairs.is_empty() {
+        return unsupported("--periodic");
+    }
     // The edits name vertices by their place in the file; a rank's sub-mesh numbers them
     // otherwise, so they would hit other vertices.
     if options.features.edits.is_some() {
@@ -657,6 +662,7 @@ pub fn curve(
         boundary_vertex_deviation_rms: quality.vertex_rms,
         boundary_node_distance_max: quality.node_max,
         boundary_sample_distance_max: quality.sample_max,
+        periodic: None,
         timings,
         backend: "cpu".into(),
         adapter: None,

@@ -31,6 +31,8 @@ pub(crate) struct Group {
     pub(crate) entity: i32,
     pub(crate) physical: i32,
     pub(crate) name: String,
+    /// The boundary or region tag whose members the group holds (0 = untagged).
+    pub(crate) tag: i32,
     /// Element indices (into elements or boundary facets) in this group.
     pub(crate) members: Vec<usize>,
 }
@@ -87,6 +89,7 @@ pub(crate) fn groups(mesh: &HighOrderMesh, volume_name: &str) -> Vec<Group> {
                 entity: g.entity,
                 physical: g.physical,
                 name: g.name,
+                tag: g.tag,
                 members,
             }),
         }
@@ -249,7 +252,7 @@ pub fn write_msh_named(
             msh.elements_v22(w)?;
         }
     }
-    Ok(())
+    msh.periodic(version, w)
 }
 
 /// What every section of one output file needs: the mesh, its physical groups, and the Gmsh
@@ -399,6 +402,81 @@ impl<'m> Msh<'m> {
             }
         }
         writeln!(w, "$EndEntities")
+    }
+
+    /// The boundary entity (dimension d−1) of boundary tag `tag`.
+    fn boundary_entity(&self, tag: i32) -> io::Result<i32> {
+        self.groups
+            .iter()
+            .find(|g| g.dim + 1 == self.d && g.tag == tag)
+            .map(|g| g.entity)
+            .ok_or_else(|| {
+                io::Error::new(
+                    io::ErrorKind::InvalidInput,
+                    format!("periodic boundary tag {tag} has no facets in the mesh"),
+                )
+            })
+    }
+
+    /// `$Periodic` (when the mesh has periodic pairs): per pair the image entity, its master
+    /// entity, the affine map master → image (4×4 by rows) and the node pairs (image node,
+    /// master node), 1-based tags. MSH 4.1 writes it binary in a binary file; MSH 2.2 always
+    /// in ASCII (Gmsh reads the 2.2 section as text in binary files too, and only with
+    /// `Mesh.IgnorePeriodicity=0`, its default being to skip it).
+    fn periodic(&self, version: MshVersion, w: &mut impl Write) -> io::Result<()> {
+        let links = &self.mesh.periodic;
+        if links.is_empty() {
+            return Ok(());
+        }
+        let dim = self.d as i32 - 1;
+        let binary = version == MshVersion::V41 && self.binary;
+        writeln!(w, "$Periodic")?;
+        if binary {
+            w.u64(links.len() as u64)?;
+        } else {
+            writeln!(w, "{}", links.len())?;
+        }
+        for l in links {
+            let slave = self.boundary_entity(l.slave_tag)?;
+            let master = self.boundary_entity(l.master_tag)?;
+            let affine = l.transform.affine();
+            let n = l.node_pairs.len() as u64;
+            if binary {
+                w.i32(dim)?;
+                w.i32(slave)?;
+                w.i32(master)?;
+                w.u64(16)?;
+                for a in affine {
+                    w.f64(a)?;
+                }
+                w.u64(n)?;
+                for &[s, m] in &l.node_pairs {
+                    w.u64(s as u64 + 1)?;
+                    w.u64(m as u64 + 1)?;
+                }
+                continue;
+            }
+            let values: Vec<String> = affine
+                .iter()
+                .map(|&a| zmij::Buffer::new().format(a).to_string())
+                .collect();
+            writeln!(w, "{dim} {slave} {master}")?;
+            match version {
+                MshVersion::V41 => writeln!(w, "16 {}", values.join(" "))?,
+                MshVersion::V22 => writeln!(w, "Affine {}", values.join(" "))?,
+            }
+            writeln!(w, "{n}")?;
+            write_lines(w, l.node_pairs.len(), |i, out| {
+                let [s, m] = l.node_pairs[i];
+                out.extend_from_slice(itoa::Buffer::new().format(s as u64 + 1).as_bytes());
+                out.push(b' ');
+                out.extend_from_slice(itoa::Buffer::new().format(m as u64 + 1).as_bytes());
+            })?;
+        }
+        if binary {
+            writeln!(w)?;
+        }
+        writeln!(w, "$EndPeriodic")
     }
 
     /// MSH 4.1 `$Nodes`: all nodes in one block on the first volume entity.
@@ -618,6 +696,7 @@ mod tests {
             boundary: vec![0; 2 * boundary_tags.len()],
             boundary_tags,
             tag_names: names.iter().map(|(t, n)| (*t, n.to_string())).collect(),
+            periodic: Vec::new(),
         }
     }
 

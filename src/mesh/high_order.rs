@@ -46,6 +46,9 @@ pub struct HighOrderMesh {
     /// Tag per boundary facet (0 = untagged).
     pub boundary_tags: Vec<i32>,
     pub tag_names: BTreeMap<i32, String>,
+    /// Periodic pairs of boundary tags with their node pairs (written to MSH `$Periodic`);
+    /// node ids stay valid through [`HighOrderMesh::subdivided`].
+    pub periodic: Vec<crate::mesh::periodic::PeriodicLink>,
 }
 
 impl HighOrderMesh {
@@ -109,6 +112,7 @@ impl HighOrderMesh {
             boundary: split(&self.boundary, self.dim - 1),
             boundary_tags: rep(&self.boundary_tags, per_f),
             tag_names: self.tag_names.clone(),
+            periodic: self.periodic.clone(),
         }
     }
 }

@@ -6,6 +6,7 @@ pub mod generate;
 pub mod high_order;
 pub mod linear;
 pub mod manifold;
+pub mod periodic;
 pub mod raw;
 pub mod topology;
 

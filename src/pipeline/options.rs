@@ -81,6 +81,19 @@ pub struct CurveOptions {
     /// After the certified least-squares fit, minimise the element degeneration energy
     /// ([`crate::energy`]); `None` (the default) keeps the least-squares result.
     pub energy: Option<EnergyParams>,
+    /// Periodic boundary pairs (`--periodic`, `--periodic-pyfr-names`).
+    pub periodic: PeriodicOptions,
+}
+
+/// Periodic boundary pairs: the written nodes of each image side are the transform of its
+/// master side's (`crate::mesh::periodic`).
+#[derive(Clone, Debug, Default)]
+pub struct PeriodicOptions {
+    /// `--periodic A:B`, in the order given.
+    pub pairs: Vec<crate::mesh::periodic::PeriodicSpec>,
+    /// Name pair i's groups `periodic_<i>_l` (master) and `periodic_<i>_r` (image), PyFR's
+    /// convention, in the written mesh.
+    pub pyfr_names: bool,
 }
 
 impl Default for CurveOptions {
@@ -101,6 +114,7 @@ impl Default for CurveOptions {
             output: OutputOptions::default(),
             backend: Backend::default(),
             energy: None,
+            periodic: PeriodicOptions::default(),
         }
     }
 }
@@ -136,6 +150,13 @@ impl CurveOptions {
         self.output.check()?;
         if let Some(e) = &self.energy {
             e.check()?;
+        }
+        if self.periodic.pyfr_names && self.periodic.pairs.is_empty() {
+            return Err(ParamError::new(
+                "--periodic-pyfr-names",
+                "set",
+                "names periodic pairs: give them with --periodic A:B",
+            ));
         }
         Ok(())
     }

@@ -129,6 +129,8 @@ pub struct CurveReport {
     pub boundary_node_distance_max: f64,
     /// The same over the output's boundary facets sampled on the lattice of order 2p.
     pub boundary_sample_distance_max: f64,
+    /// With `--periodic`: the pairs, their transforms and the largest mismatch written.
+    pub periodic: Option<PeriodicReport>,
     /// Seconds per stage, and `total`.
     pub timings: BTreeMap<String, f64>,
     /// `cpu` or `gpu`: where the heavy kernels ran.
@@ -152,6 +154,30 @@ pub(super) struct Finished {
     pub input_min_scaled_jacobian: f64,
     pub min_scaled_jacobian: f64,
     pub deviation: BoundaryDeviation,
+    /// The periodic pairs and what making the seams exact images did.
+    pub periodic: Option<(
+        Vec<crate::mesh::periodic::PeriodicPair>,
+        crate::mesh::periodic::ImageInfo,
+    )>,
+}
+
+/// The periodic seams of the written mesh (`--periodic`). Distances are relative to the
+/// bounding-box diagonal.
+#[deny(missing_docs)]
+#[derive(Clone, Debug, Serialize)]
+pub struct PeriodicReport {
+    /// Each pair as used: sides, tags, transform, vertex pairs and input mismatch.
+    pub pairs: Vec<crate::mesh::periodic::PeriodicSummary>,
+    /// Node pairs written (every node of an image side paired with one of its master side).
+    pub node_pairs: usize,
+    /// Largest move of a seam node that made the image sides exact images.
+    pub max_seam_shift: f64,
+    /// Largest |T(x_master) − x_image| over the written node pairs.
+    pub written_mismatch: f64,
+    /// Elements certified again because a node of theirs moved (all passed).
+    pub recertified_elements: usize,
+    /// Whether the groups were written under PyFR's names `periodic_<i>_l` / `periodic_<i>_r`.
+    pub pyfr_names: bool,
 }
 
 impl CurveReport {
@@ -234,6 +260,17 @@ impl CurveReport {
             boundary_vertex_deviation_rms: done.deviation.vertex_rms,
             boundary_node_distance_max: done.deviation.node_max,
             boundary_sample_distance_max: done.deviation.sample_max,
+            periodic: done.periodic.as_ref().map(|(pairs, info)| {
+                let diagonal = done.deviation.diagonal;
+                PeriodicReport {
+                    pairs: pairs.iter().map(|p| p.summary(diagonal)).collect(),
+                    node_pairs: ho.periodic.iter().map(|l| l.node_pairs.len()).sum(),
+                    max_seam_shift: info.max_shift / diagonal,
+                    written_mismatch: info.max_mismatch / diagonal,
+                    recertified_elements: info.recertified,
+                    pyfr_names: options.periodic.pyfr_names,
+                }
+            }),
             timings,
             backend: options.backend.name().into(),
             adapter: gpu.map(|g| g.adapter.clone()),

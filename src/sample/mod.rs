@@ -273,6 +273,7 @@ pub fn sample(
         boundary: boundary_facets(mesh, topo, &num),
         boundary_tags: topo.boundary_facet_tags.clone(),
         tag_names: mesh.tag_names.clone(),
+        periodic: Vec::new(),
     };
     ho.nodes.shrink_to_fit();
     ho
@@ -505,6 +506,7 @@ pub fn sample_with<T: Copy + Default + Send + Sync>(
         boundary: boundary_facets(mesh, topo, &num),
         boundary_tags: topo.boundary_facet_tags.clone(),
         tag_names: mesh.tag_names.clone(),
+        periodic: Vec::new(),
     };
     (ho, nodes)
 }

@@ -19,4 +19,5 @@ mod hardening;
 mod high_order;
 mod jacobian_oracle;
 mod knot_intervals;
+mod periodic;
 mod report_schema;

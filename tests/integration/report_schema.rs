@@ -32,6 +32,12 @@ fn curve_reports_validate_against_the_documented_schema() {
         report_of("hexes", d3, &[]).unwrap(),
         report_of("elastic", d2, &["--method", "elastic"]).unwrap(),
         report_of(
+            "periodic",
+            "meshes/real/su2-testcases/mesh_vki_turbine_prepbc.su2",
+            &["--periodic", "periodic_1:periodic_2"],
+        )
+        .unwrap(),
+        report_of(
             "energy",
             d2,
             &["--fit", "energy", "--line-search", "global"],

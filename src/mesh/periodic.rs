@@ -1,0 +1,1000 @@
+//! Periodic boundary pairs (`--periodic A:B`): two boundary groups of a mesh that are images of
+//! each other under a rigid transform, a translation or a rotation about an axis.
+//!
+//! Input: the linear mesh, its topology and the pairs as the user names them
+//! ([`PeriodicSpec`]: boundary names or tags). Output: one [`PeriodicPair`] per spec (the tags,
+//! the transform found from the vertex positions, the vertex map), or a one-line
+//! [`PeriodicError`]. After sampling, [`node_pairs`] pairs the order-P nodes of the two sides
+//! and [`make_images`] moves them so that the nodes of B are exactly the transform of A's.
+//!
+//! Invariants of an accepted pair: A and B are different non-empty boundary groups with as many
+//! vertices each; every vertex of A, mapped by the transform, lies within [`PERIODIC_REL_TOL`]
+//! times its shortest boundary edge of a vertex of B, and the map is one-to-one.
+//!
+//! The transform is found without knowing the correspondence: the translation between the
+//! centroids, else rotations built from frames that a rigid map carries from A to B (the
+//! area-weighted normal of the group and the principal axes of its vertex cloud, with either
+//! sign) that carry A's outward normal onto B's inward one, each verified, the best kept.
+
+use crate::math::linalg::DVec3;
+use crate::mesh::high_order::HighOrderMesh;
+use crate::mesh::{LinearMesh, Topology};
+use serde::Serialize;
+use std::collections::HashMap;
+
+/// Largest distance, relative to the vertex's shortest boundary edge, between a vertex of A
+/// mapped by the transform and its vertex of B.
+pub const PERIODIC_REL_TOL: f64 = 1e-6;
+
+/// How many groups an error message lists.
+const MAX_LISTED: usize = 8;
+
+/// One `--periodic A:B`: boundary A (the master) is mapped onto boundary B (its image).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct PeriodicSpec {
+    /// Boundary name or tag of the master side.
+    pub master: String,
+    /// Boundary name or tag of the image side.
+    pub slave: String,
+}
+
+impl std::str::FromStr for PeriodicSpec {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s.split_once(':') {
+            Some((a, b)) if !a.is_empty() && !b.is_empty() && !b.contains(':') => {
+                Ok(PeriodicSpec {
+                    master: a.to_string(),
+                    slave: b.to_string(),
+                })
+            }
+            _ => Err(format!(
+                "expected A:B (two boundary names or tags), got {s:?}"
+            )),
+        }
+    }
+}
+
+impl std::fmt::Display for PeriodicSpec {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{}:{}", self.master, self.slave)
+    }
+}
+
+/// Why a periodic pair cannot be used.
+#[derive(Debug, thiserror::Error)]
+#[error("--periodic {spec}: {what}")]
+pub struct PeriodicError {
+    /// The pair as given.
+    pub spec: String,
+    /// What is wrong, in one line.
+    pub what: String,
+}
+
+/// A rigid map x ↦ R x + t.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Rigid {
+    /// The rotation R (rows).
+    pub rotation: [[f64; 3]; 3],
+    /// The translation t.
+    pub translation: [f64; 3],
+}
+
+impl Rigid {
+    /// The translation by `t`.
+    pub fn translation(t: [f64; 3]) -> Rigid {
+        Rigid {
+            rotation: [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            translation: t,
+        }
+    }
+
+    /// R x + t.
+    pub fn apply(&self, x: [f64; 3]) -> [f64; 3] {
+        let r = &self.rotation;
+        let t = &self.translation;
+        std::array::from_fn(|i| r[i][0] * x[0] + r[i][1] * x[1] + r[i][2] * x[2] + t[i])
+    }
+
+    /// Rᵀ (x − t).
+    pub fn apply_inverse(&self, x: [f64; 3]) -> [f64; 3] {
+        let r = &self.rotation;
+        let y = [
+            x[0] - self.translation[0],
+            x[1] - self.translation[1],
+            x[2] - self.translation[2],
+        ];
+        std::array::from_fn(|i| r[0][i] * y[0] + r[1][i] * y[1] + r[2][i] * y[2])
+    }
+
+    /// R is the identity.
+    pub fn is_translation(&self) -> bool {
+        let r = &self.rotation;
+        (0..3).all(|i| (0..3).all(|j| r[i][j] == if i == j { 1.0 } else { 0.0 }))
+    }
+
+    /// The 4×4 affine matrix by rows (Gmsh's `$Periodic` transform, master to image).
+    pub fn affine(&self) -> [f64; 16] {
+        let r = &self.rotation;
+        let t = &self.translation;
+        [
+            r[0][0], r[0][1], r[0][2], t[0], r[1][0], r[1][1], r[1][2], t[1], r[2][0], r[2][1],
+            r[2][2], t[2], 0.0, 0.0, 0.0, 1.0,
+        ]
+    }
+
+    /// A rotation's unit axis, a point on the axis (the one nearest the origin) and its angle
+    /// in degrees (right-handed about the axis); `None` for a translation. The translation
+    /// along the axis (a screw) is `translation · axis`.
+    pub fn axis_angle(&self) -> Option<([f64; 3], [f64; 3], f64)> {
+        if self.is_translation() {
+            return None;
+        }
+        let r = &self.rotation;
+        let w = DVec3::new(r[2][1] - r[1][2], r[0][2] - r[2][0], r[1][0] - r[0][1]);
+        let trace = r[0][0] + r[1][1] + r[2][2];
+        let angle = w.length().atan2(trace - 1.0);
+        let axis = if w.length() > 1e-12 {
+            w / w.length()
+        } else {
+            // A half turn: the axis is the column of R + I of largest norm.
+            let cols: Vec<DVec3> = (0..3)
+                .map(|j| DVec3::new(r[0][j], r[1][j], r[2][j]) + DVec3::from_array(unit_col(j)))
+                .collect();
+            let best = cols
+                .iter()
+                .copied()
+                .max_by(|a, b| a.length().total_cmp(&b.length()))
+                .unwrap_or(DVec3::Z);
+            best / best.length()
+        };
+        // The point p on the axis with p·axis = 0 and (I − R) p = t − (t·axis) axis.
+        let t = DVec3::from_array(self.translation);
+        let t_perp = t - axis * t.dot(axis);
+        // (I − R) is invertible on the plane ⟂ axis: solve with the axis row added.
+        let m = crate::math::linalg::DMat3::from_cols(
+            DVec3::new(1.0 - r[0][0], -r[1][0], -r[2][0]) + axis * axis.x,
+            DVec3::new(-r[0][1], 1.0 - r[1][1], -r[2][1]) + axis * axis.y,
+            DVec3::new(-r[0][2], -r[1][2], 1.0 - r[2][2]) + axis * axis.z,
+        );
+        let p = m.inverse() * t_perp;
+        Some((axis.to_array(), p.to_array(), angle.to_degrees()))
+    }
+}
+
+fn unit_col(j: usize) -> [f64; 3] {
+    let mut e = [0.0; 3];
+    e[j] = 1.0;
+    e
+}
+
+/// A verified periodic pair of boundary groups.
+#[derive(Clone, Debug)]
+pub struct PeriodicPair {
+    /// The pair as given.
+    pub spec: PeriodicSpec,
+    /// Boundary tag of the master side A.
+    pub master_tag: i32,
+    /// Boundary tag of the image side B.
+    pub slave_tag: i32,
+    /// Maps A onto B.
+    pub transform: Rigid,
+    /// (vertex of B, vertex of A) for every vertex of B.
+    pub vertex_map: Vec<[u32; 2]>,
+    /// Largest |T(x_A) − x_B| over the vertex pairs of the input.
+    pub input_mismatch: f64,
+}
+
+/// The node pairs of one periodic pair of a [`HighOrderMesh`]: what the MSH `$Periodic`
+/// section writes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PeriodicLink {
+    /// Boundary tag of the master side.
+    pub master_tag: i32,
+    /// Boundary tag of the image side.
+    pub slave_tag: i32,
+    /// Maps the master side onto the image side.
+    pub transform: Rigid,
+    /// (node of the image side, node of the master side), 0-based.
+    pub node_pairs: Vec<[u32; 2]>,
+}
+
+/// One pair as the report and `info` show it.
+#[deny(missing_docs)]
+#[derive(Clone, Debug, Serialize)]
+pub struct PeriodicSummary {
+    /// The master side A as given (name or tag).
+    pub master: String,
+    /// The image side B as given.
+    pub slave: String,
+    /// Boundary tag of A.
+    pub master_tag: i32,
+    /// Boundary tag of B.
+    pub slave_tag: i32,
+    /// `translation` or `rotation`.
+    pub kind: &'static str,
+    /// t of the map x_B = R x_A + t.
+    pub translation: [f64; 3],
+    /// A rotation's unit axis (right-handed with `angle_degrees`).
+    pub axis: Option<[f64; 3]>,
+    /// A rotation's point on the axis nearest the origin.
+    pub axis_point: Option<[f64; 3]>,
+    /// A rotation's angle in degrees.
+    pub angle_degrees: Option<f64>,
+    /// Vertices of the input on each side.
+    pub vertex_pairs: usize,
+    /// Largest |T(x_A) − x_B| over the input's vertex pairs, relative to the bounding-box
+    /// diagonal.
+    pub input_mismatch: f64,
+}
+
+impl PeriodicPair {
+    /// The pair as the report and `info` show it; `diagonal` scales the mismatch.
+    pub fn summary(&self, diagonal: f64) -> PeriodicSummary {
+        let rot = self.transform.axis_angle();
+        PeriodicSummary {
+            master: self.spec.master.clone(),
+            slave: self.spec.slave.clone(),
+            master_tag: self.master_tag,
+            slave_tag: self.slave_tag,
+            kind: if rot.is_some() {
+                "rotation"
+            } else {
+                "translation"
+            },
+            translation: self.transform.translation,
+            axis: rot.map(|r| r.0),
+            axis_point: rot.map(|r| r.1),
+            angle_degrees: rot.map(|r| r.2),
+            vertex_pairs: self.vertex_map.len(),
+            input_mismatch: self.input_mismatch / diagonal,
+        }
+    }
+}
+
+impl std::fmt::Display for PeriodicSummary {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let v = |a: [f64; 3]| format!("({:.6}, {:.6}, {:.6})", a[0], a[1], a[2]);
+        write!(
+            f,
+            "{} -> {} (tags {} -> {}): ",
+            self.master, self.slave, self.master_tag, self.slave_tag
+        )?;
+        match (self.axis, self.axis_point, self.angle_degrees) {
+            (Some(a), Some(p), Some(deg)) => {
+                write!(f, "rotation {deg:.6}° about axis {} through {}", v(a), v(p))?
+            }
+            _ => write!(f, "translation {}", v(self.translation))?,
+        }
+        write!(
+            f,
+            ", {} vertex pairs, mismatch {:.1e}",
+            self.vertex_pairs, self.input_mismatch
+        )
+    }
+}
+
+/// One side of a pair: its boundary facets' vertices with their shortest boundary edge, the
+/// vertex centroid and the area-weighted outward normal.
+struct Side {
+    tag: i32,
+    vertices: Vec<u32>,
+    edge: Vec<f64>,
+    centroid: DVec3,
+    normal: DVec3,
+}
+
+fn point(x: [f64; 3]) -> DVec3 {
+    DVec3::from_array(x)
+}
+
+impl Side {
+    fn new(mesh: &LinearMesh, topo: &Topology, tag: i32) -> Side {
+        let mut edge: HashMap<u32, f64> = HashMap::new();
+        let mut normal = DVec3::ZERO;
+        for (k, &f) in topo.boundary_facets.iter().enumerate() {
+            if topo.boundary_facet_tags[k] != tag {
+                continue;
+            }
+            let f = f as usize;
+            let vs = topo.facet_vertices(f);
+            let n = vs.len();
+            for i in 0..n {
+                let (a, b) = (vs[i], vs[(i + 1) % n]);
+                let len =
+                    (point(mesh.coords[a as usize]) - point(mesh.coords[b as usize])).length();
+                for v in [a, b] {
+                    let e = edge.entry(v).or_insert(f64::INFINITY);
+                    *e = e.min(len);
+                }
+            }
+            let x: Vec<DVec3> = vs.iter().map(|&v| point(mesh.coords[v as usize])).collect();
+            let centre = x.iter().copied().sum::<DVec3>() / n as f64;
+            let mut nf = if mesh.dim == 2 {
+                let d = x[1] - x[0];
+                DVec3::new(d.y, -d.x, 0.0)
+            } else {
+                0.5 * (x[2] - x[0]).cross(x[3] - x[1])
+            };
+            // Outward: away from the centroid of the facet's element.
+            let e = topo.facet_elements[f][0] as usize;
+            let ex = mesh.element(e);
+            let ec = ex
+                .iter()
+                .map(|&v| point(mesh.coords[v as usize]))
+                .sum::<DVec3>()
+                / ex.len() as f64;
+            if nf.dot(centre - ec) < 0.0 {
+                nf = -nf;
+            }
+            normal += nf;
+        }
+        let mut vertices: Vec<u32> = edge.keys().copied().collect();
+        vertices.sort_unstable();
+        let edge = vertices.iter().map(|v| edge[v]).collect();
+        let centroid = vertices
+            .iter()
+            .map(|&v| point(mesh.coords[v as usize]))
+            .sum::<DVec3>()
+            / vertices.len().max(1) as f64;
+        Side {
+            tag,
+            vertices,
+            edge,
+            centroid,
+            normal,
+        }
+    }
+
+    /// Principal axes of the vertex cloud (unit eigenvectors of its covariance).
+    fn axes(&self, mesh: &LinearMesh) -> [DVec3; 3] {
+        let mut c = [[0.0; 3]; 3];
+        for &v in &self.vertices {
+            let d = point(mesh.coords[v as usize]) - self.centroid;
+            let d = d.to_array();
+            for i in 0..3 {
+                for j in 0..3 {
+                    c[i][j] += d[i] * d[j];
+                }
+            }
+        }
+        symmetric_eigenvectors(c)
+    }
+}
+
+/// Unit eigenvectors of a symmetric 3×3 matrix (cyclic Jacobi rotations).
+fn symmetric_eigenvectors(mut a: [[f64; 3]; 3]) -> [DVec3; 3] {
+    let mut v = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    for _ in 0..50 {
+        let off = a[0][1].abs() + a[0][2].abs() + a[1][2].abs();
+        let scale = a[0][0].abs() + a[1][1].abs() + a[2][2].abs();
+        if off <= 1e-15 * scale || off == 0.0 {
+            break;
+        }
+        for (p, q) in [(0, 1), (0, 2), (1, 2)] {
+            if a[p][q] == 0.0 {
+                continue;
+            }
+            let theta = (a[q][q] - a[p][p]) / (2.0 * a[p][q]);
+            let t = theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt());
+            let t = if theta == 0.0 { 1.0 } else { t };
+            let c = 1.0 / (t * t + 1.0).sqrt();
+            let s = t * c;
+            // A ← Jᵀ A J, V ← V J.
+            for k in 0..3 {
+                let (akp, akq) = (a[k][p], a[k][q]);
+                a[k][p] = c * akp - s * akq;
+                a[k][q] = s * akp + c * akq;
+            }
+            for k in 0..3 {
+                let (apk, aqk) = (a[p][k], a[q][k]);
+                a[p][k] = c * apk - s * aqk;
+                a[q][k] = s * apk + c * aqk;
+            }
+            for row in v.iter_mut() {
+                let (vp, vq) = (row[p], row[q]);
+                row[p] = c * vp - s * vq;
+                row[q] = s * vp + c * vq;
+            }
+        }
+    }
+    let mut order = [0, 1, 2];
+    order.sort_by(|&i, &j| a[i][i].total_cmp(&a[j][j]));
+    order.map(|j| DVec3::new(v[0][j], v[1][j], v[2][j]))
+}
+
+/// An orthonormal frame from two directions (None when they are nearly parallel).
+fn frame(u: DVec3, w: DVec3) -> Option<[DVec3; 3]> {
+    let lu = u.length();
+    if lu == 0.0 || !lu.is_finite() {
+        return None;
+    }
+    let e1 = u / lu;
+    let w2 = w - e1 * w.dot(e1);
+    if w2.length() <= 1e-6 * w.length() || w.length() == 0.0 {
+        return None;
+    }
+    let e2 = w2 / w2.length();
+    Some([e1, e2, e1.cross(e2)])
+}
+
+/// The rotation taking frame `a` onto frame `b` (R = B Aᵀ).
+fn rotation_between(a: [DVec3; 3], b: [DVec3; 3]) -> [[f64; 3]; 3] {
+    std::array::from_fn(|i| std::array::from_fn(|j| (0..3).map(|k| b[k][i] * a[k][j]).sum::<f64>()))
+}
+
+/// Points in cells of side `h`, for nearest-point queries within `h`.
+pub(crate) struct PointGrid<'a> {
+    h: f64,
+    points: &'a [[f64; 3]],
+    cells: HashMap<[i64; 3], Vec<u32>>,
+}
+
+impl<'a> PointGrid<'a> {
+    pub(crate) fn new(points: &'a [[f64; 3]], ids: &[u32], h: f64) -> PointGrid<'a> {
+        let mut cells: HashMap<[i64; 3], Vec<u32>> = HashMap::new();
+        for &i in ids {
+            cells
+                .entry(Self::key(points[i as usize], h))
+                .or_default()
+                .push(i);
+        }
+        PointGrid { h, points, cells }
+    }
+    fn key(x: [f64; 3], h: f64) -> [i64; 3] {
+        x.map(|c| (c / h).floor() as i64)
+    }
+    /// The nearest point within about `h` of `q`, with its distance.
+    pub(crate) fn nearest(&self, q: [f64; 3]) -> Option<(u32, f64)> {
+        let k = Self::key(q, self.h);
+        let mut best: Option<(u32, f64)> = None;
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    let Some(ids) = self.cells.get(&[k[0] + dx, k[1] + dy, k[2] + dz]) else {
+                        continue;
+                    };
+                    for &i in ids {
+                        let d = (point(self.points[i as usize]) - point(q)).length();
+                        if best.is_none_or(|b| d < b.1) {
+                            best = Some((i, d));
+                        }
+                    }
+                }
+            }
+        }
+        best
+    }
+}
+
+/// How well `t` maps side `a` onto the side in `grid`: the vertex map and the worst vertex of A by distance/tolerance with its distance (infinite where no vertex of B
+/// is near).
+struct Verdict {
+    map: Vec<[u32; 2]>,
+    worst: Option<(u32, f64, f64)>,
+}
+
+fn verify(mesh: &LinearMesh, a: &Side, grid: &PointGrid, t: &Rigid) -> Verdict {
+    let mut map = Vec::with_capacity(a.vertices.len());
+    let mut used = HashMap::new();
+    let mut worst: Option<(u32, f64, f64)> = None;
+    for (k, &v) in a.vertices.iter().enumerate() {
+        let q = t.apply(mesh.coords[v as usize]);
+        let tol = PERIODIC_REL_TOL * a.edge[k];
+        let (hit, d) = match grid.nearest(q) {
+            Some((w, d)) => (Some(w), d),
+            None => (None, f64::INFINITY),
+        };
+        let ratio = d / tol;
+        // A vertex of B taken twice: the map is not one-to-one.
+        let dup = hit.is_some_and(|w| used.insert(w, v).is_some());
+        let ratio = if dup { f64::INFINITY } else { ratio };
+        if ratio > 1.0 && worst.is_none_or(|w| ratio > w.1) {
+            worst = Some((v, ratio, d));
+        }
+        if let Some(w) = hit {
+            map.push([w, v]);
+        }
+    }
+    Verdict { map, worst }
+}
+
+/// The boundary tag a name or tag string denotes.
+fn resolve_tag(
+    mesh: &LinearMesh,
+    tags: &[i32],
+    spec: &PeriodicSpec,
+    s: &str,
+) -> Result<i32, PeriodicError> {
+    let by_name = mesh
+        .tag_names
+        .iter()
+        .filter(|(t, n)| n.as_str() == s && tags.contains(t))
+        .map(|(t, _)| *t)
+        .next();
+    if let Some(t) = by_name {
+        return Ok(t);
+    }
+    if let Ok(t) = s.parse::<i32>()
+        && t != 0
+        && tags.contains(&t)
+    {
+        return Ok(t);
+    }
+    let listed: Vec<String> = tags
+        .iter()
+        .filter(|&&t| t != 0)
+        .take(MAX_LISTED)
+        .map(|t| match mesh.tag_names.get(t) {
+            Some(n) => format!("{t} {n:?}"),
+            None => t.to_string(),
+        })
+        .collect();
+    let more = if tags.len() > MAX_LISTED { ", ..." } else { "" };
+    Err(PeriodicError {
+        spec: spec.to_string(),
+        what: format!(
+            "no boundary group named or tagged {s:?} (boundary groups: {}{more})",
+            if listed.is_empty() {
+                "none".to_string()
+            } else {
+                listed.join(", ")
+            }
+        ),
+    })
+}
+
+/// Resolve and verify every pair of `specs` on the mesh.
+pub fn resolve(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    specs: &[PeriodicSpec],
+) -> Result<Vec<PeriodicPair>, PeriodicError> {
+    let mut tags: Vec<i32> = topo.boundary_facet_tags.clone();
+    tags.sort_unstable();
+    tags.dedup();
+    let mut seen: Vec<i32> = Vec::new();
+    let mut out = Vec::new();
+    for spec in specs {
+        let err = |what: String| PeriodicError {
+            spec: spec.to_string(),
+            what,
+        };
+        let ta = resolve_tag(mesh, &tags, spec, &spec.master)?;
+        let tb = resolve_tag(mesh, &tags, spec, &spec.slave)?;
+        if ta == tb {
+            return Err(err(format!("both sides are boundary tag {ta}")));
+        }
+        for t in [ta, tb] {
+            if seen.contains(&t) {
+                return Err(err(format!(
+                    "boundary tag {t} is already in another periodic pair"
+                )));
+            }
+        }
+        seen.extend([ta, tb]);
+        out.push(pair(mesh, topo, spec, ta, tb).map_err(err)?);
+    }
+    Ok(out)
+}
+
+/// Find and verify the transform of one pair.
+fn pair(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    spec: &PeriodicSpec,
+    ta: i32,
+    tb: i32,
+) -> Result<PeriodicPair, String> {
+    let a = Side::new(mesh, topo, ta);
+    let b = Side::new(mesh, topo, tb);
+    if a.vertices.len() != b.vertices.len() {
+        return Err(format!(
+            "{} has {} boundary vertices and {} has {}: they cannot be images of each other",
+            spec.master,
+            a.vertices.len(),
+            spec.slave,
+            b.vertices.len()
+        ));
+    }
+    let shared: Vec<u32> = a
+        .vertices
+        .iter()
+        .copied()
+        .filter(|v| b.vertices.binary_search(v).is_ok())
+        .collect();
+    if !shared.is_empty() {
+        return Err(format!(
+            "{} and {} share {} vertices (first: {}); periodic sides must be apart",
+            spec.master,
+            spec.slave,
+            shared.len(),
+            shared[0]
+        ));
+    }
+    let h = a
+        .edge
+        .iter()
+        .chain(&b.edge)
+        .copied()
+        .fold(f64::INFINITY, f64::min);
+    if !(h > 0.0 && h.is_finite()) {
+        return Err(format!(
+            "{} or {} has a zero-length edge",
+            spec.master, spec.slave
+        ));
+    }
+    let grid = PointGrid::new(&mesh.coords, &b.vertices, h);
+    let mut candidates = vec![Rigid::translation((b.centroid - a.centroid).to_array())];
+    // Direction pairs a rigid map carries from A to B (up to sign).
+    let (xa, xb) = (a.axes(mesh), b.axes(mesh));
+    let mut dirs: Vec<(DVec3, DVec3)> = vec![(a.normal, b.normal)];
+    if mesh.dim == 3 {
+        // The smallest rotation between the normals (planar sides of a sector).
+        dirs.push((a.normal.cross(-b.normal), a.normal.cross(-b.normal)));
+        dirs.extend((0..3).map(|i| (xa[i], xb[i])));
+    } else {
+        dirs.extend(
+            (0..3)
+                .map(|i| (xa[i], xb[i]))
+                .filter(|(u, _)| u.z.abs() < 0.5),
+        );
+        dirs.push((DVec3::Z, DVec3::Z));
+    }
+    for i in 0..dirs.len() {
+        for j in 0..dirs.len() {
+            if i == j {
+                continue;
+            }
+            for si in [1.0, -1.0] {
+                for sj in [1.0, -1.0] {
+                    let (Some(fa), Some(fb)) = (
+                        frame(dirs[i].0, dirs[j].0),
+                        frame(dirs[i].1 * si, dirs[j].1 * sj),
+                    ) else {
+                        continue;
+                    };
+                    let r = rotation_between(fa, fb);
+                    // A periodic map carries the outward normal of A onto the inward normal
+                    // of B; a half turn that maps A onto B mirrored (and, in the plane, a
+                    // flip of z) carries it onto the outward one and is no periodicity.
+                    let rn = point(
+                        Rigid {
+                            rotation: r,
+                            translation: [0.0; 3],
+                        }
+                        .apply(a.normal.to_array()),
+                    );
+                    if rn.dot(b.normal) > 0.0 || (mesh.dim == 2 && r[2][2] < 0.0) {
+                        continue;
+                    }
+                    let t = b.centroid
+                        - point(
+                            Rigid {
+                                rotation: r,
+                                translation: [0.0; 3],
+                            }
+                            .apply(a.centroid.to_array()),
+                        );
+                    candidates.push(Rigid {
+                        rotation: r,
+                        translation: t.to_array(),
+                    });
+                }
+            }
+        }
+    }
+    let mut best: Option<(Rigid, Verdict)> = None;
+    for t in candidates {
+        let v = verify(mesh, &a, &grid, &t);
+        let score = |v: &Verdict| v.worst.map_or(0.0, |w| w.1);
+        let better = match &best {
+            None => true,
+            Some((_, bv)) => score(&v) < score(bv),
+        };
+        if better {
+            best = Some((t, v));
+        }
+        if best.as_ref().is_some_and(|b| b.1.worst.is_none()) {
+            break;
+        }
+    }
+    let (mut transform, verdict) = best.expect("the translation is a candidate");
+    if let Some((v, _, d)) = verdict.worst {
+        let d = if d.is_finite() {
+            d
+        } else {
+            // The distance to the nearest vertex of B, for the message.
+            let q = transform.apply(mesh.coords[v as usize]);
+            b.vertices
+                .iter()
+                .map(|&w| (point(mesh.coords[w as usize]) - point(q)).length())
+                .fold(f64::INFINITY, f64::min)
+        };
+        let x = mesh.coords[v as usize];
+        return Err(format!(
+            "no translation or rotation maps {} onto {}: vertex {v} at ({:.6}, {:.6}, {:.6}) lands {d:.3e} from the nearest vertex of {} (tolerance {PERIODIC_REL_TOL:e} of its edge)",
+            spec.master, spec.slave, x[0], x[1], x[2], spec.slave
+        ));
+    }
+    // Least-squares translation over the matched vertices (the centroids' is the same for a
+    // translation; for a rotation it removes the centroid rounding).
+    let n = verdict.map.len() as f64;
+    let rot_only = Rigid {
+        rotation: transform.rotation,
+        translation: [0.0; 3],
+    };
+    let mean = verdict
+        .map
+        .iter()
+        .map(|&[w, v]| {
+            point(mesh.coords[w as usize]) - point(rot_only.apply(mesh.coords[v as usize]))
+        })
+        .sum::<DVec3>()
+        / n;
+    transform.translation = mean.to_array();
+    if mesh.dim == 2 {
+        transform.translation[2] = 0.0;
+    }
+    let input_mismatch = verdict
+        .map
+        .iter()
+        .map(|&[w, v]| {
+            (point(mesh.coords[w as usize]) - point(transform.apply(mesh.coords[v as usize])))
+                .length()
+        })
+        .fold(0.0, f64::max);
+    let mut vertex_map = verdict.map;
+    vertex_map.sort_unstable();
+    Ok(PeriodicPair {
+        spec: spec.clone(),
+        master_tag: a.tag,
+        slave_tag: b.tag,
+        transform,
+        vertex_map,
+        input_mismatch,
+    })
+}
+
+/// Nodes of the facets of `ho` tagged `tag`, sorted.
+fn tagged_nodes(ho: &HighOrderMesh, tag: i32) -> Vec<u32> {
+    let npf = ho.nodes_per_facet();
+    let mut nodes: Vec<u32> = ho
+        .boundary
+        .chunks(npf)
+        .zip(&ho.boundary_tags)
+        .filter(|(_, t)| **t == tag)
+        .flat_map(|(f, _)| f.iter().copied())
+        .collect();
+    nodes.sort_unstable();
+    nodes.dedup();
+    nodes
+}
+
+/// The order-P node pairs of each pair on `straight`, the straight-sided sampling of the input
+/// at the output's order (before any subdivision; the curved and subdivided meshes number
+/// their nodes alike). The straight nodes of the two sides are exact images, so they pair by
+/// position; `pairs[i]` gives link `i`.
+pub fn node_pairs(
+    straight: &HighOrderMesh,
+    pairs: &[PeriodicPair],
+) -> Result<Vec<PeriodicLink>, PeriodicError> {
+    let p = straight.order.max(1) as f64;
+    pairs
+        .iter()
+        .map(|pair| {
+            let a = tagged_nodes(straight, pair.master_tag);
+            let b = tagged_nodes(straight, pair.slave_tag);
+            let shortest = pair_spacing(straight, pair.slave_tag) / p;
+            let grid = PointGrid::new(&straight.nodes, &b, shortest);
+            let tol = (PERIODIC_REL_TOL * shortest).max(2.0 * pair.input_mismatch);
+            let mut node_pairs = Vec::with_capacity(a.len());
+            for &n in &a {
+                let q = pair.transform.apply(straight.nodes[n as usize]);
+                match grid.nearest(q) {
+                    Some((m, d)) if d <= tol => node_pairs.push([m, n]),
+                    _ => {
+                        return Err(PeriodicError {
+                            spec: pair.spec.to_string(),
+                            what: format!(
+                                "node {n} of the order-{} mesh has no image",
+                                straight.order
+                            ),
+                        });
+                    }
+                }
+            }
+            node_pairs.sort_unstable();
+            if node_pairs.len() != b.len() || node_pairs.windows(2).any(|w| w[0][0] == w[1][0]) {
+                return Err(PeriodicError {
+                    spec: pair.spec.to_string(),
+                    what: format!(
+                        "the order-{} nodes of the two sides do not pair one-to-one",
+                        straight.order
+                    ),
+                });
+            }
+            Ok(PeriodicLink {
+                master_tag: pair.master_tag,
+                slave_tag: pair.slave_tag,
+                transform: pair.transform,
+                node_pairs,
+            })
+        })
+        .collect()
+}
+
+/// Shortest facet edge (between facet corner nodes) of the facets tagged `tag`.
+fn pair_spacing(ho: &HighOrderMesh, tag: i32) -> f64 {
+    let npf = ho.nodes_per_facet();
+    let p = ho.order;
+    let corners: Vec<usize> = if ho.dim == 2 {
+        vec![0, p]
+    } else {
+        vec![0, p, (p + 1) * (p + 1) - 1, (p + 1) * p]
+    };
+    let mut h = f64::INFINITY;
+    for (f, _) in ho
+        .boundary
+        .chunks(npf)
+        .zip(&ho.boundary_tags)
+        .filter(|(_, t)| **t == tag)
+    {
+        for i in 0..corners.len() {
+            let a = ho.nodes[f[corners[i]] as usize];
+            let b = ho.nodes[f[corners[(i + 1) % corners.len()]] as usize];
+            h = h.min((point(a) - point(b)).length());
+        }
+    }
+    h
+}
+
+/// What [`make_images`] did.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ImageInfo {
+    /// Largest move of a seam node.
+    pub max_shift: f64,
+    /// Largest |T(x_A) − x_B| over the node pairs after the move.
+    pub max_mismatch: f64,
+    /// Elements re-certified because a node of theirs moved.
+    pub recertified: usize,
+}
+
+/// Weights of the master node in its new position, tried in turn for the pairs around
+/// elements that lose their certificate: the midpoint, then each side kept.
+const IMAGE_WEIGHTS: [f64; 3] = [0.5, 1.0, 0.0];
+
+/// Move the seam nodes of `ho` so that every image node is exactly the transform of its
+/// master: the master goes to `w·x_A + (1−w)·T⁻¹(x_B)` and the image to T of that, `w` = ½
+/// first; elements containing a moved node are certified (`certify`), and around those that
+/// fail the other weights are tried. Returns the elements still uncertified (empty on
+/// success) and the figures.
+pub fn make_images(
+    ho: &mut HighOrderMesh,
+    links: &[PeriodicLink],
+    certify: impl Fn(&HighOrderMesh, usize) -> bool + Sync,
+) -> (Vec<usize>, ImageInfo) {
+    use rayon::prelude::*;
+    let original = ho.nodes.clone();
+    let mut weight: Vec<Vec<usize>> = links.iter().map(|l| vec![0; l.node_pairs.len()]).collect();
+    let place = |ho: &mut HighOrderMesh, weight: &[Vec<usize>]| {
+        for (l, w) in links.iter().zip(weight) {
+            for (k, &[s, m]) in l.node_pairs.iter().enumerate() {
+                let wa = IMAGE_WEIGHTS[w[k]];
+                let xa = point(original[m as usize]);
+                let xb = point(l.transform.apply_inverse(original[s as usize]));
+                ho.nodes[m as usize] = (xa * wa + xb * (1.0 - wa)).to_array();
+            }
+        }
+        // Images from masters, in pair order, repeated so that a node that is an image in one
+        // pair and a master in another (corners of doubly periodic meshes) settles.
+        for _ in 0..links.len() {
+            for l in links {
+                for &[s, m] in &l.node_pairs {
+                    ho.nodes[s as usize] = l.transform.apply(ho.nodes[m as usize]);
+                }
+            }
+        }
+    };
+    place(ho, &weight);
+    let moved: Vec<bool> = (0..ho.nodes.len())
+        .map(|n| ho.nodes[n] != original[n])
+        .collect();
+    let npe = ho.nodes_per_element();
+    let touched: Vec<usize> = (0..ho.n_elements())
+        .filter(|&e| {
+            ho.elements[e * npe..(e + 1) * npe]
+                .iter()
+                .any(|&n| moved[n as usize])
+        })
+        .collect();
+    let mut check: Vec<usize> = touched.clone();
+    let mut bad: Vec<usize> = Vec::new();
+    for round in 0..IMAGE_WEIGHTS.len() {
+        bad = check
+            .par_iter()
+            .copied()
+            .filter(|&e| !certify(ho, e))
+            .collect();
+        if bad.is_empty() || round + 1 == IMAGE_WEIGHTS.len() {
+            break;
+        }
+        let mut in_bad = vec![false; ho.nodes.len()];
+        for &e in &bad {
+            for &n in &ho.elements[e * npe..(e + 1) * npe] {
+                in_bad[n as usize] = true;
+            }
+        }
+        for (l, w) in links.iter().zip(weight.iter_mut()) {
+            for (k, &[s, m]) in l.node_pairs.iter().enumerate() {
+                if in_bad[s as usize] || in_bad[m as usize] {
+                    w[k] = round + 1;
+                }
+            }
+        }
+        place(ho, &weight);
+        check = touched.clone();
+    }
+    let mut info = ImageInfo {
+        recertified: touched.len(),
+        ..Default::default()
+    };
+    for n in 0..ho.nodes.len() {
+        info.max_shift = info
+            .max_shift
+            .max((point(ho.nodes[n]) - point(original[n])).length());
+    }
+    info.max_mismatch = max_mismatch(ho, links);
+    (bad, info)
+}
+
+/// Largest |T(x_master) − x_image| over the node pairs of `links` on `ho`.
+pub fn max_mismatch(ho: &HighOrderMesh, links: &[PeriodicLink]) -> f64 {
+    links
+        .iter()
+        .flat_map(|l| {
+            l.node_pairs.iter().map(|&[s, m]| {
+                (point(l.transform.apply(ho.nodes[m as usize])) - point(ho.nodes[s as usize]))
+                    .length()
+            })
+        })
+        .fold(0.0, f64::max)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn spec_parses_two_names() {
+        let s: PeriodicSpec = "left:right".parse().unwrap();
+        assert_eq!((s.master.as_str(), s.slave.as_str()), ("left", "right"));
+        assert!("left".parse::<PeriodicSpec>().is_err());
+        assert!(":b".parse::<PeriodicSpec>().is_err());
+        assert!("a:b:c".parse::<PeriodicSpec>().is_err());
+    }
+
+    #[test]
+    fn rotation_axis_angle_and_inverse() {
+        // 30° about z through (1, 2, 0).
+        let (c, s) = (30f64.to_radians().cos(), 30f64.to_radians().sin());
+        let r = [[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]];
+        let p = [1.0, 2.0, 0.0];
+        let rp = Rigid {
+            rotation: r,
+            translation: [0.0; 3],
+        }
+        .apply(p);
+        let t = Rigid {
+            rotation: r,
+            translation: [p[0] - rp[0], p[1] - rp[1], 0.0],
+        };
+        let (axis, point_on, deg) = t.axis_angle().unwrap();
+        assert!((deg - 30.0).abs() < 1e-12);
+        assert!((axis[2] - 1.0).abs() < 1e-12);
+        assert!((point_on[0] - 1.0).abs() < 1e-12 && (point_on[1] - 2.0).abs() < 1e-12);
+        let x = [3.0, -1.0, 0.5];
+        let back = t.apply_inverse(t.apply(x));
+        assert!((0..3).all(|i| (back[i] - x[i]).abs() < 1e-14));
+    }
+}

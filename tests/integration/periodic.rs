@@ -1,0 +1,418 @@
+//! Periodic meshes (`curve --periodic A:B`): the written nodes of the image side are the
+//! transform of the master side's, and solvers' readers see the pairs. Oracles: Gmsh's reader
+//! (`getPeriodicNodes` with high-order nodes, node coordinates, the affine transform and the
+//! facet angles across the seam from its Jacobians, `tests/external/periodic_probe.py`), the
+//! analytic transform of the generated sectors (a rotation about z, a translation along z),
+//! and PyFR's importer (`periodic/…` datasets of the `.pyfrm`).
+
+use crate::common::{self, polyspline, python, python_has, run_ok, scratch_in};
+use polyspline::mesh::LinearMesh;
+use serde_json::Value;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+const ROOT: &str = env!("CARGO_MANIFEST_DIR");
+const TURBINE: &str = "meshes/real/su2-testcases/mesh_vki_turbine_prepbc.su2";
+/// Written images agree to rounding: relative to the bounding-box diagonal.
+const IMAGE_TOL: f64 = 1e-12;
+
+/// A sector of the annulus 1 ≤ r ≤ 2, 0 ≤ θ ≤ `deg`, (3D: 0 ≤ z ≤ 0.5) in `nr` × `nt` (× 2)
+/// cells, its sides tagged `theta_lo`, `theta_hi`, `hub`, `shroud` (3D: `bottom`, `top`).
+fn sector(dim: usize, deg: f64, nr: usize, nt: usize) -> LinearMesh {
+    let nz = if dim == 3 { 2 } else { 0 };
+    let id = |i: usize, j: usize, k: usize| ((k * (nt + 1) + j) * (nr + 1) + i) as u32;
+    let mut coords = Vec::new();
+    for k in 0..=nz {
+        for j in 0..=nt {
+            for i in 0..=nr {
+                let r = 1.0 + i as f64 / nr as f64;
+                let t = (deg * j as f64 / nt as f64).to_radians();
+                coords.push([r * t.cos(), r * t.sin(), 0.25 * k as f64]);
+            }
+        }
+    }
+    let mut elements = Vec::new();
+    let mut facets = Vec::new();
+    let mut tags = Vec::new();
+    let mut face = |vs: Vec<u32>, tag: i32| {
+        facets.extend(vs);
+        tags.push(tag);
+    };
+    if dim == 2 {
+        for j in 0..nt {
+            for i in 0..nr {
+                elements.extend([
+                    id(i, j, 0),
+                    id(i + 1, j, 0),
+                    id(i + 1, j + 1, 0),
+                    id(i, j + 1, 0),
+                ]);
+            }
+        }
+        for i in 0..nr {
+            face(vec![id(i, 0, 0), id(i + 1, 0, 0)], 1);
+            face(vec![id(i, nt, 0), id(i + 1, nt, 0)], 2);
+        }
+        for j in 0..nt {
+            face(vec![id(0, j, 0), id(0, j + 1, 0)], 3);
+            face(vec![id(nr, j, 0), id(nr, j + 1, 0)], 4);
+        }
+    } else {
+        for k in 0..nz {
+            for j in 0..nt {
+                for i in 0..nr {
+                    let q = |k| {
+                        [
+                            id(i, j, k),
+                            id(i + 1, j, k),
+                            id(i + 1, j + 1, k),
+                            id(i, j + 1, k),
+                        ]
+                    };
+                    elements.extend(q(k));
+                    elements.extend(q(k + 1));
+                }
+            }
+        }
+        for k in 0..nz {
+            for i in 0..nr {
+                face(
+                    vec![
+                        id(i, 0, k),
+                        id(i + 1, 0, k),
+                        id(i + 1, 0, k + 1),
+                        id(i, 0, k + 1),
+                    ],
+                    1,
+                );
+                face(
+                    vec![
+                        id(i, nt, k),
+                        id(i + 1, nt, k),
+                        id(i + 1, nt, k + 1),
+                        id(i, nt, k + 1),
+                    ],
+                    2,
+                );
+            }
+            for j in 0..nt {
+                face(
+                    vec![
+                        id(0, j, k),
+                        id(0, j + 1, k),
+                        id(0, j + 1, k + 1),
+                        id(0, j, k + 1),
+                    ],
+                    3,
+                );
+                face(
+                    vec![
+                        id(nr, j, k),
+                        id(nr, j + 1, k),
+                        id(nr, j + 1, k + 1),
+                        id(nr, j, k + 1),
+                    ],
+                    4,
+                );
+            }
+        }
+        for j in 0..nt {
+            for i in 0..nr {
+                for (k, tag) in [(0, 5), (nz, 6)] {
+                    face(
+                        vec![
+                            id(i, j, k),
+                            id(i + 1, j, k),
+                            id(i + 1, j + 1, k),
+                            id(i, j + 1, k),
+                        ],
+                        tag,
+                    );
+                }
+            }
+        }
+    }
+    let names = ["theta_lo", "theta_hi", "hub", "shroud", "bottom", "top"];
+    let mut raw = LinearMesh {
+        dim,
+        coords,
+        elements,
+        tagged_facets: facets,
+        facet_tags: tags,
+        tag_names: (1..=6)
+            .zip(names)
+            .map(|(t, n)| (t, n.to_string()))
+            .collect(),
+        ..Default::default()
+    };
+    raw.tag_names.retain(|t, _| dim == 3 || *t <= 4);
+    raw
+}
+
+/// The sector written as a linear MSH file in the scratch folder.
+fn sector_file(dim: usize, deg: f64) -> PathBuf {
+    let path = scratch_in("periodic", &format!("sector{dim}d.msh"));
+    common::write_linear(&sector(dim, deg, 3, 6), &path);
+    path
+}
+
+/// `curve INPUT -o OUT ARGS --report`: the report.
+fn curve(input: &Path, out: &Path, args: &[&str]) -> Value {
+    let report = out.with_extension("json");
+    run_ok(
+        polyspline()
+            .arg("curve")
+            .arg(input)
+            .arg("-o")
+            .arg(out)
+            .arg("-q")
+            .arg("--report")
+            .arg(&report)
+            .args(args),
+    );
+    serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap()
+}
+
+/// Gmsh's view of the periodic pairs of `file` (`periodic_probe.py`).
+fn probe(file: &Path) -> Value {
+    let out = run_ok(
+        python()
+            .arg(Path::new(ROOT).join("tests/external/periodic_probe.py"))
+            .arg(file),
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// Every node of each image entity is paired in Gmsh, and its coordinates are the affine
+/// image of its master's to `IMAGE_TOL` of the diagonal. Returns the links by image name.
+fn assert_exact_images(file: &Path, expect: usize) -> BTreeMap<String, Value> {
+    let p = probe(file);
+    let diag = p["diagonal"].as_f64().unwrap();
+    let links = p["links"].as_array().unwrap();
+    assert_eq!(links.len(), expect, "{}: links {links:?}", file.display());
+    let mut out = BTreeMap::new();
+    for l in links {
+        let (pairs, nodes) = (
+            l["pairs"].as_u64().unwrap(),
+            l["entity_nodes"].as_u64().unwrap(),
+        );
+        assert!(pairs > 0 && pairs == nodes, "{}: {l}", file.display());
+        assert_eq!(l["unpaired"], 0, "{}: {l}", file.display());
+        let miss = l["max_mismatch"].as_f64().unwrap() / diag;
+        assert!(
+            miss <= IMAGE_TOL,
+            "{}: images miss by {miss:e} of the diagonal: {l}",
+            file.display()
+        );
+        out.insert(l["name"].as_str().unwrap().to_string(), l.clone());
+    }
+    out
+}
+
+fn affine(l: &Value) -> Vec<f64> {
+    l["affine"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect()
+}
+
+#[test]
+fn turbine_images_are_exact_and_gmsh_pairs_every_node() {
+    if !common::have_gmsh(&common::current_test()) {
+        return;
+    }
+    let input = Path::new(ROOT).join(TURBINE);
+    for (name, args) in [
+        ("o1", vec!["--order", "1"]),
+        ("o2", vec!["--order", "2"]),
+        ("o4_v22", vec!["--order", "4", "--msh-version", "2.2"]),
+        ("sub3", vec!["--order", "1", "--subdivide", "3"]),
+        ("o3_bin", vec!["--order", "3", "--binary"]),
+    ] {
+        let out = scratch_in("periodic", &format!("turbine_{name}.msh"));
+        let mut args = args;
+        args.extend(["--periodic", "periodic_1:periodic_2"]);
+        let report = curve(&input, &out, &args);
+        let per = &report["periodic"];
+        assert!(
+            per["written_mismatch"].as_f64().unwrap() <= IMAGE_TOL,
+            "{name}: {per}"
+        );
+        assert_eq!(per["pairs"][0]["kind"], "translation", "{name}");
+        let links = assert_exact_images(&out, 1);
+        let l = &links["periodic_2"];
+        assert_eq!(l["master_name"], "periodic_1", "{name}");
+        // The cascade's pitch: a translation by (0, -0.0575) (the file's markers to 3e-11).
+        let a = affine(l);
+        let expect = [
+            1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, -0.0575, 0.0, 0.0, 1.0, 0.0,
+        ];
+        for k in 0..12 {
+            assert!((a[k] - expect[k]).abs() < 1e-6, "{name}: affine {a:?}");
+        }
+    }
+}
+
+#[test]
+fn sectors_rotation_and_translation_are_exact_at_every_order() {
+    if !common::have_gmsh(&common::current_test()) {
+        return;
+    }
+    let (c, s) = (30f64.to_radians().cos(), 30f64.to_radians().sin());
+    let rotation = [c, -s, 0.0, 0.0, s, c, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0];
+    let lift = [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.5];
+    for dim in [2, 3] {
+        let input = sector_file(dim, 30.0);
+        let max_order = if dim == 2 { 10 } else { 9 };
+        let mut runs: Vec<Vec<String>> = (1..=max_order)
+            .filter(|p| dim == 2 || [1, 2, 3, 5, 9].contains(p))
+            .map(|p| vec!["--order".into(), p.to_string()])
+            .collect();
+        runs.push(vec![
+            "--order".into(),
+            "1".into(),
+            "--subdivide".into(),
+            "4".into(),
+        ]);
+        for run in runs {
+            let mut args: Vec<&str> = run.iter().map(String::as_str).collect();
+            args.extend(["--periodic", "theta_lo:theta_hi"]);
+            if dim == 3 {
+                args.extend(["--periodic", "bottom:top"]);
+            }
+            let out = scratch_in("periodic", &format!("sector{dim}d_{}.msh", run.join("_")));
+            let report = curve(&input, &out, &args);
+            let pairs = &report["periodic"]["pairs"];
+            assert_eq!(pairs[0]["kind"], "rotation", "{dim}D {run:?}");
+            let deg = pairs[0]["angle_degrees"].as_f64().unwrap();
+            assert!((deg - 30.0).abs() < 1e-9, "{dim}D {run:?}: {deg}");
+            let links = assert_exact_images(&out, dim - 1);
+            let a = affine(&links["theta_hi"]);
+            for k in 0..12 {
+                assert!(
+                    (a[k] - rotation[k]).abs() < 1e-9,
+                    "{dim}D {run:?}: affine {a:?}"
+                );
+            }
+            if dim == 3 {
+                assert_eq!(pairs[1]["kind"], "translation");
+                let a = affine(&links["top"]);
+                for k in 0..12 {
+                    assert!((a[k] - lift[k]).abs() < 1e-9, "{run:?}: affine {a:?}");
+                }
+            }
+        }
+    }
+}
+
+#[test]
+#[ignore = "C¹ across the seam needs the two sides identified in the spline space (docs/periodic.md); today the seam is C⁰ (2D sector: 4.9° across the seam, 3.3° inside)"]
+fn seam_facet_angle_is_no_worse_than_the_interior() {
+    if !common::have_gmsh(&common::current_test()) {
+        return;
+    }
+    // The curved hub and shroud cross the rotational seam: the derivative across it, seen from
+    // both sides through the rotation, turns no more than across the interior facets.
+    for dim in [2, 3] {
+        let input = sector_file(dim, 30.0);
+        let out = scratch_in("periodic", &format!("angle{dim}d.msh"));
+        curve(
+            &input,
+            &out,
+            &["--order", "3", "--periodic", "theta_lo:theta_hi"],
+        );
+        let p = probe(&out);
+        let seam = p["seam_angle_max"].as_f64().unwrap();
+        let interior = p["interior_angle_max"].as_f64().unwrap();
+        assert!(p["seam_facets"].as_u64().unwrap() > 0, "{p}");
+        assert!(
+            seam <= interior + 1e-6,
+            "{dim}D: seam {seam}° > interior {interior}°"
+        );
+    }
+}
+
+#[test]
+fn pyfr_import_connects_the_periodic_faces() {
+    let test = common::current_test();
+    if !python_has("pyfr", &test) || !python_has("h5py", &test) {
+        return;
+    }
+    let input = Path::new(ROOT).join(TURBINE);
+    let out = scratch_in("periodic", "turbine_pyfr.msh");
+    curve(
+        &input,
+        &out,
+        &[
+            "--periodic",
+            "periodic_1:periodic_2",
+            "--periodic-pyfr-names",
+        ],
+    );
+    let pyfrm = out.with_extension("pyfrm");
+    let _ = std::fs::remove_file(&pyfrm);
+    run_ok(
+        python()
+            .args(["-m", "pyfr", "import"])
+            .arg(&out)
+            .arg(&pyfrm),
+    );
+    let sizes = run_ok(python().arg("-c").arg(
+        "import h5py, sys\nf = h5py.File(sys.argv[1])\nprint(sorted(len(f['periodic'][k]) for k in f['periodic']))",
+    ).arg(&pyfrm));
+    // 144 facets on each side: 144 connected face pairs.
+    assert_eq!(String::from_utf8_lossy(&sizes.stdout).trim(), "[144]");
+}
+
+#[test]
+fn a_wrong_periodic_pair_is_refused_in_one_line() {
+    let turbine = Path::new(ROOT).join(TURBINE);
+    let sector = sector_file(2, 30.0);
+    for (input, pair, says) in [
+        (&turbine, "periodic_1:airfoil", "cannot be images"),
+        (
+            &turbine,
+            "periodic_1:nosuch",
+            "no boundary group named or tagged \"nosuch\"",
+        ),
+        (&turbine, "periodic_1:4", "both sides"),
+        // Same vertex counts, but the shroud is the hub scaled by 2: no rigid map.
+        (
+            &sector,
+            "hub:shroud",
+            "no translation or rotation maps hub onto shroud: vertex",
+        ),
+    ] {
+        let out = scratch_in("periodic", "refused.msh");
+        let _ = std::fs::remove_file(&out);
+        let run = polyspline()
+            .arg("curve")
+            .arg(input)
+            .arg("-o")
+            .arg(&out)
+            .args(["--periodic", pair])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert!(!run.status.success(), "{pair}: accepted");
+        assert_eq!(err.trim().lines().count(), 1, "{pair}: {err}");
+        assert!(err.contains(says), "{pair}: {err}");
+        assert!(!out.exists(), "{pair}: wrote output");
+    }
+    // A PyFR naming option without pairs cannot apply.
+    let run = polyspline()
+        .arg("curve")
+        .arg(&turbine)
+        .arg("-o")
+        .arg(scratch_in("periodic", "refused.msh"))
+        .arg("--periodic-pyfr-names")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(
+        !run.status.success() && err.trim().lines().count() == 1,
+        "{err}"
+    );
+}
