@@ -5,7 +5,7 @@ graded and uniform knot intervals against the straight-sided elevation.
 usage: python3 scripts/bench_smoothness.py [--timeout S] [MESH ...]
 
 Builds nothing: run `cargo build --release` first ($POLYSPLINE_EXE overrides the binary). For each mesh (default: every file under
-meshes/real/), runs `curve` (order 2, default options) with `--knot-intervals graded` and
+meshes/real/), runs `curve` (order 2, otherwise default options) with `--knot-intervals graded` and
 `uniform`, and `curve --straight`, each writing MSH and a JSON report. Measures every written
 file with Gmsh alone (`tests/external/facet_angles.py`: the angle between the two elements'
 derivatives transversal to each interior facet at its centre, and Gmsh's Jacobian ratio per
@@ -60,7 +60,8 @@ def main():
         name = os.path.relpath(mesh, os.path.join(ROOT, "meshes", "real"))
         base = os.path.join(tmp, name.replace("/", "_"))
         runs = {}
-        for knots, extra in [("graded", []), ("uniform", ["--knot-intervals", "uniform"]),
+        for knots, extra in [("graded", ["--knot-intervals", "graded"]),
+                             ("uniform", ["--knot-intervals", "uniform"]),
                              ("straight", ["--straight"])]:
             out = base + "_" + knots + ".msh"
             rep, err = curve(mesh, out, base + "_" + knots + ".json", extra, a.timeout)

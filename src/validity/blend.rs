@@ -15,8 +15,9 @@
 //!
 //! [`blend_search`] starts from t = 2 and accepts an element when (validity) its certified lower
 //! bound of det J exceeds `min_det_fraction` × the straight element's and (quality) its
-//! Jacobian ratio bound r_B (certified min det J over the largest Bernstein coefficient of
-//! det J, an upper bound of max det J) is at least max(q_min · r_S, q_p · min(r_S, P)), r_S the
+//! Jacobian ratio bound r_B (a certified lower bound of min det J over a certified upper bound
+//! of max det J, both refined by subdivision until the test is decided,
+//! [`super::certify_ratio`]) is at least max(q_min · r_S, q_p · min(r_S, P)), r_S the
 //! straight element's ratio (from its corners) and P the 1st percentile of r_S over the mesh.
 //! Its smallest scaled Jacobian over the lattice {0, ½, 1}^d must also be at least q_min × the
 //! straight element's (det J alone does not see a thin cell sheared along its length).
@@ -37,7 +38,7 @@ pub use entities::{EntityIds, entity_ids};
 use shape::{corner_ratio, hadamard_upper};
 pub use shape::{lattice_scaled_jacobian, max_det_bound};
 
-use super::{Certifier, DetBounds, bernstein_min_bounds, certify_screened, det_jacobian_bernstein};
+use super::{Certifier, DetBounds, certify_ratio, certify_screened, det_jacobian_bernstein};
 use crate::math::linalg::DVec3;
 use crate::math::{BezierElements, BezierNet};
 use crate::mesh::{LinearMesh, Topology};
@@ -438,16 +439,11 @@ pub fn blend_search_shared(
         if b.lower >= ratio_target(e) * hadamard_upper(dim, net) {
             return (true, shape(), b.lower);
         }
+        // The coefficients' min over max is pessimistic on a curved element (while the
+        // straight ratio is exact): refine both bounds by subdivision until decided.
         let poly = det_jacobian_bernstein(dim, net);
-        let max = poly.coef.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        let need = ratio_target(e) * max;
-        // The screened lower bound may be loose: take the exact certificate's when it decides.
-        let lower = if b.lower >= need {
-            b.lower
-        } else {
-            bernstein_min_bounds(dim, poly, depth).lower
-        };
-        (true, lower >= need && shape(), lower.max(b.lower))
+        let (ok, lower) = certify_ratio(dim, poly, ratio_target(e), depth);
+        (true, ok && shape(), lower.max(b.lower))
     };
     // `elements` sorted. The blended nets are built once per call (a reduced element's costs
     // the target map's smooth corrections, any other's the spline's evaluation) and shared by
