@@ -115,7 +115,9 @@ fn to_py_err(py: Python<'_>, e: &anyhow::Error, fallback: &str) -> PyErr {
     use polyspline::io::output::WriteError;
     let class = if let Some(c) = e.downcast_ref::<CurveError>() {
         match c {
-            CurveError::Read(_) | CurveError::Features(_) => "InputError",
+            CurveError::Read(_) | CurveError::Features(_) | CurveError::Periodic { .. } => {
+                "InputError"
+            }
             CurveError::NotCurvable { .. } => "NotCurvableError",
             CurveError::Write(_) => "OutputError",
             CurveError::Options(_) => "ParameterError",
