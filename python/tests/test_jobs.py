@@ -115,7 +115,7 @@ def test_sigint_during_the_job_stops_it_before_writing(tmp_path):
 
 
 def test_ctrl_c_during_the_cg_solve_stops_within_a_fraction_of_a_second(tmp_path):
-    # A CG-heavy fit (point Jacobi, tolerance 1e-14): the solve alone takes over a second. A
+    # A CG-heavy fit (point Jacobi, tolerance 1e-14): the solve alone takes about a second. A
     # SIGINT from another thread a few iterations in must stop the job within one iteration,
     # not when the solve (and the fit stage) ends.
     if not BIG.exists():
@@ -141,6 +141,9 @@ def test_ctrl_c_during_the_cg_solve_stops_within_a_fraction_of_a_second(tmp_path
         polyspline.curve_file(BIG, out, progress=progress, **options)
     latency = time.perf_counter() - sent["t"]
     assert not out.exists()
-    assert cg_seconds > 0.5, f"the solve is too short to tell ({cg_seconds:.2f} s)"
-    assert latency < 0.2, f"stopped {latency:.3f} s after SIGINT (solve: {cg_seconds:.2f} s)"
+    # A solve that ignored the signal would run on for about the rest of the solve after the
+    # signal (sent 0.05 s after iteration 10): the bound stays well below that on any machine.
+    assert cg_seconds > 0.2, f"the solve is too short to tell ({cg_seconds:.2f} s)"
+    bound = min(0.2, (cg_seconds - 0.05) / 2)
+    assert latency < bound, f"stopped {latency:.3f} s after SIGINT (solve: {cg_seconds:.2f} s)"
     print(f"SIGINT latency {latency * 1000:.1f} ms, uninterrupted CG {cg_seconds:.2f} s")
