@@ -1,6 +1,7 @@
 """Shared helpers of the Python package's tests: the command line to compare with, Gmsh as the
 independent checker of written files, and visible skips (a failure under CI=true), as the Rust
 tests have them (tests/common/mod.rs)."""
+import contextlib
 import os
 import subprocess
 from pathlib import Path
@@ -58,19 +59,28 @@ def cli_error(*args):
     return line
 
 
-def gmsh_jacobians(path):
-    """Gmsh's own reading of a mesh file: (volume elements, min det J, max det J, volume),
-    det J at Gauss points of degree 2p+2 and the volume integrated with them."""
+@contextlib.contextmanager
+def gmsh_open(path):
+    """Gmsh with `path` open and its terminal output off, finalized afterwards: yields the gmsh
+    module and the mesh's dimension."""
     gmsh = need("gmsh")
-    import numpy as np
-
     # interruptible=False: otherwise Gmsh sets SIGINT to its default action for the rest of
     # the process, and the Ctrl-C tests that run later would kill pytest.
     gmsh.initialize(readConfigFiles=False, interruptible=False)
     try:
         gmsh.option.setNumber("General.Terminal", 0)
         gmsh.open(str(path))
-        dim = gmsh.model.getDimension()
+        yield gmsh, gmsh.model.getDimension()
+    finally:
+        gmsh.finalize()
+
+
+def gmsh_jacobians(path):
+    """Gmsh's own reading of a mesh file: (volume elements, min det J, max det J, volume),
+    det J at Gauss points of degree 2p+2 and the volume integrated with them."""
+    import numpy as np
+
+    with gmsh_open(path) as (gmsh, dim):
         types, tags, _ = gmsh.model.mesh.getElements(dim)
         assert len(types) == 1, types
         etype = types[0]
@@ -80,5 +90,3 @@ def gmsh_jacobians(path):
         dets = np.asarray(dets).reshape(len(tags[0]), -1)
         volume = float(np.sum(dets * np.asarray(weights)[None, :]))
         return len(tags[0]), float(dets.min()), float(dets.max()), volume
-    finally:
-        gmsh.finalize()

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import polyspline
-from conftest import HEXES, QUADS, cli, cli_error, cli_path, need
+from conftest import HEXES, QUADS, cli, cli_error, cli_path, gmsh_open, need
 
 
 def cli_json(*args):
@@ -17,16 +17,9 @@ def cli_json(*args):
 
 def gmsh_min_det_jac(path):
     """Gmsh's minDetJac per volume element (its Bezier bound of det J), in file order."""
-    gmsh = need("gmsh")
-    gmsh.initialize(readConfigFiles=False, interruptible=False)
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.open(str(path))
-        dim = gmsh.model.getDimension()
+    with gmsh_open(path) as (gmsh, dim):
         _, tags, _ = gmsh.model.mesh.getElements(dim)
         return np.asarray(gmsh.model.mesh.getElementQualities(tags[0], "minDetJac"))
-    finally:
-        gmsh.finalize()
 
 
 def inverted(curved, element):
