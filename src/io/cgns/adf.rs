@@ -108,7 +108,7 @@ impl Adf {
             })
     }
 
-    /// An unsigned integer of `width` bytes in the file's byte order.
+    /// An unsigned integer of `bytes.len()` (at most 8) bytes in the file's byte order.
     fn int(&self, bytes: &[u8]) -> u64 {
         let mut b = [0u8; 8];
         if self.big_endian {
