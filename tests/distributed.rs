@@ -361,6 +361,10 @@ fn unsupported_options_under_mpirun_fail_with_one_line_and_write_nothing() {
             "--knot-intervals graded",
         ),
         (
+            vec!["--cg-preconditioner", "block-sgs"],
+            "--cg-preconditioner block-sgs",
+        ),
+        (
             vec!["--feature-edits", edits.to_str().unwrap()],
             "--feature-edits",
         ),

@@ -140,6 +140,14 @@ fn check_supported(options: &CurveOptions) -> Result<(), CurveError> {
     if options.knots.intervals != crate::spline::KnotIntervals::Uniform {
         return unsupported("--knot-intervals graded");
     }
+    // The distributed CG preconditions by block Jacobi within each rank's share; the sweeps
+    // of block Gauss–Seidel would run across the shares in an order that depends on them.
+    if matches!(
+        options.fit.cg.preconditioner,
+        crate::solve::CgPreconditioner::BlockSgs { .. }
+    ) {
+        return unsupported("--cg-preconditioner block-sgs");
+    }
     Ok(())
 }
 
