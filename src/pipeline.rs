@@ -264,7 +264,7 @@ fn curve_mesh(
     };
     let mut spline = match options.geometry {
         Geometry::Straight => None,
-        _ => Some(spline::curve_spline(&job, &mut clock)?),
+        _ => Some(spline::curve_spline(&job, &mut clock, &periodic)?),
     };
     clock.check()?;
     let mut ho = clock.run(Stage::Sample, || {
@@ -377,11 +377,20 @@ fn sample_stage(
                 // The search's nets: the reduced elements' target-map corrections once only.
                 let nets = outcome.blend_nets.take();
                 let space = &outcome.space;
+                let (ids_mesh, ids_topo) = setup.entity_mesh(job);
                 blended = match nets {
-                    Some(c) => {
-                        Blended::with_cache(mesh, &target_map, space, mesh, topo, factors, c)
-                    }
-                    None => Blended::new(mesh, &target_map, space, mesh, topo, factors),
+                    Some(c) => Blended::with_cache(
+                        mesh,
+                        &target_map,
+                        space,
+                        ids_mesh,
+                        ids_topo,
+                        factors,
+                        c,
+                    )
+                    .with_geometry(mesh),
+                    None => Blended::new(mesh, &target_map, space, ids_mesh, ids_topo, factors)
+                        .with_geometry(mesh),
                 };
                 &blended
             }
@@ -472,7 +481,7 @@ fn periodic_stage(
     })?;
     let depth = job.options.line_search.certificate_depth;
     let (bad, info) = crate::mesh::periodic::make_images(ho, &links, |ho, e| {
-        crate::validity::lagrange_element_bounds(ho, e, depth).certified_positive()
+        crate::validity::lagrange_element_bounds(ho, e, depth).lower
     });
     if !bad.is_empty() {
         return Err(CurveError::invalid(job.input, "periodic seam", &bad));

@@ -110,6 +110,8 @@ pub struct Energy<'a> {
     /// Per element: w_e h_e².
     pub(crate) scale: Vec<f64>,
     pub(crate) rows: Vec<ElementRows>,
+    /// Per element: the constant part of its net (periodic seam offsets), if any.
+    shifts: Vec<Option<Box<BezierNet>>>,
     /// Smallest input element size vol^{1/d}.
     pub(crate) h_min: f64,
     /// Control points that carry the boundary (a non-zero extraction weight at a Bernstein
@@ -257,6 +259,9 @@ impl<'a> Energy<'a> {
             pinv,
             scale,
             rows,
+            shifts: (0..space.n_elements())
+                .map(|e| space.net_shift(e).map(Box::new))
+                .collect(),
             h_min,
             frozen,
         })
@@ -293,6 +298,13 @@ impl<'a> Energy<'a> {
                     for i in 0..3 {
                         net[a][i] += w * c[i];
                     }
+                }
+            }
+        }
+        if let Some(s) = &self.shifts[e] {
+            for (x, d) in net.iter_mut().zip(s.iter()) {
+                for i in 0..3 {
+                    x[i] += d[i];
                 }
             }
         }

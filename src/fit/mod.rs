@@ -61,6 +61,11 @@ pub trait FitSpace: Sync {
     );
     /// Bernstein net of element `e` for the control points `cps`.
     fn bezier_net_with(&self, e: usize, cps: &[[f64; 3]]) -> BezierNet;
+    /// The constant part of element `e`'s net (its periodic seam offsets): the net is
+    /// E_e C plus this. `None` (the default): none.
+    fn net_shift(&self, _e: usize) -> Option<BezierNet> {
+        None
+    }
     /// When E_e is a matrix shared by every element with the same key times the selection of
     /// 3^d distinct control points (in local-node order), return the key and write the
     /// control points into `ids`; the assembly then computes one local matrix per key.
@@ -605,6 +610,9 @@ impl FitSpace for crate::spline::SplineSpace {
     }
     fn bezier_net_with(&self, e: usize, cps: &[[f64; 3]]) -> BezierNet {
         self.element_bezier_with(e, cps)
+    }
+    fn net_shift(&self, e: usize) -> Option<BezierNet> {
+        crate::spline::eval::shift_net(&self.extraction, e)
     }
     /// By sum factorisation: E_e = (M_z ⊗ M_y ⊗ M_x) N_e with N_e the local nodes' control
     /// point entries, so E_eᵀ f applies the transposed 1D matrices direction by direction

@@ -858,6 +858,8 @@ pub struct ImageInfo {
     pub max_mismatch: f64,
     /// Elements re-certified because a node of theirs moved.
     pub recertified: usize,
+    /// Smallest certified lower bound of det J over the re-certified elements (∞ for none).
+    pub min_det_bound: f64,
 }
 
 /// Weights of the master node in its new position, tried in turn for the pairs around
@@ -866,13 +868,13 @@ const IMAGE_WEIGHTS: [f64; 3] = [0.5, 1.0, 0.0];
 
 /// Move the seam nodes of `ho` so that every image node is exactly the transform of its
 /// master: the master goes to `w·x_A + (1−w)·T⁻¹(x_B)` and the image to T of that, `w` = ½
-/// first; elements containing a moved node are certified (`certify`), and around those that
-/// fail the other weights are tried. Returns the elements still uncertified (empty on
-/// success) and the figures.
+/// first; elements containing a moved node are certified (`certify` gives a certified lower
+/// bound of det J, positive when valid), and around those that fail the other weights are
+/// tried. Returns the elements still uncertified (empty on success) and the figures.
 pub fn make_images(
     ho: &mut HighOrderMesh,
     links: &[PeriodicLink],
-    certify: impl Fn(&HighOrderMesh, usize) -> bool + Sync,
+    certify: impl Fn(&HighOrderMesh, usize) -> f64 + Sync,
 ) -> (Vec<usize>, ImageInfo) {
     use rayon::prelude::*;
     let original = ho.nodes.clone();
@@ -910,11 +912,14 @@ pub fn make_images(
         .collect();
     let mut check: Vec<usize> = touched.clone();
     let mut bad: Vec<usize> = Vec::new();
+    let mut min_det_bound = f64::INFINITY;
     for round in 0..IMAGE_WEIGHTS.len() {
-        bad = check
-            .par_iter()
-            .copied()
-            .filter(|&e| !certify(ho, e))
+        let bounds: Vec<(usize, f64)> = check.par_iter().map(|&e| (e, certify(ho, e))).collect();
+        min_det_bound = bounds.iter().map(|b| b.1).fold(f64::INFINITY, f64::min);
+        bad = bounds
+            .iter()
+            .filter(|b| !(b.1 > 0.0))
+            .map(|b| b.0)
             .collect();
         if bad.is_empty() || round + 1 == IMAGE_WEIGHTS.len() {
             break;
@@ -937,6 +942,7 @@ pub fn make_images(
     }
     let mut info = ImageInfo {
         recertified: touched.len(),
+        min_det_bound,
         ..Default::default()
     };
     for n in 0..ho.nodes.len() {

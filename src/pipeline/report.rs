@@ -174,8 +174,15 @@ pub struct PeriodicReport {
     pub max_seam_shift: f64,
     /// Largest |T(x_master) − x_image| over the written node pairs.
     pub written_mismatch: f64,
-    /// Elements certified again because a node of theirs moved (all passed).
+    /// Elements certified again because a node of theirs moved (all passed; their bounds are
+    /// in `min_det_jacobian_bound`).
     pub recertified_elements: usize,
+    /// `c1`: every pair is identified in the spline space, so the curved map is C¹ across the
+    /// seams where the elements are regular; `c0`: some pair is curved on each side and made
+    /// exact images after sampling only.
+    pub seam: &'static str,
+    /// Why the seams are `c0`, when they are.
+    pub seam_c0_reason: Option<String>,
     /// Whether the groups were written under PyFR's names `periodic_<i>_l` / `periodic_<i>_r`.
     pub pyfr_names: bool,
 }
@@ -249,10 +256,15 @@ impl CurveReport {
             energy_skipped: outcome.and_then(|o| o.energy_skipped.clone()),
             invalid_elements: 0,
             // The elastic mesh replaces the spline's: its own certificate's bound.
+            // The periodic seams' re-certified elements replace their earlier bounds.
             min_det_jacobian_bound: match &done.elastic {
                 Some((_, bound)) => Some(*bound),
                 None => outcome.and_then(|o| o.min_det_bound),
-            },
+            }
+            .map(|b| match &done.periodic {
+                Some((_, info)) => b.min(info.min_det_bound),
+                None => b,
+            }),
             input_min_scaled_jacobian: done.input_min_scaled_jacobian,
             min_scaled_jacobian: done.min_scaled_jacobian,
             bounding_box_diagonal: done.deviation.diagonal,
@@ -268,6 +280,11 @@ impl CurveReport {
                     max_seam_shift: info.max_shift / diagonal,
                     written_mismatch: info.max_mismatch / diagonal,
                     recertified_elements: info.recertified,
+                    seam: setup.map_or("c0", |s| s.seam_continuity().0),
+                    seam_c0_reason: match setup {
+                        Some(s) => s.seam_continuity().1,
+                        None => Some("straight-sided output".into()),
+                    },
                     pyfr_names: options.periodic.pyfr_names,
                 }
             }),

@@ -22,7 +22,10 @@ use crate::fit::{
     FitInfo, FitParams, FitSolver, FitTargets, SmoothTargets, TargetMap, fit_with_targets_from,
 };
 use crate::mesh::features::Features;
+use crate::mesh::periodic::PeriodicPair;
+use crate::mesh::{LinearMesh, Topology};
 use crate::progress::{Progress, Stage};
+use crate::spline::seam::{self, Glued};
 use crate::spline::{ElementRows, KnotSurfaceInfo, KnotWeights, Q2Reason, SplineSpace, kinks};
 use crate::validity::blend::{BlendInfo, Blended, NetCache, blend_search};
 use crate::validity::certificate::{
@@ -52,6 +55,14 @@ pub(crate) struct SplineSetup {
     pub(crate) knot_info: KnotSurfaceInfo,
     /// The knot intervals used.
     pub(crate) knot_intervals: crate::spline::KnotIntervals,
+    /// Translation-periodic seams identified in the spline space (`--periodic`,
+    /// [`crate::spline::seam`]): the space is built on this glued mesh.
+    pub(crate) seams: Option<Glued>,
+    /// Why a periodic pair is not identified in the spline space (it is then made an exact
+    /// image after sampling only, C⁰); `None` when every pair is, or there are none.
+    pub(crate) seam_c0: std::sync::Mutex<Option<String>>,
+    /// Putting a glued space back on the input failed: later spaces are built unglued.
+    seams_failed: std::sync::atomic::AtomicBool,
 }
 
 impl SplineSetup {
@@ -111,7 +122,56 @@ impl SplineSetup {
             knot_weights,
             knot_info,
             knot_intervals: options.knots.intervals,
+            seams: None,
+            seam_c0: std::sync::Mutex::new(None),
+            seams_failed: std::sync::atomic::AtomicBool::new(false),
         })
+    }
+
+    /// Identify the translation pairs among `pairs` in the spline space (uniform knots only:
+    /// graded knot surfaces are measured on the input's topology); the reason when some pair
+    /// stays apart is kept for the report.
+    pub(crate) fn glue_seams(&mut self, job: &Job, pairs: &[PeriodicPair]) {
+        if pairs.is_empty() {
+            return;
+        }
+        let why = if self.knot_intervals != crate::spline::KnotIntervals::Uniform {
+            Some("graded knot intervals are measured on the unglued mesh")
+        } else {
+            self.seams = seam::glue(job.mesh, pairs);
+            if self.seams.is_none() && pairs.iter().any(|p| p.transform.is_translation()) {
+                Some("the mesh with its translation pairs glued is not manifold")
+            } else if pairs.iter().any(|p| !p.transform.is_translation()) {
+                Some("rotation pairs are not identified in the spline space")
+            } else {
+                None
+            }
+        };
+        *self.seam_c0.lock().expect("not poisoned") = why.map(str::to_string);
+    }
+
+    /// The seams as glued for the spline space, unless identifying them failed.
+    fn live_seams(&self) -> Option<&Glued> {
+        let failed = self.seams_failed.load(std::sync::atomic::Ordering::Relaxed);
+        self.seams.as_ref().filter(|_| !failed)
+    }
+
+    /// The mesh and topology whose entities the blend's factors live on: the glued ones when
+    /// the seams are identified (one factor per seam entity, so the blend stays C¹ there).
+    pub(crate) fn entity_mesh<'a>(&'a self, job: &Job<'a>) -> (&'a LinearMesh, &'a Topology) {
+        match self.live_seams() {
+            Some(g) => (&g.mesh, &g.topo),
+            None => (job.mesh, job.topo),
+        }
+    }
+
+    /// `c1` when every periodic pair is identified in the spline space, else `c0`, with why.
+    pub(crate) fn seam_continuity(&self) -> (&'static str, Option<String>) {
+        let why = self.seam_c0.lock().expect("not poisoned").clone();
+        match (self.live_seams(), why) {
+            (Some(_), None) => ("c1", None),
+            (_, why) => ("c0", why),
+        }
     }
 
     /// The features the fit keeps (none with `--ignore-features`).
@@ -131,17 +191,25 @@ impl SplineSetup {
         demote: &[bool],
         misfit: &[bool],
     ) -> SplineSpace {
-        SplineSpace::build_with_knots(
-            job.mesh,
-            job.topo,
-            &[
-                (&self.crease, Q2Reason::FeatureCrease),
-                (&self.kinks.elements, Q2Reason::BoundaryKink),
-                (demote, Q2Reason::InvalidSplineMap),
-                (misfit, Q2Reason::BoundaryMisfit),
-            ],
-            self.knot_weights.as_deref(),
-        )
+        let marks = [
+            (&self.crease[..], Q2Reason::FeatureCrease),
+            (&self.kinks.elements[..], Q2Reason::BoundaryKink),
+            (demote, Q2Reason::InvalidSplineMap),
+            (misfit, Q2Reason::BoundaryMisfit),
+        ];
+        if let Some(g) = self.live_seams() {
+            // Built on the glued mesh, then put back on the input's elements.
+            let mut space = SplineSpace::build_with_knots(&g.mesh, &g.topo, &marks, None);
+            match seam::unwrap(&mut space, job.mesh, job.topo, g) {
+                Ok(_) => return space,
+                Err(why) => {
+                    self.seams_failed
+                        .store(true, std::sync::atomic::Ordering::Relaxed);
+                    *self.seam_c0.lock().expect("not poisoned") = Some(why);
+                }
+            }
+        }
+        SplineSpace::build_with_knots(job.mesh, job.topo, &marks, self.knot_weights.as_deref())
     }
 
     /// The target map of the certified blend (its middle state).
@@ -204,13 +272,16 @@ impl SplineOutcome {
     }
 }
 
-/// The spline geometry's stages (the job's geometry is not [`Geometry::Straight`]).
+/// The spline geometry's stages (the job's geometry is not [`Geometry::Straight`]); the
+/// translation pairs among `periodic` are identified in the spline space where they can be.
 pub(super) fn curve_spline(
     job: &Job,
     clock: &mut Clock,
+    periodic: &[PeriodicPair],
 ) -> Result<(SplineSetup, SplineOutcome), CurveError> {
     let (setup, space) = clock.run(Stage::Spline, || {
-        let setup = SplineSetup::new(job)?;
+        let mut setup = SplineSetup::new(job)?;
+        setup.glue_seams(job, periodic);
         let space = setup.build(job, &vec![false; job.mesh.n_elements()]);
         Ok::<_, CurveError>((setup, space))
     })?;
@@ -496,7 +567,9 @@ fn blend(
     space: &SplineSpace,
 ) -> Result<((Vec<f32>, NetCache), BlendInfo), CurveError> {
     let target_map = setup.target_map(job);
-    let mut blended = Blended::new(job.mesh, &target_map, space, job.mesh, job.topo, Vec::new());
+    let (ids_mesh, ids_topo) = setup.entity_mesh(job);
+    let mut blended = Blended::new(job.mesh, &target_map, space, ids_mesh, ids_topo, Vec::new())
+        .with_geometry(job.mesh);
     let global = job.options.line_search_mode == LineSearchMode::Global;
     let info = blend_search(
         job.executor,

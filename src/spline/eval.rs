@@ -1,5 +1,6 @@
-//! Bézier elements of the spline space: an element's net from the control points, and the
-//! rows of global basis functions (CPU, f64). Points and derivatives of a net are the
+//! Bézier elements of the spline space: an element's net from the control points (plus its
+//! periodic seam offsets, [`Extraction::node_shift`]), and the rows of global basis functions
+//! (CPU, f64). Points and derivatives of a net are the
 //! foundation's ([`crate::math::bernstein`]).
 
 use super::extraction::Extraction;
@@ -22,6 +23,27 @@ pub fn bezier_net(ext: &Extraction, e: usize, cps: &[[f64; 3]]) -> BezierNet {
         }
         p[l] = x;
     }
+    // Across a periodic seam the control points are those of the other side, moved by the
+    // period (rows sum to 1, so the shift of a local node is the rows' mix of the shifts).
+    if let Some(s) = ext.node_shift(e) {
+        for (x, d) in p.iter_mut().zip(s).take(n) {
+            for i in 0..3 {
+                x[i] += d[i];
+            }
+        }
+    }
+    to_bernstein(ext, e, p)
+}
+
+/// The Bernstein net of element `e`'s periodic seam offsets alone (the net of `e` is that of
+/// its control points plus this), `None` when it has none.
+pub fn shift_net(ext: &Extraction, e: usize) -> Option<BezierNet> {
+    ext.node_shift(e).map(|s| to_bernstein(ext, e, *s))
+}
+
+/// Local node positions `p` of element `e` to its Bernstein points.
+fn to_bernstein(ext: &Extraction, e: usize, mut p: BezierNet) -> BezierNet {
+    let n = ext.n_local();
     // Apply M_x, M_y, M_z in turn (sum factorisation).
     let m = ext.matrices(e);
     for (k, mk) in m.iter().enumerate().take(ext.dim) {

@@ -39,6 +39,14 @@ pub struct Extraction {
     pub constraint_offsets: Vec<u32>,
     /// (control point, weight) pairs of the constraint rows, sorted by column within a row.
     pub constraint_entries: Vec<(u32, f64)>,
+    /// Periodic seams ([`super::seam`]): per element an index into `node_shifts`, or `NONE`
+    /// for an element whose local nodes take the control points as they are; empty when no
+    /// element has a shift.
+    pub shift_of: Vec<u32>,
+    /// Per shifted element, the offset added to each local node (3^d used): where its stencil
+    /// reaches control points across a periodic seam, the known translation that carries them
+    /// to this element's side. Constant in the control points: the rows `E_e` are unchanged.
+    pub node_shifts: Vec<[[f64; 3]; 27]>,
 }
 
 /// The explicit rows of one element's `E_e`: row i (Bernstein index, x fastest) has the
@@ -121,6 +129,14 @@ impl Extraction {
                 self.constraint_offsets[r + 1] as usize,
             );
             NodeEntries::Many(self.constraint_entries[a..b].iter())
+        }
+    }
+
+    /// The local node offsets of element `e` across a periodic seam, if it has any.
+    pub fn node_shift(&self, e: usize) -> Option<&[[f64; 3]; 27]> {
+        match self.shift_of.get(e) {
+            Some(&i) if i != u32::MAX => Some(&self.node_shifts[i as usize]),
+            _ => None,
         }
     }
 

@@ -35,6 +35,7 @@ pub mod intervals;
 pub mod kinks;
 pub mod knots;
 pub mod q2;
+pub mod seam;
 pub mod stencil;
 
 use crate::math::BezierNet;
@@ -288,6 +289,8 @@ impl SplineSpace {
                 local_nodes,
                 constraint_offsets: q2.constraint_offsets,
                 constraint_entries: q2.constraint_entries,
+                shift_of: Vec::new(),
+                node_shifts: Vec::new(),
             },
             classes,
         }

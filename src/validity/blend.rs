@@ -142,6 +142,9 @@ pub struct Blended<'a> {
     pub target: &'a (dyn BezierElements + 'a),
     pub fitted: &'a (dyn BezierElements + 'a),
     pub ids: EntityIds<'a>,
+    /// The elements' straight geometry (the shapes the quality tests compare with): the
+    /// entities' mesh unless [`Blended::with_geometry`] says otherwise.
+    pub geometry: &'a LinearMesh,
     /// One factor per entity; empty means 2 (the fitted map) everywhere.
     pub factors: Vec<f32>,
     /// Elements with a factor below 2 on one of their points.
@@ -179,6 +182,14 @@ impl<'a> Blended<'a> {
         Self::with_cache(straight, target, fitted, mesh, topo, factors, none)
     }
 
+    /// The elements' straight geometry is `geometry`'s, while the factors stay on the
+    /// entities of the mesh given to [`Blended::new`] (a periodic mesh glued across its seams,
+    /// whose image-side elements have their masters' vertices).
+    pub fn with_geometry(mut self, geometry: &'a LinearMesh) -> Self {
+        self.geometry = geometry;
+        self
+    }
+
     /// [`Blended::new`] starting from the nets `cache` that a blend of the same straight,
     /// target and fitted maps computed ([`Blended::into_cache`]); a cache of another element
     /// count is not used.
@@ -202,6 +213,7 @@ impl<'a> Blended<'a> {
             target,
             fitted,
             ids: EntityIds::new(mesh, topo),
+            geometry: mesh,
             factors,
             reduced: Vec::new(),
             references,
@@ -320,7 +332,7 @@ fn straight_reference(
             first: bad.into_iter().take(8).collect(),
         });
     }
-    let mesh = blended.ids.mesh;
+    let mesh = blended.geometry;
     let shapes: Vec<StraightShape> = mine
         .par_iter()
         .map(|&e| (corner_ratio(mesh, e), lattice_scaled_jacobian(dim, &net(e))))
@@ -628,7 +640,7 @@ fn summarise(blended: &Blended, info: &mut BlendInfo, lower: &[f64], owned: &[bo
     let dim = blended.dim();
     let np = blended.points();
     info.min_det_lower_bound = lower.iter().copied().fold(f64::INFINITY, f64::min);
-    let mesh = blended.ids.mesh;
+    let mesh = blended.geometry;
     let per: Vec<Option<ReducedElement>> = (0..n)
         .into_par_iter()
         .map(|e| {

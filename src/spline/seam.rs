@@ -1,0 +1,312 @@
+//! Translation-periodic seams identified in the spline space.
+//!
+//! Input: the linear mesh, its topology and the verified periodic pairs
+//! ([`crate::mesh::periodic::PeriodicPair`]). [`glue`] gives the mesh whose image-side vertices
+//! are replaced by their masters' (translations only; chains of pairs, as at the corners of a
+//! doubly periodic box, glue to one representative) and its topology: the seam facets are
+//! interior there, so the stencils of [`super::SplineSpace`] built on it reach across the seam
+//! and the two sides share control points. [`unwrap`] then puts the space back onto the
+//! input's geometry, element by element:
+//!
+//! * every control point key is renamed to the input's entity of one element holding it (its
+//!   *home*) and starts at that entity's vertex average, as without seams;
+//! * an element whose stencil reaches a control point across a seam sees it moved by the
+//!   known period: the shift `x_e(g) − x_h(g)` of a glued vertex g common to the element and
+//!   the point's home, snapped to the nearest combination `Σ k_i t_i` of the translations.
+//!   The shifts enter [`super::Extraction::node_shifts`] (the rows `E_e` sum to 1 and are
+//!   unchanged), so the least-squares matrix is that of the glued space and only the nets,
+//!   and through them the fit's right-hand side, carry the shift.
+//!
+//! Invariants: where [`glue`] returns a mesh, its topology is manifold and every seam facet is
+//! interior; [`unwrap`] refuses (and the caller keeps the sides apart) when a shift is not a
+//! combination of the translations to `SHIFT_REL_TOL` of the period, or two common vertices
+//! disagree. Rotations are not glued: their control points would couple the components.
+
+use super::{ControlPoint, SplineSpace};
+use crate::math::linalg::DVec3;
+use crate::mesh::LinearMesh;
+use crate::mesh::periodic::PeriodicPair;
+use crate::mesh::topology::{NONE, Topology};
+
+/// Largest distance of a measured shift from its combination of the translations, relative to
+/// the shortest translation.
+const SHIFT_REL_TOL: f64 = 1e-6;
+
+/// The input with its translation-periodic sides glued.
+#[derive(Clone, Debug)]
+pub struct Glued {
+    /// The input's coordinates with every element's image-side vertices replaced by their
+    /// representatives (the masters); image-side vertices are used by no element.
+    pub mesh: LinearMesh,
+    /// The topology of `mesh`.
+    pub topo: Topology,
+    /// The periods: the translation of each glued pair.
+    pub translations: Vec<[f64; 3]>,
+}
+
+fn find(parent: &mut [u32], mut v: u32) -> u32 {
+    while parent[v as usize] != v {
+        let p = parent[v as usize];
+        parent[v as usize] = parent[p as usize];
+        v = p;
+    }
+    v
+}
+
+/// The input with the translation pairs among `pairs` glued, or `None` when there is none or
+/// the glued mesh is not manifold (a period of fewer elements than a stencil needs, for
+/// instance): the sides are then curved apart and made images afterwards.
+pub fn glue(mesh: &LinearMesh, pairs: &[PeriodicPair]) -> Option<Glued> {
+    let translations: Vec<&PeriodicPair> = pairs
+        .iter()
+        .filter(|p| p.transform.is_translation())
+        .collect();
+    if translations.is_empty() {
+        return None;
+    }
+    let mut parent: Vec<u32> = (0..mesh.n_vertices() as u32).collect();
+    for p in &translations {
+        for &[b, a] in &p.vertex_map {
+            let (rb, ra) = (find(&mut parent, b), find(&mut parent, a));
+            // The smaller id represents the class: a master unless the chain says otherwise.
+            let (lo, hi) = (ra.min(rb), ra.max(rb));
+            parent[hi as usize] = lo;
+        }
+    }
+    let rep: Vec<u32> = (0..parent.len() as u32)
+        .map(|v| find(&mut parent, v))
+        .collect();
+    let mut glued = mesh.clone();
+    for v in glued
+        .elements
+        .iter_mut()
+        .chain(glued.tagged_facets.iter_mut())
+    {
+        *v = rep[*v as usize];
+    }
+    let topo = Topology::build(&glued);
+    let ne = topo.n_elements;
+    let self_neighbour =
+        (0..ne).any(|e| (0..topo.sides()).any(|s| topo.neighbor(e, s) == e as u32));
+    if !topo.non_manifold.is_empty() || self_neighbour {
+        return None;
+    }
+    // An element whose corners glue together is collapsed: keep the sides apart.
+    let npe = mesh.nodes_per_element();
+    for e in 0..ne {
+        let mut vs = glued.elements[e * npe..(e + 1) * npe].to_vec();
+        vs.sort_unstable();
+        if vs.windows(2).any(|w| w[0] == w[1]) {
+            return None;
+        }
+    }
+    Some(Glued {
+        mesh: glued,
+        topo,
+        translations: translations
+            .iter()
+            .map(|p| p.transform.translation)
+            .collect(),
+    })
+}
+
+/// Element `h`'s input vertex at its glued corner `g`.
+fn original_of(mesh: &LinearMesh, glued: &LinearMesh, h: usize, g: u32) -> u32 {
+    let c = glued
+        .element(h)
+        .iter()
+        .position(|&v| v == g)
+        .expect("the home element holds the entity");
+    mesh.element(h)[c]
+}
+
+/// A glued-topology key's home element, its key in the input's topology and that entity's
+/// input vertices.
+fn home_of(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    glued: &Glued,
+    key: ControlPoint,
+) -> (usize, ControlPoint, Vec<u32>) {
+    use ControlPoint::*;
+    let gt = &glued.topo;
+    let facet_home = |f: u32| {
+        let h = gt.facet_elements[f as usize][0] as usize;
+        let side = gt.facet_sides[f as usize][0] as usize;
+        let of = topo.element_facet(h, side);
+        (h, of, topo.facet_vertices(of as usize).to_vec())
+    };
+    match key {
+        Cell(e) | Q2Centre(e) => (e as usize, key, mesh.element(e as usize).to_vec()),
+        BFace(f) | Q2Face(f) => {
+            let (h, of, vs) = facet_home(f);
+            let k = if matches!(key, BFace(_)) {
+                BFace(of)
+            } else {
+                Q2Face(of)
+            };
+            (h, k, vs)
+        }
+        BEdge(ed) | Q2Edge(ed) => {
+            let (h, oe) = if gt.dim == 2 {
+                let (h, of, _) = facet_home(ed);
+                (h, of)
+            } else {
+                let a = gt.edges[ed as usize][0] as usize;
+                gt.elements_at_vertex(a)
+                    .iter()
+                    .find_map(|&h| {
+                        let h = h as usize;
+                        (0..12)
+                            .find(|&le| gt.element_edges[h * 12 + le] == ed)
+                            .map(|le| (h, topo.element_edges[h * 12 + le]))
+                    })
+                    .expect("an edge has an element")
+            };
+            let k = if matches!(key, BEdge(_)) {
+                BEdge(oe)
+            } else {
+                Q2Edge(oe)
+            };
+            (h, k, topo.edges[oe as usize].to_vec())
+        }
+        BVertex(v) | Q2Vertex(v) => {
+            let h = gt.elements_at_vertex(v as usize)[0] as usize;
+            let ov = original_of(mesh, &glued.mesh, h, v);
+            let k = if matches!(key, BVertex(_)) {
+                BVertex(ov)
+            } else {
+                Q2Vertex(ov)
+            };
+            (h, k, vec![ov])
+        }
+    }
+}
+
+fn centre(mesh: &LinearMesh, vs: &[u32]) -> DVec3 {
+    vs.iter()
+        .map(|&v| DVec3::from(mesh.coords[v as usize]))
+        .sum::<DVec3>()
+        / vs.len() as f64
+}
+
+/// The combinations Σ k_i t_i, k_i ∈ {−1, 0, 1}, of the periods.
+fn lattice(translations: &[[f64; 3]]) -> Vec<DVec3> {
+    let mut out = vec![DVec3::ZERO];
+    for t in translations {
+        let t = DVec3::from(*t);
+        out = out.iter().flat_map(|&s| [s - t, s, s + t]).collect();
+    }
+    out
+}
+
+/// Put `space`, built on `glued`, back onto the input's geometry (module docs): keys and
+/// initial control points of the input's entities, and the seam shifts of the elements whose
+/// stencils cross a seam. Returns the number of elements with a shift, or why the seams
+/// cannot be identified (then `space` must not be used).
+pub fn unwrap(
+    space: &mut SplineSpace,
+    mesh: &LinearMesh,
+    topo: &Topology,
+    glued: &Glued,
+) -> Result<usize, String> {
+    use rayon::prelude::*;
+    let homes: Vec<(usize, ControlPoint, Vec<u32>)> = space
+        .control_point_keys
+        .par_iter()
+        .map(|&k| home_of(mesh, topo, glued, k))
+        .collect();
+    let lattice = lattice(&glued.translations);
+    let period = glued
+        .translations
+        .iter()
+        .map(|t| DVec3::from(*t).length())
+        .fold(f64::INFINITY, f64::min);
+    let tol = SHIFT_REL_TOL * period;
+    let snap = |d: DVec3| -> Option<DVec3> {
+        let s = lattice
+            .iter()
+            .copied()
+            .min_by(|a, b| (*a - d).length().total_cmp(&(*b - d).length()))?;
+        ((s - d).length() <= tol).then_some(s)
+    };
+    let gm = &glued.mesh;
+    let ext = &space.extraction;
+    let n = ext.n_local();
+    let shifts: Vec<Result<Option<[[f64; 3]; 27]>, String>> = (0..space.n_elements())
+        .into_par_iter()
+        .map(|e| {
+            let mut out = [[0.0; 3]; 27];
+            let mut any = false;
+            let (ge, oe) = (gm.element(e), mesh.element(e));
+            let mut cache: Vec<(u32, DVec3)> = Vec::new();
+            for (l, &node) in ext.element_nodes(e).iter().enumerate().take(n) {
+                for (c, w) in ext.node_entries(node) {
+                    let s = match cache.iter().find(|p| p.0 == c) {
+                        Some(p) => p.1,
+                        None => {
+                            let h = homes[c as usize].0;
+                            let (gh, oh) = (gm.element(h), mesh.element(h));
+                            let mut s: Option<DVec3> = None;
+                            for (i, g) in ge.iter().enumerate() {
+                                let Some(j) = gh.iter().position(|x| x == g) else {
+                                    continue;
+                                };
+                                let d = DVec3::from(mesh.coords[oe[i] as usize])
+                                    - DVec3::from(mesh.coords[oh[j] as usize]);
+                                let d = snap(d).ok_or_else(|| {
+                                    format!("element {e} sees control point {c} moved by no period")
+                                })?;
+                                if s.is_some_and(|s| s != d) {
+                                    return Err(format!(
+                                        "element {e} meets the home of control point {c} across two seams"
+                                    ));
+                                }
+                                s = Some(d);
+                            }
+                            // No common vertex (a stencil reaching further): the period that
+                            // brings the point nearest to the element.
+                            let s = s.unwrap_or_else(|| {
+                                let (ce, cp) =
+                                    (centre(mesh, oe), centre(mesh, &homes[c as usize].2));
+                                lattice
+                                    .iter()
+                                    .copied()
+                                    .min_by(|a, b| {
+                                        (cp + *a - ce).length().total_cmp(&(cp + *b - ce).length())
+                                    })
+                                    .unwrap_or(DVec3::ZERO)
+                            });
+                            cache.push((c, s));
+                            s
+                        }
+                    };
+                    if s != DVec3::ZERO {
+                        any = true;
+                        let x = DVec3::from(out[l]) + s * w;
+                        out[l] = x.to_array();
+                    }
+                }
+            }
+            Ok(any.then_some(out))
+        })
+        .collect();
+    let mut shift_of = vec![NONE; space.n_elements()];
+    let mut node_shifts = Vec::new();
+    for (e, s) in shifts.into_iter().enumerate() {
+        if let Some(s) = s? {
+            shift_of[e] = node_shifts.len() as u32;
+            node_shifts.push(s);
+        }
+    }
+    let count = node_shifts.len();
+    for (i, (_, key, vs)) in homes.into_iter().enumerate() {
+        space.control_point_keys[i] = key;
+        space.control_points[i] = centre(mesh, &vs).to_array();
+    }
+    if count > 0 {
+        space.extraction.shift_of = shift_of;
+        space.extraction.node_shifts = node_shifts;
+    }
+    Ok(count)
+}
