@@ -12,7 +12,8 @@ Prints one JSON object:
       each facet on an image side, between the derivative transversal to it of the element on
       the image side and that of the element on the master side carried over by the affine
       map's linear part (0 = C¹ across the seam),
-  "interior_angle_max", "interior_angle_p99": the same across the interior facets.
+  "interior_angle_max", "interior_angle_p99", "interior_angle_mean": the same across the
+      interior facets.
 Derivatives come from Gmsh's getJacobians at the reference facet centres; facets are matched
 by their corner node tags (image corners mapped to their masters).
 """
@@ -107,6 +108,7 @@ def measure(path):
         "seam_angle_mean": float(np.mean(seam)) if seam else 0.0,
         "interior_angle_max": float(interior.max()),
         "interior_angle_p99": float(np.percentile(interior, 99)),
+        "interior_angle_mean": float(np.mean(interior)),
     }
 
 

@@ -307,7 +307,7 @@ fn sectors_rotation_and_translation_are_exact_at_every_order() {
     }
 }
 
-/// A channel periodic in x, 0 ≤ x ≤ 2, between a wavy floor y = 0.15 sin(πx) and the roof
+/// A channel periodic in x, 0 ≤ x ≤ 2, between a wavy floor y = 0.1 sin(πx) and the roof
 /// y = 1, in `nx` × `ny` cells graded towards the floor (3D: extruded over 0 ≤ z ≤ 0.6 in
 /// three layers). Its sides are tagged `left`, `right` (the periodic pair, a translation by
 /// (2, 0, 0)), `floor`, `roof` (3D: `front`, `back`).
@@ -319,8 +319,8 @@ fn channel(dim: usize, nx: usize, ny: usize) -> LinearMesh {
         for j in 0..=ny {
             for i in 0..=nx {
                 let x = 2.0 * i as f64 / nx as f64;
-                let floor = 0.15 * (std::f64::consts::PI * x).sin();
-                let s = (j as f64 / ny as f64).powf(1.4);
+                let floor = 0.1 * (std::f64::consts::PI * x).sin();
+                let s = (j as f64 / ny as f64).powf(1.2);
                 coords.push([x, floor + s * (1.0 - floor), 0.2 * k as f64]);
             }
         }
@@ -416,7 +416,8 @@ fn seam_facet_angle_is_no_worse_than_the_interior() {
     // facets, and the exact-image step after sampling moves the seam nodes by rounding only.
     for dim in [2, 3] {
         let input = scratch_in("periodic", &format!("channel{dim}d.msh"));
-        common::write_linear(&channel(dim, 12, 4), &input);
+        let (nx, ny) = if dim == 2 { (24, 6) } else { (16, 4) };
+        common::write_linear(&channel(dim, nx, ny), &input);
         let orders: &[&[&str]] = match dim {
             2 => &[
                 &["--order", "3"],
@@ -439,6 +440,21 @@ fn seam_facet_angle_is_no_worse_than_the_interior() {
             args.extend(["--periodic", "left:right"]);
             let report = curve(&input, &out, &args);
             let per = &report["periodic"];
+            if i == 0 {
+                let p = probe(&out);
+                assert!(p["seam_facets"].as_u64().unwrap() > 0, "{p}");
+                // Largest and mean angle: C¹ spline facets meet at rounding-level angles, the
+                // interior's large ones are where the blend held the fit back (C⁰ there); the
+                // floor keeps the comparison meaningful where the interior is C¹ throughout.
+                for what in ["max", "mean"] {
+                    let seam = p[format!("seam_angle_{what}")].as_f64().unwrap();
+                    let interior = p[format!("interior_angle_{what}")].as_f64().unwrap();
+                    assert!(
+                        seam <= interior.max(1e-3),
+                        "{dim}D: {what} seam {seam}° > interior {interior}°"
+                    );
+                }
+            }
             assert_eq!(per["seam"], "c1", "{dim}D {run:?}: {per}");
             assert_eq!(per["pairs"][0]["kind"], "translation", "{dim}D {run:?}");
             // Both sides come from one spline: sampling them agrees to rounding already.
@@ -448,19 +464,6 @@ fn seam_facet_angle_is_no_worse_than_the_interior() {
                 "{dim}D {run:?}: seam nodes moved {shift:e}"
             );
             assert_exact_images(&out, 1);
-            if i > 0 {
-                continue;
-            }
-            let p = probe(&out);
-            let seam = p["seam_angle_max"].as_f64().unwrap();
-            let interior = p["interior_angle_max"].as_f64().unwrap();
-            assert!(p["seam_facets"].as_u64().unwrap() > 0, "{p}");
-            // C¹ spline facets meet at rounding-level angles: the floor keeps the comparison
-            // meaningful when the interior's largest angle is itself zero to rounding.
-            assert!(
-                seam <= interior.max(1e-3),
-                "{dim}D: seam {seam}° > interior {interior}°"
-            );
         }
     }
 }
