@@ -256,7 +256,8 @@ impl CurveReport {
             energy_skipped: outcome.and_then(|o| o.energy_skipped.clone()),
             invalid_elements: 0,
             // The elastic mesh replaces the spline's: its own certificate's bound.
-            // The periodic seams' re-certified elements replace their earlier bounds.
+            // The periodic seams' re-certified elements' bounds are folded in (a lower bound
+            // of the whole mesh either way).
             min_det_jacobian_bound: match &done.elastic {
                 Some((_, bound)) => Some(*bound),
                 None => outcome.and_then(|o| o.min_det_bound),
