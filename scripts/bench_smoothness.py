@@ -6,12 +6,14 @@ usage: python3 scripts/bench_smoothness.py [--timeout S] [MESH ...]
 
 Builds nothing: run `cargo build --release` first ($POLYSPLINE_EXE overrides the binary). For each mesh (default: every file under
 meshes/real/), runs `curve` (order 2, otherwise default options) with `--knot-intervals graded` and
-`uniform`, and `curve --straight`, each writing MSH and a JSON report. Measures every written
+`uniform`, `curve --straight` and `curve --method elastic` (the elastic analogy inside the
+uniform smooth fit's boundary), each writing MSH and a JSON report. Measures every written
 file with Gmsh alone (`tests/external/facet_angles.py`: the angle between the two elements'
 derivatives transversal to each interior facet at its centre, and Gmsh's Jacobian ratio per
 element); Python from $POLYSPLINE_PYTHON, else python3. Prints a Markdown table: held back
-(`reduced_elements` / `elements`), facet angle mean / p99 / max, min scaled Jacobian in → out
-(the report's), Gmsh's min Jacobian ratio, and the `curve` wall time (report total).
+(`reduced_elements` / `elements`), Q2 elements, facet angle mean / p99 / max (ours, straight,
+elastic), min scaled Jacobian in → out (the report's; elastic's), Gmsh's min Jacobian ratio,
+and the `curve` wall time (report total). `--extra ARGS` adds options to the graded run.
 """
 import argparse
 import glob
@@ -47,47 +49,54 @@ def measure(files):
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--timeout", type=float, default=900)
+    ap.add_argument("--extra", default="", help="more options of the graded run")
     ap.add_argument("meshes", nargs="*")
     a = ap.parse_args()
     meshes = a.meshes or sorted(
         f for f in glob.glob(os.path.join(ROOT, "meshes", "real", "*", "*"))
         if not f.endswith(".md"))
     tmp = tempfile.mkdtemp(prefix="smoothness-")
-    print("| mesh | knots | held back | facet angle mean / p99 / max | straight | "
-          "min scaled Jacobian in → out | Jacobian ratio min (straight) | curve s |")
-    print("|---|---|---:|---|---|---|---|---:|")
+    print("| mesh | knots | held back | Q2 | facet angle mean / p99 / max | straight | elastic | "
+          "min scaled Jacobian in → out | elastic | Jacobian ratio min (straight) | curve s |")
+    print("|---|---|---:|---:|---|---|---|---|---|---|---:|")
     for mesh in meshes:
         name = os.path.relpath(mesh, os.path.join(ROOT, "meshes", "real"))
         base = os.path.join(tmp, name.replace("/", "_"))
         runs = {}
-        for knots, extra in [("graded", ["--knot-intervals", "graded"]),
+        for knots, extra in [("graded", ["--knot-intervals", "graded"] + a.extra.split()),
                              ("uniform", ["--knot-intervals", "uniform"]),
-                             ("straight", ["--straight"])]:
+                             ("straight", ["--straight"]),
+                             ("elastic", ["--method", "elastic"])]:
             out = base + "_" + knots + ".msh"
             rep, err = curve(mesh, out, base + "_" + knots + ".json", extra, a.timeout)
             runs[knots] = (out, rep, err)
         if runs["straight"][1] is None:
             print("| %s | | %s |" % (name, runs["straight"][2]))
             continue
-        ok = [k for k in ("graded", "uniform", "straight") if runs[k][1] is not None]
+        ok = [k for k in ("graded", "uniform", "straight", "elastic") if runs[k][1] is not None]
         try:
             m = dict(zip(ok, measure([runs[k][0] for k in ok])))
         except subprocess.CalledProcessError as e:
             print("| %s | | Gmsh probe failed: %s |" % (name, e.stderr.strip()[-200:]))
             continue
         s = m["straight"]
+        el = m.get("elastic")
+        el_angles = ("%.2f° / %.1f° / %.1f°" % (el["angle_mean"], el["angle_p99"], el["angle_max"])
+                     if el else runs["elastic"][2])
+        el_msj = "%.3f" % runs["elastic"][1]["min_scaled_jacobian"] if el else "–"
         for k in ("graded", "uniform"):
             out, rep, err = runs[k]
             if rep is None:
                 print("| %s | %s | %s |" % (name, k, err))
                 continue
             g = m[k]
-            print("| %s | %s | %.0f %% | %.2f° / %.1f° / %.1f° | %.2f° / %.1f° / %.1f° | "
-                  "%.3f → %.3f | %.3f (%.3f) | %.2f |" % (
+            print("| %s | %s | %.0f %% | %.0f %% | %.2f° / %.1f° / %.1f° | %.2f° / %.1f° / %.1f° | "
+                  "%s | %.3f → %.3f | %s | %.3f (%.3f) | %.2f |" % (
                       name, k, 100.0 * rep["reduced_elements"] / rep["elements"],
+                      100.0 * rep["q2_elements"] / rep["elements"],
                       g["angle_mean"], g["angle_p99"], g["angle_max"],
-                      s["angle_mean"], s["angle_p99"], s["angle_max"],
-                      rep["input_min_scaled_jacobian"], rep["min_scaled_jacobian"],
+                      s["angle_mean"], s["angle_p99"], s["angle_max"], el_angles,
+                      rep["input_min_scaled_jacobian"], rep["min_scaled_jacobian"], el_msj,
                       g["ratio_min"], s["ratio_min"], rep["timings"]["total"]))
         sys.stdout.flush()
 

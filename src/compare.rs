@@ -232,6 +232,8 @@ pub struct CompareReport {
     pub dimension: usize,
     pub elements: usize,
     pub order: usize,
+    /// Knot intervals of the IGA rows' spline space (and of the elastic row's boundary).
+    pub knot_intervals: crate::spline::KnotIntervals,
     pub rows: Vec<CompareRow>,
     /// `method_seconds` of `elastic` over that of `iga-smooth` (the boundary they share).
     pub elastic_over_iga_time: Option<f64>,
@@ -375,6 +377,7 @@ pub fn compare(input: &Path, options: &CompareOptions) -> Result<CompareReport, 
         dimension: mesh.dim,
         elements: mesh.n_elements(),
         order: base.order,
+        knot_intervals: base.knots.intervals,
         rows,
         elastic_over_iga_time,
     })
@@ -384,11 +387,15 @@ impl std::fmt::Display for CompareReport {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         writeln!(
             f,
-            "{}: {}D, {} elements, order {}",
+            "{}: {}D, {} elements, order {}, {} knots",
             self.input.display(),
             self.dimension,
             self.elements,
-            self.order
+            self.order,
+            match self.knot_intervals {
+                crate::spline::KnotIntervals::Uniform => "uniform",
+                crate::spline::KnotIntervals::Graded => "graded",
+            }
         )?;
         writeln!(
             f,

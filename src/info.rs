@@ -66,21 +66,30 @@ pub struct MeshInfo {
     pub features: Option<crate::mesh::features::FeatureSummary>,
     /// Periodic pairs (`--periodic`) with their transforms; empty without.
     pub periodic: Vec<crate::mesh::periodic::PeriodicSummary>,
+    /// With graded knot intervals (`--knot-intervals graded`): the knot surfaces; the spline
+    /// space's counts above then include the elements made Q2 where surfaces are split.
+    pub knot_surfaces: Option<crate::spline::KnotSurfaceInfo>,
+}
+
+/// Q2 elements of `space` by reason.
+fn q2_reasons(space: &crate::spline::SplineSpace) -> BTreeMap<String, usize> {
+    let mut q2_reasons = BTreeMap::new();
+    for c in &space.classes {
+        if let crate::spline::ElementClass::Q2(r) = c {
+            let name = serde_json::to_value(r)
+                .ok()
+                .and_then(|v| v.as_str().map(str::to_owned))
+                .unwrap_or_default();
+            *q2_reasons.entry(name).or_insert(0) += 1;
+        }
+    }
+    q2_reasons
 }
 
 impl MeshInfo {
     pub fn new(mesh: &LinearMesh, topo: &Topology) -> MeshInfo {
         let space = crate::spline::SplineSpace::build(mesh, topo);
-        let mut q2_reasons = BTreeMap::new();
-        for c in &space.classes {
-            if let crate::spline::ElementClass::Q2(r) = c {
-                let name = serde_json::to_value(r)
-                    .ok()
-                    .and_then(|v| v.as_str().map(str::to_owned))
-                    .unwrap_or_default();
-                *q2_reasons.entry(name).or_insert(0) += 1;
-            }
-        }
+        let q2_reasons = q2_reasons(&space);
         let mut boundary_tags = BTreeMap::new();
         for &t in &topo.boundary_facet_tags {
             *boundary_tags.entry(t).or_insert(0) += 1;
@@ -142,7 +151,29 @@ impl MeshInfo {
             q2_reasons,
             features: None,
             periodic: Vec::new(),
+            knot_surfaces: None,
         }
+    }
+
+    /// The spline space's figures with the knot intervals of `params` (`mesh` and `topo` as
+    /// given to [`MeshInfo::new`]); nothing changes with uniform knots.
+    pub fn set_knots(
+        &mut self,
+        mesh: &LinearMesh,
+        topo: &Topology,
+        params: &crate::spline::KnotParams,
+    ) -> Result<(), crate::params::ParamError> {
+        params.check()?;
+        if params.intervals == crate::spline::KnotIntervals::Uniform {
+            return Ok(());
+        }
+        let (space, info) = crate::spline::SplineSpace::build_for_knots(mesh, topo, params)?;
+        self.spline_elements = space.n_spline_elements();
+        self.q2_elements = space.n_q2_elements();
+        self.control_points = space.n_control_points();
+        self.q2_reasons = q2_reasons(&space);
+        self.knot_surfaces = Some(info);
+        Ok(())
     }
 }
 
@@ -243,6 +274,23 @@ impl MeshInfo {
                 .map(|(k, n)| format!("{n} {}", k.replace('_', " ")))
                 .collect();
             row(f, "Q2 because", reasons.join(", "))?;
+        }
+        if let Some(k) = &self.knot_surfaces {
+            row(
+                f,
+                "knot surfaces",
+                format!(
+                    "{} ({} graded, {} clamped, {} non-orientable), max |ln ratio| {:.3}, \
+                     max spread {:.3}, {} split elements",
+                    k.surfaces,
+                    k.graded,
+                    k.clamped,
+                    k.non_orientable,
+                    k.max_abs_log_ratio,
+                    k.max_spread,
+                    k.split_elements
+                ),
+            )?;
         }
         let mut valence = format!("vertex {}", self.max_vertex_valence);
         if self.dimension == 3 {

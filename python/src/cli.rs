@@ -18,4 +18,4 @@ pub(crate) mod generate;
 #[path = "../../src/cli/values.rs"]
 mod values;
 
-use args::{ElasticArgs, FeatureArgs, PeriodicArgs};
+use args::{ElasticArgs, FeatureArgs, KnotArgs, PeriodicArgs};

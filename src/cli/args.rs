@@ -7,6 +7,7 @@ use polyspline::mesh::features::FeatureParams;
 use polyspline::mesh::periodic::PeriodicSpec;
 use polyspline::pipeline::{FeatureOptions, PeriodicOptions};
 use polyspline::solve::CgParams;
+use polyspline::spline::{KnotIntervals, KnotParams};
 use std::path::PathBuf;
 
 /// Material and solver of the elastic analogy.
@@ -46,6 +47,33 @@ impl ElasticArgs {
             preconditioner: self.elastic_preconditioner.into(),
             solver: self.elastic_solver.into(),
             stiffening: self.elastic_stiffening,
+        }
+    }
+}
+
+/// Knot intervals of the spline elements (`polyspline::spline::intervals`).
+#[derive(clap::Args)]
+pub(crate) struct KnotArgs {
+    /// Knot intervals of the spline elements.
+    #[arg(long, value_enum, default_value_t = KnotIntervals::default().into())]
+    knot_intervals: values::KnotIntervals,
+    /// With graded knot intervals: the largest ratio of neighbouring intervals.
+    #[arg(long, default_value_t = KnotParams::default().max_ratio, value_name = "R")]
+    knot_max_ratio: f64,
+    /// With graded knot intervals: the largest spread (max − min) of the measured
+    /// log-ratios of cells across one knot surface; where a surface's cells vary more, it is
+    /// split and the elements on both sides of the split become Q2 (C⁰ there). `inf`: one
+    /// ratio per surface, never split.
+    #[arg(long, default_value_t = KnotParams::default().max_spread, value_name = "S")]
+    knot_max_spread: f64,
+}
+
+impl KnotArgs {
+    pub(crate) fn params(&self) -> KnotParams {
+        KnotParams {
+            intervals: self.knot_intervals.into(),
+            max_ratio: self.knot_max_ratio,
+            max_spread: self.knot_max_spread,
         }
     }
 }

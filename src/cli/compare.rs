@@ -1,7 +1,7 @@
 //! `polyspline compare`: every method on one mesh, one table.
 
 use super::values;
-use super::{ElasticArgs, FeatureArgs};
+use super::{ElasticArgs, FeatureArgs, KnotArgs};
 use polyspline::compare::{CompareOptions, compare};
 use polyspline::exec::gpu::BackendChoice;
 use polyspline::fit::FitParams;
@@ -34,6 +34,8 @@ pub(super) struct Args {
     backend: values::BackendChoice,
     #[command(flatten)]
     features: FeatureArgs,
+    #[command(flatten)]
+    knots: KnotArgs,
 }
 
 pub(super) fn run(args: Args) -> anyhow::Result<()> {
@@ -52,6 +54,7 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
             },
             backend: BackendChoice::from(args.backend).resolve(None)?,
             features: args.features.options(),
+            knots: args.knots.params(),
             ..Default::default()
         },
         elastic: args.elastic.params(args.cg_tol),

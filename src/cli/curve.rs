@@ -7,7 +7,7 @@
 //! the job on one process and writes the mesh and the report.
 
 use super::values;
-use super::{ElasticArgs, FeatureArgs, PeriodicArgs};
+use super::{ElasticArgs, FeatureArgs, KnotArgs, PeriodicArgs};
 use polyspline::elastic::ElasticSolver;
 use polyspline::energy::{EnergyParams, EnergySolver};
 use polyspline::exec::gpu::BackendChoice;
@@ -19,7 +19,6 @@ use polyspline::pipeline::{
 };
 use polyspline::progress::Progress;
 use polyspline::solve::{CgParams, CgPreconditioner};
-use polyspline::spline::{KnotIntervals, KnotParams};
 use polyspline::validity::LineSearchParams;
 use std::path::{Path, PathBuf};
 
@@ -109,12 +108,8 @@ pub(crate) struct JobArgs {
     /// this off.
     #[arg(long, default_value_t = 10.0, value_name = "DEG")]
     kink_angle: f64,
-    /// Knot intervals of the spline elements.
-    #[arg(long, value_enum, default_value_t = KnotIntervals::default().into())]
-    knot_intervals: values::KnotIntervals,
-    /// With graded knot intervals: the largest ratio of neighbouring intervals.
-    #[arg(long, default_value_t = KnotParams::default().max_ratio, value_name = "R")]
-    knot_max_ratio: f64,
+    #[command(flatten)]
+    knots: KnotArgs,
     /// Solver of the fit's normal equations: `auto` factors small systems (at most 12,000
     /// control points in 2D, 1,000 in 3D) by sparse Cholesky on the CPU backend and solves
     /// the rest by CG; `cg` and `cholesky` force one (distributed runs always use CG).
@@ -304,10 +299,7 @@ impl JobArgs {
                 },
                 ..Default::default()
             },
-            knots: KnotParams {
-                intervals: self.knot_intervals.into(),
-                max_ratio: self.knot_max_ratio,
-            },
+            knots: self.knots.params(),
             features: self.features.options(),
             line_search: LineSearchParams {
                 max_bisections: self.max_bisections,

@@ -1,6 +1,6 @@
 //! `polyspline info`: size, topology, quality and sharp features of a linear mesh.
 
-use super::FeatureArgs;
+use super::{FeatureArgs, KnotArgs};
 use polyspline::info::MeshInfo;
 use polyspline::io::read_mesh;
 use polyspline::mesh::{MeshOptions, Topology};
@@ -18,6 +18,8 @@ pub(super) struct Args {
     allow_invalid: bool,
     #[command(flatten)]
     features: FeatureArgs,
+    #[command(flatten)]
+    knots: KnotArgs,
     /// Check that boundary A is periodic with boundary B (names or tags; repeatable) and
     /// report the transform.
     #[arg(long, value_name = "A:B")]
@@ -34,6 +36,7 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
     let found = feature_options.detect(&linear, &topo)?;
     let mut info = MeshInfo::new(&linear, &topo);
     info.features = Some(found.summary(&feature_options.params, &topo));
+    info.set_knots(&linear, &topo, &args.knots.params())?;
     let pairs = polyspline::mesh::periodic::resolve(&linear, &topo, &args.periodic)
         .map_err(|e| anyhow::anyhow!("{}: {e}", args.mesh.display()))?;
     let (lo, hi) = linear.bounding_box();

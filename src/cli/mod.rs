@@ -20,7 +20,7 @@ mod info;
 mod plot;
 mod values;
 
-use args::{ElasticArgs, FeatureArgs, PeriodicArgs};
+use args::{ElasticArgs, FeatureArgs, KnotArgs, PeriodicArgs};
 use clap::{Parser, Subcommand};
 use polyspline::io::read_raw;
 use polyspline::mesh::HighOrderMesh;

@@ -1,6 +1,6 @@
 //! `polyspline plot`: a 2D mesh as SVG, curved edges as curves.
 
-use super::{FeatureArgs, read_high_order};
+use super::{FeatureArgs, KnotArgs, read_high_order};
 use polyspline::io::output::{check_outputs, write_atomically};
 use polyspline::io::read_mesh;
 use polyspline::mesh::{MeshOptions, Topology};
@@ -41,6 +41,9 @@ pub(super) struct Args {
     show_features: bool,
     #[command(flatten)]
     features: FeatureArgs,
+    /// With --control-points: the knot intervals of the unfitted spline map.
+    #[command(flatten)]
+    knots: KnotArgs,
 }
 
 /// Colours of MESH and the overlays, in turn.
@@ -58,6 +61,7 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
         control_points,
         show_features,
         features,
+        knots,
     } = args;
     let inputs: Vec<&Path> = std::iter::once(mesh.as_path())
         .chain(overlay.iter().map(|p| p.as_path()))
@@ -86,7 +90,8 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
     let spline = if control_points {
         let linear = read_mesh(&mesh, &MeshOptions::default())?;
         let topo = Topology::build(&linear);
-        let space = polyspline::spline::SplineSpace::build(&linear, &topo);
+        let (space, _) =
+            polyspline::spline::SplineSpace::build_for_knots(&linear, &topo, &knots.params())?;
         let curved = polyspline::sample::sample(&space, &linear, &topo, 4);
         Some((space.control_points, curved))
     } else {

@@ -51,6 +51,8 @@ pub(crate) struct SplineSetup {
     blend_targets: Option<SmoothTargets>,
     /// Knot weights of the spline space (`None`: uniform knots), fixed for all demotions.
     knot_weights: Option<Vec<KnotWeights>>,
+    /// Elements made Q2 where knot surfaces are split (empty: none).
+    knot_split: Vec<bool>,
     /// Figures of the knot surfaces.
     pub(crate) knot_info: KnotSurfaceInfo,
     /// The knot intervals used.
@@ -111,7 +113,7 @@ impl SplineSetup {
             ),
             _ => None,
         };
-        let (knot_weights, knot_info) = SplineSpace::knot_weights(mesh, topo, &options.knots);
+        let knots = SplineSpace::knot_weights(mesh, topo, &options.knots);
         Ok(SplineSetup {
             features,
             crease,
@@ -119,8 +121,9 @@ impl SplineSetup {
             fit_params,
             targets,
             blend_targets,
-            knot_weights,
-            knot_info,
+            knot_weights: knots.weights,
+            knot_split: knots.split,
+            knot_info: knots.info,
             knot_intervals: options.knots.intervals,
             seams: None,
             seam_c0: std::sync::Mutex::new(None),
@@ -196,6 +199,7 @@ impl SplineSetup {
             (&self.kinks.elements[..], Q2Reason::BoundaryKink),
             (demote, Q2Reason::InvalidSplineMap),
             (misfit, Q2Reason::BoundaryMisfit),
+            (&self.knot_split[..], Q2Reason::KnotSplit),
         ];
         if let Some(g) = self.live_seams() {
             // Built on the glued mesh, then put back on the input's elements.

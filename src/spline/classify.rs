@@ -55,6 +55,10 @@ pub enum Q2Reason {
     /// smooth targets, much further than a neighbouring side and than a Q2 element would
     /// leave (`pipeline::misfit`).
     BoundaryMisfit,
+    /// Made Q2 by graded knot intervals: a knot surface through the element is split there,
+    /// because the cells' measured interval ratios along it vary more than one ratio can fit
+    /// ([`crate::spline::intervals`]); the map is C⁰ across the split.
+    KnotSplit,
 }
 
 /// The kind of an element in the poly-spline space.

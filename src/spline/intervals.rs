@@ -21,6 +21,16 @@
 //! the layer; their ratios across it do not), and a surface wandering through an unstructured
 //! region averages to nearly uniform.
 //!
+//! **Splitting.** One ratio per surface cannot fit a surface along which the cells' ratio
+//! changes a lot (a C-grid's first layers: the trailing edge's growth is not the leading
+//! edge's). With a finite [`KnotParams::max_spread`], neighbouring element pairs are taken in
+//! order of increasing disagreement of the ratios they tie together, and a pair is refused when
+//! tying would make the spread (max − min) of the measured log-ratios of a surface exceed
+//! `max_spread`, Kruskal-like. Both elements of a refused pair become Q2 elements
+//! ([`super::Q2Reason::KnotSplit`]): ratios are tied only across a face with a spline element on
+//! at least one side, so the surface is cut there, and the Q2 elements' constraints keep the
+//! map C⁰ across the cut (C¹ is kept where the mesh is regular enough for one ratio).
+//!
 //! Invariants: the weights lie in `[1/(1+r), r/(1+r)]` with `r` = [`KnotParams::max_ratio`];
 //! a tensor-product grid (any spacing per direction) under an affine map gets exactly its
 //! spacing ratios, so the initial spline map (control points at cell centres, Greville
@@ -51,6 +61,9 @@ pub struct KnotParams {
     pub intervals: KnotIntervals,
     /// Largest ratio of neighbouring intervals (≥ 1); larger measured ratios are clamped.
     pub max_ratio: f64,
+    /// Largest spread (max − min) of the measured log-ratios within one knot surface before
+    /// it is split (`f64::INFINITY`: never split).
+    pub max_spread: f64,
 }
 
 impl Default for KnotParams {
@@ -58,9 +71,13 @@ impl Default for KnotParams {
         KnotParams {
             intervals: KnotIntervals::Uniform,
             max_ratio: 16.0,
+            max_spread: DEFAULT_MAX_SPREAD,
         }
     }
 }
+
+/// Default [`KnotParams::max_spread`].
+pub const DEFAULT_MAX_SPREAD: f64 = 0.3;
 
 impl KnotParams {
     /// Uniform knots.
@@ -72,7 +89,15 @@ impl KnotParams {
     }
 
     pub fn check(&self) -> Result<(), ParamError> {
-        above("--knot-max-ratio", self.max_ratio, 1.0 - f64::EPSILON, 1e6)
+        above("--knot-max-ratio", self.max_ratio, 1.0 - f64::EPSILON, 1e6)?;
+        if self.max_spread.is_nan() || self.max_spread < 0.0 {
+            return Err(ParamError::new(
+                "--knot-max-spread",
+                crate::params::num(self.max_spread),
+                "must be ≥ 0 (inf: never split)",
+            ));
+        }
+        Ok(())
     }
 }
 
@@ -92,6 +117,21 @@ pub struct KnotSurfaceInfo {
     pub clamped: usize,
     /// Largest |ln ratio| assigned.
     pub max_abs_log_ratio: f64,
+    /// Elements made Q2 where knot surfaces were split ([`KnotParams::max_spread`]).
+    pub split_elements: usize,
+    /// Largest spread (max − min) of the measured log-ratios within one surface, after
+    /// splitting.
+    pub max_spread: f64,
+}
+
+/// The knot intervals of a mesh: what [`knot_weights`] returns.
+#[derive(Clone, Debug, Default)]
+pub struct Knots {
+    /// Extraction weights per element (`None`: uniform knots).
+    pub weights: Option<Vec<KnotWeights>>,
+    /// Elements to make Q2 ([`super::Q2Reason::KnotSplit`]; empty: none).
+    pub split: Vec<bool>,
+    pub info: KnotSurfaceInfo,
 }
 
 /// Union-find with the orientation of each facet relative to its parent.
@@ -101,6 +141,10 @@ struct SignedUnionFind {
     flip: Vec<bool>,
     /// Root: a cycle with an odd number of flips was found.
     conflict: Vec<bool>,
+    /// Root: smallest and largest value of the set's members, in the root's orientation
+    /// (empty: `lo > hi`).
+    lo: Vec<f64>,
+    hi: Vec<f64>,
 }
 
 impl SignedUnionFind {
@@ -109,7 +153,39 @@ impl SignedUnionFind {
             parent: (0..n as u32).collect(),
             flip: vec![false; n],
             conflict: vec![false; n],
+            lo: vec![f64::INFINITY; n],
+            hi: vec![f64::NEG_INFINITY; n],
         }
+    }
+
+    /// Singletons with values (`None`: no value).
+    fn with_values(values: impl Iterator<Item = Option<f64>>) -> Self {
+        let values: Vec<Option<f64>> = values.collect();
+        let mut u = Self::new(values.len());
+        for (i, v) in values.into_iter().enumerate() {
+            if let Some(v) = v {
+                (u.lo[i], u.hi[i]) = (v, v);
+            }
+        }
+        u
+    }
+
+    /// The range of the set `a`'s and `b`'s would form under `ρ(a) = ±ρ(b)`, in `a`'s root's
+    /// orientation (empty: `lo > hi`).
+    fn merged_range(&mut self, a: u32, b: u32, opposite: bool) -> (f64, f64) {
+        let (ra, fa) = self.find(a);
+        let (rb, fb) = self.find(b);
+        let (lo, hi) = (self.lo[ra as usize], self.hi[ra as usize]);
+        if ra == rb {
+            return (lo, hi);
+        }
+        let (blo, bhi) = (self.lo[rb as usize], self.hi[rb as usize]);
+        let (blo, bhi) = if fa ^ fb ^ opposite {
+            (-bhi, -blo)
+        } else {
+            (blo, bhi)
+        };
+        (lo.min(blo), hi.max(bhi))
     }
 
     /// Root of `x` and whether `ρ(x) = −ρ(root)` (path compression).
@@ -147,8 +223,10 @@ impl SignedUnionFind {
             }
             return;
         }
+        let (lo, hi) = self.merged_range(a, b, opposite);
         self.parent[rb as usize] = ra;
         self.flip[rb as usize] = fa ^ fb ^ opposite;
+        (self.lo[ra as usize], self.hi[ra as usize]) = (lo, hi);
         if self.conflict[rb as usize] {
             self.conflict[ra as usize] = true;
         }
@@ -204,76 +282,172 @@ fn second(topo: &Topology, f: u32, e: usize) -> bool {
     topo.facet_elements[f as usize][0] != e as u32
 }
 
-/// The extraction weights of every element for `params` (`None`: uniform knots), with the
-/// figures of the knot surfaces. Knot surfaces are continued across the elements that are
-/// spline elements by topology (`spline[e]`); elsewhere the continuation is not defined.
+/// One tie `ρ(f) = ±ρ(f2)` made by continuing facet `f` of `element` across its face to
+/// `neighbour` (`opposite`: minus).
+#[derive(Clone, Copy)]
+struct Tie {
+    element: u32,
+    neighbour: u32,
+    f: u32,
+    f2: u32,
+    opposite: bool,
+}
+
+/// Every tie of the knot surfaces continued across the spline elements (`spline[e]`).
+fn ties(topo: &Topology, spline: &[bool]) -> Vec<Tie> {
+    let dim = topo.dim;
+    let sides = topo.sides();
+    (0..topo.n_elements)
+        .into_par_iter()
+        .filter(|&e| spline[e])
+        .flat_map_iter(|e| {
+            let mut out = Vec::new();
+            for side in 0..sides {
+                let f = topo.element_facet(e, side);
+                for other in 0..sides {
+                    if other / 2 == side / 2 {
+                        continue;
+                    }
+                    let n = topo.neighbor(e, other);
+                    if n == NONE || n as usize == e {
+                        continue;
+                    }
+                    let g = topo.element_facet(e, other);
+                    let fv = topo.facet_vertices(f as usize);
+                    let common: Vec<u32> = topo
+                        .facet_vertices(g as usize)
+                        .iter()
+                        .copied()
+                        .filter(|v| fv.contains(v))
+                        .collect();
+                    if common.len() != dim - 1 {
+                        continue;
+                    }
+                    let mut found = None;
+                    for s2 in 0..sides {
+                        let f2 = topo.element_facet(n as usize, s2);
+                        if f2 == g {
+                            continue;
+                        }
+                        let v2 = topo.facet_vertices(f2 as usize);
+                        if common.iter().all(|v| v2.contains(v)) {
+                            if found.is_some() {
+                                found = None;
+                                break;
+                            }
+                            found = Some(f2);
+                        }
+                    }
+                    if let Some(f2) = found {
+                        out.push(Tie {
+                            element: e as u32,
+                            neighbour: n,
+                            f,
+                            f2,
+                            opposite: second(topo, f, e) ^ second(topo, f2, n as usize),
+                        });
+                    }
+                }
+            }
+            out
+        })
+        .collect()
+}
+
+/// The knot surfaces of `ties` (facets in one set share a ratio up to sign), with the
+/// measured log-ratios as the sets' values.
+fn surfaces(nf: usize, ties: &[Tie], measured: &[Option<(f64, f64)>]) -> SignedUnionFind {
+    let mut uf = SignedUnionFind::with_values((0..nf).map(|f| measured[f].map(|(m, _)| m)));
+    for t in ties {
+        uf.union(t.f, t.f2, t.opposite);
+    }
+    uf
+}
+
+/// The elements to make Q2 so that no knot surface's measured log-ratios spread more than
+/// `max_spread` (module docs: element pairs in order of increasing disagreement; a pair whose
+/// ties would spread a surface too far is refused and both its elements marked).
+fn split_elements(
+    ne: usize,
+    nf: usize,
+    ties: &[Tie],
+    measured: &[Option<(f64, f64)>],
+    max_spread: f64,
+) -> Vec<bool> {
+    let mut split = vec![false; ne];
+    if !max_spread.is_finite() {
+        return split;
+    }
+    let value = |f: u32| measured[f as usize].map(|(m, _)| m);
+    // Ties grouped by unordered element pair, with the pair's largest disagreement.
+    let mut order: Vec<(u64, usize)> = ties
+        .iter()
+        .enumerate()
+        .map(|(i, t)| {
+            let (a, b) = (t.element.min(t.neighbour), t.element.max(t.neighbour));
+            (((a as u64) << 32) | b as u64, i)
+        })
+        .collect();
+    order.par_sort_unstable();
+    let mut pairs: Vec<(f64, usize, usize)> = Vec::new();
+    let mut i = 0;
+    while i < order.len() {
+        let mut j = i;
+        let mut worst = 0.0f64;
+        while j < order.len() && order[j].0 == order[i].0 {
+            let t = &ties[order[j].1];
+            if let (Some(a), Some(b)) = (value(t.f), value(t.f2)) {
+                let b = if t.opposite { -b } else { b };
+                worst = worst.max((a - b).abs());
+            }
+            j += 1;
+        }
+        pairs.push((worst, i, j));
+        i = j;
+    }
+    pairs.par_sort_by(|a, b| a.0.total_cmp(&b.0));
+    let mut uf = SignedUnionFind::with_values((0..nf).map(|f| value(f as u32)));
+    for &(_, i, j) in &pairs {
+        let group = &order[i..j];
+        let fits = group.iter().all(|&(_, k)| {
+            let t = &ties[k];
+            let (lo, hi) = uf.merged_range(t.f, t.f2, t.opposite);
+            lo > hi || hi - lo <= max_spread
+        });
+        if fits {
+            for &(_, k) in group {
+                let t = &ties[k];
+                uf.union(t.f, t.f2, t.opposite);
+            }
+        } else {
+            let t = &ties[group[0].1];
+            split[t.element as usize] = true;
+            split[t.neighbour as usize] = true;
+        }
+    }
+    split
+}
+
+/// The extraction weights of every element for `params` (uniform knots: `None`), the
+/// elements to make Q2 where surfaces are split, and the figures of the knot surfaces. Knot
+/// surfaces are continued across the elements that are spline elements by topology
+/// (`spline[e]`); elsewhere the continuation is not defined.
 pub fn knot_weights(
     mesh: &LinearMesh,
     topo: &Topology,
     spline: &[bool],
     params: &KnotParams,
-) -> (Option<Vec<KnotWeights>>, KnotSurfaceInfo) {
+) -> Knots {
     if params.intervals == KnotIntervals::Uniform {
-        return (None, KnotSurfaceInfo::default());
+        return Knots::default();
     }
     let dim = topo.dim;
     let nf = topo.n_facets();
     let ne = topo.n_elements;
-    let sides = topo.sides();
 
-    // 1. Knot surfaces: facet pairs continued across each spline element's neighbours.
-    let mut uf = SignedUnionFind::new(nf);
-    for e in 0..ne {
-        if !spline[e] {
-            continue;
-        }
-        for side in 0..sides {
-            let f = topo.element_facet(e, side);
-            for other in 0..sides {
-                if other / 2 == side / 2 {
-                    continue;
-                }
-                let n = topo.neighbor(e, other);
-                if n == NONE || n as usize == e {
-                    continue;
-                }
-                let g = topo.element_facet(e, other);
-                let fv = topo.facet_vertices(f as usize);
-                let common: Vec<u32> = topo
-                    .facet_vertices(g as usize)
-                    .iter()
-                    .copied()
-                    .filter(|v| fv.contains(v))
-                    .collect();
-                if common.len() != dim - 1 {
-                    continue;
-                }
-                let n = n as usize;
-                let mut found = None;
-                for s2 in 0..sides {
-                    let f2 = topo.element_facet(n, s2);
-                    if f2 == g {
-                        continue;
-                    }
-                    let v2 = topo.facet_vertices(f2 as usize);
-                    if common.iter().all(|v| v2.contains(v)) {
-                        if found.is_some() {
-                            found = None;
-                            break;
-                        }
-                        found = Some(f2);
-                    }
-                }
-                if let Some(f2) = found {
-                    uf.union(f, f2, second(topo, f, e) ^ second(topo, f2, n));
-                }
-            }
-        }
-    }
-
-    // 2. Measured log-ratio of every interior facet, summed per surface with weight 1 / the
-    //    facet's size: a ratio that misfits a thin cell distorts it relative to its thickness,
-    //    so the small facets of a boundary layer decide where a surface crosses it.
+    // 1. Measured log-ratio of every interior facet, with weight 1 / the facet's size: a
+    //    ratio that misfits a thin cell distorts it relative to its thickness, so the small
+    //    facets of a boundary layer decide where a surface crosses it.
     let measured: Vec<Option<(f64, f64)>> = (0..nf)
         .into_par_iter()
         .map(|f| {
@@ -289,6 +463,18 @@ pub fn knot_weights(
             (r.is_finite() && w.is_finite()).then_some((r, w))
         })
         .collect();
+
+    // 2. Knot surfaces: facets tied across each spline element's neighbours; split where
+    //    one ratio cannot fit, and rebuilt without the split elements' ties.
+    let all = ties(topo, spline);
+    let split = split_elements(ne, nf, &all, &measured, params.max_spread);
+    let kept: Vec<Tie> = all
+        .into_iter()
+        .filter(|t| !split[t.element as usize])
+        .collect();
+    let mut uf = surfaces(nf, &kept, &measured);
+
+    // 3. One ratio per surface: the weighted mean of its facets' measured ratios.
     let mut sum = vec![0.0f64; nf];
     let mut weight = vec![0.0f64; nf];
     let mut sign = vec![false; nf];
@@ -303,13 +489,19 @@ pub fn knot_weights(
         }
     }
     let cap = params.max_ratio.ln();
-    let mut info = KnotSurfaceInfo::default();
+    let mut info = KnotSurfaceInfo {
+        split_elements: split.iter().filter(|&&s| s).count(),
+        ..Default::default()
+    };
     let mut rho_root = vec![0.0f64; nf];
     for r in 0..nf {
         if weight[r] == 0.0 || root[r] as usize != r {
             continue;
         }
         info.surfaces += 1;
+        if uf.hi[r] >= uf.lo[r] {
+            info.max_spread = info.max_spread.max(uf.hi[r] - uf.lo[r]);
+        }
         if uf.conflict[r] {
             info.non_orientable += 1;
             continue;
@@ -330,7 +522,7 @@ pub fn knot_weights(
         if sign[f as usize] { -v } else { v }
     };
 
-    // 3. Weights: α = 1/(1 + h₋₁/h₀), β = 1/(1 + h₀/h₁).
+    // 4. Weights: α = 1/(1 + h₋₁/h₀), β = 1/(1 + h₀/h₁).
     let logistic = |x: f64| 1.0 / (1.0 + (-x).exp());
     let weights = (0..ne)
         .into_par_iter()
@@ -355,7 +547,15 @@ pub fn knot_weights(
             w
         })
         .collect();
-    (Some(weights), info)
+    Knots {
+        weights: Some(weights),
+        split: if info.split_elements > 0 {
+            split
+        } else {
+            Vec::new()
+        },
+        info,
+    }
 }
 
 #[cfg(test)]

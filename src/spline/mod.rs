@@ -41,7 +41,7 @@ pub mod stencil;
 use crate::math::BezierNet;
 pub use classify::{ElementClass, Q2Reason};
 pub use extraction::{ElementRows, Extraction, ExtractionCsr};
-pub use intervals::{KnotIntervals, KnotParams, KnotSurfaceInfo, KnotWeights};
+pub use intervals::{KnotIntervals, KnotParams, KnotSurfaceInfo, KnotWeights, Knots};
 pub use knots::Op1d;
 pub use stencil::Entity;
 
@@ -126,21 +126,36 @@ impl SplineSpace {
         Self::build_with_knots(mesh, topo, demote, None)
     }
 
-    /// The knot weights of `mesh` for `params` ([`intervals::knot_weights`]; `None` for
-    /// uniform knots), to pass to [`SplineSpace::build_with_knots`].
-    pub fn knot_weights(
-        mesh: &LinearMesh,
-        topo: &Topology,
-        params: &KnotParams,
-    ) -> (Option<Vec<KnotWeights>>, KnotSurfaceInfo) {
+    /// The knot intervals of `mesh` for `params` ([`intervals::knot_weights`]; no weights for
+    /// uniform knots): the weights to pass to [`SplineSpace::build_with_knots`], with the
+    /// elements to make Q2 ([`Q2Reason::KnotSplit`]) where knot surfaces are split.
+    pub fn knot_weights(mesh: &LinearMesh, topo: &Topology, params: &KnotParams) -> Knots {
         if params.intervals == KnotIntervals::Uniform {
-            return (None, KnotSurfaceInfo::default());
+            return Knots::default();
         }
         let spline: Vec<bool> = classify::classify(mesh, topo)
             .iter()
             .map(|c| c.is_spline())
             .collect();
         intervals::knot_weights(mesh, topo, &spline, params)
+    }
+
+    /// The space of `mesh` with the knot intervals of `params` (the split elements made Q2),
+    /// and the figures of its knot surfaces; [`SplineSpace::build`] for uniform knots.
+    pub fn build_for_knots(
+        mesh: &LinearMesh,
+        topo: &Topology,
+        params: &KnotParams,
+    ) -> Result<(SplineSpace, KnotSurfaceInfo), crate::params::ParamError> {
+        params.check()?;
+        let knots = Self::knot_weights(mesh, topo, params);
+        let space = Self::build_with_knots(
+            mesh,
+            topo,
+            &[(&knots.split, Q2Reason::KnotSplit)],
+            knots.weights.as_deref(),
+        );
+        Ok((space, knots.info))
     }
 
     /// [`SplineSpace::build_with_q2`] with non-uniform knot intervals: `weights` (one entry
