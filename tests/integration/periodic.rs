@@ -366,6 +366,106 @@ fn pyfr_import_connects_the_periodic_faces() {
     assert_eq!(String::from_utf8_lossy(&sizes.stdout).trim(), "[144]");
 }
 
+/// Gmsh's own periodic meshes (`gmsh_periodic_input.py`: `setPeriodic` on a curved-sided
+/// channel, an annular sector and a box, MSH 4.1 ASCII and binary and 2.2) in `dir`.
+fn gmsh_periodic_inputs() -> PathBuf {
+    let dir = scratch_in("periodic_input", "x")
+        .parent()
+        .unwrap()
+        .to_owned();
+    run_ok(
+        python()
+            .arg(Path::new(ROOT).join("tests/external/gmsh_periodic_input.py"))
+            .arg(&dir),
+    );
+    dir
+}
+
+#[test]
+fn gmsh_periodic_sections_are_used_without_the_option() {
+    if !common::have_gmsh(&common::current_test()) {
+        return;
+    }
+    let dir = gmsh_periodic_inputs();
+    for (file, master, image, kind) in [
+        ("channel2d_41.msh", "left", "right", "translation"),
+        ("channel2d_41b.msh", "left", "right", "translation"),
+        ("channel2d_22.msh", "left", "right", "translation"),
+        ("sector2d_41.msh", "theta_lo", "theta_hi", "rotation"),
+        ("box3d_41.msh", "xmin", "xmax", "translation"),
+    ] {
+        let input = dir.join(file);
+        // `info` reports the file's pair.
+        let info = run_ok(polyspline().arg("info").arg(&input).arg("--json"));
+        let info: Value = serde_json::from_slice(&info.stdout).unwrap();
+        let pairs = info["periodic"].as_array().unwrap();
+        assert_eq!(pairs.len(), 1, "{file}: {info}");
+        assert_eq!(
+            (
+                &pairs[0]["master"],
+                &pairs[0]["slave"],
+                &pairs[0]["from_file"]
+            ),
+            (
+                &Value::from(master),
+                &Value::from(image),
+                &Value::Bool(true)
+            ),
+            "{file}"
+        );
+        // `curve` without --periodic pairs the sides and Gmsh sees exact images.
+        for order in ["2", "4"] {
+            let out = scratch_in("periodic_input", &format!("o{order}_{file}"));
+            let report = curve(&input, &out, &["--order", order]);
+            let per = &report["periodic"];
+            assert_eq!(per["pairs"][0]["kind"], kind, "{file}: {per}");
+            assert_eq!(per["pairs"][0]["from_file"], true, "{file}: {per}");
+            assert!(
+                per["written_mismatch"].as_f64().unwrap() <= IMAGE_TOL,
+                "{file}: {per}"
+            );
+            let links = assert_exact_images(&out, 1);
+            assert_eq!(links[image]["master_name"], master, "{file}");
+        }
+    }
+    // A pair given on the command line wins for its groups.
+    let input = dir.join("channel2d_41.msh");
+    let out = scratch_in("periodic_input", "reversed.msh");
+    let report = curve(&input, &out, &["--periodic", "right:left"]);
+    let pairs = report["periodic"]["pairs"].as_array().unwrap();
+    assert_eq!(pairs.len(), 1, "{pairs:?}");
+    assert_eq!(
+        (&pairs[0]["master"], &pairs[0]["from_file"]),
+        (&Value::from("right"), &Value::Bool(false))
+    );
+    // A file whose affine map is not the transform of its nodes: one line naming the file
+    // and the pair, nothing written.
+    let good = std::fs::read_to_string(dir.join("channel2d_22.msh")).unwrap();
+    let bad = good.replace("Affine 1 0 0 1 ", "Affine 1 0 0 1.01 ");
+    assert_ne!(bad, good, "the 2.2 file's affine line changed");
+    let input = scratch_in("periodic_input", "bad_affine.msh");
+    std::fs::write(&input, bad).unwrap();
+    let out = scratch_in("periodic_input", "bad_affine_out.msh");
+    let _ = std::fs::remove_file(&out);
+    let run = polyspline()
+        .arg("curve")
+        .arg(&input)
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success(), "accepted: {err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(
+        err.contains("bad_affine.msh")
+            && err.contains("$Periodic pair left:right")
+            && err.contains("disagrees"),
+        "{err}"
+    );
+    assert!(!out.exists());
+}
+
 #[test]
 fn a_wrong_periodic_pair_is_refused_in_one_line() {
     let turbine = Path::new(ROOT).join(TURBINE);
