@@ -466,6 +466,99 @@ fn gmsh_periodic_sections_are_used_without_the_option() {
     assert!(!out.exists());
 }
 
+/// Largest distance of the nodes of `group` of `file` from the analytic `wall`
+/// (`wall_error.py`, Gmsh's reading).
+fn wall_error(file: &Path, group: &str, wall: &str) -> f64 {
+    let out = run_ok(
+        python()
+            .arg(Path::new(ROOT).join("tests/external/wall_error.py"))
+            .arg(file)
+            .args([group, wall]),
+    );
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(v["nodes"].as_u64().unwrap() > 0, "{group}: {v}");
+    v["max_error"].as_f64().unwrap()
+}
+
+#[test]
+fn generated_channel_and_sector_are_periodic_and_curve_onto_their_walls() {
+    if !common::have_gmsh(&common::current_test()) {
+        return;
+    }
+    let (c, s) = (40f64.to_radians().cos(), 40f64.to_radians().sin());
+    let rotation = [c, -s, 0.0, 0.0, s, c, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0];
+    let shift = [1.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0];
+    let channel = "--around 12 --across 8 --first-height 0.02 --bump 0.15";
+    let sector = "--around 6 --across 8 --first-height 0.02 --sector 40";
+    for (name, args, pair, expect, walls) in [
+        (
+            "channel2d",
+            channel.to_string(),
+            ["periodic_left", "periodic_right"],
+            shift,
+            vec![("wall", "bump=0.15")],
+        ),
+        (
+            "channel3d",
+            format!("{channel} --layers 2 --span 0.3"),
+            ["periodic_left", "periodic_right"],
+            shift,
+            vec![("wall", "bump=0.15")],
+        ),
+        (
+            "sector2d",
+            sector.to_string(),
+            ["periodic_lo", "periodic_hi"],
+            rotation,
+            vec![("hub", "r=1"), ("shroud", "r=2")],
+        ),
+        (
+            "sector3d",
+            format!("{sector} --layers 2 --span 0.5"),
+            ["periodic_lo", "periodic_hi"],
+            rotation,
+            vec![("hub", "r=1"), ("shroud", "r=2")],
+        ),
+    ] {
+        let kind = &name[..name.len() - 2];
+        let linear = scratch_in("periodic_generate", &format!("{name}.msh"));
+        run_ok(
+            polyspline()
+                .args(["generate", kind, "-o"])
+                .arg(&linear)
+                .args(args.split(' ')),
+        );
+        // The generated file carries the pair: Gmsh reads it, images exact.
+        let links = assert_exact_images(&linear, 1);
+        assert_eq!(links[pair[1]]["master_name"], pair[0], "{name}");
+        let a = affine(&links[pair[1]]);
+        for k in 0..12 {
+            assert!((a[k] - expect[k]).abs() < 1e-12, "{name}: affine {a:?}");
+        }
+        // Curved without --periodic: the pair from the file, exact images at order 3, and the
+        // walls closer to the analytic curves than the straight order-3 mesh's nodes (by a fifth
+        // at least; the 3D channel's wall meets the periodic sides and the end planes in
+        // feature edges, where it gains least).
+        let curved = scratch_in("periodic_generate", &format!("{name}_o3.msh"));
+        let report = curve(&linear, &curved, &["--order", "3"]);
+        assert_eq!(report["periodic"]["pairs"][0]["from_file"], true, "{name}");
+        let links = assert_exact_images(&curved, 1);
+        assert_eq!(links[pair[1]]["master_name"], pair[0], "{name}");
+        let straight = scratch_in("periodic_generate", &format!("{name}_straight.msh"));
+        curve(&linear, &straight, &["--order", "3", "--straight"]);
+        for (group, wall) in walls {
+            let (before, after) = (
+                wall_error(&straight, group, wall),
+                wall_error(&curved, group, wall),
+            );
+            assert!(
+                after < 0.8 * before,
+                "{name} {group}: curved nodes {after:e} from the wall, straight {before:e}"
+            );
+        }
+    }
+}
+
 #[test]
 fn a_wrong_periodic_pair_is_refused_in_one_line() {
     let turbine = Path::new(ROOT).join(TURBINE);
