@@ -64,7 +64,7 @@ pub struct MeshInfo {
     /// Sharp features, when detected (`docs/features.md`); `crease_elements` become
     /// `feature_crease` Q2 elements in `curve` (not counted in `q2_reasons`).
     pub features: Option<crate::mesh::features::FeatureSummary>,
-    /// Periodic pairs (`--periodic`) with their transforms; empty without.
+    /// Periodic pairs (`--periodic` and the file's `$Periodic`) with their transforms.
     pub periodic: Vec<crate::mesh::periodic::PeriodicSummary>,
     /// With graded knot intervals (`--knot-intervals graded`): the knot surfaces; the spline
     /// space's counts above then include the elements made Q2 where surfaces are split.

@@ -86,6 +86,8 @@ GENERATE = [
     ("torus", {"elements": 300}),
     ("ogrid", {"around": 32, "across": 12, "wall": "circle"}),
     ("cgrid", {"around": 32, "across": 10, "wake": 8, "layers": 2, "span": 0.5}),
+    ("channel", {"around": 16, "across": 8, "first_height": 0.02, "bump": 0.15}),
+    ("sector", {"around": 8, "across": 8, "first_height": 0.02, "sector": 40, "layers": 2}),
 ]
 
 

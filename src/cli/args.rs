@@ -116,7 +116,9 @@ impl FeatureArgs {
 pub(crate) struct PeriodicArgs {
     /// Boundary A is periodic with boundary B (names or tags; repeatable): the transform, a
     /// translation or a rotation, is found from the vertex positions and verified, and the
-    /// written nodes of B are exactly the transform of A's.
+    /// written nodes of B are exactly the transform of A's. Pairs of the input's Gmsh
+    /// `$Periodic` section are used without this option; a pair given here wins over the
+    /// file's for its groups.
     #[arg(long, value_name = "A:B")]
     periodic: Vec<PeriodicSpec>,
     /// Write pair i's groups as `periodic_<i>_l` (A) and `periodic_<i>_r` (B), the names

@@ -4,7 +4,7 @@ use super::values;
 use polyspline::io::output::check_outputs;
 use polyspline::mesh::generate::boundary_layer::{self, BoundaryLayer, Wall};
 use polyspline::mesh::generate::{Shape, generate};
-use polyspline::mesh::{HighOrderMesh, Topology};
+use polyspline::mesh::{HighOrderMesh, Topology, periodic};
 use polyspline::pipeline::{OutputOptions, write_high_order};
 use std::path::{Path, PathBuf};
 
@@ -43,8 +43,10 @@ pub(crate) struct Generated {
     pub(crate) spacing: Option<String>,
 }
 
-/// Options of `generate ogrid|cgrid` (lengths in wall units: chord 2 for the ellipse and
-/// the circle, 1 for the airfoil).
+/// Options of `generate ogrid|cgrid|channel|sector` (lengths in wall units: chord 2 for the
+/// ellipse and the circle, 1 for the airfoil; the channel's period and height are 1, the
+/// sector's hub and shroud radii 1 and 2). The channel and the sector take `--around` along
+/// the period, `--across` wall to wall.
 #[derive(clap::Args)]
 pub(crate) struct BoundaryLayerArgs {
     /// Wall curve [default: ellipse for ogrid, naca for cgrid].
@@ -78,6 +80,12 @@ pub(crate) struct BoundaryLayerArgs {
     /// C-grid: cells along the wake cut.
     #[arg(long, default_value_t = 32)]
     wake: usize,
+    /// Channel: bump height (the period and the channel height are 1).
+    #[arg(long, default_value_t = 0.1)]
+    bump: f64,
+    /// Sector: angle in degrees.
+    #[arg(long, default_value_t = 30.0)]
+    sector: f64,
 }
 
 impl BoundaryLayerArgs {
@@ -111,13 +119,14 @@ pub(crate) fn make(args: &ShapeArgs, name: &Path) -> anyhow::Result<Generated> {
     let mut spacing = None;
     let mesh = match shape {
         Shape::Benchmark(kind) => generate(kind, args.elements.unwrap_or_default()),
-        Shape::Ogrid | Shape::Cgrid => {
+        Shape::Ogrid | Shape::Cgrid | Shape::Channel | Shape::Sector => {
             let cgrid = shape == Shape::Cgrid;
             let params = args.layer.params(cgrid);
-            let made = if cgrid {
-                boundary_layer::cgrid(&params)
-            } else {
-                boundary_layer::ogrid(&params)
+            let made = match shape {
+                Shape::Cgrid => boundary_layer::cgrid(&params),
+                Shape::Channel => boundary_layer::channel(&params, args.layer.bump),
+                Shape::Sector => boundary_layer::sector(&params, args.layer.sector),
+                _ => boundary_layer::ogrid(&params),
             }
             .map_err(|e| anyhow::anyhow!("{}: {e}", name.display()))?;
             let s = &made.spacing;
@@ -126,7 +135,7 @@ pub(crate) fn make(args: &ShapeArgs, name: &Path) -> anyhow::Result<Generated> {
                 s.geometric_cells,
                 params.first_height,
                 params.growth,
-                params.across - s.geometric_cells,
+                s.distances.len() - 1 - s.geometric_cells,
                 s.outer_growth,
                 made.mesh.min_scaled_jacobian().map_or(0.0, |m| m.0),
                 boundary_layer::max_aspect_ratio(&made.mesh),
@@ -135,8 +144,21 @@ pub(crate) fn make(args: &ShapeArgs, name: &Path) -> anyhow::Result<Generated> {
         }
     };
     let topo = Topology::build(&mesh);
+    let mut ho = polyspline::sample::sample(&mesh, &mesh, &topo, 1);
+    // The periodic shapes carry their pair (written as `$Periodic`), verified like --periodic.
+    let pair = match shape {
+        Shape::Channel => Some(boundary_layer::CHANNEL_PAIR),
+        Shape::Sector => Some(boundary_layer::SECTOR_PAIR),
+        _ => None,
+    };
+    if let Some(pair) = pair {
+        let spec = pair.parse().map_err(anyhow::Error::msg)?;
+        let fail = |e: periodic::PeriodicError| anyhow::anyhow!("{}: {e}", name.display());
+        let pairs = periodic::resolve(&mesh, &topo, &[spec]).map_err(fail)?;
+        ho.periodic = periodic::node_pairs(&ho, &pairs).map_err(fail)?;
+    }
     Ok(Generated {
-        mesh: polyspline::sample::sample(&mesh, &mesh, &topo, 1),
+        mesh: ho,
         elements: mesh.n_elements(),
         vertices: mesh.n_vertices(),
         boundary_facets: topo.boundary_facets.len(),

@@ -21,7 +21,8 @@ pub(super) struct Args {
     #[command(flatten)]
     knots: KnotArgs,
     /// Check that boundary A is periodic with boundary B (names or tags; repeatable) and
-    /// report the transform.
+    /// report the transform. Pairs of the file's Gmsh `$Periodic` section are checked and
+    /// reported too.
     #[arg(long, value_name = "A:B")]
     periodic: Vec<polyspline::mesh::periodic::PeriodicSpec>,
 }

@@ -233,6 +233,14 @@ pub(super) enum GenerateShape {
     Ogrid,
     #[value(help = "Boundary-layer C-grid around a NACA 00xx airfoil with a wake cut")]
     Cgrid,
+    #[value(
+        help = "Periodic channel over a bump `--bump` (x-periodic, $Periodic pair periodic_left:periodic_right)"
+    )]
+    Channel,
+    #[value(
+        help = "Annular sector of `--sector` degrees between r = 1 and 2 (rotation-periodic, periodic_lo:periodic_hi)"
+    )]
+    Sector,
 }
 
 impl From<GenerateShape> for Shape {
@@ -243,6 +251,8 @@ impl From<GenerateShape> for Shape {
             GenerateShape::Torus => Shape::Benchmark(Kind::Torus),
             GenerateShape::Ogrid => Shape::Ogrid,
             GenerateShape::Cgrid => Shape::Cgrid,
+            GenerateShape::Channel => Shape::Channel,
+            GenerateShape::Sector => Shape::Sector,
         }
     }
 }

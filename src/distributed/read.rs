@@ -609,6 +609,8 @@ impl MshFile {
             point_locations: Vec::new(),
             declared_dim: Some(3),
             blocks: vec![block, fblock],
+            // The ranks' readers do not read `$Periodic`.
+            periodic: Vec::new(),
             tag_names: self.ix.tag_names.clone(),
         };
         let mesh = LinearMesh::from_raw(raw, options)?;

@@ -458,6 +458,8 @@ pub fn read_parts_share(
         point_locations: Vec::new(),
         declared_dim: Some(3),
         blocks: vec![block, fblock],
+        // The ranks' readers do not read `$Periodic`.
+        periodic: Vec::new(),
         tag_names: r.tag_names,
     };
     let mesh = agree(comm, LinearMesh::from_raw(raw, options))?;

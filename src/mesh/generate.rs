@@ -10,7 +10,8 @@ use crate::params::ParamError;
 
 pub mod boundary_layer;
 pub use boundary_layer::{
-    BoundaryLayer, BoundaryLayerMesh, GenerateError, Wall, WallNormalSpacing, cgrid, ogrid,
+    BoundaryLayer, BoundaryLayerMesh, CHANNEL_PAIR, GenerateError, SECTOR_PAIR, Wall,
+    WallNormalSpacing, cgrid, channel, ogrid, sector,
 };
 
 /// Structured quad grid on the tensor product of the coordinate lists `xs` × `ys`.
@@ -387,6 +388,10 @@ pub enum Shape {
     Benchmark(Kind),
     Ogrid,
     Cgrid,
+    /// The periodic channel over a bump (`boundary_layer::channel`).
+    Channel,
+    /// The periodic annular sector (`boundary_layer::sector`).
+    Sector,
 }
 
 /// Most elements the `generate` command makes (memory grows linearly, see docs/reliability.md).
@@ -398,10 +403,10 @@ impl Shape {
     pub fn check(self, elements: Option<usize>) -> Result<(), ParamError> {
         match (self, elements) {
             (Shape::Benchmark(_), Some(n)) => check_generated_elements(n),
-            (Shape::Ogrid | Shape::Cgrid, Some(n)) => Err(ParamError::new(
+            (_, Some(n)) => Err(ParamError::new(
                 "--elements",
                 n,
-                "applies to disc, cylinder and torus; ogrid and cgrid take --around and --across",
+                "applies to disc, cylinder and torus; ogrid, cgrid, channel and sector take --around and --across",
             )),
             (_, None) => Ok(()),
         }

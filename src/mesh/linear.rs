@@ -67,6 +67,9 @@ pub struct LinearMesh {
     pub unused_vertices: usize,
     /// Cells of the file that are neither elements nor tagged facets (points, edges in 3D).
     pub ignored_cells: BTreeMap<String, usize>,
+    /// Periodic pairs of facet tags the file declares (Gmsh's `$Periodic`); used by
+    /// [`crate::mesh::periodic::resolve`] after verification.
+    pub declared_periodic: Vec<crate::mesh::raw::DeclaredPeriodic>,
 }
 
 /// Corner neighbours of each hex corner, ordered so that the corner Jacobian
@@ -244,6 +247,7 @@ impl LinearMesh {
             declared_dim: _,
             blocks,
             tag_names,
+            periodic,
         } = raw;
         let dim = if n_hex > 0 {
             3
@@ -309,6 +313,8 @@ impl LinearMesh {
             invalid_elements: Vec::new(),
             unused_vertices,
             ignored_cells,
+            // Only pairs of boundary facets concern the volume mesh.
+            declared_periodic: periodic.into_iter().filter(|p| p.dim + 1 == dim).collect(),
         };
         mesh.normalise_orientation(options, &element_locations)?;
         Ok(mesh)

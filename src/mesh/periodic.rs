@@ -18,6 +18,7 @@
 
 use crate::math::linalg::DVec3;
 use crate::mesh::high_order::HighOrderMesh;
+use crate::mesh::raw::DeclaredPeriodic;
 use crate::mesh::{LinearMesh, Topology};
 use serde::Serialize;
 use std::collections::HashMap;
@@ -36,6 +37,19 @@ pub struct PeriodicSpec {
     pub master: String,
     /// Boundary name or tag of the image side.
     pub slave: String,
+    /// Declared by the input file (Gmsh's `$Periodic`) rather than given with `--periodic`.
+    pub from_file: bool,
+}
+
+impl PeriodicSpec {
+    /// How messages name the pair: `--periodic A:B`, or `$Periodic pair A:B` for a pair of the
+    /// input file.
+    pub fn label(&self) -> String {
+        match self.from_file {
+            false => format!("--periodic {self}"),
+            true => format!("$Periodic pair {self}"),
+        }
+    }
 }
 
 impl std::str::FromStr for PeriodicSpec {
@@ -46,6 +60,7 @@ impl std::str::FromStr for PeriodicSpec {
                 Ok(PeriodicSpec {
                     master: a.to_string(),
                     slave: b.to_string(),
+                    from_file: false,
                 })
             }
             _ => Err(format!(
@@ -63,9 +78,9 @@ impl std::fmt::Display for PeriodicSpec {
 
 /// Why a periodic pair cannot be used.
 #[derive(Debug, thiserror::Error)]
-#[error("--periodic {spec}: {what}")]
+#[error("{spec}: {what}")]
 pub struct PeriodicError {
-    /// The pair as given.
+    /// The pair as given ([`PeriodicSpec::label`]).
     pub spec: String,
     /// What is wrong, in one line.
     pub what: String,
@@ -226,6 +241,8 @@ pub struct PeriodicSummary {
     /// Largest |T(x_A) − x_B| over the input's vertex pairs, relative to the bounding-box
     /// diagonal.
     pub input_mismatch: f64,
+    /// Declared by the input file (Gmsh's `$Periodic`) rather than by `--periodic`.
+    pub from_file: bool,
 }
 
 impl PeriodicPair {
@@ -248,6 +265,7 @@ impl PeriodicPair {
             angle_degrees: rot.map(|r| r.2),
             vertex_pairs: self.vertex_map.len(),
             input_mismatch: self.input_mismatch / diagonal,
+            from_file: self.spec.from_file,
         }
     }
 }
@@ -268,8 +286,14 @@ impl std::fmt::Display for PeriodicSummary {
         }
         write!(
             f,
-            ", {} vertex pairs, mismatch {:.1e}",
-            self.vertex_pairs, self.input_mismatch
+            ", {} vertex pairs, mismatch {:.1e}{}",
+            self.vertex_pairs,
+            self.input_mismatch,
+            if self.from_file {
+                " (from the file's $Periodic)"
+            } else {
+                ""
+            }
         )
     }
 }
@@ -532,7 +556,7 @@ fn resolve_tag(
         .collect();
     let more = if tags.len() > MAX_LISTED { ", ..." } else { "" };
     Err(PeriodicError {
-        spec: spec.to_string(),
+        spec: spec.label(),
         what: format!(
             "no boundary group named or tagged {s:?} (boundary groups: {}{more})",
             if listed.is_empty() {
@@ -544,7 +568,10 @@ fn resolve_tag(
     })
 }
 
-/// Resolve and verify every pair of `specs` on the mesh.
+/// Resolve and verify every pair of `specs` on the mesh, then the pairs the input declares
+/// ([`LinearMesh::declared_periodic`], Gmsh's `$Periodic`) whose groups no pair of `specs`
+/// names: a pair given on the command line wins over the file's for its groups. A declared
+/// pair whose affine map disagrees with the transform found from the positions is an error.
 pub fn resolve(
     mesh: &LinearMesh,
     topo: &Topology,
@@ -555,13 +582,20 @@ pub fn resolve(
     tags.dedup();
     let mut seen: Vec<i32> = Vec::new();
     let mut out = Vec::new();
+    let mut resolved: Vec<(PeriodicSpec, i32, i32, Vec<&DeclaredPeriodic>)> = Vec::new();
     for spec in specs {
-        let err = |what: String| PeriodicError {
-            spec: spec.to_string(),
-            what,
-        };
         let ta = resolve_tag(mesh, &tags, spec, &spec.master)?;
         let tb = resolve_tag(mesh, &tags, spec, &spec.slave)?;
+        resolved.push((spec.clone(), ta, tb, Vec::new()));
+    }
+    let given: Vec<i32> = resolved.iter().flat_map(|r| [r.1, r.2]).collect();
+    resolved.extend(declared(mesh, &tags, &given));
+    for (spec, ta, tb, claims) in &resolved {
+        let err = |what: String| PeriodicError {
+            spec: spec.label(),
+            what,
+        };
+        let (ta, tb) = (*ta, *tb);
         if ta == tb {
             return Err(err(format!("both sides are boundary tag {ta}")));
         }
@@ -573,9 +607,94 @@ pub fn resolve(
             }
         }
         seen.extend([ta, tb]);
-        out.push(pair(mesh, topo, spec, ta, tb).map_err(err)?);
+        let found = pair(mesh, topo, spec, ta, tb).map_err(err)?;
+        for claim in claims {
+            check_declared(mesh, topo, &found, claim).map_err(err)?;
+        }
+        out.push(found);
     }
     Ok(out)
+}
+
+/// The pairs of boundary groups the file declares, each with the file's links it gathers
+/// (several entity pairs of one physical pair). Left out: links whose sides carry no boundary
+/// group of the mesh (no physical tag) or the same one, the reverse of a pair already kept,
+/// and pairs naming a group of `given` (the command line's pairs).
+fn declared<'m>(
+    mesh: &'m LinearMesh,
+    tags: &[i32],
+    given: &[i32],
+) -> Vec<(PeriodicSpec, i32, i32, Vec<&'m DeclaredPeriodic>)> {
+    let mut out: Vec<(PeriodicSpec, i32, i32, Vec<&DeclaredPeriodic>)> = Vec::new();
+    let name = |t: i32| mesh.tag_names.get(&t).cloned().unwrap_or(t.to_string());
+    for d in &mesh.declared_periodic {
+        let (ta, tb) = (d.master_tag, d.slave_tag);
+        if ta == 0 || tb == 0 || ta == tb || !tags.contains(&ta) || !tags.contains(&tb) {
+            continue;
+        }
+        if given.contains(&ta) || given.contains(&tb) {
+            continue;
+        }
+        if let Some(o) = out.iter_mut().find(|o| o.1 == ta && o.2 == tb) {
+            o.3.push(d);
+            continue;
+        }
+        if out.iter().any(|o| o.1 == tb && o.2 == ta) {
+            continue;
+        }
+        let spec = PeriodicSpec {
+            master: name(ta),
+            slave: name(tb),
+            from_file: true,
+        };
+        out.push((spec, ta, tb, vec![d]));
+    }
+    out
+}
+
+/// The file's affine map of a declared pair must carry every vertex of A onto its vertex of B
+/// as the transform found does (to the same tolerance).
+fn check_declared(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    found: &PeriodicPair,
+    claim: &DeclaredPeriodic,
+) -> Result<(), String> {
+    let Some(a) = claim.affine else {
+        return Ok(());
+    };
+    let map = Rigid {
+        rotation: [[a[0], a[1], a[2]], [a[4], a[5], a[6]], [a[8], a[9], a[10]]],
+        translation: [a[3], a[7], a[11]],
+    };
+    let side = Side::new(mesh, topo, found.master_tag);
+    let mut worst: Option<(u32, f64, f64)> = None;
+    for &[w, v] in &found.vertex_map {
+        let Ok(k) = side.vertices.binary_search(&v) else {
+            continue;
+        };
+        let mut x = map.apply(mesh.coords[v as usize]);
+        if mesh.dim == 2 {
+            x[2] = 0.0;
+        }
+        let d = (point(x) - point(mesh.coords[w as usize])).length();
+        let tol = (PERIODIC_REL_TOL * side.edge[k]).max(2.0 * found.input_mismatch);
+        let ratio = if d.is_finite() {
+            d / tol
+        } else {
+            f64::INFINITY
+        };
+        if ratio > 1.0 && worst.is_none_or(|b| ratio > b.1) {
+            worst = Some((v, ratio, d));
+        }
+    }
+    match worst {
+        None => Ok(()),
+        Some((v, _, d)) => Err(format!(
+            "the file's affine map (entities {} -> {}, {}) disagrees with the transform found from the vertex positions: it puts vertex {v} {d:.3e} from its image (tolerance {PERIODIC_REL_TOL:e} of its edge)",
+            claim.entities[0], claim.entities[1], claim.location
+        )),
+    }
 }
 
 /// Find and verify the transform of one pair.
@@ -795,7 +914,7 @@ pub fn node_pairs(
                     Some((m, d)) if d <= tol => node_pairs.push([m, n]),
                     _ => {
                         return Err(PeriodicError {
-                            spec: pair.spec.to_string(),
+                            spec: pair.spec.label(),
                             what: format!(
                                 "node {n} of the order-{} mesh has no image",
                                 straight.order
@@ -807,7 +926,7 @@ pub fn node_pairs(
             node_pairs.sort_unstable();
             if node_pairs.len() != b.len() || node_pairs.windows(2).any(|w| w[0][0] == w[1][0]) {
                 return Err(PeriodicError {
-                    spec: pair.spec.to_string(),
+                    spec: pair.spec.label(),
                     what: format!(
                         "the order-{} nodes of the two sides do not pair one-to-one",
                         straight.order

@@ -251,6 +251,27 @@ pub struct RawMesh {
     pub blocks: Vec<RawBlock>,
     /// Names of tags (Gmsh physical names, SU2 marker names, Abaqus set names).
     pub tag_names: BTreeMap<i32, String>,
+    /// Periodic pairs the file declares (Gmsh's `$Periodic`), in every dimension.
+    pub periodic: Vec<DeclaredPeriodic>,
+}
+
+/// A periodic pair a file declares (Gmsh's `$Periodic`): the cells tagged `slave_tag` are the
+/// image of those tagged `master_tag`. Tags are those of [`RawBlock::tags`] (0 when the file's
+/// entity has none); the pair is a claim, verified from the positions before use.
+#[derive(Clone, Debug, PartialEq)]
+pub struct DeclaredPeriodic {
+    /// Dimension of the paired cells (the boundary's: 1 in 2D, 2 in 3D).
+    pub dim: usize,
+    /// Tag of the master side.
+    pub master_tag: i32,
+    /// Tag of the image side.
+    pub slave_tag: i32,
+    /// The file's entity tags (master, image), for messages.
+    pub entities: [i32; 2],
+    /// The file's 4×4 affine map master → image, by rows, when it gives one.
+    pub affine: Option<[f64; 16]>,
+    /// Where the pair was read.
+    pub location: Location,
 }
 
 impl RawMesh {

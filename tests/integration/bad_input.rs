@@ -112,7 +112,17 @@ fn wrong_counts_are_reported() {
     let msh = "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n5\n1 0 0 0\n2 1 0 0\n3 1 1 0\n4 0 1 0\n$EndNodes\n$Elements\n1\n1 3 2 0 0 1 2 3 4\n$EndElements\n";
     let p = write("count.msh", msh.as_bytes());
     let e = info_error(&p);
-    assert!(e.contains("line 10"), "{e}");
+    assert!(e.contains("line 10"), "{e}"); // Gmsh: $Periodic names a node $Nodes does not define, or ends inside a link.
+    let msh = "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n4\n1 0 0 0\n2 1 0 0\n3 1 1 0\n4 0 1 0\n$EndNodes\n$Elements\n1\n1 3 2 0 0 1 2 3 4\n$EndElements\n$Periodic\n1\n1 2 4\n1\n2 99\n$EndPeriodic\n";
+    let p = write("periodic_node.msh", msh.as_bytes());
+    let e = info_error(&p);
+    assert!(e.contains("line 19") && e.contains("node 99"), "{e}");
+    let p = write("periodic_short.msh", msh.replace("2 99\n", "").as_bytes());
+    let e = info_error(&p);
+    assert!(
+        e.contains("line 19") && e.contains("node pair 1 of 1"),
+        "{e}"
+    );
 }
 
 #[test]

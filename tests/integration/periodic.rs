@@ -519,6 +519,199 @@ fn pyfr_import_connects_the_periodic_faces() {
     assert_eq!(String::from_utf8_lossy(&sizes.stdout).trim(), "[144]");
 }
 
+/// Gmsh's own periodic meshes (`gmsh_periodic_input.py`: `setPeriodic` on a curved-sided
+/// channel, an annular sector and a box, MSH 4.1 ASCII and binary and 2.2) in `dir`.
+fn gmsh_periodic_inputs() -> PathBuf {
+    let dir = scratch_in("periodic_input", "x")
+        .parent()
+        .unwrap()
+        .to_owned();
+    run_ok(
+        python()
+            .arg(Path::new(ROOT).join("tests/external/gmsh_periodic_input.py"))
+            .arg(&dir),
+    );
+    dir
+}
+
+#[test]
+fn gmsh_periodic_sections_are_used_without_the_option() {
+    if !common::have_gmsh(&common::current_test()) {
+        return;
+    }
+    let dir = gmsh_periodic_inputs();
+    for (file, master, image, kind) in [
+        ("channel2d_41.msh", "left", "right", "translation"),
+        ("channel2d_41b.msh", "left", "right", "translation"),
+        ("channel2d_22.msh", "left", "right", "translation"),
+        ("sector2d_41.msh", "theta_lo", "theta_hi", "rotation"),
+        ("box3d_41.msh", "xmin", "xmax", "translation"),
+    ] {
+        let input = dir.join(file);
+        // `info` reports the file's pair.
+        let info = run_ok(polyspline().arg("info").arg(&input).arg("--json"));
+        let info: Value = serde_json::from_slice(&info.stdout).unwrap();
+        let pairs = info["periodic"].as_array().unwrap();
+        assert_eq!(pairs.len(), 1, "{file}: {info}");
+        assert_eq!(
+            (
+                &pairs[0]["master"],
+                &pairs[0]["slave"],
+                &pairs[0]["from_file"]
+            ),
+            (
+                &Value::from(master),
+                &Value::from(image),
+                &Value::Bool(true)
+            ),
+            "{file}"
+        );
+        // `curve` without --periodic pairs the sides and Gmsh sees exact images.
+        for order in ["2", "4"] {
+            let out = scratch_in("periodic_input", &format!("o{order}_{file}"));
+            let report = curve(&input, &out, &["--order", order]);
+            let per = &report["periodic"];
+            assert_eq!(per["pairs"][0]["kind"], kind, "{file}: {per}");
+            assert_eq!(per["pairs"][0]["from_file"], true, "{file}: {per}");
+            assert!(
+                per["written_mismatch"].as_f64().unwrap() <= IMAGE_TOL,
+                "{file}: {per}"
+            );
+            let links = assert_exact_images(&out, 1);
+            assert_eq!(links[image]["master_name"], master, "{file}");
+        }
+    }
+    // A pair given on the command line wins for its groups.
+    let input = dir.join("channel2d_41.msh");
+    let out = scratch_in("periodic_input", "reversed.msh");
+    let report = curve(&input, &out, &["--periodic", "right:left"]);
+    let pairs = report["periodic"]["pairs"].as_array().unwrap();
+    assert_eq!(pairs.len(), 1, "{pairs:?}");
+    assert_eq!(
+        (&pairs[0]["master"], &pairs[0]["from_file"]),
+        (&Value::from("right"), &Value::Bool(false))
+    );
+    // A file whose affine map is not the transform of its nodes: one line naming the file
+    // and the pair, nothing written.
+    let good = std::fs::read_to_string(dir.join("channel2d_22.msh")).unwrap();
+    let bad = good.replace("Affine 1 0 0 1 ", "Affine 1 0 0 1.01 ");
+    assert_ne!(bad, good, "the 2.2 file's affine line changed");
+    let input = scratch_in("periodic_input", "bad_affine.msh");
+    std::fs::write(&input, bad).unwrap();
+    let out = scratch_in("periodic_input", "bad_affine_out.msh");
+    let _ = std::fs::remove_file(&out);
+    let run = polyspline()
+        .arg("curve")
+        .arg(&input)
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success(), "accepted: {err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(
+        err.contains("bad_affine.msh")
+            && err.contains("$Periodic pair left:right")
+            && err.contains("disagrees"),
+        "{err}"
+    );
+    assert!(!out.exists());
+}
+
+/// Largest distance of the nodes of `group` of `file` from the analytic `wall`
+/// (`wall_error.py`, Gmsh's reading).
+fn wall_error(file: &Path, group: &str, wall: &str) -> f64 {
+    let out = run_ok(
+        python()
+            .arg(Path::new(ROOT).join("tests/external/wall_error.py"))
+            .arg(file)
+            .args([group, wall]),
+    );
+    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(v["nodes"].as_u64().unwrap() > 0, "{group}: {v}");
+    v["max_error"].as_f64().unwrap()
+}
+
+#[test]
+fn generated_channel_and_sector_are_periodic_and_curve_onto_their_walls() {
+    if !common::have_gmsh(&common::current_test()) {
+        return;
+    }
+    let (c, s) = (40f64.to_radians().cos(), 40f64.to_radians().sin());
+    let rotation = [c, -s, 0.0, 0.0, s, c, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0];
+    let shift = [1.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0];
+    let channel = "--around 12 --across 8 --first-height 0.02 --bump 0.15";
+    let sector = "--around 6 --across 8 --first-height 0.02 --sector 40";
+    for (name, args, pair, expect, walls) in [
+        (
+            "channel2d",
+            channel.to_string(),
+            ["periodic_left", "periodic_right"],
+            shift,
+            vec![("wall", "bump=0.15")],
+        ),
+        (
+            "channel3d",
+            format!("{channel} --layers 2 --span 0.3"),
+            ["periodic_left", "periodic_right"],
+            shift,
+            vec![("wall", "bump=0.15")],
+        ),
+        (
+            "sector2d",
+            sector.to_string(),
+            ["periodic_lo", "periodic_hi"],
+            rotation,
+            vec![("hub", "r=1"), ("shroud", "r=2")],
+        ),
+        (
+            "sector3d",
+            format!("{sector} --layers 2 --span 0.5"),
+            ["periodic_lo", "periodic_hi"],
+            rotation,
+            vec![("hub", "r=1"), ("shroud", "r=2")],
+        ),
+    ] {
+        let kind = &name[..name.len() - 2];
+        let linear = scratch_in("periodic_generate", &format!("{name}.msh"));
+        run_ok(
+            polyspline()
+                .args(["generate", kind, "-o"])
+                .arg(&linear)
+                .args(args.split(' ')),
+        );
+        // The generated file carries the pair: Gmsh reads it, images exact.
+        let links = assert_exact_images(&linear, 1);
+        assert_eq!(links[pair[1]]["master_name"], pair[0], "{name}");
+        let a = affine(&links[pair[1]]);
+        for k in 0..12 {
+            assert!((a[k] - expect[k]).abs() < 1e-12, "{name}: affine {a:?}");
+        }
+        // Curved without --periodic: the pair from the file, exact images at order 3, and the
+        // walls closer to the analytic curves than the straight order-3 mesh's nodes (by a fifth
+        // at least; the 3D channel's wall meets the periodic sides and the end planes in
+        // feature edges, where it gains least).
+        let curved = scratch_in("periodic_generate", &format!("{name}_o3.msh"));
+        let report = curve(&linear, &curved, &["--order", "3"]);
+        assert_eq!(report["periodic"]["pairs"][0]["from_file"], true, "{name}");
+        let links = assert_exact_images(&curved, 1);
+        assert_eq!(links[pair[1]]["master_name"], pair[0], "{name}");
+        let straight = scratch_in("periodic_generate", &format!("{name}_straight.msh"));
+        curve(&linear, &straight, &["--order", "3", "--straight"]);
+        for (group, wall) in walls {
+            let (before, after) = (
+                wall_error(&straight, group, wall),
+                wall_error(&curved, group, wall),
+            );
+            assert!(
+                after < 0.8 * before,
+                "{name} {group}: curved nodes {after:e} from the wall, straight {before:e}"
+            );
+        }
+    }
+}
+
 #[test]
 fn a_wrong_periodic_pair_is_refused_in_one_line() {
     let turbine = Path::new(ROOT).join(TURBINE);

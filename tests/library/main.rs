@@ -11,6 +11,7 @@ mod fit;
 mod floors;
 mod generated_meshes;
 mod node_ordering;
+mod periodic_io;
 mod real_meshes;
 mod spline;
 mod topology;

@@ -11,6 +11,13 @@ use super::{Reader, Version, capped, to_i32};
 use crate::mesh::raw::{Location, ParseError};
 
 impl Reader<'_> {
+    /// Remember the physical tag of the first element of elementary entity `entity` of the
+    /// dimension of block `bi` (MSH 1/2 `$Periodic` names elementary entities).
+    fn record_v2_entity(&mut self, bi: usize, entity: i32, physical: i32) {
+        let dim = self.blocks.list[bi].1.kind().dim().map_or(-1, |d| d as i32);
+        self.v2_entities.entry((dim, entity)).or_insert(physical);
+    }
+
     pub(super) fn elements_section(&mut self, name: &str, line: usize) -> Result<(), ParseError> {
         let Some(nodes) = self.nodes.take() else {
             return Err(ParseError::at_line(
@@ -57,14 +64,21 @@ impl Reader<'_> {
             } else {
                 let ntags = c.parse_or::<u64>(|| format!("number of tags of element {id}"))?;
                 let mut first = 0;
+                let mut elementary = None;
                 for j in 0..ntags {
                     let t = c.parse_or::<i64>(|| format!("tag {} of element {id}", j + 1))?;
                     if j == 0 {
                         first = to_i32(t, c, "physical tag")?;
+                    } else if j == 1 {
+                        elementary = i32::try_from(t).ok();
                     }
                 }
                 physical = first;
+                if let Some(e) = elementary {
+                    self.record_v2_entity(bi, e, physical);
+                }
             }
+            let c = &mut self.c;
             let block = &mut self.blocks.list[bi].1;
             for k in 0..npe {
                 let t = c.parse_or::<u64>(|| format!("node {} of {npe} of element {id}", k + 1))?;
@@ -113,6 +127,7 @@ impl Reader<'_> {
                 .blocks
                 .index(i64::from(ty), Location::Byte(header_at))?;
             let block = &mut self.blocks.list[bi].1;
+            let block_dim = block.kind().dim().map_or(-1, |d| d as i32);
             let npe = block.nodes_per_cell;
             let ntags = ntags as usize;
             let rec = 4 * (1 + ntags + npe);
@@ -123,6 +138,11 @@ impl Reader<'_> {
             for (e, r) in data.chunks_exact(rec).enumerate() {
                 let at = start + e * rec;
                 let physical = if ntags > 0 { b.dec_i32(&r[4..]) } else { 0 };
+                if ntags > 1 {
+                    self.v2_entities
+                        .entry((block_dim, b.dec_i32(&r[8..])))
+                        .or_insert(physical);
+                }
                 for node in r[4 * (1 + ntags)..].chunks_exact(4) {
                     let t = b.dec_i32(node);
                     let Some(v) = u64::try_from(t).ok().and_then(|t| nodes.get(t)) else {

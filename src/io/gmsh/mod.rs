@@ -11,8 +11,9 @@
 //! says which.
 //!
 //! Sections: `$MeshFormat`, `$PhysicalNames` (into [`RawMesh::tag_names`]), `$Entities` and
-//! `$PartitionedEntities` (physical tags per entity), `$Nodes`, `$Elements`. Every other section
-//! (`$Periodic`, `$NodeData`, `$ElementData`, `$Comments`, ...) is skipped up to its `$End` line.
+//! `$PartitionedEntities` (physical tags per entity), `$Nodes`, `$Elements`, `$Periodic` (into
+//! [`RawMesh::periodic`], entity pairs turned into physical tags). Every other section
+//! (`$NodeData`, `$ElementData`, `$Comments`, ...) is skipped up to its `$End` line.
 //!
 //! Tags: each cell's tag is its physical group. In MSH 1/2 that is the first integer tag of the
 //! element; in MSH 4 it is the first physical tag of the entity the element block belongs to
@@ -41,8 +42,8 @@
 //!
 //! Parts: this module reads `$MeshFormat` and `$PhysicalNames` and runs the section loop;
 //! `entities`, `nodes` and `elements` read their sections in every version and encoding;
-//! `binary` decodes binary data with bounds checks; `element_types` maps type numbers to
-//! cell kinds.
+//! `periodic` reads `$Periodic`; `binary` decodes binary data with bounds checks;
+//! `element_types` maps type numbers to cell kinds.
 //!
 //! [`CellKind`]: crate::mesh::raw::CellKind
 //! [`CellKind::Other`]: crate::mesh::raw::CellKind::Other
@@ -52,6 +53,7 @@ mod element_types;
 mod elements;
 mod entities;
 mod nodes;
+mod periodic;
 
 use super::text::{TextCursor, parse_f64};
 use crate::mesh::raw::{Location, ParseError, RawMesh};
@@ -59,7 +61,7 @@ use binary::Bin;
 use element_types::Blocks;
 pub use entities::EntityTags;
 use nodes::NodeMap;
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, HashMap};
 
 /// Parse a Gmsh `.msh` file held in memory.
 pub fn read(data: &[u8]) -> Result<RawMesh, ParseError> {
@@ -114,6 +116,10 @@ struct Reader<'a> {
     blocks: Blocks,
     /// The physical tag of each entity.
     entities: EntityTags,
+    /// MSH 1/2: the physical tag of the first element of each (dimension, elementary entity).
+    v2_entities: HashMap<(i32, i32), i32>,
+    /// The links of `$Periodic`.
+    periodic: Vec<periodic::Link>,
 }
 
 /// Reserve for `count` items, but never more than the input could possibly hold (every item
@@ -137,11 +143,14 @@ impl<'a> Reader<'a> {
             nodes: None,
             blocks: Blocks::default(),
             entities: EntityTags::default(),
+            v2_entities: HashMap::new(),
+            periodic: Vec::new(),
         }
     }
 
     fn run(mut self) -> Result<RawMesh, ParseError> {
         self.sections()?;
+        self.mesh.periodic = self.declared_periodic();
         let mut mesh = self.mesh;
         for (_, mut block) in self.blocks.list {
             // Tag 0 means "no tag"; a block without any tag has none.
@@ -193,6 +202,7 @@ impl<'a> Reader<'a> {
                 "PartitionedEntities" => self.entities(true)?,
                 "Nodes" => self.nodes_section(name)?,
                 "Elements" => self.elements_section(name, line)?,
+                "Periodic" => self.periodic_section(line)?,
                 _ if name.len() >= 3 && name.as_bytes()[..3].eq_ignore_ascii_case(b"End") => {
                     return Err(self.c.error(format!(
                         "unexpected {tok} without a matching ${}",

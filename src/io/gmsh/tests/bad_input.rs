@@ -121,7 +121,106 @@ fn bad_tokens_and_indices() {
     assert!(e.message.contains("before the $Nodes"), "{}", e.message);
     let e = err_str(&format!("{HEAD}$Periodic\n1\n"));
     assert_eq!(e.location, Location::Line(4));
-    assert!(e.message.contains("$EndPeriodic"), "{}", e.message);
+    assert!(e.message.contains("before the $Nodes"), "{}", e.message);
+}
+
+/// Malformed `$Periodic` sections (MSH 2.2, 4.1 ASCII and binary): one message at the place.
+#[test]
+fn bad_periodic_sections() {
+    let v2 = |body: &str| format!("{HEAD}{NODES}$Periodic\n{body}$EndPeriodic\n");
+    for (body, line, says) in [
+        // Truncated link.
+        ("1\n1 2\n", 14, "master entity tag of periodic link 1 of 1"),
+        // More links than the section holds.
+        (
+            "2\n1 2 4\n1\n2 1\n",
+            16,
+            "dimension of periodic link 2 of 2",
+        ),
+        // A node tag $Nodes does not define.
+        ("1\n1 2 4\n1\n2 9\n", 15, "names node 9"),
+        // A short affine line.
+        (
+            "1\n1 2 4\nAffine 1 0 0\n1\n2 1\n",
+            14,
+            "has 3 values, expected 16",
+        ),
+        (
+            "1\n1 2 4\nAffine 1 0 x 0 1 0 0 0 0 1 0 0 0 0 1\n1\n2 1\n",
+            14,
+            "affine value 3 of 16",
+        ),
+        // An absurd node pair count.
+        ("1\n1 2 4\n99999999999\n", 14, "99999999999 node pairs"),
+        // Fewer pairs than declared.
+        ("1\n1 2 4\n2\n2 1\n", 16, "node of node pair 2 of 2"),
+    ] {
+        let e = err_str(&v2(body));
+        assert_eq!(e.location, Location::Line(line), "{body:?}: {e}");
+        assert!(e.message.contains(says), "{body:?}: {e}");
+    }
+    let v41 = "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 2 1 2\n2 1 0 2\n1\n2\n0 0 0\n1 0 0\n$EndNodes\n";
+    for (body, says) in [
+        ("1\n1 2 4\n3 1 0 0\n1\n2 1\n", "affine map of 3 values"),
+        ("1\n1 2 4\n0\n1\n2 3\n", "names node 3"),
+        (
+            "1\n1 2 4\n0\n2\n2 1\n$EndPeriodic\n",
+            "node of node pair 2 of 2",
+        ),
+    ] {
+        let e = err_str(&format!("{v41}$Periodic\n{body}$EndPeriodic\n"));
+        assert!(e.message.contains(says), "{body:?}: {e}");
+    }
+    // MSH 4.1 binary: counts that do not fit, a node out of range, a truncated section.
+    let bin_head = |links: u64| {
+        let mut d = b"$MeshFormat\n4.1 1 8\n".to_vec();
+        d.extend(1i32.to_le_bytes());
+        d.extend(b"\n$EndMeshFormat\n$Nodes\n");
+        for v in [1u64, 2, 1, 2] {
+            d.extend(v.to_le_bytes());
+        }
+        for v in [2i32, 1, 0] {
+            d.extend(v.to_le_bytes());
+        }
+        d.extend(2u64.to_le_bytes());
+        d.extend(1u64.to_le_bytes());
+        d.extend(2u64.to_le_bytes());
+        for c in [0.0f64, 0.0, 0.0, 1.0, 0.0, 0.0] {
+            d.extend(c.to_le_bytes());
+        }
+        d.extend(b"\n$EndNodes\n$Periodic\n");
+        d.extend(links.to_le_bytes());
+        for v in [1i32, 2, 4] {
+            d.extend(v.to_le_bytes());
+        }
+        d
+    };
+    let mut huge = bin_head(1);
+    huge.extend(0u64.to_le_bytes());
+    huge.extend(u64::MAX.to_le_bytes());
+    let mut out_of_range = bin_head(1);
+    out_of_range.extend(0u64.to_le_bytes());
+    out_of_range.extend(1u64.to_le_bytes());
+    out_of_range.extend(2u64.to_le_bytes());
+    out_of_range.extend(7u64.to_le_bytes());
+    out_of_range.extend(b"\n$EndPeriodic\n");
+    let mut bad_affine = bin_head(1);
+    bad_affine.extend(5u64.to_le_bytes());
+    let truncated = bin_head(2);
+    for (data, says) in [
+        (huge, "do not fit"),
+        (out_of_range, "names node 7"),
+        (bad_affine, "affine map of 5 values"),
+        (truncated, "periodic link 1 of 2"),
+    ] {
+        let e = err(&data);
+        assert!(matches!(e.location, Location::Byte(_)), "{e}");
+        assert!(e.message.contains(says), "{e}");
+        assert!(
+            e.to_string().len() < 400 && !e.to_string().contains('\n'),
+            "{e}"
+        );
+    }
 }
 
 #[test]

@@ -32,14 +32,17 @@
 //! and trailing edges) for the airfoil.
 //!
 //! Parts: `wall` (the analytic walls), `spacing` (distances along a wall-normal line and
-//! the far-field blend), `grids` (the O- and C-grid layouts); this module checks the options
+//! the far-field blend), `grids` (the O- and C-grid layouts), `periodic` (the periodic
+//! channel and annular sector); this module checks the options
 //! and assembles, extrudes and checks the mesh.
 
 mod grids;
+mod periodic;
 mod spacing;
 mod wall;
 
 pub use grids::{cgrid, ogrid};
+pub use periodic::{CHANNEL_PAIR, SECTOR_PAIR, channel, sector};
 pub use spacing::{WallNormalSpacing, wall_normal_spacing};
 pub use wall::Wall;
 
