@@ -56,36 +56,36 @@ pub(crate) struct BoundaryLayerArgs {
     /// chord (default 0.12).
     #[arg(long)]
     thickness: Option<f64>,
-    /// Cells around the wall (even for the airfoil).
-    #[arg(long, default_value_t = 128)]
-    around: usize,
-    /// Cells from the wall to the far field.
-    #[arg(long, default_value_t = 48)]
-    across: usize,
-    /// Height of the first cell off the wall (absolute).
-    #[arg(long, default_value_t = 1e-5)]
-    first_height: f64,
-    /// Wall-normal growth ratio of the cell heights near the wall.
-    #[arg(long, default_value_t = 1.25)]
-    growth: f64,
-    /// Far-field radius in chords.
-    #[arg(long, default_value_t = 10.0)]
-    farfield: f64,
-    /// 0: 2D quads; L >= 1: L hex layers extruded along z over --span.
-    #[arg(long, default_value_t = 0)]
-    layers: usize,
-    /// Extrusion length along z.
-    #[arg(long, default_value_t = 1.0)]
-    span: f64,
-    /// C-grid: cells along the wake cut.
-    #[arg(long, default_value_t = 32)]
-    wake: usize,
-    /// Channel: bump height (the period and the channel height are 1).
-    #[arg(long, default_value_t = 0.1)]
-    bump: f64,
-    /// Sector: angle in degrees.
-    #[arg(long, default_value_t = 30.0)]
-    sector: f64,
+    /// Cells around the wall (even for the airfoil) [default: 128].
+    #[arg(long)]
+    around: Option<usize>,
+    /// Cells from the wall to the far field [default: 48].
+    #[arg(long)]
+    across: Option<usize>,
+    /// Height of the first cell off the wall (absolute) [default: 1e-5].
+    #[arg(long)]
+    first_height: Option<f64>,
+    /// Wall-normal growth ratio of the cell heights near the wall [default: 1.25].
+    #[arg(long)]
+    growth: Option<f64>,
+    /// Far-field radius in chords (ogrid, cgrid) [default: 10].
+    #[arg(long)]
+    farfield: Option<f64>,
+    /// 0: 2D quads; L >= 1: L hex layers extruded along z over --span [default: 0].
+    #[arg(long)]
+    layers: Option<usize>,
+    /// Extrusion length along z [default: 1].
+    #[arg(long)]
+    span: Option<f64>,
+    /// C-grid: cells along the wake cut [default: 32].
+    #[arg(long)]
+    wake: Option<usize>,
+    /// Channel: bump height (the period and the channel height are 1) [default: 0.1].
+    #[arg(long)]
+    bump: Option<f64>,
+    /// Sector: angle in degrees [default: 30].
+    #[arg(long)]
+    sector: Option<f64>,
 }
 
 impl BoundaryLayerArgs {
@@ -100,14 +100,57 @@ impl BoundaryLayerArgs {
                 .wall
                 .map_or(default, Wall::from)
                 .with_thickness(self.thickness),
-            around: self.around,
-            across: self.across,
-            first_height: self.first_height,
-            growth: self.growth,
-            farfield: self.farfield,
-            layers: self.layers,
-            span: self.span,
-            wake: self.wake,
+            around: self.around.unwrap_or(128),
+            across: self.across.unwrap_or(48),
+            first_height: self.first_height.unwrap_or(1e-5),
+            growth: self.growth.unwrap_or(1.25),
+            farfield: self.farfield.unwrap_or(10.0),
+            layers: self.layers.unwrap_or(0),
+            span: self.span.unwrap_or(1.0),
+            wake: self.wake.unwrap_or(32),
+        }
+    }
+
+    /// The options given on the command line that `shape` does not use: refused, never
+    /// silently ignored.
+    fn check_applies(&self, shape: Shape, kind: &str) -> anyhow::Result<()> {
+        let given = [
+            ("--wall", self.wall.is_some()),
+            ("--thickness", self.thickness.is_some()),
+            ("--around", self.around.is_some()),
+            ("--across", self.across.is_some()),
+            ("--first-height", self.first_height.is_some()),
+            ("--growth", self.growth.is_some()),
+            ("--farfield", self.farfield.is_some()),
+            ("--layers", self.layers.is_some()),
+            ("--span", self.span.is_some()),
+            ("--wake", self.wake.is_some()),
+            ("--bump", self.bump.is_some()),
+            ("--sector", self.sector.is_some()),
+        ];
+        let layer = [
+            "--around",
+            "--across",
+            "--first-height",
+            "--growth",
+            "--layers",
+            "--span",
+        ];
+        let applies = |name: &str| match shape {
+            Shape::Benchmark(_) => false,
+            Shape::Ogrid => {
+                layer.contains(&name) || ["--wall", "--thickness", "--farfield"].contains(&name)
+            }
+            Shape::Cgrid => {
+                layer.contains(&name)
+                    || ["--wall", "--thickness", "--farfield", "--wake"].contains(&name)
+            }
+            Shape::Channel => layer.contains(&name) || name == "--bump",
+            Shape::Sector => layer.contains(&name) || name == "--sector",
+        };
+        match given.iter().find(|(name, set)| *set && !applies(name)) {
+            Some((name, _)) => anyhow::bail!("generate {kind}: {name} does not apply to {kind}"),
+            None => Ok(()),
         }
     }
 }
@@ -116,6 +159,9 @@ impl BoundaryLayerArgs {
 pub(crate) fn make(args: &ShapeArgs, name: &Path) -> anyhow::Result<Generated> {
     let shape = Shape::from(args.kind);
     shape.check(args.elements)?;
+    let kind = clap::ValueEnum::to_possible_value(&args.kind)
+        .map_or_else(String::new, |v| v.get_name().to_owned());
+    args.layer.check_applies(shape, &kind)?;
     let mut spacing = None;
     let mesh = match shape {
         Shape::Benchmark(kind) => generate(kind, args.elements.unwrap_or_default()),
@@ -124,8 +170,8 @@ pub(crate) fn make(args: &ShapeArgs, name: &Path) -> anyhow::Result<Generated> {
             let params = args.layer.params(cgrid);
             let made = match shape {
                 Shape::Cgrid => boundary_layer::cgrid(&params),
-                Shape::Channel => boundary_layer::channel(&params, args.layer.bump),
-                Shape::Sector => boundary_layer::sector(&params, args.layer.sector),
+                Shape::Channel => boundary_layer::channel(&params, args.layer.bump.unwrap_or(0.1)),
+                Shape::Sector => boundary_layer::sector(&params, args.layer.sector.unwrap_or(30.0)),
                 _ => boundary_layer::ogrid(&params),
             }
             .map_err(|e| anyhow::anyhow!("{}: {e}", name.display()))?;

@@ -418,6 +418,13 @@ fn generate_rejects_bad_boundary_layer_options_in_one_line() {
         &["ogrid", "--layers", "2", "--span", "0"],
         &["cgrid", "--wake", "0"],
         &["ogrid", "--elements", "100"],
+        // Options of another kind are refused, not ignored.
+        &["disc", "--elements", "100", "--bump", "0.2"],
+        &["ogrid", "--sector", "20"],
+        &["ogrid", "--wake", "8"],
+        &["channel", "--farfield", "5"],
+        &["sector", "--bump", "0.1"],
+        &["cylinder", "--elements", "100", "--layers", "2"],
     ]
     .iter()
     .enumerate()
