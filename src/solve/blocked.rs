@@ -348,6 +348,7 @@ struct OffBlock {
 impl OffBlock {
     /// The entries of `a` outside each row's aggregate (`agg_start` in `a`'s numbering), or
     /// `a` back when a row is too long for 16-bit positions.
+    #[allow(clippy::result_large_err)]
     fn new(a: TemplateMatrix, agg_start: &[usize]) -> Result<Self, TemplateMatrix> {
         let n = a.nrows();
         if (0..n).any(|i| a.indptr[i + 1] - a.indptr[i] > usize::from(u16::MAX) + 1) {
