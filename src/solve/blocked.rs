@@ -796,7 +796,7 @@ unsafe fn eisenstat_update_avx2(
     eisenstat_update(l, first, alpha, x, r, rt, zt, p, t, v, w)
 }
 
-/// Domains of the Gauss–Seidel ordering ([`colour_order`]): a fixed number, so that the
+/// Domains of the Gauss–Seidel ordering (the aggregates' colour order): a fixed number, so that the
 /// order (and every bit of the solve) does not depend on the thread count.
 pub const SWEEP_DOMAINS: usize = 16;
 
@@ -983,7 +983,7 @@ impl BlockedSystem {
 
     /// The group and colour boundaries of the symmetric block Gauss–Seidel preconditioner
     /// (group g is aggregates `groups[g]..groups[g + 1]`, colour k is groups
-    /// `colours[k]..colours[k + 1]`; see [`colour_order`]), `None` for block Jacobi.
+    /// `colours[k]..colours[k + 1]`; see the colour order of the aggregates), `None` for block Jacobi.
     pub fn sweep_order(&self) -> Option<(&[usize], &[usize])> {
         match &self.op {
             Operator::Split { order, .. } => Some((&order.groups, &order.colours)),
