@@ -36,12 +36,13 @@ pub(crate) struct ElasticArgs {
 }
 
 impl ElasticArgs {
-    pub(crate) fn params(&self, cg_tol: f64) -> ElasticParams {
+    /// The elastic analogy's parameters; `cg_tol` is `--cg-tol` (default: the elastic CG's).
+    pub(crate) fn params(&self, cg_tol: Option<f64>) -> ElasticParams {
         ElasticParams {
             young: self.young,
             poisson: self.poisson,
             cg: CgParams {
-                rel_tol: cg_tol,
+                rel_tol: cg_tol.unwrap_or(CgParams::default().rel_tol),
                 ..Default::default()
             },
             preconditioner: self.elastic_preconditioner.into(),

@@ -4,7 +4,7 @@ use super::values;
 use super::{ElasticArgs, FeatureArgs, KnotArgs};
 use polyspline::compare::{CompareOptions, compare};
 use polyspline::exec::gpu::BackendChoice;
-use polyspline::fit::FitParams;
+use polyspline::fit::{FIT_CG_TOL, FitParams};
 use polyspline::mesh::MeshOptions;
 use polyspline::pipeline::CurveOptions;
 use polyspline::solve::CgParams;
@@ -22,9 +22,10 @@ pub(super) struct Args {
     json: bool,
     #[command(flatten)]
     elastic: ElasticArgs,
-    /// Relative tolerance of the conjugate-gradient solves (fit and elasticity).
-    #[arg(long, default_value_t = 1e-6)]
-    cg_tol: f64,
+    /// Relative tolerance of the conjugate-gradient solves [default: 1e-8 for the fit, 1e-6
+    /// for the elastic analogy, as `curve`'s].
+    #[arg(long, value_name = "CG_TOL")]
+    cg_tol: Option<f64>,
     /// Keep tangled or degenerate input elements instead of failing.
     #[arg(long)]
     allow_invalid: bool,
@@ -44,7 +45,7 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
             order: args.order,
             fit: FitParams {
                 cg: CgParams {
-                    rel_tol: args.cg_tol,
+                    rel_tol: args.cg_tol.unwrap_or(FIT_CG_TOL),
                     ..Default::default()
                 },
                 ..FitParams::smooth()

@@ -11,7 +11,9 @@ use super::{ElasticArgs, FeatureArgs, KnotArgs, PeriodicArgs};
 use polyspline::elastic::ElasticSolver;
 use polyspline::energy::{EnergyParams, EnergySolver};
 use polyspline::exec::gpu::BackendChoice;
-use polyspline::fit::{FitParams, FitPreset, FitSolver, FitTargets, FitWeights, SmoothParams};
+use polyspline::fit::{
+    FIT_CG_TOL, FitParams, FitPreset, FitSolver, FitTargets, FitWeights, SmoothParams,
+};
 use polyspline::io::output::{check_outputs, prepare};
 use polyspline::mesh::MeshOptions;
 use polyspline::pipeline::{
@@ -115,9 +117,11 @@ pub(crate) struct JobArgs {
     /// the rest by CG; `cg` and `cholesky` force one (distributed runs always use CG).
     #[arg(long, value_enum, default_value_t = FitSolver::default().into())]
     fit_solver: values::FitSolver,
-    /// Relative tolerance of the conjugate-gradient solve.
-    #[arg(long, default_value_t = 1e-6)]
-    cg_tol: f64,
+    /// Relative tolerance of the conjugate-gradient solves [default: 1e-8 for the fit, so that
+    /// its decisions do not depend on where the solve stops (nor on the number of MPI ranks);
+    /// 1e-6 for the elastic analogy].
+    #[arg(long, value_name = "CG_TOL")]
+    cg_tol: Option<f64>,
     /// Preconditioner of the fit's CG solve on the CPU: the diagonal, exact inverses of the
     /// diagonal blocks on aggregates of 64 neighbouring control points (block Jacobi), or a
     /// symmetric Gauss–Seidel sweep over those blocks (block SGS, in Eisenstat's form: about
@@ -285,7 +289,7 @@ impl JobArgs {
                 weights: self.weights(),
                 solver: self.fit_solver.into(),
                 cg: CgParams {
-                    rel_tol: self.cg_tol,
+                    rel_tol: self.cg_tol.unwrap_or(FIT_CG_TOL),
                     preconditioner: self.cg_preconditioner.into(),
                     ..Default::default()
                 },

@@ -202,8 +202,9 @@ struct Share {
     bytes_fit: u64,
     bytes_validity: u64,
     bytes_sample: u64,
-    /// Control points this rank owns whose blend factor was reduced.
-    damped_owned: usize,
+    /// Blend entities this rank owns whose factor was reduced (below the fitted map, at or
+    /// below the target map, at the straight elevation): [`damped_owned`].
+    damped_owned: [usize; 3],
     /// The whole mesh's feature summary (deviations absolute), when any rank found features.
     features: Option<crate::mesh::features::FeatureReport>,
 }
@@ -537,13 +538,14 @@ fn run_share(
     })
 }
 
-/// Blend entities (vertices, edges, faces, cells) this rank owns whose factor was reduced: an
+/// Blend entities (vertices, edges, faces, cells) this rank owns whose factor was reduced
+/// (below 2, at most 1, 0: the serial `BlendInfo`'s reduced, target and straight points): an
 /// entity is owned by the rank of the lowest global element containing it (every element
 /// containing an entity of an own element is in the sub-mesh), so the sum over the ranks
 /// counts each entity once, as the serial report does.
-fn damped_owned(local: &LocalMesh, blended: &Blended) -> usize {
+fn damped_owned(local: &LocalMesh, blended: &Blended) -> [usize; 3] {
     if blended.factors.is_empty() {
-        return 0;
+        return [0; 3];
     }
     let d = local.mesh.dim;
     let np = if d == 2 { 9 } else { 27 };
@@ -559,11 +561,20 @@ fn damped_owned(local: &LocalMesh, blended: &Blended) -> usize {
             }
         }
     }
-    lowest
+    let owned: Vec<f32> = lowest
         .iter()
         .zip(&blended.factors)
-        .filter(|&(&(_, e), &f)| e < local.n_owned && f < crate::validity::blend::FITTED)
-        .count()
+        .filter(|&(&(_, e), _)| e < local.n_owned)
+        .map(|(_, &f)| f)
+        .collect();
+    [
+        owned
+            .iter()
+            .filter(|&&f| f < crate::validity::blend::FITTED)
+            .count(),
+        owned.iter().filter(|&&f| f <= 1.0).count(),
+        owned.iter().filter(|&&f| f == 0.0).count(),
+    ]
 }
 
 /// Run the distributed `curve` job on every rank of `comm` (see the module docs): every rank
@@ -591,7 +602,9 @@ pub fn curve(
     let mut sizes = [
         out.node_tags.len() as u64,
         (out.boundary.len() / npf) as u64,
-        share.damped_owned as u64,
+        share.damped_owned[0] as u64,
+        share.damped_owned[1] as u64,
+        share.damped_owned[2] as u64,
     ];
     comm.sum_u64(&mut counts);
     comm.sum_u64(&mut sizes);
@@ -616,7 +629,14 @@ pub fn curve(
     let all_figures = gather_figures(comm, &figures);
     let mut timings = laps.timings;
     timings.insert("total".into(), start.elapsed().as_secs_f64());
-    let (cg, blend_info) = (share.cg, share.blend);
+    // The blend's point counts over the ranks (each rank's search counts its sub-mesh's).
+    let blend_info = crate::validity::blend::BlendInfo {
+        reduced_points: sizes[2] as usize,
+        target_points: sizes[3] as usize,
+        straight_points: sizes[4] as usize,
+        ..share.blend
+    };
+    let cg = share.cg;
     let report = CurveReport {
         input: input.to_owned(),
         output: PathBuf::new(),
