@@ -22,8 +22,8 @@ pub(super) struct Args {
     json: bool,
     #[command(flatten)]
     elastic: ElasticArgs,
-    /// Relative tolerance of the conjugate-gradient solves [default: 1e-8 for the fit, 1e-6
-    /// for the elastic analogy, as `curve`'s].
+    /// Relative tolerance of the conjugate-gradient solves (fit and elastic analogy)
+    /// [default: 1e-6, as `curve`'s].
     #[arg(long, value_name = "CG_TOL")]
     cg_tol: Option<f64>,
     /// Keep tangled or degenerate input elements instead of failing.

@@ -117,9 +117,9 @@ pub(crate) struct JobArgs {
     /// the rest by CG; `cg` and `cholesky` force one (distributed runs always use CG).
     #[arg(long, value_enum, default_value_t = FitSolver::default().into())]
     fit_solver: values::FitSolver,
-    /// Relative tolerance of the conjugate-gradient solves [default: 1e-8 for the fit, so that
-    /// its decisions do not depend on where the solve stops (nor on the number of MPI ranks);
-    /// 1e-6 for the elastic analogy].
+    /// Relative tolerance of the conjugate-gradient solves (fit and elastic analogy)
+    /// [default: 1e-6]; 1e-8 makes the output independent of the number of MPI ranks to 1e-6
+    /// of the diagonal, at about half again the fit's CG iterations.
     #[arg(long, value_name = "CG_TOL")]
     cg_tol: Option<f64>,
     /// Preconditioner of the fit's CG solve on the CPU: the diagonal, exact inverses of the
