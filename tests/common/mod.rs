@@ -250,3 +250,19 @@ pub fn max_coordinate_gap(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
 pub fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
     (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>().sqrt()
 }
+
+/// The rows of a `compare --json` result, each asserted to have run (no `error`) and to have
+/// written no invalid element: `compare` never loses a method on a valid input.
+pub fn compare_rows_all_valid(compare_json: &Value) -> &[Value] {
+    let rows = compare_json["rows"].as_array().expect("compare rows");
+    for row in rows {
+        assert!(
+            row["error"].is_null(),
+            "{}: {}",
+            row["method"],
+            row["error"]
+        );
+        assert_eq!(row["invalid_elements"], 0, "{}", row["method"]);
+    }
+    rows
+}

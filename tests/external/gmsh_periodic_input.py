@@ -40,22 +40,33 @@ def channel(out):
     loop = g.addCurveLoop([cb, cr, -ct, -cl])
     s = g.addPlaneSurface([loop])
     g.synchronize()
-    m = gmsh.model.mesh
-    for c in (cl, cr):
-        m.setTransfiniteCurve(c, 9)
-    for c in (cb, ct):
-        m.setTransfiniteCurve(c, 7)
-    m.setPeriodic(1, [cr], [cl], [1, 0, 0, 1, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1])
-    m.setTransfiniteSurface(s)
-    m.setRecombine(2, s)
-    for name, c in (("left", cl), ("right", cr), ("bottom", cb), ("top", ct)):
-        gmsh.model.setPhysicalName(1, gmsh.model.addPhysicalGroup(1, [c]), name)
-    gmsh.model.setPhysicalName(2, gmsh.model.addPhysicalGroup(2, [s]), "fluid")
-    m.generate(2)
+    periodic_quads(
+        s,
+        {cl: 9, cr: 9, cb: 7, ct: 7},
+        (cr, cl, [1, 0, 0, 1, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]),
+        {"left": cl, "right": cr, "bottom": cb, "top": ct},
+    )
     save(os.path.join(out, "channel2d_41.msh"), 4.1, False)
     save(os.path.join(out, "channel2d_41b.msh"), 4.1, True)
     save(os.path.join(out, "channel2d_22.msh"), 2.2, False)
     gmsh.model.remove()
+
+
+def periodic_quads(s, points, periodic, names):
+    """Mesh the plane surface s with transfinite quads: points[curve] nodes on each curve,
+    periodic = (image, master, affine map master -> image by rows), names[name] = curve as a
+    physical group, s as "fluid"."""
+    m = gmsh.model.mesh
+    for c, n in points.items():
+        m.setTransfiniteCurve(c, n)
+    image, master, affine = periodic
+    m.setPeriodic(1, [image], [master], affine)
+    m.setTransfiniteSurface(s)
+    m.setRecombine(2, s)
+    for name, c in names.items():
+        gmsh.model.setPhysicalName(1, gmsh.model.addPhysicalGroup(1, [c]), name)
+    gmsh.model.setPhysicalName(2, gmsh.model.addPhysicalGroup(2, [s]), "fluid")
+    m.generate(2)
 
 
 def sector(out):
@@ -73,19 +84,13 @@ def sector(out):
     shroud = g.addCircleArc(a2, o, b2)
     s = g.addPlaneSurface([g.addCurveLoop([lo, shroud, -hi, -hub])])
     g.synchronize()
-    m = gmsh.model.mesh
-    for c in (lo, hi):
-        m.setTransfiniteCurve(c, 5)
-    for c in (hub, shroud):
-        m.setTransfiniteCurve(c, 7)
     c, sn = math.cos(t), math.sin(t)
-    m.setPeriodic(1, [hi], [lo], [c, -sn, 0, 0, sn, c, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1])
-    m.setTransfiniteSurface(s)
-    m.setRecombine(2, s)
-    for name, cv in (("theta_lo", lo), ("theta_hi", hi), ("hub", hub), ("shroud", shroud)):
-        gmsh.model.setPhysicalName(1, gmsh.model.addPhysicalGroup(1, [cv]), name)
-    gmsh.model.setPhysicalName(2, gmsh.model.addPhysicalGroup(2, [s]), "fluid")
-    m.generate(2)
+    periodic_quads(
+        s,
+        {lo: 5, hi: 5, hub: 7, shroud: 7},
+        (hi, lo, [c, -sn, 0, 0, sn, c, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]),
+        {"theta_lo": lo, "theta_hi": hi, "hub": hub, "shroud": shroud},
+    )
     save(os.path.join(out, "sector2d_41.msh"), 4.1, False)
     gmsh.model.remove()
 

@@ -20,119 +20,97 @@ const IMAGE_TOL: f64 = 1e-12;
 /// cells, its sides tagged `theta_lo`, `theta_hi`, `hub`, `shroud` (3D: `bottom`, `top`).
 fn sector(dim: usize, deg: f64, nr: usize, nt: usize) -> LinearMesh {
     let nz = if dim == 3 { 2 } else { 0 };
-    let id = |i: usize, j: usize, k: usize| ((k * (nt + 1) + j) * (nr + 1) + i) as u32;
+    let point = |i: usize, j: usize, k: usize| {
+        let r = 1.0 + i as f64 / nr as f64;
+        let t = (deg * j as f64 / nt as f64).to_radians();
+        [r * t.cos(), r * t.sin(), 0.25 * k as f64]
+    };
+    let names = ["hub", "shroud", "theta_lo", "theta_hi", "bottom", "top"];
+    grid(dim, [nr, nt, nz], point, names)
+}
+
+/// The structured grid of `n[0]` × `n[1]` (3D: × `n[2]`) cells whose vertex (i, j, k) is at
+/// `point(i, j, k)`, its sides tagged 1, 2 at i = 0, n[0]; 3, 4 at j = 0, n[1]; (3D) 5, 6 at
+/// k = 0, n[2], named `names`.
+fn grid(
+    dim: usize,
+    [nx, ny, nz]: [usize; 3],
+    point: impl Fn(usize, usize, usize) -> [f64; 3],
+    names: [&str; 6],
+) -> LinearMesh {
+    let id = |i: usize, j: usize, k: usize| ((k * (ny + 1) + j) * (nx + 1) + i) as u32;
     let mut coords = Vec::new();
     for k in 0..=nz {
-        for j in 0..=nt {
-            for i in 0..=nr {
-                let r = 1.0 + i as f64 / nr as f64;
-                let t = (deg * j as f64 / nt as f64).to_radians();
-                coords.push([r * t.cos(), r * t.sin(), 0.25 * k as f64]);
+        for j in 0..=ny {
+            for i in 0..=nx {
+                coords.push(point(i, j, k));
             }
         }
     }
-    let mut elements = Vec::new();
-    let mut facets = Vec::new();
-    let mut tags = Vec::new();
+    let (mut elements, mut facets, mut tags) = (Vec::new(), Vec::new(), Vec::new());
+    let quad = |i: usize, j: usize, k: usize| {
+        [
+            id(i, j, k),
+            id(i + 1, j, k),
+            id(i + 1, j + 1, k),
+            id(i, j + 1, k),
+        ]
+    };
+    for k in 0..nz.max(1) {
+        for j in 0..ny {
+            for i in 0..nx {
+                elements.extend(quad(i, j, k));
+                if dim == 3 {
+                    elements.extend(quad(i, j, k + 1));
+                }
+            }
+        }
+    }
     let mut face = |vs: Vec<u32>, tag: i32| {
         facets.extend(vs);
         tags.push(tag);
     };
-    if dim == 2 {
-        for j in 0..nt {
-            for i in 0..nr {
-                elements.extend([
-                    id(i, j, 0),
-                    id(i + 1, j, 0),
-                    id(i + 1, j + 1, 0),
-                    id(i, j + 1, 0),
-                ]);
-            }
-        }
-        for i in 0..nr {
-            face(vec![id(i, 0, 0), id(i + 1, 0, 0)], 1);
-            face(vec![id(i, nt, 0), id(i + 1, nt, 0)], 2);
-        }
-        for j in 0..nt {
-            face(vec![id(0, j, 0), id(0, j + 1, 0)], 3);
-            face(vec![id(nr, j, 0), id(nr, j + 1, 0)], 4);
-        }
-    } else {
-        for k in 0..nz {
-            for j in 0..nt {
-                for i in 0..nr {
-                    let q = |k| {
-                        [
-                            id(i, j, k),
-                            id(i + 1, j, k),
-                            id(i + 1, j + 1, k),
-                            id(i, j + 1, k),
-                        ]
-                    };
-                    elements.extend(q(k));
-                    elements.extend(q(k + 1));
-                }
-            }
-        }
-        for k in 0..nz {
-            for i in 0..nr {
+    for k in 0..nz.max(1) {
+        let side = |a: u32, b: u32, c: u32, d: u32| match dim {
+            2 => vec![a, b],
+            _ => vec![a, b, c, d],
+        };
+        for j in 0..ny {
+            for (i, tag) in [(0, 1), (nx, 2)] {
                 face(
-                    vec![
-                        id(i, 0, k),
-                        id(i + 1, 0, k),
-                        id(i + 1, 0, k + 1),
-                        id(i, 0, k + 1),
-                    ],
-                    1,
-                );
-                face(
-                    vec![
-                        id(i, nt, k),
-                        id(i + 1, nt, k),
-                        id(i + 1, nt, k + 1),
-                        id(i, nt, k + 1),
-                    ],
-                    2,
-                );
-            }
-            for j in 0..nt {
-                face(
-                    vec![
-                        id(0, j, k),
-                        id(0, j + 1, k),
-                        id(0, j + 1, k + 1),
-                        id(0, j, k + 1),
-                    ],
-                    3,
-                );
-                face(
-                    vec![
-                        id(nr, j, k),
-                        id(nr, j + 1, k),
-                        id(nr, j + 1, k + 1),
-                        id(nr, j, k + 1),
-                    ],
-                    4,
+                    side(
+                        id(i, j, k),
+                        id(i, j + 1, k),
+                        id(i, j + 1, k + 1),
+                        id(i, j, k + 1),
+                    ),
+                    tag,
                 );
             }
         }
-        for j in 0..nt {
-            for i in 0..nr {
+        for i in 0..nx {
+            for (j, tag) in [(0, 3), (ny, 4)] {
+                face(
+                    side(
+                        id(i, j, k),
+                        id(i + 1, j, k),
+                        id(i + 1, j, k + 1),
+                        id(i, j, k + 1),
+                    ),
+                    tag,
+                );
+            }
+        }
+    }
+    if dim == 3 {
+        for j in 0..ny {
+            for i in 0..nx {
                 for (k, tag) in [(0, 5), (nz, 6)] {
-                    face(
-                        vec![
-                            id(i, j, k),
-                            id(i + 1, j, k),
-                            id(i + 1, j + 1, k),
-                            id(i, j + 1, k),
-                        ],
-                        tag,
-                    );
+                    face(quad(i, j, k).to_vec(), tag);
                 }
             }
         }
     }
-    let names = ["theta_lo", "theta_hi", "hub", "shroud", "bottom", "top"];
     let mut raw = LinearMesh {
         dim,
         coords,
@@ -313,97 +291,14 @@ fn sectors_rotation_and_translation_are_exact_at_every_order() {
 /// (2, 0, 0)), `floor`, `roof` (3D: `front`, `back`).
 fn channel(dim: usize, nx: usize, ny: usize) -> LinearMesh {
     let nz = if dim == 3 { 3 } else { 0 };
-    let id = |i: usize, j: usize, k: usize| ((k * (ny + 1) + j) * (nx + 1) + i) as u32;
-    let mut coords = Vec::new();
-    for k in 0..=nz {
-        for j in 0..=ny {
-            for i in 0..=nx {
-                let x = 2.0 * i as f64 / nx as f64;
-                let floor = 0.1 * (std::f64::consts::PI * x).sin();
-                let s = (j as f64 / ny as f64).powf(1.2);
-                coords.push([x, floor + s * (1.0 - floor), 0.2 * k as f64]);
-            }
-        }
-    }
-    let (mut elements, mut facets, mut tags) = (Vec::new(), Vec::new(), Vec::new());
-    let quad = |i: usize, j: usize, k: usize| {
-        [
-            id(i, j, k),
-            id(i + 1, j, k),
-            id(i + 1, j + 1, k),
-            id(i, j + 1, k),
-        ]
+    let point = |i: usize, j: usize, k: usize| {
+        let x = 2.0 * i as f64 / nx as f64;
+        let floor = 0.1 * (std::f64::consts::PI * x).sin();
+        let s = (j as f64 / ny as f64).powf(1.2);
+        [x, floor + s * (1.0 - floor), 0.2 * k as f64]
     };
-    for k in 0..nz.max(1) {
-        for j in 0..ny {
-            for i in 0..nx {
-                elements.extend(quad(i, j, k));
-                if dim == 3 {
-                    elements.extend(quad(i, j, k + 1));
-                }
-            }
-        }
-    }
-    let mut face = |vs: Vec<u32>, tag: i32| {
-        facets.extend(vs);
-        tags.push(tag);
-    };
-    for k in 0..nz.max(1) {
-        let side = |a: u32, b: u32, c: u32, d: u32| match dim {
-            2 => vec![a, b],
-            _ => vec![a, b, c, d],
-        };
-        for j in 0..ny {
-            for (i, tag) in [(0, 1), (nx, 2)] {
-                face(
-                    side(
-                        id(i, j, k),
-                        id(i, j + 1, k),
-                        id(i, j + 1, k + 1),
-                        id(i, j, k + 1),
-                    ),
-                    tag,
-                );
-            }
-        }
-        for i in 0..nx {
-            for (j, tag) in [(0, 3), (ny, 4)] {
-                face(
-                    side(
-                        id(i, j, k),
-                        id(i + 1, j, k),
-                        id(i + 1, j, k + 1),
-                        id(i, j, k + 1),
-                    ),
-                    tag,
-                );
-            }
-        }
-    }
-    if dim == 3 {
-        for j in 0..ny {
-            for i in 0..nx {
-                for (k, tag) in [(0, 5), (nz, 6)] {
-                    face(quad(i, j, k).to_vec(), tag);
-                }
-            }
-        }
-    }
     let names = ["left", "right", "floor", "roof", "front", "back"];
-    let mut raw = LinearMesh {
-        dim,
-        coords,
-        elements,
-        tagged_facets: facets,
-        facet_tags: tags,
-        tag_names: (1..=6)
-            .zip(names)
-            .map(|(t, n)| (t, n.to_string()))
-            .collect(),
-        ..Default::default()
-    };
-    raw.tag_names.retain(|t, _| dim == 3 || *t <= 4);
-    raw
+    grid(dim, [nx, ny, nz], point, names)
 }
 
 #[test]
