@@ -187,13 +187,24 @@ fn assert_exact_images(file: &Path, expect: usize) -> BTreeMap<String, Value> {
     out
 }
 
-fn affine(l: &Value) -> Vec<f64> {
-    l["affine"]
+/// The first three rows of a Gmsh link's affine map (`link["affine"]`, by rows) are `want` to
+/// `tol`.
+fn assert_affine(link: &Value, want: &[f64; 12], tol: f64, what: &str) {
+    let a: Vec<f64> = link["affine"]
         .as_array()
         .unwrap()
         .iter()
         .map(|v| v.as_f64().unwrap())
-        .collect()
+        .collect();
+    for k in 0..12 {
+        assert!((a[k] - want[k]).abs() < tol, "{what}: affine {a:?}");
+    }
+}
+
+/// The rotation by `deg` degrees about z, as the first three rows of an affine map.
+fn rotation_z(deg: f64) -> [f64; 12] {
+    let (c, s) = (deg.to_radians().cos(), deg.to_radians().sin());
+    [c, -s, 0.0, 0.0, s, c, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0]
 }
 
 #[test]
@@ -223,13 +234,10 @@ fn turbine_images_are_exact_and_gmsh_pairs_every_node() {
         let l = &links["periodic_2"];
         assert_eq!(l["master_name"], "periodic_1", "{name}");
         // The cascade's pitch: a translation by (0, -0.0575) (the file's markers to 3e-11).
-        let a = affine(l);
         let expect = [
             1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, -0.0575, 0.0, 0.0, 1.0, 0.0,
         ];
-        for k in 0..12 {
-            assert!((a[k] - expect[k]).abs() < 1e-6, "{name}: affine {a:?}");
-        }
+        assert_affine(l, &expect, 1e-6, name);
     }
 }
 
@@ -238,8 +246,7 @@ fn sectors_rotation_and_translation_are_exact_at_every_order() {
     if !common::have_gmsh(&common::current_test()) {
         return;
     }
-    let (c, s) = (30f64.to_radians().cos(), 30f64.to_radians().sin());
-    let rotation = [c, -s, 0.0, 0.0, s, c, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0];
+    let rotation = rotation_z(30.0);
     let lift = [1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.5];
     for dim in [2, 3] {
         let input = sector_file(dim, 30.0);
@@ -267,19 +274,11 @@ fn sectors_rotation_and_translation_are_exact_at_every_order() {
             let deg = pairs[0]["angle_degrees"].as_f64().unwrap();
             assert!((deg - 30.0).abs() < 1e-9, "{dim}D {run:?}: {deg}");
             let links = assert_exact_images(&out, dim - 1);
-            let a = affine(&links["theta_hi"]);
-            for k in 0..12 {
-                assert!(
-                    (a[k] - rotation[k]).abs() < 1e-9,
-                    "{dim}D {run:?}: affine {a:?}"
-                );
-            }
+            let what = format!("{dim}D {run:?}");
+            assert_affine(&links["theta_hi"], &rotation, 1e-9, &what);
             if dim == 3 {
                 assert_eq!(pairs[1]["kind"], "translation");
-                let a = affine(&links["top"]);
-                for k in 0..12 {
-                    assert!((a[k] - lift[k]).abs() < 1e-9, "{run:?}: affine {a:?}");
-                }
+                assert_affine(&links["top"], &lift, 1e-9, &what);
             }
         }
     }
@@ -533,8 +532,7 @@ fn generated_channel_and_sector_are_periodic_and_curve_onto_their_walls() {
     if !common::have_gmsh(&common::current_test()) {
         return;
     }
-    let (c, s) = (40f64.to_radians().cos(), 40f64.to_radians().sin());
-    let rotation = [c, -s, 0.0, 0.0, s, c, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0];
+    let rotation = rotation_z(40.0);
     let shift = [1.0, 0.0, 0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0];
     let channel = "--around 12 --across 8 --first-height 0.02 --bump 0.15";
     let sector = "--around 6 --across 8 --first-height 0.02 --sector 40";
@@ -579,10 +577,7 @@ fn generated_channel_and_sector_are_periodic_and_curve_onto_their_walls() {
         // The generated file carries the pair: Gmsh reads it, images exact.
         let links = assert_exact_images(&linear, 1);
         assert_eq!(links[pair[1]]["master_name"], pair[0], "{name}");
-        let a = affine(&links[pair[1]]);
-        for k in 0..12 {
-            assert!((a[k] - expect[k]).abs() < 1e-12, "{name}: affine {a:?}");
-        }
+        assert_affine(&links[pair[1]], &expect, 1e-12, name);
         // Curved without --periodic: the pair from the file, exact images at order 3, and the
         // walls closer to the analytic curves than the straight order-3 mesh's nodes (by a fifth
         // at least; the 3D channel's wall meets the periodic sides and the end planes in
