@@ -115,7 +115,11 @@ def main():
     programs = {"current": args.exe}
     if not args.no_baseline:
         where = args.baseline_dir or "/tmp/polyspline-baseline-" + args.baseline
-        programs["baseline"] = baseline_binary(args.baseline, where)
+        try:
+            programs["baseline"] = baseline_binary(args.baseline, where)
+        except subprocess.CalledProcessError as e:
+            sys.exit("bench_scale: cannot build baseline %s in %s: `%s` failed (exit %d)" % (
+                args.baseline, where, " ".join(e.cmd), e.returncode))
     head = subprocess.run(["git", "-C", ROOT, "rev-parse", "--short", "HEAD"],
                           capture_output=True, text=True).stdout.strip()
     binary = [] if args.ascii else ["--binary"]
