@@ -154,7 +154,11 @@ impl Rigid {
         };
         // T = t − (I − R) c = (R c + t) − c.
         let image = self.apply(c);
-        (c, [alpha, beta, gamma], std::array::from_fn(|i| image[i] - c[i]))
+        (
+            c,
+            [alpha, beta, gamma],
+            std::array::from_fn(|i| image[i] - c[i]),
+        )
     }
 
     /// R is the identity.
@@ -1209,7 +1213,9 @@ mod tests {
         let rot: [[f64; 3]; 3] = std::array::from_fn(|i| {
             let e = DVec3::from_array(unit_col(i));
             // Rows of R: R e_i by Rodrigues, transposed below.
-            k(e * theta.cos() + axis.cross(e) * theta.sin() + axis * axis.dot(e) * (1.0 - theta.cos()))
+            k(e * theta.cos()
+                + axis.cross(e) * theta.sin()
+                + axis * axis.dot(e) * (1.0 - theta.cos()))
         });
         let rot = std::array::from_fn(|i| std::array::from_fn(|j| rot[j][i]));
         for map in [

@@ -69,11 +69,7 @@ pub(crate) fn cgnscheck_allowing(file: &Path, allowed: &[&str]) -> bool {
     let bad = |l: &&str| {
         l.contains("ERROR") || l.contains("WARNING") && !allowed.iter().any(|a| l.contains(a))
     };
-    assert!(
-        !text.lines().any(|l| bad(&l)),
-        "{}: {text}",
-        file.display()
-    );
+    assert!(!text.lines().any(|l| bad(&l)), "{}: {text}", file.display());
     true
 }
 

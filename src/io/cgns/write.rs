@@ -67,7 +67,13 @@ pub(super) fn string_node(name: &str, label: &str, value: &str) -> GroupBuilder 
 }
 
 /// An integer node of HDF5 shape `shape` (C order: the CGNS dimensions reversed).
-pub(super) fn int_node(name: &str, label: &str, values: &[i64], shape: &[u64], wide: bool) -> GroupBuilder {
+pub(super) fn int_node(
+    name: &str,
+    label: &str,
+    values: &[i64],
+    shape: &[u64],
+    wide: bool,
+) -> GroupBuilder {
     let mut g = node(name, label, if wide { "I8" } else { "I4" });
     let d = g.create_dataset(" data");
     if wide {
