@@ -161,6 +161,27 @@ fn probe(file: &Path) -> Value {
     serde_json::from_slice(&out.stdout).unwrap()
 }
 
+/// `cmd` fails with one error line that contains every one of `says`.
+fn assert_refused(cmd: &mut std::process::Command, says: &[&str]) {
+    let run = cmd.output().unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success(), "accepted: {err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(says.iter().all(|s| err.contains(s)), "{says:?}: {err}");
+}
+
+/// `pyfr import MSH`, then the sizes of the `.pyfrm`'s `periodic/…` datasets (connected face
+/// pairs), sorted, as Python prints the list.
+fn pyfr_periodic_sizes(msh: &Path) -> String {
+    let pyfrm = msh.with_extension("pyfrm");
+    let _ = std::fs::remove_file(&pyfrm);
+    run_ok(python().args(["-m", "pyfr", "import"]).arg(msh).arg(&pyfrm));
+    let sizes = run_ok(python().arg("-c").arg(
+        "import h5py, sys\nf = h5py.File(sys.argv[1])\nprint(sorted(len(f['periodic'][k]) for k in f['periodic']))",
+    ).arg(&pyfrm));
+    String::from_utf8_lossy(&sizes.stdout).trim().to_string()
+}
+
 /// Every node of each image entity is paired in Gmsh, and its coordinates are the affine
 /// image of its master's to `IMAGE_TOL` of the diagonal. Returns the links by image name.
 fn assert_exact_images(file: &Path, expect: usize) -> BTreeMap<String, Value> {
@@ -398,19 +419,8 @@ fn pyfr_import_connects_the_periodic_faces() {
             "--periodic-pyfr-names",
         ],
     );
-    let pyfrm = out.with_extension("pyfrm");
-    let _ = std::fs::remove_file(&pyfrm);
-    run_ok(
-        python()
-            .args(["-m", "pyfr", "import"])
-            .arg(&out)
-            .arg(&pyfrm),
-    );
-    let sizes = run_ok(python().arg("-c").arg(
-        "import h5py, sys\nf = h5py.File(sys.argv[1])\nprint(sorted(len(f['periodic'][k]) for k in f['periodic']))",
-    ).arg(&pyfrm));
     // 144 facets on each side: 144 connected face pairs.
-    assert_eq!(String::from_utf8_lossy(&sizes.stdout).trim(), "[144]");
+    assert_eq!(pyfr_periodic_sizes(&out), "[144]");
 }
 
 /// Gmsh's own periodic meshes (`gmsh_periodic_input.py`: `setPeriodic` on a curved-sided
@@ -494,21 +504,9 @@ fn gmsh_periodic_sections_are_used_without_the_option() {
     std::fs::write(&input, bad).unwrap();
     let out = scratch_in("periodic_input", "bad_affine_out.msh");
     let _ = std::fs::remove_file(&out);
-    let run = polyspline()
-        .arg("curve")
-        .arg(&input)
-        .arg("-o")
-        .arg(&out)
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&run.stderr);
-    assert!(!run.status.success(), "accepted: {err}");
-    assert_eq!(err.trim().lines().count(), 1, "{err}");
-    assert!(
-        err.contains("bad_affine.msh")
-            && err.contains("$Periodic pair left:right")
-            && err.contains("disagrees"),
-        "{err}"
+    assert_refused(
+        polyspline().arg("curve").arg(&input).arg("-o").arg(&out),
+        &["bad_affine.msh", "$Periodic pair left:right", "disagrees"],
     );
     assert!(!out.exists());
 }
@@ -638,18 +636,14 @@ fn a_wrong_periodic_pair_is_refused_in_one_line() {
         assert!(!out.exists(), "{pair}: wrote output");
     }
     // A PyFR naming option without pairs cannot apply.
-    let run = polyspline()
-        .arg("curve")
-        .arg(&turbine)
-        .arg("-o")
-        .arg(scratch_in("periodic", "refused.msh"))
-        .arg("--periodic-pyfr-names")
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&run.stderr);
-    assert!(
-        !run.status.success() && err.trim().lines().count() == 1,
-        "{err}"
+    assert_refused(
+        polyspline()
+            .arg("curve")
+            .arg(&turbine)
+            .arg("-o")
+            .arg(scratch_in("periodic", "refused.msh"))
+            .arg("--periodic-pyfr-names"),
+        &["--periodic-pyfr-names", "no periodic pair"],
     );
 }
 
@@ -896,18 +890,7 @@ fn pyfr_names_apply_to_the_files_own_pairs() {
     );
     assert_eq!(report["periodic"]["pyfr_names"], true, "{report}");
     assert_eq!(report["periodic"]["pairs"][0]["from_file"], true);
-    let pyfrm = out.with_extension("pyfrm");
-    let _ = std::fs::remove_file(&pyfrm);
-    run_ok(
-        python()
-            .args(["-m", "pyfr", "import"])
-            .arg(&out)
-            .arg(&pyfrm),
-    );
-    let sizes = run_ok(python().arg("-c").arg(
-        "import h5py, sys\nf = h5py.File(sys.argv[1])\nprint(sorted(len(f['periodic'][k]) for k in f['periodic']))",
-    ).arg(&pyfrm));
-    assert_eq!(String::from_utf8_lossy(&sizes.stdout).trim(), "[8]");
+    assert_eq!(pyfr_periodic_sizes(&out), "[8]");
 }
 
 /// A `$Periodic` link whose entities are no two separate boundary groups (here the image
@@ -953,20 +936,13 @@ fn a_periodic_link_without_physical_groups_is_refused() {
     let out = scratch_in("periodic_input", "unnamed_side_out.msh");
     let _ = std::fs::remove_file(&out);
     for cmd in [vec!["curve", "-o", out.to_str().unwrap()], vec!["info"]] {
-        let run = polyspline()
-            .arg(cmd[0])
-            .arg(&input)
-            .args(&cmd[1..])
-            .output()
-            .unwrap();
-        let err = String::from_utf8_lossy(&run.stderr);
-        assert!(!run.status.success(), "{cmd:?} accepted: {err}");
-        assert_eq!(err.trim().lines().count(), 1, "{err}");
-        assert!(
-            err.contains("unnamed_side.msh")
-                && err.contains("$Periodic link of entities")
-                && err.contains("no physical group"),
-            "{err}"
+        assert_refused(
+            polyspline().arg(cmd[0]).arg(&input).args(&cmd[1..]),
+            &[
+                "unnamed_side.msh",
+                "$Periodic link of entities",
+                "no physical group",
+            ],
         );
     }
     assert!(!out.exists());
