@@ -253,6 +253,15 @@ fn curve_mesh(
             input: input.to_owned(),
             source,
         })?;
+    if options.periodic.pyfr_names && periodic.is_empty() {
+        return Err(CurveError::Periodic {
+            input: input.to_owned(),
+            source: crate::mesh::periodic::PeriodicError {
+                spec: "--periodic-pyfr-names".into(),
+                what: "the mesh has no periodic pair to name: give one with --periodic A:B (or in a Gmsh input's $Periodic section)".into(),
+            },
+        });
+    }
     clock.check()?;
     let executor = crate::exec::executor(&options.backend);
     let job = Job {

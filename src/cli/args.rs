@@ -123,7 +123,7 @@ pub(crate) struct PeriodicArgs {
     #[arg(long, value_name = "A:B")]
     periodic: Vec<PeriodicSpec>,
     /// Write pair i's groups as `periodic_<i>_l` (A) and `periodic_<i>_r` (B), the names
-    /// PyFR's importer pairs.
+    /// PyFR's importer pairs: the pairs of --periodic, then those of the input's $Periodic.
     #[arg(long)]
     periodic_pyfr_names: bool,
 }

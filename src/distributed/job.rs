@@ -130,6 +130,9 @@ fn check_supported(options: &CurveOptions) -> Result<(), CurveError> {
     if !options.periodic.pairs.is_empty() {
         return unsupported("--periodic");
     }
+    if options.periodic.pyfr_names {
+        return unsupported("--periodic-pyfr-names");
+    }
     // The edits name vertices by their place in the file; a rank's sub-mesh numbers them
     // otherwise, so they would hit other vertices.
     if options.features.edits.is_some() {

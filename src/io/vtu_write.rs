@@ -15,6 +15,14 @@
 //!
 //! Cell data: `tag` (region tag of elements, boundary tag of facets, 0 = none). Encodings:
 //! ASCII, inline base64 (`binary`) with UInt64 headers, or raw appended data.
+//!
+//! Field data (the grid's `<FieldData>`, written when the mesh names a tag or has periodic
+//! pairs), numeric only, so that meshio (which refuses VTK's `String` arrays) reads the file:
+//! * `tag_ids` (Int32) and `tag_names` (UInt8): the named tags and their names, UTF-8, each
+//!   followed by a NUL byte, in the order of `tag_ids`;
+//! * `periodic_tags` (Int32, 2 components): per periodic pair its master and image boundary
+//!   tags; `periodic_affine` (Float64, 12 components): the map master → image, x' = R x + t,
+//!   as the rows (R₀₀ R₀₁ R₀₂ t₀ R₁₀ … t₂), the first three rows of MSH `$Periodic`'s matrix.
 
 use crate::io::ordering::{gmsh_line, to_indices, vtk_hex, vtk_quad};
 use crate::mesh::HighOrderMesh;
@@ -34,6 +42,8 @@ struct Array {
     name: &'static str,
     vtk_type: &'static str,
     components: usize,
+    /// `NumberOfTuples`, which VTK needs for field data (no piece gives the count).
+    tuples: Option<usize>,
     bytes: Vec<u8>,
     text: String,
 }
@@ -95,9 +105,57 @@ fn array<T: Value>(
         name,
         vtk_type,
         components,
+        tuples: None,
         bytes,
         text,
     }
+}
+
+/// The grid's field data (module docs): tag names and periodic pairs, empty without either.
+fn field_data(mesh: &HighOrderMesh, encoding: VtuEncoding) -> Vec<Array> {
+    let with_tuples = |mut a: Array, n: usize| {
+        a.tuples = Some(n);
+        a
+    };
+    let mut out = Vec::new();
+    if !mesh.tag_names.is_empty() {
+        let ids: Vec<i32> = mesh.tag_names.keys().copied().collect();
+        let mut names: Vec<u8> = Vec::new();
+        for n in mesh.tag_names.values() {
+            names.extend_from_slice(n.as_bytes());
+            names.push(0);
+        }
+        out.push(with_tuples(
+            array("tag_ids", "Int32", 1, &ids, encoding),
+            ids.len(),
+        ));
+        out.push(with_tuples(
+            array("tag_names", "UInt8", 1, &names, encoding),
+            names.len(),
+        ));
+    }
+    if !mesh.periodic.is_empty() {
+        let tags: Vec<i32> = mesh
+            .periodic
+            .iter()
+            .flat_map(|l| [l.master_tag, l.slave_tag])
+            .collect();
+        let affine: Vec<f64> = mesh
+            .periodic
+            .iter()
+            .flat_map(|l| l.transform.affine().into_iter().take(12))
+            .collect();
+        let n = mesh.periodic.len();
+        out.push(with_tuples(
+            array("periodic_tags", "Int32", 2, &tags, encoding),
+            n,
+        ));
+        out.push(with_tuples(
+            array("periodic_affine", "Float64", 12, &affine, encoding),
+            n,
+        ));
+    }
+    out
 }
 
 /// Which cells a VTU file holds.
@@ -181,6 +239,7 @@ pub fn write_vtu_cells(
         array("types", "UInt8", 1, &types, encoding),
     ];
     let cell_data = [array("tag", "Int32", 1, &tags, encoding)];
+    let field_data = field_data(mesh, encoding);
 
     writeln!(w, "<?xml version=\"1.0\"?>")?;
     writeln!(
@@ -189,19 +248,16 @@ pub fn write_vtu_cells(
         vtu_version(mesh, which)
     )?;
     writeln!(w, "<UnstructuredGrid>")?;
-    writeln!(
-        w,
-        "<Piece NumberOfPoints=\"{}\" NumberOfCells=\"{}\">",
-        mesh.nodes.len(),
-        n_cells
-    )?;
     let mut appended: Vec<u8> = Vec::new();
     let mut put = |w: &mut dyn Write, a: &Array| -> io::Result<()> {
-        let comps = if a.components > 1 {
+        let mut comps = if a.components > 1 {
             format!(" NumberOfComponents=\"{}\"", a.components)
         } else {
             String::new()
         };
+        if let Some(n) = a.tuples {
+            comps += &format!(" NumberOfTuples=\"{n}\"");
+        }
         match encoding {
             VtuEncoding::Ascii => {
                 writeln!(
@@ -241,6 +297,19 @@ pub fn write_vtu_cells(
             }
         }
     };
+    if !field_data.is_empty() {
+        writeln!(w, "<FieldData>")?;
+        for a in &field_data {
+            put(w, a)?;
+        }
+        writeln!(w, "</FieldData>")?;
+    }
+    writeln!(
+        w,
+        "<Piece NumberOfPoints=\"{}\" NumberOfCells=\"{}\">",
+        mesh.nodes.len(),
+        n_cells
+    )?;
     writeln!(w, "<Points>")?;
     put(w, &points)?;
     writeln!(w, "</Points>\n<Cells>")?;

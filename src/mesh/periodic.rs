@@ -122,6 +122,45 @@ impl Rigid {
         std::array::from_fn(|i| r[0][i] * y[0] + r[1][i] * y[1] + r[2][i] * y[2])
     }
 
+    /// The inverse map x ↦ Rᵀ x − Rᵀ t.
+    pub fn inverse(&self) -> Rigid {
+        let r = &self.rotation;
+        let rotation = std::array::from_fn(|i| std::array::from_fn(|j| r[j][i]));
+        let back = self.apply_inverse([0.0; 3]);
+        Rigid {
+            rotation,
+            translation: back,
+        }
+    }
+
+    /// The map as CGNS's `Periodic_t` states it: x' = R (x − c) + c + T with R the rotation
+    /// about x by α, then about y by β, then about z by γ (R = R_z R_y R_x, counter-clockwise,
+    /// radians). Returns (c, [α, β, γ], T): for a rotation c is [`Rigid::axis_angle`]'s point
+    /// on the axis, so T is the screw part along the axis (0 for a pure rotation); for a
+    /// translation c = 0 and T = t.
+    pub fn center_angles_translation(&self) -> ([f64; 3], [f64; 3], [f64; 3]) {
+        let Some((_, c, _)) = self.axis_angle() else {
+            return ([0.0; 3], [0.0; 3], self.translation);
+        };
+        let r = &self.rotation;
+        // R_z(γ) R_y(β) R_x(α): r[2][0] = −sin β, r[2][1] = cos β sin α, r[2][2] = cos β cos α,
+        // r[1][0] = sin γ cos β, r[0][0] = cos γ cos β.
+        let beta = (-r[2][0]).clamp(-1.0, 1.0).asin();
+        let (alpha, gamma) = if beta.cos() > 1e-12 {
+            (r[2][1].atan2(r[2][2]), r[1][0].atan2(r[0][0]))
+        } else {
+            // Gimbal lock: only α ∓ γ is defined; put it all in γ.
+            (0.0, (-r[0][1]).atan2(r[1][1]))
+        };
+        // T = t − (I − R) c = (R c + t) − c.
+        let image = self.apply(c);
+        (
+            c,
+            [alpha, beta, gamma],
+            std::array::from_fn(|i| image[i] - c[i]),
+        )
+    }
+
     /// R is the identity.
     pub fn is_translation(&self) -> bool {
         let r = &self.rotation;
@@ -582,14 +621,14 @@ pub fn resolve(
     tags.dedup();
     let mut seen: Vec<i32> = Vec::new();
     let mut out = Vec::new();
-    let mut resolved: Vec<(PeriodicSpec, i32, i32, Vec<&DeclaredPeriodic>)> = Vec::new();
+    let mut resolved: Vec<Declared<'_>> = Vec::new();
     for spec in specs {
         let ta = resolve_tag(mesh, &tags, spec, &spec.master)?;
         let tb = resolve_tag(mesh, &tags, spec, &spec.slave)?;
         resolved.push((spec.clone(), ta, tb, Vec::new()));
     }
     let given: Vec<i32> = resolved.iter().flat_map(|r| [r.1, r.2]).collect();
-    resolved.extend(declared(mesh, &tags, &given));
+    resolved.extend(declared(mesh, &tags, &given)?);
     for (spec, ta, tb, claims) in &resolved {
         let err = |what: String| PeriodicError {
             spec: spec.label(),
@@ -616,21 +655,48 @@ pub fn resolve(
     Ok(out)
 }
 
+/// A file's pair with the links it gathers.
+type Declared<'m> = (PeriodicSpec, i32, i32, Vec<&'m DeclaredPeriodic>);
+
 /// The pairs of boundary groups the file declares, each with the file's links it gathers
-/// (several entity pairs of one physical pair). Left out: links whose sides carry no boundary
-/// group of the mesh (no physical tag) or the same one, the reverse of a pair already kept,
-/// and pairs naming a group of `given` (the command line's pairs).
+/// (several entity pairs of one physical pair). Left out: the reverse of a pair already kept,
+/// and pairs naming a group of `given` (the command line's pairs). A link whose sides are not
+/// two separate boundary groups (an entity without a physical group, both in the same group,
+/// or a group without boundary facets) is an error: used as is, the written sides would no
+/// longer be images of each other and the output would silently lose the periodicity the
+/// file declares.
 fn declared<'m>(
     mesh: &'m LinearMesh,
     tags: &[i32],
     given: &[i32],
-) -> Vec<(PeriodicSpec, i32, i32, Vec<&'m DeclaredPeriodic>)> {
-    let mut out: Vec<(PeriodicSpec, i32, i32, Vec<&DeclaredPeriodic>)> = Vec::new();
+) -> Result<Vec<Declared<'m>>, PeriodicError> {
+    let mut out: Vec<Declared<'m>> = Vec::new();
     let name = |t: i32| mesh.tag_names.get(&t).cloned().unwrap_or(t.to_string());
     for d in &mesh.declared_periodic {
         let (ta, tb) = (d.master_tag, d.slave_tag);
-        if ta == 0 || tb == 0 || ta == tb || !tags.contains(&ta) || !tags.contains(&tb) {
-            continue;
+        let why = if ta == 0 || tb == 0 {
+            Some("an entity has no physical group, so its facets are no boundary group to pair; give both entities a physical group (Gmsh: Physical Curve/Surface)".to_string())
+        } else if ta == tb {
+            Some(format!(
+                "both entities are in physical group {}; put the two sides in separate physical groups",
+                name(ta)
+            ))
+        } else if let Some(&t) = [ta, tb].iter().find(|t| !tags.contains(t)) {
+            Some(format!(
+                "physical group {} has no boundary facets in the mesh",
+                name(t)
+            ))
+        } else {
+            None
+        };
+        if let Some(why) = why {
+            return Err(PeriodicError {
+                spec: format!(
+                    "$Periodic link of entities {} -> {} ({})",
+                    d.entities[0], d.entities[1], d.location
+                ),
+                what: format!("{why}, or remove the link"),
+            });
         }
         if given.contains(&ta) || given.contains(&tb) {
             continue;
@@ -649,7 +715,7 @@ fn declared<'m>(
         };
         out.push((spec, ta, tb, vec![d]));
     }
-    out
+    Ok(out)
 }
 
 /// The file's affine map of a declared pair must carry every vertex of A onto its vertex of B
@@ -1121,5 +1187,52 @@ mod tests {
         let x = [3.0, -1.0, 0.5];
         let back = t.apply_inverse(t.apply(x));
         assert!((0..3).all(|i| (back[i] - x[i]).abs() < 1e-14));
+        let inv = t.inverse().apply(t.apply(x));
+        assert!((0..3).all(|i| (inv[i] - x[i]).abs() < 1e-14));
+    }
+
+    /// R_x(α), then R_y(β), then R_z(γ) about c, then T: the CGNS `Periodic_t` map.
+    fn cgns_map(c: [f64; 3], a: [f64; 3], t: [f64; 3], x: [f64; 3]) -> [f64; 3] {
+        let mut y = [x[0] - c[0], x[1] - c[1], x[2] - c[2]];
+        for (axis, &angle) in a.iter().enumerate() {
+            let (i, j) = ((axis + 1) % 3, (axis + 2) % 3);
+            let (cs, sn) = (angle.cos(), angle.sin());
+            let (yi, yj) = (y[i], y[j]);
+            y[i] = cs * yi - sn * yj;
+            y[j] = sn * yi + cs * yj;
+        }
+        std::array::from_fn(|k| y[k] + c[k] + t[k])
+    }
+
+    #[test]
+    fn cgns_parameters_rebuild_the_map() {
+        let x = [0.3, -1.2, 2.5];
+        // A rotation about a skew axis through a point off the origin, with a screw part.
+        let (axis, theta) = (DVec3::new(1.0, 2.0, 2.0) / 3.0, 0.7f64);
+        let k = |v: DVec3| -> [f64; 3] { v.to_array() };
+        let rot: [[f64; 3]; 3] = std::array::from_fn(|i| {
+            let e = DVec3::from_array(unit_col(i));
+            // Rows of R: R e_i by Rodrigues, transposed below.
+            k(e * theta.cos()
+                + axis.cross(e) * theta.sin()
+                + axis * axis.dot(e) * (1.0 - theta.cos()))
+        });
+        let rot = std::array::from_fn(|i| std::array::from_fn(|j| rot[j][i]));
+        for map in [
+            Rigid::translation([0.0, -0.0575, 0.0]),
+            Rigid {
+                rotation: rot,
+                translation: [0.4, -0.1, 0.9],
+            },
+        ] {
+            for m in [map, map.inverse()] {
+                let (c, a, t) = m.center_angles_translation();
+                let (want, got) = (m.apply(x), cgns_map(c, a, t, x));
+                assert!(
+                    (0..3).all(|i| (want[i] - got[i]).abs() < 1e-12),
+                    "{want:?} {got:?}"
+                );
+            }
+        }
     }
 }

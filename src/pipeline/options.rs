@@ -92,7 +92,8 @@ pub struct PeriodicOptions {
     /// `--periodic A:B`, in the order given.
     pub pairs: Vec<crate::mesh::periodic::PeriodicSpec>,
     /// Name pair i's groups `periodic_<i>_l` (master) and `periodic_<i>_r` (image), PyFR's
-    /// convention, in the written mesh.
+    /// convention, in the written mesh: the pairs of `pairs` and of the input's `$Periodic`
+    /// (a mesh with neither is refused once read).
     pub pyfr_names: bool,
 }
 
@@ -150,13 +151,6 @@ impl CurveOptions {
         self.output.check()?;
         if let Some(e) = &self.energy {
             e.check()?;
-        }
-        if self.periodic.pyfr_names && self.periodic.pairs.is_empty() {
-            return Err(ParamError::new(
-                "--periodic-pyfr-names",
-                "set",
-                "names periodic pairs: give them with --periodic A:B",
-            ));
         }
         Ok(())
     }

@@ -161,6 +161,27 @@ fn probe(file: &Path) -> Value {
     serde_json::from_slice(&out.stdout).unwrap()
 }
 
+/// `cmd` fails with one error line that contains every one of `says`.
+fn assert_refused(cmd: &mut std::process::Command, says: &[&str]) {
+    let run = cmd.output().unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success(), "accepted: {err}");
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(says.iter().all(|s| err.contains(s)), "{says:?}: {err}");
+}
+
+/// `pyfr import MSH`, then the sizes of the `.pyfrm`'s `periodic/…` datasets (connected face
+/// pairs), sorted, as Python prints the list.
+fn pyfr_periodic_sizes(msh: &Path) -> String {
+    let pyfrm = msh.with_extension("pyfrm");
+    let _ = std::fs::remove_file(&pyfrm);
+    run_ok(python().args(["-m", "pyfr", "import"]).arg(msh).arg(&pyfrm));
+    let sizes = run_ok(python().arg("-c").arg(
+        "import h5py, sys\nf = h5py.File(sys.argv[1])\nprint(sorted(len(f['periodic'][k]) for k in f['periodic']))",
+    ).arg(&pyfrm));
+    String::from_utf8_lossy(&sizes.stdout).trim().to_string()
+}
+
 /// Every node of each image entity is paired in Gmsh, and its coordinates are the affine
 /// image of its master's to `IMAGE_TOL` of the diagonal. Returns the links by image name.
 fn assert_exact_images(file: &Path, expect: usize) -> BTreeMap<String, Value> {
@@ -398,19 +419,8 @@ fn pyfr_import_connects_the_periodic_faces() {
             "--periodic-pyfr-names",
         ],
     );
-    let pyfrm = out.with_extension("pyfrm");
-    let _ = std::fs::remove_file(&pyfrm);
-    run_ok(
-        python()
-            .args(["-m", "pyfr", "import"])
-            .arg(&out)
-            .arg(&pyfrm),
-    );
-    let sizes = run_ok(python().arg("-c").arg(
-        "import h5py, sys\nf = h5py.File(sys.argv[1])\nprint(sorted(len(f['periodic'][k]) for k in f['periodic']))",
-    ).arg(&pyfrm));
     // 144 facets on each side: 144 connected face pairs.
-    assert_eq!(String::from_utf8_lossy(&sizes.stdout).trim(), "[144]");
+    assert_eq!(pyfr_periodic_sizes(&out), "[144]");
 }
 
 /// Gmsh's own periodic meshes (`gmsh_periodic_input.py`: `setPeriodic` on a curved-sided
@@ -494,21 +504,9 @@ fn gmsh_periodic_sections_are_used_without_the_option() {
     std::fs::write(&input, bad).unwrap();
     let out = scratch_in("periodic_input", "bad_affine_out.msh");
     let _ = std::fs::remove_file(&out);
-    let run = polyspline()
-        .arg("curve")
-        .arg(&input)
-        .arg("-o")
-        .arg(&out)
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&run.stderr);
-    assert!(!run.status.success(), "accepted: {err}");
-    assert_eq!(err.trim().lines().count(), 1, "{err}");
-    assert!(
-        err.contains("bad_affine.msh")
-            && err.contains("$Periodic pair left:right")
-            && err.contains("disagrees"),
-        "{err}"
+    assert_refused(
+        polyspline().arg("curve").arg(&input).arg("-o").arg(&out),
+        &["bad_affine.msh", "$Periodic pair left:right", "disagrees"],
     );
     assert!(!out.exists());
 }
@@ -638,17 +636,314 @@ fn a_wrong_periodic_pair_is_refused_in_one_line() {
         assert!(!out.exists(), "{pair}: wrote output");
     }
     // A PyFR naming option without pairs cannot apply.
-    let run = polyspline()
-        .arg("curve")
-        .arg(&turbine)
-        .arg("-o")
-        .arg(scratch_in("periodic", "refused.msh"))
-        .arg("--periodic-pyfr-names")
-        .output()
-        .unwrap();
-    let err = String::from_utf8_lossy(&run.stderr);
-    assert!(
-        !run.status.success() && err.trim().lines().count() == 1,
-        "{err}"
+    assert_refused(
+        polyspline()
+            .arg("curve")
+            .arg(&turbine)
+            .arg("-o")
+            .arg(scratch_in("periodic", "refused.msh"))
+            .arg("--periodic-pyfr-names"),
+        &["--periodic-pyfr-names", "no periodic pair"],
     );
+}
+
+/// `cgns_periodic.py FILE`: the periodic grid connectivity of a CGNS file as h5py reads it.
+fn cgns_probe(file: &Path) -> Value {
+    let out = run_ok(
+        python()
+            .arg(Path::new(ROOT).join("tests/external/cgns_periodic.py"))
+            .arg(file),
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// CGNS output carries every periodic pair as standard grid connectivity. The CGNS library's
+/// `cgnscheck` accepts the file; read with h5py (`cgns_periodic.py`), each pair A → B has two
+/// `GridConnectivity_t`, `A_to_B` and `B_to_A` (`Abutting1to1`, `Vertex`, donor the zone
+/// itself), whose `PointList` is exactly the node set of the current side's boundary section
+/// and `PointListDonor` the other side's, one entry per node pair of the MSH `$Periodic`;
+/// the pairs are rigid images to rounding, and the stored `Periodic_t` (centre, angles about
+/// x, y, z, translation), rebuilt into a map by the probe, carries each node onto its donor to
+/// single precision: the cascade's translation (0, −0.0575), the sectors' 30° about z (forward
+/// +30°, backward −30°; the 2D sector is written with 3 physical dimensions for its angle about
+/// z), the 3D sector's lift by 0.5 along z.
+#[test]
+fn cgns_output_carries_the_periodic_pairs() {
+    let test = common::current_test();
+    if !python_has("h5py", &test) {
+        return;
+    }
+    let turbine = Path::new(ROOT).join(TURBINE);
+    let (s2, s3) = (sector_file(2, 30.0), sector_file(3, 30.0));
+    let lift = ["--periodic", "bottom:top"];
+    for (name, input, order, extra, phys) in [
+        (
+            "turbine",
+            &turbine,
+            "2",
+            &["--periodic", "periodic_1:periodic_2"],
+            2,
+        ),
+        (
+            "sector2d",
+            &s2,
+            "4",
+            &["--periodic", "theta_lo:theta_hi"],
+            3,
+        ),
+        (
+            "sector3d",
+            &s3,
+            "3",
+            &["--periodic", "theta_lo:theta_hi"],
+            3,
+        ),
+    ] {
+        let out = scratch_in("periodic", &format!("{name}.cgns"));
+        let mut args = vec!["--order", order];
+        args.extend(extra);
+        if name == "sector3d" {
+            args.extend(lift);
+        }
+        let report = curve(input, &out, &args);
+        // A planar mesh written with a z coordinate: cgnscheck notes its zero range.
+        let allowed: &[&str] = if name == "sector2d" {
+            &["coordinate range is 0"]
+        } else {
+            &[]
+        };
+        if !crate::formats::cgnscheck_allowing(&out, allowed) {
+            return;
+        }
+        let v = cgns_probe(&out);
+        let ctx = format!("{name}: {v}");
+        assert_eq!(v["phys_dim"], phys, "{ctx}");
+        let diag = v["diagonal"].as_f64().unwrap();
+        let pairs = report["periodic"]["pairs"].as_array().unwrap();
+        let conns = v["connections"].as_array().unwrap();
+        assert_eq!(conns.len(), 2 * pairs.len(), "{ctx}");
+        let mut entries = 0;
+        for p in pairs {
+            let (a, b) = (p["master"].as_str().unwrap(), p["slave"].as_str().unwrap());
+            for (from, to, sign) in [(a, b, 1.0), (b, a, -1.0)] {
+                let c = conns
+                    .iter()
+                    .find(|c| c["name"] == format!("{from}_to_{to}"))
+                    .unwrap_or_else(|| panic!("{ctx}: no {from}_to_{to}"));
+                assert_eq!(
+                    (&c["type"], &c["location"], &c["donor"]),
+                    (
+                        &Value::from("Abutting1to1"),
+                        &Value::from("Vertex"),
+                        &Value::from("Zone")
+                    ),
+                    "{ctx}"
+                );
+                assert_eq!(
+                    (&c["current_side"], &c["donor_side"]),
+                    (&Value::from(from), &Value::from(to)),
+                    "{ctx}"
+                );
+                let n = c["n"].as_u64().unwrap();
+                assert!(n > 0 && c["donor_n"] == n && c["distinct"] == n, "{ctx}");
+                if sign > 0.0 {
+                    entries += n;
+                }
+                let miss = c["max_mismatch"].as_f64().unwrap() / diag;
+                assert!(miss < 1e-6, "{ctx}: {from}_to_{to} misses by {miss:e}");
+                let rigid = c["max_residual"].as_f64().unwrap() / diag;
+                assert!(rigid < 1e-12, "{ctx}: {from}_to_{to} residual {rigid:e}");
+                let f = |k: &str, i: usize| c[k][i].as_f64().unwrap();
+                if p["kind"] == "rotation" {
+                    let gamma = f("angles", 2).to_degrees();
+                    assert!((gamma - sign * 30.0).abs() < 1e-4, "{ctx}: {gamma}");
+                    assert!(f("angles", 0).abs() < 1e-6 && f("angles", 1).abs() < 1e-6);
+                } else {
+                    for i in 0..phys {
+                        let t = sign * p["translation"][i].as_f64().unwrap();
+                        assert!((f("translation", i) - t).abs() < 1e-6, "{ctx}");
+                    }
+                }
+            }
+        }
+        assert_eq!(entries, report["periodic"]["node_pairs"], "{ctx}");
+        // Gmsh's CGNS reader takes the 2D pairs (it classifies each node on one boundary
+        // section, so a side's two end nodes sit on the neighbouring sides and stay unpaired;
+        // in 3D it mixes up the sections sharing nodes, so only 2D is asked of it).
+        if name != "sector3d" && common::have_gmsh(&test) {
+            let g = probe(&out);
+            let links = g["links"].as_array().unwrap();
+            let p = &pairs[0];
+            assert_eq!(links.len(), 1, "{name}: {g}");
+            let l = &links[0];
+            let sides = [l["name"].clone(), l["master_name"].clone()];
+            assert!(
+                sides == [p["master"].clone(), p["slave"].clone()]
+                    || sides == [p["slave"].clone(), p["master"].clone()],
+                "{name}: {l}"
+            );
+            let (n, own) = (
+                l["pairs"].as_u64().unwrap(),
+                l["entity_nodes"].as_u64().unwrap(),
+            );
+            assert!(n + 2 >= own && n > 0, "{name}: {l}");
+            let miss = l["max_mismatch"].as_f64().unwrap() / g["diagonal"].as_f64().unwrap();
+            assert!(miss < 1e-6, "{name}: {l}");
+        }
+    }
+}
+
+/// VTU output names the tags and records the pairs in its field data (`tag_ids`/`tag_names`,
+/// `periodic_tags`, `periodic_affine`): VTK's own reader reads them (and meshio, which reads
+/// only version-1.0 files: the 2D sector's), the names decode to the report's sides and the
+/// affine rows are the report's transform, in every encoding.
+#[test]
+fn vtu_field_data_records_names_and_pairs() {
+    let test = common::current_test();
+    if !python_has("vtkmodules", &test) || !python_has("meshio", &test) {
+        return;
+    }
+    let (s2, s3) = (sector_file(2, 30.0), sector_file(3, 30.0));
+    let cases = [
+        (
+            &s3,
+            "3",
+            &[
+                "--periodic",
+                "theta_lo:theta_hi",
+                "--periodic",
+                "bottom:top",
+            ][..],
+        ),
+        (&s2, "2", &["--periodic", "theta_lo:theta_hi"][..]),
+    ];
+    for ((input, dim, pairs), enc) in cases
+        .iter()
+        .flat_map(|c| ["ascii", "base64", "appended"].map(|e| (c, e)))
+    {
+        let out = scratch_in("periodic", &format!("sector{dim}d_{enc}.vtu"));
+        let mut args = vec!["--order", "2", "--vtu-encoding", enc];
+        args.extend(*pairs);
+        let report = curve(input, &out, &args);
+        let script = r#"
+import json, sys
+import meshio
+from vtkmodules.vtkIOXML import vtkXMLUnstructuredGridReader
+from vtkmodules.util.numpy_support import vtk_to_numpy
+r = vtkXMLUnstructuredGridReader(); r.SetFileName(sys.argv[1]); r.Update()
+fd = r.GetOutput().GetFieldData()
+a = {fd.GetArrayName(i): vtk_to_numpy(fd.GetArray(i)).tolist() for i in range(fd.GetNumberOfArrays())}
+names = bytes(a["tag_names"]).split(b"\0")[:-1]
+m = sorted(meshio.read(sys.argv[1]).field_data) if sys.argv[2] == "2" else None
+print(json.dumps({"names": dict(zip(a["tag_ids"], [n.decode() for n in names])),
+                  "pairs": a["periodic_tags"], "affine": a["periodic_affine"],
+                  "meshio": m, "cells": r.GetOutput().GetNumberOfCells()}))
+"#;
+        let o = run_ok(python().arg("-c").arg(script).arg(&out).arg(dim));
+        let v: Value = serde_json::from_slice(&o.stdout).unwrap();
+        let ctx = format!("{enc}: {v}");
+        assert!(v["cells"].as_u64().unwrap() > 0, "{ctx}");
+        if *dim == "2" {
+            assert_eq!(
+                v["meshio"],
+                serde_json::json!(["periodic_affine", "periodic_tags", "tag_ids", "tag_names"]),
+                "{ctx}"
+            );
+        }
+        let pairs = report["periodic"]["pairs"].as_array().unwrap();
+        assert_eq!(v["pairs"].as_array().unwrap().len(), pairs.len(), "{ctx}");
+        for (i, p) in pairs.iter().enumerate() {
+            let tags = &v["pairs"][i];
+            let name = |t: &Value| v["names"][t.as_i64().unwrap().to_string()].clone();
+            assert_eq!(name(&tags[0]), p["master"], "{ctx}");
+            assert_eq!(name(&tags[1]), p["slave"], "{ctx}");
+            let a = &v["affine"][i];
+            let t = |k: usize| a[k].as_f64().unwrap();
+            for (k, want) in [(3, 0), (7, 1), (11, 2)] {
+                let tw = p["translation"][want].as_f64().unwrap();
+                assert!((t(k) - tw).abs() < 1e-12, "{ctx}");
+            }
+            if p["kind"] == "rotation" {
+                let deg = t(4).atan2(t(0)).to_degrees();
+                assert!((deg - 30.0).abs() < 1e-9, "{ctx}: {deg}");
+            } else {
+                assert!((t(0) - 1.0).abs() < 1e-15 && t(1).abs() < 1e-15, "{ctx}");
+            }
+        }
+    }
+}
+
+/// `--periodic-pyfr-names` names the pairs of a Gmsh input's own `$Periodic` section (no
+/// `--periodic`): `pyfr import` connects the channel's periodic faces (8 facets a side).
+#[test]
+fn pyfr_names_apply_to_the_files_own_pairs() {
+    let test = common::current_test();
+    if !python_has("pyfr", &test) || !python_has("h5py", &test) || !common::have_gmsh(&test) {
+        return;
+    }
+    let dir = gmsh_periodic_inputs();
+    let out = scratch_in("periodic_input", "channel_pyfr.msh");
+    let report = curve(
+        &dir.join("channel2d_41.msh"),
+        &out,
+        &["--periodic-pyfr-names"],
+    );
+    assert_eq!(report["periodic"]["pyfr_names"], true, "{report}");
+    assert_eq!(report["periodic"]["pairs"][0]["from_file"], true);
+    assert_eq!(pyfr_periodic_sizes(&out), "[8]");
+}
+
+/// A `$Periodic` link whose entities are no two separate boundary groups (here the image
+/// curve's elements lose their physical group) is refused in one line naming the file, the
+/// link's entities and the fix, for `curve` and `info`; nothing is written.
+#[test]
+fn a_periodic_link_without_physical_groups_is_refused() {
+    if !common::have_gmsh(&common::current_test()) {
+        return;
+    }
+    let dir = gmsh_periodic_inputs();
+    let good = std::fs::read_to_string(dir.join("channel2d_22.msh")).unwrap();
+    // MSH 2.2: `$PhysicalNames` gives the tag of "right"; its line elements get physical 0.
+    let right = good
+        .lines()
+        .find(|l| l.ends_with("\"right\""))
+        .and_then(|l| l.split(' ').nth(1))
+        .unwrap()
+        .to_string();
+    let mut in_elements = false;
+    let mut changed = 0;
+    let bad: Vec<String> = good
+        .lines()
+        .map(|l| {
+            in_elements = match l {
+                "$Elements" => true,
+                "$EndElements" => false,
+                _ => in_elements,
+            };
+            let f: Vec<&str> = l.split(' ').collect();
+            if in_elements && f.len() > 4 && f[1] == "1" && f[3] == right {
+                changed += 1;
+                let mut f = f.clone();
+                f[3] = "0";
+                return f.join(" ");
+            }
+            l.to_string()
+        })
+        .collect();
+    assert!(changed > 0, "no line element of group {right}");
+    let input = scratch_in("periodic_input", "unnamed_side.msh");
+    std::fs::write(&input, bad.join("\n") + "\n").unwrap();
+    let out = scratch_in("periodic_input", "unnamed_side_out.msh");
+    let _ = std::fs::remove_file(&out);
+    for cmd in [vec!["curve", "-o", out.to_str().unwrap()], vec!["info"]] {
+        assert_refused(
+            polyspline().arg(cmd[0]).arg(&input).args(&cmd[1..]),
+            &[
+                "unnamed_side.msh",
+                "$Periodic link of entities",
+                "no physical group",
+            ],
+        );
+    }
+    assert!(!out.exists());
 }

@@ -24,7 +24,8 @@
 //!   are refused.
 //!
 //! Errors are one line naming the node's path (`/Base/Zone1/GridCoordinates: ...`).
-//! Write: [`mod@write`] (the curved mesh as one unstructured zone).
+//! Write: [`mod@write`] (the curved mesh as one unstructured zone, its periodic pairs as
+//! grid connectivity with `Periodic_t`, [`periodic`]).
 //!
 //! Parts: `tree` the node tree (HDF5 or ADF) and its memory bound, `adf` the ADF container,
 //! `zone` one zone, `ordering` the CGNS node orders, `write` the writer; this module the base,
@@ -32,6 +33,7 @@
 
 mod adf;
 pub mod ordering;
+mod periodic;
 mod tree;
 pub mod write;
 mod zone;

@@ -3,14 +3,17 @@
 //! Input: a high-order mesh of order 1–4 (the orders CGNS defines for quadrilaterals and
 //! hexahedra). Output: the bytes of a CGNS/HDF5 file (HDF5 1.8 format, read by the CGNS
 //! library 3.4 and later and by Gmsh) holding
-//! * `GridCoordinates` (`CoordinateX/Y[/Z]`, double; Z is left out of a planar 2D mesh);
+//! * `GridCoordinates` (`CoordinateX/Y[/Z]`, double; Z is left out of a planar 2D mesh
+//!   unless it has a rotational periodic pair);
 //! * one `Elements_t` section per volume group (`QUAD_4/9/16/25` or `HEXA_8/27/64/125`), then
 //!   one per boundary group (`BAR_n` in 2D, `QUAD_n` in 3D), nodes in CGNS order
 //!   ([`super::ordering`]), element ids consecutive over the sections;
 //! * a `BC_t` per boundary group in `ZoneBC` (`PointRange` over its section's ids,
 //!   `GridLocation` `EdgeCenter`/`FaceCenter`) with a `FamilyName`, and a `Family_t` of that
 //!   name in the base (holding a `FamilyName_t` of the same name, from which Gmsh makes its
-//!   physical group); the volume sections' names and families are the volume groups'.
+//!   physical group); the volume sections' names and families are the volume groups';
+//! * with periodic pairs, a `ZoneGridConnectivity` of `GridConnectivity_t` with `Periodic_t`
+//!   per pair and direction ([`super::periodic`]).
 //!
 //! Groups and their names are those of the MSH writer ([`crate::io::gmsh_write`]): the input's
 //! tag names, `boundary`/`untagged` for untagged facets, the volume named `fluid` (or the
@@ -35,13 +38,13 @@ pub fn unsupported(mesh: &HighOrderMesh) -> Option<String> {
     })
 }
 
-fn text(s: &str, width: u32) -> AttrValue {
+pub(super) fn text(s: &str, width: u32) -> AttrValue {
     // Names are ASCII and at most 32 bytes (`cgns_name`); labels and types are fixed.
     AttrValue::ascii_string_sized(s, width).expect("CGNS attribute within its width")
 }
 
 /// A CGNS node: a group with the `name`, `label`, `type` and `flags` attributes.
-fn node(name: &str, label: &str, ty: &str) -> GroupBuilder {
+pub(super) fn node(name: &str, label: &str, ty: &str) -> GroupBuilder {
     let mut g = FileBuilder::new().create_group(name);
     g.set_attr("name", text(name, 33));
     g.set_attr("label", text(label, 33));
@@ -50,12 +53,12 @@ fn node(name: &str, label: &str, ty: &str) -> GroupBuilder {
     g
 }
 
-fn chars(s: &str) -> Vec<i8> {
+pub(super) fn chars(s: &str) -> Vec<i8> {
     s.bytes().map(|b| b as i8).collect()
 }
 
 /// A `C1` node holding `value`.
-fn string_node(name: &str, label: &str, value: &str) -> GroupBuilder {
+pub(super) fn string_node(name: &str, label: &str, value: &str) -> GroupBuilder {
     let mut g = node(name, label, "C1");
     g.create_dataset(" data")
         .with_i8_data(&chars(value))
@@ -64,7 +67,13 @@ fn string_node(name: &str, label: &str, value: &str) -> GroupBuilder {
 }
 
 /// An integer node of HDF5 shape `shape` (C order: the CGNS dimensions reversed).
-fn int_node(name: &str, label: &str, values: &[i64], shape: &[u64], wide: bool) -> GroupBuilder {
+pub(super) fn int_node(
+    name: &str,
+    label: &str,
+    values: &[i64],
+    shape: &[u64],
+    wide: bool,
+) -> GroupBuilder {
     let mut g = node(name, label, if wide { "I8" } else { "I4" });
     let d = g.create_dataset(" data");
     if wide {
@@ -78,7 +87,7 @@ fn int_node(name: &str, label: &str, values: &[i64], shape: &[u64], wide: bool) 
 
 /// `name` as a CGNS node name: printable ASCII without `/`, at most 32 bytes, not yet in
 /// `taken`.
-fn cgns_name(name: &str, taken: &mut Vec<String>) -> String {
+pub(super) fn cgns_name(name: &str, taken: &mut Vec<String>) -> String {
     let clean: String = name
         .chars()
         .map(|c| {
@@ -113,7 +122,11 @@ pub fn write_cgns(mesh: &HighOrderMesh, volume_name: &str, w: &mut impl Write) -
         return Err(io::Error::new(io::ErrorKind::InvalidInput, why));
     }
     let (d, p) = (mesh.dim, mesh.order);
-    let planar = d == 2 && mesh.nodes.iter().all(|x| x[2] == 0.0);
+    // A rotation's angle about z needs the third axis: a planar mesh with a rotational pair
+    // keeps its zero z.
+    let planar = d == 2
+        && mesh.nodes.iter().all(|x| x[2] == 0.0)
+        && mesh.periodic.iter().all(|l| l.transform.is_translation());
     let phys = if planar { 2 } else { 3 };
     let n_nodes = mesh.nodes.len();
     let n_cells = mesh.n_elements();
@@ -190,7 +203,12 @@ pub fn write_cgns(mesh: &HighOrderMesh, volume_name: &str, w: &mut impl Write) -
     let (fac_type, _) = cgns_type(d - 1, p).expect("order checked");
     let npe = mesh.nodes_per_element();
     let npf = mesh.nodes_per_facet();
-    let mut taken = vec!["ZoneType".into(), "GridCoordinates".into(), "ZoneBC".into()];
+    let mut taken = vec![
+        "ZoneType".into(),
+        "GridCoordinates".into(),
+        "ZoneBC".into(),
+        "ZoneGridConnectivity".into(),
+    ];
     // Family names are unique among the base's children, where the zone is `Zone`.
     let mut family_names = vec!["Zone".to_string()];
     let mut families = Vec::new();
@@ -261,6 +279,16 @@ pub fn write_cgns(mesh: &HighOrderMesh, volume_name: &str, w: &mut impl Write) -
         }
     }
     zone.add_group(zone_bc.finish());
+    let name_of = |tag: i32| {
+        plan.iter()
+            .find(|g| g.dim + 1 == d && g.tag == tag)
+            .map_or_else(|| format!("boundary_{tag}"), |g| g.name.clone())
+    };
+    if let Some(zgc) =
+        super::periodic::zone_connectivity(&mesh.periodic, "Zone", name_of, phys as usize, wide)
+    {
+        zone.add_group(zgc.finish());
+    }
     base.add_group(zone.finish());
     for f in &families {
         let mut fam = node(f, "Family_t", "MT");
