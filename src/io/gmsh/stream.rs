@@ -114,9 +114,16 @@ impl Source {
         })?;
         Ok(at)
     }
-    /// Skip the `bytes` of block `what`, checked against the file's length.
-    fn skip(&mut self, bytes: Option<u64>, what: &dyn Fn() -> String) -> Result<(), ParseError> {
+    /// Skip the `count` records of `record` bytes of block `what`, checked against the file's
+    /// length.
+    fn skip(
+        &mut self,
+        count: u64,
+        record: usize,
+        what: &dyn Fn() -> String,
+    ) -> Result<(), ParseError> {
         let at = self.pos()?;
+        let bytes = count.checked_mul(record as u64);
         match bytes.and_then(|b| at.checked_add(b)) {
             Some(end) if end <= self.len => self.seek(end),
             _ => Err(ParseError::at_byte(
@@ -244,21 +251,30 @@ impl Indexed {
         Ok(section_counts(&mut self.bin(&buf, at), item)?.0)
     }
 
+    /// The header bytes of block `blk` of `item` ("node" or "element"; the two headers have
+    /// the same size), with a decoder over them.
+    fn block_header<'b>(
+        &mut self,
+        buf: &'b mut Vec<u8>,
+        item: &str,
+        blk: u64,
+    ) -> Result<Bin<'b>, ParseError> {
+        let what = format!("the header of {item} block {}", blk + 1);
+        let at = self
+            .src
+            .bytes(buf, NodeBlockHeader::len(self.format.size_t), &what)?;
+        Ok(self.bin(buf, at))
+    }
+
     fn index_nodes(&mut self) -> Result<(), ParseError> {
         let sz = self.format.size_t;
         let blocks = self.counts("node")?;
         let mut buf = Vec::new();
         for blk in 0..blocks {
-            let what = format!("the header of node block {}", blk + 1);
-            let at = self.src.bytes(&mut buf, NodeBlockHeader::len(sz), &what)?;
-            let h = NodeBlockHeader::read(&mut self.bin(&buf, at), blk)?;
+            let h = NodeBlockHeader::read(&mut self.block_header(&mut buf, "node", blk)?, blk)?;
             let tags_at = self.src.pos()?;
             let stride = h.stride();
-            let bytes = h
-                .count
-                .checked_mul((sz + 8 * stride) as u64)
-                .filter(|&b| b <= self.src.len);
-            self.src.skip(bytes, &|| {
+            self.src.skip(h.count, sz + 8 * stride, &|| {
                 format!("node block {} ({} nodes)", blk + 1, h.count)
             })?;
             self.nodes.push(NodeBlock {
@@ -275,17 +291,13 @@ impl Indexed {
         let blocks = self.counts("element")?;
         let mut buf = Vec::new();
         for blk in 0..blocks {
-            let what = format!("the header of element block {}", blk + 1);
-            let at = self.src.bytes(&mut buf, NodeBlockHeader::len(sz), &what)?;
-            let h = ElementBlockHeader::read(&mut self.bin(&buf, at), blk)?;
-            let (_, npe) = element_type(i64::from(h.gmsh_type))
-                .map_err(|m| ParseError::at_byte(at as usize, m))?;
+            let mut b = self.block_header(&mut buf, "element", blk)?;
+            let at = b.at();
+            let h = ElementBlockHeader::read(&mut b, blk)?;
+            let (_, npe) =
+                element_type(i64::from(h.gmsh_type)).map_err(|m| ParseError::at_byte(at, m))?;
             let data_at = self.src.pos()?;
-            let bytes = h
-                .count
-                .checked_mul((sz * (1 + npe)) as u64)
-                .filter(|&b| b <= self.src.len);
-            self.src.skip(bytes, &|| {
+            self.src.skip(h.count, sz * (1 + npe), &|| {
                 format!("element block {} ({} elements)", blk + 1, h.count)
             })?;
             self.elements.push(ElementBlock {
