@@ -9,7 +9,7 @@
 //! the parts over the ranks.
 //!
 //! Parsing is the MSH parser family's ([`crate::io::gmsh::header_tags`] for the header,
-//! [`crate::io::gmsh::read_keeping_tags`] for the part, in the file's numbering, with the ghost
+//! `io::gmsh::read_keeping_tags` for the part, in the file's numbering, with the ghost
 //! entities of `$PartitionedEntities`); this module adds what is distributed: which files make
 //! the set, which element types a partitioned input may hold, and the ghost mark per cell.
 //! Invariant: a part's cells carry the physical tags [`crate::io::gmsh::read`] gives them.

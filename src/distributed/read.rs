@@ -10,7 +10,7 @@
 //! and vertex (its node tag). [`super::share`] decides which elements a rank owns.
 //!
 //! How it reads: the file is parsed by the MSH parser family's offset-indexed reader
-//! ([`crate::io::gmsh::stream`]: one pass over the section headers, then runs read at their
+//! (`io::gmsh::stream`: one pass over the section headers, then runs read at their
 //! offsets and streamed passes in chunks); this module adds what is distributed: each ghost
 //! ring is one streamed pass keeping the elements that touch a node of the previous rings; the
 //! tagged facets one streamed pass; the coordinates one pass keeping the needed tags. No rank

@@ -41,9 +41,9 @@
 //! are never trusted for allocation beyond what the remaining input can hold.
 //!
 //! Modes: [`read`] makes the serial reader's [`RawMesh`]; [`header_tags`] parses the sections
-//! before `$Nodes` only; [`read_keeping_tags`] (MSH 4, for Gmsh's partitioned files) keeps the
+//! before `$Nodes` only; `read_keeping_tags` (MSH 4, for Gmsh's partitioned files) keeps the
 //! file's numbering, the node tags, each cell's element and entity tag and the ghost entities;
-//! [`stream`] indexes a binary MSH 4.1 file without holding it and reads its blocks by
+//! `stream` indexes a binary MSH 4.1 file without holding it and reads its blocks by
 //! offset, for the ranks that each read a share of one file. All of them parse with the same
 //! section, block-header, entity, element-type and binary-decoding code, so a file means the
 //! same in every reader, and their errors name the place (line, byte) and the problem.
