@@ -3,7 +3,8 @@
 //! [`comm`] is the communication layer (rsmpi over the system MPI, or one process),
 //! [`read`] and [`share`] each rank's share of the input (its Morton part of the elements
 //! and the ghosts around it; [`read_parts`] and [`part_file`] the same from Gmsh's
-//! partitioned files), [`partition`] the element partition along a Morton curve, [`cg`] the fit's CG across ranks
+//! partitioned files; all of them parse with `io::gmsh`, the one MSH parser family, and keep
+//! only who reads what), [`partition`] the element partition along a Morton curve, [`cg`] the fit's CG across ranks
 //! (halo exchange of shared control points, global reductions), [`job`] the `curve` job
 //! stage by stage, [`mod@write`] the one output file written collectively and [`write_parts`]
 //! Gmsh's partitioned output (one file per rank). `docs/distributed.md` states what is distributed, what is replicated on

@@ -1,4 +1,4 @@
-//! One part of a Gmsh partitioned MSH 4.1 mesh (`NAME_<k>.msh`, as Gmsh writes them with
+//! One part of a Gmsh partitioned MSH 4 mesh (`NAME_<k>.msh`, as Gmsh writes them with
 //! `Mesh.PartitionSplitMeshFiles=1`), ASCII or binary, parsed whole.
 //!
 //! Input: a part's path. Outputs: whether a file is such a part ([`is_partitioned`]); the
@@ -7,9 +7,16 @@
 //! reader assigns it, whether the element's entity is one of Gmsh's ghost entities, node
 //! tags) and its nodes (tags, coordinates) (`read_part`). [`super::read_parts`] distributes
 //! the parts over the ranks.
+//!
+//! Parsing is the MSH parser family's ([`crate::io::gmsh::header_tags`] for the header,
+//! `io::gmsh::read_keeping_tags` for the part, in the file's numbering, with the ghost
+//! entities of `$PartitionedEntities`); this module adds what is distributed: which files make
+//! the set, which element types a partitioned input may hold, and the ghost mark per cell.
+//! Invariant: a part's cells carry the physical tags [`crate::io::gmsh::read`] gives them.
 
+use crate::io::gmsh::{HeaderTags, header_tags, read_keeping_tags};
 use crate::mesh::raw::{Location, ParseError};
-use std::collections::{BTreeMap, HashSet};
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 fn err(what: impl Into<String>) -> ParseError {
@@ -40,88 +47,6 @@ pub fn is_partitioned(path: &Path) -> bool {
     false
 }
 
-/// A byte cursor over an MSH 4.1 file, ASCII or binary (little-endian, 8-byte `size_t`).
-struct Cur<'a> {
-    b: &'a [u8],
-    at: usize,
-    binary: bool,
-}
-
-impl<'a> Cur<'a> {
-    fn eof() -> ParseError {
-        err("the file ends inside a section")
-    }
-    /// The next line, trimmed (`None` at the end).
-    fn line(&mut self) -> Option<&'a [u8]> {
-        if self.at >= self.b.len() {
-            return None;
-        }
-        let rest = &self.b[self.at..];
-        let n = rest
-            .iter()
-            .position(|&c| c == b'\n')
-            .map_or(rest.len(), |i| i + 1);
-        self.at += n;
-        Some(rest[..n].trim_ascii())
-    }
-    fn token(&mut self) -> Result<&'a str, ParseError> {
-        while self.at < self.b.len() && self.b[self.at].is_ascii_whitespace() {
-            self.at += 1;
-        }
-        let s = self.at;
-        while self.at < self.b.len() && !self.b[self.at].is_ascii_whitespace() {
-            self.at += 1;
-        }
-        if s == self.at {
-            return Err(Self::eof());
-        }
-        std::str::from_utf8(&self.b[s..self.at]).map_err(|_| err("a number is not text"))
-    }
-    fn raw<const N: usize>(&mut self) -> Result<[u8; N], ParseError> {
-        let s = self.b.get(self.at..self.at + N).ok_or_else(Self::eof)?;
-        self.at += N;
-        Ok(s.try_into().unwrap())
-    }
-    fn parse<T: std::str::FromStr>(&mut self) -> Result<T, ParseError> {
-        let t = self.token()?;
-        t.parse()
-            .map_err(|_| err(format!("'{t}' is not a number where one is expected")))
-    }
-    fn size(&mut self) -> Result<u64, ParseError> {
-        if self.binary {
-            Ok(u64::from_le_bytes(self.raw::<8>()?))
-        } else {
-            self.parse()
-        }
-    }
-    fn int(&mut self) -> Result<i32, ParseError> {
-        if self.binary {
-            Ok(i32::from_le_bytes(self.raw::<4>()?))
-        } else {
-            self.parse()
-        }
-    }
-    fn real(&mut self) -> Result<f64, ParseError> {
-        if self.binary {
-            Ok(f64::from_le_bytes(self.raw::<8>()?))
-        } else {
-            self.parse()
-        }
-    }
-    /// Skip to the line after `$End<name>`.
-    fn skip_section(&mut self, name: &str) -> Result<(), ParseError> {
-        let end = format!("\n$End{name}");
-        let rest = &self.b[self.at.saturating_sub(1)..];
-        let i = rest
-            .windows(end.len())
-            .position(|w| w == end.as_bytes())
-            .ok_or_else(|| err(format!("${name} has no $End{name}")))?;
-        self.at = self.at.saturating_sub(1) + i + 1;
-        self.line();
-        Ok(())
-    }
-}
-
 /// Elements of one Gmsh type read from a part: Gmsh tag, physical tag, whether its entity
 /// is a ghost entity, and node tags.
 #[derive(Default)]
@@ -142,178 +67,54 @@ pub(super) struct PartData {
     pub node_coords: Vec<[f64; 3]>,
 }
 
-/// The head of the file (the sections before `$Nodes`) and the offset of `$Nodes`' body.
-fn split_head(b: &[u8]) -> Result<(&[u8], usize), ParseError> {
-    let mut c = Cur {
-        b,
-        at: 0,
-        binary: false,
-    };
-    let mut partitioned = false;
-    loop {
-        let start = c.at;
-        match c.line() {
-            None => return Err(err("no $Nodes section")),
-            Some(b"$Nodes") => {
-                if !partitioned {
-                    return Err(err(
-                        "not a Gmsh partition (no $PartitionedEntities): give one part of a partitioned mesh (NAME_1.msh … NAME_K.msh), or a single binary MSH 4.1 file",
-                    ));
-                }
-                return Ok((&b[..start], c.at));
-            }
-            Some(b"$PartitionedEntities") => partitioned = true,
-            Some(_) => {}
-        }
+/// Check that a part's header is that of a Gmsh partition: MSH 4 with
+/// `$PartitionedEntities`; returns its number of partitions.
+fn partitions_of(head: &HeaderTags) -> Result<u64, ParseError> {
+    if !head.is_msh4() {
+        return Err(err(format!(
+            "partitioned input must be MSH 4.1; this part is {}",
+            head.describe_format()
+        )));
     }
-}
-
-/// The format line: (binary, ok) for MSH 4.1 with 8-byte `size_t`.
-fn format_of(head: &[u8]) -> Result<bool, ParseError> {
-    let mut c = Cur {
-        b: head,
-        at: 0,
-        binary: false,
-    };
-    while let Some(l) = c.line() {
-        if l == b"$MeshFormat" {
-            let f = String::from_utf8_lossy(c.line().unwrap_or_default()).to_string();
-            let v: Vec<&str> = f.split_whitespace().collect();
-            if v.len() != 3 || v[0] != "4.1" || v[2] != "8" {
-                return Err(err(format!(
-                    "partitioned input must be MSH 4.1 with 8-byte size_t; this part's format line is '{f}'"
-                )));
-            }
-            let binary = v[1] == "1";
-            if binary && c.raw::<4>().map(i32::from_le_bytes)? != 1 {
-                return Err(err("big-endian MSH files are not supported"));
-            }
-            return Ok(binary);
-        }
-    }
-    Err(err("no $MeshFormat section"))
-}
-
-/// The number of partitions and the ghost entities (dim is the mesh's, tags listed) of
-/// `$PartitionedEntities`.
-fn partition_header(head: &[u8], binary: bool) -> Result<(u64, HashSet<i32>), ParseError> {
-    let mut c = Cur {
-        b: head,
-        at: 0,
-        binary: false,
-    };
-    while let Some(l) = c.line() {
-        if l == b"$PartitionedEntities" {
-            c.binary = binary;
-            let parts = c.size()?;
-            let ghosts = c.size()?;
-            let mut tags = HashSet::new();
-            for _ in 0..ghosts {
-                tags.insert(c.int()?);
-                let _partition = c.int()?;
-            }
-            return Ok((parts, tags));
-        }
-    }
-    Err(err("no $PartitionedEntities section"))
+    head.entities.partitions().ok_or_else(|| {
+        err(
+            "not a Gmsh partition (no $PartitionedEntities): give one part of a partitioned mesh (NAME_1.msh … NAME_K.msh), or a single binary MSH 4.1 file",
+        )
+    })
 }
 
 /// Parse one part (see [`PartData`]).
 pub(super) fn read_part(path: &Path) -> Result<PartData, ParseError> {
+    let partitions = partitions_of(&header_tags(&head_of(path)?)?)?;
     let bytes = std::fs::read(path).map_err(|e| err(format!("read failed: {e}")))?;
-    let (head, nodes_at) = split_head(&bytes)?;
-    let binary = format_of(head)?;
-    let (partitions, ghosts) = partition_header(head, binary)?;
-    let tags = crate::io::gmsh::header_tags(head)?;
+    let m = read_keeping_tags(&bytes)?;
+    drop(bytes);
     let mut d = PartData {
         partitions,
+        node_tags: m.node_tags,
+        node_coords: m.points,
         ..PartData::default()
     };
-    let mut c = Cur {
-        b: &bytes,
-        at: nodes_at,
-        binary,
-    };
-    read_nodes(&mut c, &mut d)?;
-    c.binary = false;
-    c.skip_section("Nodes")?;
-    while let Some(l) = c.line() {
-        let l = String::from_utf8_lossy(l).to_string();
-        if l == "$Elements" {
-            c.binary = binary;
-            read_elements(&mut c, &mut d, &tags.entities, &ghosts)?;
-            c.binary = false;
-            c.skip_section("Elements")?;
-        } else if let Some(name) = l.strip_prefix('$') {
-            c.skip_section(name)?;
-        }
-    }
-    Ok(d)
-}
-
-fn read_nodes(c: &mut Cur, d: &mut PartData) -> Result<(), ParseError> {
-    let blocks = c.size()?;
-    let _n = c.size()?;
-    let _lo = c.size()?;
-    let _hi = c.size()?;
-    for _ in 0..blocks {
-        let dim = c.int()?;
-        let _tag = c.int()?;
-        let parametric = c.int()?;
-        let n = c.size()? as usize;
-        let first = d.node_tags.len();
-        for _ in 0..n {
-            d.node_tags.push(c.size()?);
-        }
-        let extra = if parametric != 0 { dim.max(0) } else { 0 };
-        for _ in first..first + n {
-            d.node_coords.push([c.real()?, c.real()?, c.real()?]);
-            for _ in 0..extra {
-                c.real()?;
-            }
-        }
-    }
-    Ok(())
-}
-
-fn read_elements(
-    c: &mut Cur,
-    d: &mut PartData,
-    entities: &crate::io::gmsh::EntityTags,
-    ghosts: &HashSet<i32>,
-) -> Result<(), ParseError> {
-    let blocks = c.size()?;
-    for _ in 0..3 {
-        c.size()?;
-    }
-    for _ in 0..blocks {
-        let dim = c.int()?;
-        let entity = c.int()?;
-        let kind = c.int()?;
-        let n = c.size()?;
-        let (npe, into) = match kind {
-            1 => (2, Some(&mut d.lines)),
-            3 => (4, Some(&mut d.quads)),
-            5 => (8, Some(&mut d.hexes)),
-            15 => (1, None),
-            _ => {
+    let entities = &m.header.entities;
+    for b in m.blocks {
+        let into = match b.gmsh_type {
+            1 => &mut d.lines,
+            3 => &mut d.quads,
+            5 => &mut d.hexes,
+            15 => continue,
+            kind => {
                 return Err(err(format!(
                     "element type {kind} in a partitioned input: polyspline curves linear quad (2D) and hex (3D) meshes"
                 )));
             }
         };
-        let physical = entities.physical_of(dim, entity);
-        let ghost = ghosts.contains(&entity);
-        let mut sink = Records::default();
-        let r = into.unwrap_or(&mut sink);
-        for _ in 0..n {
-            r.items.push((c.size()?, physical, ghost));
-            for _ in 0..npe {
-                r.nodes.push(c.size()?);
-            }
-        }
+        into.items.extend(
+            (b.element_tags.iter().zip(&b.physical).zip(&b.entities))
+                .map(|((&t, &p), &e)| (t, p, entities.is_ghost(e))),
+        );
+        into.nodes.extend(b.nodes);
     }
-    Ok(())
+    Ok(d)
 }
 
 /// The sections before `$Nodes` of the file at `path` (read line by line, not the whole file).
@@ -342,10 +143,9 @@ fn head_of(path: &Path) -> Result<Vec<u8>, ParseError> {
 /// is a part of, K from its `$PartitionedEntities`, and the names of its physical groups
 /// (every rank reads them from this part, whether it reads any part or not).
 pub fn part_names(path: &Path) -> Result<(Vec<PathBuf>, BTreeMap<i32, String>), ParseError> {
-    let head = head_of(path)?;
-    let tag_names = crate::io::gmsh::header_tags(&head)?.tag_names;
-    let binary = format_of(&head)?;
-    let (k, _) = partition_header(&head, binary)?;
+    let head = header_tags(&head_of(path)?)?;
+    let k = partitions_of(&head)?;
+    let tag_names = head.tag_names;
     let stem = path.file_stem().unwrap_or_default().to_string_lossy();
     let base = stem
         .rsplit_once('_')

@@ -1,67 +1,30 @@
-//! Reading a binary MSH 4.1 file by offsets: runs of elements, ghost rings, and a rank's
-//! ghosted sub-mesh.
+//! A rank's share of a binary MSH 4.1 file: runs of elements, ghost rings, and its ghosted
+//! sub-mesh.
 //!
-//! Input: the path of a binary (little-endian, 8-byte `size_t`) MSH 4.1 file of linear hexes
-//! (3D) or quads (2D) ([`MshFile::open`]). Outputs: a contiguous run of the file's elements
-//! ([`MshFile::run`]); the elements within g vertex rings of a set of elements
-//! ([`MshFile::ghosts`]); the coordinates of a set of nodes; and a [`LocalMesh`]: given own
-//! elements, ghosts and the ghosts' owners, the tagged boundary facets whose vertices are all
-//! present and only the nodes these use, with the global id of every element (its index among
-//! the file's elements) and vertex (its node tag). [`super::share`] decides which elements a
-//! rank owns.
+//! Input: the path of a binary MSH 4.1 file of linear hexes (3D) or quads (2D)
+//! ([`MshFile::open`]). Outputs: a contiguous run of the file's elements ([`MshFile::run`]);
+//! the elements within g vertex rings of a set of elements ([`MshFile::ghosts`]); the
+//! coordinates of a set of nodes; and a [`LocalMesh`]: given own elements, ghosts and the
+//! ghosts' owners, the tagged boundary facets whose vertices are all present and only the
+//! nodes these use, with the global id of every element (its index among the file's elements)
+//! and vertex (its node tag). [`super::share`] decides which elements a rank owns.
 //!
-//! How it reads: one pass over the section headers records where each node and element block
-//! starts (its records are skipped by seeking); a run is read at its offsets; each ghost ring
-//! is one streamed pass over the element blocks in chunks, keeping the elements that touch a
-//! node of the previous rings; the tagged facets are one streamed pass; the coordinates one
-//! streamed pass over the node blocks keeping the needed tags. No rank ever holds more than
-//! its elements, ghosts and their nodes, plus one chunk.
+//! How it reads: the file is parsed by the MSH parser family's offset-indexed reader
+//! (`io::gmsh::stream`: one pass over the section headers, then runs read at their
+//! offsets and streamed passes in chunks); this module adds what is distributed: each ghost
+//! ring is one streamed pass keeping the elements that touch a node of the previous rings; the
+//! tagged facets one streamed pass; the coordinates one pass keeping the needed tags. No rank
+//! ever holds more than its elements, ghosts and their nodes, plus one chunk.
 //!
 //! Invariant: the local mesh is what the serial reader ([`crate::io::read_mesh`]) makes of
 //! the file restricted to these elements: the same element tags (the entity's first physical
 //! tag), the same facet tags and group names, the same orientation fix per element.
 
+use crate::io::gmsh::stream::{Head, Indexed};
 use crate::mesh::raw::{CellKind, Location, ParseError, RawBlock, RawMesh};
 use crate::mesh::{LinearMesh, MeshOptions};
-use std::collections::{BTreeMap, HashMap, HashSet};
-use std::fs::File;
-use std::io::{BufRead, BufReader, Read, Seek, SeekFrom};
+use std::collections::{HashMap, HashSet};
 use std::path::Path;
-
-/// Records read per chunk of a streamed pass.
-const CHUNK: usize = 1 << 14;
-
-/// One block of `$Nodes`.
-#[derive(Clone, Debug)]
-struct NodeBlock {
-    n: u64,
-    /// Offset of the node tags; the coordinates follow at `tags_at + 8 n`.
-    tags_at: u64,
-    /// Doubles per node (3, plus the parametric coordinates of parametric blocks).
-    stride: usize,
-}
-
-/// One block of `$Elements`.
-#[derive(Clone, Debug)]
-struct ElementBlock {
-    /// Gmsh element type.
-    kind: i32,
-    /// Physical tag of its entity (0: none).
-    physical: i32,
-    n: u64,
-    /// Nodes per element.
-    npe: usize,
-    /// Offset of its first record (tag, then `npe` node tags, all `size_t`).
-    data_at: u64,
-}
-
-/// Where everything is in the file.
-#[derive(Debug, Default)]
-struct Index {
-    tag_names: BTreeMap<i32, String>,
-    nodes: Vec<NodeBlock>,
-    elements: Vec<ElementBlock>,
-}
 
 /// A rank's elements and ghosts (see the module docs).
 pub struct LocalMesh {
@@ -96,337 +59,6 @@ fn err(what: impl Into<String>) -> ParseError {
     ParseError::new(Location::File, what)
 }
 
-fn io_err(e: std::io::Error) -> ParseError {
-    err(format!("read failed: {e}"))
-}
-
-/// Nodes per element of the Gmsh types a linear quad/hex file may hold.
-fn nodes_per_element(kind: i32) -> Result<usize, ParseError> {
-    Ok(match kind {
-        15 => 1,
-        1 => 2,
-        2 => 3,
-        3 => 4,
-        4 => 4,
-        5 => 8,
-        6 => 6,
-        7 => 5,
-        8 => 3,
-        9 => 6,
-        10 => 9,
-        11 => 10,
-        12 => 27,
-        16 => 8,
-        17 => 20,
-        _ => {
-            return Err(err(format!(
-                "element type {kind} is not supported by the rank-local reader"
-            )));
-        }
-    })
-}
-
-struct Reader {
-    r: BufReader<File>,
-}
-
-impl Reader {
-    fn line(&mut self) -> Result<Option<String>, ParseError> {
-        let mut buf = Vec::new();
-        let n = self.r.read_until(b'\n', &mut buf).map_err(io_err)?;
-        if n == 0 {
-            return Ok(None);
-        }
-        Ok(Some(String::from_utf8_lossy(&buf).trim().to_string()))
-    }
-    /// The next non-empty line.
-    fn token_line(&mut self) -> Result<Option<String>, ParseError> {
-        while let Some(l) = self.line()? {
-            if !l.is_empty() {
-                return Ok(Some(l));
-            }
-        }
-        Ok(None)
-    }
-    fn expect_end(&mut self, name: &str) -> Result<(), ParseError> {
-        match self.token_line()? {
-            Some(l) if l == format!("$End{name}") => Ok(()),
-            other => Err(err(format!(
-                "expected $End{name}, found {}",
-                other.unwrap_or_else(|| "the end of the file".into())
-            ))),
-        }
-    }
-    fn bytes<const N: usize>(&mut self) -> Result<[u8; N], ParseError> {
-        let mut b = [0u8; N];
-        self.r
-            .read_exact(&mut b)
-            .map_err(|_| err("the file ends inside a binary section"))?;
-        Ok(b)
-    }
-    fn i32(&mut self) -> Result<i32, ParseError> {
-        Ok(i32::from_le_bytes(self.bytes::<4>()?))
-    }
-    fn size(&mut self) -> Result<u64, ParseError> {
-        Ok(u64::from_le_bytes(self.bytes::<8>()?))
-    }
-    fn pos(&mut self) -> Result<u64, ParseError> {
-        self.r.stream_position().map_err(io_err)
-    }
-    fn skip(&mut self, bytes: u64) -> Result<(), ParseError> {
-        let bytes = i64::try_from(bytes).map_err(|_| err("a block size overflows"))?;
-        self.r.seek_relative(bytes).map_err(io_err)
-    }
-    fn seek(&mut self, at: u64) -> Result<(), ParseError> {
-        self.r.seek(SeekFrom::Start(at)).map(|_| ()).map_err(io_err)
-    }
-    /// `n` little-endian u64 at the current position.
-    fn sizes(&mut self, out: &mut Vec<u64>, n: usize) -> Result<(), ParseError> {
-        let mut b = vec![0u8; 8 * n];
-        self.r
-            .read_exact(&mut b)
-            .map_err(|_| err("the file ends inside a binary section"))?;
-        out.clear();
-        out.extend(
-            b.chunks_exact(8)
-                .map(|c| u64::from_le_bytes(c.try_into().unwrap())),
-        );
-        Ok(())
-    }
-}
-
-fn open(path: &Path) -> Result<Reader, ParseError> {
-    let f = File::open(path).map_err(io_err)?;
-    Ok(Reader {
-        r: BufReader::with_capacity(1 << 16, f),
-    })
-}
-
-/// The sections before `$Nodes`, as bytes, with the format checked: what the rank-local
-/// reader can read, and no partitioned file.
-fn head(r: &mut Reader) -> Result<Vec<u8>, ParseError> {
-    let mut head = Vec::new();
-    let mut buf = Vec::new();
-    loop {
-        buf.clear();
-        if r.r.read_until(b'\n', &mut buf).map_err(io_err)? == 0 {
-            return Err(err("no $Nodes section"));
-        }
-        let line = String::from_utf8_lossy(&buf);
-        match line.trim() {
-            "$Nodes" => break,
-            "$PartitionedEntities" => {
-                return Err(err(
-                    "a partitioned MSH file: give the partition files IN_1.msh … IN_N.msh as IN.msh (one per rank)",
-                ));
-            }
-            "$MeshFormat" if head.is_empty() => {
-                head.extend_from_slice(&buf);
-                buf.clear();
-                r.r.read_until(b'\n', &mut buf).map_err(io_err)?;
-                let line = String::from_utf8_lossy(&buf);
-                let f: Vec<&str> = line.split_whitespace().collect();
-                if f.len() != 3 || f[0] != "4.1" || f[1] != "1" || f[2] != "8" {
-                    return Err(err(format!(
-                        "the rank-local reader reads binary MSH 4.1 with 8-byte size_t; this file's format line is '{}' (convert it with gmsh -format msh41 -bin, or run on one process)",
-                        line.trim()
-                    )));
-                }
-                head.extend_from_slice(&buf);
-                let one = r.bytes::<4>()?;
-                if i32::from_le_bytes(one) != 1 {
-                    return Err(err("big-endian MSH files are not supported"));
-                }
-                head.extend_from_slice(&one);
-                continue;
-            }
-            _ => {}
-        }
-        head.extend_from_slice(&buf);
-    }
-    Ok(head)
-}
-
-/// The header pass: format, names, entities' physical tags (parsed by the serial reader's
-/// [`crate::io::gmsh::header_tags`]), and the blocks' offsets.
-fn index(path: &Path) -> Result<Index, ParseError> {
-    let mut r = open(path)?;
-    let head = head(&mut r)?;
-    if !head.starts_with(b"$MeshFormat") {
-        return Err(err("no $MeshFormat section"));
-    }
-    let tags = crate::io::gmsh::header_tags(&head)?;
-    drop(head);
-    let mut ix = Index {
-        tag_names: tags.tag_names,
-        ..Index::default()
-    };
-    // `head` stopped at the `$Nodes` line.
-    let mut next = Some("$Nodes".to_string());
-    while let Some(l) = next {
-        match l.as_str() {
-            "$Nodes" => {
-                let blocks = r.size()?;
-                let _n = r.size()?;
-                r.skip(16)?;
-                for _ in 0..blocks {
-                    let dim = r.i32()?;
-                    let _tag = r.i32()?;
-                    let parametric = r.i32()?;
-                    let n = r.size()?;
-                    let stride = 3 + if parametric != 0 {
-                        dim.max(0) as usize
-                    } else {
-                        0
-                    };
-                    let tags_at = r.pos()?;
-                    ix.nodes.push(NodeBlock { n, tags_at, stride });
-                    r.skip(8 * n + 8 * n * stride as u64)?;
-                }
-                r.expect_end("Nodes")?;
-            }
-            "$Elements" => {
-                let blocks = r.size()?;
-                r.skip(24)?;
-                for _ in 0..blocks {
-                    let dim = r.i32()?;
-                    let tag = r.i32()?;
-                    let kind = r.i32()?;
-                    let n = r.size()?;
-                    let npe = nodes_per_element(kind)?;
-                    let data_at = r.pos()?;
-                    ix.elements.push(ElementBlock {
-                        kind,
-                        physical: tags.entities.physical_of(dim, tag),
-                        n,
-                        npe,
-                        data_at,
-                    });
-                    r.skip(8 * n * (1 + npe as u64))?;
-                }
-                r.expect_end("Elements")?;
-            }
-            s if s.starts_with('$') => {
-                // Another section: skip to its end line.
-                let end = format!("$End{}", &s[1..]);
-                loop {
-                    match r.line()? {
-                        Some(l) if l == end => break,
-                        Some(_) => {}
-                        None => return Err(err(format!("{s} has no {end}"))),
-                    }
-                }
-            }
-            other => return Err(err(format!("unexpected line '{other}' between sections"))),
-        }
-        next = r.token_line()?;
-    }
-    Ok(ix)
-}
-
-/// Calls `f(global index, physical tag, nodes)` for every element of Gmsh type `kind`, in
-/// file order, reading `CHUNK` records at a time.
-fn stream(
-    r: &mut Reader,
-    ix: &Index,
-    kind: i32,
-    mut f: impl FnMut(u64, i32, &[u64]),
-) -> Result<(), ParseError> {
-    let mut g = 0u64;
-    let mut buf = Vec::new();
-    for b in ix.elements.iter().filter(|b| b.kind == kind) {
-        r.seek(b.data_at)?;
-        let rec = 1 + b.npe;
-        let mut left = b.n;
-        while left > 0 {
-            let k = left.min(CHUNK as u64) as usize;
-            r.sizes(&mut buf, k * rec)?;
-            for c in buf.chunks_exact(rec) {
-                f(g, b.physical, &c[1..]);
-                g += 1;
-            }
-            left -= k as u64;
-        }
-    }
-    Ok(())
-}
-
-/// Elements `lo..hi` (global indices among those of type `kind`), read at their offsets.
-fn read_range(
-    r: &mut Reader,
-    ix: &Index,
-    kind: i32,
-    lo: u64,
-    hi: u64,
-    mut f: impl FnMut(u64, i32, &[u64]),
-) -> Result<(), ParseError> {
-    let mut first = 0u64;
-    let mut buf = Vec::new();
-    for b in ix.elements.iter().filter(|b| b.kind == kind) {
-        let (s, e) = (lo.max(first), hi.min(first + b.n));
-        if s < e {
-            let rec = 1 + b.npe;
-            r.seek(b.data_at + 8 * (s - first) * rec as u64)?;
-            let mut g = s;
-            while g < e {
-                let k = (e - g).min(CHUNK as u64) as usize;
-                r.sizes(&mut buf, k * rec)?;
-                for c in buf.chunks_exact(rec) {
-                    f(g, b.physical, &c[1..]);
-                    g += 1;
-                }
-            }
-        }
-        first += b.n;
-    }
-    Ok(())
-}
-
-/// The coordinates of the nodes in `have`, in file order, read block by block in chunks (a
-/// chunk's coordinates are read only when one of its tags is needed). Fails when a needed node
-/// is not defined.
-fn read_coordinates(
-    r: &mut Reader,
-    ix: &Index,
-    have: &HashSet<u64>,
-) -> Result<(Vec<u64>, Vec<[f64; 3]>), ParseError> {
-    let mut global_vertex: Vec<u64> = Vec::with_capacity(have.len());
-    let mut points: Vec<[f64; 3]> = Vec::with_capacity(have.len());
-    let mut tag_buf = Vec::new();
-    let mut xyz_buf = Vec::new();
-    for b in &ix.nodes {
-        let mut done = 0u64;
-        while done < b.n {
-            let k = (b.n - done).min(CHUNK as u64) as usize;
-            r.seek(b.tags_at + 8 * done)?;
-            r.sizes(&mut tag_buf, k)?;
-            if tag_buf.iter().any(|t| have.contains(t)) {
-                r.seek(b.tags_at + 8 * b.n + 8 * done * b.stride as u64)?;
-                r.sizes(&mut xyz_buf, k * b.stride)?;
-                for (i, t) in tag_buf.iter().enumerate() {
-                    if have.contains(t) {
-                        let x = &xyz_buf[i * b.stride..i * b.stride + 3];
-                        global_vertex.push(*t);
-                        points.push([
-                            f64::from_bits(x[0]),
-                            f64::from_bits(x[1]),
-                            f64::from_bits(x[2]),
-                        ]);
-                    }
-                }
-            }
-            done += k as u64;
-        }
-    }
-    if global_vertex.len() != have.len() {
-        return Err(err(format!(
-            "{} node(s) used by the elements are not defined in $Nodes",
-            have.len() - global_vertex.len()
-        )));
-    }
-    Ok((global_vertex, points))
-}
-
 /// Elements read from the file: global index, physical tag and node tags of each.
 #[derive(Debug, Default)]
 pub struct Elements {
@@ -446,8 +78,7 @@ impl Elements {
 
 /// An indexed binary MSH 4.1 file of hexes (3D) or quads (2D), read by offsets.
 pub struct MshFile {
-    r: Reader,
-    ix: Index,
+    ix: Indexed,
     /// Gmsh types of the cells and of their facets.
     kind: i32,
     facet_kind: i32,
@@ -459,13 +90,26 @@ pub struct MshFile {
 }
 
 impl MshFile {
-    /// Index the file and check it holds only quads or only hexes among its cells.
+    /// Index the file (binary MSH 4.1, not one of Gmsh's partitions) and check it holds only
+    /// quads or only hexes among its cells.
     pub fn open(path: &Path) -> Result<MshFile, ParseError> {
-        let ix = index(path)?;
+        let head = Head::open(path)?;
+        if !head.header.is_binary_41() {
+            return Err(err(format!(
+                "the rank-local reader reads binary MSH 4.1; this file is {} (convert it with gmsh -format msh41 -bin, or run on one process)",
+                head.header.describe_format()
+            )));
+        }
+        if head.header.entities.partitions().is_some() {
+            return Err(err(
+                "a partitioned MSH file: give the partition files IN_1.msh … IN_N.msh as IN.msh (one per rank)",
+            ));
+        }
+        let ix = head.index()?;
         let count = |k: i32| -> u64 {
             ix.elements
                 .iter()
-                .filter(|b| b.kind == k)
+                .filter(|b| b.gmsh_type == k)
                 .map(|b| b.n)
                 .sum()
         };
@@ -476,15 +120,12 @@ impl MshFile {
         } else {
             return Err(err("no hexahedra or quadrilaterals in the file"));
         };
+        // Cells of the mesh's dimension of another type (tets, prisms, high-order hexes...).
         for b in &ix.elements {
-            let bad = match dim {
-                3 => matches!(b.kind, 4..=7 | 11..=14 | 16..=19),
-                _ => matches!(b.kind, 2 | 9 | 10 | 16),
-            } && b.kind != kind;
-            if bad && b.n > 0 {
+            if b.dim == dim as i32 && b.gmsh_type != kind && b.n > 0 {
                 return Err(err(format!(
                     "element type {} next to the {}: polyspline curves linear quad (2D) and hex (3D) meshes",
-                    b.kind,
+                    b.gmsh_type,
                     if dim == 3 {
                         "hexahedra"
                     } else {
@@ -495,7 +136,6 @@ impl MshFile {
         }
         let n_global = count(kind);
         Ok(MshFile {
-            r: open(path)?,
             ix,
             kind,
             facet_kind,
@@ -508,9 +148,8 @@ impl MshFile {
     /// Cells `lo..hi` (file order), read at their offsets.
     pub fn run(&mut self, lo: u64, hi: u64) -> Result<Elements, ParseError> {
         let mut out = Elements::default();
-        read_range(&mut self.r, &self.ix, self.kind, lo, hi, |g, p, v| {
-            out.push(g, p, v)
-        })?;
+        self.ix
+            .range(self.kind, lo, hi, |g, p, v| out.push(g, p, v))?;
         Ok(out)
     }
 
@@ -522,7 +161,7 @@ impl MshFile {
         let mut out = Elements::default();
         for _ in 0..depth {
             let before = out.global.len();
-            stream(&mut self.r, &self.ix, self.kind, |g, p, v| {
+            self.ix.for_each(self.kind, |g, p, v| {
                 if !seen.contains(&g) && v.iter().any(|t| have.contains(t)) {
                     seen.insert(g);
                     out.push(g, p, v);
@@ -542,7 +181,7 @@ impl MshFile {
         &mut self,
         have: &HashSet<u64>,
     ) -> Result<(Vec<u64>, Vec<[f64; 3]>), ParseError> {
-        read_coordinates(&mut self.r, &self.ix, have)
+        self.ix.coordinates(have)
     }
 
     /// The [`LocalMesh`] of `own` then `ghosts` (`owner`: the rank of each ghost), with the
@@ -568,14 +207,14 @@ impl MshFile {
         // Tagged facets among the present nodes.
         let mut facets: Vec<u64> = Vec::new();
         let mut facet_tags: Vec<i32> = Vec::new();
-        stream(&mut self.r, &self.ix, self.facet_kind, |_, p, v| {
+        self.ix.for_each(self.facet_kind, |_, p, v| {
             if p != 0 && v.iter().all(|t| have.contains(t)) {
                 facets.extend_from_slice(v);
                 facet_tags.push(p);
             }
         })?;
 
-        let (global_vertex, points) = read_coordinates(&mut self.r, &self.ix, &have)?;
+        let (global_vertex, points) = self.ix.coordinates(&have)?;
         drop(have);
         // Named by the file's node tag (the mesh check below knows only local indices).
         for (p, &t) in points.iter().zip(&global_vertex) {
@@ -611,7 +250,7 @@ impl MshFile {
             blocks: vec![block, fblock],
             // The ranks' readers do not read `$Periodic`.
             periodic: Vec::new(),
-            tag_names: self.ix.tag_names.clone(),
+            tag_names: self.ix.header.tag_names.clone(),
         };
         let mesh = LinearMesh::from_raw(raw, options)?;
         debug_assert_eq!(mesh.unused_vertices, 0);
@@ -632,6 +271,7 @@ mod tests {
     use crate::io::gmsh_write::{MshVersion, write_msh};
     use crate::mesh::Topology;
     use crate::mesh::generate::{Kind, generate};
+    use std::fs::File;
 
     /// A generated cylinder written as binary MSH 4.1, and the serial reader's mesh of it.
     fn cylinder(name: &str) -> (std::path::PathBuf, LinearMesh) {

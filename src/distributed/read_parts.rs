@@ -76,8 +76,11 @@ fn read_mine(comm: &dyn Comm, parts: &[PathBuf]) -> Result<Read, ParseError> {
     let (lo, hi) = (rank * k / size, (rank + 1) * k / size);
     let mut data = Vec::new();
     let read = (lo..hi).try_for_each(|i| {
-        let d = read_part(&parts[i])
-            .map_err(|e| err(format!("{}: {}", parts[i].display(), e.message)))?;
+        // The part's name and the place in it (line or byte) where the parser stopped.
+        let d = read_part(&parts[i]).map_err(|e| match e.location {
+            Location::File => err(format!("{}: {}", parts[i].display(), e.message)),
+            _ => err(format!("{}: {e}", parts[i].display())),
+        })?;
         if d.partitions != k as u64 {
             return Err(err(format!(
                 "{} declares {} partitions, {} declares {k}: the parts are not of one partitioned mesh",

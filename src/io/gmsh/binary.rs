@@ -4,6 +4,8 @@
 //! declared. Output: integers and floats, or a [`ParseError`] at the byte offset where the data
 //! ran out. Invariant: no read goes past the end of the input, and [`Bin::room`] refuses a count
 //! whose records cannot fit in what is left, so no allocation follows an absurd header count.
+//! The streamed reader ([`super::stream`]) decodes pieces of a file read at an offset: `base`
+//! is that offset, so its errors name bytes of the file too.
 
 use crate::mesh::raw::ParseError;
 
@@ -12,11 +14,18 @@ use crate::mesh::raw::ParseError;
 pub(super) struct Bin<'a> {
     pub(super) data: &'a [u8],
     pub(super) pos: usize,
+    /// Offset in the file of `data[0]` (0 when `data` is the whole file).
+    pub(super) base: usize,
     pub(super) big_endian: bool,
     pub(super) size_t: usize,
 }
 
 impl<'a> Bin<'a> {
+    /// The file offset of the next byte.
+    pub(super) fn at(&self) -> usize {
+        self.base + self.pos
+    }
+
     pub(super) fn remaining(&self) -> usize {
         self.data.len() - self.pos
     }
@@ -36,7 +45,7 @@ impl<'a> Bin<'a> {
                 Ok(s)
             }
             None => Err(ParseError::at_byte(
-                self.pos,
+                self.at(),
                 format!(
                     "expected {} ({n} bytes), but the file ends after {} more bytes",
                     what(),
@@ -55,7 +64,7 @@ impl<'a> Bin<'a> {
         match total {
             Some(t) if t <= self.remaining() => Ok(t),
             _ => Err(ParseError::at_byte(
-                self.pos,
+                self.at(),
                 format!(
                     "{count} {what} of {record} bytes each do not fit in the {} bytes left in the file",
                     self.remaining()

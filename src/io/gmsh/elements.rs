@@ -3,12 +3,39 @@
 //! Input: the section body and the [`NodeMap`] of the `$Nodes` section before it. Output: one
 //! [`RawBlock`](crate::mesh::raw::RawBlock) per element type in `Reader::blocks`, node tags mapped
 //! to 0-based positions, each cell tagged with its physical group (MSH 1/2: the first integer
-//! tag; MSH 4: the entity's physical tag). Invariant: an element naming a node tag `$Nodes` did
-//! not define is an error at that line (byte offset in binary sections).
+//! tag; MSH 4: the entity's physical tag). In the tag-keeping mode (MSH 4), cells keep the
+//! file's node tags, and `Reader::keep` gets each cell's element tag and entity tag.
+//! Invariant: an element naming a node tag `$Nodes` did not define is an error at that line
+//! (byte offset in binary sections). [`ElementBlockHeader`] reads binary MSH 4.1 block headers
+//! for this parser and for the streamed one ([`super::stream`]).
 
-use super::nodes::NodeMap;
+use super::binary::Bin;
+use super::nodes::{NodeMap, section_counts};
 use super::{Reader, Version, capped, to_i32};
 use crate::mesh::raw::{Location, ParseError};
+
+/// The header of a binary MSH 4.1 `$Elements` entity block (as many bytes as
+/// [`super::nodes::NodeBlockHeader::len`]): entity dimension and tag, Gmsh element type,
+/// element count. `count` records follow, each the element tag and its nodes' tags (`size_t`).
+pub(super) struct ElementBlockHeader {
+    pub(super) dim: i32,
+    pub(super) entity: i32,
+    pub(super) gmsh_type: i32,
+    pub(super) count: u64,
+}
+
+impl ElementBlockHeader {
+    /// Read the header of element block `blk` (0-based).
+    pub(super) fn read(b: &mut Bin, blk: u64) -> Result<Self, ParseError> {
+        let what = || format!("header of element block {}", blk + 1);
+        Ok(ElementBlockHeader {
+            dim: b.i32(&what)?,
+            entity: b.i32(&what)?,
+            gmsh_type: b.i32(&what)?,
+            count: b.size(&what)?,
+        })
+    }
+}
 
 impl Reader<'_> {
     /// Remember the physical tag of the first element of elementary entity `entity` of the
@@ -87,7 +114,7 @@ impl Reader<'_> {
                         "element {id} refers to node {t}, which $Nodes does not define"
                     )));
                 };
-                block.nodes.push(i64::from(v));
+                block.nodes.push(v);
             }
             block.tags.push(physical);
             block.locations.push(loc);
@@ -154,7 +181,7 @@ impl Reader<'_> {
                             ),
                         ));
                     };
-                    block.nodes.push(i64::from(v));
+                    block.nodes.push(v);
                 }
                 block.tags.push(physical);
                 block.locations.push(Location::Byte(at));
@@ -199,6 +226,8 @@ impl Reader<'_> {
             let bi = self.blocks.index(ty, type_loc)?;
             let block = &mut self.blocks.list[bi].1;
             let npe = block.nodes_per_cell;
+            let mut kept = self.keep.as_mut().map(|k| k.cells(bi));
+            let entity = i32::try_from(etag).unwrap_or(0);
             let c = &mut self.c;
             let remaining = c.data().len() - c.pos();
             block
@@ -213,6 +242,9 @@ impl Reader<'_> {
                     )
                 })?;
                 let loc = c.location();
+                if let Some(k) = kept.as_mut() {
+                    k.push(id, entity);
+                }
                 for k in 0..npe {
                     let t =
                         c.parse_or::<u64>(|| format!("node {} of {npe} of element {id}", k + 1))?;
@@ -221,7 +253,7 @@ impl Reader<'_> {
                             "element {id} refers to node {t}, which $Nodes does not define"
                         )));
                     };
-                    block.nodes.push(i64::from(v));
+                    block.nodes.push(v);
                 }
                 block.tags.push(physical);
                 block.locations.push(loc);
@@ -240,22 +272,17 @@ impl Reader<'_> {
         self.c.skip_line();
         let mut b = self.bin();
         let sz = b.size_t;
-        let blocks = b.size(&|| "number of element entity blocks".into())?;
-        let total = b.size(&|| "number of elements".into())?;
-        b.size(&|| "minimum element tag".into())?;
-        b.size(&|| "maximum element tag".into())?;
+        let (blocks, total) = section_counts(&mut b, "element")?;
         let mut read = 0u64;
         for blk in 0..blocks {
-            let what = || format!("header of element block {}", blk + 1);
             let header_at = b.pos;
-            let dim = b.i32(&what)?;
-            let etag = b.i32(&what)?;
-            let ty = b.i32(&what)?;
-            let count = b.size(&what)?;
-            let physical = self.entities.physical_of(dim, etag);
+            let h = ElementBlockHeader::read(&mut b, blk)?;
+            let count = h.count;
+            let physical = self.entities.physical_of(h.dim, h.entity);
             let bi = self
                 .blocks
-                .index(i64::from(ty), Location::Byte(header_at))?;
+                .index(i64::from(h.gmsh_type), Location::Byte(header_at))?;
+            let mut kept = self.keep.as_mut().map(|k| k.cells(bi));
             let block = &mut self.blocks.list[bi].1;
             let npe = block.nodes_per_cell;
             let rec = sz * (1 + npe);
@@ -265,6 +292,9 @@ impl Reader<'_> {
             block.nodes.reserve(count as usize * npe);
             for (e, r) in data.chunks_exact(rec).enumerate() {
                 let at = start + e * rec;
+                if let Some(k) = kept.as_mut() {
+                    k.push(b.dec_size(r), h.entity);
+                }
                 for node in r[sz..].chunks_exact(sz) {
                     let t = b.dec_size(node);
                     let Some(v) = nodes.get(t) else {
@@ -276,7 +306,7 @@ impl Reader<'_> {
                             ),
                         ));
                     };
-                    block.nodes.push(i64::from(v));
+                    block.nodes.push(v);
                 }
                 block.tags.push(physical);
                 block.locations.push(Location::Byte(at));

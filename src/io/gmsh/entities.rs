@@ -2,12 +2,14 @@
 //!
 //! Input: the section body, ASCII or binary. Output: [`EntityTags`] (first physical tag of
 //! each (dimension, entity tag), 0 when none, and the parent of each partitioned entity
-//! without physical tags), read by [`EntityTags::physical_of`] when element blocks are tagged.
+//! without physical tags), read by [`EntityTags::physical_of`] when element blocks are tagged;
+//! from `$PartitionedEntities` also the number of partitions and the ghost entities' tags (the
+//! partitioned-input reader drops the cells of those entities: another part owns them).
 
 use super::binary::Bin;
 use super::{Reader, Version, to_i32};
 use crate::mesh::raw::ParseError;
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 
 /// The physical tag of every entity of `$Entities` and `$PartitionedEntities`.
 #[derive(Clone, Debug, Default)]
@@ -16,6 +18,10 @@ pub struct EntityTags {
     physical: HashMap<(i32, i32), i32>,
     /// Parent (dimension, tag) of each partitioned entity that has no physical tag itself.
     parent: HashMap<(i32, i32), (i32, i32)>,
+    /// The number of partitions of `$PartitionedEntities` (None without that section).
+    partitions: Option<u64>,
+    /// The tags of the ghost entities of `$PartitionedEntities`.
+    ghosts: HashSet<i32>,
 }
 
 impl EntityTags {
@@ -31,6 +37,17 @@ impl EntityTags {
                 .copied()
                 .unwrap_or(0),
         }
+    }
+
+    /// The number of partitions `$PartitionedEntities` declares; None without that section.
+    pub(crate) fn partitions(&self) -> Option<u64> {
+        self.partitions
+    }
+
+    /// Whether `tag` is one of the ghost entities `$PartitionedEntities` lists (Gmsh gives
+    /// the ghost entities tags of their own, whatever their dimension).
+    pub(crate) fn is_ghost(&self, tag: i32) -> bool {
+        self.ghosts.contains(&tag)
     }
 }
 
@@ -86,12 +103,15 @@ impl Reader<'_> {
     ) -> Result<(), ParseError> {
         let c = &mut self.c;
         if partitioned {
-            let _parts = c.parse_or::<u64>(|| "number of partitions".into())?;
+            let parts = c.parse_or::<u64>(|| "number of partitions".into())?;
             let ghosts = c.parse_or::<u64>(|| "number of ghost entities".into())?;
             for _ in 0..ghosts {
-                c.parse_or::<i64>(|| "ghost entity tag".into())?;
+                let tag = c.parse_or::<i64>(|| "ghost entity tag".into())?;
+                let tag = to_i32(tag, c, "ghost entity tag")?;
                 c.parse_or::<i64>(|| "ghost entity partition".into())?;
+                self.entities.ghosts.insert(tag);
             }
+            self.entities.partitions = Some(parts);
         }
         let mut counts = [0u64; 4];
         for (d, n) in counts.iter_mut().enumerate() {
@@ -158,9 +178,15 @@ impl Reader<'_> {
     ) -> Result<(), ParseError> {
         let sz = b.size_t;
         if partitioned {
-            b.size(&|| "number of partitions".into())?;
+            let parts = b.size(&|| "number of partitions".into())?;
             let ghosts = b.size(&|| "number of ghost entities".into())?;
-            b.skip(ghosts, 8, "ghost entities")?;
+            b.room(ghosts, 8, "ghost entities")?;
+            for _ in 0..ghosts {
+                let tag = b.i32(&|| "ghost entity tag".into())?;
+                b.i32(&|| "ghost entity partition".into())?;
+                self.entities.ghosts.insert(tag);
+            }
+            self.entities.partitions = Some(parts);
         }
         let mut counts = [0u64; 4];
         for n in counts.iter_mut() {

@@ -40,10 +40,18 @@
 //! MSH 2 binary element blocks (type, count, tag count) followed by records; counts in headers
 //! are never trusted for allocation beyond what the remaining input can hold.
 //!
+//! Modes: [`read`] makes the serial reader's [`RawMesh`]; [`header_tags`] parses the sections
+//! before `$Nodes` only; `read_keeping_tags` (MSH 4, for Gmsh's partitioned files) keeps the
+//! file's numbering, the node tags, each cell's element and entity tag and the ghost entities;
+//! `stream` indexes a binary MSH 4.1 file without holding it and reads its blocks by
+//! offset, for the ranks that each read a share of one file. All of them parse with the same
+//! section, block-header, entity, element-type and binary-decoding code, so a file means the
+//! same in every reader, and their errors name the place (line, byte) and the problem.
+//!
 //! Parts: this module reads `$MeshFormat` and `$PhysicalNames` and runs the section loop;
 //! `entities`, `nodes` and `elements` read their sections in every version and encoding;
 //! `periodic` reads `$Periodic`; `binary` decodes binary data with bounds checks;
-//! `element_types` maps type numbers to cell kinds.
+//! `element_types` maps type numbers to cell kinds; `stream` is the offset-indexed reader.
 //!
 //! [`CellKind`]: crate::mesh::raw::CellKind
 //! [`CellKind::Other`]: crate::mesh::raw::CellKind::Other
@@ -54,6 +62,7 @@ mod elements;
 mod entities;
 mod nodes;
 mod periodic;
+pub(crate) mod stream;
 
 use super::text::{TextCursor, parse_f64};
 use crate::mesh::raw::{Location, ParseError, RawMesh};
@@ -74,6 +83,39 @@ pub struct HeaderTags {
     /// As [`RawMesh::tag_names`].
     pub tag_names: BTreeMap<i32, String>,
     pub entities: EntityTags,
+    /// What `$MeshFormat` said (None for MSH 1, which has no such section).
+    pub(crate) format: Option<Format>,
+}
+
+impl HeaderTags {
+    /// Whether the file is binary MSH 4.1 (what [`stream`] reads).
+    pub(crate) fn is_binary_41(&self) -> bool {
+        self.format
+            .is_some_and(|f| f.binary && f.version == Version::V41)
+    }
+
+    /// Whether the file is MSH 4.0 or 4.1 (what [`read_keeping_tags`] reads).
+    pub(crate) fn is_msh4(&self) -> bool {
+        self.format
+            .is_some_and(|f| matches!(f.version, Version::V40 | Version::V41))
+    }
+
+    /// The file's variant, for messages: "ASCII MSH 4.1", "binary MSH 2", ...
+    pub(crate) fn describe_format(&self) -> String {
+        match self.format {
+            None => "MSH 1".into(),
+            Some(f) => format!(
+                "{} MSH {}",
+                if f.binary { "binary" } else { "ASCII" },
+                match f.version {
+                    Version::V1 => "1",
+                    Version::V2 => "2",
+                    Version::V40 => "4.0",
+                    Version::V41 => "4.1",
+                }
+            ),
+        }
+    }
 }
 
 /// Parse the sections of a MSH file that come before `$Nodes` (`$MeshFormat`,
@@ -87,11 +129,80 @@ pub fn header_tags(head: &[u8]) -> Result<HeaderTags, ParseError> {
     Ok(HeaderTags {
         tag_names: r.mesh.tag_names,
         entities: r.entities,
+        format: r.format,
+    })
+}
+
+/// One Gmsh element type's cells of a file read by [`read_keeping_tags`], in file order.
+#[derive(Debug)]
+pub(crate) struct TaggedBlock {
+    pub(crate) gmsh_type: i64,
+    /// The file's tag of each cell.
+    pub(crate) element_tags: Vec<u64>,
+    /// The tag of each cell's entity (see [`EntityTags::is_ghost`]).
+    pub(crate) entities: Vec<i32>,
+    /// The physical tag of each cell, as [`read`] tags it.
+    pub(crate) physical: Vec<i32>,
+    /// The node tags of each cell (as many per cell as the type has nodes), as in the file.
+    pub(crate) nodes: Vec<u64>,
+}
+
+/// A MSH 4 file in its own numbering ([`read_keeping_tags`]).
+#[derive(Debug)]
+pub(crate) struct TaggedMesh {
+    pub(crate) header: HeaderTags,
+    /// The tag of each node of `points`, in file order.
+    pub(crate) node_tags: Vec<u64>,
+    pub(crate) points: Vec<[f64; 3]>,
+    /// One per Gmsh element type, in order of first appearance.
+    pub(crate) blocks: Vec<TaggedBlock>,
+}
+
+/// Parse a MSH 4 file held in memory keeping the file's numbering: node tags, element tags,
+/// entity tags, and elements' node tags as written (a node tag `$Nodes` does not define is
+/// not an error here: a part of a partitioned mesh may name nodes it does not hold). Names,
+/// physical tags and errors are those of [`read`]; MSH 1/2 files are an error.
+pub(crate) fn read_keeping_tags(data: &[u8]) -> Result<TaggedMesh, ParseError> {
+    let mut r = Reader::new(data);
+    r.keep = Some(Kept::default());
+    r.sections()?;
+    if !matches!(r.format().version, Version::V40 | Version::V41) {
+        return Err(ParseError::new(
+            Location::File,
+            "element tags are kept only from MSH 4 files",
+        ));
+    }
+    let mut kept = r.keep.take().unwrap_or_default();
+    kept.cells
+        .resize_with(r.blocks.list.len(), Default::default);
+    let blocks = r
+        .blocks
+        .list
+        .into_iter()
+        .zip(kept.cells)
+        .map(|((gmsh_type, block), cells)| TaggedBlock {
+            gmsh_type,
+            element_tags: cells.element_tags,
+            entities: cells.entities,
+            physical: block.tags,
+            // Non-negative: `NodeMap::Identity` keeps only tags that fit an i64.
+            nodes: block.nodes.into_iter().map(|t| t as u64).collect(),
+        })
+        .collect();
+    Ok(TaggedMesh {
+        header: HeaderTags {
+            tag_names: r.mesh.tag_names,
+            entities: r.entities,
+            format: r.format,
+        },
+        node_tags: kept.node_tags,
+        points: r.mesh.points,
+        blocks,
     })
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Version {
+pub(crate) enum Version {
     V1,
     V2,
     V40,
@@ -100,12 +211,44 @@ enum Version {
 
 /// What `$MeshFormat` said.
 #[derive(Clone, Copy, Debug)]
-struct Format {
-    version: Version,
-    binary: bool,
-    big_endian: bool,
+pub(crate) struct Format {
+    pub(crate) version: Version,
+    pub(crate) binary: bool,
+    pub(crate) big_endian: bool,
     /// Width of `size_t` in MSH 4 binary files.
-    size_t: usize,
+    pub(crate) size_t: usize,
+}
+
+/// What the tag-keeping mode records besides the mesh.
+#[derive(Default)]
+struct Kept {
+    node_tags: Vec<u64>,
+    /// Per entry of `Reader::blocks`.
+    cells: Vec<KeptCells>,
+}
+
+/// The element tag and entity tag of each cell of one block.
+#[derive(Default)]
+struct KeptCells {
+    element_tags: Vec<u64>,
+    entities: Vec<i32>,
+}
+
+impl KeptCells {
+    fn push(&mut self, element_tag: u64, entity: i32) {
+        self.element_tags.push(element_tag);
+        self.entities.push(entity);
+    }
+}
+
+impl Kept {
+    /// The record of block `bi` of `Reader::blocks`.
+    fn cells(&mut self, bi: usize) -> &mut KeptCells {
+        if self.cells.len() <= bi {
+            self.cells.resize_with(bi + 1, Default::default);
+        }
+        &mut self.cells[bi]
+    }
 }
 
 struct Reader<'a> {
@@ -120,6 +263,8 @@ struct Reader<'a> {
     v2_entities: HashMap<(i32, i32), i32>,
     /// The links of `$Periodic`.
     periodic: Vec<periodic::Link>,
+    /// The file's numbering, in the tag-keeping mode.
+    keep: Option<Kept>,
 }
 
 /// Reserve for `count` items, but never more than the input could possibly hold (every item
@@ -145,6 +290,7 @@ impl<'a> Reader<'a> {
             entities: EntityTags::default(),
             v2_entities: HashMap::new(),
             periodic: Vec::new(),
+            keep: None,
         }
     }
 
@@ -250,6 +396,7 @@ impl<'a> Reader<'a> {
         Bin {
             data: self.c.data(),
             pos: self.c.pos(),
+            base: 0,
             big_endian: f.big_endian,
             size_t: f.size_t,
         }

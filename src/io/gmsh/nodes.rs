@@ -1,18 +1,84 @@
 //! `$Nodes` (MSH 2/4, ASCII and binary) and `$NOD` (MSH 1): node coordinates and tags.
 //!
 //! Input: the section body. Output: the points pushed to the mesh, in file order, with their
-//! locations, and `Reader::nodes`, the [`NodeMap`] from node tag to 0-based position.
-//! Invariants: a tag defined twice is an error at its second definition; MSH 4 parametric
-//! coordinates are skipped; reservations are capped by what the remaining input can hold.
+//! locations, and `Reader::nodes`, the [`NodeMap`] from node tag to 0-based position (in the
+//! tag-keeping mode, the node tags in `Reader::keep` and the identity map: elements keep the
+//! file's node tags). Invariants: a tag defined twice is an error at its second definition
+//! (not checked when keeping tags); MSH 4 parametric coordinates are skipped; reservations are
+//! capped by what the remaining input can hold. [`NodeBlockHeader`] and [`section_counts`]
+//! read the binary MSH 4.1 headers for this parser and for the streamed one
+//! ([`super::stream`]).
 
+use super::binary::Bin;
 use super::{Reader, Version, capped};
 use crate::mesh::raw::{Location, ParseError};
 use std::collections::HashMap;
 
-/// Node tag -> 0-based position.
+/// Node tag -> 0-based position, or the tag itself (`Identity`, when keeping the file's tags).
 pub(super) enum NodeMap {
     Dense(Vec<u32>),
     Sparse(HashMap<u64, u32>),
+    Identity,
+}
+
+/// The counts that open a binary MSH 4.1 `$Nodes` or `$Elements` section (`item`: "node" or
+/// "element"): the number of entity blocks and of items; the smallest and largest tags that
+/// follow are read and dropped.
+pub(super) fn section_counts(b: &mut Bin, item: &str) -> Result<(u64, u64), ParseError> {
+    let blocks = b.size(&|| format!("number of {item} entity blocks"))?;
+    let total = b.size(&|| format!("number of {item}s"))?;
+    b.size(&|| format!("minimum {item} tag"))?;
+    b.size(&|| format!("maximum {item} tag"))?;
+    Ok((blocks, total))
+}
+
+/// The header of a binary MSH 4.1 `$Nodes` entity block (`NodeBlockHeader::len` bytes):
+/// entity dimension and tag, parametric flag, node count. The block's `count` node tags
+/// (`size_t`) follow, then `count` records of [`NodeBlockHeader::stride`] doubles.
+pub(super) struct NodeBlockHeader {
+    pub(super) dim: i32,
+    pub(super) parametric: bool,
+    pub(super) count: u64,
+}
+
+impl NodeBlockHeader {
+    /// Bytes of the header for a `size_t` of `size_t` bytes.
+    pub(super) fn len(size_t: usize) -> usize {
+        12 + size_t
+    }
+
+    /// Read the header of node block `blk` (0-based); a dimension outside 0..=3 is an error.
+    pub(super) fn read(b: &mut Bin, blk: u64) -> Result<Self, ParseError> {
+        let what = || format!("header of node block {}", blk + 1);
+        let header_at = b.at();
+        let dim = b.i32(&what)?;
+        b.i32(&what)?;
+        let parametric = b.i32(&what)? != 0;
+        let count = b.size(&what)?;
+        if !(0..=3).contains(&dim) {
+            return Err(ParseError::at_byte(
+                header_at,
+                format!(
+                    "entity dimension {dim} of node block {} is not 0, 1, 2 or 3",
+                    blk + 1
+                ),
+            ));
+        }
+        Ok(NodeBlockHeader {
+            dim,
+            parametric,
+            count,
+        })
+    }
+
+    /// Doubles per node record: x, y, z, then the parametric coordinates of a parametric block.
+    pub(super) fn stride(&self) -> usize {
+        3 + if self.parametric {
+            self.dim as usize
+        } else {
+            0
+        }
+    }
 }
 
 impl NodeMap {
@@ -60,15 +126,18 @@ impl NodeMap {
         }
     }
 
+    /// The position of node `tag` (the tag itself for `Identity`); None when undefined.
     #[inline]
-    pub(super) fn get(&self, tag: u64) -> Option<u32> {
+    pub(super) fn get(&self, tag: u64) -> Option<i64> {
         match self {
             NodeMap::Dense(v) => usize::try_from(tag)
                 .ok()
                 .and_then(|t| v.get(t))
                 .copied()
-                .filter(|&i| i != u32::MAX),
-            NodeMap::Sparse(m) => m.get(&tag).copied(),
+                .filter(|&i| i != u32::MAX)
+                .map(i64::from),
+            NodeMap::Sparse(m) => m.get(&tag).copied().map(i64::from),
+            NodeMap::Identity => i64::try_from(tag).ok(),
         }
     }
 }
@@ -86,7 +155,13 @@ impl Reader<'_> {
             (Version::V40 | Version::V41, false) => self.nodes_v4_ascii(&mut tags, f.version)?,
             (_, true) => self.nodes_v41_binary(&mut tags)?,
         }
-        self.nodes = Some(NodeMap::build(&tags, &self.mesh.point_locations)?);
+        self.nodes = Some(match &mut self.keep {
+            Some(keep) => {
+                keep.node_tags = tags;
+                NodeMap::Identity
+            }
+            None => NodeMap::build(&tags, &self.mesh.point_locations)?,
+        });
         self.expect_end(name)
     }
 
@@ -223,30 +298,13 @@ impl Reader<'_> {
         self.c.skip_line();
         let mut b = self.bin();
         let sz = b.size_t;
-        let blocks = b.size(&|| "number of node entity blocks".into())?;
-        let total = b.size(&|| "number of nodes".into())?;
-        b.size(&|| "minimum node tag".into())?;
-        b.size(&|| "maximum node tag".into())?;
+        let (blocks, total) = section_counts(&mut b, "node")?;
         let cap = capped(total, b.remaining(), sz + 24);
         tags.reserve(cap);
         self.reserve_points(cap);
         for blk in 0..blocks {
-            let what = || format!("header of node block {}", blk + 1);
-            let header_at = b.pos;
-            let dim = b.i32(&what)?;
-            b.i32(&what)?;
-            let parametric = b.i32(&what)?;
-            let count = b.size(&what)?;
-            if !(0..=3).contains(&dim) {
-                return Err(ParseError::at_byte(
-                    header_at,
-                    format!(
-                        "entity dimension {dim} of node block {} is not 0, 1, 2 or 3",
-                        blk + 1
-                    ),
-                ));
-            }
-            let nval = 3 + if parametric != 0 { dim as usize } else { 0 };
+            let header = NodeBlockHeader::read(&mut b, blk)?;
+            let (count, nval) = (header.count, header.stride());
             // Tags of the whole block first, then its coordinates.
             let tag_len = b.room(count, sz, "node tags")?;
             let tag_data = b.take(tag_len, &|| "node tags".into())?;

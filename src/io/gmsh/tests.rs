@@ -526,3 +526,4 @@ fn v22_binary_either_byte_order() {
 }
 
 mod bad_input;
+mod modes;
