@@ -95,29 +95,23 @@ fn graded_structured_grids_are_reproduced_exactly() {
     ] {
         let path = scratch(&format!("{name}.msh"));
         write_linear(&mesh, &path);
-        let graded = KnotParams {
-            intervals: KnotIntervals::Graded,
-            ..Default::default()
-        };
-        let (gap, held, q2) = gap_to_straight(&path, graded);
-        eprintln!("{name}: graded knots: gap {gap:.2e} of the diagonal, {held} held back, {q2} Q2");
-        assert!(
-            gap < 1e-12,
-            "{name}: graded knots are {gap:.2e} off the straight grid"
-        );
-        assert_eq!(held, 0, "{name}: elements held back by the blend");
-        assert_eq!(q2, 0, "{name}: Q2 elements in a structured grid");
-        // `auto` finds the grading: the same exact reproduction.
-        let auto = KnotParams {
-            intervals: KnotIntervals::Auto,
-            ..Default::default()
-        };
-        let (gap, held, q2) = gap_to_straight(&path, auto);
-        eprintln!("{name}: auto knots: gap {gap:.2e}, {held} held back, {q2} Q2");
-        assert!(
-            gap < 1e-12 && held == 0 && q2 == 0,
-            "{name}: auto knots: gap {gap:.2e}, {held} held back, {q2} Q2"
-        );
+        // Graded knots, and `auto`, which finds the grading (uniform knots are held back).
+        for intervals in [KnotIntervals::Graded, KnotIntervals::Auto] {
+            let knots = KnotParams {
+                intervals,
+                ..Default::default()
+            };
+            let (gap, held, q2) = gap_to_straight(&path, knots);
+            eprintln!(
+                "{name}: {intervals:?} knots: gap {gap:.2e} of the diagonal, {held} held back, {q2} Q2"
+            );
+            assert!(
+                gap < 1e-12,
+                "{name}: {intervals:?} knots are {gap:.2e} off the straight grid"
+            );
+            assert_eq!(held, 0, "{name}: elements held back by the blend");
+            assert_eq!(q2, 0, "{name}: Q2 elements in a structured grid");
+        }
         // The oracle can fail: uniform knots cannot reproduce the grading.
         let (gap, _, _) = gap_to_straight(&path, KnotParams::uniform());
         eprintln!("{name}: uniform knots: gap {gap:.2e}");
