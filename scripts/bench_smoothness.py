@@ -2,18 +2,21 @@
 """Smoothness, held-back elements and cell quality of `curve` on the bundled real meshes, with
 graded and uniform knot intervals against the straight-sided elevation.
 
-usage: python3 scripts/bench_smoothness.py [--timeout S] [MESH ...]
+usage: python3 scripts/bench_smoothness.py [--timeout S] [--knots graded,uniform]
+       [--no-elastic] [MESH ...]
 
 Builds nothing: run `cargo build --release` first ($POLYSPLINE_EXE overrides the binary). For each mesh (default: every file under
-meshes/real/), runs `curve` (order 2, otherwise default options) with `--knot-intervals graded` and
-`uniform`, `curve --straight` and `curve --method elastic` (the elastic analogy inside the
-uniform smooth fit's boundary), each writing MSH and a JSON report. Measures every written
+meshes/real/), runs `curve` (order 2, otherwise default options) with `--knot-intervals graded`
+and `uniform` (`--knots` names the modes, comma-separated), `curve --straight` and `curve
+--method elastic` (the elastic analogy inside the smooth fit's boundary; `--no-elastic` skips
+it), each writing MSH and a JSON report. Measures every written
 file with Gmsh alone (`tests/external/facet_angles.py`: the angle between the two elements'
 derivatives transversal to each interior facet at its centre, and Gmsh's Jacobian ratio per
 element); Python from $POLYSPLINE_PYTHON, else python3. Prints a Markdown table: held back
 (`reduced_elements` / `elements`), Q2 elements, facet angle mean / p99 / max (ours, straight,
 elastic), min scaled Jacobian in → out (the report's; elastic's), Gmsh's min Jacobian ratio,
-and the `curve` wall time (report total). `--extra ARGS` adds options to the graded run.
+the knot surfaces graded / left uniform (report `knot_surfaces`) and the `curve` wall time
+(report total). `--extra ARGS` adds options to every run but the uniform one.
 """
 import argparse
 import glob
@@ -49,7 +52,9 @@ def measure(files):
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--timeout", type=float, default=900)
-    ap.add_argument("--extra", default="", help="more options of the graded run")
+    ap.add_argument("--extra", default="", help="more options of every run but the uniform one")
+    ap.add_argument("--knots", default="graded,uniform")
+    ap.add_argument("--no-elastic", action="store_true")
     ap.add_argument("meshes", nargs="*")
     a = ap.parse_args()
     meshes = a.meshes or sorted(
@@ -57,23 +62,26 @@ def main():
         if not f.endswith(".md"))
     tmp = tempfile.mkdtemp(prefix="smoothness-")
     print("| mesh | knots | held back | Q2 | facet angle mean / p99 / max | straight | elastic | "
-          "min scaled Jacobian in → out | elastic | Jacobian ratio min (straight) | curve s |")
-    print("|---|---|---:|---:|---|---|---|---|---|---|---:|")
+          "min scaled Jacobian in → out | elastic | Jacobian ratio min (straight) | "
+          "surfaces graded / uniform | curve s |")
+    print("|---|---|---:|---:|---|---|---|---|---|---|---|---:|")
+    knots = a.knots.split(",")
     for mesh in meshes:
         name = os.path.relpath(mesh, os.path.join(ROOT, "meshes", "real"))
         base = os.path.join(tmp, name.replace("/", "_"))
         runs = {}
-        for knots, extra in [("graded", ["--knot-intervals", "graded"] + a.extra.split()),
-                             ("uniform", ["--knot-intervals", "uniform"]),
-                             ("straight", ["--straight"]),
-                             ("elastic", ["--method", "elastic"])]:
-            out = base + "_" + knots + ".msh"
-            rep, err = curve(mesh, out, base + "_" + knots + ".json", extra, a.timeout)
-            runs[knots] = (out, rep, err)
+        modes = [(k, ["--knot-intervals", k] + (a.extra.split() if k != "uniform" else []))
+                 for k in knots] + [("straight", ["--straight"])]
+        if not a.no_elastic:
+            modes.append(("elastic", ["--method", "elastic"]))
+        for mode, extra in modes:
+            out = base + "_" + mode + ".msh"
+            rep, err = curve(mesh, out, base + "_" + mode + ".json", extra, a.timeout)
+            runs[mode] = (out, rep, err)
         if runs["straight"][1] is None:
             print("| %s | | %s |" % (name, runs["straight"][2]))
             continue
-        ok = [k for k in ("graded", "uniform", "straight", "elastic") if runs[k][1] is not None]
+        ok = [k for k, _ in modes if runs[k][1] is not None]
         try:
             m = dict(zip(ok, measure([runs[k][0] for k in ok])))
         except subprocess.CalledProcessError as e:
@@ -82,22 +90,24 @@ def main():
         s = m["straight"]
         el = m.get("elastic")
         el_angles = ("%.2f° / %.1f° / %.1f°" % (el["angle_mean"], el["angle_p99"], el["angle_max"])
-                     if el else runs["elastic"][2])
+                     if el else runs.get("elastic", (None, None, "–"))[2])
         el_msj = "%.3f" % runs["elastic"][1]["min_scaled_jacobian"] if el else "–"
-        for k in ("graded", "uniform"):
+        for k in knots:
             out, rep, err = runs[k]
             if rep is None:
                 print("| %s | %s | %s |" % (name, k, err))
                 continue
             g = m[k]
+            ks = rep.get("knot_surfaces")
+            surf = "%d / %d" % (ks["graded"], ks["surfaces"] - ks["graded"]) if ks else "–"
             print("| %s | %s | %.0f %% | %.0f %% | %.2f° / %.1f° / %.1f° | %.2f° / %.1f° / %.1f° | "
-                  "%s | %.3f → %.3f | %s | %.3f (%.3f) | %.2f |" % (
+                  "%s | %.3f → %.3f | %s | %.3f (%.3f) | %s | %.2f |" % (
                       name, k, 100.0 * rep["reduced_elements"] / rep["elements"],
                       100.0 * rep["q2_elements"] / rep["elements"],
                       g["angle_mean"], g["angle_p99"], g["angle_max"],
                       s["angle_mean"], s["angle_p99"], s["angle_max"], el_angles,
                       rep["input_min_scaled_jacobian"], rep["min_scaled_jacobian"], el_msj,
-                      g["ratio_min"], s["ratio_min"], rep["timings"]["total"]))
+                      g["ratio_min"], s["ratio_min"], surf, rep["timings"]["total"]))
         sys.stdout.flush()
 
 

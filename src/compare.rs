@@ -395,6 +395,7 @@ impl std::fmt::Display for CompareReport {
             match self.knot_intervals {
                 crate::spline::KnotIntervals::Uniform => "uniform",
                 crate::spline::KnotIntervals::Graded => "graded",
+                crate::spline::KnotIntervals::Auto => "auto",
             }
         )?;
         writeln!(

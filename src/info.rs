@@ -164,7 +164,7 @@ impl MeshInfo {
         params: &crate::spline::KnotParams,
     ) -> Result<(), crate::params::ParamError> {
         params.check()?;
-        if params.intervals == crate::spline::KnotIntervals::Uniform {
+        if params.intervals != crate::spline::KnotIntervals::Graded {
             return Ok(());
         }
         let (space, info) = crate::spline::SplineSpace::build_for_knots(mesh, topo, params)?;

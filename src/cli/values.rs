@@ -75,6 +75,10 @@ value_enum! {
             graded (boundary-layer) grids are reproduced exactly and stay C¹ (distributed \
             runs use uniform)")]
         Graded,
+        #[value(help = "Uniform, and graded where the certified blend then holds back more \
+            than a tenth of the elements (the report's `knot_intervals` names the knots used; \
+            distributed runs use uniform)")]
+        Auto,
     }
 }
 

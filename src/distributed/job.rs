@@ -139,8 +139,9 @@ fn check_supported(options: &CurveOptions) -> Result<(), CurveError> {
         return unsupported("--feature-edits");
     }
     // Graded knot intervals average over whole knot surfaces, which cross the shares; the
-    // distributed run keeps uniform knots so that its result does not depend on the ranks.
-    if options.knots.intervals != crate::spline::KnotIntervals::Uniform {
+    // distributed run keeps uniform knots so that its result does not depend on the ranks
+    // (`auto` runs as uniform, see [`curve`]).
+    if options.knots.intervals == crate::spline::KnotIntervals::Graded {
         return unsupported("--knot-intervals graded");
     }
     // The distributed CG preconditions by block Jacobi within each rank's share; the sweeps
@@ -588,6 +589,14 @@ pub fn curve(
     options: &CurveOptions,
 ) -> Result<Finished, CurveError> {
     check_supported(options)?;
+    // `auto` would decide on the whole mesh's blend: uniform here.
+    let options = &CurveOptions {
+        knots: crate::spline::KnotParams {
+            intervals: crate::spline::KnotIntervals::Uniform,
+            ..options.knots
+        },
+        ..options.clone()
+    };
     // The serial job's option checks (elastic is refused above, so no elastic parameters).
     let (order, _) = crate::pipeline::check_options(options)?;
     let size = comm.size();

@@ -276,9 +276,58 @@ impl SplineOutcome {
     }
 }
 
+/// With `--knot-intervals auto`: the share of the elements the certified blend may hold back
+/// with uniform knots before the spline is redone with graded knots.
+pub const AUTO_MAX_HELD_BACK: f64 = 0.1;
+
 /// The spline geometry's stages (the job's geometry is not [`Geometry::Straight`]); the
 /// translation pairs among `periodic` are identified in the spline space where they can be.
+///
+/// `--knot-intervals auto` runs them with uniform knots and, where the blend then holds back
+/// more than [`AUTO_MAX_HELD_BACK`] of the elements (a C¹ map with uniform knots cannot follow
+/// a graded grid: the spline is thrown away there), again with graded knots; the setup names
+/// the knots used.
 pub(super) fn curve_spline(
+    job: &Job,
+    clock: &mut Clock,
+    periodic: &[PeriodicPair],
+) -> Result<(SplineSetup, SplineOutcome), CurveError> {
+    use crate::spline::KnotIntervals;
+    if job.options.knots.intervals != KnotIntervals::Auto {
+        return curve_spline_with(job, clock, periodic);
+    }
+    let with = |intervals| crate::pipeline::CurveOptions {
+        knots: crate::spline::KnotParams {
+            intervals,
+            ..job.options.knots
+        },
+        ..job.options.clone()
+    };
+    let uniform = with(KnotIntervals::Uniform);
+    let first = curve_spline_with(
+        &Job {
+            options: &uniform,
+            ..*job
+        },
+        clock,
+        periodic,
+    )?;
+    let held = first.1.blend.as_ref().map_or(0, |b| b.reduced_elements);
+    if held as f64 <= AUTO_MAX_HELD_BACK * job.mesh.n_elements() as f64 {
+        return Ok(first);
+    }
+    let graded = with(KnotIntervals::Graded);
+    curve_spline_with(
+        &Job {
+            options: &graded,
+            ..*job
+        },
+        clock,
+        periodic,
+    )
+}
+
+fn curve_spline_with(
     job: &Job,
     clock: &mut Clock,
     periodic: &[PeriodicPair],

@@ -37,6 +37,12 @@
 //! abscissae) equals the straight map; the result depends only on topology and coordinates.
 //! Surfaces closing on themselves with opposite orientation (non-orientable continuation) get
 //! uniform knots.
+//!
+//! **Auto** (opt-in) is decided by `curve` on the outcome, not here
+//! (`pipeline::spline::curve_spline`): uniform knots, and graded ones where the certified
+//! blend holds back more than a tenth of the elements with uniform knots. Per-surface rules
+//! on the measured log-ratios did not separate graded from unstructured meshes
+//! (BENCHMARKS.md, "Graded knot intervals"). Without a fit (`info`, `plot`), auto is uniform.
 
 use crate::mesh::LinearMesh;
 use crate::mesh::topology::{NONE, Topology};
@@ -53,6 +59,10 @@ pub enum KnotIntervals {
     Uniform,
     /// From the cells' extents, one log-ratio per knot surface (graded grids reproduced).
     Graded,
+    /// `curve` decides: uniform, unless the certified blend then holds back more than a tenth
+    /// of the elements, graded then (`pipeline::spline::curve_spline`). Where nothing is
+    /// fitted (`info`, `plot`), uniform.
+    Auto,
 }
 
 /// Parameters of the knot intervals.
@@ -438,7 +448,7 @@ pub fn knot_weights(
     spline: &[bool],
     params: &KnotParams,
 ) -> Knots {
-    if params.intervals == KnotIntervals::Uniform {
+    if params.intervals != KnotIntervals::Graded {
         return Knots::default();
     }
     let dim = topo.dim;

@@ -130,7 +130,7 @@ impl SplineSpace {
     /// uniform knots): the weights to pass to [`SplineSpace::build_with_knots`], with the
     /// elements to make Q2 ([`Q2Reason::KnotSplit`]) where knot surfaces are split.
     pub fn knot_weights(mesh: &LinearMesh, topo: &Topology, params: &KnotParams) -> Knots {
-        if params.intervals == KnotIntervals::Uniform {
+        if params.intervals != KnotIntervals::Graded {
             return Knots::default();
         }
         let spline: Vec<bool> = classify::classify(mesh, topo)
