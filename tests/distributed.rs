@@ -378,6 +378,7 @@ fn unsupported_options_under_mpirun_fail_with_one_line_and_write_nothing() {
             vec!["--knot-intervals", "graded"],
             "--knot-intervals graded",
         ),
+        (vec!["--knot-intervals", "auto"], "--knot-intervals auto"),
         (
             vec!["--cg-preconditioner", "block-sgs"],
             "--cg-preconditioner block-sgs",

@@ -139,10 +139,12 @@ fn check_supported(options: &CurveOptions) -> Result<(), CurveError> {
         return unsupported("--feature-edits");
     }
     // Graded knot intervals average over whole knot surfaces, which cross the shares; the
-    // distributed run keeps uniform knots so that its result does not depend on the ranks
-    // (`auto` runs as uniform, see [`curve`]).
-    if options.knots.intervals == crate::spline::KnotIntervals::Graded {
-        return unsupported("--knot-intervals graded");
+    // distributed run keeps uniform knots so that its result does not depend on the ranks.
+    // `auto` decides on the whole mesh's blend, which no rank sees.
+    match options.knots.intervals {
+        crate::spline::KnotIntervals::Uniform => {}
+        crate::spline::KnotIntervals::Graded => return unsupported("--knot-intervals graded"),
+        crate::spline::KnotIntervals::Auto => return unsupported("--knot-intervals auto"),
     }
     // The distributed CG preconditions by block Jacobi within each rank's share; the sweeps
     // of block Gauss–Seidel would run across the shares in an order that depends on them.
@@ -589,14 +591,6 @@ pub fn curve(
     options: &CurveOptions,
 ) -> Result<Finished, CurveError> {
     check_supported(options)?;
-    // `auto` would decide on the whole mesh's blend: uniform here.
-    let options = &CurveOptions {
-        knots: crate::spline::KnotParams {
-            intervals: crate::spline::KnotIntervals::Uniform,
-            ..options.knots
-        },
-        ..options.clone()
-    };
     // The serial job's option checks (elastic is refused above, so no elastic parameters).
     let (order, _) = crate::pipeline::check_options(options)?;
     let size = comm.size();
