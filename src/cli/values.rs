@@ -187,6 +187,7 @@ pub(super) enum CgPreconditioner {
     Jacobi,
     BlockJacobi,
     BlockSgs,
+    BlockJacobiPair,
 }
 
 impl From<CgPreconditioner> for LibCgPreconditioner {
@@ -199,6 +200,9 @@ impl From<CgPreconditioner> for LibCgPreconditioner {
             CgPreconditioner::BlockSgs => LibCgPreconditioner::BlockSgs {
                 size: DEFAULT_BLOCK,
             },
+            CgPreconditioner::BlockJacobiPair => LibCgPreconditioner::BlockJacobiPair {
+                size: DEFAULT_BLOCK,
+            },
         }
     }
 }
@@ -209,6 +213,7 @@ impl From<LibCgPreconditioner> for CgPreconditioner {
             LibCgPreconditioner::Jacobi => CgPreconditioner::Jacobi,
             LibCgPreconditioner::BlockJacobi { .. } => CgPreconditioner::BlockJacobi,
             LibCgPreconditioner::BlockSgs { .. } => CgPreconditioner::BlockSgs,
+            LibCgPreconditioner::BlockJacobiPair { .. } => CgPreconditioner::BlockJacobiPair,
         }
     }
 }
