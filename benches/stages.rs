@@ -81,6 +81,12 @@ fn stages(c: &mut Criterion) {
                     size: polyspline::solve::block_jacobi::DEFAULT_BLOCK,
                 },
             ),
+            (
+                "cg_block_jacobi_pair",
+                CgPreconditioner::BlockJacobiPair {
+                    size: polyspline::solve::block_jacobi::DEFAULT_BLOCK,
+                },
+            ),
         ] {
             let params = CgParams {
                 preconditioner: pre,

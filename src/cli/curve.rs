@@ -125,8 +125,10 @@ pub(crate) struct JobArgs {
     /// Preconditioner of the fit's CG solve on the CPU: the diagonal, exact inverses of the
     /// diagonal blocks on aggregates of 64 neighbouring control points (block Jacobi), or a
     /// symmetric Gauss–Seidel sweep over those blocks (block SGS, in Eisenstat's form: about
-    /// 40 % of block Jacobi's iterations, each about 2.4 times as costly). The GPU solver
-    /// always uses the diagonal and distributed runs block Jacobi on each rank's rows.
+    /// 40 % of block Jacobi's iterations, each about 2.4 times as costly), or the average of
+    /// block Jacobi on two staggered partitions (block Jacobi pair: about 60 % of block
+    /// Jacobi's iterations, two block solves each). The GPU solver always uses the diagonal
+    /// and distributed runs block Jacobi on each rank's rows.
     #[arg(long, value_enum, default_value_t = CgPreconditioner::default().into())]
     cg_preconditioner: values::CgPreconditioner,
     /// Most bisections of the validity line search.

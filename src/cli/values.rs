@@ -191,6 +191,7 @@ pub(super) enum CgPreconditioner {
     Jacobi,
     BlockJacobi,
     BlockSgs,
+    BlockJacobiPair,
 }
 
 impl From<CgPreconditioner> for LibCgPreconditioner {
@@ -203,6 +204,9 @@ impl From<CgPreconditioner> for LibCgPreconditioner {
             CgPreconditioner::BlockSgs => LibCgPreconditioner::BlockSgs {
                 size: DEFAULT_BLOCK,
             },
+            CgPreconditioner::BlockJacobiPair => LibCgPreconditioner::BlockJacobiPair {
+                size: DEFAULT_BLOCK,
+            },
         }
     }
 }
@@ -213,6 +217,7 @@ impl From<LibCgPreconditioner> for CgPreconditioner {
             LibCgPreconditioner::Jacobi => CgPreconditioner::Jacobi,
             LibCgPreconditioner::BlockJacobi { .. } => CgPreconditioner::BlockJacobi,
             LibCgPreconditioner::BlockSgs { .. } => CgPreconditioner::BlockSgs,
+            LibCgPreconditioner::BlockJacobiPair { .. } => CgPreconditioner::BlockJacobiPair,
         }
     }
 }

@@ -148,11 +148,15 @@ fn check_supported(options: &CurveOptions) -> Result<(), CurveError> {
     }
     // The distributed CG preconditions by block Jacobi within each rank's share; the sweeps
     // of block Gauss–Seidel would run across the shares in an order that depends on them.
-    if matches!(
-        options.fit.cg.preconditioner,
-        crate::solve::CgPreconditioner::BlockSgs { .. }
-    ) {
-        return unsupported("--cg-preconditioner block-sgs");
+    match options.fit.cg.preconditioner {
+        crate::solve::CgPreconditioner::BlockSgs { .. } => {
+            return unsupported("--cg-preconditioner block-sgs");
+        }
+        // The second partition's patches would cross the shares.
+        crate::solve::CgPreconditioner::BlockJacobiPair { .. } => {
+            return unsupported("--cg-preconditioner block-jacobi-pair");
+        }
+        _ => {}
     }
     Ok(())
 }

@@ -61,6 +61,10 @@ pub enum CgPreconditioner {
     /// ([`BlockedSystem::symmetric_gauss_seidel`]); point Jacobi for operators that are not
     /// assembled.
     BlockSgs { size: usize },
+    /// Additive block Jacobi on two staggered partitions into aggregates of at most `size`
+    /// unknowns ([`block_jacobi::BlockJacobiPair`]); point Jacobi for operators that are not
+    /// assembled.
+    BlockJacobiPair { size: usize },
 }
 
 impl Default for CgPreconditioner {
@@ -370,6 +374,11 @@ pub fn preconditioner(
             CgPreconditioner::BlockJacobi { size } | CgPreconditioner::BlockSgs { size },
             Some((indptr, indices, data)),
         ) => Ok(Box::new(BlockJacobi::new(indptr, indices, data, size)?)),
+        (CgPreconditioner::BlockJacobiPair { size }, Some((indptr, indices, data))) => {
+            Ok(Box::new(block_jacobi::BlockJacobiPair::new(
+                indptr, indices, data, size,
+            )?))
+        }
         _ => Ok(Box::new(Jacobi::new(op)?)),
     }
 }
