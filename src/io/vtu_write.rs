@@ -16,8 +16,9 @@
 //! Cell data: `tag` (region tag of elements, boundary tag of facets, 0 = none). Encodings:
 //! ASCII, inline base64 (`binary`) with UInt64 headers, or raw appended data.
 //!
-//! Field data (the grid's `<FieldData>`, written when the mesh names a tag or has periodic
-//! pairs), numeric only, so that meshio (which refuses VTK's `String` arrays) reads the file:
+//! Field data (the grid's `<FieldData>`, after the piece, written only when the mesh has
+//! periodic pairs: MFEM's VTU reader refuses a grid with any child besides its one piece),
+//! numeric only, so that meshio (which refuses VTK's `String` arrays) reads the file:
 //! * `tag_ids` (Int32) and `tag_names` (UInt8): the named tags and their names, UTF-8, each
 //!   followed by a NUL byte, in the order of `tag_ids`;
 //! * `periodic_tags` (Int32, 2 components): per periodic pair its master and image boundary
@@ -111,8 +112,13 @@ fn array<T: Value>(
     }
 }
 
-/// The grid's field data (module docs): tag names and periodic pairs, empty without either.
+/// The grid's field data (module docs): tag names and periodic pairs, empty without pairs.
 fn field_data(mesh: &HighOrderMesh, encoding: VtuEncoding) -> Vec<Array> {
+    // MFEM's VTU reader refuses a grid with any child besides its one piece, so a mesh
+    // without pairs (nothing a solver needs) stays readable there.
+    if mesh.periodic.is_empty() {
+        return Vec::new();
+    }
     let with_tuples = |mut a: Array, n: usize| {
         a.tuples = Some(n);
         a
@@ -297,13 +303,6 @@ pub fn write_vtu_cells(
             }
         }
     };
-    if !field_data.is_empty() {
-        writeln!(w, "<FieldData>")?;
-        for a in &field_data {
-            put(w, a)?;
-        }
-        writeln!(w, "</FieldData>")?;
-    }
     writeln!(
         w,
         "<Piece NumberOfPoints=\"{}\" NumberOfCells=\"{}\">",
@@ -320,7 +319,17 @@ pub fn write_vtu_cells(
     for a in &cell_data {
         put(w, a)?;
     }
-    writeln!(w, "</CellData>\n</Piece>\n</UnstructuredGrid>")?;
+    writeln!(w, "</CellData>\n</Piece>")?;
+    // After the piece, as VTK's own writer puts it; VTK and meshio find it anywhere among the
+    // grid's children.
+    if !field_data.is_empty() {
+        writeln!(w, "<FieldData>")?;
+        for a in &field_data {
+            put(w, a)?;
+        }
+        writeln!(w, "</FieldData>")?;
+    }
+    writeln!(w, "</UnstructuredGrid>")?;
     if encoding == VtuEncoding::Appended {
         write!(w, "<AppendedData encoding=\"raw\">\n_")?;
         w.write_all(&appended)?;

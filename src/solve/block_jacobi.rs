@@ -290,7 +290,7 @@ impl Preconditioner for BlockJacobi {
 }
 
 /// Additive block Jacobi on two staggered partitions: z = ½ (M₁⁻¹ r + M₂⁻¹ r), M₁ the
-/// block diagonal on [`Aggregates::new`]'s patches and M₂ on [`Aggregates::reversed`]'s,
+/// block diagonal on `Aggregates::new`'s patches and M₂ on `Aggregates::reversed`'s,
 /// which straddle M₁'s boundaries (an overlapping additive Schwarz method whose overlap
 /// costs no larger blocks). SPD as a sum of two SPD operators.
 ///

@@ -25,7 +25,7 @@
 //!
 //! Errors are one line naming the node's path (`/Base/Zone1/GridCoordinates: ...`).
 //! Write: [`mod@write`] (the curved mesh as one unstructured zone, its periodic pairs as
-//! grid connectivity with `Periodic_t`, [`periodic`]).
+//! grid connectivity with `Periodic_t`, `periodic`).
 //!
 //! Parts: `tree` the node tree (HDF5 or ADF) and its memory bound, `adf` the ADF container,
 //! `zone` one zone, `ordering` the CGNS node orders, `write` the writer; this module the base,

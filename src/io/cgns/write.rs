@@ -13,7 +13,7 @@
 //!   name in the base (holding a `FamilyName_t` of the same name, from which Gmsh makes its
 //!   physical group); the volume sections' names and families are the volume groups';
 //! * with periodic pairs, a `ZoneGridConnectivity` of `GridConnectivity_t` with `Periodic_t`
-//!   per pair and direction ([`super::periodic`]).
+//!   per pair and direction (`super::periodic`).
 //!
 //! Groups and their names are those of the MSH writer ([`crate::io::gmsh_write`]): the input's
 //! tag names, `boundary`/`untagged` for untagged facets, the volume named `fluid` (or the
