@@ -46,11 +46,12 @@ pub trait Executor: Certifier + EnergyKernel {
     }
 
     /// Solve `k` x = `b` by preconditioned CG from `x`, telling `progress` every iteration
-    /// (it may stop the solve: [`CgError::Cancelled`]). The error is the solver seam's [`CgError`]: besides
+    /// (it may stop the solve: [`CgError::Cancelled`]). The solve owns `k`: the CPU's blocked
+    /// solvers release it as they build their own form of it. The error is the solver seam's [`CgError`]: besides
     /// breakdowns it carries a device failure as [`CgError::Device`].
     fn pcg(
         &self,
-        k: &NormalMatrix,
+        k: NormalMatrix,
         b: &[[f64; 3]],
         x: &mut [[f64; 3]],
         params: &CgParams,

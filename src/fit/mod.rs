@@ -41,7 +41,7 @@ use crate::math::BezierNet;
 use crate::math::bernstein::bernstein2;
 use crate::math::linalg::DVec3;
 use crate::mesh::{LinearMesh, Topology};
-use crate::solve::{CgError, CgInfo, CgParams, LinOp, pcg};
+use crate::solve::{CgError, CgInfo, CgParams, LinOp};
 use rayon::prelude::*;
 use std::collections::HashMap;
 
@@ -479,20 +479,20 @@ pub fn fit(
     mut progress: impl FnMut(usize, f64),
 ) -> Result<(Vec<[f64; 3]>, FitInfo), CgError> {
     fit_with(space, mesh, topo, params, |k, rhs, delta, cg| {
-        pcg(k, rhs, delta, cg, &mut progress)
+        k.pcg(rhs, delta, cg, &mut progress)
     })
 }
 
-/// [`fit`] with the normal equations solved by `solve(matrix, rhs, delta, cg)` (the
-/// unknowns are displacements from the initial control points, starting at 0), e.g. an
-/// executor's `pcg` (the GPU's).
+/// [`fit`] with the normal equations solved by `solve(matrix, rhs, delta, cg)`, which owns
+/// the matrix (the unknowns are displacements from the initial control points, starting at
+/// 0), e.g. an executor's `pcg` (the GPU's).
 pub fn fit_with(
     space: &dyn FitSpace,
     mesh: &LinearMesh,
     topo: &Topology,
     params: &FitParams,
     solve: impl FnOnce(
-        &NormalMatrix,
+        NormalMatrix,
         &[[f64; 3]],
         &mut [[f64; 3]],
         &crate::solve::CgParams,
@@ -516,7 +516,7 @@ pub fn fit_with_targets(
     params: &FitParams,
     smooth: Option<&SmoothTargets>,
     solve: impl FnOnce(
-        &NormalMatrix,
+        NormalMatrix,
         &[[f64; 3]],
         &mut [[f64; 3]],
         &crate::solve::CgParams,
@@ -538,7 +538,7 @@ pub fn fit_with_targets_from(
     smooth: Option<&SmoothTargets>,
     start: Option<&[[f64; 3]]>,
     solve: impl FnOnce(
-        &NormalMatrix,
+        NormalMatrix,
         &[[f64; 3]],
         &mut [[f64; 3]],
         &crate::solve::CgParams,
@@ -572,7 +572,9 @@ pub fn fit_with_targets_from(
         }
         None => vec![[0.0; 3]; k.n()],
     };
-    let cg = solve(&k, &rhs, &mut delta, &params.cg)?;
+    // The solve takes K (the CPU's blocked solvers release it as they reorder it).
+    let (unknowns, nonzeros) = (k.n(), k.data().len());
+    let cg = solve(k, &rhs, &mut delta, &params.cg)?;
     if let Some(d) = &scale {
         for (x, &d) in delta.iter_mut().zip(d) {
             *x = x.map(|x| d * x);
@@ -590,8 +592,8 @@ pub fn fit_with_targets_from(
         FitInfo {
             solver: FitSolver::Cg,
             cg,
-            unknowns: k.n(),
-            nonzeros: k.data().len(),
+            unknowns,
+            nonzeros,
             assembly_seconds,
             solve_seconds,
         },

@@ -6,6 +6,7 @@ use super::*;
 
 /// The symmetric matrix K in CSR form (a [`sprs::CsMatI`] with `u32` column indices and
 /// `usize` row offsets, columns sorted within each row), applied to 3-component vectors.
+#[derive(Clone)]
 pub struct NormalMatrix {
     mat: sprs::CsMatI<f64, u32, usize>,
 }
@@ -52,6 +53,27 @@ impl NormalMatrix {
     /// The stored values, for in-place rescaling (the structure stays fixed).
     pub fn data_mut(&mut self) -> &mut [f64] {
         self.mat.data_mut()
+    }
+
+    /// [`crate::solve::pcg`] on this matrix, consuming it: the blocked solvers keep A in their
+    /// own form and release the CSR arrays as they build it
+    /// ([`crate::solve::BlockedSystem::from_parts`]), so the solve's peak memory does not hold
+    /// A twice. Same iterates as `pcg(&self, ..)`.
+    pub fn pcg(
+        self,
+        b: &[[f64; 3]],
+        x: &mut [[f64; 3]],
+        params: &crate::solve::CgParams,
+        progress: impl crate::solve::CgMonitor,
+    ) -> Result<crate::solve::CgInfo, CgError> {
+        match params.preconditioner.blocked() {
+            Some((size, sweeps)) => {
+                let (indptr, indices, data) = self.into_parts();
+                crate::solve::BlockedSystem::from_parts(indptr, indices, data, size, sweeps)?
+                    .solve(b, x, params, progress)
+            }
+            None => crate::solve::pcg(&self, b, x, params, progress),
+        }
     }
 
     /// The underlying sparse matrix.

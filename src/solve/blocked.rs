@@ -33,6 +33,7 @@
 use super::block_jacobi::{Aggregates, factor_blocks, split_at_offsets};
 use super::{CgError, CgInfo, CgParams, Stopping};
 use rayon::prelude::*;
+use std::borrow::Cow;
 use std::collections::HashMap;
 
 /// Rows per chunk of the product (and per partial sum of pᵀAp).
@@ -107,6 +108,7 @@ fn same_bits(a: &[f64], b: &[f64]) -> bool {
 
 impl TemplateMatrix {
     /// A (CSR) renumbered so that new row i is old row `rows[i]` (`slot` is the inverse).
+    #[cfg(test)]
     pub(crate) fn new(
         indptr: &[usize],
         indices: &[u32],
@@ -114,14 +116,23 @@ impl TemplateMatrix {
         rows: &[u32],
         slot: &[u32],
     ) -> Self {
-        Self::with_hash(indptr, indices, data, rows, slot, hash_row)
+        Self::with_hash(
+            indptr,
+            Cow::Borrowed(indices),
+            Cow::Borrowed(data),
+            rows,
+            slot,
+            hash_row,
+        )
     }
 
-    /// [`Self::new`] with a given row hash (tests force collisions with it).
+    /// [`Self::new`] with a given row hash (tests force collisions with it). Owned `data` is
+    /// released once the template table holds the values, and owned `indices` once the
+    /// columns are renumbered: A is never held twice over.
     fn with_hash(
         indptr: &[usize],
-        indices: &[u32],
-        data: &[f64],
+        indices: Cow<[u32]>,
+        data: Cow<[f64]>,
         rows: &[u32],
         slot: &[u32],
         hash: impl Fn(&[f64]) -> u64 + Sync,
@@ -137,18 +148,10 @@ impl TemplateMatrix {
             let r = rows[i] as usize;
             &data[indptr[r]..indptr[r + 1]]
         };
-        let mut cols = vec![0u32; indices.len()];
-        let hashes: Vec<u64> = split_at_offsets(&mut cols, &new_indptr)
+        let hashes: Vec<u64> = (0..n)
             .into_par_iter()
-            .zip(rows.par_iter())
             .with_min_len(256)
-            .map(|(c, &r)| {
-                let (lo, hi) = (indptr[r as usize], indptr[r as usize + 1]);
-                for (c, &old) in c.iter_mut().zip(&indices[lo..hi]) {
-                    *c = slot[old as usize];
-                }
-                hash(&data[lo..hi])
-            })
+            .map(|i| hash(row_values(i)))
             .collect();
         // Templates by hash in order of first appearance (sequential: a deterministic
         // numbering), then every row compared with its template's first row in parallel; the
@@ -191,6 +194,19 @@ impl TemplateMatrix {
             values.extend_from_slice(row_values(f));
             template_start.push(values.len());
         }
+        drop(data);
+        let mut cols = vec![0u32; indices.len()];
+        split_at_offsets(&mut cols, &new_indptr)
+            .into_par_iter()
+            .zip(rows.par_iter())
+            .with_min_len(256)
+            .for_each(|(c, &r)| {
+                let (lo, hi) = (indptr[r as usize], indptr[r as usize + 1]);
+                for (c, &old) in c.iter_mut().zip(&indices[lo..hi]) {
+                    *c = slot[old as usize];
+                }
+            });
+        drop(indices);
         TemplateMatrix {
             indptr: new_indptr,
             cols,
@@ -903,7 +919,27 @@ impl BlockedSystem {
         data: &[f64],
         size: usize,
     ) -> Result<Self, CgError> {
-        Self::build(indptr, indices, data, size, false)
+        Self::build(
+            indptr,
+            Cow::Borrowed(indices),
+            Cow::Borrowed(data),
+            size,
+            false,
+        )
+    }
+
+    /// [`Self::new`] (or [`Self::symmetric_gauss_seidel`] when `sweeps`) consuming A's CSR
+    /// arrays: the values are released once the row templates hold them and the columns once
+    /// renumbered, so the solve does not keep A twice (at 1M hexes the CSR arrays are 1.5 GB,
+    /// the reordered matrix 0.5 GB). Same system, same bits.
+    pub fn from_parts(
+        indptr: Vec<usize>,
+        indices: Vec<u32>,
+        data: Vec<f64>,
+        size: usize,
+        sweeps: bool,
+    ) -> Result<Self, CgError> {
+        Self::build(&indptr, Cow::Owned(indices), Cow::Owned(data), size, sweeps)
     }
 
     /// [`Self::new`] with the aggregates ordered by colour, for the symmetric block
@@ -932,24 +968,30 @@ impl BlockedSystem {
         data: &[f64],
         size: usize,
     ) -> Result<Self, CgError> {
-        Self::build(indptr, indices, data, size, true)
+        Self::build(
+            indptr,
+            Cow::Borrowed(indices),
+            Cow::Borrowed(data),
+            size,
+            true,
+        )
     }
 
     fn build(
         indptr: &[usize],
-        indices: &[u32],
-        data: &[f64],
+        indices: Cow<[u32]>,
+        data: Cow<[f64]>,
         size: usize,
         sweeps: bool,
     ) -> Result<Self, CgError> {
-        let agg = Aggregates::new(indptr, indices, size);
+        let agg = Aggregates::new(indptr, &indices, size);
         let (agg, order) = if sweeps {
-            let (agg, groups, colours) = colour_order(agg, indptr, indices, SWEEP_DOMAINS);
+            let (agg, groups, colours) = colour_order(agg, indptr, &indices, SWEEP_DOMAINS);
             (agg, Some(SweepOrder { groups, colours }))
         } else {
             (agg, None)
         };
-        let a = TemplateMatrix::new(indptr, indices, data, &agg.rows, &agg.slot);
+        let a = TemplateMatrix::with_hash(indptr, indices, data, &agg.rows, &agg.slot, hash_row);
         let start = &agg.start;
         let (factors, factor_start) = factor_blocks(start, &agg.rows, |b, l| {
             let s = start[b];
@@ -1518,7 +1560,14 @@ mod tests {
         let want = matvec(&a, &x);
         for m in [
             TemplateMatrix::new(&a.0, &a.1, &a.2, &agg.rows, &agg.slot),
-            TemplateMatrix::with_hash(&a.0, &a.1, &a.2, &agg.rows, &agg.slot, |_| 7),
+            TemplateMatrix::with_hash(
+                &a.0,
+                Cow::Borrowed(&a.1),
+                Cow::Borrowed(&a.2),
+                &agg.rows,
+                &agg.slot,
+                |_| 7,
+            ),
         ] {
             assert_eq!(m.n_templates(), 144);
             assert_close(&template_product(&a, &m, &agg, &x), &want, 1e-14);
@@ -1527,7 +1576,14 @@ mod tests {
         let b = laplacian(12, |x, _| if x % 2 == 0 { 0.25 } else { 0.5 });
         let agg = Aggregates::new(&b.0, &b.1, 8);
         let plain = TemplateMatrix::new(&b.0, &b.1, &b.2, &agg.rows, &agg.slot);
-        let collided = TemplateMatrix::with_hash(&b.0, &b.1, &b.2, &agg.rows, &agg.slot, |_| 7);
+        let collided = TemplateMatrix::with_hash(
+            &b.0,
+            Cow::Borrowed(&b.1),
+            Cow::Borrowed(&b.2),
+            &agg.rows,
+            &agg.slot,
+            |_| 7,
+        );
         assert_eq!(plain.n_templates(), collided.n_templates());
         assert_close(
             &template_product(&b, &collided, &agg, &x),
@@ -1579,6 +1635,36 @@ mod tests {
         let mut z: Vec<[f64; 3]> = want.iter().map(|w| w.map(|v| v * (1.0 + 1e-6))).collect();
         let warm = sys.solve(&b, &mut z, &params, |_, _| {}).unwrap();
         assert!(warm.iterations < info.iterations);
+    }
+
+    /// The solver built from owned CSR arrays (released while it is built) is the one built
+    /// from borrowed arrays, bit for bit, for both preconditioners and with templates shared.
+    #[test]
+    fn consuming_the_csr_arrays_gives_the_bits_of_borrowing_them() {
+        let a = laplacian(30, |x, y| 0.05 + 0.01 * ((3 * x + y) % 5) as f64);
+        let b = test_vector(900);
+        for sweeps in [false, true] {
+            let params = CgParams {
+                rel_tol: 1e-9,
+                ..Default::default()
+            };
+            let borrowed =
+                BlockedSystem::build(&a.0, Cow::Borrowed(&a.1), Cow::Borrowed(&a.2), 16, sweeps)
+                    .unwrap();
+            let owned =
+                BlockedSystem::from_parts(a.0.clone(), a.1.clone(), a.2.clone(), 16, sweeps)
+                    .unwrap();
+            assert_eq!(owned.sweep_order().is_some(), sweeps);
+            let mut x = vec![[0.0; 3]; 900];
+            let mut y = vec![[0.0; 3]; 900];
+            let i = borrowed.solve(&b, &mut x, &params, |_, _| {}).unwrap();
+            let j = owned.solve(&b, &mut y, &params, |_, _| {}).unwrap();
+            assert_eq!(i.iterations, j.iterations);
+            assert!(i.iterations > 5);
+            let bits =
+                |v: &[[f64; 3]]| -> Vec<u64> { v.iter().flatten().map(|x| x.to_bits()).collect() };
+            assert_eq!(bits(&x), bits(&y), "sweeps {sweeps}");
+        }
     }
 
     /// Skipping the factor rows' leading zeros changes no bit of the solve: the same system

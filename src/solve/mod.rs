@@ -67,6 +67,18 @@ pub enum CgPreconditioner {
     BlockJacobiPair { size: usize },
 }
 
+impl CgPreconditioner {
+    /// For the preconditioners that [`BlockedSystem`] runs on an assembled matrix, the
+    /// aggregate size and whether it sweeps (block Gauss–Seidel); `None` for the others.
+    pub fn blocked(self) -> Option<(usize, bool)> {
+        match self {
+            CgPreconditioner::BlockJacobi { size } => Some((size, false)),
+            CgPreconditioner::BlockSgs { size } => Some((size, true)),
+            CgPreconditioner::Jacobi | CgPreconditioner::BlockJacobiPair { .. } => None,
+        }
+    }
+}
+
 impl Default for CgPreconditioner {
     fn default() -> Self {
         // Block Gauss–Seidel needs 40 % of the iterations on the fit's systems, but even in
@@ -420,15 +432,14 @@ pub fn pcg(
     progress: impl CgMonitor,
 ) -> Result<CgInfo, CgError> {
     // An assembled matrix with block Jacobi takes the reordered, fused solver (same method).
-    match (params.preconditioner, op.csr()) {
-        (CgPreconditioner::BlockJacobi { size }, Some((indptr, indices, data))) => {
-            return BlockedSystem::new(indptr, indices, data, size)?.solve(b, x, params, progress);
-        }
-        (CgPreconditioner::BlockSgs { size }, Some((indptr, indices, data))) => {
-            return BlockedSystem::symmetric_gauss_seidel(indptr, indices, data, size)?
-                .solve(b, x, params, progress);
-        }
-        _ => {}
+    if let (Some((size, sweeps)), Some((indptr, indices, data))) =
+        (params.preconditioner.blocked(), op.csr())
+    {
+        let sys = match sweeps {
+            false => BlockedSystem::new(indptr, indices, data, size)?,
+            true => BlockedSystem::symmetric_gauss_seidel(indptr, indices, data, size)?,
+        };
+        return sys.solve(b, x, params, progress);
     }
     let pre = preconditioner(op, params)?;
     pcg_with(op, pre.as_ref(), b, x, params, progress)

@@ -502,7 +502,7 @@ fn gpu_cg_matches_cpu_cg() {
             let [(want, ci), (got, gi)] = executors::on_each(&executors, |x| {
                 let mut sol = vec![[0.0; 3]; k.n()];
                 let info = x
-                    .pcg(&k, &b, &mut sol, &params, &mut |_, _| {})
+                    .pcg(k.clone(), &b, &mut sol, &params, &mut |_, _| {})
                     .unwrap_or_else(|e| panic!("{name} {prec:?} {}: {e}", x.name()));
                 (sol, info)
             });

@@ -396,12 +396,12 @@ fn a_started_fit_reaches_the_same_control_points() {
     let p = FitParams::smooth();
     let targets = polyspline::fit::smooth_targets(&m, &t, &p);
     fn solve(
-        k: &polyspline::fit::NormalMatrix,
+        k: polyspline::fit::NormalMatrix,
         b: &[[f64; 3]],
         x: &mut [[f64; 3]],
         cg: &polyspline::solve::CgParams,
     ) -> Result<polyspline::solve::CgInfo, polyspline::solve::CgError> {
-        polyspline::solve::pcg(k, b, x, cg, |_, _| {})
+        polyspline::solve::pcg(&k, b, x, cg, |_, _| {})
     }
     let (cold, cold_info) = fit_with_targets(&s, &m, &t, &p, targets.as_ref(), solve).unwrap();
     let (lo, hi) = m.bounding_box();

@@ -32,13 +32,13 @@ impl Executor for CpuExecutor {
 
     fn pcg(
         &self,
-        k: &NormalMatrix,
+        k: NormalMatrix,
         b: &[[f64; 3]],
         x: &mut [[f64; 3]],
         params: &CgParams,
         progress: &mut dyn crate::solve::CgMonitor,
     ) -> Result<CgInfo, CgError> {
-        crate::solve::pcg(k, b, x, params, progress)
+        k.pcg(b, x, params, progress)
     }
 
     fn sample(

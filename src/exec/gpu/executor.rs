@@ -67,13 +67,13 @@ impl Executor for GpuExecutor<'_> {
 
     fn pcg(
         &self,
-        k: &NormalMatrix,
+        k: NormalMatrix,
         b: &[[f64; 3]],
         x: &mut [[f64; 3]],
         params: &CgParams,
         progress: &mut dyn crate::solve::CgMonitor,
     ) -> Result<CgInfo, CgError> {
-        super::cg::pcg(self.ctx(), k, b, x, params, progress)
+        super::cg::pcg(self.ctx(), &k, b, x, params, progress)
     }
 
     fn sample(
