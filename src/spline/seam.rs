@@ -17,6 +17,9 @@
 //!   unchanged), so the least-squares matrix is that of the glued space and only the nets,
 //!   and through them the fit's right-hand side, carry the shift.
 //!
+//! [`interior_view`] gives the input's topology with the seam facets interior, on which the
+//! pipeline builds everything fitted to the boundary (targets, features, kinks, weights).
+//!
 //! Invariants: where [`glue`] returns a mesh, its topology is manifold and every seam facet is
 //! interior; [`unwrap`] refuses (and the caller keeps the sides apart) when a shift is not a
 //! combination of the translations to `SHIFT_REL_TOL` of the period, or two common vertices
