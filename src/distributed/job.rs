@@ -428,7 +428,7 @@ fn run_share(
         topo: &topo,
         executor: executor.as_ref(),
     };
-    let setup = agree(comm, SplineSetup::new(&job))?;
+    let setup = agree(comm, SplineSetup::new(&job, &[]))?;
     let mut s = setup.build(&job, &[]);
     laps.lap("spline");
     let halo = super::local::halo(comm, &local, &topo, &s);

@@ -302,7 +302,15 @@ impl Features {
 
     /// (feature vertex deviation, planarity) of the sampled mesh `ho` of `mesh`, relative to
     /// the bounding-box diagonal (see [`FeatureReport`]).
-    pub fn deviations(&self, mesh: &LinearMesh, ho: &crate::mesh::HighOrderMesh) -> (f64, f64) {
+    /// `rows[i]`, when given, is the row of `ho.boundary` of the features' boundary facet i
+    /// (features found on a topology with fewer boundary facets than `ho`'s, as a periodic
+    /// mesh's with its seams interior); else row i.
+    pub fn deviations(
+        &self,
+        mesh: &LinearMesh,
+        ho: &crate::mesh::HighOrderMesh,
+        rows: Option<&[u32]>,
+    ) -> (f64, f64) {
         let (lo, hi) = mesh.bounding_box();
         let diag = (DVec3::from(hi) - DVec3::from(lo))
             .length()
@@ -315,7 +323,8 @@ impl Features {
         let mut planarity = 0.0f64;
         for (i, &p) in self.facet_patch.iter().enumerate() {
             if let Some(Some((n, d))) = self.planes.get(p as usize) {
-                for &k in &ho.boundary[i * npf..(i + 1) * npf] {
+                let r = rows.map_or(i, |r| r[i] as usize);
+                for &k in &ho.boundary[r * npf..(r + 1) * npf] {
                     let x = DVec3::from(ho.nodes[k as usize]);
                     planarity = planarity.max((DVec3::from(*n).dot(x) - d).abs());
                 }
@@ -462,6 +471,9 @@ fn corner_mask_2d(
             [i, j] => {
                 vertex_mask[v] = by_angle[v] || (params.tags && tag(i) != tag(j));
             }
+            // One boundary edge: the boundary goes on across a glued periodic seam (a closed
+            // boundary has none such).
+            [_] => {}
             _ => vertex_mask[v] = true,
         }
     }
@@ -516,6 +528,8 @@ fn edge_masks_3d(
         edge_mask[ed] = match fs[..] {
             [] => false,
             [i, j] => by_angle[ed] || (params.tags && tag(i) != tag(j)),
+            // One boundary face: the boundary goes on across a glued periodic seam.
+            [_] => false,
             _ => true,
         };
     }

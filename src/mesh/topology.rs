@@ -109,6 +109,47 @@ impl Topology {
         self.element_neighbors[e * self.sides() + side]
     }
 
+    /// This topology with the boundary facets of `glued` made interior, as on a periodic mesh
+    /// glued across its seams: each `(f, e, s)` names a boundary facet f and the element e
+    /// (its side s) across it. The facet keeps its own vertices (those of its element, not of
+    /// e's side); the element across becomes the facet's second element and the first
+    /// element's neighbour. The boundary facets, their tags and the boundary marks of vertices
+    /// and edges follow; vertex, edge and face ids are unchanged.
+    pub fn with_interior_facets(&self, mesh: &LinearMesh, glued: &[(u32, u32, u8)]) -> Topology {
+        let mut t = self.clone();
+        let sides = self.sides();
+        for &(f, e, s) in glued {
+            let f = f as usize;
+            let [e0, _] = self.facet_elements[f];
+            t.facet_elements[f][1] = e;
+            t.facet_sides[f][1] = s;
+            t.element_neighbors[e0 as usize * sides + self.facet_sides[f][0] as usize] = e;
+        }
+        let tagged = self.boundary_facet_tags.len() == self.boundary_facets.len();
+        let (mut facets, mut tags) = (Vec::new(), Vec::new());
+        for (i, &f) in self.boundary_facets.iter().enumerate() {
+            if t.facet_elements[f as usize][1] == NONE {
+                facets.push(f);
+                if tagged {
+                    tags.push(self.boundary_facet_tags[i]);
+                }
+            }
+        }
+        (t.vertex_on_boundary, t.edge_on_boundary) = boundary_marks(
+            self.dim,
+            &mesh.elements,
+            self.n_vertices,
+            self.edges.len(),
+            &facets,
+            &t.facet_elements,
+            &t.facet_sides,
+            &t.element_edges,
+        );
+        t.boundary_facets = facets;
+        t.boundary_facet_tags = tags;
+        t
+    }
+
     /// Facet id of local side `side` of element `e`.
     pub fn element_facet(&self, e: usize, side: usize) -> u32 {
         if self.dim == 2 {

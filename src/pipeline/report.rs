@@ -195,7 +195,7 @@ impl CurveReport {
         done: &Finished,
         timings: BTreeMap<String, f64>,
     ) -> CurveReport {
-        let (mesh, topo, options, ho) = (job.mesh, job.topo, job.options, &done.ho);
+        let (mesh, options, ho) = (job.mesh, job.options, &done.ho);
         let setup = spline.map(|(setup, _)| setup);
         let outcome = spline.map(|(_, outcome)| outcome);
         let space = outcome.map(|o| &o.space);
@@ -231,14 +231,17 @@ impl CurveReport {
                     .count()
             }),
             snapped_boundary_vertices: done.snapped,
-            features: setup.and_then(|s| s.features.as_ref()).map(|f| {
-                let (vertex, planarity) = f.deviations(mesh, ho);
-                crate::mesh::features::FeatureReport {
-                    found: f.summary(&options.features.params, topo),
-                    feature_vertex_deviation_max: vertex,
-                    planarity_max: planarity,
-                }
-            }),
+            features: setup
+                .and_then(|s| Some((s.features.as_ref()?, s)))
+                .map(|(f, s)| {
+                    let t = s.topo(job);
+                    let (vertex, planarity) = f.deviations(mesh, ho, s.boundary_rows());
+                    crate::mesh::features::FeatureReport {
+                        found: f.summary(&options.features.params, t),
+                        feature_vertex_deviation_max: vertex,
+                        planarity_max: planarity,
+                    }
+                }),
             fit_weights: fit.map(|_| options.fit.weights),
             fit_targets: fit.map(|_| options.fit.targets),
             fit_solver: fit.map(|f| f.solver),

@@ -25,7 +25,7 @@ use crate::mesh::features::Features;
 use crate::mesh::periodic::PeriodicPair;
 use crate::mesh::{LinearMesh, Topology};
 use crate::progress::{Progress, Stage};
-use crate::spline::seam::{self, Glued};
+use crate::spline::seam::{self, Glued, SeamView};
 use crate::spline::{ElementRows, KnotSurfaceInfo, KnotWeights, Q2Reason, SplineSpace, kinks};
 use crate::validity::blend::{BlendInfo, Blended, NetCache, blend_search};
 use crate::validity::certificate::{
@@ -65,11 +65,25 @@ pub(crate) struct SplineSetup {
     pub(crate) seam_c0: std::sync::Mutex<Option<String>>,
     /// Putting a glued space back on the input failed: later spaces are built unglued.
     seams_failed: std::sync::atomic::AtomicBool,
+    /// The input's topology with the glued seams interior ([`seam::interior_view`]): the
+    /// features, kinks, smooth targets, fit, misfit checks and blend target map are built on
+    /// it (`None`: on the input's). Kept when a later space cannot be put back on the input,
+    /// since the targets were built on it: the seam is then fitted like the interior on both
+    /// sides and made exact after sampling.
+    view: Option<SeamView>,
 }
 
 impl SplineSetup {
-    pub(crate) fn new(job: &Job) -> Result<Self, CurveError> {
-        let (options, mesh, topo) = (job.options, job.mesh, job.topo);
+    /// The setup of `job`; the translation pairs among `periodic` are glued first
+    /// ([`SplineSetup::glue_seams`]), so that everything fitted to the boundary sees their
+    /// seams as interior.
+    pub(crate) fn new(job: &Job, periodic: &[PeriodicPair]) -> Result<Self, CurveError> {
+        let (seams, seam_c0) = glue_seams(job, periodic);
+        let view = seams
+            .as_ref()
+            .map(|g| seam::interior_view(job.mesh, job.topo, g));
+        let (options, mesh) = (job.options, job.mesh);
+        let topo = view.as_ref().map_or(job.topo, |v| &v.topo);
         let features = Some(options.features.detect(mesh, topo)?).filter(|f| !f.is_empty());
         let used = features.as_ref().filter(|_| !options.features.ignore);
         let crease = used.map_or_else(Vec::new, |f| {
@@ -89,6 +103,12 @@ impl SplineSetup {
                 let mut exclude = kinks::feature_vertices(mesh, topo, p.feature_angle_deg);
                 if let Some(f) = used {
                     for (x, &m) in exclude.iter_mut().zip(&f.vertex_mask) {
+                        *x |= m;
+                    }
+                }
+                // A wall's fan is cut at a seam (it goes on on the other side): no kink.
+                if let Some(v) = &view {
+                    for (x, &m) in exclude.iter_mut().zip(&v.seam_ends) {
                         *x |= m;
                     }
                 }
@@ -113,7 +133,7 @@ impl SplineSetup {
             ),
             _ => None,
         };
-        let knots = SplineSpace::knot_weights(mesh, topo, &options.knots);
+        let knots = SplineSpace::knot_weights(mesh, job.topo, &options.knots);
         Ok(SplineSetup {
             features,
             crease,
@@ -125,32 +145,21 @@ impl SplineSetup {
             knot_split: knots.split,
             knot_info: knots.info,
             knot_intervals: options.knots.intervals,
-            seams: None,
-            seam_c0: std::sync::Mutex::new(None),
+            seams,
+            seam_c0: std::sync::Mutex::new(seam_c0),
             seams_failed: std::sync::atomic::AtomicBool::new(false),
+            view,
         })
     }
 
-    /// Identify the translation pairs among `pairs` in the spline space (uniform knots only:
-    /// graded knot surfaces are measured on the input's topology); the reason when some pair
-    /// stays apart is kept for the report.
-    pub(crate) fn glue_seams(&mut self, job: &Job, pairs: &[PeriodicPair]) {
-        if pairs.is_empty() {
-            return;
-        }
-        let why = if self.knot_intervals != crate::spline::KnotIntervals::Uniform {
-            Some("graded knot intervals are measured on the unglued mesh")
-        } else {
-            self.seams = seam::glue(job.mesh, pairs);
-            if self.seams.is_none() && pairs.iter().any(|p| p.transform.is_translation()) {
-                Some("the mesh with its translation pairs glued is not manifold")
-            } else if pairs.iter().any(|p| !p.transform.is_translation()) {
-                Some("rotation pairs are not identified in the spline space")
-            } else {
-                None
-            }
-        };
-        *self.seam_c0.lock().expect("not poisoned") = why.map(str::to_string);
+    /// The rows of the input's boundary facets of [`SplineSetup::topo`]'s (`None`: all).
+    pub(crate) fn boundary_rows(&self) -> Option<&[u32]> {
+        self.view.as_ref().map(|v| &v.boundary_rows[..])
+    }
+
+    /// The topology the boundary is fitted on: the input's with the glued seams interior.
+    pub(crate) fn topo<'a>(&'a self, job: &Job<'a>) -> &'a Topology {
+        self.view.as_ref().map_or(job.topo, |v| &v.topo)
     }
 
     /// The seams as glued for the spline space, unless identifying them failed.
@@ -220,10 +229,32 @@ impl SplineSetup {
     pub(crate) fn target_map<'a>(&'a self, job: &Job<'a>) -> TargetMap<'a> {
         TargetMap {
             mesh: job.mesh,
-            topo: job.topo,
+            topo: self.topo(job),
             smooth: self.targets.as_ref().or(self.blend_targets.as_ref()),
         }
     }
+}
+
+/// The translation pairs among `pairs` glued for the spline space (uniform knots only: graded
+/// knot surfaces are measured on the input's topology), and why some pair stays apart (for
+/// the report), if one does.
+fn glue_seams(job: &Job, pairs: &[PeriodicPair]) -> (Option<Glued>, Option<String>) {
+    if pairs.is_empty() {
+        return (None, None);
+    }
+    if job.options.knots.intervals != crate::spline::KnotIntervals::Uniform {
+        let why = "graded knot intervals are measured on the unglued mesh";
+        return (None, Some(why.into()));
+    }
+    let seams = seam::glue(job.mesh, pairs);
+    let why = if seams.is_none() && pairs.iter().any(|p| p.transform.is_translation()) {
+        Some("the mesh with its translation pairs glued is not manifold")
+    } else if pairs.iter().any(|p| !p.transform.is_translation()) {
+        Some("rotation pairs are not identified in the spline space")
+    } else {
+        None
+    };
+    (seams, why.map(str::to_string))
 }
 
 /// The certified spline geometry and the report's figures of how it was reached.
@@ -333,8 +364,7 @@ fn curve_spline_with(
     periodic: &[PeriodicPair],
 ) -> Result<(SplineSetup, SplineOutcome), CurveError> {
     let (setup, space) = clock.run(Stage::Spline, || {
-        let mut setup = SplineSetup::new(job)?;
-        setup.glue_seams(job, periodic);
+        let setup = SplineSetup::new(job, periodic)?;
         let space = setup.build(job, &vec![false; job.mesh.n_elements()]);
         Ok::<_, CurveError>((setup, space))
     })?;
@@ -525,7 +555,7 @@ fn fit_demoting_misfits(
         }
         round += 1;
         let marks = clock.run(Stage::Spline, || {
-            misfit::misfit_elements(job.mesh, job.topo, space, &c_star, targets)
+            misfit::misfit_elements(job.mesh, setup.topo(job), space, &c_star, targets)
         });
         if !marks.contains(&true) {
             return Ok((c_star, info));
@@ -573,7 +603,7 @@ fn solve_fit(
     let (mut c_star, mut info) = fit_with_targets_from(
         space,
         job.mesh,
-        job.topo,
+        setup.topo(job),
         &setup.fit_params,
         setup.targets.as_ref(),
         start,
@@ -608,7 +638,7 @@ fn solve_fit(
         info.solver = FitSolver::Cholesky;
     }
     if let Some(f) = setup.used_features() {
-        crate::fit::features::project_onto_planes(space, job.topo, f, &mut c_star);
+        crate::fit::features::project_onto_planes(space, setup.topo(job), f, &mut c_star);
     }
     Ok((c_star, info))
 }
@@ -703,7 +733,7 @@ fn minimize_energy(
     step: &CertifiedStep,
 ) -> Result<(Vec<[f64; 3]>, EnergyInfo), EnergyError> {
     use crate::energy::{Energy, Validity, minimize_on};
-    let (mesh, topo, fit) = (job.mesh, job.topo, &setup.fit_params);
+    let (mesh, topo, fit) = (job.mesh, setup.topo(job), &setup.fit_params);
     let start = &step.control_points;
     let energy = Energy::new(space, mesh, topo, fit, c_star, params)?;
     let depth = job.options.line_search.certificate_depth;

@@ -17,6 +17,9 @@
 //!   unchanged), so the least-squares matrix is that of the glued space and only the nets,
 //!   and through them the fit's right-hand side, carry the shift.
 //!
+//! [`interior_view`] gives the input's topology with the seam facets interior, on which the
+//! pipeline builds everything fitted to the boundary (targets, features, kinks, weights).
+//!
 //! Invariants: where [`glue`] returns a mesh, its topology is manifold and every seam facet is
 //! interior; [`unwrap`] refuses (and the caller keeps the sides apart) when a shift is not a
 //! combination of the translations to `SHIFT_REL_TOL` of the period, or two common vertices
@@ -108,6 +111,64 @@ pub fn glue(mesh: &LinearMesh, pairs: &[PeriodicPair]) -> Option<Glued> {
             .map(|p| p.transform.translation)
             .collect(),
     })
+}
+
+/// The input's topology as the glued mesh sees it: the seam facets (boundary facets of the
+/// input that are interior once glued) are interior, with the element across the seam as
+/// their second element ([`Topology::with_interior_facets`]); the geometry stays the input's.
+/// Everything fitted to the boundary (smooth targets, features, kinks, fit weights, misfit
+/// checks, the blend's target map) is built on it, so the seam is treated as the interior.
+#[derive(Clone, Debug)]
+pub struct SeamView {
+    /// The input's topology with the seam facets interior.
+    pub topo: Topology,
+    /// Vertices still on the boundary that lie on a seam facet: where a wall meets the seam.
+    /// Their boundary continues across the seam, on the other side's vertices, so they end
+    /// an open boundary curve (2D) or surface (3D) here and are no kink.
+    pub seam_ends: Vec<bool>,
+    /// Per boundary facet of `topo`, its index among the input's boundary facets.
+    pub boundary_rows: Vec<u32>,
+}
+
+/// [`SeamView`] of the input (`mesh`, `topo`) glued as `glued`.
+pub fn interior_view(mesh: &LinearMesh, topo: &Topology, glued: &Glued) -> SeamView {
+    let gt = &glued.topo;
+    let across: Vec<(u32, u32, u8)> = topo
+        .boundary_facets
+        .iter()
+        .filter_map(|&f| {
+            let e = topo.facet_elements[f as usize][0];
+            let s = topo.facet_sides[f as usize][0];
+            let gf = gt.element_facet(e as usize, s as usize) as usize;
+            let ([a, b], [sa, sb]) = (gt.facet_elements[gf], gt.facet_sides[gf]);
+            if b == NONE {
+                return None;
+            }
+            Some(if a == e && sa == s {
+                (f, b, sb)
+            } else {
+                (f, a, sa)
+            })
+        })
+        .collect();
+    let view = topo.with_interior_facets(mesh, &across);
+    let mut seam_ends = vec![false; topo.n_vertices];
+    for &(f, _, _) in &across {
+        for &v in topo.facet_vertices(f as usize) {
+            seam_ends[v as usize] = view.vertex_on_boundary[v as usize];
+        }
+    }
+    let boundary_rows = (0..topo.boundary_facets.len() as u32)
+        .filter(|&i| {
+            let f = topo.boundary_facets[i as usize] as usize;
+            view.facet_elements[f][1] == NONE
+        })
+        .collect();
+    SeamView {
+        topo: view,
+        seam_ends,
+        boundary_rows,
+    }
 }
 
 /// Element `h`'s input vertex at its glued corner `g`.

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Periodic pairs of a high-order quad/hex MSH file, as Gmsh reads them.
 
-usage: periodic_probe.py FILE.msh
+usage: periodic_probe.py FILE.msh [STRAIGHT.msh]
 Prints one JSON object:
   "diagonal": bounding-box diagonal of the nodes,
   "links": per boundary entity that Gmsh reports periodic (getPeriodicNodes with high-order
@@ -14,6 +14,12 @@ Prints one JSON object:
       map's linear part (0 = C¹ across the seam),
   "interior_angle_max", "interior_angle_p99", "interior_angle_mean": the same across the
       interior facets.
+With STRAIGHT (the straight-sided mesh of the same input, same elements in the same order):
+  "regular_seam_facets", "regular_seam_angle_mean", "regular_interior_angle_mean",
+  "regular_seam_input_angle_mean": the means over the facets where the input's grid is regular,
+      the angle across the facet in STRAIGHT below REGULAR_DEG (the input's own kinks, which
+      a curved mesh may keep where it holds the fit back, left out), and the input's mean
+      over those seam facets.
 Derivatives come from Gmsh's getJacobians at the reference facet centres; facets are matched
 by their corner node tags (image corners mapped to their masters).
 """
@@ -22,6 +28,8 @@ import sys
 
 import gmsh
 import numpy as np
+
+REGULAR_DEG = 10.0
 
 
 def measure(path):
@@ -85,6 +93,7 @@ def measure(path):
     seen = {}
     image_facets = []
     interior = []
+    interior_at = []
     for e in range(ne):
         for fi, (k, s, corners, _) in enumerate(facets):
             ids = [int(conn[e][c]) for c in corners]
@@ -92,14 +101,22 @@ def measure(path):
             key = tuple(sorted(ids))
             if all(i in to_master for i in ids):
                 r = to_master[ids[0]][1]
-                image_facets.append((tuple(sorted(to_master[i][0] for i in ids)), r.T @ d))
+                image_facets.append((tuple(sorted(to_master[i][0] for i in ids)), r.T @ d, (e, fi)))
             if key in seen:
                 interior.append(angle(seen.pop(key), d))
+                interior_at.append((e, fi))
             else:
                 seen[key] = d
-    seam = [angle(seen[key], d) for key, d in image_facets if key in seen]
+    seam_at = [(key, at) for key, _, at in image_facets if key in seen]
+    seam = [angle(seen[key], d) for key, d, _ in image_facets if key in seen]
     interior = np.array(interior) if interior else np.zeros(1)
+    # Keyed by (element, facet): the straight mesh has the same elements in the same order.
+    by_facet = {
+        "seam": dict(zip((at for _, at in seam_at), seam)),
+        "interior": dict(zip(interior_at, interior.tolist())),
+    }
     return {
+        "by_facet": by_facet,
         "file": path,
         "diagonal": diagonal,
         "links": links,
@@ -118,6 +135,20 @@ def main():
     # Gmsh skips the MSH 2.2 periodic section unless told otherwise.
     gmsh.option.setNumber("Mesh.IgnorePeriodicity", 0)
     out = measure(sys.argv[1])
+    curved = out.pop("by_facet")
+    if len(sys.argv) > 2:
+        gmsh.clear()
+        straight = measure(sys.argv[2]).pop("by_facet")
+        for what in ("seam", "interior"):
+            regular = [f for f, a in straight[what].items() if a < REGULAR_DEG]
+            if not regular or any(f not in curved[what] for f in regular):
+                sys.exit(f"{sys.argv[2]}: its {what} facets are not those of {sys.argv[1]}")
+            out[f"regular_{what}_angle_mean"] = float(np.mean([curved[what][f] for f in regular]))
+            if what == "seam":
+                out["regular_seam_facets"] = len(regular)
+                out["regular_seam_input_angle_mean"] = float(
+                    np.mean([straight[what][f] for f in regular])
+                )
     gmsh.finalize()
     print(json.dumps(out))
 
