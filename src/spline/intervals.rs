@@ -125,8 +125,6 @@ pub struct KnotSurfaceInfo {
     pub non_orientable: usize,
     /// Surfaces whose measured ratio was clamped to `max_ratio`.
     pub clamped: usize,
-    /// Surfaces crossing a curved wall, whose ratio is the wall's spacing ratio.
-    pub wall: usize,
     /// Largest |ln ratio| assigned.
     pub max_abs_log_ratio: f64,
     /// Elements made Q2 where knot surfaces were split ([`KnotParams::max_spread`]).
@@ -286,107 +284,6 @@ fn facet_size(mesh: &LinearMesh, vs: &[u32]) -> f64 {
         ];
         0.5 * (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt()
     }
-}
-
-/// Turning angle (degrees) of the boundary below which a wall counts as flat for the knot
-/// ratios ([`wall_ratio`]): a flat wall is reproduced by any parametrisation along it.
-const WALL_MIN_TURN_DEG: f64 = 1.0;
-
-/// Unit normal (3D) or unit direction (2D) of a facet, for the angle between two facets.
-fn facet_direction(mesh: &LinearMesh, vs: &[u32]) -> [f64; 3] {
-    let p = |i: usize| mesh.coords[vs[i] as usize];
-    let d = |a: [f64; 3], b: [f64; 3]| [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
-    let v = if vs.len() == 2 {
-        d(p(0), p(1))
-    } else {
-        let (u, v) = (d(p(0), p(2)), d(p(1), p(3)));
-        [
-            u[1] * v[2] - u[2] * v[1],
-            u[2] * v[0] - u[0] * v[2],
-            u[0] * v[1] - u[1] * v[0],
-        ]
-    };
-    let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
-    [v[0] / n, v[1] / n, v[2] / n]
-}
-
-/// Extent of element `e`'s boundary facet `bf` in the element's direction `k`: the distance
-/// between the centres of the sides it shares with the element's two facets normal to k.
-fn boundary_extent(mesh: &LinearMesh, topo: &Topology, e: usize, bf: u32, k: usize) -> f64 {
-    let bv = topo.facet_vertices(bf as usize);
-    let side = |s: usize| -> Vec<u32> {
-        let fv = topo.facet_vertices(topo.element_facet(e, s) as usize);
-        bv.iter().copied().filter(|v| fv.contains(v)).collect()
-    };
-    let (a, b) = (side(2 * k), side(2 * k + 1));
-    if a.is_empty() || b.is_empty() {
-        return f64::NAN;
-    }
-    let (a, b) = (centre(mesh, &a), centre(mesh, &b));
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
-}
-
-/// The log-ratio of interior facet `f` measured **along a curved wall** it meets: where `f`
-/// ends on the boundary, between boundary facets of its two elements that turn by at least
-/// [`WALL_MIN_TURN_DEG`] from each other, `ln(extent_B / extent_A)` of those boundary facets
-/// in the direction across `f` (the steepest-turning pair where there are several, e.g. at a
-/// rim). `None` where `f` does not meet a curved wall.
-///
-/// Why: the boundary is fitted from its own control points, whose parametrisation along the
-/// wall is set by the ratios of the knot surfaces crossing it; a ratio that is not the wall's
-/// own spacing ratio shifts the fitted wall's points along a curved wall and off it. The
-/// fitted boundary is far more sensitive to this than the interior cells are (an O-grid's
-/// uniformly spaced arc curved with a 2 % ratio taken from the cells inside loses a factor 3
-/// in boundary accuracy), so a surface that crosses a curved wall takes the wall's spacing.
-fn wall_ratio(mesh: &LinearMesh, topo: &Topology, f: usize) -> Option<f64> {
-    let [a, b] = topo.facet_elements[f];
-    if a == NONE || b == NONE || a == b {
-        return None;
-    }
-    let [sa, sb] = topo.facet_sides[f];
-    let fv = topo.facet_vertices(f);
-    let dim = topo.dim;
-    // Boundary facets of element `e` that meet `f` in a (dim − 2)-entity.
-    let walls = |e: u32| -> Vec<u32> {
-        (0..topo.sides())
-            .filter(|&s| topo.neighbor(e as usize, s) == NONE)
-            .map(|s| topo.element_facet(e as usize, s))
-            .filter(|&bf| {
-                let n = topo
-                    .facet_vertices(bf as usize)
-                    .iter()
-                    .filter(|v| fv.contains(v))
-                    .count();
-                n == dim - 1
-            })
-            .collect()
-    };
-    let (wa, wb) = (walls(a), walls(b));
-    let min_cos = WALL_MIN_TURN_DEG.to_radians().cos();
-    let mut best: Option<(f64, f64)> = None;
-    for &fa in &wa {
-        let va = topo.facet_vertices(fa as usize);
-        for &fb in &wb {
-            let vb = topo.facet_vertices(fb as usize);
-            // The two boundary facets share the side where `f` ends on the boundary.
-            let shared = va.iter().filter(|v| vb.contains(v) && fv.contains(v)).count();
-            if shared != dim - 1 {
-                continue;
-            }
-            let (na, nb) = (facet_direction(mesh, va), facet_direction(mesh, vb));
-            let cos = (na[0] * nb[0] + na[1] * nb[1] + na[2] * nb[2]).abs();
-            if cos > min_cos || best.is_some_and(|(c, _)| c <= cos) {
-                continue;
-            }
-            let ea = boundary_extent(mesh, topo, a as usize, fa, sa as usize / 2);
-            let eb = boundary_extent(mesh, topo, b as usize, fb, sb as usize / 2);
-            let r = (eb / ea).ln();
-            if r.is_finite() {
-                best = Some((cos, r));
-            }
-        }
-    }
-    best.map(|(_, r)| r)
 }
 
 /// −1 (`true`) when `e` is the second element of facet `f`, so that `ln(h_other / h_e)`
@@ -577,17 +474,6 @@ pub fn knot_weights(
         })
         .collect();
 
-    // Where a facet ends on a curved wall, the wall's own spacing ratio ([`wall_ratio`]).
-    let wall: Vec<Option<f64>> = (0..nf)
-        .into_par_iter()
-        .map(|f| {
-            measured[f]
-                .is_some()
-                .then(|| wall_ratio(mesh, topo, f))
-                .flatten()
-        })
-        .collect();
-
     // 2. Knot surfaces: facets tied across each spline element's neighbours; split where
     //    one ratio cannot fit, and rebuilt without the split elements' ties.
     let all = ties(topo, spline);
@@ -598,12 +484,9 @@ pub fn knot_weights(
         .collect();
     let mut uf = surfaces(nf, &kept, &measured);
 
-    // 3. One ratio per surface: the weighted mean of its facets' measured ratios, or, for a
-    //    surface that crosses a curved wall, of the wall's spacing ratios where it does.
+    // 3. One ratio per surface: the weighted mean of its facets' measured ratios.
     let mut sum = vec![0.0f64; nf];
     let mut weight = vec![0.0f64; nf];
-    let mut wall_sum = vec![0.0f64; nf];
-    let mut wall_weight = vec![0.0f64; nf];
     let mut sign = vec![false; nf];
     let mut root = vec![0u32; nf];
     for f in 0..nf {
@@ -613,10 +496,6 @@ pub fn knot_weights(
         if let Some((m, w)) = measured[f] {
             sum[r as usize] += w * if s { -m } else { m };
             weight[r as usize] += w;
-            if let Some(m) = wall[f] {
-                wall_sum[r as usize] += w * if s { -m } else { m };
-                wall_weight[r as usize] += w;
-            }
         }
     }
     let cap = params.max_ratio.ln();
@@ -637,12 +516,7 @@ pub fn knot_weights(
             info.non_orientable += 1;
             continue;
         }
-        let mut rho = if wall_weight[r] > 0.0 {
-            info.wall += 1;
-            wall_sum[r] / wall_weight[r]
-        } else {
-            sum[r] / weight[r]
-        };
+        let mut rho = sum[r] / weight[r];
         if rho.abs() > cap {
             info.clamped += 1;
             rho = rho.clamp(-cap, cap);
