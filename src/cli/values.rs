@@ -76,8 +76,8 @@ value_enum! {
             runs use uniform)")]
         Graded,
         #[value(help = "Uniform, and graded where the certified blend then holds back more \
-            than a tenth of the elements (the report's `knot_intervals` names the knots used; \
-            distributed runs use uniform)")]
+            than a tenth of the elements and graded knots hold back fewer (the report's \
+            `knot_intervals` names the knots used; distributed runs use uniform)")]
         Auto,
     }
 }

@@ -316,8 +316,8 @@ pub const AUTO_MAX_HELD_BACK: f64 = 0.1;
 ///
 /// `--knot-intervals auto` runs them with uniform knots and, where the blend then holds back
 /// more than [`AUTO_MAX_HELD_BACK`] of the elements (a C¹ map with uniform knots cannot follow
-/// a graded grid: the spline is thrown away there), again with graded knots; the setup names
-/// the knots used.
+/// a graded grid: the spline is thrown away there), again with graded knots, which are kept
+/// when their blend holds back fewer elements; the setup names the knots used.
 pub(super) fn curve_spline(
     job: &Job,
     clock: &mut Clock,
@@ -348,14 +348,19 @@ pub(super) fn curve_spline(
         return Ok(first);
     }
     let graded = with(KnotIntervals::Graded);
-    curve_spline_with(
+    let second = curve_spline_with(
         &Job {
             options: &graded,
             ..*job
         },
         clock,
         periodic,
-    )
+    )?;
+    // Graded knots only where they keep more of the spline: on meshes that are not graded
+    // (O-grids of smooth shapes) they hold back as many elements or more, and the uniform
+    // spline's boundary is the better one there.
+    let held_graded = second.1.blend.as_ref().map_or(0, |b| b.reduced_elements);
+    Ok(if held_graded < held { second } else { first })
 }
 
 fn curve_spline_with(
