@@ -64,7 +64,12 @@
 //! quarter turn or more and no polynomial model follows the surface there. The 3D boundary
 //! edge midpoints and face centres at such vertices take circular arcs on the vertex normals
 //! instead (`arcs`; regular coarse vertices take their normal from the circles through their
-//! grid lines). The interior samples keep the models.
+//! grid lines). An interior sample whose vertices inherited their models from the corners of
+//! such a boundary edge or face (after dropping its directions across the layers, along which
+//! the sources do not change) takes that entity's arc, times the mean inherited weight: the
+//! models and the arcs differ there by far more than a boundary-layer cell's height, so a thin
+//! cell with its wall side on the arcs and its inner side on the models folds. Other interior
+//! samples keep the models.
 //!
 //! With detected sharp features ([`SmoothTargets::build_with_features`]) the vertices on
 //! features take their models per patch and along feature curves instead
