@@ -217,8 +217,7 @@ impl SmoothTargets {
                     .is_some_and(|f| f.in_plane.contains_key(&(v as u32)))
         };
 
-        let mut sources = Vec::new();
-        let blended_vertices = if params.decay > 0.0 {
+        let (blended_vertices, sources) = if params.decay > 0.0 {
             inherit_interior(
                 mesh,
                 topo,
@@ -227,10 +226,9 @@ impl SmoothTargets {
                 &in_plane_3d,
                 &mut models,
                 &mut higher,
-                &mut sources,
             )
         } else {
-            0
+            (0, Vec::new())
         };
         if let Some(f) = &feature_models {
             for (&v, m) in &f.in_plane {
@@ -692,7 +690,8 @@ fn grid_pairs(topo: &Topology, fan: &[u32], v: u32) -> Option<[(u32, u32); 2]> {
 
 /// Interior vertices inherit the nearest smooth boundary vertex's model (Dijkstra along mesh
 /// edges from the smooth boundary vertices that are not `in_plane_3d`, cut off at decay · ℓ)
-/// with weight γ = 1 − d / (decay · ℓ), and its [`HigherModel`]; returns how many did.
+/// with weight γ = 1 − d / (decay · ℓ), and its [`HigherModel`]; returns how many did, and
+/// each vertex's source (itself for a source, `NONE` where none reached).
 fn inherit_interior(
     mesh: &LinearMesh,
     topo: &Topology,
@@ -701,8 +700,7 @@ fn inherit_interior(
     in_plane_3d: &dyn Fn(usize) -> bool,
     models: &mut [Option<VertexModel>],
     higher: &mut [Option<HigherModel>],
-    sources: &mut Vec<u32>,
-) -> usize {
+) -> (usize, Vec<u32>) {
     let nv = mesh.n_vertices();
     let x = |v: u32| DVec3::from(mesh.coords[v as usize]);
     let mut blended_vertices = 0;
@@ -763,8 +761,7 @@ fn inherit_interior(
             }
         }
     }
-    *sources = source;
-    blended_vertices
+    (blended_vertices, source)
 }
 
 #[cfg(test)]
