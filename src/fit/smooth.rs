@@ -64,7 +64,12 @@
 //! quarter turn or more and no polynomial model follows the surface there. The 3D boundary
 //! edge midpoints and face centres at such vertices take circular arcs on the vertex normals
 //! instead (`arcs`; regular coarse vertices take their normal from the circles through their
-//! grid lines). The interior samples keep the models.
+//! grid lines). An interior sample whose vertices inherited their models from the corners of
+//! such a boundary edge or face (after dropping its directions across the layers, along which
+//! the sources do not change) takes that entity's arc, times the mean inherited weight: the
+//! models and the arcs differ there by far more than a boundary-layer cell's height, so a thin
+//! cell with its wall side on the arcs and its inner side on the models folds. Other interior
+//! samples keep the models.
 //!
 //! With detected sharp features ([`SmoothTargets::build_with_features`]) the vertices on
 //! features take their models per patch and along feature curves instead
@@ -166,6 +171,10 @@ pub struct SmoothTargets {
     /// 3D, with at least one coarse vertex ([`arcs`]), else empty: the normal of each smooth
     /// boundary vertex, and whether it is coarse.
     arc_normals: Vec<Option<([f64; 3], bool)>>,
+    /// With arc normals: the smooth boundary vertex each vertex takes its model from (itself
+    /// on the boundary, the nearest one for an interior vertex that inherited one), else
+    /// `NONE`; empty without arc normals.
+    sources: Vec<u32>,
 }
 
 impl SmoothTargets {
@@ -208,7 +217,7 @@ impl SmoothTargets {
                     .is_some_and(|f| f.in_plane.contains_key(&(v as u32)))
         };
 
-        let blended_vertices = if params.decay > 0.0 {
+        let (blended_vertices, sources) = if params.decay > 0.0 {
             inherit_interior(
                 mesh,
                 topo,
@@ -219,7 +228,7 @@ impl SmoothTargets {
                 &mut higher,
             )
         } else {
-            0
+            (0, Vec::new())
         };
         if let Some(f) = &feature_models {
             for (&v, m) in &f.in_plane {
@@ -236,6 +245,11 @@ impl SmoothTargets {
             blended_vertices,
             feature_models,
             higher,
+            sources: if arc_normals.is_empty() {
+                Vec::new()
+            } else {
+                sources
+            },
             arc_normals,
         }
     }
@@ -332,11 +346,15 @@ impl SmoothTargets {
             if on_boundary && wsum > 0.0 {
                 delta /= wsum;
             }
-            if on_boundary
-                && !self.arc_normals.is_empty()
-                && let Some(d) = self.arc_target(xs, ks, &cs[..len], l)
-            {
-                delta = d;
+            if !self.arc_normals.is_empty() {
+                let arc = if on_boundary {
+                    self.arc_target(xs, ks, &cs[..len], l)
+                } else {
+                    self.inherited_arc(topo, mesh, ks, &cs[..len], l)
+                };
+                if let Some(d) = arc {
+                    delta = d;
+                }
             }
             *slot = delta.into();
         }
@@ -380,6 +398,84 @@ impl SmoothTargets {
             }
             _ => None,
         }
+    }
+
+    /// The target displacement of an interior sample (lattice point `l`, element corners `cs`
+    /// at vertices `ks`) whose vertices all inherited their models from smooth boundary
+    /// vertices ([`inherit_interior`]) that form a boundary edge or face with a coarse vertex:
+    /// that entity's [`arcs`] target, times the mean inherited weight γ. A boundary-layer
+    /// cell is then moved as a whole, its inner side along its wall side's arcs; the models'
+    /// corrections differ from the arcs at a coarse vertex by far more than a thin cell's
+    /// height (an extruded O-grid's three-layer wall went back to the chords). Directions of
+    /// the sample along which the sources do not change (across the layers) are dropped
+    /// first; `None` when the rest is not a boundary edge or face.
+    fn inherited_arc(
+        &self,
+        topo: &Topology,
+        mesh: &LinearMesh,
+        ks: &[usize],
+        cs: &[usize],
+        l: [usize; 3],
+    ) -> Option<DVec3> {
+        let src: Vec<u32> = ks
+            .iter()
+            .map(|&k| self.sources.get(k).copied().filter(|&s| s != NONE))
+            .collect::<Option<_>>()?;
+        let gamma = ks
+            .iter()
+            .map(|&k| self.models[k].map_or(0.0, |m| m.weight))
+            .sum::<f64>()
+            / ks.len() as f64;
+        // Corner i's parameters; the corner across free direction d from corner i.
+        let par = |i: usize| HEX_VERTEX_PARAMS[cs[i]];
+        let across = |i: usize, d: usize| {
+            (0..cs.len()).find(|&j| (0..3).all(|k| (par(j)[k] == par(i)[k]) != (k == d)))
+        };
+        let mut free: Vec<usize> = (0..3).filter(|&k| l[k] == 1).collect();
+        let mut keep: Vec<usize> = (0..cs.len()).collect();
+        while let Some(pos) = free.iter().position(|&d| {
+            keep.iter()
+                .all(|&i| across(i, d).is_some_and(|j| src[j] == src[i]))
+        }) {
+            let d = free.remove(pos);
+            keep.retain(|&i| par(i)[d] == 0);
+        }
+        let corners: Vec<u32> = keep.iter().map(|&i| src[i]).collect();
+        let edge = |a: u32, b: u32| {
+            topo.edges
+                .binary_search(&[a.min(b), a.max(b)])
+                .is_ok_and(|id| topo.edge_on_boundary[id])
+        };
+        let normals: Vec<([f64; 3], bool)> = corners
+            .iter()
+            .map(|&v| self.arc_normals[v as usize])
+            .collect::<Option<_>>()?;
+        if !normals.iter().any(|&(_, coarse)| coarse) {
+            return None;
+        }
+        let x = |i: usize| DVec3::from(mesh.coords[corners[i] as usize]);
+        let n = |i: usize| DVec3::from(normals[i].0);
+        let arc = match free.len() {
+            1 if corners[0] != corners[1] && edge(corners[0], corners[1]) => {
+                arcs::edge_arc(x(0), x(1), n(0), n(1))?
+            }
+            2 => {
+                // Corners in the face's lattice order along the two remaining directions.
+                let (mut xf, mut nf, mut vf) = ([DVec3::ZERO; 4], [DVec3::ZERO; 4], [NONE; 4]);
+                for (i, &c) in keep.iter().enumerate() {
+                    let p = par(c);
+                    let j = p[free[0]] as usize + 2 * p[free[1]] as usize;
+                    (xf[j], nf[j], vf[j]) = (x(i), n(i), corners[i]);
+                }
+                let [a, b, c, d] = vf;
+                if a == NONE || !(edge(a, b) && edge(a, c) && edge(b, d) && edge(c, d)) {
+                    return None;
+                }
+                arcs::face_arc(&xf, &nf)?
+            }
+            _ => return None,
+        };
+        Some(gamma * arc)
     }
 
     /// The boundary facet or 3D boundary edge of element `e` at lattice point `l` (an edge
@@ -594,7 +690,8 @@ fn grid_pairs(topo: &Topology, fan: &[u32], v: u32) -> Option<[(u32, u32); 2]> {
 
 /// Interior vertices inherit the nearest smooth boundary vertex's model (Dijkstra along mesh
 /// edges from the smooth boundary vertices that are not `in_plane_3d`, cut off at decay · ℓ)
-/// with weight γ = 1 − d / (decay · ℓ), and its [`HigherModel`]; returns how many did.
+/// with weight γ = 1 − d / (decay · ℓ), and its [`HigherModel`]; returns how many did, and
+/// each vertex's source (itself for a source, `NONE` where none reached).
 fn inherit_interior(
     mesh: &LinearMesh,
     topo: &Topology,
@@ -603,7 +700,7 @@ fn inherit_interior(
     in_plane_3d: &dyn Fn(usize) -> bool,
     models: &mut [Option<VertexModel>],
     higher: &mut [Option<HigherModel>],
-) -> usize {
+) -> (usize, Vec<u32>) {
     let nv = mesh.n_vertices();
     let x = |v: u32| DVec3::from(mesh.coords[v as usize]);
     let mut blended_vertices = 0;
@@ -664,7 +761,7 @@ fn inherit_interior(
             }
         }
     }
-    blended_vertices
+    (blended_vertices, source)
 }
 
 #[cfg(test)]

@@ -46,11 +46,20 @@ fn graded(h0: f64, r: f64, n: usize) -> Vec<f64> {
 /// A boundary layer on part of an ellipse with semi-axes 1 and `b` (angles 0.1..5.9 rad,
 /// `around` cells), offset along the wall normals by `dist`.
 fn ellipse_layer(b: f64, around: usize, dist: &[f64]) -> LinearMesh {
-    let xs: Vec<f64> = (0..=around).map(|i| i as f64 / around as f64).collect();
+    let ts: Vec<f64> = (0..=around)
+        .map(|i| 0.1 + 5.8 * i as f64 / around as f64)
+        .collect();
+    ellipse_layer_at(b, &ts, dist)
+}
+
+/// A boundary layer on the ellipse with semi-axes 1 and `b`: wall vertices at the angles `ts`,
+/// offset along the wall normals by `dist` (the wall is the side tagged 3).
+fn ellipse_layer_at(b: f64, ts: &[f64], dist: &[f64]) -> LinearMesh {
+    let xs: Vec<f64> = (0..ts.len()).map(|i| i as f64).collect();
     let ys: Vec<f64> = (0..dist.len()).map(|j| j as f64).collect();
     let mut mesh = grid_2d(&xs, &ys);
     for p in &mut mesh.coords {
-        let t = 0.1 + p[0] * 5.8;
+        let t = ts[p[0].round() as usize];
         let d = dist[p[1].round() as usize];
         let (x, y) = (t.cos(), b * t.sin());
         let n = [b * t.cos(), t.sin()];
@@ -58,6 +67,26 @@ fn ellipse_layer(b: f64, around: usize, dist: &[f64]) -> LinearMesh {
         *p = [x + d * n[0] / l, y + d * n[1] / l, 0.0];
     }
     mesh
+}
+
+/// Angles of `2 m + 1` points at equal arc length `h` on the ellipse (1, `b`), symmetric
+/// about its tip at angle 0 (as Gmsh spaces the nodes of a transfinite ellipse arc).
+fn equal_arc_angles(b: f64, h: f64, m: usize) -> Vec<f64> {
+    let speed = |t: f64| (t.sin().powi(2) + (b * t.cos()).powi(2)).sqrt();
+    let (mut t, mut s, dt) = (0.0f64, 0.0f64, 1e-6);
+    let mut half = vec![0.0];
+    while half.len() <= m {
+        s += dt * speed(t + 0.5 * dt);
+        t += dt;
+        if s >= h * half.len() as f64 {
+            half.push(t);
+        }
+    }
+    half.iter()
+        .rev()
+        .map(|t| -t)
+        .chain(half[1..].iter().copied())
+        .collect()
 }
 
 /// A deterministic pseudo-random sequence in [−1, 1).
@@ -445,5 +474,55 @@ fn generated_boundary_layer_walls_stay_curved() {
             "layers {layers}: wall RMS error {ours:.3e} against the linear mesh's {linear:.3e}"
         );
         assert!(curved.report.min_det_jacobian_bound.unwrap() > 0.0);
+    }
+}
+
+/// The coarse tip of a Gmsh-like O-grid around the 1 × 0.2 ellipse (equal arc lengths of
+/// 0.0328, 128 around: the tip turns by 41° with 26° beside it, so its wall vertices are
+/// coarse and take circular arcs), graded from 1e-5, extruded by one and three layers: every
+/// layer keeps its wall curved (RMS ≤ 0.3× the chords'). Three layers used to fall back to the
+/// chords (1.0×): the inner wall vertices' arcs disagreed with the models moving the thin
+/// cells' inner sides by far more than a cell height, so the certified blend held the tip
+/// cells at the straight elevation.
+#[test]
+fn extruded_coarse_ellipse_tips_keep_their_curved_wall() {
+    let b = 0.2;
+    let ts = equal_arc_angles(b, 0.0328, 12);
+    let section = ellipse_layer_at(b, &ts, &graded(1e-5, 1.28, 36));
+    let wall = polyspline::mesh::generate::Wall::Ellipse { thickness: b };
+    for layers in [1usize, 3] {
+        let zs: Vec<f64> = (0..=layers).map(|l| 0.1 * l as f64).collect();
+        let path = out_dir().join(format!("coarse_tip_{layers}.msh"));
+        write_linear(&extrude(&section, &zs), &path);
+        let rms = |geometry| {
+            let opts = CurveOptions {
+                geometry,
+                ..Default::default()
+            };
+            let c = curve_in_memory(&path, &opts).unwrap();
+            if geometry == polyspline::pipeline::Geometry::SplineFitted {
+                assert!(c.report.min_det_jacobian_bound.unwrap() > 0.0);
+            }
+            let ho = &c.ho;
+            let npf = ho.nodes_per_facet();
+            let d: Vec<f64> = (0..ho.boundary_tags.len())
+                .filter(|&f| ho.boundary_tags[f] == 3)
+                .flat_map(|f| ho.boundary[f * npf..(f + 1) * npf].to_vec())
+                .map(|id| wall.distance([ho.nodes[id as usize][0], ho.nodes[id as usize][1]]))
+                .collect();
+            assert!(
+                d.len() >= 24 * layers * npf,
+                "{layers} layers: {} wall nodes",
+                d.len()
+            );
+            (d.iter().map(|d| d * d).sum::<f64>() / d.len() as f64).sqrt()
+        };
+        let ours = rms(polyspline::pipeline::Geometry::SplineFitted);
+        let linear = rms(polyspline::pipeline::Geometry::Straight);
+        eprintln!("{layers} layers: wall RMS {ours:.3e}, linear {linear:.3e}");
+        assert!(
+            ours <= 0.3 * linear,
+            "{layers} layers: wall RMS error {ours:.3e} against the linear mesh's {linear:.3e}"
+        );
     }
 }
