@@ -214,13 +214,7 @@ impl Plan {
 }
 
 /// The groups every rank agrees on, with counts, boxes and node figures (collective).
-pub(super) fn plan(
-    comm: &dyn Comm,
-    out: &RankOutput,
-    tag_names: &BTreeMap<i32, String>,
-    volume_name: &str,
-    binary: bool,
-) -> io::Result<Plan> {
+pub(super) fn plan(comm: &dyn Comm, out: &RankOutput, options: &WriteOptions) -> io::Result<Plan> {
     let (d, p) = (out.dim, out.order);
     let vol_tags: Vec<i32> = if out.element_tags.is_empty() {
         vec![0; out.elements.len() / (p + 1).pow(d as u32)]
@@ -238,9 +232,15 @@ pub(super) fn plan(
         bnd.extend(r[1..1 + nb].iter().map(|&x| x as i32));
         vol.extend(r[1 + nb..].iter().map(|&x| x as i32));
     }
-    let groups = group_plan(d, bnd.into_iter(), vol.into_iter(), tag_names, volume_name);
+    let groups = group_plan(
+        d,
+        bnd.into_iter(),
+        vol.into_iter(),
+        options.tag_names,
+        options.volume_name,
+    );
     let mut plan = Plan {
-        blocks: Blocks::new(d, p, binary)?,
+        blocks: Blocks::new(d, p, options.binary)?,
         d,
         counts: Vec::new(),
         bbox: Vec::new(),
@@ -505,14 +505,7 @@ pub fn write_collective(
     }
     // SAFETY: the bytes are rank 0's `OsStr` encoding of a path on the same system.
     let temp = PathBuf::from(unsafe { std::ffi::OsString::from_encoded_bytes_unchecked(name) });
-    let result = plan(
-        comm,
-        out,
-        options.tag_names,
-        options.volume_name,
-        options.binary,
-    )
-    .and_then(|plan| {
+    let result = plan(comm, out, options).and_then(|plan| {
         let l = layout(comm, &plan, out);
         let file = std::fs::OpenOptions::new().write(true).open(&temp)?;
         write_parts(&plan, out, &l, comm.rank(), &file)

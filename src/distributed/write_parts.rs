@@ -353,15 +353,7 @@ pub fn write_partitioned(
         path: target.clone(),
         source,
     };
-    let result = plan(
-        comm,
-        out,
-        options.tag_names,
-        options.volume_name,
-        options.binary,
-    )
-    .map_err(io_err)
-    .and_then(|plan| {
+    let result = plan(comm, out, options).map_err(io_err).and_then(|plan| {
         let part = gather_part(comm, &plan, out);
         crate::io::output::prepare(&target, inputs, |w| {
             plan.entities(w)?;
