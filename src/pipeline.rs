@@ -27,7 +27,7 @@
 //! ([`crate::elastic`]) and each of its Lagrange elements must pass the det J certificate, or the
 //! job fails with [`CurveError::Invalid`] and writes nothing.
 
-mod clock;
+pub(crate) mod clock;
 pub(crate) mod misfit;
 mod options;
 mod report;
@@ -60,7 +60,8 @@ pub use crate::io::high_order::{
 pub use crate::validity::LineSearchMode;
 pub use crate::validity::snap::snap_boundary;
 pub use options::{CurveOptions, FeatureOptions, Geometry, Method, PeriodicOptions};
-pub use report::{CurveReport, PeriodicReport};
+pub use report::{CurveReport, PeriodicReport, RankFigures};
+pub(crate) use report::{Outcomes, SpaceCounts, SplineFigures};
 
 /// Everything that can stop the `curve` job.
 #[derive(Debug, thiserror::Error)]
@@ -182,11 +183,8 @@ pub fn curve_prepared(
     progress.started(Stage::Write);
     let t = Instant::now();
     let pending = prepare_high_order(&ho, output, &options.output, &[input])?;
-    let timings = &mut report.timings;
-    timings.insert(Stage::Write.key().into(), t.elapsed().as_secs_f64());
+    report.written(output, t, start);
     progress.finished(Stage::Write);
-    timings.insert(Stage::Total.key().into(), start.elapsed().as_secs_f64());
-    report.output = output.to_owned();
     Ok((report, pending))
 }
 

@@ -22,6 +22,8 @@ pub enum Stage {
     Topology,
     /// Features, kinks, smooth targets and the spline space (and its rebuilds after demotion).
     Spline,
+    /// Under mpirun only: the ranks' shares of the spline space's control points (their halo).
+    Partition,
     /// The least-squares fit (every round).
     Fit,
     /// Part of [`Stage::Fit`]: assembling the normal equations.
@@ -64,6 +66,7 @@ impl Stage {
             Stage::Read => "read",
             Stage::Topology => "topology",
             Stage::Spline => "spline",
+            Stage::Partition => "partition",
             Stage::Fit => "fit",
             Stage::FitAssembly => "fit_assembly",
             Stage::FitCg => "fit_cg",
@@ -89,6 +92,7 @@ impl Stage {
             Stage::Read => "reading",
             Stage::Topology => "topology",
             Stage::Spline => "spline space",
+            Stage::Partition => "partition",
             Stage::Fit | Stage::FitAssembly | Stage::FitCg => "fit",
             Stage::Validity | Stage::ElasticValidity => "certificate",
             Stage::Energy => "energy",

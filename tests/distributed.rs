@@ -987,6 +987,37 @@ fn bad_partitioned_inputs_fail_with_one_line_on_every_rank() {
     }
 }
 
+/// `curve INPUT -q --report … ARGS` on `np` ranks (0: the binary without mpirun), the files
+/// named `NAME_np<np>` in the scratch folder: the output, the report and its JSON.
+fn curve_with_report(
+    np: usize,
+    input: &Path,
+    name: &str,
+    args: &[&str],
+) -> (PathBuf, PathBuf, Value) {
+    let out = scratch(&format!("{name}_np{np}.msh"));
+    let report = scratch(&format!("{name}_np{np}.json"));
+    let _ = std::fs::remove_file(&report);
+    let mut cmd = if np == 0 {
+        Command::new(BIN)
+    } else {
+        let mut c = mpirun(np);
+        c.arg(BIN);
+        c
+    };
+    cmd.arg("curve")
+        .arg(input)
+        .arg("-o")
+        .arg(&out)
+        .arg("--report")
+        .arg(&report)
+        .arg("-q")
+        .args(args);
+    common::run_ok(&mut cmd);
+    let r = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    (out, report, r)
+}
+
 /// The post-fit Q2 choice of 2D meshes (runs of boundary sides the fit leaves far off their
 /// targets become Q2 and the fit is repeated) gives the serial run's elements and nodes under
 /// mpirun: deal.II's example.msh (744 quads, about half of them made Q2 over two rounds), as
@@ -1007,24 +1038,7 @@ fn mpirun_2d_post_fit_q2_choice_equals_the_serial_run() {
         input.as_os_str(),
     ]);
     let run = |np: usize| -> (HighOrderMesh, Value) {
-        let out = scratch(&format!("example_np{np}.msh"));
-        let report = scratch(&format!("example_np{np}.json"));
-        let mut cmd = if np == 0 {
-            Command::new(BIN)
-        } else {
-            let mut c = mpirun(np);
-            c.arg(BIN);
-            c
-        };
-        cmd.arg("curve")
-            .arg(&input)
-            .arg("-o")
-            .arg(&out)
-            .arg("--report")
-            .arg(&report)
-            .args(["-q", "--cg-tol", RANK_CG_TOL]);
-        common::run_ok(&mut cmd);
-        let r = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+        let (out, _, r) = curve_with_report(np, &input, "example", &["--cg-tol", RANK_CG_TOL]);
         (read(&out), r)
     };
     let (serial, serial_report) = run(0);
@@ -1045,5 +1059,112 @@ fn mpirun_2d_post_fit_q2_choice_equals_the_serial_run() {
             "np {np}: a node is {worst:.3e} from the serial run's (diagonal {diag:.3})"
         );
         assert_eq!(r["invalid_elements"], 0);
+    }
+}
+
+/// The key sets of a JSON object and of its objects `nested`, by name.
+fn key_sets(r: &Value, nested: &[&str]) -> Vec<(String, std::collections::BTreeSet<String>)> {
+    let keys = |v: &Value| -> std::collections::BTreeSet<String> {
+        v.as_object()
+            .map(|o| o.keys().cloned().collect())
+            .unwrap_or_default()
+    };
+    std::iter::once(("(report)".to_string(), keys(r)))
+        .chain(nested.iter().map(|k| (k.to_string(), keys(&r[*k]))))
+        .collect()
+}
+
+/// The report under mpirun is the serial report: it validates against
+/// `docs/curve-report.schema.json` (the `jsonschema` package as the oracle, every `rank`
+/// object holding exactly the documented fields), has the serial report's keys for the same
+/// input (plus `ranks` and `per_rank`, and `partition` among the timings), and the figures
+/// that follow from the options and the input alone equal the serial ones.
+#[test]
+fn the_report_under_mpirun_is_the_serial_report_with_the_ranks_added() {
+    let test = common::current_test();
+    if !have_mpirun() || !common::python_has("jsonschema", &test) {
+        return;
+    }
+    let input = binary_cylinder("report_cylinder.msh", 600);
+    let (_, serial_path, serial) = curve_with_report(0, &input, "report", &[]);
+    let (_, dist_path, dist) = curve_with_report(2, &input, "report", &[]);
+    // The schema, with every object but the per-rank one allowed to be missing (the serial
+    // schema test covers them): both reports validate and the `rank` objects are met.
+    let schema = Path::new(env!("CARGO_MANIFEST_DIR")).join("docs/curve-report.schema.json");
+    let defs: Value = serde_json::from_str(&std::fs::read_to_string(&schema).unwrap()).unwrap();
+    let mut check = common::python();
+    check
+        .arg(Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/external/report_schema.py"))
+        .arg(&schema);
+    for name in defs["$defs"].as_object().unwrap().keys() {
+        if name != "rank" {
+            check.args(["--may-miss", name]);
+        }
+    }
+    let out = check.arg(&serial_path).arg(&dist_path).output().unwrap();
+    assert!(
+        out.status.success(),
+        "the reports do not match docs/curve-report.schema.json:\n{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    // The same keys, the report's and its objects'.
+    let nested = ["blend", "features", "fit_targets", "fit_weights", "timings"];
+    let only_mpirun = |what: &str| -> &[&str] {
+        match what {
+            "(report)" => &["ranks", "per_rank"],
+            "timings" => &["partition"],
+            _ => &[],
+        }
+    };
+    for ((what, s), (_, d)) in key_sets(&serial, &nested)
+        .into_iter()
+        .zip(key_sets(&dist, &nested))
+    {
+        assert!(!s.is_empty(), "the serial report has no {what}");
+        let mut expected = s.clone();
+        expected.extend(only_mpirun(&what).iter().map(|k| k.to_string()));
+        assert_eq!(d, expected, "keys of {what} under mpirun");
+    }
+    assert_eq!(dist["ranks"], 2);
+    for rank in dist["per_rank"].as_array().unwrap() {
+        let stages: std::collections::BTreeSet<&str> = rank["timings"]
+            .as_object()
+            .unwrap()
+            .keys()
+            .map(String::as_str)
+            .collect();
+        for stage in stages {
+            assert!(
+                stage == "partition" || serial["timings"].get(stage).is_some(),
+                "per-rank stage {stage} is not a serial stage"
+            );
+        }
+    }
+    // What follows from the options and the input alone.
+    for key in [
+        "dimension",
+        "elements",
+        "order",
+        "subdivide",
+        "geometry",
+        "method",
+        "output_elements",
+        "output_nodes",
+        "boundary_facets",
+        "knot_intervals",
+        "fit_weights",
+        "fit_targets",
+        "fit_solver",
+        "line_search_mode",
+        "backend",
+        "invalid_elements",
+        "control_points",
+        "spline_elements",
+        "q2_elements",
+        "kink_elements",
+        "demoted_elements",
+    ] {
+        assert_eq!(dist[key], serial[key], "{key}");
     }
 }

@@ -364,12 +364,12 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
             };
             eprintln!(
                 "wrote {what}: {} elements of order {}, {} nodes, {} boundary facets, on {} ranks ({:.3} s)",
-                r.curve.output_elements,
-                r.curve.order,
-                r.curve.output_nodes,
-                r.curve.boundary_facets,
-                r.ranks,
-                r.curve.timings["total"]
+                r.output_elements,
+                r.order,
+                r.output_nodes,
+                r.boundary_facets,
+                r.ranks.unwrap_or(1),
+                r.timings["total"]
             );
         }
         return Ok(());

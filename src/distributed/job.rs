@@ -4,7 +4,10 @@
 //! Input: the input mesh path (binary MSH 4.1), [`CurveOptions`] (the default IGA path: the
 //! certified blend of the least-squares fit, CPU backend) and a [`Comm`]. Output: on every
 //! rank, its share of the sampled output in global node tags ([`RankOutput`], written
-//! collectively by [`super::write`]) and the [`DistributedReport`].
+//! collectively by [`super::write`]) and the [`CurveReport`], the serial job's report made by
+//! the same builder (`CurveReport::build`) from the ranks' outcomes summed and reduced, with
+//! `ranks` and `per_rank` set. The stages run on the serial job's stage clock under the same
+//! [`Stage`]s (and [`Stage::Partition`], the halo), so `timings` has the serial keys.
 //!
 //! Stages per rank: read its contiguous run of the file's elements by offsets, move the
 //! elements to their Morton parts and read [`GHOST_DEPTH`] vertex rings of ghosts
@@ -29,75 +32,27 @@ use super::read::LocalMesh;
 use super::sample::{RankOutput, sample_share};
 use super::share::read_share;
 use crate::mesh::Topology;
+use crate::pipeline::clock::{Clock, peak_memory_bytes};
 use crate::pipeline::spline::SplineSetup;
 use crate::pipeline::{
-    CurveError, CurveOptions, CurveReport, Geometry, Job, LineSearchMode, Method,
+    CurveError, CurveOptions, CurveReport, Geometry, Job, LineSearchMode, Method, Outcomes,
+    RankFigures, SpaceCounts, SplineFigures,
 };
-use crate::spline::{ElementClass, Q2Reason};
+use crate::progress::{Silent, Stage};
+use crate::spline::{ElementClass, Q2Reason, SplineSpace};
 use crate::validity::CpuCertifier;
 use crate::validity::blend::{Blended, blend_search_shared};
-use serde::Serialize;
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::Instant;
 
-/// One rank's share of the work and of the communication.
-#[deny(missing_docs)]
-#[derive(Clone, Debug, Default, Serialize)]
-pub struct RankFigures {
-    /// The rank.
-    pub rank: usize,
-    /// Elements this rank assembles, certifies and sends.
-    pub elements: usize,
-    /// Ghost elements it read and built its setup on besides its own.
-    pub ghost_elements: usize,
-    /// Control points its elements touch (the rows it holds).
-    pub control_points: usize,
-    /// Control points it owns (counted in dot products).
-    pub owned_control_points: usize,
-    /// Control points it shares with other ranks (its halo).
-    pub shared_control_points: usize,
-    /// Ranks it exchanges halo values with.
-    pub neighbours: usize,
-    /// Stored entries of its share of K (local numbering).
-    pub matrix_nonzeros: usize,
-    /// Bytes it sent in all (halo exchanges, reductions, gathers).
-    pub bytes_sent: u64,
-    /// Bytes sent by the fit (CG halo exchanges and reductions).
-    pub bytes_fit: u64,
-    /// Bytes sent by the certified blend (rejected elements, counts).
-    pub bytes_validity: u64,
-    /// Bytes sent by the sampling (node tags and positions asked of and sent to their owners).
-    pub bytes_gather: u64,
-    /// Peak resident memory of the process (VmHWM), bytes, before the write.
-    pub peak_memory_bytes: u64,
-    /// The peak (VmHWM) at the end of each stage: the stage that raised it is where the
-    /// memory is spent.
-    pub peak_memory_by_stage: BTreeMap<String, u64>,
-    /// Seconds per stage.
-    pub timings: BTreeMap<String, f64>,
-}
-
-/// The report of a distributed `curve`: the serial report's figures for the whole mesh and
-/// every rank's share (`ranks` and `per_rank` in `docs/curve-report.schema.json`).
-#[deny(missing_docs)]
-#[derive(Clone, Debug, Serialize)]
-pub struct DistributedReport {
-    /// The serial report's fields, for the whole mesh.
-    #[serde(flatten)]
-    pub curve: CurveReport,
-    /// Number of ranks.
-    pub ranks: usize,
-    /// Each rank's share.
-    pub per_rank: Vec<RankFigures>,
-}
-
-/// What every rank holds at the end: its share of the output and the report.
+/// What every rank holds at the end: its share of the output and the report (the same on
+/// every rank).
 pub struct Finished {
     pub output: RankOutput,
     /// The input's names of tags (the output's group names).
     pub tag_names: BTreeMap<i32, String>,
-    pub report: DistributedReport,
+    pub report: CurveReport,
 }
 
 /// The options the distributed job runs; anything else is one bounded error line.
@@ -161,40 +116,12 @@ fn check_supported(options: &CurveOptions) -> Result<(), CurveError> {
     Ok(())
 }
 
-/// Peak resident memory of this process (Linux `VmHWM`), bytes; 0 where unknown.
-pub fn peak_memory_bytes() -> u64 {
-    std::fs::read_to_string("/proc/self/status")
-        .ok()
-        .and_then(|s| {
-            s.lines()
-                .find(|l| l.starts_with("VmHWM:"))
-                .and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
-        })
-        .map_or(0, |kb| kb * 1024)
-}
-
 /// [`super::comm::agree`] for a stage of the job: the ranks that did not fail stop with an
 /// error the launcher does not print (the lowest failing rank prints its own).
 fn agree<T>(comm: &dyn Comm, r: Result<T, CurveError>) -> Result<T, CurveError> {
     super::comm::agree(comm, r, |q| {
         CurveError::Options(format!("stopped: rank {q} failed"))
     })
-}
-
-/// Seconds per stage, and the peak memory at the end of each, by name.
-struct Laps {
-    t: Instant,
-    timings: BTreeMap<String, f64>,
-    peaks: BTreeMap<String, u64>,
-}
-
-impl Laps {
-    fn lap(&mut self, name: &str) {
-        self.timings
-            .insert(name.to_string(), self.t.elapsed().as_secs_f64());
-        self.peaks.insert(name.to_string(), peak_memory_bytes());
-        self.t = Instant::now();
-    }
 }
 
 /// What a rank has after its share of the setup, fit and blend.
@@ -206,6 +133,7 @@ struct Share {
     output: RankOutput,
     /// Own control points (counted once over the ranks), spline, Q2 and kink elements.
     counts: [usize; 4],
+    knot_intervals: crate::spline::KnotIntervals,
     input_msj: f64,
     halo: Halo,
     nonzeros: usize,
@@ -259,22 +187,76 @@ fn local_topology(input: &Path, local: &LocalMesh) -> Result<Topology, CurveErro
     Ok(topo)
 }
 
-/// This rank's share of the fit: its rows of the normal equations with the whole mesh's size
-/// levels, the scaling agreed over the halo, the distributed block-Jacobi CG, and the fitted
-/// control points (projected onto planar patches) in `s`. Returns the CG's figures and the
-/// local matrix's stored entries.
-#[allow(clippy::too_many_arguments)]
-fn fit_share(
-    comm: &dyn Comm,
-    input: &Path,
-    local: &LocalMesh,
-    topo: &Topology,
-    setup: &SplineSetup,
-    s: &mut crate::spline::SplineSpace,
+/// What every stage of a rank's share reads: the job's (on the sub-mesh), the communicator and
+/// the sub-mesh's own elements.
+struct ShareJob<'a> {
+    comm: &'a dyn Comm,
+    local: &'a LocalMesh,
+    job: &'a Job<'a>,
+    setup: &'a SplineSetup,
+    mine: &'a [usize],
+}
+
+/// This rank's share of the fit, timed as [`Stage::Fit`] with its assembly and CG parts
+/// ([`fit_share`]).
+fn fit_stage(
+    j: &ShareJob,
+    clock: &mut Clock,
+    s: &mut SplineSpace,
     halo: &Halo,
-    mine: &[usize],
-    laps: &mut Laps,
 ) -> Result<(crate::solve::CgInfo, usize), CurveError> {
+    let t = Instant::now();
+    let fit = fit_share(j, clock, s, halo);
+    clock.add(Stage::Fit, t.elapsed().as_secs_f64());
+    fit
+}
+
+/// This rank's share of the fit: its rows of the normal equations with the whole mesh's size
+/// levels, the scaling agreed over the halo ([`Stage::FitAssembly`]), the distributed
+/// block-Jacobi CG ([`Stage::FitCg`]), and the fitted control points (projected onto planar
+/// patches) in `s`. Returns the CG's figures and the local matrix's stored entries.
+fn fit_share(
+    j: &ShareJob,
+    clock: &mut Clock,
+    s: &mut SplineSpace,
+    halo: &Halo,
+) -> Result<(crate::solve::CgInfo, usize), CurveError> {
+    let (comm, topo, setup) = (j.comm, j.job.topo, j.setup);
+    let (k, b, scale) = clock.run(Stage::FitAssembly, || assemble_share(j, s, halo));
+    let mut delta = vec![[0.0; 3]; halo.len()];
+    let fit_params = &setup.fit_params;
+    let cg = clock
+        .run(Stage::FitCg, || {
+            pcg(comm, halo, &k, &b, &mut delta, &fit_params.cg)
+        })
+        .map_err(|source| CurveError::Solve {
+            input: j.job.input.to_owned(),
+            source,
+        })?;
+    let mut c_star = s.control_points.clone();
+    for (i, &g) in halo.global.iter().enumerate() {
+        let g = g as usize;
+        let d = scale.as_ref().map_or(1.0, |d| d[g]);
+        for c in 0..3 {
+            c_star[g][c] += d * delta[i][c];
+        }
+    }
+    if let Some(f) = setup.used_features() {
+        crate::fit::features::project_onto_planes(s, topo, f, &mut c_star);
+    }
+    s.control_points = c_star;
+    Ok((cg, k.nonzeros()))
+}
+
+/// This rank's rows of the scaled normal equations: the local matrix over its halo, the
+/// right-hand side of its halo's control points and the scaling D (by global control point).
+#[allow(clippy::type_complexity)]
+fn assemble_share(
+    j: &ShareJob,
+    s: &SplineSpace,
+    halo: &Halo,
+) -> (LocalMatrix, Vec<[f64; 3]>, Option<Vec<f64>>) {
+    let (comm, local, topo, setup, mine) = (j.comm, j.local, j.job.topo, j.setup, j.mine);
     let mesh = &local.mesh;
     // This rank's share of the fit, with the whole mesh's size levels.
     let sizes = crate::fit::partial::element_sizes(mesh);
@@ -315,29 +297,7 @@ fn fit_share(
     let b: Vec<[f64; 3]> = halo.global.iter().map(|&g| sys.rhs[g as usize]).collect();
     let scale = sys.scale.take();
     drop(sys.rhs);
-    let k = LocalMatrix::from_matrix(sys.matrix, halo);
-    laps.lap("fit_assembly");
-    let mut delta = vec![[0.0; 3]; halo.len()];
-    let cg = pcg(comm, halo, &k, &b, &mut delta, &fit_params.cg).map_err(|source| {
-        CurveError::Solve {
-            input: input.to_owned(),
-            source,
-        }
-    })?;
-    laps.lap("fit_cg");
-    let mut c_star = s.control_points.clone();
-    for (i, &g) in halo.global.iter().enumerate() {
-        let g = g as usize;
-        let d = scale.as_ref().map_or(1.0, |d| d[g]);
-        for c in 0..3 {
-            c_star[g][c] += d * delta[i][c];
-        }
-    }
-    if let Some(f) = setup.used_features() {
-        crate::fit::features::project_onto_planes(s, topo, f, &mut c_star);
-    }
-    s.control_points = c_star;
-    Ok((cg, k.nonzeros()))
+    (LocalMatrix::from_matrix(sys.matrix, halo), b, scale)
 }
 
 /// The post-fit Q2 marks of the sub-mesh's elements (own and ghost) from the fitted control
@@ -404,22 +364,26 @@ fn misfit_marks(
     )
 }
 
-/// This rank's read, setup, fit and certified blend (see the module docs).
+/// This rank's read, setup, fit, certified blend and sampling (see the module docs), each
+/// stage on `clock`.
 fn run_share(
     comm: &dyn Comm,
     input: &Path,
     options: &CurveOptions,
     order: usize,
-    laps: &mut Laps,
+    clock: &mut Clock,
 ) -> Result<Share, CurveError> {
-    let local = read_share(comm, input, GHOST_DEPTH, &options.mesh)?;
-    laps.lap("read");
+    let local = clock.run(Stage::Read, || {
+        read_share(comm, input, GHOST_DEPTH, &options.mesh)
+    })?;
     let mesh = &local.mesh;
     // Checks of a rank's own share fail on that rank alone: agreed before the next collective.
-    let topo = agree(comm, local_topology(input, &local))?;
-    laps.lap("topology");
-    let mut msj = [mesh.min_scaled_jacobian().map_or(f64::INFINITY, |m| m.0)];
-    comm.min_f64(&mut msj);
+    let (topo, input_msj) = clock.run(Stage::Topology, || {
+        let topo = agree(comm, local_topology(input, &local))?;
+        let mut msj = [mesh.min_scaled_jacobian().map_or(f64::INFINITY, |m| m.0)];
+        comm.min_f64(&mut msj);
+        Ok::<_, CurveError>((topo, msj[0]))
+    })?;
     let executor = crate::exec::executor(&options.backend);
     let job = Job {
         input,
@@ -428,96 +392,108 @@ fn run_share(
         topo: &topo,
         executor: executor.as_ref(),
     };
-    let setup = agree(comm, SplineSetup::new(&job, &[]))?;
-    let mut s = setup.build(&job, &[]);
-    laps.lap("spline");
-    let halo = super::local::halo(comm, &local, &topo, &s);
+    let (setup, mut s) = clock.run(Stage::Spline, || {
+        let setup = agree(comm, SplineSetup::new(&job, &[]))?;
+        let s = setup.build(&job, &[]);
+        Ok::<_, CurveError>((setup, s))
+    })?;
+    let mut halo = clock.run(Stage::Partition, || {
+        super::local::halo(comm, &local, &topo, &s)
+    });
     let bytes_partition = comm.bytes_sent();
-    laps.lap("partition");
 
     let mine: Vec<usize> = (0..local.n_owned).collect();
-    let (mut cg, mut nonzeros) = fit_share(
-        comm, input, &local, &topo, &setup, &mut s, &halo, &mine, laps,
-    )?;
+    let j = ShareJob {
+        comm,
+        local: &local,
+        job: &job,
+        setup: &setup,
+        mine: &mine,
+    };
+    let (mut cg, mut nonzeros) = fit_stage(&j, clock, &mut s, &halo)?;
     // The serial run's post-fit Q2 choice of 2D meshes (`pipeline::misfit`), its runs of
     // misfit sides found over the whole boundary: mark, rebuild, refit.
-    let mut halo = halo;
     if let Some(targets) = setup.targets.as_ref().filter(|_| topo.dim == 2) {
         let mut misfit = vec![false; mesh.n_elements()];
         for _ in 0..crate::pipeline::misfit::MISFIT_ROUNDS {
-            let Some(marks) = misfit_marks(comm, &local, &topo, &s, targets) else {
+            let marks = clock.run(Stage::Spline, || {
+                misfit_marks(comm, &local, &topo, &s, targets)
+            });
+            let Some(marks) = marks else {
                 break;
             };
             for (m, x) in misfit.iter_mut().zip(marks) {
                 *m |= x;
             }
-            s = setup.build_with_misfits(&job, &[], &misfit);
-            halo = super::local::halo(comm, &local, &topo, &s);
-            (cg, nonzeros) = fit_share(
-                comm, input, &local, &topo, &setup, &mut s, &halo, &mine, laps,
-            )?;
+            s = clock.run(Stage::Spline, || {
+                setup.build_with_misfits(&job, &[], &misfit)
+            });
+            halo = clock.run(Stage::Partition, || {
+                super::local::halo(comm, &local, &topo, &s)
+            });
+            (cg, nonzeros) = fit_stage(&j, clock, &mut s, &halo)?;
         }
     }
     let bytes_fit = comm.bytes_sent() - bytes_partition;
 
     // The certified blend, each rank judging its own elements.
-    let blend_params = options
-        .line_search
-        .blend(options.line_search_mode == LineSearchMode::Global);
-    let target_map = setup.target_map(&job);
-    let mut blended = Blended::new(mesh, &target_map, &s, mesh, &topo, Vec::new());
-    let share = LocalShare {
-        comm,
-        mine: &mine,
-        global: &local.global_element,
-        local_of: local
-            .global_element
-            .iter()
-            .enumerate()
-            .map(|(i, &g)| (g, i))
-            .collect(),
-        n_local: mesh.n_elements(),
-        n_global: local.n_global as usize,
-    };
-    let blend =
-        blend_search_shared(&CpuCertifier, &mut blended, &blend_params, &share).map_err(|source| {
-            CurveError::Blend {
+    let target_map = clock.run(Stage::Validity, || setup.target_map(&job));
+    let (blended, blend) = clock.run(Stage::Validity, || {
+        let blend_params = options
+            .line_search
+            .blend(options.line_search_mode == LineSearchMode::Global);
+        let mut blended = Blended::new(mesh, &target_map, &s, mesh, &topo, Vec::new());
+        let share = LocalShare {
+            comm,
+            mine: &mine,
+            global: &local.global_element,
+            local_of: local
+                .global_element
+                .iter()
+                .enumerate()
+                .map(|(i, &g)| (g, i))
+                .collect(),
+            n_local: mesh.n_elements(),
+            n_global: local.n_global as usize,
+        };
+        let blend = blend_search_shared(&CpuCertifier, &mut blended, &blend_params, &share)
+            .map_err(|source| CurveError::Blend {
                 input: input.to_owned(),
                 source,
-            }
-        });
-    let blend = agree(comm, blend)?;
-    drop(share);
-    laps.lap("validity");
+            });
+        Ok::<_, CurveError>((blended, agree(comm, blend)?))
+    })?;
     let bytes_validity = comm.bytes_sent() - bytes_fit - bytes_partition;
     let damped_owned = damped_owned(&local, &blended);
     let bytes_before = comm.bytes_sent();
-    let mut output = sample_share(
-        comm,
-        &local,
-        &topo,
-        &blended,
-        order,
-        setup.features.as_ref(),
-    );
-    super::sample::to_file_order(comm, &local, &mut output);
-    // The serial report's feature summary when any rank found features (absolute
-    // deviations here; relative to the diagonal in `curve`).
-    let mut any = [f64::from(u8::from(setup.features.is_some()))];
-    comm.max_f64(&mut any);
-    let features = (any[0] > 0.0).then(|| {
-        super::features::feature_report(
+    let (output, features) = clock.run(Stage::Sample, || {
+        let mut output = sample_share(
             comm,
             &local,
             &topo,
+            &blended,
+            order,
             setup.features.as_ref(),
-            &options.features.params,
-            output.feature_deviation,
-            1.0,
-        )
+        );
+        super::sample::to_file_order(comm, &local, &mut output);
+        // The serial report's feature summary when any rank found features (absolute
+        // deviations here; relative to the diagonal in the report).
+        let mut any = [f64::from(u8::from(setup.features.is_some()))];
+        comm.max_f64(&mut any);
+        let features = (any[0] > 0.0).then(|| {
+            super::features::feature_report(
+                comm,
+                &local,
+                &topo,
+                setup.features.as_ref(),
+                &options.features.params,
+                output.feature_deviation,
+                1.0,
+            )
+        });
+        (output, features)
     });
     let bytes_sample = comm.bytes_sent() - bytes_before;
-    laps.lap("sample");
     let class = |c: &ElementClass| -> [usize; 3] {
         [
             matches!(c, ElementClass::Spline) as usize,
@@ -531,13 +507,16 @@ fn run_share(
             *n += x;
         }
     }
+    let knot_intervals = setup.knot_intervals;
+    drop(blended);
     Ok(Share {
         local,
         cg,
         blend,
         output,
         counts,
-        input_msj: msj[0],
+        knot_intervals,
+        input_msj,
         halo,
         nonzeros,
         bytes_fit,
@@ -588,7 +567,8 @@ fn damped_owned(local: &LocalMesh, blended: &Blended) -> [usize; 3] {
 }
 
 /// Run the distributed `curve` job on every rank of `comm` (see the module docs): every rank
-/// returns its share of the output and the report (the same on every rank).
+/// returns its share of the output and the report (the same on every rank; `output` empty
+/// and `timings` without `write`, set when written).
 pub fn curve(
     comm: &dyn Comm,
     input: &Path,
@@ -597,28 +577,25 @@ pub fn curve(
     check_supported(options)?;
     // The serial job's option checks (elastic is refused above, so no elastic parameters).
     let (order, _) = crate::pipeline::check_options(options)?;
-    let size = comm.size();
     let start = Instant::now();
-    let mut laps = Laps {
-        t: Instant::now(),
-        timings: BTreeMap::new(),
-        peaks: BTreeMap::new(),
-    };
-    let share = run_share(comm, input, options, order, &mut laps)?;
-    let quality = super::sample::global_quality(comm, input, &share.local, &share.output)?;
-    let mut counts = share.counts.map(|c| c as u64);
+    let mut clock = Clock::with_peaks(&Silent);
+    let share = run_share(comm, input, options, order, &mut clock)?;
     let out = &share.output;
-    let npf = (order + 1).pow(out.dim as u32 - 1);
-    let mut sizes = [
-        out.node_tags.len() as u64,
-        (out.boundary.len() / npf) as u64,
-        share.damped_owned[0] as u64,
-        share.damped_owned[1] as u64,
-        share.damped_owned[2] as u64,
-    ];
-    comm.sum_u64(&mut counts);
-    comm.sum_u64(&mut sizes);
-    laps.lap("quality");
+    let (min_sj, deviation, counts, sizes) = clock.run(Stage::Quality, || {
+        let (min_sj, deviation) = super::sample::global_quality(comm, input, &share.local, out)?;
+        let mut counts = share.counts.map(|c| c as u64);
+        let npf = (order + 1).pow(out.dim as u32 - 1);
+        let mut sizes = [
+            out.node_tags.len() as u64,
+            (out.boundary.len() / npf) as u64,
+            share.damped_owned[0] as u64,
+            share.damped_owned[1] as u64,
+            share.damped_owned[2] as u64,
+        ];
+        comm.sum_u64(&mut counts);
+        comm.sum_u64(&mut sizes);
+        Ok::<_, CurveError>((min_sj, deviation, counts.map(|c| c as usize), sizes))
+    })?;
     let figures = RankFigures {
         rank: comm.rank(),
         elements: share.local.n_owned,
@@ -633,101 +610,74 @@ pub fn curve(
         bytes_validity: share.bytes_validity,
         bytes_gather: share.bytes_sample,
         peak_memory_bytes: peak_memory_bytes(),
-        peak_memory_by_stage: laps.peaks.clone(),
-        timings: laps.timings.clone(),
+        peak_memory_by_stage: clock.peaks(),
+        timings: clock.timings().clone(),
     };
-    let all_figures = gather_figures(comm, &figures);
-    let mut timings = laps.timings;
-    timings.insert("total".into(), start.elapsed().as_secs_f64());
+    let per_rank = gather_figures(comm, &figures);
+    clock.set(Stage::Total, start.elapsed().as_secs_f64());
     // The blend's point counts over the ranks (each rank's search counts its sub-mesh's).
-    let blend_info = crate::validity::blend::BlendInfo {
+    let blend = crate::validity::blend::BlendInfo {
         reduced_points: sizes[2] as usize,
         target_points: sizes[3] as usize,
         straight_points: sizes[4] as usize,
         ..share.blend
     };
-    let cg = share.cg;
-    let report = CurveReport {
-        input: input.to_owned(),
-        output: PathBuf::new(),
-        dimension: out.dim,
-        elements: share.local.n_global as usize,
-        order,
-        subdivide: options.subdivide,
-        geometry: options.geometry,
-        method: options.method.name(),
-        elastic: None,
-        // The distributed job runs on the CPU only.
-        gpu_fallbacks: None,
-        output_nodes: sizes[0] as usize,
-        output_elements: share.local.n_global as usize,
-        boundary_facets: sizes[1] as usize,
-        control_points: counts[0] as usize,
-        spline_elements: counts[1] as usize,
-        q2_elements: counts[2] as usize,
-        // Uniform knots on every rank (`check_supported`).
-        knot_intervals: Some(crate::spline::KnotIntervals::Uniform),
-        knot_surfaces: None,
-        demoted_elements: 0,
-        kink_elements: counts[3] as usize,
-        snapped_boundary_vertices: None,
+    let space = SpaceCounts {
+        control_points: counts[0],
+        spline_elements: counts[1],
+        q2_elements: counts[2],
+        kink_elements: counts[3],
+        knot_intervals: share.knot_intervals,
         features: share.features.map(|mut f| {
-            f.feature_vertex_deviation_max /= quality.diagonal;
-            f.planarity_max /= quality.diagonal;
+            f.feature_vertex_deviation_max /= deviation.diagonal;
+            f.planarity_max /= deviation.diagonal;
             f
         }),
-        fit_weights: Some(options.fit.weights),
-        fit_targets: Some(options.fit.targets),
-        fit_solver: Some(crate::fit::FitSolver::Cg),
-        cg_iterations: Some(cg.iterations),
-        matrix_nonzeros: Some(all_figures.iter().map(|f| f.matrix_nonzeros).sum()),
-        cg_rel_residual: Some(cg.rel_residual),
-        line_search_mode: options.line_search_mode,
-        line_search_alpha: Some(0.5 * blend_info.min_factor),
-        invalid_at_full_step: blend_info.invalid_at_full_step,
-        damped_control_points: sizes[2] as usize,
-        line_search: None,
-        reduced_elements: blend_info.reduced_elements,
-        min_det_jacobian_bound: Some(blend_info.min_det_lower_bound),
-        blend: Some(blend_info),
-        energy: None,
-        energy_skipped: None,
-        invalid_elements: 0,
-        input_min_scaled_jacobian: share.input_msj,
-        min_scaled_jacobian: quality.min_sj,
-        bounding_box_diagonal: quality.diagonal,
-        boundary_vertex_deviation_max: quality.vertex_max,
-        boundary_vertex_deviation_rms: quality.vertex_rms,
-        boundary_node_distance_max: quality.node_max,
-        boundary_sample_distance_max: quality.sample_max,
-        periodic: None,
-        timings,
-        backend: "cpu".into(),
-        adapter: None,
-        gpu_precision: None,
     };
+    let nonzeros = per_rank.iter().map(|f| f.matrix_nonzeros).sum();
+    let n_global = share.local.n_global as usize;
+    let outcomes = Outcomes {
+        dimension: out.dim,
+        elements: n_global,
+        order,
+        output_nodes: sizes[0] as usize,
+        output_elements: n_global,
+        boundary_facets: sizes[1] as usize,
+        spline: Some(SplineFigures::blended(
+            space,
+            (crate::fit::FitSolver::Cg, share.cg, nonzeros),
+            blend,
+        )),
+        snapped: None,
+        elastic: None,
+        periodic: None,
+        input_min_scaled_jacobian: share.input_msj,
+        min_scaled_jacobian: min_sj,
+        deviation,
+        // The distributed job runs on the CPU only.
+        gpu: None,
+        per_rank: Some(per_rank),
+    };
+    let report = CurveReport::build(input, options, outcomes, clock.into_timings());
     Ok(Finished {
         tag_names: share.local.mesh.tag_names.clone(),
         output: share.output,
-        report: DistributedReport {
-            curve: report,
-            ranks: size,
-            per_rank: all_figures,
-        },
+        report,
     })
 }
 
-/// Stages whose seconds are reported per rank.
-const STAGES: [&str; 9] = [
-    "read",
-    "topology",
-    "spline",
-    "partition",
-    "fit_assembly",
-    "fit_cg",
-    "validity",
-    "sample",
-    "quality",
+/// Stages whose seconds and peak memory are reported per rank.
+const RANK_STAGES: [Stage; 10] = [
+    Stage::Read,
+    Stage::Topology,
+    Stage::Spline,
+    Stage::Partition,
+    Stage::Fit,
+    Stage::FitAssembly,
+    Stage::FitCg,
+    Stage::Validity,
+    Stage::Sample,
+    Stage::Quality,
 ];
 
 /// Every rank's figures on every rank (a few numbers each).
@@ -747,14 +697,14 @@ fn gather_figures(comm: &dyn Comm, f: &RankFigures) -> Vec<RankFigures> {
         f.ghost_elements as f64,
     ];
     v.extend(
-        STAGES
+        RANK_STAGES
             .iter()
-            .map(|s| f.timings.get(*s).copied().unwrap_or(0.0)),
+            .map(|s| f.timings.get(s.key()).copied().unwrap_or(0.0)),
     );
     v.extend(
-        STAGES
+        RANK_STAGES
             .iter()
-            .map(|s| f.peak_memory_by_stage.get(*s).copied().unwrap_or(0) as f64),
+            .map(|s| f.peak_memory_by_stage.get(s.key()).copied().unwrap_or(0) as f64),
     );
     comm.all_gather_f64(&v)
         .into_iter()
@@ -773,15 +723,15 @@ fn gather_figures(comm: &dyn Comm, f: &RankFigures) -> Vec<RankFigures> {
             bytes_validity: v[9] as u64,
             bytes_gather: v[10] as u64,
             ghost_elements: v[11] as usize,
-            timings: STAGES
+            timings: RANK_STAGES
                 .iter()
                 .zip(&v[12..])
-                .map(|(s, &t)| (s.to_string(), t))
+                .map(|(s, &t)| (s.key().to_string(), t))
                 .collect(),
-            peak_memory_by_stage: STAGES
+            peak_memory_by_stage: RANK_STAGES
                 .iter()
-                .zip(&v[12 + STAGES.len()..])
-                .map(|(s, &m)| (s.to_string(), m as u64))
+                .zip(&v[12 + RANK_STAGES.len()..])
+                .map(|(s, &m)| (s.key().to_string(), m as u64))
                 .collect(),
         })
         .collect()

@@ -3,11 +3,11 @@
 //! without mpirun, and `mpirun -np 1`, run the serial job unchanged.
 
 use super::comm::{Comm, Mpi};
-use super::job::{DistributedReport, curve as curve_job};
+use super::job::curve as curve_job;
 use super::write::{WriteOptions, write_collective};
 use crate::io::gmsh_write::MshVersion;
 use crate::io::high_order::OutputFormat;
-use crate::pipeline::{CurveError, CurveOptions};
+use crate::pipeline::{CurveError, CurveOptions, CurveReport};
 use std::path::Path;
 
 /// The number of ranks of the MPI job this process belongs to, from the launcher's
@@ -43,7 +43,7 @@ pub fn distributed() -> bool {
 /// What [`curve`] did on this rank.
 pub enum Outcome {
     /// Rank 0: the output (and report) were written.
-    Written(Box<DistributedReport>),
+    Written(Box<CurveReport>),
     /// Another rank: its share is done.
     Share,
 }
@@ -139,9 +139,9 @@ fn run(
     inputs: &[&Path],
     partitioned: bool,
 ) -> Result<Outcome, CurveError> {
+    let start = std::time::Instant::now();
     check_output(output, options)?;
     let finished = curve_job(comm, input, options)?;
-    let t = std::time::Instant::now();
     let write_options = WriteOptions {
         binary: options.output.binary,
         volume_name: &options.output.volume_name,
@@ -156,20 +156,18 @@ fn run(
             report,
             inputs,
             &write_options,
-            t,
+            start,
         )?;
         return Ok(r.map_or(Outcome::Share, |r| Outcome::Written(Box::new(r))));
     }
     // Its errors are alike on every rank (one sum); rank 0 prints the line (see [`curve`]).
+    let write_started = std::time::Instant::now();
     let pending = write_collective(comm, &finished.output, output, inputs, &write_options)?;
     let Some(pending) = pending else {
         return Ok(Outcome::Share);
     };
     let mut r = finished.report;
-    r.curve.output = output.to_owned();
-    r.curve
-        .timings
-        .insert("write".into(), t.elapsed().as_secs_f64());
+    r.written(output, write_started, start);
     let pending_report = match report {
         Some(path) => {
             let json = serde_json::to_string_pretty(&r).expect("the report serialises");

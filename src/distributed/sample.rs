@@ -333,24 +333,15 @@ fn boundary_distance(
     (ho.nodes, d)
 }
 
-/// The output's quality over all ranks.
-pub(super) struct Quality {
-    pub min_sj: f64,
-    pub diagonal: f64,
-    pub vertex_max: f64,
-    pub vertex_rms: f64,
-    pub node_max: f64,
-    pub sample_max: f64,
-}
-
-/// The sampled check over all ranks (an error on every rank when an element is invalid), the
-/// input's bounding-box diagonal and the boundary vertices' deviation relative to it.
+/// The sampled check over all ranks (an error on every rank when an element is invalid): the
+/// smallest sampled scaled Jacobian, and the boundary distances relative to the input's
+/// bounding-box diagonal (the serial quality stage's figures).
 pub(super) fn global_quality(
     comm: &dyn Comm,
     input: &std::path::Path,
     local: &LocalMesh,
     out: &RankOutput,
-) -> Result<Quality, crate::pipeline::CurveError> {
+) -> Result<(f64, crate::deviation::BoundaryDeviation), crate::pipeline::CurveError> {
     let invalid = comm.all_gather_f64(
         &out.invalid_elements
             .iter()
@@ -396,8 +387,7 @@ pub(super) fn global_quality(
         .sum::<f64>()
         .sqrt()
         .max(f64::MIN_POSITIVE);
-    Ok(Quality {
-        min_sj: mins[3],
+    let deviation = crate::deviation::BoundaryDeviation {
         diagonal,
         vertex_max: maxs[3] / diagonal,
         node_max: maxs[4] / diagonal,
@@ -407,7 +397,8 @@ pub(super) fn global_quality(
         } else {
             0.0
         },
-    })
+    };
+    Ok((mins[3], deviation))
 }
 
 /// Move the sampled elements to the rank whose run of the file holds them

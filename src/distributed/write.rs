@@ -6,7 +6,8 @@
 //! temporary beside the target ([`PendingFile`]), renamed over the target by the caller after
 //! the report is ready; `None` on the others.
 //!
-//! Layout (the serial writer's sections and groups, [`crate::io::gmsh_write`]):
+//! Layout (the serial writer's sections and groups, [`crate::io::gmsh_write`], every entity,
+//! node block and element block encoded by its `Blocks`):
 //! `$MeshFormat`, `$PhysicalNames`, `$Entities` (one entity per physical group, its bounding
 //! box reduced over the ranks) and the `$Nodes` header, written by rank 0; one node block per
 //! rank holding its owned nodes; then `$Elements` with one block per physical group, as the
@@ -24,9 +25,8 @@
 
 use super::comm::Comm;
 use super::sample::RankOutput;
-use crate::io::gmsh_write::{PlannedGroup, group_plan, write_format_and_names};
-use crate::io::ordering::{gmsh_hex, gmsh_line, gmsh_quad, gmsh_type, to_indices};
-use crate::io::output::{PendingFile, WriteBin, WriteError};
+use crate::io::gmsh_write::{Blocks, PlannedGroup, group_plan, write_format_and_names};
+use crate::io::output::{PendingFile, WriteError};
 use std::collections::{BTreeMap, BTreeSet};
 use std::fs::File;
 use std::io::{self, BufWriter, Write};
@@ -90,7 +90,8 @@ pub(super) fn clamp(t: i32) -> i32 {
 /// What every rank agrees on before writing: the groups, their global member counts and
 /// boxes, the node count and tag range, and the formats of the records.
 pub(super) struct Plan {
-    pub(super) binary: bool,
+    /// The encoding of the file's entities and blocks.
+    pub(super) blocks: Blocks,
     pub(super) d: usize,
     pub(super) groups: Vec<PlannedGroup>,
     /// Members of each group on each rank (`[rank][group]`).
@@ -99,10 +100,6 @@ pub(super) struct Plan {
     /// Owned nodes per rank, the smallest and largest node tag.
     nodes: Vec<u64>,
     tag_range: [u64; 2],
-    vol_order: Vec<usize>,
-    bnd_order: Vec<usize>,
-    pub(super) vol_type: i32,
-    pub(super) bnd_type: i32,
 }
 
 impl Plan {
@@ -144,48 +141,17 @@ impl Plan {
     /// `$MeshFormat`, `$PhysicalNames` and `$Entities` (one entity per group, with its box
     /// over all ranks).
     pub(super) fn entities(&self, w: &mut impl Write) -> io::Result<()> {
-        let binary = self.binary;
         let names = self
             .groups
             .iter()
             .map(|g| (g.dim, g.physical, g.name.as_str()));
-        write_format_and_names(w, "4.1", binary, names)?;
-        let mut count = [0u64; 4];
-        for g in &self.groups {
-            count[g.dim] += 1;
-        }
-        writeln!(w, "$Entities")?;
-        if binary {
-            for c in count {
-                w.u64(c)?;
-            }
-        } else {
-            writeln!(w, "{} {} {} {}", count[0], count[1], count[2], count[3])?;
-        }
-        for dim in 1..=3 {
-            for (i, g) in self.groups.iter().enumerate().filter(|(_, g)| g.dim == dim) {
-                let b = self.bbox[i];
-                if binary {
-                    w.i32(g.entity)?;
-                    for v in b {
-                        w.f64(v)?;
-                    }
-                    w.u64(1)?;
-                    w.i32(g.physical)?;
-                    w.u64(0)?;
-                } else {
-                    writeln!(
-                        w,
-                        "{} {} {} {} {} {} {} 1 {} 0",
-                        g.entity, b[0], b[1], b[2], b[3], b[4], b[5], g.physical
-                    )?;
-                }
-            }
-        }
-        if binary {
-            writeln!(w)?;
-        }
-        writeln!(w, "$EndEntities")
+        write_format_and_names(w, "4.1", self.blocks.binary, names)?;
+        let groups: Vec<(usize, i32, i32)> = self
+            .groups
+            .iter()
+            .map(|g| (g.dim, g.entity, g.physical))
+            .collect();
+        self.blocks.entities(w, &groups, |i| self.bbox[i])
     }
 
     /// `$MeshFormat`, `$PhysicalNames`, `$Entities` and the `$Nodes` header.
@@ -195,17 +161,10 @@ impl Plan {
         let blocks = self.nodes.iter().filter(|&&n| n > 0).count() as u64;
         let nn: u64 = self.nodes.iter().sum();
         let [lo, hi] = self.tag_range;
-        if self.binary {
-            for v in [blocks, nn, lo, hi] {
-                w.u64(v)?;
-            }
-        } else {
-            writeln!(w, "{blocks} {nn} {lo} {hi}")?;
-        }
-        Ok(())
+        self.blocks.four(w, [blocks, nn, lo, hi])
     }
 
-    fn vol_entity(&self) -> i32 {
+    pub(super) fn vol_entity(&self) -> i32 {
         self.groups
             .iter()
             .find(|g| g.dim == self.d)
@@ -214,113 +173,48 @@ impl Plan {
 
     /// One node block of a rank (nothing when it owns no node).
     fn node_block(&self, out: &RankOutput, w: &mut impl Write) -> io::Result<()> {
-        let n = out.node_tags.len();
-        if n == 0 {
+        if out.node_tags.is_empty() {
             return Ok(());
         }
-        let (d, e) = (self.d as i32, self.vol_entity());
-        if self.binary {
-            w.i32(d)?;
-            w.i32(e)?;
-            w.i32(0)?;
-            w.u64(n as u64)?;
-            for &t in &out.node_tags {
-                w.u64(t)?;
-            }
-            for x in &out.node_coords {
-                for &c in x {
-                    w.f64(c)?;
-                }
-            }
-            return Ok(());
-        }
-        writeln!(w, "{d} {e} 0 {n}")?;
-        crate::io::gmsh_write::write_lines(w, n, |i, o| {
-            o.extend_from_slice(itoa::Buffer::new().format(out.node_tags[i]).as_bytes());
-        })?;
-        crate::io::gmsh_write::write_lines(w, n, |i, o| {
-            for (k, &c) in out.node_coords[i].iter().enumerate() {
-                if k > 0 {
-                    o.push(b' ');
-                }
-                o.extend_from_slice(zmij::Buffer::new().format(c).as_bytes());
-            }
-        })
+        let tags = &out.node_tags;
+        self.blocks
+            .node_block(w, self.vol_entity(), |i| tags[i], &out.node_coords)
     }
 
     /// `$EndNodes` and the `$Elements` header.
     fn middle(&self, w: &mut impl Write) -> io::Result<()> {
-        if self.binary {
-            writeln!(w)?;
-        }
-        writeln!(w, "$EndNodes\n$Elements")?;
+        self.blocks.end(w, "Nodes")?;
+        writeln!(w, "$Elements")?;
         let ne: u64 = (0..self.groups.len()).map(|g| self.total(g)).sum();
-        let v = [self.groups.len() as u64, ne, 1.min(ne), ne];
-        if self.binary {
-            v.iter().try_for_each(|&x| w.u64(x))
-        } else {
-            writeln!(w, "{} {} {} {}", v[0], v[1], v[2], v[3])
-        }
+        self.blocks
+            .four(w, [self.groups.len() as u64, ne, 1.min(ne), ne])
     }
 
     fn block_header(&self, g: usize, w: &mut impl Write) -> io::Result<()> {
         let gr = &self.groups[g];
-        let t = if gr.dim == self.d {
-            self.vol_type
-        } else {
-            self.bnd_type
-        };
-        if self.binary {
-            w.i32(gr.dim as i32)?;
-            w.i32(gr.entity)?;
-            w.i32(t)?;
-            w.u64(self.total(g))
-        } else {
-            writeln!(w, "{} {} {t} {}", gr.dim, gr.entity, self.total(g))
-        }
+        self.blocks.block_header(
+            w,
+            gr.dim,
+            gr.entity,
+            self.blocks.kind(gr.dim),
+            self.total(g),
+        )
     }
 
-    /// One element record: its tag and node tags (lattice order, reordered to Gmsh's).
-    pub(super) fn record(&self, tag: u64, nodes: &[u64], w: &mut impl Write) -> io::Result<()> {
-        // No nodes: the tag alone (its size is what a record's tag adds).
-        let order: &[usize] = if nodes.is_empty() {
-            &[]
-        } else if nodes.len() == self.vol_order.len() {
-            &self.vol_order
-        } else {
-            &self.bnd_order
-        };
-        if self.binary {
-            w.u64(tag)?;
-            return order.iter().try_for_each(|&k| w.u64(nodes[k]));
-        }
-        let mut b = itoa::Buffer::new();
-        let mut line = Vec::with_capacity(16 * (order.len() + 1));
-        line.extend_from_slice(b.format(tag).as_bytes());
-        for &k in order {
-            line.push(b' ');
-            line.extend_from_slice(b.format(nodes[k]).as_bytes());
-        }
-        line.push(b'\n');
-        w.write_all(&line)
-    }
-
-    fn tail(&self, w: &mut impl Write) -> io::Result<()> {
-        if self.binary {
-            writeln!(w)?;
-        }
-        writeln!(w, "$EndElements")
+    /// One boundary facet's record: its tag and node tags (lattice order); with no nodes, the
+    /// tag alone.
+    pub(super) fn facet_record(
+        &self,
+        tag: u64,
+        nodes: &[u64],
+        w: &mut impl Write,
+    ) -> io::Result<()> {
+        self.blocks.record(w, self.d - 1, tag, nodes, 0)
     }
 }
 
 /// The groups every rank agrees on, with counts, boxes and node figures (collective).
-pub(super) fn plan(
-    comm: &dyn Comm,
-    out: &RankOutput,
-    tag_names: &BTreeMap<i32, String>,
-    volume_name: &str,
-    binary: bool,
-) -> io::Result<Plan> {
+pub(super) fn plan(comm: &dyn Comm, out: &RankOutput, options: &WriteOptions) -> io::Result<Plan> {
     let (d, p) = (out.dim, out.order);
     let vol_tags: Vec<i32> = if out.element_tags.is_empty() {
         vec![0; out.elements.len() / (p + 1).pow(d as u32)]
@@ -338,24 +232,20 @@ pub(super) fn plan(
         bnd.extend(r[1..1 + nb].iter().map(|&x| x as i32));
         vol.extend(r[1 + nb..].iter().map(|&x| x as i32));
     }
-    let groups = group_plan(d, bnd.into_iter(), vol.into_iter(), tag_names, volume_name);
-    let unsupported = |dim| {
-        io::Error::new(
-            io::ErrorKind::InvalidInput,
-            format!("Gmsh has no Lagrange element of dimension {dim} and order {p}"),
-        )
-    };
+    let groups = group_plan(
+        d,
+        bnd.into_iter(),
+        vol.into_iter(),
+        options.tag_names,
+        options.volume_name,
+    );
     let mut plan = Plan {
-        binary,
+        blocks: Blocks::new(d, p, options.binary)?,
         d,
         counts: Vec::new(),
         bbox: Vec::new(),
         nodes: Vec::new(),
         tag_range: [0, 0],
-        vol_order: to_indices(p, &if d == 2 { gmsh_quad(p) } else { gmsh_hex(p) }),
-        bnd_order: to_indices(p, &if d == 2 { gmsh_line(p) } else { gmsh_quad(p) }),
-        vol_type: gmsh_type(d, p).ok_or_else(|| unsupported(d))? as i32,
-        bnd_type: gmsh_type(d - 1, p).ok_or_else(|| unsupported(d - 1))? as i32,
         groups,
     };
     // Member counts per rank, boxes reduced, node figures.
@@ -416,12 +306,13 @@ pub(super) fn facet_places(
     first_tag: &[u64],
 ) -> (Vec<(u64, u64)>, Vec<u64>) {
     let npf = (out.order + 1).pow(out.dim as u32 - 1);
-    let no_tag = size_of(|w| plan.record(0, &[], w));
+    let no_tag = size_of(|w| plan.facet_record(0, &[], w));
     let mut v = Vec::with_capacity(6 * out.boundary_tags.len());
     for (i, &t) in out.boundary_tags.iter().enumerate() {
         let g = plan.group_of(true, t);
         // The record's size without its tag, so that every rank can add the tag's.
-        let body = size_of(|w| plan.record(0, &out.boundary[i * npf..(i + 1) * npf], w)) - no_tag;
+        let body =
+            size_of(|w| plan.facet_record(0, &out.boundary[i * npf..(i + 1) * npf], w)) - no_tag;
         v.push(g as f64);
         v.extend(out.boundary_keys[i].iter().map(|&k| k as f64));
         v.push(body as f64);
@@ -447,7 +338,7 @@ pub(super) fn facet_places(
         if r == me {
             places[i] = (pos[g], bytes[g]);
         }
-        bytes[g] += body + size_of(|w| plan.record(tag, &[], w));
+        bytes[g] += body + size_of(|w| plan.facet_record(tag, &[], w));
         pos[g] += 1;
     }
     (places, bytes)
@@ -483,7 +374,8 @@ fn layout(comm: &dyn Comm, plan: &Plan, out: &RankOutput) -> Layout {
         let g = plan.vol_group(out, e);
         let tag = first_tag[g] + before[g] + seen[g];
         seen[g] += 1;
-        bytes[g] += size_of(|w| plan.record(tag, &out.elements[e * npe..(e + 1) * npe], w)) as f64;
+        let nodes = &out.elements[e * npe..(e + 1) * npe];
+        bytes[g] += size_of(|w| plan.blocks.record(w, plan.d, tag, nodes, 0)) as f64;
     }
     bytes[ng] = size_of(|w| plan.node_block(out, w)) as f64;
     let sizes = comm.all_gather_f64(&bytes);
@@ -536,16 +428,18 @@ fn write_parts(
         for g in 0..plan.groups.len() {
             write_at(file, l.block_at[g], |w| plan.block_header(g, w))?;
         }
-        write_at(file, l.tail_at, |w| plan.tail(w))?;
+        write_at(file, l.tail_at, |w| plan.blocks.end(w, "Elements"))?;
     }
     write_at(file, l.nodes_at, |w| plan.node_block(out, w))?;
     for g in (0..plan.groups.len()).filter(|&g| plan.groups[g].dim == plan.d) {
+        let mine: Vec<usize> = (0..out.elements.len() / npe)
+            .filter(|&e| plan.vol_group(out, e) == g)
+            .collect();
         write_at(file, l.volume_at[g], |w| {
-            let mine = (0..out.elements.len() / npe).filter(|&e| plan.vol_group(out, e) == g);
-            for (tag, e) in (l.first_tag[g] + l.before[g]..).zip(mine) {
-                plan.record(tag, &out.elements[e * npe..(e + 1) * npe], w)?;
-            }
-            Ok(())
+            let first = l.first_tag[g] + l.before[g];
+            plan.blocks.records(w, plan.d, first, mine.len(), 0, |k| {
+                &out.elements[mine[k] * npe..(mine[k] + 1) * npe]
+            })
         })?;
     }
     // Boundary facets one record each, at their places in the serial order.
@@ -554,11 +448,8 @@ fn write_parts(
         let g = plan.group_of(true, t);
         let (pos, off) = l.places[i];
         buf.clear();
-        plan.record(
-            l.first_tag[g] + pos,
-            &out.boundary[i * npf..(i + 1) * npf],
-            &mut buf,
-        )?;
+        let nodes = &out.boundary[i * npf..(i + 1) * npf];
+        plan.facet_record(l.first_tag[g] + pos, nodes, &mut buf)?;
         file.write_all_at(&buf, l.volume_at[g] + off)?;
     }
     file.sync_all()
@@ -614,14 +505,7 @@ pub fn write_collective(
     }
     // SAFETY: the bytes are rank 0's `OsStr` encoding of a path on the same system.
     let temp = PathBuf::from(unsafe { std::ffi::OsString::from_encoded_bytes_unchecked(name) });
-    let result = plan(
-        comm,
-        out,
-        options.tag_names,
-        options.volume_name,
-        options.binary,
-    )
-    .and_then(|plan| {
+    let result = plan(comm, out, options).and_then(|plan| {
         let l = layout(comm, &plan, out);
         let file = std::fs::OpenOptions::new().write(true).open(&temp)?;
         write_parts(&plan, out, &l, comm.rank(), &file)

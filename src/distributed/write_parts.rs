@@ -30,12 +30,11 @@
 //! group's count and box per rank; two sums (the barriers before and after the renames).
 
 use super::comm::Comm;
-use super::job::DistributedReport;
 use super::read::LocalMesh;
 use super::sample::RankOutput;
 use super::write::{Plan, WriteOptions, elsewhere, facet_places, plan};
 use crate::io::output::{PendingFile, WriteBin, WriteError};
-use crate::pipeline::CurveError;
+use crate::pipeline::{CurveError, CurveReport};
 use std::collections::HashMap;
 use std::ffi::OsString;
 use std::io::{self, Write};
@@ -228,7 +227,7 @@ fn partition_entity(plan: &Plan, parts: usize, g: usize, r: usize) -> i32 {
 
 /// `$PartitionedEntities`: every part's entity of every group that has members there.
 fn partitioned_entities(plan: &Plan, part: &Part, w: &mut impl Write) -> io::Result<()> {
-    let binary = plan.binary;
+    let binary = plan.blocks.binary;
     let parts = part.counts.len();
     writeln!(w, "$PartitionedEntities")?;
     let mut per_dim = [0u64; 4];
@@ -242,15 +241,10 @@ fn partitioned_entities(plan: &Plan, part: &Part, w: &mut impl Write) -> io::Res
     if binary {
         w.u64(parts as u64)?;
         w.u64(0)?;
-        per_dim.iter().try_for_each(|&c| w.u64(c))?;
     } else {
         writeln!(w, "{parts}\n0")?;
-        writeln!(
-            w,
-            "{} {} {} {}",
-            per_dim[0], per_dim[1], per_dim[2], per_dim[3]
-        )?;
     }
+    plan.blocks.four(w, per_dim)?;
     for dim in 1..=3 {
         for (g, gr) in plan.groups.iter().enumerate().filter(|(_, g)| g.dim == dim) {
             for r in (0..parts).filter(|&r| part.counts[r][g] > 0) {
@@ -284,63 +278,26 @@ fn partitioned_entities(plan: &Plan, part: &Part, w: &mut impl Write) -> io::Res
             }
         }
     }
-    if binary {
-        writeln!(w)?;
-    }
-    writeln!(w, "$EndPartitionedEntities")
-}
-
-/// Four `size_t` of a section header, ASCII or binary.
-fn four(binary: bool, v: [u64; 4], w: &mut impl Write) -> io::Result<()> {
-    if binary {
-        v.iter().try_for_each(|&x| w.u64(x))
-    } else {
-        writeln!(w, "{} {} {} {}", v[0], v[1], v[2], v[3])
-    }
+    plan.blocks.end(w, "PartitionedEntities")
 }
 
 /// `$Nodes`: one block holding every node of the part, in the part's first volume entity.
 fn nodes(plan: &Plan, part: &Part, rank: usize, w: &mut impl Write) -> io::Result<()> {
-    let binary = plan.binary;
     let parts = part.counts.len();
     let n = part.node_tags.len();
     writeln!(w, "$Nodes")?;
     let lo = part.node_tags.first().copied().unwrap_or(0);
     let hi = part.node_tags.last().copied().unwrap_or(0);
-    four(binary, [(n > 0) as u64, n as u64, lo, hi], w)?;
+    plan.blocks.four(w, [(n > 0) as u64, n as u64, lo, hi])?;
     let entity = (0..plan.groups.len())
         .find(|&g| plan.groups[g].dim == plan.d && part.counts[rank][g] > 0)
         .map(|g| partition_entity(plan, parts, g, rank));
     if let (true, Some(e)) = (n > 0, entity) {
-        let d = plan.d as i32;
-        if binary {
-            w.i32(d)?;
-            w.i32(e)?;
-            w.i32(0)?;
-            w.u64(n as u64)?;
-            part.node_tags.iter().try_for_each(|&t| w.u64(t))?;
-            for x in &part.node_coords {
-                x.iter().try_for_each(|&c| w.f64(c))?;
-            }
-        } else {
-            writeln!(w, "{d} {e} 0 {n}")?;
-            crate::io::gmsh_write::write_lines(w, n, |i, o| {
-                o.extend_from_slice(itoa::Buffer::new().format(part.node_tags[i]).as_bytes());
-            })?;
-            crate::io::gmsh_write::write_lines(w, n, |i, o| {
-                for (k, &c) in part.node_coords[i].iter().enumerate() {
-                    if k > 0 {
-                        o.push(b' ');
-                    }
-                    o.extend_from_slice(zmij::Buffer::new().format(c).as_bytes());
-                }
-            })?;
-        }
+        let tags = &part.node_tags;
+        plan.blocks
+            .node_block(w, e, |i| tags[i], &part.node_coords)?;
     }
-    if binary {
-        writeln!(w)?;
-    }
-    writeln!(w, "$EndNodes")
+    plan.blocks.end(w, "Nodes")
 }
 
 /// `$Elements`: one block per group with members in the part, records sorted by tag.
@@ -351,7 +308,7 @@ fn elements(
     rank: usize,
     w: &mut impl Write,
 ) -> io::Result<()> {
-    let binary = plan.binary;
+    let blocks = &plan.blocks;
     let parts = part.counts.len();
     let npe = (out.order + 1).pow(out.dim as u32);
     let ng = plan.groups.len();
@@ -362,37 +319,21 @@ fn elements(
         .chain(part.facets.iter().map(|f| f.1));
     let (lo, hi) = tags.fold((u64::MAX, 0), |(lo, hi), t| (lo.min(t), hi.max(t)));
     let n = (part.volume.len() + part.facets.len()) as u64;
-    let blocks = (0..ng).filter(|&g| part.counts[rank][g] > 0).count() as u64;
+    let count = (0..ng).filter(|&g| part.counts[rank][g] > 0).count() as u64;
     writeln!(w, "$Elements")?;
-    four(binary, [blocks, n, if n > 0 { lo } else { 0 }, hi], w)?;
+    blocks.four(w, [count, n, if n > 0 { lo } else { 0 }, hi])?;
     for g in (0..ng).filter(|&g| part.counts[rank][g] > 0) {
-        let gr = &plan.groups[g];
-        let kind = if gr.dim == plan.d {
-            plan.vol_type
-        } else {
-            plan.bnd_type
-        };
+        let dim = plan.groups[g].dim;
         let e = partition_entity(plan, parts, g, rank);
-        let count = part.counts[rank][g];
-        if binary {
-            w.i32(gr.dim as i32)?;
-            w.i32(e)?;
-            w.i32(kind)?;
-            w.u64(count)?;
-        } else {
-            writeln!(w, "{} {e} {kind} {count}", gr.dim)?;
-        }
+        blocks.block_header(w, dim, e, blocks.kind(dim), part.counts[rank][g])?;
         for &(_, tag, i) in part.volume.iter().filter(|v| v.0 == g) {
-            plan.record(tag, &out.elements[i * npe..(i + 1) * npe], w)?;
+            blocks.record(w, dim, tag, &out.elements[i * npe..(i + 1) * npe], 0)?;
         }
         for (_, tag, nodes) in part.facets.iter().filter(|f| f.0 == g) {
-            plan.record(*tag, nodes, w)?;
+            blocks.record(w, dim, *tag, nodes, 0)?;
         }
     }
-    if binary {
-        writeln!(w)?;
-    }
-    writeln!(w, "$EndElements")
+    blocks.end(w, "Elements")
 }
 
 /// Write this rank's part of a partitioned output of `path` to a temporary beside
@@ -412,15 +353,7 @@ pub fn write_partitioned(
         path: target.clone(),
         source,
     };
-    let result = plan(
-        comm,
-        out,
-        options.tag_names,
-        options.volume_name,
-        options.binary,
-    )
-    .map_err(io_err)
-    .and_then(|plan| {
+    let result = plan(comm, out, options).map_err(io_err).and_then(|plan| {
         let part = gather_part(comm, &plan, out);
         crate::io::output::prepare(&target, inputs, |w| {
             plan.entities(w)?;
@@ -469,23 +402,20 @@ pub fn commit_parts(comm: &dyn Comm, part: PendingFile, ready: bool) -> Result<(
 pub fn write_all(
     comm: &dyn Comm,
     out: &RankOutput,
-    mut report: DistributedReport,
+    mut report: CurveReport,
     output: &Path,
     report_path: Option<&Path>,
     inputs: &[&Path],
     options: &WriteOptions,
     started: std::time::Instant,
-) -> Result<Option<DistributedReport>, CurveError> {
+) -> Result<Option<CurveReport>, CurveError> {
     let rank = comm.rank();
+    let write_started = std::time::Instant::now();
     let part = write_partitioned(comm, out, output, inputs, options)?;
     let mut pending_report = None;
     let mut report_error = None;
     if rank == 0 {
-        report.curve.output = output.to_owned();
-        report
-            .curve
-            .timings
-            .insert("write".into(), started.elapsed().as_secs_f64());
+        report.written(output, write_started, started);
         if let Some(path) = report_path {
             let json = serde_json::to_string_pretty(&report).expect("the report serialises");
             match crate::io::output::prepare(path, inputs, |w| writeln!(w, "{json}")) {

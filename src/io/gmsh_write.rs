@@ -10,6 +10,11 @@
 //! of dimension d−1 named from the input (or `boundary_<tag>`); untagged facets form a group
 //! named `boundary` (when nothing is tagged) or `untagged`. MSH 4.1 writes one geometric
 //! entity per physical group in `$Entities`, as HOPR and other solvers' readers require.
+//!
+//! [`Blocks`] is the one MSH 4.1 encoding of `$Entities`, of node blocks and of element
+//! blocks: the serial file here, and the distributed job's collective file and partitioned
+//! parts, which hand it a rank's own nodes and elements with their global tags, so every MSH
+//! 4.1 file is written by the same code.
 
 use super::output::WriteBin;
 use crate::io::ordering::{gmsh_hex, gmsh_line, gmsh_quad, gmsh_type, to_indices};
@@ -255,60 +260,267 @@ pub fn write_msh_named(
     msh.periodic(version, w)
 }
 
-/// What every section of one output file needs: the mesh, its physical groups, and the Gmsh
-/// types and node orders of its elements and facets.
-struct Msh<'m> {
-    mesh: &'m HighOrderMesh,
-    binary: bool,
-    groups: Vec<Group>,
+/// The MSH 4.1 encoding of one file's entities and blocks (ASCII or binary), with the Gmsh
+/// types and node orders of its elements (dimension `d`, order p) and boundary facets
+/// (dimension d − 1). Nodes are given in lattice order with the tag each has in the file less
+/// a `base` (the serial mesh's 0-based indices have base 1; global tags base 0).
+pub(crate) struct Blocks {
+    pub(crate) binary: bool,
     /// Dimension of the elements (facets have `d - 1`).
-    d: usize,
+    pub(crate) d: usize,
     vol_order: Vec<usize>,
     bnd_order: Vec<usize>,
     vol_type: i32,
     bnd_type: i32,
 }
 
-impl<'m> Msh<'m> {
-    fn new(mesh: &'m HighOrderMesh, binary: bool, volume_name: &str) -> io::Result<Self> {
-        let d = mesh.dim;
-        let p = mesh.order;
-        let groups = groups(mesh, volume_name);
-        let vol_order = to_indices(p, &if d == 2 { gmsh_quad(p) } else { gmsh_hex(p) });
-        let bnd_order = to_indices(p, &if d == 2 { gmsh_line(p) } else { gmsh_quad(p) });
-        let vol_type = gmsh_type(d, p).ok_or_else(|| unsupported(d, p))? as i32;
-        let bnd_type = gmsh_type(d - 1, p).ok_or_else(|| unsupported(d - 1, p))? as i32;
-        Ok(Msh {
-            mesh,
+impl Blocks {
+    /// The encoding of order-`p` elements of dimension `d`; an error when Gmsh has no such
+    /// Lagrange element.
+    pub(crate) fn new(d: usize, p: usize, binary: bool) -> io::Result<Self> {
+        Ok(Blocks {
             binary,
-            groups,
             d,
-            vol_order,
-            bnd_order,
-            vol_type,
-            bnd_type,
+            vol_order: to_indices(p, &if d == 2 { gmsh_quad(p) } else { gmsh_hex(p) }),
+            bnd_order: to_indices(p, &if d == 2 { gmsh_line(p) } else { gmsh_quad(p) }),
+            vol_type: gmsh_type(d, p).ok_or_else(|| unsupported(d, p))? as i32,
+            bnd_type: gmsh_type(d - 1, p).ok_or_else(|| unsupported(d - 1, p))? as i32,
         })
     }
 
-    /// Node indices (0-based) of member `i` of group `g`, in Gmsh's order.
-    fn nodes_of(&self, g: &Group, i: usize) -> Vec<u32> {
-        let mesh = self.mesh;
-        if g.dim == self.d {
-            let e = mesh.element(i);
-            self.vol_order.iter().map(|&k| e[k]).collect()
-        } else {
-            let n = mesh.nodes_per_facet();
-            let f = &mesh.boundary[i * n..(i + 1) * n];
-            self.bnd_order.iter().map(|&k| f[k]).collect()
-        }
-    }
-
-    fn type_of(&self, g: &Group) -> i32 {
-        if g.dim == self.d {
+    /// The Gmsh element type of the elements (`dim == d`) or of the boundary facets.
+    pub(crate) fn kind(&self, dim: usize) -> i32 {
+        if dim == self.d {
             self.vol_type
         } else {
             self.bnd_type
         }
+    }
+
+    fn order(&self, dim: usize) -> &[usize] {
+        if dim == self.d {
+            &self.vol_order
+        } else {
+            &self.bnd_order
+        }
+    }
+
+    /// Four `size_t` of a section's or block's header.
+    pub(crate) fn four(&self, w: &mut impl Write, v: [u64; 4]) -> io::Result<()> {
+        if self.binary {
+            v.iter().try_for_each(|&x| w.u64(x))
+        } else {
+            writeln!(w, "{} {} {} {}", v[0], v[1], v[2], v[3])
+        }
+    }
+
+    /// A block's header: the entity's dimension and tag, the element type (0 for a node
+    /// block: no parametric coordinates) and the block's size.
+    pub(crate) fn block_header(
+        &self,
+        w: &mut impl Write,
+        dim: usize,
+        entity: i32,
+        kind: i32,
+        count: u64,
+    ) -> io::Result<()> {
+        if self.binary {
+            w.i32(dim as i32)?;
+            w.i32(entity)?;
+            w.i32(kind)?;
+            w.u64(count)
+        } else {
+            writeln!(w, "{dim} {entity} {kind} {count}")
+        }
+    }
+
+    /// The end of section `name` (`$End<name>`, after the binary data's newline).
+    pub(crate) fn end(&self, w: &mut impl Write, name: &str) -> io::Result<()> {
+        if self.binary {
+            writeln!(w)?;
+        }
+        writeln!(w, "$End{name}")
+    }
+
+    /// `$Entities`: one entity of each `(dimension, tag, physical id)` of `groups`, with the
+    /// box `bbox(i)` of the `i`-th, listed by dimension.
+    pub(crate) fn entities(
+        &self,
+        w: &mut impl Write,
+        groups: &[(usize, i32, i32)],
+        bbox: impl Fn(usize) -> [f64; 6],
+    ) -> io::Result<()> {
+        let mut count = [0u64; 4];
+        for g in groups {
+            count[g.0] += 1;
+        }
+        writeln!(w, "$Entities")?;
+        self.four(w, count)?;
+        for dim in 1..=3 {
+            for (i, &(_, entity, physical)) in groups.iter().enumerate().filter(|g| g.1.0 == dim) {
+                let b = bbox(i);
+                if self.binary {
+                    w.i32(entity)?;
+                    for v in b {
+                        w.f64(v)?;
+                    }
+                    w.u64(1)?;
+                    w.i32(physical)?;
+                    w.u64(0)?;
+                } else {
+                    writeln!(
+                        w,
+                        "{entity} {} {} {} {} {} {} 1 {physical} 0",
+                        b[0], b[1], b[2], b[3], b[4], b[5]
+                    )?;
+                }
+            }
+        }
+        self.end(w, "Entities")
+    }
+
+    /// A node block of the `d`-dimensional entity `entity`: node `i` has tag `tag(i)` and
+    /// position `coords[i]`.
+    pub(crate) fn node_block(
+        &self,
+        w: &mut impl Write,
+        entity: i32,
+        tag: impl Fn(usize) -> u64 + Sync,
+        coords: &[[f64; 3]],
+    ) -> io::Result<()> {
+        let n = coords.len();
+        self.block_header(w, self.d, entity, 0, n as u64)?;
+        if self.binary {
+            for i in 0..n {
+                w.u64(tag(i))?;
+            }
+            for x in coords {
+                for &c in x {
+                    w.f64(c)?;
+                }
+            }
+            return Ok(());
+        }
+        write_lines(w, n, |i, out| {
+            out.extend_from_slice(itoa::Buffer::new().format(tag(i)).as_bytes());
+        })?;
+        write_lines(w, n, |i, out| {
+            for (k, &c) in coords[i].iter().enumerate() {
+                if k > 0 {
+                    out.push(b' ');
+                }
+                out.extend_from_slice(zmij::Buffer::new().format(c).as_bytes());
+            }
+        })
+    }
+
+    /// The records of `n` elements of dimension `dim` (the elements or the boundary facets),
+    /// tagged `first_tag`, `first_tag + 1`, …: record `k` holds the nodes `nodes(k)` (lattice
+    /// order, tags less `base`) in Gmsh's order. ASCII lines are formatted in parallel.
+    pub(crate) fn records<'a, T: Copy + Into<u64> + Sync + 'a>(
+        &self,
+        w: &mut impl Write,
+        dim: usize,
+        first_tag: u64,
+        n: usize,
+        base: u64,
+        nodes: impl Fn(usize) -> &'a [T] + Sync,
+    ) -> io::Result<()> {
+        if self.binary {
+            return (0..n)
+                .try_for_each(|k| self.record(w, dim, first_tag + k as u64, nodes(k), base));
+        }
+        let order = self.order(dim);
+        write_lines(w, n, |k, out| {
+            ascii_record(out, first_tag + k as u64, order, nodes(k), base);
+        })
+    }
+
+    /// One record of [`Blocks::records`]; with no nodes, its tag alone (the share of a
+    /// record's size its tag takes).
+    pub(crate) fn record<T: Copy + Into<u64>>(
+        &self,
+        w: &mut impl Write,
+        dim: usize,
+        tag: u64,
+        nodes: &[T],
+        base: u64,
+    ) -> io::Result<()> {
+        let order = if nodes.is_empty() {
+            &[]
+        } else {
+            self.order(dim)
+        };
+        if self.binary {
+            w.u64(tag)?;
+            return order
+                .iter()
+                .try_for_each(|&k| w.u64(nodes[k].into() + base));
+        }
+        let mut line = Vec::with_capacity(16 * (order.len() + 1));
+        ascii_record(&mut line, tag, order, nodes, base);
+        line.push(b'\n');
+        w.write_all(&line)
+    }
+}
+
+/// An ASCII record without its newline: the tag, then the nodes in `order`, plus `base`.
+fn ascii_record<T: Copy + Into<u64>>(
+    out: &mut Vec<u8>,
+    tag: u64,
+    order: &[usize],
+    nodes: &[T],
+    base: u64,
+) {
+    let mut b = itoa::Buffer::new();
+    out.extend_from_slice(b.format(tag).as_bytes());
+    for &k in order {
+        out.push(b' ');
+        out.extend_from_slice(b.format(nodes[k].into() + base).as_bytes());
+    }
+}
+
+/// What every section of one output file needs: the mesh, its physical groups, and the
+/// encoding of its blocks.
+struct Msh<'m> {
+    mesh: &'m HighOrderMesh,
+    binary: bool,
+    groups: Vec<Group>,
+    /// Dimension of the elements (facets have `d - 1`).
+    d: usize,
+    blocks: Blocks,
+}
+
+impl<'m> Msh<'m> {
+    fn new(mesh: &'m HighOrderMesh, binary: bool, volume_name: &str) -> io::Result<Self> {
+        Ok(Msh {
+            mesh,
+            binary,
+            groups: groups(mesh, volume_name),
+            d: mesh.dim,
+            blocks: Blocks::new(mesh.dim, mesh.order, binary)?,
+        })
+    }
+
+    /// Node indices (0-based) of member `i` of group `g`, in lattice order.
+    fn lattice_nodes(&self, g: &Group, i: usize) -> &'m [u32] {
+        let mesh = self.mesh;
+        if g.dim == self.d {
+            mesh.element(i)
+        } else {
+            let n = mesh.nodes_per_facet();
+            &mesh.boundary[i * n..(i + 1) * n]
+        }
+    }
+
+    /// Node indices (0-based) of member `i` of group `g`, in Gmsh's order.
+    fn nodes_of(&self, g: &Group, i: usize) -> Vec<u32> {
+        let nodes = self.lattice_nodes(g, i);
+        self.blocks.order(g.dim).iter().map(|&k| nodes[k]).collect()
+    }
+
+    fn type_of(&self, g: &Group) -> i32 {
+        self.blocks.kind(g.dim)
     }
 
     fn n_elements(&self) -> usize {
@@ -366,42 +578,13 @@ impl<'m> Msh<'m> {
     /// MSH 4.1 `$Entities`: one entity per physical group, with the bounding box of its
     /// elements' nodes.
     fn entities_v41(&self, w: &mut impl Write) -> io::Result<()> {
-        let groups = &self.groups;
-        let mut count = [0u64; 4];
-        for g in groups {
-            count[g.dim] += 1;
-        }
-        writeln!(w, "$Entities")?;
-        if self.binary {
-            for c in count {
-                w.u64(c)?;
-            }
-            for dim in 1..=3 {
-                for g in groups.iter().filter(|g| g.dim == dim) {
-                    w.i32(g.entity)?;
-                    for v in self.bbox(g) {
-                        w.f64(v)?;
-                    }
-                    w.u64(1)?;
-                    w.i32(g.physical)?;
-                    w.u64(0)?;
-                }
-            }
-            writeln!(w)?;
-        } else {
-            writeln!(w, "{} {} {} {}", count[0], count[1], count[2], count[3])?;
-            for dim in 1..=3 {
-                for g in groups.iter().filter(|g| g.dim == dim) {
-                    let b = self.bbox(g);
-                    writeln!(
-                        w,
-                        "{} {} {} {} {} {} {} 1 {} 0",
-                        g.entity, b[0], b[1], b[2], b[3], b[4], b[5], g.physical
-                    )?;
-                }
-            }
-        }
-        writeln!(w, "$EndEntities")
+        let groups: Vec<(usize, i32, i32)> = self
+            .groups
+            .iter()
+            .map(|g| (g.dim, g.entity, g.physical))
+            .collect();
+        self.blocks
+            .entities(w, &groups, |i| self.bbox(&self.groups[i]))
     }
 
     /// The boundary entity (dimension d−1) of boundary tag `tag`.
@@ -481,105 +664,35 @@ impl<'m> Msh<'m> {
 
     /// MSH 4.1 `$Nodes`: all nodes in one block on the first volume entity.
     fn nodes_v41(&self, w: &mut impl Write) -> io::Result<()> {
-        let mesh = self.mesh;
-        let d = self.d;
-        let nn = mesh.nodes.len() as u64;
+        let nodes = &self.mesh.nodes;
+        let nn = nodes.len() as u64;
         let vol_entity = self
             .groups
             .iter()
-            .find(|g| g.dim == d)
+            .find(|g| g.dim == self.d)
             .map_or(1, |g| g.entity);
         writeln!(w, "$Nodes")?;
-        if self.binary {
-            for v in [1, nn, 1.min(nn), nn] {
-                w.u64(v)?;
-            }
-            w.i32(d as i32)?;
-            w.i32(vol_entity)?;
-            w.i32(0)?;
-            w.u64(nn)?;
-            for i in 1..=nn {
-                w.u64(i)?;
-            }
-            for x in &mesh.nodes {
-                for &c in x {
-                    w.f64(c)?;
-                }
-            }
-            writeln!(w)?;
-        } else {
-            writeln!(w, "1 {nn} {} {nn}", 1.min(nn))?;
-            writeln!(w, "{d} {vol_entity} 0 {nn}")?;
-            write_lines(w, mesh.nodes.len(), |i, out| {
-                out.extend_from_slice(itoa::Buffer::new().format(i + 1).as_bytes());
-            })?;
-            write_lines(w, mesh.nodes.len(), |i, out| {
-                for (k, &c) in mesh.nodes[i].iter().enumerate() {
-                    if k > 0 {
-                        out.push(b' ');
-                    }
-                    out.extend_from_slice(zmij::Buffer::new().format(c).as_bytes());
-                }
-            })?;
-        }
-        writeln!(w, "$EndNodes")
+        self.blocks.four(w, [1, nn, 1.min(nn), nn])?;
+        self.blocks
+            .node_block(w, vol_entity, |i| i as u64 + 1, nodes)?;
+        self.blocks.end(w, "Nodes")
     }
 
     /// MSH 4.1 `$Elements`: one block per physical group, element tags 1, 2, ... in group
     /// order.
     fn elements_v41(&self, w: &mut impl Write) -> io::Result<()> {
-        let binary = self.binary;
-        let groups = &self.groups;
+        let blocks = &self.blocks;
         writeln!(w, "$Elements")?;
         let ne = self.n_elements() as u64;
-        if binary {
-            for v in [groups.len() as u64, ne, 1.min(ne), ne] {
-                w.u64(v)?;
-            }
-        } else {
-            writeln!(w, "{} {ne} {} {ne}", groups.len(), 1.min(ne))?;
-        }
+        blocks.four(w, [self.groups.len() as u64, ne, 1.min(ne), ne])?;
         let mut tag = 1u64;
-        for g in groups {
-            if binary {
-                w.i32(g.dim as i32)?;
-                w.i32(g.entity)?;
-                w.i32(self.type_of(g))?;
-                w.u64(g.members.len() as u64)?;
-            } else {
-                writeln!(
-                    w,
-                    "{} {} {} {}",
-                    g.dim,
-                    g.entity,
-                    self.type_of(g),
-                    g.members.len()
-                )?;
-            }
-            if binary {
-                for &i in &g.members {
-                    w.u64(tag)?;
-                    for n in self.nodes_of(g, i) {
-                        w.u64(n as u64 + 1)?;
-                    }
-                    tag += 1;
-                }
-            } else {
-                write_lines(w, g.members.len(), |k, out| {
-                    let mut b = itoa::Buffer::new();
-                    out.extend_from_slice(b.format(tag + k as u64).as_bytes());
-                    for n in self.nodes_of(g, g.members[k]) {
-                        out.push(b' ');
-                        out.extend_from_slice(b.format(n as u64 + 1).as_bytes());
-                    }
-                })?;
-                tag += g.members.len() as u64;
-            }
+        for g in &self.groups {
+            let n = g.members.len();
+            blocks.block_header(w, g.dim, g.entity, self.type_of(g), n as u64)?;
+            blocks.records(w, g.dim, tag, n, 1, |k| self.lattice_nodes(g, g.members[k]))?;
+            tag += n as u64;
         }
-        if binary {
-            writeln!(w)?;
-        }
-        writeln!(w, "$EndElements")
+        blocks.end(w, "Elements")
     }
 
     /// MSH 2.2 `$Nodes`.

@@ -2,7 +2,8 @@
 //! seconds to the report's `timings` under [`Stage::key`].
 //!
 //! A stage that runs several times (the fit and the certificate after a demotion round) is
-//! timed as the sum of its runs.
+//! timed as the sum of its runs. The distributed job runs its stages on the same clock, which
+//! also keeps each rank's peak memory at the end of every stage ([`Clock::with_peaks`]).
 
 use super::CurveError;
 use crate::progress::{Progress, Stage};
@@ -11,6 +12,8 @@ use std::time::Instant;
 
 pub(crate) struct Clock<'p> {
     timings: BTreeMap<String, f64>,
+    /// The peak memory at the end of each stage, by key, when kept.
+    peaks: Option<BTreeMap<String, u64>>,
     progress: &'p dyn Progress,
 }
 
@@ -18,7 +21,17 @@ impl<'p> Clock<'p> {
     pub(crate) fn new(progress: &'p dyn Progress) -> Self {
         Clock {
             timings: BTreeMap::new(),
+            peaks: None,
             progress,
+        }
+    }
+
+    /// A clock that also keeps the process's peak memory ([`peak_memory_bytes`]) at the end
+    /// of every stage.
+    pub(crate) fn with_peaks(progress: &'p dyn Progress) -> Self {
+        Clock {
+            peaks: Some(BTreeMap::new()),
+            ..Clock::new(progress)
         }
     }
 
@@ -49,6 +62,9 @@ impl<'p> Clock<'p> {
     /// Add `seconds` measured elsewhere (a part of a stage such as [`Stage::FitCg`]).
     pub(crate) fn add(&mut self, stage: Stage, seconds: f64) {
         *self.timings.entry(stage.key().to_string()).or_insert(0.0) += seconds;
+        if let Some(peaks) = &mut self.peaks {
+            peaks.insert(stage.key().to_string(), peak_memory_bytes());
+        }
     }
 
     /// Set `stage` to `seconds` (the whole job's [`Stage::Total`]).
@@ -56,7 +72,29 @@ impl<'p> Clock<'p> {
         self.timings.insert(stage.key().to_string(), seconds);
     }
 
+    /// The seconds of the stages so far, by key.
+    pub(crate) fn timings(&self) -> &BTreeMap<String, f64> {
+        &self.timings
+    }
+
+    /// The peak memory at the end of each stage so far, by key (empty unless kept).
+    pub(crate) fn peaks(&self) -> BTreeMap<String, u64> {
+        self.peaks.clone().unwrap_or_default()
+    }
+
     pub(crate) fn into_timings(self) -> BTreeMap<String, f64> {
         self.timings
     }
+}
+
+/// Peak resident memory of this process (Linux `VmHWM`), bytes; 0 where unknown.
+pub fn peak_memory_bytes() -> u64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmHWM:"))
+                .and_then(|l| l.split_whitespace().nth(1)?.parse::<u64>().ok())
+        })
+        .map_or(0, |kb| kb * 1024)
 }

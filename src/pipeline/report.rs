@@ -1,22 +1,32 @@
 //! The `curve` job's report ([`CurveReport`]): what was done, the certificate, quality and
 //! boundary figures, and the seconds per [`crate::progress::Stage`]; assembled once, from the
 //! stages' outcomes, at the end of the job.
+//!
+//! Input: the stages' outcomes over the whole mesh ([`Outcomes`]), the options and the stage
+//! clock's timings. Output: the report. [`CurveReport::build`] is the one place a report is
+//! made: the serial job gathers its outcomes in [`CurveReport::assemble`], the distributed job
+//! (`distributed::job`) sums and reduces its ranks' shares into the same [`Outcomes`] and adds
+//! the fields that exist only under mpirun (`ranks`, `per_rank`). Invariant: a field derived
+//! from the options is written the same way for both, so an option or a figure is added once.
 
 use super::spline::{SplineOutcome, SplineSetup};
-use super::{Geometry, Job};
+use super::{CurveOptions, Geometry, Job};
 use crate::deviation::BoundaryDeviation;
 use crate::elastic::ElasticInfo;
 use crate::energy::EnergyInfo;
 use crate::exec::gpu::{AdapterReport, Precision};
-use crate::fit::{FitTargets, FitWeights};
+use crate::fit::{FitSolver, FitTargets, FitWeights};
 use crate::mesh::HighOrderMesh;
-use crate::spline::{ElementClass, Q2Reason};
+use crate::mesh::features::FeatureReport;
+use crate::solve::CgInfo;
+use crate::spline::{ElementClass, KnotIntervals, KnotSurfaceInfo, Q2Reason};
 use crate::validity::LineSearchInfo;
 use crate::validity::LineSearchMode;
 use crate::validity::blend::BlendInfo;
 use serde::Serialize;
 use std::collections::BTreeMap;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
 
 /// What `curve` did, for `--report` and the terminal.
 ///
@@ -143,6 +153,134 @@ pub struct CurveReport {
     /// the same certified one; above 0, the device is unreliable or short of memory here).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub gpu_fallbacks: Option<usize>,
+    /// Under mpirun only (absent otherwise): the number of ranks.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ranks: Option<usize>,
+    /// Under mpirun only (absent otherwise): each rank's share of the work.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub per_rank: Option<Vec<RankFigures>>,
+}
+
+/// One rank's share of the work and of the communication (the report's `per_rank`, under
+/// mpirun).
+#[deny(missing_docs)]
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct RankFigures {
+    /// The rank.
+    pub rank: usize,
+    /// Elements this rank assembles, certifies and sends.
+    pub elements: usize,
+    /// Ghost elements it read and built its setup on besides its own.
+    pub ghost_elements: usize,
+    /// Control points its elements touch (the rows it holds).
+    pub control_points: usize,
+    /// Control points it owns (counted in dot products).
+    pub owned_control_points: usize,
+    /// Control points it shares with other ranks (its halo).
+    pub shared_control_points: usize,
+    /// Ranks it exchanges halo values with.
+    pub neighbours: usize,
+    /// Stored entries of its share of K (local numbering).
+    pub matrix_nonzeros: usize,
+    /// Bytes it sent in all (halo exchanges, reductions, gathers).
+    pub bytes_sent: u64,
+    /// Bytes sent by the fit (CG halo exchanges and reductions).
+    pub bytes_fit: u64,
+    /// Bytes sent by the certified blend (rejected elements, counts).
+    pub bytes_validity: u64,
+    /// Bytes sent by the sampling (node tags and positions asked of and sent to their owners).
+    pub bytes_gather: u64,
+    /// Peak resident memory of the process (VmHWM), bytes, before the write.
+    pub peak_memory_bytes: u64,
+    /// The peak (VmHWM) at the end of each stage: the stage that raised it is where the
+    /// memory is spent.
+    pub peak_memory_by_stage: BTreeMap<String, u64>,
+    /// Seconds per stage, under the keys of the report's `timings`.
+    pub timings: BTreeMap<String, f64>,
+}
+
+/// The stages' outcomes over the whole mesh: everything [`CurveReport::build`] reads besides
+/// the options and the timings.
+pub(crate) struct Outcomes {
+    /// 2 or 3.
+    pub dimension: usize,
+    /// Elements of the input mesh.
+    pub elements: usize,
+    /// Order of the output's elements.
+    pub order: usize,
+    /// Nodes, elements and boundary facets of the output.
+    pub output_nodes: usize,
+    pub output_elements: usize,
+    pub boundary_facets: usize,
+    /// The spline geometry's figures (`None` with `--straight`).
+    pub spline: Option<SplineFigures>,
+    pub snapped: Option<usize>,
+    /// The elastic solve and the certified bound of its mesh.
+    pub elastic: Option<(ElasticInfo, f64)>,
+    /// The periodic seams' bound, folded into `min_det_jacobian_bound`, and their report.
+    pub periodic: Option<(f64, PeriodicReport)>,
+    pub input_min_scaled_jacobian: f64,
+    pub min_scaled_jacobian: f64,
+    /// Boundary distances relative to the diagonal, and the diagonal.
+    pub deviation: BoundaryDeviation,
+    /// The GPU in use: adapter, precision and fallbacks.
+    pub gpu: Option<(AdapterReport, Precision, usize)>,
+    /// Under mpirun: every rank's figures.
+    pub per_rank: Option<Vec<RankFigures>>,
+}
+
+/// The spline geometry's figures over the whole mesh: the space's counts, the features, the
+/// fit and the certified search (the report's fields of the same names).
+pub(crate) struct SplineFigures {
+    pub space: SpaceCounts,
+    pub knot_surfaces: Option<KnotSurfaceInfo>,
+    /// The fit's solver, its CG figures and the stored entries of its matrix.
+    pub fit: Option<(FitSolver, CgInfo, usize)>,
+    pub demoted: usize,
+    pub alpha: Option<f64>,
+    pub invalid_at_full_step: usize,
+    pub damped_points: usize,
+    pub line_search: Option<LineSearchInfo>,
+    pub blend: Option<BlendInfo>,
+    pub energy: Option<EnergyInfo>,
+    pub energy_skipped: Option<String>,
+    pub min_det_bound: Option<f64>,
+}
+
+impl SplineFigures {
+    /// The figures of a blended least-squares fit: the search's are the blend's (as the serial
+    /// job's outcome of the same path), the blend's reduced points counted as held back.
+    pub(crate) fn blended(
+        space: SpaceCounts,
+        fit: (FitSolver, CgInfo, usize),
+        blend: BlendInfo,
+    ) -> Self {
+        SplineFigures {
+            space,
+            knot_surfaces: None,
+            fit: Some(fit),
+            demoted: 0,
+            alpha: Some(0.5 * blend.min_factor),
+            invalid_at_full_step: blend.invalid_at_full_step,
+            damped_points: blend.reduced_points,
+            line_search: None,
+            min_det_bound: Some(blend.min_det_lower_bound),
+            blend: Some(blend),
+            energy: None,
+            energy_skipped: None,
+        }
+    }
+}
+
+/// The counts of a spline space over the whole mesh, its knots and its features.
+pub(crate) struct SpaceCounts {
+    pub control_points: usize,
+    pub spline_elements: usize,
+    pub q2_elements: usize,
+    pub kink_elements: usize,
+    pub knot_intervals: KnotIntervals,
+    /// Deviations relative to the diagonal.
+    pub features: Option<FeatureReport>,
 }
 
 /// The outcomes of the stages after sampling.
@@ -197,106 +335,174 @@ impl CurveReport {
     ) -> CurveReport {
         let (mesh, options, ho) = (job.mesh, job.options, &done.ho);
         let setup = spline.map(|(setup, _)| setup);
-        let outcome = spline.map(|(_, outcome)| outcome);
-        let space = outcome.map(|o| &o.space);
-        let fit = outcome.and_then(|o| o.fit.as_ref());
-        let blend = outcome.and_then(|o| o.blend.clone());
-        let gpu = job.executor.gpu();
-        CurveReport {
-            input: job.input.to_owned(),
-            output: PathBuf::new(),
+        let figures = spline.map(|(setup, o)| {
+            let space = &o.space;
+            SplineFigures {
+                space: SpaceCounts {
+                    control_points: space.n_control_points(),
+                    spline_elements: space.n_spline_elements(),
+                    q2_elements: space.n_q2_elements(),
+                    // Counted in the built space: elements Q2 for other reasons already are
+                    // not kinks'.
+                    kink_elements: space
+                        .classes
+                        .iter()
+                        .filter(|c| **c == ElementClass::Q2(Q2Reason::BoundaryKink))
+                        .count(),
+                    knot_intervals: setup.knot_intervals,
+                    features: setup.features.as_ref().map(|f| {
+                        let (vertex, planarity) = f.deviations(mesh, ho, setup.boundary_rows());
+                        FeatureReport {
+                            found: f.summary(&options.features.params, setup.topo(job)),
+                            feature_vertex_deviation_max: vertex,
+                            planarity_max: planarity,
+                        }
+                    }),
+                },
+                knot_surfaces: (setup.knot_intervals == KnotIntervals::Graded)
+                    .then_some(setup.knot_info),
+                fit: o.fit.as_ref().map(|f| (f.solver, f.cg, f.nonzeros)),
+                demoted: o.demoted,
+                alpha: o.alpha,
+                invalid_at_full_step: o.invalid_at_full_step,
+                damped_points: o.damped_points,
+                line_search: o.line_search.clone(),
+                blend: o.blend.clone(),
+                energy: o.energy.clone(),
+                energy_skipped: o.energy_skipped.clone(),
+                min_det_bound: o.min_det_bound,
+            }
+        });
+        let periodic = done.periodic.as_ref().map(|(pairs, info)| {
+            let diagonal = done.deviation.diagonal;
+            let report = PeriodicReport {
+                pairs: pairs.iter().map(|p| p.summary(diagonal)).collect(),
+                node_pairs: ho.periodic.iter().map(|l| l.node_pairs.len()).sum(),
+                max_seam_shift: info.max_shift / diagonal,
+                written_mismatch: info.max_mismatch / diagonal,
+                recertified_elements: info.recertified,
+                seam: setup.map_or("c0", |s| s.seam_continuity().0),
+                seam_c0_reason: match setup {
+                    Some(s) => s.seam_continuity().1,
+                    None => Some("straight-sided output".into()),
+                },
+                pyfr_names: options.periodic.pyfr_names,
+            };
+            (info.min_det_bound, report)
+        });
+        let gpu = job
+            .executor
+            .gpu()
+            .map(|g| (g.adapter.clone(), g.precision, job.executor.fallbacks()));
+        let outcomes = Outcomes {
             dimension: mesh.dim,
             elements: mesh.n_elements(),
             order: ho.order,
-            subdivide: options.subdivide,
-            geometry: options.geometry,
-            method: options.method.name(),
-            elastic: done.elastic.map(|(info, _)| info),
             output_nodes: ho.nodes.len(),
             output_elements: ho.n_elements(),
             boundary_facets: ho.n_boundary(),
-            control_points: space.map_or(0, |s| s.n_control_points()),
-            spline_elements: space.map_or(0, |s| s.n_spline_elements()),
-            q2_elements: space.map_or(0, |s| s.n_q2_elements()),
-            knot_intervals: setup.map(|s| s.knot_intervals),
-            knot_surfaces: setup
-                .filter(|s| s.knot_intervals == crate::spline::KnotIntervals::Graded)
-                .map(|s| s.knot_info),
-            demoted_elements: outcome.map_or(0, |o| o.demoted),
-            // Counted in the built space: elements Q2 for other reasons already are not kinks'.
-            kink_elements: space.map_or(0, |s| {
-                s.classes
-                    .iter()
-                    .filter(|c| **c == ElementClass::Q2(Q2Reason::BoundaryKink))
-                    .count()
-            }),
-            snapped_boundary_vertices: done.snapped,
-            features: setup
-                .and_then(|s| Some((s.features.as_ref()?, s)))
-                .map(|(f, s)| {
-                    let t = s.topo(job);
-                    let (vertex, planarity) = f.deviations(mesh, ho, s.boundary_rows());
-                    crate::mesh::features::FeatureReport {
-                        found: f.summary(&options.features.params, t),
-                        feature_vertex_deviation_max: vertex,
-                        planarity_max: planarity,
-                    }
-                }),
+            spline: figures,
+            snapped: done.snapped,
+            elastic: done.elastic,
+            periodic,
+            input_min_scaled_jacobian: done.input_min_scaled_jacobian,
+            min_scaled_jacobian: done.min_scaled_jacobian,
+            deviation: done.deviation,
+            gpu,
+            per_rank: None,
+        };
+        CurveReport::build(job.input, options, outcomes, timings)
+    }
+
+    /// The report of the output written to `output`: its path, the seconds of
+    /// [`crate::progress::Stage::Write`] since `write_started` and of the whole job since
+    /// `started` (`total`).
+    pub(crate) fn written(&mut self, output: &Path, write_started: Instant, started: Instant) {
+        use crate::progress::Stage;
+        self.output = output.to_owned();
+        let timings = &mut self.timings;
+        timings.insert(
+            Stage::Write.key().into(),
+            write_started.elapsed().as_secs_f64(),
+        );
+        timings.insert(Stage::Total.key().into(), started.elapsed().as_secs_f64());
+    }
+
+    /// The report of the `curve` job on `input` with `options` from its stages' outcomes over
+    /// the whole mesh and the stage clock's `timings` (`output` empty: set when written).
+    pub(crate) fn build(
+        input: &Path,
+        options: &CurveOptions,
+        o: Outcomes,
+        timings: BTreeMap<String, f64>,
+    ) -> CurveReport {
+        let spline = o.spline.as_ref();
+        let fit = spline.and_then(|s| s.fit);
+        let blend = spline.and_then(|s| s.blend.clone());
+        CurveReport {
+            input: input.to_owned(),
+            output: PathBuf::new(),
+            dimension: o.dimension,
+            elements: o.elements,
+            order: o.order,
+            subdivide: options.subdivide,
+            geometry: options.geometry,
+            method: options.method.name(),
+            elastic: o.elastic.map(|(info, _)| info),
+            output_nodes: o.output_nodes,
+            output_elements: o.output_elements,
+            boundary_facets: o.boundary_facets,
+            control_points: spline.map_or(0, |s| s.space.control_points),
+            spline_elements: spline.map_or(0, |s| s.space.spline_elements),
+            q2_elements: spline.map_or(0, |s| s.space.q2_elements),
+            knot_intervals: spline.map(|s| s.space.knot_intervals),
+            knot_surfaces: spline.and_then(|s| s.knot_surfaces),
+            demoted_elements: spline.map_or(0, |s| s.demoted),
+            kink_elements: spline.map_or(0, |s| s.space.kink_elements),
+            snapped_boundary_vertices: o.snapped,
+            features: spline.and_then(|s| s.space.features),
             fit_weights: fit.map(|_| options.fit.weights),
             fit_targets: fit.map(|_| options.fit.targets),
-            fit_solver: fit.map(|f| f.solver),
-            cg_iterations: fit.map(|f| f.cg.iterations),
-            matrix_nonzeros: fit.map(|f| f.nonzeros),
-            cg_rel_residual: fit.map(|f| f.cg.rel_residual),
+            fit_solver: fit.map(|f| f.0),
+            cg_iterations: fit.map(|f| f.1.iterations),
+            matrix_nonzeros: fit.map(|f| f.2),
+            cg_rel_residual: fit.map(|f| f.1.rel_residual),
             line_search_mode: options.line_search_mode,
-            line_search_alpha: outcome.and_then(|o| o.alpha),
-            invalid_at_full_step: outcome.map_or(0, |o| o.invalid_at_full_step),
-            damped_control_points: outcome.map_or(0, |o| o.damped_points),
-            line_search: outcome.and_then(|o| o.line_search.clone()),
+            line_search_alpha: spline.and_then(|s| s.alpha),
+            invalid_at_full_step: spline.map_or(0, |s| s.invalid_at_full_step),
+            damped_control_points: spline.map_or(0, |s| s.damped_points),
+            line_search: spline.and_then(|s| s.line_search.clone()),
             reduced_elements: blend.as_ref().map_or(0, |b| b.reduced_elements),
             blend,
-            energy: outcome.and_then(|o| o.energy.clone()),
-            energy_skipped: outcome.and_then(|o| o.energy_skipped.clone()),
+            energy: spline.and_then(|s| s.energy.clone()),
+            energy_skipped: spline.and_then(|s| s.energy_skipped.clone()),
             invalid_elements: 0,
             // The elastic mesh replaces the spline's: its own certificate's bound.
             // The periodic seams' re-certified elements' bounds are folded in (a lower bound
             // of the whole mesh either way).
-            min_det_jacobian_bound: match &done.elastic {
+            min_det_jacobian_bound: match &o.elastic {
                 Some((_, bound)) => Some(*bound),
-                None => outcome.and_then(|o| o.min_det_bound),
+                None => spline.and_then(|s| s.min_det_bound),
             }
-            .map(|b| match &done.periodic {
-                Some((_, info)) => b.min(info.min_det_bound),
+            .map(|b| match &o.periodic {
+                Some((bound, _)) => b.min(*bound),
                 None => b,
             }),
-            input_min_scaled_jacobian: done.input_min_scaled_jacobian,
-            min_scaled_jacobian: done.min_scaled_jacobian,
-            bounding_box_diagonal: done.deviation.diagonal,
-            boundary_vertex_deviation_max: done.deviation.vertex_max,
-            boundary_vertex_deviation_rms: done.deviation.vertex_rms,
-            boundary_node_distance_max: done.deviation.node_max,
-            boundary_sample_distance_max: done.deviation.sample_max,
-            periodic: done.periodic.as_ref().map(|(pairs, info)| {
-                let diagonal = done.deviation.diagonal;
-                PeriodicReport {
-                    pairs: pairs.iter().map(|p| p.summary(diagonal)).collect(),
-                    node_pairs: ho.periodic.iter().map(|l| l.node_pairs.len()).sum(),
-                    max_seam_shift: info.max_shift / diagonal,
-                    written_mismatch: info.max_mismatch / diagonal,
-                    recertified_elements: info.recertified,
-                    seam: setup.map_or("c0", |s| s.seam_continuity().0),
-                    seam_c0_reason: match setup {
-                        Some(s) => s.seam_continuity().1,
-                        None => Some("straight-sided output".into()),
-                    },
-                    pyfr_names: options.periodic.pyfr_names,
-                }
-            }),
+            input_min_scaled_jacobian: o.input_min_scaled_jacobian,
+            min_scaled_jacobian: o.min_scaled_jacobian,
+            bounding_box_diagonal: o.deviation.diagonal,
+            boundary_vertex_deviation_max: o.deviation.vertex_max,
+            boundary_vertex_deviation_rms: o.deviation.vertex_rms,
+            boundary_node_distance_max: o.deviation.node_max,
+            boundary_sample_distance_max: o.deviation.sample_max,
+            periodic: o.periodic.map(|(_, report)| report),
             timings,
             backend: options.backend.name().into(),
-            adapter: gpu.map(|g| g.adapter.clone()),
-            gpu_precision: gpu.map(|g| g.precision),
-            gpu_fallbacks: gpu.map(|_| job.executor.fallbacks()),
+            adapter: o.gpu.as_ref().map(|g| g.0.clone()),
+            gpu_precision: o.gpu.as_ref().map(|g| g.1),
+            gpu_fallbacks: o.gpu.as_ref().map(|g| g.2),
+            ranks: o.per_rank.as_ref().map(Vec::len),
+            per_rank: o.per_rank,
         }
     }
 }
