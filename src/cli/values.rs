@@ -69,7 +69,7 @@ value_enum! {
 value_enum! {
     /// `curve --knot-intervals`.
     KnotIntervals => LibKnotIntervals {
-        #[value(help = "Every knot interval 1 (the paper's construction; default)")]
+        #[value(help = "Every knot interval 1 (the paper's construction)")]
         Uniform,
         #[value(help = "Knot intervals from the cells' extents, one ratio per knot surface: \
             graded (boundary-layer) grids are reproduced exactly and stay C¹ (distributed \

@@ -95,7 +95,8 @@ fn check_supported(options: &CurveOptions) -> Result<(), CurveError> {
     }
     // Graded knot intervals average over whole knot surfaces, which cross the shares; the
     // distributed run keeps uniform knots so that its result does not depend on the ranks.
-    // `auto` decides on the whole mesh's blend, which no rank sees.
+    // `auto` decides on the whole mesh's blend, which no rank sees: the launcher resolves it
+    // to uniform and says so (`launch::curve`).
     match options.knots.intervals {
         crate::spline::KnotIntervals::Uniform => {}
         crate::spline::KnotIntervals::Graded => return unsupported("--knot-intervals graded"),

@@ -66,6 +66,26 @@ pub fn curve(
         .ok_or_else(|| CurveError::Options("MPI was initialised already in this process".into()))?;
     let comm = Mpi::new(universe.world());
     let rank = comm.rank();
+    // `auto` (the default) decides on the whole mesh's blend, which no rank sees: the ranks
+    // curve with uniform knots, said once, and the report names the knots used.
+    let uniform;
+    let options = if options.knots.intervals == crate::spline::KnotIntervals::Auto {
+        if rank == 0 {
+            eprintln!(
+                "polyspline: note: knot intervals uniform under mpirun (`auto` decides on the whole mesh's blend; docs/distributed.md)"
+            );
+        }
+        uniform = CurveOptions {
+            knots: crate::spline::KnotParams {
+                intervals: crate::spline::KnotIntervals::Uniform,
+                ..options.knots
+            },
+            ..options.clone()
+        };
+        &uniform
+    } else {
+        options
+    };
     // A panic is a bug, but on one rank it would leave the others waiting in a collective for
     // ever: after its message, end the whole job.
     let report_panic = std::panic::take_hook();

@@ -242,7 +242,7 @@ fn glue_seams(job: &Job, pairs: &[PeriodicPair]) -> (Option<Glued>, Option<Strin
     if pairs.is_empty() {
         return (None, None);
     }
-    if job.options.knots.intervals != crate::spline::KnotIntervals::Uniform {
+    if job.options.knots.intervals == crate::spline::KnotIntervals::Graded {
         let why = "graded knot intervals are measured on the unglued mesh";
         return (None, Some(why.into()));
     }
@@ -317,7 +317,8 @@ pub const AUTO_MAX_HELD_BACK: f64 = 0.1;
 /// `--knot-intervals auto` runs them with uniform knots and, where the blend then holds back
 /// more than [`AUTO_MAX_HELD_BACK`] of the elements (a C¹ map with uniform knots cannot follow
 /// a graded grid: the spline is thrown away there), again with graded knots, which are kept
-/// when their blend holds back fewer elements; the setup names the knots used.
+/// when their blend holds back fewer elements; the setup names the knots used. Where
+/// translation seams are glued, the uniform spline is kept (graded knots do not glue them).
 pub(super) fn curve_spline(
     job: &Job,
     clock: &mut Clock,
@@ -344,7 +345,9 @@ pub(super) fn curve_spline(
         periodic,
     )?;
     let held = first.1.blend.as_ref().map_or(0, |b| b.reduced_elements);
-    if held as f64 <= AUTO_MAX_HELD_BACK * job.mesh.n_elements() as f64 {
+    // Glued periodic seams keep uniform knots: graded knot surfaces are measured on the
+    // unglued mesh, so graded knots would give up the seams' C¹.
+    if held as f64 <= AUTO_MAX_HELD_BACK * job.mesh.n_elements() as f64 || first.0.seams.is_some() {
         return Ok(first);
     }
     let graded = with(KnotIntervals::Graded);

@@ -38,12 +38,14 @@
 //! Surfaces closing on themselves with opposite orientation (non-orientable continuation) get
 //! uniform knots.
 //!
-//! **Auto** (opt-in) is decided by `curve` on the outcome, not here
+//! **Auto** (the default) is decided by `curve` on the outcome, not here
 //! (`pipeline::spline::curve_spline`): uniform knots, and graded ones where the certified
 //! blend holds back more than a tenth of the elements with uniform knots and fewer with
 //! graded ones. Per-surface rules
 //! on the measured log-ratios did not separate graded from unstructured meshes
-//! (BENCHMARKS.md, "Graded knot intervals"). Without a fit (`info`, `plot`), auto is uniform.
+//! (BENCHMARKS.md, "Graded knot intervals"). Without a fit (`info`, `plot`), auto is uniform; with
+//! glued periodic seams, `curve` keeps uniform knots; under mpirun the launcher resolves it to
+//! uniform.
 
 use crate::mesh::LinearMesh;
 use crate::mesh::topology::{NONE, Topology};
@@ -56,13 +58,13 @@ use serde::Serialize;
 #[serde(rename_all = "snake_case")]
 pub enum KnotIntervals {
     /// Every interval 1 (the paper's construction).
-    #[default]
     Uniform,
     /// From the cells' extents, one log-ratio per knot surface (graded grids reproduced).
     Graded,
-    /// `curve` decides: uniform, unless the certified blend then holds back more than a tenth
+    /// The default. `curve` decides: uniform, unless the certified blend then holds back more than a tenth
     /// of the elements and fewer with graded knots, graded then
     /// (`pipeline::spline::curve_spline`). Where nothing is fitted (`info`, `plot`), uniform.
+    #[default]
     Auto,
 }
 
@@ -80,7 +82,7 @@ pub struct KnotParams {
 impl Default for KnotParams {
     fn default() -> Self {
         KnotParams {
-            intervals: KnotIntervals::Uniform,
+            intervals: KnotIntervals::Auto,
             max_ratio: 16.0,
             max_spread: DEFAULT_MAX_SPREAD,
         }

@@ -341,6 +341,12 @@ fn options(mode: &str) -> CurveOptions {
             params: polyspline::mesh::features::FeatureParams::off(),
             ..Default::default()
         },
+        // The study compares fit targets on one spline space: `auto` could take graded knots
+        // for one mode and uniform ones for another.
+        knots: polyspline::spline::KnotParams {
+            intervals: polyspline::spline::KnotIntervals::Uniform,
+            ..Default::default()
+        },
         ..Default::default()
     }
 }
