@@ -643,8 +643,20 @@ fn coarse_normals(
                 .flatten()
                 .and_then(|pairs| {
                     let x = |w: u32| DVec3::from(mesh.coords[w as usize]);
+                    // The next vertex along the grid line from v through its neighbour a.
+                    let beyond = |a: u32| {
+                        grid_pairs(topo, &fan[a as usize], a)?
+                            .into_iter()
+                            .find_map(|(p, q)| {
+                                (p == v as u32)
+                                    .then_some(q)
+                                    .or((q == v as u32).then_some(p))
+                            })
+                            .filter(|&w| models[w as usize].is_some())
+                    };
+                    let outer = pairs.map(|(a, b)| Some([x(beyond(a)?), x(beyond(b)?)]));
                     let pairs = pairs.map(|(a, b)| (x(a), x(b)));
-                    arcs::grid_normal(x(v as u32), pairs, n.into())
+                    arcs::grid_normal(x(v as u32), pairs, outer, n.into())
                 })
                 .map_or(n, Into::into);
             Some((n, coarse))
