@@ -49,7 +49,10 @@
 //! is then exact on circles and spheres at any resolution and accurate to higher order
 //! elsewhere; its quadratic part is the vertex's H and normal, the rest (`HigherModel`) adds
 //! g(ξ_p) − Σ_j φ_j g(ξ_j) along the normal. Too few points, points that are not a graph over
-//! the tangent plane, or a singular system keep the one-ring quadric.
+//! the tangent plane, or a singular system keep the one-ring quadric. A plane curve whose ring
+//! turns from the vertex's tangent by more than 15° (an ellipse's coarse tip) takes the conic
+//! through the vertex and its four ring points instead (`higher::conic_fit`): exact on circles
+//! and ellipses, and defined where the ring folds back past the tip.
 //!
 //! **One-sided rings.** Next to a feature the ring stops at the feature's vertices (points of
 //! this side's surface). There the circle/sphere s_κ is replaced by the conic of the fitted
@@ -63,8 +66,8 @@
 //! turn by more than 30° (a torus of eight cells around the tube), the two rings reach a
 //! quarter turn or more and no polynomial model follows the surface there. The 3D boundary
 //! edge midpoints and face centres at such vertices take circular arcs on the vertex normals
-//! instead (`arcs`; regular coarse vertices take their normal from the circles through their
-//! grid lines). An interior sample whose vertices inherited their models from the corners of
+//! instead (`arcs`; regular coarse vertices take their normal from the conics through five
+//! points of their grid lines, or the circles through three). An interior sample whose vertices inherited their models from the corners of
 //! such a boundary edge or face (after dropping its directions across the layers, along which
 //! the sources do not change) takes that entity's arc, times the mean inherited weight: the
 //! models and the arcs differ there by far more than a boundary-layer cell's height, so a thin
@@ -643,8 +646,20 @@ fn coarse_normals(
                 .flatten()
                 .and_then(|pairs| {
                     let x = |w: u32| DVec3::from(mesh.coords[w as usize]);
+                    // The next vertex along the grid line from v through its neighbour a.
+                    let beyond = |a: u32| {
+                        grid_pairs(topo, &fan[a as usize], a)?
+                            .into_iter()
+                            .find_map(|(p, q)| {
+                                (p == v as u32)
+                                    .then_some(q)
+                                    .or((q == v as u32).then_some(p))
+                            })
+                            .filter(|&w| models[w as usize].is_some())
+                    };
+                    let outer = pairs.map(|(a, b)| Some([x(beyond(a)?), x(beyond(b)?)]));
                     let pairs = pairs.map(|(a, b)| (x(a), x(b)));
-                    arcs::grid_normal(x(v as u32), pairs, n.into())
+                    arcs::grid_normal(x(v as u32), pairs, outer, n.into())
                 })
                 .map_or(n, Into::into);
             Some((n, coarse))

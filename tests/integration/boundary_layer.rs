@@ -480,10 +480,10 @@ fn generated_boundary_layer_walls_stay_curved() {
 /// The coarse tip of a Gmsh-like O-grid around the 1 × 0.2 ellipse (equal arc lengths of
 /// 0.0328, 128 around: the tip turns by 41° with 26° beside it, so its wall vertices are
 /// coarse and take circular arcs), graded from 1e-5, extruded by one and three layers: every
-/// layer keeps its wall curved (RMS ≤ 0.3× the chords'). Three layers used to fall back to the
-/// chords (1.0×): the inner wall vertices' arcs disagreed with the models moving the thin
-/// cells' inner sides by far more than a cell height, so the certified blend held the tip
-/// cells at the straight elevation.
+/// layer keeps its wall curved (RMS ≤ 0.2× the chords' with one layer, 0.13× with three).
+/// Three layers used to fall back to the chords (1.0×): the inner wall vertices' arcs
+/// disagreed with the models moving the thin cells' inner sides by far more than a cell
+/// height, so the certified blend held the tip cells at the straight elevation.
 #[test]
 fn extruded_coarse_ellipse_tips_keep_their_curved_wall() {
     let b = 0.2;
@@ -520,8 +520,12 @@ fn extruded_coarse_ellipse_tips_keep_their_curved_wall() {
         let ours = rms(polyspline::pipeline::Geometry::SplineFitted);
         let linear = rms(polyspline::pipeline::Geometry::Straight);
         eprintln!("{layers} layers: wall RMS {ours:.3e}, linear {linear:.3e}");
+        // One layer: every wall vertex is on a rim, whose parabola models stay next to the
+        // thin cells (0.17×). Three layers: the middle row's arcs take their normals from the
+        // conics through five grid points (0.12×; 0.16× with the circles through three).
+        let bound = if layers == 1 { 0.2 } else { 0.13 };
         assert!(
-            ours <= 0.3 * linear,
+            ours <= bound * linear,
             "{layers} layers: wall RMS error {ours:.3e} against the linear mesh's {linear:.3e}"
         );
     }

@@ -55,19 +55,47 @@ fn circle_tangent(a: DVec3, v: DVec3, b: DVec3) -> Option<DVec3> {
     (la > 0.0 && lb > 0.0).then(|| lb / la * da + la / lb * db)
 }
 
+/// The tangent at `v` of its grid line through `a` and `b`: with the next points `outer` beyond
+/// them, that of the conic through the five ([`super::higher::conic_fit`], exact on ellipses:
+/// next to an ellipse's coarse tip the circle's is off by degrees), else (or when that fails)
+/// that of the circle through the three.
+fn line_tangent(a: DVec3, v: DVec3, b: DVec3, outer: Option<[DVec3; 2]>) -> Option<DVec3> {
+    let circle = circle_tangent(a, v, b)?;
+    let conic = outer.and_then(|[a2, b2]| {
+        let plane = (a - v).cross(b - v);
+        let lp = plane.length();
+        let d = b - a;
+        if !(lp > 1e-9 * d.length_squared()) {
+            return None;
+        }
+        let binormal = plane / lp;
+        let n0 = unit(binormal.cross(d));
+        let (n, _) = super::higher::conic_fit(v, n0, binormal, &[a, b, a2, b2], 0.5 * d.length())?;
+        let t = n.cross(binormal);
+        Some(t.dot(circle).signum() * t)
+    });
+    Some(conic.unwrap_or(circle / circle.length()))
+}
+
 /// The normal at a regular vertex `v` (four boundary quads) from its two grid lines: the
-/// cross product of the tangents of the circles through each opposite pair of its edge
-/// neighbours, oriented along the unit normal `n_ref`. Exact wherever the grid lines are
-/// circles (a torus's or any surface of revolution's meridians and parallels, a sphere's
-/// great or small circles), where the fan's and the quadric's normals are not (on an
-/// eight-cell torus tube they are off by up to 4°). `None` when the two tangents are (nearly)
-/// parallel or the normal turns from `n_ref` by more than 45°.
-pub(super) fn grid_normal(v: DVec3, pairs: [(DVec3, DVec3); 2], n_ref: DVec3) -> Option<DVec3> {
-    let t1 = circle_tangent(pairs[0].0, v, pairs[0].1)?;
-    let t2 = circle_tangent(pairs[1].0, v, pairs[1].1)?;
+/// cross product of the tangents of the curves through each opposite pair of its edge
+/// neighbours (and, where given in `outer`, the next points beyond them; [`line_tangent`]),
+/// oriented along the unit normal `n_ref`. Exact wherever the grid lines are circles (a
+/// torus's or any surface of revolution's meridians and parallels, a sphere's great or small
+/// circles) or, with the outer points, ellipses, where the fan's and the quadric's normals are
+/// not (on an eight-cell torus tube they are off by up to 4°). `None` when the two tangents
+/// are (nearly) parallel or the normal turns from `n_ref` by more than 45°.
+pub(super) fn grid_normal(
+    v: DVec3,
+    pairs: [(DVec3, DVec3); 2],
+    outer: [Option<[DVec3; 2]>; 2],
+    n_ref: DVec3,
+) -> Option<DVec3> {
+    let t1 = line_tangent(pairs[0].0, v, pairs[0].1, outer[0])?;
+    let t2 = line_tangent(pairs[1].0, v, pairs[1].1, outer[1])?;
     let c = t1.cross(t2);
     let l = c.length();
-    if !(l > 0.1 * t1.length() * t2.length()) {
+    if !(l > 0.1) {
         return None;
     }
     let n = c / l;
@@ -142,7 +170,7 @@ mod tests {
             let p = |a: f64, b: f64| torus(0.3 + a * dpsi, th + b * dth).0;
             let pairs = [(p(-1.0, 0.0), p(1.0, 0.0)), (p(0.0, -1.0), p(0.0, 1.0))];
             for sign in [1.0, -1.0] {
-                let g = grid_normal(v, pairs, sign * unit(n + 0.3 * DVec3::Z)).unwrap();
+                let g = grid_normal(v, pairs, [None; 2], sign * unit(n + 0.3 * DVec3::Z)).unwrap();
                 assert!((g - sign * n).length() < 1e-12, "{th}: {g:?} vs {n:?}");
             }
             let quad = |a: f64, b: f64| {
@@ -153,6 +181,20 @@ mod tests {
             fan_worst = fan_worst.max(fan.dot(n).abs().clamp(-1.0, 1.0).acos().to_degrees());
         }
         assert!(fan_worst > 1.0, "{fan_worst}");
+    }
+
+    /// Along an ellipse's coarse tip the tangent of the conic through five grid points is
+    /// exact; the circle through three is off by degrees next to the tip.
+    #[test]
+    fn line_tangent_is_exact_on_a_coarse_ellipse() {
+        let e = |t: f64| DVec3::new(t.cos(), 0.2 * t.sin(), 0.7);
+        let ts = [-0.35, 0.0, 0.35, 0.75, 1.2];
+        let exact = unit(DVec3::new(-(0.35f64).sin(), 0.2 * (0.35f64).cos(), 0.0));
+        let (a, v, b) = (e(ts[1]), e(ts[2]), e(ts[3]));
+        let conic = line_tangent(a, v, b, Some([e(ts[0]), e(ts[4])])).unwrap();
+        assert!((conic - exact).length() < 1e-9, "{conic:?} vs {exact:?}");
+        let circle = unit(line_tangent(a, v, b, None).unwrap());
+        assert!(circle.dot(exact).acos().to_degrees() > 1.0, "{circle:?}");
     }
 
     /// On the eight-by-sixteen torus (45° around the tube per cell) with exact normals, the

@@ -35,6 +35,10 @@ pub(crate) struct HigherModel {
     /// Scaled curvature form (a, b, d) of the conic whose height above its tangent plane,
     /// minus its quadratic part, is added to the polynomial (see [`conic_height`]).
     form: [f64; 3],
+    /// Coarse curves ([`conic_fit`]): the scaled coefficients (A, B, C) of the conic
+    /// A u² + B uη + C η² − 2η = 0 through the vertex and its four ring points, which then
+    /// replaces the circle (`form` and `c` zero).
+    conic: Option<[f64; 3]>,
 }
 
 /// Height above its tangent plane of the conic with curvature form q = a u² + b uw + d w²
@@ -76,7 +80,10 @@ impl HigherModel {
         let [a, b, d] = self.form;
         let q = a * u * u + b * u * w + d * w * w;
         // Beyond the conic's reach (far from the vertex) only its quadratic part is kept.
-        let conic = conic_height(self.form, u, w).map_or(0.0, |h| h - 0.5 * q);
+        let conic = match self.conic {
+            Some(abc) => curve_conic_height(abc, u).map_or(0.0, |h| h - 0.5 * abc[0] * u * u),
+            None => conic_height(self.form, u, w).map_or(0.0, |h| h - 0.5 * q),
+        };
         self.scale * (conic + m.iter().zip(&self.c).map(|(a, b)| a * b).sum::<f64>())
     }
 
@@ -255,6 +262,11 @@ pub(in crate::fit) fn refine_model(
 ) -> Option<(VertexModel, HigherModel)> {
     if !(ell > 0.0) {
         return None;
+    }
+    if dim == 2
+        && let Some(r) = coarse_conic_model(x.into(), m, pts, ell, how.binormal.into())
+    {
+        return Some(r);
     }
     const CUBIC: &[usize] = &[0, 1, 2, 3, 4, 5, 6, 7, 8];
     const QUARTIC: &[usize] = &[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13];
@@ -450,6 +462,125 @@ fn refine_with(
             scale: ell,
             c: hc,
             form,
+            conic: None,
+        },
+    ))
+}
+
+/// Height η(u) through the origin of the conic A u² + B uη + C η² − 2η = 0 (`abc`), on the
+/// branch tangent to the u axis there; `None` beyond that branch's reach.
+fn curve_conic_height([a, b, c]: [f64; 3], u: f64) -> Option<f64> {
+    let p = 2.0 - b * u;
+    let disc = p * p - 4.0 * a * c * u * u;
+    (p > 0.0 && disc >= 0.0).then(|| 2.0 * a * u * u / (p + disc.sqrt()))
+}
+
+/// A plane curve turns by more than this (degrees) between a vertex's tangent and the chord to
+/// a ring point for [`conic_fit`] to replace the circle-plus-polynomial height function.
+const CONIC_SLOPE_DEG: f64 = 15.0;
+
+/// The conic through the origin `x` of a plane curve (plane normal `binormal`) and its four
+/// ring points `pts` (scale `ell`, approximate normal `n0`): its unit normal at `x` (oriented
+/// along `n0`) and its coefficients (A, B, C) in the frame of that normal, in units of `ell`.
+/// Five points fix a conic, so the fit is exact on circles and ellipses however coarse the
+/// sampling (an ellipse's tip of four cells, where the circle plus cubic and quartic terms is
+/// off by 17 % of the chord's sagitta). `None` when the points are not four, the system is
+/// singular, or the conic's branch through `x` holds no ring point on one of its sides.
+pub(super) fn conic_fit(
+    x: DVec3,
+    n0: DVec3,
+    binormal: DVec3,
+    pts: &[DVec3],
+    ell: f64,
+) -> Option<(DVec3, [f64; 3])> {
+    if pts.len() != 4 || !(ell > 0.0) {
+        return None;
+    }
+    let t0 = n0.cross(binormal);
+    let uh: Vec<(f64, f64)> = pts
+        .iter()
+        .map(|&p| ((p - x).dot(t0) / ell, (p - x).dot(n0) / ell))
+        .collect();
+    // A u² + B uη + C η² + D u = 2η at each point.
+    let (mut a, mut r) = ([[0.0; MAX_TERMS]; MAX_TERMS], [0.0; MAX_TERMS]);
+    for (i, &(u, h)) in uh.iter().enumerate() {
+        a[i][..4].copy_from_slice(&[u * u, u * h, h * h, u]);
+        r[i] = 2.0 * h;
+    }
+    let s = solve_n(a, r, 4)?;
+    let (qa, qb, qc, qd) = (s[0], s[1], s[2], s[3]);
+    // The gradient at the origin is (D, −2): the normal, and the frame turned onto it.
+    let n = unit(2.0 * n0 - qd * t0);
+    let t = n.cross(binormal);
+    // Old coordinates from new ones: u = r11 u' + r12 η', η = r21 u' + r22 η'.
+    let (r11, r12, r21, r22) = (t.dot(t0), n.dot(t0), t.dot(n0), n.dot(n0));
+    let quad = |x1: f64, y1: f64, x2: f64, y2: f64| {
+        qa * x1 * x2 + 0.5 * qb * (x1 * y2 + y1 * x2) + qc * y1 * y2
+    };
+    let lin_h = r12 * qd - 2.0 * r22;
+    if !(lin_h < 0.0) {
+        return None;
+    }
+    let k = -2.0 / lin_h;
+    let abc = [
+        k * quad(r11, r21, r11, r21),
+        2.0 * k * quad(r11, r21, r12, r22),
+        k * quad(r12, r22, r12, r22),
+    ];
+    // Ring points on the branch through the vertex on both sides of it (its neighbours,
+    // which its edges' samples lie between); points beyond a tip, where the curve is no graph
+    // over the tangent, lie on the other branch.
+    let mut sides = [false; 2];
+    for &p in pts {
+        let (u, h) = ((p - x).dot(t) / ell, (p - x).dot(n) / ell);
+        if curve_conic_height(abc, u).is_some_and(|hc| (hc - h).abs() <= 1e-6 * (1.0 + h.abs())) {
+            sides[usize::from(u > 0.0)] = true;
+        }
+    }
+    if sides != [true; 2] {
+        return None;
+    }
+    Some((n, abc))
+}
+
+/// The model of a coarse plane-curve vertex as the [`conic_fit`] through it and its four ring
+/// points, when some ring point's chord turns from the tangent by more than
+/// [`CONIC_SLOPE_DEG`]; `None` (keep the circle-plus-polynomial fit) otherwise.
+fn coarse_conic_model(
+    x: DVec3,
+    m: &VertexModel,
+    pts: &[[f64; 3]],
+    ell: f64,
+    binormal: DVec3,
+) -> Option<(VertexModel, HigherModel)> {
+    let n0 = DVec3::from(m.normal);
+    let t0 = n0.cross(binormal);
+    let pts: Vec<DVec3> = pts.iter().map(|&p| DVec3::from(p)).collect();
+    let slope = CONIC_SLOPE_DEG.to_radians().tan();
+    if !pts
+        .iter()
+        .any(|&p| (p - x).dot(n0).abs() > slope * (p - x).dot(t0).abs())
+    {
+        return None;
+    }
+    let (n, abc) = conic_fit(x, n0, binormal, &pts, ell)?;
+    let t = n.cross(binormal);
+    let (t, n3): ([f64; 3], [f64; 3]) = (t.into(), n.into());
+    let q = 0.5 * abc[0] / ell;
+    let h = outer(t, t).map(|r| r.map(|v| q * v));
+    Some((
+        VertexModel {
+            normal: n3,
+            h,
+            weight: m.weight,
+        },
+        HigherModel {
+            origin: x.into(),
+            t: [t, [0.0; 3]],
+            scale: ell,
+            c: [0.0; 9],
+            form: [0.0; 3],
+            conic: Some(abc),
         },
     ))
 }
@@ -555,4 +686,49 @@ fn solve_n(
         x[r] = s / a[r][r];
     }
     Some(x)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// At the coarse tip of a 1 × 0.2 ellipse (cells turning by tens of degrees) the conic
+    /// model's normal and edge-midpoint targets are exact; the circle-plus-polynomial fit of
+    /// the same ring fails.
+    #[test]
+    fn coarse_conic_model_is_exact_on_an_ellipse() {
+        let e = |t: f64| DVec3::new(t.cos(), 0.2 * t.sin(), 0.0);
+        let on = |p: DVec3| (p.x * p.x + p.y * p.y / 0.04).sqrt() - 1.0;
+        let ts = [-0.75, -0.35, 0.35, 0.75];
+        let pts: Vec<[f64; 3]> = ts.iter().map(|&t| e(t).into()).collect();
+        let m = VertexModel {
+            normal: unit(DVec3::new(1.0, 0.05, 0.0)).into(),
+            h: [[0.0; 3]; 3],
+            weight: 1.0,
+        };
+        let ell = 0.5 * (e(0.35) - e(-0.35)).length();
+        let (cm, hm) = refine_model(2, e(0.0).into(), &m, &pts, ell, Height::CENTRED).unwrap();
+        assert!(hm.conic.is_some());
+        assert!(
+            (DVec3::from(cm.normal) - DVec3::X).length() < 1e-9,
+            "{:?}",
+            cm.normal
+        );
+        let chord = on(0.5 * (e(0.0) + e(0.35))).abs();
+        for t in [0.35, -0.35] {
+            let xs = [e(0.0).into(), e(t).into()];
+            let p = 0.5 * (e(0.0) + e(t));
+            let d = DVec3::from(cm.correction(p.into(), &xs, 0.5))
+                + hm.correction(p.into(), &xs, 0.5) * DVec3::from(cm.normal);
+            assert!(
+                on(p + d).abs() < 1e-9 * chord,
+                "{t}: {} vs {chord}",
+                on(p + d)
+            );
+        }
+        // Over the same ring the circle plus cubic and quartic terms has no fit: the ring
+        // points beyond the tip's neighbours are no graph over its tangent.
+        let used = [0, 2, 5, 9];
+        assert!(refine_with(2, e(0.0).into(), &m, &pts, ell, &used, Height::CENTRED).is_none());
+    }
 }
