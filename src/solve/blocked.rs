@@ -1036,25 +1036,27 @@ impl BlockedSystem {
         )
     }
 
-    /// [`Self::new`] with the pair preconditioner ([`BlockedKind::JacobiPair`]): the second
-    /// partition is `Aggregates::reversed`'s, factored from the same values, so M is
-    /// [`super::block_jacobi::BlockJacobiPair`]'s exactly (its factors bit for bit).
-    pub fn pair(
+    /// [`Self::new`], the pair ([`BlockedKind::JacobiPair`]: the second partition is
+    /// `Aggregates::reversed`'s, factored from the same values, so M is
+    /// [`super::block_jacobi::BlockJacobiPair`]'s, its factors bit for bit) or
+    /// [`Self::symmetric_gauss_seidel`], by `kind`.
+    pub fn with_kind(
         indptr: &[usize],
         indices: &[u32],
         data: &[f64],
         size: usize,
+        kind: BlockedKind,
     ) -> Result<Self, CgError> {
         Self::build(
             indptr,
             Cow::Borrowed(indices),
             Cow::Borrowed(data),
             size,
-            BlockedKind::JacobiPair,
+            kind,
         )
     }
 
-    /// [`Self::new`] (or [`Self::pair`], [`Self::symmetric_gauss_seidel`] by `kind`) consuming A's CSR
+    /// [`Self::with_kind`] consuming A's CSR
     /// arrays: the values are released once the row templates hold them and the columns once
     /// renumbered, so the solve does not keep A twice (at 1M hexes the CSR arrays are 1.5 GB,
     /// the reordered matrix 0.5 GB). Same system, same bits.
@@ -2248,7 +2250,8 @@ mod tests {
         use crate::solve::block_jacobi::tests::{random_vectors, weighted};
         let a = weighted(23);
         let generic = BlockJacobiPair::new(&a.0, &a.1, &a.2, 16).unwrap();
-        let mut fused = BlockedSystem::pair(&a.0, &a.1, &a.2, 16).unwrap();
+        let mut fused =
+            BlockedSystem::with_kind(&a.0, &a.1, &a.2, 16, BlockedKind::JacobiPair).unwrap();
         let jacobi = BlockJacobi::new(&a.0, &a.1, &a.2, 16).unwrap();
         for portable in [false, true] {
             fused.set_portable_kernels(portable);
@@ -2283,7 +2286,7 @@ mod tests {
         use crate::solve::block_jacobi::tests::{random_vectors, weighted};
         let a = weighted(19);
         let n = 361;
-        let sys = BlockedSystem::pair(&a.0, &a.1, &a.2, 12).unwrap();
+        let sys = BlockedSystem::with_kind(&a.0, &a.1, &a.2, 12, BlockedKind::JacobiPair).unwrap();
         let dot = |a: &[[f64; 3]], b: &[[f64; 3]]| -> [f64; 3] {
             std::array::from_fn(|c| a.iter().zip(b).map(|(a, b)| a[c] * b[c]).sum())
         };
@@ -2315,7 +2318,7 @@ mod tests {
             ..Default::default()
         };
         let mut x = vec![[0.0; 3]; n];
-        let fused = BlockedSystem::pair(&a.0, &a.1, &a.2, 16)
+        let fused = BlockedSystem::with_kind(&a.0, &a.1, &a.2, 16, BlockedKind::JacobiPair)
             .unwrap()
             .solve(&b, &mut x, &params, |_, _| {})
             .unwrap();

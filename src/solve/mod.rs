@@ -440,14 +440,8 @@ pub fn pcg(
     if let (Some((size, kind)), Some((indptr, indices, data))) =
         (params.preconditioner.blocked(), op.csr())
     {
-        let sys = match kind {
-            BlockedKind::Jacobi => BlockedSystem::new(indptr, indices, data, size)?,
-            BlockedKind::JacobiPair => BlockedSystem::pair(indptr, indices, data, size)?,
-            BlockedKind::GaussSeidel => {
-                BlockedSystem::symmetric_gauss_seidel(indptr, indices, data, size)?
-            }
-        };
-        return sys.solve(b, x, params, progress);
+        return BlockedSystem::with_kind(indptr, indices, data, size, kind)?
+            .solve(b, x, params, progress);
     }
     let pre = preconditioner(op, params)?;
     pcg_with(op, pre.as_ref(), b, x, params, progress)
