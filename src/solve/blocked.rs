@@ -1027,13 +1027,7 @@ impl BlockedSystem {
         data: &[f64],
         size: usize,
     ) -> Result<Self, CgError> {
-        Self::build(
-            indptr,
-            Cow::Borrowed(indices),
-            Cow::Borrowed(data),
-            size,
-            BlockedKind::Jacobi,
-        )
+        Self::with_kind(indptr, indices, data, size, BlockedKind::Jacobi)
     }
 
     /// [`Self::new`], the pair ([`BlockedKind::JacobiPair`]: the second partition is
@@ -1096,13 +1090,7 @@ impl BlockedSystem {
         data: &[f64],
         size: usize,
     ) -> Result<Self, CgError> {
-        Self::build(
-            indptr,
-            Cow::Borrowed(indices),
-            Cow::Borrowed(data),
-            size,
-            BlockedKind::GaussSeidel,
-        )
+        Self::with_kind(indptr, indices, data, size, BlockedKind::GaussSeidel)
     }
 
     fn build(
