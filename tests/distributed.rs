@@ -388,6 +388,11 @@ fn unsupported_options_under_mpirun_fail_with_one_line_and_write_nothing() {
             vec!["--cg-preconditioner", "block-sgs"],
             "--cg-preconditioner block-sgs",
         ),
+        // The serial default, refused only when asked for (the ranks' default is block Jacobi).
+        (
+            vec!["--cg-preconditioner", "block-jacobi-pair"],
+            "--cg-preconditioner block-jacobi-pair",
+        ),
         (
             vec!["--feature-edits", edits.to_str().unwrap()],
             "--feature-edits",

@@ -127,10 +127,11 @@ pub(crate) struct JobArgs {
     /// symmetric Gauss–Seidel sweep over those blocks (block SGS, in Eisenstat's form: about
     /// 40 % of block Jacobi's iterations, each about 2.4 times as costly), or the average of
     /// block Jacobi on two staggered partitions (block Jacobi pair: about 60 % of block
-    /// Jacobi's iterations, two block solves each). The GPU solver always uses the diagonal
-    /// and distributed runs block Jacobi on each rank's rows.
-    #[arg(long, value_enum, default_value_t = CgPreconditioner::default().into())]
-    cg_preconditioner: values::CgPreconditioner,
+    /// Jacobi's iterations, two block solves each; the default). The GPU solver always uses
+    /// the diagonal and distributed runs block Jacobi on each rank's rows (their default; the
+    /// pair and block SGS are refused there).
+    #[arg(long, value_enum)]
+    cg_preconditioner: Option<values::CgPreconditioner>,
     /// Most bisections of the validity line search.
     #[arg(long, default_value_t = 30)]
     max_bisections: usize,
@@ -292,7 +293,9 @@ impl JobArgs {
                 solver: self.fit_solver.into(),
                 cg: CgParams {
                     rel_tol: self.cg_tol.unwrap_or(FIT_CG_TOL),
-                    preconditioner: self.cg_preconditioner.into(),
+                    preconditioner: self
+                        .cg_preconditioner
+                        .map_or_else(default_preconditioner, Into::into),
                     ..Default::default()
                 },
                 targets: if FitPreset::from(self.fit).smooth_targets() {
@@ -610,4 +613,17 @@ fn print_summary(r: &CurveReport) {
         r.boundary_node_distance_max,
         r.boundary_sample_distance_max
     );
+}
+
+/// The fit's CG preconditioner when `--cg-preconditioner` is not given: the library's default,
+/// or block Jacobi under mpirun, where the default pair would be refused (its second
+/// partition's patches cross the ranks' shares); only an explicit pair or SGS is refused there.
+fn default_preconditioner() -> CgPreconditioner {
+    #[cfg(feature = "mpi")]
+    if polyspline::distributed::launch::distributed() {
+        return CgPreconditioner::BlockJacobi {
+            size: polyspline::solve::block_jacobi::DEFAULT_BLOCK,
+        };
+    }
+    CgPreconditioner::default()
 }

@@ -67,9 +67,9 @@ impl NormalMatrix {
         progress: impl crate::solve::CgMonitor,
     ) -> Result<crate::solve::CgInfo, CgError> {
         match params.preconditioner.blocked() {
-            Some((size, sweeps)) => {
+            Some((size, kind)) => {
                 let (indptr, indices, data) = self.into_parts();
-                crate::solve::BlockedSystem::from_parts(indptr, indices, data, size, sweeps)?
+                crate::solve::BlockedSystem::from_parts(indptr, indices, data, size, kind)?
                     .solve(b, x, params, progress)
             }
             None => crate::solve::pcg(&self, b, x, params, progress),

@@ -443,7 +443,7 @@ pub(crate) mod tests {
 
     /// A weighted, graded system: the 2D Laplacian with a light shift inside (0.05) and a
     /// heavy one (20) on the boundary rows, like the fit's midpoint and boundary weights.
-    fn weighted(g: usize) -> Csr {
+    pub(crate) fn weighted(g: usize) -> Csr {
         laplacian(g, |x, y| {
             if x == 0 || y == 0 || x + 1 == g || y + 1 == g {
                 20.0
@@ -453,7 +453,7 @@ pub(crate) mod tests {
         })
     }
 
-    fn random_vectors(n: usize, seed: u64) -> Vec<[f64; 3]> {
+    pub(crate) fn random_vectors(n: usize, seed: u64) -> Vec<[f64; 3]> {
         let mut s = seed;
         let mut next = || {
             s = s

@@ -23,6 +23,11 @@
 //! * **Fused passes.** One iteration is three parallel passes: the product A p with the
 //!   partial sums of pᵀAp; per aggregate the updates of x and r, the block solve z = M⁻¹ r and
 //!   the partial sums of rᵀz and rᵀr; then p = z + β p.
+//! * **Pair preconditioner** ([`BlockedKind::JacobiPair`]): z = ½ (M₁⁻¹ r + M₂⁻¹ r) with M₂
+//!   block Jacobi on a second, staggered partition (factors stored as M₁'s). Its block solves
+//!   need the updated r of neighbouring aggregates, so they take one more pass (gathering r
+//!   into a work vector allocated once per solve, with the partial sums of rᵀM₂⁻¹r); the
+//!   average is formed inside the pass p = z + β p, so z is never stored whole.
 //! * **4-lane entries.** Vectors hold [f64; 4] (lane 3 zero), one 256-bit operation per entry;
 //!   the two kernels are compiled a second time for AVX2 and chosen at run time (no FMA, so
 //!   both give the same bits).
@@ -304,6 +309,33 @@ pub struct BlockedSystem {
     /// from the aggregate's first row: the entries before it are exact zeros (see
     /// [`envelope_starts`]).
     first: Vec<u32>,
+    /// The second partition of the pair preconditioner ([`BlockedKind::JacobiPair`]).
+    second: Option<SecondPartition>,
+}
+
+/// Which preconditioner a [`BlockedSystem`] runs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BlockedKind {
+    /// Block Jacobi on the aggregates.
+    Jacobi,
+    /// Additive block Jacobi on the aggregates and a staggered second partition,
+    /// z = ½ (M₁⁻¹ r + M₂⁻¹ r), as [`super::block_jacobi::BlockJacobiPair`].
+    JacobiPair,
+    /// Symmetric block Gauss–Seidel in Eisenstat's form.
+    GaussSeidel,
+}
+
+/// The second partition of the pair preconditioner, in the system's (first partition's)
+/// numbering: aggregate a holds rows `rows[start[a]..start[a + 1]]`, which are not contiguous,
+/// so its block solve gathers r into a work vector in this partition's order (`slot` maps a row
+/// to its place there). Factors and envelopes are stored as the first partition's.
+struct SecondPartition {
+    rows: Vec<u32>,
+    start: Vec<usize>,
+    slot: Vec<u32>,
+    factors: Vec<f64>,
+    factor_start: Vec<usize>,
+    first: Vec<u32>,
 }
 
 /// What the solve keeps of A besides the diagonal blocks' factors.
@@ -556,6 +588,29 @@ unsafe fn block_step_avx2(
     ap: &[V4],
 ) -> (V4, V4) {
     block_step(l, first, alpha, x, r, z, p, ap)
+}
+
+/// One aggregate of the second partition: y = (L Lᵀ)⁻¹ r gathered at `rows`; returns rᵀy.
+#[inline(always)]
+fn pair_block(l: &[f64], first: &[u32], rows: &[u32], r: &[V4], y: &mut [V4]) -> V4 {
+    for (y, &i) in y.iter_mut().zip(rows) {
+        *y = r[i as usize];
+    }
+    block_solve(l, first, y);
+    let mut rz = [0.0; 4];
+    for (y, &i) in y.iter().zip(rows) {
+        let r = r[i as usize];
+        for c in 0..4 {
+            rz[c] += r[c] * y[c];
+        }
+    }
+    rz
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+unsafe fn pair_block_avx2(l: &[f64], first: &[u32], rows: &[u32], r: &[V4], y: &mut [V4]) -> V4 {
+    pair_block(l, first, rows, r, y)
 }
 
 /// Σ_k vals[pos[k]] x[cols[k]] over one part of a row (two partial sums), x read by `at`.
@@ -911,6 +966,59 @@ pub(crate) fn colour_order(
     (Aggregates { rows, start, slot }, groups, colours)
 }
 
+impl SecondPartition {
+    /// The aggregates `agg2` (old numbering) of the reordered A (`a`, numbered by `agg`),
+    /// factored as `BlockJacobi::on` factors them: each block entry is one value of A added
+    /// to zero, so the factors are the same bits.
+    fn new(a: &TemplateMatrix, agg: &Aggregates, agg2: Aggregates) -> Result<Self, CgError> {
+        let Aggregates { rows, start, .. } = agg2;
+        let rows: Vec<u32> = rows.iter().map(|&r| agg.slot[r as usize]).collect();
+        let mut slot = vec![0u32; rows.len()];
+        for (k, &i) in rows.iter().enumerate() {
+            slot[i as usize] = k as u32;
+        }
+        let old_rows: Vec<u32> = rows.iter().map(|&i| agg.rows[i as usize]).collect();
+        let (factors, factor_start) = factor_blocks(&start, &old_rows, |b, l| {
+            let s = start[b];
+            for (ii, &i) in rows[s..start[b + 1]].iter().enumerate() {
+                let (cols, vals) = a.row(i as usize);
+                let ri = ii * (ii + 1) / 2;
+                for (&c, &v) in cols.iter().zip(vals) {
+                    let j = slot[c as usize] as usize;
+                    if (s..=s + ii).contains(&j) {
+                        l[ri + j - s] += v;
+                    }
+                }
+            }
+        })?;
+        let first = envelope_starts(&start, &factors, &factor_start);
+        Ok(SecondPartition {
+            rows,
+            start,
+            slot,
+            factors,
+            factor_start,
+            first,
+        })
+    }
+
+    /// y = M₂⁻¹ r in this partition's order (`y[k]` for row `rows[k]`); returns rᵀy summed in
+    /// aggregate order.
+    fn solve(&self, portable: bool, r: &[V4], y: &mut [V4]) -> V4 {
+        let partials: Vec<V4> = split_at_offsets(y, &self.start)
+            .into_par_iter()
+            .enumerate()
+            .map(|(b, y)| {
+                let e = s_end(&self.start, b);
+                let l = &self.factors[self.factor_start[b]..self.factor_start[b + 1]];
+                let (first, rows) = (&self.first[e.clone()], &self.rows[e]);
+                dispatch!(portable, pair_block_avx2, pair_block(l, first, rows, r, y))
+            })
+            .collect();
+        sum(&partials)
+    }
+}
+
 impl BlockedSystem {
     /// Aggregate A (CSR) into blocks of at most `size` rows, reorder and factor.
     pub fn new(
@@ -919,16 +1027,30 @@ impl BlockedSystem {
         data: &[f64],
         size: usize,
     ) -> Result<Self, CgError> {
+        Self::with_kind(indptr, indices, data, size, BlockedKind::Jacobi)
+    }
+
+    /// [`Self::new`], the pair ([`BlockedKind::JacobiPair`]: the second partition is
+    /// `Aggregates::reversed`'s, factored from the same values, so M is
+    /// [`super::block_jacobi::BlockJacobiPair`]'s, its factors bit for bit) or
+    /// [`Self::symmetric_gauss_seidel`], by `kind`.
+    pub fn with_kind(
+        indptr: &[usize],
+        indices: &[u32],
+        data: &[f64],
+        size: usize,
+        kind: BlockedKind,
+    ) -> Result<Self, CgError> {
         Self::build(
             indptr,
             Cow::Borrowed(indices),
             Cow::Borrowed(data),
             size,
-            false,
+            kind,
         )
     }
 
-    /// [`Self::new`] (or [`Self::symmetric_gauss_seidel`] when `sweeps`) consuming A's CSR
+    /// [`Self::with_kind`] consuming A's CSR
     /// arrays: the values are released once the row templates hold them and the columns once
     /// renumbered, so the solve does not keep A twice (at 1M hexes the CSR arrays are 1.5 GB,
     /// the reordered matrix 0.5 GB). Same system, same bits.
@@ -937,9 +1059,9 @@ impl BlockedSystem {
         indices: Vec<u32>,
         data: Vec<f64>,
         size: usize,
-        sweeps: bool,
+        kind: BlockedKind,
     ) -> Result<Self, CgError> {
-        Self::build(&indptr, Cow::Owned(indices), Cow::Owned(data), size, sweeps)
+        Self::build(&indptr, Cow::Owned(indices), Cow::Owned(data), size, kind)
     }
 
     /// [`Self::new`] with the aggregates ordered by colour, for the symmetric block
@@ -968,13 +1090,7 @@ impl BlockedSystem {
         data: &[f64],
         size: usize,
     ) -> Result<Self, CgError> {
-        Self::build(
-            indptr,
-            Cow::Borrowed(indices),
-            Cow::Borrowed(data),
-            size,
-            true,
-        )
+        Self::with_kind(indptr, indices, data, size, BlockedKind::GaussSeidel)
     }
 
     fn build(
@@ -982,10 +1098,13 @@ impl BlockedSystem {
         indices: Cow<[u32]>,
         data: Cow<[f64]>,
         size: usize,
-        sweeps: bool,
+        kind: BlockedKind,
     ) -> Result<Self, CgError> {
         let agg = Aggregates::new(indptr, &indices, size);
-        let (agg, order) = if sweeps {
+        // The second partition is grown on A's graph before the columns are renumbered.
+        let agg2 =
+            (kind == BlockedKind::JacobiPair).then(|| Aggregates::reversed(indptr, &indices, size));
+        let (agg, order) = if kind == BlockedKind::GaussSeidel {
             let (agg, groups, colours) = colour_order(agg, indptr, &indices, SWEEP_DOMAINS);
             (agg, Some(SweepOrder { groups, colours }))
         } else {
@@ -1007,6 +1126,10 @@ impl BlockedSystem {
             }
         })?;
         let first = envelope_starts(start, &factors, &factor_start);
+        let second = match agg2 {
+            Some(agg2) => Some(SecondPartition::new(&a, &agg, agg2)?),
+            None => None,
+        };
         let op = match order {
             Some(order) => match OffBlock::new(a, start) {
                 Ok(off) => Operator::Split { off, order },
@@ -1020,6 +1143,7 @@ impl BlockedSystem {
             factors,
             factor_start,
             first,
+            second,
         })
     }
 
@@ -1352,6 +1476,46 @@ impl BlockedSystem {
         })
     }
 
+    /// The pair preconditioner's second half: z2 = M₂⁻¹ r (second partition's order); returns
+    /// rᵀz for z = ½ (z₁ + M₂⁻¹ r) given rz₁ = rᵀz₁.
+    fn add_second(
+        &self,
+        second: &SecondPartition,
+        portable: bool,
+        rz1: V4,
+        r: &[V4],
+        z2: &mut [V4],
+    ) -> V4 {
+        let rz2 = second.solve(portable, r, z2);
+        std::array::from_fn(|c| 0.5 * (rz1[c] + rz2[c]))
+    }
+
+    /// p = z + β p, where z is the first partition's z₁ alone or, for the pair, ½ (z₁ + z₂)
+    /// with z₂ gathered from the second partition's order (never stored: p is its only user).
+    fn next_direction(&self, beta: V4, z: &[V4], z2: &[V4], p: &mut [V4]) {
+        match &self.second {
+            None => p
+                .par_iter_mut()
+                .zip(z.par_iter())
+                .with_min_len(ROW_CHUNK)
+                .for_each(|(p, z)| {
+                    for k in 0..4 {
+                        p[k] = z[k] + beta[k] * p[k];
+                    }
+                }),
+            Some(second) => p
+                .par_iter_mut()
+                .zip(z.par_iter().zip(second.slot.par_iter()))
+                .with_min_len(ROW_CHUNK)
+                .for_each(|(p, (z, &k))| {
+                    let w = z2[k as usize];
+                    for c in 0..4 {
+                        p[c] = 0.5 * (z[c] + w[c]) + beta[c] * p[c];
+                    }
+                }),
+        }
+    }
+
     /// Block-Jacobi PCG from x with residual r; returns (iterations, rᵀr).
     fn solve_jacobi(
         &self,
@@ -1366,10 +1530,21 @@ impl BlockedSystem {
         let mut z = written_zeros(n);
         let mut p = written_zeros(n);
         let mut ap = written_zeros(n);
+        // The second partition's M₂⁻¹ r, in its own order (allocated once per solve).
+        let mut z2 = match self.second {
+            Some(_) => written_zeros(n),
+            None => Vec::new(),
+        };
         // z = M⁻¹ r (a zero step leaves x and r as they are).
         let (mut rz, mut rr) =
             self.update_and_precondition(a.portable, [0.0; 4], xp, &mut r, &mut z, &p, &ap);
-        p.copy_from_slice(&z);
+        if let Some(second) = &self.second {
+            rz = self.add_second(second, a.portable, rz, &r, &mut z2);
+        }
+        match self.second {
+            Some(_) => self.next_direction([0.0; 4], &z, &z2, &mut p),
+            None => p.copy_from_slice(&z),
+        }
         let mut it = 0;
         while !stop.converged(head(rr)) {
             if it >= params.max_iters {
@@ -1378,18 +1553,13 @@ impl BlockedSystem {
             let pap = a.apply_dot(&p, &mut ap);
             let [a0, a1, a2] = stop.alpha(it, head(rr), head(rz), head(pap))?;
             let alpha = [a0, a1, a2, 0.0];
-            let (rz_new, rr_new) =
+            let (mut rz_new, rr_new) =
                 self.update_and_precondition(a.portable, alpha, xp, &mut r, &mut z, &p, &ap);
+            if let Some(second) = &self.second {
+                rz_new = self.add_second(second, a.portable, rz_new, &r, &mut z2);
+            }
             let [b0, b1, b2] = Stopping::beta(head(rz), head(rz_new));
-            let beta = [b0, b1, b2, 0.0];
-            p.par_iter_mut()
-                .zip(z.par_iter())
-                .with_min_len(ROW_CHUNK)
-                .for_each(|(p, z)| {
-                    for k in 0..4 {
-                        p[k] = z[k] + beta[k] * p[k];
-                    }
-                });
+            self.next_direction([b0, b1, b2, 0.0], &z, &z2, &mut p);
             rz = rz_new;
             rr = rr_new;
             it += 1;
@@ -1462,6 +1632,44 @@ impl BlockedSystem {
         };
         *xp = v.x;
         result
+    }
+}
+
+#[cfg(test)]
+impl BlockedSystem {
+    /// z = M⁻¹ r in the original numbering, by the solve's own passes (a zero step, the
+    /// second partition's pass and the direction update with β = 0).
+    pub(crate) fn precondition(&self, r: &[[f64; 3]]) -> Vec<[f64; 3]> {
+        let Operator::Whole(a) = &self.op else {
+            panic!("a block-Jacobi system");
+        };
+        let rows = &self.agg.rows;
+        let n = rows.len();
+        let mut rp: Vec<V4> = rows
+            .iter()
+            .map(|&i| {
+                let v = r[i as usize];
+                [v[0], v[1], v[2], 0.0]
+            })
+            .collect();
+        let (mut x, mut z, mut p, ap) = (
+            vec![[0.0; 4]; n],
+            vec![[0.0; 4]; n],
+            vec![[0.0; 4]; n],
+            vec![[0.0; 4]; n],
+        );
+        let mut z2 = vec![[0.0; 4]; n];
+        let _ =
+            self.update_and_precondition(a.portable, [0.0; 4], &mut x, &mut rp, &mut z, &p, &ap);
+        if let Some(second) = &self.second {
+            self.add_second(second, a.portable, [0.0; 4], &rp, &mut z2);
+        }
+        self.next_direction([0.0; 4], &z, &z2, &mut p);
+        let mut out = vec![[0.0; 3]; n];
+        for (&i, v) in rows.iter().zip(&p) {
+            out[i as usize] = [v[0], v[1], v[2]];
+        }
+        out
     }
 }
 
@@ -1643,17 +1851,21 @@ mod tests {
     fn consuming_the_csr_arrays_gives_the_bits_of_borrowing_them() {
         let a = laplacian(30, |x, y| 0.05 + 0.01 * ((3 * x + y) % 5) as f64);
         let b = test_vector(900);
-        for sweeps in [false, true] {
+        for kind in [
+            BlockedKind::Jacobi,
+            BlockedKind::JacobiPair,
+            BlockedKind::GaussSeidel,
+        ] {
+            let sweeps = kind == BlockedKind::GaussSeidel;
             let params = CgParams {
                 rel_tol: 1e-9,
                 ..Default::default()
             };
             let borrowed =
-                BlockedSystem::build(&a.0, Cow::Borrowed(&a.1), Cow::Borrowed(&a.2), 16, sweeps)
+                BlockedSystem::build(&a.0, Cow::Borrowed(&a.1), Cow::Borrowed(&a.2), 16, kind)
                     .unwrap();
             let owned =
-                BlockedSystem::from_parts(a.0.clone(), a.1.clone(), a.2.clone(), 16, sweeps)
-                    .unwrap();
+                BlockedSystem::from_parts(a.0.clone(), a.1.clone(), a.2.clone(), 16, kind).unwrap();
             assert_eq!(owned.sweep_order().is_some(), sweeps);
             let mut x = vec![[0.0; 3]; 900];
             let mut y = vec![[0.0; 3]; 900];
@@ -1663,7 +1875,7 @@ mod tests {
             assert!(i.iterations > 5);
             let bits =
                 |v: &[[f64; 3]]| -> Vec<u64> { v.iter().flatten().map(|x| x.to_bits()).collect() };
-            assert_eq!(bits(&x), bits(&y), "sweeps {sweeps}");
+            assert_eq!(bits(&x), bits(&y), "{kind:?}");
         }
     }
 
@@ -2014,5 +2226,113 @@ mod tests {
             its[1],
             its[0]
         );
+    }
+
+    /// The fused pair preconditioner applies BlockJacobiPair's M⁻¹ (an independent
+    /// implementation: gathers, its own triangular solves, an explicit average) to rounding,
+    /// on a weighted system with aggregates that do not divide the rows; with the AVX2 and the
+    /// portable kernels alike.
+    #[test]
+    fn the_fused_pair_applies_the_generic_pair() {
+        use crate::solve::block_jacobi::BlockJacobiPair;
+        use crate::solve::block_jacobi::tests::{random_vectors, weighted};
+        let a = weighted(23);
+        let generic = BlockJacobiPair::new(&a.0, &a.1, &a.2, 16).unwrap();
+        let mut fused =
+            BlockedSystem::with_kind(&a.0, &a.1, &a.2, 16, BlockedKind::JacobiPair).unwrap();
+        let jacobi = BlockJacobi::new(&a.0, &a.1, &a.2, 16).unwrap();
+        for portable in [false, true] {
+            fused.set_portable_kernels(portable);
+            for seed in 0..3 {
+                let r = random_vectors(529, seed);
+                let mut want = vec![[0.0; 3]; 529];
+                generic.apply(&r, &mut want);
+                let got = fused.precondition(&r);
+                let scale = want.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+                for (g, w) in got.iter().zip(&want) {
+                    for c in 0..3 {
+                        assert!((g[c] - w[c]).abs() <= 1e-12 * scale, "{g:?} vs {w:?}");
+                    }
+                }
+                // Not block Jacobi alone: the second partition contributes.
+                let mut one = vec![[0.0; 3]; 529];
+                jacobi.apply(&r, &mut one);
+                let diff = one
+                    .iter()
+                    .zip(&want)
+                    .map(|(o, w)| (o[0] - w[0]).abs())
+                    .fold(0.0, f64::max);
+                assert!(diff > 1e-3 * scale, "{diff}");
+            }
+        }
+    }
+
+    /// The fused pair's M⁻¹ is symmetric and positive definite: uᵀM⁻¹v = vᵀM⁻¹u and
+    /// uᵀM⁻¹u > 0 for random u, v.
+    #[test]
+    fn the_fused_pair_is_symmetric_positive_definite() {
+        use crate::solve::block_jacobi::tests::{random_vectors, weighted};
+        let a = weighted(19);
+        let n = 361;
+        let sys = BlockedSystem::with_kind(&a.0, &a.1, &a.2, 12, BlockedKind::JacobiPair).unwrap();
+        let dot = |a: &[[f64; 3]], b: &[[f64; 3]]| -> [f64; 3] {
+            std::array::from_fn(|c| a.iter().zip(b).map(|(a, b)| a[c] * b[c]).sum())
+        };
+        for seed in 0..4 {
+            let (u, v) = (random_vectors(n, 2 * seed), random_vectors(n, 2 * seed + 1));
+            let (mu, mv) = (sys.precondition(&u), sys.precondition(&v));
+            let (uv, vu, uu) = (dot(&u, &mv), dot(&v, &mu), dot(&u, &mu));
+            for c in 0..3 {
+                assert!(
+                    (uv[c] - vu[c]).abs() <= 1e-12 * uu[c].abs(),
+                    "{uv:?} {vu:?}"
+                );
+                assert!(uu[c] > 0.0);
+            }
+        }
+    }
+
+    /// CG with the fused pair takes the generic loop's iterations with BlockJacobiPair (same
+    /// method), fewer than block Jacobi, and reaches the same solution.
+    #[test]
+    fn the_fused_pair_solve_is_the_generic_pair_solve() {
+        use crate::solve::block_jacobi::BlockJacobiPair;
+        use crate::solve::block_jacobi::tests::weighted;
+        let a = weighted(40);
+        let n = 1600;
+        let b = test_vector(n);
+        let params = CgParams {
+            rel_tol: 1e-10,
+            ..Default::default()
+        };
+        let mut x = vec![[0.0; 3]; n];
+        let fused = BlockedSystem::with_kind(&a.0, &a.1, &a.2, 16, BlockedKind::JacobiPair)
+            .unwrap()
+            .solve(&b, &mut x, &params, |_, _| {})
+            .unwrap();
+        let mut y = vec![[0.0; 3]; n];
+        let pre = BlockJacobiPair::new(&a.0, &a.1, &a.2, 16).unwrap();
+        let generic = pcg_with(&Op(&a), &pre, &b, &mut y, &params, |_, _| {}).unwrap();
+        let mut w = vec![[0.0; 3]; n];
+        let jacobi = BlockedSystem::new(&a.0, &a.1, &a.2, 16)
+            .unwrap()
+            .solve(&b, &mut w, &params, |_, _| {})
+            .unwrap();
+        assert!(fused.iterations.abs_diff(generic.iterations) <= 1);
+        assert!(fused.iterations < jacobi.iterations, "{fused:?} {jacobi:?}");
+        let residual = matvec(&a, &x);
+        let bn = b.iter().flatten().map(|v| v * v).sum::<f64>().sqrt();
+        let rn = residual
+            .iter()
+            .zip(&b)
+            .flat_map(|(r, b)| (0..3).map(move |c| (b[c] - r[c]).powi(2)))
+            .sum::<f64>()
+            .sqrt();
+        assert!(rn <= 2e-10 * bn, "{rn} {bn}");
+        for (x, y) in x.iter().zip(&y) {
+            for c in 0..3 {
+                assert!((x[c] - y[c]).abs() <= 1e-7 * (1.0 + y[c].abs()));
+            }
+        }
     }
 }

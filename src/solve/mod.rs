@@ -30,7 +30,7 @@ pub mod direct;
 
 use crate::params::{ParamError, above, in_range};
 pub use block_jacobi::BlockJacobi;
-pub use blocked::BlockedSystem;
+pub use blocked::{BlockedKind, BlockedSystem};
 use rayon::prelude::*;
 use std::ops::ControlFlow;
 
@@ -69,24 +69,28 @@ pub enum CgPreconditioner {
 
 impl CgPreconditioner {
     /// For the preconditioners that [`BlockedSystem`] runs on an assembled matrix, the
-    /// aggregate size and whether it sweeps (block Gauss–Seidel); `None` for the others.
-    pub fn blocked(self) -> Option<(usize, bool)> {
+    /// aggregate size and which one it is; `None` for point Jacobi.
+    pub fn blocked(self) -> Option<(usize, BlockedKind)> {
         match self {
-            CgPreconditioner::BlockJacobi { size } => Some((size, false)),
-            CgPreconditioner::BlockSgs { size } => Some((size, true)),
-            CgPreconditioner::Jacobi | CgPreconditioner::BlockJacobiPair { .. } => None,
+            CgPreconditioner::BlockJacobi { size } => Some((size, BlockedKind::Jacobi)),
+            CgPreconditioner::BlockSgs { size } => Some((size, BlockedKind::GaussSeidel)),
+            CgPreconditioner::BlockJacobiPair { size } => Some((size, BlockedKind::JacobiPair)),
+            CgPreconditioner::Jacobi => None,
         }
     }
 }
 
 impl Default for CgPreconditioner {
     fn default() -> Self {
-        // Block Gauss–Seidel needs 40 % of the iterations on the fit's systems, but even in
-        // Eisenstat's form (one pass over the couplings between aggregates per iteration) an
-        // iteration costs about 2.4 block-Jacobi ones: the sweeps' gathers wait on memory and
-        // each iteration does two block solves and one block product. At 100k hexes the two
-        // solves take about the same time, so the simpler one stays the default.
-        CgPreconditioner::BlockJacobi {
+        // The pair needs about 65 % of block Jacobi's iterations on the fit's systems (cylinder
+        // 50k: 77 against 120, 300k: 80 against 124) and, fused into the blocked solver, an
+        // iteration costs one more pass over the block factors and two vectors, while the
+        // product's column indices (the larger stream) are read as often as before: the CG
+        // stage takes 0.86–0.92 of block Jacobi's time. Block Gauss–Seidel needs 40 % of the
+        // iterations, but an iteration costs about 2.4 block-Jacobi ones (its sweeps' gathers
+        // wait on memory). Distributed runs keep block Jacobi (the second partition's patches
+        // would cross the ranks' shares).
+        CgPreconditioner::BlockJacobiPair {
             size: block_jacobi::DEFAULT_BLOCK,
         }
     }
@@ -422,7 +426,7 @@ pub(crate) fn row_dot<const N: usize>(cols: &[u32], vals: &[f64], x: &[[f64; N]]
 
 /// Solve A x = b by preconditioned CG (the preconditioner of `params`), starting from `x`.
 /// `progress` ([`CgMonitor`]) sees every iteration and may stop the solve. An assembled operator
-/// ([`LinOp::csr`]) with block Jacobi or block Gauss–Seidel is solved by [`BlockedSystem`],
+/// ([`LinOp::csr`]) with block Jacobi, its pair or block Gauss–Seidel is solved by [`BlockedSystem`],
 /// anything else by [`pcg_with`].
 pub fn pcg(
     op: &dyn LinOp,
@@ -431,15 +435,13 @@ pub fn pcg(
     params: &CgParams,
     progress: impl CgMonitor,
 ) -> Result<CgInfo, CgError> {
-    // An assembled matrix with block Jacobi takes the reordered, fused solver (same method).
-    if let (Some((size, sweeps)), Some((indptr, indices, data))) =
+    // An assembled matrix with a block preconditioner takes the reordered, fused solver (same
+    // method).
+    if let (Some((size, kind)), Some((indptr, indices, data))) =
         (params.preconditioner.blocked(), op.csr())
     {
-        let sys = match sweeps {
-            false => BlockedSystem::new(indptr, indices, data, size)?,
-            true => BlockedSystem::symmetric_gauss_seidel(indptr, indices, data, size)?,
-        };
-        return sys.solve(b, x, params, progress);
+        return BlockedSystem::with_kind(indptr, indices, data, size, kind)?
+            .solve(b, x, params, progress);
     }
     let pre = preconditioner(op, params)?;
     pcg_with(op, pre.as_ref(), b, x, params, progress)
