@@ -11,7 +11,7 @@
 //! named `boundary` (when nothing is tagged) or `untagged`. MSH 4.1 writes one geometric
 //! entity per physical group in `$Entities`, as HOPR and other solvers' readers require.
 //!
-//! [`Blocks`] is the one MSH 4.1 encoding of `$Entities`, of node blocks and of element
+//! `Blocks` is the one MSH 4.1 encoding of `$Entities`, of node blocks and of element
 //! blocks: the serial file here, and the distributed job's collective file and partitioned
 //! parts, which hand it a rank's own nodes and elements with their global tags, so every MSH
 //! 4.1 file is written by the same code.
