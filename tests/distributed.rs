@@ -18,6 +18,10 @@ use std::process::Command;
 
 const BIN: &str = env!("CARGO_BIN_EXE_polyspline");
 
+/// The knots of the serial runs the distributed ones are compared with: `auto`, the default,
+/// is uniform under mpirun.
+const SERIAL_KNOTS: [&str; 2] = ["--knot-intervals", "uniform"];
+
 fn scratch(name: &str) -> PathBuf {
     common::scratch_in("distributed", name)
 }
@@ -129,11 +133,7 @@ fn mpirun_1_2_4_ranks_equal_the_serial_run() {
     // Binary MSH 4.1: each rank reads its share of it by offsets.
     let input = binary_cylinder("cylinder.msh", 1500);
     let serial_out = scratch("serial.msh");
-    common::run_ok(Command::new(BIN).args([
-        "curve",
-        // `auto`, the default, is uniform under mpirun.
-        "--knot-intervals",
-        "uniform",
+    common::run_ok(Command::new(BIN).arg("curve").args(SERIAL_KNOTS).args([
         input.to_str().unwrap(),
         "-o",
         serial_out.to_str().unwrap(),
@@ -145,11 +145,7 @@ fn mpirun_1_2_4_ranks_equal_the_serial_run() {
     let diag = diagonal(&serial);
     let serial_report: Value = {
         let path = scratch("serial.json");
-        common::run_ok(Command::new(BIN).args([
-            "curve",
-            // `auto`, the default, is uniform under mpirun.
-            "--knot-intervals",
-            "uniform",
+        common::run_ok(Command::new(BIN).arg("curve").args(SERIAL_KNOTS).args([
             input.to_str().unwrap(),
             "-o",
             scratch("serial_again.msh").to_str().unwrap(),
@@ -768,11 +764,7 @@ fn partitioned_output_is_read_by_gmsh_as_the_serial_mesh() {
     }
     let input = binary_cylinder("parts_in.msh", 1500);
     let serial_out = scratch("parts_serial.msh");
-    common::run_ok(Command::new(BIN).args([
-        "curve",
-        // `auto`, the default, is uniform under mpirun.
-        "--knot-intervals",
-        "uniform",
+    common::run_ok(Command::new(BIN).arg("curve").args(SERIAL_KNOTS).args([
         input.to_str().unwrap(),
         "-o",
         serial_out.to_str().unwrap(),
@@ -892,11 +884,7 @@ fn gmsh_partitioned_input_curves_as_the_unpartitioned_mesh() {
     }
     let input = binary_cylinder("gpin.msh", 1500);
     let serial_out = scratch("gpin_serial.msh");
-    common::run_ok(Command::new(BIN).args([
-        "curve",
-        // `auto`, the default, is uniform under mpirun.
-        "--knot-intervals",
-        "uniform",
+    common::run_ok(Command::new(BIN).arg("curve").args(SERIAL_KNOTS).args([
         input.to_str().unwrap(),
         "-o",
         serial_out.to_str().unwrap(),
@@ -1032,8 +1020,7 @@ fn curve_with_report(
         .arg("-q")
         .args(args);
     if np == 0 {
-        // `auto`, the default, is uniform under mpirun.
-        cmd.args(["--knot-intervals", "uniform"]);
+        cmd.args(SERIAL_KNOTS);
     }
     common::run_ok(&mut cmd);
     let r = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
