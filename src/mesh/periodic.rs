@@ -104,6 +104,34 @@ impl Rigid {
         }
     }
 
+    /// The map CGNS's `Periodic_t` states (the inverse of
+    /// [`Rigid::center_angles_translation`]): x' = R (x − c) + c + T, R = R_z(γ) R_y(β) R_x(α).
+    pub fn from_center_angles_translation(c: [f64; 3], angles: [f64; 3], t: [f64; 3]) -> Rigid {
+        let (sa, ca) = angles[0].sin_cos();
+        let (sb, cb) = angles[1].sin_cos();
+        let (sg, cg) = angles[2].sin_cos();
+        let rotation = [
+            [cg * cb, cg * sb * sa - sg * ca, cg * sb * ca + sg * sa],
+            [sg * cb, sg * sb * sa + cg * ca, sg * sb * ca - cg * sa],
+            [-sb, cb * sa, cb * ca],
+        ];
+        let mut r = Rigid {
+            rotation,
+            translation: [0.0; 3],
+        };
+        let rc = r.apply(c);
+        r.translation = std::array::from_fn(|i| c[i] + t[i] - rc[i]);
+        r
+    }
+
+    /// The map of a 4×4 affine matrix by rows (its last row ignored).
+    pub fn from_affine(a: &[f64; 16]) -> Rigid {
+        Rigid {
+            rotation: [[a[0], a[1], a[2]], [a[4], a[5], a[6]], [a[8], a[9], a[10]]],
+            translation: [a[3], a[7], a[11]],
+        }
+    }
+
     /// R x + t.
     pub fn apply(&self, x: [f64; 3]) -> [f64; 3] {
         let r = &self.rotation;
@@ -329,7 +357,7 @@ impl std::fmt::Display for PeriodicSummary {
             self.vertex_pairs,
             self.input_mismatch,
             if self.from_file {
-                " (from the file's $Periodic)"
+                " (declared by the file)"
             } else {
                 ""
             }
@@ -628,7 +656,7 @@ pub fn resolve(
         resolved.push((spec.clone(), ta, tb, Vec::new()));
     }
     let given: Vec<i32> = resolved.iter().flat_map(|r| [r.1, r.2]).collect();
-    resolved.extend(declared(mesh, &tags, &given)?);
+    resolved.extend(declared(mesh, topo, &tags, &given)?);
     for (spec, ta, tb, claims) in &resolved {
         let err = |what: String| PeriodicError {
             spec: spec.label(),
@@ -659,63 +687,139 @@ pub fn resolve(
 type Declared<'m> = (PeriodicSpec, i32, i32, Vec<&'m DeclaredPeriodic>);
 
 /// The pairs of boundary groups the file declares, each with the file's links it gathers
-/// (several entity pairs of one physical pair). Left out: the reverse of a pair already kept,
-/// and pairs naming a group of `given` (the command line's pairs). A link whose sides are not
-/// two separate boundary groups (an entity without a physical group, both in the same group,
-/// or a group without boundary facets) is an error: used as is, the written sides would no
-/// longer be images of each other and the output would silently lose the periodicity the
-/// file declares.
+/// (several entity pairs of one physical pair). A claim that gives its map only (CGNS) pairs
+/// every two boundary groups the map carries onto each other ([`images_under`]). Left out: the
+/// reverse of a pair already kept, and pairs naming a group of `given` (the command line's
+/// pairs). A link whose sides are not two separate boundary groups (an entity without a
+/// physical group, both in the same group, a group without boundary facets, or a map that
+/// carries no group onto another) is an error: used as is, the written sides would no longer
+/// be images of each other and the output would silently lose the periodicity the file
+/// declares.
 fn declared<'m>(
     mesh: &'m LinearMesh,
+    topo: &Topology,
     tags: &[i32],
     given: &[i32],
 ) -> Result<Vec<Declared<'m>>, PeriodicError> {
     let mut out: Vec<Declared<'m>> = Vec::new();
     let name = |t: i32| mesh.tag_names.get(&t).cloned().unwrap_or(t.to_string());
+    let mut sides: Option<Vec<Side>> = None;
     for d in &mesh.declared_periodic {
-        let (ta, tb) = (d.master_tag, d.slave_tag);
-        let why = if ta == 0 || tb == 0 {
-            Some("an entity has no physical group, so its facets are no boundary group to pair; give both entities a physical group (Gmsh: Physical Curve/Surface)".to_string())
-        } else if ta == tb {
-            Some(format!(
-                "both entities are in physical group {}; put the two sides in separate physical groups",
-                name(ta)
-            ))
-        } else if let Some(&t) = [ta, tb].iter().find(|t| !tags.contains(t)) {
-            Some(format!(
-                "physical group {} has no boundary facets in the mesh",
-                name(t)
-            ))
-        } else {
-            None
+        let refuse = |why: String| PeriodicError {
+            spec: claim_place(d),
+            what: format!("{why}, or remove the link"),
         };
-        if let Some(why) = why {
-            return Err(PeriodicError {
-                spec: format!(
-                    "$Periodic link of entities {} -> {} ({})",
-                    d.entities[0], d.entities[1], d.location
-                ),
-                what: format!("{why}, or remove the link"),
-            });
-        }
-        if given.contains(&ta) || given.contains(&tb) {
-            continue;
-        }
-        if let Some(o) = out.iter_mut().find(|o| o.1 == ta && o.2 == tb) {
-            o.3.push(d);
-            continue;
-        }
-        if out.iter().any(|o| o.1 == tb && o.2 == ta) {
-            continue;
-        }
-        let spec = PeriodicSpec {
-            master: name(ta),
-            slave: name(tb),
-            from_file: true,
+        let pairs = match d.sides {
+            Some([ta, tb]) => {
+                let why = if ta == 0 || tb == 0 {
+                    Some("an entity has no physical group, so its facets are no boundary group to pair; give both entities a physical group (Gmsh: Physical Curve/Surface)".to_string())
+                } else if ta == tb {
+                    Some(format!(
+                        "both entities are in physical group {}; put the two sides in separate physical groups",
+                        name(ta)
+                    ))
+                } else if let Some(&t) = [ta, tb].iter().find(|t| !tags.contains(t)) {
+                    Some(format!(
+                        "physical group {} has no boundary facets in the mesh",
+                        name(t)
+                    ))
+                } else {
+                    None
+                };
+                if let Some(why) = why {
+                    return Err(refuse(why));
+                }
+                vec![(ta, tb)]
+            }
+            None => {
+                let sides = sides.get_or_insert_with(|| {
+                    tags.iter()
+                        .filter(|&&t| t != 0)
+                        .map(|&t| Side::new(mesh, topo, t))
+                        .collect()
+                });
+                let found = images_under(mesh, sides, d);
+                if found.is_empty() {
+                    return Err(refuse(
+                        "its map carries no boundary group onto another; put each side in a boundary condition of its own, or pair them with --periodic A:B".into(),
+                    ));
+                }
+                found
+            }
         };
-        out.push((spec, ta, tb, vec![d]));
+        for (ta, tb) in pairs {
+            if given.contains(&ta) || given.contains(&tb) {
+                continue;
+            }
+            if let Some(o) = out.iter_mut().find(|o| o.1 == ta && o.2 == tb) {
+                o.3.push(d);
+                continue;
+            }
+            if out.iter().any(|o| o.1 == tb && o.2 == ta) {
+                continue;
+            }
+            let spec = PeriodicSpec {
+                master: name(ta),
+                slave: name(tb),
+                from_file: true,
+            };
+            out.push((spec, ta, tb, vec![d]));
+        }
     }
     Ok(out)
+}
+
+/// A claim and where the file makes it (a tree file's source already names its node).
+fn claim_place(d: &DeclaredPeriodic) -> String {
+    match d.location {
+        crate::mesh::raw::Location::Tree => d.source.clone(),
+        l => format!("{} ({l})", d.source),
+    }
+}
+
+/// The pairs (A, B) of boundary groups (`sides`) that the claim's map carries onto each other:
+/// as many vertices, and the image of A's vertex bounding box and centroid on B's within a
+/// thousandth of A's shortest edge (a screen; [`pair`] then verifies every vertex).
+fn images_under(mesh: &LinearMesh, sides: &[Side], claim: &DeclaredPeriodic) -> Vec<(i32, i32)> {
+    let Some(a) = claim.affine else {
+        return Vec::new();
+    };
+    let map = Rigid::from_affine(&a);
+    let flat = |mut x: [f64; 3]| {
+        if mesh.dim == 2 {
+            x[2] = 0.0;
+        }
+        point(x)
+    };
+    let bbox = |xs: &mut dyn Iterator<Item = DVec3>| {
+        xs.fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), x| {
+            (lo.min(x), hi.max(x))
+        })
+    };
+    let mut out = Vec::new();
+    for sa in sides {
+        let Some(shortest) = sa.edge.iter().copied().reduce(f64::min) else {
+            continue;
+        };
+        let image = |v: &u32| flat(map.apply(mesh.coords[*v as usize]));
+        let (lo, hi) = bbox(&mut sa.vertices.iter().map(image));
+        let centroid = flat(map.apply(sa.centroid.to_array()));
+        let tol = 1e-3 * shortest
+            + 4.0
+                * claim.precision
+                * (hi.abs().max(lo.abs()).length() + point(map.translation).length());
+        for sb in sides {
+            if sb.tag == sa.tag || sb.vertices.len() != sa.vertices.len() {
+                continue;
+            }
+            let (blo, bhi) = bbox(&mut sb.vertices.iter().map(|v| flat(mesh.coords[*v as usize])));
+            let near = |p: DVec3, q: DVec3| (p - q).abs().max_element() <= tol;
+            if near(lo, blo) && near(hi, bhi) && near(centroid, flat(sb.centroid.to_array())) {
+                out.push((sa.tag, sb.tag));
+            }
+        }
+    }
+    out
 }
 
 /// The file's affine map of a declared pair must carry every vertex of A onto its vertex of B
@@ -729,10 +833,7 @@ fn check_declared(
     let Some(a) = claim.affine else {
         return Ok(());
     };
-    let map = Rigid {
-        rotation: [[a[0], a[1], a[2]], [a[4], a[5], a[6]], [a[8], a[9], a[10]]],
-        translation: [a[3], a[7], a[11]],
-    };
+    let map = Rigid::from_affine(&a);
     let side = Side::new(mesh, topo, found.master_tag);
     let mut worst: Option<(u32, f64, f64)> = None;
     for &[w, v] in &found.vertex_map {
@@ -744,7 +845,11 @@ fn check_declared(
             x[2] = 0.0;
         }
         let d = (point(x) - point(mesh.coords[w as usize])).length();
-        let tol = (PERIODIC_REL_TOL * side.edge[k]).max(2.0 * found.input_mismatch);
+        // A map stored in single precision is only as exact as its digits.
+        let stored = 4.0 * claim.precision * (point(x).length() + point(map.translation).length());
+        let tol = (PERIODIC_REL_TOL * side.edge[k])
+            .max(2.0 * found.input_mismatch)
+            .max(stored);
         let ratio = if d.is_finite() {
             d / tol
         } else {
@@ -757,8 +862,8 @@ fn check_declared(
     match worst {
         None => Ok(()),
         Some((v, _, d)) => Err(format!(
-            "the file's affine map (entities {} -> {}, {}) disagrees with the transform found from the vertex positions: it puts vertex {v} {d:.3e} from its image (tolerance {PERIODIC_REL_TOL:e} of its edge)",
-            claim.entities[0], claim.entities[1], claim.location
+            "the file's map ({}) disagrees with the transform found from the vertex positions: it puts vertex {v} {d:.3e} from its image (tolerance {PERIODIC_REL_TOL:e} of its edge)",
+            claim_place(claim)
         )),
     }
 }

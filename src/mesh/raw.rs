@@ -255,21 +255,25 @@ pub struct RawMesh {
     pub periodic: Vec<DeclaredPeriodic>,
 }
 
-/// A periodic pair a file declares (Gmsh's `$Periodic`): the cells tagged `slave_tag` are the
-/// image of those tagged `master_tag`. Tags are those of [`RawBlock::tags`] (0 when the file's
-/// entity has none); the pair is a claim, verified from the positions before use.
+/// A periodic pair a file declares: the boundary cells of one side are the image of the
+/// other's under a rigid map. Gmsh's `$Periodic` names the sides by their entities' tags
+/// ([`RawBlock::tags`], 0 when the entity has none); CGNS's periodic grid connectivity gives
+/// the map only, and the sides are the boundary groups it carries onto each other. The pair
+/// is a claim, verified from the positions before use.
 #[derive(Clone, Debug, PartialEq)]
 pub struct DeclaredPeriodic {
     /// Dimension of the paired cells (the boundary's: 1 in 2D, 2 in 3D).
     pub dim: usize,
-    /// Tag of the master side.
-    pub master_tag: i32,
-    /// Tag of the image side.
-    pub slave_tag: i32,
-    /// The file's entity tags (master, image), for messages.
-    pub entities: [i32; 2],
+    /// Tags of the master side and the image side, where the file names them.
+    pub sides: Option<[i32; 2]>,
+    /// The claim as the file states it, for messages (`$Periodic link of entities 3 -> 5`,
+    /// `CGNS periodic connection /Base/Zone/ZoneGridConnectivity/A_to_B`).
+    pub source: String,
     /// The file's 4×4 affine map master → image, by rows, when it gives one.
     pub affine: Option<[f64; 16]>,
+    /// Relative precision of `affine` as stored (single-precision CGNS data: `f32::EPSILON`;
+    /// 0 for text written to full precision).
+    pub precision: f64,
     /// Where the pair was read.
     pub location: Location,
 }

@@ -704,6 +704,106 @@ fn cgns_probe(file: &Path) -> Value {
     serde_json::from_slice(&out.stdout).unwrap()
 }
 
+/// A CGNS file's periodic grid connectivity makes the mesh periodic without any option: the
+/// cascade's translation and the 3D sector's rotation and lift, written as CGNS by `curve
+/// --order 1` (the writer is checked with h5py and cgnscheck below), are reported by `info`
+/// as the pairs they were written from, and `curve` of that file pairs the same sides, its MSH
+/// sides exact images as Gmsh reads them. A map that carries no group onto another is refused
+/// in one line naming the connection node.
+#[test]
+fn cgns_periodic_connectivity_is_read_as_its_pairs() {
+    let test = common::current_test();
+    let turbine = Path::new(ROOT).join(TURBINE);
+    let s3 = sector_file(3, 30.0);
+    let cases: [(&str, &Path, &[&str]); 2] = [
+        (
+            "turbine",
+            &turbine,
+            &["--periodic", "periodic_1:periodic_2"],
+        ),
+        (
+            "sector3d",
+            &s3,
+            &[
+                "--periodic",
+                "theta_lo:theta_hi",
+                "--periodic",
+                "bottom:top",
+            ],
+        ),
+    ];
+    let sides = |pairs: &Value| -> Vec<(String, String, String)> {
+        let mut v: Vec<_> = pairs
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|p| {
+                let mut s = [p["master"].as_str().unwrap(), p["slave"].as_str().unwrap()];
+                s.sort_unstable();
+                (s[0].to_string(), s[1].to_string(), p["kind"].to_string())
+            })
+            .collect();
+        v.sort();
+        v
+    };
+    for (name, input, given) in cases {
+        let cgns = scratch_in("periodic_cgns", &format!("{name}.cgns"));
+        let mut args = vec!["--order", "1"];
+        args.extend(given);
+        let written = curve(input, &cgns, &args);
+        let want = sides(&written["periodic"]["pairs"]);
+        assert_eq!(want.len(), given.len() / 2, "{name}: {written}");
+        let info = run_ok(polyspline().arg("info").arg(&cgns).arg("--json"));
+        let info: Value = serde_json::from_slice(&info.stdout).unwrap();
+        assert_eq!(sides(&info["periodic"]), want, "{name}: {info}");
+        assert!(
+            info["periodic"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .all(|p| p["from_file"] == true),
+            "{name}: {info}"
+        );
+        let out = scratch_in("periodic_cgns", &format!("{name}_o3.msh"));
+        let report = curve(&cgns, &out, &["--order", "3"]);
+        assert_eq!(
+            sides(&report["periodic"]["pairs"]),
+            want,
+            "{name}: {report}"
+        );
+        if common::have_gmsh(&test) {
+            assert_exact_images(&out, want.len());
+        }
+    }
+    // The cascade's map moved by a tenth of the pitch: no side lands on another. The stored
+    // translation's y (single precision) is found as h5py reads it.
+    let cgns = scratch_in("periodic_cgns", "turbine.cgns");
+    let bytes = std::fs::read(&cgns).unwrap();
+    let moved = scratch_in("periodic_cgns", "moved_map.cgns");
+    let stored = cgns_probe(&cgns)["connections"][0]["translation"][1]
+        .as_f64()
+        .unwrap() as f32;
+    let (from, to) = (stored.to_le_bytes(), (1.1 * stored).to_le_bytes());
+    let at = bytes
+        .windows(4)
+        .position(|w| w == from)
+        .expect("the cascade's translation is stored as f32");
+    let mut bad = bytes.clone();
+    bad[at..at + 4].copy_from_slice(&to);
+    std::fs::write(&moved, bad).unwrap();
+    let out = scratch_in("periodic_cgns", "moved_map.msh");
+    let _ = std::fs::remove_file(&out);
+    assert_refused(
+        polyspline().arg("curve").arg(&moved).arg("-o").arg(&out),
+        &[
+            "moved_map.cgns",
+            "periodic connection",
+            "carries no boundary group",
+        ],
+    );
+    assert!(!out.exists());
+}
+
 /// CGNS output carries every periodic pair as standard grid connectivity. The CGNS library's
 /// `cgnscheck` accepts the file; read with h5py (`cgns_periodic.py`), each pair A → B has two
 /// `GridConnectivity_t`, `A_to_B` and `B_to_A` (`Abutting1to1`, `Vertex`, donor the zone

@@ -20,8 +20,13 @@
 //!   `PointRange`/`PointRangeDonor`/`Transform`, or `Abutting1to1` vertex `PointList`s) when
 //!   every zone has some, the joined vertices checked to coincide within [`crate::io::glue::TOLERANCE`] of the
 //!   local edge length; otherwise by coincident vertices on the zones' outer facets within the
-//!   same tolerance. Periodic connections are not glued; overset and non-matching interfaces
-//!   are refused.
+//!   same tolerance. Overset and non-matching interfaces are refused;
+//! * periodic connections (`GridConnectivityProperty/Periodic`) are not glued: each map
+//!   (`RotationCenter`, `RotationAngle`, `Translation`; one per map and its inverse) becomes a
+//!   [`DeclaredPeriodic`] claim whose sides are the boundary groups the map carries onto each
+//!   other, found and verified on the mesh ([`crate::mesh::periodic::resolve`]). A side that
+//!   carries no boundary condition becomes a group named after its connection node, where the
+//!   connection lists its vertices.
 //!
 //! Errors are one line naming the node's path (`/Base/Zone1/GridCoordinates: ...`).
 //! Write: [`mod@write`] (the curved mesh as one unstructured zone, its periodic pairs as
@@ -44,7 +49,8 @@ mod tests;
 pub use tree::container;
 
 use crate::io::glue::{Glue, Part};
-use crate::mesh::raw::{Location, ParseError, RawBlock, RawMesh};
+use crate::mesh::periodic::Rigid;
+use crate::mesh::raw::{DeclaredPeriodic, Location, ParseError, RawBlock, RawMesh};
 use std::collections::{BTreeMap, HashMap};
 use zone::{DonorIndex, Zone};
 
@@ -108,10 +114,52 @@ pub fn read(data: &[u8]) -> Result<RawMesh, ParseError> {
     for z in base.labelled("Zone_t")? {
         zones.push(zone::read(&z, cell_dim, data.len(), &families, &mut tags)?);
     }
+    let mut claims = Vec::new();
+    for z in &mut zones {
+        for c in std::mem::take(&mut z.periodic) {
+            let name = c.path.rsplit('/').next().unwrap_or("periodic").to_string();
+            zone::tag_periodic_side(z, cell_dim, &c.own, || tags.tag(&name));
+            claims.push(c);
+        }
+    }
     let mut mesh = glue(&zones, cell_dim)?;
+    mesh.periodic = declared_periodic(claims, cell_dim);
     mesh.declared_dim = dims.get(1).map(|&d| d.clamp(1, 3) as usize);
     mesh.tag_names = tags.ids.into_iter().map(|(n, t)| (t, n)).collect();
     Ok(mesh)
+}
+
+/// The periodic maps the connections declare, one per map: a connection whose map (or its
+/// inverse, the donor's view of the same pair) was already kept adds nothing. Which boundary
+/// groups each map pairs is found on the mesh ([`crate::mesh::periodic::resolve`]).
+fn declared_periodic(claims: Vec<zone::PeriodicClaim>, cell_dim: usize) -> Vec<DeclaredPeriodic> {
+    let mut kept: Vec<zone::PeriodicClaim> = Vec::new();
+    for c in claims {
+        let same = |a: &Rigid, b: &Rigid| {
+            let scale = 1.0 + b.translation.iter().map(|x| x.abs()).fold(0.0, f64::max);
+            let tol = 1e3 * c.precision.max(f64::EPSILON);
+            (0..3).all(|i| {
+                (a.translation[i] - b.translation[i]).abs() <= tol * scale
+                    && (0..3).all(|j| (a.rotation[i][j] - b.rotation[i][j]).abs() <= tol)
+            })
+        };
+        if !kept
+            .iter()
+            .any(|k| same(&k.map, &c.map) || same(&k.map.inverse(), &c.map))
+        {
+            kept.push(c);
+        }
+    }
+    kept.into_iter()
+        .map(|c| DeclaredPeriodic {
+            dim: cell_dim - 1,
+            sides: None,
+            source: format!("CGNS periodic connection {}", c.path),
+            affine: Some(c.map.affine()),
+            precision: c.precision,
+            location: Location::Tree,
+        })
+        .collect()
 }
 
 /// Merge the zones into one mesh (module docs).

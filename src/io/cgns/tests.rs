@@ -134,3 +134,34 @@ fn errors_name_the_node_path() {
     let e = read(&data).unwrap_err().to_string();
     assert!(!e.contains('\n'), "{e}");
 }
+
+/// Gmsh's CGNS export of a 30° sector of an annulus (r in [1, 2], z in [0, 1]) whose side
+/// faces Gmsh was told are periodic: Gmsh writes one periodic connection per mesh entity (its
+/// points, curves and the face, each with its inverse), all one rotation about z. They make
+/// one claim, and on the mesh it pairs the two side groups, 9 vertices each, as the rotation
+/// by 30° about the z axis (either way round).
+#[test]
+fn gmsh_periodic_connections_pair_the_side_groups() {
+    let m = read(&real("tests/data/cgns/periodic_sector_gmsh.cgns")).unwrap();
+    assert_eq!(m.periodic.len(), 1, "{:?}", m.periodic);
+    assert!(m.periodic[0].sides.is_none() && m.periodic[0].dim == 2);
+    let lm = LinearMesh::from_raw(m, &MeshOptions::default()).unwrap();
+    let topo = crate::mesh::Topology::build(&lm);
+    let pairs = crate::mesh::periodic::resolve(&lm, &topo, &[]).unwrap();
+    assert_eq!(pairs.len(), 1);
+    let p = &pairs[0];
+    let mut names = [
+        lm.tag_names[&p.master_tag].clone(),
+        lm.tag_names[&p.slave_tag].clone(),
+    ];
+    names.sort();
+    assert_eq!(names, ["side0".to_string(), "side1".to_string()]);
+    assert_eq!(p.vertex_map.len(), 9);
+    let (axis, point, angle) = p.transform.axis_angle().expect("a rotation");
+    assert!((angle - 30.0).abs() < 1e-9, "{angle}");
+    assert!((axis[2].abs() - 1.0).abs() < 1e-12, "{axis:?}");
+    assert!(
+        point[0].abs() < 1e-12 && point[1].abs() < 1e-12,
+        "{point:?}"
+    );
+}

@@ -12,6 +12,7 @@ use super::Tags;
 use super::tree::Node;
 use crate::io::glue;
 use crate::math::reference::{HEX_SIDES, QUAD_SIDES};
+use crate::mesh::periodic::Rigid;
 use crate::mesh::raw::{CellKind, ParseError};
 use std::collections::{BTreeMap, HashMap, HashSet};
 
@@ -50,6 +51,20 @@ pub struct Zone {
     pub links: Vec<Link>,
     /// Whether the zone had any ZoneGridConnectivity entry (used or not).
     pub has_connectivity: bool,
+    /// The zone's periodic connections.
+    pub periodic: Vec<PeriodicClaim>,
+}
+
+/// A periodic connection (`GridConnectivityProperty/Periodic`): the rigid map from this
+/// zone's side to the donor's, and this side's vertices where the file lists them.
+pub struct PeriodicClaim {
+    pub map: Rigid,
+    /// Relative precision of the stored map (`f32::EPSILON` for `R4` data).
+    pub precision: f64,
+    /// This side's vertices (0-based in the zone; empty for face-located lists).
+    pub own: Vec<usize>,
+    /// The connection node's path, for messages.
+    pub path: std::rc::Rc<str>,
 }
 
 impl Zone {
@@ -163,6 +178,7 @@ pub fn read(
         ijk: structured.then_some(ijk),
         links: Vec::new(),
         has_connectivity: false,
+        periodic: Vec::new(),
     };
     // A zone in a family is a region of that name.
     let region = match z.child("FamilyName")? {
@@ -666,141 +682,253 @@ fn connectivity(z: &Node<'_>, zone: &mut Zone, cell_dim: usize) -> Result<(), Pa
                 continue;
             }
             zone.has_connectivity = true;
-            let path: std::rc::Rc<str> = gc.path.clone().into();
-            // A periodic interface joins faces that do not coincide: not glued.
-            if let Some(p) = gc.child("GridConnectivityProperty")?
-                && p.child("Periodic")?.is_some()
-            {
-                continue;
-            }
-            let donor = gc.string()?;
-            if label == "GridConnectivity_t" {
-                let kind = match gc.child("GridConnectivityType")? {
-                    Some(t) => t.string()?,
-                    None => "Overset".into(),
-                };
-                match kind.as_str() {
-                    "Abutting1to1" => {}
-                    "Overset" => return Err(gc.error("an overset interface; overlapping zones cannot be merged into one conforming mesh")),
-                    other => return Err(gc.error(format!("a {other} interface; only point-matched (Abutting1to1) zones can be merged into one conforming mesh"))),
-                }
-                if grid_location(&gc)? != "Vertex" {
-                    // Face-located lists: the zones are glued at coincident vertices instead.
-                    zone.has_connectivity = false;
-                    continue;
-                }
-                let (own, _) = gc.require("PointList")?.ints()?;
-                let Some(d) = gc.child("PointListDonor")? else {
-                    zone.has_connectivity = false;
-                    continue;
-                };
-                let (other, _) = d.ints()?;
-                let per = if zone.ijk.is_some() { cell_dim } else { 1 };
-                if own.len() != other.len() || own.len() % per != 0 {
-                    return Err(gc.error(format!(
-                        "PointList has {} values, PointListDonor {}",
-                        own.len(),
-                        other.len()
-                    )));
-                }
-                for (a, b) in own.chunks(per).zip(other.chunks(per)) {
-                    let node = local(zone, a, cell_dim).ok_or_else(|| {
-                        gc.error(format!("PointList names vertex {a:?} outside the zone"))
-                    })?;
-                    let donor_node = if per == 1 {
-                        if b[0] < 1 {
-                            return Err(gc.error(format!("PointListDonor names vertex {}", b[0])));
-                        }
-                        DonorIndex::Flat(b[0] as usize - 1)
-                    } else {
-                        DonorIndex::Ijk(ijk0(b, cell_dim).ok_or_else(|| {
-                            gc.error(format!("PointListDonor names vertex {b:?}"))
-                        })?)
-                    };
-                    zone.links.push(Link {
-                        node,
-                        donor: donor.clone(),
-                        donor_node,
-                        path: path.clone(),
-                    });
-                }
-                continue;
-            }
-            // 1-to-1: PointRange ↦ PointRangeDonor through Transform.
-            if zone.ijk.is_none() {
-                return Err(gc.error("a 1-to-1 connection in an unstructured zone"));
-            }
-            let (r, _) = gc.require("PointRange")?.ints()?;
-            let (rd, _) = gc.require("PointRangeDonor")?.ints()?;
-            let t: Vec<i64> = match gc.child("Transform")? {
-                Some(t) => t.ints()?.0,
-                None => (1..=cell_dim as i64).collect(),
+            // A periodic interface joins faces that do not coincide: not glued, but kept as
+            // the file's claim of a periodic pair.
+            let periodic = match gc.child("GridConnectivityProperty")? {
+                Some(p) => p.child("Periodic")?,
+                None => None,
             };
-            if r.len() != 2 * cell_dim || rd.len() != 2 * cell_dim || t.len() != cell_dim {
-                return Err(gc.error(
-                    "PointRange, PointRangeDonor and Transform do not match the zone's dimension",
-                ));
-            }
-            let mut used = [false; 3];
-            for &ta in &t {
-                let b = ta.unsigned_abs() as usize;
-                if b == 0 || b > cell_dim || used[b - 1] {
-                    return Err(gc.error(format!("Transform {t:?} is not a signed permutation")));
+            let links = connection_links(&gc, zone, cell_dim, &label)?;
+            match (periodic, links) {
+                (Some(p), links) => {
+                    let claim = periodic_claim(&gc, &p, links.unwrap_or_default())?;
+                    zone.periodic.push(claim);
                 }
-                used[b - 1] = true;
-            }
-            let (b0, e0) = (&r[..cell_dim], &r[cell_dim..]);
-            let (db, de) = (&rd[..cell_dim], &rd[cell_dim..]);
-            for a in 0..cell_dim {
-                let b = t[a].unsigned_abs() as usize - 1;
-                if (e0[a] - b0[a]).abs() != (de[b] - db[b]).abs() {
-                    return Err(gc.error(format!("PointRange {r:?} and PointRangeDonor {rd:?} differ in size under Transform {t:?}")));
-                }
-            }
-            let span = |a: usize| -> Vec<i64> {
-                let s = if e0[a] >= b0[a] { 1 } else { -1 };
-                (0..=(e0[a] - b0[a]).abs()).map(|k| b0[a] + s * k).collect()
-            };
-            let ranges: Vec<Vec<i64>> = (0..3)
-                .map(|a| if a < cell_dim { span(a) } else { vec![1] })
-                .collect();
-            if ranges.iter().map(|x| x.len() as u64).product::<u64>() > zone.points.len() as u64 {
-                return Err(gc.error("PointRange is larger than the zone"));
-            }
-            for &k in &ranges[2] {
-                for &j in &ranges[1] {
-                    for &i in &ranges[0] {
-                        let idx = [i, j, k];
-                        let node = local(zone, &idx[..cell_dim], cell_dim).ok_or_else(|| {
-                            gc.error(format!(
-                                "PointRange names vertex {:?} outside the zone",
-                                &idx[..cell_dim]
-                            ))
-                        })?;
-                        let mut dn = [1i64; 3];
-                        for a in 0..cell_dim {
-                            let b = t[a].unsigned_abs() as usize - 1;
-                            dn[b] = db[b] + t[a].signum() * (idx[a] - b0[a]);
-                        }
-                        let donor_node =
-                            DonorIndex::Ijk(ijk0(&dn[..cell_dim], cell_dim).ok_or_else(|| {
-                                gc.error(format!(
-                                    "PointRangeDonor names vertex {:?}",
-                                    &dn[..cell_dim]
-                                ))
-                            })?);
-                        zone.links.push(Link {
-                            node,
-                            donor: donor.clone(),
-                            donor_node,
-                            path: path.clone(),
-                        });
-                    }
-                }
+                (None, Some(links)) => zone.links.extend(links),
+                // Face-located lists: the zones are glued at coincident vertices instead.
+                (None, None) => zone.has_connectivity = false,
             }
         }
     }
     Ok(())
+}
+
+/// The periodic map of connection `gc` (its `Periodic_t` node `p`): x' = R (x − c) + c + T
+/// from `RotationCenter` c, `RotationAngle` (about x, then y, then z; radians unless a
+/// `DimensionalUnits` child of the angle or of `Periodic_t` says degrees) and `Translation` T.
+fn periodic_claim(
+    gc: &Node<'_>,
+    p: &Node<'_>,
+    links: Vec<Link>,
+) -> Result<PeriodicClaim, ParseError> {
+    let mut precision = f64::EPSILON;
+    let mut vector = |name: &str| -> Result<([f64; 3], Option<Node<'_>>), ParseError> {
+        let Some(n) = p.child(name)? else {
+            return Ok(([0.0; 3], None));
+        };
+        let v = n.reals()?;
+        if v.len() > 3 || v.iter().any(|x| !x.is_finite()) {
+            return Err(n.error(format!("{v:?} is not a vector of up to 3 finite reals")));
+        }
+        if n.data_type()? == "R4" {
+            precision = f64::from(f32::EPSILON);
+        }
+        Ok((
+            std::array::from_fn(|i| v.get(i).copied().unwrap_or(0.0)),
+            Some(n),
+        ))
+    };
+    let (center, _) = vector("RotationCenter")?;
+    let (mut angles, angle_node) = vector("RotationAngle")?;
+    let (translation, _) = vector("Translation")?;
+    let degrees = |n: &Node<'_>| -> Result<bool, ParseError> {
+        Ok(match n.child("DimensionalUnits")? {
+            Some(u) => u.string()?.contains("Degree"),
+            None => false,
+        })
+    };
+    if degrees(p)? || angle_node.as_ref().map(degrees).transpose()? == Some(true) {
+        angles = angles.map(f64::to_radians);
+    }
+    Ok(PeriodicClaim {
+        map: Rigid::from_center_angles_translation(center, angles, translation),
+        precision,
+        own: links.iter().map(|l| l.node).collect(),
+        path: gc.path.clone().into(),
+    })
+}
+
+/// Give the facets of a periodic side a boundary group where the file leaves them without
+/// one: the facet cells whose vertices all lie in `own` when none of them is tagged, or the
+/// zone's exterior facets there when it has no facet cells there. Sides that carry a boundary
+/// condition keep it.
+pub fn tag_periodic_side(
+    zone: &mut Zone,
+    cell_dim: usize,
+    own: &[usize],
+    tag: impl FnOnce() -> i32,
+) {
+    let set: HashSet<usize> = own.iter().copied().collect();
+    let (kind, npf) = facet_kind(cell_dim);
+    let mut covered = Vec::new();
+    for (b, block) in zone
+        .blocks
+        .iter()
+        .enumerate()
+        .filter(|(_, b)| b.kind == kind)
+    {
+        for (i, c) in block.nodes.chunks(npf).enumerate() {
+            if c.iter().all(|v| set.contains(v)) {
+                covered.push((b, i));
+            }
+        }
+    }
+    if covered.iter().any(|&(b, i)| zone.blocks[b].tags[i] != 0) {
+        return;
+    }
+    if !covered.is_empty() {
+        let t = tag();
+        for (b, i) in covered {
+            zone.blocks[b].tags[i] = t;
+        }
+        return;
+    }
+    let facets: Vec<Vec<usize>> = exterior_facets(zone, cell_dim)
+        .into_iter()
+        .filter(|f| f.iter().all(|v| set.contains(v)))
+        .collect();
+    if !facets.is_empty() {
+        add_facets(zone, cell_dim, facets, tag());
+    }
+}
+
+/// The vertex links of one connection node (`GridConnectivity_t` or `GridConnectivity1to1_t`):
+/// `None` where the file gives them by faces (or without a donor list).
+fn connection_links(
+    gc: &Node<'_>,
+    zone: &Zone,
+    cell_dim: usize,
+    label: &str,
+) -> Result<Option<Vec<Link>>, ParseError> {
+    let path: std::rc::Rc<str> = gc.path.clone().into();
+    let mut links = Vec::new();
+    let donor = gc.string()?;
+    if label == "GridConnectivity_t" {
+        let kind = match gc.child("GridConnectivityType")? {
+            Some(t) => t.string()?,
+            None => "Overset".into(),
+        };
+        match kind.as_str() {
+            "Abutting1to1" => {}
+            "Overset" => return Err(gc.error("an overset interface; overlapping zones cannot be merged into one conforming mesh")),
+            other => return Err(gc.error(format!("a {other} interface; only point-matched (Abutting1to1) zones can be merged into one conforming mesh"))),
+        }
+        if grid_location(gc)? != "Vertex" {
+            // Face-located lists: the zones are glued at coincident vertices instead.
+            return Ok(None);
+        }
+        let (own, _) = gc.require("PointList")?.ints()?;
+        let Some(d) = gc.child("PointListDonor")? else {
+            return Ok(None);
+        };
+        let (other, _) = d.ints()?;
+        let per = if zone.ijk.is_some() { cell_dim } else { 1 };
+        if own.len() != other.len() || own.len() % per != 0 {
+            return Err(gc.error(format!(
+                "PointList has {} values, PointListDonor {}",
+                own.len(),
+                other.len()
+            )));
+        }
+        for (a, b) in own.chunks(per).zip(other.chunks(per)) {
+            let node = local(zone, a, cell_dim).ok_or_else(|| {
+                gc.error(format!("PointList names vertex {a:?} outside the zone"))
+            })?;
+            let donor_node = if per == 1 {
+                if b[0] < 1 {
+                    return Err(gc.error(format!("PointListDonor names vertex {}", b[0])));
+                }
+                DonorIndex::Flat(b[0] as usize - 1)
+            } else {
+                DonorIndex::Ijk(
+                    ijk0(b, cell_dim)
+                        .ok_or_else(|| gc.error(format!("PointListDonor names vertex {b:?}")))?,
+                )
+            };
+            links.push(Link {
+                node,
+                donor: donor.clone(),
+                donor_node,
+                path: path.clone(),
+            });
+        }
+        return Ok(Some(links));
+    }
+    // 1-to-1: PointRange ↦ PointRangeDonor through Transform.
+    if zone.ijk.is_none() {
+        return Err(gc.error("a 1-to-1 connection in an unstructured zone"));
+    }
+    let (r, _) = gc.require("PointRange")?.ints()?;
+    let (rd, _) = gc.require("PointRangeDonor")?.ints()?;
+    let t: Vec<i64> = match gc.child("Transform")? {
+        Some(t) => t.ints()?.0,
+        None => (1..=cell_dim as i64).collect(),
+    };
+    if r.len() != 2 * cell_dim || rd.len() != 2 * cell_dim || t.len() != cell_dim {
+        return Err(
+            gc.error("PointRange, PointRangeDonor and Transform do not match the zone's dimension")
+        );
+    }
+    let mut used = [false; 3];
+    for &ta in &t {
+        let b = ta.unsigned_abs() as usize;
+        if b == 0 || b > cell_dim || used[b - 1] {
+            return Err(gc.error(format!("Transform {t:?} is not a signed permutation")));
+        }
+        used[b - 1] = true;
+    }
+    let (b0, e0) = (&r[..cell_dim], &r[cell_dim..]);
+    let (db, de) = (&rd[..cell_dim], &rd[cell_dim..]);
+    for a in 0..cell_dim {
+        let b = t[a].unsigned_abs() as usize - 1;
+        if (e0[a] - b0[a]).abs() != (de[b] - db[b]).abs() {
+            return Err(gc.error(format!(
+                "PointRange {r:?} and PointRangeDonor {rd:?} differ in size under Transform {t:?}"
+            )));
+        }
+    }
+    let span = |a: usize| -> Vec<i64> {
+        let s = if e0[a] >= b0[a] { 1 } else { -1 };
+        (0..=(e0[a] - b0[a]).abs()).map(|k| b0[a] + s * k).collect()
+    };
+    let ranges: Vec<Vec<i64>> = (0..3)
+        .map(|a| if a < cell_dim { span(a) } else { vec![1] })
+        .collect();
+    if ranges.iter().map(|x| x.len() as u64).product::<u64>() > zone.points.len() as u64 {
+        return Err(gc.error("PointRange is larger than the zone"));
+    }
+    for &k in &ranges[2] {
+        for &j in &ranges[1] {
+            for &i in &ranges[0] {
+                let idx = [i, j, k];
+                let node = local(zone, &idx[..cell_dim], cell_dim).ok_or_else(|| {
+                    gc.error(format!(
+                        "PointRange names vertex {:?} outside the zone",
+                        &idx[..cell_dim]
+                    ))
+                })?;
+                let mut dn = [1i64; 3];
+                for a in 0..cell_dim {
+                    let b = t[a].unsigned_abs() as usize - 1;
+                    dn[b] = db[b] + t[a].signum() * (idx[a] - b0[a]);
+                }
+                let donor_node =
+                    DonorIndex::Ijk(ijk0(&dn[..cell_dim], cell_dim).ok_or_else(|| {
+                        gc.error(format!(
+                            "PointRangeDonor names vertex {:?}",
+                            &dn[..cell_dim]
+                        ))
+                    })?);
+                links.push(Link {
+                    node,
+                    donor: donor.clone(),
+                    donor_node,
+                    path: path.clone(),
+                });
+            }
+        }
+    }
+    Ok(Some(links))
 }
 
 /// A zone's vertex from 1-based indices (IJK for structured zones, one id otherwise).

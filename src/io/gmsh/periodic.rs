@@ -227,10 +227,10 @@ impl Reader<'_> {
             .filter_map(|l| {
                 Some(DeclaredPeriodic {
                     dim: usize::try_from(l.dim).ok()?,
-                    master_tag: physical(l.dim, l.master),
-                    slave_tag: physical(l.dim, l.slave),
-                    entities: [l.master, l.slave],
+                    sides: Some([physical(l.dim, l.master), physical(l.dim, l.slave)]),
+                    source: format!("$Periodic link of entities {} -> {}", l.master, l.slave),
                     affine: l.affine,
+                    precision: 0.0,
                     location: l.location,
                 })
             })

@@ -12,10 +12,17 @@ two_blocks_structured_gmsh.cgns Gmsh, structured: two 3x3x3 zones sharing the fa
 two_blocks_plot3d.cgns          plot3d_to_cgns of ../plot3d/two_blocks.xyz: two structured
                                 zones, no connectivity (glued at coincident vertices).
 hex_box.adf                     cgnsconvert -a of hex_box_gmsh.cgns (the ADF container).
+periodic_sector_gmsh.cgns       Gmsh, unstructured: a 30-degree sector of an annulus (r in
+                                [1, 2], z in [0, 1], revolved about z), 12 HEXA_8, the side
+                                faces "side0" (y = 0) and "side1" declared periodic (rotation
+                                by 30 degrees about z): one periodic GridConnectivity_t per
+                                mesh entity and direction; "rest" the other faces.
 
 Run from this directory with Gmsh's Python module and Debian's cgns-convert installed.
 """
+import math
 import subprocess
+
 import gmsh
 
 
@@ -63,6 +70,27 @@ gmsh.model.addPhysicalGroup(2, [1], name="inlet")
 gmsh.model.mesh.generate(3)
 gmsh.option.setNumber("Mesh.CgnsExportStructured", 1)
 gmsh.write("two_blocks_structured_gmsh.cgns")
+
+gmsh.model.add("periodic_sector_gmsh")
+g = gmsh.model.geo
+p = [g.addPoint(1, 0, 0), g.addPoint(2, 0, 0), g.addPoint(2, 0, 1), g.addPoint(1, 0, 1)]
+lines = [g.addLine(p[i], p[(i + 1) % 4]) for i in range(4)]
+side0 = g.addPlaneSurface([g.addCurveLoop(lines)])
+for c in lines:
+    g.mesh.setTransfiniteCurve(c, 3)
+g.mesh.setTransfiniteSurface(side0)
+g.mesh.setRecombine(2, side0)
+out = g.revolve([(2, side0)], 0, 0, 0, 0, 0, 1, math.pi / 6, numElements=[3], recombine=True)
+g.synchronize()
+side1 = out[0][1]
+gmsh.model.addPhysicalGroup(3, [t for d, t in out if d == 3], name="fluid")
+gmsh.model.addPhysicalGroup(2, [side0], name="side0")
+gmsh.model.addPhysicalGroup(2, [side1], name="side1")
+gmsh.model.addPhysicalGroup(2, [t for d, t in out if d == 2 and t != side1], name="rest")
+c, s = math.cos(math.pi / 6), math.sin(math.pi / 6)
+gmsh.model.mesh.setPeriodic(2, [side1], [side0], [c, -s, 0, 0, s, c, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1])
+gmsh.model.mesh.generate(3)
+gmsh.write("periodic_sector_gmsh.cgns")
 gmsh.finalize()
 
 subprocess.run(["plot3d_to_cgns", "-f", "../plot3d/two_blocks.xyz", "two_blocks_plot3d.cgns"], check=True)
