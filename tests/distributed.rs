@@ -289,6 +289,80 @@ fn mpirun_1_2_4_ranks_equal_the_serial_run() {
     }
 }
 
+/// The largest node distance, relative to the diagonal, of the outputs of `mpirun -np 1, 2, 4`
+/// from the serial run's, all with the default tolerance and the `extra` options.
+fn rank_distances(input: &Path, name: &str, extra: &[&str]) -> Vec<(usize, f64)> {
+    let serial_out = scratch(&format!("{name}_serial.msh"));
+    common::run_ok(
+        Command::new(BIN)
+            .arg("curve")
+            .args(SERIAL_KNOTS)
+            .args([
+                input.to_str().unwrap(),
+                "-o",
+                serial_out.to_str().unwrap(),
+                "-q",
+            ])
+            .args(extra),
+    );
+    let serial = read(&serial_out);
+    let diag = diagonal(&serial);
+    [1usize, 2, 4]
+        .into_iter()
+        .map(|np| {
+            let out = scratch(&format!("{name}_np{np}.msh"));
+            let _ = std::fs::remove_file(&out);
+            common::run_ok(
+                mpirun(np)
+                    .args([
+                        BIN,
+                        "curve",
+                        input.to_str().unwrap(),
+                        "-o",
+                        out.to_str().unwrap(),
+                        "-q",
+                    ])
+                    .args(extra),
+            );
+            (np, compare(&serial, &read(&out)) / diag)
+        })
+        .collect()
+}
+
+/// With `--cg-preconditioner jacobi` at the default CG tolerance, the ranks precondition
+/// exactly as the serial solver does, so the iterates and the stopping point are the serial
+/// ones up to the order of the sums: the output is the serial one to well below 1e-6 of the
+/// diagonal (measured 0 at one rank, 2.8e-8 and 4.8e-8 at 2 and 4 over point Jacobi's 192
+/// iterations), where block Jacobi's per-share aggregates leave 1.8e-6 and 2.8e-6 on this
+/// cylinder (and where the ranks ran block Jacobi whatever the option, 1.8e-6 and 2.8e-6 too).
+#[test]
+fn with_point_jacobi_the_default_tolerance_gives_the_serial_output_on_1_2_4_ranks() {
+    if !have_mpirun() {
+        return;
+    }
+    let input = binary_cylinder("jacobi.msh", 1500);
+    for (np, d) in rank_distances(&input, "jacobi", &["--cg-preconditioner", "jacobi"]) {
+        assert!(d <= RANK_TOLERANCE, "{np} ranks: {d:.3e} of the diagonal");
+    }
+}
+
+/// Issue #33's requirement at the default options (block Jacobi on each rank's rows against
+/// the serial fused pair): today 1.8e-6 (2 ranks) and 2.8e-6 (4 ranks) of the diagonal on
+/// this cylinder, and a flipped blend decision (1.5e-4) on a 292k-hex one. It passes once the
+/// blocks are the same on any number of ranks (docs/distributed.md, "Equality with the
+/// serial run"); run with `--ignored`.
+#[test]
+#[ignore = "open: the default preconditioner's blocks depend on the shares (issue #33)"]
+fn at_the_default_options_1_2_4_ranks_give_the_serial_output() {
+    if !have_mpirun() {
+        return;
+    }
+    let input = binary_cylinder("defaults.msh", 1500);
+    for (np, d) in rank_distances(&input, "defaults", &[]) {
+        assert!(d <= RANK_TOLERANCE, "{np} ranks: {d:.3e} of the diagonal");
+    }
+}
+
 /// Temporaries (`.NAME.*.tmp`) beside `out`.
 fn temporaries(out: &Path) -> usize {
     if !out.parent().unwrap().is_dir() {
