@@ -289,9 +289,14 @@ fn mpirun_1_2_4_ranks_equal_the_serial_run() {
     }
 }
 
-/// The largest node distance, relative to the diagonal, of the outputs of `mpirun -np 1, 2, 4`
-/// from the serial run's, all with the default tolerance and the `extra` options.
-fn rank_distances(input: &Path, name: &str, extra: &[&str]) -> Vec<(usize, f64)> {
+/// The outputs of `mpirun -np 1, 2, 4` on a 1,536-hex cylinder within [`RANK_TOLERANCE`] of
+/// the diagonal from the serial run's (largest node distance), all with the default tolerance
+/// and the `extra` options.
+fn assert_1_2_4_ranks_give_the_serial_output(name: &str, extra: &[&str]) {
+    if !have_mpirun() {
+        return;
+    }
+    let input = binary_cylinder(&format!("{name}.msh"), 1500);
     let serial_out = scratch(&format!("{name}_serial.msh"));
     common::run_ok(
         Command::new(BIN)
@@ -307,26 +312,24 @@ fn rank_distances(input: &Path, name: &str, extra: &[&str]) -> Vec<(usize, f64)>
     );
     let serial = read(&serial_out);
     let diag = diagonal(&serial);
-    [1usize, 2, 4]
-        .into_iter()
-        .map(|np| {
-            let out = scratch(&format!("{name}_np{np}.msh"));
-            let _ = std::fs::remove_file(&out);
-            common::run_ok(
-                mpirun(np)
-                    .args([
-                        BIN,
-                        "curve",
-                        input.to_str().unwrap(),
-                        "-o",
-                        out.to_str().unwrap(),
-                        "-q",
-                    ])
-                    .args(extra),
-            );
-            (np, compare(&serial, &read(&out)) / diag)
-        })
-        .collect()
+    for np in [1usize, 2, 4] {
+        let out = scratch(&format!("{name}_np{np}.msh"));
+        let _ = std::fs::remove_file(&out);
+        common::run_ok(
+            mpirun(np)
+                .args([
+                    BIN,
+                    "curve",
+                    input.to_str().unwrap(),
+                    "-o",
+                    out.to_str().unwrap(),
+                    "-q",
+                ])
+                .args(extra),
+        );
+        let d = compare(&serial, &read(&out)) / diag;
+        assert!(d <= RANK_TOLERANCE, "{np} ranks: {d:.3e} of the diagonal");
+    }
 }
 
 /// With `--cg-preconditioner jacobi` at the default CG tolerance, the ranks precondition
@@ -337,13 +340,7 @@ fn rank_distances(input: &Path, name: &str, extra: &[&str]) -> Vec<(usize, f64)>
 /// cylinder (and where the ranks ran block Jacobi whatever the option, 1.8e-6 and 2.8e-6 too).
 #[test]
 fn with_point_jacobi_the_default_tolerance_gives_the_serial_output_on_1_2_4_ranks() {
-    if !have_mpirun() {
-        return;
-    }
-    let input = binary_cylinder("jacobi.msh", 1500);
-    for (np, d) in rank_distances(&input, "jacobi", &["--cg-preconditioner", "jacobi"]) {
-        assert!(d <= RANK_TOLERANCE, "{np} ranks: {d:.3e} of the diagonal");
-    }
+    assert_1_2_4_ranks_give_the_serial_output("jacobi", &["--cg-preconditioner", "jacobi"]);
 }
 
 /// Issue #33's requirement at the default options (block Jacobi on each rank's rows against
@@ -354,13 +351,7 @@ fn with_point_jacobi_the_default_tolerance_gives_the_serial_output_on_1_2_4_rank
 #[test]
 #[ignore = "open: the default preconditioner's blocks depend on the shares (issue #33)"]
 fn at_the_default_options_1_2_4_ranks_give_the_serial_output() {
-    if !have_mpirun() {
-        return;
-    }
-    let input = binary_cylinder("defaults.msh", 1500);
-    for (np, d) in rank_distances(&input, "defaults", &[]) {
-        assert!(d <= RANK_TOLERANCE, "{np} ranks: {d:.3e} of the diagonal");
-    }
+    assert_1_2_4_ranks_give_the_serial_output("defaults", &[]);
 }
 
 /// Temporaries (`.NAME.*.tmp`) beside `out`.
