@@ -289,6 +289,71 @@ fn mpirun_1_2_4_ranks_equal_the_serial_run() {
     }
 }
 
+/// The outputs of `mpirun -np 1, 2, 4` on a 1,536-hex cylinder within [`RANK_TOLERANCE`] of
+/// the diagonal from the serial run's (largest node distance), all with the default tolerance
+/// and the `extra` options.
+fn assert_1_2_4_ranks_give_the_serial_output(name: &str, extra: &[&str]) {
+    if !have_mpirun() {
+        return;
+    }
+    let input = binary_cylinder(&format!("{name}.msh"), 1500);
+    let serial_out = scratch(&format!("{name}_serial.msh"));
+    common::run_ok(
+        Command::new(BIN)
+            .arg("curve")
+            .args(SERIAL_KNOTS)
+            .args([
+                input.to_str().unwrap(),
+                "-o",
+                serial_out.to_str().unwrap(),
+                "-q",
+            ])
+            .args(extra),
+    );
+    let serial = read(&serial_out);
+    let diag = diagonal(&serial);
+    for np in [1usize, 2, 4] {
+        let out = scratch(&format!("{name}_np{np}.msh"));
+        let _ = std::fs::remove_file(&out);
+        common::run_ok(
+            mpirun(np)
+                .args([
+                    BIN,
+                    "curve",
+                    input.to_str().unwrap(),
+                    "-o",
+                    out.to_str().unwrap(),
+                    "-q",
+                ])
+                .args(extra),
+        );
+        let d = compare(&serial, &read(&out)) / diag;
+        assert!(d <= RANK_TOLERANCE, "{np} ranks: {d:.3e} of the diagonal");
+    }
+}
+
+/// With `--cg-preconditioner jacobi` at the default CG tolerance, the ranks precondition
+/// exactly as the serial solver does, so the iterates and the stopping point are the serial
+/// ones up to the order of the sums: the output is the serial one to well below 1e-6 of the
+/// diagonal (measured 0 at one rank, 2.8e-8 and 4.8e-8 at 2 and 4 over point Jacobi's 192
+/// iterations), where block Jacobi's per-share aggregates leave 1.8e-6 and 2.8e-6 on this
+/// cylinder (and where the ranks ran block Jacobi whatever the option, 1.8e-6 and 2.8e-6 too).
+#[test]
+fn with_point_jacobi_the_default_tolerance_gives_the_serial_output_on_1_2_4_ranks() {
+    assert_1_2_4_ranks_give_the_serial_output("jacobi", &["--cg-preconditioner", "jacobi"]);
+}
+
+/// Issue #33's requirement at the default options (block Jacobi on each rank's rows against
+/// the serial fused pair): today 1.8e-6 (2 ranks) and 2.8e-6 (4 ranks) of the diagonal on
+/// this cylinder, and a flipped blend decision (1.5e-4) on a 292k-hex one. It passes once the
+/// blocks are the same on any number of ranks (docs/distributed.md, "Equality with the
+/// serial run"); run with `--ignored`.
+#[test]
+#[ignore = "open: the default preconditioner's blocks depend on the shares (issue #33)"]
+fn at_the_default_options_1_2_4_ranks_give_the_serial_output() {
+    assert_1_2_4_ranks_give_the_serial_output("defaults", &[]);
+}
+
 /// Temporaries (`.NAME.*.tmp`) beside `out`.
 fn temporaries(out: &Path) -> usize {
     if !out.parent().unwrap().is_dir() {

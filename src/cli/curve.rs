@@ -128,8 +128,9 @@ pub(crate) struct JobArgs {
     /// 40 % of block Jacobi's iterations, each about 2.4 times as costly), or the average of
     /// block Jacobi on two staggered partitions (block Jacobi pair: about 60 % of block
     /// Jacobi's iterations, two block solves each; the default). The GPU solver always uses
-    /// the diagonal and distributed runs block Jacobi on each rank's rows (their default; the
-    /// pair and block SGS are refused there).
+    /// the diagonal. Distributed runs use block Jacobi on each rank's rows (their default) or
+    /// the diagonal, which gives the serial output on any number of ranks; the pair and block
+    /// SGS are refused there.
     #[arg(long, value_enum)]
     cg_preconditioner: Option<values::CgPreconditioner>,
     /// Most bisections of the validity line search.

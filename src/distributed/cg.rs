@@ -26,11 +26,14 @@
 //! aggregates differ from the serial run's, so the iterates do too; the solution agrees to the
 //! tolerance: the loop and its stopping rule (‖r‖ ≤ rel_tol ‖b‖ per coordinate) are the serial
 //! solver's, [`crate::solve::cg_loop`], with the ranks' dot products as its reductions.
+//! With `--cg-preconditioner jacobi` every row gets point Jacobi on its summed diagonal: the
+//! serial solver's preconditioner exactly, so the iterates are the serial ones up to the
+//! order of the sums (the ranks' partial products and dot products), whatever the shares.
 
 use super::comm::Comm;
 use crate::fit::NormalMatrix;
 use crate::solve::block_jacobi::{BlockJacobi, DEFAULT_BLOCK};
-use crate::solve::{CgError, CgInfo, CgParams, Preconditioner};
+use crate::solve::{CgError, CgInfo, CgParams, CgPreconditioner, Preconditioner};
 use rayon::prelude::*;
 
 /// The control points of this rank and how they are shared.
@@ -279,8 +282,10 @@ struct LocalBlockJacobi {
 }
 
 impl LocalBlockJacobi {
-    fn new(k: &LocalMatrix, halo: &Halo, diag: Vec<f64>) -> Result<Self, CgError> {
-        let mut shared = vec![false; halo.len()];
+    /// Blocks of at most `size` rows; `size` 0 is point Jacobi on every row (no blocks: the
+    /// serial solver's point Jacobi, which does not depend on the shares).
+    fn new(k: &LocalMatrix, halo: &Halo, diag: Vec<f64>, size: usize) -> Result<Self, CgError> {
+        let mut shared = vec![size == 0; halo.len()];
         for (_, l) in &halo.neighbours {
             for &i in l {
                 shared[i as usize] = true;
@@ -310,7 +315,7 @@ impl LocalBlockJacobi {
             None
         } else {
             Some(
-                BlockJacobi::new(&indptr, &indices, &data, DEFAULT_BLOCK).map_err(|e| match e {
+                BlockJacobi::new(&indptr, &indices, &data, size).map_err(|e| match e {
                     CgError::BadDiagonal { row, value } => CgError::BadDiagonal {
                         row: interior[row] as usize,
                         value,
@@ -381,8 +386,15 @@ pub fn pcg(
         k.apply(p, y);
         halo.sum_partials(comm, flat(y), 3);
     };
+    // Point Jacobi is the serial solver's own preconditioner on every share; block Jacobi's
+    // aggregates are grown on each rank's unshared rows (the module docs).
+    let size = match params.preconditioner {
+        CgPreconditioner::Jacobi => 0,
+        CgPreconditioner::BlockJacobi { size } => size.max(1),
+        _ => DEFAULT_BLOCK,
+    };
     // A block that fails to factor fails the solve on every rank alike.
-    let m = LocalBlockJacobi::new(k, halo, diag);
+    let m = LocalBlockJacobi::new(k, halo, diag, size);
     let mut ok = [if m.is_ok() { 1.0 } else { 0.0 }];
     comm.min_f64(&mut ok);
     let m = match m {
