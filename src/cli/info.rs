@@ -1,9 +1,11 @@
-//! `polyspline info`: size, topology, quality and sharp features of a linear mesh.
+//! `polyspline info`: size, topology, quality, sharp features (as `curve` sees them, with
+//! translation-periodic seams interior) and periodic pairs of a linear mesh.
 
 use super::{FeatureArgs, KnotArgs};
 use polyspline::info::MeshInfo;
 use polyspline::io::read_mesh;
 use polyspline::mesh::{MeshOptions, Topology};
+use polyspline::spline::seam;
 use std::path::PathBuf;
 
 #[derive(clap::Args)]
@@ -33,13 +35,21 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
     };
     let linear = read_mesh(&args.mesh, &options)?;
     let topo = Topology::build(&linear);
-    let feature_options = args.features.options();
-    let found = feature_options.detect(&linear, &topo)?;
-    let mut info = MeshInfo::new(&linear, &topo);
-    info.features = Some(found.summary(&feature_options.params, &topo));
-    info.set_knots(&linear, &topo, &args.knots.params())?;
     let pairs = polyspline::mesh::periodic::resolve(&linear, &topo, &args.periodic)
         .map_err(|e| anyhow::anyhow!("{}: {e}", args.mesh.display()))?;
+    let knots = args.knots.params();
+    // Features as `curve` finds them: where it glues the translation seams (not with graded
+    // knots), a seam is interior and no feature.
+    let view = (knots.intervals != polyspline::spline::KnotIntervals::Graded)
+        .then(|| seam::glue(&linear, &pairs))
+        .flatten()
+        .map(|g| seam::interior_view(&linear, &topo, &g));
+    let feature_topo = view.as_ref().map_or(&topo, |v| &v.topo);
+    let feature_options = args.features.options();
+    let found = feature_options.detect(&linear, feature_topo)?;
+    let mut info = MeshInfo::new(&linear, &topo);
+    info.features = Some(found.summary(&feature_options.params, feature_topo));
+    info.set_knots(&linear, &topo, &knots)?;
     let (lo, hi) = linear.bounding_box();
     let diagonal =
         ((hi[0] - lo[0]).powi(2) + (hi[1] - lo[1]).powi(2) + (hi[2] - lo[2]).powi(2)).sqrt();

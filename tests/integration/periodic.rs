@@ -704,6 +704,33 @@ fn cgns_probe(file: &Path) -> Value {
     serde_json::from_slice(&out.stdout).unwrap()
 }
 
+/// `info` reports the sharp features `curve` works with: on the cascade with its translation
+/// seams glued, the boundary is the blade, the inlet and the outlet (3 patches), and the
+/// inlet's and outlet's ends, on the seams, are no corners; without `--periodic` the four
+/// corners of each periodic side are there.
+#[test]
+fn info_reports_the_features_of_the_glued_cascade() {
+    let turbine = Path::new(ROOT).join(TURBINE);
+    let features = |extra: &[&str]| -> Value {
+        let out = run_ok(
+            polyspline()
+                .arg("info")
+                .arg(&turbine)
+                .arg("--json")
+                .args(extra),
+        );
+        serde_json::from_slice::<Value>(&out.stdout).unwrap()["features"].clone()
+    };
+    let glued = features(&["--periodic", "periodic_1:periodic_2"]);
+    assert_eq!(
+        (&glued["patches"], &glued["feature_corners"]),
+        (&Value::from(3), &Value::from(0)),
+        "{glued}"
+    );
+    let apart = features(&[]);
+    assert_eq!(apart["feature_corners"], 8, "{apart}");
+}
+
 /// A CGNS file's periodic grid connectivity makes the mesh periodic without any option: the
 /// cascade's translation and the 3D sector's rotation and lift, written as CGNS by `curve
 /// --order 1` (the writer is checked with h5py and cgnscheck below), are reported by `info`
