@@ -410,6 +410,21 @@ fn boundary_layer_cells_keep_their_jacobian_ratio_by_gmsh() {
     }
 }
 
+/// `mesh` written as `name`.msh and curved with the default options and straight-sided.
+fn curved_and_straight(
+    mesh: &LinearMesh,
+    name: &str,
+) -> (polyspline::pipeline::Curved, polyspline::pipeline::Curved) {
+    let path = out_dir().join(format!("{name}.msh"));
+    write_linear(mesh, &path);
+    let curved = curve_in_memory(&path, &CurveOptions::default()).unwrap();
+    let straight = CurveOptions {
+        geometry: polyspline::pipeline::Geometry::Straight,
+        ..Default::default()
+    };
+    (curved, curve_in_memory(&path, &straight).unwrap())
+}
+
 /// RMS distance from the analytic wall of the nodes of the boundary facets tagged `wall`.
 fn wall_rms(c: &polyspline::pipeline::Curved, wall: &polyspline::mesh::generate::Wall) -> f64 {
     let ho = &c.ho;
@@ -455,18 +470,8 @@ fn generated_boundary_layer_walls_stay_curved() {
             span: 0.1,
             ..Default::default()
         };
-        let mesh = ogrid(&p).unwrap().mesh;
-        let path = out_dir().join(format!("ogrid_{layers}.msh"));
-        write_linear(&mesh, &path);
-        let curved = curve_in_memory(&path, &CurveOptions::default()).unwrap();
-        let straight = curve_in_memory(
-            &path,
-            &CurveOptions {
-                geometry: polyspline::pipeline::Geometry::Straight,
-                ..Default::default()
-            },
-        )
-        .unwrap();
+        let (curved, straight) =
+            curved_and_straight(&ogrid(&p).unwrap().mesh, &format!("ogrid_{layers}"));
         let (ours, linear) = (wall_rms(&curved, &wall), wall_rms(&straight, &wall));
         eprintln!("layers {layers}: wall RMS {ours:.3e}, linear {linear:.3e}");
         // One layer: every wall vertex is a rim vertex next to thin cells, whose curve refit
@@ -575,17 +580,7 @@ fn generated_extrusions_keep_their_walls_curved() {
         .unwrap()
         .mesh;
         let name = format!("{kind}_{first_height:e}_{growth}_{layers}");
-        let path = out_dir().join(format!("{name}.msh"));
-        write_linear(&mesh, &path);
-        let curved = curve_in_memory(&path, &CurveOptions::default()).unwrap();
-        let straight = curve_in_memory(
-            &path,
-            &CurveOptions {
-                geometry: polyspline::pipeline::Geometry::Straight,
-                ..Default::default()
-            },
-        )
-        .unwrap();
+        let (curved, straight) = curved_and_straight(&mesh, &name);
         assert!(
             curved.report.min_det_jacobian_bound.unwrap() > 0.0,
             "{name}"
