@@ -41,9 +41,17 @@ pub struct FeatureModels {
     patch_higher: HashMap<(u32, u32), HigherModel>,
     /// Curve models refitted as height functions over two neighbours each way along the
     /// feature curve, for the samples on feature edges only (inside the mesh and in planar
-    /// patches the parabola is kept: at an ellipse's tip the refit's quartic follows the
-    /// curve's own points but not the cells a thousand times thinner next to it).
+    /// patches the parabola is kept next to cells of comparable size).
     curve_higher: HashMap<u32, (VertexModel, HigherModel)>,
+    /// Rims next to thin cells (a boundary layer's wall rim, [`RIM_Q2_MIN_ASPECT`]): the
+    /// refit's higher terms, which every sample at the vertex takes with its refitted curve
+    /// model (`curve`), on the rim, the wall, the caps and inside, as the samples of a 2D
+    /// boundary layer take their wall vertex's: a thin cell's inner side then moves with its
+    /// wall side (a parabola inside under a more accurate rim folds the cell). Not at or next
+    /// to a coarse tip's conic, which keeps the parabola.
+    rim_higher: HashMap<u32, HigherModel>,
+    /// The in-plane models' higher terms, inherited from thin rims (`rim_higher`).
+    pub(crate) in_plane_higher: HashMap<u32, HigherModel>,
     /// Boundary facet id → patch (boundary facets at feature vertices).
     facet_patch: HashMap<u32, u32>,
     /// Boundary edge id → patch of its faces (non-feature edges at feature vertices).
@@ -168,29 +176,64 @@ impl FeatureModels {
                 }
             }
         }
-        // Curve models where a feature curve passes through (two feature edges).
+        // Curve models where a feature curve passes through (two feature edges), and their
+        // refits over two neighbours each way.
         let along = features.curve_neighbours(topo);
+        let mut refits: HashMap<u32, (VertexModel, HigherModel)> = HashMap::new();
         for (&v, nbs) in &along {
             if let [a, b] = nbs[..]
                 && let Some(m) = curve_model(x(v), x(a), x(b))
             {
                 out.curve.insert(v, m);
-                // Next to thin cells (a boundary layer's wall rim) the parabola is kept: their
-                // inner sides follow it, and a more accurate rim would fold them.
-                let along_len = 0.5 * ((x(a) - x(v)).length() + (x(b) - x(v)).length());
-                if shortest[v as usize] >= RIM_Q2_MIN_ASPECT * along_len
-                    && let Some(h) = curve_higher(&along, v, [a, b], &m, &x)
-                {
-                    out.curve_higher.insert(v, h);
+                if let Some(h) = curve_higher(&along, v, [a, b], &m, &x) {
+                    refits.insert(v, h);
                 }
             }
         }
+        // Next to thin cells the refit replaces the parabola everywhere (`rim_higher`), else
+        // on the feature edges only (on the rim alone it folds the thin cells). Not at a
+        // coarse tip's conic or next to one: with the conic the whole column of thin cells at
+        // the coarse ellipse tip of a one-layer extrusion was held at the straight elevation
+        // (0.89× the chords' wall error), and an edge between a parabola and a refit loses the
+        // cancellation of its two ends' parabola errors, largest next to the tip.
+        let conic = |v: u32| refits.get(&v).is_some_and(|(_, h)| h.is_conic());
+        for (&v, &h) in &refits {
+            let nbs = &along[&v];
+            let along_len = nbs.iter().map(|&w| (x(w) - x(v)).length()).sum::<f64>() / 2.0;
+            if shortest[v as usize] >= RIM_Q2_MIN_ASPECT * along_len {
+                out.curve_higher.insert(v, h);
+            } else if !conic(v) && !nbs.iter().any(|&w| conic(w)) {
+                out.curve.insert(v, h.0);
+                out.rim_higher.insert(v, h.1);
+                out.curve_higher.insert(v, h);
+            }
+        }
         // A patch one element wide across the curve (the wall of a one-layer extrusion) has
-        // too few vertices at v for a quadric: the feature curve is its best model there.
+        // too few vertices at v for a quadric: the feature curve is its best model there. At a
+        // thin rim the curve's refit also replaces the one-ring quadric of a patch that meets
+        // the curve's plane at a right angle (an extruded wall, whose section the curve is):
+        // the thin cells' other samples at v follow the refit.
         for (&v, faces) in &fan {
-            if let Some(m) = out.curve.get(&v).copied() {
-                for &(_, p) in faces {
-                    out.patch.entry((v, p)).or_insert(m);
+            let Some(m) = out.curve.get(&v).copied() else {
+                continue;
+            };
+            let higher = out.rim_higher.get(&v).copied();
+            let binormal = along.get(&v).and_then(|nbs| match nbs[..] {
+                [a, b] => Some((x(a) - x(v)).cross(x(b) - x(v)).normalize_or_zero()),
+                _ => None,
+            });
+            let binormal = binormal.filter(|b| *b != DVec3::ZERO);
+            for &(_, p) in faces {
+                let across =
+                    |n: [f64; 3]| binormal.is_some_and(|b| b.dot(n.into()).abs() < RIM_WALL_SIN);
+                match out.patch.get(&(v, p)) {
+                    None => {}
+                    Some(own) if higher.is_some() && across(own.normal) => {}
+                    Some(_) => continue,
+                }
+                out.patch.insert((v, p), m);
+                if let Some(h) = higher {
+                    out.patch_higher.insert((v, p), h);
                 }
             }
         }
@@ -248,6 +291,9 @@ impl FeatureModels {
                 continue;
             }
             self.patch.insert((v, p), *m);
+            if let Some(h) = self.rim_higher.get(&v) {
+                self.patch_higher.insert((v, p), *h);
+            }
             if best.insert(v, (0.0, v)).is_none() {
                 heap.push(Reverse((0u64, v)));
             }
@@ -275,10 +321,15 @@ impl FeatureModels {
         }
         for (&v, &n) in &plane_of {
             let model = match best.get(&v) {
-                Some(&(d, s)) => VertexModel {
-                    weight: 1.0 - d / (decay * ell(s)),
-                    ..self.curve[&s]
-                },
+                Some(&(d, s)) => {
+                    if let Some(h) = self.rim_higher.get(&s) {
+                        self.in_plane_higher.insert(v, *h);
+                    }
+                    VertexModel {
+                        weight: 1.0 - d / (decay * ell(s)),
+                        ..self.curve[&s]
+                    }
+                }
                 None => flat(n),
             };
             self.in_plane.insert(v, model);
@@ -303,10 +354,11 @@ impl FeatureModels {
         }
     }
 
-    /// The cubic and quartic terms of [`FeatureModels::model`], where it has them.
+    /// The cubic and quartic terms of [`FeatureModels::model`] (`at` on the boundary) or of
+    /// [`FeatureModels::interior_model`] (`None`), where it has them.
     pub(crate) fn higher(&self, k: u32, at: Option<BoundaryEntity>) -> Option<&HigherModel> {
         match at.map(|at| self.patch_of(at)) {
-            None => None,
+            None => self.rim_higher.get(&k),
             Some(None) => self.curve_higher.get(&k).map(|(_, h)| h),
             Some(Some(p)) => self.patch_higher.get(&(k, p?)),
         }
@@ -361,6 +413,10 @@ fn curve_higher(
     };
     refine_model(2, x(v).into(), m, &pts, ell, how)
 }
+
+/// A patch meets a thin rim's plane at a right angle (`FeatureModels::rim_higher`) when its
+/// normal's component along the plane's normal is below this sine (5°).
+const RIM_WALL_SIN: f64 = 0.087;
 
 /// A model without curvature (targets on the chords), of normal `n`.
 fn flat(n: [f64; 3]) -> VertexModel {

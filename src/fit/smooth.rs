@@ -236,8 +236,9 @@ impl SmoothTargets {
         if let Some(f) = &feature_models {
             for (&v, m) in &f.in_plane {
                 models[v as usize] = Some(*m);
-                // The height function was fitted over the plane, not along the in-plane curve.
-                higher[v as usize] = None;
+                // The height function was fitted over the plane, not along the in-plane curve;
+                // a thin rim's curve refit comes with its own.
+                higher[v as usize] = f.in_plane_higher.get(&v).copied();
             }
         }
         SmoothTargets {
