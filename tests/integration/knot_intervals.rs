@@ -540,11 +540,14 @@ fn info_and_plot_take_graded_knots() {
 fn graded_knots_keep_the_spline_on_an_airfoil_ogrid() {
     let input =
         Path::new(env!("CARGO_MANIFEST_DIR")).join("meshes/real/su2-testcases/n0012_113-33.su2");
-    let (graded, straight) = (scratch("n0012_graded.msh"), scratch("n0012_straight.msh"));
+    let (graded, straight) = (
+        scratch("n0012_default_graded.msh"),
+        scratch("n0012_default_straight.msh"),
+    );
     let r = curve_to(
         &input,
         &graded,
-        &scratch("n0012_graded.json"),
+        &scratch("n0012_default_graded.json"),
         &["--knot-intervals", "graded"],
     );
     let elements = r["elements"].as_f64().unwrap();
@@ -562,7 +565,7 @@ fn graded_knots_keep_the_spline_on_an_airfoil_ogrid() {
     curve_to(
         &input,
         &straight,
-        &scratch("n0012_straight.json"),
+        &scratch("n0012_default_straight.json"),
         &["--straight"],
     );
     let Some(m) = gmsh_measures(&[&graded, &straight]) else {
