@@ -86,6 +86,11 @@ pub(crate) struct JobArgs {
     /// the preset).
     #[arg(long)]
     w_midpoint: Option<f64>,
+    /// Position weight at the midpoints and centres of elements a ring away from the boundary
+    /// (no vertex on an element touching it; default: `--w-midpoint` with uniform knots, at
+    /// least 3 with graded ones).
+    #[arg(long)]
+    w_deep_midpoint: Option<f64>,
     /// Position weight at midpoints of boundary edges and faces (overrides the preset).
     #[arg(long)]
     w_boundary_midpoint: Option<f64>,
@@ -266,6 +271,7 @@ impl JobArgs {
                 *slot = v;
             }
         }
+        weights.deep_midpoint = self.w_deep_midpoint;
         weights
     }
 

@@ -76,8 +76,9 @@ value_enum! {
             runs use uniform)")]
         Graded,
         #[value(help = "Uniform, and graded where the certified blend then holds back more \
-            than a tenth of the elements and graded knots hold back fewer (the report's \
-            `knot_intervals` names the knots used; distributed runs use uniform)")]
+            than a tenth of the elements and graded knots hold back at most half as many \
+            (the report's `knot_intervals` names the knots used; distributed runs use \
+            uniform)")]
         Auto,
     }
 }

@@ -196,7 +196,8 @@ fn corner_of(l: [usize; 3]) -> usize {
 /// kept.
 pub struct ElementBlocks {
     /// Per element: bit c (c < 8) for a boundary corner c, bit 8 + i for a sample i that takes
-    /// the feature weight.
+    /// the feature weight, [`DEEP_BIT`] for an element a ring away from the boundary, the size
+    /// level from bit [`LEVEL_SHIFT`].
     pub masks: Vec<u64>,
     /// (G^d, G^r), row-major 3^d × 3^d, per mask.
     pub cache: HashMap<u64, (Vec<f64>, Vec<f64>)>,
@@ -212,6 +213,10 @@ pub(super) fn sample_weight(
 ) -> f64 {
     size_scale(mask) * sample_weight_unscaled(w, mask, i, l, corner)
 }
+
+/// Weight-mask bit of an element none of whose vertices belongs to an element touching the
+/// boundary ([`FitWeights::deep_midpoint`]; above the feature bits 8..35).
+pub(super) const DEEP_BIT: u64 = 1 << 40;
 
 /// Bit offset of an element's size level in its weight mask.
 pub(super) const LEVEL_SHIFT: u32 = 48;
@@ -233,6 +238,8 @@ fn sample_weight_unscaled(w: &FitWeights, mask: u64, i: usize, l: [usize; 3], co
     } else if !corner {
         if boundary_midpoint(mask, l) {
             w.boundary_midpoint
+        } else if mask & DEEP_BIT != 0 {
+            w.deep_midpoint.unwrap_or(w.midpoint)
         } else {
             w.midpoint
         }
@@ -374,6 +381,15 @@ impl ElementBlocks {
             (gd, gr)
         };
         let levels = size_levels(mesh);
+        // Vertices of the elements that touch the boundary: an element with none of them is
+        // "deep" (a ring away from the wall).
+        let mut near = vec![false; topo.vertex_on_boundary.len()];
+        for e in 0..space.n_elements() {
+            let vs = mesh.element(e);
+            if vs.iter().any(|&v| topo.vertex_on_boundary[v as usize]) {
+                vs.iter().for_each(|&v| near[v as usize] = true);
+            }
+        }
         let masks: Vec<u64> = (0..space.n_elements())
             .map(|e| {
                 let mut m = 0u64;
@@ -381,6 +397,9 @@ impl ElementBlocks {
                     if topo.vertex_on_boundary[v as usize] {
                         m |= 1 << c;
                     }
+                }
+                if mesh.element(e).iter().all(|&v| !near[v as usize]) {
+                    m |= DEEP_BIT;
                 }
                 if let Some(f) = features {
                     m |= features::sample_mask(f, mesh, e) << 8;

@@ -461,7 +461,10 @@ impl CurveReport {
             kink_elements: spline.map_or(0, |s| s.space.kink_elements),
             snapped_boundary_vertices: o.snapped,
             features: spline.and_then(|s| s.space.features),
-            fit_weights: fit.map(|_| options.fit.weights),
+            fit_weights: fit.map(|_| {
+                let graded = spline.map(|s| s.space.knot_intervals) == Some(KnotIntervals::Graded);
+                options.fit.weights.for_knots(graded)
+            }),
             fit_targets: fit.map(|_| options.fit.targets),
             fit_solver: fit.map(|f| f.0),
             cg_iterations: fit.map(|f| f.1.iterations),

@@ -94,6 +94,10 @@ impl SplineSetup {
         });
         let fit_params = FitParams {
             features: used.cloned().map(std::sync::Arc::new),
+            weights: options
+                .fit
+                .weights
+                .for_knots(options.knots.intervals == crate::spline::KnotIntervals::Graded),
             ..options.fit.clone()
         };
         // With the smooth fit, elements at kinks of the boundary grid lines start as Q2;
@@ -311,13 +315,18 @@ impl SplineOutcome {
 /// with uniform knots before the spline is redone with graded knots.
 pub const AUTO_MAX_HELD_BACK: f64 = 0.1;
 
+/// With `--knot-intervals auto`: graded knots are kept when their blend holds back at most
+/// this share of the elements uniform knots' holds back.
+pub const AUTO_MIN_GAIN: f64 = 0.5;
+
 /// The spline geometry's stages (the job's geometry is not [`Geometry::Straight`]); the
 /// translation pairs among `periodic` are identified in the spline space where they can be.
 ///
 /// `--knot-intervals auto` runs them with uniform knots and, where the blend then holds back
 /// more than [`AUTO_MAX_HELD_BACK`] of the elements (a C¹ map with uniform knots cannot follow
 /// a graded grid: the spline is thrown away there), again with graded knots, which are kept
-/// when their blend holds back fewer elements; the setup names the knots used. Where
+/// when their blend holds back at most [`AUTO_MIN_GAIN`] as many elements; the setup names
+/// the knots used. Where
 /// translation seams are glued, the uniform spline is kept (graded knots do not glue them).
 pub(super) fn curve_spline(
     job: &Job,
@@ -359,11 +368,17 @@ pub(super) fn curve_spline(
         clock,
         periodic,
     )?;
-    // Graded knots only where they keep more of the spline: on meshes that are not graded
-    // (O-grids of smooth shapes) they hold back as many elements or more, and the uniform
-    // spline's boundary is the better one there.
+    // Graded knots only where they keep decisively more of the spline: on meshes that are
+    // not graded (O-grids of smooth shapes) they hold back nearly as many elements or more
+    // (level-2 O-grid cylinder: 672 against 800 of 1,536), and the uniform spline's boundary
+    // is the better one there (4.7× Gmsh-with-CAD's max error against 26×); on graded meshes
+    // they hold back a third or less of uniform knots' (BENCHMARKS.md, "Graded knot intervals").
     let held_graded = second.1.blend.as_ref().map_or(0, |b| b.reduced_elements);
-    Ok(if held_graded < held { second } else { first })
+    Ok(if held_graded as f64 <= AUTO_MIN_GAIN * held as f64 {
+        second
+    } else {
+        first
+    })
 }
 
 fn curve_spline_with(

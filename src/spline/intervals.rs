@@ -40,8 +40,8 @@
 //!
 //! **Auto** (the default) is decided by `curve` on the outcome, not here
 //! (`pipeline::spline::curve_spline`): uniform knots, and graded ones where the certified
-//! blend holds back more than a tenth of the elements with uniform knots and fewer with
-//! graded ones. Per-surface rules
+//! blend holds back more than a tenth of the elements with uniform knots and at most half as
+//! many with graded ones. Per-surface rules
 //! on the measured log-ratios did not separate graded from unstructured meshes
 //! (BENCHMARKS.md, "Graded knot intervals"). Without a fit (`info`, `plot`), auto is uniform; with
 //! glued periodic seams, `curve` keeps uniform knots; under mpirun the launcher resolves it to
@@ -62,7 +62,7 @@ pub enum KnotIntervals {
     /// From the cells' extents, one log-ratio per knot surface (graded grids reproduced).
     Graded,
     /// The default. `curve` decides: uniform, unless the certified blend then holds back more than a tenth
-    /// of the elements and fewer with graded knots, graded then
+    /// of the elements and at most half as many with graded knots, graded then
     /// (`pipeline::spline::curve_spline`). Where nothing is fitted (`info`, `plot`), uniform.
     #[default]
     Auto,

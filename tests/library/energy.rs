@@ -186,6 +186,7 @@ fn energy_of_an_affine_image_is_known() {
             corner: 0.0,
             boundary_corner: 0.0,
             midpoint: 0.0,
+            deep_midpoint: None,
             boundary_midpoint: 0.0,
             frame_corner: 0.0,
             frame_midpoint: 0.0,
