@@ -75,10 +75,12 @@ value_enum! {
             graded (boundary-layer) grids are reproduced exactly and stay C¹ (distributed \
             runs use uniform)")]
         Graded,
-        #[value(help = "Uniform, and graded where the certified blend then holds back more \
-            than a tenth of the elements and graded knots hold back at most half as many \
-            (the report's `knot_intervals` names the knots used; distributed runs use \
-            uniform)")]
+        #[value(help = "Graded where at least 30 % of the interior facets lie on \
+            consistently graded knot surfaces (boundary-layer grids; one spline pass), else \
+            uniform, and graded where the certified blend then holds back more than a tenth \
+            of the elements and graded knots hold back at most half as many (a second pass; the report's \
+            `knot_intervals` and `knot_passes` name the knots used and the passes; \
+            distributed runs use uniform)")]
         Auto,
     }
 }

@@ -629,6 +629,7 @@ pub fn curve(
         q2_elements: counts[2],
         kink_elements: counts[3],
         knot_intervals: share.knot_intervals,
+        knot_passes: 1,
         features: share.features.map(|mut f| {
             f.feature_vertex_deviation_max /= deviation.diagonal;
             f.planarity_max /= deviation.diagonal;

@@ -68,6 +68,9 @@ pub struct CurveReport {
     pub q2_elements: usize,
     /// Knot intervals of the spline space, `uniform` or `graded` (spline geometries).
     pub knot_intervals: Option<crate::spline::KnotIntervals>,
+    /// Spline passes (space, fit, certified blend) run to choose the knots: 1, or 2 where
+    /// `--knot-intervals auto` tried uniform and graded knots (spline geometries).
+    pub knot_passes: Option<usize>,
     /// With graded knot intervals: the figures of the knot surfaces (surfaces, graded ones,
     /// non-orientable ones given uniform knots, clamped ratios, the largest |ln ratio|).
     pub knot_surfaces: Option<crate::spline::KnotSurfaceInfo>,
@@ -279,6 +282,8 @@ pub(crate) struct SpaceCounts {
     pub q2_elements: usize,
     pub kink_elements: usize,
     pub knot_intervals: KnotIntervals,
+    /// Spline passes run to choose the knots (the report's `knot_passes`).
+    pub knot_passes: usize,
     /// Deviations relative to the diagonal.
     pub features: Option<FeatureReport>,
 }
@@ -350,6 +355,7 @@ impl CurveReport {
                         .filter(|c| **c == ElementClass::Q2(Q2Reason::BoundaryKink))
                         .count(),
                     knot_intervals: setup.knot_intervals,
+                    knot_passes: setup.knot_passes,
                     features: setup.features.as_ref().map(|f| {
                         let (vertex, planarity) = f.deviations(mesh, ho, setup.boundary_rows());
                         FeatureReport {
@@ -456,6 +462,7 @@ impl CurveReport {
             spline_elements: spline.map_or(0, |s| s.space.spline_elements),
             q2_elements: spline.map_or(0, |s| s.space.q2_elements),
             knot_intervals: spline.map(|s| s.space.knot_intervals),
+            knot_passes: spline.map(|s| s.space.knot_passes),
             knot_surfaces: spline.and_then(|s| s.knot_surfaces),
             demoted_elements: spline.map_or(0, |s| s.demoted),
             kink_elements: spline.map_or(0, |s| s.space.kink_elements),

@@ -26,7 +26,9 @@ use crate::mesh::periodic::PeriodicPair;
 use crate::mesh::{LinearMesh, Topology};
 use crate::progress::{Progress, Stage};
 use crate::spline::seam::{self, Glued, SeamView};
-use crate::spline::{ElementRows, KnotSurfaceInfo, KnotWeights, Q2Reason, SplineSpace, kinks};
+use crate::spline::{
+    ElementRows, KnotSurfaceInfo, KnotWeights, Knots, Q2Reason, SplineSpace, kinks,
+};
 use crate::validity::blend::{BlendInfo, Blended, NetCache, blend_search};
 use crate::validity::certificate::{
     MAX_DEMOTION_ROUNDS, certify_mesh, demote_with_rings, uncertified,
@@ -57,6 +59,8 @@ pub(crate) struct SplineSetup {
     pub(crate) knot_info: KnotSurfaceInfo,
     /// The knot intervals used.
     pub(crate) knot_intervals: crate::spline::KnotIntervals,
+    /// Spline passes run to choose the knots (`--knot-intervals auto`: 1 or 2).
+    pub(crate) knot_passes: usize,
     /// Translation-periodic seams identified in the spline space (`--periodic`,
     /// [`crate::spline::seam`]): the space is built on this glued mesh.
     pub(crate) seams: Option<Glued>,
@@ -149,11 +153,28 @@ impl SplineSetup {
             knot_split: knots.split,
             knot_info: knots.info,
             knot_intervals: options.knots.intervals,
+            knot_passes: 1,
             seams,
             seam_c0: std::sync::Mutex::new(seam_c0),
             seams_failed: std::sync::atomic::AtomicBool::new(false),
             view,
         })
+    }
+
+    /// Puts `knots` of `intervals` in place of the setup's knots and returns those (the
+    /// features, kinks and targets do not depend on the knots). Only without glued seams.
+    fn set_knots(&mut self, intervals: crate::spline::KnotIntervals, knots: Knots) -> Knots {
+        debug_assert!(self.seams.is_none());
+        let old = Knots {
+            weights: self.knot_weights.take(),
+            split: std::mem::take(&mut self.knot_split),
+            info: self.knot_info,
+        };
+        self.knot_weights = knots.weights;
+        self.knot_split = knots.split;
+        self.knot_info = knots.info;
+        self.knot_intervals = intervals;
+        old
     }
 
     /// The rows of the input's boundary facets of [`SplineSetup::topo`]'s (`None`: all).
@@ -322,12 +343,21 @@ pub const AUTO_MIN_GAIN: f64 = 0.5;
 /// The spline geometry's stages (the job's geometry is not [`Geometry::Straight`]); the
 /// translation pairs among `periodic` are identified in the spline space where they can be.
 ///
-/// `--knot-intervals auto` runs them with uniform knots and, where the blend then holds back
-/// more than [`AUTO_MAX_HELD_BACK`] of the elements (a C¹ map with uniform knots cannot follow
-/// a graded grid: the spline is thrown away there), again with graded knots, which are kept
-/// when their blend holds back at most [`AUTO_MIN_GAIN`] as many elements; the setup names
-/// the knots used. Where
-/// translation seams are glued, the uniform spline is kept (graded knots do not glue them).
+/// `--knot-intervals auto` decides in one spline pass (space, fit, certified blend) where it
+/// can:
+/// 1. the graded knot surfaces are measured first (no fit): where at least
+///    [`crate::spline::AUTO_GRADED_SHARE`] of the interior facets lie on consistently graded
+///    surfaces ([`KnotSurfaceInfo::graded_share`]: a boundary-layer grid, which a C¹ map with
+///    uniform knots cannot follow), the spline is run once, with graded knots;
+/// 2. otherwise once with uniform knots, kept where the blend holds back at most
+///    [`AUTO_MAX_HELD_BACK`] of the elements;
+/// 3. otherwise a second pass with graded knots, kept when its blend holds back at most
+///    [`AUTO_MIN_GAIN`] as many elements (the one case with two passes).
+///
+/// Both passes share the setup (features, kinks, smooth targets: they do not depend on the
+/// knots); the setup names the knots used and the passes run (`knot_passes`). With periodic
+/// pairs the uniform pass comes first, each pass with its own setup, and where translation
+/// seams are glued the uniform spline is kept (graded knots do not glue them).
 pub(super) fn curve_spline(
     job: &Job,
     clock: &mut Clock,
@@ -344,41 +374,66 @@ pub(super) fn curve_spline(
         },
         ..job.options.clone()
     };
-    let uniform = with(KnotIntervals::Uniform);
-    let first = curve_spline_with(
-        &Job {
-            options: &uniform,
-            ..*job
-        },
-        clock,
-        periodic,
-    )?;
-    let held = first.1.blend.as_ref().map_or(0, |b| b.reduced_elements);
-    // Glued periodic seams keep uniform knots: graded knot surfaces are measured on the
-    // unglued mesh, so graded knots would give up the seams' C¹.
-    if held as f64 <= AUTO_MAX_HELD_BACK * job.mesh.n_elements() as f64 || first.0.seams.is_some() {
-        return Ok(first);
-    }
-    let graded = with(KnotIntervals::Graded);
-    let second = curve_spline_with(
-        &Job {
-            options: &graded,
-            ..*job
-        },
-        clock,
-        periodic,
-    )?;
+    let (uniform, graded) = (with(KnotIntervals::Uniform), with(KnotIntervals::Graded));
+    let uniform_job = Job {
+        options: &uniform,
+        ..*job
+    };
+    let graded_job = Job {
+        options: &graded,
+        ..*job
+    };
+    let held = |o: &SplineOutcome| o.blend.as_ref().map_or(0, |b| b.reduced_elements);
+    let too_many = |held: usize| held as f64 > AUTO_MAX_HELD_BACK * job.mesh.n_elements() as f64;
     // Graded knots only where they keep decisively more of the spline: on meshes that are
     // not graded (O-grids of smooth shapes) they hold back nearly as many elements or more
     // (level-2 O-grid cylinder: 672 against 800 of 1,536), and the uniform spline's boundary
     // is the better one there (4.7× Gmsh-with-CAD's max error against 26×); on graded meshes
     // they hold back a third or less of uniform knots' (BENCHMARKS.md, "Graded knot intervals").
-    let held_graded = second.1.blend.as_ref().map_or(0, |b| b.reduced_elements);
-    Ok(if held_graded as f64 <= AUTO_MIN_GAIN * held as f64 {
-        second
-    } else {
-        first
-    })
+    let decisive = |graded: usize, uniform: usize| graded as f64 <= AUTO_MIN_GAIN * uniform as f64;
+    if !periodic.is_empty() {
+        let first = curve_spline_with(&uniform_job, clock, periodic)?;
+        // Glued periodic seams keep uniform knots: graded knot surfaces are measured on the
+        // unglued mesh, so graded knots would give up the seams' C¹.
+        if !too_many(held(&first.1)) || first.0.seams.is_some() {
+            return Ok(first);
+        }
+        let mut second = curve_spline_with(&graded_job, clock, periodic)?;
+        second.0.knot_passes = 2;
+        return Ok(if decisive(held(&second.1), held(&first.1)) {
+            second
+        } else {
+            first
+        });
+    }
+    let (mut setup, survey) = clock.run(Stage::Spline, || {
+        let setup = SplineSetup::new(&uniform_job, periodic)?;
+        Ok::<_, CurveError>((setup, SplineSpace::knot_survey(job.mesh, job.topo)))
+    })?;
+    let graded_knots = |clock: &mut Clock, survey| {
+        clock.run(Stage::Spline, || {
+            crate::spline::intervals::knot_weights_from(survey, job.topo, &graded.knots)
+        })
+    };
+    if survey.graded_share >= crate::spline::AUTO_GRADED_SHARE {
+        let knots = graded_knots(clock, survey);
+        setup.set_knots(KnotIntervals::Graded, knots);
+        let outcome = spline_pass(&graded_job, &setup, clock)?;
+        return Ok((setup, outcome));
+    }
+    let first = spline_pass(&uniform_job, &setup, clock)?;
+    if !too_many(held(&first)) {
+        return Ok((setup, first));
+    }
+    let knots = graded_knots(clock, survey);
+    let uniform_knots = setup.set_knots(KnotIntervals::Graded, knots);
+    setup.knot_passes = 2;
+    let second = spline_pass(&graded_job, &setup, clock)?;
+    if decisive(held(&second), held(&first)) {
+        return Ok((setup, second));
+    }
+    setup.set_knots(KnotIntervals::Uniform, uniform_knots);
+    Ok((setup, first))
 }
 
 fn curve_spline_with(
@@ -386,20 +441,26 @@ fn curve_spline_with(
     clock: &mut Clock,
     periodic: &[PeriodicPair],
 ) -> Result<(SplineSetup, SplineOutcome), CurveError> {
-    let (setup, space) = clock.run(Stage::Spline, || {
-        let setup = SplineSetup::new(job, periodic)?;
-        let space = setup.build(job, &vec![false; job.mesh.n_elements()]);
-        Ok::<_, CurveError>((setup, space))
-    })?;
-    clock.check()?;
-    let outcome = match (job.options.geometry, &job.options.energy) {
-        (Geometry::SplineFitted, None) => fit_and_blend(job, &setup, clock, space)?,
-        (Geometry::SplineFitted, Some(params)) => {
-            fit_with_energy(job, &setup, clock, space, params)?
-        }
-        _ => certify_initial(job, clock, space)?,
-    };
+    let setup = clock.run(Stage::Spline, || SplineSetup::new(job, periodic))?;
+    let outcome = spline_pass(job, &setup, clock)?;
     Ok((setup, outcome))
+}
+
+/// One spline pass on `setup`: the space, then the fit and certificate of the job's path.
+fn spline_pass(
+    job: &Job,
+    setup: &SplineSetup,
+    clock: &mut Clock,
+) -> Result<SplineOutcome, CurveError> {
+    let space = clock.run(Stage::Spline, || {
+        setup.build(job, &vec![false; job.mesh.n_elements()])
+    });
+    clock.check()?;
+    match (job.options.geometry, &job.options.energy) {
+        (Geometry::SplineFitted, None) => fit_and_blend(job, setup, clock, space),
+        (Geometry::SplineFitted, Some(params)) => fit_with_energy(job, setup, clock, space, params),
+        _ => certify_initial(job, clock, space),
+    }
 }
 
 /// Least squares: one fit, then the certified blend from the straight elevation to it (valid

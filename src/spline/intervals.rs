@@ -38,12 +38,16 @@
 //! Surfaces closing on themselves with opposite orientation (non-orientable continuation) get
 //! uniform knots.
 //!
-//! **Auto** (the default) is decided by `curve` on the outcome, not here
-//! (`pipeline::spline::curve_spline`): uniform knots, and graded ones where the certified
-//! blend holds back more than a tenth of the elements with uniform knots and at most half as
-//! many with graded ones. Per-surface rules
-//! on the measured log-ratios did not separate graded from unstructured meshes
-//! (BENCHMARKS.md, "Graded knot intervals"). Without a fit (`info`, `plot`), auto is uniform; with
+//! **Auto** (the default) is decided by `curve` (`pipeline::spline::curve_spline`), in one
+//! spline pass where it can. Graded knots straight away where at least [`AUTO_GRADED_SHARE`]
+//! of the interior facets lie on consistently graded surfaces of the unsplit knot surfaces
+//! ([`KnotSurfaceInfo::graded_share`]: weighted mean |ln ratio| ≥ 0.1 with ≥ 90 % of the
+//! surface's measured ratios on its side; a boundary-layer grid). Otherwise uniform knots,
+//! and graded ones (a second pass) where the certified blend holds back more than a tenth of
+//! the elements with uniform knots and at most half as many with graded ones. The share alone does not
+//! separate every mesh where graded knots win from unstructured ones (sphere_r6 0.043
+//! against systems_of_equations_ex9 0.051, BENCHMARKS.md, "Graded knot intervals"), hence the
+//! outcome rule below the threshold. Without a fit (`info`, `plot`), auto is uniform; with
 //! glued periodic seams, `curve` keeps uniform knots; under mpirun the launcher resolves it to
 //! uniform.
 
@@ -61,9 +65,10 @@ pub enum KnotIntervals {
     Uniform,
     /// From the cells' extents, one log-ratio per knot surface (graded grids reproduced).
     Graded,
-    /// The default. `curve` decides: uniform, unless the certified blend then holds back more than a tenth
-    /// of the elements and at most half as many with graded knots, graded then
-    /// (`pipeline::spline::curve_spline`). Where nothing is fitted (`info`, `plot`), uniform.
+    /// The default. `curve` decides (`pipeline::spline::curve_spline`): graded where
+    /// [`KnotSurfaceInfo::graded_share`] reaches [`AUTO_GRADED_SHARE`]; else uniform, unless
+    /// the certified blend then holds back more than a tenth of the elements and at most half
+    /// as many with graded knots, graded then. Where nothing is fitted (`info`, `plot`), uniform.
     #[default]
     Auto,
 }
@@ -135,6 +140,62 @@ pub struct KnotSurfaceInfo {
     /// Largest spread (max − min) of the measured log-ratios within one surface, after
     /// splitting.
     pub max_spread: f64,
+    /// Share of the interior facets on consistently graded surfaces of the unsplit knot
+    /// surfaces ([`graded_share`]): `--knot-intervals auto` takes graded knots without trying
+    /// uniform ones from [`AUTO_GRADED_SHARE`] on.
+    pub graded_share: f64,
+}
+
+/// With `--knot-intervals auto`: from this [`KnotSurfaceInfo::graded_share`] on, the mesh is
+/// a boundary-layer grid that uniform knots cannot follow, and graded knots are taken without
+/// a uniform pass. Real meshes: 0.37 (turbine) to 0.74 (NACA4412) where graded knots hold back
+/// fewer elements (or, on spheremesh01 and 70degCone_3D, as many); 0.25 (cylinder-hex) and
+/// below where uniform knots are kept, 0.14 and below on the rest; the generated O-grids of the
+/// fidelity tests 0.06 to 0.12 (BENCHMARKS.md, "Graded knot intervals").
+pub const AUTO_GRADED_SHARE: f64 = 0.3;
+
+/// Smallest |weighted mean log-ratio| of a consistently graded surface ([`graded_share`]).
+const CONSISTENT_LOG_RATIO: f64 = 0.1;
+/// Smallest share of a consistently graded surface's measured ratios on its mean's side.
+const CONSISTENT_SIGN_SHARE: f64 = 0.9;
+
+/// The share of the interior facets (those with a measured ratio) that lie on a knot surface
+/// of `uf` with a consistent grading: the 1 / facet-size weighted mean of its measured
+/// log-ratios is at least [`CONSISTENT_LOG_RATIO`] in size and at least
+/// [`CONSISTENT_SIGN_SHARE`] of its facets' ratios have the mean's sign. A boundary layer's
+/// surfaces crossing the layer are such surfaces; on an unstructured mesh a surface wanders
+/// through cells of every ratio and averages out.
+fn graded_share(uf: &mut SignedUnionFind, measured: &[Option<(f64, f64)>]) -> f64 {
+    let nf = measured.len();
+    // Per root: weighted sum, weight, facets, facets with a positive ratio (root's sign).
+    let mut acc = vec![(0.0f64, 0.0f64, 0usize, 0usize); nf];
+    for (f, m) in measured.iter().enumerate() {
+        let Some((m, w)) = *m else { continue };
+        let (r, s) = uf.find(f as u32);
+        let m = if s { -m } else { m };
+        let a = &mut acc[r as usize];
+        a.0 += w * m;
+        a.1 += w;
+        a.2 += 1;
+        a.3 += usize::from(m > 0.0);
+    }
+    let (mut consistent, mut total) = (0usize, 0usize);
+    for (r, &(sum, weight, n, positive)) in acc.iter().enumerate() {
+        total += n;
+        if n == 0 || uf.conflict[r] {
+            continue;
+        }
+        let mean = sum / weight;
+        let side = if mean > 0.0 { positive } else { n - positive };
+        if mean.abs() >= CONSISTENT_LOG_RATIO && side as f64 >= CONSISTENT_SIGN_SHARE * n as f64 {
+            consistent += n;
+        }
+    }
+    if total == 0 {
+        0.0
+    } else {
+        consistent as f64 / total as f64
+    }
 }
 
 /// The knot intervals of a mesh: what [`knot_weights`] returns.
@@ -201,29 +262,23 @@ impl SignedUnionFind {
         (lo.min(blo), hi.max(bhi))
     }
 
-    /// Root of `x` and whether `ρ(x) = −ρ(root)` (path compression).
+    /// Root of `x` and whether `ρ(x) = −ρ(root)` (path compression, without allocating: it
+    /// runs for every tie of a mesh).
     fn find(&mut self, x: u32) -> (u32, bool) {
-        let mut path = Vec::new();
-        let mut r = x;
+        let (mut r, mut parity) = (x, false);
         while self.parent[r as usize] != r {
-            path.push(r);
+            parity ^= self.flip[r as usize];
             r = self.parent[r as usize];
         }
-        // From the top of the path down: flip relative to the root.
-        let mut acc = false;
-        for &p in path.iter().rev() {
-            acc ^= self.flip[p as usize];
-            self.flip[p as usize] = acc;
-            self.parent[p as usize] = r;
+        // Point every node on the path at the root, with its flip relative to the root.
+        let (mut y, mut py) = (x, parity);
+        while self.parent[y as usize] != y {
+            let (next, next_parity) = (self.parent[y as usize], py ^ self.flip[y as usize]);
+            self.parent[y as usize] = r;
+            self.flip[y as usize] = py;
+            (y, py) = (next, next_parity);
         }
-        (
-            r,
-            if path.is_empty() {
-                false
-            } else {
-                self.flip[x as usize]
-            },
-        )
+        (r, parity)
     }
 
     /// Record `ρ(a) = ±ρ(b)` (`opposite`: minus).
@@ -314,7 +369,7 @@ fn ties(topo: &Topology, spline: &[bool]) -> Vec<Tie> {
         .into_par_iter()
         .filter(|&e| spline[e])
         .flat_map_iter(|e| {
-            let mut out = Vec::new();
+            let mut out = Vec::with_capacity(sides * (sides - 2));
             for side in 0..sides {
                 let f = topo.element_facet(e, side);
                 for other in 0..sides {
@@ -326,16 +381,21 @@ fn ties(topo: &Topology, spline: &[bool]) -> Vec<Tie> {
                         continue;
                     }
                     let g = topo.element_facet(e, other);
+                    // The vertices f and g share (an edge in 3D, a vertex in 2D).
                     let fv = topo.facet_vertices(f as usize);
-                    let common: Vec<u32> = topo
-                        .facet_vertices(g as usize)
-                        .iter()
-                        .copied()
-                        .filter(|v| fv.contains(v))
-                        .collect();
-                    if common.len() != dim - 1 {
+                    let (mut shared, mut n_shared) = ([0u32; 2], 0);
+                    for &v in topo.facet_vertices(g as usize) {
+                        if fv.contains(&v) {
+                            if n_shared < 2 {
+                                shared[n_shared] = v;
+                            }
+                            n_shared += 1;
+                        }
+                    }
+                    if n_shared != dim - 1 {
                         continue;
                     }
+                    let common = &shared[..n_shared];
                     let mut found = None;
                     for s2 in 0..sides {
                         let f2 = topo.element_facet(n as usize, s2);
@@ -441,26 +501,23 @@ fn split_elements(
     split
 }
 
-/// The extraction weights of every element for `params` (uniform knots: `None`), the
-/// elements to make Q2 where surfaces are split, and the figures of the knot surfaces. Knot
-/// surfaces are continued across the elements that are spline elements by topology
-/// (`spline[e]`); elsewhere the continuation is not defined.
-pub fn knot_weights(
-    mesh: &LinearMesh,
-    topo: &Topology,
-    spline: &[bool],
-    params: &KnotParams,
-) -> Knots {
-    if params.intervals != KnotIntervals::Graded {
-        return Knots::default();
-    }
-    let dim = topo.dim;
-    let nf = topo.n_facets();
-    let ne = topo.n_elements;
+/// What graded knot intervals are built from: every interior facet's measured log-ratio and
+/// the ties of the knot surfaces ([`survey`]), with the share of the facets on consistently
+/// graded surfaces (`--knot-intervals auto` decides on it before any fit).
+pub struct KnotSurvey {
+    measured: Vec<Option<(f64, f64)>>,
+    ties: Vec<Tie>,
+    /// [`KnotSurfaceInfo::graded_share`].
+    pub graded_share: f64,
+}
 
-    // 1. Measured log-ratio of every interior facet, with weight 1 / the facet's size: a
-    //    ratio that misfits a thin cell distorts it relative to its thickness, so the small
-    //    facets of a boundary layer decide where a surface crosses it.
+/// The measured ratios, ties and graded share of the knot surfaces continued across the
+/// elements that are spline elements by topology (`spline[e]`).
+pub fn survey(mesh: &LinearMesh, topo: &Topology, spline: &[bool]) -> KnotSurvey {
+    let nf = topo.n_facets();
+    // Measured log-ratio of every interior facet, with weight 1 / the facet's size: a ratio
+    // that misfits a thin cell distorts it relative to its thickness, so the small facets of
+    // a boundary layer decide where a surface crosses it.
     let measured: Vec<Option<(f64, f64)>> = (0..nf)
         .into_par_iter()
         .map(|f| {
@@ -476,10 +533,44 @@ pub fn knot_weights(
             (r.is_finite() && w.is_finite()).then_some((r, w))
         })
         .collect();
+    let ties = ties(topo, spline);
+    let graded_share = graded_share(&mut surfaces(nf, &ties, &measured), &measured);
+    KnotSurvey {
+        measured,
+        ties,
+        graded_share,
+    }
+}
 
-    // 2. Knot surfaces: facets tied across each spline element's neighbours; split where
-    //    one ratio cannot fit, and rebuilt without the split elements' ties.
-    let all = ties(topo, spline);
+/// The extraction weights of every element for `params` (uniform knots: `None`), the
+/// elements to make Q2 where surfaces are split, and the figures of the knot surfaces. Knot
+/// surfaces are continued across the elements that are spline elements by topology
+/// (`spline[e]`); elsewhere the continuation is not defined.
+pub fn knot_weights(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    spline: &[bool],
+    params: &KnotParams,
+) -> Knots {
+    if params.intervals != KnotIntervals::Graded {
+        return Knots::default();
+    }
+    knot_weights_from(survey(mesh, topo, spline), topo, params)
+}
+
+/// [`knot_weights`] of graded knots from the mesh's [`survey`].
+pub fn knot_weights_from(survey: KnotSurvey, topo: &Topology, params: &KnotParams) -> Knots {
+    let dim = topo.dim;
+    let nf = topo.n_facets();
+    let ne = topo.n_elements;
+    let KnotSurvey {
+        measured,
+        ties: all,
+        graded_share: share,
+    } = survey;
+
+    // Knot surfaces: facets tied across each spline element's neighbours; split where one
+    // ratio cannot fit, and rebuilt without the split elements' ties.
     let split = split_elements(ne, nf, &all, &measured, params.max_spread);
     let kept: Vec<Tie> = all
         .into_iter()
@@ -504,6 +595,7 @@ pub fn knot_weights(
     let cap = params.max_ratio.ln();
     let mut info = KnotSurfaceInfo {
         split_elements: split.iter().filter(|&&s| s).count(),
+        graded_share: share,
         ..Default::default()
     };
     let mut rho_root = vec![0.0f64; nf];

@@ -41,7 +41,9 @@ pub mod stencil;
 use crate::math::BezierNet;
 pub use classify::{ElementClass, Q2Reason};
 pub use extraction::{ElementRows, Extraction, ExtractionCsr};
-pub use intervals::{KnotIntervals, KnotParams, KnotSurfaceInfo, KnotWeights, Knots};
+pub use intervals::{
+    AUTO_GRADED_SHARE, KnotIntervals, KnotParams, KnotSurfaceInfo, KnotSurvey, KnotWeights, Knots,
+};
 pub use knots::Op1d;
 pub use stencil::Entity;
 
@@ -133,11 +135,17 @@ impl SplineSpace {
         if params.intervals != KnotIntervals::Graded {
             return Knots::default();
         }
+        intervals::knot_weights_from(Self::knot_survey(mesh, topo), topo, params)
+    }
+
+    /// The measured ratios and ties of `mesh`'s knot surfaces ([`intervals::survey`]), for
+    /// [`intervals::knot_weights_from`].
+    pub fn knot_survey(mesh: &LinearMesh, topo: &Topology) -> intervals::KnotSurvey {
         let spline: Vec<bool> = classify::classify(mesh, topo)
             .iter()
             .map(|c| c.is_spline())
             .collect();
-        intervals::knot_weights(mesh, topo, &spline, params)
+        intervals::survey(mesh, topo, &spline)
     }
 
     /// The space of `mesh` with the knot intervals of `params` (the split elements made Q2),

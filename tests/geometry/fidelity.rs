@@ -200,8 +200,10 @@ fn auto_knots_keep_the_o_grid_boundary() {
         let m = measure(shape, &[&cad, &out], "all");
         let (gmsh, (rms, max)) = (m[0], m[1]);
         println!(
-            "{shape} level 2 auto ({} knots, {} of {} held back): RMS {:.2}×, max {:.2}× Gmsh-with-CAD",
+            "{shape} level 2 auto ({} knots, {} passes, share {}, {} of {} held back): RMS {:.2}×, max {:.2}× Gmsh-with-CAD",
             r["knot_intervals"],
+            r["knot_passes"],
+            r["knot_surfaces"]["graded_share"],
             r["reduced_elements"],
             r["elements"],
             rms / gmsh.0,

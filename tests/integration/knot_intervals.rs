@@ -583,3 +583,52 @@ fn graded_knots_keep_the_spline_on_an_airfoil_ogrid() {
     assert!(f(0, "angle_max") <= f(1, "angle_max") + 1.0);
     assert!(f(0, "ratio_min") >= 0.85 * f(1, "ratio_min"));
 }
+
+/// `--knot-intervals auto` runs the spline stages (space, fit, certified blend) once on a
+/// clearly graded boundary-layer mesh and on an unstructured one (the report's `knot_passes`):
+/// on NACA 0012 it takes graded knots straight away, and the file is byte for byte
+/// `--knot-intervals graded`'s, where uniform knots would hold back more than a tenth of the
+/// elements (the outcome that justifies graded knots); on the plate with a hole it keeps
+/// uniform knots after one pass. A mesh that needs the outcome rule (the generated disc:
+/// uniform knots hold back more than a tenth, its surfaces are not consistently graded) still
+/// gets both passes.
+#[test]
+fn auto_knots_run_the_spline_once() {
+    let real = Path::new(env!("CARGO_MANIFEST_DIR")).join("meshes/real");
+    let run = |input: &Path, name: &str, knots: &str| {
+        let (msh, json) = (
+            scratch(&format!("once_{name}_{knots}.msh")),
+            scratch(&format!("once_{name}_{knots}.json")),
+        );
+        let r = curve_to(input, &msh, &json, &["--knot-intervals", knots]);
+        (std::fs::read(&msh).unwrap(), r)
+    };
+    let held =
+        |r: &Value| r["reduced_elements"].as_f64().unwrap() / r["elements"].as_f64().unwrap();
+
+    let n0012 = real.join("su2-testcases/n0012_113-33.su2");
+    let (auto, r) = run(&n0012, "n0012", "auto");
+    assert_eq!(r["knot_intervals"], "graded");
+    assert_eq!(r["knot_passes"], 1, "auto ran the spline twice on n0012");
+    assert!(r["knot_surfaces"]["graded_share"].as_f64().unwrap() >= 0.3);
+    let (graded, _) = run(&n0012, "n0012", "graded");
+    assert!(auto == graded, "auto differs from graded knots on n0012");
+    let (_, uniform) = run(&n0012, "n0012", "uniform");
+    assert!(held(&uniform) > 0.1, "uniform held back {}", held(&uniform));
+    assert!(held(&r) < held(&uniform));
+
+    let (_, r) = run(&real.join("dealii/hole8170.msh"), "hole", "auto");
+    assert_eq!(r["knot_intervals"], "uniform");
+    assert_eq!(r["knot_passes"], 1, "auto ran the spline twice on hole8170");
+
+    let disc = scratch("once_disc.msh");
+    common::run_ok(
+        common::polyspline()
+            .args(["generate", "disc", "--elements", "2000", "-o"])
+            .arg(&disc),
+    );
+    let (_, r) = run(&disc, "disc", "auto");
+    let (_, uniform) = run(&disc, "disc", "uniform");
+    assert!(held(&uniform) > 0.1);
+    assert_eq!(r["knot_passes"], 2);
+}
