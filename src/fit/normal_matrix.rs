@@ -149,8 +149,18 @@ impl NormalMatrix {
     /// The stored values, for in-place rescaling (the structure stays fixed; row templates
     /// are expanded).
     pub fn data_mut(&mut self) -> &mut [f64] {
-        if let Values::Templated { .. } = self.values {
-            let data = self.data().to_vec();
+        if matches!(self.values, Values::Templated { .. }) {
+            let Values::Templated {
+                row_template,
+                table,
+                full,
+            } = std::mem::replace(&mut self.values, Values::Full(Vec::new()))
+            else {
+                unreachable!("matched just above")
+            };
+            let data = full
+                .into_inner()
+                .unwrap_or_else(|| expand(&self.indptr, &row_template, &table));
             self.values = Values::Full(data);
         }
         match &mut self.values {
@@ -175,16 +185,20 @@ impl NormalMatrix {
                 Values::Templated {
                     row_template,
                     table,
-                    ..
-                } => crate::solve::BlockedSystem::from_templates(
-                    self.indptr,
-                    self.indices,
-                    row_template,
-                    table,
-                    size,
-                    kind,
-                )?
-                .solve(b, x, params, progress),
+                    full,
+                } => {
+                    // An expanded copy, if one was asked for, is not kept through the solve.
+                    drop(full);
+                    crate::solve::BlockedSystem::from_templates(
+                        self.indptr,
+                        self.indices,
+                        row_template,
+                        table,
+                        size,
+                        kind,
+                    )?
+                    .solve(b, x, params, progress)
+                }
                 Values::Full(data) => crate::solve::BlockedSystem::from_parts(
                     self.indptr,
                     self.indices,

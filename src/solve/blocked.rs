@@ -1980,9 +1980,14 @@ mod tests {
                 rel_tol: 1e-9,
                 ..Default::default()
             };
-            let borrowed =
-                BlockedSystem::build(&a.0, Cow::Borrowed(&a.1), Cow::Borrowed(&a.2), 16, kind)
-                    .unwrap();
+            let borrowed = BlockedSystem::build(
+                &a.0,
+                Cow::Borrowed(&a.1),
+                Values::Csr(Cow::Borrowed(&a.2)),
+                16,
+                kind,
+            )
+            .unwrap();
             let owned =
                 BlockedSystem::from_parts(a.0.clone(), a.1.clone(), a.2.clone(), 16, kind).unwrap();
             assert_eq!(owned.sweep_order().is_some(), sweeps);
