@@ -239,7 +239,7 @@ impl LocalMatrix {
                 )
             }
             Err(k) => {
-                let (indptr, indices, data) = k.into_parts();
+                let (indptr, indices, data) = (*k).into_parts();
                 (indptr, indices, LocalValues::Full(data))
             }
         };

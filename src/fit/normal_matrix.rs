@@ -19,6 +19,14 @@ pub struct NormalMatrix {
     values: Values,
 }
 
+/// A matrix stored by row template: row offsets, columns, template per row, templates.
+pub(crate) type TemplatedParts = (
+    Vec<usize>,
+    Vec<u32>,
+    Vec<u32>,
+    crate::solve::blocked::RowTemplates,
+);
+
 #[derive(Clone)]
 enum Values {
     Full(Vec<f64>),
@@ -125,24 +133,14 @@ impl NormalMatrix {
 
     /// The rows stored by template as (row offsets, columns, template per row, templates), or
     /// the matrix back when it holds a plain value array.
-    pub(crate) fn into_templates(
-        self,
-    ) -> Result<
-        (
-            Vec<usize>,
-            Vec<u32>,
-            Vec<u32>,
-            crate::solve::blocked::RowTemplates,
-        ),
-        Self,
-    > {
+    pub(crate) fn into_templates(self) -> Result<TemplatedParts, Box<Self>> {
         match self.values {
             Values::Templated {
                 row_template,
                 table,
                 ..
             } => Ok((self.indptr, self.indices, row_template, table)),
-            values => Err(NormalMatrix { values, ..self }),
+            values => Err(Box::new(NormalMatrix { values, ..self })),
         }
     }
 
