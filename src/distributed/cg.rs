@@ -33,6 +33,7 @@
 use super::comm::Comm;
 use crate::fit::NormalMatrix;
 use crate::solve::block_jacobi::{BlockJacobi, DEFAULT_BLOCK};
+use crate::solve::blocked::RowTemplates;
 use crate::solve::{CgError, CgInfo, CgParams, CgPreconditioner, Preconditioner};
 use rayon::prelude::*;
 
@@ -182,7 +183,14 @@ impl Halo {
 pub struct LocalMatrix {
     indptr: Vec<usize>,
     indices: Vec<u32>,
-    data: Vec<f64>,
+    values: LocalValues,
+}
+
+/// The values of a [`LocalMatrix`]: a CSR value array, or a template per row as the
+/// assembly stores them (the share's rows repeat like K's; see [`NormalMatrix`]).
+enum LocalValues {
+    Full(Vec<f64>),
+    Templated(Vec<u32>, RowTemplates),
 }
 
 impl LocalMatrix {
@@ -206,24 +214,38 @@ impl LocalMatrix {
         LocalMatrix {
             indptr,
             indices,
-            data,
+            values: LocalValues::Full(data),
         }
     }
 
     /// [`LocalMatrix::new`] taking `k` apart instead of copying it: its rows outside
     /// `halo.global` are empty and the local numbering keeps the global order, so the
     /// entries stay where they are and only the columns are renumbered (the assembled share
-    /// is the largest array a rank holds; a copy would double it at the fit's peak).
+    /// is the largest array a rank holds; a copy would double it at the fit's peak). Rows
+    /// stored by template stay so: the share's values are never expanded.
     pub fn from_matrix(k: NormalMatrix, halo: &Halo) -> LocalMatrix {
         let touched: usize = halo
             .global
             .iter()
             .map(|&g| k.indptr()[g as usize + 1] - k.indptr()[g as usize])
             .sum();
-        if touched != k.data().len() {
+        if touched != k.indices().len() {
             return LocalMatrix::new(&k, halo);
         }
-        let (global_ptr, mut indices, data) = k.into_parts();
+        let (global_ptr, mut indices, values) = match k.into_templates() {
+            Ok((indptr, indices, row_template, table)) => {
+                let local = halo.global.iter().map(|&g| row_template[g as usize]);
+                (
+                    indptr,
+                    indices,
+                    LocalValues::Templated(local.collect(), table),
+                )
+            }
+            Err(k) => {
+                let (indptr, indices, data) = (*k).into_parts();
+                (indptr, indices, LocalValues::Full(data))
+            }
+        };
         let mut indptr = Vec::with_capacity(halo.len() + 1);
         indptr.push(0);
         indptr.extend(halo.global.iter().map(|&g| global_ptr[g as usize + 1]));
@@ -237,20 +259,30 @@ impl LocalMatrix {
         LocalMatrix {
             indptr,
             indices,
-            data,
+            values,
         }
     }
 
     pub fn nonzeros(&self) -> usize {
-        self.data.len()
+        self.indices.len()
+    }
+
+    /// Row r's columns and values.
+    fn row(&self, r: usize) -> (&[u32], &[f64]) {
+        let (lo, hi) = (self.indptr[r], self.indptr[r + 1]);
+        let values = match &self.values {
+            LocalValues::Full(data) => &data[lo..hi],
+            LocalValues::Templated(row_template, table) => table.get(row_template[r]),
+        };
+        (&self.indices[lo..hi], values)
     }
 
     fn apply(&self, x: &[[f64; 3]], y: &mut [[f64; 3]]) {
         y.par_iter_mut().enumerate().for_each(|(r, y)| {
             let mut s = [0.0; 3];
-            for j in self.indptr[r]..self.indptr[r + 1] {
-                let xv = x[self.indices[j] as usize];
-                let a = self.data[j];
+            let (cols, values) = self.row(r);
+            for (&c, &a) in cols.iter().zip(values) {
+                let xv = x[c as usize];
                 for k in 0..3 {
                     s[k] += a * xv[k];
                 }
@@ -262,9 +294,10 @@ impl LocalMatrix {
     fn diagonal(&self) -> Vec<f64> {
         (0..self.indptr.len() - 1)
             .map(|r| {
-                (self.indptr[r]..self.indptr[r + 1])
-                    .find(|&j| self.indices[j] as usize == r)
-                    .map_or(0.0, |j| self.data[j])
+                let (cols, values) = self.row(r);
+                cols.iter()
+                    .position(|&c| c as usize == r)
+                    .map_or(0.0, |j| values[j])
             })
             .collect()
     }
@@ -301,12 +334,12 @@ impl LocalBlockJacobi {
         let mut indptr = vec![0usize];
         let (mut indices, mut data) = (Vec::new(), Vec::new());
         for &i in &interior {
-            let i = i as usize;
-            for j in k.indptr[i]..k.indptr[i + 1] {
-                let c = slot[k.indices[j] as usize];
+            let (cols, values) = k.row(i as usize);
+            for (&c, &v) in cols.iter().zip(values) {
+                let c = slot[c as usize];
                 if c != u32::MAX {
                     indices.push(c);
-                    data.push(k.data[j]);
+                    data.push(v);
                 }
             }
             indptr.push(indices.len());
@@ -481,12 +514,27 @@ mod tests {
             &NormalMatrix::new(5, indptr.clone(), indices.clone(), data.clone()),
             &halo,
         );
+        // The same share with its rows stored by template.
+        let mut table = RowTemplates::default();
+        let templates = table.add_rows(
+            5,
+            |r| &data[indptr[r]..indptr[r + 1]],
+            crate::solve::blocked::hash_row,
+        );
+        let templated = LocalMatrix::from_matrix(
+            NormalMatrix::from_templates(indptr.clone(), indices.clone(), templates, table),
+            &halo,
+        );
+        assert!(matches!(templated.values, LocalValues::Templated(..)));
         let parts = LocalMatrix::from_matrix(NormalMatrix::new(5, indptr, indices, data), &halo);
         assert_eq!(copy.indptr, vec![0, 2, 5, 7]);
         assert_eq!(copy.indices, vec![0, 1, 0, 1, 2, 1, 2]);
-        assert_eq!(
-            (&parts.indptr, &parts.indices, &parts.data),
-            (&copy.indptr, &copy.indices, &copy.data)
-        );
+        let values = |k: &LocalMatrix| (0..3).map(|r| k.row(r).1.to_vec()).collect::<Vec<_>>();
+        for k in [&parts, &templated] {
+            assert_eq!(
+                (&k.indptr, &k.indices, values(k)),
+                (&copy.indptr, &copy.indices, values(&copy))
+            );
+        }
     }
 }

@@ -613,7 +613,7 @@ pub fn fit_with_targets_from(
         None => vec![[0.0; 3]; k.n()],
     };
     // The solve takes K (the CPU's blocked solvers release it as they reorder it).
-    let (unknowns, nonzeros) = (k.n(), k.data().len());
+    let (unknowns, nonzeros) = (k.n(), k.indices().len());
     let cg = solve(k, &rhs, &mut delta, &params.cg)?;
     if let Some(d) = &scale {
         for (x, &d) in delta.iter_mut().zip(d) {

@@ -4,11 +4,38 @@
 
 use super::*;
 
-/// The symmetric matrix K in CSR form (a [`sprs::CsMatI`] with `u32` column indices and
-/// `usize` row offsets, columns sorted within each row), applied to 3-component vectors.
+/// The symmetric matrix K in CSR form (`u32` column indices, `usize` row offsets, columns
+/// sorted within each row), applied to 3-component vectors.
+///
+/// The values are stored either as a plain CSR value array or, as the assembly makes them
+/// on meshes whose rows repeat (K depends on the topology and the weights, not on the
+/// geometry), as one template id per row into a table of distinct row value sequences: at
+/// 1M hexes that is a few MB instead of the 0.95 GB value array. [`Self::data`] expands the
+/// templates on first use (once); the blocked CG takes them as they are.
 #[derive(Clone)]
 pub struct NormalMatrix {
-    mat: sprs::CsMatI<f64, u32, usize>,
+    indptr: Vec<usize>,
+    indices: Vec<u32>,
+    values: Values,
+}
+
+/// A matrix stored by row template: row offsets, columns, template per row, templates.
+pub(crate) type TemplatedParts = (
+    Vec<usize>,
+    Vec<u32>,
+    Vec<u32>,
+    crate::solve::blocked::RowTemplates,
+);
+
+#[derive(Clone)]
+enum Values {
+    Full(Vec<f64>),
+    Templated {
+        row_template: Vec<u32>,
+        table: crate::solve::blocked::RowTemplates,
+        /// The expanded values, made by the first [`NormalMatrix::data`].
+        full: std::sync::OnceLock<Vec<f64>>,
+    },
 }
 
 impl NormalMatrix {
@@ -19,46 +46,131 @@ impl NormalMatrix {
     /// If the arrays do not describe a valid n×n CSR structure: they are built by this crate,
     /// so a failure is a bug, not bad input.
     pub fn new(n: usize, indptr: Vec<usize>, indices: Vec<u32>, data: Vec<f64>) -> Self {
+        let (indptr, indices, data) =
+            sprs::CsMatI::new((n, n), indptr, indices, data).into_raw_storage();
         NormalMatrix {
-            mat: sprs::CsMatI::new((n, n), indptr, indices, data),
+            indptr,
+            indices,
+            values: Values::Full(data),
+        }
+    }
+
+    /// The matrix whose row r has the columns `indices[indptr[r]..indptr[r + 1]]` (strictly
+    /// increasing) and the values of template `row_template[r]` of `table`.
+    pub(crate) fn from_templates(
+        indptr: Vec<usize>,
+        indices: Vec<u32>,
+        row_template: Vec<u32>,
+        table: crate::solve::blocked::RowTemplates,
+    ) -> Self {
+        debug_assert!((0..row_template.len()).all(|r| {
+            table.get(row_template[r]).len() == indptr[r + 1] - indptr[r]
+                && indices[indptr[r]..indptr[r + 1]]
+                    .windows(2)
+                    .all(|w| w[0] < w[1])
+        }));
+        NormalMatrix {
+            indptr,
+            indices,
+            values: Values::Templated {
+                row_template,
+                table,
+                full: std::sync::OnceLock::new(),
+            },
+        }
+    }
+
+    /// The number of distinct row value sequences stored, `None` for a plain value array.
+    pub fn n_templates(&self) -> Option<usize> {
+        match &self.values {
+            Values::Full(_) => None,
+            Values::Templated { table, .. } => Some(table.len()),
         }
     }
 
     /// The number of rows (= columns).
     pub fn n(&self) -> usize {
-        self.mat.rows()
+        self.indptr.len() - 1
     }
 
     /// The n + 1 row offsets into [`Self::indices`] and [`Self::data`].
     pub fn indptr(&self) -> &[usize] {
-        self.mat.indptr().into_raw_storage()
+        &self.indptr
     }
 
     /// The column of each stored entry, row by row.
     pub fn indices(&self) -> &[u32] {
-        self.mat.indices()
+        &self.indices
     }
 
-    /// The value of each stored entry, row by row.
+    /// The value of each stored entry, row by row (expanding row templates on first use).
     pub fn data(&self) -> &[f64] {
-        self.mat.data()
+        match &self.values {
+            Values::Full(d) => d,
+            Values::Templated {
+                row_template,
+                table,
+                full,
+            } => full.get_or_init(|| expand(&self.indptr, row_template, table)),
+        }
     }
 
-    /// The CSR arrays (row offsets, columns, values), without copying them.
+    /// The CSR arrays (row offsets, columns, values), without copying them (row templates
+    /// are expanded).
     pub fn into_parts(self) -> (Vec<usize>, Vec<u32>, Vec<f64>) {
-        let (indptr, indices, data) = self.mat.into_raw_storage();
-        (indptr, indices, data)
+        let data = match self.values {
+            Values::Full(d) => d,
+            Values::Templated {
+                row_template,
+                table,
+                full,
+            } => full
+                .into_inner()
+                .unwrap_or_else(|| expand(&self.indptr, &row_template, &table)),
+        };
+        (self.indptr, self.indices, data)
     }
 
-    /// The stored values, for in-place rescaling (the structure stays fixed).
+    /// The rows stored by template as (row offsets, columns, template per row, templates), or
+    /// the matrix back when it holds a plain value array.
+    pub(crate) fn into_templates(self) -> Result<TemplatedParts, Box<Self>> {
+        match self.values {
+            Values::Templated {
+                row_template,
+                table,
+                ..
+            } => Ok((self.indptr, self.indices, row_template, table)),
+            values => Err(Box::new(NormalMatrix { values, ..self })),
+        }
+    }
+
+    /// The stored values, for in-place rescaling (the structure stays fixed; row templates
+    /// are expanded).
     pub fn data_mut(&mut self) -> &mut [f64] {
-        self.mat.data_mut()
+        if matches!(self.values, Values::Templated { .. }) {
+            let Values::Templated {
+                row_template,
+                table,
+                full,
+            } = std::mem::replace(&mut self.values, Values::Full(Vec::new()))
+            else {
+                unreachable!("matched just above")
+            };
+            let data = full
+                .into_inner()
+                .unwrap_or_else(|| expand(&self.indptr, &row_template, &table));
+            self.values = Values::Full(data);
+        }
+        match &mut self.values {
+            Values::Full(d) => d,
+            Values::Templated { .. } => unreachable!("expanded just above"),
+        }
     }
 
     /// [`crate::solve::pcg`] on this matrix, consuming it: the blocked solvers keep A in their
     /// own form and release the CSR arrays as they build it
-    /// ([`crate::solve::BlockedSystem::from_parts`]), so the solve's peak memory does not hold
-    /// A twice. Same iterates as `pcg(&self, ..)`.
+    /// ([`crate::solve::BlockedSystem::from_parts`]; row templates are taken as they are), so
+    /// the solve's peak memory does not hold A twice. Same iterates as `pcg(&self, ..)`.
     pub fn pcg(
         self,
         b: &[[f64; 3]],
@@ -67,19 +179,51 @@ impl NormalMatrix {
         progress: impl crate::solve::CgMonitor,
     ) -> Result<crate::solve::CgInfo, CgError> {
         match params.preconditioner.blocked() {
-            Some((size, kind)) => {
-                let (indptr, indices, data) = self.into_parts();
-                crate::solve::BlockedSystem::from_parts(indptr, indices, data, size, kind)?
+            Some((size, kind)) => match self.values {
+                Values::Templated {
+                    row_template,
+                    table,
+                    full,
+                } => {
+                    // An expanded copy, if one was asked for, is not kept through the solve.
+                    drop(full);
+                    crate::solve::BlockedSystem::from_templates(
+                        self.indptr,
+                        self.indices,
+                        row_template,
+                        table,
+                        size,
+                        kind,
+                    )?
                     .solve(b, x, params, progress)
-            }
+                }
+                Values::Full(data) => crate::solve::BlockedSystem::from_parts(
+                    self.indptr,
+                    self.indices,
+                    data,
+                    size,
+                    kind,
+                )?
+                .solve(b, x, params, progress),
+            },
             None => crate::solve::pcg(&self, b, x, params, progress),
         }
     }
+}
 
-    /// The underlying sparse matrix.
-    pub fn as_sprs(&self) -> &sprs::CsMatI<f64, u32, usize> {
-        &self.mat
-    }
+/// The CSR value array of rows stored by template (rows past `row_template`'s end are zero).
+pub(super) fn expand(
+    indptr: &[usize],
+    row_template: &[u32],
+    table: &crate::solve::blocked::RowTemplates,
+) -> Vec<f64> {
+    let mut data = vec![0.0; indptr[indptr.len() - 1]];
+    crate::solve::block_jacobi::split_at_offsets(&mut data, indptr)
+        .into_par_iter()
+        .zip(row_template.par_iter())
+        .with_min_len(256)
+        .for_each(|(row, &t)| row.copy_from_slice(table.get(t)));
+    data
 }
 
 impl LinOp for NormalMatrix {
@@ -321,20 +465,69 @@ pub(super) fn control_point_scales(space: &dyn FitSpace, levels: &[u16]) -> Opti
 impl NormalMatrix {
     /// K ← D K D for the diagonal D = diag(`d`).
     pub fn scale_symmetric(&mut self, d: &[f64]) {
-        // `modify` lends the three CSR arrays at once, so the values can be scaled row by row
-        // in parallel next to the column indices; the structure itself is left unchanged.
-        self.mat.modify(|indptr, indices, data| {
-            let (indptr, indices) = (&*indptr, &*indices);
-            crate::solve::block_jacobi::split_at_offsets(data, indptr)
+        let (indptr, indices) = (&self.indptr, &self.indices);
+        if let Values::Templated {
+            row_template,
+            table,
+            full,
+        } = &mut self.values
+        {
+            // Rows and columns with D = 1 keep their template; the other rows get templates
+            // of their scaled values, a chunk of rows at a time.
+            let moved: Vec<usize> = (0..row_template.len())
                 .into_par_iter()
-                .enumerate()
-                .for_each(|(r, row)| {
-                    let cols = &indices[indptr[r]..indptr[r + 1]];
-                    for (v, &c) in row.iter_mut().zip(cols) {
-                        *v *= d[r] * d[c as usize];
+                .with_min_len(256)
+                .filter(|&r| {
+                    d[r] != 1.0
+                        || indices[indptr[r]..indptr[r + 1]]
+                            .iter()
+                            .any(|&c| d[c as usize] != 1.0)
+                })
+                .collect();
+            if 2 * moved.len() <= row_template.len() {
+                *full = std::sync::OnceLock::new();
+                for rows in moved.chunks(1 << 14) {
+                    let mut start = vec![0usize];
+                    for &r in rows {
+                        start.push(start[start.len() - 1] + indptr[r + 1] - indptr[r]);
                     }
-                });
-        });
+                    let mut values = vec![0.0; start[rows.len()]];
+                    crate::solve::block_jacobi::split_at_offsets(&mut values, &start)
+                        .into_par_iter()
+                        .zip(rows.par_iter())
+                        .for_each(|(v, &r)| {
+                            v.copy_from_slice(table.get(row_template[r]));
+                            scale_row(&indices[indptr[r]..indptr[r + 1]], d, r, v);
+                        });
+                    let t = table.add_rows(
+                        rows.len(),
+                        |i| &values[start[i]..start[i + 1]],
+                        crate::solve::blocked::hash_row,
+                    );
+                    for (&r, t) in rows.iter().zip(t) {
+                        row_template[r] = t;
+                    }
+                }
+                return;
+            }
+        }
+        // Scaled rows seldom repeat: the plain value array.
+        self.data_mut();
+        let Values::Full(data) = &mut self.values else {
+            unreachable!("expanded by data_mut")
+        };
+        let (indptr, indices) = (&self.indptr, &self.indices);
+        crate::solve::block_jacobi::split_at_offsets(data, indptr)
+            .into_par_iter()
+            .enumerate()
+            .for_each(|(r, row)| scale_row(&indices[indptr[r]..indptr[r + 1]], d, r, row));
+    }
+}
+
+/// Row r's values `v` (columns `cols`) times d_r d_c.
+fn scale_row(cols: &[u32], d: &[f64], r: usize, v: &mut [f64]) {
+    for (v, &c) in v.iter_mut().zip(cols) {
+        *v *= d[r] * d[c as usize];
     }
 }
 

@@ -91,7 +91,7 @@ pub struct TemplateMatrix {
 }
 
 /// A hash of a row's value sequence (four independent lanes, so it is not latency-bound).
-fn hash_row(v: &[f64]) -> u64 {
+pub(crate) fn hash_row(v: &[f64]) -> u64 {
     let mut h = [v.len() as u64, 1, 2, 3];
     let mut it = v.chunks_exact(4);
     for c in &mut it {
@@ -109,6 +109,98 @@ fn hash_row(v: &[f64]) -> u64 {
 
 fn same_bits(a: &[f64], b: &[f64]) -> bool {
     a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits())
+}
+
+/// A table of distinct row value sequences (templates), filled batch by batch: template t's
+/// values are `values[start[t]..start[t + 1]]`. Rows are matched by exact bits, so a row's
+/// template holds its own values.
+#[derive(Clone)]
+pub(crate) struct RowTemplates {
+    by_hash: HashMap<u64, u32>,
+    /// Templates made for rows whose hash matched a template with other values.
+    collided: Vec<u32>,
+    pub(crate) start: Vec<usize>,
+    pub(crate) values: Vec<f64>,
+}
+
+impl Default for RowTemplates {
+    fn default() -> Self {
+        RowTemplates {
+            by_hash: HashMap::new(),
+            collided: Vec::new(),
+            start: vec![0],
+            values: Vec::new(),
+        }
+    }
+}
+
+impl RowTemplates {
+    /// Number of templates.
+    pub(crate) fn len(&self) -> usize {
+        self.start.len() - 1
+    }
+
+    /// Template t's values.
+    pub(crate) fn get(&self, t: u32) -> &[f64] {
+        &self.values[self.start[t as usize]..self.start[t as usize + 1]]
+    }
+
+    fn push(start: &mut Vec<usize>, values: &mut Vec<f64>, v: &[f64]) -> u32 {
+        values.extend_from_slice(v);
+        start.push(values.len());
+        start.len() as u32 - 2
+    }
+
+    /// The template of each of the rows `row(0..count)`, adding the new ones in order of
+    /// first appearance (by hash, sequentially: a deterministic numbering), then every row
+    /// compared with its template in parallel; the rows of a hash collision (if any) get
+    /// templates of their own.
+    pub(crate) fn add_rows<'a>(
+        &mut self,
+        count: usize,
+        row: impl Fn(usize) -> &'a [f64] + Sync,
+        hash: impl Fn(&[f64]) -> u64 + Sync,
+    ) -> Vec<u32> {
+        let hashes: Vec<u64> = (0..count)
+            .into_par_iter()
+            .with_min_len(256)
+            .map(|i| hash(row(i)))
+            .collect();
+        let RowTemplates {
+            by_hash,
+            collided,
+            start,
+            values,
+        } = self;
+        let mut template: Vec<u32> = hashes
+            .iter()
+            .enumerate()
+            .map(|(i, &h)| {
+                *by_hash
+                    .entry(h)
+                    .or_insert_with(|| Self::push(start, values, row(i)))
+            })
+            .collect();
+        let get = |t: u32| &values[start[t as usize]..start[t as usize + 1]];
+        let mismatched: Vec<usize> = (0..count)
+            .into_par_iter()
+            .with_min_len(256)
+            .filter(|&i| !same_bits(row(i), get(template[i])))
+            .collect();
+        for i in mismatched {
+            let v = row(i);
+            let known = collided.iter().copied().find(|&t| {
+                let t = t as usize;
+                same_bits(&values[start[t]..start[t + 1]], v)
+            });
+            template[i] = known.unwrap_or_else(|| {
+                let t = Self::push(start, values, v);
+                collided.push(t);
+                t
+            });
+        }
+        template
+    }
 }
 
 impl TemplateMatrix {
@@ -142,64 +234,47 @@ impl TemplateMatrix {
         slot: &[u32],
         hash: impl Fn(&[f64]) -> u64 + Sync,
     ) -> Self {
-        let n = rows.len();
-        let mut new_indptr = Vec::with_capacity(n + 1);
+        let row_values = |i: usize| {
+            let r = rows[i] as usize;
+            &data[indptr[r]..indptr[r + 1]]
+        };
+        let mut table = RowTemplates::default();
+        let template = table.add_rows(rows.len(), row_values, hash);
+        drop(data);
+        Self::renumbered(indptr, indices, template, table, rows, slot)
+    }
+
+    /// A whose rows are already stored by template (row r of the old numbering takes the
+    /// values of template `row_template[r]` of `table`), renumbered like [`Self::new`]: the
+    /// values are never expanded.
+    fn from_templates(
+        indptr: &[usize],
+        indices: Cow<[u32]>,
+        row_template: &[u32],
+        table: RowTemplates,
+        rows: &[u32],
+        slot: &[u32],
+    ) -> Self {
+        let template = rows.iter().map(|&r| row_template[r as usize]).collect();
+        Self::renumbered(indptr, indices, template, table, rows, slot)
+    }
+
+    /// The columns of A renumbered (new row i is old row `rows[i]`, old column c is new
+    /// column `slot[c]`); owned `indices` are released once copied.
+    fn renumbered(
+        indptr: &[usize],
+        indices: Cow<[u32]>,
+        template: Vec<u32>,
+        table: RowTemplates,
+        rows: &[u32],
+        slot: &[u32],
+    ) -> Self {
+        let mut new_indptr = Vec::with_capacity(rows.len() + 1);
         new_indptr.push(0usize);
         for &r in rows {
             let r = r as usize;
             new_indptr.push(new_indptr.last().unwrap() + indptr[r + 1] - indptr[r]);
         }
-        let row_values = |i: usize| {
-            let r = rows[i] as usize;
-            &data[indptr[r]..indptr[r + 1]]
-        };
-        let hashes: Vec<u64> = (0..n)
-            .into_par_iter()
-            .with_min_len(256)
-            .map(|i| hash(row_values(i)))
-            .collect();
-        // Templates by hash in order of first appearance (sequential: a deterministic
-        // numbering), then every row compared with its template's first row in parallel; the
-        // rows of a hash collision (if any) get templates of their own.
-        let mut by_hash: HashMap<u64, u32> = HashMap::new();
-        let mut first_row: Vec<usize> = Vec::new();
-        let mut template: Vec<u32> = hashes
-            .iter()
-            .enumerate()
-            .map(|(i, &h)| {
-                *by_hash.entry(h).or_insert_with(|| {
-                    first_row.push(i);
-                    first_row.len() as u32 - 1
-                })
-            })
-            .collect();
-        let collisions: Vec<usize> = (0..n)
-            .into_par_iter()
-            .with_min_len(256)
-            .filter(|&i| !same_bits(row_values(i), row_values(first_row[template[i] as usize])))
-            .collect();
-        let mut extra: Vec<usize> = Vec::new();
-        for i in collisions {
-            let t = match extra
-                .iter()
-                .position(|&f| same_bits(row_values(f), row_values(i)))
-            {
-                Some(k) => first_row.len() + k,
-                None => {
-                    extra.push(i);
-                    first_row.len() + extra.len() - 1
-                }
-            };
-            template[i] = t as u32;
-        }
-        first_row.extend(extra);
-        let mut template_start = vec![0usize];
-        let mut values = Vec::new();
-        for &f in &first_row {
-            values.extend_from_slice(row_values(f));
-            template_start.push(values.len());
-        }
-        drop(data);
         let mut cols = vec![0u32; indices.len()];
         split_at_offsets(&mut cols, &new_indptr)
             .into_par_iter()
@@ -216,8 +291,8 @@ impl TemplateMatrix {
             indptr: new_indptr,
             cols,
             template,
-            template_start,
-            values,
+            template_start: table.start,
+            values: table.values,
             portable: portable_from_env(),
         }
     }
@@ -296,6 +371,12 @@ fn sum(partials: &[V4]) -> V4 {
     partials
         .iter()
         .fold([0.0; 4], |a, b| std::array::from_fn(|d| a[d] + b[d]))
+}
+
+/// A's values as given to [`BlockedSystem::build`]: CSR values, or a template per row.
+enum Values<'a> {
+    Csr(Cow<'a, [f64]>),
+    Templates(Vec<u32>, RowTemplates),
 }
 
 /// The reordered system and its block factors.
@@ -1044,7 +1125,7 @@ impl BlockedSystem {
         Self::build(
             indptr,
             Cow::Borrowed(indices),
-            Cow::Borrowed(data),
+            Values::Csr(Cow::Borrowed(data)),
             size,
             kind,
         )
@@ -1061,7 +1142,33 @@ impl BlockedSystem {
         size: usize,
         kind: BlockedKind,
     ) -> Result<Self, CgError> {
-        Self::build(&indptr, Cow::Owned(indices), Cow::Owned(data), size, kind)
+        Self::build(
+            &indptr,
+            Cow::Owned(indices),
+            Values::Csr(Cow::Owned(data)),
+            size,
+            kind,
+        )
+    }
+
+    /// [`Self::from_parts`] for a matrix whose rows are stored by template (row r's values
+    /// are template `row_template[r]` of `table`, as the fit's assembly makes them): the
+    /// values are never expanded into a CSR value array. Same system, same bits.
+    pub(crate) fn from_templates(
+        indptr: Vec<usize>,
+        indices: Vec<u32>,
+        row_template: Vec<u32>,
+        table: RowTemplates,
+        size: usize,
+        kind: BlockedKind,
+    ) -> Result<Self, CgError> {
+        Self::build(
+            &indptr,
+            Cow::Owned(indices),
+            Values::Templates(row_template, table),
+            size,
+            kind,
+        )
     }
 
     /// [`Self::new`] with the aggregates ordered by colour, for the symmetric block
@@ -1096,7 +1203,7 @@ impl BlockedSystem {
     fn build(
         indptr: &[usize],
         indices: Cow<[u32]>,
-        data: Cow<[f64]>,
+        values: Values,
         size: usize,
         kind: BlockedKind,
     ) -> Result<Self, CgError> {
@@ -1110,7 +1217,19 @@ impl BlockedSystem {
         } else {
             (agg, None)
         };
-        let a = TemplateMatrix::with_hash(indptr, indices, data, &agg.rows, &agg.slot, hash_row);
+        let a = match values {
+            Values::Csr(data) => {
+                TemplateMatrix::with_hash(indptr, indices, data, &agg.rows, &agg.slot, hash_row)
+            }
+            Values::Templates(row_template, table) => TemplateMatrix::from_templates(
+                indptr,
+                indices,
+                &row_template,
+                table,
+                &agg.rows,
+                &agg.slot,
+            ),
+        };
         let start = &agg.start;
         let (factors, factor_start) = factor_blocks(start, &agg.rows, |b, l| {
             let s = start[b];
@@ -1861,9 +1980,14 @@ mod tests {
                 rel_tol: 1e-9,
                 ..Default::default()
             };
-            let borrowed =
-                BlockedSystem::build(&a.0, Cow::Borrowed(&a.1), Cow::Borrowed(&a.2), 16, kind)
-                    .unwrap();
+            let borrowed = BlockedSystem::build(
+                &a.0,
+                Cow::Borrowed(&a.1),
+                Values::Csr(Cow::Borrowed(&a.2)),
+                16,
+                kind,
+            )
+            .unwrap();
             let owned =
                 BlockedSystem::from_parts(a.0.clone(), a.1.clone(), a.2.clone(), 16, kind).unwrap();
             assert_eq!(owned.sweep_order().is_some(), sweeps);
