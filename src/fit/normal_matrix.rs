@@ -340,8 +340,8 @@ fn corner_of(l: [usize; 3]) -> usize {
 /// kept.
 pub struct ElementBlocks {
     /// Per element: bit c (c < 8) for a boundary corner c, bit 8 + i for a sample i that takes
-    /// the feature weight, [`DEEP_BIT`] for an element a ring away from the boundary, the size
-    /// level from bit [`LEVEL_SHIFT`].
+    /// the feature weight, `DEEP_BIT` for an element a ring away from the boundary, the size
+    /// level from bit `LEVEL_SHIFT`.
     pub masks: Vec<u64>,
     /// (G^d, G^r), row-major 3^d × 3^d, per mask.
     pub cache: HashMap<u64, (Vec<f64>, Vec<f64>)>,

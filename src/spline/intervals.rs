@@ -141,7 +141,7 @@ pub struct KnotSurfaceInfo {
     /// splitting.
     pub max_spread: f64,
     /// Share of the interior facets on consistently graded surfaces of the unsplit knot
-    /// surfaces ([`graded_share`]): `--knot-intervals auto` takes graded knots without trying
+    /// surfaces (`graded_share`): `--knot-intervals auto` takes graded knots without trying
     /// uniform ones from [`AUTO_GRADED_SHARE`] on.
     pub graded_share: f64,
 }
