@@ -163,8 +163,16 @@ impl SplineSetup {
 
     /// Puts `knots` of `intervals` in place of the setup's knots and returns those (the
     /// features, kinks and targets do not depend on the knots). Only without glued seams.
-    fn set_knots(&mut self, intervals: crate::spline::KnotIntervals, knots: Knots) -> Knots {
+    fn set_knots(
+        &mut self,
+        intervals: crate::spline::KnotIntervals,
+        knots: Knots,
+        weights: crate::fit::FitWeights,
+    ) -> Knots {
         debug_assert!(self.seams.is_none());
+        // The fit's weights depend on the knots too (`FitWeights::for_knots`).
+        self.fit_params.weights =
+            weights.for_knots(intervals == crate::spline::KnotIntervals::Graded);
         let old = Knots {
             weights: self.knot_weights.take(),
             split: std::mem::take(&mut self.knot_split),
@@ -417,7 +425,7 @@ pub(super) fn curve_spline(
     };
     if survey.graded_share >= crate::spline::AUTO_GRADED_SHARE {
         let knots = graded_knots(clock, survey);
-        setup.set_knots(KnotIntervals::Graded, knots);
+        setup.set_knots(KnotIntervals::Graded, knots, job.options.fit.weights);
         let outcome = spline_pass(&graded_job, &setup, clock)?;
         return Ok((setup, outcome));
     }
@@ -426,13 +434,17 @@ pub(super) fn curve_spline(
         return Ok((setup, first));
     }
     let knots = graded_knots(clock, survey);
-    let uniform_knots = setup.set_knots(KnotIntervals::Graded, knots);
+    let uniform_knots = setup.set_knots(KnotIntervals::Graded, knots, job.options.fit.weights);
     setup.knot_passes = 2;
     let second = spline_pass(&graded_job, &setup, clock)?;
     if decisive(held(&second), held(&first)) {
         return Ok((setup, second));
     }
-    setup.set_knots(KnotIntervals::Uniform, uniform_knots);
+    setup.set_knots(
+        KnotIntervals::Uniform,
+        uniform_knots,
+        job.options.fit.weights,
+    );
     Ok((setup, first))
 }
 
