@@ -40,7 +40,8 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
     let knots = args.knots.params();
     // Features as `curve` finds them: where it glues the translation seams (not with graded
     // knots), a seam is interior and no feature.
-    let view = (knots.intervals != polyspline::spline::KnotIntervals::Graded)
+    let view = seam::not_glued_with(knots.intervals)
+        .is_none()
         .then(|| seam::glue(&linear, &pairs))
         .flatten()
         .map(|g| seam::interior_view(&linear, &topo, &g));

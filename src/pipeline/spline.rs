@@ -275,8 +275,7 @@ fn glue_seams(job: &Job, pairs: &[PeriodicPair]) -> (Option<Glued>, Option<Strin
     if pairs.is_empty() {
         return (None, None);
     }
-    if job.options.knots.intervals == crate::spline::KnotIntervals::Graded {
-        let why = "graded knot intervals are measured on the unglued mesh";
+    if let Some(why) = seam::not_glued_with(job.options.knots.intervals) {
         return (None, Some(why.into()));
     }
     let seams = seam::glue(job.mesh, pairs);

@@ -56,6 +56,13 @@ fn find(parent: &mut [u32], mut v: u32) -> u32 {
     v
 }
 
+/// Why the seams are not glued with knots of `intervals`, if they are not: graded knot
+/// surfaces are measured on the unglued mesh (the one rule `curve` and `info` follow).
+pub fn not_glued_with(intervals: super::KnotIntervals) -> Option<&'static str> {
+    (intervals == super::KnotIntervals::Graded)
+        .then_some("graded knot intervals are measured on the unglued mesh")
+}
+
 /// The input with the translation pairs among `pairs` glued, or `None` when there is none or
 /// the glued mesh is not manifold (a period of fewer elements than a stencil needs, for
 /// instance): the sides are then curved apart and made images afterwards.
