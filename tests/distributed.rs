@@ -1282,3 +1282,255 @@ fn the_default_knot_intervals_run_uniform_under_mpirun_and_say_so() {
         "the default differs from uniform knots under mpirun"
     );
 }
+
+// ---------------------------------------------------------------------------------------
+// Periodic pairs across ranks (`distributed::periodic`).
+// ---------------------------------------------------------------------------------------
+
+/// Largest |A x_master − x_image| Gmsh finds over the written node pairs, relative to the
+/// diagonal (issue #34: to rounding, 1e-12 of the diagonal).
+const PERIODIC_IMAGE_TOL: f64 = 1e-12;
+
+/// The ranks whose elements touch boundary group `side` of `path` when its elements are
+/// split into `np` runs in file order (`POLYSPLINE_PARTITION=file-order`: rank r owns
+/// elements ⌊rN/P⌋ … ⌊(r+1)N/P⌋ − 1), from the raw file.
+fn file_order_ranks_of(path: &Path, np: usize, side: &str) -> std::collections::BTreeSet<usize> {
+    use polyspline::io::CellKind;
+    let raw = polyspline::io::read_raw(path).unwrap();
+    let tag = *raw
+        .tag_names
+        .iter()
+        .find(|(_, n)| n.as_str() == side)
+        .unwrap()
+        .0;
+    let cells = |kinds: &[CellKind]| -> Vec<&[i64]> {
+        raw.blocks
+            .iter()
+            .filter(|b| b.kind.is_some_and(|k| kinds.contains(&k)))
+            .flat_map(|b| b.nodes.chunks_exact(b.nodes_per_cell))
+            .collect()
+    };
+    let volume = cells(&[CellKind::Hexahedron, CellKind::Quadrilateral]);
+    let dim3 = volume.first().is_some_and(|c| c.len() == 8);
+    let facet_kind = if dim3 {
+        CellKind::Quadrilateral
+    } else {
+        CellKind::Line
+    };
+    let on_side: std::collections::HashSet<i64> = raw
+        .blocks
+        .iter()
+        .filter(|b| b.kind == Some(facet_kind))
+        .flat_map(|b| {
+            b.nodes
+                .chunks_exact(b.nodes_per_cell)
+                .zip(&b.tags)
+                .filter(|&(_, &t)| t == tag)
+                .flat_map(|(c, _)| c.iter().copied())
+        })
+        .collect();
+    let volume: Vec<&[i64]> = volume
+        .into_iter()
+        .filter(|c| c.len() == if dim3 { 8 } else { 4 })
+        .collect();
+    let n = volume.len();
+    volume
+        .iter()
+        .enumerate()
+        .filter(|(_, c)| c.iter().any(|v| on_side.contains(v)))
+        .map(|(e, _)| (0..np).rfind(|&r| r * n / np <= e).unwrap())
+        .collect()
+}
+
+/// `periodic_probe.py` (Gmsh's `getPeriodicNodes` and node coordinates) on `file`: one link,
+/// image side `image` of master `master`, every node of the image side paired, each pair the
+/// affine image of its master to [`PERIODIC_IMAGE_TOL`] of the diagonal. Returns the link.
+fn assert_gmsh_pairs_exact(file: &Path, master: &str, image: &str) -> Value {
+    let out = common::run_ok(
+        common::python()
+            .arg(concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/tests/external/periodic_probe.py"
+            ))
+            .arg(file),
+    );
+    let p: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let what = file.display();
+    let links = p["links"].as_array().unwrap();
+    assert_eq!(links.len(), 1, "{what}: {links:?}");
+    let l = &links[0];
+    assert_eq!(l["name"], image, "{what}: {l}");
+    assert_eq!(l["master_name"], master, "{what}: {l}");
+    let pairs = l["pairs"].as_u64().unwrap();
+    assert!(pairs > 0 && pairs == l["entity_nodes"], "{what}: {l}");
+    assert_eq!(l["unpaired"], 0, "{what}: {l}");
+    let miss = l["max_mismatch"].as_f64().unwrap() / p["diagonal"].as_f64().unwrap();
+    assert!(
+        miss <= PERIODIC_IMAGE_TOL,
+        "{what}: the images miss by {miss:e} of the diagonal: {l}"
+    );
+    l.clone()
+}
+
+/// `--periodic A:B` under mpirun, the two sides on different ranks: the generated channel
+/// (translation; 2D at orders 1, 4 and 10, 3D at order 2) and the generated annulus sector
+/// (rotation about z, 3D at order 3), binary MSH 4.1, on 2 and 3 ranks with the elements
+/// split in file order so that the ranks holding side A are not those holding side B
+/// (checked from the raw file). Gmsh reads the written `$Periodic` section: every node of the
+/// image side is paired with one of the master side, as many pairs as the serial file's, and
+/// each pair matches under Gmsh's affine map to 1e-12 of the diagonal; the report says `c0`
+/// and as many node pairs. The same with the default Morton partition at 3 ranks. Against the
+/// serial run: the rotation pair (C⁰ serially too) within [`RANK_TOLERANCE`] at
+/// `--cg-tol 1e-8`; the translation pairs are glued serially (C¹) but not across ranks (C⁰),
+/// so only the counts are compared there.
+#[test]
+fn periodic_pairs_are_exact_images_across_ranks() {
+    if !have_mpirun() || !common::have_gmsh(&common::current_test()) {
+        return;
+    }
+    let channel = "channel --around 12 --across 6 --first-height 0.02 --bump 0.15";
+    let sector = "sector --around 6 --across 6 --first-height 0.02 --sector 40";
+    let cases: [(&str, String, [&str; 2], &[usize], bool); 3] = [
+        (
+            "pchannel2d",
+            channel.to_string(),
+            ["periodic_left", "periodic_right"],
+            &[1, 4, 10],
+            false,
+        ),
+        (
+            "pchannel3d",
+            format!("{channel} --layers 2 --span 0.3"),
+            ["periodic_left", "periodic_right"],
+            &[2],
+            false,
+        ),
+        (
+            "psector3d",
+            format!("{sector} --layers 2 --span 0.5"),
+            ["periodic_lo", "periodic_hi"],
+            &[3],
+            true,
+        ),
+    ];
+    for (name, args, [a, b], orders, same_as_serial) in cases {
+        let input = scratch(&format!("{name}.msh"));
+        common::run_ok(
+            Command::new(BIN)
+                .args(args.split(' ').next())
+                .args(["--binary", "-o"])
+                .arg(&input)
+                .args(args.split(' ').skip(1)),
+        );
+        let pair = format!("{a}:{b}");
+        for &order in orders {
+            let o = order.to_string();
+            let opts = [
+                "--order",
+                &o,
+                "--periodic",
+                &pair,
+                "--cg-tol",
+                RANK_CG_TOL,
+            ];
+            let (serial, _, sr) = curve_with_report(0, &input, &format!("{name}_p{order}"), &opts);
+            let serial_link = assert_gmsh_pairs_exact(&serial, a, b);
+            let serial_mesh = read(&serial);
+            for (np, partition) in [(2, "file-order"), (3, "file-order"), (3, "morton")] {
+                if partition == "file-order" {
+                    let (ra, rb) = (
+                        file_order_ranks_of(&input, np, a),
+                        file_order_ranks_of(&input, np, b),
+                    );
+                    assert!(
+                        ra.is_disjoint(&rb),
+                        "{name}: at {np} ranks side {a} is on ranks {ra:?}, {b} on {rb:?}"
+                    );
+                }
+                let tag = format!("{name}_p{order}_{partition}");
+                let out = scratch(&format!("{tag}_np{np}.msh"));
+                let report = scratch(&format!("{tag}_np{np}.json"));
+                let mut cmd = mpirun(np);
+                if partition == "file-order" {
+                    cmd.env("POLYSPLINE_PARTITION", "file-order");
+                }
+                common::run_ok(
+                    cmd.arg(BIN)
+                        .arg("curve")
+                        .arg(&input)
+                        .arg("-o")
+                        .arg(&out)
+                        .arg("--report")
+                        .arg(&report)
+                        .arg("-q")
+                        .args(opts),
+                );
+                let what = format!("{tag} on {np} ranks");
+                let link = assert_gmsh_pairs_exact(&out, a, b);
+                assert_eq!(link["pairs"], serial_link["pairs"], "{what}");
+                let r: Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap())
+                    .unwrap();
+                let rp = &r["periodic"];
+                assert_eq!(rp["seam"], "c0", "{what}: {rp}");
+                assert_eq!(rp["node_pairs"], serial_link["pairs"], "{what}: {rp}");
+                assert_eq!(rp["pairs"][0]["kind"], sr["periodic"]["pairs"][0]["kind"]);
+                let dist_mesh = read(&out);
+                if same_as_serial {
+                    let worst = compare(&serial_mesh, &dist_mesh);
+                    assert!(
+                        worst <= RANK_TOLERANCE * diagonal(&serial_mesh),
+                        "{what}: a node is {worst:e} from the serial run's"
+                    );
+                } else {
+                    assert_eq!(serial_mesh.nodes.len(), dist_mesh.nodes.len(), "{what}");
+                    assert_eq!(serial_mesh.boundary_tags, dist_mesh.boundary_tags, "{what}");
+                }
+            }
+        }
+    }
+}
+
+/// Under mpirun a generated periodic channel (its `$Periodic` section, not read by the ranks)
+/// without `--periodic`, a pair whose sides are no images, and `--periodic` with
+/// `--partitioned` each fail with one error line and write nothing.
+#[test]
+fn periodic_refusals_under_mpirun_are_one_line() {
+    if !have_mpirun() {
+        return;
+    }
+    let input = scratch("prefuse.msh");
+    common::run_ok(
+        Command::new(BIN)
+            .args(["generate", "channel", "--around", "8", "--across", "4"])
+            .args(["--binary", "-o"])
+            .arg(&input),
+    );
+    for (args, says) in [
+        (vec![], "$Periodic"),
+        (
+            vec!["--periodic", "periodic_left:wall"],
+            "cannot be images of each other",
+        ),
+        (
+            vec!["--periodic", "periodic_left:periodic_right", "--partitioned"],
+            "--partitioned",
+        ),
+    ] {
+        let out = scratch("prefuse_out.msh");
+        let _ = std::fs::remove_file(&out);
+        let o = mpirun(2)
+            .arg(BIN)
+            .arg("curve")
+            .arg(&input)
+            .arg("-o")
+            .arg(&out)
+            .args(&args)
+            .output()
+            .unwrap();
+        assert!(!o.status.success(), "{args:?} accepted");
+        let lines = error_lines(&o);
+        assert_eq!(lines.len(), 1, "{args:?}: {lines:?}");
+        assert!(lines[0].contains(says), "{args:?}: {lines:?}");
+        assert!(!out.exists(), "{args:?}");
+    }
+}

@@ -7,7 +7,8 @@
 //! only who reads what), [`partition`] the element partition along a Morton curve, [`cg`] the fit's CG across ranks
 //! (halo exchange of shared control points, global reductions), [`job`] the `curve` job
 //! stage by stage, [`mod@write`] the one output file written collectively and [`write_parts`]
-//! Gmsh's partitioned output (one file per rank). `docs/distributed.md` states what is distributed, what is replicated on
+//! Gmsh's partitioned output (one file per rank), [`periodic`] the periodic pairs across ranks
+//! (resolved over the whole mesh, the image sides' nodes made the transform of the masters'). `docs/distributed.md` states what is distributed, what is replicated on
 //! every rank so far, and the measured volumes.
 
 pub mod cg;
@@ -19,6 +20,7 @@ pub mod launch;
 pub mod local;
 pub mod part_file;
 pub mod partition;
+pub mod periodic;
 pub mod read;
 pub mod read_parts;
 pub mod sample;
