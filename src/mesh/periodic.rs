@@ -660,7 +660,12 @@ fn resolve_tag(
 }
 
 /// Each tag in one pair at most, the two sides different.
-fn distinct(seen: &mut Vec<i32>, spec: &PeriodicSpec, ta: i32, tb: i32) -> Result<(), PeriodicError> {
+fn distinct(
+    seen: &mut Vec<i32>,
+    spec: &PeriodicSpec,
+    ta: i32,
+    tb: i32,
+) -> Result<(), PeriodicError> {
     let err = |what: String| PeriodicError {
         spec: spec.label(),
         what,
@@ -1108,9 +1113,7 @@ fn pair(
     let mean = verdict
         .map
         .iter()
-        .map(|&[w, v]| {
-            point(coords[w as usize]) - point(rot_only.apply(coords[v as usize]))
-        })
+        .map(|&[w, v]| point(coords[w as usize]) - point(rot_only.apply(coords[v as usize])))
         .sum::<DVec3>()
         / n;
     transform.translation = mean.to_array();
@@ -1121,8 +1124,7 @@ fn pair(
         .map
         .iter()
         .map(|&[w, v]| {
-            (point(coords[w as usize]) - point(transform.apply(coords[v as usize])))
-                .length()
+            (point(coords[w as usize]) - point(transform.apply(coords[v as usize]))).length()
         })
         .fold(0.0, f64::max);
     let mut vertex_map = verdict.map;
