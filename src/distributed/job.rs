@@ -19,8 +19,10 @@
 //! distributed block-Jacobi CG ([`super::cg`]); run the certified blend on its own elements,
 //! the ranks agreeing on the rejected elements of every round in global ids
 //! ([`crate::validity::blend::blend_search_shared`]); sample its own elements with a global
-//! node numbering ([`super::sample`]), check them and route them back to their file runs for
-//! the collective write; no rank reads or holds the whole mesh.
+//! node numbering ([`super::sample`]), with `--periodic` the pairs resolved over the whole mesh
+//! and the image sides' nodes made the transform of their masters' ([`super::periodic`]),
+//! check them and route them back to their file runs for the collective write; no rank reads
+//! or holds the whole mesh.
 //! Invariant: the result equals the serial run's up to
 //! the CG tolerance (the block-Jacobi aggregates differ from the serial solver's); the
 //! blend's factors are the serial search's for the same fitted map.

@@ -20,6 +20,10 @@
 //! lattice point in it); the owner answers with the value it evaluated, so shared nodes have
 //! bit-identical coordinates on every rank. Invariant: the positions are those of the serial
 //! [`crate::sample::sample`] (the same owner element and lattice point evaluate each node).
+//!
+//! **Periodic seams.** With periodic pairs, the seam nodes of the own elements are moved
+//! before any check or box ([`super::periodic::make_images`], collective): every rank takes
+//! them from one gathered copy, so shared seam nodes stay bit-identical across ranks.
 
 use super::comm::Comm;
 use super::read::LocalMesh;
