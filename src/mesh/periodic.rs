@@ -6,6 +6,8 @@
 //! the transform found from the vertex positions, the vertex map), or a one-line
 //! [`PeriodicError`]. After sampling, [`node_pairs`] pairs the order-P nodes of the two sides
 //! and [`make_images`] moves them so that the nodes of B are exactly the transform of A's.
+//! The distributed job (`distributed::periodic`) finds its pairs on the gathered sides with
+//! [`pair_facets`] and moves its gathered seam nodes with [`place_images`], the same code.
 //!
 //! Invariants of an accepted pair: A and B are different non-empty boundary groups with as many
 //! vertices each; every vertex of A, mapped by the transform, lies within [`PERIODIC_REL_TOL`]
