@@ -359,7 +359,9 @@ pub const AUTO_MIN_GAIN: f64 = 0.5;
 /// 2. otherwise once with uniform knots, kept where the blend holds back at most
 ///    [`AUTO_MAX_HELD_BACK`] of the elements;
 /// 3. otherwise a second pass with graded knots, kept when its blend holds back at most
-///    [`AUTO_MIN_GAIN`] as many elements (the one case with two passes).
+///    [`AUTO_MIN_GAIN`] as many elements (the one case with two passes); not where no
+///    interior facet's measured |ln ratio| reaches [`crate::spline::AUTO_MIN_LOG_RATIO`]
+///    (graded knots all but uniform: they do not hold back half as many).
 ///
 /// Both passes share the setup (features, kinks, smooth targets: they do not depend on the
 /// knots); the setup names the knots used and the passes run (`knot_passes`). With periodic
@@ -428,11 +430,13 @@ pub(super) fn curve_spline(
         let outcome = spline_pass(&graded_job, &setup, clock)?;
         return Ok((setup, outcome));
     }
+    // Graded knots all but uniform: a second pass would not hold back half as many.
+    let near_uniform = survey.max_abs_log_ratio < crate::spline::AUTO_MIN_LOG_RATIO;
     // Not held through the uniform pass: the fit's peak would carry it (+0.56 GB on the 1M
     // cylinder); the rare second pass measures the surfaces again.
     drop(survey);
     let first = spline_pass(&uniform_job, &setup, clock)?;
-    if !too_many(held(&first)) {
+    if !too_many(held(&first)) || near_uniform {
         return Ok((setup, first));
     }
     let survey = clock.run(Stage::Spline, || {

@@ -632,3 +632,54 @@ fn auto_knots_run_the_spline_once() {
     assert!(held(&uniform) > 0.1);
     assert_eq!(r["knot_passes"], 2);
 }
+
+/// `--knot-intervals auto` does not run the graded pass where graded knots are all but
+/// uniform (no interior facet's cells differ by 10 % in extent across it,
+/// `spline::AUTO_MIN_LOG_RATIO`): on sfepy's hollow sphere uniform knots hold back more than a
+/// tenth of the elements, so the outcome rule would have tried graded knots, and graded knots
+/// (weights within 0.5 ± 0.025) do not hold back half as many, so the one pass loses
+/// nothing: the file is byte for byte `--knot-intervals uniform`'s. deal.II's example mesh,
+/// whose cells do differ across facets, still gets both passes and keeps graded knots.
+#[test]
+fn auto_knots_skip_the_graded_pass_where_knots_stay_uniform() {
+    let real = Path::new(env!("CARGO_MANIFEST_DIR")).join("meshes/real");
+    let run = |input: &Path, name: &str, knots: &str| {
+        let (msh, json) = (
+            scratch(&format!("skip_{name}_{knots}.msh")),
+            scratch(&format!("skip_{name}_{knots}.json")),
+        );
+        let r = curve_to(input, &msh, &json, &["--knot-intervals", knots]);
+        (std::fs::read(&msh).unwrap(), r)
+    };
+    let held = |r: &Value| r["reduced_elements"].as_f64().unwrap();
+    let elements = |r: &Value| r["elements"].as_f64().unwrap();
+
+    let hsphere = real.join("sfepy/hsphere8.vtk");
+    let (auto, r) = run(&hsphere, "hsphere8", "auto");
+    let (uniform_file, uniform) = run(&hsphere, "hsphere8", "uniform");
+    let (_, graded) = run(&hsphere, "hsphere8", "graded");
+    assert!(
+        held(&uniform) > 0.1 * elements(&uniform),
+        "the outcome rule must apply"
+    );
+    assert!(
+        held(&graded) > 0.5 * held(&uniform),
+        "graded knots held back {} against uniform knots' {}: worth the second pass",
+        held(&graded),
+        held(&uniform)
+    );
+    let max_log = graded["knot_surfaces"]["max_abs_log_ratio"]
+        .as_f64()
+        .unwrap();
+    assert!(max_log < 0.1, "hsphere8's surfaces are graded by {max_log}");
+    assert_eq!(r["knot_intervals"], "uniform");
+    assert_eq!(r["knot_passes"], 1, "auto ran the graded pass on hsphere8");
+    assert!(
+        auto == uniform_file,
+        "auto differs from uniform knots on hsphere8"
+    );
+
+    let (_, r) = run(&real.join("dealii/example.msh"), "example", "auto");
+    assert_eq!(r["knot_passes"], 2);
+    assert_eq!(r["knot_intervals"], "graded");
+}
