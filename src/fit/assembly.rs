@@ -48,20 +48,51 @@ struct Local {
     k: Vec<f64>,
 }
 
-/// Rᵀ G R for the explicit rows of element `e` (R: nb × m over the sorted distinct columns),
-/// through R's non-zeros: G R column by column, then Rᵀ (G R) row by row.
-fn local_matrix(space: &dyn FitSpace, e: usize, g: &[f64], nb: usize) -> Local {
-    let (mut offsets, mut cols, mut weights) = (Vec::new(), Vec::new(), Vec::new());
-    space.element_rows(e, &mut offsets, &mut cols, &mut weights);
+/// The buffers of [`local_matrix`], one set per thread: the element's rows, its block G,
+/// the rows' local column indices and G R (a graded mesh computes one matrix per element).
+#[derive(Default)]
+struct Scratch {
+    offsets: Vec<usize>,
+    cols: Vec<u32>,
+    weights: Vec<f64>,
+    local: Vec<usize>,
+    g: Vec<f64>,
+    gr: Vec<f64>,
+}
+
+/// Rᵀ G R for the explicit rows of element `e` (R: nb × m over the sorted distinct columns;
+/// G the block of its weight mask), through R's non-zeros: G R column by column, then
+/// Rᵀ (G R) row by row.
+fn local_matrix(
+    space: &dyn FitSpace,
+    e: usize,
+    blocks: &ElementBlocks,
+    nb: usize,
+    s: &mut Scratch,
+) -> Local {
+    let Scratch {
+        offsets,
+        cols,
+        weights,
+        local,
+        g,
+        gr,
+    } = s;
+    space.element_rows(e, offsets, cols, weights);
+    let (gd, gs) = &blocks.cache[&blocks.masks[e]];
+    g.clear();
+    g.extend(gd.iter().zip(gs).map(|(a, b)| a + b));
     let mut ids = cols.clone();
     ids.sort_unstable();
     ids.dedup();
     let m = ids.len();
-    let local: Vec<usize> = cols
-        .iter()
-        .map(|c| ids.binary_search(c).expect("column of the element"))
-        .collect();
-    let mut gr = vec![0.0; nb * m];
+    local.clear();
+    local.extend(
+        cols.iter()
+            .map(|c| ids.binary_search(c).expect("column of the element")),
+    );
+    gr.clear();
+    gr.resize(nb * m, 0.0);
     for b in 0..nb {
         for k in offsets[b]..offsets[b + 1] {
             let (j, w) = (local[k], weights[k]);
@@ -156,17 +187,16 @@ impl ElementMatrices {
 fn element_matrices(space: &dyn FitSpace, blocks: &ElementBlocks) -> ElementMatrices {
     let ne = space.n_elements();
     let nb = if space.dim() == 2 { 9 } else { 27 };
-    let g_of = |e: usize| -> Vec<f64> {
-        let (gd, gr) = &blocks.cache[&blocks.masks[e]];
-        gd.iter().zip(gr).map(|(a, b)| a + b).collect()
-    };
 
     let kinds: Vec<Matrix> = (0..ne)
         .into_par_iter()
-        .map_init(Vec::new, |ids, e| match space.element_pattern(e, ids) {
-            Some(key) => Matrix::Shared(key),
-            None => Matrix::Own(Box::new(local_matrix(space, e, &g_of(e), nb))),
-        })
+        .map_init(
+            || (Vec::new(), Scratch::default()),
+            |(ids, scratch), e| match space.element_pattern(e, ids) {
+                Some(key) => Matrix::Shared(key),
+                None => Matrix::Own(Box::new(local_matrix(space, e, blocks, nb, scratch))),
+            },
+        )
         .collect();
     let mut elem_ptr = Vec::with_capacity(ne + 1);
     elem_ptr.push(0usize);
@@ -208,8 +238,8 @@ fn element_matrices(space: &dyn FitSpace, blocks: &ElementBlocks) -> ElementMatr
     // Local-node order: permute the sorted-column matrix back to the pattern's node order.
     let table: Vec<Vec<f64>> = representatives
         .par_iter()
-        .map(|&e| {
-            let l = local_matrix(space, e, &g_of(e), nb);
+        .map_init(Scratch::default, |scratch, &e| {
+            let l = local_matrix(space, e, blocks, nb, scratch);
             let local_ids = &elem_cols[elem_ptr[e]..elem_ptr[e + 1]];
             let pos: Vec<usize> = local_ids
                 .iter()

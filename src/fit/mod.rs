@@ -657,7 +657,13 @@ impl FitSpace for crate::spline::SplineSpace {
         cols: &mut Vec<u32>,
         weights: &mut Vec<f64>,
     ) {
-        let mut rows = crate::spline::ElementRows::default();
+        // The caller's buffers, reused: the assembly asks for every element's rows on graded
+        // meshes.
+        let mut rows = crate::spline::ElementRows {
+            offsets: std::mem::take(offsets),
+            cols: std::mem::take(cols),
+            weights: std::mem::take(weights),
+        };
         self.extraction.rows(e, &mut rows);
         *offsets = rows.offsets;
         *cols = rows.cols;
