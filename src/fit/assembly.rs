@@ -10,8 +10,10 @@
 //!    of distinct control points ([`FitSpace::element_pattern`]: spline elements, and Q2
 //!    elements made only of own nodes), the local matrix depends only on the pattern key and
 //!    the element's weight mask, so one table entry per (key, mask) is computed up front, in
-//!    parallel, and the element keeps an index into it. The other elements (Q2 elements with
-//!    constrained nodes) keep their own matrix.
+//!    parallel, and the element keeps an index into it. Elements with graded knots are the
+//!    same product of 1D matrices, but their own: their matrices are formed from the 1D
+//!    factors into one flat array ([`FitSpace::element_factors`]). The other elements (Q2
+//!    elements with constrained nodes) keep their own matrix, from E_e's explicit rows.
 //! 2. **Incidence.** Control point → (element, local index) in CSR form, filled in element
 //!    order.
 //! 3. **Rows, in parallel and without atomics.** Row c is built by its own task: the union of
@@ -48,20 +50,51 @@ struct Local {
     k: Vec<f64>,
 }
 
-/// Rᵀ G R for the explicit rows of element `e` (R: nb × m over the sorted distinct columns),
-/// through R's non-zeros: G R column by column, then Rᵀ (G R) row by row.
-fn local_matrix(space: &dyn FitSpace, e: usize, g: &[f64], nb: usize) -> Local {
-    let (mut offsets, mut cols, mut weights) = (Vec::new(), Vec::new(), Vec::new());
-    space.element_rows(e, &mut offsets, &mut cols, &mut weights);
+/// The buffers of [`local_matrix`], one set per thread: the element's rows, its block G,
+/// the rows' local column indices and G R (a graded mesh computes one matrix per element).
+#[derive(Default)]
+struct Scratch {
+    offsets: Vec<usize>,
+    cols: Vec<u32>,
+    weights: Vec<f64>,
+    local: Vec<usize>,
+    g: Vec<f64>,
+    gr: Vec<f64>,
+}
+
+/// Rᵀ G R for the explicit rows of element `e` (R: nb × m over the sorted distinct columns;
+/// G the block of its weight mask), through R's non-zeros: G R column by column, then
+/// Rᵀ (G R) row by row.
+fn local_matrix(
+    space: &dyn FitSpace,
+    e: usize,
+    blocks: &ElementBlocks,
+    nb: usize,
+    s: &mut Scratch,
+) -> Local {
+    let Scratch {
+        offsets,
+        cols,
+        weights,
+        local,
+        g,
+        gr,
+    } = s;
+    space.element_rows(e, offsets, cols, weights);
+    let (gd, gs) = &blocks.cache[&blocks.masks[e]];
+    g.clear();
+    g.extend(gd.iter().zip(gs).map(|(a, b)| a + b));
     let mut ids = cols.clone();
     ids.sort_unstable();
     ids.dedup();
     let m = ids.len();
-    let local: Vec<usize> = cols
-        .iter()
-        .map(|c| ids.binary_search(c).expect("column of the element"))
-        .collect();
-    let mut gr = vec![0.0; nb * m];
+    local.clear();
+    local.extend(
+        cols.iter()
+            .map(|c| ids.binary_search(c).expect("column of the element")),
+    );
+    gr.clear();
+    gr.resize(nb * m, 0.0);
     for b in 0..nb {
         for k in offsets[b]..offsets[b + 1] {
             let (j, w) = (local[k], weights[k]);
@@ -121,11 +154,57 @@ fn sort_columns(cols: &mut [u32], bits: &mut [u64]) {
     }
 }
 
+/// Rᵀ G R for an element whose E_e is (M_z ⊗ M_y ⊗ M_x) times a selection of distinct
+/// control points ([`FitSpace::element_factors`]), over its local nodes in order: R's entries
+/// are the products of the 1D matrices' entries, so neither R's rows nor a column order are
+/// built. `k` (nb × nb) receives it; the sums run in the order of [`local_matrix`]'s (over
+/// R's rows, then G's), so both give the same bits.
+fn factored_matrix(m: &[[[f64; 3]; 3]; 3], (gd, gs): &(Vec<f64>, Vec<f64>), k: &mut [f64]) {
+    let nb = k.len().isqrt();
+    let mut g = [0.0; 27 * 27];
+    for ((g, a), b) in g.iter_mut().zip(gd).zip(gs) {
+        *g = a + b;
+    }
+    let mut r = [0.0; 27 * 27];
+    for b in 0..nb {
+        let (bx, by, bz) = (b % 3, (b / 3) % 3, b / 9);
+        for l in 0..nb {
+            r[b * nb + l] = m[0][bx][l % 3] * m[1][by][(l / 3) % 3] * m[2][bz][l / 9];
+        }
+    }
+    let mut gr = [0.0; 27 * 27];
+    for b in 0..nb {
+        for l in 0..nb {
+            let w = r[b * nb + l];
+            if w != 0.0 {
+                for a in 0..nb {
+                    gr[a * nb + l] += g[a * nb + b] * w;
+                }
+            }
+        }
+    }
+    k.fill(0.0);
+    for a in 0..nb {
+        let gra = &gr[a * nb..(a + 1) * nb];
+        for i in 0..nb {
+            let w = r[a * nb + i];
+            if w != 0.0 {
+                for (kij, g) in k[i * nb..(i + 1) * nb].iter_mut().zip(gra) {
+                    *kij += w * g;
+                }
+            }
+        }
+    }
+}
+
 /// Where an element's local matrix lives.
 enum Matrix {
     /// A pattern element, by its pattern key (its shared-table entry follows from the key and
     /// its weight mask).
     Shared(u64),
+    /// A factored element of its own (graded knots), by its index among them: its nb × nb
+    /// matrix over its local nodes is a slice of `ElementMatrices::factored`.
+    Factored(u32),
     /// The element's own matrix (its columns are `Local::ids`), boxed so that the tag stays
     /// 16 bytes per element.
     Own(Box<Local>),
@@ -140,12 +219,19 @@ struct ElementMatrices {
     elem_cols: Vec<u32>,
     table_index: Vec<u32>,
     table: Vec<Vec<f64>>,
+    /// The matrices of the [`Matrix::Factored`] elements, nb × nb each, flat.
+    factored: Vec<f64>,
+    nb: usize,
 }
 
 impl ElementMatrices {
     fn matrix(&self, e: usize) -> &[f64] {
         match &self.kinds[e] {
             Matrix::Shared(_) => &self.table[self.table_index[e] as usize],
+            Matrix::Factored(i) => {
+                let len = self.nb * self.nb;
+                &self.factored[*i as usize * len..(*i as usize + 1) * len]
+            }
             Matrix::Own(l) => &l.k,
         }
     }
@@ -156,23 +242,39 @@ impl ElementMatrices {
 fn element_matrices(space: &dyn FitSpace, blocks: &ElementBlocks) -> ElementMatrices {
     let ne = space.n_elements();
     let nb = if space.dim() == 2 { 9 } else { 27 };
-    let g_of = |e: usize| -> Vec<f64> {
-        let (gd, gr) = &blocks.cache[&blocks.masks[e]];
-        gd.iter().zip(gr).map(|(a, b)| a + b).collect()
-    };
 
-    let kinds: Vec<Matrix> = (0..ne)
+    let mut kinds: Vec<Matrix> = (0..ne)
         .into_par_iter()
-        .map_init(Vec::new, |ids, e| match space.element_pattern(e, ids) {
-            Some(key) => Matrix::Shared(key),
-            None => Matrix::Own(Box::new(local_matrix(space, e, &g_of(e), nb))),
-        })
+        .map_init(
+            || (Vec::new(), Scratch::default()),
+            |(ids, scratch), e| match space.element_pattern(e, ids) {
+                Some(key) => Matrix::Shared(key),
+                None if space.element_factors(e, ids).is_some() => Matrix::Factored(u32::MAX),
+                None => Matrix::Own(Box::new(local_matrix(space, e, blocks, nb, scratch))),
+            },
+        )
         .collect();
+    // The factored elements' matrices, flat and in element order: no allocation per element.
+    let mut factored_elements = Vec::new();
+    for (e, k) in kinds.iter_mut().enumerate() {
+        if let Matrix::Factored(i) = k {
+            *i = factored_elements.len() as u32;
+            factored_elements.push(e);
+        }
+    }
+    let mut factored = vec![0.0; factored_elements.len() * nb * nb];
+    factored
+        .par_chunks_mut(nb * nb)
+        .zip(&factored_elements)
+        .for_each_init(Vec::new, |ids, (k, &e)| {
+            let m = space.element_factors(e, ids).expect("a factored element");
+            factored_matrix(&m, &blocks.cache[&blocks.masks[e]], k);
+        });
     let mut elem_ptr = Vec::with_capacity(ne + 1);
     elem_ptr.push(0usize);
     for k in &kinds {
         let m = match k {
-            Matrix::Shared(_) => nb,
+            Matrix::Shared(_) | Matrix::Factored(_) => nb,
             Matrix::Own(l) => l.ids.len(),
         };
         elem_ptr.push(elem_ptr[elem_ptr.len() - 1] + m);
@@ -184,6 +286,10 @@ fn element_matrices(space: &dyn FitSpace, blocks: &ElementBlocks) -> ElementMatr
         .for_each_init(Vec::new, |ids, (e, out)| match &kinds[e] {
             Matrix::Shared(_) => {
                 space.element_pattern(e, ids);
+                out.copy_from_slice(ids);
+            }
+            Matrix::Factored(_) => {
+                space.element_factors(e, ids);
                 out.copy_from_slice(ids);
             }
             Matrix::Own(l) => out.copy_from_slice(&l.ids),
@@ -201,15 +307,15 @@ fn element_matrices(space: &dyn FitSpace, blocks: &ElementBlocks) -> ElementMatr
                 representatives.push(e);
                 representatives.len() as u32 - 1
             }),
-            Matrix::Own(_) => u32::MAX,
+            Matrix::Factored(_) | Matrix::Own(_) => u32::MAX,
         })
         .collect();
     drop(slot_of);
     // Local-node order: permute the sorted-column matrix back to the pattern's node order.
     let table: Vec<Vec<f64>> = representatives
         .par_iter()
-        .map(|&e| {
-            let l = local_matrix(space, e, &g_of(e), nb);
+        .map_init(Scratch::default, |scratch, &e| {
+            let l = local_matrix(space, e, blocks, nb, scratch);
             let local_ids = &elem_cols[elem_ptr[e]..elem_ptr[e + 1]];
             let pos: Vec<usize> = local_ids
                 .iter()
@@ -231,6 +337,8 @@ fn element_matrices(space: &dyn FitSpace, blocks: &ElementBlocks) -> ElementMatr
         elem_cols,
         table_index,
         table,
+        factored,
+        nb,
     }
 }
 
@@ -297,6 +405,14 @@ fn assemble_rows(
 ) -> NormalMatrix {
     let n = space.control_points().len();
     let em = element_matrices(space, blocks);
+    // Where most elements have a matrix of their own (graded knots), K's rows hardly repeat:
+    // the first chunk's templates would only be expanded again.
+    let own = em
+        .kinds
+        .iter()
+        .filter(|k| !matches!(k, Matrix::Shared(_)))
+        .count();
+    let template_share = template_share.filter(|_| 2 * own <= em.kinds.len());
     let (elem_ptr, elem_cols) = (&em.elem_ptr, &em.elem_cols);
     let matrix_of = |e: usize| em.matrix(e);
     let inc = incidence(elem_cols, elem_ptr, n);
@@ -463,5 +579,69 @@ mod tests {
         let (it, x) = solve(templated);
         assert!(it > 5);
         assert_eq!((it, x), solve(plain));
+    }
+
+    /// The space's elements with their explicit rows only (no pattern, no factors).
+    struct RowsOnly<'a>(&'a SplineSpace);
+
+    impl FitSpace for RowsOnly<'_> {
+        fn dim(&self) -> usize {
+            self.0.dim
+        }
+        fn n_elements(&self) -> usize {
+            self.0.n_elements()
+        }
+        fn control_points(&self) -> &[[f64; 3]] {
+            &self.0.control_points
+        }
+        fn element_rows(
+            &self,
+            e: usize,
+            offsets: &mut Vec<usize>,
+            cols: &mut Vec<u32>,
+            weights: &mut Vec<f64>,
+        ) {
+            self.0.element_rows(e, offsets, cols, weights)
+        }
+        fn bezier_net_with(&self, e: usize, cps: &[[f64; 3]]) -> crate::math::BezierNet {
+            self.0.bezier_net_with(e, cps)
+        }
+    }
+
+    /// With graded knots (every spline element its own 1D matrices) the matrices formed from
+    /// the 1D factors give K with the bits of the matrices formed from E_e's explicit rows, in
+    /// 2D and 3D, and K is stored as plain values (its rows do not repeat).
+    #[test]
+    fn factored_graded_matrices_are_the_explicit_rows_alike() {
+        for (kind, n) in [(Kind::Disc, 400), (Kind::Cylinder, 1500)] {
+            let m = generate(kind, n);
+            let t = Topology::build(&m);
+            // Knot weights of a graded grid, different per element and direction.
+            let weights: Vec<_> = (0..m.n_elements())
+                .map(|e| {
+                    let f = |k: usize| 0.3 + 0.4 * (((e * 7 + k * 3) % 11) as f64 / 10.0);
+                    [[f(0), f(1)], [f(2), f(3)], [f(4), f(5)]]
+                })
+                .collect();
+            let s = SplineSpace::build_with_knots(&m, &t, &[], Some(&weights));
+            let factored = (0..s.n_elements())
+                .filter(|&e| s.element_factors(e, &mut Vec::new()).is_some())
+                .filter(|&e| s.element_pattern(e, &mut Vec::new()).is_none())
+                .count();
+            assert!(
+                2 * factored > s.n_elements(),
+                "{factored} factored elements"
+            );
+            let w = FitWeights::position();
+            let blocks = ElementBlocks::new(&s, &m, &t, &w);
+            let n = s.control_points().len();
+            let fast = assemble_matrix(&s, &blocks);
+            assert_eq!(fast.n_templates(), None);
+            let rows = assemble_rows(&RowsOnly(&s), &blocks, n, None);
+            let bits = |k: &NormalMatrix| k.data().iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+            assert_eq!(fast.indptr(), rows.indptr());
+            assert_eq!(fast.indices(), rows.indices());
+            assert!(bits(&fast) == bits(&rows), "{kind:?}: K differs");
+        }
     }
 }

@@ -73,6 +73,14 @@ pub trait FitSpace: Sync {
     fn element_pattern(&self, _e: usize, _ids: &mut Vec<u32>) -> Option<u64> {
         None
     }
+    /// When E_e = (M_z ⊗ M_y ⊗ M_x) times the selection of 3^d distinct control points (in
+    /// local-node order), whatever the matrices (graded knots give every element its own),
+    /// return the three 3 × 3 matrices (x, y, z; the identity for z in 2D) and write the
+    /// control points into `ids`: the assembly then forms the local matrix from them without
+    /// expanding E_e's rows. `None` (the default) always works.
+    fn element_factors(&self, _e: usize, _ids: &mut Vec<u32>) -> Option<[[[f64; 3]; 3]; 3]> {
+        None
+    }
     /// Append E_eᵀ f to `out` as (control point, value) pairs (a control point may repeat),
     /// for f one 3-vector per Bernstein point. The default expands the explicit rows.
     fn add_transposed(&self, e: usize, f: &BezierNet, out: &mut Vec<(u32, [f64; 3])>) {
@@ -657,7 +665,13 @@ impl FitSpace for crate::spline::SplineSpace {
         cols: &mut Vec<u32>,
         weights: &mut Vec<f64>,
     ) {
-        let mut rows = crate::spline::ElementRows::default();
+        // The caller's buffers, reused: the assembly asks for every element's rows on graded
+        // meshes.
+        let mut rows = crate::spline::ElementRows {
+            offsets: std::mem::take(offsets),
+            cols: std::mem::take(cols),
+            weights: std::mem::take(weights),
+        };
         self.extraction.rows(e, &mut rows);
         *offsets = rows.offsets;
         *cols = rows.cols;
@@ -718,5 +732,22 @@ impl FitSpace for crate::spline::SplineSpace {
         ids.clear();
         ids.extend_from_slice(nodes);
         Some(x.ops[e].iter().fold(0u64, |k, op| k * 8 + *op as u64))
+    }
+    fn element_factors(&self, e: usize, ids: &mut Vec<u32>) -> Option<[[[f64; 3]; 3]; 3]> {
+        let x = &self.extraction;
+        let nodes = x.element_nodes(e);
+        if nodes.iter().any(|&n| n as usize >= x.n_control) {
+            return None;
+        }
+        let mut sorted = [0u32; 27];
+        let sorted = &mut sorted[..nodes.len()];
+        sorted.copy_from_slice(nodes);
+        sorted.sort_unstable();
+        if sorted.windows(2).any(|w| w[0] == w[1]) {
+            return None;
+        }
+        ids.clear();
+        ids.extend_from_slice(nodes);
+        Some(x.matrices(e))
     }
 }

@@ -45,6 +45,9 @@ impl FitSpace for Subset<'_> {
     fn element_pattern(&self, e: usize, ids: &mut Vec<u32>) -> Option<u64> {
         self.inner.element_pattern(self.elements[e], ids)
     }
+    fn element_factors(&self, e: usize, ids: &mut Vec<u32>) -> Option<[[[f64; 3]; 3]; 3]> {
+        self.inner.element_factors(self.elements[e], ids)
+    }
     fn add_transposed(&self, e: usize, f: &BezierNet, out: &mut Vec<(u32, [f64; 3])>) {
         self.inner.add_transposed(self.elements[e], f, out)
     }

@@ -359,7 +359,9 @@ pub const AUTO_MIN_GAIN: f64 = 0.5;
 /// 2. otherwise once with uniform knots, kept where the blend holds back at most
 ///    [`AUTO_MAX_HELD_BACK`] of the elements;
 /// 3. otherwise a second pass with graded knots, kept when its blend holds back at most
-///    [`AUTO_MIN_GAIN`] as many elements (the one case with two passes).
+///    [`AUTO_MIN_GAIN`] as many elements (the one case with two passes); not where no
+///    interior facet's measured |ln ratio| reaches [`crate::spline::AUTO_MIN_LOG_RATIO`]
+///    (graded knots all but uniform: they do not hold back half as many).
 ///
 /// Both passes share the setup (features, kinks, smooth targets: they do not depend on the
 /// knots); the setup names the knots used and the passes run (`knot_passes`). With periodic
@@ -425,14 +427,16 @@ pub(super) fn curve_spline(
     if survey.graded_share >= crate::spline::AUTO_GRADED_SHARE {
         let knots = graded_knots(clock, survey);
         setup.set_knots(KnotIntervals::Graded, knots, job.options.fit.weights);
-        let outcome = spline_pass(&graded_job, &setup, clock)?;
+        let outcome = spline_pass(&graded_job, &setup, clock, None)?;
         return Ok((setup, outcome));
     }
+    // Graded knots all but uniform: a second pass would not hold back half as many.
+    let near_uniform = survey.max_abs_log_ratio < crate::spline::AUTO_MIN_LOG_RATIO;
     // Not held through the uniform pass: the fit's peak would carry it (+0.56 GB on the 1M
     // cylinder); the rare second pass measures the surfaces again.
     drop(survey);
-    let first = spline_pass(&uniform_job, &setup, clock)?;
-    if !too_many(held(&first)) {
+    let first = spline_pass(&uniform_job, &setup, clock, None)?;
+    if !too_many(held(&first)) || near_uniform {
         return Ok((setup, first));
     }
     let survey = clock.run(Stage::Spline, || {
@@ -441,7 +445,9 @@ pub(super) fn curve_spline(
     let knots = graded_knots(clock, survey);
     let uniform_knots = setup.set_knots(KnotIntervals::Graded, knots, job.options.fit.weights);
     setup.knot_passes = 2;
-    let second = spline_pass(&graded_job, &setup, clock)?;
+    // The graded fit starts from the uniform one where the two spaces share control points
+    // (every entity's but the knot splits'): fewer CG iterations than from C0.
+    let second = spline_pass(&graded_job, &setup, clock, Some(&first.space))?;
     if decisive(held(&second), held(&first)) {
         return Ok((setup, second));
     }
@@ -459,7 +465,7 @@ fn curve_spline_with(
     periodic: &[PeriodicPair],
 ) -> Result<(SplineSetup, SplineOutcome), CurveError> {
     let setup = clock.run(Stage::Spline, || SplineSetup::new(job, periodic))?;
-    let outcome = spline_pass(job, &setup, clock)?;
+    let outcome = spline_pass(job, &setup, clock, None)?;
     Ok((setup, outcome))
 }
 
@@ -468,13 +474,14 @@ fn spline_pass(
     job: &Job,
     setup: &SplineSetup,
     clock: &mut Clock,
+    previous: Option<&SplineSpace>,
 ) -> Result<SplineOutcome, CurveError> {
     let space = clock.run(Stage::Spline, || {
         setup.build(job, &vec![false; job.mesh.n_elements()])
     });
     clock.check()?;
     match (job.options.geometry, &job.options.energy) {
-        (Geometry::SplineFitted, None) => fit_and_blend(job, setup, clock, space),
+        (Geometry::SplineFitted, None) => fit_and_blend(job, setup, clock, space, previous),
         (Geometry::SplineFitted, Some(params)) => fit_with_energy(job, setup, clock, space, params),
         _ => certify_initial(job, clock, space),
     }
@@ -487,9 +494,12 @@ fn fit_and_blend(
     setup: &SplineSetup,
     clock: &mut Clock,
     mut space: SplineSpace,
+    previous: Option<&SplineSpace>,
 ) -> Result<SplineOutcome, CurveError> {
     let mut misfit = Vec::new();
-    let (c_star, info) = fit_demoting_misfits(job, setup, clock, &mut space, &[], &mut misfit)?;
+    let start = previous.map(|p| carry_over(p, &p.control_points, &space));
+    let (c_star, info) =
+        fit_demoting_misfits(job, setup, clock, &mut space, &[], &mut misfit, start)?;
     clock.check()?;
     space.control_points = c_star;
     let (factors, blend) = clock.run(Stage::Validity, || blend(job, setup, &space))?;
@@ -513,7 +523,7 @@ fn fit_with_energy(
     for round in 0.. {
         clock.check()?;
         let (c_star, info) =
-            fit_demoting_misfits(job, setup, clock, &mut space, &demote, &mut misfit)?;
+            fit_demoting_misfits(job, setup, clock, &mut space, &demote, &mut misfit, None)?;
         clock.check()?;
         let (thresholds, step) = clock.run(Stage::Validity, || {
             let fraction = job.options.line_search.min_det_fraction;
@@ -642,9 +652,9 @@ fn fit_demoting_misfits(
     space: &mut SplineSpace,
     demote: &[bool],
     misfit: &mut Vec<bool>,
+    mut start: Option<Vec<[f64; 3]>>,
 ) -> Result<(Vec<[f64; 3]>, FitInfo), CurveError> {
     let mut round = 0;
-    let mut start: Option<Vec<[f64; 3]>> = None;
     loop {
         clock.check()?;
         let (c_star, info) = fit(job, setup, clock, space, start.as_deref())?;

@@ -44,7 +44,8 @@
 //! ([`KnotSurfaceInfo::graded_share`]: weighted mean |ln ratio| ≥ 0.1 with ≥ 90 % of the
 //! surface's measured ratios on its side; a boundary-layer grid). Otherwise uniform knots,
 //! and graded ones (a second pass) where the certified blend holds back more than a tenth of
-//! the elements with uniform knots and at most half as many with graded ones. The share alone does not
+//! the elements with uniform knots and at most half as many with graded ones (not tried where
+//! no facet's |ln ratio| reaches [`AUTO_MIN_LOG_RATIO`]). The share alone does not
 //! separate every mesh where graded knots win from unstructured ones (sphere_r6 0.043
 //! against systems_of_equations_ex9 0.051, BENCHMARKS.md, "Graded knot intervals"), hence the
 //! outcome rule below the threshold. Without a fit (`info`, `plot`), auto is uniform; with
@@ -153,6 +154,15 @@ pub struct KnotSurfaceInfo {
 /// below where uniform knots are kept, 0.14 and below on the rest; the generated O-grids of the
 /// fidelity tests 0.06 to 0.12 (BENCHMARKS.md, "Graded knot intervals").
 pub const AUTO_GRADED_SHARE: f64 = 0.3;
+
+/// With `--knot-intervals auto`: where no interior facet's cells differ this much in extent
+/// across it ([`KnotSurvey::max_abs_log_ratio`] below it), no knot surface is graded by more
+/// either, every extraction weight lies within 0.5 ± 0.025, and the graded pass is not run
+/// after the uniform one: graded knots that close to uniform do not hold back half as many
+/// elements (sfepy/hsphere8, largest |ln ratio| < 0.05: 20 % held back against uniform
+/// knots' 24 %). Every mesh where graded knots were kept after a uniform pass has facets of
+/// |ln ratio| ≥ 0.2 (BENCHMARKS.md, "Automatic choice").
+pub const AUTO_MIN_LOG_RATIO: f64 = 0.1;
 
 /// Smallest |weighted mean log-ratio| of a consistently graded surface ([`graded_share`]).
 const CONSISTENT_LOG_RATIO: f64 = 0.1;
@@ -509,6 +519,9 @@ pub struct KnotSurvey {
     ties: Vec<Tie>,
     /// [`KnotSurfaceInfo::graded_share`].
     pub graded_share: f64,
+    /// Largest |measured log-ratio| of an interior facet (0 without one): below
+    /// [`AUTO_MIN_LOG_RATIO`] graded knots are all but uniform.
+    pub max_abs_log_ratio: f64,
 }
 
 /// The measured ratios, ties and graded share of the knot surfaces continued across the
@@ -535,10 +548,15 @@ pub fn survey(mesh: &LinearMesh, topo: &Topology, spline: &[bool]) -> KnotSurvey
         .collect();
     let ties = ties(topo, spline);
     let graded_share = graded_share(&mut surfaces(nf, &ties, &measured), &measured);
+    let max_abs_log_ratio = measured
+        .iter()
+        .flatten()
+        .fold(0.0f64, |a, &(m, _)| a.max(m.abs()));
     KnotSurvey {
         measured,
         ties,
         graded_share,
+        max_abs_log_ratio,
     }
 }
 
@@ -567,6 +585,7 @@ pub fn knot_weights_from(survey: KnotSurvey, topo: &Topology, params: &KnotParam
         measured,
         ties: all,
         graded_share: share,
+        ..
     } = survey;
 
     // Knot surfaces: facets tied across each spline element's neighbours; split where one

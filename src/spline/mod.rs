@@ -42,7 +42,8 @@ use crate::math::BezierNet;
 pub use classify::{ElementClass, Q2Reason};
 pub use extraction::{ElementRows, Extraction, ExtractionCsr};
 pub use intervals::{
-    AUTO_GRADED_SHARE, KnotIntervals, KnotParams, KnotSurfaceInfo, KnotSurvey, KnotWeights, Knots,
+    AUTO_GRADED_SHARE, AUTO_MIN_LOG_RATIO, KnotIntervals, KnotParams, KnotSurfaceInfo, KnotSurvey,
+    KnotWeights, Knots,
 };
 pub use knots::Op1d;
 pub use stencil::Entity;

@@ -632,3 +632,88 @@ fn auto_knots_run_the_spline_once() {
     assert!(held(&uniform) > 0.1);
     assert_eq!(r["knot_passes"], 2);
 }
+
+/// When `--knot-intervals auto` runs the spline twice, its graded fit starts from the uniform
+/// pass's solution (control points of the same entities) instead of the initial control
+/// points: on deal.II's sphere (both passes solved by CG) it takes at least a tenth fewer CG
+/// iterations than the same graded fit started cold (`--knot-intervals graded`), and reaches
+/// the same map within CG's tolerance (same held-back elements, same quality and boundary
+/// distance to 1e-4).
+#[test]
+fn auto_graded_pass_starts_from_the_uniform_fit() {
+    let sphere = Path::new(env!("CARGO_MANIFEST_DIR")).join("meshes/real/dealii/sphere_r6.msh");
+    let run = |knots: &str| {
+        curve_to(
+            &sphere,
+            &scratch(&format!("start_{knots}.msh")),
+            &scratch(&format!("start_{knots}.json")),
+            &["--knot-intervals", knots, "--fit-solver", "cg"],
+        )
+    };
+    let (auto, graded) = (run("auto"), run("graded"));
+    assert_eq!(auto["knot_passes"], 2);
+    assert_eq!(auto["knot_intervals"], "graded");
+    let iterations = |r: &Value| r["cg_iterations"].as_f64().unwrap();
+    assert!(
+        iterations(&auto) <= 0.9 * iterations(&graded),
+        "graded fit after the uniform one: {} CG iterations, cold: {}",
+        iterations(&auto),
+        iterations(&graded)
+    );
+    assert_eq!(auto["reduced_elements"], graded["reduced_elements"]);
+    for key in ["min_scaled_jacobian", "boundary_node_distance_max"] {
+        let (a, g) = (auto[key].as_f64().unwrap(), graded[key].as_f64().unwrap());
+        assert!((a - g).abs() <= 1e-4 * g.abs(), "{key}: {a} against {g}");
+    }
+}
+
+/// `--knot-intervals auto` does not run the graded pass where graded knots are all but
+/// uniform (no interior facet's cells differ by 10 % in extent across it,
+/// `spline::AUTO_MIN_LOG_RATIO`): on sfepy's hollow sphere uniform knots hold back more than a
+/// tenth of the elements, so the outcome rule would have tried graded knots, and graded knots
+/// (weights within 0.5 ± 0.025) do not hold back half as many, so the one pass loses
+/// nothing: the file is byte for byte `--knot-intervals uniform`'s. deal.II's example mesh,
+/// whose cells do differ across facets, still gets both passes and keeps graded knots.
+#[test]
+fn auto_knots_skip_the_graded_pass_where_knots_stay_uniform() {
+    let real = Path::new(env!("CARGO_MANIFEST_DIR")).join("meshes/real");
+    let run = |input: &Path, name: &str, knots: &str| {
+        let (msh, json) = (
+            scratch(&format!("skip_{name}_{knots}.msh")),
+            scratch(&format!("skip_{name}_{knots}.json")),
+        );
+        let r = curve_to(input, &msh, &json, &["--knot-intervals", knots]);
+        (std::fs::read(&msh).unwrap(), r)
+    };
+    let held = |r: &Value| r["reduced_elements"].as_f64().unwrap();
+    let elements = |r: &Value| r["elements"].as_f64().unwrap();
+
+    let hsphere = real.join("sfepy/hsphere8.vtk");
+    let (auto, r) = run(&hsphere, "hsphere8", "auto");
+    let (uniform_file, uniform) = run(&hsphere, "hsphere8", "uniform");
+    let (_, graded) = run(&hsphere, "hsphere8", "graded");
+    assert!(
+        held(&uniform) > 0.1 * elements(&uniform),
+        "the outcome rule must apply"
+    );
+    assert!(
+        held(&graded) > 0.5 * held(&uniform),
+        "graded knots held back {} against uniform knots' {}: worth the second pass",
+        held(&graded),
+        held(&uniform)
+    );
+    let max_log = graded["knot_surfaces"]["max_abs_log_ratio"]
+        .as_f64()
+        .unwrap();
+    assert!(max_log < 0.1, "hsphere8's surfaces are graded by {max_log}");
+    assert_eq!(r["knot_intervals"], "uniform");
+    assert_eq!(r["knot_passes"], 1, "auto ran the graded pass on hsphere8");
+    assert!(
+        auto == uniform_file,
+        "auto differs from uniform knots on hsphere8"
+    );
+
+    let (_, r) = run(&real.join("dealii/example.msh"), "example", "auto");
+    assert_eq!(r["knot_passes"], 2);
+    assert_eq!(r["knot_intervals"], "graded");
+}
