@@ -73,7 +73,7 @@ pub fn knot_weights(input: &LinearMesh, g: &Glued, params: &KnotParams) -> Knots
 }
 
 /// The knot surfaces of the glued mesh `g` of `input` ([`knot_weights`]), for
-/// [`super::intervals::knot_weights_from`] and `--knot-intervals auto`'s graded share.
+/// [`super::intervals::knot_weights_from`].
 pub fn knot_survey(input: &LinearMesh, g: &Glued) -> KnotSurvey {
     let spline: Vec<bool> = super::classify::classify(&g.mesh, &g.topo)
         .iter()
