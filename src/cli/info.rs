@@ -38,13 +38,9 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
     let pairs = polyspline::mesh::periodic::resolve(&linear, &topo, &args.periodic)
         .map_err(|e| anyhow::anyhow!("{}: {e}", args.mesh.display()))?;
     let knots = args.knots.params();
-    // Features as `curve` finds them: where it glues the translation seams (not with graded
-    // knots), a seam is interior and no feature.
-    let view = seam::not_glued_with(knots.intervals)
-        .is_none()
-        .then(|| seam::glue(&linear, &pairs))
-        .flatten()
-        .map(|g| seam::interior_view(&linear, &topo, &g));
+    // Features as `curve` finds them: where it glues the translation seams, a seam is
+    // interior and no feature.
+    let view = seam::glue(&linear, &pairs).map(|g| seam::interior_view(&linear, &topo, &g));
     let feature_topo = view.as_ref().map_or(&topo, |v| &v.topo);
     let feature_options = args.features.options();
     let found = feature_options.detect(&linear, feature_topo)?;

@@ -141,7 +141,11 @@ impl SplineSetup {
             ),
             _ => None,
         };
-        let knots = SplineSpace::knot_weights(mesh, job.topo, &options.knots);
+        // With glued seams the knot surfaces run across them (one ratio on both sides).
+        let knots = match &seams {
+            Some(g) => seam::knot_weights(mesh, g, &options.knots),
+            None => SplineSpace::knot_weights(mesh, job.topo, &options.knots),
+        };
         Ok(SplineSetup {
             features,
             crease,
@@ -245,7 +249,8 @@ impl SplineSetup {
         ];
         if let Some(g) = self.live_seams() {
             // Built on the glued mesh, then put back on the input's elements.
-            let mut space = SplineSpace::build_with_knots(&g.mesh, &g.topo, &marks, None);
+            let weights = self.knot_weights.as_deref();
+            let mut space = SplineSpace::build_with_knots(&g.mesh, &g.topo, &marks, weights);
             match seam::unwrap(&mut space, job.mesh, job.topo, g) {
                 Ok(_) => return space,
                 Err(why) => {
@@ -254,6 +259,18 @@ impl SplineSetup {
                     *self.seam_c0.lock().expect("not poisoned") = Some(why);
                 }
             }
+        }
+        if self.seams.is_some() && self.knot_weights.is_some() {
+            // The setup's graded knots run across the seams: the sides apart need the
+            // input's own knot surfaces (their split elements made Q2 as well).
+            let own = SplineSpace::knot_weights(job.mesh, job.topo, &job.options.knots);
+            let marks = [&marks[..], &[(&own.split[..], Q2Reason::KnotSplit)]].concat();
+            return SplineSpace::build_with_knots(
+                job.mesh,
+                job.topo,
+                &marks,
+                own.weights.as_deref(),
+            );
         }
         SplineSpace::build_with_knots(job.mesh, job.topo, &marks, self.knot_weights.as_deref())
     }
@@ -268,15 +285,11 @@ impl SplineSetup {
     }
 }
 
-/// The translation pairs among `pairs` glued for the spline space (uniform knots only: graded
-/// knot surfaces are measured on the input's topology), and why some pair stays apart (for
-/// the report), if one does.
+/// The translation pairs among `pairs` glued for the spline space, and why some pair stays
+/// apart (for the report), if one does.
 fn glue_seams(job: &Job, pairs: &[PeriodicPair]) -> (Option<Glued>, Option<String>) {
     if pairs.is_empty() {
         return (None, None);
-    }
-    if let Some(why) = seam::not_glued_with(job.options.knots.intervals) {
-        return (None, Some(why.into()));
     }
     let seams = seam::glue(job.mesh, pairs);
     let why = if seams.is_none() && pairs.iter().any(|p| p.transform.is_translation()) {
@@ -365,8 +378,8 @@ pub const AUTO_MIN_GAIN: f64 = 0.5;
 ///
 /// Both passes share the setup (features, kinks, smooth targets: they do not depend on the
 /// knots); the setup names the knots used and the passes run (`knot_passes`). With periodic
-/// pairs the uniform pass comes first, each pass with its own setup, and where translation
-/// seams are glued the uniform spline is kept (graded knots do not glue them).
+/// pairs each pass has its own setup (its knots are measured on the glued mesh,
+/// [`seam::knot_weights`]), and the same rules choose between them.
 pub(super) fn curve_spline(
     job: &Job,
     clock: &mut Clock,
@@ -401,10 +414,15 @@ pub(super) fn curve_spline(
     // they hold back a third or less of uniform knots' (BENCHMARKS.md, "Graded knot intervals").
     let decisive = |graded: usize, uniform: usize| graded as f64 <= AUTO_MIN_GAIN * uniform as f64;
     if !periodic.is_empty() {
+        // The share is the input's (the seams hold a few facets of it).
+        let share = clock.run(Stage::Spline, || {
+            SplineSpace::knot_survey(job.mesh, job.topo).graded_share
+        });
+        if share >= crate::spline::AUTO_GRADED_SHARE {
+            return curve_spline_with(&graded_job, clock, periodic);
+        }
         let first = curve_spline_with(&uniform_job, clock, periodic)?;
-        // Glued periodic seams keep uniform knots: graded knot surfaces are measured on the
-        // unglued mesh, so graded knots would give up the seams' C¹.
-        if !too_many(held(&first.1)) || first.0.seams.is_some() {
+        if !too_many(held(&first.1)) {
             return Ok(first);
         }
         let mut second = curve_spline_with(&graded_job, clock, periodic)?;

@@ -48,9 +48,13 @@
 //! no facet's |ln ratio| reaches [`AUTO_MIN_LOG_RATIO`]). The share alone does not
 //! separate every mesh where graded knots win from unstructured ones (sphere_r6 0.043
 //! against systems_of_equations_ex9 0.051, BENCHMARKS.md, "Graded knot intervals"), hence the
-//! outcome rule below the threshold. Without a fit (`info`, `plot`), auto is uniform; with
-//! glued periodic seams, `curve` keeps uniform knots; under mpirun the launcher resolves it to
-//! uniform.
+//! outcome rule below the threshold. Without a fit (`info`, `plot`), auto is uniform; under
+//! mpirun the launcher resolves it to uniform.
+//!
+//! **Glued periodic seams** ([`survey_glued`]): the knot surfaces are continued on the glued
+//! topology, across the seams, and every element is measured on its own vertices of the
+//! unglued input; a translation keeps the cells' extents, so a surface crossing a seam gets
+//! one ratio from the cells of both sides and the seam stays C¹ with graded knots.
 
 use crate::mesh::LinearMesh;
 use crate::mesh::topology::{NONE, Topology};
@@ -311,46 +315,64 @@ impl SignedUnionFind {
     }
 }
 
-fn centre(mesh: &LinearMesh, vs: &[u32]) -> [f64; 3] {
-    let mut c = [0.0; 3];
-    for &v in vs {
-        let p = mesh.coords[v as usize];
-        for i in 0..3 {
-            c[i] += p[i] / vs.len() as f64;
-        }
+/// Where element `e` has its vertex `v` (of the topology's numbering): the mesh's own
+/// coordinates, or, on a glued mesh, the position of that corner of the element in the
+/// unglued input, so that every element is measured on its own vertices.
+#[derive(Clone, Copy)]
+struct Corners<'a> {
+    mesh: &'a LinearMesh,
+    unglued: Option<&'a LinearMesh>,
+}
+
+impl Corners<'_> {
+    fn at(&self, e: usize, v: u32) -> [f64; 3] {
+        let Some(input) = self.unglued else {
+            return self.mesh.coords[v as usize];
+        };
+        let npe = self.mesh.nodes_per_element();
+        let row = &self.mesh.elements[e * npe..(e + 1) * npe];
+        let i = row
+            .iter()
+            .position(|&w| w == v)
+            .expect("a facet vertex is a vertex of its element");
+        input.coords[input.elements[e * npe + i] as usize]
     }
-    c
-}
 
-/// Extent of element `e` in its local direction `k`: the distance between the centres of its
-/// two faces normal to k.
-fn extent(mesh: &LinearMesh, topo: &Topology, e: usize, k: usize) -> f64 {
-    let a = centre(
-        mesh,
-        topo.facet_vertices(topo.element_facet(e, 2 * k) as usize),
-    );
-    let b = centre(
-        mesh,
-        topo.facet_vertices(topo.element_facet(e, 2 * k + 1) as usize),
-    );
-    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
-}
+    fn centre(&self, e: usize, vs: &[u32]) -> [f64; 3] {
+        let mut c = [0.0; 3];
+        for &v in vs {
+            let p = self.at(e, v);
+            for i in 0..3 {
+                c[i] += p[i] / vs.len() as f64;
+            }
+        }
+        c
+    }
 
-/// Length (2D) or area (3D, from the diagonals) of a facet.
-fn facet_size(mesh: &LinearMesh, vs: &[u32]) -> f64 {
-    let p = |i: usize| mesh.coords[vs[i] as usize];
-    let d = |a: [f64; 3], b: [f64; 3]| [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
-    if vs.len() == 2 {
-        let v = d(p(0), p(1));
-        (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
-    } else {
-        let (u, v) = (d(p(0), p(2)), d(p(1), p(3)));
-        let c = [
-            u[1] * v[2] - u[2] * v[1],
-            u[2] * v[0] - u[0] * v[2],
-            u[0] * v[1] - u[1] * v[0],
-        ];
-        0.5 * (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt()
+    /// Extent of element `e` in its local direction `k`: the distance between the centres of
+    /// its two faces normal to k.
+    fn extent(&self, topo: &Topology, e: usize, k: usize) -> f64 {
+        let face = |s: usize| topo.facet_vertices(topo.element_facet(e, s) as usize);
+        let (a, b) = (self.centre(e, face(2 * k)), self.centre(e, face(2 * k + 1)));
+        ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+    }
+
+    /// Length (2D) or area (3D, from the diagonals) of facet `vs` of element `e`.
+    fn facet_size(&self, e: usize, vs: &[u32]) -> f64 {
+        let p = |i: usize| self.at(e, vs[i]);
+        let d = |a: [f64; 3], b: [f64; 3]| [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+        if vs.len() == 2 {
+            let v = d(p(0), p(1));
+            (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
+        } else {
+            let (u, v) = (d(p(0), p(2)), d(p(1), p(3)));
+            let c = [
+                u[1] * v[2] - u[2] * v[1],
+                u[2] * v[0] - u[0] * v[2],
+                u[0] * v[1] - u[1] * v[0],
+            ];
+            0.5 * (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt()
+        }
     }
 }
 
@@ -527,6 +549,37 @@ pub struct KnotSurvey {
 /// The measured ratios, ties and graded share of the knot surfaces continued across the
 /// elements that are spline elements by topology (`spline[e]`).
 pub fn survey(mesh: &LinearMesh, topo: &Topology, spline: &[bool]) -> KnotSurvey {
+    survey_with(
+        Corners {
+            mesh,
+            unglued: None,
+        },
+        topo,
+        spline,
+    )
+}
+
+/// [`survey`] of a glued mesh (`glued`, `topo`: translation-periodic sides identified,
+/// [`super::seam::glue`]) whose elements are measured on their own vertices in `input` (same
+/// elements, same corner order): a translation keeps lengths, so a knot surface crossing a
+/// seam measures the same cells on both sides and gets one ratio.
+pub fn survey_glued(
+    input: &LinearMesh,
+    glued: &LinearMesh,
+    topo: &Topology,
+    spline: &[bool],
+) -> KnotSurvey {
+    survey_with(
+        Corners {
+            mesh: glued,
+            unglued: Some(input),
+        },
+        topo,
+        spline,
+    )
+}
+
+fn survey_with(corners: Corners, topo: &Topology, spline: &[bool]) -> KnotSurvey {
     let nf = topo.n_facets();
     // Measured log-ratio of every interior facet, with weight 1 / the facet's size: a ratio
     // that misfits a thin cell distorts it relative to its thickness, so the small facets of
@@ -539,10 +592,10 @@ pub fn survey(mesh: &LinearMesh, topo: &Topology, spline: &[bool]) -> KnotSurvey
                 return None;
             }
             let [sa, sb] = topo.facet_sides[f];
-            let ea = extent(mesh, topo, a as usize, sa as usize / 2);
-            let eb = extent(mesh, topo, b as usize, sb as usize / 2);
+            let ea = corners.extent(topo, a as usize, sa as usize / 2);
+            let eb = corners.extent(topo, b as usize, sb as usize / 2);
             let r = (eb / ea).ln();
-            let w = 1.0 / facet_size(mesh, topo.facet_vertices(f));
+            let w = 1.0 / corners.facet_size(a as usize, topo.facet_vertices(f));
             (r.is_finite() && w.is_finite()).then_some((r, w))
         })
         .collect();

@@ -19,12 +19,15 @@
 //!
 //! [`interior_view`] gives the input's topology with the seam facets interior, on which the
 //! pipeline builds everything fitted to the boundary (targets, features, kinks, weights).
+//! [`knot_weights`] gives graded knot intervals of the glued space: its knot surfaces run
+//! across the seams, each element measured on its own input vertices.
 //!
 //! Invariants: where [`glue`] returns a mesh, its topology is manifold and every seam facet is
 //! interior; [`unwrap`] refuses (and the caller keeps the sides apart) when a shift is not a
 //! combination of the translations to `SHIFT_REL_TOL` of the period, or two common vertices
 //! disagree. Rotations are not glued: their control points would couple the components.
 
+use super::intervals::{KnotIntervals, KnotParams, KnotSurvey, Knots};
 use super::{ControlPoint, SplineSpace};
 use crate::math::linalg::DVec3;
 use crate::mesh::LinearMesh;
@@ -56,11 +59,27 @@ fn find(parent: &mut [u32], mut v: u32) -> u32 {
     v
 }
 
-/// Why the seams are not glued with knots of `intervals`, if they are not: graded knot
-/// surfaces are measured on the unglued mesh (the one rule `curve` and `info` follow).
-pub fn not_glued_with(intervals: super::KnotIntervals) -> Option<&'static str> {
-    (intervals == super::KnotIntervals::Graded)
-        .then_some("graded knot intervals are measured on the unglued mesh")
+/// The knot intervals of `params` for the space built on the glued mesh `g` of `input`
+/// (uniform knots: none): the knot surfaces are continued across the seams on the glued
+/// topology and each element's extents are measured on its own vertices in `input`
+/// ([`super::intervals::survey_glued`]), so a surface crossing a seam gets one ratio and the
+/// seam stays C¹ with graded knots. The weights and split elements are per element, in the
+/// input's numbering (the glued mesh keeps its elements and their corner order).
+pub fn knot_weights(input: &LinearMesh, g: &Glued, params: &KnotParams) -> Knots {
+    if params.intervals != KnotIntervals::Graded {
+        return Knots::default();
+    }
+    super::intervals::knot_weights_from(knot_survey(input, g), &g.topo, params)
+}
+
+/// The knot surfaces of the glued mesh `g` of `input` ([`knot_weights`]), for
+/// [`super::intervals::knot_weights_from`].
+pub fn knot_survey(input: &LinearMesh, g: &Glued) -> KnotSurvey {
+    let spline: Vec<bool> = super::classify::classify(&g.mesh, &g.topo)
+        .iter()
+        .map(|c| c.is_spline())
+        .collect();
+    super::intervals::survey_glued(input, &g.mesh, &g.topo, &spline)
 }
 
 /// The input with the translation pairs among `pairs` glued, or `None` when there is none or

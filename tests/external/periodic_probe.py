@@ -19,7 +19,10 @@ With STRAIGHT (the straight-sided mesh of the same input, same elements in the s
   "regular_seam_input_angle_mean": the means over the facets where the input's grid is regular,
       the angle across the facet in STRAIGHT below REGULAR_DEG (the input's own kinks, which
       a curved mesh may keep where it holds the fit back, left out), and the input's mean
-      over those seam facets.
+      over those seam facets; "min_scaled_jacobian", "straight_min_scaled_jacobian": the
+      smallest scaled Jacobian det J / (|dx/du| |dx/dv| [|dx/dw|]) over the elements of FILE
+      and of STRAIGHT, from Gmsh's Jacobians on a lattice of 2p + 1 points per direction
+      (corners included: a straight quad's smallest sine of its corner angles).
 Derivatives come from Gmsh's getJacobians at the reference facet centres; facets are matched
 by their corner node tags (image corners mapped to their masters).
 """
@@ -129,6 +132,27 @@ def measure(path):
     }
 
 
+def min_scaled_jacobian():
+    """The smallest scaled Jacobian of the current model's volume elements on a lattice of
+    2p + 1 points per reference direction."""
+    dim = gmsh.model.getDimension()
+    worst = np.inf
+    for etype in gmsh.model.mesh.getElementTypes(dim):
+        order = gmsh.model.mesh.getElementProperties(etype)[2]
+        t = np.linspace(-1.0, 1.0, 2 * order + 1)
+        grid = np.meshgrid(*([t] * dim), indexing="ij")
+        pts = np.zeros((grid[0].size, 3))
+        for k in range(dim):
+            pts[:, k] = grid[k].ravel()
+        jac, _, _ = gmsh.model.mesh.getJacobians(etype, pts.ravel().tolist())
+        # Per element and point, row k: d x / d u_k.
+        jac = np.array(jac).reshape(-1, len(pts), 3, 3)[:, :, :dim, :dim]
+        det = np.linalg.det(jac)
+        norms = np.prod(np.linalg.norm(jac, axis=3), axis=2)
+        worst = min(worst, float(np.min(det / norms)))
+    return worst
+
+
 def main():
     gmsh.initialize(["-nopopup"])
     gmsh.option.setNumber("General.Terminal", 0)
@@ -137,8 +161,10 @@ def main():
     out = measure(sys.argv[1])
     curved = out.pop("by_facet")
     if len(sys.argv) > 2:
+        out["min_scaled_jacobian"] = min_scaled_jacobian()
         gmsh.clear()
         straight = measure(sys.argv[2]).pop("by_facet")
+        out["straight_min_scaled_jacobian"] = min_scaled_jacobian()
         for what in ("seam", "interior"):
             regular = [f for f, a in straight[what].items() if a < REGULAR_DEG]
             if not regular or any(f not in curved[what] for f in regular):
