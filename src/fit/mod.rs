@@ -717,37 +717,33 @@ impl FitSpace for crate::spline::SplineSpace {
     /// three 1D operators.
     fn element_pattern(&self, e: usize, ids: &mut Vec<u32>) -> Option<u64> {
         let x = &self.extraction;
-        let nodes = x.element_nodes(e);
         // The key names the 1D operators only: graded rows get their own matrices.
-        if !x.is_uniform(e) || nodes.iter().any(|&n| n as usize >= x.n_control) {
+        if !x.is_uniform(e) || !plain_distinct_nodes(self, e, ids) {
             return None;
         }
-        let mut sorted = [0u32; 27];
-        let sorted = &mut sorted[..nodes.len()];
-        sorted.copy_from_slice(nodes);
-        sorted.sort_unstable();
-        if sorted.windows(2).any(|w| w[0] == w[1]) {
-            return None;
-        }
-        ids.clear();
-        ids.extend_from_slice(nodes);
         Some(x.ops[e].iter().fold(0u64, |k, op| k * 8 + *op as u64))
     }
     fn element_factors(&self, e: usize, ids: &mut Vec<u32>) -> Option<[[[f64; 3]; 3]; 3]> {
-        let x = &self.extraction;
-        let nodes = x.element_nodes(e);
-        if nodes.iter().any(|&n| n as usize >= x.n_control) {
-            return None;
-        }
-        let mut sorted = [0u32; 27];
-        let sorted = &mut sorted[..nodes.len()];
-        sorted.copy_from_slice(nodes);
-        sorted.sort_unstable();
-        if sorted.windows(2).any(|w| w[0] == w[1]) {
-            return None;
-        }
-        ids.clear();
-        ids.extend_from_slice(nodes);
-        Some(x.matrices(e))
+        plain_distinct_nodes(self, e, ids).then(|| self.extraction.matrices(e))
     }
+}
+
+/// Whether element `e`'s local nodes are distinct plain control points (then written to
+/// `ids`): the elements whose E_e is a Kronecker product times a selection.
+fn plain_distinct_nodes(space: &crate::spline::SplineSpace, e: usize, ids: &mut Vec<u32>) -> bool {
+    let x = &space.extraction;
+    let nodes = x.element_nodes(e);
+    if nodes.iter().any(|&n| n as usize >= x.n_control) {
+        return false;
+    }
+    let mut sorted = [0u32; 27];
+    let sorted = &mut sorted[..nodes.len()];
+    sorted.copy_from_slice(nodes);
+    sorted.sort_unstable();
+    if sorted.windows(2).any(|w| w[0] == w[1]) {
+        return false;
+    }
+    ids.clear();
+    ids.extend_from_slice(nodes);
+    true
 }

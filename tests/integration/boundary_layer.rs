@@ -546,9 +546,36 @@ fn extruded_coarse_ellipse_tips_keep_their_curved_wall() {
 /// 1.05 to 1.4, wall RMS distance from the analytic wall ≤ 0.1× the linear mesh's (measured
 /// 0.002–0.017×), caps planar, every output certified valid. Boundary layers thinner than
 /// the decay distance: `boundary_layers_within_the_decay_distance_keep_their_walls_curved`.
+/// The generated O-grid (`kind` "ogrid") or C-grid ("cgrid") around `wall`, extruded by
+/// `layers` over a span of 0.1 (2D for 0).
+fn layer_grid(
+    kind: &str,
+    wall: polyspline::mesh::generate::Wall,
+    first_height: f64,
+    growth: f64,
+    layers: usize,
+) -> LinearMesh {
+    use polyspline::mesh::generate::{BoundaryLayer, cgrid, ogrid};
+    let p = BoundaryLayer {
+        wall,
+        first_height,
+        growth,
+        layers,
+        span: 0.1,
+        ..Default::default()
+    };
+    (if kind == "cgrid" {
+        cgrid(&p)
+    } else {
+        ogrid(&p)
+    })
+    .unwrap()
+    .mesh
+}
+
 #[test]
 fn generated_extrusions_keep_their_walls_curved() {
-    use polyspline::mesh::generate::{BoundaryLayer, Wall, cgrid, ogrid};
+    use polyspline::mesh::generate::Wall;
     let mut cases = Vec::new();
     for layers in [1, 3] {
         cases.push(("cgrid", Wall::Naca { thickness: 0.12 }, 1e-5, 1.25, layers));
@@ -564,21 +591,7 @@ fn generated_extrusions_keep_their_walls_curved() {
     }
     let mut failed = Vec::new();
     for (kind, wall, first_height, growth, layers) in cases {
-        let p = BoundaryLayer {
-            wall,
-            first_height,
-            growth,
-            layers,
-            span: 0.1,
-            ..Default::default()
-        };
-        let mesh = (if kind == "cgrid" {
-            cgrid(&p)
-        } else {
-            ogrid(&p)
-        })
-        .unwrap()
-        .mesh;
+        let mesh = layer_grid(kind, wall, first_height, growth, layers);
         let name = format!("{kind}_{first_height:e}_{growth}_{layers}");
         let (curved, straight) = curved_and_straight(&mesh, &name);
         assert!(
@@ -619,7 +632,7 @@ fn generated_extrusions_keep_their_walls_curved() {
 /// certified blend took every cell below, and the wall, back to the chords (0.99–1.0×).
 #[test]
 fn boundary_layers_within_the_decay_distance_keep_their_walls_curved() {
-    use polyspline::mesh::generate::{BoundaryLayer, Wall, cgrid, ogrid};
+    use polyspline::mesh::generate::Wall;
     let ellipse = Wall::Ellipse { thickness: 0.2 };
     let naca = Wall::Naca { thickness: 0.12 };
     let mut failed = Vec::new();
@@ -629,21 +642,7 @@ fn boundary_layers_within_the_decay_distance_keep_their_walls_curved() {
         ("ogrid", ellipse, 3),
         ("cgrid", naca, 0),
     ] {
-        let p = BoundaryLayer {
-            wall,
-            first_height: 1e-6,
-            growth: 1.05,
-            layers,
-            span: 0.1,
-            ..Default::default()
-        };
-        let mesh = (if kind == "cgrid" {
-            cgrid(&p)
-        } else {
-            ogrid(&p)
-        })
-        .unwrap()
-        .mesh;
+        let mesh = layer_grid(kind, wall, 1e-6, 1.05, layers);
         let name = format!("within_decay_{kind}_{layers}");
         let (curved, straight) = curved_and_straight(&mesh, &name);
         assert!(
