@@ -96,23 +96,21 @@ fn check_supported(options: &CurveOptions) -> Result<(), CurveError> {
     // Graded knot intervals average over whole knot surfaces, which cross the shares; the
     // distributed run keeps uniform knots so that its result does not depend on the ranks.
     // `auto` decides on the whole mesh's blend, which no rank sees: the launcher resolves it
-    // to uniform and says so (`launch::curve`).
+    // to uniform at every rank count, one included, and says so (`launch::mpirun_options`).
     match options.knots.intervals {
         crate::spline::KnotIntervals::Uniform => {}
         crate::spline::KnotIntervals::Graded => return unsupported("--knot-intervals graded"),
         crate::spline::KnotIntervals::Auto => return unsupported("--knot-intervals auto"),
     }
-    // The distributed CG preconditions by block Jacobi within each rank's share; the sweeps
-    // of block Gauss–Seidel would run across the shares in an order that depends on them.
-    match options.fit.cg.preconditioner {
-        crate::solve::CgPreconditioner::BlockSgs { .. } => {
-            return unsupported("--cg-preconditioner block-sgs");
-        }
-        // The second partition's patches would cross the shares.
-        crate::solve::CgPreconditioner::BlockJacobiPair { .. } => {
-            return unsupported("--cg-preconditioner block-jacobi-pair");
-        }
-        _ => {}
+    // The deep midpoints are found on the mesh a rank holds, whose cut fringe is not the
+    // whole mesh's boundary.
+    if options.fit.weights.deep_midpoint.is_some() {
+        return unsupported("--w-deep-midpoint");
+    }
+    // The sweeps of block Gauss–Seidel run across the whole matrix in one order (the CG
+    // refuses it too: `CgError::Unavailable`).
+    if let crate::solve::CgPreconditioner::BlockSgs { .. } = options.fit.cg.preconditioner {
+        return unsupported("--cg-preconditioner block-sgs");
     }
     Ok(())
 }
