@@ -1,12 +1,13 @@
 //! The serial solver's block preconditioners applied across ranks: block Jacobi and the
 //! block-Jacobi pair on the aggregates the serial run grows, whatever the shares.
 //!
-//! Input: a rank's share of K ([`LocalMatrix`], its rows of the control points its elements
-//! touch, partial where a control point is shared) and its [`Halo`] with the global keys of
-//! those control points. Output: z = M⁻¹ r on the rank's control points (consistent: every
-//! copy of a shared control point gets the same value), with M the serial preconditioner:
-//! [`crate::solve::block_jacobi::BlockJacobi`] on `Aggregates::new`, and for the pair also on
-//! `Aggregates::reversed`, z = ½ (M₁⁻¹ r + M₂⁻¹ r).
+//! Input: the control points each own element couples (its stencil, in the rank's local
+//! numbering of its [`Halo`], with the global keys of those control points), then a rank's
+//! share of K ([`LocalMatrix`]: the rows of the control points its elements touch, partial
+//! where a control point is shared). Output: z = M⁻¹ r on the rank's control points
+//! (consistent: every copy of a shared control point gets the same value), with M the
+//! serial preconditioner: [`crate::solve::block_jacobi::BlockJacobi`] on `Aggregates::new`,
+//! and for the pair also on `Aggregates::reversed`, z = ½ (M₁⁻¹ r + M₂⁻¹ r).
 //!
 //! **Numbering.** A control point's global number is the rank of its key
 //! ([`super::local::key_of`]: entity kind, then the entity's sorted global ids) among all keys;
@@ -15,14 +16,18 @@
 //! numbers, as the topology sorts them), so the aggregates are the serial run's; in any case
 //! they do not depend on the ranks.
 //!
-//! **Setup** (once per solve). The ranks gather their keys (40 B per control point, on every
-//! rank) and K's graph in global numbers (rank 0 only, 4–8 B per stored entry); rank 0 grows
-//! the aggregates as the serial solver does and sends every rank the blocks and each block's
-//! home (the lowest rank touching its first row). Each block's home receives its partial
-//! entries from the ranks touching it, sums them in rank order and factors the block.
+//! **Aggregates** ([`Aggregation`], before the fit's assembly, when a rank holds least). The
+//! ranks gather their keys (40 B per control point, on every rank) and send rank 0 their own
+//! elements' stencils in global numbers (8 B per stencil entry; K's graph is the union of the
+//! stencils' cliques, E_eᵀ G_e E_e being dense on the element's columns); rank 0 grows the
+//! aggregates as the serial solver does, on that graph (each row's neighbours formed when the
+//! growth reaches it, never the whole graph), and sends every rank the blocks and each block's
+//! home (the lowest rank touching its first row).
 //!
-//! **Per application** two exchanges with the homes: each rank sends r of the control points
-//! it owns to their blocks' homes; the homes solve their blocks and return z to every rank
+//! **Blocks** ([`GlobalBlocks`], in the CG). Each block's home sums its entries from the
+//! ranks' shares (its own rows without a copy, the other ranks' in rank order) and factors it.
+//! Per application, two exchanges with the homes: each rank sends r of the control points it
+//! owns to their blocks' homes; the homes solve their blocks and return z to every rank
 //! touching one of the rows. A block inside one rank's share stays on that rank.
 //!
 //! Invariants: every row is in exactly one block per partition and one home solves it, so the
@@ -31,10 +36,28 @@
 use super::cg::{Halo, LocalMatrix};
 use super::comm::Comm;
 use super::local::Key;
-use crate::solve::block_jacobi::{Aggregates, BlockJacobi};
-use crate::solve::{CgError, Preconditioner};
+use crate::fit::FitSpace;
+use crate::solve::block_jacobi::{Aggregates, BlockJacobi, Neighbours};
+use crate::solve::{CgError, CgPreconditioner, Preconditioner};
+use crate::spline::SplineSpace;
 
-/// One partition of the rows into blocks, as this rank sees it.
+/// One partition as rank 0 grew it: the rows of every block in the order of growth (block a is
+/// `rows[start[a]..start[a + 1]]`) and each block's home rank.
+struct Blocks {
+    rows: Vec<u32>,
+    start: Vec<usize>,
+    home: Vec<u32>,
+}
+
+/// The serial aggregates of the whole mesh's control points, known to every rank (see the
+/// module docs): one partition for block Jacobi, two for the pair.
+pub struct Aggregation {
+    /// The global number of each of this rank's control points (local numbering of the halo).
+    numbers: Vec<u32>,
+    parts: Vec<Blocks>,
+}
+
+/// One partition of the rows into blocks, as this rank applies it.
 struct Partition {
     /// Per rank q: the local rows this rank sends r of (its owned rows in q's blocks).
     send_r: Vec<Vec<u32>>,
@@ -87,116 +110,208 @@ fn global_numbers(comm: &dyn Comm, halo: &Halo) -> (Vec<u32>, usize) {
     (numbers, all.len())
 }
 
-/// Rank 0: K's graph in global numbers (columns sorted, as the serial matrix stores them) and
-/// the lowest rank touching each row, from every rank's records `[row, rank, count, cols…]`.
-fn gathered_graph(records: &[f64], n: usize) -> (Vec<usize>, Vec<u32>, Vec<u32>) {
-    let mut cols: Vec<Vec<u32>> = vec![Vec::new(); n];
-    let mut owner = vec![u32::MAX; n];
-    let mut at = 0;
-    while at < records.len() {
-        let (g, q, len) = (
-            records[at] as usize,
-            records[at + 1] as u32,
-            records[at + 2] as usize,
-        );
-        owner[g] = owner[g].min(q);
-        cols[g].extend(records[at + 3..at + 3 + len].iter().map(|&c| c as u32));
-        at += 3 + len;
-    }
-    let mut indptr = Vec::with_capacity(n + 1);
-    indptr.push(0);
-    let mut indices = Vec::new();
-    for mut c in cols {
-        c.sort_unstable();
-        c.dedup();
-        indices.extend_from_slice(&c);
-        indptr.push(indices.len());
-    }
-    (indptr, indices, owner)
+/// Rank 0's view of K's graph: the elements' stencils and, per control point, the elements
+/// holding it; a row's neighbours are formed when asked for.
+struct Stencils {
+    element_start: Vec<usize>,
+    element_points: Vec<u32>,
+    point_start: Vec<usize>,
+    point_elements: Vec<u32>,
+    /// The lowest rank touching each control point.
+    owner: Vec<u32>,
+    row: Vec<u32>,
 }
 
-/// One partition as rank 0 grew it: the rows of every block in the order of growth (block a is
-/// `rows[start[a]..start[a + 1]]`) and each block's home rank.
-struct Blocks {
-    rows: Vec<u32>,
-    start: Vec<usize>,
-    home: Vec<u32>,
-}
-
-/// Rank 0 grows the serial aggregates on the gathered graph; every rank receives them.
-fn serial_aggregates(
-    comm: &dyn Comm,
-    k: &LocalMatrix,
-    numbers: &[u32],
-    n: usize,
-    size: usize,
-    pair: bool,
-) -> Vec<Blocks> {
-    let mut records = Vec::new();
-    for (i, &g) in numbers.iter().enumerate() {
-        let (cols, _) = k.row(i);
-        records.extend([g as f64, comm.rank() as f64, cols.len() as f64]);
-        records.extend(cols.iter().map(|&c| numbers[c as usize] as f64));
-    }
-    let gathered = comm.gather_f64(0, &records);
-    drop(records);
-    // Per partition: the number of blocks, the rows, the starts, the homes.
-    let message: Vec<f64> = match gathered {
-        Some(records) => {
-            let (indptr, indices, owner) = gathered_graph(&records, n);
-            drop(records);
-            let mut partitions = vec![Aggregates::new(&indptr, &indices, size)];
-            if pair {
-                partitions.push(Aggregates::reversed(&indptr, &indices, size));
+impl Stencils {
+    /// From every rank's records `[rank, elements, (count, points…) per element]`, in rank
+    /// order, over `n` control points.
+    fn new(records: &[f64], n: usize) -> Stencils {
+        let (mut element_start, mut element_points) = (vec![0usize], Vec::new());
+        let mut owner = vec![u32::MAX; n];
+        let mut at = 0;
+        while at < records.len() {
+            let (q, elements) = (records[at] as u32, records[at + 1] as usize);
+            at += 2;
+            for _ in 0..elements {
+                let len = records[at] as usize;
+                for &g in &records[at + 1..at + 1 + len] {
+                    owner[g as usize] = owner[g as usize].min(q);
+                    element_points.push(g as u32);
+                }
+                element_start.push(element_points.len());
+                at += 1 + len;
             }
-            let mut m = Vec::new();
-            for agg in &partitions {
-                let blocks = agg.start.len() - 1;
-                m.push(blocks as f64);
-                m.extend(agg.rows.iter().map(|&r| r as f64));
-                m.extend(agg.start.iter().map(|&s| s as f64));
-                m.extend((0..blocks).map(|a| owner[agg.rows[agg.start[a]] as usize] as f64));
-            }
-            m
         }
-        None => Vec::new(),
-    };
-    let message = comm.all_gather_f64(&message).swap_remove(0);
-    let mut out = Vec::new();
-    let mut at = 0;
-    while at < message.len() {
-        let blocks = message[at] as usize;
-        at += 1;
-        let take = |at: &mut usize, len: usize| {
-            let s = &message[*at..*at + len];
-            *at += len;
-            s
-        };
-        let rows = take(&mut at, n).iter().map(|&r| r as u32).collect();
-        let start = take(&mut at, blocks + 1).iter().map(|&s| s as usize).collect();
-        let home = take(&mut at, blocks).iter().map(|&q| q as u32).collect();
-        out.push(Blocks { rows, start, home });
+        let mut point_start = vec![0usize; n + 1];
+        for &g in &element_points {
+            point_start[g as usize + 1] += 1;
+        }
+        for g in 0..n {
+            point_start[g + 1] += point_start[g];
+        }
+        let mut fill = point_start.clone();
+        let mut point_elements = vec![0u32; element_points.len()];
+        for e in 0..element_start.len() - 1 {
+            for &g in &element_points[element_start[e]..element_start[e + 1]] {
+                point_elements[fill[g as usize]] = e as u32;
+                fill[g as usize] += 1;
+            }
+        }
+        Stencils {
+            element_start,
+            element_points,
+            point_start,
+            point_elements,
+            owner,
+            row: Vec::new(),
+        }
     }
-    out
+}
+
+impl Neighbours for Stencils {
+    fn len(&self) -> usize {
+        self.point_start.len() - 1
+    }
+    fn of(&mut self, r: usize) -> &[u32] {
+        self.row.clear();
+        for &e in &self.point_elements[self.point_start[r]..self.point_start[r + 1]] {
+            let e = e as usize;
+            self.row.extend_from_slice(
+                &self.element_points[self.element_start[e]..self.element_start[e + 1]],
+            );
+        }
+        self.row.sort_unstable();
+        self.row.dedup();
+        &self.row
+    }
+}
+
+impl Aggregation {
+    /// The aggregates of at most `size` rows (collective; see the module docs), both
+    /// partitions of the pair when `pair`, of the graph whose cliques are `stencils`: each own
+    /// element's control points, in the halo's local numbering.
+    pub fn new(
+        comm: &dyn Comm,
+        halo: &Halo,
+        stencils: &[Vec<u32>],
+        size: usize,
+        pair: bool,
+    ) -> Aggregation {
+        let (numbers, n) = global_numbers(comm, halo);
+        let mut records = vec![comm.rank() as f64, stencils.len() as f64];
+        for s in stencils {
+            records.push(s.len() as f64);
+            records.extend(s.iter().map(|&i| numbers[i as usize] as f64));
+        }
+        let gathered = comm.gather_f64(0, &records);
+        drop(records);
+        // Per partition: the number of blocks, the rows, the starts, the homes.
+        let message: Vec<f64> = match gathered {
+            Some(records) => {
+                let mut graph = Stencils::new(&records, n);
+                drop(records);
+                let size = size.max(1);
+                let mut m = Vec::new();
+                for reverse in [false, true].into_iter().take(1 + usize::from(pair)) {
+                    let agg = Aggregates::grow_on(&mut graph, size, reverse);
+                    let blocks = agg.start.len() - 1;
+                    m.push(blocks as f64);
+                    m.extend(agg.rows.iter().map(|&r| r as f64));
+                    m.extend(agg.start.iter().map(|&s| s as f64));
+                    m.extend(
+                        (0..blocks).map(|a| graph.owner[agg.rows[agg.start[a]] as usize] as f64),
+                    );
+                }
+                m
+            }
+            None => Vec::new(),
+        };
+        let message = comm.all_gather_f64(&message).swap_remove(0);
+        let mut parts = Vec::new();
+        let mut at = 0;
+        let take = |at: &mut usize, len: usize| {
+            *at += len;
+            &message[*at - len..*at]
+        };
+        while at < message.len() {
+            let blocks = take(&mut at, 1)[0] as usize;
+            let rows = take(&mut at, n).iter().map(|&r| r as u32).collect();
+            let start = take(&mut at, blocks + 1)
+                .iter()
+                .map(|&s| s as usize)
+                .collect();
+            let home = take(&mut at, blocks).iter().map(|&q| q as u32).collect();
+            parts.push(Blocks { rows, start, home });
+        }
+        Aggregation { numbers, parts }
+    }
+}
+
+/// The control points each element of `elements` couples in `space`, in the local numbering
+/// of `halo`: the columns the fit's assembly gives the element's matrix
+/// ([`FitSpace::element_pattern`]'s control points, or else the distinct columns of its
+/// extraction rows), so the union of their cliques is K's graph.
+pub fn own_stencils(space: &SplineSpace, halo: &Halo, elements: &[usize]) -> Vec<Vec<u32>> {
+    let (mut ids, mut offsets, mut cols, mut weights) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    elements
+        .iter()
+        .map(|&e| {
+            let used: &[u32] = if space.element_pattern(e, &mut ids).is_some() {
+                &ids
+            } else {
+                space.element_rows(e, &mut offsets, &mut cols, &mut weights);
+                &cols
+            };
+            let mut stencil: Vec<u32> = used
+                .iter()
+                .map(|&c| {
+                    halo.local(c)
+                        .expect("an own element's control point is in the halo")
+                        as u32
+                })
+                .collect();
+            stencil.sort_unstable();
+            stencil.dedup();
+            stencil
+        })
+        .collect()
+}
+
+impl Aggregation {
+    /// The aggregates `preconditioner` applies ([`Aggregation::new`]), or `None` for one
+    /// without blocks.
+    pub fn for_preconditioner(
+        comm: &dyn Comm,
+        halo: &Halo,
+        stencils: &[Vec<u32>],
+        preconditioner: &CgPreconditioner,
+    ) -> Option<Aggregation> {
+        match *preconditioner {
+            CgPreconditioner::BlockJacobi { size } => {
+                Some(Aggregation::new(comm, halo, stencils, size, false))
+            }
+            CgPreconditioner::BlockJacobiPair { size } => {
+                Some(Aggregation::new(comm, halo, stencils, size, true))
+            }
+            CgPreconditioner::Jacobi | CgPreconditioner::BlockSgs { .. } => None,
+        }
+    }
 }
 
 impl GlobalBlocks {
-    /// The blocks of at most `size` rows (collective; see the module docs); both partitions of
-    /// the pair when `pair`. A block that fails to factor fails on every rank alike.
+    /// The blocks of `aggregation` over this rank's share `k` of K (collective; see the module
+    /// docs). A block that fails to factor fails on every rank alike.
     pub fn new(
         comm: &dyn Comm,
         halo: &Halo,
         k: &LocalMatrix,
-        size: usize,
-        pair: bool,
+        aggregation: &Aggregation,
     ) -> Result<GlobalBlocks, CgError> {
-        let (numbers, n) = global_numbers(comm, halo);
-        let partitions = serial_aggregates(comm, k, &numbers, n, size.max(1), pair);
         let mut parts = Vec::new();
         let mut failure = None;
-        for blocks in &partitions {
-            let part = Partition::new(comm, halo, k, &numbers, blocks);
-            match part {
+        for blocks in &aggregation.parts {
+            match Partition::new(comm, halo, k, &aggregation.numbers, blocks) {
                 Ok(p) => parts.push(p),
                 Err(e) => {
                     failure.get_or_insert(e);
@@ -287,34 +402,37 @@ impl Partition {
                 of[r as usize] = a as u32;
             }
         }
-        let home_of = |i: usize| home[of[numbers[i] as usize] as usize] as usize;
         let mut send_r = vec![Vec::new(); ranks];
         let mut recv_z = vec![Vec::new(); ranks];
-        for i in 0..numbers.len() {
-            let q = home_of(i);
+        for (i, &g) in numbers.iter().enumerate() {
+            let q = home[of[g as usize] as usize] as usize;
             recv_z[q].push(i as u32);
             if halo.owned[i] {
                 send_r[q].push(i as u32);
             }
         }
-        // To each home: the rows this rank sends r of, the rows it wants z of, and its partial
-        // entries of the blocks (row, column, value; the columns in the row's block).
+        // Local row i's entries in its block: (row, column, value) in global numbers.
+        let entries = |i: u32, f: &mut dyn FnMut(u32, u32, f64)| {
+            let g = numbers[i as usize];
+            let (cols, values) = k.row(i as usize);
+            for (&c, &v) in cols.iter().zip(values) {
+                let h = numbers[c as usize];
+                if of[h as usize] == of[g as usize] {
+                    f(g, h, v);
+                }
+            }
+        };
+        // To each other home: the rows this rank sends r of, the rows it wants z of, and its
+        // partial entries of those rows.
         let mut send = vec![Vec::new(); ranks];
-        for q in 0..ranks {
+        for q in (0..ranks).filter(|&q| q != me) {
             let s = &mut send[q];
             s.push(send_r[q].len() as f64);
             s.extend(send_r[q].iter().map(|&i| numbers[i as usize] as f64));
             s.push(recv_z[q].len() as f64);
             s.extend(recv_z[q].iter().map(|&i| numbers[i as usize] as f64));
             for &i in &recv_z[q] {
-                let g = numbers[i as usize];
-                let (cols, values) = k.row(i as usize);
-                for (&c, &v) in cols.iter().zip(values) {
-                    let h = numbers[c as usize];
-                    if of[h as usize] == of[g as usize] {
-                        s.extend([g as f64, h as f64, v]);
-                    }
-                }
+                entries(i, &mut |g, h, v| s.extend([g as f64, h as f64, v]));
             }
         }
         let received = comm.exchange_f64(&send);
@@ -332,39 +450,62 @@ impl Partition {
             local_start.push(global.len());
         }
         let m = global.len();
+        let at = |list: &[u32]| -> Vec<u32> {
+            list.iter()
+                .map(|&i| position[numbers[i as usize] as usize])
+                .collect()
+        };
         let mut recv_r = vec![Vec::new(); ranks];
         let mut send_z = vec![Vec::new(); ranks];
-        let mut entries: Vec<Vec<(u32, f64)>> = vec![Vec::new(); m];
-        for (q, buf) in received.iter().enumerate() {
+        recv_r[me] = at(&send_r[me]);
+        send_z[me] = at(&recv_z[me]);
+        // The other ranks' parts: their lists, then their entries.
+        let entries_from = |buf: &[f64]| {
             let nr = buf[0] as usize;
-            recv_r[q] = buf[1..1 + nr]
-                .iter()
-                .map(|&g| position[g as usize])
-                .collect();
-            let nz = buf[1 + nr] as usize;
-            let at = 2 + nr;
-            send_z[q] = buf[at..at + nz]
-                .iter()
-                .map(|&g| position[g as usize])
-                .collect();
-            for t in buf[at + nz..].chunks_exact(3) {
-                let (i, j) = (position[t[0] as usize], position[t[1] as usize]);
-                entries[i as usize].push((j, t[2]));
+            2 + nr + buf[1 + nr] as usize
+        };
+        // Each homed row's entries from every rank, in rank order (this rank's from its share).
+        let for_each_entry = |f: &mut dyn FnMut(u32, u32, f64)| {
+            for (q, buf) in received.iter().enumerate() {
+                if q == me {
+                    for &i in &recv_z[me] {
+                        entries(i, &mut |g, h, v| {
+                            f(position[g as usize], position[h as usize], v)
+                        });
+                    }
+                } else {
+                    for t in buf[entries_from(buf)..].chunks_exact(3) {
+                        f(position[t[0] as usize], position[t[1] as usize], t[2]);
+                    }
+                }
             }
+        };
+        let mut indptr = vec![0usize; m + 1];
+        for_each_entry(&mut |i, _, _| indptr[i as usize + 1] += 1);
+        for i in 0..m {
+            indptr[i + 1] += indptr[i];
+        }
+        let mut fill = indptr.clone();
+        let mut indices = vec![0u32; indptr[m]];
+        let mut data = vec![0.0; indptr[m]];
+        for_each_entry(&mut |i, j, v| {
+            let f = &mut fill[i as usize];
+            indices[*f] = j;
+            data[*f] = v;
+            *f += 1;
+        });
+        drop(fill);
+        for (q, buf) in received.iter().enumerate().filter(|(q, _)| *q != me) {
+            let nr = buf[0] as usize;
+            let list =
+                |ids: &[f64]| -> Vec<u32> { ids.iter().map(|&g| position[g as usize]).collect() };
+            recv_r[q] = list(&buf[1..1 + nr]);
+            send_z[q] = list(&buf[2 + nr..entries_from(buf)]);
         }
         drop(received);
         let blocks = if m == 0 {
             None
         } else {
-            let mut indptr = vec![0usize];
-            let (mut indices, mut data) = (Vec::new(), Vec::new());
-            for row in entries {
-                for (j, v) in row {
-                    indices.push(j);
-                    data.push(v);
-                }
-                indptr.push(indices.len());
-            }
             let aggregates = Aggregates {
                 rows: (0..m as u32).collect(),
                 start: local_start,
@@ -438,6 +579,19 @@ mod tests {
         (indptr, indices, data)
     }
 
+    /// The edges of a CSR graph as 2-cliques (their union is the graph).
+    fn pairs(indptr: &[usize], indices: &[u32]) -> Vec<Vec<u32>> {
+        let mut out = Vec::new();
+        for r in 0..indptr.len() - 1 {
+            for &c in &indices[indptr[r]..indptr[r + 1]] {
+                if c as usize >= r {
+                    out.push(vec![r as u32, c]);
+                }
+            }
+        }
+        out
+    }
+
     /// On one rank the blocks are the serial solver's: the same z, bit for bit, as
     /// [`BlockJacobiPair`] (both partitions) and [`BlockJacobi`] (the first).
     #[test]
@@ -462,7 +616,9 @@ mod tests {
                 Box::new(BlockJacobi::new(&indptr, &indices, &data, 8).unwrap()),
             ),
         ] {
-            let blocks = GlobalBlocks::new(&comm, &halo, &local, 8, pair).unwrap();
+            let stencils = pairs(&indptr, &indices);
+            let aggregation = Aggregation::new(&comm, &halo, &stencils, 8, pair);
+            let blocks = GlobalBlocks::new(&comm, &halo, &local, &aggregation).unwrap();
             let (mut z, mut want) = (vec![[0.0; 3]; n], vec![[0.0; 3]; n]);
             blocks.apply(&comm, &r, &mut z);
             serial.apply(&r, &mut want);
@@ -495,6 +651,7 @@ mod tests {
             }
             fptr.push(fidx.len());
         }
+        let stencils = pairs(&fptr, &fidx);
         let k = NormalMatrix::new(n, fptr, fidx, fdat);
         let mut halo = Halo::new(0, &[(0..n as u32).collect()], n);
         halo.keys = (0..n).map(|i| [0, flip(i) as u64, 0, 0, 0]).collect();
@@ -502,7 +659,8 @@ mod tests {
         let r: Vec<[f64; 3]> = (0..n).map(|i| [i as f64, 1.0, (i * i) as f64]).collect();
         let r_flipped: Vec<[f64; 3]> = (0..n).map(|i| r[flip(i)]).collect();
         let comm = Single::default();
-        let blocks = GlobalBlocks::new(&comm, &halo, &local, 8, true).unwrap();
+        let aggregation = Aggregation::new(&comm, &halo, &stencils, 8, true);
+        let blocks = GlobalBlocks::new(&comm, &halo, &local, &aggregation).unwrap();
         let mut z = vec![[0.0; 3]; n];
         blocks.apply(&comm, &r_flipped, &mut z);
         let mut want = vec![[0.0; 3]; n];

@@ -14,13 +14,15 @@
 //! by rounding over the iterations). Dot products count each control point once, on its owner
 //! (the lowest rank touching it), then sum over the ranks (one all-reduce of 3 values for p·Kp, one of
 //! 6 for r·z and the stopping test's r·r together: two per iteration). The halo exchange
-//! needs no counts (the lists are the same on both sides), so an iteration is 3 collectives:
-//! on oversubscribed or loaded nodes each one waits for every rank to be scheduled.
+//! needs no counts (the lists are the same on both sides), so an iteration is 3 collectives,
+//! and 2 more with a block preconditioner (r to the blocks' homes, z back): on oversubscribed
+//! or loaded nodes each one waits for every rank to be scheduled.
 //!
 //! **Preconditioner.** The serial solver's own ([`super::blocks`]): block Jacobi and the
 //! block-Jacobi pair (the default) on the aggregates the serial run grows, numbered by the
-//! control points' global keys, not by the shares; a block that straddles ranks is summed and
-//! solved on one home rank. With `--cg-preconditioner jacobi` every row gets point Jacobi on
+//! control points' global keys, not by the shares (grown before the assembly,
+//! [`Aggregation`], and passed in); a block that straddles ranks is summed and solved on one
+//! home rank. With `--cg-preconditioner jacobi` every row gets point Jacobi on
 //! its summed diagonal. Either way the preconditioner is the serial one, so the iterates are
 //! the serial ones up to the order of the sums (the ranks' partial products, dot products and
 //! block entries), whatever the shares: the loop and its stopping rule (‖r‖ ≤ rel_tol ‖b‖ per
@@ -28,10 +30,10 @@
 //! products as its reductions. Block Gauss–Seidel, whose sweeps run in an order across the
 //! whole matrix, is refused ([`CgError::Unavailable`]).
 
+use super::blocks::{Aggregation, GlobalBlocks};
 use super::comm::Comm;
-use crate::fit::NormalMatrix;
-use super::blocks::GlobalBlocks;
 use super::local::Key;
+use crate::fit::NormalMatrix;
 use crate::solve::blocked::RowTemplates;
 use crate::solve::{CgError, CgInfo, CgParams, CgPreconditioner};
 use rayon::prelude::*;
@@ -320,8 +322,9 @@ fn flat(v: &mut [[f64; 3]]) -> &mut [f64] {
 }
 
 /// Solve the distributed system for δ (consistent, on `halo`'s control points) from `x` = 0:
-/// `b` is this rank's partial right-hand side (summed here). Returns the CG figures; every
-/// rank returns the same ones.
+/// `b` is this rank's partial right-hand side (summed here). A block preconditioner applies
+/// `aggregation`, made for it ([`Aggregation::for_preconditioner`]; without one it is
+/// [`CgError::Unavailable`]). Returns the CG figures; every rank returns the same ones.
 pub fn pcg(
     comm: &dyn Comm,
     halo: &Halo,
@@ -329,6 +332,7 @@ pub fn pcg(
     b_partial: &[[f64; 3]],
     x: &mut [[f64; 3]],
     params: &CgParams,
+    aggregation: Option<&Aggregation>,
 ) -> Result<CgInfo, CgError> {
     let mut b = b_partial.to_vec();
     halo.sum_partials(comm, flat(&mut b), 3);
@@ -353,18 +357,19 @@ pub fn pcg(
         halo.sum_partials(comm, flat(y), 3);
     };
     // The serial solver's preconditioner on every share (the module docs).
-    let m = match params.preconditioner {
-        CgPreconditioner::Jacobi => Local::Point(diag),
-        CgPreconditioner::BlockJacobi { size } => {
-            Local::Blocks(GlobalBlocks::new(comm, halo, k, size, false)?)
-        }
-        CgPreconditioner::BlockJacobiPair { size } => {
-            Local::Blocks(GlobalBlocks::new(comm, halo, k, size, true)?)
-        }
-        CgPreconditioner::BlockSgs { .. } => {
+    let m = match (params.preconditioner, aggregation) {
+        (CgPreconditioner::Jacobi, _) => Local::Point(diag),
+        (CgPreconditioner::BlockSgs { .. }, _) => {
             return Err(CgError::Unavailable {
                 what: "block Gauss–Seidel",
                 why: "its sweeps run across the whole matrix in one order",
+            });
+        }
+        (_, Some(a)) => Local::Blocks(GlobalBlocks::new(comm, halo, k, a)?),
+        (_, None) => {
+            return Err(CgError::Unavailable {
+                what: "block",
+                why: "the distributed CG was given no aggregates",
             });
         }
     };
@@ -427,7 +432,21 @@ mod tests {
             rel_tol: 1e-12,
             ..Default::default()
         };
-        pcg(&Single::default(), &halo, &local, &b, &mut x, &params).unwrap();
+        // The graph's edges as the elements' stencils.
+        let stencils: Vec<Vec<u32>> = (0..n as u32 - 1).map(|i| vec![i, i + 1]).collect();
+        let comm = Single::default();
+        let aggregation =
+            Aggregation::for_preconditioner(&comm, &halo, &stencils, &params.preconditioner);
+        pcg(
+            &comm,
+            &halo,
+            &local,
+            &b,
+            &mut x,
+            &params,
+            aggregation.as_ref(),
+        )
+        .unwrap();
         let mut y = vec![[0.0; 3]; n];
         crate::solve::LinOp::apply(&k, &x, &mut y);
         for (y, b) in y.iter().zip(&b) {

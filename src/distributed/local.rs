@@ -89,7 +89,11 @@ pub fn halo(comm: &dyn Comm, local: &LocalMesh, topo: &Topology, space: &SplineS
         .iter()
         .map(|&c| key_of(space.control_point_keys[c as usize], local, topo))
         .collect();
-    let mut by_key: Vec<(Key, u32)> = keys.iter().enumerate().map(|(i, &k)| (k, i as u32)).collect();
+    let mut by_key: Vec<(Key, u32)> = keys
+        .iter()
+        .enumerate()
+        .map(|(i, &k)| (k, i as u32))
+        .collect();
     by_key.sort_unstable();
     let candidates: BTreeSet<usize> = local.owner[local.n_owned..]
         .iter()
