@@ -118,7 +118,7 @@ pub enum CurveError {
 
 impl CurveError {
     /// The output would contain the elements `bad`, not certified valid: name the first few.
-    fn invalid(input: &Path, what: &str, bad: &[usize]) -> CurveError {
+    pub(crate) fn invalid(input: &Path, what: &str, bad: &[usize]) -> CurveError {
         CurveError::Invalid {
             input: input.to_owned(),
             what: what.into(),

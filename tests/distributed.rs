@@ -1299,3 +1299,322 @@ fn the_default_knot_intervals_run_uniform_under_mpirun_and_say_so() {
         "the default differs from uniform knots under mpirun"
     );
 }
+
+// ---------------------------------------------------------------------------------------
+// Periodic pairs across ranks (`distributed::periodic`).
+// ---------------------------------------------------------------------------------------
+
+/// Largest |A x_master − x_image| Gmsh finds over the written node pairs, relative to the
+/// diagonal (issue #34: to rounding, 1e-12 of the diagonal).
+const PERIODIC_IMAGE_TOL: f64 = 1e-12;
+
+/// The Morton key of a point quantised to 21 bits per axis in the box `lo`–`hi`, bits
+/// interleaved x, y, z from the lowest (the partition `distributed::partition` computes).
+fn morton_key(c: [f64; 3], lo: [f64; 3], hi: [f64; 3]) -> u64 {
+    let top = ((1u64 << 21) - 1) as f64;
+    let mut key = 0u64;
+    for k in 0..3 {
+        let scale = if hi[k] > lo[k] {
+            top / (hi[k] - lo[k])
+        } else {
+            0.0
+        };
+        let q = ((c[k] - lo[k]) * scale).round().max(0.0) as u64;
+        for b in 0..21 {
+            key |= ((q >> b) & 1) << (3 * b + k);
+        }
+    }
+    key
+}
+
+/// The ranks whose Morton parts (computed here from the raw file, as [`morton_shares`] does)
+/// hold an element touching boundary group `side` of `path` at `np` ranks.
+fn morton_ranks_of(path: &Path, np: usize, side: &str) -> std::collections::BTreeSet<usize> {
+    use polyspline::io::CellKind;
+    let raw = polyspline::io::read_raw(path).unwrap();
+    let tag = *raw
+        .tag_names
+        .iter()
+        .find(|(_, n)| n.as_str() == side)
+        .unwrap()
+        .0;
+    let dim3 = raw
+        .blocks
+        .iter()
+        .any(|b| b.kind == Some(CellKind::Hexahedron));
+    let (cell_kind, facet_kind) = if dim3 {
+        (CellKind::Hexahedron, CellKind::Quad)
+    } else {
+        (CellKind::Quad, CellKind::Line)
+    };
+    let volume: Vec<&[i64]> = raw
+        .blocks
+        .iter()
+        .filter(|b| b.kind.as_ref() == Some(&cell_kind))
+        .flat_map(|b| b.nodes.chunks_exact(b.nodes_per_cell))
+        .collect();
+    let on_side: std::collections::HashSet<i64> = raw
+        .blocks
+        .iter()
+        .filter(|b| b.kind.as_ref() == Some(&facet_kind))
+        .flat_map(|b| {
+            b.nodes
+                .chunks_exact(b.nodes_per_cell)
+                .zip(&b.tags)
+                .filter(|&(_, &t)| t == tag)
+                .flat_map(|(c, _)| c.iter().copied())
+        })
+        .collect();
+    let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+    for c in &volume {
+        for &v in c.iter() {
+            for k in 0..3 {
+                lo[k] = lo[k].min(raw.points[v as usize][k]);
+                hi[k] = hi[k].max(raw.points[v as usize][k]);
+            }
+        }
+    }
+    let mut keyed: Vec<(u64, usize)> = volume
+        .iter()
+        .enumerate()
+        .map(|(e, c)| {
+            let centroid = std::array::from_fn(|k| {
+                c.iter().map(|&v| raw.points[v as usize][k]).sum::<f64>() / c.len() as f64
+            });
+            (morton_key(centroid, lo, hi), e)
+        })
+        .collect();
+    keyed.sort_unstable();
+    let n = volume.len();
+    keyed
+        .iter()
+        .enumerate()
+        .filter(|(_, (_, e))| volume[*e].iter().any(|v| on_side.contains(v)))
+        .map(|(i, _)| i * np / n)
+        .collect()
+}
+
+/// A generated periodic mesh `args` (`polyspline generate …`) turned by `deg` degrees about z
+/// and written as binary MSH 4.1 (without its `$Periodic` section), elements in the same
+/// order: so that the Morton partition's first cut (along y) runs between the two sides.
+fn turned_periodic_input(name: &str, args: &str, deg: f64) -> PathBuf {
+    let generated = scratch(&format!("{name}_generated.msh"));
+    common::run_ok(
+        Command::new(BIN)
+            .arg("generate")
+            .args(args.split(' '))
+            .arg("-o")
+            .arg(&generated),
+    );
+    let raw = polyspline::io::read_raw(&generated).unwrap();
+    let mut mesh = polyspline::mesh::LinearMesh::from_raw(raw, &Default::default()).unwrap();
+    let (c, s) = (deg.to_radians().cos(), deg.to_radians().sin());
+    for x in &mut mesh.coords {
+        *x = [c * x[0] - s * x[1], s * x[0] + c * x[1], x[2]];
+    }
+    let topo = polyspline::mesh::Topology::build(&mesh);
+    let ho = polyspline::sample::sample(&mesh, &mesh, &topo, 1);
+    let input = scratch(&format!("{name}.msh"));
+    let mut w = std::io::BufWriter::new(std::fs::File::create(&input).unwrap());
+    polyspline::io::gmsh_write::write_msh(
+        &ho,
+        polyspline::io::gmsh_write::MshVersion::V41,
+        true,
+        &mut w,
+    )
+    .unwrap();
+    input
+}
+
+/// `periodic_probe.py` (Gmsh's `getPeriodicNodes` and node coordinates) on `file`: one link,
+/// image side `image` of master `master`, every node of the image side paired, each pair the
+/// affine image of its master to [`PERIODIC_IMAGE_TOL`] of the diagonal. Returns the link.
+fn assert_gmsh_pairs_exact(file: &Path, master: &str, image: &str) -> Value {
+    let out = common::run_ok(
+        common::python()
+            .arg(concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/tests/external/periodic_probe.py"
+            ))
+            .arg(file),
+    );
+    let p: Value = serde_json::from_slice(&out.stdout).unwrap();
+    let what = file.display();
+    let links = p["links"].as_array().unwrap();
+    assert_eq!(links.len(), 1, "{what}: {links:?}");
+    let l = &links[0];
+    assert_eq!(l["name"], image, "{what}: {l}");
+    assert_eq!(l["master_name"], master, "{what}: {l}");
+    let pairs = l["pairs"].as_u64().unwrap();
+    assert!(pairs > 0 && pairs == l["entity_nodes"], "{what}: {l}");
+    assert_eq!(l["unpaired"], 0, "{what}: {l}");
+    let miss = l["max_mismatch"].as_f64().unwrap() / p["diagonal"].as_f64().unwrap();
+    assert!(
+        miss <= PERIODIC_IMAGE_TOL,
+        "{what}: the images miss by {miss:e} of the diagonal: {l}"
+    );
+    l.clone()
+}
+
+/// `--periodic A:B` under mpirun, the two sides on different ranks: the generated channel
+/// (translation; 2D at orders 1, 4 and 10, 3D at order 2), the generated annulus sector
+/// (rotation about z, 3D at order 3), each turned about z so that the default Morton
+/// partition's first cut runs between the sides (at 2 ranks the ranks holding side A are not
+/// those holding B, checked from the raw file; at 3 they differ), and the VKI cascade (a real
+/// mismatch: its two sides, curved each on its own, differ by 1e-4 of the diagonal), as
+/// binary MSH 4.1. Gmsh reads the written `$Periodic` section: every node of the image side is
+/// paired with one of the master side, as many pairs as the serial file's, each matching
+/// under Gmsh's affine map to 1e-12 of the diagonal; the report says `c0` and as many node
+/// pairs. Against the serial run at `--cg-tol 1e-8`: the rotation pair (C⁰ serially too)
+/// within [`RANK_TOLERANCE`]; the translation pairs are glued serially (C¹) but not across
+/// ranks (C⁰), so only the counts and tags are compared there.
+#[test]
+fn periodic_pairs_are_exact_images_across_ranks() {
+    if !have_mpirun() || !common::have_gmsh(&common::current_test()) {
+        return;
+    }
+    let channel = "channel --around 12 --across 6 --first-height 0.02 --bump 0.15";
+    let sector =
+        "sector --around 6 --across 6 --first-height 0.02 --sector 40 --layers 1 --span 0.5";
+    let turbine = scratch("pturbine.msh");
+    common::run_ok(
+        Command::new(BIN)
+            .args([
+                "curve",
+                "meshes/real/su2-testcases/mesh_vki_turbine_prepbc.su2",
+            ])
+            .args(["--straight", "--order", "1", "--binary", "-q", "-o"])
+            .arg(&turbine)
+            .current_dir(env!("CARGO_MANIFEST_DIR")),
+    );
+    let cases: [(&str, PathBuf, [&str; 2], &[usize], bool); 4] = [
+        (
+            "pchannel2d",
+            turned_periodic_input("pchannel2d", channel, 90.0),
+            ["periodic_left", "periodic_right"],
+            &[1, 4, 10],
+            false,
+        ),
+        (
+            "pchannel3d",
+            turned_periodic_input(
+                "pchannel3d",
+                &format!("{channel} --layers 1 --span 0.3"),
+                90.0,
+            ),
+            ["periodic_left", "periodic_right"],
+            &[2],
+            false,
+        ),
+        (
+            "psector3d",
+            turned_periodic_input("psector3d", sector, -20.0),
+            ["periodic_lo", "periodic_hi"],
+            &[3],
+            true,
+        ),
+        (
+            "pturbine",
+            turbine,
+            ["periodic_1", "periodic_2"],
+            &[2],
+            false,
+        ),
+    ];
+    for (name, input, [a, b], orders, same_as_serial) in cases {
+        let pair = format!("{a}:{b}");
+        for np in [2, 3] {
+            let (ra, rb) = (
+                morton_ranks_of(&input, np, a),
+                morton_ranks_of(&input, np, b),
+            );
+            if name != "pturbine" {
+                assert_ne!(ra, rb, "{name}: at {np} ranks both sides are on {ra:?}");
+                if np == 2 {
+                    assert!(ra.is_disjoint(&rb), "{name}: {a} on {ra:?}, {b} on {rb:?}");
+                }
+            }
+        }
+        for &order in orders {
+            let o = order.to_string();
+            let opts = ["--order", &o, "--periodic", &pair, "--cg-tol", RANK_CG_TOL];
+            let tag = format!("{name}_p{order}");
+            let (serial, _, sr) = curve_with_report(0, &input, &tag, &opts);
+            let serial_link = assert_gmsh_pairs_exact(&serial, a, b);
+            let serial_mesh = read(&serial);
+            for np in [2, 3] {
+                let (out, _, r) = curve_with_report(np, &input, &tag, &opts);
+                let what = format!("{tag} on {np} ranks");
+                let link = assert_gmsh_pairs_exact(&out, a, b);
+                assert_eq!(link["pairs"], serial_link["pairs"], "{what}");
+                let rp = &r["periodic"];
+                assert_eq!(rp["seam"], "c0", "{what}: {rp}");
+                assert_eq!(rp["node_pairs"], serial_link["pairs"], "{what}: {rp}");
+                assert_eq!(
+                    rp["pairs"][0]["kind"], sr["periodic"]["pairs"][0]["kind"],
+                    "{what}"
+                );
+                let dist_mesh = read(&out);
+                if same_as_serial {
+                    let worst = compare(&serial_mesh, &dist_mesh);
+                    assert!(
+                        worst <= RANK_TOLERANCE * diagonal(&serial_mesh),
+                        "{what}: a node is {worst:e} from the serial run's"
+                    );
+                } else {
+                    assert_eq!(serial_mesh.nodes.len(), dist_mesh.nodes.len(), "{what}");
+                    assert_eq!(serial_mesh.boundary_tags, dist_mesh.boundary_tags, "{what}");
+                }
+            }
+        }
+    }
+}
+
+/// Under mpirun a generated periodic channel (its `$Periodic` section, not read by the ranks)
+/// without `--periodic`, a pair whose sides are no images, and `--periodic` with
+/// `--partitioned` each fail with one error line and write nothing.
+#[test]
+fn periodic_refusals_under_mpirun_are_one_line() {
+    if !have_mpirun() {
+        return;
+    }
+    let input = scratch("prefuse.msh");
+    common::run_ok(
+        Command::new(BIN)
+            .args(["generate", "channel", "--around", "8", "--across", "4"])
+            .args(["--binary", "-o"])
+            .arg(&input),
+    );
+    for (args, says) in [
+        (vec![], "$Periodic"),
+        (
+            vec!["--periodic", "periodic_left:wall"],
+            "cannot be images of each other",
+        ),
+        (
+            vec![
+                "--periodic",
+                "periodic_left:periodic_right",
+                "--partitioned",
+            ],
+            "--partitioned",
+        ),
+    ] {
+        let out = scratch("prefuse_out.msh");
+        let _ = std::fs::remove_file(&out);
+        let o = mpirun(2)
+            .arg(BIN)
+            .arg("curve")
+            .arg(&input)
+            .arg("-o")
+            .arg(&out)
+            .args(&args)
+            .output()
+            .unwrap();
+        assert!(!o.status.success(), "{args:?} accepted");
+        let lines = error_lines(&o);
+        assert_eq!(lines.len(), 1, "{args:?}: {lines:?}");
+        assert!(lines[0].contains(says), "{args:?}: {lines:?}");
+        assert!(!out.exists(), "{args:?}");
+    }
+}

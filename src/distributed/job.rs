@@ -19,8 +19,10 @@
 //! distributed CG ([`super::cg`]) under the serial preconditioner; run the certified blend on
 //! its own elements, the ranks agreeing on the rejected elements of every round in global ids
 //! ([`crate::validity::blend::blend_search_shared`]); sample its own elements with a global
-//! node numbering ([`super::sample`]), check them and route them back to their file runs for
-//! the collective write; no rank reads or holds the whole mesh.
+//! node numbering ([`super::sample`]), with `--periodic` the pairs resolved over the whole mesh
+//! and the image sides' nodes made the transform of their masters' ([`super::periodic`]),
+//! check them and route them back to their file runs for the collective write; no rank reads
+//! or holds the whole mesh.
 //! Invariant: the result is the serial run's (with uniform knots) up to the order of the
 //! sums: the CG applies the serial preconditioner on the serial aggregates
 //! ([`super::blocks`]), so it takes the serial iterates and stops where the serial solve
@@ -82,14 +84,6 @@ fn check_supported(options: &CurveOptions) -> Result<(), CurveError> {
     if options.snap_boundary {
         return unsupported("--snap-boundary");
     }
-    // The two sides of a periodic pair may fall on different ranks; the seam pass runs on the
-    // whole sampled mesh.
-    if !options.periodic.pairs.is_empty() {
-        return unsupported("--periodic");
-    }
-    if options.periodic.pyfr_names {
-        return unsupported("--periodic-pyfr-names");
-    }
     // The edits name vertices by their place in the file; a rank's sub-mesh numbers them
     // otherwise, so they would hit other vertices.
     if options.features.edits.is_some() {
@@ -146,6 +140,8 @@ struct Share {
     damped_owned: [usize; 3],
     /// The whole mesh's feature summary (deviations absolute), when any rank found features.
     features: Option<crate::mesh::features::FeatureReport>,
+    /// The periodic pairs (`--periodic`), resolved over the whole mesh.
+    pairs: Vec<crate::mesh::periodic::PeriodicPair>,
 }
 
 /// The topology of a ghosted sub-mesh, checked curvable where the serial check would see the
@@ -399,6 +395,10 @@ fn run_share(
         comm.min_f64(&mut msj);
         Ok::<_, CurveError>((topo, msj[0]))
     })?;
+    // Periodic pairs over the whole mesh: every rank finds the same pairs, or the same error.
+    let pairs = clock.run(Stage::Topology, || {
+        periodic_pairs(comm, input, options, &local, &topo)
+    })?;
     let executor = crate::exec::executor(&options.backend);
     let job = Job {
         input,
@@ -482,6 +482,11 @@ fn run_share(
     let damped_owned = damped_owned(&local, &blended);
     let bytes_before = comm.bytes_sent();
     let (output, features) = clock.run(Stage::Sample, || {
+        let seams = super::periodic::Seams {
+            pairs: &pairs,
+            input,
+            depth: options.line_search.certificate_depth,
+        };
         let mut output = sample_share(
             comm,
             &local,
@@ -489,7 +494,8 @@ fn run_share(
             &blended,
             order,
             setup.features.as_ref(),
-        );
+            Some(&seams),
+        )?;
         super::sample::to_file_order(comm, &local, &mut output);
         // The serial report's feature summary when any rank found features (absolute
         // deviations here; relative to the diagonal in the report).
@@ -506,8 +512,8 @@ fn run_share(
                 1.0,
             )
         });
-        (output, features)
-    });
+        Ok::<_, CurveError>((output, features))
+    })?;
     let bytes_sample = comm.bytes_sent() - bytes_before;
     let class = |c: &ElementClass| -> [usize; 3] {
         [
@@ -539,7 +545,43 @@ fn run_share(
         bytes_sample,
         damped_owned,
         features,
+        pairs,
     })
+}
+
+/// The periodic pairs of `--periodic` over the whole mesh ([`super::periodic::resolve`]):
+/// the same pairs, or the same error, on every rank. Collective when pairs are given.
+fn periodic_pairs(
+    comm: &dyn Comm,
+    input: &Path,
+    options: &CurveOptions,
+    local: &LocalMesh,
+    topo: &Topology,
+) -> Result<Vec<crate::mesh::periodic::PeriodicPair>, CurveError> {
+    let periodic_err = |source| CurveError::Periodic {
+        input: input.to_owned(),
+        source,
+    };
+    if options.periodic.pairs.is_empty() {
+        // Curved without its pairs, the sides would no longer be images of each other and the
+        // output would carry no pair, which the file says it has: refused, as the serial job
+        // refuses a link it cannot use.
+        if local.declares_periodic {
+            return Err(periodic_err(crate::mesh::periodic::PeriodicError {
+                spec: "$Periodic".into(),
+                what: "the input's periodic section is not read under mpirun yet: give its pairs with --periodic A:B (docs/periodic.md)".into(),
+            }));
+        }
+        if options.periodic.pyfr_names {
+            // The serial job's refusal (`pipeline::curve`); under mpirun no `$Periodic` is read.
+            return Err(periodic_err(crate::mesh::periodic::PeriodicError {
+                spec: "--periodic-pyfr-names".into(),
+                what: "the mesh has no periodic pair to name: give one with --periodic A:B (under mpirun an input's $Periodic section is not read)".into(),
+            }));
+        }
+        return Ok(Vec::new());
+    }
+    super::periodic::resolve(comm, local, topo, &options.periodic.pairs).map_err(periodic_err)
 }
 
 /// Blend entities (vertices, edges, faces, cells) this rank owns whose factor was reduced
@@ -666,7 +708,7 @@ pub fn curve(
         )),
         snapped: None,
         elastic: None,
-        periodic: None,
+        periodic: periodic_report(&share.pairs, &share.output, options, deviation.diagonal),
         input_min_scaled_jacobian: share.input_msj,
         min_scaled_jacobian: min_sj,
         deviation,
@@ -675,11 +717,46 @@ pub fn curve(
         per_rank: Some(per_rank),
     };
     let report = CurveReport::build(input, options, outcomes, clock.into_timings());
+    let mut tag_names = share.local.mesh.tag_names.clone();
+    if options.periodic.pyfr_names {
+        for (i, p) in share.pairs.iter().enumerate() {
+            tag_names.insert(p.master_tag, format!("periodic_{i}_l"));
+            tag_names.insert(p.slave_tag, format!("periodic_{i}_r"));
+        }
+    }
     Ok(Finished {
-        tag_names: share.local.mesh.tag_names.clone(),
+        tag_names,
         output: share.output,
         report,
     })
+}
+
+/// The report's `periodic` (and the seams' certified bound) when the job has pairs: the
+/// serial report's fields, the seams `c0` (each side curved on its own under mpirun).
+fn periodic_report(
+    pairs: &[crate::mesh::periodic::PeriodicPair],
+    output: &RankOutput,
+    options: &CurveOptions,
+    diagonal: f64,
+) -> Option<(f64, crate::pipeline::PeriodicReport)> {
+    let info = output.images?;
+    let report = crate::pipeline::PeriodicReport {
+        pairs: pairs.iter().map(|p| p.summary(diagonal)).collect(),
+        node_pairs: output
+            .periodic
+            .iter()
+            .map(|l| l.node_pairs.len())
+            .sum(),
+        max_seam_shift: info.max_shift / diagonal,
+        written_mismatch: info.max_mismatch / diagonal,
+        recertified_elements: info.recertified,
+        seam: "c0",
+        seam_c0_reason: Some(
+            "under mpirun the seams are not identified in the spline space: each side is curved on its own and made exact images after sampling".into(),
+        ),
+        pyfr_names: options.periodic.pyfr_names,
+    };
+    Some((info.min_det_bound, report))
 }
 
 /// Stages whose seconds and peak memory are reported per rank.

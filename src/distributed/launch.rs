@@ -167,6 +167,11 @@ fn run(
 ) -> Result<Outcome, CurveError> {
     let start = std::time::Instant::now();
     check_output(output, options)?;
+    if partitioned && !options.periodic.pairs.is_empty() {
+        return Err(CurveError::Options(
+            "--periodic with --partitioned is not available yet (docs/distributed.md): write one file".into(),
+        ));
+    }
     let finished = curve_job(comm, input, options)?;
     let write_options = WriteOptions {
         binary: options.output.binary,

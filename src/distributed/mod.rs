@@ -8,7 +8,8 @@
 //! (halo exchange of shared control points, global reductions) with [`blocks`] the serial
 //! block preconditioners across the shares, [`job`] the `curve` job
 //! stage by stage, [`mod@write`] the one output file written collectively and [`write_parts`]
-//! Gmsh's partitioned output (one file per rank). `docs/distributed.md` states what is distributed, what is replicated on
+//! Gmsh's partitioned output (one file per rank), [`periodic`] the periodic pairs across ranks
+//! (resolved over the whole mesh, the image sides' nodes made the transform of the masters'). `docs/distributed.md` states what is distributed, what is replicated on
 //! every rank so far, and the measured volumes.
 
 pub mod blocks;
@@ -21,6 +22,7 @@ pub mod launch;
 pub mod local;
 pub mod part_file;
 pub mod partition;
+pub mod periodic;
 pub mod read;
 pub mod read_parts;
 pub mod sample;

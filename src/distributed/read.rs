@@ -39,6 +39,8 @@ pub struct LocalMesh {
     pub global_vertex: Vec<u64>,
     /// Elements in the whole file.
     pub n_global: u64,
+    /// The file declares periodic pairs (Gmsh's `$Periodic`), which the ranks do not read.
+    pub declares_periodic: bool,
 }
 
 impl LocalMesh {
@@ -261,6 +263,7 @@ impl MshFile {
             owner: owners,
             global_vertex,
             n_global: self.n_global,
+            declares_periodic: self.ix.periodic_section,
         })
     }
 }

@@ -473,5 +473,7 @@ pub fn read_parts_share(
         owner: owners,
         global_vertex,
         n_global,
+        // Gmsh's split files carry no `$Periodic` the ranks would read.
+        declares_periodic: false,
     })
 }

@@ -20,6 +20,10 @@
 //! lattice point in it); the owner answers with the value it evaluated, so shared nodes have
 //! bit-identical coordinates on every rank. Invariant: the positions are those of the serial
 //! [`crate::sample::sample`] (the same owner element and lattice point evaluate each node).
+//!
+//! **Periodic seams.** With periodic pairs, the seam nodes of the own elements are moved
+//! before any check or box ([`super::periodic::make_images`], collective): every rank takes
+//! them from one gathered copy, so shared seam nodes stay bit-identical across ranks.
 
 use super::comm::Comm;
 use super::read::LocalMesh;
@@ -66,6 +70,10 @@ pub struct RankOutput {
     /// Largest distance of an owned feature vertex node from its input vertex, and of an own
     /// boundary facet's node from its planar patch's plane (absolute; 0 without features).
     pub feature_deviation: (f64, f64),
+    /// The periodic pairs' node pairs in global tags (the same on every rank; empty without
+    /// pairs) and what making the image sides exact images did ([`super::periodic`]).
+    pub periodic: Vec<super::periodic::TagLink>,
+    pub images: Option<crate::mesh::periodic::ImageInfo>,
 }
 
 /// Owner element of every local node id: its global index, its local index and the node's
@@ -90,12 +98,14 @@ fn owners(local: &LocalMesh, num: &Numbering, p: usize) -> (Vec<u64>, Vec<u32>, 
     (elem, at, lat)
 }
 
-fn lattice_param(p: usize, l: Lattice) -> [f64; 3] {
+pub(super) fn lattice_param(p: usize, l: Lattice) -> [f64; 3] {
     let pf = p as f64;
     [l[0] as f64 / pf, l[1] as f64 / pf, l[2] as f64 / pf]
 }
 
-/// Sample this rank's elements (see the module docs). Collective.
+/// Sample this rank's elements (see the module docs), with `seams` the periodic pairs whose
+/// image sides are made the transform of their masters ([`super::periodic::make_images`]).
+/// Collective; an error (a seam) is the same on every rank.
 pub fn sample_share(
     comm: &dyn Comm,
     local: &LocalMesh,
@@ -103,7 +113,8 @@ pub fn sample_share(
     source: &dyn BezierElements,
     p: usize,
     features: Option<&Features>,
-) -> RankOutput {
+    seams: Option<&super::periodic::Seams>,
+) -> Result<RankOutput, crate::pipeline::CurveError> {
     let (rank, size) = (comm.rank(), comm.size());
     let mesh = &local.mesh;
     let d = mesh.dim;
@@ -183,10 +194,25 @@ pub fn sample_share(
         xyz[id as usize] = x;
     });
 
-    let quality = local_quality(d, p, &xyz, &ids);
-    let vertex_deviation = vertex_deviation(local, topo, &owned, &xyz);
     let (boundary, boundary_tags, boundary_keys, boundary_ids) =
         own_boundary(local, topo, &num, &tag);
+    let (periodic, images) = match seams.filter(|s| !s.pairs.is_empty()) {
+        Some(seams) => {
+            let share = super::periodic::SampledShare {
+                local,
+                p,
+                ids: &ids,
+                facet_ids: &boundary_ids,
+                facet_tags: &boundary_tags,
+                tag: &tag,
+            };
+            let (links, info) = super::periodic::make_images(comm, seams, &share, &mut xyz)?;
+            (links, Some(info))
+        }
+        None => (Vec::new(), None),
+    };
+    let quality = local_quality(d, p, &xyz, &ids);
+    let vertex_deviation = vertex_deviation(local, topo, &owned, &xyz);
     let (xyz, boundary_distance) = boundary_distance(local, topo, p, xyz, &boundary_ids);
     let feature_deviation = features.map_or((0.0, 0.0), |f| {
         feature_deviation(local, topo, f, &owned, &xyz, &boundary_ids)
@@ -222,7 +248,7 @@ pub fn sample_share(
     };
     let element_boxes = boxes(&ids, npe);
     let boundary_boxes = boxes(&boundary_ids, (p + 1).pow(d as u32 - 1));
-    RankOutput {
+    Ok(RankOutput {
         dim: d,
         order: p,
         node_tags: owned.iter().map(|&id| tag[id as usize]).collect(),
@@ -243,7 +269,9 @@ pub fn sample_share(
         vertex_deviation,
         boundary_distance,
         feature_deviation,
-    }
+        periodic,
+        images,
+    })
 }
 
 /// [`Features::deviations`] of this rank's share, absolute: the largest distance of an owned

@@ -13,7 +13,9 @@
 //! rank holding its owned nodes; then `$Elements` with one block per physical group, as the
 //! serial file: a volume group's records are the ranks' runs in rank order (the ranks hold
 //! the file's elements in order), a boundary group's records are in the serial order of
-//! boundary facets (their sorted vertex tags), so the element tags are the serial ones.
+//! boundary facets (their sorted vertex tags), so the element tags are the serial ones; then,
+//! with periodic pairs, `$Periodic` (rank 0: the serial writer's section, node pairs in
+//! global tags).
 //!
 //! Offsets: every part's size is computed first by formatting it into a byte counter (exact
 //! for ASCII and binary alike), the sizes are all-gathered, and each rank writes its parts
@@ -25,7 +27,10 @@
 
 use super::comm::Comm;
 use super::sample::RankOutput;
-use crate::io::gmsh_write::{Blocks, PlannedGroup, group_plan, write_format_and_names};
+use crate::io::gmsh_write::{
+    Blocks, PeriodicRecord, PlannedGroup, group_plan, write_format_and_names,
+    write_periodic_section,
+};
 use crate::io::output::{PendingFile, WriteError};
 use std::collections::{BTreeMap, BTreeSet};
 use std::fs::File;
@@ -428,7 +433,10 @@ fn write_parts(
         for g in 0..plan.groups.len() {
             write_at(file, l.block_at[g], |w| plan.block_header(g, w))?;
         }
-        write_at(file, l.tail_at, |w| plan.blocks.end(w, "Elements"))?;
+        write_at(file, l.tail_at, |w| {
+            plan.blocks.end(w, "Elements")?;
+            periodic_section(plan, out, w)
+        })?;
     }
     write_at(file, l.nodes_at, |w| plan.node_block(out, w))?;
     for g in (0..plan.groups.len()).filter(|&g| plan.groups[g].dim == plan.d) {
@@ -453,6 +461,39 @@ fn write_parts(
         file.write_all_at(&buf, l.volume_at[g] + off)?;
     }
     file.sync_all()
+}
+
+/// `$Periodic` after `$Elements` (rank 0; every rank holds the whole node pairs): the serial
+/// writer's section, entities of the boundary groups and the node pairs in global tags.
+fn periodic_section(plan: &Plan, out: &RankOutput, w: &mut impl Write) -> io::Result<()> {
+    if out.periodic.is_empty() {
+        return Ok(());
+    }
+    let entity = |tag: i32| plan.groups[plan.group_of(true, tag)].entity;
+    let pairs: Vec<_> = out
+        .periodic
+        .iter()
+        .map(|l| move |i: usize| l.node_pairs[i])
+        .collect();
+    let records: Vec<PeriodicRecord> = out
+        .periodic
+        .iter()
+        .zip(&pairs)
+        .map(|(l, pair)| PeriodicRecord {
+            slave_entity: entity(l.slave_tag),
+            master_entity: entity(l.master_tag),
+            affine: l.transform.affine(),
+            n: l.node_pairs.len(),
+            pair,
+        })
+        .collect();
+    write_periodic_section(
+        w,
+        crate::io::gmsh_write::MshVersion::V41,
+        plan.blocks.binary,
+        plan.d as i32 - 1,
+        &records,
+    )
 }
 
 /// Options of the collective write.

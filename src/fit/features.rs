@@ -60,6 +60,9 @@ pub struct FeatureModels {
     /// Non-feature vertices of planar patches (2D: straight chains) → their model within the
     /// plane, replacing the flat model of their fan (see module docs).
     pub(crate) in_plane: HashMap<u32, VertexModel>,
+    /// The rim's edge length ℓ at the source of each inherited in-plane model (the scale of
+    /// [`super::smooth::MODEL_REACH`]).
+    pub(crate) in_plane_scale: HashMap<u32, f64>,
 }
 
 /// Where a sample lies on the boundary.
@@ -325,6 +328,7 @@ impl FeatureModels {
                     if let Some(h) = self.rim_higher.get(&s) {
                         self.in_plane_higher.insert(v, *h);
                     }
+                    self.in_plane_scale.insert(v, ell(s));
                     VertexModel {
                         weight: 1.0 - d / (decay * ell(s)),
                         ..self.curve[&s]

@@ -34,6 +34,18 @@
 //! its boundary side pushed through its inner side, while isotropic cells see the correction
 //! only on their boundary side.
 //!
+//! **Reach.** A model is a reconstruction over its source's two rings (about 2ℓ), and its
+//! height function grows as (ξ/ℓ)⁴ beyond, so a sample takes no correction from a model when
+//! a corner of its entity lies more than [`MODEL_REACH`] × ℓ (ℓ the source's boundary edge
+//! length) from it along the model's curved directions. Only entities far larger than the
+//! wall's cells next to inheriting vertices are concerned: the single outer cell of an O-grid
+//! whose whole boundary layer is thinner than the decay distance (first cell 10⁻⁶, growth
+//! 1.05: 47 cells within 2·10⁻⁴ of the wall, then one cell to the far field). There the
+//! wall's models, evaluated hundreds of ℓ away, folded the target map in most outer cells,
+//! and the certified blend, holding them back to the straight elevation, took every thin cell
+//! below them and the wall back to the chords too (a thin cell cannot have one side curved
+//! and the other straight).
+//!
 //! **Two-ring height functions.** The one-ring quadric leaves an error of order h⁴ with a large
 //! constant (on a circle of 14 segments, 1.8 % of the chord's sagitta) and of order h³ where
 //! the ring is irregular, which is what Q2 elements at irregular vertices interpolate. Each
@@ -153,6 +165,27 @@ impl VertexModel {
         }
         (-s * DVec3::from(self.normal)).into()
     }
+
+    /// How far the points `xs` reach from `p` along the model's curved directions:
+    /// max √(|yᵀ H y| / ‖H‖), y = x − p (‖·‖ Frobenius; 0 for a flat model). Offsets along
+    /// which the model does not bend (a cylinder's axis, an extrusion's span under a curve
+    /// model) do not count: the model is exact along them.
+    fn curved_extent(&self, p: [f64; 3], xs: &[[f64; 3]]) -> f64 {
+        let h = self.h.map(DVec3::from);
+        let norm = h.iter().map(|r| r.length_squared()).sum::<f64>().sqrt();
+        if norm == 0.0 {
+            return 0.0;
+        }
+        xs.iter()
+            .map(|x| {
+                let y = DVec3::from(*x) - DVec3::from(p);
+                (y.dot(DVec3::new(h[0].dot(y), h[1].dot(y), h[2].dot(y)))
+                    .abs()
+                    / norm)
+                    .sqrt()
+            })
+            .fold(0.0, f64::max)
+    }
 }
 
 /// Per-vertex boundary models of a mesh, and the sample-point corrections they give.
@@ -178,7 +211,20 @@ pub struct SmoothTargets {
     /// on the boundary, the nearest one for an interior vertex that inherited one), else
     /// `NONE`; empty without arc normals.
     sources: Vec<u32>,
+    /// Per vertex with a model: the boundary edge length ℓ of the vertex the model was fitted
+    /// at (itself, its source, or a planar patch's rim vertex); ∞ where unknown (flat models).
+    /// An entity reaching farther than [`MODEL_REACH`] × ℓ from a sample takes no correction
+    /// from that model there.
+    scale: Vec<f64>,
 }
+
+/// How far, in boundary edge lengths ℓ of its source, a vertex model is evaluated (see the
+/// module docs): an entity whose corners lie farther than this from one of its samples along
+/// the model's curved directions ([`VertexModel::curved_extent`]) takes no correction from
+/// the model at that sample. On the real meshes of the repository no entity reaches 2ℓ; the
+/// outer cells of the generated O- and C-grids whose boundary layer lies within the decay
+/// distance reach 250–830ℓ.
+pub const MODEL_REACH: f64 = 4.0;
 
 impl SmoothTargets {
     /// Reconstruct the boundary models of `mesh` (quads or hexes) with topology `topo`.
@@ -233,9 +279,19 @@ impl SmoothTargets {
         } else {
             (0, Vec::new())
         };
+        // A model's scale is its source's boundary edge length (every model so far is a
+        // boundary vertex's own or inherited from its source).
+        let mut scale: Vec<f64> = (0..nv)
+            .map(|v| match (models[v], sources.get(v)) {
+                (None, _) => f64::INFINITY,
+                (Some(_), Some(&s)) if s != NONE => ell[s as usize],
+                (Some(_), _) => ell[v],
+            })
+            .collect();
         if let Some(f) = &feature_models {
             for (&v, m) in &f.in_plane {
                 models[v as usize] = Some(*m);
+                scale[v as usize] = f.in_plane_scale.get(&v).copied().unwrap_or(f64::INFINITY);
                 // The height function was fitted over the plane, not along the in-plane curve;
                 // a thin rim's curve refit comes with its own.
                 higher[v as usize] = f.in_plane_higher.get(&v).copied();
@@ -255,6 +311,7 @@ impl SmoothTargets {
                 sources
             },
             arc_normals,
+            scale,
         }
     }
 
@@ -322,6 +379,12 @@ impl SmoothTargets {
             let mut delta = DVec3::ZERO;
             let mut wsum = 0.0;
             for &k in ks {
+                // Beyond the model's reach it would fold the entity (see `MODEL_REACH`).
+                if let Some(m) = &self.models[k]
+                    && m.curved_extent(p, xs) > MODEL_REACH * self.scale[k]
+                {
+                    continue;
+                }
                 let higher = match self.models[k] {
                     Some(_) => self.higher.get(k).copied().flatten(),
                     None => self

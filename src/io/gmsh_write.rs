@@ -601,65 +601,28 @@ impl<'m> Msh<'m> {
             })
     }
 
-    /// `$Periodic` (when the mesh has periodic pairs): per pair the image entity, its master
-    /// entity, the affine map master → image (4×4 by rows) and the node pairs (image node,
-    /// master node), 1-based tags. MSH 4.1 writes it binary in a binary file; MSH 2.2 always
-    /// in ASCII (Gmsh reads the 2.2 section as text in binary files too, and only with
-    /// `Mesh.IgnorePeriodicity=0`, its default being to skip it).
+    /// `$Periodic` (when the mesh has periodic pairs): [`write_periodic_section`] with the
+    /// node pairs' 0-based indices written as 1-based tags.
     fn periodic(&self, version: MshVersion, w: &mut impl Write) -> io::Result<()> {
         let links = &self.mesh.periodic;
         if links.is_empty() {
             return Ok(());
         }
-        let dim = self.d as i32 - 1;
-        let binary = version == MshVersion::V41 && self.binary;
-        writeln!(w, "$Periodic")?;
-        if binary {
-            w.u64(links.len() as u64)?;
-        } else {
-            writeln!(w, "{}", links.len())?;
+        let pairs: Vec<_> = links
+            .iter()
+            .map(|l| move |i: usize| l.node_pairs[i].map(|n| n as u64 + 1))
+            .collect();
+        let mut records = Vec::with_capacity(links.len());
+        for (l, pair) in links.iter().zip(&pairs) {
+            records.push(PeriodicRecord {
+                slave_entity: self.boundary_entity(l.slave_tag)?,
+                master_entity: self.boundary_entity(l.master_tag)?,
+                affine: l.transform.affine(),
+                n: l.node_pairs.len(),
+                pair,
+            });
         }
-        for l in links {
-            let slave = self.boundary_entity(l.slave_tag)?;
-            let master = self.boundary_entity(l.master_tag)?;
-            let affine = l.transform.affine();
-            let n = l.node_pairs.len() as u64;
-            if binary {
-                w.i32(dim)?;
-                w.i32(slave)?;
-                w.i32(master)?;
-                w.u64(16)?;
-                for a in affine {
-                    w.f64(a)?;
-                }
-                w.u64(n)?;
-                for &[s, m] in &l.node_pairs {
-                    w.u64(s as u64 + 1)?;
-                    w.u64(m as u64 + 1)?;
-                }
-                continue;
-            }
-            let values: Vec<String> = affine
-                .iter()
-                .map(|&a| zmij::Buffer::new().format(a).to_string())
-                .collect();
-            writeln!(w, "{dim} {slave} {master}")?;
-            match version {
-                MshVersion::V41 => writeln!(w, "16 {}", values.join(" "))?,
-                MshVersion::V22 => writeln!(w, "Affine {}", values.join(" "))?,
-            }
-            writeln!(w, "{n}")?;
-            write_lines(w, l.node_pairs.len(), |i, out| {
-                let [s, m] = l.node_pairs[i];
-                out.extend_from_slice(itoa::Buffer::new().format(s as u64 + 1).as_bytes());
-                out.push(b' ');
-                out.extend_from_slice(itoa::Buffer::new().format(m as u64 + 1).as_bytes());
-            })?;
-        }
-        if binary {
-            writeln!(w)?;
-        }
-        writeln!(w, "$EndPeriodic")
+        write_periodic_section(w, version, self.binary, self.d as i32 - 1, &records)
     }
 
     /// MSH 4.1 `$Nodes`: all nodes in one block on the first volume entity.
@@ -751,6 +714,76 @@ impl<'m> Msh<'m> {
         }
         writeln!(w, "$EndElements")
     }
+}
+
+/// One pair of a `$Periodic` section: the image and master entities, the affine map master →
+/// image (4×4 by rows) and `n` node pairs, `pair(i)` = (image node tag, master node tag).
+pub(crate) struct PeriodicRecord<'a> {
+    pub slave_entity: i32,
+    pub master_entity: i32,
+    pub affine: [f64; 16],
+    pub n: usize,
+    pub pair: &'a (dyn Fn(usize) -> [u64; 2] + Sync),
+}
+
+/// `$Periodic` of the serial and the collective (`distributed::write`) MSH writers: per pair
+/// the image entity, its master entity, the affine map and the node pairs (entities of
+/// dimension `dim`). MSH 4.1 writes it binary in a binary file; MSH 2.2 always in ASCII
+/// (Gmsh reads the 2.2 section as text in binary files too, and only with
+/// `Mesh.IgnorePeriodicity=0`, its default being to skip it).
+pub(crate) fn write_periodic_section(
+    w: &mut impl Write,
+    version: MshVersion,
+    binary: bool,
+    dim: i32,
+    links: &[PeriodicRecord],
+) -> io::Result<()> {
+    let binary = version == MshVersion::V41 && binary;
+    writeln!(w, "$Periodic")?;
+    if binary {
+        w.u64(links.len() as u64)?;
+    } else {
+        writeln!(w, "{}", links.len())?;
+    }
+    for l in links {
+        if binary {
+            w.i32(dim)?;
+            w.i32(l.slave_entity)?;
+            w.i32(l.master_entity)?;
+            w.u64(16)?;
+            for a in l.affine {
+                w.f64(a)?;
+            }
+            w.u64(l.n as u64)?;
+            for i in 0..l.n {
+                let [s, m] = (l.pair)(i);
+                w.u64(s)?;
+                w.u64(m)?;
+            }
+            continue;
+        }
+        let values: Vec<String> = l
+            .affine
+            .iter()
+            .map(|&a| zmij::Buffer::new().format(a).to_string())
+            .collect();
+        writeln!(w, "{dim} {} {}", l.slave_entity, l.master_entity)?;
+        match version {
+            MshVersion::V41 => writeln!(w, "16 {}", values.join(" "))?,
+            MshVersion::V22 => writeln!(w, "Affine {}", values.join(" "))?,
+        }
+        writeln!(w, "{}", l.n)?;
+        write_lines(w, l.n, |i, out| {
+            let [s, m] = (l.pair)(i);
+            out.extend_from_slice(itoa::Buffer::new().format(s).as_bytes());
+            out.push(b' ');
+            out.extend_from_slice(itoa::Buffer::new().format(m).as_bytes());
+        })?;
+    }
+    if binary {
+        writeln!(w)?;
+    }
+    writeln!(w, "$EndPeriodic")
 }
 
 /// Write `n` lines, line `i` made by `line(i, buffer)` (without its newline): formatted in

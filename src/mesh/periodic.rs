@@ -6,6 +6,8 @@
 //! the transform found from the vertex positions, the vertex map), or a one-line
 //! [`PeriodicError`]. After sampling, [`node_pairs`] pairs the order-P nodes of the two sides
 //! and [`make_images`] moves them so that the nodes of B are exactly the transform of A's.
+//! The distributed job (`distributed::periodic`) finds its pairs on the gathered sides with
+//! [`pair_facets`] and moves its gathered seam nodes with [`place_images`], the same code.
 //!
 //! Invariants of an accepted pair: A and B are different non-empty boundary groups with as many
 //! vertices each; every vertex of A, mapped by the transform, lies within [`PERIODIC_REL_TOL`]
@@ -21,7 +23,7 @@ use crate::mesh::high_order::HighOrderMesh;
 use crate::mesh::raw::DeclaredPeriodic;
 use crate::mesh::{LinearMesh, Topology};
 use serde::Serialize;
-use std::collections::HashMap;
+use std::collections::{BTreeMap, HashMap};
 
 /// Largest distance, relative to the vertex's shortest boundary edge, between a vertex of A
 /// mapped by the transform and its vertex of B.
@@ -379,43 +381,68 @@ fn point(x: [f64; 3]) -> DVec3 {
     DVec3::from_array(x)
 }
 
+/// One boundary facet of a side as [`Side::from_facets`] takes it: its vertices (indices into
+/// the coordinates, in the facet's cyclic order) and the centroid of its element (the facet's
+/// normal is turned away from it).
+pub struct SideFacet {
+    pub vertices: Vec<u32>,
+    pub inside: [f64; 3],
+}
+
 impl Side {
     fn new(mesh: &LinearMesh, topo: &Topology, tag: i32) -> Side {
+        let facets = topo
+            .boundary_facets
+            .iter()
+            .zip(&topo.boundary_facet_tags)
+            .filter(|&(_, &t)| t == tag)
+            .map(|(&f, _)| {
+                let f = f as usize;
+                let ex = mesh.element(topo.facet_elements[f][0] as usize);
+                let inside = ex
+                    .iter()
+                    .map(|&v| point(mesh.coords[v as usize]))
+                    .sum::<DVec3>()
+                    / ex.len() as f64;
+                SideFacet {
+                    vertices: topo.facet_vertices(f).to_vec(),
+                    inside: inside.to_array(),
+                }
+            });
+        Side::from_facets(&mesh.coords, mesh.dim, tag, facets)
+    }
+
+    /// The side made of `facets` over `coords` (a mesh's, or the gathered boundary of a
+    /// distributed one).
+    fn from_facets(
+        coords: &[[f64; 3]],
+        dim: usize,
+        tag: i32,
+        facets: impl Iterator<Item = SideFacet>,
+    ) -> Side {
         let mut edge: HashMap<u32, f64> = HashMap::new();
         let mut normal = DVec3::ZERO;
-        for (k, &f) in topo.boundary_facets.iter().enumerate() {
-            if topo.boundary_facet_tags[k] != tag {
-                continue;
-            }
-            let f = f as usize;
-            let vs = topo.facet_vertices(f);
+        for f in facets {
+            let vs = &f.vertices;
             let n = vs.len();
             for i in 0..n {
                 let (a, b) = (vs[i], vs[(i + 1) % n]);
-                let len =
-                    (point(mesh.coords[a as usize]) - point(mesh.coords[b as usize])).length();
+                let len = (point(coords[a as usize]) - point(coords[b as usize])).length();
                 for v in [a, b] {
                     let e = edge.entry(v).or_insert(f64::INFINITY);
                     *e = e.min(len);
                 }
             }
-            let x: Vec<DVec3> = vs.iter().map(|&v| point(mesh.coords[v as usize])).collect();
+            let x: Vec<DVec3> = vs.iter().map(|&v| point(coords[v as usize])).collect();
             let centre = x.iter().copied().sum::<DVec3>() / n as f64;
-            let mut nf = if mesh.dim == 2 {
+            let mut nf = if dim == 2 {
                 let d = x[1] - x[0];
                 DVec3::new(d.y, -d.x, 0.0)
             } else {
                 0.5 * (x[2] - x[0]).cross(x[3] - x[1])
             };
             // Outward: away from the centroid of the facet's element.
-            let e = topo.facet_elements[f][0] as usize;
-            let ex = mesh.element(e);
-            let ec = ex
-                .iter()
-                .map(|&v| point(mesh.coords[v as usize]))
-                .sum::<DVec3>()
-                / ex.len() as f64;
-            if nf.dot(centre - ec) < 0.0 {
+            if nf.dot(centre - point(f.inside)) < 0.0 {
                 nf = -nf;
             }
             normal += nf;
@@ -425,7 +452,7 @@ impl Side {
         let edge = vertices.iter().map(|v| edge[v]).collect();
         let centroid = vertices
             .iter()
-            .map(|&v| point(mesh.coords[v as usize]))
+            .map(|&v| point(coords[v as usize]))
             .sum::<DVec3>()
             / vertices.len().max(1) as f64;
         Side {
@@ -438,10 +465,10 @@ impl Side {
     }
 
     /// Principal axes of the vertex cloud (unit eigenvectors of its covariance).
-    fn axes(&self, mesh: &LinearMesh) -> [DVec3; 3] {
+    fn axes(&self, coords: &[[f64; 3]]) -> [DVec3; 3] {
         let mut c = [[0.0; 3]; 3];
         for &v in &self.vertices {
-            let d = point(mesh.coords[v as usize]) - self.centroid;
+            let d = point(coords[v as usize]) - self.centroid;
             let d = d.to_array();
             for i in 0..3 {
                 for j in 0..3 {
@@ -565,12 +592,12 @@ struct Verdict {
     worst: Option<(u32, f64, f64)>,
 }
 
-fn verify(mesh: &LinearMesh, a: &Side, grid: &PointGrid, t: &Rigid) -> Verdict {
+fn verify(coords: &[[f64; 3]], a: &Side, grid: &PointGrid, t: &Rigid) -> Verdict {
     let mut map = Vec::with_capacity(a.vertices.len());
     let mut used = HashMap::new();
     let mut worst: Option<(u32, f64, f64)> = None;
     for (k, &v) in a.vertices.iter().enumerate() {
-        let q = t.apply(mesh.coords[v as usize]);
+        let q = t.apply(coords[v as usize]);
         let tol = PERIODIC_REL_TOL * a.edge[k];
         let (hit, d) = match grid.nearest(q) {
             Some((w, d)) => (Some(w), d),
@@ -592,13 +619,12 @@ fn verify(mesh: &LinearMesh, a: &Side, grid: &PointGrid, t: &Rigid) -> Verdict {
 
 /// The boundary tag a name or tag string denotes.
 fn resolve_tag(
-    mesh: &LinearMesh,
+    names: &BTreeMap<i32, String>,
     tags: &[i32],
     spec: &PeriodicSpec,
     s: &str,
 ) -> Result<i32, PeriodicError> {
-    let by_name = mesh
-        .tag_names
+    let by_name = names
         .iter()
         .filter(|(t, n)| n.as_str() == s && tags.contains(t))
         .map(|(t, _)| *t)
@@ -616,7 +642,7 @@ fn resolve_tag(
         .iter()
         .filter(|&&t| t != 0)
         .take(MAX_LISTED)
-        .map(|t| match mesh.tag_names.get(t) {
+        .map(|t| match names.get(t) {
             Some(n) => format!("{t} {n:?}"),
             None => t.to_string(),
         })
@@ -635,6 +661,66 @@ fn resolve_tag(
     })
 }
 
+/// Each tag in one pair at most, the two sides different.
+fn distinct(
+    seen: &mut Vec<i32>,
+    spec: &PeriodicSpec,
+    ta: i32,
+    tb: i32,
+) -> Result<(), PeriodicError> {
+    let err = |what: String| PeriodicError {
+        spec: spec.label(),
+        what,
+    };
+    if ta == tb {
+        return Err(err(format!("both sides are boundary tag {ta}")));
+    }
+    for t in [ta, tb] {
+        if seen.contains(&t) {
+            return Err(err(format!(
+                "boundary tag {t} is already in another periodic pair"
+            )));
+        }
+    }
+    seen.extend([ta, tb]);
+    Ok(())
+}
+
+/// The boundary tags (A, B) of every pair of `specs` among the boundary groups `tags` (sorted)
+/// named by `names`: each names two different groups, and no group is in two pairs.
+pub fn spec_tags(
+    names: &BTreeMap<i32, String>,
+    tags: &[i32],
+    specs: &[PeriodicSpec],
+) -> Result<Vec<(PeriodicSpec, i32, i32)>, PeriodicError> {
+    let mut seen = Vec::new();
+    specs
+        .iter()
+        .map(|spec| {
+            let ta = resolve_tag(names, tags, spec, &spec.master)?;
+            let tb = resolve_tag(names, tags, spec, &spec.slave)?;
+            distinct(&mut seen, spec, ta, tb)?;
+            Ok((spec.clone(), ta, tb))
+        })
+        .collect()
+}
+
+/// The sides of a mesh's boundary groups, each built once.
+struct Sides<'m> {
+    mesh: &'m LinearMesh,
+    topo: &'m Topology,
+    built: HashMap<i32, Side>,
+}
+
+impl Sides<'_> {
+    fn get(&mut self, tag: i32) -> &Side {
+        let (mesh, topo) = (self.mesh, self.topo);
+        self.built
+            .entry(tag)
+            .or_insert_with(|| Side::new(mesh, topo, tag))
+    }
+}
+
 /// Resolve and verify every pair of `specs` on the mesh, then the pairs the input declares
 /// ([`LinearMesh::declared_periodic`], Gmsh's `$Periodic`) whose groups no pair of `specs`
 /// names: a pair given on the command line wins over the file's for its groups. A declared
@@ -647,40 +733,57 @@ pub fn resolve(
     let mut tags: Vec<i32> = topo.boundary_facet_tags.clone();
     tags.sort_unstable();
     tags.dedup();
-    let mut seen: Vec<i32> = Vec::new();
+    let mut resolved: Vec<Declared<'_>> = spec_tags(&mesh.tag_names, &tags, specs)?
+        .into_iter()
+        .map(|(spec, ta, tb)| (spec, ta, tb, Vec::new()))
+        .collect();
+    let mut seen: Vec<i32> = resolved.iter().flat_map(|r| [r.1, r.2]).collect();
+    let given = seen.clone();
+    let mut sides = Sides {
+        mesh,
+        topo,
+        built: HashMap::new(),
+    };
+    let n_given = resolved.len();
+    resolved.extend(declared(mesh, &tags, &given, &mut sides)?);
     let mut out = Vec::new();
-    let mut resolved: Vec<Declared<'_>> = Vec::new();
-    for spec in specs {
-        let ta = resolve_tag(mesh, &tags, spec, &spec.master)?;
-        let tb = resolve_tag(mesh, &tags, spec, &spec.slave)?;
-        resolved.push((spec.clone(), ta, tb, Vec::new()));
-    }
-    let given: Vec<i32> = resolved.iter().flat_map(|r| [r.1, r.2]).collect();
-    resolved.extend(declared(mesh, topo, &tags, &given)?);
-    for (spec, ta, tb, claims) in &resolved {
+    for (i, (spec, ta, tb, claims)) in resolved.iter().enumerate() {
         let err = |what: String| PeriodicError {
             spec: spec.label(),
             what,
         };
         let (ta, tb) = (*ta, *tb);
-        if ta == tb {
-            return Err(err(format!("both sides are boundary tag {ta}")));
+        if i >= n_given {
+            distinct(&mut seen, spec, ta, tb)?;
         }
-        for t in [ta, tb] {
-            if seen.contains(&t) {
-                return Err(err(format!(
-                    "boundary tag {t} is already in another periodic pair"
-                )));
-            }
-        }
-        seen.extend([ta, tb]);
-        let found = pair(mesh, topo, spec, ta, tb).map_err(err)?;
+        sides.get(ta);
+        sides.get(tb);
+        let (a, b) = (&sides.built[&ta], &sides.built[&tb]);
+        let found = pair(&mesh.coords, mesh.dim, spec, a, b).map_err(err)?;
         for claim in claims {
-            check_declared(mesh, topo, &found, claim).map_err(err)?;
+            check_declared(mesh, a, &found, claim).map_err(err)?;
         }
         out.push(found);
     }
     Ok(out)
+}
+
+/// One pair found and verified on boundary facets given apart from a mesh (the gathered
+/// boundary of a distributed mesh): `coords` holds the sides' vertices, `a` and `b` the
+/// facets of sides `ta` and `tb`. The pair's vertex map is in indices of `coords`.
+pub fn pair_facets(
+    coords: &[[f64; 3]],
+    dim: usize,
+    spec: &PeriodicSpec,
+    (ta, a): (i32, Vec<SideFacet>),
+    (tb, b): (i32, Vec<SideFacet>),
+) -> Result<PeriodicPair, PeriodicError> {
+    let a = Side::from_facets(coords, dim, ta, a.into_iter());
+    let b = Side::from_facets(coords, dim, tb, b.into_iter());
+    pair(coords, dim, spec, &a, &b).map_err(|what| PeriodicError {
+        spec: spec.label(),
+        what,
+    })
 }
 
 /// A file's pair with the links it gathers.
@@ -697,13 +800,12 @@ type Declared<'m> = (PeriodicSpec, i32, i32, Vec<&'m DeclaredPeriodic>);
 /// declares.
 fn declared<'m>(
     mesh: &'m LinearMesh,
-    topo: &Topology,
     tags: &[i32],
     given: &[i32],
+    sides: &mut Sides,
 ) -> Result<Vec<Declared<'m>>, PeriodicError> {
     let mut out: Vec<Declared<'m>> = Vec::new();
     let name = |t: i32| mesh.tag_names.get(&t).cloned().unwrap_or(t.to_string());
-    let mut sides: Option<Vec<Side>> = None;
     for d in &mesh.declared_periodic {
         let refuse = |why: String| PeriodicError {
             spec: claim_place(d),
@@ -732,13 +834,12 @@ fn declared<'m>(
                 vec![(ta, tb)]
             }
             None => {
-                let sides = sides.get_or_insert_with(|| {
-                    tags.iter()
-                        .filter(|&&t| t != 0)
-                        .map(|&t| Side::new(mesh, topo, t))
-                        .collect()
-                });
-                let found = images_under(mesh, sides, d);
+                let groups: Vec<i32> = tags.iter().copied().filter(|&t| t != 0).collect();
+                for &t in &groups {
+                    sides.get(t);
+                }
+                let all: Vec<&Side> = groups.iter().map(|t| &sides.built[t]).collect();
+                let found = images_under(mesh, &all, d);
                 if found.is_empty() {
                     return Err(refuse(
                         "its map carries no boundary group onto another; put each side in a boundary condition of its own, or pair them with --periodic A:B".into(),
@@ -780,7 +881,7 @@ fn claim_place(d: &DeclaredPeriodic) -> String {
 /// The pairs (A, B) of boundary groups (`sides`) that the claim's map carries onto each other:
 /// as many vertices, and the image of A's vertex bounding box and centroid on B's within a
 /// thousandth of A's shortest edge (a screen; [`pair`] then verifies every vertex).
-fn images_under(mesh: &LinearMesh, sides: &[Side], claim: &DeclaredPeriodic) -> Vec<(i32, i32)> {
+fn images_under(mesh: &LinearMesh, sides: &[&Side], claim: &DeclaredPeriodic) -> Vec<(i32, i32)> {
     let Some(a) = claim.affine else {
         return Vec::new();
     };
@@ -826,7 +927,7 @@ fn images_under(mesh: &LinearMesh, sides: &[Side], claim: &DeclaredPeriodic) -> 
 /// as the transform found does (to the same tolerance).
 fn check_declared(
     mesh: &LinearMesh,
-    topo: &Topology,
+    side: &Side,
     found: &PeriodicPair,
     claim: &DeclaredPeriodic,
 ) -> Result<(), String> {
@@ -834,7 +935,6 @@ fn check_declared(
         return Ok(());
     };
     let map = Rigid::from_affine(&a);
-    let side = Side::new(mesh, topo, found.master_tag);
     let mut worst: Option<(u32, f64, f64)> = None;
     for &[w, v] in &found.vertex_map {
         let Ok(k) = side.vertices.binary_search(&v) else {
@@ -868,16 +968,14 @@ fn check_declared(
     }
 }
 
-/// Find and verify the transform of one pair.
+/// Find and verify the transform mapping side `a` onto side `b` (vertices in `coords`).
 fn pair(
-    mesh: &LinearMesh,
-    topo: &Topology,
+    coords: &[[f64; 3]],
+    dim: usize,
     spec: &PeriodicSpec,
-    ta: i32,
-    tb: i32,
+    a: &Side,
+    b: &Side,
 ) -> Result<PeriodicPair, String> {
-    let a = Side::new(mesh, topo, ta);
-    let b = Side::new(mesh, topo, tb);
     if a.vertices.len() != b.vertices.len() {
         return Err(format!(
             "{} has {} boundary vertices and {} has {}: they cannot be images of each other",
@@ -914,12 +1012,12 @@ fn pair(
             spec.master, spec.slave
         ));
     }
-    let grid = PointGrid::new(&mesh.coords, &b.vertices, h);
+    let grid = PointGrid::new(coords, &b.vertices, h);
     let mut candidates = vec![Rigid::translation((b.centroid - a.centroid).to_array())];
     // Direction pairs a rigid map carries from A to B (up to sign).
-    let (xa, xb) = (a.axes(mesh), b.axes(mesh));
+    let (xa, xb) = (a.axes(coords), b.axes(coords));
     let mut dirs: Vec<(DVec3, DVec3)> = vec![(a.normal, b.normal)];
-    if mesh.dim == 3 {
+    if dim == 3 {
         // The smallest rotation between the normals (planar sides of a sector).
         dirs.push((a.normal.cross(-b.normal), a.normal.cross(-b.normal)));
         dirs.extend((0..3).map(|i| (xa[i], xb[i])));
@@ -955,7 +1053,7 @@ fn pair(
                         }
                         .apply(a.normal.to_array()),
                     );
-                    if rn.dot(b.normal) > 0.0 || (mesh.dim == 2 && r[2][2] < 0.0) {
+                    if rn.dot(b.normal) > 0.0 || (dim == 2 && r[2][2] < 0.0) {
                         continue;
                     }
                     let t = b.centroid
@@ -976,7 +1074,7 @@ fn pair(
     }
     let mut best: Option<(Rigid, Verdict)> = None;
     for t in candidates {
-        let v = verify(mesh, &a, &grid, &t);
+        let v = verify(coords, a, &grid, &t);
         let score = |v: &Verdict| v.worst.map_or(0.0, |w| w.1);
         let better = match &best {
             None => true,
@@ -995,13 +1093,13 @@ fn pair(
             d
         } else {
             // The distance to the nearest vertex of B, for the message.
-            let q = transform.apply(mesh.coords[v as usize]);
+            let q = transform.apply(coords[v as usize]);
             b.vertices
                 .iter()
-                .map(|&w| (point(mesh.coords[w as usize]) - point(q)).length())
+                .map(|&w| (point(coords[w as usize]) - point(q)).length())
                 .fold(f64::INFINITY, f64::min)
         };
-        let x = mesh.coords[v as usize];
+        let x = coords[v as usize];
         return Err(format!(
             "no translation or rotation maps {} onto {}: vertex {v} at ({:.6}, {:.6}, {:.6}) lands {d:.3e} from the nearest vertex of {} (tolerance {PERIODIC_REL_TOL:e} of its edge)",
             spec.master, spec.slave, x[0], x[1], x[2], spec.slave
@@ -1017,21 +1115,18 @@ fn pair(
     let mean = verdict
         .map
         .iter()
-        .map(|&[w, v]| {
-            point(mesh.coords[w as usize]) - point(rot_only.apply(mesh.coords[v as usize]))
-        })
+        .map(|&[w, v]| point(coords[w as usize]) - point(rot_only.apply(coords[v as usize])))
         .sum::<DVec3>()
         / n;
     transform.translation = mean.to_array();
-    if mesh.dim == 2 {
+    if dim == 2 {
         transform.translation[2] = 0.0;
     }
     let input_mismatch = verdict
         .map
         .iter()
         .map(|&[w, v]| {
-            (point(mesh.coords[w as usize]) - point(transform.apply(mesh.coords[v as usize])))
-                .length()
+            (point(coords[w as usize]) - point(transform.apply(coords[v as usize]))).length()
         })
         .fold(0.0, f64::max);
     let mut vertex_map = verdict.map;
@@ -1154,7 +1249,34 @@ pub struct ImageInfo {
 
 /// Weights of the master node in its new position, tried in turn for the pairs around
 /// elements that lose their certificate: the midpoint, then each side kept.
-const IMAGE_WEIGHTS: [f64; 3] = [0.5, 1.0, 0.0];
+pub const IMAGE_WEIGHTS: [f64; 3] = [0.5, 1.0, 0.0];
+
+/// Place the seam nodes of `links` (indices into `nodes`) from their `original` positions:
+/// the master of pair k of link l at `w·x_A + (1−w)·T⁻¹(x_B)`, w = `IMAGE_WEIGHTS[weight[l][k]]`,
+/// then every image at T of its master, in link order, repeated so that a node that is an
+/// image in one pair and a master in another (corners of doubly periodic meshes) settles.
+pub fn place_images(
+    nodes: &mut [[f64; 3]],
+    original: &[[f64; 3]],
+    links: &[PeriodicLink],
+    weight: &[Vec<usize>],
+) {
+    for (l, w) in links.iter().zip(weight) {
+        for (k, &[s, m]) in l.node_pairs.iter().enumerate() {
+            let wa = IMAGE_WEIGHTS[w[k]];
+            let xa = point(original[m as usize]);
+            let xb = point(l.transform.apply_inverse(original[s as usize]));
+            nodes[m as usize] = (xa * wa + xb * (1.0 - wa)).to_array();
+        }
+    }
+    for _ in 0..links.len() {
+        for l in links {
+            for &[s, m] in &l.node_pairs {
+                nodes[s as usize] = l.transform.apply(nodes[m as usize]);
+            }
+        }
+    }
+}
 
 /// Move the seam nodes of `ho` so that every image node is exactly the transform of its
 /// master: the master goes to `w·x_A + (1−w)·T⁻¹(x_B)` and the image to T of that, `w` = ½
@@ -1169,26 +1291,7 @@ pub fn make_images(
     use rayon::prelude::*;
     let original = ho.nodes.clone();
     let mut weight: Vec<Vec<usize>> = links.iter().map(|l| vec![0; l.node_pairs.len()]).collect();
-    let place = |ho: &mut HighOrderMesh, weight: &[Vec<usize>]| {
-        for (l, w) in links.iter().zip(weight) {
-            for (k, &[s, m]) in l.node_pairs.iter().enumerate() {
-                let wa = IMAGE_WEIGHTS[w[k]];
-                let xa = point(original[m as usize]);
-                let xb = point(l.transform.apply_inverse(original[s as usize]));
-                ho.nodes[m as usize] = (xa * wa + xb * (1.0 - wa)).to_array();
-            }
-        }
-        // Images from masters, in pair order, repeated so that a node that is an image in one
-        // pair and a master in another (corners of doubly periodic meshes) settles.
-        for _ in 0..links.len() {
-            for l in links {
-                for &[s, m] in &l.node_pairs {
-                    ho.nodes[s as usize] = l.transform.apply(ho.nodes[m as usize]);
-                }
-            }
-        }
-    };
-    place(ho, &weight);
+    place_images(&mut ho.nodes, &original, links, &weight);
     let moved: Vec<bool> = (0..ho.nodes.len())
         .map(|n| ho.nodes[n] != original[n])
         .collect();
@@ -1227,7 +1330,7 @@ pub fn make_images(
                 }
             }
         }
-        place(ho, &weight);
+        place_images(&mut ho.nodes, &original, links, &weight);
         check = touched.clone();
     }
     let mut info = ImageInfo {
@@ -1240,18 +1343,17 @@ pub fn make_images(
             .max_shift
             .max((point(ho.nodes[n]) - point(original[n])).length());
     }
-    info.max_mismatch = max_mismatch(ho, links);
+    info.max_mismatch = max_mismatch(&ho.nodes, links);
     (bad, info)
 }
 
-/// Largest |T(x_master) − x_image| over the node pairs of `links` on `ho`.
-pub fn max_mismatch(ho: &HighOrderMesh, links: &[PeriodicLink]) -> f64 {
+/// Largest |T(x_master) − x_image| over the node pairs of `links` (indices into `nodes`).
+pub fn max_mismatch(nodes: &[[f64; 3]], links: &[PeriodicLink]) -> f64 {
     links
         .iter()
         .flat_map(|l| {
             l.node_pairs.iter().map(|&[s, m]| {
-                (point(l.transform.apply(ho.nodes[m as usize])) - point(ho.nodes[s as usize]))
-                    .length()
+                (point(l.transform.apply(nodes[m as usize])) - point(nodes[s as usize])).length()
             })
         })
         .fold(0.0, f64::max)

@@ -457,11 +457,17 @@ fn tag_vertex_set(zone: &mut Zone, cell_dim: usize, set: &HashSet<usize>, tag: i
     if hit || zone.blocks.iter().any(|b| b.kind == kind) {
         return;
     }
-    let facets: Vec<Vec<usize>> = exterior_facets(zone, cell_dim)
+    let facets = exterior_facets_within(zone, cell_dim, set);
+    add_facets(zone, cell_dim, facets, tag);
+}
+
+/// The zone's exterior facets whose vertices all lie in `set`: the faces of a side that the
+/// file names only by its vertices.
+fn exterior_facets_within(zone: &Zone, cell_dim: usize, set: &HashSet<usize>) -> Vec<Vec<usize>> {
+    exterior_facets(zone, cell_dim)
         .into_iter()
         .filter(|f| f.iter().all(|v| set.contains(v)))
-        .collect();
-    add_facets(zone, cell_dim, facets, tag);
+        .collect()
 }
 
 fn add_facets(zone: &mut Zone, cell_dim: usize, facets: Vec<Vec<usize>>, tag: i32) {
@@ -783,10 +789,7 @@ pub fn tag_periodic_side(
         }
         return;
     }
-    let facets: Vec<Vec<usize>> = exterior_facets(zone, cell_dim)
-        .into_iter()
-        .filter(|f| f.iter().all(|v| set.contains(v)))
-        .collect();
+    let facets = exterior_facets_within(zone, cell_dim, &set);
     if !facets.is_empty() {
         add_facets(zone, cell_dim, facets, tag());
     }

@@ -185,6 +185,7 @@ impl Head {
             header: self.header,
             nodes: Vec::new(),
             elements: Vec::new(),
+            periodic_section: false,
         };
         // `Head::open` stopped after the `$Nodes` line.
         let mut next = Some("$Nodes".to_string());
@@ -193,6 +194,7 @@ impl Head {
                 "$Nodes" => ix.index_nodes()?,
                 "$Elements" => ix.index_elements()?,
                 s if s.starts_with('$') => {
+                    ix.periodic_section |= s == "$Periodic";
                     let end = format!("$End{}", &s[1..]);
                     loop {
                         match ix.src.line()? {
@@ -229,6 +231,8 @@ pub(crate) struct Indexed {
     nodes: Vec<NodeBlock>,
     /// The element blocks, in file order.
     pub(crate) elements: Vec<ElementBlock>,
+    /// The file has a `$Periodic` section (skipped: it is not read by offsets).
+    pub(crate) periodic_section: bool,
 }
 
 impl Indexed {

@@ -1,0 +1,449 @@
+//! Periodic pairs across MPI ranks (`--periodic A:B` under mpirun): the two sides of a pair
+//! may fall on different ranks.
+//!
+//! Input: each rank's [`LocalMesh`] and topology (its own elements' boundary facets carry the
+//! input's tags), the pairs as the user names them, and after sampling the rank's sampled
+//! nodes (local ids with global tags and positions). Output: on every rank alike, the
+//! verified pairs ([`resolve`]), and after [`make_images`] the node pairs in global node tags
+//! ([`TagLink`], what the collective writer's `$Periodic` section writes), with every seam node
+//! a rank holds moved so that the image side's nodes are the transform of the master side's.
+//!
+//! **Resolve.** Every rank contributes the boundary facets of its own elements tagged A or B
+//! (vertex tags and positions, the element's centroid); the gathered facets are the two sides
+//! whole, and every rank finds and verifies the transform on them with the serial code
+//! ([`crate::mesh::periodic::pair_facets`]), so every rank has the same pairs and the same
+//! error. The boundary groups of the sides are gathered whole (one all-gather of 21 doubles per
+//! facet of A and B): this is replicated, like the 2D post-fit misfit sides.
+//!
+//! **Images.** The spline space is not glued across the seams under mpirun (each side is fitted
+//! on its own, as serially for rotation pairs): the seam is C⁰. After sampling, every rank
+//! contributes the order-P nodes of its own A and B facets (global tag, straight-sided position
+//! — the multilinear map of their element at the lattice point — and sampled position); the
+//! gathered nodes pair by their straight positions as [`crate::mesh::periodic::node_pairs`]
+//! pairs them serially, and [`crate::mesh::periodic::place_images`] moves them on the gathered
+//! copy, which is the same on every rank: so a node held by several ranks gets bit-identical
+//! coordinates on each, and an image node is the transform of its master to rounding whatever
+//! ranks hold the two. Every rank certifies its own elements holding a moved node (Bernstein
+//! bounds of their Lagrange map, as serially); the nodes of the elements that fail are
+//! all-gathered and the pairs around them keep the master's, then the image's side, as the
+//! serial [`crate::mesh::periodic::make_images`] does. Invariant: the result is the serial
+//! seam pass's on the same sampled nodes.
+
+use super::comm::Comm;
+use super::read::LocalMesh;
+use crate::math::BezierElements;
+use crate::mesh::Topology;
+use crate::mesh::high_order::lattice_point;
+use crate::mesh::periodic::{
+    IMAGE_WEIGHTS, ImageInfo, PERIODIC_REL_TOL, PeriodicError, PeriodicLink, PeriodicPair,
+    PeriodicSpec, PointGrid, Rigid, SideFacet, pair_facets, place_images, spec_tags,
+};
+use crate::pipeline::CurveError;
+use std::collections::{BTreeMap, HashMap};
+use std::path::Path;
+
+/// A periodic pair's node pairs in global node tags: what `$Periodic` writes.
+#[derive(Clone, Debug)]
+pub struct TagLink {
+    pub master_tag: i32,
+    pub slave_tag: i32,
+    /// Maps the master side onto the image side.
+    pub transform: Rigid,
+    /// (image node tag, master node tag), sorted.
+    pub node_pairs: Vec<[u64; 2]>,
+}
+
+/// The facets of the own elements tagged `tag`, as (local facet index in
+/// `topo.boundary_facets`, facet id).
+fn own_facets<'a>(
+    local: &'a LocalMesh,
+    topo: &'a Topology,
+    tag: i32,
+) -> impl Iterator<Item = (usize, usize)> + 'a {
+    topo.boundary_facets
+        .iter()
+        .enumerate()
+        .filter(move |&(i, &f)| {
+            topo.boundary_facet_tags.get(i) == Some(&tag)
+                && (topo.facet_elements[f as usize][0] as usize) < local.n_owned
+        })
+        .map(|(i, &f)| (i, f as usize))
+}
+
+/// Width of a gathered facet record: side, vertex count, 4 vertex tags, 4 positions, the
+/// element's centroid.
+const FACET_WIDTH: usize = 21;
+
+/// Resolve and verify every pair of `specs` over the whole mesh (collective; the same pairs,
+/// or the same error, on every rank). The pairs' vertex maps index the gathered sides'
+/// vertices, not the rank's.
+pub fn resolve(
+    comm: &dyn Comm,
+    local: &LocalMesh,
+    topo: &Topology,
+    specs: &[PeriodicSpec],
+) -> Result<Vec<PeriodicPair>, PeriodicError> {
+    let mesh = &local.mesh;
+    // The boundary groups of the whole mesh.
+    let mine: Vec<f64> = topo
+        .boundary_facets
+        .iter()
+        .zip(&topo.boundary_facet_tags)
+        .filter(|&(&f, _)| (topo.facet_elements[f as usize][0] as usize) < local.n_owned)
+        .map(|(_, &t)| t)
+        .collect::<std::collections::BTreeSet<i32>>()
+        .into_iter()
+        .map(f64::from)
+        .collect();
+    let mut tags: Vec<i32> = comm
+        .all_gather_f64(&mine)
+        .concat()
+        .iter()
+        .map(|&t| t as i32)
+        .collect();
+    tags.sort_unstable();
+    tags.dedup();
+    let resolved = spec_tags(&mesh.tag_names, &tags, specs)?;
+    let mut out = Vec::with_capacity(resolved.len());
+    for (spec, ta, tb) in resolved {
+        let mut send = Vec::new();
+        for (side, tag) in [(0.0, ta), (1.0, tb)] {
+            for (_, f) in own_facets(local, topo, tag) {
+                let vs = topo.facet_vertices(f);
+                let mut r = [0.0; FACET_WIDTH];
+                r[0] = side;
+                r[1] = vs.len() as f64;
+                for (k, &v) in vs.iter().enumerate() {
+                    r[2 + k] = local.global_vertex[v as usize] as f64;
+                    r[6 + 3 * k..9 + 3 * k].copy_from_slice(&mesh.coords[v as usize]);
+                }
+                let ex = mesh.element(topo.facet_elements[f][0] as usize);
+                for &v in ex {
+                    for c in 0..3 {
+                        r[18 + c] += mesh.coords[v as usize][c] / ex.len() as f64;
+                    }
+                }
+                send.extend_from_slice(&r);
+            }
+        }
+        let all = comm.all_gather_f64(&send).concat();
+        drop(send);
+        // The sides' vertices by tag (sorted, so every rank numbers them alike).
+        let mut index: BTreeMap<u64, [f64; 3]> = BTreeMap::new();
+        for r in all.chunks_exact(FACET_WIDTH) {
+            for k in 0..r[1] as usize {
+                index
+                    .entry(r[2 + k] as u64)
+                    .or_insert([r[6 + 3 * k], r[7 + 3 * k], r[8 + 3 * k]]);
+            }
+        }
+        let coords: Vec<[f64; 3]> = index.values().copied().collect();
+        let at: HashMap<u64, u32> = index
+            .keys()
+            .enumerate()
+            .map(|(i, &t)| (t, i as u32))
+            .collect();
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        for r in all.chunks_exact(FACET_WIDTH) {
+            let facet = SideFacet {
+                vertices: (0..r[1] as usize).map(|k| at[&(r[2 + k] as u64)]).collect(),
+                inside: [r[18], r[19], r[20]],
+            };
+            if r[0] == 0.0 { &mut a } else { &mut b }.push(facet);
+        }
+        out.push(pair_facets(&coords, mesh.dim, &spec, (ta, a), (tb, b))?);
+    }
+    Ok(out)
+}
+
+/// What the seam pass needs besides the sampled nodes.
+pub struct Seams<'a> {
+    pub pairs: &'a [PeriodicPair],
+    pub input: &'a Path,
+    /// Subdivision depth of the Bernstein certificate (`--certificate-depth`).
+    pub depth: usize,
+}
+
+/// The rank's sampled share as the seam pass sees it: local node ids of the own elements
+/// (`(p+1)^d` each) and of the own boundary facets (`(p+1)^(d−1)` each, with their tags), the
+/// global tag of every local id the own elements use, and their positions.
+pub struct SampledShare<'a> {
+    pub local: &'a LocalMesh,
+    pub p: usize,
+    pub ids: &'a [u32],
+    pub facet_ids: &'a [u32],
+    pub facet_tags: &'a [i32],
+    pub tag: &'a [u64],
+}
+
+/// Width of a gathered node record: pair, side, tag, straight position, sampled position.
+const NODE_WIDTH: usize = 9;
+
+/// Make the image sides' nodes the transform of their masters' over all ranks (see the module
+/// docs), moving the seam nodes of `xyz`. Collective; the same links, figures and errors on
+/// every rank.
+pub fn make_images(
+    comm: &dyn Comm,
+    seams: &Seams,
+    share: &SampledShare,
+    xyz: &mut [[f64; 3]],
+) -> Result<(Vec<TagLink>, ImageInfo), CurveError> {
+    let (local, p) = (share.local, share.p);
+    let mesh = &local.mesh;
+    let d = mesh.dim;
+    let npe = (p + 1).pow(d as u32);
+    let npf = (p + 1).pow(d as u32 - 1);
+    // Which (pair, side) each own facet's nodes are on.
+    let mut side_of: HashMap<u32, Vec<(usize, usize)>> = HashMap::new();
+    let mut spacing = vec![f64::INFINITY; seams.pairs.len()];
+    let corners: Vec<usize> = if d == 2 {
+        vec![0, p]
+    } else {
+        vec![0, p, (p + 1) * (p + 1) - 1, (p + 1) * p]
+    };
+    // Straight-sided positions of the seam nodes, from their own elements.
+    let mut straight: HashMap<u32, [f64; 3]> = HashMap::new();
+    for (k, &t) in share.facet_tags.iter().enumerate() {
+        for (i, pair) in seams.pairs.iter().enumerate() {
+            for (s, side_tag) in [pair.master_tag, pair.slave_tag].into_iter().enumerate() {
+                if t == side_tag {
+                    for &id in &share.facet_ids[k * npf..(k + 1) * npf] {
+                        let e = side_of.entry(id).or_default();
+                        if !e.contains(&(i, s)) {
+                            e.push((i, s));
+                        }
+                    }
+                }
+            }
+        }
+    }
+    for e in 0..local.n_owned {
+        let cell = &share.ids[e * npe..(e + 1) * npe];
+        if !cell.iter().any(|id| side_of.contains_key(id)) {
+            continue;
+        }
+        let net = mesh.bezier_net(e);
+        for (n, &id) in cell.iter().enumerate() {
+            if side_of.contains_key(&id) && !straight.contains_key(&id) {
+                let l = lattice_point(p, d, n);
+                let t = super::sample::lattice_param(p, l);
+                straight.insert(id, crate::sample::eval_net(d, &net, t));
+            }
+        }
+    }
+    // The image sides' node spacing (the serial `pair_spacing`).
+    for (k, &t) in share.facet_tags.iter().enumerate() {
+        for (i, pair) in seams.pairs.iter().enumerate() {
+            if t != pair.slave_tag {
+                continue;
+            }
+            let f = &share.facet_ids[k * npf..(k + 1) * npf];
+            for c in 0..corners.len() {
+                let a = straight[&f[corners[c]]];
+                let b = straight[&f[corners[(c + 1) % corners.len()]]];
+                let len = (0..3).map(|j| (a[j] - b[j]).powi(2)).sum::<f64>().sqrt();
+                spacing[i] = spacing[i].min(len);
+            }
+        }
+    }
+    comm.min_f64(&mut spacing);
+    let mut send = Vec::new();
+    let mut ids: Vec<u32> = side_of.keys().copied().collect();
+    ids.sort_unstable();
+    for &id in &ids {
+        for &(i, s) in &side_of[&id] {
+            send.push(i as f64);
+            send.push(s as f64);
+            send.push(share.tag[id as usize] as f64);
+            send.extend_from_slice(&straight[&id]);
+            send.extend_from_slice(&xyz[id as usize]);
+        }
+    }
+    let all = comm.all_gather_f64(&send).concat();
+    drop(send);
+    // Every seam node once, by tag (sorted: every rank numbers them alike).
+    let mut nodes: BTreeMap<u64, ([f64; 3], [f64; 3])> = BTreeMap::new();
+    let mut sides: Vec<[Vec<u64>; 2]> = vec![[Vec::new(), Vec::new()]; seams.pairs.len()];
+    for r in all.chunks_exact(NODE_WIDTH) {
+        let tag = r[2] as u64;
+        nodes
+            .entry(tag)
+            .or_insert(([r[3], r[4], r[5]], [r[6], r[7], r[8]]));
+        sides[r[0] as usize][r[1] as usize].push(tag);
+    }
+    drop(all);
+    let at: HashMap<u64, u32> = nodes
+        .keys()
+        .enumerate()
+        .map(|(i, &t)| (t, i as u32))
+        .collect();
+    let tags: Vec<u64> = nodes.keys().copied().collect();
+    let straight_pos: Vec<[f64; 3]> = nodes.values().map(|v| v.0).collect();
+    let original: Vec<[f64; 3]> = nodes.values().map(|v| v.1).collect();
+    drop(nodes);
+    let periodic_err = |pair: &PeriodicPair, what: String| CurveError::Periodic {
+        input: seams.input.to_owned(),
+        source: PeriodicError {
+            spec: pair.spec.label(),
+            what,
+        },
+    };
+    let mut links = Vec::with_capacity(seams.pairs.len());
+    for (i, pair) in seams.pairs.iter().enumerate() {
+        let [a, b] = &mut sides[i];
+        a.sort_unstable();
+        a.dedup();
+        b.sort_unstable();
+        b.dedup();
+        let shortest = spacing[i] / p.max(1) as f64;
+        let b_ids: Vec<u32> = b.iter().map(|t| at[t]).collect();
+        let grid = PointGrid::new(&straight_pos, &b_ids, shortest);
+        let tol = (PERIODIC_REL_TOL * shortest).max(2.0 * pair.input_mismatch);
+        let mut node_pairs = Vec::with_capacity(a.len());
+        for t in a.iter() {
+            let n = at[t];
+            match grid.nearest(pair.transform.apply(straight_pos[n as usize])) {
+                Some((m, dist)) if dist <= tol => node_pairs.push([m, n]),
+                _ => {
+                    return Err(periodic_err(
+                        pair,
+                        format!("node {t} of the order-{p} mesh has no image"),
+                    ));
+                }
+            }
+        }
+        node_pairs.sort_unstable();
+        if node_pairs.len() != b.len() || node_pairs.windows(2).any(|w| w[0][0] == w[1][0]) {
+            return Err(periodic_err(
+                pair,
+                format!("the order-{p} nodes of the two sides do not pair one-to-one"),
+            ));
+        }
+        links.push(PeriodicLink {
+            master_tag: pair.master_tag,
+            slave_tag: pair.slave_tag,
+            transform: pair.transform,
+            node_pairs,
+        });
+    }
+    drop(sides);
+    // The own elements holding a seam node, and where each seam node sits in `xyz`.
+    let local_of: Vec<(u32, u32)> = {
+        let mut v: Vec<(u32, u32)> = Vec::new();
+        let mut seen = std::collections::HashSet::new();
+        for &id in share.ids {
+            let t = share.tag[id as usize];
+            if let Some(&k) = at.get(&t)
+                && seen.insert(id)
+            {
+                v.push((id, k));
+            }
+        }
+        v
+    };
+    let touched: Vec<usize> = (0..local.n_owned)
+        .filter(|&e| {
+            share.ids[e * npe..(e + 1) * npe]
+                .iter()
+                .any(|id| at.contains_key(&share.tag[*id as usize]))
+        })
+        .collect();
+    let mut weight: Vec<Vec<usize>> = links.iter().map(|l| vec![0; l.node_pairs.len()]).collect();
+    let mut pos = original.clone();
+    let mut min_det_bound = f64::INFINITY;
+    let mut bad_global: Vec<u64> = Vec::new();
+    for round in 0..IMAGE_WEIGHTS.len() {
+        place_images(&mut pos, &original, &links, &weight);
+        for &(id, k) in &local_of {
+            xyz[id as usize] = pos[k as usize];
+        }
+        let ho = crate::mesh::HighOrderMesh {
+            dim: d,
+            order: p,
+            nodes: xyz.to_vec(),
+            elements: share.ids.to_vec(),
+            ..Default::default()
+        };
+        use rayon::prelude::*;
+        let bounds: Vec<(usize, f64)> = touched
+            .par_iter()
+            .map(|&e| {
+                (
+                    e,
+                    crate::validity::lagrange_element_bounds(&ho, e, seams.depth).lower,
+                )
+            })
+            .collect();
+        drop(ho);
+        let mut m = [bounds.iter().map(|b| b.1).fold(f64::INFINITY, f64::min)];
+        comm.min_f64(&mut m);
+        min_det_bound = m[0];
+        // The failing elements' global ids, then their nodes' tags.
+        let bad: Vec<usize> = bounds
+            .iter()
+            .filter(|b| !(b.1 > 0.0))
+            .map(|b| b.0)
+            .collect();
+        let mut send: Vec<f64> = Vec::new();
+        for &e in &bad {
+            send.push(local.global_element[e] as f64);
+            send.extend(
+                share.ids[e * npe..(e + 1) * npe]
+                    .iter()
+                    .map(|&id| share.tag[id as usize] as f64),
+            );
+        }
+        let all = comm.all_gather_f64(&send).concat();
+        bad_global = all.chunks_exact(npe + 1).map(|r| r[0] as u64).collect();
+        if bad_global.is_empty() || round + 1 == IMAGE_WEIGHTS.len() {
+            break;
+        }
+        let mut in_bad = vec![false; tags.len()];
+        for r in all.chunks_exact(npe + 1) {
+            for &t in &r[1..] {
+                if let Some(&k) = at.get(&(t as u64)) {
+                    in_bad[k as usize] = true;
+                }
+            }
+        }
+        for (l, w) in links.iter().zip(weight.iter_mut()) {
+            for (k, &[s, m]) in l.node_pairs.iter().enumerate() {
+                if in_bad[s as usize] || in_bad[m as usize] {
+                    w[k] = round + 1;
+                }
+            }
+        }
+    }
+    if !bad_global.is_empty() {
+        bad_global.sort_unstable();
+        let bad: Vec<usize> = bad_global.iter().map(|&e| e as usize).collect();
+        return Err(CurveError::invalid(seams.input, "periodic seam", &bad));
+    }
+    let mut recertified = [touched.len() as u64];
+    comm.sum_u64(&mut recertified);
+    let max_shift = pos
+        .iter()
+        .zip(&original)
+        .map(|(a, b)| (0..3).map(|j| (a[j] - b[j]).powi(2)).sum::<f64>().sqrt())
+        .fold(0.0, f64::max);
+    let info = ImageInfo {
+        max_shift,
+        max_mismatch: crate::mesh::periodic::max_mismatch(&pos, &links),
+        recertified: recertified[0] as usize,
+        min_det_bound,
+    };
+    let links = links
+        .into_iter()
+        .map(|l| TagLink {
+            master_tag: l.master_tag,
+            slave_tag: l.slave_tag,
+            transform: l.transform,
+            node_pairs: l
+                .node_pairs
+                .iter()
+                .map(|&[s, m]| [tags[s as usize], tags[m as usize]])
+                .collect(),
+        })
+        .collect();
+    Ok((links, info))
+}
