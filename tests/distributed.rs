@@ -1487,6 +1487,7 @@ fn periodic_pairs_are_exact_images_across_ranks() {
             .arg(&turbine)
             .current_dir(env!("CARGO_MANIFEST_DIR")),
     );
+    #[allow(clippy::type_complexity)]
     let cases: [(&str, PathBuf, [&str; 2], &[usize], bool); 4] = [
         (
             "pchannel2d",
