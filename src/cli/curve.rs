@@ -302,7 +302,7 @@ impl JobArgs {
                     rel_tol: self.cg_tol.unwrap_or(FIT_CG_TOL),
                     preconditioner: self
                         .cg_preconditioner
-                        .map_or_else(default_preconditioner, Into::into),
+                        .map_or_else(CgPreconditioner::default, Into::into),
                     ..Default::default()
                 },
                 targets: if FitPreset::from(self.fit).smooth_targets() {
@@ -338,7 +338,18 @@ impl JobArgs {
 }
 
 pub(super) fn run(args: Args) -> anyhow::Result<()> {
-    let job = prepare_files(args.files)?;
+    #[cfg_attr(not(feature = "mpi"), allow(unused_mut))]
+    let mut job = prepare_files(args.files)?;
+    // Under mpirun, at any rank count (one runs the serial job): mpirun's options.
+    #[cfg(feature = "mpi")]
+    if polyspline::distributed::launch::launched_size().is_some()
+        && let Some(o) = polyspline::distributed::launch::mpirun_options(
+            &job.options,
+            polyspline::distributed::launch::launched_rank().unwrap_or(0),
+        )
+    {
+        job.options = o;
+    }
     // Under mpirun with several ranks: the distributed job (docs/distributed.md).
     #[cfg(feature = "mpi")]
     if polyspline::distributed::launch::distributed() {
@@ -620,17 +631,4 @@ fn print_summary(r: &CurveReport) {
         r.boundary_node_distance_max,
         r.boundary_sample_distance_max
     );
-}
-
-/// The fit's CG preconditioner when `--cg-preconditioner` is not given: the library's default,
-/// or block Jacobi under mpirun, where the default pair would be refused (its second
-/// partition's patches cross the ranks' shares); only an explicit pair or SGS is refused there.
-fn default_preconditioner() -> CgPreconditioner {
-    #[cfg(feature = "mpi")]
-    if polyspline::distributed::launch::distributed() {
-        return CgPreconditioner::BlockJacobi {
-            size: polyspline::solve::block_jacobi::DEFAULT_BLOCK,
-        };
-    }
-    CgPreconditioner::default()
 }

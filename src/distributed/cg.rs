@@ -14,27 +14,28 @@
 //! by rounding over the iterations). Dot products count each control point once, on its owner
 //! (the lowest rank touching it), then sum over the ranks (one all-reduce of 3 values for p·Kp, one of
 //! 6 for r·z and the stopping test's r·r together: two per iteration). The halo exchange
-//! needs no counts (the lists are the same on both sides), so an iteration is 3 collectives:
-//! on oversubscribed or loaded nodes each one waits for every rank to be scheduled.
+//! needs no counts (the lists are the same on both sides), so an iteration is 3 collectives,
+//! and 2 more with a block preconditioner (r to the blocks' homes, z back): on oversubscribed
+//! or loaded nodes each one waits for every rank to be scheduled.
 //!
-//! **Preconditioner.** Block Jacobi, as the serial solver's default
-//! ([`crate::solve::block_jacobi`]): the control points only this rank touches have complete
-//! rows in its share of K, so they are aggregated (64 per block, breadth-first over K's graph)
-//! and each diagonal block is factored; the shared control points, whose rows are split
-//! between ranks, get point Jacobi on their summed diagonal. The preconditioner is one SPD
-//! block-diagonal matrix across the ranks, applied locally without communication. The
-//! aggregates differ from the serial run's, so the iterates do too; the solution agrees to the
-//! tolerance: the loop and its stopping rule (‖r‖ ≤ rel_tol ‖b‖ per coordinate) are the serial
-//! solver's, [`crate::solve::cg_loop`], with the ranks' dot products as its reductions.
-//! With `--cg-preconditioner jacobi` every row gets point Jacobi on its summed diagonal: the
-//! serial solver's preconditioner exactly, so the iterates are the serial ones up to the
-//! order of the sums (the ranks' partial products and dot products), whatever the shares.
+//! **Preconditioner.** The serial solver's own ([`super::blocks`]): block Jacobi and the
+//! block-Jacobi pair (the default) on the aggregates the serial run grows, numbered by the
+//! control points' global keys, not by the shares (grown before the assembly,
+//! [`Aggregation`], and passed in); a block that straddles ranks is summed and solved on one
+//! home rank. With `--cg-preconditioner jacobi` every row gets point Jacobi on
+//! its summed diagonal. Either way the preconditioner is the serial one, so the iterates are
+//! the serial ones up to the order of the sums (the ranks' partial products, dot products and
+//! block entries), whatever the shares: the loop and its stopping rule (‖r‖ ≤ rel_tol ‖b‖ per
+//! coordinate) are the serial solver's, [`crate::solve::cg_loop`], with the ranks' dot
+//! products as its reductions. Block Gauss–Seidel, whose sweeps run in an order across the
+//! whole matrix, is refused ([`CgError::Unavailable`]).
 
+use super::blocks::{Aggregation, GlobalBlocks};
 use super::comm::Comm;
+use super::local::Key;
 use crate::fit::NormalMatrix;
-use crate::solve::block_jacobi::{BlockJacobi, DEFAULT_BLOCK};
 use crate::solve::blocked::RowTemplates;
-use crate::solve::{CgError, CgInfo, CgParams, CgPreconditioner, Preconditioner};
+use crate::solve::{CgError, CgInfo, CgParams, CgPreconditioner};
 use rayon::prelude::*;
 
 /// The control points of this rank and how they are shared.
@@ -46,6 +47,9 @@ pub struct Halo {
     /// Per other rank sharing control points with this one: the rank and the local indices
     /// of the shared control points, in increasing global id (the same order on both sides).
     pub neighbours: Vec<(usize, Vec<u32>)>,
+    /// The global key of each control point ([`super::local::key_of`]): the same on every
+    /// rank holding it, and ordered as the serial space numbers its control points.
+    pub keys: Vec<Key>,
 }
 
 impl Halo {
@@ -77,10 +81,13 @@ impl Halo {
             .enumerate()
             .filter(|(_, l)| !l.is_empty())
             .collect();
+        // The ids are global here: their order is every rank's.
+        let keys = global.iter().map(|&g| [0, u64::from(g), 0, 0, 0]).collect();
         Halo {
             global,
             owned,
             neighbours,
+            keys,
         }
     }
 
@@ -268,7 +275,7 @@ impl LocalMatrix {
     }
 
     /// Row r's columns and values.
-    fn row(&self, r: usize) -> (&[u32], &[f64]) {
+    pub(super) fn row(&self, r: usize) -> (&[u32], &[f64]) {
         let (lo, hi) = (self.indptr[r], self.indptr[r + 1]);
         let values = match &self.values {
             LocalValues::Full(data) => &data[lo..hi],
@@ -303,83 +310,11 @@ impl LocalMatrix {
     }
 }
 
-/// Block Jacobi on the rows only this rank touches, point Jacobi on the shared ones (see the
-/// module docs).
-struct LocalBlockJacobi {
-    /// Local rows of the blocks (the unshared control points), in the blocks' numbering.
-    interior: Vec<u32>,
-    blocks: Option<BlockJacobi>,
-    /// Summed diagonal (used on the shared rows).
-    diag: Vec<f64>,
-    shared: Vec<bool>,
-}
-
-impl LocalBlockJacobi {
-    /// Blocks of at most `size` rows; `size` 0 is point Jacobi on every row (no blocks: the
-    /// serial solver's point Jacobi, which does not depend on the shares).
-    fn new(k: &LocalMatrix, halo: &Halo, diag: Vec<f64>, size: usize) -> Result<Self, CgError> {
-        let mut shared = vec![size == 0; halo.len()];
-        for (_, l) in &halo.neighbours {
-            for &i in l {
-                shared[i as usize] = true;
-            }
-        }
-        let interior: Vec<u32> = (0..halo.len() as u32)
-            .filter(|&i| !shared[i as usize])
-            .collect();
-        let mut slot = vec![u32::MAX; halo.len()];
-        for (j, &i) in interior.iter().enumerate() {
-            slot[i as usize] = j as u32;
-        }
-        let mut indptr = vec![0usize];
-        let (mut indices, mut data) = (Vec::new(), Vec::new());
-        for &i in &interior {
-            let (cols, values) = k.row(i as usize);
-            for (&c, &v) in cols.iter().zip(values) {
-                let c = slot[c as usize];
-                if c != u32::MAX {
-                    indices.push(c);
-                    data.push(v);
-                }
-            }
-            indptr.push(indices.len());
-        }
-        let blocks = if interior.is_empty() {
-            None
-        } else {
-            Some(
-                BlockJacobi::new(&indptr, &indices, &data, size).map_err(|e| match e {
-                    CgError::BadDiagonal { row, value } => CgError::BadDiagonal {
-                        row: interior[row] as usize,
-                        value,
-                    },
-                    e => e,
-                })?,
-            )
-        };
-        Ok(LocalBlockJacobi {
-            interior,
-            blocks,
-            diag,
-            shared,
-        })
-    }
-
-    fn apply(&self, r: &[[f64; 3]], z: &mut [[f64; 3]]) {
-        for (i, ((z, r), d)) in z.iter_mut().zip(r).zip(&self.diag).enumerate() {
-            if self.shared[i] {
-                *z = r.map(|v| v / d);
-            }
-        }
-        if let Some(b) = &self.blocks {
-            let rs: Vec<[f64; 3]> = self.interior.iter().map(|&i| r[i as usize]).collect();
-            let mut zs = vec![[0.0; 3]; rs.len()];
-            b.apply(&rs, &mut zs);
-            for (&i, z_i) in self.interior.iter().zip(zs) {
-                z[i as usize] = z_i;
-            }
-        }
-    }
+/// The preconditioner of the distributed CG (see the module docs).
+enum Local {
+    /// Point Jacobi: the summed diagonal.
+    Point(Vec<f64>),
+    Blocks(GlobalBlocks),
 }
 
 fn flat(v: &mut [[f64; 3]]) -> &mut [f64] {
@@ -387,8 +322,9 @@ fn flat(v: &mut [[f64; 3]]) -> &mut [f64] {
 }
 
 /// Solve the distributed system for δ (consistent, on `halo`'s control points) from `x` = 0:
-/// `b` is this rank's partial right-hand side (summed here). Returns the CG figures; every
-/// rank returns the same ones.
+/// `b` is this rank's partial right-hand side (summed here). A block preconditioner applies
+/// `aggregation`, made for it ([`Aggregation::for_preconditioner`]; without one it is
+/// [`CgError::Unavailable`]). Returns the CG figures; every rank returns the same ones.
 pub fn pcg(
     comm: &dyn Comm,
     halo: &Halo,
@@ -396,6 +332,7 @@ pub fn pcg(
     b_partial: &[[f64; 3]],
     x: &mut [[f64; 3]],
     params: &CgParams,
+    aggregation: Option<&Aggregation>,
 ) -> Result<CgInfo, CgError> {
     let mut b = b_partial.to_vec();
     halo.sum_partials(comm, flat(&mut b), 3);
@@ -419,27 +356,31 @@ pub fn pcg(
         k.apply(p, y);
         halo.sum_partials(comm, flat(y), 3);
     };
-    // Point Jacobi is the serial solver's own preconditioner on every share; block Jacobi's
-    // aggregates are grown on each rank's unshared rows (the module docs).
-    let size = match params.preconditioner {
-        CgPreconditioner::Jacobi => 0,
-        CgPreconditioner::BlockJacobi { size } => size.max(1),
-        _ => DEFAULT_BLOCK,
-    };
-    // A block that fails to factor fails the solve on every rank alike.
-    let m = LocalBlockJacobi::new(k, halo, diag, size);
-    let mut ok = [if m.is_ok() { 1.0 } else { 0.0 }];
-    comm.min_f64(&mut ok);
-    let m = match m {
-        Ok(_) if ok[0] < 1.0 => {
-            return Err(CgError::BadDiagonal {
-                row: 0,
-                value: f64::NAN,
+    // The serial solver's preconditioner on every share (the module docs).
+    let m = match (params.preconditioner, aggregation) {
+        (CgPreconditioner::Jacobi, _) => Local::Point(diag),
+        (CgPreconditioner::BlockSgs { .. }, _) => {
+            return Err(CgError::Unavailable {
+                what: "block Gauss–Seidel",
+                why: "its sweeps run across the whole matrix in one order",
             });
         }
-        m => m?,
+        (_, Some(a)) => Local::Blocks(GlobalBlocks::new(comm, halo, k, a)?),
+        (_, None) => {
+            return Err(CgError::Unavailable {
+                what: "block",
+                why: "the distributed CG was given no aggregates",
+            });
+        }
     };
-    let precondition = |r: &[[f64; 3]], z: &mut [[f64; 3]]| m.apply(r, z);
+    let precondition = |r: &[[f64; 3]], z: &mut [[f64; 3]]| match &m {
+        Local::Point(d) => {
+            for ((z, r), d) in z.iter_mut().zip(r).zip(d) {
+                *z = r.map(|v| v / d);
+            }
+        }
+        Local::Blocks(b) => b.apply(comm, r, z),
+    };
     let ranks = OwnedRows { comm, halo };
     crate::solve::cg_loop(&ranks, apply, precondition, &b, x, params, |_, _| {})
 }
@@ -491,7 +432,21 @@ mod tests {
             rel_tol: 1e-12,
             ..Default::default()
         };
-        pcg(&Single::default(), &halo, &local, &b, &mut x, &params).unwrap();
+        // The graph's edges as the elements' stencils.
+        let stencils: Vec<Vec<u32>> = (0..n as u32 - 1).map(|i| vec![i, i + 1]).collect();
+        let comm = Single::default();
+        let aggregation =
+            Aggregation::for_preconditioner(&comm, &halo, &stencils, &params.preconditioner);
+        pcg(
+            &comm,
+            &halo,
+            &local,
+            &b,
+            &mut x,
+            &params,
+            aggregation.as_ref(),
+        )
+        .unwrap();
         let mut y = vec![[0.0; 3]; n];
         crate::solve::LinOp::apply(&k, &x, &mut y);
         for (y, b) in y.iter().zip(&b) {

@@ -16,17 +16,19 @@
 //! (`pipeline::spline::SplineSetup`); agree on the shared control points by keys of
 //! global entity ids ([`super::local`]); assemble the normal equations over its own elements
 //! with the whole mesh's size levels ([`crate::fit::partial`]); solve them with the
-//! distributed block-Jacobi CG ([`super::cg`]); run the certified blend on its own elements,
-//! the ranks agreeing on the rejected elements of every round in global ids
+//! distributed CG ([`super::cg`]) under the serial preconditioner; run the certified blend on
+//! its own elements, the ranks agreeing on the rejected elements of every round in global ids
 //! ([`crate::validity::blend::blend_search_shared`]); sample its own elements with a global
 //! node numbering ([`super::sample`]), with `--periodic` the pairs resolved over the whole mesh
 //! and the image sides' nodes made the transform of their masters' ([`super::periodic`]),
 //! check them and route them back to their file runs for the collective write; no rank reads
 //! or holds the whole mesh.
-//! Invariant: the result equals the serial run's up to
-//! the CG tolerance (the block-Jacobi aggregates differ from the serial solver's); the
-//! blend's factors are the serial search's for the same fitted map.
+//! Invariant: the result is the serial run's (with uniform knots) up to the order of the
+//! sums: the CG applies the serial preconditioner on the serial aggregates
+//! ([`super::blocks`]), so it takes the serial iterates and stops where the serial solve
+//! stops; the blend's factors are the serial search's for the same fitted map.
 
+use super::blocks::Aggregation;
 use super::cg::{Halo, LocalMatrix, pcg};
 use super::comm::Comm;
 use super::local::{GHOST_DEPTH, LocalShare};
@@ -90,23 +92,21 @@ fn check_supported(options: &CurveOptions) -> Result<(), CurveError> {
     // Graded knot intervals average over whole knot surfaces, which cross the shares; the
     // distributed run keeps uniform knots so that its result does not depend on the ranks.
     // `auto` decides on the whole mesh's blend, which no rank sees: the launcher resolves it
-    // to uniform and says so (`launch::curve`).
+    // to uniform at every rank count, one included, and says so (`launch::mpirun_options`).
     match options.knots.intervals {
         crate::spline::KnotIntervals::Uniform => {}
         crate::spline::KnotIntervals::Graded => return unsupported("--knot-intervals graded"),
         crate::spline::KnotIntervals::Auto => return unsupported("--knot-intervals auto"),
     }
-    // The distributed CG preconditions by block Jacobi within each rank's share; the sweeps
-    // of block Gauss–Seidel would run across the shares in an order that depends on them.
-    match options.fit.cg.preconditioner {
-        crate::solve::CgPreconditioner::BlockSgs { .. } => {
-            return unsupported("--cg-preconditioner block-sgs");
-        }
-        // The second partition's patches would cross the shares.
-        crate::solve::CgPreconditioner::BlockJacobiPair { .. } => {
-            return unsupported("--cg-preconditioner block-jacobi-pair");
-        }
-        _ => {}
+    // The deep midpoints are found on the mesh a rank holds, whose cut fringe is not the
+    // whole mesh's boundary.
+    if options.fit.weights.deep_midpoint.is_some() {
+        return unsupported("--w-deep-midpoint");
+    }
+    // The sweeps of block Gauss–Seidel run across the whole matrix in one order (the CG
+    // refuses it too: `CgError::Unavailable`).
+    if let crate::solve::CgPreconditioner::BlockSgs { .. } = options.fit.cg.preconditioner {
+        return unsupported("--cg-preconditioner block-sgs");
     }
     Ok(())
 }
@@ -209,9 +209,9 @@ fn fit_stage(
 }
 
 /// This rank's share of the fit: its rows of the normal equations with the whole mesh's size
-/// levels, the scaling agreed over the halo ([`Stage::FitAssembly`]), the distributed
-/// block-Jacobi CG ([`Stage::FitCg`]), and the fitted control points (projected onto planar
-/// patches) in `s`. Returns the CG's figures and the local matrix's stored entries.
+/// levels, the scaling agreed over the halo ([`Stage::FitAssembly`]), the distributed CG
+/// with its preconditioner's aggregates grown first ([`Stage::FitCg`]), and the fitted
+/// control points (projected onto planar patches) in `s`. Returns the CG's figures and the local matrix's stored entries.
 fn fit_share(
     j: &ShareJob,
     clock: &mut Clock,
@@ -219,12 +219,26 @@ fn fit_share(
     halo: &Halo,
 ) -> Result<(crate::solve::CgInfo, usize), CurveError> {
     let (comm, topo, setup) = (j.comm, j.job.topo, j.setup);
+    let fit_params = &setup.fit_params;
+    // The preconditioner's aggregates (the serial run's: rank 0 grows them on the whole
+    // mesh's stencils) before the assembly, while a rank holds least.
+    let aggregation = clock.run(Stage::FitCg, || {
+        let stencils = super::blocks::own_stencils(s, halo, j.mine);
+        Aggregation::for_preconditioner(comm, halo, &stencils, &fit_params.cg.preconditioner)
+    });
     let (k, b, scale) = clock.run(Stage::FitAssembly, || assemble_share(j, s, halo));
     let mut delta = vec![[0.0; 3]; halo.len()];
-    let fit_params = &setup.fit_params;
     let cg = clock
         .run(Stage::FitCg, || {
-            pcg(comm, halo, &k, &b, &mut delta, &fit_params.cg)
+            pcg(
+                comm,
+                halo,
+                &k,
+                &b,
+                &mut delta,
+                &fit_params.cg,
+                aggregation.as_ref(),
+            )
         })
         .map_err(|source| CurveError::Solve {
             input: j.job.input.to_owned(),

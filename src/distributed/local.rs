@@ -85,15 +85,14 @@ pub fn touched(space: &SplineSpace, n_owned: usize) -> Vec<u32> {
 pub fn halo(comm: &dyn Comm, local: &LocalMesh, topo: &Topology, space: &SplineSpace) -> Halo {
     let (rank, size) = (comm.rank(), comm.size());
     let global = touched(space, local.n_owned);
-    let mut by_key: Vec<(Key, u32)> = global
+    let keys: Vec<Key> = global
+        .iter()
+        .map(|&c| key_of(space.control_point_keys[c as usize], local, topo))
+        .collect();
+    let mut by_key: Vec<(Key, u32)> = keys
         .iter()
         .enumerate()
-        .map(|(i, &c)| {
-            (
-                key_of(space.control_point_keys[c as usize], local, topo),
-                i as u32,
-            )
-        })
+        .map(|(i, &k)| (k, i as u32))
         .collect();
     by_key.sort_unstable();
     let candidates: BTreeSet<usize> = local.owner[local.n_owned..]
@@ -146,6 +145,7 @@ pub fn halo(comm: &dyn Comm, local: &LocalMesh, topo: &Topology, space: &SplineS
         global,
         owned,
         neighbours,
+        keys,
     }
 }
 

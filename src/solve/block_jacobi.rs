@@ -58,7 +58,13 @@ impl Aggregates {
     }
 
     fn grow(indptr: &[usize], indices: &[u32], size: usize, reverse: bool) -> Self {
-        let n = indptr.len() - 1;
+        Self::grow_on(&mut Csr { indptr, indices }, size, reverse)
+    }
+
+    /// [`Self::new`] (or, when `reverse`, [`Self::reversed`]) on the graph `graph`, whose rows'
+    /// neighbours come in increasing order as a CSR matrix stores them.
+    pub(crate) fn grow_on(graph: &mut impl Neighbours, size: usize, reverse: bool) -> Self {
+        let n = graph.len();
         let size = size.max(1);
         const FREE: u32 = u32::MAX;
         let mut agg = vec![FREE; n];
@@ -77,7 +83,7 @@ impl Aggregates {
             queue.clear();
             queue.push_back(seed);
             'grow: while let Some(r) = queue.pop_front() {
-                let neighbours = &indices[indptr[r]..indptr[r + 1]];
+                let neighbours = graph.of(r);
                 for k in 0..neighbours.len() {
                     let c = neighbours[if reverse { neighbours.len() - 1 - k } else { k }];
                     if rows.len() - first >= size {
@@ -98,6 +104,29 @@ impl Aggregates {
             slot[r as usize] = k as u32;
         }
         Aggregates { rows, start, slot }
+    }
+}
+
+/// A graph whose aggregates [`Aggregates::grow_on`] grows: its rows and each row's neighbours.
+pub(crate) trait Neighbours {
+    /// Number of rows.
+    fn len(&self) -> usize;
+    /// Row r's neighbours, increasing.
+    fn of(&mut self, r: usize) -> &[u32];
+}
+
+/// A CSR matrix's graph.
+struct Csr<'a> {
+    indptr: &'a [usize],
+    indices: &'a [u32],
+}
+
+impl Neighbours for Csr<'_> {
+    fn len(&self) -> usize {
+        self.indptr.len() - 1
+    }
+    fn of(&mut self, r: usize) -> &[u32] {
+        &self.indices[self.indptr[r]..self.indptr[r + 1]]
     }
 }
 

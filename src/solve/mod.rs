@@ -169,6 +169,13 @@ pub enum CgError {
     /// The GPU solver's device failed.
     #[error("the GPU solver failed: {0}")]
     Device(String),
+    /// The solver cannot apply this preconditioner (the distributed CG and block
+    /// Gauss–Seidel).
+    #[error("the {what} preconditioner is not available here: {why}")]
+    Unavailable {
+        what: &'static str,
+        why: &'static str,
+    },
     /// The [`CgMonitor`] stopped the solve (the caller cancelled the job).
     #[error("conjugate gradients cancelled after {iterations} iterations")]
     Cancelled { iterations: usize },
