@@ -574,13 +574,12 @@ impl ElementBlocks {
             (gd, gr)
         };
         let levels = size_levels(mesh);
-        let on_boundary = weighted_boundary(topo, features);
         // Vertices of the elements that touch the boundary: an element with none of them is
         // "deep" (a ring away from the wall).
-        let mut near = vec![false; on_boundary.len()];
+        let mut near = vec![false; topo.vertex_on_boundary.len()];
         for e in 0..space.n_elements() {
             let vs = mesh.element(e);
-            if vs.iter().any(|&v| on_boundary[v as usize]) {
+            if vs.iter().any(|&v| topo.vertex_on_boundary[v as usize]) {
                 vs.iter().for_each(|&v| near[v as usize] = true);
             }
         }
@@ -588,7 +587,7 @@ impl ElementBlocks {
             .map(|e| {
                 let mut m = 0u64;
                 for (c, &v) in mesh.element(e).iter().enumerate() {
-                    if on_boundary[v as usize] {
+                    if topo.vertex_on_boundary[v as usize] {
                         m |= 1 << c;
                     }
                 }
@@ -607,31 +606,6 @@ impl ElementBlocks {
         }
         ElementBlocks { masks, cache }
     }
-}
-
-/// The vertices whose samples take the boundary weights and make their elements' neighbours
-/// non-deep: the boundary vertices, less (3D) those whose boundary facets all lie in planar
-/// patches. A planar patch is projected back onto its plane after the fit, so its vertices need
-/// no pinning; counted as boundary, the caps of a one- or three-layer extrusion made every
-/// element a boundary element (every midpoint at `boundary_midpoint`, none deep), and the fit
-/// lost the deep-midpoint weight that keeps graded layers valid in 2D.
-fn weighted_boundary(
-    topo: &Topology,
-    features: Option<&crate::mesh::features::Features>,
-) -> Vec<bool> {
-    let mut on = topo.vertex_on_boundary.clone();
-    let Some(f) = features.filter(|f| topo.dim == 3 && f.planes.iter().any(Option::is_some)) else {
-        return on;
-    };
-    on.iter_mut().for_each(|b| *b = false);
-    for (i, &facet) in topo.boundary_facets.iter().enumerate() {
-        if f.planes[f.facet_patch[i] as usize].is_none() {
-            for &v in topo.facet_vertices(facet as usize) {
-                on[v as usize] = true;
-            }
-        }
-    }
-    on
 }
 
 /// K applied without assembling it: y = Σ_e E_eᵀ G_e E_e x, element by element (the
