@@ -541,11 +541,6 @@ fn extruded_coarse_ellipse_tips_keep_their_curved_wall() {
     }
 }
 
-/// Generated one- and three-layer extrusions keep their walls curved: the C-grid around the
-/// NACA 0012 and O-grids around the 1 × 0.2 ellipse graded from 1e-6 to 1e-3 with growth
-/// 1.05 to 1.4, wall RMS distance from the analytic wall ≤ 0.1× the linear mesh's (measured
-/// 0.002–0.017×), caps planar, every output certified valid. Boundary layers thinner than
-/// the decay distance: `boundary_layers_within_the_decay_distance_keep_their_walls_curved`.
 /// The generated O-grid (`kind` "ogrid") or C-grid ("cgrid") around `wall`, extruded by
 /// `layers` over a span of 0.1 (2D for 0).
 fn layer_grid(
@@ -573,6 +568,11 @@ fn layer_grid(
     .mesh
 }
 
+/// Generated one- and three-layer extrusions keep their walls curved: the C-grid around the
+/// NACA 0012 and O-grids around the 1 × 0.2 ellipse graded from 1e-6 to 1e-3 with growth
+/// 1.05 to 1.4, wall RMS distance from the analytic wall ≤ 0.1× the linear mesh's (measured
+/// 0.002–0.017×), caps planar, every output certified valid. Boundary layers thinner than
+/// the decay distance: `boundary_layers_within_the_decay_distance_keep_their_walls_curved`.
 #[test]
 fn generated_extrusions_keep_their_walls_curved() {
     use polyspline::mesh::generate::Wall;
