@@ -620,6 +620,9 @@ pub fn fit_with_targets_from(
         }
         None => vec![[0.0; 3]; k.n()],
     };
+    if start.is_some() {
+        keep_closer_starts(&k, &rhs, &mut delta);
+    }
     // The solve takes K (the CPU's blocked solvers release it as they reorder it).
     let (unknowns, nonzeros) = (k.n(), k.indices().len());
     let cg = solve(k, &rhs, &mut delta, &params.cg)?;
@@ -646,6 +649,29 @@ pub fn fit_with_targets_from(
             solve_seconds,
         },
     ))
+}
+
+/// Zero every component of the start `delta` whose residual ‖rhs − K δ‖ is not below the
+/// cold start's ‖rhs‖. Where a component's right-hand side is rounding noise (the normal
+/// direction of a planar mesh or extrusion), a carried start's residual is rounding of K's
+/// size, far above it, and the test relative to ‖rhs‖ could never be met.
+fn keep_closer_starts(k: &NormalMatrix, rhs: &[[f64; 3]], delta: &mut [[f64; 3]]) {
+    let (indptr, indices, data) = (k.indptr(), k.indices(), k.data());
+    let (mut r2, mut b2) = ([0.0f64; 3], [0.0f64; 3]);
+    for (i, b) in rhs.iter().enumerate() {
+        let mut kd = [0.0; 3];
+        for j in indptr[i]..indptr[i + 1] {
+            let d = delta[indices[j] as usize];
+            (0..3).for_each(|a| kd[a] += data[j] * d[a]);
+        }
+        for a in 0..3 {
+            r2[a] += (b[a] - kd[a]).powi(2);
+            b2[a] += b[a] * b[a];
+        }
+    }
+    for a in (0..3).filter(|&a| r2[a] >= b2[a]) {
+        delta.iter_mut().for_each(|d| d[a] = 0.0);
+    }
 }
 
 impl FitSpace for crate::spline::SplineSpace {
