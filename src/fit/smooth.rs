@@ -220,7 +220,7 @@ pub struct SmoothTargets {
 
 /// How far, in boundary edge lengths ℓ of its source, a vertex model is evaluated (see the
 /// module docs): an entity whose corners lie farther than this from one of its samples along
-/// the model's curved directions ([`VertexModel::curved_extent`]) takes no correction from
+/// the model's curved directions (`VertexModel::curved_extent`) takes no correction from
 /// the model at that sample. On the real meshes of the repository no entity reaches 2ℓ; the
 /// outer cells of the generated O- and C-grids whose boundary layer lies within the decay
 /// distance reach 250–830ℓ.

@@ -381,7 +381,7 @@ fn point(x: [f64; 3]) -> DVec3 {
     DVec3::from_array(x)
 }
 
-/// One boundary facet of a side as [`Side::from_facets`] takes it: its vertices (indices into
+/// One boundary facet of a side as `Side::from_facets` takes it: its vertices (indices into
 /// the coordinates, in the facet's cyclic order) and the centroid of its element (the facet's
 /// normal is turned away from it).
 pub struct SideFacet {
