@@ -656,14 +656,10 @@ pub fn fit_with_targets_from(
 /// direction of a planar mesh or extrusion), a carried start's residual is rounding of K's
 /// size, far above it, and the test relative to ‖rhs‖ could never be met.
 fn keep_closer_starts(k: &NormalMatrix, rhs: &[[f64; 3]], delta: &mut [[f64; 3]]) {
-    let (indptr, indices, data) = (k.indptr(), k.indices(), k.data());
+    let mut kd = vec![[0.0; 3]; rhs.len()];
+    k.apply(delta, &mut kd);
     let (mut r2, mut b2) = ([0.0f64; 3], [0.0f64; 3]);
-    for (i, b) in rhs.iter().enumerate() {
-        let mut kd = [0.0; 3];
-        for j in indptr[i]..indptr[i + 1] {
-            let d = delta[indices[j] as usize];
-            (0..3).for_each(|a| kd[a] += data[j] * d[a]);
-        }
+    for (b, kd) in rhs.iter().zip(&kd) {
         for a in 0..3 {
             r2[a] += (b[a] - kd[a]).powi(2);
             b2[a] += b[a] * b[a];
