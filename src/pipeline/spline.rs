@@ -378,6 +378,12 @@ pub const AUTO_MIN_GAIN: f64 = 0.5;
 ///    interior facet's measured |ln ratio| reaches [`crate::spline::AUTO_MIN_LOG_RATIO`]
 ///    (graded knots all but uniform: they do not hold back half as many).
 ///
+/// The uniform pass's blend stops as soon as it holds back more than
+/// [`AUTO_MAX_HELD_BACK`] of the elements ([`blend_search_at_most`]: its count so far is a
+/// lower bound of the final one). Graded knots holding back at most [`AUTO_MIN_GAIN`] of
+/// that bound are then kept at once; otherwise the uniform blend is run to its end and the
+/// rule applied to its count, so the choice and the output are those of the full passes.
+///
 /// Both passes share the setup (features, kinks, smooth targets: they do not depend on the
 /// knots); the setup names the knots used and the passes run (`knot_passes`). With periodic
 /// pairs each pass has its own setup (its knots are measured on the glued mesh,
