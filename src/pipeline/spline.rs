@@ -506,6 +506,8 @@ pub(super) fn curve_spline(
 }
 
 /// A spline pass that may stop early ([`spline_pass_within`]): `auto`'s uniform pass.
+// One value per pass, moved a few times: the size difference does not matter.
+#[allow(clippy::large_enum_variant)]
 enum First {
     /// Run to its end.
     Done(SplineOutcome),
