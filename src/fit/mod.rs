@@ -276,8 +276,10 @@ impl FitSolver {
     pub const DIRECT_2D: usize = 12_000;
     /// Largest 3D system [`FitSolver::Auto`] factors: 3D fill grows as n², and from 1.7k
     /// control points (mfem/cylinder-hex, hsphere8, libmesh ex9, beam-sphere) the two were
-    /// within 15 % of each other; the 765 of su2 cylinder were solved in 8 against 14 ms.
-    pub const DIRECT_3D: usize = 1_000;
+    /// within 15 % of each other; the 765 of su2 cylinder were solved in 8 against 14 ms, and
+    /// its 1,193 (the Q2 elements along its curved feature edges) in 14 against 32 ms (fit
+    /// CG stage, medians of 9 runs; 0.080 against 0.089 s of CPU for the whole run).
+    pub const DIRECT_3D: usize = 1_500;
 
     /// Whether this choice factors a `dim`-D system of `unknowns` control points; `cpu` says
     /// whether the CG would run on the CPU (automatic choice keeps a GPU solve on the GPU).
