@@ -118,7 +118,7 @@ pub(crate) struct JobArgs {
     #[command(flatten)]
     knots: KnotArgs,
     /// Solver of the fit's normal equations: `auto` factors small systems (at most 12,000
-    /// control points in 2D, 1,000 in 3D) by sparse Cholesky on the CPU backend and solves
+    /// control points in 2D, 1,500 in 3D) by sparse Cholesky on the CPU backend and solves
     /// the rest by CG; `cg` and `cholesky` force one (distributed runs always use CG).
     #[arg(long, value_enum, default_value_t = FitSolver::default().into())]
     fit_solver: values::FitSolver,
