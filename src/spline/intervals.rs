@@ -385,12 +385,12 @@ fn second(topo: &Topology, f: u32, e: usize) -> bool {
 /// One tie `ρ(f) = ±ρ(f2)` made by continuing facet `f` of `element` across its face to
 /// `neighbour` (`opposite`: minus).
 #[derive(Clone, Copy)]
-struct Tie {
-    element: u32,
-    neighbour: u32,
-    f: u32,
-    f2: u32,
-    opposite: bool,
+pub(crate) struct Tie {
+    pub(crate) element: u32,
+    pub(crate) neighbour: u32,
+    pub(crate) f: u32,
+    pub(crate) f2: u32,
+    pub(crate) opposite: bool,
 }
 
 /// Every tie of the knot surfaces continued across the spline elements (`spline[e]`).
@@ -537,8 +537,9 @@ fn split_elements(
 /// the ties of the knot surfaces ([`survey`]), with the share of the facets on consistently
 /// graded surfaces (`--knot-intervals auto` decides on it before any fit).
 pub struct KnotSurvey {
-    measured: Vec<Option<(f64, f64)>>,
-    ties: Vec<Tie>,
+    /// Per facet: the measured log-ratio and its weight (`None`: not an interior facet).
+    pub(crate) measured: Vec<Option<(f64, f64)>>,
+    pub(crate) ties: Vec<Tie>,
     /// [`KnotSurfaceInfo::graded_share`].
     pub graded_share: f64,
     /// Largest |measured log-ratio| of an interior facet (0 without one): below
@@ -580,6 +581,33 @@ pub fn survey_glued(
 }
 
 fn survey_with(corners: Corners, topo: &Topology, spline: &[bool]) -> KnotSurvey {
+    let (measured, ties) = survey_parts_with(corners, topo, spline);
+    KnotSurvey::from_parts(measured, ties)
+}
+
+/// What [`survey`] is made of: every facet's measured log-ratio with its weight (`None`
+/// where it is not interior) and the ties of the knot surfaces continued across the elements
+/// with `spline[e]`; [`KnotSurvey::from_parts`] joins them. A rank of a distributed job
+/// surveys its share with it (`distributed::knots`).
+#[allow(clippy::type_complexity)]
+pub(crate) fn survey_parts(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    spline: &[bool],
+) -> (Vec<Option<(f64, f64)>>, Vec<Tie>) {
+    let corners = Corners {
+        mesh,
+        unglued: None,
+    };
+    survey_parts_with(corners, topo, spline)
+}
+
+#[allow(clippy::type_complexity)]
+fn survey_parts_with(
+    corners: Corners,
+    topo: &Topology,
+    spline: &[bool],
+) -> (Vec<Option<(f64, f64)>>, Vec<Tie>) {
     let nf = topo.n_facets();
     // Measured log-ratio of every interior facet, with weight 1 / the facet's size: a ratio
     // that misfits a thin cell distorts it relative to its thickness, so the small facets of
@@ -599,17 +627,26 @@ fn survey_with(corners: Corners, topo: &Topology, spline: &[bool]) -> KnotSurvey
             (r.is_finite() && w.is_finite()).then_some((r, w))
         })
         .collect();
-    let ties = ties(topo, spline);
-    let graded_share = graded_share(&mut surfaces(nf, &ties, &measured), &measured);
-    let max_abs_log_ratio = measured
-        .iter()
-        .flatten()
-        .fold(0.0f64, |a, &(m, _)| a.max(m.abs()));
-    KnotSurvey {
-        measured,
-        ties,
-        graded_share,
-        max_abs_log_ratio,
+    (measured, ties(topo, spline))
+}
+
+impl KnotSurvey {
+    /// The survey of the facets' measured log-ratios `measured` (by facet) and the knot
+    /// surfaces' `ties`: the graded share and the largest |log-ratio| from them. The share
+    /// sums by facet in the order of `measured` (the ties' order does not matter).
+    pub(crate) fn from_parts(measured: Vec<Option<(f64, f64)>>, ties: Vec<Tie>) -> KnotSurvey {
+        let nf = measured.len();
+        let graded_share = graded_share(&mut surfaces(nf, &ties, &measured), &measured);
+        let max_abs_log_ratio = measured
+            .iter()
+            .flatten()
+            .fold(0.0f64, |a, &(m, _)| a.max(m.abs()));
+        KnotSurvey {
+            measured,
+            ties,
+            graded_share,
+            max_abs_log_ratio,
+        }
     }
 }
 
@@ -631,15 +668,39 @@ pub fn knot_weights(
 
 /// [`knot_weights`] of graded knots from the mesh's [`survey`].
 pub fn knot_weights_from(survey: KnotSurvey, topo: &Topology, params: &KnotParams) -> Knots {
-    let dim = topo.dim;
-    let nf = topo.n_facets();
-    let ne = topo.n_elements;
+    let ratios = surface_ratios(survey, topo.n_elements, params);
+    let weights = weights_from_ratios(topo, |f| ratios.rho[f as usize]);
+    Knots {
+        weights: Some(weights),
+        split: if ratios.info.split_elements > 0 {
+            ratios.split
+        } else {
+            Vec::new()
+        },
+        info: ratios.info,
+    }
+}
+
+/// The knot surfaces' ratios of a [`KnotSurvey`] ([`surface_ratios`]).
+pub(crate) struct SurfaceRatios {
+    /// Per facet of the survey: `ρ(f) = ln(h_second / h_first)` of its surface (0: uniform).
+    pub(crate) rho: Vec<f64>,
+    /// Per element (`ne` of them): made Q2 where a knot surface is split.
+    pub(crate) split: Vec<bool>,
+    pub(crate) info: KnotSurfaceInfo,
+}
+
+/// The knot surfaces of `survey` over `ne` elements, split where one ratio cannot fit, and
+/// each surface's ratio: the 1 / facet-size weighted mean of its facets' measured ratios,
+/// summed by facet in the survey's order. Needs no topology: only facet and element numbers.
+pub(crate) fn surface_ratios(survey: KnotSurvey, ne: usize, params: &KnotParams) -> SurfaceRatios {
     let KnotSurvey {
         measured,
         ties: all,
         graded_share: share,
         ..
     } = survey;
+    let nf = measured.len();
 
     // Knot surfaces: facets tied across each spline element's neighbours; split where one
     // ratio cannot fit, and rebuilt without the split elements' ties.
@@ -649,6 +710,7 @@ pub fn knot_weights_from(survey: KnotSurvey, topo: &Topology, params: &KnotParam
         .filter(|t| !split[t.element as usize])
         .collect();
     let mut uf = surfaces(nf, &kept, &measured);
+    drop(kept);
 
     // 3. One ratio per surface: the weighted mean of its facets' measured ratios.
     let mut sum = vec![0.0f64; nf];
@@ -694,14 +756,28 @@ pub fn knot_weights_from(survey: KnotSurvey, topo: &Topology, params: &KnotParam
         info.max_abs_log_ratio = info.max_abs_log_ratio.max(rho.abs());
         rho_root[r] = rho;
     }
-    let rho = |f: u32| {
-        let v = rho_root[root[f as usize] as usize];
-        if sign[f as usize] { -v } else { v }
-    };
+    drop((uf, sum, weight, measured));
+    let rho = root
+        .iter()
+        .zip(&sign)
+        .map(|(&r, &s)| {
+            let v = rho_root[r as usize];
+            if s { -v } else { v }
+        })
+        .collect();
+    SurfaceRatios { rho, split, info }
+}
 
-    // 4. Weights: α = 1/(1 + h₋₁/h₀), β = 1/(1 + h₀/h₁).
+/// 4. The extraction weights of every element of `topo` from their facets' ratios `rho(f)`
+/// (`ln(h_second / h_first)` of facet f of `topo`): `α = 1/(1 + h₋₁/h₀)`,
+/// `β = 1/(1 + h₀/h₁)`; ½ on the boundary.
+pub(crate) fn weights_from_ratios(
+    topo: &Topology,
+    rho: impl Fn(u32) -> f64 + Sync,
+) -> Vec<KnotWeights> {
+    let dim = topo.dim;
     let logistic = |x: f64| 1.0 / (1.0 + (-x).exp());
-    let weights = (0..ne)
+    (0..topo.n_elements)
         .into_par_iter()
         .map(|e| {
             let mut w = [[0.5; 2]; 3];
@@ -723,16 +799,7 @@ pub fn knot_weights_from(survey: KnotSurvey, topo: &Topology, params: &KnotParam
             }
             w
         })
-        .collect();
-    Knots {
-        weights: Some(weights),
-        split: if info.split_elements > 0 {
-            split
-        } else {
-            Vec::new()
-        },
-        info,
-    }
+        .collect()
 }
 
 #[cfg(test)]
