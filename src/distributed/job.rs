@@ -461,23 +461,26 @@ fn spline_passes(
         ..*job
     };
     let survey = |clock: &mut Clock| {
-        clock.run(Stage::Spline, || super::knots::survey(comm, local, job.topo))
+        clock.run(Stage::Spline, || {
+            super::knots::survey(comm, local, job.topo)
+        })
     };
     let graded_knots = |clock: &mut Clock, survey| {
         clock.run(Stage::Spline, || {
             super::knots::knots(comm, survey, local, job.topo, &graded.knots)
         })
     };
-    let pass = |setup: &SplineSetup, job: &Job, clock: &mut Clock, bytes: &mut [u64; 2], previous| {
-        let j = ShareJob {
-            comm,
-            local,
-            job,
-            setup,
-            mine: p.mine,
+    let pass =
+        |setup: &SplineSetup, job: &Job, clock: &mut Clock, bytes: &mut [u64; 2], previous| {
+            let j = ShareJob {
+                comm,
+                local,
+                job,
+                setup,
+                mine: p.mine,
+            };
+            share_pass(&j, clock, previous, bytes)
         };
-        share_pass(&j, clock, previous, bytes)
-    };
     match options.knots.intervals {
         KnotIntervals::Uniform => pass(setup, &uniform_job, clock, bytes, None),
         KnotIntervals::Graded => {
@@ -505,8 +508,10 @@ fn spline_passes(
             let knots = graded_knots(clock, shared);
             let uniform_knots = setup.set_knots(KnotIntervals::Graded, knots, weights);
             setup.knot_passes = 2;
-            // From the uniform fit, as the serial second pass starts.
-            let second = pass(setup, &graded_job, clock, bytes, Some(&first.s))?;
+            // From the uniform fit, as the serial second pass starts (from C0 with periodic
+            // pairs, whose passes have a setup each there).
+            let previous = options.periodic.pairs.is_empty().then_some(&first.s);
+            let second = pass(setup, &graded_job, clock, bytes, previous)?;
             if spline::auto_graded_is_decisive(second.held(), first.held()) {
                 return Ok(second);
             }
