@@ -8,43 +8,50 @@
 //! extraction weights of its elements, its elements split where a knot surface is, and the
 //! whole mesh's [`crate::spline::KnotSurfaceInfo`]).
 //!
-//! Steps. (1) Each rank renumbers its sub-mesh as the whole mesh numbers it (elements by
-//! global index, vertices by node tag) and builds its topology: a facet's first element is
-//! then its lowest global element and its vertices are in that element's order, as in the
-//! serial topology, so [`crate::spline::intervals::survey_parts`] measures the facets it owns
-//! (those whose first element is its own) and the ties of its own spline elements exactly as
-//! the serial survey does. (2) The facets are numbered by their sorted node tags over the
-//! ranks (all-gathered, 32 B per facet in 3D): the serial topology's order for a file listing
-//! its nodes in tag order. (3) Rank 0 gathers the measured ratios (24 B per interior facet)
-//! and the ties (32 B each, about 24 per hex) and runs the serial survey and, for graded
-//! knots, the serial splitting and weighted means ([`crate::spline::intervals::surface_ratios`])
-//! on them; (4) every rank asks rank 0 for the ratios of its sub-mesh's facets and takes the
-//! split elements, then computes its elements' weights with the serial formula.
+//! Steps. (1) Each rank measures the facets it owns (those whose first element, the lowest
+//! global index, is its own) and lists the ties of its own spline elements with the serial
+//! functions ([`crate::spline::intervals::survey_parts`]), each facet oriented and its
+//! vertices summed as the whole mesh's topology does (its first element's side), so the
+//! values are the serial survey's bit for bit. A facet is named by its first element's global
+//! index and side. (2) Rank 0 numbers the facets in the serial topology's order, by their
+//! sorted node tags (the ranks send the keys of the facets they own: 40 B each in 3D), then
+//! gathers the measured ratios (24 B per interior facet) and, one rank at a time, the ties
+//! (32 B each on the wire, 16 B held; about 24 per hex), and runs the serial survey and, for
+//! graded knots, the serial splitting and weighted means
+//! ([`crate::spline::intervals::surface_ratios`]) on them; (3) every rank asks rank 0 for the
+//! ratios of its sub-mesh's facets and takes the split elements, then computes its elements'
+//! weights with the serial formula.
 //!
 //! Invariant: the ratios every rank uses are the serial run's, bit for bit where the file's
 //! node tags increase with the nodes' order (the sums run over the facets in the serial
 //! order); elsewhere up to the order of the sums. The weights of ghosts at the fringe of the
 //! ghost layer, whose neighbours are cut off, are uniform there (their classes are too); the
-//! own elements' and their neighbours' are the serial ones.
+//! own elements' and their neighbours' are the serial ones. Memory: rank 0 holds the whole
+//! mesh's ties and measured ratios for the survey (about 0.7 KB per hex), before the fit.
 
 use super::comm::Comm;
 use super::read::LocalMesh;
+use crate::mesh::Topology;
 use crate::mesh::topology::NONE;
-use crate::mesh::{LinearMesh, Topology};
 use crate::spline::intervals::{self, KnotSurvey, Tie};
 use crate::spline::{KnotParams, KnotSurfaceInfo, Knots};
+
+/// Ties sent to rank 0 in one message (32 B each).
+const TIE_CHUNK: usize = 1 << 16;
 
 /// A facet's key: its node tags sorted (2D: the last two 0).
 type FacetKey = [u64; 4];
 
 /// The whole mesh's knot survey (see the module docs).
 pub struct SharedSurvey {
-    /// Rank 0: the survey of the whole mesh in the serial numbering; `None` elsewhere.
-    survey: Option<KnotSurvey>,
-    /// Per facet of the rank's topology: its global number.
-    global_facet: Vec<u32>,
-    /// Per facet of the rank's topology: its first element is not the whole mesh's first
-    /// (the lowest global element), so its ratio is the global one negated.
+    /// Rank 0: the survey of the whole mesh in the serial numbering, and every facet's name
+    /// with its number (sorted by name); `None` elsewhere.
+    survey: Option<(KnotSurvey, Vec<(u64, u32)>)>,
+    /// Per facet of the rank's topology with both its elements here: its name (global index of
+    /// its first element × 8 + side); `u64::MAX` elsewhere.
+    names: Vec<u64>,
+    /// Per facet of the rank's topology: its first element here is not the whole mesh's
+    /// first, so its ratio is the global one negated.
     flipped: Vec<bool>,
     /// [`KnotSurvey::graded_share`] of the whole mesh.
     pub graded_share: f64,
@@ -52,156 +59,172 @@ pub struct SharedSurvey {
     pub max_abs_log_ratio: f64,
 }
 
-/// The sub-mesh renumbered as the whole mesh numbers it: elements by global index, vertices
-/// by node tag. Returns the mesh, each of its elements' local index and its vertices' tags.
-fn in_global_order(local: &LocalMesh) -> (LinearMesh, Vec<usize>, Vec<u64>) {
-    let mesh = &local.mesh;
-    let npe = mesh.nodes_per_element();
-    let mut elements: Vec<usize> = (0..mesh.n_elements()).collect();
-    elements.sort_unstable_by_key(|&e| local.global_element[e]);
-    let mut vertices: Vec<u32> = (0..mesh.n_vertices() as u32).collect();
-    vertices.sort_unstable_by_key(|&v| local.global_vertex[v as usize]);
-    let mut new_of = vec![0u32; vertices.len()];
-    for (i, &v) in vertices.iter().enumerate() {
-        new_of[v as usize] = i as u32;
+/// Facet `f`'s first element over the whole mesh (the lower global index of its elements
+/// here) and its side there.
+fn first(local: &LocalMesh, topo: &Topology, f: usize) -> (u32, u8) {
+    let ([a, b], [sa, sb]) = (topo.facet_elements[f], topo.facet_sides[f]);
+    let g = &local.global_element;
+    if b != NONE && g[b as usize] < g[a as usize] {
+        (b, sb)
+    } else {
+        (a, sa)
     }
-    let sorted = LinearMesh {
-        dim: mesh.dim,
-        coords: vertices.iter().map(|&v| mesh.coords[v as usize]).collect(),
-        elements: elements
-            .iter()
-            .flat_map(|&e| mesh.element(e).iter().map(|&v| new_of[v as usize]))
-            .collect(),
-        ..Default::default()
-    };
-    let tags = vertices
-        .iter()
-        .map(|&v| local.global_vertex[v as usize])
-        .collect();
-    debug_assert_eq!(sorted.elements.len(), npe * elements.len());
-    (sorted, elements, tags)
-}
-
-/// The key of facet `f` of `topo`, whose vertices have the tags `tags`.
-fn key(topo: &Topology, f: usize, tags: impl Fn(u32) -> u64) -> FacetKey {
-    let mut k = [0u64; 4];
-    let vs = topo.facet_vertices(f);
-    for (x, &v) in k.iter_mut().zip(vs) {
-        *x = tags(v);
-    }
-    k[..vs.len()].sort_unstable();
-    k
 }
 
 /// The knot survey of the whole mesh (collective; see the module docs). `local` and `topo`:
 /// this rank's sub-mesh and its topology.
 pub fn survey(comm: &dyn Comm, local: &LocalMesh, topo: &Topology) -> SharedSurvey {
-    let (sorted, local_of, tags) = in_global_order(local);
-    let st = Topology::build(&sorted);
-    let own = |e: usize| local_of[e] < local.n_owned;
-    // Own elements that are spline elements by topology (their one-ring is on this rank).
-    let spline: Vec<bool> = crate::spline::classify::classify(&sorted, &st)
+    let (mesh, g) = (&local.mesh, &local.global_element);
+    let own = |e: u32| (e as usize) < local.n_owned;
+    // Own elements that are spline elements by topology (their two rings are on this rank).
+    let spline: Vec<bool> = crate::spline::classify::classify(mesh, topo)
         .iter()
         .enumerate()
-        .map(|(e, c)| own(e) && c.is_spline())
+        .map(|(e, c)| own(e as u32) && c.is_spline())
         .collect();
-    let (measured, ties) = intervals::survey_parts(&sorted, &st, &spline);
+    let (measured, ties) = intervals::survey_parts(mesh, topo, &spline, g);
     drop(spline);
-    // The facets this rank owns, in the order of their keys (the topology sorts them so).
-    let owned = |f: usize| own(st.facet_elements[f][0] as usize);
-    let width = if st.dim == 3 { 4 } else { 2 };
-    let mine: Vec<f64> = (0..st.n_facets())
-        .filter(|&f| owned(f))
-        .flat_map(|f| key(&st, f, |v| tags[v as usize])[..width].to_vec())
-        .map(|t| t as f64)
-        .collect();
-    let mut all: Vec<FacetKey> = comm
-        .all_gather_f64(&mine)
-        .concat()
-        .chunks_exact(width)
-        .map(|c| std::array::from_fn(|i| c.get(i).map_or(0, |&t| t as u64)))
-        .collect();
-    drop(mine);
-    all.sort_unstable();
-    let number = |k: &FacetKey| {
-        all.binary_search(k)
-            .expect("every facet is owned by one rank") as u32
+    let name = |f: usize| {
+        let (e, side) = first(local, topo, f);
+        g[e as usize] * 8 + side as u64
     };
-    let sorted_facet: Vec<u32> = (0..st.n_facets())
-        .map(|f| number(&key(&st, f, |v| tags[v as usize])))
+    let owned = |f: usize| own(first(local, topo, f).0);
+    // The facets this rank owns, named, with their keys (for rank 0's numbering).
+    let width = if topo.dim == 3 { 4 } else { 2 };
+    let keys: Vec<f64> = (0..topo.n_facets())
+        .filter(|&f| owned(f))
+        .flat_map(|f| {
+            let mut k = [0u64; 4];
+            let vs = topo.facet_vertices(f);
+            for (x, &v) in k.iter_mut().zip(vs) {
+                *x = local.global_vertex[v as usize];
+            }
+            k[..vs.len()].sort_unstable();
+            let mut r = k[..width].to_vec();
+            r.push(name(f));
+            r
+        })
+        .map(|x| x as f64)
         .collect();
-    let ge = |e: u32| local.global_element[local_of[e as usize]];
+    let numbers = comm.gather_f64(0, &keys).map(|all| numbering(&all, width));
+    drop(keys);
     let measured: Vec<f64> = measured
         .iter()
         .enumerate()
         .filter(|&(f, _)| owned(f))
-        .filter_map(|(f, m)| m.map(|(m, w)| [sorted_facet[f] as f64, m, w]))
+        .filter_map(|(f, m)| m.map(|(m, w)| [name(f) as f64, m, w]))
         .flatten()
         .collect();
-    // A tie's sign is the sign of its second facet's number plus one.
-    let ties: Vec<f64> = ties
+    let number = |names: &[(u64, u32)], x: f64| -> u32 {
+        let i = names
+            .binary_search_by_key(&(x as u64), |&(n, _)| n)
+            .expect("every facet is numbered");
+        names[i].1
+    };
+    let by_facet = comm.gather_f64(0, &measured).map(|all| {
+        let names = numbers.as_ref().expect("rank 0 numbers the facets");
+        let mut by_facet = vec![None; names.len()];
+        for r in all.chunks_exact(3) {
+            by_facet[number(names, r[0]) as usize] = Some((r[1], r[2]));
+        }
+        by_facet
+    });
+    drop(measured);
+    // The ties, one rank and at most `TIE_CHUNK` of them at a time: rank 0 holds one chunk's
+    // records besides the ties, a rank one chunk's beside its own ties.
+    let counts: Vec<usize> = comm
+        .all_gather_f64(&[ties.len() as f64])
         .iter()
-        .flat_map(|t| {
-            let f2 = sorted_facet[t.f2 as usize] as f64 + 1.0;
-            [
-                ge(t.element) as f64,
-                ge(t.neighbour) as f64,
-                sorted_facet[t.f as usize] as f64,
-                if t.opposite { -f2 } else { f2 },
-            ]
-        })
+        .map(|c| c[0] as usize)
         .collect();
-    drop((st, sorted, sorted_facet));
-    // This rank's topology: each facet's number and orientation.
-    let global_vertex = &local.global_vertex;
-    let global_facet: Vec<u32> = (0..topo.n_facets())
-        .map(|f| number(&key(topo, f, |v| global_vertex[v as usize])))
-        .collect();
-    let flipped = topo
-        .facet_elements
-        .iter()
-        .map(|&[a, b]| {
-            b != NONE && local.global_element[a as usize] > local.global_element[b as usize]
-        })
-        .collect();
-    let nf = all.len();
-    drop(all);
-    let measured = comm.gather_f64(0, &measured);
-    let ties = comm.gather_f64(0, &ties);
-    let survey = measured
-        .zip(ties)
-        .map(|(measured, ties)| whole_survey(nf, &measured, &ties));
+    let mut whole: Vec<Tie> = Vec::with_capacity(if comm.rank() == 0 {
+        counts.iter().sum()
+    } else {
+        0
+    });
+    for (q, &n) in counts.iter().enumerate() {
+        for start in (0..n).step_by(TIE_CHUNK) {
+            let send: Vec<f64> = if q == comm.rank() {
+                ties[start..n.min(start + TIE_CHUNK)]
+                    .iter()
+                    .flat_map(|t| {
+                        // The second facet's sign is the tie's.
+                        let f2 = name(t.f2() as usize) as f64 + 1.0;
+                        [
+                            g[t.element as usize] as f64,
+                            g[t.neighbour as usize] as f64,
+                            name(t.f as usize) as f64,
+                            if t.opposite() { -f2 } else { f2 },
+                        ]
+                    })
+                    .collect()
+            } else {
+                Vec::new()
+            };
+            if let Some(all) = comm.gather_f64(0, &send) {
+                let names = numbers.as_ref().expect("rank 0 numbers the facets");
+                whole.extend(all.chunks_exact(4).map(|r| {
+                    Tie::new(
+                        r[0] as u32,
+                        r[1] as u32,
+                        number(names, r[2]),
+                        number(names, r[3].abs() - 1.0),
+                        r[3] < 0.0,
+                    )
+                }));
+            }
+        }
+    }
+    drop(ties);
+    let survey = by_facet
+        .zip(numbers)
+        .map(|(by_facet, names)| (KnotSurvey::from_parts(by_facet, whole), names));
     // Rank 0's figures on every rank (the others add zeros).
     let mut figures = survey
         .as_ref()
-        .map_or([0.0; 2], |s| [s.graded_share, s.max_abs_log_ratio]);
+        .map_or([0.0; 2], |(s, _)| [s.graded_share, s.max_abs_log_ratio]);
     comm.sum_f64(&mut figures);
+    // This rank's facets: names where both elements are here, orientation.
+    let names = (0..topo.n_facets())
+        .map(|f| {
+            if topo.facet_elements[f][1] == NONE {
+                u64::MAX
+            } else {
+                name(f)
+            }
+        })
+        .collect();
+    let flipped = (0..topo.n_facets())
+        .map(|f| first(local, topo, f).0 != topo.facet_elements[f][0])
+        .collect();
     SharedSurvey {
         survey,
-        global_facet,
+        names,
         flipped,
         graded_share: figures[0],
         max_abs_log_ratio: figures[1],
     }
 }
 
-/// Rank 0: the serial survey of `nf` facets from the ranks' records ([`survey`]).
-fn whole_survey(nf: usize, measured: &[f64], ties: &[f64]) -> KnotSurvey {
-    let mut by_facet = vec![None; nf];
-    for r in measured.chunks_exact(3) {
-        by_facet[r[0] as usize] = Some((r[1], r[2]));
-    }
-    let ties = ties
-        .chunks_exact(4)
-        .map(|r| Tie {
-            element: r[0] as u32,
-            neighbour: r[1] as u32,
-            f: r[2] as u32,
-            f2: (r[3].abs() - 1.0) as u32,
-            opposite: r[3] < 0.0,
+/// Rank 0: every facet's name with its number in the serial topology's order (by sorted node
+/// tags), sorted by name, from the ranks' records `[key (width), name]`.
+fn numbering(records: &[f64], width: usize) -> Vec<(u64, u32)> {
+    let mut keyed: Vec<(FacetKey, u64)> = records
+        .chunks_exact(width + 1)
+        .map(|r| {
+            let key = std::array::from_fn(|i| if i < width { r[i] as u64 } else { 0 });
+            (key, r[width] as u64)
         })
         .collect();
-    KnotSurvey::from_parts(by_facet, ties)
+    keyed.sort_unstable();
+    let mut names: Vec<(u64, u32)> = keyed
+        .iter()
+        .enumerate()
+        .map(|(i, &(_, n))| (n, i as u32))
+        .collect();
+    drop(keyed);
+    names.sort_unstable();
+    names
 }
 
 /// This sub-mesh's graded knots from the whole mesh's survey (collective; see the module
@@ -217,28 +240,44 @@ pub fn knots(
 ) -> Knots {
     let SharedSurvey {
         survey,
-        global_facet,
+        names,
         flipped,
         ..
     } = shared;
     let n_global = local.n_global as usize;
-    let ratios = survey.map(|s| intervals::surface_ratios(s, n_global, params));
-    // The ratios of this rank's facets, asked of rank 0.
+    let ratios = survey.map(|(s, names)| (intervals::surface_ratios(s, n_global, params), names));
+    // The ratios of this rank's facets with both elements here, asked of rank 0 by name.
+    let asking: Vec<usize> = (0..names.len()).filter(|&f| names[f] != u64::MAX).collect();
     let mut ask = vec![Vec::new(); comm.size()];
-    ask[0] = global_facet.iter().map(|&g| g as f64).collect();
-    drop(global_facet);
+    ask[0] = asking.iter().map(|&f| names[f] as f64).collect();
+    drop(names);
     let asked = comm.exchange_f64(&ask);
     drop(ask);
     let answer: Vec<Vec<f64>> = match &ratios {
-        Some(r) => asked
+        Some((r, names)) => asked
             .iter()
-            .map(|list| list.iter().map(|&g| r.rho[g as usize]).collect())
+            .map(|list| {
+                list.iter()
+                    .map(|&x| {
+                        let i = names
+                            .binary_search_by_key(&(x as u64), |&(n, _)| n)
+                            .expect("every facet is numbered");
+                        r.rho[names[i].1 as usize]
+                    })
+                    .collect()
+            })
             .collect(),
         None => vec![Vec::new(); comm.size()],
     };
     drop(asked);
-    let rho: Vec<f64> = comm.exchange_f64(&answer).swap_remove(0);
+    let answered = comm.exchange_f64(&answer).swap_remove(0);
     drop(answer);
+    let mut rho = vec![0.0f64; flipped.len()];
+    for (&f, &x) in asking.iter().zip(&answered) {
+        rho[f] = x;
+    }
+    drop((asking, answered));
+    let ratios = ratios.map(|(r, _)| r);
     // The split elements and the figures, from rank 0.
     let split_ids: Vec<f64> = ratios.as_ref().map_or_else(Vec::new, |r| {
         (0..n_global)
