@@ -820,7 +820,7 @@ pub(crate) fn surface_ratios(survey: KnotSurvey, ne: usize, params: &KnotParams)
     SurfaceRatios { rho, split, info }
 }
 
-/// 4. The extraction weights of every element of `topo` from their facets' ratios `rho(f)`
+/// The extraction weights (step 4) of every element of `topo` from their facets' ratios `rho(f)`
 /// (`ln(h_second / h_first)` of facet f of `topo`): `α = 1/(1 + h₋₁/h₀)`,
 /// `β = 1/(1 + h₀/h₁)`; ½ on the boundary.
 pub(crate) fn weights_from_ratios(
