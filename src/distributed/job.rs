@@ -13,7 +13,10 @@
 //! elements to their Morton parts and read [`GHOST_DEPTH`] vertex rings of ghosts
 //! ([`super::share`], [`super::read`]); build the topology, features, smooth targets
 //! and spline space on that sub-mesh with the serial stage functions
-//! (`pipeline::spline::SplineSetup`); agree on the shared control points by keys of
+//! (`pipeline::spline::SplineSetup`); with graded or `auto` knots, survey the whole mesh's
+//! knot surfaces and take the serial knot weights ([`super::knots`]), `auto` deciding on the
+//! whole mesh's figures as the serial `curve_spline` does ([`spline_passes`], one or two
+//! passes of what follows); agree on the shared control points by keys of
 //! global entity ids ([`super::local`]); assemble the normal equations over its own elements
 //! with the whole mesh's size levels ([`crate::fit::partial`]); solve them with the
 //! distributed CG ([`super::cg`]) under the serial preconditioner; run the certified blend on
@@ -23,7 +26,7 @@
 //! and the image sides' nodes made the transform of their masters' ([`super::periodic`]),
 //! check them and route them back to their file runs for the collective write; no rank reads
 //! or holds the whole mesh.
-//! Invariant: the result is the serial run's (with uniform knots) up to the order of the
+//! Invariant: the result is the serial run's (the same knots too) up to the order of the
 //! sums: the CG applies the serial preconditioner on the serial aggregates
 //! ([`super::blocks`]), so it takes the serial iterates and stops where the serial solve
 //! stops; the blend's factors are the serial search's for the same fitted map.
