@@ -15,7 +15,7 @@
 //! and spline space on that sub-mesh with the serial stage functions
 //! (`pipeline::spline::SplineSetup`); with graded or `auto` knots, survey the whole mesh's
 //! knot surfaces and take the serial knot weights ([`super::knots`]), `auto` deciding on the
-//! whole mesh's figures as the serial `curve_spline` does ([`spline_passes`], one or two
+//! whole mesh's figures as the serial `curve_spline` does (`spline_passes`, one or two
 //! passes of what follows); agree on the shared control points by keys of
 //! global entity ids ([`super::local`]); assemble the normal equations over its own elements
 //! with the whole mesh's size levels ([`crate::fit::partial`]); solve them with the

@@ -10,7 +10,7 @@
 //!
 //! Steps. (1) Each rank measures the facets it owns (those whose first element, the lowest
 //! global index, is its own) and lists the ties of its own spline elements with the serial
-//! functions ([`crate::spline::intervals::survey_parts`]), each facet oriented and its
+//! functions (`spline::intervals::survey_parts`), each facet oriented and its
 //! vertices summed as the whole mesh's topology does (its first element's side), so the
 //! values are the serial survey's bit for bit. A facet is named by its first element's global
 //! index and side. (2) Rank 0 numbers the facets in the serial topology's order, by their
@@ -18,7 +18,7 @@
 //! gathers the measured ratios (24 B per interior facet) and, one rank at a time, the ties
 //! (32 B each on the wire, 16 B held; about 24 per hex), and runs the serial survey and, for
 //! graded knots, the serial splitting and weighted means
-//! ([`crate::spline::intervals::surface_ratios`]) on them; (3) every rank asks rank 0 for the
+//! (`spline::intervals::surface_ratios`) on them; (3) every rank asks rank 0 for the
 //! ratios of its sub-mesh's facets and takes the split elements, then computes its elements'
 //! weights with the serial formula.
 //!
