@@ -338,18 +338,7 @@ impl JobArgs {
 }
 
 pub(super) fn run(args: Args) -> anyhow::Result<()> {
-    #[cfg_attr(not(feature = "mpi"), allow(unused_mut))]
-    let mut job = prepare_files(args.files)?;
-    // Under mpirun, at any rank count (one runs the serial job): mpirun's options.
-    #[cfg(feature = "mpi")]
-    if polyspline::distributed::launch::launched_size().is_some()
-        && let Some(o) = polyspline::distributed::launch::mpirun_options(
-            &job.options,
-            polyspline::distributed::launch::launched_rank().unwrap_or(0),
-        )
-    {
-        job.options = o;
-    }
+    let job = prepare_files(args.files)?;
     // Under mpirun with several ranks: the distributed job (docs/distributed.md).
     #[cfg(feature = "mpi")]
     if polyspline::distributed::launch::distributed() {

@@ -65,8 +65,8 @@ pub struct CurveOptions {
     pub method: Method,
     /// Weights of the fit (used with [`Geometry::SplineFitted`]).
     pub fit: FitParams,
-    /// Knot intervals of the spline space (uniform by default; the distributed run uses
-    /// uniform knots, see `distributed::job`).
+    /// Knot intervals of the spline space (`auto` by default, decided by the spline stages;
+    /// under mpirun on the whole mesh, see `distributed::knots`).
     pub knots: KnotParams,
     pub line_search: LineSearchParams,
     pub line_search_mode: LineSearchMode,

@@ -169,7 +169,7 @@ impl SplineSetup {
 
     /// Puts `knots` of `intervals` in place of the setup's knots and returns those (the
     /// features, kinks and targets do not depend on the knots). Only without glued seams.
-    fn set_knots(
+    pub(crate) fn set_knots(
         &mut self,
         intervals: crate::spline::KnotIntervals,
         knots: Knots,
@@ -362,6 +362,25 @@ pub const AUTO_MAX_HELD_BACK: f64 = 0.1;
 /// this share of the elements uniform knots' holds back.
 pub const AUTO_MIN_GAIN: f64 = 0.5;
 
+/// With `--knot-intervals auto`, after the uniform pass: whether its blend, holding back
+/// `held` of the mesh's `elements`, holds back too many ([`AUTO_MAX_HELD_BACK`]) for the
+/// uniform knots to be kept without trying graded ones.
+pub(crate) fn auto_holds_back_too_many(held: usize, elements: usize) -> bool {
+    held as f64 > AUTO_MAX_HELD_BACK * elements as f64
+}
+
+/// With `--knot-intervals auto`, after both passes: whether graded knots, holding back
+/// `graded` elements against uniform knots' `uniform`, are kept ([`AUTO_MIN_GAIN`]).
+///
+/// Graded knots only where they keep decisively more of the spline: on meshes that are not
+/// graded (O-grids of smooth shapes) they hold back nearly as many elements or more (level-2
+/// O-grid cylinder: 672 against 800 of 1,536), and the uniform spline's boundary is the better
+/// one there (4.7× Gmsh-with-CAD's max error against 26×); on graded meshes they hold back a
+/// third or less of uniform knots' (BENCHMARKS.md, "Graded knot intervals").
+pub(crate) fn auto_graded_is_decisive(graded: usize, uniform: usize) -> bool {
+    graded as f64 <= AUTO_MIN_GAIN * uniform as f64
+}
+
 /// The spline geometry's stages (the job's geometry is not [`Geometry::Straight`]); the
 /// translation pairs among `periodic` are identified in the spline space where they can be.
 ///
@@ -414,13 +433,8 @@ pub(super) fn curve_spline(
         ..*job
     };
     let held = |o: &SplineOutcome| o.blend.as_ref().map_or(0, |b| b.reduced_elements);
-    let too_many = |held: usize| held as f64 > AUTO_MAX_HELD_BACK * job.mesh.n_elements() as f64;
-    // Graded knots only where they keep decisively more of the spline: on meshes that are
-    // not graded (O-grids of smooth shapes) they hold back nearly as many elements or more
-    // (level-2 O-grid cylinder: 672 against 800 of 1,536), and the uniform spline's boundary
-    // is the better one there (4.7× Gmsh-with-CAD's max error against 26×); on graded meshes
-    // they hold back a third or less of uniform knots' (BENCHMARKS.md, "Graded knot intervals").
-    let decisive = |graded: usize, uniform: usize| graded as f64 <= AUTO_MIN_GAIN * uniform as f64;
+    let too_many = |held: usize| auto_holds_back_too_many(held, job.mesh.n_elements());
+    let decisive = auto_graded_is_decisive;
     if !periodic.is_empty() {
         // The share is the input's (the seams hold a few facets of it).
         let share = clock.run(Stage::Spline, || {
@@ -790,7 +804,11 @@ fn fit_demoting_misfits(
 
 /// Control points of `to` taken from `from_points` (the control points of the space `from`)
 /// where both spaces have a control point on the same entity, else `to`'s initial ones.
-fn carry_over(from: &SplineSpace, from_points: &[[f64; 3]], to: &SplineSpace) -> Vec<[f64; 3]> {
+pub(crate) fn carry_over(
+    from: &SplineSpace,
+    from_points: &[[f64; 3]],
+    to: &SplineSpace,
+) -> Vec<[f64; 3]> {
     let at: HashMap<_, _> = from.control_point_keys.iter().zip(from_points).collect();
     to.control_point_keys
         .iter()
