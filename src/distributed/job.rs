@@ -395,17 +395,6 @@ fn misfit_marks(
     )
 }
 
-/// `options` with the knot intervals `intervals`.
-fn with_knots(options: &CurveOptions, intervals: KnotIntervals) -> CurveOptions {
-    CurveOptions {
-        knots: crate::spline::KnotParams {
-            intervals,
-            ..options.knots
-        },
-        ..options.clone()
-    }
-}
-
 /// What the spline passes of a rank's share read: the job (on the sub-mesh, with the options
 /// asked for), the communicator and the sub-mesh's own elements.
 struct Passes<'a> {
@@ -452,8 +441,8 @@ fn spline_passes(
     let options = job.options;
     let weights = options.fit.weights;
     let (uniform, graded) = (
-        with_knots(options, KnotIntervals::Uniform),
-        with_knots(options, KnotIntervals::Graded),
+        options.with_knots(KnotIntervals::Uniform),
+        options.with_knots(KnotIntervals::Graded),
     );
     let uniform_job = Job {
         options: &uniform,
@@ -644,7 +633,7 @@ fn run_share(
     };
     // The setup of uniform knots; graded ones are put in place once surveyed (as the serial
     // `curve_spline` does: the features, kinks and targets do not depend on the knots).
-    let uniform = with_knots(options, KnotIntervals::Uniform);
+    let uniform = options.with_knots(KnotIntervals::Uniform);
     let uniform_job = Job {
         options: &uniform,
         ..job

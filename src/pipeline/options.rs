@@ -121,6 +121,17 @@ impl Default for CurveOptions {
 }
 
 impl CurveOptions {
+    /// These options with the knot intervals `intervals` (`auto`'s passes).
+    pub fn with_knots(&self, intervals: crate::spline::KnotIntervals) -> CurveOptions {
+        CurveOptions {
+            knots: crate::spline::KnotParams {
+                intervals,
+                ..self.knots
+            },
+            ..self.clone()
+        }
+    }
+
     /// Every option of the `curve` job, before any work (the order range is checked here too,
     /// with the option's own name: `--order` or `--subdivide`). The first option out of range
     /// is the error.

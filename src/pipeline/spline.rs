@@ -416,14 +416,10 @@ pub(super) fn curve_spline(
     if job.options.knots.intervals != KnotIntervals::Auto {
         return curve_spline_with(job, clock, periodic);
     }
-    let with = |intervals| crate::pipeline::CurveOptions {
-        knots: crate::spline::KnotParams {
-            intervals,
-            ..job.options.knots
-        },
-        ..job.options.clone()
-    };
-    let (uniform, graded) = (with(KnotIntervals::Uniform), with(KnotIntervals::Graded));
+    let (uniform, graded) = (
+        job.options.with_knots(KnotIntervals::Uniform),
+        job.options.with_knots(KnotIntervals::Graded),
+    );
     let uniform_job = Job {
         options: &uniform,
         ..*job
