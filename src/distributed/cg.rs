@@ -337,17 +337,10 @@ pub fn keep_closer_starts(
     let mut kx = vec![[0.0; 3]; x.len()];
     k.apply(x, &mut kx);
     halo.sum_partials(comm, flat(&mut kx), 3);
-    let mut norms = [0.0f64; 6];
-    for ((b, kx), _) in b.iter().zip(&kx).zip(&halo.owned).filter(|(_, o)| **o) {
-        for a in 0..3 {
-            norms[a] += (b[a] - kx[a]).powi(2);
-            norms[3 + a] += b[a] * b[a];
-        }
-    }
+    let owned = b.iter().zip(&kx).zip(&halo.owned).filter(|(_, o)| **o);
+    let mut norms = crate::fit::start_norms(owned.map(|(row, _)| row));
     comm.sum_f64(&mut norms);
-    for a in (0..3).filter(|&a| norms[a] >= norms[3 + a]) {
-        x.iter_mut().for_each(|d| d[a] = 0.0);
-    }
+    crate::fit::zero_farther_components(&norms, x);
 }
 
 /// Solve the distributed system for δ (consistent, on `halo`'s control points) from `x` = 0:

@@ -62,13 +62,8 @@ pub struct SharedSurvey {
 /// Facet `f`'s first element over the whole mesh (the lower global index of its elements
 /// here) and its side there.
 fn first(local: &LocalMesh, topo: &Topology, f: usize) -> (u32, u8) {
-    let ([a, b], [sa, sb]) = (topo.facet_elements[f], topo.facet_sides[f]);
-    let g = &local.global_element;
-    if b != NONE && g[b as usize] < g[a as usize] {
-        (b, sb)
-    } else {
-        (a, sa)
-    }
+    let ([e, _], [side, _]) = intervals::elements_in_global_order(topo, f, &local.global_element);
+    (e, side)
 }
 
 /// The knot survey of the whole mesh (collective; see the module docs). `local` and `topo`:
@@ -115,12 +110,6 @@ pub fn survey(comm: &dyn Comm, local: &LocalMesh, topo: &Topology) -> SharedSurv
         .filter_map(|(f, m)| m.map(|(m, w)| [name(f) as f64, m, w]))
         .flatten()
         .collect();
-    let number = |names: &[(u64, u32)], x: f64| -> u32 {
-        let i = names
-            .binary_search_by_key(&(x as u64), |&(n, _)| n)
-            .expect("every facet is numbered");
-        names[i].1
-    };
     let by_facet = comm.gather_f64(0, &measured).map(|all| {
         let names = numbers.as_ref().expect("rank 0 numbers the facets");
         let mut by_facet = vec![None; names.len()];
@@ -206,6 +195,14 @@ pub fn survey(comm: &dyn Comm, local: &LocalMesh, topo: &Topology) -> SharedSurv
     }
 }
 
+/// The number of the facet named `x` in rank 0's `names` ([`numbering`]).
+fn number(names: &[(u64, u32)], x: f64) -> u32 {
+    let i = names
+        .binary_search_by_key(&(x as u64), |&(n, _)| n)
+        .expect("every facet is numbered");
+    names[i].1
+}
+
 /// Rank 0: every facet's name with its number in the serial topology's order (by sorted node
 /// tags), sorted by name, from the ranks' records `[key (width), name]`.
 fn numbering(records: &[f64], width: usize) -> Vec<(u64, u32)> {
@@ -258,12 +255,7 @@ pub fn knots(
             .iter()
             .map(|list| {
                 list.iter()
-                    .map(|&x| {
-                        let i = names
-                            .binary_search_by_key(&(x as u64), |&(n, _)| n)
-                            .expect("every facet is numbered");
-                        r.rho[names[i].1 as usize]
-                    })
+                    .map(|&x| r.rho[number(names, x) as usize])
                     .collect()
             })
             .collect(),

@@ -660,14 +660,30 @@ pub fn fit_with_targets_from(
 fn keep_closer_starts(k: &NormalMatrix, rhs: &[[f64; 3]], delta: &mut [[f64; 3]]) {
     let mut kd = vec![[0.0; 3]; rhs.len()];
     k.apply(delta, &mut kd);
-    let (mut r2, mut b2) = ([0.0f64; 3], [0.0f64; 3]);
-    for (b, kd) in rhs.iter().zip(&kd) {
+    let norms = start_norms(rhs.iter().zip(&kd));
+    zero_farther_components(&norms, delta);
+}
+
+/// Per component, the squared norms of the residual `b − K δ` and of `b` (`[r²; b²]`) over
+/// the rows given as `(b, K δ)` pairs: what [`keep_closer_starts`] judges a start by (a
+/// distributed fit sums them over the rows' owners first).
+pub(crate) fn start_norms<'a>(
+    rows: impl Iterator<Item = (&'a [f64; 3], &'a [f64; 3])>,
+) -> [f64; 6] {
+    let mut norms = [0.0f64; 6];
+    for (b, kd) in rows {
         for a in 0..3 {
-            r2[a] += (b[a] - kd[a]).powi(2);
-            b2[a] += b[a] * b[a];
+            norms[a] += (b[a] - kd[a]).powi(2);
+            norms[3 + a] += b[a] * b[a];
         }
     }
-    for a in (0..3).filter(|&a| r2[a] >= b2[a]) {
+    norms
+}
+
+/// Zero every component of the start `delta` whose residual is not below the cold start's,
+/// by the norms of [`start_norms`].
+pub(crate) fn zero_farther_components(norms: &[f64; 6], delta: &mut [[f64; 3]]) {
+    for a in (0..3).filter(|&a| norms[a] >= norms[3 + a]) {
         delta.iter_mut().for_each(|d| d[a] = 0.0);
     }
 }

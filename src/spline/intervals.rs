@@ -357,10 +357,9 @@ impl Corners<'_> {
     /// The elements of facet `f`, first the one the topology of the whole mesh puts first
     /// (with `global`, the lower global index), and their local sides.
     fn elements(&self, topo: &Topology, f: usize) -> ([u32; 2], [u8; 2]) {
-        let ([a, b], [sa, sb]) = (topo.facet_elements[f], topo.facet_sides[f]);
         match self.global {
-            Some(g) if b != NONE && g[b as usize] < g[a as usize] => ([b, a], [sb, sa]),
-            _ => ([a, b], [sa, sb]),
+            Some(g) => elements_in_global_order(topo, f, g),
+            None => (topo.facet_elements[f], topo.facet_sides[f]),
         }
     }
 
@@ -410,6 +409,22 @@ impl Corners<'_> {
 /// is `±ρ(f)` with `ρ(f) = ln(h_second / h_first)`.
 fn second(topo: &Topology, f: u32, e: usize) -> bool {
     topo.facet_elements[f as usize][0] != e as u32
+}
+
+/// The elements of facet `f` of a sub-mesh's topology and their sides, first the one with
+/// the lower index `global[e]` in the larger mesh: the order the larger mesh's topology gives
+/// them.
+pub(crate) fn elements_in_global_order(
+    topo: &Topology,
+    f: usize,
+    global: &[u64],
+) -> ([u32; 2], [u8; 2]) {
+    let ([a, b], [sa, sb]) = (topo.facet_elements[f], topo.facet_sides[f]);
+    if b != NONE && global[b as usize] < global[a as usize] {
+        ([b, a], [sb, sa])
+    } else {
+        ([a, b], [sa, sb])
+    }
 }
 
 /// One tie `ρ(f) = ±ρ(f2)` made by continuing facet `f` of `element` across its face to
