@@ -8,7 +8,7 @@
 //! and dispatched ([`GpuTraffic`], the report's `gpu_traffic`), under the same keys.
 
 use super::CurveError;
-use crate::exec::gpu::{Backend, GpuContext, GpuTraffic};
+use crate::exec::gpu::{Backend, GpuTraffic};
 use crate::progress::{Progress, Stage};
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -17,8 +17,8 @@ pub(crate) struct Clock<'p> {
     timings: BTreeMap<String, f64>,
     /// The peak memory at the end of each stage, by key, when kept.
     peaks: Option<BTreeMap<String, u64>>,
-    /// The device whose traffic is counted per stage, and the counts by key.
-    gpu: Option<(std::sync::Arc<GpuContext>, BTreeMap<String, GpuTraffic>)>,
+    /// The backend whose device traffic is counted per stage, and the counts by key.
+    gpu: Option<(Backend, BTreeMap<String, GpuTraffic>)>,
     progress: &'p dyn Progress,
 }
 
@@ -35,8 +35,8 @@ impl<'p> Clock<'p> {
     /// This clock, also keeping each stage's traffic on `backend`'s device (nothing on the
     /// CPU).
     pub(crate) fn counting(mut self, backend: &Backend) -> Self {
-        if let Backend::Gpu(ctx) = backend {
-            self.gpu = Some((ctx.clone(), BTreeMap::new()));
+        if backend.traffic().is_some() {
+            self.gpu = Some((backend.clone(), BTreeMap::new()));
         }
         self
     }
@@ -65,10 +65,11 @@ impl<'p> Clock<'p> {
     pub(crate) fn run<T>(&mut self, stage: Stage, work: impl FnOnce() -> T) -> T {
         self.progress.started(stage);
         let t = Instant::now();
-        let before = self.gpu.as_ref().map(|(ctx, _)| ctx.traffic());
+        let before = self.gpu.as_ref().and_then(|(backend, _)| backend.traffic());
         let out = work();
-        if let (Some((ctx, traffic)), Some(before)) = (&mut self.gpu, before) {
-            *traffic.entry(stage.key().to_string()).or_default() += ctx.traffic() - before;
+        if let (Some((backend, traffic)), Some(before)) = (&mut self.gpu, before) {
+            let after = backend.traffic().unwrap_or(before);
+            *traffic.entry(stage.key().to_string()).or_default() += after - before;
         }
         self.add(stage, t.elapsed().as_secs_f64());
         self.progress.finished(stage);

@@ -555,6 +555,11 @@ impl Backend {
             Backend::Gpu(c) => Some(c),
         }
     }
+    /// What the device's kernels moved and issued so far ([`GpuContext::traffic`]); `None` on
+    /// the CPU.
+    pub fn traffic(&self) -> Option<GpuTraffic> {
+        self.gpu().map(GpuContext::traffic)
+    }
 }
 
 /// Shader source at a precision: every shader declares `alias real = f32;`, replaced by f64.
