@@ -219,7 +219,8 @@ def main(argv=None):
     print("\n".join(lines))
     print()
     print("Model (an estimate): %g GB/s device memory, %g GB/s PCIe, %g µs per dispatch and "
-          "per submit%s. Counts at %s hexes: the %s-hex GPU run (precision %s) × %.2f; knot "
+          "per submit%s. Bytes at %s hexes: the %s-hex GPU run's (precision %s) × %.2f, "
+          "dispatches, submits and read-backs as measured there; knot "
           "passes %s (GPU runs) and %d (CPU run); CG iterations %s (GPU, point Jacobi) and "
           "%s (CPU at %s hexes)." % (
               a.device_gbs, a.pcie_gbs, a.dispatch_us,
