@@ -73,7 +73,7 @@ def generate(binary, n, d):
     path = os.path.join(d, "cyl%d.msh" % n)
     if not os.path.exists(path):
         subprocess.run([binary, "generate", "cylinder", "--elements", str(n), "--binary",
-                        "-o", path, "-q"], check=True, stdout=subprocess.DEVNULL)
+                        "-o", path], check=True, stdout=subprocess.DEVNULL)
     return path
 
 
