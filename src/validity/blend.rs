@@ -363,6 +363,8 @@ pub trait BlendShare {
     fn sum(&self, v: usize) -> usize;
     /// The minimum of every process's `v`.
     fn min(&self, v: f64) -> f64;
+    /// The whole mesh's index of this process's element `e`.
+    fn global(&self, e: usize) -> usize;
 }
 
 /// The whole search in this process.
@@ -384,6 +386,9 @@ impl BlendShare for Alone {
     }
     fn min(&self, v: f64) -> f64 {
         v
+    }
+    fn global(&self, e: usize) -> usize {
+        e
     }
 }
 
@@ -421,22 +426,23 @@ pub enum Bounded {
     Exceeded(usize),
 }
 
-/// [`blend_search`], given up as soon as more than `max_reduced` elements are held back
-/// (local mode: each round can only add held-back elements, so the count so far is a lower
-/// bound of the final one). For a caller that only needs the result when few elements are
+/// [`blend_search_shared`], given up as soon as more than `max_reduced` elements (of every
+/// process) are held back (local mode: each round can only add held-back elements, so the
+/// count so far is a lower bound of the final one; every process stops at the same round). For a caller that only needs the result when few elements are
 /// held back; the rounds after the bound is passed are not run.
 pub fn blend_search_at_most(
     certifier: &dyn Certifier,
     blended: &mut Blended,
     params: &BlendParams,
+    share: &dyn BlendShare,
     max_reduced: usize,
 ) -> Result<Bounded, BlendError> {
-    search(certifier, blended, params, &Alone, Some(max_reduced))
+    search(certifier, blended, params, share, Some(max_reduced))
 }
 
 /// [`blend_search`] sharing the judging of the elements with other processes ([`BlendShare`]).
-/// The factors and the info are those of [`blend_search`] on the whole mesh, except
-/// `worst`, which lists the reduced elements of this process only.
+/// The factors and the info are those of [`blend_search`] on the whole mesh (`worst` names
+/// the elements by their whole mesh's index, [`BlendShare::global`]).
 pub fn blend_search_shared(
     certifier: &dyn Certifier,
     blended: &mut Blended,
@@ -466,9 +472,10 @@ fn search(
     mine.iter().for_each(|&e| owned[e] = true);
     let (straight_lower, reference) = straight_reference(certifier, blended, depth, mine, share)?;
     let straight_ratio: Vec<f64> = reference.iter().map(|r| r.0).collect();
+    // Every process's ratios: the minimum and percentile are the whole mesh's.
     let mut sorted = share.concat(mine.iter().map(|&e| straight_ratio[e]).collect());
     sorted.sort_by(f64::total_cmp);
-    let p1 = sorted.get(n / 100).copied().unwrap_or(1.0);
+    let p1 = sorted.get(sorted.len() / 100).copied().unwrap_or(1.0);
     let det_target = |e: usize| params.min_det_fraction.max(0.0) * straight_lower[e];
     let quality = params.min_quality_fraction > 0.0 || params.percentile_quality_fraction > 0.0;
     let ratio_target = |e: usize| {
@@ -601,10 +608,41 @@ fn search(
     blended.factors = factors;
     blended.refresh();
     summarise(blended, &mut info, &lower, &owned);
+    info.worst = worst_over(share, &info.worst);
     info.reduced_elements = share.sum(info.reduced_elements);
     info.min_det_lower_bound = share.min(info.min_det_lower_bound);
     info.min_factor = share.min(info.min_factor);
     Ok(Bounded::Done(info))
+}
+
+/// Reduced elements listed in [`BlendInfo::worst`].
+const WORST: usize = 10;
+
+/// The [`WORST`] elements of every process's `own` list (the largest withheld displacement
+/// first, then the lowest element), in the whole mesh's element indices: the list of the
+/// search over the whole mesh.
+fn worst_over(share: &dyn BlendShare, own: &[ReducedElement]) -> Vec<ReducedElement> {
+    let flat = own
+        .iter()
+        .flat_map(|r| {
+            let [x, y, z] = r.centroid;
+            let e = share.global(r.element) as f64;
+            [e, x, y, z, r.min_factor, r.withheld]
+        })
+        .collect();
+    let mut all: Vec<ReducedElement> = share
+        .concat(flat)
+        .chunks_exact(6)
+        .map(|c| ReducedElement {
+            element: c[0] as usize,
+            centroid: [c[1], c[2], c[3]],
+            min_factor: c[4],
+            withheld: c[5],
+        })
+        .collect();
+    all.sort_by(|a, b| (b.withheld.total_cmp(&a.withheld)).then(a.element.cmp(&b.element)));
+    all.truncate(WORST);
+    all
 }
 
 /// What the search learns of an element: (certified valid, accepted, certified lower bound).
@@ -729,7 +767,7 @@ fn summarise(blended: &Blended, info: &mut BlendInfo, lower: &[f64], owned: &[bo
         .map(|r| r.min_factor)
         .fold(FITTED as f64, f64::min);
     reduced.sort_by(|a, b| b.withheld.total_cmp(&a.withheld));
-    reduced.truncate(10);
+    reduced.truncate(WORST);
     info.worst = reduced;
 }
 
