@@ -137,9 +137,6 @@ struct Share {
     bytes_fit: u64,
     bytes_validity: u64,
     bytes_sample: u64,
-    /// Blend entities this rank owns whose factor was reduced (below the fitted map, at or
-    /// below the target map, at the straight elevation): [`damped_owned`].
-    damped_owned: [usize; 3],
     /// The whole mesh's feature summary (deviations absolute), when any rank found features.
     features: Option<crate::mesh::features::FeatureReport>,
     /// The periodic pairs (`--periodic`), resolved over the whole mesh.
@@ -667,7 +664,6 @@ fn run_share(
     // The certified blend found, for sampling (its nets computed once).
     let target_map = setup.target_map(&job);
     let blended = Blended::with_cache(mesh, &target_map, &s, mesh, &topo, factors, nets);
-    let damped_owned = damped_owned(&local, &blended);
     let bytes_before = comm.bytes_sent();
     let (output, features) = clock.run(Stage::Sample, || {
         let seams = super::periodic::Seams {
@@ -733,7 +729,6 @@ fn run_share(
         bytes_fit,
         bytes_validity,
         bytes_sample,
-        damped_owned,
         features,
         pairs,
     })
@@ -774,45 +769,6 @@ fn periodic_pairs(
     super::periodic::resolve(comm, local, topo, &options.periodic.pairs).map_err(periodic_err)
 }
 
-/// Blend entities (vertices, edges, faces, cells) this rank owns whose factor was reduced
-/// (below 2, at most 1, 0: the serial `BlendInfo`'s reduced, target and straight points): an
-/// entity is owned by the rank of the lowest global element containing it (every element
-/// containing an entity of an own element is in the sub-mesh), so the sum over the ranks
-/// counts each entity once, as the serial report does.
-fn damped_owned(local: &LocalMesh, blended: &Blended) -> [usize; 3] {
-    if blended.factors.is_empty() {
-        return [0; 3];
-    }
-    let d = local.mesh.dim;
-    let np = if d == 2 { 9 } else { 27 };
-    // Each entity is counted by the rank holding the lowest global element around it (its
-    // local index is kept: own elements come first, whatever the partition).
-    let mut lowest = vec![(u64::MAX, usize::MAX); blended.factors.len()];
-    for e in 0..local.mesh.n_elements() {
-        let g = local.global_element[e];
-        for &id in &blended.ids.of(e)[..np] {
-            let l = &mut lowest[id as usize];
-            if g < l.0 {
-                *l = (g, e);
-            }
-        }
-    }
-    let owned: Vec<f32> = lowest
-        .iter()
-        .zip(&blended.factors)
-        .filter(|&(&(_, e), _)| e < local.n_owned)
-        .map(|(_, &f)| f)
-        .collect();
-    [
-        owned
-            .iter()
-            .filter(|&&f| f < crate::validity::blend::FITTED)
-            .count(),
-        owned.iter().filter(|&&f| f <= 1.0).count(),
-        owned.iter().filter(|&&f| f == 0.0).count(),
-    ]
-}
-
 /// Run the distributed `curve` job on every rank of `comm` (see the module docs): every rank
 /// returns its share of the output and the report (the same on every rank; `output` empty
 /// and `timings` without `write`, set when written).
@@ -835,9 +791,6 @@ pub fn curve(
         let mut sizes = [
             out.node_tags.len() as u64,
             (out.boundary.len() / npf) as u64,
-            share.damped_owned[0] as u64,
-            share.damped_owned[1] as u64,
-            share.damped_owned[2] as u64,
         ];
         comm.sum_u64(&mut counts);
         comm.sum_u64(&mut sizes);
@@ -862,13 +815,6 @@ pub fn curve(
     };
     let per_rank = gather_figures(comm, &figures);
     clock.set(Stage::Total, start.elapsed().as_secs_f64());
-    // The blend's point counts over the ranks (each rank's search counts its sub-mesh's).
-    let blend = crate::validity::blend::BlendInfo {
-        reduced_points: sizes[2] as usize,
-        target_points: sizes[3] as usize,
-        straight_points: sizes[4] as usize,
-        ..share.blend
-    };
     let space = SpaceCounts {
         control_points: counts[0],
         spline_elements: counts[1],
@@ -896,7 +842,7 @@ pub fn curve(
             ..SplineFigures::blended(
                 space,
                 (crate::fit::FitSolver::Cg, share.cg, nonzeros),
-                blend,
+                share.blend,
             )
         }),
         snapped: None,

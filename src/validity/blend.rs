@@ -607,7 +607,7 @@ fn search(
     }
     blended.factors = factors;
     blended.refresh();
-    summarise(blended, &mut info, &lower, &owned);
+    summarise(blended, &mut info, &lower, &owned, share);
     info.worst = worst_over(share, &info.worst);
     info.reduced_elements = share.sum(info.reduced_elements);
     info.min_det_lower_bound = share.min(info.min_det_lower_bound);
@@ -717,9 +717,16 @@ fn reduce_rejected(
 }
 
 /// Fill the reduction counts and the worst reduced elements of `info`.
-/// Only the elements marked `owned` are listed and counted (the point counts are global: every
-/// process holds all the factors).
-fn summarise(blended: &Blended, info: &mut BlendInfo, lower: &[f64], owned: &[bool]) {
+/// Only the elements marked `owned` are listed and counted; a point is counted by the
+/// process owning the lowest element (in the whole mesh's indices) around it, and the
+/// point counts are summed over the processes.
+fn summarise(
+    blended: &Blended,
+    info: &mut BlendInfo,
+    lower: &[f64],
+    owned: &[bool],
+    share: &dyn BlendShare,
+) {
     let n = blended.n_elements();
     let dim = blended.dim();
     let np = blended.points();
@@ -759,9 +766,30 @@ fn summarise(blended: &Blended, info: &mut BlendInfo, lower: &[f64], owned: &[bo
         .collect();
     let mut reduced: Vec<ReducedElement> = per.into_iter().flatten().collect();
     info.reduced_elements = reduced.len();
-    info.reduced_points = blended.factors.iter().filter(|&&l| l < FITTED).count();
-    info.target_points = blended.factors.iter().filter(|&&l| l <= 1.0).count();
-    info.straight_points = blended.factors.iter().filter(|&&l| l == 0.0).count();
+    // Per point shared with other processes: the lowest element around it here and whether
+    // it is owned (every element around a point of an own element is held here, so that is
+    // the whole mesh's lowest). Empty: every point is this process's.
+    let mut lowest = Vec::new();
+    if share.mine().is_some() {
+        lowest = vec![(usize::MAX, false); blended.factors.len()];
+        for e in 0..n {
+            let g = share.global(e);
+            for &id in &blended.ids.of(e)[..np] {
+                let l = &mut lowest[id as usize];
+                if g < l.0 {
+                    *l = (g, owned[e]);
+                }
+            }
+        }
+    }
+    let counted = |keep: fn(f32) -> bool| {
+        let ours = |i: usize| lowest.get(i).is_none_or(|l| l.1);
+        let here = blended.factors.iter().enumerate();
+        share.sum(here.filter(|&(i, &l)| keep(l) && ours(i)).count())
+    };
+    info.reduced_points = counted(|l| l < FITTED);
+    info.target_points = counted(|l| l <= 1.0);
+    info.straight_points = counted(|l| l == 0.0);
     info.min_factor = reduced
         .iter()
         .map(|r| r.min_factor)
