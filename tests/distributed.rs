@@ -39,12 +39,13 @@ fn mpirun(np: usize) -> Command {
 /// A generated cylinder of about `elements` hexes as binary MSH 4.1 (what the ranks read by
 /// offsets), in the scratch directory under `name`.
 fn binary_cylinder(name: &str, elements: usize) -> PathBuf {
+    binary_generated(name, &["cylinder", "--elements", &elements.to_string()])
+}
+
+/// `polyspline generate ARGS --binary` in the scratch directory under `name`.
+fn binary_generated(name: &str, args: &[&str]) -> PathBuf {
     let input = scratch(name);
-    common::run_ok(Command::new(BIN).args([
-        "generate",
-        "cylinder",
-        "--elements",
-        &elements.to_string(),
+    common::run_ok(Command::new(BIN).arg("generate").args(args).args([
         "--binary",
         "-o",
         input.to_str().unwrap(),
@@ -1281,16 +1282,7 @@ fn the_reports_blend_under_mpirun_is_the_serial_one() {
     if !have_mpirun() {
         return;
     }
-    let input = scratch("blend_disc.msh");
-    common::run_ok(Command::new(BIN).args([
-        "generate",
-        "disc",
-        "--elements",
-        "1500",
-        "--binary",
-        "-o",
-        input.to_str().unwrap(),
-    ]));
+    let input = binary_generated("blend_disc.msh", &["disc", "--elements", "1500"]);
     let (_, _, serial) = curve_with_report(0, &input, "blend_disc", &[]);
     let s = &serial["blend"];
     let (min, p1) = (&s["straight_ratio_min"], &s["straight_ratio_p1"]);
@@ -1359,21 +1351,8 @@ fn the_reports_blend_under_mpirun_is_the_serial_one() {
 /// A generated boundary-layer O-grid around an ellipse (32 cells around, 16 across, first
 /// height 1e-5 growing by 1.25) extruded in 4 hex layers (2,048 hexes), as binary MSH 4.1.
 fn binary_ogrid(name: &str) -> PathBuf {
-    let input = scratch(name);
-    common::run_ok(Command::new(BIN).args([
-        "generate",
-        "ogrid",
-        "--around",
-        "32",
-        "--across",
-        "16",
-        "--layers",
-        "4",
-        "--binary",
-        "-o",
-        input.to_str().unwrap(),
-    ]));
-    input
+    let args = ["ogrid", "--around", "32", "--across", "16", "--layers", "4"];
+    binary_generated(name, &args)
 }
 
 /// Issue #33 on a boundary-layer grid: `--knot-intervals auto` (the default) takes graded

@@ -170,7 +170,9 @@ impl BlendShare for LocalShare<'_> {
             .into_iter()
             .filter_map(|x| self.local_of.get(&(x as u64)).copied())
             .collect();
-        all.sort_unstable();
+        // In the whole mesh's order: the blend lowers the factors of the rejected elements
+        // one after the other, each looking at the factors the ones before it left.
+        all.sort_unstable_by_key(|&e| self.global[e]);
         all.dedup();
         (all, any)
     }

@@ -353,7 +353,8 @@ fn straight_reference(
 pub trait BlendShare {
     /// The elements this process judges (`None`: all).
     fn mine(&self) -> Option<&[usize]>;
-    /// The union of every process's `elements`: the members this process holds, sorted, and
+    /// The union of every process's `elements`: the members this process holds, in the
+    /// whole mesh's order ([`BlendShare::global`]; the reduction of a round depends on it), and
     /// whether the union is non-empty anywhere (every process gets the same flag, so loops
     /// and early returns on it stay collective).
     fn union(&self, elements: Vec<usize>) -> (Vec<usize>, bool);
