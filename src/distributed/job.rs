@@ -51,7 +51,7 @@ use crate::progress::{Silent, Stage};
 use crate::spline::{ElementClass, KnotIntervals, KnotParams, Knots, Q2Reason, SplineSpace};
 use crate::validity::CpuCertifier;
 use crate::validity::blend::{
-    BlendInfo, Blended, Bounded, NetCache, blend_search_at_most, blend_search_shared,
+    BlendInfo, Blended, Bounded, NetCache, blend_search_shared, blend_search_shared_at_most,
 };
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -580,7 +580,9 @@ fn blend_share(
             None => {
                 blend_search_shared(&CpuCertifier, &mut blended, &params, &share).map(Bounded::Done)
             }
-            Some(most) => blend_search_at_most(&CpuCertifier, &mut blended, &params, &share, most),
+            Some(most) => {
+                blend_search_shared_at_most(&CpuCertifier, &mut blended, &params, &share, most)
+            }
         }
         .map_err(|source| CurveError::Blend {
             input: job.input.to_owned(),

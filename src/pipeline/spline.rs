@@ -30,7 +30,7 @@ use crate::spline::{
     ElementRows, KnotSurfaceInfo, KnotWeights, Knots, Q2Reason, SplineSpace, kinks,
 };
 use crate::validity::blend::{
-    Alone, BlendInfo, Blended, Bounded, NetCache, blend_search, blend_search_at_most,
+    BlendInfo, Blended, Bounded, NetCache, blend_search, blend_search_at_most,
 };
 use crate::validity::certificate::{
     MAX_DEMOTION_ROUNDS, certify_mesh, demote_with_rings, uncertified,
@@ -916,7 +916,7 @@ fn blend_within(
     let params = job.options.line_search.blend(global);
     let searched = match most {
         None => blend_search(job.executor, &mut blended, &params).map(Bounded::Done),
-        Some(most) => blend_search_at_most(job.executor, &mut blended, &params, &Alone, most),
+        Some(most) => blend_search_at_most(job.executor, &mut blended, &params, most),
     }
     .map_err(|source| CurveError::Blend {
         input: job.input.to_owned(),

@@ -427,11 +427,23 @@ pub enum Bounded {
     Exceeded(usize),
 }
 
-/// [`blend_search_shared`], given up as soon as more than `max_reduced` elements (of every
-/// process) are held back (local mode: each round can only add held-back elements, so the
-/// count so far is a lower bound of the final one; every process stops at the same round). For a caller that only needs the result when few elements are
+/// [`blend_search`], given up as soon as more than `max_reduced` elements are held back
+/// (local mode: each round can only add held-back elements, so the count so far is a lower
+/// bound of the final one). For a caller that only needs the result when few elements are
 /// held back; the rounds after the bound is passed are not run.
 pub fn blend_search_at_most(
+    certifier: &dyn Certifier,
+    blended: &mut Blended,
+    params: &BlendParams,
+    max_reduced: usize,
+) -> Result<Bounded, BlendError> {
+    search(certifier, blended, params, &Alone, Some(max_reduced))
+}
+
+/// [`blend_search_at_most`] sharing the judging with other processes ([`BlendShare`]): given
+/// up once more than `max_reduced` elements of all processes are held back, on every process
+/// at the same round.
+pub fn blend_search_shared_at_most(
     certifier: &dyn Certifier,
     blended: &mut Blended,
     params: &BlendParams,
