@@ -122,6 +122,21 @@ const RANK_TOLERANCE: f64 = 1e-6;
 /// 1e-6 leaves the outputs up to 2.8e-6 of the diagonal apart on the cylinder here).
 const RANK_CG_TOL: &str = "1e-8";
 
+/// The report's `blend` figures that are the serial run's exactly under mpirun: the blend's
+/// decisions, and the straight mesh's ratios (the input's).
+const BLEND_FIGURES: [&str; 10] = [
+    "invalid_at_full_step",
+    "poor_at_full_step",
+    "straight_ratio_min",
+    "straight_ratio_p1",
+    "rounds",
+    "reduced_elements",
+    "reduced_points",
+    "target_points",
+    "straight_points",
+    "min_factor",
+];
+
 #[test]
 fn mpirun_1_2_4_ranks_equal_the_serial_run() {
     if !have_mpirun() {
@@ -192,16 +207,7 @@ fn mpirun_1_2_4_ranks_equal_the_serial_run() {
         let r: Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
         // The blend decided alike: the same elements failed the full fit and were reduced,
         // in as many rounds, the same entities down to the same smallest factor.
-        for key in [
-            "invalid_at_full_step",
-            "poor_at_full_step",
-            "rounds",
-            "reduced_elements",
-            "reduced_points",
-            "target_points",
-            "straight_points",
-            "min_factor",
-        ] {
+        for key in BLEND_FIGURES {
             assert_eq!(
                 r["blend"][key], serial_report["blend"][key],
                 "{name}: blend.{key}"
@@ -1298,18 +1304,7 @@ fn the_reports_blend_under_mpirun_is_the_serial_one() {
         let (_, _, dist) = curve_with_report(np, &input, "blend_disc", &[]);
         let d = &dist["blend"];
         eprintln!("np {np}: serial {s}\nmpirun {d}");
-        for key in [
-            "invalid_at_full_step",
-            "poor_at_full_step",
-            "straight_ratio_min",
-            "straight_ratio_p1",
-            "rounds",
-            "reduced_elements",
-            "reduced_points",
-            "target_points",
-            "straight_points",
-            "min_factor",
-        ] {
+        for key in BLEND_FIGURES {
             assert_eq!(d[key], s[key], "np {np}: blend.{key}");
         }
         let bound = |r: &Value| r["min_det_lower_bound"].as_f64().unwrap();
