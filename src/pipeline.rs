@@ -30,6 +30,7 @@
 pub(crate) mod clock;
 pub(crate) mod misfit;
 mod options;
+pub(crate) mod passes;
 mod report;
 pub(crate) mod spline;
 

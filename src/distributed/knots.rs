@@ -59,6 +59,15 @@ pub struct SharedSurvey {
     pub max_abs_log_ratio: f64,
 }
 
+impl crate::pipeline::passes::KnotFigures for SharedSurvey {
+    fn graded_share(&self) -> f64 {
+        self.graded_share
+    }
+    fn max_abs_log_ratio(&self) -> f64 {
+        self.max_abs_log_ratio
+    }
+}
+
 /// Facet `f`'s first element over the whole mesh (the lower global index of its elements
 /// here) and its side there.
 fn first(local: &LocalMesh, topo: &Topology, f: usize) -> (u32, u8) {

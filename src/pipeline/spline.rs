@@ -402,12 +402,40 @@ pub(crate) fn auto_graded_is_decisive(graded: usize, uniform: usize) -> bool {
 /// lower bound of the final one). Graded knots holding back at most [`AUTO_MIN_GAIN`] of
 /// that bound are then kept at once; otherwise the uniform blend is run to its end and the
 /// rule applied to its count, so the choice and the output are those of the full passes.
+/// The passes and the choice are [`super::passes::spline_passes`], which the job under
+/// mpirun runs too.
 ///
 /// Both passes share the setup (features, kinks, smooth targets: they do not depend on the
 /// knots); the setup names the knots used and the passes run (`knot_passes`). With periodic
 /// pairs each pass has its own setup (its knots are measured on the glued mesh,
-/// [`seam::knot_weights`]), and the same rules choose between them.
+/// [`seam::knot_weights`]), and the same rules choose between them
+/// ([`curve_spline_periodic`]).
 pub(super) fn curve_spline(
+    job: &Job,
+    clock: &mut Clock,
+    periodic: &[PeriodicPair],
+) -> Result<(SplineSetup, SplineOutcome), CurveError> {
+    use crate::spline::KnotIntervals;
+    if !periodic.is_empty() {
+        return curve_spline_periodic(job, clock, periodic);
+    }
+    let uniform = job.options.with_knots(KnotIntervals::Uniform);
+    let uniform_job = Job {
+        options: &uniform,
+        ..*job
+    };
+    let mut setup = clock.run(Stage::Spline, || SplineSetup::new(&uniform_job, &[]))?;
+    let pass = super::passes::spline_passes(&mut Whole { job }, job, &mut setup, clock)?;
+    match pass {
+        First::Done(outcome) => Ok((setup, outcome)),
+        First::Exceeded { .. } => unreachable!("the pass kept ran to its end"),
+    }
+}
+
+/// [`curve_spline`] with periodic pairs: each pass has its own setup (its knots are measured
+/// on the glued mesh, [`seam::knot_weights`]), and `auto`'s rules choose between them, each
+/// pass run to its end.
+fn curve_spline_periodic(
     job: &Job,
     clock: &mut Clock,
     periodic: &[PeriodicPair],
@@ -429,90 +457,84 @@ pub(super) fn curve_spline(
         ..*job
     };
     let held = |o: &SplineOutcome| o.blend.as_ref().map_or(0, |b| b.reduced_elements);
-    let too_many = |held: usize| auto_holds_back_too_many(held, job.mesh.n_elements());
-    let decisive = auto_graded_is_decisive;
-    if !periodic.is_empty() {
-        // The share is the input's (the seams hold a few facets of it).
-        let share = clock.run(Stage::Spline, || {
-            SplineSpace::knot_survey(job.mesh, job.topo).graded_share
-        });
-        if share >= crate::spline::AUTO_GRADED_SHARE {
-            return curve_spline_with(&graded_job, clock, periodic);
-        }
-        let first = curve_spline_with(&uniform_job, clock, periodic)?;
-        if !too_many(held(&first.1)) {
-            return Ok(first);
-        }
-        let mut second = curve_spline_with(&graded_job, clock, periodic)?;
-        second.0.knot_passes = 2;
-        return Ok(if decisive(held(&second.1), held(&first.1)) {
+    // The share is the input's (the seams hold a few facets of it).
+    let share = clock.run(Stage::Spline, || {
+        SplineSpace::knot_survey(job.mesh, job.topo).graded_share
+    });
+    if share >= crate::spline::AUTO_GRADED_SHARE {
+        return curve_spline_with(&graded_job, clock, periodic);
+    }
+    let first = curve_spline_with(&uniform_job, clock, periodic)?;
+    if !auto_holds_back_too_many(held(&first.1), job.mesh.n_elements()) {
+        return Ok(first);
+    }
+    let mut second = curve_spline_with(&graded_job, clock, periodic)?;
+    second.0.knot_passes = 2;
+    Ok(
+        if auto_graded_is_decisive(held(&second.1), held(&first.1)) {
             second
         } else {
             first
-        });
+        },
+    )
+}
+
+/// The serial job's passes ([`super::passes`]): every element in this process.
+struct Whole<'a> {
+    job: &'a Job<'a>,
+}
+
+impl super::passes::Passes for Whole<'_> {
+    type Pass = First;
+    type Survey = crate::spline::KnotSurvey;
+    fn elements(&self) -> usize {
+        self.job.mesh.n_elements()
     }
-    let (mut setup, survey) = clock.run(Stage::Spline, || {
-        let setup = SplineSetup::new(&uniform_job, periodic)?;
-        Ok::<_, CurveError>((setup, SplineSpace::knot_survey(job.mesh, job.topo)))
-    })?;
-    let graded_knots = |clock: &mut Clock, survey| {
+    fn survey(&mut self, clock: &mut Clock) -> Self::Survey {
+        let (mesh, topo) = (self.job.mesh, self.job.topo);
+        clock.run(Stage::Spline, || SplineSpace::knot_survey(mesh, topo))
+    }
+    fn knots(
+        &mut self,
+        clock: &mut Clock,
+        survey: Self::Survey,
+        params: &crate::spline::KnotParams,
+    ) -> Knots {
+        let topo = self.job.topo;
         clock.run(Stage::Spline, || {
-            crate::spline::intervals::knot_weights_from(survey, job.topo, &graded.knots)
+            crate::spline::intervals::knot_weights_from(survey, topo, params)
         })
-    };
-    if survey.graded_share >= crate::spline::AUTO_GRADED_SHARE {
-        let knots = graded_knots(clock, survey);
-        setup.set_knots(KnotIntervals::Graded, knots, job.options.fit.weights);
-        let outcome = spline_pass(&graded_job, &setup, clock, None)?;
-        return Ok((setup, outcome));
     }
-    // Graded knots all but uniform: a second pass would not hold back half as many.
-    let near_uniform = survey.max_abs_log_ratio < crate::spline::AUTO_MIN_LOG_RATIO;
-    // Not held through the uniform pass: the fit's peak would carry it (+0.56 GB on the 1M
-    // cylinder); the rare second pass measures the surfaces again.
-    drop(survey);
-    let first = if near_uniform {
-        First::Done(spline_pass(&uniform_job, &setup, clock, None)?)
-    } else {
-        // Whether it is kept is decided once it holds back too many.
-        let most = (AUTO_MAX_HELD_BACK * job.mesh.n_elements() as f64).floor() as usize;
-        spline_pass_within(&uniform_job, &setup, clock, None, Some(most))?
-    };
-    let first = match first {
-        First::Done(o) if !too_many(held(&o)) || near_uniform => return Ok((setup, o)),
-        first => first,
-    };
-    let survey = clock.run(Stage::Spline, || {
-        SplineSpace::knot_survey(job.mesh, job.topo)
-    });
-    let knots = graded_knots(clock, survey);
-    let uniform_knots = setup.set_knots(KnotIntervals::Graded, knots, job.options.fit.weights);
-    setup.knot_passes = 2;
-    // The graded fit starts from the uniform one where the two spaces share control points
-    // (every entity's but the knot splits'): fewer CG iterations than from C0.
-    let second = spline_pass(&graded_job, &setup, clock, Some(first.space()))?;
-    let first = match first {
-        First::Done(o) => o,
-        // Decisive against a lower bound of the uniform count: decisive against the count.
-        First::Exceeded { at_least, .. } if decisive(held(&second), at_least) => {
-            return Ok((setup, second));
-        }
-        // Otherwise the uniform blend is run to its end (it does not depend on the setup's
-        // knots: its space carries its own).
-        First::Exceeded { space, fit, .. } => {
-            let (factors, blend) = clock.run(Stage::Validity, || blend(job, &setup, &space))?;
-            SplineOutcome::blended(space, factors, fit, blend, 0, None)
-        }
-    };
-    if decisive(held(&second), held(&first)) {
-        return Ok((setup, second));
+    fn run(
+        &mut self,
+        job: &Job,
+        setup: &SplineSetup,
+        clock: &mut Clock,
+        previous: Option<&First>,
+        most: Option<usize>,
+    ) -> Result<First, CurveError> {
+        spline_pass_within(job, setup, clock, previous.map(First::space), most)
     }
-    setup.set_knots(
-        KnotIntervals::Uniform,
-        uniform_knots,
-        job.options.fit.weights,
-    );
-    Ok((setup, first))
+    fn held(pass: &First) -> Result<usize, usize> {
+        match pass {
+            First::Done(o) => Ok(o.blend.as_ref().map_or(0, |b| b.reduced_elements)),
+            First::Exceeded { at_least, .. } => Err(*at_least),
+        }
+    }
+    fn finish(
+        &mut self,
+        job: &Job,
+        setup: &SplineSetup,
+        clock: &mut Clock,
+        pass: First,
+    ) -> Result<First, CurveError> {
+        let First::Exceeded { space, fit, .. } = pass else {
+            return Ok(pass);
+        };
+        let (factors, blend) = clock.run(Stage::Validity, || blend(job, setup, &space))?;
+        let outcome = SplineOutcome::blended(space, factors, fit, blend, 0, None);
+        Ok(First::Done(outcome))
+    }
 }
 
 /// A spline pass that may stop early ([`spline_pass_within`]): `auto`'s uniform pass.
@@ -546,7 +568,7 @@ fn curve_spline_with(
     periodic: &[PeriodicPair],
 ) -> Result<(SplineSetup, SplineOutcome), CurveError> {
     let setup = clock.run(Stage::Spline, || SplineSetup::new(job, periodic))?;
-    let outcome = spline_pass(job, &setup, clock, None)?;
+    let outcome = spline_pass(job, &setup, clock)?;
     Ok((setup, outcome))
 }
 
@@ -555,9 +577,8 @@ fn spline_pass(
     job: &Job,
     setup: &SplineSetup,
     clock: &mut Clock,
-    previous: Option<&SplineSpace>,
 ) -> Result<SplineOutcome, CurveError> {
-    match spline_pass_within(job, setup, clock, previous, None)? {
+    match spline_pass_within(job, setup, clock, None, None)? {
         First::Done(outcome) => Ok(outcome),
         First::Exceeded { .. } => unreachable!("an unbounded pass runs to its end"),
     }
