@@ -1584,9 +1584,84 @@ fn periodic_pairs_are_exact_images_across_ranks() {
     }
 }
 
-/// Under mpirun a generated periodic channel (its `$Periodic` section, not read by the ranks)
-/// without `--periodic`, a pair whose sides are no images, and `--periodic` with
-/// `--partitioned` each fail with one error line and write nothing.
+/// Under mpirun the input's `$Periodic` section is read by every rank: the generated channel
+/// (binary MSH 4.1 with its pair in `$Periodic`) curved without `--periodic` on 1, 2 and 4
+/// ranks is periodic (the report's pair `from_file`, the written file's `$Periodic` pairing
+/// every image node under Gmsh's map to 1e-12 of the diagonal) and byte for byte the file
+/// curved with `--periodic` naming the same pair; a section whose map disagrees with the
+/// positions is refused in one line naming the file's pair.
+#[test]
+fn periodic_sections_are_read_under_mpirun() {
+    if !have_mpirun() || !common::have_gmsh(&common::current_test()) {
+        return;
+    }
+    let input = scratch("psection.msh");
+    common::run_ok(
+        Command::new(BIN)
+            .args(["generate", "channel", "--around", "12", "--across", "6"])
+            .args(["--first-height", "0.02", "--bump", "0.15", "--binary", "-o"])
+            .arg(&input),
+    );
+    let pair = ["--periodic", "periodic_left:periodic_right"];
+    for np in [1, 2, 4] {
+        let (from_file, _, r) = curve_with_report(np, &input, "psection_file", &["--order", "3"]);
+        let what = format!("{np} ranks");
+        let rp = &r["periodic"];
+        assert_eq!(rp["pairs"][0]["from_file"], true, "{what}: {rp}");
+        assert_eq!(rp["pairs"][0]["kind"], "translation", "{what}: {rp}");
+        assert_gmsh_pairs_exact(&from_file, "periodic_left", "periodic_right");
+        let (given, _, g) = curve_with_report(
+            np,
+            &input,
+            "psection_given",
+            &[&["--order", "3"][..], &pair[..]].concat(),
+        );
+        assert_eq!(g["periodic"]["pairs"][0]["from_file"], false, "{what}");
+        assert!(
+            std::fs::read(&from_file).unwrap() == std::fs::read(&given).unwrap(),
+            "{what}: the file's pair and --periodic wrote different files"
+        );
+    }
+    // The section's affine map moved off the transform found from the positions: its first
+    // translation value (row 0, column 3) shifted by a tenth of the channel.
+    let bytes = std::fs::read(&input).unwrap();
+    let at = bytes
+        .windows(10)
+        .position(|w| w == b"$Periodic\n")
+        .expect("a $Periodic section")
+        + 10;
+    // Binary MSH 4.1: link count (size_t), then per link dim, tag, master tag (int), the
+    // count of affine values (size_t) and the values: the 4th is the x translation.
+    let sz = 8;
+    let x = at + sz + 12 + sz + 3 * 8;
+    let mut bad = bytes.clone();
+    let t = f64::from_le_bytes(bad[x..x + 8].try_into().unwrap());
+    bad[x..x + 8].copy_from_slice(&(t + 0.1 * t.abs().max(1.0)).to_le_bytes());
+    let broken = scratch("psection_broken.msh");
+    std::fs::write(&broken, bad).unwrap();
+    let out = scratch("psection_broken_out.msh");
+    let _ = std::fs::remove_file(&out);
+    let o = mpirun(2)
+        .arg(BIN)
+        .arg("curve")
+        .arg(&broken)
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(!o.status.success(), "a disagreeing $Periodic map accepted");
+    let lines = error_lines(&o);
+    assert_eq!(lines.len(), 1, "{lines:?}");
+    assert!(
+        lines[0].contains("$Periodic pair periodic_left:periodic_right")
+            && lines[0].contains("disagrees"),
+        "{lines:?}"
+    );
+    assert!(!out.exists());
+}
+
+/// Under mpirun, on a generated periodic channel, a pair whose sides are no images and
+/// `--periodic` with `--partitioned` each fail with one error line and write nothing.
 #[test]
 fn periodic_refusals_under_mpirun_are_one_line() {
     if !have_mpirun() {
@@ -1600,7 +1675,6 @@ fn periodic_refusals_under_mpirun_are_one_line() {
             .arg(&input),
     );
     for (args, says) in [
-        (vec![], "$Periodic"),
         (
             vec!["--periodic", "periodic_left:wall"],
             "cannot be images of each other",

@@ -739,8 +739,9 @@ fn run_share(
     })
 }
 
-/// The periodic pairs of `--periodic` over the whole mesh ([`super::periodic::resolve`]):
-/// the same pairs, or the same error, on every rank. Collective when pairs are given.
+/// The periodic pairs of `--periodic` and of the input's `$Periodic` over the whole mesh
+/// ([`super::periodic::resolve`]): the same pairs, or the same error, on every rank.
+/// Collective when there are pairs.
 fn periodic_pairs(
     comm: &dyn Comm,
     input: &Path,
@@ -752,21 +753,13 @@ fn periodic_pairs(
         input: input.to_owned(),
         source,
     };
-    if options.periodic.pairs.is_empty() {
-        // Curved without its pairs, the sides would no longer be images of each other and the
-        // output would carry no pair, which the file says it has: refused, as the serial job
-        // refuses a link it cannot use.
-        if local.declares_periodic {
-            return Err(periodic_err(crate::mesh::periodic::PeriodicError {
-                spec: "$Periodic".into(),
-                what: "the input's periodic section is not read under mpirun yet: give its pairs with --periodic A:B (docs/periodic.md)".into(),
-            }));
-        }
+    // Every rank read the file's `$Periodic` links (the same on every rank).
+    if options.periodic.pairs.is_empty() && local.mesh.declared_periodic.is_empty() {
         if options.periodic.pyfr_names {
-            // The serial job's refusal (`pipeline::curve`); under mpirun no `$Periodic` is read.
+            // The serial job's refusal (`pipeline::curve`).
             return Err(periodic_err(crate::mesh::periodic::PeriodicError {
                 spec: "--periodic-pyfr-names".into(),
-                what: "the mesh has no periodic pair to name: give one with --periodic A:B (under mpirun an input's $Periodic section is not read)".into(),
+                what: "the mesh has no periodic pair to name: give one with --periodic A:B (or in a Gmsh input's $Periodic section)".into(),
             }));
         }
         return Ok(Vec::new());

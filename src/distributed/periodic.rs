@@ -35,8 +35,9 @@ use crate::math::BezierElements;
 use crate::mesh::Topology;
 use crate::mesh::high_order::lattice_point;
 use crate::mesh::periodic::{
-    IMAGE_WEIGHTS, ImageInfo, PERIODIC_REL_TOL, PeriodicError, PeriodicLink, PeriodicPair,
-    PeriodicSpec, PointGrid, Rigid, SideFacet, pair_facets, place_images, spec_tags,
+    Declared, IMAGE_WEIGHTS, ImageInfo, PERIODIC_REL_TOL, PeriodicError, PeriodicLink,
+    PeriodicPair, PeriodicSpec, PointGrid, Rigid, SideFacet, declared_pairs, pair_facets,
+    place_images, spec_tags,
 };
 use crate::pipeline::CurveError;
 use std::collections::{BTreeMap, HashMap};
@@ -103,9 +104,21 @@ pub fn resolve(
         .collect();
     tags.sort_unstable();
     tags.dedup();
-    let resolved = spec_tags(&mesh.tag_names, &tags, specs)?;
+    // The command line's pairs, then the file's (`$Periodic`, read by every rank) whose groups
+    // they do not name, as the serial `resolve` takes them.
+    let mut resolved: Vec<Declared> = spec_tags(&mesh.tag_names, &tags, specs)?
+        .into_iter()
+        .map(|(spec, ta, tb)| (spec, ta, tb, Vec::new()))
+        .collect();
+    let mut seen: Vec<i32> = resolved.iter().flat_map(|r| [r.1, r.2]).collect();
+    resolved.extend(declared_pairs(
+        &mesh.tag_names,
+        &mesh.declared_periodic,
+        &tags,
+        &mut seen,
+    )?);
     let mut out = Vec::with_capacity(resolved.len());
-    for (spec, ta, tb) in resolved {
+    for (spec, ta, tb, claims) in resolved {
         let mut send = Vec::new();
         for (side, tag) in [(0.0, ta), (1.0, tb)] {
             for (_, f) in own_facets(local, topo, tag) {
@@ -151,7 +164,14 @@ pub fn resolve(
             };
             if r[0] == 0.0 { &mut a } else { &mut b }.push(facet);
         }
-        out.push(pair_facets(&coords, mesh.dim, &spec, (ta, a), (tb, b))?);
+        out.push(pair_facets(
+            &coords,
+            mesh.dim,
+            &spec,
+            (ta, a),
+            (tb, b),
+            &claims,
+        )?);
     }
     Ok(out)
 }

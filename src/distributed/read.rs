@@ -7,7 +7,9 @@
 //! coordinates of a set of nodes; and a [`LocalMesh`]: given own elements, ghosts and the
 //! ghosts' owners, the tagged boundary facets whose vertices are all present and only the
 //! nodes these use, with the global id of every element (its index among the file's elements)
-//! and vertex (its node tag). [`super::share`] decides which elements a rank owns.
+//! and vertex (its node tag), and the file's `$Periodic` links (every rank reads the section
+//! at its offset with the serial parser, `Indexed::declared_periodic`). [`super::share`]
+//! decides which elements a rank owns.
 //!
 //! How it reads: the file is parsed by the MSH parser family's offset-indexed reader
 //! (`io::gmsh::stream`: one pass over the section headers, then runs read at their
@@ -39,8 +41,6 @@ pub struct LocalMesh {
     pub global_vertex: Vec<u64>,
     /// Elements in the whole file.
     pub n_global: u64,
-    /// The file declares periodic pairs (Gmsh's `$Periodic`), which the ranks do not read.
-    pub declares_periodic: bool,
 }
 
 impl LocalMesh {
@@ -250,8 +250,9 @@ impl MshFile {
             point_locations: Vec::new(),
             declared_dim: Some(3),
             blocks: vec![block, fblock],
-            // The ranks' readers do not read `$Periodic`.
-            periodic: Vec::new(),
+            // Every rank reads the whole section (its links; the node pairs are checked, not
+            // kept: the pairing is found again from the positions, as serially).
+            periodic: self.ix.declared_periodic()?,
             tag_names: self.ix.header.tag_names.clone(),
         };
         let mesh = LinearMesh::from_raw(raw, options)?;
@@ -263,7 +264,6 @@ impl MshFile {
             owner: owners,
             global_vertex,
             n_global: self.n_global,
-            declares_periodic: self.ix.periodic_section,
         })
     }
 }
