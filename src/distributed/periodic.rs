@@ -83,7 +83,7 @@ pub fn resolve(
     local: &LocalMesh,
     topo: &Topology,
     specs: &[PeriodicSpec],
-) -> Result<Vec<PeriodicPair>, PeriodicError> {
+) -> Result<Resolved, PeriodicError> {
     let mesh = &local.mesh;
     // The boundary groups of the whole mesh.
     let mine: Vec<f64> = topo
@@ -117,7 +117,7 @@ pub fn resolve(
         &tags,
         &mut seen,
     )?);
-    let mut out = Vec::with_capacity(resolved.len());
+    let mut out = Resolved::default();
     for (spec, ta, tb, claims) in resolved {
         let mut send = Vec::new();
         for (side, tag) in [(0.0, ta), (1.0, tb)] {
@@ -164,16 +164,130 @@ pub fn resolve(
             };
             if r[0] == 0.0 { &mut a } else { &mut b }.push(facet);
         }
-        out.push(pair_facets(
-            &coords,
-            mesh.dim,
-            &spec,
-            (ta, a),
-            (tb, b),
-            &claims,
-        )?);
+        let found = pair_facets(&coords, mesh.dim, &spec, (ta, a), (tb, b), &claims)?;
+        let tag: Vec<u64> = index.into_keys().collect();
+        out.tag_maps.push(
+            found
+                .vertex_map
+                .iter()
+                .map(|&[b, a]| [tag[b as usize], tag[a as usize]])
+                .collect(),
+        );
+        out.pairs.push(found);
     }
     Ok(out)
+}
+
+/// The verified pairs of [`resolve`], the same on every rank.
+#[derive(Default)]
+pub struct Resolved {
+    /// Their vertex maps index the gathered sides' vertices.
+    pub pairs: Vec<PeriodicPair>,
+    /// Per pair, its vertex map in node tags: (image tag, master tag).
+    pub tag_maps: Vec<Vec<[u64; 2]>>,
+}
+
+impl Resolved {
+    /// Node tag → representative tag of the glued translation seams (the lowest tag of each
+    /// chain of pairs, as `spline::seam::glue` represents a class by its lowest vertex); only
+    /// the tags represented by another. Empty without translation pairs.
+    pub fn seam_map(&self) -> HashMap<u64, u64> {
+        let mut parent: HashMap<u64, u64> = HashMap::new();
+        fn find(parent: &mut HashMap<u64, u64>, mut t: u64) -> u64 {
+            while let Some(&p) = parent.get(&t) {
+                t = p;
+            }
+            t
+        }
+        for (p, map) in self.pairs.iter().zip(&self.tag_maps) {
+            if !p.transform.is_translation() {
+                continue;
+            }
+            for &[b, a] in map {
+                let (rb, ra) = (find(&mut parent, b), find(&mut parent, a));
+                if ra != rb {
+                    parent.insert(ra.max(rb), ra.min(rb));
+                }
+            }
+        }
+        let tags: Vec<u64> = parent.keys().copied().collect();
+        tags.into_iter()
+            .map(|t| (t, find(&mut parent, t)))
+            .collect()
+    }
+
+    /// The pairs with their vertex maps in the local vertices of `local` (the vertex pairs
+    /// whose two vertices it holds): what a rank's sub-mesh is glued by.
+    pub fn local_pairs(&self, local: &LocalMesh) -> Vec<PeriodicPair> {
+        let at: HashMap<u64, u32> = local
+            .global_vertex
+            .iter()
+            .enumerate()
+            .map(|(i, &t)| (t, i as u32))
+            .collect();
+        self.pairs
+            .iter()
+            .zip(&self.tag_maps)
+            .map(|(p, map)| PeriodicPair {
+                vertex_map: map
+                    .iter()
+                    .filter_map(|[b, a]| Some([*at.get(b)?, *at.get(a)?]))
+                    .collect(),
+                ..p.clone()
+            })
+            .collect()
+    }
+}
+
+/// The translation seams of `pairs` glued on this rank's sub-mesh (`spline::seam::glue_share`:
+/// classes represented by their lowest node tag, homes by the lowest global element, only the
+/// own elements' entities checked manifold), and why a pair stays apart, as the serial
+/// `pipeline::spline::glue_seams` says it. Collective: the ranks agree, so that either every
+/// rank glues its seams or none does. `across`: the ghost rings run across the seams (the
+/// share was read through [`Resolved::seam_map`]); otherwise nothing is glued.
+pub fn glue_share(
+    comm: &dyn Comm,
+    local: &LocalMesh,
+    resolved: &Resolved,
+    across: bool,
+) -> (Option<crate::spline::seam::Glued>, Option<String>) {
+    let pairs = &resolved.pairs;
+    if pairs.is_empty() {
+        return (None, None);
+    }
+    let translations = pairs.iter().any(|p| p.transform.is_translation());
+    let glued = if translations && across {
+        let mesh = &local.mesh;
+        let mut near = vec![false; mesh.n_vertices()];
+        for e in 0..local.n_owned {
+            for &v in mesh.element(e) {
+                near[v as usize] = true;
+            }
+        }
+        let order = crate::spline::seam::ShareOrder {
+            vertex: &local.global_vertex,
+            element: &local.global_element,
+            near: &near,
+        };
+        crate::spline::seam::glue_share(mesh, &resolved.local_pairs(local), Some(&order))
+    } else {
+        None
+    };
+    let mut ok = [f64::from(u8::from(glued.is_some()))];
+    comm.min_f64(&mut ok);
+    let glued = glued.filter(|_| ok[0] > 0.0);
+    let why = if glued.is_none() && translations {
+        Some(if across {
+            "the mesh with its translation pairs glued is not manifold"
+        } else {
+            "under mpirun the seams of a partitioned input are not identified in the spline space"
+        })
+    } else if pairs.iter().any(|p| !p.transform.is_translation()) {
+        Some("rotation pairs are not identified in the spline space")
+    } else {
+        None
+    };
+    (glued, why.map(str::to_string))
 }
 
 /// What the seam pass needs besides the sampled nodes.
@@ -182,6 +296,10 @@ pub struct Seams<'a> {
     pub input: &'a Path,
     /// Subdivision depth of the Bernstein certificate (`--certificate-depth`).
     pub depth: usize,
+    /// With glued seams, the features' boundary facets: per boundary facet of the topology
+    /// they were found on (the seam facets interior), its index among the input's
+    /// (`SeamView::boundary_rows`); `None`: the input's.
+    pub boundary_rows: Option<&'a [u32]>,
 }
 
 /// The rank's sampled share as the seam pass sees it: local node ids of the own elements

@@ -157,14 +157,22 @@ impl MshFile {
 
     /// The cells within `depth` vertex rings of `own` and not in it: one streamed pass over
     /// the cell blocks per ring, keeping the cells that touch a node of the previous rings.
-    pub fn ghosts(&mut self, own: &Elements, depth: usize) -> Result<Elements, ParseError> {
-        let mut have: HashSet<u64> = own.nodes.iter().copied().collect();
+    /// With `seams` (node tag → its representative, for the image nodes of glued periodic
+    /// seams) the rings are those of the glued mesh: they run on across the seams.
+    pub fn ghosts(
+        &mut self,
+        own: &Elements,
+        depth: usize,
+        seams: Option<&HashMap<u64, u64>>,
+    ) -> Result<Elements, ParseError> {
+        let glued = |t: &u64| seams.and_then(|m| m.get(t)).copied().unwrap_or(*t);
+        let mut have: HashSet<u64> = own.nodes.iter().map(glued).collect();
         let mut seen: HashSet<u64> = own.global.iter().copied().collect();
         let mut out = Elements::default();
         for _ in 0..depth {
             let before = out.global.len();
             self.ix.for_each(self.kind, |g, p, v| {
-                if !seen.contains(&g) && v.iter().any(|t| have.contains(t)) {
+                if !seen.contains(&g) && v.iter().any(|t| have.contains(&glued(t))) {
                     seen.insert(g);
                     out.push(g, p, v);
                 }
@@ -172,7 +180,7 @@ impl MshFile {
             if out.global.len() == before {
                 break;
             }
-            have.extend(out.nodes[self.npe * before..].iter().copied());
+            have.extend(out.nodes[self.npe * before..].iter().map(glued));
         }
         Ok(out)
     }
@@ -296,7 +304,7 @@ mod tests {
         let mut f = MshFile::open(path).unwrap();
         let starts = LocalMesh::starts(f.n_global, size);
         let own = f.run(starts[rank], starts[rank + 1]).unwrap();
-        let ghosts = f.ghosts(&own, depth).unwrap();
+        let ghosts = f.ghosts(&own, depth, None).unwrap();
         let owner = ghosts
             .global
             .iter()

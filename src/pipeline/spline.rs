@@ -84,7 +84,15 @@ impl SplineSetup {
     /// ([`SplineSetup::glue_seams`]), so that everything fitted to the boundary sees their
     /// seams as interior.
     pub(crate) fn new(job: &Job, periodic: &[PeriodicPair]) -> Result<Self, CurveError> {
-        let (seams, seam_c0) = glue_seams(job, periodic);
+        Self::with_seams(job, glue_seams(job, periodic))
+    }
+
+    /// [`SplineSetup::new`] with its seams glued already, and why some pair stays apart (a
+    /// rank's sub-mesh glued by the distributed job, `seam::glue_share`).
+    pub(crate) fn with_seams(
+        job: &Job,
+        (seams, seam_c0): (Option<Glued>, Option<String>),
+    ) -> Result<Self, CurveError> {
         let view = seams
             .as_ref()
             .map(|g| seam::interior_view(job.mesh, job.topo, g));
