@@ -22,8 +22,10 @@
 //! distributed CG ([`super::cg`]) under the serial preconditioner; run the certified blend on
 //! its own elements, the ranks agreeing on the rejected elements of every round in global ids
 //! ([`crate::validity::blend::blend_search_shared`]); sample its own elements with a global
-//! node numbering ([`super::sample`]), with `--periodic` the pairs resolved over the whole mesh
-//! and the image sides' nodes made the transform of their masters' ([`super::periodic`]),
+//! node numbering ([`super::sample`]), with periodic pairs resolved over the whole mesh (the
+//! translation seams glued in the spline space: the share read again with its ghost rings
+//! across the seams) and the image sides' nodes made the transform of their masters'
+//! ([`super::periodic`]),
 //! check them and route them back to their file runs for the collective write; no rank reads
 //! or holds the whole mesh.
 //! Invariant: the result is the serial run's (the same knots too) up to the order of the
@@ -651,6 +653,7 @@ fn run_share(
         super::periodic::glue_share(comm, &local, &resolved, across)
     });
     let pairs = resolved.pairs;
+    local.glued = seams.0.clone().map(std::sync::Arc::new);
     let mesh = &local.mesh;
     let executor = crate::exec::executor(&options.backend);
     let job = Job {

@@ -15,8 +15,12 @@
 //! error. The boundary groups of the sides are gathered whole (one all-gather of 21 doubles per
 //! facet of A and B): this is replicated, like the 2D post-fit misfit sides.
 //!
-//! **Images.** The spline space is not glued across the seams under mpirun (each side is fitted
-//! on its own, as serially for rotation pairs): the seam is C⁰. After sampling, every rank
+//! **Glue.** [`Resolved::seam_map`] gives every image node of a translation pair its
+//! representative tag; the job reads its share again with the ghost rings run on across the
+//! seams, and [`glue_share`] glues it as the serial job glues the whole mesh (the ranks agree
+//! that all of them can). Rotation pairs are not glued (C⁰, as serially).
+//!
+//! **Images.** After sampling, every rank
 //! contributes the order-P nodes of its own A and B facets (global tag, straight-sided position
 //! — the multilinear map of their element at the lattice point — and sampled position); the
 //! gathered nodes pair by their straight positions as [`crate::mesh::periodic::node_pairs`]

@@ -41,6 +41,10 @@ pub struct LocalMesh {
     pub global_vertex: Vec<u64>,
     /// Elements in the whole file.
     pub n_global: u64,
+    /// The share glued along its translation seams, when the job glues them
+    /// (`super::periodic::glue_share`): the graded knots are surveyed on it
+    /// ([`super::knots`]), their surfaces running on across the seams.
+    pub glued: Option<std::sync::Arc<crate::spline::seam::Glued>>,
 }
 
 impl LocalMesh {
@@ -272,6 +276,7 @@ impl MshFile {
             owner: owners,
             global_vertex,
             n_global: self.n_global,
+            glued: None,
         })
     }
 }

@@ -473,5 +473,6 @@ pub fn read_parts_share(
         owner: owners,
         global_vertex,
         n_global,
+        glued: None,
     })
 }
