@@ -23,8 +23,10 @@
 //! distributed CG ([`super::cg`]) under the serial preconditioner; run the certified blend on
 //! its own elements, the ranks agreeing on the rejected elements of every round in global ids
 //! ([`crate::validity::blend::blend_search_shared`]); sample its own elements with a global
-//! node numbering ([`super::sample`]), with `--periodic` the pairs resolved over the whole mesh
-//! and the image sides' nodes made the transform of their masters' ([`super::periodic`]),
+//! node numbering ([`super::sample`]), with periodic pairs resolved over the whole mesh (the
+//! translation seams glued in the spline space: the share read again with its ghost rings
+//! across the seams) and the image sides' nodes made the transform of their masters'
+//! ([`super::periodic`]),
 //! check them and route them back to their file runs for the collective write; no rank reads
 //! or holds the whole mesh.
 //! Invariant: the result is the serial run's (the same knots too) up to the order of the
@@ -141,6 +143,9 @@ struct Share {
     features: Option<crate::mesh::features::FeatureReport>,
     /// The periodic pairs (`--periodic`), resolved over the whole mesh.
     pairs: Vec<crate::mesh::periodic::PeriodicPair>,
+    /// `c1` when the seams are glued in the spline space (on every rank alike), else `c0`
+    /// with why ([`SplineSetup::seam_continuity`]).
+    seam: (&'static str, Option<String>),
 }
 
 /// The topology of a ghosted sub-mesh, checked curvable where the serial check would see the
@@ -222,7 +227,8 @@ fn fit_share(
     halo: &Halo,
     start: Option<&[[f64; 3]]>,
 ) -> Result<(crate::solve::CgInfo, usize), CurveError> {
-    let (comm, topo, setup) = (j.comm, j.job.topo, j.setup);
+    // The boundary is fitted on the topology with the glued seams interior.
+    let (comm, topo, setup) = (j.comm, j.setup.topo(j.job), j.setup);
     let fit_params = &setup.fit_params;
     // The preconditioner's aggregates (the serial run's: rank 0 grows them on the whole
     // mesh's stencils) before the assembly, while a rank holds least.
@@ -288,7 +294,8 @@ fn assemble_share(
     s: &SplineSpace,
     halo: &Halo,
 ) -> (LocalMatrix, Vec<[f64; 3]>, Option<Vec<f64>>) {
-    let (comm, local, topo, setup, mine) = (j.comm, j.local, j.job.topo, j.setup, j.mine);
+    let (comm, local, setup, mine) = (j.comm, j.local, j.setup, j.mine);
+    let topo = setup.topo(j.job);
     let mesh = &local.mesh;
     // This rank's share of the fit, with the whole mesh's size levels.
     let sizes = crate::fit::partial::element_sizes(mesh);
@@ -518,7 +525,7 @@ fn share_pass(
         let mut misfit = vec![false; mesh.n_elements()];
         for _ in 0..crate::pipeline::misfit::MISFIT_ROUNDS {
             let marks = clock.run(Stage::Spline, || {
-                misfit_marks(comm, local, topo, &s, targets)
+                misfit_marks(comm, local, setup.topo(job), &s, targets)
             });
             let Some(marks) = marks else {
                 break;
@@ -564,7 +571,9 @@ fn blend_share(
         let params = options
             .line_search
             .blend(options.line_search_mode == LineSearchMode::Global);
-        let mut blended = Blended::new(mesh, &target_map, s, mesh, topo, Vec::new());
+        let (ids_mesh, ids_topo) = setup.entity_mesh(job);
+        let mut blended =
+            Blended::new(mesh, &target_map, s, ids_mesh, ids_topo, Vec::new()).with_geometry(mesh);
         let share = LocalShare {
             comm,
             mine: j.mine,
@@ -609,21 +618,44 @@ fn run_share(
     order: usize,
     clock: &mut Clock,
 ) -> Result<Share, CurveError> {
-    let local = clock.run(Stage::Read, || {
-        read_share(comm, input, GHOST_DEPTH, &options.mesh)
+    let mut local = clock.run(Stage::Read, || {
+        read_share(comm, input, GHOST_DEPTH, &options.mesh, None)
     })?;
-    let mesh = &local.mesh;
     // Checks of a rank's own share fail on that rank alone: agreed before the next collective.
-    let (topo, input_msj) = clock.run(Stage::Topology, || {
+    let (mut topo, input_msj) = clock.run(Stage::Topology, || {
         let topo = agree(comm, local_topology(input, &local))?;
-        let mut msj = [mesh.min_scaled_jacobian().map_or(f64::INFINITY, |m| m.0)];
+        let mut msj = [local
+            .mesh
+            .min_scaled_jacobian()
+            .map_or(f64::INFINITY, |m| m.0)];
         comm.min_f64(&mut msj);
         Ok::<_, CurveError>((topo, msj[0]))
     })?;
     // Periodic pairs over the whole mesh: every rank finds the same pairs, or the same error.
-    let pairs = clock.run(Stage::Topology, || {
+    let resolved = clock.run(Stage::Topology, || {
         periodic_pairs(comm, input, options, &local, &topo)
     })?;
+    // Translation seams are glued in the spline space as serially: the share is read again
+    // with its ghost rings run on across the seams (the elements across a seam are neighbours
+    // there), then glued ([`super::periodic::glue_share`]). Gmsh's partitioned inputs are not
+    // read through the seams: their seams stay apart.
+    let seam_map = resolved.seam_map();
+    let across = !seam_map.is_empty() && !super::read_parts::is_partitioned(input);
+    if across {
+        local = clock.run(Stage::Read, || {
+            read_share(comm, input, GHOST_DEPTH, &options.mesh, Some(&seam_map))
+        })?;
+        topo = clock.run(Stage::Topology, || {
+            agree(comm, local_topology(input, &local))
+        })?;
+    }
+    drop(seam_map);
+    let seams = clock.run(Stage::Spline, || {
+        super::periodic::glue_share(comm, &local, &resolved, across)
+    });
+    let pairs = resolved.pairs;
+    local.glued = seams.0.clone().map(std::sync::Arc::new);
+    let mesh = &local.mesh;
     let executor = crate::exec::executor(&options.backend);
     let job = Job {
         input,
@@ -640,7 +672,7 @@ fn run_share(
         ..job
     };
     let mut setup = clock.run(Stage::Spline, || {
-        agree(comm, SplineSetup::new(&uniform_job, &[]))
+        agree(comm, SplineSetup::with_seams(&uniform_job, seams))
     })?;
     let mine: Vec<usize> = (0..local.n_owned).collect();
     let mut passes = RankPasses {
@@ -665,13 +697,16 @@ fn run_share(
     };
     // The certified blend found, for sampling (its nets computed once).
     let target_map = setup.target_map(&job);
-    let blended = Blended::with_cache(mesh, &target_map, &s, mesh, &topo, factors, nets);
+    let (ids_mesh, ids_topo) = setup.entity_mesh(&job);
+    let blended = Blended::with_cache(mesh, &target_map, &s, ids_mesh, ids_topo, factors, nets)
+        .with_geometry(mesh);
     let bytes_before = comm.bytes_sent();
     let (output, features) = clock.run(Stage::Sample, || {
         let seams = super::periodic::Seams {
             pairs: &pairs,
             input,
             depth: options.line_search.certificate_depth,
+            boundary_rows: setup.boundary_rows(),
         };
         let mut output = sample_share(
             comm,
@@ -691,7 +726,7 @@ fn run_share(
             super::features::feature_report(
                 comm,
                 &local,
-                &topo,
+                setup.topo(&job),
                 setup.features.as_ref(),
                 &options.features.params,
                 output.feature_deviation,
@@ -716,6 +751,17 @@ fn run_share(
     }
     let knot_intervals = setup.knot_intervals;
     drop(blended);
+    // Putting a glued space back on the sub-mesh may fail on one rank: c1 only when on all.
+    let seam = setup.seam_continuity();
+    let mut glued = [f64::from(u8::from(seam.0 == "c1"))];
+    comm.min_f64(&mut glued);
+    let seam = match (glued[0] > 0.0, seam) {
+        (false, ("c1", _)) => (
+            "c0",
+            Some("the glued spline space could not be put back on every rank's elements".into()),
+        ),
+        (_, seam) => seam,
+    };
     Ok(Share {
         local,
         cg,
@@ -733,40 +779,34 @@ fn run_share(
         bytes_sample,
         features,
         pairs,
+        seam,
     })
 }
 
-/// The periodic pairs of `--periodic` over the whole mesh ([`super::periodic::resolve`]):
-/// the same pairs, or the same error, on every rank. Collective when pairs are given.
+/// The periodic pairs of `--periodic` and of the input's `$Periodic` over the whole mesh
+/// ([`super::periodic::resolve`]): the same pairs, or the same error, on every rank.
+/// Collective when there are pairs.
 fn periodic_pairs(
     comm: &dyn Comm,
     input: &Path,
     options: &CurveOptions,
     local: &LocalMesh,
     topo: &Topology,
-) -> Result<Vec<crate::mesh::periodic::PeriodicPair>, CurveError> {
+) -> Result<super::periodic::Resolved, CurveError> {
     let periodic_err = |source| CurveError::Periodic {
         input: input.to_owned(),
         source,
     };
-    if options.periodic.pairs.is_empty() {
-        // Curved without its pairs, the sides would no longer be images of each other and the
-        // output would carry no pair, which the file says it has: refused, as the serial job
-        // refuses a link it cannot use.
-        if local.declares_periodic {
-            return Err(periodic_err(crate::mesh::periodic::PeriodicError {
-                spec: "$Periodic".into(),
-                what: "the input's periodic section is not read under mpirun yet: give its pairs with --periodic A:B (docs/periodic.md)".into(),
-            }));
-        }
+    // Every rank read the file's `$Periodic` links (the same on every rank).
+    if options.periodic.pairs.is_empty() && local.mesh.declared_periodic.is_empty() {
         if options.periodic.pyfr_names {
-            // The serial job's refusal (`pipeline::curve`); under mpirun no `$Periodic` is read.
+            // The serial job's refusal (`pipeline::curve`).
             return Err(periodic_err(crate::mesh::periodic::PeriodicError {
                 spec: "--periodic-pyfr-names".into(),
-                what: "the mesh has no periodic pair to name: give one with --periodic A:B (under mpirun an input's $Periodic section is not read)".into(),
+                what: "the mesh has no periodic pair to name: give one with --periodic A:B (or in a Gmsh input's $Periodic section)".into(),
             }));
         }
-        return Ok(Vec::new());
+        return Ok(Default::default());
     }
     super::periodic::resolve(comm, local, topo, &options.periodic.pairs).map_err(periodic_err)
 }
@@ -849,7 +889,13 @@ pub fn curve(
         }),
         snapped: None,
         elastic: None,
-        periodic: periodic_report(&share.pairs, &share.output, options, deviation.diagonal),
+        periodic: periodic_report(
+            &share.pairs,
+            &share.output,
+            &share.seam,
+            options,
+            deviation.diagonal,
+        ),
         input_min_scaled_jacobian: share.input_msj,
         min_scaled_jacobian: min_sj,
         deviation,
@@ -873,28 +919,23 @@ pub fn curve(
 }
 
 /// The report's `periodic` (and the seams' certified bound) when the job has pairs: the
-/// serial report's fields, the seams `c0` (each side curved on its own under mpirun).
+/// serial report's fields.
 fn periodic_report(
     pairs: &[crate::mesh::periodic::PeriodicPair],
     output: &RankOutput,
+    seam: &(&'static str, Option<String>),
     options: &CurveOptions,
     diagonal: f64,
 ) -> Option<(f64, crate::pipeline::PeriodicReport)> {
     let info = output.images?;
     let report = crate::pipeline::PeriodicReport {
         pairs: pairs.iter().map(|p| p.summary(diagonal)).collect(),
-        node_pairs: output
-            .periodic
-            .iter()
-            .map(|l| l.node_pairs.len())
-            .sum(),
+        node_pairs: output.periodic.iter().map(|l| l.node_pairs.len()).sum(),
         max_seam_shift: info.max_shift / diagonal,
         written_mismatch: info.max_mismatch / diagonal,
         recertified_elements: info.recertified,
-        seam: "c0",
-        seam_c0_reason: Some(
-            "under mpirun the seams are not identified in the spline space: each side is curved on its own and made exact images after sampling".into(),
-        ),
+        seam: seam.0,
+        seam_c0_reason: seam.1.clone(),
         pyfr_names: options.periodic.pyfr_names,
     };
     Some((info.min_det_bound, report))

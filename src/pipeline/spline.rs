@@ -84,7 +84,15 @@ impl SplineSetup {
     /// ([`SplineSetup::glue_seams`]), so that everything fitted to the boundary sees their
     /// seams as interior.
     pub(crate) fn new(job: &Job, periodic: &[PeriodicPair]) -> Result<Self, CurveError> {
-        let (seams, seam_c0) = glue_seams(job, periodic);
+        Self::with_seams(job, glue_seams(job, periodic))
+    }
+
+    /// [`SplineSetup::new`] with its seams glued already, and why some pair stays apart (a
+    /// rank's sub-mesh glued by the distributed job, `seam::glue_share`).
+    pub(crate) fn with_seams(
+        job: &Job,
+        (seams, seam_c0): (Option<Glued>, Option<String>),
+    ) -> Result<Self, CurveError> {
         let view = seams
             .as_ref()
             .map(|g| seam::interior_view(job.mesh, job.topo, g));
@@ -168,14 +176,14 @@ impl SplineSetup {
     }
 
     /// Puts `knots` of `intervals` in place of the setup's knots and returns those (the
-    /// features, kinks and targets do not depend on the knots). Only without glued seams.
+    /// features, kinks and targets do not depend on the knots). With glued seams, `knots`
+    /// must be measured on the glued mesh (the distributed job's survey of its glued shares).
     pub(crate) fn set_knots(
         &mut self,
         intervals: crate::spline::KnotIntervals,
         knots: Knots,
         weights: crate::fit::FitWeights,
     ) -> Knots {
-        debug_assert!(self.seams.is_none());
         // The fit's weights depend on the knots too (`FitWeights::for_knots`).
         self.fit_params.weights =
             weights.for_knots(intervals == crate::spline::KnotIntervals::Graded);

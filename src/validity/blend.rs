@@ -781,9 +781,10 @@ fn summarise(
     info.reduced_elements = reduced.len();
     // Per point shared with other processes: the lowest element around it here and whether
     // it is owned (every element around a point of an own element is held here, so that is
-    // the whole mesh's lowest). Empty: every point is this process's.
+    // the whole mesh's lowest). Empty: every point is this process's, or no factor was
+    // lowered on this process (`factors` is empty, nothing to count).
     let mut lowest = Vec::new();
-    if share.mine().is_some() {
+    if share.mine().is_some() && !blended.factors.is_empty() {
         lowest = vec![(usize::MAX, false); blended.factors.len()];
         for e in 0..n {
             let g = share.global(e);
