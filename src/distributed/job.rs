@@ -564,7 +564,7 @@ fn blend_share(
     bytes: &mut [u64; 2],
 ) -> Result<Result<Blend, usize>, CurveError> {
     let (comm, local, job, setup) = (j.comm, j.local, j.job, j.setup);
-    let (mesh, topo, options) = (&local.mesh, job.topo, job.options);
+    let (mesh, options) = (&local.mesh, job.options);
     let before = comm.bytes_sent();
     let target_map = clock.run(Stage::Validity, || setup.target_map(job));
     let blend = clock.run(Stage::Validity, || {
