@@ -6,9 +6,8 @@
 //! into chunks, each uploaded into its own buffers.
 //!
 //! Every upload, read-back, dispatch and submit goes through the context's helpers
-//! ([`GpuContext::storage`], [`GpuContext::write`], [`GpuContext::map_read`],
-//! [`GpuContext::dispatch`], [`GpuContext::submit`]), which count it in [`GpuTraffic`]: the
-//! report's `gpu_traffic` is measured, not derived from sizes.
+//! (`GpuContext::storage`, `write`, `map_read`, `dispatch`, `submit`), which count it in
+//! [`GpuTraffic`]: the report's `gpu_traffic` is measured, not derived from sizes.
 //!
 //! Environment: `VK_DRIVER_FILES=/usr/share/vulkan/icd.d/lvp_icd.x86_64.json` restricts Vulkan
 //! to Mesa's software driver (lavapipe); `XDG_RUNTIME_DIR=/tmp` silences a harmless Mesa
