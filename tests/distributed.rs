@@ -53,6 +53,23 @@ fn binary_generated(name: &str, args: &[&str]) -> PathBuf {
     input
 }
 
+/// The VKI turbine cascade (`meshes/real/su2-testcases`, periodic markers `periodic_1` and
+/// `periodic_2`) as binary MSH 4.1, written straight at order 1, under `name`.
+fn binary_turbine(name: &str) -> PathBuf {
+    let turbine = scratch(name);
+    common::run_ok(
+        Command::new(BIN)
+            .args([
+                "curve",
+                "meshes/real/su2-testcases/mesh_vki_turbine_prepbc.su2",
+            ])
+            .args(["--straight", "--order", "1", "--binary", "-q", "-o"])
+            .arg(&turbine)
+            .current_dir(env!("CARGO_MANIFEST_DIR")),
+    );
+    turbine
+}
+
 fn have_mpirun() -> bool {
     let ok = Command::new("mpirun")
         .arg("--version")
@@ -1553,17 +1570,7 @@ fn periodic_pairs_are_exact_images_across_ranks() {
     let channel = "channel --around 12 --across 6 --first-height 0.02 --bump 0.15";
     let sector =
         "sector --around 6 --across 6 --first-height 0.02 --sector 40 --layers 1 --span 0.5";
-    let turbine = scratch("pturbine.msh");
-    common::run_ok(
-        Command::new(BIN)
-            .args([
-                "curve",
-                "meshes/real/su2-testcases/mesh_vki_turbine_prepbc.su2",
-            ])
-            .args(["--straight", "--order", "1", "--binary", "-q", "-o"])
-            .arg(&turbine)
-            .current_dir(env!("CARGO_MANIFEST_DIR")),
-    );
+    let turbine = binary_turbine("pturbine.msh");
     // Name, input, sides A and B, orders, compared node by node with the serial run.
     type Case<'a> = (&'a str, PathBuf, [&'a str; 2], &'a [usize], bool);
     let cases: [Case; 4] = [
@@ -1669,17 +1676,7 @@ fn translation_seams_are_glued_across_ranks() {
         "channel --around 48 --across 12 --first-height 0.02 --bump 0.15",
         90.0,
     );
-    let turbine = scratch("gturbine.msh");
-    common::run_ok(
-        Command::new(BIN)
-            .args([
-                "curve",
-                "meshes/real/su2-testcases/mesh_vki_turbine_prepbc.su2",
-            ])
-            .args(["--straight", "--order", "1", "--binary", "-q", "-o"])
-            .arg(&turbine)
-            .current_dir(env!("CARGO_MANIFEST_DIR")),
-    );
+    let turbine = binary_turbine("gturbine.msh");
     let (cp, tp) = (
         ["--periodic", "periodic_left:periodic_right"],
         ["--periodic", "periodic_1:periodic_2"],
