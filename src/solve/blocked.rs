@@ -35,7 +35,7 @@
 //! Invariants: every dot product is a sum of per-chunk partial sums (fixed chunks of rows, or
 //! aggregates) added in order, so the result does not depend on the thread count.
 
-use super::block_jacobi::{Aggregates, factor_blocks, split_at_offsets};
+use super::block_jacobi::{Aggregates, FactorValue, factor_blocks, split_at_offsets};
 use super::{CgError, CgInfo, CgParams, Stopping};
 use rayon::prelude::*;
 use std::borrow::Cow;
@@ -384,7 +384,7 @@ pub struct BlockedSystem {
     agg: Aggregates,
     op: Operator,
     /// Packed lower Cholesky factor of aggregate a's diagonal block, from `factor_start[a]`.
-    factors: Vec<f64>,
+    factors: Factors,
     factor_start: Vec<usize>,
     /// Per row (new numbering), the even-rounded start of its factor row's envelope, counted
     /// from the aggregate's first row: the entries before it are exact zeros (see
@@ -392,6 +392,14 @@ pub struct BlockedSystem {
     first: Vec<u32>,
     /// The second partition of the pair preconditioner ([`BlockedKind::JacobiPair`]).
     second: Option<SecondPartition>,
+}
+
+/// The diagonal blocks' factors as stored: f32 for block Jacobi and the pair (widened per block
+/// by [`widened`]; see `block_jacobi`'s module docs), f64 for Gauss–Seidel, whose Eisenstat
+/// form uses D inside the operator (A = (D + L) + (D + U) − D), so D must be A's blocks exactly.
+enum Factors {
+    Single(Vec<f32>),
+    Double(Vec<f64>),
 }
 
 /// Which preconditioner a [`BlockedSystem`] runs.
@@ -414,7 +422,7 @@ struct SecondPartition {
     rows: Vec<u32>,
     start: Vec<usize>,
     slot: Vec<u32>,
-    factors: Vec<f64>,
+    factors: Vec<f32>,
     factor_start: Vec<usize>,
     first: Vec<u32>,
 }
@@ -574,17 +582,40 @@ impl OffBlock {
 /// is and keeps a +0 at +0 (a −0 there would need r to be exactly −0 in that component). The
 /// start is rounded to even so that each kept product still goes to the same one of the forward
 /// solve's two partial sums.
-fn envelope_starts(start: &[usize], factors: &[f64], factor_start: &[usize]) -> Vec<u32> {
+fn envelope_starts<T: FactorValue>(
+    start: &[usize],
+    factors: &[T],
+    factor_start: &[usize],
+) -> Vec<u32> {
     let mut first = vec![0u32; *start.last().unwrap_or(&0)];
     for b in 0..start.len() - 1 {
         let l = &factors[factor_start[b]..factor_start[b + 1]];
         for i in 0..start[b + 1] - start[b] {
             let ri = i * (i + 1) / 2;
-            let f = l[ri..ri + i].iter().position(|&v| v != 0.0).unwrap_or(i);
+            let f = l[ri..ri + i]
+                .iter()
+                .position(|&v| v.widen() != 0.0)
+                .unwrap_or(i);
             first[start[b] + i] = (f & !1) as u32;
         }
     }
     first
+}
+
+/// Runs `f` on the packed factor `l` widened to f64 (exactly) in a buffer of the calling
+/// thread's: the kernels then read each factor entry from memory once per solve, at half the
+/// bytes, and work in f64 from L1 (a 64-row block is 16.6 kB in f64).
+#[inline]
+fn widened<R>(l: &[f32], f: impl FnOnce(&[f64]) -> R) -> R {
+    thread_local! {
+        static BUFFER: std::cell::RefCell<Vec<f64>> = const { std::cell::RefCell::new(Vec::new()) };
+    }
+    BUFFER.with(|b| {
+        let mut b = b.borrow_mut();
+        b.clear();
+        b.extend(l.iter().map(|&v| f64::from(v)));
+        f(&b)
+    })
 }
 
 /// One aggregate's step: x += α p, r −= α ap, z = (L Lᵀ)⁻¹ r; returns (rᵀz, rᵀr). Row i of
@@ -1291,7 +1322,9 @@ impl SecondPartition {
                 let e = s_end(&self.start, b);
                 let l = &self.factors[self.factor_start[b]..self.factor_start[b + 1]];
                 let (first, rows) = (&self.first[e.clone()], &self.rows[e]);
-                dispatch!(portable, pair_block_avx2, pair_block(l, first, rows, r, y))
+                widened(l, |l| {
+                    dispatch!(portable, pair_block_avx2, pair_block(l, first, rows, r, y))
+                })
             })
             .collect();
         sum(&partials)
@@ -1429,7 +1462,7 @@ impl BlockedSystem {
             ),
         };
         let start = &agg.start;
-        let (factors, factor_start) = factor_blocks(start, &agg.rows, |b, l| {
+        let fill = |b: usize, l: &mut [f64]| {
             let s = start[b];
             for i in s..start[b + 1] {
                 let (cols, vals) = a.row(i);
@@ -1441,8 +1474,16 @@ impl BlockedSystem {
                     }
                 }
             }
-        })?;
-        let first = envelope_starts(start, &factors, &factor_start);
+        };
+        let (factors, factor_start, first) = if order.is_some() {
+            let (f, fs) = factor_blocks::<f64>(start, &agg.rows, fill)?;
+            let first = envelope_starts(start, &f, &fs);
+            (Factors::Double(f), fs, first)
+        } else {
+            let (f, fs) = factor_blocks::<f32>(start, &agg.rows, fill)?;
+            let first = envelope_starts(start, &f, &fs);
+            (Factors::Single(f), fs, first)
+        };
         let second = match agg2 {
             Some(agg2) => Some(SecondPartition::new(&a, &agg, agg2)?),
             None => None,
@@ -1484,13 +1525,18 @@ impl BlockedSystem {
         &self.agg.rows
     }
 
-    /// Aggregate b's packed factor and envelope starts.
-    fn factor(&self, b: usize) -> (&[f64], &[u32]) {
-        let start = &self.agg.start;
-        (
-            &self.factors[self.factor_start[b]..self.factor_start[b + 1]],
-            &self.first[start[b]..start[b + 1]],
-        )
+    /// `f` on aggregate b's packed factor (in f64) and envelope starts.
+    #[inline]
+    fn with_factor<R>(&self, b: usize, f: impl FnOnce(&[f64], &[u32]) -> R) -> R {
+        let (start, e) = (
+            &self.agg.start,
+            self.factor_start[b]..self.factor_start[b + 1],
+        );
+        let first = &self.first[start[b]..start[b + 1]];
+        match &self.factors {
+            Factors::Single(l) => widened(&l[e], |l| f(l, first)),
+            Factors::Double(l) => f(&l[e], first),
+        }
     }
 
     /// Colour k's rows `s0..s1` and the offsets of its groups from s0: (offsets, s0, s1).
@@ -1546,13 +1592,14 @@ impl BlockedSystem {
                             hi: tail,
                             hi_off: s1,
                         };
-                        let (l, first) = self.factor(b);
                         let (t, u) = (&mut tb[s - sg..], &mut ug[s - sg..e - sg]);
-                        dispatch!(
-                            off.portable,
-                            backward_block_avx2,
-                            backward_block(off, l, first, s, p, &later, t, u)
-                        )
+                        self.with_factor(b, |l, first| {
+                            dispatch!(
+                                off.portable,
+                                backward_block_avx2,
+                                backward_block(off, l, first, s, p, &later, t, u)
+                            )
+                        })
                     }
                 });
         }
@@ -1594,13 +1641,14 @@ impl BlockedSystem {
                             hi: before,
                             hi_off: sg,
                         };
-                        let (l, first) = self.factor(b);
                         let (v, w) = (&mut vb[..e - s], &mut wg[s - sg..e - sg]);
-                        dispatch!(
-                            off.portable,
-                            forward_block_avx2,
-                            forward_block(off, l, first, s, &earlier, t, v, w)
-                        );
+                        self.with_factor(b, |l, first| {
+                            dispatch!(
+                                off.portable,
+                                forward_block_avx2,
+                                forward_block(off, l, first, s, &earlier, t, v, w)
+                            )
+                        });
                         for ((p, t), v) in p[s..e].iter().zip(&t[s..e]).zip(v.iter()) {
                             for c in 0..4 {
                                 pq[c] += p[c] * (t[c] + v[c]);
@@ -1630,9 +1678,10 @@ impl BlockedSystem {
         let start = &self.agg.start;
         let mut dv = vec![[0.0; 4]; n];
         for b in 0..start.len() - 1 {
-            let (l, first) = self.factor(b);
             let r = start[b]..start[b + 1];
-            block_multiply(l, first, &v[r.clone()], &mut dv[r]);
+            self.with_factor(b, |l, first| {
+                block_multiply(l, first, &v[r.clone()], &mut dv[r])
+            });
         }
         self.backward(off, order, None, &mut dv, z, &mut w);
     }
@@ -1645,8 +1694,9 @@ impl BlockedSystem {
             .enumerate()
             .for_each(|(b, y)| {
                 let s = start[b];
-                let (l, first) = self.factor(b);
-                block_multiply(l, first, &x[s..start[b + 1]], y);
+                self.with_factor(b, |l, first| {
+                    block_multiply(l, first, &x[s..start[b + 1]], y)
+                });
                 for (i, y) in y.iter_mut().enumerate() {
                     let (cl, pl, vl) = off.lower(s + i);
                     let (cu, pu, vu) = off.upper(s + i);
@@ -1671,13 +1721,14 @@ impl BlockedSystem {
             .enumerate()
             .map(|(b, (((x, r), rt), zt))| {
                 let e = s_end(start, b);
-                let (l, first) = self.factor(b);
                 let (p, t, vv, w) = (&p[e.clone()], &t[e.clone()], &vv[e.clone()], &w[e]);
-                dispatch!(
-                    portable,
-                    eisenstat_update_avx2,
-                    eisenstat_update(l, first, alpha, x, r, rt, zt, p, t, vv, w)
-                )
+                self.with_factor(b, |l, first| {
+                    dispatch!(
+                        portable,
+                        eisenstat_update_avx2,
+                        eisenstat_update(l, first, alpha, x, r, rt, zt, p, t, vv, w)
+                    )
+                })
             })
             .collect();
         let rz: Vec<V4> = partials.iter().map(|p| p.0).collect();
@@ -1723,13 +1774,14 @@ impl BlockedSystem {
             .enumerate()
             .map(|(b, ((x, r), z))| {
                 let e = s_end(start, b);
-                let (l, first) = self.factor(b);
                 let (p, ap) = (&p[e.clone()], &ap[e]);
-                dispatch!(
-                    portable,
-                    block_step_avx2,
-                    block_step(l, first, alpha, x, r, z, p, ap)
-                )
+                self.with_factor(b, |l, first| {
+                    dispatch!(
+                        portable,
+                        block_step_avx2,
+                        block_step(l, first, alpha, x, r, z, p, ap)
+                    )
+                })
             })
             .collect();
         let rz: Vec<V4> = partials.iter().map(|p| p.0).collect();
