@@ -268,8 +268,9 @@ impl SmoothTargets {
         let smooth_vertices = models.iter().filter(|m| m.is_some()).count();
         let feature_vertices =
             topo.vertex_on_boundary.iter().filter(|&&b| b).count() - smooth_vertices;
-        let feature_models = features
-            .map(|f| FeatureModels::build(mesh, topo, f, cos_max, params.decay, &fan, &models));
+        let feature_models = features.map(|f| {
+            FeatureModels::build(mesh, topo, f, cos_max, params.decay, &fan, &models, share)
+        });
         // A 3D planar patch is its own 2D problem (its vertices take in-plane models below):
         // the cells next to it inherit from the curved boundary, not from the plane.
         let in_plane_3d = |v: usize| {
@@ -841,11 +842,11 @@ impl Reach {
 
 /// The model a source hands on, its boundary edge length ℓ and its order.
 #[derive(Clone, Copy, Debug)]
-struct Source {
-    model: VertexModel,
-    higher: Option<HigherModel>,
-    ell: f64,
-    order: u64,
+pub(super) struct Source {
+    pub model: VertexModel,
+    pub higher: Option<HigherModel>,
+    pub ell: f64,
+    pub order: u64,
 }
 
 impl Source {
@@ -905,13 +906,8 @@ struct Inherited {
 
 /// Interior vertices inherit the nearest smooth boundary vertex's model (Dijkstra along mesh
 /// edges from the smooth boundary vertices that are not `in_plane_3d`, cut off at decay · ℓ)
-/// with weight γ = 1 − d / (decay · ℓ), and its [`HigherModel`]. On a rank's part of a
-/// distributed mesh (`share`) the sources are its computed vertices and those of the other
-/// ranks, whose distances and models come in as records over the ranks' borders; each round
-/// relaxes the computed vertices from scratch from the latest records, until no record
-/// changes on any rank. Each vertex's nearest path is the unique fixed point of "a vertex
-/// takes the nearest of its neighbours' paths within their sources' cut-off", ties going as
-/// in the serial Dijkstra ([`Reach::before`]), so the computed vertices get the serial result.
+/// with weight γ = 1 − d / (decay · ℓ), and its [`HigherModel`]; on a rank's part of a
+/// distributed mesh (`share`), the whole mesh's ([`nearest_shared`]).
 #[allow(clippy::too_many_arguments)]
 fn inherit_interior(
     mesh: &LinearMesh,
@@ -924,106 +920,36 @@ fn inherit_interior(
     share: Option<&dyn InheritShare>,
 ) -> Inherited {
     let nv = mesh.n_vertices();
-    let computes = |v: usize| share.is_none_or(|s| s.computes(v));
-    let order = |v: u32| share.map_or(u64::from(v), |s| s.order(v as usize));
-    let (reach, remote) = {
+    let nearest = {
         let (models, higher) = (&*models, &*higher);
-        let local_source = |v: usize| Source {
-            model: models[v].expect("sources have models"),
-            higher: higher[v],
-            ell: ell[v],
-            order: order(v as u32),
+        let order = |v: u32| share.map_or(u64::from(v), |s| s.order(v as usize));
+        let source = |v: usize| {
+            let model = models[v].filter(|_| !in_plane_3d(v))?;
+            Some(Source {
+                model,
+                higher: higher[v],
+                ell: ell[v],
+                order: order(v as u32),
+            })
         };
-        let adj = edge_adjacency(topo, nv);
-        let is_source = |v: usize| models[v].is_some() && !in_plane_3d(v) && computes(v);
-        let relaxable = |w: usize| computes(w) && !topo.vertex_on_boundary[w];
-        // Sources received from other ranks (slot nv + i), and the local slot of a computed
-        // source by its order.
-        let mut remote: Vec<Source> = Vec::new();
-        let mut slot_of: HashMap<u64, u32> = HashMap::new();
-        if share.is_some() {
-            slot_of.extend(
-                (0..nv)
-                    .filter(|&v| is_source(v))
-                    .map(|v| (order(v as u32), v as u32)),
-            );
-        }
-        let mut seeds = vec![Reach::NONE; nv];
-        loop {
-            let mut reach: Vec<Reach> = (0..nv)
-                .map(|v| match (is_source(v), computes(v)) {
-                    (true, _) => Reach {
-                        dist: 0.0,
-                        via: (0.0, order(v as u32)),
-                        src: v as u32,
-                    },
-                    (false, true) => Reach::NONE,
-                    (false, false) => seeds[v],
-                })
-                .collect();
-            let cutoff = |slot: u32| {
-                let l = match (slot as usize).checked_sub(nv) {
-                    None => ell[slot as usize],
-                    Some(i) => remote[i].ell,
-                };
-                decay * l
-            };
-            nearest_sources(mesh, &adj, &mut reach, &relaxable, &cutoff, &order);
-            let Some(share) = share else {
-                break (reach, remote);
-            };
-            let mut records = vec![0.0; nv * RECORD_LEN];
-            for (r, out) in reach.iter().zip(records.chunks_exact_mut(RECORD_LEN)) {
-                match (r.src as usize).checked_sub(nv) {
-                    _ if r.src == NONE => out[0] = f64::INFINITY,
-                    None => local_source(r.src as usize).write(r, out),
-                    Some(i) => remote[i].write(r, out),
-                }
-            }
-            share.exchange(&mut records);
-            let mut changed = false;
-            for v in (0..nv).filter(|&v| !computes(v)) {
-                let new = match Source::read(&records[v * RECORD_LEN..(v + 1) * RECORD_LEN]) {
-                    None => Reach::NONE,
-                    Some((r, s)) => {
-                        let src = *slot_of.entry(s.order).or_insert_with(|| {
-                            remote.push(s);
-                            (nv + remote.len() - 1) as u32
-                        });
-                        Reach { src, ..r }
-                    }
-                };
-                changed |= new != seeds[v];
-                seeds[v] = new;
-            }
-            if !share.any(changed) {
-                break (reach, remote);
-            }
-        }
+        let adj = adjacency(nv, topo.edges.iter().copied());
+        let relaxable = |w: usize| !topo.vertex_on_boundary[w];
+        nearest_shared(mesh, &adj, &source, &relaxable, decay, share)
     };
     let mut out = Inherited {
         vertices: 0,
         sources: vec![NONE; nv],
         scale: vec![f64::NAN; nv],
     };
-    for (v, r) in reach.iter().enumerate() {
-        if r.src == NONE {
+    for (v, n) in nearest.iter().enumerate() {
+        let Some(n) = n else {
             continue;
-        }
-        let s = match (r.src as usize).checked_sub(nv) {
-            None => Source {
-                model: models[r.src as usize].expect("sources have models"),
-                higher: higher[r.src as usize],
-                ell: ell[r.src as usize],
-                order: 0,
-            },
-            Some(i) => remote[i],
         };
-        out.sources[v] = if (r.src as usize) < nv { r.src } else { NONE };
+        let s = &n.source;
+        out.sources[v] = n.local;
         out.scale[v] = s.ell;
-        // A source's path starts at itself; an interior vertex's at a neighbour.
-        if r.via.1 != order(v as u32) {
-            let g = 1.0 - r.dist / (decay * s.ell);
+        if !n.is_source {
+            let g = 1.0 - n.dist / (decay * s.ell);
             if g > 0.0 {
                 models[v] = Some(VertexModel {
                     weight: g,
@@ -1037,10 +963,130 @@ fn inherit_interior(
     out
 }
 
-/// The edge neighbours of every vertex: offsets (n + 1) into the list of neighbours.
-fn edge_adjacency(topo: &Topology, nv: usize) -> (Vec<u32>, Vec<u32>) {
+/// A vertex's nearest source ([`nearest_shared`]).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Nearest {
+    /// Distance along the edges.
+    pub dist: f64,
+    /// The source's local index ([`NONE`]: a source another rank holds).
+    pub local: u32,
+    /// Whether the vertex is its own source.
+    pub is_source: bool,
+    pub source: Source,
+}
+
+/// Multi-source Dijkstra along the edges `adj` ([`adjacency`]): the vertices `source` gives
+/// a model to are the sources, and a `relaxable` vertex takes the nearest path a neighbour
+/// hands on within decay · ℓ of its source ([`Reach::before`]). On a rank's part of a
+/// distributed mesh (`share`) the sources are its computed vertices and those of the other
+/// ranks, whose distances and models come in as records over the ranks' borders; each round
+/// relaxes the computed vertices from scratch from the latest records, until no record
+/// changes on any rank. Each vertex's nearest path is the unique fixed point of "a vertex
+/// takes the nearest of its neighbours' paths within their sources' cut-off", ties going as
+/// in the serial Dijkstra, so the computed vertices get the serial result.
+pub(super) fn nearest_shared(
+    mesh: &LinearMesh,
+    adj: &(Vec<u32>, Vec<u32>),
+    source: &dyn Fn(usize) -> Option<Source>,
+    relaxable: &dyn Fn(usize) -> bool,
+    decay: f64,
+    share: Option<&dyn InheritShare>,
+) -> Vec<Option<Nearest>> {
+    let nv = mesh.n_vertices();
+    let computes = |v: usize| share.is_none_or(|s| s.computes(v));
+    let order = |v: u32| share.map_or(u64::from(v), |s| s.order(v as usize));
+    let sources: Vec<Option<Source>> = (0..nv).map(|v| source(v).filter(|_| computes(v))).collect();
+    let relaxable = |w: usize| computes(w) && relaxable(w);
+    // Sources received from other ranks (slot nv + i), and the local slot of a computed
+    // source by its order.
+    let mut remote: Vec<Source> = Vec::new();
+    let mut slot_of: HashMap<u64, u32> = HashMap::new();
+    if share.is_some() {
+        slot_of.extend(
+            (0..nv)
+                .filter(|&v| sources[v].is_some())
+                .map(|v| (order(v as u32), v as u32)),
+        );
+    }
+    let mut seeds = vec![Reach::NONE; nv];
+    let reach = loop {
+        let mut reach: Vec<Reach> = (0..nv)
+            .map(|v| match (&sources[v], computes(v)) {
+                (Some(_), _) => Reach {
+                    dist: 0.0,
+                    via: (0.0, order(v as u32)),
+                    src: v as u32,
+                },
+                (None, true) => Reach::NONE,
+                (None, false) => seeds[v],
+            })
+            .collect();
+        let slot = |src: u32| -> &Source {
+            match (src as usize).checked_sub(nv) {
+                None => sources[src as usize].as_ref().expect("a source"),
+                Some(i) => &remote[i],
+            }
+        };
+        let cutoff = |src: u32| decay * slot(src).ell;
+        nearest_sources(mesh, adj, &mut reach, &relaxable, &cutoff, &order);
+        let Some(share) = share else {
+            break reach;
+        };
+        let mut records = vec![0.0; nv * RECORD_LEN];
+        for (r, out) in reach.iter().zip(records.chunks_exact_mut(RECORD_LEN)) {
+            if r.src == NONE {
+                out[0] = f64::INFINITY;
+            } else {
+                slot(r.src).write(r, out);
+            }
+        }
+        share.exchange(&mut records);
+        let mut changed = false;
+        for v in (0..nv).filter(|&v| !computes(v)) {
+            let new = match Source::read(&records[v * RECORD_LEN..(v + 1) * RECORD_LEN]) {
+                None => Reach::NONE,
+                Some((r, s)) => {
+                    let src = *slot_of.entry(s.order).or_insert_with(|| {
+                        remote.push(s);
+                        (nv + remote.len() - 1) as u32
+                    });
+                    Reach { src, ..r }
+                }
+            };
+            changed |= new != seeds[v];
+            seeds[v] = new;
+        }
+        if !share.any(changed) {
+            break reach;
+        }
+    };
+    reach
+        .iter()
+        .enumerate()
+        .map(|(v, r)| {
+            let i = r.src as usize;
+            (r.src != NONE).then(|| Nearest {
+                dist: r.dist,
+                local: if i < nv { r.src } else { NONE },
+                // A source's path starts at itself; any other vertex's at a neighbour.
+                is_source: r.via.1 == order(v as u32),
+                source: match i.checked_sub(nv) {
+                    None => sources[i].expect("a source"),
+                    Some(k) => remote[k],
+                },
+            })
+        })
+        .collect()
+}
+
+/// The neighbours of every vertex along `edges`: offsets (`nv` + 1) into the list of
+/// neighbours.
+pub(super) fn adjacency(
+    nv: usize,
+    edges: impl Iterator<Item = [u32; 2]> + Clone,
+) -> (Vec<u32>, Vec<u32>) {
     let mut offsets = vec![0u32; nv + 1];
-    for e in &topo.edges {
+    for e in edges.clone() {
         offsets[e[0] as usize + 1] += 1;
         offsets[e[1] as usize + 1] += 1;
     }
@@ -1049,7 +1095,7 @@ fn edge_adjacency(topo: &Topology, nv: usize) -> (Vec<u32>, Vec<u32>) {
     }
     let mut fill = offsets.clone();
     let mut adj = vec![0u32; offsets[nv] as usize];
-    for e in &topo.edges {
+    for e in edges {
         for (a, b) in [(e[0], e[1]), (e[1], e[0])] {
             adj[fill[a as usize] as usize] = b;
             fill[a as usize] += 1;
@@ -1058,7 +1104,7 @@ fn edge_adjacency(topo: &Topology, nv: usize) -> (Vec<u32>, Vec<u32>) {
     (offsets, adj)
 }
 
-/// Dijkstra along the edges (`adj`, [`edge_adjacency`]) from the vertices whose `reach` is
+/// Dijkstra along the edges (`adj`, [`adjacency`]) from the vertices whose `reach` is
 /// finite: a `relaxable` vertex takes the nearest path ([`Reach::before`]) a neighbour hands
 /// on within its source's `cutoff`; vertices are settled in the order of (distance, `order`).
 fn nearest_sources(
