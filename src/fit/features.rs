@@ -77,7 +77,9 @@ impl FeatureModels {
     /// patch's facet normals and the patch normal at a vertex (beyond it: no model); the
     /// in-plane models of planar patches decay over `decay` × the rim's edge length. `fan`
     /// holds the boundary facets at each vertex and `smooth` the smooth vertices' models,
-    /// through which the patch models' second rings are reached.
+    /// through which the patch models' second rings are reached; `share` as in
+    /// [`super::SmoothTargets::build_shared`].
+    #[allow(clippy::too_many_arguments)]
     pub fn build(
         mesh: &LinearMesh,
         topo: &Topology,

@@ -811,7 +811,8 @@ pub trait InheritShare {
 
 /// Values per vertex in the records of [`InheritShare::exchange`]: the distance to the source
 /// (∞: none), the predecessor's distance and order, the source's order and boundary edge
-/// length ℓ, its model's normal and H, and its [`HigherModel`] (a flag, then the model).
+/// length ℓ, its model's normal and H, and its height function's cubic and quartic terms (a
+/// flag, then the terms).
 pub const RECORD_LEN: usize = 5 + 3 + 9 + 1 + HigherModel::LEN;
 
 /// A vertex's place in the inheritance: the distance along mesh edges to its source, the
@@ -972,6 +973,7 @@ pub(super) struct Nearest {
     pub local: u32,
     /// Whether the vertex is its own source.
     pub is_source: bool,
+    /// What the source hands on.
     pub source: Source,
 }
 
