@@ -533,13 +533,21 @@ fn share_pass(
             for (m, x) in misfit.iter_mut().zip(marks) {
                 *m |= x;
             }
-            s = clock.run(Stage::Spline, || {
-                setup.build_with_misfits(job, &[], &misfit)
-            });
+            let previous = std::mem::replace(
+                &mut s,
+                clock.run(Stage::Spline, || {
+                    setup.build_with_misfits(job, &[], &misfit)
+                }),
+            );
             halo = clock.run(Stage::Partition, || {
                 super::local::halo(comm, local, topo, &s)
             });
-            (cg, nonzeros) = fit_stage(j, clock, &mut s, &halo, None)?;
+            // The refit starts from this fit where the two spaces share control points, as
+            // the serial refit does (`pipeline::spline::fit_demoting_misfits`): a cold start
+            // stops the CG elsewhere.
+            let start = spline::carry_over(&previous, &previous.control_points, &s);
+            drop(previous);
+            (cg, nonzeros) = fit_stage(j, clock, &mut s, &halo, Some(&start))?;
         }
     }
     bytes[0] += comm.bytes_sent() - before_fit;
@@ -672,7 +680,11 @@ fn run_share(
         ..job
     };
     let mut setup = clock.run(Stage::Spline, || {
-        agree(comm, SplineSetup::with_seams(&uniform_job, seams))
+        let inherit = super::local::VertexHalo::new(comm, &local);
+        agree(
+            comm,
+            SplineSetup::with_seams(&uniform_job, seams, Some(&inherit)),
+        )
     })?;
     let mine: Vec<usize> = (0..local.n_owned).collect();
     let mut passes = RankPasses {

@@ -12,6 +12,7 @@
 use super::cg::Halo;
 use super::comm::Comm;
 use super::read::LocalMesh;
+use crate::fit::{InheritShare, RECORD_LEN};
 use crate::mesh::Topology;
 use crate::spline::{ControlPoint, ElementRows, SplineSpace};
 use crate::validity::blend::BlendShare;
@@ -191,5 +192,122 @@ impl BlendShare for LocalShare<'_> {
     }
     fn global(&self, e: usize) -> usize {
         self.global[e] as usize
+    }
+}
+
+/// [`InheritShare`] of a ghosted sub-mesh: a rank computes the vertices of its own elements;
+/// the other vertices of the elements around them take the records of the rank owning the
+/// lowest global element among the ghosts at that vertex (a vertex of one of its own
+/// elements). The whole mesh's vertex order is the node tags' (the file's order, as the
+/// serial reader numbers the vertices, wherever the tags increase through the file).
+pub struct VertexHalo<'a> {
+    comm: &'a dyn Comm,
+    global_vertex: &'a [u64],
+    computed: Vec<bool>,
+    /// Per rank: the local vertices whose records it asked for, in its order.
+    give: Vec<(usize, Vec<u32>)>,
+    /// Per rank: the local vertices whose records come from it, in the order asked.
+    take: Vec<(usize, Vec<u32>)>,
+}
+
+impl<'a> VertexHalo<'a> {
+    /// The halo of `local`'s vertices (collective: one exchange of the requests).
+    pub fn new(comm: &'a dyn Comm, local: &'a LocalMesh) -> Self {
+        let (mesh, size) = (&local.mesh, comm.size());
+        let mut computed = vec![false; mesh.n_vertices()];
+        for e in 0..local.n_owned {
+            for &v in mesh.element(e) {
+                computed[v as usize] = true;
+            }
+        }
+        // Per vertex needed: the lowest global ghost element at it.
+        let mut from: HashMap<u32, (u64, usize)> = HashMap::new();
+        for e in local.n_owned..mesh.n_elements() {
+            let vs = mesh.element(e);
+            if !vs.iter().any(|&v| computed[v as usize]) {
+                continue;
+            }
+            let g = local.global_element[e];
+            for &v in vs.iter().filter(|&&v| !computed[v as usize]) {
+                let at = from.entry(v).or_insert((g, e));
+                if g < at.0 {
+                    *at = (g, e);
+                }
+            }
+        }
+        let mut take = vec![Vec::new(); size];
+        for (&v, &(_, e)) in &from {
+            take[local.owner[e] as usize].push(v);
+        }
+        for t in &mut take {
+            t.sort_unstable_by_key(|&v| local.global_vertex[v as usize]);
+        }
+        let send: Vec<Vec<f64>> = take
+            .iter()
+            .map(|t| {
+                t.iter()
+                    .map(|&v| local.global_vertex[v as usize] as f64)
+                    .collect()
+            })
+            .collect();
+        let asked = comm.exchange_f64(&send);
+        let of_tag: HashMap<u64, u32> = (0..mesh.n_vertices() as u32)
+            .filter(|&v| computed[v as usize])
+            .map(|v| (local.global_vertex[v as usize], v))
+            .collect();
+        let give = asked
+            .into_iter()
+            .enumerate()
+            .filter(|(_, a)| !a.is_empty())
+            .map(|(q, a)| {
+                // A vertex asked for is one of this rank's own elements' (the asker holds
+                // that element as a ghost).
+                let list = a.iter().map(|&t| of_tag[&(t as u64)]).collect();
+                (q, list)
+            })
+            .collect();
+        let take = take
+            .into_iter()
+            .enumerate()
+            .filter(|(_, t)| !t.is_empty())
+            .collect();
+        VertexHalo {
+            comm,
+            global_vertex: &local.global_vertex,
+            computed,
+            give,
+            take,
+        }
+    }
+}
+
+impl InheritShare for VertexHalo<'_> {
+    fn computes(&self, v: usize) -> bool {
+        self.computed[v]
+    }
+    fn order(&self, v: usize) -> u64 {
+        self.global_vertex[v]
+    }
+    fn exchange(&self, records: &mut [f64]) {
+        let n = RECORD_LEN;
+        let mut send = vec![Vec::new(); self.comm.size()];
+        for (q, list) in &self.give {
+            send[*q] = list
+                .iter()
+                .flat_map(|&v| &records[v as usize * n..(v as usize + 1) * n])
+                .copied()
+                .collect();
+        }
+        let recv = self.comm.exchange_f64(&send);
+        for (q, list) in &self.take {
+            for (&v, r) in list.iter().zip(recv[*q].chunks_exact(n)) {
+                records[v as usize * n..(v as usize + 1) * n].copy_from_slice(r);
+            }
+        }
+    }
+    fn any(&self, local: bool) -> bool {
+        let mut x = [u64::from(local)];
+        self.comm.sum_u64(&mut x);
+        x[0] > 0
     }
 }

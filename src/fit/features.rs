@@ -18,16 +18,15 @@
 //!   coplanar vertices), so every step of the line search keeps them there.
 
 use super::smooth::{
-    Height, HigherModel, RingScratch, VertexModel, fan_model, fit_parabola, refine_model,
-    refine_patch_model, two_ring_from,
+    Height, HigherModel, InheritShare, RingScratch, Source, VertexModel, adjacency, fan_model,
+    fit_parabola, nearest_shared, refine_model, refine_patch_model, two_ring_from,
 };
 use crate::math::linalg::DVec3;
 use crate::math::reference::HEX_VERTEX_PARAMS;
 use crate::mesh::features::{Features, RIM_Q2_MIN_ASPECT};
 use crate::mesh::{LinearMesh, Topology};
 use crate::spline::{ControlPoint, SplineSpace};
-use std::cmp::Reverse;
-use std::collections::{BinaryHeap, HashMap};
+use std::collections::HashMap;
 
 /// Per-patch and per-curve boundary models at feature vertices.
 #[derive(Clone, Debug, Default)]
@@ -78,7 +77,9 @@ impl FeatureModels {
     /// patch's facet normals and the patch normal at a vertex (beyond it: no model); the
     /// in-plane models of planar patches decay over `decay` × the rim's edge length. `fan`
     /// holds the boundary facets at each vertex and `smooth` the smooth vertices' models,
-    /// through which the patch models' second rings are reached.
+    /// through which the patch models' second rings are reached; `share` as in
+    /// [`super::SmoothTargets::build_shared`].
+    #[allow(clippy::too_many_arguments)]
     pub fn build(
         mesh: &LinearMesh,
         topo: &Topology,
@@ -87,6 +88,7 @@ impl FeatureModels {
         decay: f64,
         fan_all: &[Vec<u32>],
         smooth: &[Option<VertexModel>],
+        share: Option<&dyn InheritShare>,
     ) -> FeatureModels {
         let mut out = FeatureModels {
             edge_mask: features.edge_mask.clone(),
@@ -240,7 +242,7 @@ impl FeatureModels {
                 }
             }
         }
-        out.in_plane_models(mesh, topo, features, &along, decay);
+        out.in_plane_models(mesh, topo, features, &along, decay, share);
         out
     }
 
@@ -248,7 +250,8 @@ impl FeatureModels {
     /// model (in the plane) for the patch, and the patch's other vertices inherit the model of
     /// the nearest rim vertex (along the patch's edges) with weight 1 − d / (`decay` · ℓ), ℓ
     /// the rim's edge length there — as interior vertices of a 2D mesh inherit its boundary's.
-    /// Those beyond reach keep a flat model.
+    /// Those beyond reach keep a flat model. On a rank's part of a distributed mesh
+    /// (`share`), the whole mesh's nearest rim vertices ([`nearest_shared`]).
     fn in_plane_models(
         &mut self,
         mesh: &LinearMesh,
@@ -256,9 +259,10 @@ impl FeatureModels {
         features: &Features,
         along: &HashMap<u32, Vec<u32>>,
         decay: f64,
+        share: Option<&dyn InheritShare>,
     ) {
         let x = |v: u32| DVec3::from(mesh.coords[v as usize]);
-        let mut adj: HashMap<u32, Vec<u32>> = HashMap::new();
+        let mut adj: Vec<[u32; 2]> = Vec::new();
         let mut plane_of: HashMap<u32, [f64; 3]> = HashMap::new();
         let mut rim: Vec<(u32, u32)> = Vec::new();
         for (i, &f) in topo.boundary_facets.iter().enumerate() {
@@ -269,9 +273,7 @@ impl FeatureModels {
             let e = topo.facet_elements[f as usize][0] as usize;
             let side = topo.facet_sides[f as usize][0] as usize;
             for ed in crate::mesh::features::face_edges(topo, e, side) {
-                let [a, b] = topo.edges[ed as usize];
-                adj.entry(a).or_default().push(b);
-                adj.entry(b).or_default().push(a);
+                adj.push(topo.edges[ed as usize]);
             }
             for &v in &topo.faces[f as usize] {
                 if features.vertex_mask[v as usize] {
@@ -284,8 +286,7 @@ impl FeatureModels {
         rim.sort_unstable();
         rim.dedup();
         // Rim vertices whose feature curve lies in the plane: the curve is the patch's boundary.
-        let mut heap = BinaryHeap::new();
-        let mut best: HashMap<u32, (f64, u32)> = HashMap::new();
+        let mut sources: HashMap<u32, VertexModel> = HashMap::new();
         for &(v, p) in &rim {
             let (Some(m), Some((n, _))) = (self.curve.get(&v), features.planes[p as usize]) else {
                 continue;
@@ -297,41 +298,36 @@ impl FeatureModels {
             if let Some(h) = self.rim_higher.get(&v) {
                 self.patch_higher.insert((v, p), *h);
             }
-            if best.insert(v, (0.0, v)).is_none() {
-                heap.push(Reverse((0u64, v)));
-            }
+            sources.insert(v, *m);
         }
         let ell = |s: u32| {
             let nbs = &along[&s];
             nbs.iter().map(|&w| (x(w) - x(s)).length()).sum::<f64>() / nbs.len() as f64
         };
-        while let Some(Reverse((bits, v))) = heap.pop() {
-            let (d, s) = best[&v];
-            if bits != d.to_bits() {
-                continue;
-            }
-            let cutoff = decay * ell(s);
-            for &w in adj.get(&v).map_or(&[][..], |a| &a[..]) {
-                if !plane_of.contains_key(&w) {
-                    continue;
-                }
-                let nd = d + (x(w) - x(v)).length();
-                if nd < cutoff && best.get(&w).is_none_or(|&(old, _)| nd < old) {
-                    best.insert(w, (nd, s));
-                    heap.push(Reverse((nd.to_bits(), w)));
-                }
-            }
-        }
+        let source = |v: usize| {
+            let v32 = v as u32;
+            Some(Source {
+                model: *sources.get(&v32)?,
+                higher: self.rim_higher.get(&v32).copied(),
+                ell: ell(v32),
+                order: share.map_or(v as u64, |s| s.order(v)),
+            })
+        };
+        let nv = mesh.n_vertices();
+        let adj = adjacency(nv, adj.iter().copied());
+        let relaxable = |w: usize| plane_of.contains_key(&(w as u32));
+        let nearest = nearest_shared(mesh, &adj, &source, &relaxable, decay, share);
         for (&v, &n) in &plane_of {
-            let model = match best.get(&v) {
-                Some(&(d, s)) => {
-                    if let Some(h) = self.rim_higher.get(&s) {
-                        self.in_plane_higher.insert(v, *h);
+            let model = match nearest[v as usize].filter(|n| !n.is_source) {
+                Some(near) => {
+                    let s = near.source;
+                    if let Some(h) = s.higher {
+                        self.in_plane_higher.insert(v, h);
                     }
-                    self.in_plane_scale.insert(v, ell(s));
+                    self.in_plane_scale.insert(v, s.ell);
                     VertexModel {
-                        weight: 1.0 - d / (decay * ell(s)),
-                        ..self.curve[&s]
+                        weight: 1.0 - near.dist / (decay * s.ell),
+                        ..s.model
                     }
                 }
                 None => flat(n),

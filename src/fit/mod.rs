@@ -35,7 +35,7 @@ pub mod smooth;
 use crate::params::{ParamError, above, in_range};
 pub use normal_matrix::{ElementBlocks, MatrixFree, NormalMatrix, mask_level, size_levels};
 use normal_matrix::{control_point_scales, sample_weight};
-pub use smooth::{SmoothParams, SmoothTargets};
+pub use smooth::{InheritShare, RECORD_LEN, SmoothParams, SmoothTargets};
 
 use crate::math::BezierNet;
 use crate::math::bernstein::bernstein2;
@@ -441,13 +441,24 @@ pub fn smooth_targets(
     topo: &Topology,
     params: &FitParams,
 ) -> Option<SmoothTargets> {
+    smooth_targets_shared(mesh, topo, params, None)
+}
+
+/// [`smooth_targets`] on a rank's part of a distributed mesh ([`SmoothTargets::build_shared`]).
+pub fn smooth_targets_shared(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    params: &FitParams,
+    share: Option<&dyn InheritShare>,
+) -> Option<SmoothTargets> {
     match params.targets {
         FitTargets::Chords => None,
-        FitTargets::Smooth(p) => Some(SmoothTargets::build_with_features(
+        FitTargets::Smooth(p) => Some(SmoothTargets::build_shared(
             mesh,
             topo,
             &p,
             params.features.as_deref(),
+            share,
         )),
     }
 }

@@ -111,7 +111,7 @@ pub(super) use higher::{
 pub(super) use one_ring::{fan_model, fit_parabola};
 use rayon::prelude::*;
 use std::cmp::Reverse;
-use std::collections::BinaryHeap;
+use std::collections::{BinaryHeap, HashMap};
 
 /// Parameters of the smooth-boundary reconstruction.
 #[deny(missing_docs)]
@@ -240,6 +240,19 @@ impl SmoothTargets {
         params: &SmoothParams,
         features: Option<&Features>,
     ) -> SmoothTargets {
+        Self::build_shared(mesh, topo, params, features, None)
+    }
+
+    /// [`SmoothTargets::build_with_features`] on a rank's part of a mesh distributed over
+    /// ranks (`share`, see [`InheritShare`]; `None`: the whole mesh): the vertices of the
+    /// rank's own elements inherit the whole mesh's interior models.
+    pub fn build_shared(
+        mesh: &LinearMesh,
+        topo: &Topology,
+        params: &SmoothParams,
+        features: Option<&Features>,
+        share: Option<&dyn InheritShare>,
+    ) -> SmoothTargets {
         let nv = mesh.n_vertices();
         let cos_max = params.feature_angle_deg.to_radians().cos();
         // Boundary fans: facets at each boundary vertex.
@@ -255,8 +268,9 @@ impl SmoothTargets {
         let smooth_vertices = models.iter().filter(|m| m.is_some()).count();
         let feature_vertices =
             topo.vertex_on_boundary.iter().filter(|&&b| b).count() - smooth_vertices;
-        let feature_models = features
-            .map(|f| FeatureModels::build(mesh, topo, f, cos_max, params.decay, &fan, &models));
+        let feature_models = features.map(|f| {
+            FeatureModels::build(mesh, topo, f, cos_max, params.decay, &fan, &models, share)
+        });
         // A 3D planar patch is its own 2D problem (its vertices take in-plane models below):
         // the cells next to it inherit from the curved boundary, not from the plane.
         let in_plane_3d = |v: usize| {
@@ -266,7 +280,7 @@ impl SmoothTargets {
                     .is_some_and(|f| f.in_plane.contains_key(&(v as u32)))
         };
 
-        let (blended_vertices, sources) = if params.decay > 0.0 {
+        let inherited = if params.decay > 0.0 {
             inherit_interior(
                 mesh,
                 topo,
@@ -275,16 +289,18 @@ impl SmoothTargets {
                 &in_plane_3d,
                 &mut models,
                 &mut higher,
+                share,
             )
         } else {
-            (0, Vec::new())
+            Inherited::default()
         };
+        let (blended_vertices, sources) = (inherited.vertices, inherited.sources);
         // A model's scale is its source's boundary edge length (every model so far is a
         // boundary vertex's own or inherited from its source).
         let mut scale: Vec<f64> = (0..nv)
-            .map(|v| match (models[v], sources.get(v)) {
+            .map(|v| match (models[v], inherited.scale.get(v)) {
                 (None, _) => f64::INFINITY,
-                (Some(_), Some(&s)) if s != NONE => ell[s as usize],
+                (Some(_), Some(&l)) if !l.is_nan() => l,
                 (Some(_), _) => ell[v],
             })
             .collect();
@@ -767,10 +783,133 @@ fn grid_pairs(topo: &Topology, fan: &[u32], v: u32) -> Option<[(u32, u32); 2]> {
     Some([(a, b), (c, d)])
 }
 
+/// A rank's part of a mesh distributed over ranks, as the interior inheritance
+/// ([`SmoothTargets::build_shared`]) needs it: which vertices the rank computes, their place
+/// in the whole mesh's vertex order, and the exchange of per-vertex records with the ranks
+/// around it.
+///
+/// A rank computes the vertices of its own elements: their edge neighbours, their boundary
+/// status and their boundary models are the whole mesh's (its ghost rings hold every element
+/// around them and the facets their models read), while the fringe of its ghost rings is cut
+/// out of the mesh and looks like boundary. Only computed vertices are sources and only they
+/// are relaxed; every other vertex around them takes the record of a rank that computes it,
+/// and the ranks repeat until no record changes, since a boundary layer's decay distance
+/// reaches across many element rings.
+pub trait InheritShare {
+    /// Whether this rank computes local vertex `v` (a vertex of one of its own elements).
+    fn computes(&self, v: usize) -> bool;
+    /// Local vertex `v`'s place in the whole mesh's vertex order (the order of the serial
+    /// run's vertex indices), below 2⁵³.
+    fn order(&self, v: usize) -> u64;
+    /// Collective: `records` holds [`RECORD_LEN`] values per local vertex; the records of
+    /// the vertices this rank does not compute but whose neighbours it does are replaced by
+    /// those of a rank that computes them.
+    fn exchange(&self, records: &mut [f64]);
+    /// Collective: whether `local` is true on any rank.
+    fn any(&self, local: bool) -> bool;
+}
+
+/// Values per vertex in the records of [`InheritShare::exchange`]: the distance to the source
+/// (∞: none), the predecessor's distance and order, the source's order and boundary edge
+/// length ℓ, its model's normal and H, and its height function's cubic and quartic terms (a
+/// flag, then the terms).
+pub const RECORD_LEN: usize = 5 + 3 + 9 + 1 + HigherModel::LEN;
+
+/// A vertex's place in the inheritance: the distance along mesh edges to its source, the
+/// distance and order of the predecessor on that path, and the source's slot ([`NONE`]:
+/// none; below the vertex count a local vertex, above it a source received from another rank).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Reach {
+    dist: f64,
+    via: (f64, u64),
+    src: u32,
+}
+
+impl Reach {
+    const NONE: Reach = Reach {
+        dist: f64::INFINITY,
+        via: (f64::INFINITY, u64::MAX),
+        src: NONE,
+    };
+
+    /// Whether `self` is nearer than `other`: by distance, then by the predecessor's distance
+    /// and order. The serial Dijkstra settles the vertices in that order of (distance, order)
+    /// and keeps a vertex's first path among equal distances, so this is its choice, and a
+    /// choice that does not depend on the order the relaxations come in.
+    fn before(&self, other: &Reach) -> bool {
+        (self.dist, self.via.0, self.via.1) < (other.dist, other.via.0, other.via.1)
+    }
+}
+
+/// The model a source hands on, its boundary edge length ℓ and its order.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Source {
+    pub model: VertexModel,
+    pub higher: Option<HigherModel>,
+    pub ell: f64,
+    pub order: u64,
+}
+
+impl Source {
+    /// Writes `reach` from this source into `out` ([`RECORD_LEN`] values).
+    fn write(&self, reach: &Reach, out: &mut [f64]) {
+        out[..5].copy_from_slice(&[
+            reach.dist,
+            reach.via.0,
+            reach.via.1 as f64,
+            self.order as f64,
+            self.ell,
+        ]);
+        out[5..8].copy_from_slice(&self.model.normal);
+        for (k, row) in self.model.h.iter().enumerate() {
+            out[8 + 3 * k..11 + 3 * k].copy_from_slice(row);
+        }
+        out[17] = f64::from(u8::from(self.higher.is_some()));
+        if let Some(h) = &self.higher {
+            h.write(&mut out[18..]);
+        }
+    }
+
+    /// The reach (its source slot unset) and source of a record, when it has a source.
+    fn read(r: &[f64]) -> Option<(Reach, Source)> {
+        if !r[0].is_finite() {
+            return None;
+        }
+        let a3 = |i: usize| [r[i], r[i + 1], r[i + 2]];
+        let reach = Reach {
+            dist: r[0],
+            via: (r[1], r[2] as u64),
+            src: NONE,
+        };
+        let source = Source {
+            model: VertexModel {
+                normal: a3(5),
+                h: [a3(8), a3(11), a3(14)],
+                weight: 1.0,
+            },
+            higher: (r[17] != 0.0).then(|| HigherModel::read(&r[18..])),
+            ell: r[4],
+            order: r[3] as u64,
+        };
+        Some((reach, source))
+    }
+}
+
+/// What the interior inheritance gives: how many interior vertices took a model, and per
+/// vertex its source's local index (itself for a source; [`NONE`] without one, or with a
+/// source another rank holds) and the source's boundary edge length ℓ (NaN without one).
+#[derive(Debug, Default)]
+struct Inherited {
+    vertices: usize,
+    sources: Vec<u32>,
+    scale: Vec<f64>,
+}
+
 /// Interior vertices inherit the nearest smooth boundary vertex's model (Dijkstra along mesh
 /// edges from the smooth boundary vertices that are not `in_plane_3d`, cut off at decay · ℓ)
-/// with weight γ = 1 − d / (decay · ℓ), and its [`HigherModel`]; returns how many did, and
-/// each vertex's source (itself for a source, `NONE` where none reached).
+/// with weight γ = 1 − d / (decay · ℓ), and its [`HigherModel`]; on a rank's part of a
+/// distributed mesh (`share`), the whole mesh's ([`nearest_shared`]).
+#[allow(clippy::too_many_arguments)]
 fn inherit_interior(
     mesh: &LinearMesh,
     topo: &Topology,
@@ -779,12 +918,177 @@ fn inherit_interior(
     in_plane_3d: &dyn Fn(usize) -> bool,
     models: &mut [Option<VertexModel>],
     higher: &mut [Option<HigherModel>],
-) -> (usize, Vec<u32>) {
+    share: Option<&dyn InheritShare>,
+) -> Inherited {
     let nv = mesh.n_vertices();
-    let x = |v: u32| DVec3::from(mesh.coords[v as usize]);
-    let mut blended_vertices = 0;
+    let nearest = {
+        let (models, higher) = (&*models, &*higher);
+        let order = |v: u32| share.map_or(u64::from(v), |s| s.order(v as usize));
+        let source = |v: usize| {
+            let model = models[v].filter(|_| !in_plane_3d(v))?;
+            Some(Source {
+                model,
+                higher: higher[v],
+                ell: ell[v],
+                order: order(v as u32),
+            })
+        };
+        let adj = adjacency(nv, topo.edges.iter().copied());
+        let relaxable = |w: usize| !topo.vertex_on_boundary[w];
+        nearest_shared(mesh, &adj, &source, &relaxable, decay, share)
+    };
+    let mut out = Inherited {
+        vertices: 0,
+        sources: vec![NONE; nv],
+        scale: vec![f64::NAN; nv],
+    };
+    for (v, n) in nearest.iter().enumerate() {
+        let Some(n) = n else {
+            continue;
+        };
+        let s = &n.source;
+        out.sources[v] = n.local;
+        out.scale[v] = s.ell;
+        if !n.is_source {
+            let g = 1.0 - n.dist / (decay * s.ell);
+            if g > 0.0 {
+                models[v] = Some(VertexModel {
+                    weight: g,
+                    ..s.model
+                });
+                higher[v] = s.higher;
+                out.vertices += 1;
+            }
+        }
+    }
+    out
+}
+
+/// A vertex's nearest source ([`nearest_shared`]).
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Nearest {
+    /// Distance along the edges.
+    pub dist: f64,
+    /// The source's local index ([`NONE`]: a source another rank holds).
+    pub local: u32,
+    /// Whether the vertex is its own source.
+    pub is_source: bool,
+    /// What the source hands on.
+    pub source: Source,
+}
+
+/// Multi-source Dijkstra along the edges `adj` ([`adjacency`]): the vertices `source` gives
+/// a model to are the sources, and a `relaxable` vertex takes the nearest path a neighbour
+/// hands on within decay · ℓ of its source ([`Reach::before`]). On a rank's part of a
+/// distributed mesh (`share`) the sources are its computed vertices and those of the other
+/// ranks, whose distances and models come in as records over the ranks' borders; each round
+/// relaxes the computed vertices from scratch from the latest records, until no record
+/// changes on any rank. Each vertex's nearest path is the unique fixed point of "a vertex
+/// takes the nearest of its neighbours' paths within their sources' cut-off", ties going as
+/// in the serial Dijkstra, so the computed vertices get the serial result.
+pub(super) fn nearest_shared(
+    mesh: &LinearMesh,
+    adj: &(Vec<u32>, Vec<u32>),
+    source: &dyn Fn(usize) -> Option<Source>,
+    relaxable: &dyn Fn(usize) -> bool,
+    decay: f64,
+    share: Option<&dyn InheritShare>,
+) -> Vec<Option<Nearest>> {
+    let nv = mesh.n_vertices();
+    let computes = |v: usize| share.is_none_or(|s| s.computes(v));
+    let order = |v: u32| share.map_or(u64::from(v), |s| s.order(v as usize));
+    let sources: Vec<Option<Source>> = (0..nv).map(|v| source(v).filter(|_| computes(v))).collect();
+    let relaxable = |w: usize| computes(w) && relaxable(w);
+    // Sources received from other ranks (slot nv + i), and the local slot of a computed
+    // source by its order.
+    let mut remote: Vec<Source> = Vec::new();
+    let mut slot_of: HashMap<u64, u32> = HashMap::new();
+    if share.is_some() {
+        slot_of.extend(
+            (0..nv)
+                .filter(|&v| sources[v].is_some())
+                .map(|v| (order(v as u32), v as u32)),
+        );
+    }
+    let mut seeds = vec![Reach::NONE; nv];
+    let reach = loop {
+        let mut reach: Vec<Reach> = (0..nv)
+            .map(|v| match (&sources[v], computes(v)) {
+                (Some(_), _) => Reach {
+                    dist: 0.0,
+                    via: (0.0, order(v as u32)),
+                    src: v as u32,
+                },
+                (None, true) => Reach::NONE,
+                (None, false) => seeds[v],
+            })
+            .collect();
+        let slot = |src: u32| -> &Source {
+            match (src as usize).checked_sub(nv) {
+                None => sources[src as usize].as_ref().expect("a source"),
+                Some(i) => &remote[i],
+            }
+        };
+        let cutoff = |src: u32| decay * slot(src).ell;
+        nearest_sources(mesh, adj, &mut reach, &relaxable, &cutoff, &order);
+        let Some(share) = share else {
+            break reach;
+        };
+        let mut records = vec![0.0; nv * RECORD_LEN];
+        for (r, out) in reach.iter().zip(records.chunks_exact_mut(RECORD_LEN)) {
+            if r.src == NONE {
+                out[0] = f64::INFINITY;
+            } else {
+                slot(r.src).write(r, out);
+            }
+        }
+        share.exchange(&mut records);
+        let mut changed = false;
+        for v in (0..nv).filter(|&v| !computes(v)) {
+            let new = match Source::read(&records[v * RECORD_LEN..(v + 1) * RECORD_LEN]) {
+                None => Reach::NONE,
+                Some((r, s)) => {
+                    let src = *slot_of.entry(s.order).or_insert_with(|| {
+                        remote.push(s);
+                        (nv + remote.len() - 1) as u32
+                    });
+                    Reach { src, ..r }
+                }
+            };
+            changed |= new != seeds[v];
+            seeds[v] = new;
+        }
+        if !share.any(changed) {
+            break reach;
+        }
+    };
+    reach
+        .iter()
+        .enumerate()
+        .map(|(v, r)| {
+            let i = r.src as usize;
+            (r.src != NONE).then(|| Nearest {
+                dist: r.dist,
+                local: if i < nv { r.src } else { NONE },
+                // A source's path starts at itself; any other vertex's at a neighbour.
+                is_source: r.via.1 == order(v as u32),
+                source: match i.checked_sub(nv) {
+                    None => sources[i].expect("a source"),
+                    Some(k) => remote[k],
+                },
+            })
+        })
+        .collect()
+}
+
+/// The neighbours of every vertex along `edges`: offsets (`nv` + 1) into the list of
+/// neighbours.
+pub(super) fn adjacency(
+    nv: usize,
+    edges: impl Iterator<Item = [u32; 2]> + Clone,
+) -> (Vec<u32>, Vec<u32>) {
     let mut offsets = vec![0u32; nv + 1];
-    for e in &topo.edges {
+    for e in edges.clone() {
         offsets[e[0] as usize + 1] += 1;
         offsets[e[1] as usize + 1] += 1;
     }
@@ -793,54 +1097,56 @@ fn inherit_interior(
     }
     let mut fill = offsets.clone();
     let mut adj = vec![0u32; offsets[nv] as usize];
-    for e in &topo.edges {
+    for e in edges {
         for (a, b) in [(e[0], e[1]), (e[1], e[0])] {
             adj[fill[a as usize] as usize] = b;
             fill[a as usize] += 1;
         }
     }
-    let mut dist = vec![f64::INFINITY; nv];
-    let mut source = vec![NONE; nv];
+    (offsets, adj)
+}
+
+/// Dijkstra along the edges (`adj`, [`adjacency`]) from the vertices whose `reach` is
+/// finite: a `relaxable` vertex takes the nearest path ([`Reach::before`]) a neighbour hands
+/// on within its source's `cutoff`; vertices are settled in the order of (distance, `order`).
+fn nearest_sources(
+    mesh: &LinearMesh,
+    (offsets, adj): &(Vec<u32>, Vec<u32>),
+    reach: &mut [Reach],
+    relaxable: &dyn Fn(usize) -> bool,
+    cutoff: &dyn Fn(u32) -> f64,
+    order: &dyn Fn(u32) -> u64,
+) {
+    let x = |v: u32| DVec3::from(mesh.coords[v as usize]);
     let mut heap = BinaryHeap::new();
-    for v in 0..nv {
-        if models[v].is_some() && !in_plane_3d(v) {
-            dist[v] = 0.0;
-            source[v] = v as u32;
-            heap.push(Reverse((0u64, v as u32)));
+    for (v, r) in reach.iter().enumerate() {
+        if r.dist.is_finite() {
+            heap.push(Reverse((r.dist.to_bits(), order(v as u32), v as u32)));
         }
     }
-    while let Some(Reverse((d_bits, v))) = heap.pop() {
+    while let Some(Reverse((d_bits, ov, v))) = heap.pop() {
         let d = f64::from_bits(d_bits);
-        if d > dist[v as usize] {
+        let r = reach[v as usize];
+        if d > r.dist {
             continue;
         }
-        let s = source[v as usize] as usize;
-        let cutoff = decay * ell[s];
+        let cut = cutoff(r.src);
         for &w in &adj[offsets[v as usize] as usize..offsets[v as usize + 1] as usize] {
-            if topo.vertex_on_boundary[w as usize] {
+            if !relaxable(w as usize) {
                 continue;
             }
             let nd = d + (x(w) - x(v)).length();
-            if nd < cutoff && nd < dist[w as usize] {
-                dist[w as usize] = nd;
-                source[w as usize] = s as u32;
-                heap.push(Reverse((nd.to_bits(), w)));
+            let next = Reach {
+                dist: nd,
+                via: (d, ov),
+                src: r.src,
+            };
+            if nd < cut && next.before(&reach[w as usize]) {
+                reach[w as usize] = next;
+                heap.push(Reverse((nd.to_bits(), order(w), w)));
             }
         }
     }
-    for v in 0..nv {
-        if !topo.vertex_on_boundary[v] && source[v] != NONE {
-            let s = source[v] as usize;
-            let g = 1.0 - dist[v] / (decay * ell[s]);
-            if g > 0.0 {
-                let m = models[s].expect("sources have models");
-                models[v] = Some(VertexModel { weight: g, ..m });
-                higher[v] = higher[s];
-                blended_vertices += 1;
-            }
-        }
-    }
-    (blended_vertices, source)
 }
 
 #[cfg(test)]

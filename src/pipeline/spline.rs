@@ -84,14 +84,17 @@ impl SplineSetup {
     /// ([`SplineSetup::glue_seams`]), so that everything fitted to the boundary sees their
     /// seams as interior.
     pub(crate) fn new(job: &Job, periodic: &[PeriodicPair]) -> Result<Self, CurveError> {
-        Self::with_seams(job, glue_seams(job, periodic))
+        Self::with_seams(job, glue_seams(job, periodic), None)
     }
 
     /// [`SplineSetup::new`] with its seams glued already, and why some pair stays apart (a
-    /// rank's sub-mesh glued by the distributed job, `seam::glue_share`).
+    /// rank's sub-mesh glued by the distributed job, `seam::glue_share`); on a rank's part of
+    /// a distributed mesh, `share` makes its smooth targets the whole mesh's
+    /// ([`crate::fit::InheritShare`]).
     pub(crate) fn with_seams(
         job: &Job,
         (seams, seam_c0): (Option<Glued>, Option<String>),
+        share: Option<&dyn crate::fit::InheritShare>,
     ) -> Result<Self, CurveError> {
         let view = seams
             .as_ref()
@@ -136,18 +139,19 @@ impl SplineSetup {
         };
         let fitted = options.geometry == Geometry::SplineFitted;
         let targets = if fitted {
-            crate::fit::smooth_targets(mesh, topo, &fit_params)
+            crate::fit::smooth_targets_shared(mesh, topo, &fit_params, share)
         } else {
             None
         };
         let blend_targets = match (&targets, fitted) {
-            (None, true) => crate::fit::smooth_targets(
+            (None, true) => crate::fit::smooth_targets_shared(
                 mesh,
                 topo,
                 &FitParams {
                     targets: FitTargets::Smooth(Default::default()),
                     ..fit_params.clone()
                 },
+                share,
             ),
             _ => None,
         };

@@ -70,6 +70,41 @@ fn form_in(k: &[[f64; 3]; 3], t1: DVec3, t2: DVec3) -> [f64; 3] {
 }
 
 impl HigherModel {
+    /// Values in a record ([`HigherModel::write`], [`HigherModel::read`]).
+    pub(crate) const LEN: usize = 26;
+
+    /// Writes the model into `out` (`LEN` values), to travel between ranks.
+    pub(crate) fn write(&self, out: &mut [f64]) {
+        let conic = self.conic.unwrap_or([0.0; 3]);
+        let flag = f64::from(u8::from(self.conic.is_some()));
+        let parts: [&[f64]; 8] = [
+            &self.origin,
+            &self.t[0],
+            &self.t[1],
+            &[self.scale],
+            &self.c,
+            &self.form,
+            &[flag],
+            &conic,
+        ];
+        for (o, x) in out.iter_mut().zip(parts.into_iter().flatten()) {
+            *o = *x;
+        }
+    }
+
+    /// The model [`HigherModel::write`] wrote into `r`.
+    pub(crate) fn read(r: &[f64]) -> HigherModel {
+        let a3 = |i: usize| [r[i], r[i + 1], r[i + 2]];
+        HigherModel {
+            origin: a3(0),
+            t: [a3(3), a3(6)],
+            scale: r[9],
+            c: std::array::from_fn(|k| r[10 + k]),
+            form: a3(19),
+            conic: (r[22] != 0.0).then(|| a3(23)),
+        }
+    }
+
     fn height(&self, x: [f64; 3]) -> f64 {
         let y = DVec3::from(x) - DVec3::from(self.origin);
         let (u, w) = (
