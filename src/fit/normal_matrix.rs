@@ -339,9 +339,10 @@ fn corner_of(l: [usize; 3]) -> usize {
 /// which samples lie on sharp features (the position weights), so one block per pattern is
 /// kept.
 pub struct ElementBlocks {
-    /// Per element: bit c (c < 8) for a boundary corner c, bit 8 + i for a sample i that takes
-    /// the feature weight, `DEEP_BIT` for an element a ring away from the boundary, the size
-    /// level from bit `LEVEL_SHIFT`.
+    /// Per element: bit c (c < 8) for a boundary corner c (of [`weighted_boundary`]), bit
+    /// 8 + i for a sample i that takes the feature weight, `DEEP_BIT` for an element a ring
+    /// away from that boundary, the size level in the 8 bits from `LEVEL_SHIFT`, bit
+    /// `PINNED_SHIFT` + c for a corner c at one of [`pinned_vertices`].
     pub masks: Vec<u64>,
     /// (G^d, G^r), row-major 3^d × 3^d, per mask.
     pub cache: HashMap<u64, (Vec<f64>, Vec<f64>)>,
@@ -367,14 +368,23 @@ pub(super) const LEVEL_SHIFT: u32 = 48;
 
 /// The weight factor 4^k of size level k (bits 48.. of the mask; see [`size_levels`]).
 fn size_scale(mask: u64) -> f64 {
-    let k = (mask >> LEVEL_SHIFT) as i32;
+    let k = ((mask >> LEVEL_SHIFT) & LEVEL_BITS) as i32;
     (4.0f64).powi(k)
 }
 
 /// The size level stored in a weight mask.
 pub fn mask_level(mask: u64) -> u16 {
-    (mask >> LEVEL_SHIFT) as u16
+    ((mask >> LEVEL_SHIFT) & LEVEL_BITS) as u16
 }
+
+/// The bits of a size level in a weight mask, above [`LEVEL_SHIFT`] ([`MAX_LEVEL`] < 256).
+pub(super) const LEVEL_BITS: u64 = 0xFF;
+
+/// Bit offset of the pinned corners in a weight mask: corner c of an element has bit
+/// `PINNED_SHIFT` + c when its vertex is one of [`pinned_vertices`]. It takes
+/// [`FitWeights::boundary_corner`] like a boundary corner, but spans no boundary midpoint and
+/// does not make the element's neighbours non-deep.
+const PINNED_SHIFT: usize = 56;
 
 fn sample_weight_unscaled(w: &FitWeights, mask: u64, i: usize, l: [usize; 3], corner: bool) -> f64 {
     if mask & (1 << (8 + i)) != 0 {
@@ -387,7 +397,7 @@ fn sample_weight_unscaled(w: &FitWeights, mask: u64, i: usize, l: [usize; 3], co
         } else {
             w.midpoint
         }
-    } else if mask & (1 << corner_of(l)) != 0 {
+    } else if mask & (1 << corner_of(l)) != 0 || mask & (1 << (PINNED_SHIFT + corner_of(l))) != 0 {
         w.boundary_corner
     } else {
         w.corner
@@ -574,12 +584,14 @@ impl ElementBlocks {
             (gd, gr)
         };
         let levels = size_levels(mesh);
+        let on_boundary = weighted_boundary(topo, features);
+        let pinned = pinned_vertices(topo, features, &on_boundary);
         // Vertices of the elements that touch the boundary: an element with none of them is
         // "deep" (a ring away from the wall).
-        let mut near = vec![false; topo.vertex_on_boundary.len()];
+        let mut near = vec![false; on_boundary.len()];
         for e in 0..space.n_elements() {
             let vs = mesh.element(e);
-            if vs.iter().any(|&v| topo.vertex_on_boundary[v as usize]) {
+            if vs.iter().any(|&v| on_boundary[v as usize]) {
                 vs.iter().for_each(|&v| near[v as usize] = true);
             }
         }
@@ -587,8 +599,11 @@ impl ElementBlocks {
             .map(|e| {
                 let mut m = 0u64;
                 for (c, &v) in mesh.element(e).iter().enumerate() {
-                    if topo.vertex_on_boundary[v as usize] {
+                    if on_boundary[v as usize] {
                         m |= 1 << c;
+                    }
+                    if pinned[v as usize] {
+                        m |= 1 << (PINNED_SHIFT + c);
                     }
                 }
                 if mesh.element(e).iter().all(|&v| !near[v as usize]) {
@@ -606,6 +621,68 @@ impl ElementBlocks {
         }
         ElementBlocks { masks, cache }
     }
+}
+
+/// The vertices that span boundary midpoints ([`FitWeights::boundary_midpoint`]) and make
+/// their elements' neighbours non-deep: the boundary vertices, less (3D) those whose boundary
+/// facets all lie in planar patches, unless they lie on a feature curve or corner. A planar
+/// patch is projected back onto its plane after the fit, and its midpoints have no smooth
+/// targets to follow; counted as boundary, the caps of a one- or three-layer extrusion made
+/// every element a boundary element (every midpoint at `boundary_midpoint`, none deep), and the
+/// fit lost the deep-midpoint weight that keeps graded layers valid in 2D (ellipse O-grid with
+/// wall cells 1e-6 growing by 1.05, one layer: every element held back). The vertices left out
+/// next to a feature keep the boundary corner weight ([`pinned_vertices`]).
+fn weighted_boundary(
+    topo: &Topology,
+    features: Option<&crate::mesh::features::Features>,
+) -> Vec<bool> {
+    let mut on = topo.vertex_on_boundary.clone();
+    let Some(f) = features.filter(|f| topo.dim == 3 && f.planes.iter().any(Option::is_some)) else {
+        return on;
+    };
+    on.iter_mut().for_each(|b| *b = false);
+    for (i, &facet) in topo.boundary_facets.iter().enumerate() {
+        if f.planes[f.facet_patch[i] as usize].is_none() {
+            for &v in topo.facet_vertices(facet as usize) {
+                on[v as usize] = true;
+            }
+        }
+    }
+    // Feature curves and corners keep the boundary weights: they are not projected back
+    // along their curve, and their neighbours' weights hold them at the input's vertices.
+    for (v, &m) in f.vertex_mask.iter().enumerate() {
+        on[v] |= m;
+    }
+    for &c in &f.corners {
+        on[c as usize] = true;
+    }
+    on
+}
+
+/// The boundary vertices left out of [`weighted_boundary`] that share a boundary facet with a
+/// feature vertex: they keep the boundary corner weight (`PINNED_SHIFT`), which holds the
+/// feature curves at the input's vertices (with the interior corner weight there, a box's
+/// feature vertices drifted 1e-8 along their straight edges). Pinning every planar vertex
+/// instead, against the interior midpoint weight next to it, doubled or tripled the CG
+/// iterations on meshes of planar patches (acoustics_mesh3d: 105 to 340).
+fn pinned_vertices(
+    topo: &Topology,
+    features: Option<&crate::mesh::features::Features>,
+    on: &[bool],
+) -> Vec<bool> {
+    let mut pinned = vec![false; on.len()];
+    let Some(f) = features else {
+        return pinned;
+    };
+    for &facet in &topo.boundary_facets {
+        let vs = topo.facet_vertices(facet as usize);
+        if vs.iter().any(|&v| f.vertex_mask[v as usize]) {
+            for &v in vs {
+                pinned[v as usize] = !on[v as usize];
+            }
+        }
+    }
+    pinned
 }
 
 /// K applied without assembling it: y = Σ_e E_eᵀ G_e E_e x, element by element (the
