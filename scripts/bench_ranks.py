@@ -2,9 +2,11 @@
 """The distributed `curve` against the serial run: largest node distance per element over the
 bounding-box diagonal, CG iterations and wall time, at each rank count.
 
-Generates a binary cylinder of about ELEMENTS hexes, runs the serial `curve` with
-`--knot-intervals uniform` (the knots every mpirun rank count uses) and `mpirun --oversubscribe
--np N` for each N, all with the same extra options, and prints one row per rank count. Nodes
+Generates a binary cylinder of about ELEMENTS hexes (or takes `--input`, a binary MSH 4.1
+file), runs the serial `curve` and `mpirun --oversubscribe -np N` for each N, all with the same
+extra options (the knots too: under mpirun `auto` chooses them as the serial run does), and
+prints one row per run: CG iterations, the knots used (intervals and passes), wall time, peak
+memory (the serial run's one thread; the largest rank's) and the largest node distance. Nodes
 are compared element by element (the same element tags, the same node order in each element),
 read with Gmsh's Python API (`POLYSPLINE_PYTHON` or this interpreter must import gmsh).
 
@@ -31,6 +33,21 @@ def run(cmd, env=None):
     if r.returncode != 0:
         sys.exit(f"{' '.join(cmd)} failed:\n{r.stderr}")
     return time.time() - t
+
+
+def serial_peak(cmd, env):
+    """Wall seconds and peak resident memory (bytes) of one process."""
+    import resource
+
+    t = time.time()
+    r = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    if r.returncode != 0:
+        sys.exit(f"{' '.join(cmd)} failed:\n{r.stderr}")
+    return time.time() - t, resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024
+
+
+def knots(r):
+    return f"{r.get('knot_intervals')} ({r.get('knot_passes')} pass{'es' if r.get('knot_passes') != 1 else ''})"
 
 
 def element_nodes(path):
@@ -68,32 +85,32 @@ def main():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--elements", type=int, default=1500)
     p.add_argument("--ranks", type=int, nargs="+", default=[2, 4])
+    p.add_argument("--input", default=None, help="a binary MSH 4.1 mesh instead of the cylinder")
     p.add_argument("--tmp", default=None)
     p.add_argument("extra", nargs="*")
     a = p.parse_args()
     tmp = a.tmp or tempfile.mkdtemp(prefix="ranks")
-    mesh = os.path.join(tmp, f"cylinder{a.elements}.msh")
+    mesh = a.input or os.path.join(tmp, f"cylinder{a.elements}.msh")
     if not os.path.exists(mesh):
         run([BIN, "generate", "cylinder", "--elements", str(a.elements), "--binary", "-o", mesh])
     env = dict(os.environ, OMPI_MCA_mpi_yield_when_idle="1", RAYON_NUM_THREADS="1",
                OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")
-    rows = []
     s_out, s_rep = os.path.join(tmp, "serial.msh"), os.path.join(tmp, "serial.json")
-    wall = run([BIN, "curve", "--knot-intervals", "uniform", mesh, "-o", s_out, "-q",
-                "--report", s_rep, *a.extra])
+    wall, peak = serial_peak([BIN, "curve", mesh, "-o", s_out, "-q", "--report", s_rep, *a.extra], env)
     serial, diag = element_nodes(s_out)
     r = json.load(open(s_rep))
-    print(f"cylinder: {r['elements']} hexes, diagonal {diag:.4g}; options: {' '.join(a.extra) or 'default'}")
-    print("| run | CG iterations | wall s | largest node distance / diagonal |")
-    print("|---|---|---|---|")
-    print(f"| serial | {r['cg_iterations']} | {wall:.2f} | — |")
+    print(f"{os.path.basename(mesh)}: {r['elements']} elements, diagonal {diag:.4g}; options: {' '.join(a.extra) or 'default'}")
+    print("| run | CG iterations | knots | wall s | peak MB | largest node distance / diagonal |")
+    print("|---|---|---|---|---|---|")
+    print(f"| serial | {r['cg_iterations']} | {knots(r)} | {wall:.2f} | {peak / 1e6:.0f} | — |")
     for np_ in a.ranks:
         out, rep = os.path.join(tmp, f"np{np_}.msh"), os.path.join(tmp, f"np{np_}.json")
         wall = run(["mpirun", "--oversubscribe", "-np", str(np_), BIN, "curve", mesh, "-o", out,
                     "-q", "--report", rep, *a.extra], env)
         d = largest_distance(serial, element_nodes(out)[0]) / diag
         r = json.load(open(rep))
-        print(f"| {np_} ranks | {r['cg_iterations']} | {wall:.2f} | {d:.2e} |")
+        peak = max(f["peak_memory_bytes"] for f in r.get("per_rank") or [{"peak_memory_bytes": 0}])
+        print(f"| {np_} ranks | {r['cg_iterations']} | {knots(r)} | {wall:.2f} | {peak / 1e6:.0f} | {d:.2e} |")
         sys.stdout.flush()
 
 

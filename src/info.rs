@@ -55,7 +55,8 @@ pub struct MeshInfo {
     /// Cells of the file that are neither elements nor boundary tags.
     pub ignored_cells: BTreeMap<String, usize>,
     /// Poly-spline space: elements with a spline stencil, constrained Q2 elements, control
-    /// points (spline control points and own Q2 nodes).
+    /// points (spline control points and own Q2 nodes); with translation pairs, of the space on
+    /// the glued mesh ([`MeshInfo::set_spline_space`]).
     pub spline_elements: usize,
     pub q2_elements: usize,
     pub control_points: usize,
@@ -155,24 +156,46 @@ impl MeshInfo {
         }
     }
 
-    /// The spline space's figures with the knot intervals of `params` (`mesh` and `topo` as
-    /// given to [`MeshInfo::new`]); nothing changes with uniform knots.
-    pub fn set_knots(
+    /// The spline space's figures as `curve` builds it: with the knot intervals of `params`,
+    /// on the mesh with its translation seams glued where `glued` is given (`mesh` and `topo`
+    /// as given to [`MeshInfo::new`], `glued` from [`crate::spline::seam::glue`] of `mesh`).
+    /// Graded knots are measured across the glued seams ([`crate::spline::seam::knot_weights`]).
+    /// Nothing changes with uniform knots and no seams.
+    pub fn set_spline_space(
         &mut self,
         mesh: &LinearMesh,
         topo: &Topology,
+        glued: Option<&crate::spline::seam::Glued>,
         params: &crate::spline::KnotParams,
     ) -> Result<(), crate::params::ParamError> {
+        use crate::spline::{KnotIntervals, Q2Reason, SplineSpace, seam};
         params.check()?;
-        if params.intervals != crate::spline::KnotIntervals::Graded {
+        let graded = params.intervals == KnotIntervals::Graded;
+        if !graded && glued.is_none() {
             return Ok(());
         }
-        let (space, info) = crate::spline::SplineSpace::build_for_knots(mesh, topo, params)?;
+        let on = |m: &LinearMesh, t: &Topology, knots: &crate::spline::Knots| {
+            let split = [(&knots.split[..], Q2Reason::KnotSplit)];
+            SplineSpace::build_with_knots(m, t, &split, knots.weights.as_deref())
+        };
+        // As `curve`: where the glued space cannot be put back on the input, the sides stay
+        // apart.
+        let glued_space = glued.and_then(|g| {
+            let knots = seam::knot_weights(mesh, g, params);
+            let mut space = on(&g.mesh, &g.topo, &knots);
+            seam::unwrap(&mut space, mesh, topo, g).ok()?;
+            Some((knots, space))
+        });
+        let (knots, space) = glued_space.unwrap_or_else(|| {
+            let knots = SplineSpace::knot_weights(mesh, topo, params);
+            let space = on(mesh, topo, &knots);
+            (knots, space)
+        });
         self.spline_elements = space.n_spline_elements();
         self.q2_elements = space.n_q2_elements();
         self.control_points = space.n_control_points();
         self.q2_reasons = q2_reasons(&space);
-        self.knot_surfaces = Some(info);
+        self.knot_surfaces = graded.then_some(knots.info);
         Ok(())
     }
 }

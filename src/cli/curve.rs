@@ -118,7 +118,7 @@ pub(crate) struct JobArgs {
     #[command(flatten)]
     knots: KnotArgs,
     /// Solver of the fit's normal equations: `auto` factors small systems (at most 12,000
-    /// control points in 2D, 1,000 in 3D) by sparse Cholesky on the CPU backend and solves
+    /// control points in 2D, 1,500 in 3D) by sparse Cholesky on the CPU backend and solves
     /// the rest by CG; `cg` and `cholesky` force one (distributed runs always use CG).
     #[arg(long, value_enum, default_value_t = FitSolver::default().into())]
     fit_solver: values::FitSolver,
@@ -338,18 +338,7 @@ impl JobArgs {
 }
 
 pub(super) fn run(args: Args) -> anyhow::Result<()> {
-    #[cfg_attr(not(feature = "mpi"), allow(unused_mut))]
-    let mut job = prepare_files(args.files)?;
-    // Under mpirun, at any rank count (one runs the serial job): mpirun's options.
-    #[cfg(feature = "mpi")]
-    if polyspline::distributed::launch::launched_size().is_some()
-        && let Some(o) = polyspline::distributed::launch::mpirun_options(
-            &job.options,
-            polyspline::distributed::launch::launched_rank().unwrap_or(0),
-        )
-    {
-        job.options = o;
-    }
+    let job = prepare_files(args.files)?;
     // Under mpirun with several ranks: the distributed job (docs/distributed.md).
     #[cfg(feature = "mpi")]
     if polyspline::distributed::launch::distributed() {

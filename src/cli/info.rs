@@ -40,13 +40,17 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
     let knots = args.knots.params();
     // Features as `curve` finds them: where it glues the translation seams, a seam is
     // interior and no feature.
-    let view = seam::glue(&linear, &pairs).map(|g| seam::interior_view(&linear, &topo, &g));
+    let glued = seam::glue(&linear, &pairs);
+    let view = glued
+        .as_ref()
+        .map(|g| seam::interior_view(&linear, &topo, g));
     let feature_topo = view.as_ref().map_or(&topo, |v| &v.topo);
     let feature_options = args.features.options();
     let found = feature_options.detect(&linear, feature_topo)?;
     let mut info = MeshInfo::new(&linear, &topo);
     info.features = Some(found.summary(&feature_options.params, feature_topo));
-    info.set_knots(&linear, &topo, &knots)?;
+    // The spline space as `curve` builds it: on the glued mesh, knots measured across seams.
+    info.set_spline_space(&linear, &topo, glued.as_ref(), &knots)?;
     let (lo, hi) = linear.bounding_box();
     let diagonal =
         ((hi[0] - lo[0]).powi(2) + (hi[1] - lo[1]).powi(2) + (hi[2] - lo[2]).powi(2)).sqrt();

@@ -321,6 +321,28 @@ fn flat(v: &mut [[f64; 3]]) -> &mut [f64] {
     v.as_flattened_mut()
 }
 
+/// The serial fit's check of a warm start (`fit::keep_closer_starts`) across the ranks: zero
+/// every component of the start `x` (consistent) whose residual ‖b − K x‖ is not below the
+/// cold start's ‖b‖, the norms summed over the control points' owners (`b_partial`: this
+/// rank's partial right-hand side). Collective; every rank zeroes the same components.
+pub fn keep_closer_starts(
+    comm: &dyn Comm,
+    halo: &Halo,
+    k: &LocalMatrix,
+    b_partial: &[[f64; 3]],
+    x: &mut [[f64; 3]],
+) {
+    let mut b = b_partial.to_vec();
+    halo.sum_partials(comm, flat(&mut b), 3);
+    let mut kx = vec![[0.0; 3]; x.len()];
+    k.apply(x, &mut kx);
+    halo.sum_partials(comm, flat(&mut kx), 3);
+    let owned = b.iter().zip(&kx).zip(&halo.owned).filter(|(_, o)| **o);
+    let mut norms = crate::fit::start_norms(owned.map(|(row, _)| row));
+    comm.sum_f64(&mut norms);
+    crate::fit::zero_farther_components(&norms, x);
+}
+
 /// Solve the distributed system for δ (consistent, on `halo`'s control points) from `x` = 0:
 /// `b` is this rank's partial right-hand side (summed here). A block preconditioner applies
 /// `aggregation`, made for it ([`Aggregation::for_preconditioner`]; without one it is

@@ -13,7 +13,10 @@
 //! elements to their Morton parts and read [`GHOST_DEPTH`] vertex rings of ghosts
 //! ([`super::share`], [`super::read`]); build the topology, features, smooth targets
 //! and spline space on that sub-mesh with the serial stage functions
-//! (`pipeline::spline::SplineSetup`); agree on the shared control points by keys of
+//! (`pipeline::spline::SplineSetup`); with graded or `auto` knots, survey the whole mesh's
+//! knot surfaces and take the serial knot weights ([`super::knots`]), `auto` deciding on the
+//! whole mesh's figures as the serial `curve_spline` does (`spline_passes`, one or two
+//! passes of what follows); agree on the shared control points by keys of
 //! global entity ids ([`super::local`]); assemble the normal equations over its own elements
 //! with the whole mesh's size levels ([`crate::fit::partial`]); solve them with the
 //! distributed CG ([`super::cg`]) under the serial preconditioner; run the certified blend on
@@ -23,7 +26,7 @@
 //! and the image sides' nodes made the transform of their masters' ([`super::periodic`]),
 //! check them and route them back to their file runs for the collective write; no rank reads
 //! or holds the whole mesh.
-//! Invariant: the result is the serial run's (with uniform knots) up to the order of the
+//! Invariant: the result is the serial run's (the same knots too) up to the order of the
 //! sums: the CG applies the serial preconditioner on the serial aggregates
 //! ([`super::blocks`]), so it takes the serial iterates and stops where the serial solve
 //! stops; the blend's factors are the serial search's for the same fitted map.
@@ -37,13 +40,13 @@ use super::sample::{RankOutput, sample_share};
 use super::share::read_share;
 use crate::mesh::Topology;
 use crate::pipeline::clock::{Clock, peak_memory_bytes};
-use crate::pipeline::spline::SplineSetup;
+use crate::pipeline::spline::{self, SplineSetup};
 use crate::pipeline::{
     CurveError, CurveOptions, CurveReport, Geometry, Job, LineSearchMode, Method, Outcomes,
     RankFigures, SpaceCounts, SplineFigures,
 };
 use crate::progress::{Silent, Stage};
-use crate::spline::{ElementClass, Q2Reason, SplineSpace};
+use crate::spline::{ElementClass, KnotIntervals, Q2Reason, SplineSpace};
 use crate::validity::CpuCertifier;
 use crate::validity::blend::{Blended, blend_search_shared};
 use std::collections::BTreeMap;
@@ -89,15 +92,6 @@ fn check_supported(options: &CurveOptions) -> Result<(), CurveError> {
     if options.features.edits.is_some() {
         return unsupported("--feature-edits");
     }
-    // Graded knot intervals average over whole knot surfaces, which cross the shares; the
-    // distributed run keeps uniform knots so that its result does not depend on the ranks.
-    // `auto` decides on the whole mesh's blend, which no rank sees: the launcher resolves it
-    // to uniform at every rank count, one included, and says so (`launch::mpirun_options`).
-    match options.knots.intervals {
-        crate::spline::KnotIntervals::Uniform => {}
-        crate::spline::KnotIntervals::Graded => return unsupported("--knot-intervals graded"),
-        crate::spline::KnotIntervals::Auto => return unsupported("--knot-intervals auto"),
-    }
     // The deep midpoints are found on the mesh a rank holds, whose cut fringe is not the
     // whole mesh's boundary.
     if options.fit.weights.deep_midpoint.is_some() {
@@ -128,7 +122,11 @@ struct Share {
     output: RankOutput,
     /// Own control points (counted once over the ranks), spline, Q2 and kink elements.
     counts: [usize; 4],
-    knot_intervals: crate::spline::KnotIntervals,
+    knot_intervals: KnotIntervals,
+    /// Spline passes run to choose the knots (`auto`: 1 or 2).
+    knot_passes: usize,
+    /// The whole mesh's knot surfaces, with graded knots.
+    knot_surfaces: Option<crate::spline::KnotSurfaceInfo>,
     input_msj: f64,
     halo: Halo,
     nonzeros: usize,
@@ -201,9 +199,10 @@ fn fit_stage(
     clock: &mut Clock,
     s: &mut SplineSpace,
     halo: &Halo,
+    start: Option<&[[f64; 3]]>,
 ) -> Result<(crate::solve::CgInfo, usize), CurveError> {
     let t = Instant::now();
-    let fit = fit_share(j, clock, s, halo);
+    let fit = fit_share(j, clock, s, halo, start);
     clock.add(Stage::Fit, t.elapsed().as_secs_f64());
     fit
 }
@@ -211,12 +210,16 @@ fn fit_stage(
 /// This rank's share of the fit: its rows of the normal equations with the whole mesh's size
 /// levels, the scaling agreed over the halo ([`Stage::FitAssembly`]), the distributed CG
 /// with its preconditioner's aggregates grown first ([`Stage::FitCg`]), and the fitted
-/// control points (projected onto planar patches) in `s`. Returns the CG's figures and the local matrix's stored entries.
+/// control points (projected onto planar patches) in `s`. The CG starts from the control
+/// points `start` where given (one per control point of `s`), as the serial fit's warm start
+/// does ([`crate::fit::fit_with_targets_from`]). Returns the CG's figures and the local
+/// matrix's stored entries.
 fn fit_share(
     j: &ShareJob,
     clock: &mut Clock,
     s: &mut SplineSpace,
     halo: &Halo,
+    start: Option<&[[f64; 3]]>,
 ) -> Result<(crate::solve::CgInfo, usize), CurveError> {
     let (comm, topo, setup) = (j.comm, j.job.topo, j.setup);
     let fit_params = &setup.fit_params;
@@ -227,7 +230,24 @@ fn fit_share(
         Aggregation::for_preconditioner(comm, halo, &stencils, &fit_params.cg.preconditioner)
     });
     let (k, b, scale) = clock.run(Stage::FitAssembly, || assemble_share(j, s, halo));
-    let mut delta = vec![[0.0; 3]; halo.len()];
+    // The unknowns are displacements from the initial control points, scaled like K.
+    let mut delta: Vec<[f64; 3]> = match start {
+        Some(start) => halo
+            .global
+            .iter()
+            .map(|&g| {
+                let (g, c) = (g as usize, s.control_points[g as usize]);
+                let d = scale.as_ref().map_or(1.0, |d| d[g]);
+                std::array::from_fn(|a| (start[g][a] - c[a]) / d)
+            })
+            .collect(),
+        None => vec![[0.0; 3]; halo.len()],
+    };
+    if start.is_some() {
+        clock.run(Stage::FitCg, || {
+            super::cg::keep_closer_starts(comm, halo, &k, &b, &mut delta)
+        });
+    }
     let cg = clock
         .run(Stage::FitCg, || {
             pcg(
@@ -375,6 +395,210 @@ fn misfit_marks(
     )
 }
 
+/// What the spline passes of a rank's share read: the job (on the sub-mesh, with the options
+/// asked for), the communicator and the sub-mesh's own elements.
+struct Passes<'a> {
+    comm: &'a dyn Comm,
+    local: &'a LocalMesh,
+    job: &'a Job<'a>,
+    mine: &'a [usize],
+}
+
+/// One spline pass of a rank's share: its space, halo and fit, and the certified blend's
+/// outcome (factors and nets owned, so that the setup can change knots between passes).
+struct Pass {
+    s: SplineSpace,
+    halo: Halo,
+    cg: crate::solve::CgInfo,
+    nonzeros: usize,
+    factors: Vec<f32>,
+    nets: crate::validity::blend::NetCache,
+    blend: crate::validity::blend::BlendInfo,
+}
+
+impl Pass {
+    /// Elements the blend holds back over the whole mesh (what `auto` decides on).
+    fn held(&self) -> usize {
+        self.blend.reduced_elements
+    }
+}
+
+/// The spline passes of the job's knot intervals on this rank's share, with the serial
+/// `curve_spline`'s rules (`pipeline::spline`): uniform or graded knots as asked; `auto`
+/// graded straight away where the whole mesh's graded share reaches
+/// [`crate::spline::AUTO_GRADED_SHARE`], else uniform, then graded (from the uniform fit)
+/// where the uniform blend holds back too many elements over the whole mesh, kept when
+/// decisive. Every rank decides alike: on the whole mesh's survey ([`super::knots`]) and the
+/// blends' global counts. `setup` ends with the knots of the pass returned; `bytes` adds the
+/// bytes sent in the fits and the blends.
+fn spline_passes(
+    p: &Passes,
+    setup: &mut SplineSetup,
+    clock: &mut Clock,
+    bytes: &mut [u64; 2],
+) -> Result<Pass, CurveError> {
+    let (comm, local, job) = (p.comm, p.local, p.job);
+    let options = job.options;
+    let weights = options.fit.weights;
+    let (uniform, graded) = (
+        options.with_knots(KnotIntervals::Uniform),
+        options.with_knots(KnotIntervals::Graded),
+    );
+    let uniform_job = Job {
+        options: &uniform,
+        ..*job
+    };
+    let graded_job = Job {
+        options: &graded,
+        ..*job
+    };
+    let survey = |clock: &mut Clock| {
+        clock.run(Stage::Spline, || {
+            super::knots::survey(comm, local, job.topo)
+        })
+    };
+    let graded_knots = |clock: &mut Clock, survey| {
+        clock.run(Stage::Spline, || {
+            super::knots::knots(comm, survey, local, job.topo, &graded.knots)
+        })
+    };
+    let pass =
+        |setup: &SplineSetup, job: &Job, clock: &mut Clock, bytes: &mut [u64; 2], previous| {
+            let j = ShareJob {
+                comm,
+                local,
+                job,
+                setup,
+                mine: p.mine,
+            };
+            share_pass(&j, clock, previous, bytes)
+        };
+    match options.knots.intervals {
+        KnotIntervals::Uniform => pass(setup, &uniform_job, clock, bytes, None),
+        KnotIntervals::Graded => {
+            let shared = survey(clock);
+            let knots = graded_knots(clock, shared);
+            setup.set_knots(KnotIntervals::Graded, knots, weights);
+            pass(setup, &graded_job, clock, bytes, None)
+        }
+        KnotIntervals::Auto => {
+            let shared = survey(clock);
+            if shared.graded_share >= crate::spline::AUTO_GRADED_SHARE {
+                let knots = graded_knots(clock, shared);
+                setup.set_knots(KnotIntervals::Graded, knots, weights);
+                return pass(setup, &graded_job, clock, bytes, None);
+            }
+            let near_uniform = shared.max_abs_log_ratio < crate::spline::AUTO_MIN_LOG_RATIO;
+            // Not held through the uniform pass (rank 0 holds the whole mesh's survey).
+            drop(shared);
+            let first = pass(setup, &uniform_job, clock, bytes, None)?;
+            let n_global = local.n_global as usize;
+            if !spline::auto_holds_back_too_many(first.held(), n_global) || near_uniform {
+                return Ok(first);
+            }
+            let shared = survey(clock);
+            let knots = graded_knots(clock, shared);
+            let uniform_knots = setup.set_knots(KnotIntervals::Graded, knots, weights);
+            setup.knot_passes = 2;
+            // From the uniform fit, as the serial second pass starts (from C0 with periodic
+            // pairs, whose passes have a setup each there).
+            let previous = options.periodic.pairs.is_empty().then_some(&first.s);
+            let second = pass(setup, &graded_job, clock, bytes, previous)?;
+            if spline::auto_graded_is_decisive(second.held(), first.held()) {
+                return Ok(second);
+            }
+            setup.set_knots(KnotIntervals::Uniform, uniform_knots, weights);
+            Ok(first)
+        }
+    }
+}
+
+/// One spline pass of this rank's share (see [`Pass`]): the space of `j.setup`, its halo, the
+/// fit (from `previous`'s fitted control points where given; in 2D with the serial run's
+/// post-fit Q2 rounds), then the certified blend, each rank judging its own elements.
+fn share_pass(
+    j: &ShareJob,
+    clock: &mut Clock,
+    previous: Option<&SplineSpace>,
+    bytes: &mut [u64; 2],
+) -> Result<Pass, CurveError> {
+    let (comm, local, job, setup) = (j.comm, j.local, j.job, j.setup);
+    let (mesh, topo, options) = (&local.mesh, job.topo, job.options);
+    let mut s = clock.run(Stage::Spline, || setup.build(job, &[]));
+    let mut halo = clock.run(Stage::Partition, || {
+        super::local::halo(comm, local, topo, &s)
+    });
+    let before_fit = comm.bytes_sent();
+    let start = previous.map(|p| spline::carry_over(p, &p.control_points, &s));
+    let (mut cg, mut nonzeros) = fit_stage(j, clock, &mut s, &halo, start.as_deref())?;
+    drop(start);
+    // The serial run's post-fit Q2 choice of 2D meshes (`pipeline::misfit`), its runs of
+    // misfit sides found over the whole boundary: mark, rebuild, refit.
+    if let Some(targets) = setup.targets.as_ref().filter(|_| topo.dim == 2) {
+        let mut misfit = vec![false; mesh.n_elements()];
+        for _ in 0..crate::pipeline::misfit::MISFIT_ROUNDS {
+            let marks = clock.run(Stage::Spline, || {
+                misfit_marks(comm, local, topo, &s, targets)
+            });
+            let Some(marks) = marks else {
+                break;
+            };
+            for (m, x) in misfit.iter_mut().zip(marks) {
+                *m |= x;
+            }
+            s = clock.run(Stage::Spline, || {
+                setup.build_with_misfits(job, &[], &misfit)
+            });
+            halo = clock.run(Stage::Partition, || {
+                super::local::halo(comm, local, topo, &s)
+            });
+            (cg, nonzeros) = fit_stage(j, clock, &mut s, &halo, None)?;
+        }
+    }
+    let before_blend = comm.bytes_sent();
+    bytes[0] += before_blend - before_fit;
+
+    // The certified blend, each rank judging its own elements.
+    let target_map = clock.run(Stage::Validity, || setup.target_map(job));
+    let (factors, nets, blend) = clock.run(Stage::Validity, || {
+        let blend_params = options
+            .line_search
+            .blend(options.line_search_mode == LineSearchMode::Global);
+        let mut blended = Blended::new(mesh, &target_map, &s, mesh, topo, Vec::new());
+        let share = LocalShare {
+            comm,
+            mine: j.mine,
+            global: &local.global_element,
+            local_of: local
+                .global_element
+                .iter()
+                .enumerate()
+                .map(|(i, &g)| (g, i))
+                .collect(),
+            n_local: mesh.n_elements(),
+            n_global: local.n_global as usize,
+        };
+        let blend = blend_search_shared(&CpuCertifier, &mut blended, &blend_params, &share)
+            .map_err(|source| CurveError::Blend {
+                input: job.input.to_owned(),
+                source,
+            });
+        let blend = agree(comm, blend)?;
+        let factors = std::mem::take(&mut blended.factors);
+        Ok::<_, CurveError>((factors, blended.into_cache(), blend))
+    })?;
+    bytes[1] += comm.bytes_sent() - before_blend;
+    Ok(Pass {
+        s,
+        halo,
+        cg,
+        nonzeros,
+        factors,
+        nets,
+        blend,
+    })
+}
+
 /// This rank's read, setup, fit, certified blend and sampling (see the module docs), each
 /// stage on `clock`.
 fn run_share(
@@ -407,78 +631,42 @@ fn run_share(
         topo: &topo,
         executor: executor.as_ref(),
     };
-    let (setup, mut s) = clock.run(Stage::Spline, || {
-        let setup = agree(comm, SplineSetup::new(&job, &[]))?;
-        let s = setup.build(&job, &[]);
-        Ok::<_, CurveError>((setup, s))
-    })?;
-    let mut halo = clock.run(Stage::Partition, || {
-        super::local::halo(comm, &local, &topo, &s)
-    });
-    let bytes_partition = comm.bytes_sent();
-
-    let mine: Vec<usize> = (0..local.n_owned).collect();
-    let j = ShareJob {
-        comm,
-        local: &local,
-        job: &job,
-        setup: &setup,
-        mine: &mine,
+    // The setup of uniform knots; graded ones are put in place once surveyed (as the serial
+    // `curve_spline` does: the features, kinks and targets do not depend on the knots).
+    let uniform = options.with_knots(KnotIntervals::Uniform);
+    let uniform_job = Job {
+        options: &uniform,
+        ..job
     };
-    let (mut cg, mut nonzeros) = fit_stage(&j, clock, &mut s, &halo)?;
-    // The serial run's post-fit Q2 choice of 2D meshes (`pipeline::misfit`), its runs of
-    // misfit sides found over the whole boundary: mark, rebuild, refit.
-    if let Some(targets) = setup.targets.as_ref().filter(|_| topo.dim == 2) {
-        let mut misfit = vec![false; mesh.n_elements()];
-        for _ in 0..crate::pipeline::misfit::MISFIT_ROUNDS {
-            let marks = clock.run(Stage::Spline, || {
-                misfit_marks(comm, &local, &topo, &s, targets)
-            });
-            let Some(marks) = marks else {
-                break;
-            };
-            for (m, x) in misfit.iter_mut().zip(marks) {
-                *m |= x;
-            }
-            s = clock.run(Stage::Spline, || {
-                setup.build_with_misfits(&job, &[], &misfit)
-            });
-            halo = clock.run(Stage::Partition, || {
-                super::local::halo(comm, &local, &topo, &s)
-            });
-            (cg, nonzeros) = fit_stage(&j, clock, &mut s, &halo)?;
-        }
-    }
-    let bytes_fit = comm.bytes_sent() - bytes_partition;
-
-    // The certified blend, each rank judging its own elements.
-    let target_map = clock.run(Stage::Validity, || setup.target_map(&job));
-    let (blended, blend) = clock.run(Stage::Validity, || {
-        let blend_params = options
-            .line_search
-            .blend(options.line_search_mode == LineSearchMode::Global);
-        let mut blended = Blended::new(mesh, &target_map, &s, mesh, &topo, Vec::new());
-        let share = LocalShare {
-            comm,
-            mine: &mine,
-            global: &local.global_element,
-            local_of: local
-                .global_element
-                .iter()
-                .enumerate()
-                .map(|(i, &g)| (g, i))
-                .collect(),
-            n_local: mesh.n_elements(),
-            n_global: local.n_global as usize,
-        };
-        let blend = blend_search_shared(&CpuCertifier, &mut blended, &blend_params, &share)
-            .map_err(|source| CurveError::Blend {
-                input: input.to_owned(),
-                source,
-            });
-        Ok::<_, CurveError>((blended, agree(comm, blend)?))
+    let mut setup = clock.run(Stage::Spline, || {
+        agree(comm, SplineSetup::new(&uniform_job, &[]))
     })?;
-    let bytes_validity = comm.bytes_sent() - bytes_fit - bytes_partition;
+    let mine: Vec<usize> = (0..local.n_owned).collect();
+    let mut bytes = [0u64; 2];
+    let pass = spline_passes(
+        &Passes {
+            comm,
+            local: &local,
+            job: &job,
+            mine: &mine,
+        },
+        &mut setup,
+        clock,
+        &mut bytes,
+    )?;
+    let [bytes_fit, bytes_validity] = bytes;
+    let Pass {
+        s,
+        halo,
+        cg,
+        nonzeros,
+        factors,
+        nets,
+        blend,
+    } = pass;
+    // The certified blend found, for sampling (its nets computed once).
+    let target_map = setup.target_map(&job);
+    let blended = Blended::with_cache(mesh, &target_map, &s, mesh, &topo, factors, nets);
     let damped_owned = damped_owned(&local, &blended);
     let bytes_before = comm.bytes_sent();
     let (output, features) = clock.run(Stage::Sample, || {
@@ -537,6 +725,8 @@ fn run_share(
         output,
         counts,
         knot_intervals,
+        knot_passes: setup.knot_passes,
+        knot_surfaces: (knot_intervals == KnotIntervals::Graded).then_some(setup.knot_info),
         input_msj,
         halo,
         nonzeros,
@@ -685,7 +875,7 @@ pub fn curve(
         q2_elements: counts[2],
         kink_elements: counts[3],
         knot_intervals: share.knot_intervals,
-        knot_passes: 1,
+        knot_passes: share.knot_passes,
         features: share.features.map(|mut f| {
             f.feature_vertex_deviation_max /= deviation.diagonal;
             f.planarity_max /= deviation.diagonal;
@@ -701,11 +891,14 @@ pub fn curve(
         output_nodes: sizes[0] as usize,
         output_elements: n_global,
         boundary_facets: sizes[1] as usize,
-        spline: Some(SplineFigures::blended(
-            space,
-            (crate::fit::FitSolver::Cg, share.cg, nonzeros),
-            blend,
-        )),
+        spline: Some(SplineFigures {
+            knot_surfaces: share.knot_surfaces,
+            ..SplineFigures::blended(
+                space,
+                (crate::fit::FitSolver::Cg, share.cg, nonzeros),
+                blend,
+            )
+        }),
         snapped: None,
         elastic: None,
         periodic: periodic_report(&share.pairs, &share.output, options, deviation.diagonal),

@@ -40,30 +40,6 @@ pub fn distributed() -> bool {
     launched_size().is_some_and(|n| n > 1)
 }
 
-/// The options of `curve` under mpirun, at every rank count (`mpirun -np 1` runs the serial
-/// job, and takes them too), or `None` when they are the given ones: the one place where
-/// mpirun's defaults differ from the serial run's. `auto` knot intervals (the default) decide
-/// on the whole mesh's blend, which no rank sees: they become uniform, said once (by `rank`
-/// 0), and the report names the knots used. Every other default, the CG's preconditioner
-/// included, is the serial run's.
-pub fn mpirun_options(options: &CurveOptions, rank: usize) -> Option<CurveOptions> {
-    if options.knots.intervals != crate::spline::KnotIntervals::Auto {
-        return None;
-    }
-    if rank == 0 {
-        eprintln!(
-            "polyspline: note: knot intervals uniform under mpirun (`auto` decides on the whole mesh's blend; docs/distributed.md)"
-        );
-    }
-    Some(CurveOptions {
-        knots: crate::spline::KnotParams {
-            intervals: crate::spline::KnotIntervals::Uniform,
-            ..options.knots
-        },
-        ..options.clone()
-    })
-}
-
 /// What [`curve`] did on this rank.
 pub enum Outcome {
     /// Rank 0: the output (and report) were written.
@@ -90,8 +66,6 @@ pub fn curve(
         .ok_or_else(|| CurveError::Options("MPI was initialised already in this process".into()))?;
     let comm = Mpi::new(universe.world());
     let rank = comm.rank();
-    let resolved = mpirun_options(options, rank);
-    let options = resolved.as_ref().unwrap_or(options);
     // A panic is a bug, but on one rank it would leave the others waiting in a collective for
     // ever: after its message, end the whole job.
     let report_panic = std::panic::take_hook();

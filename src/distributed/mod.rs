@@ -6,7 +6,8 @@
 //! partitioned files; all of them parse with `io::gmsh`, the one MSH parser family, and keep
 //! only who reads what), [`partition`] the element partition along a Morton curve, [`cg`] the fit's CG across ranks
 //! (halo exchange of shared control points, global reductions) with [`blocks`] the serial
-//! block preconditioners across the shares, [`job`] the `curve` job
+//! block preconditioners across the shares, [`knots`] the graded knot intervals of the whole
+//! mesh (its knot surfaces joined on rank 0), [`job`] the `curve` job
 //! stage by stage, [`mod@write`] the one output file written collectively and [`write_parts`]
 //! Gmsh's partitioned output (one file per rank), [`periodic`] the periodic pairs across ranks
 //! (resolved over the whole mesh, the image sides' nodes made the transform of the masters'). `docs/distributed.md` states what is distributed, what is replicated on
@@ -17,6 +18,7 @@ pub mod cg;
 pub mod comm;
 pub mod features;
 pub mod job;
+pub mod knots;
 #[cfg(feature = "mpi")]
 pub mod launch;
 pub mod local;

@@ -65,8 +65,8 @@ pub struct CurveOptions {
     pub method: Method,
     /// Weights of the fit (used with [`Geometry::SplineFitted`]).
     pub fit: FitParams,
-    /// Knot intervals of the spline space (uniform by default; the distributed run uses
-    /// uniform knots, see `distributed::job`).
+    /// Knot intervals of the spline space (`auto` by default, decided by the spline stages;
+    /// under mpirun on the whole mesh, see `distributed::knots`).
     pub knots: KnotParams,
     pub line_search: LineSearchParams,
     pub line_search_mode: LineSearchMode,
@@ -121,6 +121,17 @@ impl Default for CurveOptions {
 }
 
 impl CurveOptions {
+    /// These options with the knot intervals `intervals` (`auto`'s passes).
+    pub fn with_knots(&self, intervals: crate::spline::KnotIntervals) -> CurveOptions {
+        CurveOptions {
+            knots: crate::spline::KnotParams {
+                intervals,
+                ..self.knots
+            },
+            ..self.clone()
+        }
+    }
+
     /// Every option of the `curve` job, before any work (the order range is checked here too,
     /// with the option's own name: `--order` or `--subdivide`). The first option out of range
     /// is the error.

@@ -29,7 +29,9 @@ use crate::spline::seam::{self, Glued, SeamView};
 use crate::spline::{
     ElementRows, KnotSurfaceInfo, KnotWeights, Knots, Q2Reason, SplineSpace, kinks,
 };
-use crate::validity::blend::{BlendInfo, Blended, NetCache, blend_search};
+use crate::validity::blend::{
+    BlendInfo, Blended, Bounded, NetCache, blend_search, blend_search_at_most,
+};
 use crate::validity::certificate::{
     MAX_DEMOTION_ROUNDS, certify_mesh, demote_with_rings, uncertified,
 };
@@ -167,7 +169,7 @@ impl SplineSetup {
 
     /// Puts `knots` of `intervals` in place of the setup's knots and returns those (the
     /// features, kinks and targets do not depend on the knots). Only without glued seams.
-    fn set_knots(
+    pub(crate) fn set_knots(
         &mut self,
         intervals: crate::spline::KnotIntervals,
         knots: Knots,
@@ -360,6 +362,25 @@ pub const AUTO_MAX_HELD_BACK: f64 = 0.1;
 /// this share of the elements uniform knots' holds back.
 pub const AUTO_MIN_GAIN: f64 = 0.5;
 
+/// With `--knot-intervals auto`, after the uniform pass: whether its blend, holding back
+/// `held` of the mesh's `elements`, holds back too many ([`AUTO_MAX_HELD_BACK`]) for the
+/// uniform knots to be kept without trying graded ones.
+pub(crate) fn auto_holds_back_too_many(held: usize, elements: usize) -> bool {
+    held as f64 > AUTO_MAX_HELD_BACK * elements as f64
+}
+
+/// With `--knot-intervals auto`, after both passes: whether graded knots, holding back
+/// `graded` elements against uniform knots' `uniform`, are kept ([`AUTO_MIN_GAIN`]).
+///
+/// Graded knots only where they keep decisively more of the spline: on meshes that are not
+/// graded (O-grids of smooth shapes) they hold back nearly as many elements or more (level-2
+/// O-grid cylinder: 672 against 800 of 1,536), and the uniform spline's boundary is the better
+/// one there (4.7× Gmsh-with-CAD's max error against 26×); on graded meshes they hold back a
+/// third or less of uniform knots' (BENCHMARKS.md, "Graded knot intervals").
+pub(crate) fn auto_graded_is_decisive(graded: usize, uniform: usize) -> bool {
+    graded as f64 <= AUTO_MIN_GAIN * uniform as f64
+}
+
 /// The spline geometry's stages (the job's geometry is not [`Geometry::Straight`]); the
 /// translation pairs among `periodic` are identified in the spline space where they can be.
 ///
@@ -376,6 +397,12 @@ pub const AUTO_MIN_GAIN: f64 = 0.5;
 ///    interior facet's measured |ln ratio| reaches [`crate::spline::AUTO_MIN_LOG_RATIO`]
 ///    (graded knots all but uniform: they do not hold back half as many).
 ///
+/// The uniform pass's blend stops as soon as it holds back more than
+/// [`AUTO_MAX_HELD_BACK`] of the elements ([`blend_search_at_most`]: its count so far is a
+/// lower bound of the final one). Graded knots holding back at most [`AUTO_MIN_GAIN`] of
+/// that bound are then kept at once; otherwise the uniform blend is run to its end and the
+/// rule applied to its count, so the choice and the output are those of the full passes.
+///
 /// Both passes share the setup (features, kinks, smooth targets: they do not depend on the
 /// knots); the setup names the knots used and the passes run (`knot_passes`). With periodic
 /// pairs each pass has its own setup (its knots are measured on the glued mesh,
@@ -389,14 +416,10 @@ pub(super) fn curve_spline(
     if job.options.knots.intervals != KnotIntervals::Auto {
         return curve_spline_with(job, clock, periodic);
     }
-    let with = |intervals| crate::pipeline::CurveOptions {
-        knots: crate::spline::KnotParams {
-            intervals,
-            ..job.options.knots
-        },
-        ..job.options.clone()
-    };
-    let (uniform, graded) = (with(KnotIntervals::Uniform), with(KnotIntervals::Graded));
+    let (uniform, graded) = (
+        job.options.with_knots(KnotIntervals::Uniform),
+        job.options.with_knots(KnotIntervals::Graded),
+    );
     let uniform_job = Job {
         options: &uniform,
         ..*job
@@ -406,13 +429,8 @@ pub(super) fn curve_spline(
         ..*job
     };
     let held = |o: &SplineOutcome| o.blend.as_ref().map_or(0, |b| b.reduced_elements);
-    let too_many = |held: usize| held as f64 > AUTO_MAX_HELD_BACK * job.mesh.n_elements() as f64;
-    // Graded knots only where they keep decisively more of the spline: on meshes that are
-    // not graded (O-grids of smooth shapes) they hold back nearly as many elements or more
-    // (level-2 O-grid cylinder: 672 against 800 of 1,536), and the uniform spline's boundary
-    // is the better one there (4.7× Gmsh-with-CAD's max error against 26×); on graded meshes
-    // they hold back a third or less of uniform knots' (BENCHMARKS.md, "Graded knot intervals").
-    let decisive = |graded: usize, uniform: usize| graded as f64 <= AUTO_MIN_GAIN * uniform as f64;
+    let too_many = |held: usize| auto_holds_back_too_many(held, job.mesh.n_elements());
+    let decisive = auto_graded_is_decisive;
     if !periodic.is_empty() {
         // The share is the input's (the seams hold a few facets of it).
         let share = clock.run(Stage::Spline, || {
@@ -453,10 +471,17 @@ pub(super) fn curve_spline(
     // Not held through the uniform pass: the fit's peak would carry it (+0.56 GB on the 1M
     // cylinder); the rare second pass measures the surfaces again.
     drop(survey);
-    let first = spline_pass(&uniform_job, &setup, clock, None)?;
-    if !too_many(held(&first)) || near_uniform {
-        return Ok((setup, first));
-    }
+    let first = if near_uniform {
+        First::Done(spline_pass(&uniform_job, &setup, clock, None)?)
+    } else {
+        // Whether it is kept is decided once it holds back too many.
+        let most = (AUTO_MAX_HELD_BACK * job.mesh.n_elements() as f64).floor() as usize;
+        spline_pass_within(&uniform_job, &setup, clock, None, Some(most))?
+    };
+    let first = match first {
+        First::Done(o) if !too_many(held(&o)) || near_uniform => return Ok((setup, o)),
+        first => first,
+    };
     let survey = clock.run(Stage::Spline, || {
         SplineSpace::knot_survey(job.mesh, job.topo)
     });
@@ -465,7 +490,20 @@ pub(super) fn curve_spline(
     setup.knot_passes = 2;
     // The graded fit starts from the uniform one where the two spaces share control points
     // (every entity's but the knot splits'): fewer CG iterations than from C0.
-    let second = spline_pass(&graded_job, &setup, clock, Some(&first.space))?;
+    let second = spline_pass(&graded_job, &setup, clock, Some(first.space()))?;
+    let first = match first {
+        First::Done(o) => o,
+        // Decisive against a lower bound of the uniform count: decisive against the count.
+        First::Exceeded { at_least, .. } if decisive(held(&second), at_least) => {
+            return Ok((setup, second));
+        }
+        // Otherwise the uniform blend is run to its end (it does not depend on the setup's
+        // knots: its space carries its own).
+        First::Exceeded { space, fit, .. } => {
+            let (factors, blend) = clock.run(Stage::Validity, || blend(job, &setup, &space))?;
+            SplineOutcome::blended(space, factors, fit, blend, 0, None)
+        }
+    };
     if decisive(held(&second), held(&first)) {
         return Ok((setup, second));
     }
@@ -475,6 +513,31 @@ pub(super) fn curve_spline(
         job.options.fit.weights,
     );
     Ok((setup, first))
+}
+
+/// A spline pass that may stop early ([`spline_pass_within`]): `auto`'s uniform pass.
+// One value per pass, moved a few times: the size difference does not matter.
+#[allow(clippy::large_enum_variant)]
+enum First {
+    /// Run to its end.
+    Done(SplineOutcome),
+    /// Its blend held back more than the bound, at least `at_least` elements, and was not
+    /// run further: the fitted space and the fit's figures.
+    Exceeded {
+        space: SplineSpace,
+        fit: FitInfo,
+        at_least: usize,
+    },
+}
+
+impl First {
+    /// The pass's space with its fitted control points.
+    fn space(&self) -> &SplineSpace {
+        match self {
+            First::Done(o) => &o.space,
+            First::Exceeded { space, .. } => space,
+        }
+    }
 }
 
 fn curve_spline_with(
@@ -494,34 +557,63 @@ fn spline_pass(
     clock: &mut Clock,
     previous: Option<&SplineSpace>,
 ) -> Result<SplineOutcome, CurveError> {
+    match spline_pass_within(job, setup, clock, previous, None)? {
+        First::Done(outcome) => Ok(outcome),
+        First::Exceeded { .. } => unreachable!("an unbounded pass runs to its end"),
+    }
+}
+
+/// [`spline_pass`]; with `most`, the least-squares path's blend is given up once it holds
+/// back more than `most` elements ([`blend_search_at_most`]): `auto`'s uniform pass then
+/// needs only that count to go on to graded knots, not the blend's remaining rounds.
+fn spline_pass_within(
+    job: &Job,
+    setup: &SplineSetup,
+    clock: &mut Clock,
+    previous: Option<&SplineSpace>,
+    most: Option<usize>,
+) -> Result<First, CurveError> {
     let space = clock.run(Stage::Spline, || {
         setup.build(job, &vec![false; job.mesh.n_elements()])
     });
     clock.check()?;
     match (job.options.geometry, &job.options.energy) {
-        (Geometry::SplineFitted, None) => fit_and_blend(job, setup, clock, space, previous),
-        (Geometry::SplineFitted, Some(params)) => fit_with_energy(job, setup, clock, space, params),
-        _ => certify_initial(job, clock, space),
+        (Geometry::SplineFitted, None) => fit_and_blend(job, setup, clock, space, previous, most),
+        (Geometry::SplineFitted, Some(params)) => {
+            fit_with_energy(job, setup, clock, space, params).map(First::Done)
+        }
+        _ => certify_initial(job, clock, space).map(First::Done),
     }
 }
 
 /// Least squares: one fit, then the certified blend from the straight elevation to it (valid
-/// for every input whose straight elevation is certified).
+/// for every input whose straight elevation is certified); with `most`, as
+/// [`spline_pass_within`].
 fn fit_and_blend(
     job: &Job,
     setup: &SplineSetup,
     clock: &mut Clock,
     mut space: SplineSpace,
     previous: Option<&SplineSpace>,
-) -> Result<SplineOutcome, CurveError> {
+    most: Option<usize>,
+) -> Result<First, CurveError> {
     let mut misfit = Vec::new();
     let start = previous.map(|p| carry_over(p, &p.control_points, &space));
-    let (c_star, info) =
+    let (c_star, fit) =
         fit_demoting_misfits(job, setup, clock, &mut space, &[], &mut misfit, start)?;
     clock.check()?;
     space.control_points = c_star;
-    let (factors, blend) = clock.run(Stage::Validity, || blend(job, setup, &space))?;
-    Ok(SplineOutcome::blended(space, factors, info, blend, 0, None))
+    let bounded = clock.run(Stage::Validity, || blend_within(job, setup, &space, most))?;
+    Ok(match bounded {
+        Ok((factors, blend)) => {
+            First::Done(SplineOutcome::blended(space, factors, fit, blend, 0, None))
+        }
+        Err(at_least) => First::Exceeded {
+            space,
+            fit,
+            at_least,
+        },
+    })
 }
 
 /// `--fit energy`: fit; take the full step when certified, else search towards the initial
@@ -708,7 +800,11 @@ fn fit_demoting_misfits(
 
 /// Control points of `to` taken from `from_points` (the control points of the space `from`)
 /// where both spaces have a control point on the same entity, else `to`'s initial ones.
-fn carry_over(from: &SplineSpace, from_points: &[[f64; 3]], to: &SplineSpace) -> Vec<[f64; 3]> {
+pub(crate) fn carry_over(
+    from: &SplineSpace,
+    from_points: &[[f64; 3]],
+    to: &SplineSpace,
+) -> Vec<[f64; 3]> {
     let at: HashMap<_, _> = from.control_point_keys.iter().zip(from_points).collect();
     to.control_point_keys
         .iter()
@@ -778,22 +874,40 @@ fn blend(
     setup: &SplineSetup,
     space: &SplineSpace,
 ) -> Result<((Vec<f32>, NetCache), BlendInfo), CurveError> {
+    let done = blend_within(job, setup, space, None)?;
+    Ok(done.expect("an unbounded blend runs to its end"))
+}
+
+/// The factors, nets and figures of [`blend`], or, with `most`, the number of elements held
+/// back (a lower bound) when the search gives up on holding back more than `most`.
+#[allow(clippy::type_complexity)]
+fn blend_within(
+    job: &Job,
+    setup: &SplineSetup,
+    space: &SplineSpace,
+    most: Option<usize>,
+) -> Result<Result<((Vec<f32>, NetCache), BlendInfo), usize>, CurveError> {
     let target_map = setup.target_map(job);
     let (ids_mesh, ids_topo) = setup.entity_mesh(job);
     let mut blended = Blended::new(job.mesh, &target_map, space, ids_mesh, ids_topo, Vec::new())
         .with_geometry(job.mesh);
     let global = job.options.line_search_mode == LineSearchMode::Global;
-    let info = blend_search(
-        job.executor,
-        &mut blended,
-        &job.options.line_search.blend(global),
-    )
+    let params = job.options.line_search.blend(global);
+    let searched = match most {
+        None => blend_search(job.executor, &mut blended, &params).map(Bounded::Done),
+        Some(most) => blend_search_at_most(job.executor, &mut blended, &params, most),
+    }
     .map_err(|source| CurveError::Blend {
         input: job.input.to_owned(),
         source,
     })?;
-    let factors = std::mem::take(&mut blended.factors);
-    Ok(((factors, blended.into_cache()), info))
+    Ok(match searched {
+        Bounded::Done(info) => {
+            let factors = std::mem::take(&mut blended.factors);
+            Ok(((factors, blended.into_cache()), info))
+        }
+        Bounded::Exceeded(at_least) => Err(at_least),
+    })
 }
 
 /// Certified bounds of the space's current map, exact where at most `target(e)`

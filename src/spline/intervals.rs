@@ -48,8 +48,9 @@
 //! no facet's |ln ratio| reaches [`AUTO_MIN_LOG_RATIO`]). The share alone does not
 //! separate every mesh where graded knots win from unstructured ones (sphere_r6 0.043
 //! against systems_of_equations_ex9 0.051, BENCHMARKS.md, "Graded knot intervals"), hence the
-//! outcome rule below the threshold. Without a fit (`info`, `plot`), auto is uniform; under
-//! mpirun the launcher resolves it to uniform.
+//! outcome rule below the threshold. Without a fit (`info`, `plot`), auto is uniform. Under
+//! mpirun the ranks decide alike on the whole mesh's survey and counts, and use the serial
+//! weights (`distributed::knots`).
 //!
 //! **Glued periodic seams** ([`survey_glued`]): the knot surfaces are continued on the glued
 //! topology, across the seams, and every element is measured on its own vertices of the
@@ -322,6 +323,10 @@ impl SignedUnionFind {
 struct Corners<'a> {
     mesh: &'a LinearMesh,
     unglued: Option<&'a LinearMesh>,
+    /// A sub-mesh of a larger mesh: the larger mesh's index of each element, whose order
+    /// decides a facet's first element and its vertices' order as on the larger mesh (`None`:
+    /// the mesh's own).
+    global: Option<&'a [u64]>,
 }
 
 impl Corners<'_> {
@@ -349,11 +354,35 @@ impl Corners<'_> {
         c
     }
 
+    /// The elements of facet `f`, first the one the topology of the whole mesh puts first
+    /// (with `global`, the lower global index), and their local sides.
+    fn elements(&self, topo: &Topology, f: usize) -> ([u32; 2], [u8; 2]) {
+        match self.global {
+            Some(g) => elements_in_global_order(topo, f, g),
+            None => (topo.facet_elements[f], topo.facet_sides[f]),
+        }
+    }
+
+    /// The vertices of facet `f` in the order the whole mesh's topology lists them (its first
+    /// element's side, [`Topology::faces`]; a centre's sum depends on the order).
+    fn facet<'t>(&self, topo: &'t Topology, f: usize, buf: &'t mut [u32; 4]) -> &'t [u32] {
+        if self.global.is_none() || topo.dim == 2 {
+            return topo.facet_vertices(f);
+        }
+        let ([e, _], [side, _]) = self.elements(topo, f);
+        let npe = self.mesh.nodes_per_element();
+        let row = &self.mesh.elements[e as usize * npe..(e as usize + 1) * npe];
+        *buf = crate::math::reference::HEX_SIDES[side as usize].map(|c| row[c]);
+        &buf[..]
+    }
+
     /// Extent of element `e` in its local direction `k`: the distance between the centres of
     /// its two faces normal to k.
     fn extent(&self, topo: &Topology, e: usize, k: usize) -> f64 {
-        let face = |s: usize| topo.facet_vertices(topo.element_facet(e, s) as usize);
-        let (a, b) = (self.centre(e, face(2 * k)), self.centre(e, face(2 * k + 1)));
+        let (mut b0, mut b1) = ([0u32; 4], [0u32; 4]);
+        let face0 = self.facet(topo, topo.element_facet(e, 2 * k) as usize, &mut b0);
+        let face1 = self.facet(topo, topo.element_facet(e, 2 * k + 1) as usize, &mut b1);
+        let (a, b) = (self.centre(e, face0), self.centre(e, face1));
         ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
     }
 
@@ -382,19 +411,55 @@ fn second(topo: &Topology, f: u32, e: usize) -> bool {
     topo.facet_elements[f as usize][0] != e as u32
 }
 
-/// One tie `ρ(f) = ±ρ(f2)` made by continuing facet `f` of `element` across its face to
-/// `neighbour` (`opposite`: minus).
-#[derive(Clone, Copy)]
-struct Tie {
-    element: u32,
-    neighbour: u32,
-    f: u32,
-    f2: u32,
-    opposite: bool,
+/// The elements of facet `f` of a sub-mesh's topology and their sides, first the one with
+/// the lower index `global[e]` in the larger mesh: the order the larger mesh's topology gives
+/// them.
+pub(crate) fn elements_in_global_order(
+    topo: &Topology,
+    f: usize,
+    global: &[u64],
+) -> ([u32; 2], [u8; 2]) {
+    let ([a, b], [sa, sb]) = (topo.facet_elements[f], topo.facet_sides[f]);
+    if b != NONE && global[b as usize] < global[a as usize] {
+        ([b, a], [sb, sa])
+    } else {
+        ([a, b], [sa, sb])
+    }
 }
 
-/// Every tie of the knot surfaces continued across the spline elements (`spline[e]`).
-fn ties(topo: &Topology, spline: &[bool]) -> Vec<Tie> {
+/// One tie `ρ(f) = ±ρ(f2)` made by continuing facet `f` of `element` across its face to
+/// `neighbour` (`opposite`: minus). 16 bytes: a mesh has about 24 per hex.
+#[derive(Clone, Copy)]
+pub(crate) struct Tie {
+    pub(crate) element: u32,
+    pub(crate) neighbour: u32,
+    pub(crate) f: u32,
+    /// `f2`, with `opposite` in the top bit.
+    f2_opposite: u32,
+}
+
+impl Tie {
+    pub(crate) fn new(element: u32, neighbour: u32, f: u32, f2: u32, opposite: bool) -> Tie {
+        debug_assert!(f2 < 1 << 31, "facet numbers below 2^31");
+        Tie {
+            element,
+            neighbour,
+            f,
+            f2_opposite: f2 | (u32::from(opposite) << 31),
+        }
+    }
+    pub(crate) fn f2(&self) -> u32 {
+        self.f2_opposite & !(1 << 31)
+    }
+    pub(crate) fn opposite(&self) -> bool {
+        self.f2_opposite >> 31 == 1
+    }
+}
+
+/// Every tie of the knot surfaces continued across the spline elements (`spline[e]`), each
+/// facet's sign ([`second`]) as `corners` orders its elements.
+fn ties(topo: &Topology, spline: &[bool], corners: Corners) -> Vec<Tie> {
+    let second = |f: u32, e: usize| corners.elements(topo, f as usize).0[0] != e as u32;
     let dim = topo.dim;
     let sides = topo.sides();
     (0..topo.n_elements)
@@ -444,13 +509,8 @@ fn ties(topo: &Topology, spline: &[bool]) -> Vec<Tie> {
                         }
                     }
                     if let Some(f2) = found {
-                        out.push(Tie {
-                            element: e as u32,
-                            neighbour: n,
-                            f,
-                            f2,
-                            opposite: second(topo, f, e) ^ second(topo, f2, n as usize),
-                        });
+                        let opposite = second(f, e) ^ second(f2, n as usize);
+                        out.push(Tie::new(e as u32, n, f, f2, opposite));
                     }
                 }
             }
@@ -464,7 +524,7 @@ fn ties(topo: &Topology, spline: &[bool]) -> Vec<Tie> {
 fn surfaces(nf: usize, ties: &[Tie], measured: &[Option<(f64, f64)>]) -> SignedUnionFind {
     let mut uf = SignedUnionFind::with_values((0..nf).map(|f| measured[f].map(|(m, _)| m)));
     for t in ties {
-        uf.union(t.f, t.f2, t.opposite);
+        uf.union(t.f, t.f2(), t.opposite());
     }
     uf
 }
@@ -484,25 +544,24 @@ fn split_elements(
         return split;
     }
     let value = |f: u32| measured[f as usize].map(|(m, _)| m);
-    // Ties grouped by unordered element pair, with the pair's largest disagreement.
-    let mut order: Vec<(u64, usize)> = ties
-        .iter()
-        .enumerate()
-        .map(|(i, t)| {
-            let (a, b) = (t.element.min(t.neighbour), t.element.max(t.neighbour));
-            (((a as u64) << 32) | b as u64, i)
-        })
-        .collect();
-    order.par_sort_unstable();
+    // Ties grouped by unordered element pair (then by index), with the pair's largest
+    // disagreement; the order holds tie indices only (4 B a tie, not the keys).
+    let pair = |i: u32| {
+        let t = &ties[i as usize];
+        let (a, b) = (t.element.min(t.neighbour), t.element.max(t.neighbour));
+        ((a as u64) << 32) | b as u64
+    };
+    let mut order: Vec<u32> = (0..ties.len() as u32).collect();
+    order.par_sort_unstable_by_key(|&i| (pair(i), i));
     let mut pairs: Vec<(f64, usize, usize)> = Vec::new();
     let mut i = 0;
     while i < order.len() {
         let mut j = i;
         let mut worst = 0.0f64;
-        while j < order.len() && order[j].0 == order[i].0 {
-            let t = &ties[order[j].1];
-            if let (Some(a), Some(b)) = (value(t.f), value(t.f2)) {
-                let b = if t.opposite { -b } else { b };
+        while j < order.len() && pair(order[j]) == pair(order[i]) {
+            let t = &ties[order[j] as usize];
+            if let (Some(a), Some(b)) = (value(t.f), value(t.f2())) {
+                let b = if t.opposite() { -b } else { b };
                 worst = worst.max((a - b).abs());
             }
             j += 1;
@@ -514,18 +573,18 @@ fn split_elements(
     let mut uf = SignedUnionFind::with_values((0..nf).map(|f| value(f as u32)));
     for &(_, i, j) in &pairs {
         let group = &order[i..j];
-        let fits = group.iter().all(|&(_, k)| {
-            let t = &ties[k];
-            let (lo, hi) = uf.merged_range(t.f, t.f2, t.opposite);
+        let fits = group.iter().all(|&k| {
+            let t = &ties[k as usize];
+            let (lo, hi) = uf.merged_range(t.f, t.f2(), t.opposite());
             lo > hi || hi - lo <= max_spread
         });
         if fits {
-            for &(_, k) in group {
-                let t = &ties[k];
-                uf.union(t.f, t.f2, t.opposite);
+            for &k in group {
+                let t = &ties[k as usize];
+                uf.union(t.f, t.f2(), t.opposite());
             }
         } else {
-            let t = &ties[group[0].1];
+            let t = &ties[group[0] as usize];
             split[t.element as usize] = true;
             split[t.neighbour as usize] = true;
         }
@@ -537,8 +596,9 @@ fn split_elements(
 /// the ties of the knot surfaces ([`survey`]), with the share of the facets on consistently
 /// graded surfaces (`--knot-intervals auto` decides on it before any fit).
 pub struct KnotSurvey {
-    measured: Vec<Option<(f64, f64)>>,
-    ties: Vec<Tie>,
+    /// Per facet: the measured log-ratio and its weight (`None`: not an interior facet).
+    pub(crate) measured: Vec<Option<(f64, f64)>>,
+    pub(crate) ties: Vec<Tie>,
     /// [`KnotSurfaceInfo::graded_share`].
     pub graded_share: f64,
     /// Largest |measured log-ratio| of an interior facet (0 without one): below
@@ -553,6 +613,7 @@ pub fn survey(mesh: &LinearMesh, topo: &Topology, spline: &[bool]) -> KnotSurvey
         Corners {
             mesh,
             unglued: None,
+            global: None,
         },
         topo,
         spline,
@@ -573,6 +634,7 @@ pub fn survey_glued(
         Corners {
             mesh: glued,
             unglued: Some(input),
+            global: None,
         },
         topo,
         spline,
@@ -580,6 +642,39 @@ pub fn survey_glued(
 }
 
 fn survey_with(corners: Corners, topo: &Topology, spline: &[bool]) -> KnotSurvey {
+    let (measured, ties) = survey_parts_with(corners, topo, spline);
+    KnotSurvey::from_parts(measured, ties)
+}
+
+/// What [`survey`] is made of, on a sub-mesh of a larger mesh whose elements' indices there
+/// are `global` (each element's nodes in the larger mesh's order): every facet's measured
+/// log-ratio with its weight (`None` where it is not interior here) and the ties of the knot
+/// surfaces continued across the elements with `spline[e]`, each facet oriented and its
+/// vertices summed as the larger mesh's topology does (its first element the lower global
+/// index), so a facet whose elements are both here is measured bit for bit as [`survey`]
+/// measures it on the larger mesh. [`KnotSurvey::from_parts`] joins the parts of the whole
+/// mesh; a rank of a distributed job surveys its share with it (`distributed::knots`).
+#[allow(clippy::type_complexity)]
+pub(crate) fn survey_parts(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    spline: &[bool],
+    global: &[u64],
+) -> (Vec<Option<(f64, f64)>>, Vec<Tie>) {
+    let corners = Corners {
+        mesh,
+        unglued: None,
+        global: Some(global),
+    };
+    survey_parts_with(corners, topo, spline)
+}
+
+#[allow(clippy::type_complexity)]
+fn survey_parts_with(
+    corners: Corners,
+    topo: &Topology,
+    spline: &[bool],
+) -> (Vec<Option<(f64, f64)>>, Vec<Tie>) {
     let nf = topo.n_facets();
     // Measured log-ratio of every interior facet, with weight 1 / the facet's size: a ratio
     // that misfits a thin cell distorts it relative to its thickness, so the small facets of
@@ -587,29 +682,38 @@ fn survey_with(corners: Corners, topo: &Topology, spline: &[bool]) -> KnotSurvey
     let measured: Vec<Option<(f64, f64)>> = (0..nf)
         .into_par_iter()
         .map(|f| {
-            let [a, b] = topo.facet_elements[f];
+            let ([a, b], [sa, sb]) = corners.elements(topo, f);
             if a == NONE || b == NONE || a == b {
                 return None;
             }
-            let [sa, sb] = topo.facet_sides[f];
             let ea = corners.extent(topo, a as usize, sa as usize / 2);
             let eb = corners.extent(topo, b as usize, sb as usize / 2);
             let r = (eb / ea).ln();
-            let w = 1.0 / corners.facet_size(a as usize, topo.facet_vertices(f));
+            let mut buf = [0u32; 4];
+            let w = 1.0 / corners.facet_size(a as usize, corners.facet(topo, f, &mut buf));
             (r.is_finite() && w.is_finite()).then_some((r, w))
         })
         .collect();
-    let ties = ties(topo, spline);
-    let graded_share = graded_share(&mut surfaces(nf, &ties, &measured), &measured);
-    let max_abs_log_ratio = measured
-        .iter()
-        .flatten()
-        .fold(0.0f64, |a, &(m, _)| a.max(m.abs()));
-    KnotSurvey {
-        measured,
-        ties,
-        graded_share,
-        max_abs_log_ratio,
+    (measured, ties(topo, spline, corners))
+}
+
+impl KnotSurvey {
+    /// The survey of the facets' measured log-ratios `measured` (by facet) and the knot
+    /// surfaces' `ties`: the graded share and the largest |log-ratio| from them. The share
+    /// sums by facet in the order of `measured` (the ties' order does not matter).
+    pub(crate) fn from_parts(measured: Vec<Option<(f64, f64)>>, ties: Vec<Tie>) -> KnotSurvey {
+        let nf = measured.len();
+        let graded_share = graded_share(&mut surfaces(nf, &ties, &measured), &measured);
+        let max_abs_log_ratio = measured
+            .iter()
+            .flatten()
+            .fold(0.0f64, |a, &(m, _)| a.max(m.abs()));
+        KnotSurvey {
+            measured,
+            ties,
+            graded_share,
+            max_abs_log_ratio,
+        }
     }
 }
 
@@ -631,15 +735,39 @@ pub fn knot_weights(
 
 /// [`knot_weights`] of graded knots from the mesh's [`survey`].
 pub fn knot_weights_from(survey: KnotSurvey, topo: &Topology, params: &KnotParams) -> Knots {
-    let dim = topo.dim;
-    let nf = topo.n_facets();
-    let ne = topo.n_elements;
+    let ratios = surface_ratios(survey, topo.n_elements, params);
+    let weights = weights_from_ratios(topo, |f| ratios.rho[f as usize]);
+    Knots {
+        weights: Some(weights),
+        split: if ratios.info.split_elements > 0 {
+            ratios.split
+        } else {
+            Vec::new()
+        },
+        info: ratios.info,
+    }
+}
+
+/// The knot surfaces' ratios of a [`KnotSurvey`] ([`surface_ratios`]).
+pub(crate) struct SurfaceRatios {
+    /// Per facet of the survey: `ρ(f) = ln(h_second / h_first)` of its surface (0: uniform).
+    pub(crate) rho: Vec<f64>,
+    /// Per element (`ne` of them): made Q2 where a knot surface is split.
+    pub(crate) split: Vec<bool>,
+    pub(crate) info: KnotSurfaceInfo,
+}
+
+/// The knot surfaces of `survey` over `ne` elements, split where one ratio cannot fit, and
+/// each surface's ratio: the 1 / facet-size weighted mean of its facets' measured ratios,
+/// summed by facet in the survey's order. Needs no topology: only facet and element numbers.
+pub(crate) fn surface_ratios(survey: KnotSurvey, ne: usize, params: &KnotParams) -> SurfaceRatios {
     let KnotSurvey {
         measured,
         ties: all,
         graded_share: share,
         ..
     } = survey;
+    let nf = measured.len();
 
     // Knot surfaces: facets tied across each spline element's neighbours; split where one
     // ratio cannot fit, and rebuilt without the split elements' ties.
@@ -649,6 +777,7 @@ pub fn knot_weights_from(survey: KnotSurvey, topo: &Topology, params: &KnotParam
         .filter(|t| !split[t.element as usize])
         .collect();
     let mut uf = surfaces(nf, &kept, &measured);
+    drop(kept);
 
     // 3. One ratio per surface: the weighted mean of its facets' measured ratios.
     let mut sum = vec![0.0f64; nf];
@@ -694,14 +823,28 @@ pub fn knot_weights_from(survey: KnotSurvey, topo: &Topology, params: &KnotParam
         info.max_abs_log_ratio = info.max_abs_log_ratio.max(rho.abs());
         rho_root[r] = rho;
     }
-    let rho = |f: u32| {
-        let v = rho_root[root[f as usize] as usize];
-        if sign[f as usize] { -v } else { v }
-    };
+    drop((uf, sum, weight, measured));
+    let rho = root
+        .iter()
+        .zip(&sign)
+        .map(|(&r, &s)| {
+            let v = rho_root[r as usize];
+            if s { -v } else { v }
+        })
+        .collect();
+    SurfaceRatios { rho, split, info }
+}
 
-    // 4. Weights: α = 1/(1 + h₋₁/h₀), β = 1/(1 + h₀/h₁).
+/// The extraction weights (step 4) of every element of `topo` from their facets' ratios `rho(f)`
+/// (`ln(h_second / h_first)` of facet f of `topo`): `α = 1/(1 + h₋₁/h₀)`,
+/// `β = 1/(1 + h₀/h₁)`; ½ on the boundary.
+pub(crate) fn weights_from_ratios(
+    topo: &Topology,
+    rho: impl Fn(u32) -> f64 + Sync,
+) -> Vec<KnotWeights> {
+    let dim = topo.dim;
     let logistic = |x: f64| 1.0 / (1.0 + (-x).exp());
-    let weights = (0..ne)
+    (0..topo.n_elements)
         .into_par_iter()
         .map(|e| {
             let mut w = [[0.5; 2]; 3];
@@ -723,16 +866,7 @@ pub fn knot_weights_from(survey: KnotSurvey, topo: &Topology, params: &KnotParam
             }
             w
         })
-        .collect();
-    Knots {
-        weights: Some(weights),
-        split: if info.split_elements > 0 {
-            split
-        } else {
-            Vec::new()
-        },
-        info,
-    }
+        .collect()
 }
 
 #[cfg(test)]

@@ -410,6 +410,30 @@ pub fn blend_search(
     blend_search_shared(certifier, blended, params, &Alone)
 }
 
+/// What [`blend_search_at_most`] finds.
+#[derive(Debug)]
+pub enum Bounded {
+    /// The search ran to its end: the factors and figures of [`blend_search`].
+    Done(BlendInfo),
+    /// The search stopped once more elements than the bound were held back; at least this
+    /// many are held back at its end (a held-back point is never raised again). The factors
+    /// are not certified and nothing is stored in the blend.
+    Exceeded(usize),
+}
+
+/// [`blend_search`], given up as soon as more than `max_reduced` elements are held back
+/// (local mode: each round can only add held-back elements, so the count so far is a lower
+/// bound of the final one). For a caller that only needs the result when few elements are
+/// held back; the rounds after the bound is passed are not run.
+pub fn blend_search_at_most(
+    certifier: &dyn Certifier,
+    blended: &mut Blended,
+    params: &BlendParams,
+    max_reduced: usize,
+) -> Result<Bounded, BlendError> {
+    search(certifier, blended, params, &Alone, Some(max_reduced))
+}
+
 /// [`blend_search`] sharing the judging of the elements with other processes ([`BlendShare`]).
 /// The factors and the info are those of [`blend_search`] on the whole mesh, except
 /// `worst`, which lists the reduced elements of this process only.
@@ -419,6 +443,21 @@ pub fn blend_search_shared(
     params: &BlendParams,
     share: &dyn BlendShare,
 ) -> Result<BlendInfo, BlendError> {
+    match search(certifier, blended, params, share, None)? {
+        Bounded::Done(info) => Ok(info),
+        Bounded::Exceeded(_) => unreachable!("an unbounded search runs to its end"),
+    }
+}
+
+/// The search of [`blend_search_shared`], given up once more than `max_reduced` elements
+/// (of all processes) are held back, when given.
+fn search(
+    certifier: &dyn Certifier,
+    blended: &mut Blended,
+    params: &BlendParams,
+    share: &dyn BlendShare,
+    max_reduced: Option<usize>,
+) -> Result<Bounded, BlendError> {
     let (n, dim, np) = (blended.n_elements(), blended.dim(), blended.points());
     let depth = params.certificate_depth;
     let all: Vec<usize> = (0..n).collect();
@@ -534,6 +573,13 @@ pub fn blend_search_shared(
                 .iter()
                 .any(|&id| factors[id as usize] < FITTED);
         }
+        if let Some(max) = max_reduced {
+            // Factors only go down, so an element held back now stays held back.
+            let held = share.sum(mine.iter().filter(|&&e| reduced[e]).count());
+            if held > max {
+                return Ok(Bounded::Exceeded(held));
+            }
+        }
         recheck.retain(|&e| owned[e]);
         let r = judge(blended, &factors, &reduced, &recheck);
         info.rounds += 1;
@@ -558,7 +604,7 @@ pub fn blend_search_shared(
     info.reduced_elements = share.sum(info.reduced_elements);
     info.min_det_lower_bound = share.min(info.min_det_lower_bound);
     info.min_factor = share.min(info.min_factor);
-    Ok(info)
+    Ok(Bounded::Done(info))
 }
 
 /// What the search learns of an element: (certified valid, accepted, certified lower bound).

@@ -11,7 +11,9 @@ use polyspline::mesh::generate::{extrude, grid_2d};
 use polyspline::mesh::{LinearMesh, Topology};
 use polyspline::pipeline::{CurveOptions, LineSearchMode, curve_in_memory};
 use polyspline::sample::BezierElements;
-use polyspline::validity::blend::{BlendParams, Blended, blend_search, entity_ids};
+use polyspline::validity::blend::{
+    BlendParams, Blended, Bounded, blend_search, blend_search_at_most, entity_ids,
+};
 use polyspline::validity::{CpuCertifier, det_jacobian_bounds};
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -282,25 +284,47 @@ impl BezierElements for Garbage<'_> {
     }
 }
 
-#[test]
-fn the_blend_certifies_any_fitted_map() {
-    for (dim, mesh) in [
+/// The inputs of the garbage blends: a 2D boundary layer and a jittered 3D extrusion, as read.
+fn garbage_inputs() -> Vec<(usize, LinearMesh)> {
+    [
         (2, ellipse_layer(0.3, 32, &graded(1e-4, 1.3, 12))),
         (3, extrude(&jittered(5, 0.3, 3), &[0.0, 0.1, 0.25])),
-    ] {
+    ]
+    .into_iter()
+    .map(|(dim, mesh)| {
         let mesh = as_read(&mesh, &format!("garbage_{dim}")).expect("a valid input");
+        (dim, mesh)
+    })
+    .collect()
+}
+
+/// A conforming map of garbage on `mesh`: each entity's Bernstein points shifted at random by
+/// up to `amplitude` in each coordinate, with probability `share` (all of them at 1).
+fn garbage<'a>(
+    mesh: &'a LinearMesh,
+    topo: &'a Topology,
+    amplitude: f64,
+    share: f64,
+) -> Garbage<'a> {
+    let n_ids = topo.n_vertices + topo.edges.len() + topo.faces.len() + mesh.n_elements();
+    let mut rng = Lcg(11);
+    let shift: Vec<[f64; 3]> = (0..n_ids)
+        .map(|_| {
+            let hit = share >= 1.0 || rng.next() < 2.0 * share - 1.0;
+            let a = if hit { amplitude } else { 0.0 };
+            [rng.next(), rng.next(), rng.next()].map(|x| a * x)
+        })
+        .collect();
+    Garbage { mesh, topo, shift }
+}
+
+#[test]
+fn the_blend_certifies_any_fitted_map() {
+    for (dim, mesh) in garbage_inputs() {
         let topo = Topology::build(&mesh);
         let ids = |e| entity_ids(&mesh, &topo, e);
         let n_ids = topo.n_vertices + topo.edges.len() + topo.faces.len() + mesh.n_elements();
-        let mut rng = Lcg(11);
-        let shift: Vec<[f64; 3]> = (0..n_ids)
-            .map(|_| [0.2 * rng.next(), 0.2 * rng.next(), 0.2 * rng.next()])
-            .collect();
-        let garbage = Garbage {
-            mesh: &mesh,
-            topo: &topo,
-            shift,
-        };
+        let garbage = garbage(&mesh, &topo, 0.2, 1.0);
         let invalid_full = (0..mesh.n_elements())
             .filter(|&e| !det_jacobian_bounds(dim, &garbage.bezier_net(e), 6).certified_positive())
             .count();
@@ -337,6 +361,47 @@ fn the_blend_certifies_any_fitted_map() {
             }
         }
         assert!(info.reduced_elements > 0 && info.worst.len() <= 10);
+    }
+}
+
+/// A blend search bounded by a number of held-back elements gives up only when the full
+/// search holds back more, and then names a lower bound of the full search's count (what
+/// `--knot-intervals auto` decides on); within its bound it is the full search.
+#[test]
+fn a_bounded_blend_gives_up_only_above_its_bound() {
+    let params = BlendParams::default();
+    for (dim, mesh) in garbage_inputs() {
+        let topo = Topology::build(&mesh);
+        // A few entities moved: part of the mesh is held back, in several rounds.
+        let garbage = garbage(&mesh, &topo, 0.2, 0.03);
+        let mut full = Blended::new(&mesh, &mesh, &garbage, &mesh, &topo, Vec::new());
+        let info = blend_search(&CpuCertifier, &mut full, &params).unwrap();
+        let held = info.reduced_elements;
+        assert!(held > 4 && info.rounds > 1, "{dim}D: {held} held back");
+        for most in [0, held / 2, held - 1] {
+            let mut b = Blended::new(&mesh, &mesh, &garbage, &mesh, &topo, Vec::new());
+            match blend_search_at_most(&CpuCertifier, &mut b, &params, most).unwrap() {
+                Bounded::Exceeded(n) => assert!(
+                    most < n && n <= held,
+                    "{dim}D, at most {most}: gave up at {n}, the full search holds back {held}"
+                ),
+                Bounded::Done(i) => panic!(
+                    "{dim}D, at most {most}: ran to its end with {} held back",
+                    i.reduced_elements
+                ),
+            }
+        }
+        let mut b = Blended::new(&mesh, &mesh, &garbage, &mesh, &topo, Vec::new());
+        match blend_search_at_most(&CpuCertifier, &mut b, &params, held).unwrap() {
+            Bounded::Done(i) => {
+                assert_eq!(
+                    (i.reduced_elements, i.reduced_points, i.rounds),
+                    (held, info.reduced_points, info.rounds)
+                );
+                assert_eq!(b.factors, full.factors, "{dim}D: other factors");
+            }
+            Bounded::Exceeded(n) => panic!("{dim}D, at most {held}: gave up at {n}"),
+        }
     }
 }
 

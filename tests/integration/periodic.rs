@@ -745,6 +745,39 @@ fn info_reports_the_features_of_the_glued_cascade() {
     assert_eq!(apart["feature_corners"], 8, "{apart}");
 }
 
+/// `info --knot-intervals graded --periodic` measures the knot surfaces as `curve` does, on the
+/// cascade with its seams glued: its surfaces continue across the seams, so there are fewer
+/// of them than on the sides apart, and the figures are the curve report's.
+#[test]
+fn info_measures_the_knots_across_the_glued_seams() {
+    let turbine = Path::new(ROOT).join(TURBINE);
+    let knots = |extra: &[&str]| -> Value {
+        let out = run_ok(
+            polyspline()
+                .arg("info")
+                .arg(&turbine)
+                .args(["--json", "--knot-intervals", "graded"])
+                .args(extra),
+        );
+        serde_json::from_slice::<Value>(&out.stdout).unwrap()["knot_surfaces"].clone()
+    };
+    let pair = ["--periodic", "periodic_1:periodic_2"];
+    let glued = knots(&pair);
+    let out = scratch_in("periodic", "turbine_info_knots.msh");
+    let report = curve(
+        &turbine,
+        &out,
+        &[pair[0], pair[1], "--knot-intervals", "graded"],
+    );
+    assert_eq!(glued, report["knot_surfaces"], "info and curve");
+    let apart = knots(&[]);
+    let surfaces = |v: &Value| v["surfaces"].as_u64().unwrap();
+    assert!(
+        surfaces(&glued) < surfaces(&apart),
+        "{glued} against {apart}"
+    );
+}
+
 /// A CGNS file's periodic grid connectivity makes the mesh periodic without any option: the
 /// cascade's translation and the 3D sector's rotation and lift, written as CGNS by `curve
 /// --order 1` (the writer is checked with h5py and cgnscheck below), are reported by `info`

@@ -383,12 +383,26 @@ impl BackendChoice {
             BackendChoice::Gpu => {
                 Backend::Gpu(GpuContext::new(AdapterChoice::Any, precision)?.into())
             }
+            // Loading the Vulkan drivers costs 0.1-0.3 s (lavapipe initialises LLVM), a large
+            // share of a small mesh's job: not paid where no GPU device node exists.
+            BackendChoice::Auto if !may_hold_a_gpu(std::path::Path::new("/dev")) => Backend::Cpu,
             BackendChoice::Auto => match GpuContext::new(AdapterChoice::HardwareOnly, precision) {
                 Ok(ctx) => Backend::Gpu(ctx.into()),
                 Err(_) => Backend::Cpu,
             },
         })
     }
+}
+
+/// Whether the device directory `dev` has a node a hardware GPU's Vulkan driver opens: on
+/// Linux, DRM nodes (`dri/`: AMD, Intel, virtio and other Mesa drivers), NVIDIA's proprietary
+/// `nvidiactl`, or WSL's `dxg`. Without any of them no hardware adapter can appear. Elsewhere
+/// the drivers are always asked.
+fn may_hold_a_gpu(dev: &std::path::Path) -> bool {
+    !cfg!(target_os = "linux")
+        || ["dri", "nvidiactl", "dxg"]
+            .iter()
+            .any(|node| dev.join(node).exists())
 }
 
 impl Backend {
@@ -459,4 +473,21 @@ pub(crate) fn groups(n: usize, size: usize) -> u32 {
 /// net − anchor, so f32 rounding scales with the element's size, not with its coordinates.
 pub fn anchor(dim: usize, net: &BezierNet) -> [f64; 3] {
     net[if dim == 2 { 4 } else { 13 }]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::may_hold_a_gpu;
+
+    #[test]
+    #[cfg(target_os = "linux")]
+    fn gpu_device_nodes_decide_whether_drivers_are_asked() {
+        let dev = tempfile::tempdir().unwrap();
+        assert!(!may_hold_a_gpu(dev.path()), "no device node");
+        for node in ["dri", "nvidiactl", "dxg"] {
+            let dev = tempfile::tempdir().unwrap();
+            std::fs::create_dir(dev.path().join(node)).unwrap();
+            assert!(may_hold_a_gpu(dev.path()), "{node}");
+        }
+    }
 }
