@@ -12,7 +12,10 @@ skipped), to the top-level module it enters, and checks against FLOORS below:
   2. a module imports only modules of its own floor or of floors below it, and neither of two
      side-by-side floors (SIBLINGS) imports the other;
   3. the graph between top-level modules has no cycle (imports within one floor included);
-  4. the library names no clap path (the command line spells its values, `src/cli/values.rs`).
+  4. the library names no clap path (the command line spells its values, `src/cli/values.rs`);
+  5. the library neither prints nor exits (`print!`, `println!`, `eprint!`, `eprintln!`,
+     `dbg!`, `process::exit`, `process::abort` outside its `mod tests`): it returns typed
+     errors and reports, and the binary (`main.rs`, `cli/`) prints them and sets the status.
 
 Prints one line per violation, with the file and line of every import that makes it, and
 exits 1 if there is any; `--edges` also lists every edge between top-level modules. Python 3
@@ -38,6 +41,9 @@ FLOORS = [
 
 # Floors that sit side by side: neither may import the other (the job floor composes them).
 SIBLINGS = [("io", "algorithms")]
+
+# Macros by which a library would print (rule 5).
+PRINTS = ("print", "println", "eprint", "eprintln", "dbg")
 
 IDENT = re.compile(r"[A-Za-z_][A-Za-z0-9_]*")
 DOC_PATH = re.compile(r"\bcrate(?:::[A-Za-z_][A-Za-z0-9_]*)+")
@@ -210,6 +216,13 @@ def scan(src, lib_modules):
                 depth -= 1
                 if stack and stack[-1][1] == depth:
                     stack.pop()
+            in_tests = any(m == "tests" for m, _ in stack)
+            if not binary and not in_tests:
+                nxt = toks[k + 1][0] if k + 1 < len(toks) else ""
+                if t in PRINTS and nxt == "!":
+                    refs.append((rel, line, ["@print", t + "!"], binary))
+                elif t == "process" and nxt == "::" and k + 2 < len(toks) and toks[k + 2][0] in ("exit", "abort"):
+                    refs.append((rel, line, ["@print", "process::" + toks[k + 2][0]], binary))
             if t == "clap" and not binary and k + 1 < len(toks) and toks[k + 1][0] == "::":
                 refs.append((rel, line, ["@clap"], binary))
             if t == "use":
@@ -297,6 +310,9 @@ def main():
     for rel, line, full, binary in scan(src, mods):
         if full == ["@clap"]:
             problems.append(f"src/{rel}:{line}: the library names clap; spell the value in src/cli/")
+            continue
+        if full[0] == "@print":
+            problems.append(f"src/{rel}:{line}: the library calls {full[1]}; return an error or a report and let the binary (src/cli/) print or exit")
             continue
         a = top_of(rel, binary)
         b = full[0] if full else None

@@ -65,7 +65,7 @@ fn remove_temporaries_on_signals() {
             // A rank of a failed MPI job, ending after the job's one error line: the launcher
             // stops the ranks that are still finishing; that is not news.
             #[cfg(feature = "mpi")]
-            if polyspline::distributed::launch::failed() {
+            if cli::launch::failed() {
                 std::process::exit(1);
             }
             let name = match sig {

@@ -30,6 +30,7 @@
 pub(crate) mod clock;
 pub(crate) mod misfit;
 mod options;
+pub(crate) mod passes;
 mod report;
 pub(crate) mod spline;
 
@@ -239,7 +240,7 @@ fn curve_mesh(
 ) -> Result<Curved, CurveError> {
     let (order, elastic) = check_options(options)?;
     let start = Instant::now();
-    let mut clock = Clock::new(progress);
+    let mut clock = Clock::new(progress).counting(&options.backend);
     let mesh = clock.run(Stage::Read, read)?;
     clock.check()?;
     let topo = clock.run(Stage::Topology, || topology(input, &mesh))?;
@@ -309,7 +310,9 @@ fn curve_mesh(
         deviation,
         periodic: seams.map(|info| (periodic, info)),
     };
-    let report = CurveReport::assemble(&job, spline.as_ref(), &done, clock.into_timings());
+    let gpu_traffic = clock.gpu_traffic();
+    let mut report = CurveReport::assemble(&job, spline.as_ref(), &done, clock.into_timings());
+    report.gpu_traffic = gpu_traffic;
     Ok(Curved {
         mesh,
         topo,

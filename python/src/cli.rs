@@ -14,6 +14,10 @@ pub(crate) mod curve;
 #[allow(dead_code)]
 #[path = "../../src/cli/generate.rs"]
 pub(crate) mod generate;
+#[cfg(feature = "mpi")]
+#[allow(dead_code)]
+#[path = "../../src/cli/launch.rs"]
+mod launch;
 #[allow(dead_code)]
 #[path = "../../src/cli/values.rs"]
 mod values;

@@ -342,7 +342,8 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
     // Under mpirun with several ranks: the distributed job (docs/distributed.md).
     #[cfg(feature = "mpi")]
     if polyspline::distributed::launch::distributed() {
-        use polyspline::distributed::launch::{Outcome, curve};
+        use super::launch::curve;
+        use polyspline::distributed::launch::Outcome;
         let Prepared {
             mesh,
             output,
@@ -451,11 +452,11 @@ pub(crate) fn prepare_files(args: FileArgs) -> anyhow::Result<Prepared> {
     };
     // Under mpirun every rank finds the same error: one line, from rank 0.
     #[cfg(feature = "mpi")]
-    let prechecks = || prechecks().map_err(polyspline::distributed::launch::quiet_unless_rank_0);
+    let prechecks = || prechecks().map_err(super::launch::quiet_unless_rank_0);
     let parts = prechecks()?;
     let options = job.resolve(out.options());
     #[cfg(feature = "mpi")]
-    let options = options.map_err(polyspline::distributed::launch::quiet_unless_rank_0);
+    let options = options.map_err(super::launch::quiet_unless_rank_0);
     Ok(Prepared {
         options: options?,
         mesh,

@@ -17,6 +17,8 @@ mod compare;
 mod curve;
 mod generate;
 mod info;
+#[cfg(feature = "mpi")]
+pub(crate) mod launch;
 mod plot;
 mod values;
 

@@ -13,17 +13,20 @@
 //! elements to their Morton parts and read [`GHOST_DEPTH`] vertex rings of ghosts
 //! ([`super::share`], [`super::read`]); build the topology, features, smooth targets
 //! and spline space on that sub-mesh with the serial stage functions
-//! (`pipeline::spline::SplineSetup`); with graded or `auto` knots, survey the whole mesh's
-//! knot surfaces and take the serial knot weights ([`super::knots`]), `auto` deciding on the
-//! whole mesh's figures as the serial `curve_spline` does (`spline_passes`, one or two
-//! passes of what follows); agree on the shared control points by keys of
+//! (`pipeline::spline::SplineSetup`); run the serial job's spline passes
+//! (`pipeline::passes::spline_passes`, one or two passes of what follows) with graded or
+//! `auto` knots surveyed over the whole mesh, the serial knot weights taken
+//! ([`super::knots`]) and `auto` deciding on the whole mesh's figures; agree on the shared
+//! control points by keys of
 //! global entity ids ([`super::local`]); assemble the normal equations over its own elements
 //! with the whole mesh's size levels ([`crate::fit::partial`]); solve them with the
 //! distributed CG ([`super::cg`]) under the serial preconditioner; run the certified blend on
 //! its own elements, the ranks agreeing on the rejected elements of every round in global ids
 //! ([`crate::validity::blend::blend_search_shared`]); sample its own elements with a global
-//! node numbering ([`super::sample`]), with `--periodic` the pairs resolved over the whole mesh
-//! and the image sides' nodes made the transform of their masters' ([`super::periodic`]),
+//! node numbering ([`super::sample`]), with periodic pairs resolved over the whole mesh (the
+//! translation seams glued in the spline space: the share read again with its ghost rings
+//! across the seams) and the image sides' nodes made the transform of their masters'
+//! ([`super::periodic`]),
 //! check them and route them back to their file runs for the collective write; no rank reads
 //! or holds the whole mesh.
 //! Invariant: the result is the serial run's (the same knots too) up to the order of the
@@ -40,15 +43,18 @@ use super::sample::{RankOutput, sample_share};
 use super::share::read_share;
 use crate::mesh::Topology;
 use crate::pipeline::clock::{Clock, peak_memory_bytes};
+use crate::pipeline::passes::{Passes, spline_passes};
 use crate::pipeline::spline::{self, SplineSetup};
 use crate::pipeline::{
     CurveError, CurveOptions, CurveReport, Geometry, Job, LineSearchMode, Method, Outcomes,
     RankFigures, SpaceCounts, SplineFigures,
 };
 use crate::progress::{Silent, Stage};
-use crate::spline::{ElementClass, KnotIntervals, Q2Reason, SplineSpace};
+use crate::spline::{ElementClass, KnotIntervals, KnotParams, Knots, Q2Reason, SplineSpace};
 use crate::validity::CpuCertifier;
-use crate::validity::blend::{Blended, blend_search_shared};
+use crate::validity::blend::{
+    BlendInfo, Blended, Bounded, NetCache, blend_search_shared, blend_search_shared_at_most,
+};
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::Instant;
@@ -133,13 +139,13 @@ struct Share {
     bytes_fit: u64,
     bytes_validity: u64,
     bytes_sample: u64,
-    /// Blend entities this rank owns whose factor was reduced (below the fitted map, at or
-    /// below the target map, at the straight elevation): [`damped_owned`].
-    damped_owned: [usize; 3],
     /// The whole mesh's feature summary (deviations absolute), when any rank found features.
     features: Option<crate::mesh::features::FeatureReport>,
     /// The periodic pairs (`--periodic`), resolved over the whole mesh.
     pairs: Vec<crate::mesh::periodic::PeriodicPair>,
+    /// `c1` when the seams are glued in the spline space (on every rank alike), else `c0`
+    /// with why ([`SplineSetup::seam_continuity`]).
+    seam: (&'static str, Option<String>),
 }
 
 /// The topology of a ghosted sub-mesh, checked curvable where the serial check would see the
@@ -221,7 +227,8 @@ fn fit_share(
     halo: &Halo,
     start: Option<&[[f64; 3]]>,
 ) -> Result<(crate::solve::CgInfo, usize), CurveError> {
-    let (comm, topo, setup) = (j.comm, j.job.topo, j.setup);
+    // The boundary is fitted on the topology with the glued seams interior.
+    let (comm, topo, setup) = (j.comm, j.setup.topo(j.job), j.setup);
     let fit_params = &setup.fit_params;
     // The preconditioner's aggregates (the serial run's: rank 0 grows them on the whole
     // mesh's stencils) before the assembly, while a rank holds least.
@@ -287,7 +294,8 @@ fn assemble_share(
     s: &SplineSpace,
     halo: &Halo,
 ) -> (LocalMatrix, Vec<[f64; 3]>, Option<Vec<f64>>) {
-    let (comm, local, topo, setup, mine) = (j.comm, j.local, j.job.topo, j.setup, j.mine);
+    let (comm, local, setup, mine) = (j.comm, j.local, j.setup, j.mine);
+    let topo = setup.topo(j.job);
     let mesh = &local.mesh;
     // This rank's share of the fit, with the whole mesh's size levels.
     let sizes = crate::fit::partial::element_sizes(mesh);
@@ -395,135 +403,130 @@ fn misfit_marks(
     )
 }
 
-/// What the spline passes of a rank's share read: the job (on the sub-mesh, with the options
-/// asked for), the communicator and the sub-mesh's own elements.
-struct Passes<'a> {
-    comm: &'a dyn Comm,
-    local: &'a LocalMesh,
-    job: &'a Job<'a>,
-    mine: &'a [usize],
-}
-
 /// One spline pass of a rank's share: its space, halo and fit, and the certified blend's
-/// outcome (factors and nets owned, so that the setup can change knots between passes).
+/// outcome (factors and nets owned, so that the setup can change knots between passes), or
+/// the elements it holds back at least over the whole mesh when it stopped early.
 struct Pass {
     s: SplineSpace,
     halo: Halo,
     cg: crate::solve::CgInfo,
     nonzeros: usize,
-    factors: Vec<f32>,
-    nets: crate::validity::blend::NetCache,
-    blend: crate::validity::blend::BlendInfo,
+    blend: Result<Blend, usize>,
 }
 
-impl Pass {
-    /// Elements the blend holds back over the whole mesh (what `auto` decides on).
-    fn held(&self) -> usize {
-        self.blend.reduced_elements
+/// The certified blend's factors, nets and figures.
+type Blend = (Vec<f32>, NetCache, BlendInfo);
+
+/// The spline passes of a rank's share ([`crate::pipeline::passes`], the serial job's
+/// driver): the whole mesh's knot survey over the ranks ([`super::knots`]), each rank
+/// fitting and blending its own elements, the blend's counts summed over the ranks, so every
+/// rank decides alike and as the serial run. `bytes` adds the bytes sent in the fits and the
+/// blends.
+struct RankPasses<'a> {
+    comm: &'a dyn Comm,
+    local: &'a LocalMesh,
+    topo: &'a Topology,
+    mine: &'a [usize],
+    bytes: [u64; 2],
+    /// From the uniform fit, as the serial second pass starts (from C0 with periodic pairs,
+    /// whose passes have a setup each there).
+    warm_start: bool,
+}
+
+impl Passes for RankPasses<'_> {
+    type Pass = Pass;
+    type Survey = super::knots::SharedSurvey;
+    fn elements(&self) -> usize {
+        self.local.n_global as usize
+    }
+    fn survey(&mut self, clock: &mut Clock) -> Self::Survey {
+        let (comm, local, topo) = (self.comm, self.local, self.topo);
+        clock.run(Stage::Spline, || super::knots::survey(comm, local, topo))
+    }
+    fn knots(&mut self, clock: &mut Clock, survey: Self::Survey, params: &KnotParams) -> Knots {
+        let (comm, local, topo) = (self.comm, self.local, self.topo);
+        clock.run(Stage::Spline, || {
+            super::knots::knots(comm, survey, local, topo, params)
+        })
+    }
+    fn run(
+        &mut self,
+        job: &Job,
+        setup: &SplineSetup,
+        clock: &mut Clock,
+        previous: Option<&Pass>,
+        most: Option<usize>,
+    ) -> Result<Pass, CurveError> {
+        let j = self.share_job(job, setup);
+        share_pass(&j, clock, previous.map(|p| &p.s), most, &mut self.bytes)
+    }
+    fn held(pass: &Pass) -> Result<usize, usize> {
+        match &pass.blend {
+            Ok((_, _, info)) => Ok(info.reduced_elements),
+            Err(at_least) => Err(*at_least),
+        }
+    }
+    fn finish(
+        &mut self,
+        job: &Job,
+        setup: &SplineSetup,
+        clock: &mut Clock,
+        mut pass: Pass,
+    ) -> Result<Pass, CurveError> {
+        if pass.blend.is_err() {
+            let j = self.share_job(job, setup);
+            pass.blend = blend_share(&j, clock, &pass.s, None, &mut self.bytes)?;
+        }
+        Ok(pass)
+    }
+    fn boundary_rms(
+        &mut self,
+        job: &Job,
+        setup: &SplineSetup,
+        clock: &mut Clock,
+        pass: &Pass,
+    ) -> f64 {
+        // Each boundary side once: the own elements' (the ghosts' outer sides are no boundary).
+        let (comm, n_owned) = (self.comm, self.local.n_owned);
+        clock.run(Stage::Validity, || {
+            let (sum, n) = spline::fitted_boundary_sq_sum(job, setup, &pass.s, |e| e < n_owned);
+            let mut v = [sum, n as f64];
+            comm.sum_f64(&mut v);
+            crate::pipeline::misfit::rms(v[0], v[1] as usize)
+        })
+    }
+    fn warm_start(&self) -> bool {
+        self.warm_start
     }
 }
 
-/// The spline passes of the job's knot intervals on this rank's share, with the serial
-/// `curve_spline`'s rules (`pipeline::spline`): uniform or graded knots as asked; `auto`
-/// graded straight away where the whole mesh's graded share reaches
-/// [`crate::spline::AUTO_GRADED_SHARE`], else uniform, then graded (from the uniform fit)
-/// where the uniform blend holds back too many elements over the whole mesh, kept when
-/// decisive. Every rank decides alike: on the whole mesh's survey ([`super::knots`]) and the
-/// blends' global counts. `setup` ends with the knots of the pass returned; `bytes` adds the
-/// bytes sent in the fits and the blends.
-fn spline_passes(
-    p: &Passes,
-    setup: &mut SplineSetup,
-    clock: &mut Clock,
-    bytes: &mut [u64; 2],
-) -> Result<Pass, CurveError> {
-    let (comm, local, job) = (p.comm, p.local, p.job);
-    let options = job.options;
-    let weights = options.fit.weights;
-    let (uniform, graded) = (
-        options.with_knots(KnotIntervals::Uniform),
-        options.with_knots(KnotIntervals::Graded),
-    );
-    let uniform_job = Job {
-        options: &uniform,
-        ..*job
-    };
-    let graded_job = Job {
-        options: &graded,
-        ..*job
-    };
-    let survey = |clock: &mut Clock| {
-        clock.run(Stage::Spline, || {
-            super::knots::survey(comm, local, job.topo)
-        })
-    };
-    let graded_knots = |clock: &mut Clock, survey| {
-        clock.run(Stage::Spline, || {
-            super::knots::knots(comm, survey, local, job.topo, &graded.knots)
-        })
-    };
-    let pass =
-        |setup: &SplineSetup, job: &Job, clock: &mut Clock, bytes: &mut [u64; 2], previous| {
-            let j = ShareJob {
-                comm,
-                local,
-                job,
-                setup,
-                mine: p.mine,
-            };
-            share_pass(&j, clock, previous, bytes)
-        };
-    match options.knots.intervals {
-        KnotIntervals::Uniform => pass(setup, &uniform_job, clock, bytes, None),
-        KnotIntervals::Graded => {
-            let shared = survey(clock);
-            let knots = graded_knots(clock, shared);
-            setup.set_knots(KnotIntervals::Graded, knots, weights);
-            pass(setup, &graded_job, clock, bytes, None)
-        }
-        KnotIntervals::Auto => {
-            let shared = survey(clock);
-            if shared.graded_share >= crate::spline::AUTO_GRADED_SHARE {
-                let knots = graded_knots(clock, shared);
-                setup.set_knots(KnotIntervals::Graded, knots, weights);
-                return pass(setup, &graded_job, clock, bytes, None);
-            }
-            let near_uniform = shared.max_abs_log_ratio < crate::spline::AUTO_MIN_LOG_RATIO;
-            // Not held through the uniform pass (rank 0 holds the whole mesh's survey).
-            drop(shared);
-            let first = pass(setup, &uniform_job, clock, bytes, None)?;
-            let n_global = local.n_global as usize;
-            if !spline::auto_holds_back_too_many(first.held(), n_global) || near_uniform {
-                return Ok(first);
-            }
-            let shared = survey(clock);
-            let knots = graded_knots(clock, shared);
-            let uniform_knots = setup.set_knots(KnotIntervals::Graded, knots, weights);
-            setup.knot_passes = 2;
-            // From the uniform fit, as the serial second pass starts (from C0 with periodic
-            // pairs, whose passes have a setup each there).
-            let previous = options.periodic.pairs.is_empty().then_some(&first.s);
-            let second = pass(setup, &graded_job, clock, bytes, previous)?;
-            if spline::auto_graded_is_decisive(second.held(), first.held()) {
-                return Ok(second);
-            }
-            setup.set_knots(KnotIntervals::Uniform, uniform_knots, weights);
-            Ok(first)
+impl<'a> RankPasses<'a> {
+    fn share_job<'j>(&self, job: &'j Job<'j>, setup: &'j SplineSetup) -> ShareJob<'j>
+    where
+        'a: 'j,
+    {
+        ShareJob {
+            comm: self.comm,
+            local: self.local,
+            job,
+            setup,
+            mine: self.mine,
         }
     }
 }
 
 /// One spline pass of this rank's share (see [`Pass`]): the space of `j.setup`, its halo, the
 /// fit (from `previous`'s fitted control points where given; in 2D with the serial run's
-/// post-fit Q2 rounds), then the certified blend, each rank judging its own elements.
+/// post-fit Q2 rounds), then the certified blend ([`blend_share`]).
 fn share_pass(
     j: &ShareJob,
     clock: &mut Clock,
     previous: Option<&SplineSpace>,
+    most: Option<usize>,
     bytes: &mut [u64; 2],
 ) -> Result<Pass, CurveError> {
     let (comm, local, job, setup) = (j.comm, j.local, j.job, j.setup);
-    let (mesh, topo, options) = (&local.mesh, job.topo, job.options);
+    let (mesh, topo) = (&local.mesh, job.topo);
     let mut s = clock.run(Stage::Spline, || setup.build(job, &[]));
     let mut halo = clock.run(Stage::Partition, || {
         super::local::halo(comm, local, topo, &s)
@@ -538,7 +541,7 @@ fn share_pass(
         let mut misfit = vec![false; mesh.n_elements()];
         for _ in 0..crate::pipeline::misfit::MISFIT_ROUNDS {
             let marks = clock.run(Stage::Spline, || {
-                misfit_marks(comm, local, topo, &s, targets)
+                misfit_marks(comm, local, setup.topo(job), &s, targets)
             });
             let Some(marks) = marks else {
                 break;
@@ -555,16 +558,38 @@ fn share_pass(
             (cg, nonzeros) = fit_stage(j, clock, &mut s, &halo, None)?;
         }
     }
-    let before_blend = comm.bytes_sent();
-    bytes[0] += before_blend - before_fit;
+    bytes[0] += comm.bytes_sent() - before_fit;
+    let blend = blend_share(j, clock, &s, most, bytes)?;
+    Ok(Pass {
+        s,
+        halo,
+        cg,
+        nonzeros,
+        blend,
+    })
+}
 
-    // The certified blend, each rank judging its own elements.
+/// The certified blend of this rank's share to the fitted map of `s`, each rank judging its
+/// own elements; with `most`, given up once the whole mesh holds back more than `most`
+/// elements (`Err` with that count), on every rank at the same round.
+fn blend_share(
+    j: &ShareJob,
+    clock: &mut Clock,
+    s: &SplineSpace,
+    most: Option<usize>,
+    bytes: &mut [u64; 2],
+) -> Result<Result<Blend, usize>, CurveError> {
+    let (comm, local, job, setup) = (j.comm, j.local, j.job, j.setup);
+    let (mesh, options) = (&local.mesh, job.options);
+    let before = comm.bytes_sent();
     let target_map = clock.run(Stage::Validity, || setup.target_map(job));
-    let (factors, nets, blend) = clock.run(Stage::Validity, || {
-        let blend_params = options
+    let blend = clock.run(Stage::Validity, || {
+        let params = options
             .line_search
             .blend(options.line_search_mode == LineSearchMode::Global);
-        let mut blended = Blended::new(mesh, &target_map, &s, mesh, topo, Vec::new());
+        let (ids_mesh, ids_topo) = setup.entity_mesh(job);
+        let mut blended =
+            Blended::new(mesh, &target_map, s, ids_mesh, ids_topo, Vec::new()).with_geometry(mesh);
         let share = LocalShare {
             comm,
             mine: j.mine,
@@ -575,28 +600,29 @@ fn share_pass(
                 .enumerate()
                 .map(|(i, &g)| (g, i))
                 .collect(),
-            n_local: mesh.n_elements(),
-            n_global: local.n_global as usize,
         };
-        let blend = blend_search_shared(&CpuCertifier, &mut blended, &blend_params, &share)
-            .map_err(|source| CurveError::Blend {
-                input: job.input.to_owned(),
-                source,
-            });
-        let blend = agree(comm, blend)?;
-        let factors = std::mem::take(&mut blended.factors);
-        Ok::<_, CurveError>((factors, blended.into_cache(), blend))
+        let searched = match most {
+            None => {
+                blend_search_shared(&CpuCertifier, &mut blended, &params, &share).map(Bounded::Done)
+            }
+            Some(most) => {
+                blend_search_shared_at_most(&CpuCertifier, &mut blended, &params, &share, most)
+            }
+        }
+        .map_err(|source| CurveError::Blend {
+            input: job.input.to_owned(),
+            source,
+        });
+        Ok::<_, CurveError>(match agree(comm, searched)? {
+            Bounded::Done(info) => {
+                let factors = std::mem::take(&mut blended.factors);
+                Ok((factors, blended.into_cache(), info))
+            }
+            Bounded::Exceeded(at_least) => Err(at_least),
+        })
     })?;
-    bytes[1] += comm.bytes_sent() - before_blend;
-    Ok(Pass {
-        s,
-        halo,
-        cg,
-        nonzeros,
-        factors,
-        nets,
-        blend,
-    })
+    bytes[1] += comm.bytes_sent() - before;
+    Ok(blend)
 }
 
 /// This rank's read, setup, fit, certified blend and sampling (see the module docs), each
@@ -608,21 +634,44 @@ fn run_share(
     order: usize,
     clock: &mut Clock,
 ) -> Result<Share, CurveError> {
-    let local = clock.run(Stage::Read, || {
-        read_share(comm, input, GHOST_DEPTH, &options.mesh)
+    let mut local = clock.run(Stage::Read, || {
+        read_share(comm, input, GHOST_DEPTH, &options.mesh, None)
     })?;
-    let mesh = &local.mesh;
     // Checks of a rank's own share fail on that rank alone: agreed before the next collective.
-    let (topo, input_msj) = clock.run(Stage::Topology, || {
+    let (mut topo, input_msj) = clock.run(Stage::Topology, || {
         let topo = agree(comm, local_topology(input, &local))?;
-        let mut msj = [mesh.min_scaled_jacobian().map_or(f64::INFINITY, |m| m.0)];
+        let mut msj = [local
+            .mesh
+            .min_scaled_jacobian()
+            .map_or(f64::INFINITY, |m| m.0)];
         comm.min_f64(&mut msj);
         Ok::<_, CurveError>((topo, msj[0]))
     })?;
     // Periodic pairs over the whole mesh: every rank finds the same pairs, or the same error.
-    let pairs = clock.run(Stage::Topology, || {
+    let resolved = clock.run(Stage::Topology, || {
         periodic_pairs(comm, input, options, &local, &topo)
     })?;
+    // Translation seams are glued in the spline space as serially: the share is read again
+    // with its ghost rings run on across the seams (the elements across a seam are neighbours
+    // there), then glued ([`super::periodic::glue_share`]). Gmsh's partitioned inputs are not
+    // read through the seams: their seams stay apart.
+    let seam_map = resolved.seam_map();
+    let across = !seam_map.is_empty() && !super::read_parts::is_partitioned(input);
+    if across {
+        local = clock.run(Stage::Read, || {
+            read_share(comm, input, GHOST_DEPTH, &options.mesh, Some(&seam_map))
+        })?;
+        topo = clock.run(Stage::Topology, || {
+            agree(comm, local_topology(input, &local))
+        })?;
+    }
+    drop(seam_map);
+    let seams = clock.run(Stage::Spline, || {
+        super::periodic::glue_share(comm, &local, &resolved, across)
+    });
+    let pairs = resolved.pairs;
+    local.glued = seams.0.clone().map(std::sync::Arc::new);
+    let mesh = &local.mesh;
     let executor = crate::exec::executor(&options.backend);
     let job = Job {
         input,
@@ -639,41 +688,41 @@ fn run_share(
         ..job
     };
     let mut setup = clock.run(Stage::Spline, || {
-        agree(comm, SplineSetup::new(&uniform_job, &[]))
+        agree(comm, SplineSetup::with_seams(&uniform_job, seams))
     })?;
     let mine: Vec<usize> = (0..local.n_owned).collect();
-    let mut bytes = [0u64; 2];
-    let pass = spline_passes(
-        &Passes {
-            comm,
-            local: &local,
-            job: &job,
-            mine: &mine,
-        },
-        &mut setup,
-        clock,
-        &mut bytes,
-    )?;
-    let [bytes_fit, bytes_validity] = bytes;
+    let mut passes = RankPasses {
+        comm,
+        local: &local,
+        topo: &topo,
+        mine: &mine,
+        bytes: [0; 2],
+        warm_start: options.periodic.pairs.is_empty(),
+    };
+    let pass = spline_passes(&mut passes, &job, &mut setup, clock)?;
+    let [bytes_fit, bytes_validity] = passes.bytes;
     let Pass {
         s,
         halo,
         cg,
         nonzeros,
-        factors,
-        nets,
         blend,
     } = pass;
+    let Ok((factors, nets, blend)) = blend else {
+        unreachable!("the pass kept ran its blend to the end")
+    };
     // The certified blend found, for sampling (its nets computed once).
     let target_map = setup.target_map(&job);
-    let blended = Blended::with_cache(mesh, &target_map, &s, mesh, &topo, factors, nets);
-    let damped_owned = damped_owned(&local, &blended);
+    let (ids_mesh, ids_topo) = setup.entity_mesh(&job);
+    let blended = Blended::with_cache(mesh, &target_map, &s, ids_mesh, ids_topo, factors, nets)
+        .with_geometry(mesh);
     let bytes_before = comm.bytes_sent();
     let (output, features) = clock.run(Stage::Sample, || {
         let seams = super::periodic::Seams {
             pairs: &pairs,
             input,
             depth: options.line_search.certificate_depth,
+            boundary_rows: setup.boundary_rows(),
         };
         let mut output = sample_share(
             comm,
@@ -693,7 +742,7 @@ fn run_share(
             super::features::feature_report(
                 comm,
                 &local,
-                &topo,
+                setup.topo(&job),
                 setup.features.as_ref(),
                 &options.features.params,
                 output.feature_deviation,
@@ -718,6 +767,17 @@ fn run_share(
     }
     let knot_intervals = setup.knot_intervals;
     drop(blended);
+    // Putting a glued space back on the sub-mesh may fail on one rank: c1 only when on all.
+    let seam = setup.seam_continuity();
+    let mut glued = [f64::from(u8::from(seam.0 == "c1"))];
+    comm.min_f64(&mut glued);
+    let seam = match (glued[0] > 0.0, seam) {
+        (false, ("c1", _)) => (
+            "c0",
+            Some("the glued spline space could not be put back on every rank's elements".into()),
+        ),
+        (_, seam) => seam,
+    };
     Ok(Share {
         local,
         cg,
@@ -733,84 +793,38 @@ fn run_share(
         bytes_fit,
         bytes_validity,
         bytes_sample,
-        damped_owned,
         features,
         pairs,
+        seam,
     })
 }
 
-/// The periodic pairs of `--periodic` over the whole mesh ([`super::periodic::resolve`]):
-/// the same pairs, or the same error, on every rank. Collective when pairs are given.
+/// The periodic pairs of `--periodic` and of the input's `$Periodic` over the whole mesh
+/// ([`super::periodic::resolve`]): the same pairs, or the same error, on every rank.
+/// Collective when there are pairs.
 fn periodic_pairs(
     comm: &dyn Comm,
     input: &Path,
     options: &CurveOptions,
     local: &LocalMesh,
     topo: &Topology,
-) -> Result<Vec<crate::mesh::periodic::PeriodicPair>, CurveError> {
+) -> Result<super::periodic::Resolved, CurveError> {
     let periodic_err = |source| CurveError::Periodic {
         input: input.to_owned(),
         source,
     };
-    if options.periodic.pairs.is_empty() {
-        // Curved without its pairs, the sides would no longer be images of each other and the
-        // output would carry no pair, which the file says it has: refused, as the serial job
-        // refuses a link it cannot use.
-        if local.declares_periodic {
-            return Err(periodic_err(crate::mesh::periodic::PeriodicError {
-                spec: "$Periodic".into(),
-                what: "the input's periodic section is not read under mpirun yet: give its pairs with --periodic A:B (docs/periodic.md)".into(),
-            }));
-        }
+    // Every rank read the file's `$Periodic` links (the same on every rank).
+    if options.periodic.pairs.is_empty() && local.mesh.declared_periodic.is_empty() {
         if options.periodic.pyfr_names {
-            // The serial job's refusal (`pipeline::curve`); under mpirun no `$Periodic` is read.
+            // The serial job's refusal (`pipeline::curve`).
             return Err(periodic_err(crate::mesh::periodic::PeriodicError {
                 spec: "--periodic-pyfr-names".into(),
-                what: "the mesh has no periodic pair to name: give one with --periodic A:B (under mpirun an input's $Periodic section is not read)".into(),
+                what: "the mesh has no periodic pair to name: give one with --periodic A:B (or in a Gmsh input's $Periodic section)".into(),
             }));
         }
-        return Ok(Vec::new());
+        return Ok(Default::default());
     }
     super::periodic::resolve(comm, local, topo, &options.periodic.pairs).map_err(periodic_err)
-}
-
-/// Blend entities (vertices, edges, faces, cells) this rank owns whose factor was reduced
-/// (below 2, at most 1, 0: the serial `BlendInfo`'s reduced, target and straight points): an
-/// entity is owned by the rank of the lowest global element containing it (every element
-/// containing an entity of an own element is in the sub-mesh), so the sum over the ranks
-/// counts each entity once, as the serial report does.
-fn damped_owned(local: &LocalMesh, blended: &Blended) -> [usize; 3] {
-    if blended.factors.is_empty() {
-        return [0; 3];
-    }
-    let d = local.mesh.dim;
-    let np = if d == 2 { 9 } else { 27 };
-    // Each entity is counted by the rank holding the lowest global element around it (its
-    // local index is kept: own elements come first, whatever the partition).
-    let mut lowest = vec![(u64::MAX, usize::MAX); blended.factors.len()];
-    for e in 0..local.mesh.n_elements() {
-        let g = local.global_element[e];
-        for &id in &blended.ids.of(e)[..np] {
-            let l = &mut lowest[id as usize];
-            if g < l.0 {
-                *l = (g, e);
-            }
-        }
-    }
-    let owned: Vec<f32> = lowest
-        .iter()
-        .zip(&blended.factors)
-        .filter(|&(&(_, e), _)| e < local.n_owned)
-        .map(|(_, &f)| f)
-        .collect();
-    [
-        owned
-            .iter()
-            .filter(|&&f| f < crate::validity::blend::FITTED)
-            .count(),
-        owned.iter().filter(|&&f| f <= 1.0).count(),
-        owned.iter().filter(|&&f| f == 0.0).count(),
-    ]
 }
 
 /// Run the distributed `curve` job on every rank of `comm` (see the module docs): every rank
@@ -835,9 +849,6 @@ pub fn curve(
         let mut sizes = [
             out.node_tags.len() as u64,
             (out.boundary.len() / npf) as u64,
-            share.damped_owned[0] as u64,
-            share.damped_owned[1] as u64,
-            share.damped_owned[2] as u64,
         ];
         comm.sum_u64(&mut counts);
         comm.sum_u64(&mut sizes);
@@ -862,13 +873,6 @@ pub fn curve(
     };
     let per_rank = gather_figures(comm, &figures);
     clock.set(Stage::Total, start.elapsed().as_secs_f64());
-    // The blend's point counts over the ranks (each rank's search counts its sub-mesh's).
-    let blend = crate::validity::blend::BlendInfo {
-        reduced_points: sizes[2] as usize,
-        target_points: sizes[3] as usize,
-        straight_points: sizes[4] as usize,
-        ..share.blend
-    };
     let space = SpaceCounts {
         control_points: counts[0],
         spline_elements: counts[1],
@@ -896,12 +900,18 @@ pub fn curve(
             ..SplineFigures::blended(
                 space,
                 (crate::fit::FitSolver::Cg, share.cg, nonzeros),
-                blend,
+                share.blend,
             )
         }),
         snapped: None,
         elastic: None,
-        periodic: periodic_report(&share.pairs, &share.output, options, deviation.diagonal),
+        periodic: periodic_report(
+            &share.pairs,
+            &share.output,
+            &share.seam,
+            options,
+            deviation.diagonal,
+        ),
         input_min_scaled_jacobian: share.input_msj,
         min_scaled_jacobian: min_sj,
         deviation,
@@ -925,28 +935,23 @@ pub fn curve(
 }
 
 /// The report's `periodic` (and the seams' certified bound) when the job has pairs: the
-/// serial report's fields, the seams `c0` (each side curved on its own under mpirun).
+/// serial report's fields.
 fn periodic_report(
     pairs: &[crate::mesh::periodic::PeriodicPair],
     output: &RankOutput,
+    seam: &(&'static str, Option<String>),
     options: &CurveOptions,
     diagonal: f64,
 ) -> Option<(f64, crate::pipeline::PeriodicReport)> {
     let info = output.images?;
     let report = crate::pipeline::PeriodicReport {
         pairs: pairs.iter().map(|p| p.summary(diagonal)).collect(),
-        node_pairs: output
-            .periodic
-            .iter()
-            .map(|l| l.node_pairs.len())
-            .sum(),
+        node_pairs: output.periodic.iter().map(|l| l.node_pairs.len()).sum(),
         max_seam_shift: info.max_shift / diagonal,
         written_mismatch: info.max_mismatch / diagonal,
         recertified_elements: info.recertified,
-        seam: "c0",
-        seam_c0_reason: Some(
-            "under mpirun the seams are not identified in the spline space: each side is curved on its own and made exact images after sampling".into(),
-        ),
+        seam: seam.0,
+        seam_c0_reason: seam.1.clone(),
         pyfr_names: options.periodic.pyfr_names,
     };
     Some((info.min_det_bound, report))

@@ -59,6 +59,15 @@ pub struct SharedSurvey {
     pub max_abs_log_ratio: f64,
 }
 
+impl crate::pipeline::passes::KnotFigures for SharedSurvey {
+    fn graded_share(&self) -> f64 {
+        self.graded_share
+    }
+    fn max_abs_log_ratio(&self) -> f64 {
+        self.max_abs_log_ratio
+    }
+}
+
 /// Facet `f`'s first element over the whole mesh (the lower global index of its elements
 /// here) and its side there.
 fn first(local: &LocalMesh, topo: &Topology, f: usize) -> (u32, u8) {
@@ -69,7 +78,11 @@ fn first(local: &LocalMesh, topo: &Topology, f: usize) -> (u32, u8) {
 /// The knot survey of the whole mesh (collective; see the module docs). `local` and `topo`:
 /// this rank's sub-mesh and its topology.
 pub fn survey(comm: &dyn Comm, local: &LocalMesh, topo: &Topology) -> SharedSurvey {
-    let (mesh, g) = (&local.mesh, &local.global_element);
+    // With glued seams the knot surfaces run on across them (the serial `seam::knot_weights`):
+    // the survey is the glued share's, each element measured on its own vertices.
+    let glued = local.glued.as_deref();
+    let (mesh, topo) = glued.map_or((&local.mesh, topo), |s| (&s.mesh, &s.topo));
+    let g = &local.global_element;
     let own = |e: u32| (e as usize) < local.n_owned;
     // Own elements that are spline elements by topology (their two rings are on this rank).
     let spline: Vec<bool> = crate::spline::classify::classify(mesh, topo)
@@ -77,7 +90,10 @@ pub fn survey(comm: &dyn Comm, local: &LocalMesh, topo: &Topology) -> SharedSurv
         .enumerate()
         .map(|(e, c)| own(e as u32) && c.is_spline())
         .collect();
-    let (measured, ties) = intervals::survey_parts(mesh, topo, &spline, g);
+    let (measured, ties) = match glued {
+        Some(_) => intervals::survey_parts_glued(&local.mesh, mesh, topo, &spline, g),
+        None => intervals::survey_parts(mesh, topo, &spline, g),
+    };
     drop(spline);
     let name = |f: usize| {
         let (e, side) = first(local, topo, f);
@@ -241,6 +257,8 @@ pub fn knots(
         flipped,
         ..
     } = shared;
+    // The survey's topology: the glued share's with glued seams.
+    let topo = local.glued.as_deref().map_or(topo, |s| &s.topo);
     let n_global = local.n_global as usize;
     let ratios = survey.map(|(s, names)| (intervals::surface_ratios(s, n_global, params), names));
     // The ratios of this rank's facets with both elements here, asked of rank 0 by name.

@@ -1,8 +1,15 @@
-//! The binary's entry under `mpirun` (feature `mpi`): MPI is initialised only when the
-//! process was started by an MPI launcher with more than one rank, so `polyspline curve`
-//! without mpirun, and `mpirun -np 1`, run the serial job unchanged.
+//! Where the binary's `curve` meets the distributed job (feature `mpi`): whether this process
+//! was started by an MPI launcher with more than one rank (MPI is initialised only then, so
+//! `polyspline curve` without mpirun, and `mpirun -np 1`, run the serial job unchanged), and
+//! the job run and written on an initialised communicator ([`curve_and_write`]).
+//!
+//! Input: the launcher's environment; a communicator, the input and output paths and the
+//! options. Output: the output file written collectively (or Gmsh's parts) and the report on
+//! rank 0, or the job's error on every rank. Invariant: nothing here prints or exits; the
+//! binary's launcher (`cli/launch.rs`) initialises MPI, prints the one error line from the
+//! failing rank and sets the status.
 
-use super::comm::{Comm, Mpi};
+use super::comm::Comm;
 use super::job::curve as curve_job;
 use super::write::{WriteOptions, write_collective};
 use crate::io::gmsh_write::MshVersion;
@@ -25,91 +32,50 @@ pub fn launched_rank() -> Option<usize> {
         .find_map(|v| std::env::var(v).ok()?.parse().ok())
 }
 
-/// Under mpirun with several ranks, end a rank other than 0 quietly (status 0) on an error
-/// every rank finds before the job starts (an output path, an option): rank 0 prints the
-/// one error line and sets the job's status. Returns the error on rank 0 and outside mpirun.
-pub fn quiet_unless_rank_0<E>(e: E) -> E {
-    if distributed() && launched_rank().is_some_and(|r| r != 0) {
-        std::process::exit(0);
-    }
-    e
-}
-
 /// Whether `curve` should run distributed: under an MPI launcher with more than one rank.
 pub fn distributed() -> bool {
     launched_size().is_some_and(|n| n > 1)
 }
 
-/// What [`curve`] did on this rank.
+/// MPI for one job: initialised by [`World::initialize`], finalised when dropped (after the
+/// communicator, which is dropped first).
+pub struct World {
+    comm: super::comm::Mpi,
+    _universe: mpi::environment::Universe,
+}
+
+impl World {
+    /// Initialise MPI; an error if this process initialised it already.
+    pub fn initialize() -> Result<World, CurveError> {
+        let universe = mpi::initialize().ok_or_else(|| {
+            CurveError::Options("MPI was initialised already in this process".into())
+        })?;
+        Ok(World {
+            comm: super::comm::Mpi::new(universe.world()),
+            _universe: universe,
+        })
+    }
+
+    /// The communicator of every rank of the job.
+    pub fn comm(&self) -> &super::comm::Mpi {
+        &self.comm
+    }
+
+    /// End every rank of the job at once (`MPI_Abort` with `code`): for a panic on one rank,
+    /// which would otherwise leave the others waiting in a collective for ever.
+    pub fn abort_all(code: i32) -> ! {
+        use mpi::topology::Communicator;
+        mpi::topology::SimpleCommunicator::world().abort(code)
+    }
+}
+
+/// What [`curve_and_write`] did on this rank.
 pub enum Outcome {
     /// Rank 0: the output (and report) were written.
     Written(Box<CurveReport>),
     /// Another rank: its share is done.
     Share,
 }
-
-/// Run `curve` distributed: initialise MPI, run the job, write the output collectively (and
-/// the JSON report on rank 0), finalise MPI. On an error every rank ends with status 1 and
-/// the job prints one error line: the lowest rank whose stage failed prints it (agreed by
-/// [`super::comm::agree`]), or rank 0 for an error every rank finds alike (an option, the
-/// output, the solve). The line is printed before MPI is finalised, and the ranks wait for
-/// each other there, so no rank's exit lets the launcher kill the printing rank first.
-pub fn curve(
-    input: &Path,
-    output: &Path,
-    options: &CurveOptions,
-    report: Option<&Path>,
-    inputs: &[&Path],
-    partitioned: bool,
-) -> Result<Outcome, CurveError> {
-    let universe = mpi::initialize()
-        .ok_or_else(|| CurveError::Options("MPI was initialised already in this process".into()))?;
-    let comm = Mpi::new(universe.world());
-    let rank = comm.rank();
-    // A panic is a bug, but on one rank it would leave the others waiting in a collective for
-    // ever: after its message, end the whole job.
-    let report_panic = std::panic::take_hook();
-    std::panic::set_hook(Box::new(move |info| {
-        report_panic(info);
-        use mpi::topology::Communicator;
-        mpi::topology::SimpleCommunicator::world().abort(70);
-    }));
-    let result = run(&comm, input, output, options, report, inputs, partitioned);
-    let failed = result.is_err();
-    if failed {
-        FAILED.store(true, std::sync::atomic::Ordering::Relaxed);
-    }
-    if let Err(e) = &result
-        && rank == super::comm::failing_rank().unwrap_or(0)
-    {
-        eprintln!(
-            "polyspline: error: {}",
-            crate::mesh::raw::one_line(&e.to_string(), MAX_ERROR_CHARS)
-        );
-    }
-    // Every rank is here (an error is agreed or alike on every rank): the line is out before
-    // any rank ends.
-    let mut done = [0u64];
-    comm.sum_u64(&mut done);
-    drop(comm);
-    drop(universe);
-    if failed {
-        std::process::exit(1);
-    }
-    result
-}
-
-/// Set once this rank knows the job failed (its error line is printed or is another rank's).
-static FAILED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
-
-/// Whether this process is a rank of a distributed job that failed and is ending: the launcher
-/// may stop it with a signal before it exits, which needs no message of its own.
-pub fn failed() -> bool {
-    FAILED.load(std::sync::atomic::Ordering::Relaxed)
-}
-
-/// Longest error line (characters after the prefix), as the serial command's.
-const MAX_ERROR_CHARS: usize = 2000;
 
 /// The output options the collective writer takes: one MSH 4.1 file (ASCII or binary).
 fn check_output(output: &Path, options: &CurveOptions) -> Result<(), CurveError> {
@@ -130,7 +96,10 @@ fn check_output(output: &Path, options: &CurveOptions) -> Result<(), CurveError>
     Ok(())
 }
 
-fn run(
+/// Run the `curve` job over `comm` and write its output collectively (one MSH 4.1 file, or
+/// with `partitioned` Gmsh's part files) and the JSON report on rank 0. An error is returned on
+/// every rank; which rank's is printed is the caller's ([`super::comm::failing_rank`]).
+pub fn curve_and_write(
     comm: &dyn Comm,
     input: &Path,
     output: &Path,
@@ -165,7 +134,7 @@ fn run(
         )?;
         return Ok(r.map_or(Outcome::Share, |r| Outcome::Written(Box::new(r))));
     }
-    // Its errors are alike on every rank (one sum); rank 0 prints the line (see [`curve`]).
+    // Its errors are alike on every rank (one sum); rank 0 prints the line (the binary's launcher).
     let write_started = std::time::Instant::now();
     let pending = write_collective(comm, &finished.output, output, inputs, &write_options)?;
     let Some(pending) = pending else {

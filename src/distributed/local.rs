@@ -156,9 +156,6 @@ pub struct LocalShare<'a> {
     pub mine: &'a [usize],
     pub global: &'a [u64],
     pub local_of: HashMap<u64, usize>,
-    /// Elements of the sub-mesh (own and ghosts) and of the whole mesh.
-    pub n_local: usize,
-    pub n_global: usize,
 }
 
 impl BlendShare for LocalShare<'_> {
@@ -173,20 +170,14 @@ impl BlendShare for LocalShare<'_> {
             .into_iter()
             .filter_map(|x| self.local_of.get(&(x as u64)).copied())
             .collect();
-        all.sort_unstable();
+        // In the whole mesh's order: the blend lowers the factors of the rejected elements
+        // one after the other, each looking at the factors the ones before it left.
+        all.sort_unstable_by_key(|&e| self.global[e]);
         all.dedup();
         (all, any)
     }
-    /// The blend concatenates the straight elements' ratios to take their 1st percentile at
-    /// index n/100 of the sorted list, n its own element count: the whole mesh's percentile
-    /// is returned so that it is found at the sub-mesh's index.
     fn concat(&self, values: Vec<f64>) -> Vec<f64> {
-        let mut all = self.comm.all_gather_f64(&values).concat();
-        all.sort_by(f64::total_cmp);
-        match all.get(self.n_global / 100) {
-            Some(&p) => vec![p; self.n_local / 100 + 1],
-            None => Vec::new(),
-        }
+        self.comm.all_gather_f64(&values).concat()
     }
     fn sum(&self, v: usize) -> usize {
         let mut x = [v as u64];
@@ -197,5 +188,8 @@ impl BlendShare for LocalShare<'_> {
         let mut x = [v];
         self.comm.min_f64(&mut x);
         x[0]
+    }
+    fn global(&self, e: usize) -> usize {
+        self.global[e] as usize
     }
 }

@@ -15,8 +15,12 @@
 //! error. The boundary groups of the sides are gathered whole (one all-gather of 21 doubles per
 //! facet of A and B): this is replicated, like the 2D post-fit misfit sides.
 //!
-//! **Images.** The spline space is not glued across the seams under mpirun (each side is fitted
-//! on its own, as serially for rotation pairs): the seam is C⁰. After sampling, every rank
+//! **Glue.** [`Resolved::seam_map`] gives every image node of a translation pair its
+//! representative tag; the job reads its share again with the ghost rings run on across the
+//! seams, and [`glue_share`] glues it as the serial job glues the whole mesh (the ranks agree
+//! that all of them can). Rotation pairs are not glued (C⁰, as serially).
+//!
+//! **Images.** After sampling, every rank
 //! contributes the order-P nodes of its own A and B facets (global tag, straight-sided position
 //! — the multilinear map of their element at the lattice point — and sampled position); the
 //! gathered nodes pair by their straight positions as [`crate::mesh::periodic::node_pairs`]
@@ -35,8 +39,9 @@ use crate::math::BezierElements;
 use crate::mesh::Topology;
 use crate::mesh::high_order::lattice_point;
 use crate::mesh::periodic::{
-    IMAGE_WEIGHTS, ImageInfo, PERIODIC_REL_TOL, PeriodicError, PeriodicLink, PeriodicPair,
-    PeriodicSpec, PointGrid, Rigid, SideFacet, pair_facets, place_images, spec_tags,
+    Declared, IMAGE_WEIGHTS, ImageInfo, PERIODIC_REL_TOL, PeriodicError, PeriodicLink,
+    PeriodicPair, PeriodicSpec, PointGrid, Rigid, SideFacet, declared_pairs, pair_facets,
+    place_images, spec_tags,
 };
 use crate::pipeline::CurveError;
 use std::collections::{BTreeMap, HashMap};
@@ -82,7 +87,7 @@ pub fn resolve(
     local: &LocalMesh,
     topo: &Topology,
     specs: &[PeriodicSpec],
-) -> Result<Vec<PeriodicPair>, PeriodicError> {
+) -> Result<Resolved, PeriodicError> {
     let mesh = &local.mesh;
     // The boundary groups of the whole mesh.
     let mine: Vec<f64> = topo
@@ -103,9 +108,21 @@ pub fn resolve(
         .collect();
     tags.sort_unstable();
     tags.dedup();
-    let resolved = spec_tags(&mesh.tag_names, &tags, specs)?;
-    let mut out = Vec::with_capacity(resolved.len());
-    for (spec, ta, tb) in resolved {
+    // The command line's pairs, then the file's (`$Periodic`, read by every rank) whose groups
+    // they do not name, as the serial `resolve` takes them.
+    let mut resolved: Vec<Declared> = spec_tags(&mesh.tag_names, &tags, specs)?
+        .into_iter()
+        .map(|(spec, ta, tb)| (spec, ta, tb, Vec::new()))
+        .collect();
+    let mut seen: Vec<i32> = resolved.iter().flat_map(|r| [r.1, r.2]).collect();
+    resolved.extend(declared_pairs(
+        &mesh.tag_names,
+        &mesh.declared_periodic,
+        &tags,
+        &mut seen,
+    )?);
+    let mut out = Resolved::default();
+    for (spec, ta, tb, claims) in resolved {
         let mut send = Vec::new();
         for (side, tag) in [(0.0, ta), (1.0, tb)] {
             for (_, f) in own_facets(local, topo, tag) {
@@ -151,9 +168,130 @@ pub fn resolve(
             };
             if r[0] == 0.0 { &mut a } else { &mut b }.push(facet);
         }
-        out.push(pair_facets(&coords, mesh.dim, &spec, (ta, a), (tb, b))?);
+        let found = pair_facets(&coords, mesh.dim, &spec, (ta, a), (tb, b), &claims)?;
+        let tag: Vec<u64> = index.into_keys().collect();
+        out.tag_maps.push(
+            found
+                .vertex_map
+                .iter()
+                .map(|&[b, a]| [tag[b as usize], tag[a as usize]])
+                .collect(),
+        );
+        out.pairs.push(found);
     }
     Ok(out)
+}
+
+/// The verified pairs of [`resolve`], the same on every rank.
+#[derive(Default)]
+pub struct Resolved {
+    /// Their vertex maps index the gathered sides' vertices.
+    pub pairs: Vec<PeriodicPair>,
+    /// Per pair, its vertex map in node tags: (image tag, master tag).
+    pub tag_maps: Vec<Vec<[u64; 2]>>,
+}
+
+impl Resolved {
+    /// Node tag → representative tag of the glued translation seams (the lowest tag of each
+    /// chain of pairs, as `spline::seam::glue` represents a class by its lowest vertex); only
+    /// the tags represented by another. Empty without translation pairs.
+    pub fn seam_map(&self) -> HashMap<u64, u64> {
+        let mut parent: HashMap<u64, u64> = HashMap::new();
+        fn find(parent: &mut HashMap<u64, u64>, mut t: u64) -> u64 {
+            while let Some(&p) = parent.get(&t) {
+                t = p;
+            }
+            t
+        }
+        for (p, map) in self.pairs.iter().zip(&self.tag_maps) {
+            if !p.transform.is_translation() {
+                continue;
+            }
+            for &[b, a] in map {
+                let (rb, ra) = (find(&mut parent, b), find(&mut parent, a));
+                if ra != rb {
+                    parent.insert(ra.max(rb), ra.min(rb));
+                }
+            }
+        }
+        let tags: Vec<u64> = parent.keys().copied().collect();
+        tags.into_iter()
+            .map(|t| (t, find(&mut parent, t)))
+            .collect()
+    }
+
+    /// The pairs with their vertex maps in the local vertices of `local` (the vertex pairs
+    /// whose two vertices it holds): what a rank's sub-mesh is glued by.
+    pub fn local_pairs(&self, local: &LocalMesh) -> Vec<PeriodicPair> {
+        let at: HashMap<u64, u32> = local
+            .global_vertex
+            .iter()
+            .enumerate()
+            .map(|(i, &t)| (t, i as u32))
+            .collect();
+        self.pairs
+            .iter()
+            .zip(&self.tag_maps)
+            .map(|(p, map)| PeriodicPair {
+                vertex_map: map
+                    .iter()
+                    .filter_map(|[b, a]| Some([*at.get(b)?, *at.get(a)?]))
+                    .collect(),
+                ..p.clone()
+            })
+            .collect()
+    }
+}
+
+/// The translation seams of `pairs` glued on this rank's sub-mesh (`spline::seam::glue_share`:
+/// classes represented by their lowest node tag, homes by the lowest global element, only the
+/// own elements' entities checked manifold), and why a pair stays apart, as the serial
+/// `pipeline::spline::glue_seams` says it. Collective: the ranks agree, so that either every
+/// rank glues its seams or none does. `across`: the ghost rings run across the seams (the
+/// share was read through [`Resolved::seam_map`]); otherwise nothing is glued.
+pub fn glue_share(
+    comm: &dyn Comm,
+    local: &LocalMesh,
+    resolved: &Resolved,
+    across: bool,
+) -> (Option<crate::spline::seam::Glued>, Option<String>) {
+    let pairs = &resolved.pairs;
+    if pairs.is_empty() {
+        return (None, None);
+    }
+    let translations = pairs.iter().any(|p| p.transform.is_translation());
+    let glued = if translations && across {
+        let mesh = &local.mesh;
+        let mut near = vec![false; mesh.n_vertices()];
+        for e in 0..local.n_owned {
+            for &v in mesh.element(e) {
+                near[v as usize] = true;
+            }
+        }
+        let order = crate::spline::seam::ShareOrder {
+            vertex: &local.global_vertex,
+            element: &local.global_element,
+            near: &near,
+        };
+        crate::spline::seam::glue_share(mesh, &resolved.local_pairs(local), Some(&order))
+    } else {
+        None
+    };
+    let mut ok = [f64::from(u8::from(glued.is_some()))];
+    comm.min_f64(&mut ok);
+    let glued = glued.filter(|_| ok[0] > 0.0);
+    let why = if glued.is_none() && translations {
+        Some(if across {
+            "the mesh with its translation pairs glued is not manifold"
+        } else {
+            "under mpirun the seams of a partitioned input are not identified in the spline space"
+        })
+    } else if pairs.iter().any(|p| !p.transform.is_translation()) {
+        Some("rotation pairs are not identified in the spline space")
+    } else {
+        None
+    };
+    (glued, why.map(str::to_string))
 }
 
 /// What the seam pass needs besides the sampled nodes.
@@ -162,6 +300,10 @@ pub struct Seams<'a> {
     pub input: &'a Path,
     /// Subdivision depth of the Bernstein certificate (`--certificate-depth`).
     pub depth: usize,
+    /// With glued seams, the features' boundary facets: per boundary facet of the topology
+    /// they were found on (the seam facets interior), its index among the input's
+    /// (`SeamView::boundary_rows`); `None`: the input's.
+    pub boundary_rows: Option<&'a [u32]>,
 }
 
 /// The rank's sampled share as the seam pass sees it: local node ids of the own elements

@@ -7,7 +7,9 @@
 //! coordinates of a set of nodes; and a [`LocalMesh`]: given own elements, ghosts and the
 //! ghosts' owners, the tagged boundary facets whose vertices are all present and only the
 //! nodes these use, with the global id of every element (its index among the file's elements)
-//! and vertex (its node tag). [`super::share`] decides which elements a rank owns.
+//! and vertex (its node tag), and the file's `$Periodic` links (every rank reads the section
+//! at its offset with the serial parser, `Indexed::declared_periodic`). [`super::share`]
+//! decides which elements a rank owns.
 //!
 //! How it reads: the file is parsed by the MSH parser family's offset-indexed reader
 //! (`io::gmsh::stream`: one pass over the section headers, then runs read at their
@@ -39,8 +41,10 @@ pub struct LocalMesh {
     pub global_vertex: Vec<u64>,
     /// Elements in the whole file.
     pub n_global: u64,
-    /// The file declares periodic pairs (Gmsh's `$Periodic`), which the ranks do not read.
-    pub declares_periodic: bool,
+    /// The share glued along its translation seams, when the job glues them
+    /// (`super::periodic::glue_share`): the graded knots are surveyed on it
+    /// ([`super::knots`]), their surfaces running on across the seams.
+    pub glued: Option<std::sync::Arc<crate::spline::seam::Glued>>,
 }
 
 impl LocalMesh {
@@ -157,14 +161,22 @@ impl MshFile {
 
     /// The cells within `depth` vertex rings of `own` and not in it: one streamed pass over
     /// the cell blocks per ring, keeping the cells that touch a node of the previous rings.
-    pub fn ghosts(&mut self, own: &Elements, depth: usize) -> Result<Elements, ParseError> {
-        let mut have: HashSet<u64> = own.nodes.iter().copied().collect();
+    /// With `seams` (node tag → its representative, for the image nodes of glued periodic
+    /// seams) the rings are those of the glued mesh: they run on across the seams.
+    pub fn ghosts(
+        &mut self,
+        own: &Elements,
+        depth: usize,
+        seams: Option<&HashMap<u64, u64>>,
+    ) -> Result<Elements, ParseError> {
+        let glued = |t: &u64| seams.and_then(|m| m.get(t)).copied().unwrap_or(*t);
+        let mut have: HashSet<u64> = own.nodes.iter().map(glued).collect();
         let mut seen: HashSet<u64> = own.global.iter().copied().collect();
         let mut out = Elements::default();
         for _ in 0..depth {
             let before = out.global.len();
             self.ix.for_each(self.kind, |g, p, v| {
-                if !seen.contains(&g) && v.iter().any(|t| have.contains(t)) {
+                if !seen.contains(&g) && v.iter().any(|t| have.contains(&glued(t))) {
                     seen.insert(g);
                     out.push(g, p, v);
                 }
@@ -172,7 +184,7 @@ impl MshFile {
             if out.global.len() == before {
                 break;
             }
-            have.extend(out.nodes[self.npe * before..].iter().copied());
+            have.extend(out.nodes[self.npe * before..].iter().map(glued));
         }
         Ok(out)
     }
@@ -250,8 +262,9 @@ impl MshFile {
             point_locations: Vec::new(),
             declared_dim: Some(3),
             blocks: vec![block, fblock],
-            // The ranks' readers do not read `$Periodic`.
-            periodic: Vec::new(),
+            // Every rank reads the whole section (its links; the node pairs are checked, not
+            // kept: the pairing is found again from the positions, as serially).
+            periodic: self.ix.declared_periodic()?,
             tag_names: self.ix.header.tag_names.clone(),
         };
         let mesh = LinearMesh::from_raw(raw, options)?;
@@ -263,7 +276,7 @@ impl MshFile {
             owner: owners,
             global_vertex,
             n_global: self.n_global,
-            declares_periodic: self.ix.periodic_section,
+            glued: None,
         })
     }
 }
@@ -296,7 +309,7 @@ mod tests {
         let mut f = MshFile::open(path).unwrap();
         let starts = LocalMesh::starts(f.n_global, size);
         let own = f.run(starts[rank], starts[rank + 1]).unwrap();
-        let ghosts = f.ghosts(&own, depth).unwrap();
+        let ghosts = f.ghosts(&own, depth, None).unwrap();
         let owner = ghosts
             .global
             .iter()

@@ -461,7 +461,7 @@ pub fn read_parts_share(
         point_locations: Vec::new(),
         declared_dim: Some(3),
         blocks: vec![block, fblock],
-        // The ranks' readers do not read `$Periodic`.
+        // The parts' `$Periodic` sections are not read (give the pairs with `--periodic`).
         periodic: Vec::new(),
         tag_names: r.tag_names,
     };
@@ -473,7 +473,6 @@ pub fn read_parts_share(
         owner: owners,
         global_vertex,
         n_global,
-        // Gmsh's split files carry no `$Periodic` the ranks would read.
-        declares_periodic: false,
+        glued: None,
     })
 }

@@ -215,7 +215,8 @@ pub fn sample_share(
     let vertex_deviation = vertex_deviation(local, topo, &owned, &xyz);
     let (xyz, boundary_distance) = boundary_distance(local, topo, p, xyz, &boundary_ids);
     let feature_deviation = features.map_or((0.0, 0.0), |f| {
-        feature_deviation(local, topo, f, &owned, &xyz, &boundary_ids)
+        let rows = seams.and_then(|s| s.boundary_rows);
+        feature_deviation(local, topo, f, rows, &owned, &xyz, &boundary_ids)
     });
     let boundary_elements = topo
         .boundary_facets
@@ -281,6 +282,7 @@ fn feature_deviation(
     local: &LocalMesh,
     topo: &Topology,
     f: &Features,
+    rows: Option<&[u32]>,
     owned: &[u32],
     xyz: &[[f64; 3]],
     ids: &[u32],
@@ -306,8 +308,18 @@ fn feature_deviation(
     } else {
         ids.len() / own.len()
     };
+    // With glued seams the features' facets are the input's but the seam facets (`rows`).
+    let row_of: Option<std::collections::HashMap<u32, usize>> =
+        rows.map(|r| r.iter().enumerate().map(|(k, &i)| (i, k)).collect());
     let mut planarity = 0.0f64;
     for (k, &i) in own.iter().enumerate() {
+        let i = match &row_of {
+            Some(m) => match m.get(&(i as u32)) {
+                Some(&r) => r,
+                None => continue,
+            },
+            None => i,
+        };
         if let Some(Some((n, d))) = f.planes.get(f.facet_patch[i] as usize) {
             for &id in &ids[k * npf..(k + 1) * npf] {
                 let x = xyz[id as usize];

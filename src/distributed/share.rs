@@ -35,12 +35,15 @@ use crate::mesh::raw::{Location, ParseError};
 use std::collections::{HashMap, HashSet};
 use std::path::Path;
 
-/// Read this rank's share with `depth` vertex rings of ghosts (see the module docs).
+/// Read this rank's share with `depth` vertex rings of ghosts (see the module docs); with
+/// `seams` (node tag → representative tag of glued periodic seams, single files only) the
+/// rings run on across the seams ([`MshFile::ghosts`]).
 pub fn read_share(
     comm: &dyn Comm,
     path: &Path,
     depth: usize,
     options: &MeshOptions,
+    seams: Option<&HashMap<u64, u64>>,
 ) -> Result<LocalMesh, crate::io::ReadError> {
     let wrap = |source| crate::io::ReadError::Parse {
         path: path.to_owned(),
@@ -70,7 +73,11 @@ pub fn read_share(
     };
     let own = route(comm, &run, &part, file.npe);
     drop(run);
-    let ghosts = agree_with(comm, file.ghosts(&own, depth).map_err(wrap), elsewhere)?;
+    let ghosts = agree_with(
+        comm,
+        file.ghosts(&own, depth, seams).map_err(wrap),
+        elsewhere,
+    )?;
     let owner = ghost_owners(comm, &starts, lo, &part, &ghosts.global);
     drop(part);
     agree_with(

@@ -363,7 +363,7 @@ pub fn write_partitioned(
         })
     });
     // Every rank's outcome: the barrier before any part may be renamed. The lowest failing
-    // rank prints its own error (`launch::curve`).
+    // rank prints its own error (the binary's launcher, `cli/launch.rs`).
     super::comm::agree(comm, result, |q| {
         elsewhere(
             &target,
@@ -397,7 +397,7 @@ pub fn commit_parts(comm: &dyn Comm, part: PendingFile, ready: bool) -> Result<(
 /// The partitioned output and rank 0's report, renamed together: [`write_partitioned`], the
 /// report prepared on rank 0, then [`commit_parts`]. Collective. Returns the report on rank 0
 /// and `None` elsewhere; an error is every rank's, and the lowest failing rank (or rank 0)
-/// prints it (`launch::curve`).
+/// prints it (the binary's launcher, `cli/launch.rs`).
 #[allow(clippy::too_many_arguments)]
 pub fn write_all(
     comm: &dyn Comm,

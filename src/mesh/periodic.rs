@@ -745,7 +745,22 @@ pub fn resolve(
         built: HashMap::new(),
     };
     let n_given = resolved.len();
-    resolved.extend(declared(mesh, &tags, &given, &mut sides)?);
+    let images = |d: &DeclaredPeriodic| {
+        // A claim naming no sides (CGNS): the groups its map carries onto each other.
+        let groups: Vec<i32> = tags.iter().copied().filter(|&t| t != 0).collect();
+        for &t in &groups {
+            sides.get(t);
+        }
+        let all: Vec<&Side> = groups.iter().map(|t| &sides.built[t]).collect();
+        images_under(mesh, &all, d)
+    };
+    resolved.extend(declared(
+        &mesh.tag_names,
+        &mesh.declared_periodic,
+        &tags,
+        &given,
+        images,
+    )?);
     let mut out = Vec::new();
     for (i, (spec, ta, tb, claims)) in resolved.iter().enumerate() {
         let err = |what: String| PeriodicError {
@@ -761,7 +776,7 @@ pub fn resolve(
         let (a, b) = (&sides.built[&ta], &sides.built[&tb]);
         let found = pair(&mesh.coords, mesh.dim, spec, a, b).map_err(err)?;
         for claim in claims {
-            check_declared(mesh, a, &found, claim).map_err(err)?;
+            check_declared(&mesh.coords, mesh.dim, a, &found, claim).map_err(err)?;
         }
         out.push(found);
     }
@@ -770,24 +785,51 @@ pub fn resolve(
 
 /// One pair found and verified on boundary facets given apart from a mesh (the gathered
 /// boundary of a distributed mesh): `coords` holds the sides' vertices, `a` and `b` the
-/// facets of sides `ta` and `tb`. The pair's vertex map is in indices of `coords`.
+/// facets of sides `ta` and `tb`, and every file link in `claims` (a pair of
+/// [`declared_pairs`]) must agree with the transform found, as [`resolve`] checks it. The
+/// pair's vertex map is in indices of `coords`.
 pub fn pair_facets(
     coords: &[[f64; 3]],
     dim: usize,
     spec: &PeriodicSpec,
     (ta, a): (i32, Vec<SideFacet>),
     (tb, b): (i32, Vec<SideFacet>),
+    claims: &[&DeclaredPeriodic],
 ) -> Result<PeriodicPair, PeriodicError> {
     let a = Side::from_facets(coords, dim, ta, a.into_iter());
     let b = Side::from_facets(coords, dim, tb, b.into_iter());
-    pair(coords, dim, spec, &a, &b).map_err(|what| PeriodicError {
+    let err = |what| PeriodicError {
         spec: spec.label(),
         what,
-    })
+    };
+    let found = pair(coords, dim, spec, &a, &b).map_err(err)?;
+    for claim in claims {
+        check_declared(coords, dim, &a, &found, claim).map_err(err)?;
+    }
+    Ok(found)
 }
 
 /// A file's pair with the links it gathers.
-type Declared<'m> = (PeriodicSpec, i32, i32, Vec<&'m DeclaredPeriodic>);
+pub type Declared<'m> = (PeriodicSpec, i32, i32, Vec<&'m DeclaredPeriodic>);
+
+/// The pairs the file declares (`declared`, Gmsh's `$Periodic` links naming their sides)
+/// among the boundary groups `tags` (sorted) named by `names`, after the pairs `given` (the
+/// command line's, whose groups they may not name; `seen`: their groups), each checked as
+/// [`resolve`] checks them: what the ranks of a distributed job run on the gathered groups.
+/// A claim naming no sides (CGNS, which the ranks do not read) is refused.
+pub fn declared_pairs<'m>(
+    names: &BTreeMap<i32, String>,
+    declared: &'m [DeclaredPeriodic],
+    tags: &[i32],
+    seen: &mut Vec<i32>,
+) -> Result<Vec<Declared<'m>>, PeriodicError> {
+    let given = seen.clone();
+    let out = self::declared(names, declared, tags, &given, |_| Vec::new())?;
+    for (spec, ta, tb, _) in &out {
+        distinct(seen, spec, *ta, *tb)?;
+    }
+    Ok(out)
+}
 
 /// The pairs of boundary groups the file declares, each with the file's links it gathers
 /// (several entity pairs of one physical pair). A claim that gives its map only (CGNS) pairs
@@ -799,14 +841,15 @@ type Declared<'m> = (PeriodicSpec, i32, i32, Vec<&'m DeclaredPeriodic>);
 /// be images of each other and the output would silently lose the periodicity the file
 /// declares.
 fn declared<'m>(
-    mesh: &'m LinearMesh,
+    names: &BTreeMap<i32, String>,
+    declared: &'m [DeclaredPeriodic],
     tags: &[i32],
     given: &[i32],
-    sides: &mut Sides,
+    mut images: impl FnMut(&DeclaredPeriodic) -> Vec<(i32, i32)>,
 ) -> Result<Vec<Declared<'m>>, PeriodicError> {
     let mut out: Vec<Declared<'m>> = Vec::new();
-    let name = |t: i32| mesh.tag_names.get(&t).cloned().unwrap_or(t.to_string());
-    for d in &mesh.declared_periodic {
+    let name = |t: i32| names.get(&t).cloned().unwrap_or(t.to_string());
+    for d in declared {
         let refuse = |why: String| PeriodicError {
             spec: claim_place(d),
             what: format!("{why}, or remove the link"),
@@ -834,12 +877,7 @@ fn declared<'m>(
                 vec![(ta, tb)]
             }
             None => {
-                let groups: Vec<i32> = tags.iter().copied().filter(|&t| t != 0).collect();
-                for &t in &groups {
-                    sides.get(t);
-                }
-                let all: Vec<&Side> = groups.iter().map(|t| &sides.built[t]).collect();
-                let found = images_under(mesh, &all, d);
+                let found = images(d);
                 if found.is_empty() {
                     return Err(refuse(
                         "its map carries no boundary group onto another; put each side in a boundary condition of its own, or pair them with --periodic A:B".into(),
@@ -926,7 +964,8 @@ fn images_under(mesh: &LinearMesh, sides: &[&Side], claim: &DeclaredPeriodic) ->
 /// The file's affine map of a declared pair must carry every vertex of A onto its vertex of B
 /// as the transform found does (to the same tolerance).
 fn check_declared(
-    mesh: &LinearMesh,
+    coords: &[[f64; 3]],
+    dim: usize,
     side: &Side,
     found: &PeriodicPair,
     claim: &DeclaredPeriodic,
@@ -940,11 +979,11 @@ fn check_declared(
         let Ok(k) = side.vertices.binary_search(&v) else {
             continue;
         };
-        let mut x = map.apply(mesh.coords[v as usize]);
-        if mesh.dim == 2 {
+        let mut x = map.apply(coords[v as usize]);
+        if dim == 2 {
             x[2] = 0.0;
         }
-        let d = (point(x) - point(mesh.coords[w as usize])).length();
+        let d = (point(x) - point(coords[w as usize])).length();
         // A map stored in single precision is only as exact as its digits.
         let stored = 4.0 * claim.precision * (point(x).length() + point(map.translation).length());
         let tol = (PERIODIC_REL_TOL * side.edge[k])

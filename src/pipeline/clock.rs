@@ -4,8 +4,11 @@
 //! A stage that runs several times (the fit and the certificate after a demotion round) is
 //! timed as the sum of its runs. The distributed job runs its stages on the same clock, which
 //! also keeps each rank's peak memory at the end of every stage ([`Clock::with_peaks`]).
+//! With a GPU ([`Clock::counting`]) it also keeps what each stage moved to and from the device
+//! and dispatched ([`GpuTraffic`], the report's `gpu_traffic`), under the same keys.
 
 use super::CurveError;
+use crate::exec::gpu::{Backend, GpuTraffic};
 use crate::progress::{Progress, Stage};
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -14,6 +17,8 @@ pub(crate) struct Clock<'p> {
     timings: BTreeMap<String, f64>,
     /// The peak memory at the end of each stage, by key, when kept.
     peaks: Option<BTreeMap<String, u64>>,
+    /// The backend whose device traffic is counted per stage, and the counts by key.
+    gpu: Option<(Backend, BTreeMap<String, GpuTraffic>)>,
     progress: &'p dyn Progress,
 }
 
@@ -22,8 +27,24 @@ impl<'p> Clock<'p> {
         Clock {
             timings: BTreeMap::new(),
             peaks: None,
+            gpu: None,
             progress,
         }
+    }
+
+    /// This clock, also keeping each stage's traffic on `backend`'s device (nothing on the
+    /// CPU).
+    pub(crate) fn counting(mut self, backend: &Backend) -> Self {
+        if backend.traffic().is_some() {
+            self.gpu = Some((backend.clone(), BTreeMap::new()));
+        }
+        self
+    }
+
+    /// Each stage's traffic on the device, by key (every stage run, zeros included), when
+    /// counted.
+    pub(crate) fn gpu_traffic(&self) -> Option<BTreeMap<String, GpuTraffic>> {
+        self.gpu.as_ref().map(|(_, t)| t.clone())
     }
 
     /// A clock that also keeps the process's peak memory ([`peak_memory_bytes`]) at the end
@@ -44,7 +65,12 @@ impl<'p> Clock<'p> {
     pub(crate) fn run<T>(&mut self, stage: Stage, work: impl FnOnce() -> T) -> T {
         self.progress.started(stage);
         let t = Instant::now();
+        let before = self.gpu.as_ref().and_then(|(backend, _)| backend.traffic());
         let out = work();
+        if let (Some((backend, traffic)), Some(before)) = (&mut self.gpu, before) {
+            let after = backend.traffic().unwrap_or(before);
+            *traffic.entry(stage.key().to_string()).or_default() += after - before;
+        }
         self.add(stage, t.elapsed().as_secs_f64());
         self.progress.finished(stage);
         out

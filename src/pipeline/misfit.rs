@@ -197,31 +197,36 @@ pub(crate) fn boundary_sides(
         .collect()
 }
 
-/// Parameters per direction at which [`boundary_rms`] measures a boundary side.
+/// Parameters per direction at which [`boundary_sq_sum`] measures a boundary side.
 const SIDE_SAMPLES: usize = 5;
 
-/// Root mean square distance of `map`'s boundary from `surface`'s (both over the elements of
-/// `topo`): for every boundary side, the points of `map` at 5 × 5 (2D: 5) parameters inside
-/// the side (the centres of a 5 × 5 grid of it), each at its distance from the same side of
-/// `surface`, found by Gauss–Newton from the same parameters. 0 without boundary sides.
+/// Squared distances of `map`'s boundary from `surface`'s (both over the elements of `topo`),
+/// summed over the boundary sides of the elements `e` with `which(e)`, and their count: for
+/// every such side, the points of `map` at 5 × 5 (2D: 5) parameters inside the side (the
+/// centres of a 5 × 5 grid of it), each at its distance from the same side of `surface`, found
+/// by Gauss–Newton from the same parameters. [`rms`] of the sums is the RMS distance; the sums
+/// of a distributed job's ranks, each over its own elements, add up to the whole mesh's.
 ///
 /// The distance is to the nearest point, not to the point of the same parameters: two maps of
 /// one boundary may slide along it against each other (a spline's parametrisation of a graded
 /// wall does), and only the distance across it is an error of the shape.
-pub(crate) fn boundary_rms(
+pub(crate) fn boundary_sq_sum(
     topo: &Topology,
     map: &dyn BezierElements,
     surface: &dyn BezierElements,
-) -> f64 {
+    which: &(dyn Fn(usize) -> bool + Sync),
+) -> (f64, usize) {
     let dim = topo.dim;
     // Inside the side: a point of its edge that slides off the side along the boundary would
     // be measured by its slide.
     let at = |i: usize| (i as f64 + 0.5) / SIDE_SAMPLES as f64;
-    let (sum, n) = topo
-        .boundary_facets
+    topo.boundary_facets
         .par_iter()
         .map(|&f| {
             let e = topo.facet_elements[f as usize][0] as usize;
+            if !which(e) {
+                return (0.0, 0);
+            }
             let Some(s) = (0..2 * dim).find(|&s| topo.element_facet(e, s) == f) else {
                 return (0.0, 0);
             };
@@ -242,7 +247,12 @@ pub(crate) fn boundary_rms(
             }
             (sum, SIDE_SAMPLES * per)
         })
-        .reduce(|| (0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1));
+        .reduce(|| (0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1))
+}
+
+/// The root mean square of `n` squared distances summing to `sum` ([`boundary_sq_sum`]); 0
+/// without any.
+pub(crate) fn rms(sum: f64, n: usize) -> f64 {
     if n == 0 { 0.0 } else { (sum / n as f64).sqrt() }
 }
 

@@ -14,7 +14,7 @@ use super::{CurveOptions, Geometry, Job};
 use crate::deviation::BoundaryDeviation;
 use crate::elastic::ElasticInfo;
 use crate::energy::EnergyInfo;
-use crate::exec::gpu::{AdapterReport, Precision};
+use crate::exec::gpu::{AdapterReport, GpuTraffic, Precision};
 use crate::fit::{FitSolver, FitTargets, FitWeights};
 use crate::mesh::HighOrderMesh;
 use crate::mesh::features::FeatureReport;
@@ -156,6 +156,12 @@ pub struct CurveReport {
     /// the same certified one; above 0, the device is unreliable or short of memory here).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub gpu_fallbacks: Option<usize>,
+    /// With `gpu` only (absent otherwise): what each stage moved between host and device and
+    /// through device memory, and the dispatches, submits and read-backs it issued, counted by
+    /// the device context, under the keys of `timings` (every stage run; the fit's traffic is
+    /// its CG's, the assembly runs on the CPU). `write` runs after the report and moves nothing.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gpu_traffic: Option<BTreeMap<String, GpuTraffic>>,
     /// Under mpirun only (absent otherwise): the number of ranks.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub ranks: Option<usize>,
@@ -511,6 +517,8 @@ impl CurveReport {
             adapter: o.gpu.as_ref().map(|g| g.0.clone()),
             gpu_precision: o.gpu.as_ref().map(|g| g.1),
             gpu_fallbacks: o.gpu.as_ref().map(|g| g.2),
+            // Set by the serial job from its clock (the distributed job has no GPU path).
+            gpu_traffic: None,
             ranks: o.per_rank.as_ref().map(Vec::len),
             per_rank: o.per_rank,
         }

@@ -84,7 +84,15 @@ impl SplineSetup {
     /// ([`SplineSetup::glue_seams`]), so that everything fitted to the boundary sees their
     /// seams as interior.
     pub(crate) fn new(job: &Job, periodic: &[PeriodicPair]) -> Result<Self, CurveError> {
-        let (seams, seam_c0) = glue_seams(job, periodic);
+        Self::with_seams(job, glue_seams(job, periodic))
+    }
+
+    /// [`SplineSetup::new`] with its seams glued already, and why some pair stays apart (a
+    /// rank's sub-mesh glued by the distributed job, `seam::glue_share`).
+    pub(crate) fn with_seams(
+        job: &Job,
+        (seams, seam_c0): (Option<Glued>, Option<String>),
+    ) -> Result<Self, CurveError> {
         let view = seams
             .as_ref()
             .map(|g| seam::interior_view(job.mesh, job.topo, g));
@@ -168,14 +176,14 @@ impl SplineSetup {
     }
 
     /// Puts `knots` of `intervals` in place of the setup's knots and returns those (the
-    /// features, kinks and targets do not depend on the knots). Only without glued seams.
+    /// features, kinks and targets do not depend on the knots). With glued seams, `knots`
+    /// must be measured on the glued mesh (the distributed job's survey of its glued shares).
     pub(crate) fn set_knots(
         &mut self,
         intervals: crate::spline::KnotIntervals,
         knots: Knots,
         weights: crate::fit::FitWeights,
     ) -> Knots {
-        debug_assert!(self.seams.is_none());
         // The fit's weights depend on the knots too (`FitWeights::for_knots`).
         self.fit_params.weights =
             weights.for_knots(intervals == crate::spline::KnotIntervals::Graded);
@@ -386,7 +394,7 @@ pub(crate) fn auto_graded_is_decisive(graded: usize, uniform: usize) -> bool {
 pub const AUTO_BOUNDARY_SLACK: f64 = 1.1;
 
 /// With `--knot-intervals auto`, after both passes: whether graded knots, whose fitted map's
-/// boundary is `graded` (RMS distance from the target map, [`misfit::boundary_rms`]) against
+/// boundary is `graded` (RMS distance from the target map, [`misfit::boundary_sq_sum`]) against
 /// uniform knots' `uniform`, keep the boundary ([`AUTO_BOUNDARY_SLACK`]); graded knots are
 /// kept where they also hold back decisively fewer ([`auto_graded_is_decisive`]).
 ///
@@ -425,12 +433,40 @@ pub(crate) fn auto_graded_keeps_the_boundary(graded: f64, uniform: f64) -> bool 
 /// lower bound of the final one). Graded knots holding back at most [`AUTO_MIN_GAIN`] of
 /// that bound are then kept at once; otherwise the uniform blend is run to its end and the
 /// rule applied to its count, so the choice and the output are those of the full passes.
+/// The passes and the choice are [`super::passes::spline_passes`], which the job under
+/// mpirun runs too.
 ///
 /// Both passes share the setup (features, kinks, smooth targets: they do not depend on the
 /// knots); the setup names the knots used and the passes run (`knot_passes`). With periodic
 /// pairs each pass has its own setup (its knots are measured on the glued mesh,
-/// [`seam::knot_weights`]), and the same rules choose between them.
+/// [`seam::knot_weights`]), and the same rules choose between them
+/// ([`curve_spline_periodic`]).
 pub(super) fn curve_spline(
+    job: &Job,
+    clock: &mut Clock,
+    periodic: &[PeriodicPair],
+) -> Result<(SplineSetup, SplineOutcome), CurveError> {
+    use crate::spline::KnotIntervals;
+    if !periodic.is_empty() {
+        return curve_spline_periodic(job, clock, periodic);
+    }
+    let uniform = job.options.with_knots(KnotIntervals::Uniform);
+    let uniform_job = Job {
+        options: &uniform,
+        ..*job
+    };
+    let mut setup = clock.run(Stage::Spline, || SplineSetup::new(&uniform_job, &[]))?;
+    let pass = super::passes::spline_passes(&mut Whole { job }, job, &mut setup, clock)?;
+    match pass {
+        First::Done(outcome) => Ok((setup, outcome)),
+        First::Exceeded { .. } => unreachable!("the pass kept ran to its end"),
+    }
+}
+
+/// [`curve_spline`] with periodic pairs: each pass has its own setup (its knots are measured
+/// on the glued mesh, [`seam::knot_weights`]), and `auto`'s rules choose between them, each
+/// pass run to its end.
+fn curve_spline_periodic(
     job: &Job,
     clock: &mut Clock,
     periodic: &[PeriodicPair],
@@ -452,106 +488,108 @@ pub(super) fn curve_spline(
         ..*job
     };
     let held = |o: &SplineOutcome| o.blend.as_ref().map_or(0, |b| b.reduced_elements);
-    let too_many = |held: usize| auto_holds_back_too_many(held, job.mesh.n_elements());
-    let decisive = auto_graded_is_decisive;
-    if !periodic.is_empty() {
-        // The share is the input's (the seams hold a few facets of it).
-        let share = clock.run(Stage::Spline, || {
-            SplineSpace::knot_survey(job.mesh, job.topo).graded_share
-        });
-        if share >= crate::spline::AUTO_GRADED_SHARE {
-            return curve_spline_with(&graded_job, clock, periodic);
-        }
-        let first = curve_spline_with(&uniform_job, clock, periodic)?;
-        if !too_many(held(&first.1)) {
-            return Ok(first);
-        }
-        let mut second = curve_spline_with(&graded_job, clock, periodic)?;
-        second.0.knot_passes = 2;
-        let boundary =
-            |(setup, o): &(SplineSetup, SplineOutcome)| fitted_boundary_rms(job, setup, &o.space);
-        let kept = decisive(held(&second.1), held(&first.1))
-            && auto_graded_keeps_the_boundary(boundary(&second), boundary(&first));
-        return Ok(if kept { second } else { first });
-    }
-    let (mut setup, survey) = clock.run(Stage::Spline, || {
-        let setup = SplineSetup::new(&uniform_job, periodic)?;
-        Ok::<_, CurveError>((setup, SplineSpace::knot_survey(job.mesh, job.topo)))
-    })?;
-    let graded_knots = |clock: &mut Clock, survey| {
-        clock.run(Stage::Spline, || {
-            crate::spline::intervals::knot_weights_from(survey, job.topo, &graded.knots)
-        })
-    };
-    if survey.graded_share >= crate::spline::AUTO_GRADED_SHARE {
-        let knots = graded_knots(clock, survey);
-        setup.set_knots(KnotIntervals::Graded, knots, job.options.fit.weights);
-        let outcome = spline_pass(&graded_job, &setup, clock, None)?;
-        return Ok((setup, outcome));
-    }
-    // Graded knots all but uniform: a second pass would not hold back half as many.
-    let near_uniform = survey.max_abs_log_ratio < crate::spline::AUTO_MIN_LOG_RATIO;
-    // Not held through the uniform pass: the fit's peak would carry it (+0.56 GB on the 1M
-    // cylinder); the rare second pass measures the surfaces again.
-    drop(survey);
-    let first = if near_uniform {
-        First::Done(spline_pass(&uniform_job, &setup, clock, None)?)
-    } else {
-        // Whether it is kept is decided once it holds back too many.
-        let most = (AUTO_MAX_HELD_BACK * job.mesh.n_elements() as f64).floor() as usize;
-        spline_pass_within(&uniform_job, &setup, clock, None, Some(most))?
-    };
-    let first = match first {
-        First::Done(o) if !too_many(held(&o)) || near_uniform => return Ok((setup, o)),
-        first => first,
-    };
-    let survey = clock.run(Stage::Spline, || {
-        SplineSpace::knot_survey(job.mesh, job.topo)
+    // The share is the input's (the seams hold a few facets of it).
+    let share = clock.run(Stage::Spline, || {
+        SplineSpace::knot_survey(job.mesh, job.topo).graded_share
     });
-    let knots = graded_knots(clock, survey);
-    let uniform_knots = setup.set_knots(KnotIntervals::Graded, knots, job.options.fit.weights);
-    setup.knot_passes = 2;
-    // The graded fit starts from the uniform one where the two spaces share control points
-    // (every entity's but the knot splits'): fewer CG iterations than from C0.
-    let second = spline_pass(&graded_job, &setup, clock, Some(first.space()))?;
-    // The uniform fit's boundary, measured once (the target map does not depend on the knots).
-    let uniform_boundary = clock.run(Stage::Validity, || {
-        fitted_boundary_rms(job, &setup, first.space())
-    });
-    let keeps_boundary = |graded: &SplineSpace| {
-        let graded = fitted_boundary_rms(job, &setup, graded);
-        auto_graded_keeps_the_boundary(graded, uniform_boundary)
-    };
-    let first = match first {
-        First::Done(o) => o,
-        // Decisive against a lower bound of the uniform count: decisive against the count.
-        First::Exceeded { at_least, .. }
-            if decisive(held(&second), at_least) && keeps_boundary(&second.space) =>
-        {
-            return Ok((setup, second));
-        }
-        // Otherwise the uniform blend is run to its end (it does not depend on the setup's
-        // knots: its space carries its own).
-        First::Exceeded { space, fit, .. } => {
-            let (factors, blend) = clock.run(Stage::Validity, || blend(job, &setup, &space))?;
-            SplineOutcome::blended(space, factors, fit, blend, 0, None)
-        }
-    };
-    if decisive(held(&second), held(&first)) && keeps_boundary(&second.space) {
-        return Ok((setup, second));
+    if share >= crate::spline::AUTO_GRADED_SHARE {
+        return curve_spline_with(&graded_job, clock, periodic);
     }
-    setup.set_knots(
-        KnotIntervals::Uniform,
-        uniform_knots,
-        job.options.fit.weights,
-    );
-    Ok((setup, first))
+    let first = curve_spline_with(&uniform_job, clock, periodic)?;
+    if !auto_holds_back_too_many(held(&first.1), job.mesh.n_elements()) {
+        return Ok(first);
+    }
+    let mut second = curve_spline_with(&graded_job, clock, periodic)?;
+    second.0.knot_passes = 2;
+    let boundary = |(setup, o): &(SplineSetup, SplineOutcome)| {
+        let (sum, n) = fitted_boundary_sq_sum(job, setup, &o.space, |_| true);
+        misfit::rms(sum, n)
+    };
+    let kept = auto_graded_is_decisive(held(&second.1), held(&first.1))
+        && auto_graded_keeps_the_boundary(boundary(&second), boundary(&first));
+    Ok(if kept { second } else { first })
 }
 
-/// The fitted map's boundary distance from the target map's ([`misfit::boundary_rms`]):
+/// The serial job's passes ([`super::passes`]): every element in this process.
+struct Whole<'a> {
+    job: &'a Job<'a>,
+}
+
+impl super::passes::Passes for Whole<'_> {
+    type Pass = First;
+    type Survey = crate::spline::KnotSurvey;
+    fn elements(&self) -> usize {
+        self.job.mesh.n_elements()
+    }
+    fn survey(&mut self, clock: &mut Clock) -> Self::Survey {
+        let (mesh, topo) = (self.job.mesh, self.job.topo);
+        clock.run(Stage::Spline, || SplineSpace::knot_survey(mesh, topo))
+    }
+    fn knots(
+        &mut self,
+        clock: &mut Clock,
+        survey: Self::Survey,
+        params: &crate::spline::KnotParams,
+    ) -> Knots {
+        let topo = self.job.topo;
+        clock.run(Stage::Spline, || {
+            crate::spline::intervals::knot_weights_from(survey, topo, params)
+        })
+    }
+    fn run(
+        &mut self,
+        job: &Job,
+        setup: &SplineSetup,
+        clock: &mut Clock,
+        previous: Option<&First>,
+        most: Option<usize>,
+    ) -> Result<First, CurveError> {
+        spline_pass_within(job, setup, clock, previous.map(First::space), most)
+    }
+    fn held(pass: &First) -> Result<usize, usize> {
+        match pass {
+            First::Done(o) => Ok(o.blend.as_ref().map_or(0, |b| b.reduced_elements)),
+            First::Exceeded { at_least, .. } => Err(*at_least),
+        }
+    }
+    fn finish(
+        &mut self,
+        job: &Job,
+        setup: &SplineSetup,
+        clock: &mut Clock,
+        pass: First,
+    ) -> Result<First, CurveError> {
+        let First::Exceeded { space, fit, .. } = pass else {
+            return Ok(pass);
+        };
+        let (factors, blend) = clock.run(Stage::Validity, || blend(job, setup, &space))?;
+        let outcome = SplineOutcome::blended(space, factors, fit, blend, 0, None);
+        Ok(First::Done(outcome))
+    }
+    fn boundary_rms(
+        &mut self,
+        job: &Job,
+        setup: &SplineSetup,
+        clock: &mut Clock,
+        pass: &First,
+    ) -> f64 {
+        clock.run(Stage::Validity, || {
+            let (sum, n) = fitted_boundary_sq_sum(job, setup, pass.space(), |_| true);
+            misfit::rms(sum, n)
+        })
+    }
+}
+
+/// The fitted map's boundary distance from the target map's, squared and summed over the
+/// boundary sides of the elements `which` takes, and the count ([`misfit::boundary_sq_sum`]):
 /// how closely a pass's spline space follows the smooth boundary before the blend.
-fn fitted_boundary_rms(job: &Job, setup: &SplineSetup, space: &SplineSpace) -> f64 {
-    misfit::boundary_rms(setup.topo(job), space, &setup.target_map(job))
+pub(crate) fn fitted_boundary_sq_sum(
+    job: &Job,
+    setup: &SplineSetup,
+    space: &SplineSpace,
+    which: impl Fn(usize) -> bool + Sync,
+) -> (f64, usize) {
+    misfit::boundary_sq_sum(setup.topo(job), space, &setup.target_map(job), &which)
 }
 
 /// A spline pass that may stop early ([`spline_pass_within`]): `auto`'s uniform pass.
@@ -585,7 +623,7 @@ fn curve_spline_with(
     periodic: &[PeriodicPair],
 ) -> Result<(SplineSetup, SplineOutcome), CurveError> {
     let setup = clock.run(Stage::Spline, || SplineSetup::new(job, periodic))?;
-    let outcome = spline_pass(job, &setup, clock, None)?;
+    let outcome = spline_pass(job, &setup, clock)?;
     Ok((setup, outcome))
 }
 
@@ -594,9 +632,8 @@ fn spline_pass(
     job: &Job,
     setup: &SplineSetup,
     clock: &mut Clock,
-    previous: Option<&SplineSpace>,
 ) -> Result<SplineOutcome, CurveError> {
-    match spline_pass_within(job, setup, clock, previous, None)? {
+    match spline_pass_within(job, setup, clock, None, None)? {
         First::Done(outcome) => Ok(outcome),
         First::Exceeded { .. } => unreachable!("an unbounded pass runs to its end"),
     }

@@ -655,6 +655,8 @@ fn block_step(
     (rz, rr)
 }
 
+/// [`block_step`] in AVX2 registers ([`avx2`]): the same operations in the same order on
+/// each lane, so the same bits.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 #[allow(clippy::too_many_arguments)]
@@ -668,7 +670,11 @@ unsafe fn block_step_avx2(
     p: &[V4],
     ap: &[V4],
 ) -> (V4, V4) {
-    block_step(l, first, alpha, x, r, z, p, ap)
+    let rr = avx2::update(alpha, x, r, p, ap);
+    z.copy_from_slice(r);
+    avx2::forward::<true>(l, first, z);
+    avx2::backward(l, first, z);
+    (avx2::dot(r, z), rr)
 }
 
 /// One aggregate of the second partition: y = (L Lᵀ)⁻¹ r gathered at `rows`; returns rᵀy.
@@ -688,10 +694,202 @@ fn pair_block(l: &[f64], first: &[u32], rows: &[u32], r: &[V4], y: &mut [V4]) ->
     rz
 }
 
+/// [`pair_block`] in AVX2 registers ([`avx2`]; the same bits).
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 unsafe fn pair_block_avx2(l: &[f64], first: &[u32], rows: &[u32], r: &[V4], y: &mut [V4]) -> V4 {
-    pair_block(l, first, rows, r, y)
+    for (y, &i) in y.iter_mut().zip(rows) {
+        *y = r[i as usize];
+    }
+    avx2::forward::<false>(l, first, y);
+    avx2::backward(l, first, y);
+    let mut rz = [0.0; 4];
+    for (y, &i) in y.iter().zip(rows) {
+        let r = r[i as usize];
+        for c in 0..4 {
+            rz[c] += r[c] * y[c];
+        }
+    }
+    rz
+}
+
+/// The block kernels' loops written in AVX2 registers, one 256-bit operation per vector entry
+/// (compiled from the portable loops, the triangular solves' updates were vectorised across
+/// entries with shuffles), and the forward substitution four rows at a time.
+///
+/// Every lane sees the IEEE multiplications, additions and divisions of the portable kernels
+/// in the same order (no FMA), so the results are the same bits:
+/// * the forward substitution of rows i0..i0 + 4 runs their dot products' common part (the
+///   columns before i0) as four independent chains, then finishes the rows in order, each
+///   taking its remaining columns in increasing order: every row's sum is still accumulated
+///   column by column in increasing order, into the same partial sum (`TWO`: even columns
+///   into one, odd into the other, as [`block_step`]'s pairs from its even envelope start).
+///   The common part starts at the group's smallest envelope start: a row whose own start is
+///   later adds products with the exact zeros before it, which leave a +0 partial sum +0 (as
+///   `envelope_starts` argues);
+/// * the backward substitution applies columns i and i − 1 in one pass over the entries below
+///   them, column i's update first, each over its own envelope (no zero products: those could
+///   turn a −0 entry into +0).
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use super::V4;
+    use std::arch::x86_64::*;
+
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn ld(v: &V4) -> __m256d {
+        // SAFETY: a V4 is four contiguous f64 (unaligned load).
+        unsafe { _mm256_loadu_pd(v.as_ptr()) }
+    }
+
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn st(v: &mut V4, x: __m256d) {
+        // SAFETY: a V4 is four contiguous f64 (unaligned store).
+        unsafe { _mm256_storeu_pd(v.as_mut_ptr(), x) }
+    }
+
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    fn lanes(x: __m256d) -> V4 {
+        let mut v = [0.0; 4];
+        st(&mut v, x);
+        v
+    }
+
+    /// x += α p, r −= α ap entry by entry; returns rᵀr (per lane, in entry order).
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    pub(super) fn update(alpha: V4, x: &mut [V4], r: &mut [V4], p: &[V4], ap: &[V4]) -> V4 {
+        let a = ld(&alpha);
+        let mut rr = _mm256_setzero_pd();
+        for (((x, r), p), ap) in x.iter_mut().zip(r.iter_mut()).zip(p).zip(ap) {
+            st(x, _mm256_add_pd(ld(x), _mm256_mul_pd(a, ld(p))));
+            let rn = _mm256_sub_pd(ld(r), _mm256_mul_pd(a, ld(ap)));
+            st(r, rn);
+            rr = _mm256_add_pd(rr, _mm256_mul_pd(rn, rn));
+        }
+        lanes(rr)
+    }
+
+    /// Σ_i a_i b_i per lane, in entry order.
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    pub(super) fn dot(a: &[V4], b: &[V4]) -> V4 {
+        let mut s = _mm256_setzero_pd();
+        for (a, b) in a.iter().zip(b) {
+            s = _mm256_add_pd(s, _mm256_mul_pd(ld(a), ld(b)));
+        }
+        lanes(s)
+    }
+
+    /// y = L⁻¹ y in place for one aggregate's packed factor (row i from column `first[i]`):
+    /// one partial sum per row ([`super::block_solve`]) or, `TWO`, one for the even and one
+    /// for the odd columns ([`super::block_step`]).
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    pub(super) fn forward<const TWO: bool>(l: &[f64], first: &[u32], y: &mut [V4]) {
+        let m = y.len();
+        let tri = |i: usize| i * (i + 1) / 2;
+        let mut i0 = 0;
+        while i0 < m {
+            let g = (m - i0).min(4);
+            let mut s0 = [_mm256_setzero_pd(); 4];
+            let mut s1 = [_mm256_setzero_pd(); 4];
+            let ri: [usize; 4] = std::array::from_fn(|j| tri(i0 + j.min(g - 1)));
+            // The columns before i0, common to the group's rows.
+            let mut k = (0..g).map(|j| first[i0 + j]).min().unwrap_or(0) as usize;
+            if g == 4 {
+                if TWO {
+                    while k + 1 < i0 {
+                        let (y0, y1) = (ld(&y[k]), ld(&y[k + 1]));
+                        for j in 0..4 {
+                            let l0 = _mm256_set1_pd(l[ri[j] + k]);
+                            let l1 = _mm256_set1_pd(l[ri[j] + k + 1]);
+                            s0[j] = _mm256_add_pd(s0[j], _mm256_mul_pd(l0, y0));
+                            s1[j] = _mm256_add_pd(s1[j], _mm256_mul_pd(l1, y1));
+                        }
+                        k += 2;
+                    }
+                } else {
+                    while k < i0 {
+                        let yk = ld(&y[k]);
+                        for j in 0..4 {
+                            let lk = _mm256_set1_pd(l[ri[j] + k]);
+                            s0[j] = _mm256_add_pd(s0[j], _mm256_mul_pd(lk, yk));
+                        }
+                        k += 1;
+                    }
+                }
+            }
+            // The rest of each row, row by row (a short group starts at its own rows'
+            // envelopes).
+            for j in 0..g {
+                let i = i0 + j;
+                let from = if g == 4 { k } else { first[i] as usize };
+                for c in from..i {
+                    let t = _mm256_mul_pd(_mm256_set1_pd(l[ri[j] + c]), ld(&y[c]));
+                    if TWO && c & 1 == 1 {
+                        s1[j] = _mm256_add_pd(s1[j], t);
+                    } else {
+                        s0[j] = _mm256_add_pd(s0[j], t);
+                    }
+                }
+                let acc = if TWO {
+                    _mm256_add_pd(s0[j], s1[j])
+                } else {
+                    s0[j]
+                };
+                let d = _mm256_set1_pd(l[ri[j] + i]);
+                let v = _mm256_div_pd(_mm256_sub_pd(ld(&y[i]), acc), d);
+                st(&mut y[i], v);
+            }
+            i0 += g;
+        }
+    }
+
+    /// y = L⁻ᵀ y in place, columns from the last ([`super::block_solve`]'s second half).
+    #[inline]
+    #[target_feature(enable = "avx2")]
+    pub(super) fn backward(l: &[f64], first: &[u32], y: &mut [V4]) {
+        let tri = |i: usize| i * (i + 1) / 2;
+        let mut i = y.len();
+        while i >= 2 {
+            // Columns i1 = i − 1 and i2 = i − 2.
+            let (i1, i2) = (i - 1, i - 2);
+            let (r1, r2) = (tri(i1), tri(i2));
+            let (f1, f2) = (first[i1] as usize, first[i2] as usize);
+            let z1 = _mm256_div_pd(ld(&y[i1]), _mm256_set1_pd(l[r1 + i1]));
+            st(&mut y[i1], z1);
+            if f1 <= i2 {
+                let t = _mm256_mul_pd(_mm256_set1_pd(l[r1 + i2]), z1);
+                let v = _mm256_sub_pd(ld(&y[i2]), t);
+                st(&mut y[i2], v);
+            }
+            let z2 = _mm256_div_pd(ld(&y[i2]), _mm256_set1_pd(l[r2 + i2]));
+            st(&mut y[i2], z2);
+            let both = f1.max(f2).min(i2);
+            for k in f1.min(both)..both {
+                let v = _mm256_sub_pd(ld(&y[k]), _mm256_mul_pd(_mm256_set1_pd(l[r1 + k]), z1));
+                st(&mut y[k], v);
+            }
+            for k in f2.min(both)..both {
+                let v = _mm256_sub_pd(ld(&y[k]), _mm256_mul_pd(_mm256_set1_pd(l[r2 + k]), z2));
+                st(&mut y[k], v);
+            }
+            for k in both..i2 {
+                let t1 = _mm256_mul_pd(_mm256_set1_pd(l[r1 + k]), z1);
+                let v = _mm256_sub_pd(ld(&y[k]), t1);
+                let t2 = _mm256_mul_pd(_mm256_set1_pd(l[r2 + k]), z2);
+                st(&mut y[k], _mm256_sub_pd(v, t2));
+            }
+            i -= 2;
+        }
+        if i == 1 {
+            let v = _mm256_div_pd(ld(&y[0]), _mm256_set1_pd(l[0]));
+            st(&mut y[0], v);
+        }
+    }
 }
 
 /// Σ_k vals[pos[k]] x[cols[k]] over one part of a row (two partial sums), x read by `at`.
@@ -2074,6 +2272,24 @@ mod tests {
             )
         };
         assert_eq!(run_sgs(false), run_sgs(true));
+        // And the pair's (its second partition's block solves).
+        let mut pair =
+            BlockedSystem::with_kind(&a.0, &a.1, &a.2, 32, BlockedKind::JacobiPair).unwrap();
+        let mut run_pair = |portable: bool| {
+            pair.set_portable_kernels(portable);
+            let mut x = vec![[0.0; 3]; 2500];
+            let info = pair
+                .solve(&b, &mut x, &CgParams::default(), |_, _| {})
+                .unwrap();
+            (
+                x.iter().map(|p| p.map(f64::to_bits)).collect::<Vec<_>>(),
+                info.iterations,
+                info.rel_residual.to_bits(),
+            )
+        };
+        let (pair_avx2, pair_portable) = (run_pair(false), run_pair(true));
+        assert!(pair_avx2.1 > 10, "{} iterations", pair_avx2.1);
+        assert_eq!(pair_avx2, pair_portable);
         assert!(ia > 10, "{ia} iterations");
         assert_eq!((ia, ra.to_bits()), (ip, rp.to_bits()));
         assert_eq!(da.map(f64::to_bits), dp.map(f64::to_bits));

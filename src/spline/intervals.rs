@@ -669,6 +669,25 @@ pub(crate) fn survey_parts(
     survey_parts_with(corners, topo, spline)
 }
 
+/// [`survey_parts`] of a sub-mesh glued along its translation seams (`glued`, `topo`:
+/// [`super::seam::glue_share`]) whose elements are measured on their own vertices in `input`,
+/// as [`survey_glued`] measures the whole glued mesh.
+#[allow(clippy::type_complexity)]
+pub(crate) fn survey_parts_glued(
+    input: &LinearMesh,
+    glued: &LinearMesh,
+    topo: &Topology,
+    spline: &[bool],
+    global: &[u64],
+) -> (Vec<Option<(f64, f64)>>, Vec<Tie>) {
+    let corners = Corners {
+        mesh: glued,
+        unglued: Some(input),
+        global: Some(global),
+    };
+    survey_parts_with(corners, topo, spline)
+}
+
 #[allow(clippy::type_complexity)]
 fn survey_parts_with(
     corners: Corners,

@@ -48,6 +48,11 @@ pub struct Glued {
     pub topo: Topology,
     /// The periods: the translation of each glued pair.
     pub translations: Vec<[f64; 3]>,
+    /// The order in which [`unwrap`] picks a control point's home among the elements holding
+    /// its entity (the lowest): each element's global index on a rank's sub-mesh, so that
+    /// every rank picks the same home whatever its local numbering; `None`: the element's
+    /// index (the serial mesh).
+    pub element_order: Option<Vec<u64>>,
 }
 
 fn find(parent: &mut [u32], mut v: u32) -> u32 {
@@ -86,6 +91,29 @@ pub fn knot_survey(input: &LinearMesh, g: &Glued) -> KnotSurvey {
 /// the glued mesh is not manifold (a period of fewer elements than a stencil needs, for
 /// instance): the sides are then curved apart and made images afterwards.
 pub fn glue(mesh: &LinearMesh, pairs: &[PeriodicPair]) -> Option<Glued> {
+    glue_share(mesh, pairs, None)
+}
+
+/// How a rank's sub-mesh is glued ([`glue_share`]).
+pub struct ShareOrder<'a> {
+    /// The global rank of each vertex (its node tag): a class of glued vertices is
+    /// represented by its lowest, as on the whole mesh.
+    pub vertex: &'a [u64],
+    /// The global index of each element ([`Glued::element_order`]).
+    pub element: &'a [u64],
+    /// Per vertex: it belongs to one of the rank's own elements. Only the non-manifold
+    /// entities, self-neighbours and collapsed elements among these refuse the gluing: the
+    /// cut fringe of a ghost layer may look non-manifold where the whole mesh is not.
+    pub near: &'a [bool],
+}
+
+/// [`glue`] of the whole mesh (`share`: `None`) or of a rank's ghosted sub-mesh, its pairs'
+/// vertex maps restricted to the vertices it holds (`share`: see [`ShareOrder`]).
+pub fn glue_share(
+    mesh: &LinearMesh,
+    pairs: &[PeriodicPair],
+    share: Option<&ShareOrder>,
+) -> Option<Glued> {
     let translations: Vec<&PeriodicPair> = pairs
         .iter()
         .filter(|p| p.transform.is_translation())
@@ -98,8 +126,15 @@ pub fn glue(mesh: &LinearMesh, pairs: &[PeriodicPair]) -> Option<Glued> {
         for &[b, a] in &p.vertex_map {
             let (rb, ra) = (find(&mut parent, b), find(&mut parent, a));
             // The smaller id represents the class: a master unless the chain says otherwise.
-            let (lo, hi) = (ra.min(rb), ra.max(rb));
-            parent[hi as usize] = lo;
+            let rank = |v: u32| share.map_or(v as u64, |o| o.vertex[v as usize]);
+            let (lo, hi) = if rank(ra) <= rank(rb) {
+                (ra, rb)
+            } else {
+                (rb, ra)
+            };
+            if lo != hi {
+                parent[hi as usize] = lo;
+            }
         }
     }
     let rep: Vec<u32> = (0..parent.len() as u32)
@@ -115,14 +150,34 @@ pub fn glue(mesh: &LinearMesh, pairs: &[PeriodicPair]) -> Option<Glued> {
     }
     let topo = Topology::build(&glued);
     let ne = topo.n_elements;
-    let self_neighbour =
-        (0..ne).any(|e| (0..topo.sides()).any(|s| topo.neighbor(e, s) == e as u32));
-    if !topo.non_manifold.is_empty() || self_neighbour {
+    let npe = mesh.nodes_per_element();
+    // The elements and entities that decide (a share's: those among its own vertices).
+    let near: Option<Vec<bool>> = share.map(|o| {
+        let mut near = vec![false; mesh.n_vertices()];
+        for (v, &n) in o.near.iter().enumerate() {
+            if n {
+                near[rep[v] as usize] = true;
+            }
+        }
+        near
+    });
+    let counts = |vs: &[u32]| {
+        near.as_ref()
+            .is_none_or(|n| vs.iter().all(|&v| n[v as usize]))
+    };
+    let element_counts = |e: usize| counts(&glued.elements[e * npe..(e + 1) * npe]);
+    let nm = &topo.non_manifold;
+    let facet = |f: u32| -> &[u32] { topo.facet_vertices(f as usize) };
+    let non_manifold = nm.facets.iter().any(|&f| counts(facet(f)))
+        || nm.edges.iter().any(|&d| counts(&topo.edges[d as usize]))
+        || nm.vertices.iter().any(|&v| counts(&[v]));
+    let self_neighbour = (0..ne)
+        .any(|e| element_counts(e) && (0..topo.sides()).any(|s| topo.neighbor(e, s) == e as u32));
+    if non_manifold || self_neighbour {
         return None;
     }
     // An element whose corners glue together is collapsed: keep the sides apart.
-    let npe = mesh.nodes_per_element();
-    for e in 0..ne {
+    for e in (0..ne).filter(|&e| element_counts(e)) {
         let mut vs = glued.elements[e * npe..(e + 1) * npe].to_vec();
         vs.sort_unstable();
         if vs.windows(2).any(|w| w[0] == w[1]) {
@@ -136,6 +191,7 @@ pub fn glue(mesh: &LinearMesh, pairs: &[PeriodicPair]) -> Option<Glued> {
             .iter()
             .map(|p| p.transform.translation)
             .collect(),
+        element_order: share.map(|o| o.element.to_vec()),
     })
 }
 
@@ -217,9 +273,20 @@ fn home_of(
 ) -> (usize, ControlPoint, Vec<u32>) {
     use ControlPoint::*;
     let gt = &glued.topo;
+    // The lowest element holding the entity (the first in the serial topology's lists).
+    let order = |e: u32| {
+        glued
+            .element_order
+            .as_ref()
+            .map_or(e as u64, |o| o[e as usize])
+    };
     let facet_home = |f: u32| {
-        let h = gt.facet_elements[f as usize][0] as usize;
-        let side = gt.facet_sides[f as usize][0] as usize;
+        let ([a, b], [sa, sb]) = (gt.facet_elements[f as usize], gt.facet_sides[f as usize]);
+        let (h, side) = if b != NONE && order(b) < order(a) {
+            (b as usize, sb as usize)
+        } else {
+            (a as usize, sa as usize)
+        };
         let of = topo.element_facet(h, side);
         (h, of, topo.facet_vertices(of as usize).to_vec())
     };
@@ -242,12 +309,13 @@ fn home_of(
                 let a = gt.edges[ed as usize][0] as usize;
                 gt.elements_at_vertex(a)
                     .iter()
-                    .find_map(|&h| {
+                    .filter_map(|&h| {
                         let h = h as usize;
                         (0..12)
                             .find(|&le| gt.element_edges[h * 12 + le] == ed)
                             .map(|le| (h, topo.element_edges[h * 12 + le]))
                     })
+                    .min_by_key(|&(h, _)| order(h as u32))
                     .expect("an edge has an element")
             };
             let k = if matches!(key, BEdge(_)) {
@@ -258,7 +326,11 @@ fn home_of(
             (h, k, topo.edges[oe as usize].to_vec())
         }
         BVertex(v) | Q2Vertex(v) => {
-            let h = gt.elements_at_vertex(v as usize)[0] as usize;
+            let h = *gt
+                .elements_at_vertex(v as usize)
+                .iter()
+                .min_by_key(|&&h| order(h))
+                .expect("a vertex has an element") as usize;
             let ov = original_of(mesh, &glued.mesh, h, v);
             let k = if matches!(key, BVertex(_)) {
                 BVertex(ov)

@@ -353,7 +353,8 @@ fn straight_reference(
 pub trait BlendShare {
     /// The elements this process judges (`None`: all).
     fn mine(&self) -> Option<&[usize]>;
-    /// The union of every process's `elements`: the members this process holds, sorted, and
+    /// The union of every process's `elements`: the members this process holds, in the
+    /// whole mesh's order ([`BlendShare::global`]; the reduction of a round depends on it), and
     /// whether the union is non-empty anywhere (every process gets the same flag, so loops
     /// and early returns on it stay collective).
     fn union(&self, elements: Vec<usize>) -> (Vec<usize>, bool);
@@ -363,6 +364,8 @@ pub trait BlendShare {
     fn sum(&self, v: usize) -> usize;
     /// The minimum of every process's `v`.
     fn min(&self, v: f64) -> f64;
+    /// The whole mesh's index of this process's element `e`.
+    fn global(&self, e: usize) -> usize;
 }
 
 /// The whole search in this process.
@@ -384,6 +387,9 @@ impl BlendShare for Alone {
     }
     fn min(&self, v: f64) -> f64 {
         v
+    }
+    fn global(&self, e: usize) -> usize {
+        e
     }
 }
 
@@ -434,9 +440,22 @@ pub fn blend_search_at_most(
     search(certifier, blended, params, &Alone, Some(max_reduced))
 }
 
+/// [`blend_search_at_most`] sharing the judging with other processes ([`BlendShare`]): given
+/// up once more than `max_reduced` elements of all processes are held back, on every process
+/// at the same round.
+pub fn blend_search_shared_at_most(
+    certifier: &dyn Certifier,
+    blended: &mut Blended,
+    params: &BlendParams,
+    share: &dyn BlendShare,
+    max_reduced: usize,
+) -> Result<Bounded, BlendError> {
+    search(certifier, blended, params, share, Some(max_reduced))
+}
+
 /// [`blend_search`] sharing the judging of the elements with other processes ([`BlendShare`]).
-/// The factors and the info are those of [`blend_search`] on the whole mesh, except
-/// `worst`, which lists the reduced elements of this process only.
+/// The factors and the info are those of [`blend_search`] on the whole mesh (`worst` names
+/// the elements by their whole mesh's index, [`BlendShare::global`]).
 pub fn blend_search_shared(
     certifier: &dyn Certifier,
     blended: &mut Blended,
@@ -466,9 +485,10 @@ fn search(
     mine.iter().for_each(|&e| owned[e] = true);
     let (straight_lower, reference) = straight_reference(certifier, blended, depth, mine, share)?;
     let straight_ratio: Vec<f64> = reference.iter().map(|r| r.0).collect();
+    // Every process's ratios: the minimum and percentile are the whole mesh's.
     let mut sorted = share.concat(mine.iter().map(|&e| straight_ratio[e]).collect());
     sorted.sort_by(f64::total_cmp);
-    let p1 = sorted.get(n / 100).copied().unwrap_or(1.0);
+    let p1 = sorted.get(sorted.len() / 100).copied().unwrap_or(1.0);
     let det_target = |e: usize| params.min_det_fraction.max(0.0) * straight_lower[e];
     let quality = params.min_quality_fraction > 0.0 || params.percentile_quality_fraction > 0.0;
     let ratio_target = |e: usize| {
@@ -600,11 +620,42 @@ fn search(
     }
     blended.factors = factors;
     blended.refresh();
-    summarise(blended, &mut info, &lower, &owned);
+    summarise(blended, &mut info, &lower, &owned, share);
+    info.worst = worst_over(share, &info.worst);
     info.reduced_elements = share.sum(info.reduced_elements);
     info.min_det_lower_bound = share.min(info.min_det_lower_bound);
     info.min_factor = share.min(info.min_factor);
     Ok(Bounded::Done(info))
+}
+
+/// Reduced elements listed in [`BlendInfo::worst`].
+const WORST: usize = 10;
+
+/// The [`WORST`] elements of every process's `own` list (the largest withheld displacement
+/// first, then the lowest element), in the whole mesh's element indices: the list of the
+/// search over the whole mesh.
+fn worst_over(share: &dyn BlendShare, own: &[ReducedElement]) -> Vec<ReducedElement> {
+    let flat = own
+        .iter()
+        .flat_map(|r| {
+            let [x, y, z] = r.centroid;
+            let e = share.global(r.element) as f64;
+            [e, x, y, z, r.min_factor, r.withheld]
+        })
+        .collect();
+    let mut all: Vec<ReducedElement> = share
+        .concat(flat)
+        .chunks_exact(6)
+        .map(|c| ReducedElement {
+            element: c[0] as usize,
+            centroid: [c[1], c[2], c[3]],
+            min_factor: c[4],
+            withheld: c[5],
+        })
+        .collect();
+    all.sort_by(|a, b| (b.withheld.total_cmp(&a.withheld)).then(a.element.cmp(&b.element)));
+    all.truncate(WORST);
+    all
 }
 
 /// What the search learns of an element: (certified valid, accepted, certified lower bound).
@@ -679,9 +730,16 @@ fn reduce_rejected(
 }
 
 /// Fill the reduction counts and the worst reduced elements of `info`.
-/// Only the elements marked `owned` are listed and counted (the point counts are global: every
-/// process holds all the factors).
-fn summarise(blended: &Blended, info: &mut BlendInfo, lower: &[f64], owned: &[bool]) {
+/// Only the elements marked `owned` are listed and counted; a point is counted by the
+/// process owning the lowest element (in the whole mesh's indices) around it, and the
+/// point counts are summed over the processes.
+fn summarise(
+    blended: &Blended,
+    info: &mut BlendInfo,
+    lower: &[f64],
+    owned: &[bool],
+    share: &dyn BlendShare,
+) {
     let n = blended.n_elements();
     let dim = blended.dim();
     let np = blended.points();
@@ -721,15 +779,37 @@ fn summarise(blended: &Blended, info: &mut BlendInfo, lower: &[f64], owned: &[bo
         .collect();
     let mut reduced: Vec<ReducedElement> = per.into_iter().flatten().collect();
     info.reduced_elements = reduced.len();
-    info.reduced_points = blended.factors.iter().filter(|&&l| l < FITTED).count();
-    info.target_points = blended.factors.iter().filter(|&&l| l <= 1.0).count();
-    info.straight_points = blended.factors.iter().filter(|&&l| l == 0.0).count();
+    // Per point shared with other processes: the lowest element around it here and whether
+    // it is owned (every element around a point of an own element is held here, so that is
+    // the whole mesh's lowest). Empty: every point is this process's, or no factor was
+    // lowered on this process (`factors` is empty, nothing to count).
+    let mut lowest = Vec::new();
+    if share.mine().is_some() && !blended.factors.is_empty() {
+        lowest = vec![(usize::MAX, false); blended.factors.len()];
+        for e in 0..n {
+            let g = share.global(e);
+            for &id in &blended.ids.of(e)[..np] {
+                let l = &mut lowest[id as usize];
+                if g < l.0 {
+                    *l = (g, owned[e]);
+                }
+            }
+        }
+    }
+    let counted = |keep: fn(f32) -> bool| {
+        let ours = |i: usize| lowest.get(i).is_none_or(|l| l.1);
+        let here = blended.factors.iter().enumerate();
+        share.sum(here.filter(|&(i, &l)| keep(l) && ours(i)).count())
+    };
+    info.reduced_points = counted(|l| l < FITTED);
+    info.target_points = counted(|l| l <= 1.0);
+    info.straight_points = counted(|l| l == 0.0);
     info.min_factor = reduced
         .iter()
         .map(|r| r.min_factor)
         .fold(FITTED as f64, f64::min);
     reduced.sort_by(|a, b| b.withheld.total_cmp(&a.withheld));
-    reduced.truncate(10);
+    reduced.truncate(WORST);
     info.worst = reduced;
 }
 

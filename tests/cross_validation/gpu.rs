@@ -1119,3 +1119,94 @@ fn colored_energy_with_gpu_derivatives_matches_cpu() {
         );
     }
 }
+
+/// The report's `gpu_traffic` counts what the kernels really moved: on a curved cylinder with
+/// f32 kernels, the fit's CG uploads at least the normal matrix (a u32 index and an f32 value
+/// per stored entry, `matrix_nonzeros`) and reads back at least the solution (a vec4 per
+/// control point); it dispatches the 7 kernels of an iteration at least `cg_iterations` times
+/// (one matrix block here). The sampling reads back exactly one point (3 f32) per written
+/// node, and uploads at least one Bézier net (27 points × 3 f32) per element. Reading,
+/// topology and quality run on the CPU and move nothing; every stage's counts agree with each
+/// other (a dispatch is submitted, a read-back downloads). The CPU backend reports none.
+#[test]
+fn gpu_traffic_counts_what_the_kernels_move() {
+    use polyspline::exec::gpu::Backend;
+    use polyspline::pipeline::{CurveOptions, curve};
+    let Some(ctx) = context(Precision::F32) else {
+        return;
+    };
+    let input =
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("meshes/real/mfem/cylinder-hex.mesh");
+    let run = |backend: Backend| {
+        let name = polyspline::exec::executor(&backend).name();
+        let out = executors::output_path("gpu_traffic", "cylinder-hex", name, "msh");
+        let opts = CurveOptions {
+            backend,
+            ..Default::default()
+        };
+        curve(&input, &out, &opts).unwrap_or_else(|e| panic!("{name}: {e}"))
+    };
+    assert!(run(Backend::Cpu).gpu_traffic.is_none(), "CPU backend");
+    let r = run(Backend::Gpu(std::sync::Arc::new(ctx)));
+    let traffic = r
+        .gpu_traffic
+        .as_ref()
+        .expect("gpu_traffic under --backend gpu");
+    let at = |key: &str| {
+        *traffic
+            .get(key)
+            .unwrap_or_else(|| panic!("no `{key}` in {traffic:?}"))
+    };
+    for (key, t) in traffic {
+        let ctx = format!("{key}: {t:?}");
+        assert_eq!(t.dispatches > 0, t.device_bytes > 0, "{ctx}");
+        assert_eq!(t.readbacks > 0, t.downloaded_bytes > 0, "{ctx}");
+        assert!(t.readbacks <= t.submits, "{ctx}");
+        assert!(
+            t.dispatches == 0 || (t.submits > 0 && t.readbacks > 0),
+            "{ctx}"
+        );
+        assert!(t.wait_seconds >= 0.0, "{ctx}");
+        assert!(r.timings.contains_key(key), "{ctx}: not a stage of timings");
+    }
+    for key in ["read", "topology", "quality"] {
+        assert_eq!(at(key), Default::default(), "{key} runs on the CPU");
+    }
+    let (n, nnz, iterations) = (
+        r.control_points as u64,
+        r.matrix_nonzeros.unwrap() as u64,
+        r.cg_iterations.unwrap() as u64,
+    );
+    assert!(iterations > 0 && nnz > 0);
+    let fit = at("fit");
+    assert!(
+        fit.uploaded_bytes >= nnz * (4 + 4) + 3 * 16 * n,
+        "fit: {fit:?}, {nnz} nonzeros"
+    );
+    assert!(
+        fit.downloaded_bytes >= 16 * n,
+        "fit: {fit:?}, {n} control points"
+    );
+    assert!(
+        fit.dispatches >= 7 * iterations,
+        "fit: {fit:?}, {iterations} iterations"
+    );
+    assert!(
+        fit.device_bytes >= iterations * nnz * (4 + 4),
+        "fit: {fit:?}"
+    );
+    assert!(fit.submits * 10 >= iterations, "fit: {fit:?}");
+    let sample = at("sample");
+    assert_eq!(
+        sample.downloaded_bytes,
+        3 * 4 * r.output_nodes as u64,
+        "sample: {sample:?}"
+    );
+    assert!(
+        sample.uploaded_bytes >= 81 * 4 * r.elements as u64 + 8 * r.output_nodes as u64,
+        "sample: {sample:?}, {} elements",
+        r.elements
+    );
+    assert!(sample.dispatches >= 1, "sample: {sample:?}");
+    println!("{traffic:#?}");
+}

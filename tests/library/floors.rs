@@ -1,6 +1,7 @@
 //! The library's floors hold (`scripts/check_floors.py`, which has the floor table): no import
 //! cycle between top-level modules, no import pointing up a floor, and every top-level module
-//! of `src/lib.rs` on a floor. Imports are read from the sources (`use` trees, paths in code
+//! of `src/lib.rs` on a floor, no clap in the library, and no printing or exiting in it (the
+//! binary prints and sets the status). Imports are read from the sources (`use` trees, paths in code
 //! and in doc links), so the test needs only Python's standard library.
 
 use crate::common::{python, python_path, skip};

@@ -13,7 +13,7 @@
 //! aggregate and are not ported to WGSL).
 
 use super::{
-    GpuContext, GpuError, ITEM_WORKGROUP, Precision, bytes_to_reals, groups, reals_to_bytes,
+    Bound, GpuContext, GpuError, ITEM_WORKGROUP, Precision, bytes_to_reals, groups, reals_to_bytes,
 };
 pub use crate::exec::cpu::cg::{CgKernelParams, CgState};
 pub use crate::exec::cpu::dot::DotParams;
@@ -131,7 +131,7 @@ impl GpuMatrix {
         pipeline: &wgpu::ComputePipeline,
         x: &wgpu::Buffer,
         y: &wgpu::Buffer,
-    ) -> Vec<wgpu::BindGroup> {
+    ) -> Vec<Bound> {
         self.blocks
             .iter()
             .map(|b| {
@@ -152,14 +152,13 @@ impl GpuMatrix {
 
     fn encode(
         &self,
+        ctx: &GpuContext,
         pass: &mut wgpu::ComputePass<'_>,
         pipeline: &wgpu::ComputePipeline,
-        binds: &[wgpu::BindGroup],
+        binds: &[Bound],
     ) {
-        pass.set_pipeline(pipeline);
         for (b, g) in self.blocks.iter().zip(binds) {
-            pass.set_bind_group(0, g, &[]);
-            pass.dispatch_workgroups(groups(b.n_rows, ITEM_WORKGROUP), 1, 1);
+            ctx.dispatch(pass, pipeline, g, groups(b.n_rows, ITEM_WORKGROUP));
         }
     }
 }
@@ -207,9 +206,9 @@ impl<'a> GpuOperator<'a> {
         let mut enc = ctx.device.create_command_encoder(&Default::default());
         {
             let mut pass = enc.begin_compute_pass(&Default::default());
-            self.matrix.encode(&mut pass, &self.pipeline, &binds);
+            self.matrix.encode(ctx, &mut pass, &self.pipeline, &binds);
         }
-        ctx.queue.submit([enc.finish()]);
+        ctx.submit(enc);
         Ok(from_vec4(&bytes_to_reals(
             ctx.precision,
             &ctx.read_back(&yb, bytes)?,
@@ -290,9 +289,9 @@ struct CgKernels<'c> {
     pipelines: [wgpu::ComputePipeline; 6],
     /// x (the inner correction d), r, z, p, Ap, 1/diag, partials, scalars, state.
     buffers: [wgpu::Buffer; 9],
-    spmv_binds: Vec<wgpu::BindGroup>,
-    dot_pap: wgpu::BindGroup,
-    dot_rz: wgpu::BindGroup,
+    spmv_binds: Vec<Bound>,
+    dot_pap: Bound,
+    dot_rz: Bound,
     staging: wgpu::Buffer,
 }
 
@@ -373,13 +372,12 @@ impl<'c> CgKernels<'c> {
         let vbytes = 4 * sz * n as u64;
         let [xd, r, z, p, ap, invb, partials, scalars, state] = &self.buffers;
         let [_, _, fin_a, upd_xr, fin_b, upd_p] = &self.pipelines;
-        let q = &ctx.queue;
-        q.write_buffer(xd, 0, &vec![0u8; vbytes as usize]);
-        q.write_buffer(r, 0, &vec4_bytes(prec, res));
-        q.write_buffer(z, 0, &vec4_bytes(prec, zv));
-        q.write_buffer(p, 0, &vec4_bytes(prec, zv));
-        q.write_buffer(scalars, 0, &reals_to_bytes(prec, sc.into_iter()));
-        q.write_buffer(state, 0, bytemuck::bytes_of(&CgState::default()));
+        ctx.write(xd, &vec![0u8; vbytes as usize]);
+        ctx.write(r, &vec4_bytes(prec, res));
+        ctx.write(z, &vec4_bytes(prec, zv));
+        ctx.write(p, &vec4_bytes(prec, zv));
+        ctx.write(scalars, &reals_to_bytes(prec, sc.into_iter()));
+        ctx.write(state, bytemuck::bytes_of(&CgState::default()));
         let cgp = ctx.uniform(
             "cg params",
             &CgKernelParams {
@@ -415,7 +413,7 @@ impl<'c> CgKernels<'c> {
             }
             enc.copy_buffer_to_buffer(state, 0, &self.staging, 0, 16);
             enc.copy_buffer_to_buffer(scalars, 0, &self.staging, 16, SCALARS as u64 * sz);
-            q.submit([enc.finish()]);
+            ctx.submit(enc);
             let bytes = ctx.map_read(&self.staging).map_err(dev)?;
             let st: CgState = *bytemuck::from_bytes(&bytes[..16]);
             batch(&st, &bytes_to_reals(prec, &bytes[16..]))?;
@@ -431,11 +429,11 @@ impl<'c> CgKernels<'c> {
     }
 
     /// One CG iteration: Ap, pᵀAp, α and the x/r/z update, rᵀz, β and the p update.
-    fn encode_iteration(&self, pass: &mut wgpu::ComputePass<'_>, binds: [&wgpu::BindGroup; 4]) {
+    fn encode_iteration(&self, pass: &mut wgpu::ComputePass<'_>, binds: [&Bound; 4]) {
         let [spmv, dot, fin_a, upd_xr, fin_b, upd_p] = &self.pipelines;
         let [fa, uxr, fb, up] = binds;
         let lanes = groups(self.n, ITEM_WORKGROUP);
-        self.matrix.encode(pass, spmv, &self.spmv_binds);
+        self.matrix.encode(self.ctx, pass, spmv, &self.spmv_binds);
         for (pipeline, bind, groups) in [
             (dot, &self.dot_pap, DOT_WORKGROUPS),
             (fin_a, fa, 1),
@@ -444,9 +442,7 @@ impl<'c> CgKernels<'c> {
             (fin_b, fb, 1),
             (upd_p, up, lanes),
         ] {
-            pass.set_pipeline(pipeline);
-            pass.set_bind_group(0, bind, &[]);
-            pass.dispatch_workgroups(groups, 1, 1);
+            self.ctx.dispatch(pass, pipeline, bind, groups);
         }
     }
 }

@@ -132,11 +132,9 @@ pub fn evaluate(
         let mut enc = ctx.device.create_command_encoder(&Default::default());
         {
             let mut pass = enc.begin_compute_pass(&Default::default());
-            pass.set_pipeline(&pipeline);
-            pass.set_bind_group(0, &bind, &[]);
-            pass.dispatch_workgroups(groups(n, ITEM_WORKGROUP), 1, 1);
+            ctx.dispatch(&mut pass, &pipeline, &bind, groups(n, ITEM_WORKGROUP));
         }
-        ctx.queue.submit([enc.finish()]);
+        ctx.submit(enc);
         let pts = bytes_to_reals(prec, &ctx.read_back(&p_buf, 3 * sz * n as u64)?);
         let ders = if with_derivs {
             bytes_to_reals(prec, &ctx.read_back(&d_buf, 9 * sz * n as u64)?)

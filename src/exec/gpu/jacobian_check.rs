@@ -102,11 +102,9 @@ pub fn jacobian_check(
         let mut enc = ctx.device.create_command_encoder(&Default::default());
         {
             let mut pass = enc.begin_compute_pass(&Default::default());
-            pass.set_pipeline(&pipeline);
-            pass.set_bind_group(0, &bind, &[]);
-            pass.dispatch_workgroups(groups(n, ITEM_WORKGROUP), 1, 1);
+            ctx.dispatch(&mut pass, &pipeline, &bind, groups(n, ITEM_WORKGROUP));
         }
-        ctx.queue.submit([enc.finish()]);
+        ctx.submit(enc);
         let v = bytes_to_reals(prec, &ctx.read_back(&out_buf, 8 * sz * n as u64)?);
         for (i, net) in anchored.iter().enumerate() {
             let b = &v[8 * i..8 * i + 8];

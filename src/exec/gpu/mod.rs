@@ -5,6 +5,10 @@
 //! `device` and `queue`). Arrays larger than one storage binding (lavapipe: 128 MiB) are split
 //! into chunks, each uploaded into its own buffers.
 //!
+//! Every upload, read-back, dispatch and submit goes through the context's helpers
+//! (`GpuContext::storage`, `write`, `map_read`, `dispatch`, `submit`), which count it in
+//! [`GpuTraffic`]: the report's `gpu_traffic` is measured, not derived from sizes.
+//!
 //! Environment: `VK_DRIVER_FILES=/usr/share/vulkan/icd.d/lvp_icd.x86_64.json` restricts Vulkan
 //! to Mesa's software driver (lavapipe); `XDG_RUNTIME_DIR=/tmp` silences a harmless Mesa
 //! warning when the variable is unset. Without any Vulkan driver, adapter selection fails
@@ -18,6 +22,7 @@ pub mod local_newton;
 pub mod reflect;
 
 use crate::math::BezierNet;
+use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
 use wgpu::util::DeviceExt;
 
 /// Floating-point type of the kernels (`--precision`).
@@ -105,6 +110,80 @@ pub struct GpuContext {
     pub precision: Precision,
     /// Compiled pipelines by entry point (compiling is slow on lavapipe).
     pipelines: std::sync::Mutex<std::collections::HashMap<String, wgpu::ComputePipeline>>,
+    /// What the kernels moved and issued so far ([`GpuContext::traffic`]).
+    counters: Counters,
+}
+
+/// What went between host and device and through device memory, counted by the context's
+/// helpers (see the module docs); a stage's share is the difference of two snapshots
+/// ([`GpuContext::traffic`]).
+#[deny(missing_docs)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
+pub struct GpuTraffic {
+    /// Bytes copied from the host into device buffers (buffer contents at creation, uniform
+    /// blocks, queue writes).
+    pub uploaded_bytes: u64,
+    /// Bytes copied from device buffers back to the host (mapped read-backs).
+    pub downloaded_bytes: u64,
+    /// Bytes of the buffers bound to each dispatch, summed over the dispatches: the
+    /// device-memory traffic of kernels that stream each bound buffer once (an upper bound
+    /// for the reductions' scalar buffers, a lower one for the SpMV's gathered vector).
+    pub device_bytes: u64,
+    /// Compute dispatches encoded.
+    pub dispatches: u64,
+    /// Command buffers submitted to the queue.
+    pub submits: u64,
+    /// Times the host waited for the device to finish (one per read-back).
+    pub readbacks: u64,
+    /// Seconds the host spent waiting for the device in those read-backs: on a software
+    /// adapter the kernels' own time, on a hardware GPU mostly the kernels' and the copies'.
+    pub wait_seconds: f64,
+}
+
+impl std::ops::Sub for GpuTraffic {
+    type Output = GpuTraffic;
+    fn sub(self, o: GpuTraffic) -> GpuTraffic {
+        GpuTraffic {
+            uploaded_bytes: self.uploaded_bytes - o.uploaded_bytes,
+            downloaded_bytes: self.downloaded_bytes - o.downloaded_bytes,
+            device_bytes: self.device_bytes - o.device_bytes,
+            dispatches: self.dispatches - o.dispatches,
+            submits: self.submits - o.submits,
+            readbacks: self.readbacks - o.readbacks,
+            wait_seconds: self.wait_seconds - o.wait_seconds,
+        }
+    }
+}
+
+impl std::ops::AddAssign for GpuTraffic {
+    fn add_assign(&mut self, o: GpuTraffic) {
+        self.uploaded_bytes += o.uploaded_bytes;
+        self.downloaded_bytes += o.downloaded_bytes;
+        self.device_bytes += o.device_bytes;
+        self.dispatches += o.dispatches;
+        self.submits += o.submits;
+        self.readbacks += o.readbacks;
+        self.wait_seconds += o.wait_seconds;
+    }
+}
+
+/// The running totals behind [`GpuTraffic`] (relaxed atomics: the kernels are called from one
+/// thread at a time, and a snapshot is taken between stages).
+#[derive(Default)]
+struct Counters {
+    uploaded: AtomicU64,
+    downloaded: AtomicU64,
+    device: AtomicU64,
+    dispatches: AtomicU64,
+    submits: AtomicU64,
+    readbacks: AtomicU64,
+    wait_nanos: AtomicU64,
+}
+
+/// A bind group with the bytes of the buffers bound in it (counted per dispatch).
+pub(crate) struct Bound {
+    group: wgpu::BindGroup,
+    bytes: u64,
 }
 
 impl std::fmt::Debug for GpuContext {
@@ -188,7 +267,50 @@ impl GpuContext {
             has_f64,
             precision,
             pipelines: Default::default(),
+            counters: Default::default(),
         })
+    }
+
+    /// What the kernels moved and issued since the context was made.
+    pub fn traffic(&self) -> GpuTraffic {
+        let c = &self.counters;
+        GpuTraffic {
+            uploaded_bytes: c.uploaded.load(Relaxed),
+            downloaded_bytes: c.downloaded.load(Relaxed),
+            device_bytes: c.device.load(Relaxed),
+            dispatches: c.dispatches.load(Relaxed),
+            submits: c.submits.load(Relaxed),
+            readbacks: c.readbacks.load(Relaxed),
+            wait_seconds: c.wait_nanos.load(Relaxed) as f64 * 1e-9,
+        }
+    }
+
+    /// Copy `data` into `buffer` from offset 0 (counted as uploaded).
+    pub(crate) fn write(&self, buffer: &wgpu::Buffer, data: &[u8]) {
+        self.counters.uploaded.fetch_add(data.len() as u64, Relaxed);
+        self.queue.write_buffer(buffer, 0, data);
+    }
+
+    /// Submit the commands of `enc` (counted).
+    pub(crate) fn submit(&self, enc: wgpu::CommandEncoder) {
+        self.counters.submits.fetch_add(1, Relaxed);
+        self.queue.submit([enc.finish()]);
+    }
+
+    /// Encode `pipeline` on `bound` over `workgroups` workgroups into `pass` (counted, with
+    /// the bound buffers' bytes).
+    pub(crate) fn dispatch(
+        &self,
+        pass: &mut wgpu::ComputePass<'_>,
+        pipeline: &wgpu::ComputePipeline,
+        bound: &Bound,
+        workgroups: u32,
+    ) {
+        self.counters.dispatches.fetch_add(1, Relaxed);
+        self.counters.device.fetch_add(bound.bytes, Relaxed);
+        pass.set_pipeline(pipeline);
+        pass.set_bind_group(0, &bound.group, &[]);
+        pass.dispatch_workgroups(workgroups, 1, 1);
     }
 
     /// Largest storage binding in bytes (lavapipe: 128 MiB).
@@ -236,6 +358,9 @@ impl GpuContext {
         if writable {
             usage |= wgpu::BufferUsages::COPY_SRC;
         }
+        self.counters
+            .uploaded
+            .fetch_add(data.len().max(16) as u64, Relaxed);
         if data.len() < 16 {
             let mut padded = data.to_vec();
             padded.resize(16, 0);
@@ -269,6 +394,9 @@ impl GpuContext {
 
     /// A uniform buffer holding a `Pod` value.
     pub(crate) fn uniform<T: bytemuck::Pod>(&self, label: &str, value: &T) -> wgpu::Buffer {
+        self.counters
+            .uploaded
+            .fetch_add(std::mem::size_of::<T>() as u64, Relaxed);
         self.device
             .create_buffer_init(&wgpu::util::BufferInitDescriptor {
                 label: Some(label),
@@ -282,7 +410,7 @@ impl GpuContext {
         &self,
         pipeline: &wgpu::ComputePipeline,
         buffers: &[(u32, &wgpu::Buffer)],
-    ) -> wgpu::BindGroup {
+    ) -> Bound {
         let entries: Vec<wgpu::BindGroupEntry> = buffers
             .iter()
             .map(|&(binding, b)| wgpu::BindGroupEntry {
@@ -290,11 +418,14 @@ impl GpuContext {
                 resource: b.as_entire_binding(),
             })
             .collect();
-        self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: None,
-            layout: &pipeline.get_bind_group_layout(0),
-            entries: &entries,
-        })
+        Bound {
+            group: self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: None,
+                layout: &pipeline.get_bind_group_layout(0),
+                entries: &entries,
+            }),
+            bytes: buffers.iter().map(|(_, b)| b.size()).sum(),
+        }
     }
 
     /// Bind `buffers` (binding, buffer) to `pipeline` and run it once over `n` invocations in
@@ -309,11 +440,9 @@ impl GpuContext {
         let mut enc = self.device.create_command_encoder(&Default::default());
         {
             let mut pass = enc.begin_compute_pass(&Default::default());
-            pass.set_pipeline(pipeline);
-            pass.set_bind_group(0, &bind, &[]);
-            pass.dispatch_workgroups(groups(n, ITEM_WORKGROUP), 1, 1);
+            self.dispatch(&mut pass, pipeline, &bind, groups(n, ITEM_WORKGROUP));
         }
-        self.queue.submit([enc.finish()]);
+        self.submit(enc);
     }
 
     /// Copy `bytes` bytes of `src` (from offset 0) back to the host.
@@ -327,12 +456,14 @@ impl GpuContext {
         });
         let mut enc = self.device.create_command_encoder(&Default::default());
         enc.copy_buffer_to_buffer(src, 0, &staging, 0, bytes);
-        self.queue.submit([enc.finish()]);
+        self.submit(enc);
         self.map_read(&staging)
     }
 
-    /// Map a MAP_READ buffer after the last submit, copy it out, unmap.
+    /// Map a MAP_READ buffer after the last submit, copy it out, unmap (counted as a
+    /// read-back of the buffer's bytes, with the time waited for the device).
     pub(crate) fn map_read(&self, staging: &wgpu::Buffer) -> Result<Vec<u8>, GpuError> {
+        let waiting = std::time::Instant::now();
         let (tx, rx) = std::sync::mpsc::channel();
         staging.map_async(wgpu::MapMode::Read, .., move |r| {
             let _ = tx.send(r);
@@ -348,6 +479,11 @@ impl GpuContext {
             .map_err(|e| GpuError::Readback(e.to_string()))?
             .to_vec();
         staging.unmap();
+        let c = &self.counters;
+        c.readbacks.fetch_add(1, Relaxed);
+        c.downloaded.fetch_add(out.len() as u64, Relaxed);
+        c.wait_nanos
+            .fetch_add(waiting.elapsed().as_nanos() as u64, Relaxed);
         Ok(out)
     }
 }
@@ -417,6 +553,11 @@ impl Backend {
             Backend::Cpu => None,
             Backend::Gpu(c) => Some(c),
         }
+    }
+    /// What the device's kernels moved and issued so far ([`GpuContext::traffic`]); `None` on
+    /// the CPU.
+    pub fn traffic(&self) -> Option<GpuTraffic> {
+        self.gpu().map(GpuContext::traffic)
     }
 }
 

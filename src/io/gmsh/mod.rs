@@ -263,6 +263,9 @@ struct Reader<'a> {
     v2_entities: HashMap<(i32, i32), i32>,
     /// The links of `$Periodic`.
     periodic: Vec<periodic::Link>,
+    /// The node tags of `$Periodic`'s node pairs with their places, kept to be checked by a
+    /// reader that does not hold `$Nodes` (`stream`); `None`: checked as they are read.
+    unchecked_nodes: Option<Vec<(u64, Location)>>,
     /// The file's numbering, in the tag-keeping mode.
     keep: Option<Kept>,
 }
@@ -290,6 +293,7 @@ impl<'a> Reader<'a> {
             entities: EntityTags::default(),
             v2_entities: HashMap::new(),
             periodic: Vec::new(),
+            unchecked_nodes: None,
             keep: None,
         }
     }

@@ -32,6 +32,42 @@ pub(super) struct Link {
 /// Values of an affine map.
 const AFFINE: usize = 16;
 
+/// A node pair naming node `tag`, which `$Nodes` does not define, at `at`.
+pub(super) fn undefined_node(tag: u64, at: Location) -> ParseError {
+    ParseError::new(
+        at,
+        format!("periodic node pair names node {tag}, which $Nodes does not define"),
+    )
+}
+
+/// The body of a binary MSH 4.1 `$Periodic` section read by offsets (`stream`): `data`, the
+/// bytes after its `$Periodic` line, at file offset `at`, in a file of `format` whose header
+/// is `header`. Parsed by the in-memory reader's own code; returns the links in physical tags
+/// ([`Reader::declared_periodic`]) and every node tag of the node pairs with its place, which
+/// the caller checks against `$Nodes` (it does not hold them).
+#[allow(clippy::type_complexity)]
+pub(super) fn stream_section(
+    header: &super::HeaderTags,
+    format: super::Format,
+    data: &[u8],
+    at: u64,
+) -> Result<(Vec<DeclaredPeriodic>, Vec<(u64, Location)>), ParseError> {
+    let mut r = Reader::new(data);
+    r.format = Some(format);
+    r.entities = header.entities.clone();
+    r.unchecked_nodes = Some(Vec::new());
+    let mut b = Bin {
+        data,
+        pos: 0,
+        base: at as usize,
+        big_endian: format.big_endian,
+        size_t: format.size_t,
+    };
+    r.periodic_binary(&mut b)?;
+    let nodes = r.unchecked_nodes.take().unwrap_or_default();
+    Ok((r.declared_periodic(), nodes))
+}
+
 impl Reader<'_> {
     /// `$Periodic`: read the links into `self.periodic`.
     pub(super) fn periodic_section(&mut self, line: usize) -> Result<(), ParseError> {
@@ -156,7 +192,7 @@ impl Reader<'_> {
         let n = b.size(&|| "number of periodic links".into())?;
         for i in 0..n {
             let what = || format!("periodic link {} of {n}", i + 1);
-            let at = b.pos;
+            let at = b.at();
             let dim = b.i32(&what)?;
             let slave = b.i32(&what)?;
             let master = b.i32(&what)?;
@@ -182,12 +218,16 @@ impl Reader<'_> {
                 }
             };
             let count = b.size(&what)?;
-            let start = b.pos;
+            let start = b.at();
             let sz = b.size_t;
             let len = b.room(count, 2 * sz, "periodic node pairs")?;
             let data = b.take(len, &|| "periodic node pairs".into())?;
             for (k, t) in data.chunks_exact(sz).enumerate() {
-                self.periodic_node(b.dec_size(t), || Location::Byte(start + k * sz))?;
+                let (tag, at) = (b.dec_size(t), Location::Byte(start + k * sz));
+                match &mut self.unchecked_nodes {
+                    Some(later) => later.push((tag, at)),
+                    None => self.periodic_node(tag, || at)?,
+                }
             }
             self.periodic.push(Link {
                 dim,
@@ -206,10 +246,7 @@ impl Reader<'_> {
         if defined {
             return Ok(());
         }
-        Err(ParseError::new(
-            at(),
-            format!("periodic node pair names node {tag}, which $Nodes does not define"),
-        ))
+        Err(undefined_node(tag, at()))
     }
 
     /// The links read, in the physical tags the cells carry (0 where the entity has none).

@@ -9,8 +9,9 @@
 //! seeking. Outputs: [`Indexed::range`] (elements `lo..hi` of one type, at their offsets),
 //! [`Indexed::for_each`] (every element of one type, in file order, `CHUNK` records at a time)
 //! and [`Indexed::coordinates`] (the nodes of a set, in file order, a chunk's coordinates read
-//! only when one of its tags is wanted). Memory: the index, one chunk, and what the caller
-//! keeps.
+//! only when one of its tags is wanted), and [`Indexed::declared_periodic`] (the `$Periodic`
+//! section's bytes, parsed by the in-memory parser's code). Memory: the index, one chunk, and
+//! what the caller keeps.
 //!
 //! Invariants: block headers, element types, entity physical tags and binary decoding are the
 //! in-memory parser's ([`super::nodes::NodeBlockHeader`], [`super::elements::ElementBlockHeader`],
@@ -185,7 +186,7 @@ impl Head {
             header: self.header,
             nodes: Vec::new(),
             elements: Vec::new(),
-            periodic_section: false,
+            periodic_at: None,
         };
         // `Head::open` stopped after the `$Nodes` line.
         let mut next = Some("$Nodes".to_string());
@@ -194,11 +195,17 @@ impl Head {
                 "$Nodes" => ix.index_nodes()?,
                 "$Elements" => ix.index_elements()?,
                 s if s.starts_with('$') => {
-                    ix.periodic_section |= s == "$Periodic";
+                    let body = ix.src.pos()?;
                     let end = format!("$End{}", &s[1..]);
                     loop {
+                        let at = ix.src.pos()?;
                         match ix.src.line()? {
-                            Some(l) if String::from_utf8_lossy(&l).trim() == end => break,
+                            Some(l) if String::from_utf8_lossy(&l).trim() == end => {
+                                if s == "$Periodic" {
+                                    ix.periodic_at = Some((body, at));
+                                }
+                                break;
+                            }
                             Some(_) => {}
                             None => {
                                 return Err(ParseError::new(
@@ -231,8 +238,9 @@ pub(crate) struct Indexed {
     nodes: Vec<NodeBlock>,
     /// The element blocks, in file order.
     pub(crate) elements: Vec<ElementBlock>,
-    /// The file has a `$Periodic` section (skipped: it is not read by offsets).
-    pub(crate) periodic_section: bool,
+    /// Where the body of the file's `$Periodic` section starts and ends (its `$EndPeriodic`
+    /// line), when it has one ([`Indexed::declared_periodic`] reads it).
+    periodic_at: Option<(u64, u64)>,
 }
 
 impl Indexed {
@@ -378,6 +386,44 @@ impl Indexed {
         f: impl FnMut(u64, i32, &[u64]),
     ) -> Result<(), ParseError> {
         self.range(gmsh_type, 0, u64::MAX, f)
+    }
+
+    /// The periodic pairs `$Periodic` declares (none without the section), as the in-memory
+    /// reader gives them ([`super::read`]'s `RawMesh::periodic`): the section's bytes read at
+    /// their offset and parsed by its code, then the node tags of its node pairs checked
+    /// against `$Nodes` in one streamed pass over the node tags (the first undefined one is
+    /// the in-memory reader's error at its byte).
+    pub(crate) fn declared_periodic(
+        &mut self,
+    ) -> Result<Vec<crate::mesh::raw::DeclaredPeriodic>, ParseError> {
+        let Some((body, end)) = self.periodic_at else {
+            return Ok(Vec::new());
+        };
+        let mut data = Vec::new();
+        self.src.seek(body)?;
+        self.src
+            .bytes(&mut data, (end - body) as usize, "the $Periodic section")?;
+        let (links, nodes) =
+            super::periodic::stream_section(&self.header, self.format, &data, body)?;
+        drop(data);
+        let mut missing: HashSet<u64> = nodes.iter().map(|n| n.0).collect();
+        let sz = self.format.size_t as u64;
+        let (mut raw, mut tags) = (Vec::new(), Vec::new());
+        for b in self.nodes.clone() {
+            let mut done = 0u64;
+            while done < b.n && !missing.is_empty() {
+                let k = (b.n - done).min(CHUNK as u64) as usize;
+                self.sizes(&mut raw, &mut tags, b.tags_at + sz * done, k)?;
+                for t in &tags {
+                    missing.remove(t);
+                }
+                done += k as u64;
+            }
+        }
+        match nodes.into_iter().find(|n| missing.contains(&n.0)) {
+            Some((tag, at)) => Err(super::periodic::undefined_node(tag, at)),
+            None => Ok(links),
+        }
     }
 
     /// The tags and coordinates of the nodes in `have`, in file order; fails when a wanted

@@ -1,0 +1,199 @@
+//! The spline passes of the job's knot intervals, for the serial job and the job under mpirun
+//! alike: which passes run, the bound on `auto`'s uniform pass, the choice between the passes
+//! and the warm start of the second.
+//!
+//! Input: a [`Passes`] (how this process surveys the whole mesh's knot surfaces, turns the
+//! survey into its knots and runs one pass, space, fit and certified blend, on its elements:
+//! the serial job on the whole mesh, a rank on its share), the [`Job`] (options as asked) and
+//! the [`SplineSetup`] of uniform knots. Output: the pass kept; the setup ends with that pass's
+//! knots, and `knot_passes` counts the passes run.
+//!
+//! Invariant: every decision is taken on whole-mesh figures (the survey's graded share and
+//! largest |ln ratio|, the blends' held-back counts and the fitted boundaries' RMS distances
+//! over every process), so every process of
+//! a job decides alike and the choice is the serial run's on any number of processes.
+
+use super::clock::Clock;
+use super::spline::{
+    SplineSetup, auto_graded_is_decisive, auto_graded_keeps_the_boundary, auto_holds_back_too_many,
+};
+use super::{CurveError, Job};
+use crate::spline::{AUTO_GRADED_SHARE, AUTO_MIN_LOG_RATIO, KnotIntervals, KnotParams, Knots};
+
+/// The whole mesh's knot figures `auto` decides on (the serial [`crate::spline::KnotSurvey`],
+/// or its assembly over ranks).
+pub(crate) trait KnotFigures {
+    /// [`crate::spline::KnotSurfaceInfo::graded_share`] of the whole mesh.
+    fn graded_share(&self) -> f64;
+    /// The largest |measured ln ratio| of an interior facet of the whole mesh.
+    fn max_abs_log_ratio(&self) -> f64;
+}
+
+impl KnotFigures for crate::spline::KnotSurvey {
+    fn graded_share(&self) -> f64 {
+        self.graded_share
+    }
+    fn max_abs_log_ratio(&self) -> f64 {
+        self.max_abs_log_ratio
+    }
+}
+
+/// What differs between the jobs that run spline passes: where the elements are and how
+/// their figures are summed. Every method is collective over the job's processes.
+pub(crate) trait Passes {
+    /// One pass's outcome (its fitted space and, unless it stopped early, its blend).
+    type Pass;
+    /// The whole mesh's knot survey.
+    type Survey: KnotFigures;
+    /// Elements of the whole mesh.
+    fn elements(&self) -> usize;
+    /// The whole mesh's knot survey, timed as the spline stage.
+    fn survey(&mut self, clock: &mut Clock) -> Self::Survey;
+    /// This process's knots of `params` from `survey`, timed as the spline stage.
+    fn knots(&mut self, clock: &mut Clock, survey: Self::Survey, params: &KnotParams) -> Knots;
+    /// One pass of `job` on `setup`: the space, the fit (started from `previous`'s fitted
+    /// control points where given) and the certificate of the job's path; with `most`, the
+    /// certified blend is given up once it holds back more than `most` elements.
+    fn run(
+        &mut self,
+        job: &Job,
+        setup: &SplineSetup,
+        clock: &mut Clock,
+        previous: Option<&Self::Pass>,
+        most: Option<usize>,
+    ) -> Result<Self::Pass, CurveError>;
+    /// Elements `pass` holds back over the whole mesh: `Ok` when it ran to its end, else
+    /// `Err` with the lower bound at which it stopped.
+    fn held(pass: &Self::Pass) -> Result<usize, usize>;
+    /// A pass that stopped early, its blend run to its end (on its own space: the setup's
+    /// knots may be another pass's).
+    fn finish(
+        &mut self,
+        job: &Job,
+        setup: &SplineSetup,
+        clock: &mut Clock,
+        pass: Self::Pass,
+    ) -> Result<Self::Pass, CurveError>;
+    /// RMS distance of `pass`'s fitted boundary from the smooth boundary (the target map's)
+    /// over the whole mesh ([`super::misfit::boundary_sq_sum`]), timed as the validity stage.
+    fn boundary_rms(
+        &mut self,
+        job: &Job,
+        setup: &SplineSetup,
+        clock: &mut Clock,
+        pass: &Self::Pass,
+    ) -> f64;
+    /// Whether the second pass starts from the first one's fit.
+    fn warm_start(&self) -> bool {
+        true
+    }
+}
+
+/// The spline passes of `job`'s knot intervals on `setup` (built with uniform knots): uniform
+/// or graded knots as asked, one pass; `--knot-intervals auto` (see
+/// [`super::spline::curve_spline`] for the rules) decides in one pass where it can:
+/// 1. graded knots at once where the survey's graded share reaches [`AUTO_GRADED_SHARE`];
+/// 2. else uniform knots, kept where the blend holds back at most
+///    [`super::spline::AUTO_MAX_HELD_BACK`] of the elements (or graded knots are all but
+///    uniform: no facet's |ln ratio| reaches [`AUTO_MIN_LOG_RATIO`]). The uniform blend stops
+///    once it holds back more than that: its count so far is a lower bound of its end's;
+/// 3. else a second pass with graded knots from the uniform fit, kept when decisive
+///    ([`auto_graded_is_decisive`]) against the uniform count and its fitted boundary is as
+///    close to the smooth boundary as the uniform fit's ([`auto_graded_keeps_the_boundary`],
+///    on [`Passes::boundary_rms`]): against the lower bound first, and only when that does
+///    not decide is the uniform blend run to its end, so the choice and the output are those
+///    of the full passes.
+pub(crate) fn spline_passes<P: Passes>(
+    p: &mut P,
+    job: &Job,
+    setup: &mut SplineSetup,
+    clock: &mut Clock,
+) -> Result<P::Pass, CurveError> {
+    let options = job.options;
+    let weights = options.fit.weights;
+    let (uniform, graded) = (
+        options.with_knots(KnotIntervals::Uniform),
+        options.with_knots(KnotIntervals::Graded),
+    );
+    let uniform_job = Job {
+        options: &uniform,
+        ..*job
+    };
+    let graded_job = Job {
+        options: &graded,
+        ..*job
+    };
+    // The features, kinks and targets of the setup do not depend on the knots: graded ones
+    // are put in its place.
+    let graded_pass = |p: &mut P, setup: &mut SplineSetup, clock: &mut Clock, survey| {
+        let knots = p.knots(clock, survey, &graded.knots);
+        setup.set_knots(KnotIntervals::Graded, knots, weights);
+        p.run(&graded_job, setup, clock, None, None)
+    };
+    match options.knots.intervals {
+        KnotIntervals::Uniform => return p.run(&uniform_job, setup, clock, None, None),
+        KnotIntervals::Graded => {
+            let survey = p.survey(clock);
+            return graded_pass(p, setup, clock, survey);
+        }
+        KnotIntervals::Auto => {}
+    }
+    let survey = p.survey(clock);
+    if survey.graded_share() >= AUTO_GRADED_SHARE {
+        return graded_pass(p, setup, clock, survey);
+    }
+    // Graded knots all but uniform: a second pass would not hold back half as many.
+    let near_uniform = survey.max_abs_log_ratio() < AUTO_MIN_LOG_RATIO;
+    // Not held through the uniform pass: the fit's peak would carry it (+0.56 GB on the 1M
+    // cylinder); the rare second pass measures the surfaces again.
+    drop(survey);
+    let n = p.elements();
+    let most = (super::spline::AUTO_MAX_HELD_BACK * n as f64).floor() as usize;
+    let first = p.run(
+        &uniform_job,
+        setup,
+        clock,
+        None,
+        (!near_uniform).then_some(most),
+    )?;
+    match P::held(&first) {
+        Ok(held) if near_uniform || !auto_holds_back_too_many(held, n) => return Ok(first),
+        _ => {}
+    }
+    let survey = p.survey(clock);
+    let knots = p.knots(clock, survey, &graded.knots);
+    let uniform_knots = setup.set_knots(KnotIntervals::Graded, knots, weights);
+    setup.knot_passes = 2;
+    // The graded fit starts from the uniform one where the two spaces share control points
+    // (every entity's but the knot splits'): fewer CG iterations than from C0.
+    let previous = p.warm_start().then_some(&first);
+    let second = p.run(&graded_job, setup, clock, previous, None)?;
+    let graded_held = P::held(&second).expect("an unbounded pass runs to its end");
+    // Measured only where the counts alone would keep graded knots, the uniform fit's once
+    // (the target map does not depend on the knots).
+    let mut uniform_boundary = None;
+    let mut keeps_boundary =
+        |p: &mut P, setup: &SplineSetup, clock: &mut Clock, first: &P::Pass| {
+            let uniform =
+                *uniform_boundary.get_or_insert_with(|| p.boundary_rms(job, setup, clock, first));
+            auto_graded_keeps_the_boundary(p.boundary_rms(job, setup, clock, &second), uniform)
+        };
+    let first = match P::held(&first) {
+        Ok(_) => first,
+        // Decisive against a lower bound of the uniform count: decisive against the count.
+        Err(at_least)
+            if auto_graded_is_decisive(graded_held, at_least)
+                && keeps_boundary(p, setup, clock, &first) =>
+        {
+            return Ok(second);
+        }
+        Err(_) => p.finish(&uniform_job, setup, clock, first)?,
+    };
+    let uniform_held = P::held(&first).expect("a finished pass ran to its end");
+    if auto_graded_is_decisive(graded_held, uniform_held) && keeps_boundary(p, setup, clock, &first)
+    {
+        return Ok(second);
+    }
+    setup.set_knots(KnotIntervals::Uniform, uniform_knots, weights);
+    Ok(first)
+}
