@@ -341,8 +341,7 @@ fn corner_of(l: [usize; 3]) -> usize {
 pub struct ElementBlocks {
     /// Per element: bit c (c < 8) for a boundary corner c (of [`weighted_boundary`]), bit
     /// 8 + i for a sample i that takes the feature weight, `DEEP_BIT` for an element a ring
-    /// away from that boundary, the size level in the 8 bits from `LEVEL_SHIFT`, bit
-    /// `PINNED_SHIFT` + c for a corner c at one of [`pinned_vertices`].
+    /// away from that boundary, the size level in the 8 bits from `LEVEL_SHIFT`.
     pub masks: Vec<u64>,
     /// (G^d, G^r), row-major 3^d × 3^d, per mask.
     pub cache: HashMap<u64, (Vec<f64>, Vec<f64>)>,
@@ -380,12 +379,6 @@ pub fn mask_level(mask: u64) -> u16 {
 /// The bits of a size level in a weight mask, above [`LEVEL_SHIFT`] ([`MAX_LEVEL`] < 256).
 pub(super) const LEVEL_BITS: u64 = 0xFF;
 
-/// Bit offset of the pinned corners in a weight mask: corner c of an element has bit
-/// `PINNED_SHIFT` + c when its vertex is one of [`pinned_vertices`]. It takes
-/// [`FitWeights::boundary_corner`] like a boundary corner, but spans no boundary midpoint and
-/// does not make the element's neighbours non-deep.
-const PINNED_SHIFT: usize = 56;
-
 fn sample_weight_unscaled(w: &FitWeights, mask: u64, i: usize, l: [usize; 3], corner: bool) -> f64 {
     if mask & (1 << (8 + i)) != 0 {
         w.feature
@@ -397,7 +390,7 @@ fn sample_weight_unscaled(w: &FitWeights, mask: u64, i: usize, l: [usize; 3], co
         } else {
             w.midpoint
         }
-    } else if mask & (1 << corner_of(l)) != 0 || mask & (1 << (PINNED_SHIFT + corner_of(l))) != 0 {
+    } else if mask & (1 << corner_of(l)) != 0 {
         w.boundary_corner
     } else {
         w.corner
@@ -584,8 +577,7 @@ impl ElementBlocks {
             (gd, gr)
         };
         let levels = size_levels(mesh);
-        let on_boundary = weighted_boundary(topo, features);
-        let pinned = pinned_vertices(topo, features, &on_boundary);
+        let on_boundary = weighted_boundary(topo, features, w);
         // Vertices of the elements that touch the boundary: an element with none of them is
         // "deep" (a ring away from the wall).
         let mut near = vec![false; on_boundary.len()];
@@ -601,9 +593,6 @@ impl ElementBlocks {
                 for (c, &v) in mesh.element(e).iter().enumerate() {
                     if on_boundary[v as usize] {
                         m |= 1 << c;
-                    }
-                    if pinned[v as usize] {
-                        m |= 1 << (PINNED_SHIFT + c);
                     }
                 }
                 if mesh.element(e).iter().all(|&v| !near[v as usize]) {
@@ -623,21 +612,34 @@ impl ElementBlocks {
     }
 }
 
-/// The vertices that span boundary midpoints ([`FitWeights::boundary_midpoint`]) and make
-/// their elements' neighbours non-deep: the boundary vertices, less (3D) those whose boundary
-/// facets all lie in planar patches, unless they lie on a feature curve or corner. A planar
-/// patch is projected back onto its plane after the fit, and its midpoints have no smooth
-/// targets to follow; counted as boundary, the caps of a one- or three-layer extrusion made
-/// every element a boundary element (every midpoint at `boundary_midpoint`, none deep), and the
-/// fit lost the deep-midpoint weight that keeps graded layers valid in 2D (ellipse O-grid with
-/// wall cells 1e-6 growing by 1.05, one layer: every element held back). The vertices left out
-/// next to a feature keep the boundary corner weight ([`pinned_vertices`]).
+/// The vertices that take the boundary weights ([`FitWeights::boundary_corner`], the
+/// boundary midpoints they span) and make their elements' neighbours non-deep: the boundary
+/// vertices; in 3D where the deep midpoints weigh otherwise than the interior ones (graded
+/// knots, [`FitWeights::for_knots`]), less those whose boundary facets all lie in planar
+/// patches, unless they lie on a feature curve or corner.
+///
+/// Why: a planar patch is projected back onto its plane after the fit, and its midpoints have
+/// no smooth targets to follow; counted as boundary, the caps of a one- or three-layer
+/// extrusion made every element a boundary element (every midpoint at `boundary_midpoint`,
+/// none deep), and the graded fit lost the deep-midpoint weight that keeps graded layers
+/// valid in 2D (ellipse O-grid, wall cells 1e-6 growing by 1.05, one layer: every element held
+/// back with either knots, 18 % with graded knots and these vertices). Not with uniform
+/// knots, where the deep weight is the interior one: there nothing becomes deep, and the
+/// planar vertices' interior weights only loosen the fit (box with a hole: feature vertices
+/// 9e-9 off their straight edges instead of rounding; min scaled Jacobian 0.7018 against
+/// 0.7071). The planar vertices next to a feature keep the interior weights too: with the
+/// boundary corner weight beside interior midpoints, CG took 2× the iterations on meshes of
+/// planar patches (acoustics_mesh3d 105 → 217, NACA4412_2.msh 69 → 88).
 fn weighted_boundary(
     topo: &Topology,
     features: Option<&crate::mesh::features::Features>,
+    w: &FitWeights,
 ) -> Vec<bool> {
     let mut on = topo.vertex_on_boundary.clone();
-    let Some(f) = features.filter(|f| topo.dim == 3 && f.planes.iter().any(Option::is_some)) else {
+    let deep_differs = w.deep_midpoint.is_some_and(|d| d != w.midpoint);
+    let Some(f) =
+        features.filter(|f| deep_differs && topo.dim == 3 && f.planes.iter().any(Option::is_some))
+    else {
         return on;
     };
     on.iter_mut().for_each(|b| *b = false);
@@ -657,32 +659,6 @@ fn weighted_boundary(
         on[c as usize] = true;
     }
     on
-}
-
-/// The boundary vertices left out of [`weighted_boundary`] that share a boundary facet with a
-/// feature vertex: they keep the boundary corner weight (`PINNED_SHIFT`), which holds the
-/// feature curves at the input's vertices (with the interior corner weight there, a box's
-/// feature vertices drifted 1e-8 along their straight edges). Pinning every planar vertex
-/// instead, against the interior midpoint weight next to it, doubled or tripled the CG
-/// iterations on meshes of planar patches (acoustics_mesh3d: 105 to 340).
-fn pinned_vertices(
-    topo: &Topology,
-    features: Option<&crate::mesh::features::Features>,
-    on: &[bool],
-) -> Vec<bool> {
-    let mut pinned = vec![false; on.len()];
-    let Some(f) = features else {
-        return pinned;
-    };
-    for &facet in &topo.boundary_facets {
-        let vs = topo.facet_vertices(facet as usize);
-        if vs.iter().any(|&v| f.vertex_mask[v as usize]) {
-            for &v in vs {
-                pinned[v as usize] = !on[v as usize];
-            }
-        }
-    }
-    pinned
 }
 
 /// K applied without assembling it: y = Σ_e E_eᵀ G_e E_e x, element by element (the
