@@ -339,7 +339,7 @@ fn corner_of(l: [usize; 3]) -> usize {
 /// which samples lie on sharp features (the position weights), so one block per pattern is
 /// kept.
 pub struct ElementBlocks {
-    /// Per element: bit c (c < 8) for a boundary corner c (of [`weighted_boundary`]), bit
+    /// Per element: bit c (c < 8) for a boundary corner c (of `weighted_boundary`), bit
     /// 8 + i for a sample i that takes the feature weight, `DEEP_BIT` for an element a ring
     /// away from that boundary, the size level in the 8 bits from `LEVEL_SHIFT`.
     pub masks: Vec<u64>,
