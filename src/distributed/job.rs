@@ -479,6 +479,22 @@ impl Passes for RankPasses<'_> {
         }
         Ok(pass)
     }
+    fn boundary_rms(
+        &mut self,
+        job: &Job,
+        setup: &SplineSetup,
+        clock: &mut Clock,
+        pass: &Pass,
+    ) -> f64 {
+        // Each boundary side once: the own elements' (the ghosts' outer sides are no boundary).
+        let (comm, n_owned) = (self.comm, self.local.n_owned);
+        clock.run(Stage::Validity, || {
+            let (sum, n) = spline::fitted_boundary_sq_sum(job, setup, &pass.s, |e| e < n_owned);
+            let mut v = [sum, n as f64];
+            comm.sum_f64(&mut v);
+            crate::pipeline::misfit::rms(v[0], v[1] as usize)
+        })
+    }
     fn warm_start(&self) -> bool {
         self.warm_start
     }

@@ -90,7 +90,7 @@ type BlockPair = (Vec<f64>, Vec<f64>);
 /// `blocks` with the size levels `levels` in place of its own (the blocks of a level are
 /// 4^k times those of level 0, so they are rescaled exactly, by powers of 2).
 fn relevel(blocks: ElementBlocks, levels: &[u16]) -> ElementBlocks {
-    let low = (1u64 << super::normal_matrix::LEVEL_SHIFT) - 1;
+    let low = !(super::normal_matrix::LEVEL_BITS << super::normal_matrix::LEVEL_SHIFT);
     let masks: Vec<u64> = blocks
         .masks
         .iter()
@@ -101,13 +101,13 @@ fn relevel(blocks: ElementBlocks, levels: &[u16]) -> ElementBlocks {
     let mut base: std::collections::HashMap<u64, (i32, &BlockPair)> = Default::default();
     for (m, g) in &blocks.cache {
         base.entry(m & low)
-            .or_insert(((m >> super::normal_matrix::LEVEL_SHIFT) as i32, g));
+            .or_insert((super::normal_matrix::mask_level(*m) as i32, g));
     }
     let mut cache = std::collections::HashMap::new();
     for &m in &masks {
         cache.entry(m).or_insert_with(|| {
             let (k0, (gd, gr)) = base[&(m & low)];
-            let f = 4.0f64.powi((m >> super::normal_matrix::LEVEL_SHIFT) as i32 - k0);
+            let f = 4.0f64.powi(super::normal_matrix::mask_level(m) as i32 - k0);
             (
                 gd.iter().map(|x| f * x).collect(),
                 gr.iter().map(|x| f * x).collect(),

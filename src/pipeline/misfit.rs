@@ -33,6 +33,7 @@
 //! so the distributed run gathers its ranks' sides and marks the same runs.
 
 use crate::fit::SmoothTargets;
+use crate::math::bernstein::{BezierElements, eval_net_with_derivatives};
 use crate::math::linalg::DVec3;
 use crate::math::reference::HEX_VERTEX_PARAMS;
 use crate::mesh::topology::NONE;
@@ -194,6 +195,100 @@ pub(crate) fn boundary_sides(
             out
         })
         .collect()
+}
+
+/// Parameters per direction at which [`boundary_sq_sum`] measures a boundary side.
+const SIDE_SAMPLES: usize = 5;
+
+/// Squared distances of `map`'s boundary from `surface`'s (both over the elements of `topo`),
+/// summed over the boundary sides of the elements `e` with `which(e)`, and their count: for
+/// every such side, the points of `map` at 5 × 5 (2D: 5) parameters inside the side (the
+/// centres of a 5 × 5 grid of it), each at its distance from the same side of `surface`, found
+/// by Gauss–Newton from the same parameters. [`rms`] of the sums is the RMS distance; the sums
+/// of a distributed job's ranks, each over its own elements, add up to the whole mesh's.
+///
+/// The distance is to the nearest point, not to the point of the same parameters: two maps of
+/// one boundary may slide along it against each other (a spline's parametrisation of a graded
+/// wall does), and only the distance across it is an error of the shape.
+pub(crate) fn boundary_sq_sum(
+    topo: &Topology,
+    map: &dyn BezierElements,
+    surface: &dyn BezierElements,
+    which: &(dyn Fn(usize) -> bool + Sync),
+) -> (f64, usize) {
+    let dim = topo.dim;
+    // Inside the side: a point of its edge that slides off the side along the boundary would
+    // be measured by its slide.
+    let at = |i: usize| (i as f64 + 0.5) / SIDE_SAMPLES as f64;
+    topo.boundary_facets
+        .par_iter()
+        .map(|&f| {
+            let e = topo.facet_elements[f as usize][0] as usize;
+            if !which(e) {
+                return (0.0, 0);
+            }
+            let Some(s) = (0..2 * dim).find(|&s| topo.element_facet(e, s) == f) else {
+                return (0.0, 0);
+            };
+            let (k, b) = (s / 2, (s % 2) as f64);
+            let others: Vec<usize> = (0..dim).filter(|&j| j != k).collect();
+            let (m, t) = (map.bezier_net(e), surface.bezier_net(e));
+            let per = if dim == 2 { 1 } else { SIDE_SAMPLES };
+            let mut sum = 0.0;
+            for i in 0..SIDE_SAMPLES * per {
+                let mut u = [0.0; 3];
+                u[k] = b;
+                u[others[0]] = at(i % SIDE_SAMPLES);
+                if dim == 3 {
+                    u[others[1]] = at(i / SIDE_SAMPLES);
+                }
+                let p = DVec3::from(eval_net_with_derivatives(dim, &m, u).0);
+                sum += nearest_on_side(dim, &t, u, &others, p).powi(2);
+            }
+            (sum, SIDE_SAMPLES * per)
+        })
+        .reduce(|| (0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1))
+}
+
+/// The root mean square of `n` squared distances summing to `sum` ([`boundary_sq_sum`]); 0
+/// without any.
+pub(crate) fn rms(sum: f64, n: usize) -> f64 {
+    if n == 0 { 0.0 } else { (sum / n as f64).sqrt() }
+}
+
+/// Distance of `p` from the side of the net `t` through `u` that varies in the directions
+/// `others` (Gauss–Newton from `u`, the parameters kept in [0, 1]).
+fn nearest_on_side(
+    dim: usize,
+    t: &crate::math::BezierNet,
+    mut u: [f64; 3],
+    others: &[usize],
+    p: DVec3,
+) -> f64 {
+    for _ in 0..6 {
+        let (x, d) = eval_net_with_derivatives(dim, t, u);
+        let r = p - DVec3::from(x);
+        let j: Vec<DVec3> = others.iter().map(|&o| DVec3::from(d[o])).collect();
+        let step = if j.len() == 1 {
+            let a = j[0].dot(j[0]);
+            if a <= 0.0 {
+                break;
+            }
+            [j[0].dot(r) / a, 0.0]
+        } else {
+            let (a, bb, c) = (j[0].dot(j[0]), j[0].dot(j[1]), j[1].dot(j[1]));
+            let det = a * c - bb * bb;
+            if det <= 0.0 {
+                break;
+            }
+            let (g0, g1) = (j[0].dot(r), j[1].dot(r));
+            [(c * g0 - bb * g1) / det, (a * g1 - bb * g0) / det]
+        };
+        for (q, &o) in others.iter().enumerate() {
+            u[o] = (u[o] + step[q]).clamp(0.0, 1.0);
+        }
+    }
+    (p - DVec3::from(eval_net_with_derivatives(dim, t, u).0)).length()
 }
 
 /// What the marking needs of one boundary side: its vertices by a key common to every

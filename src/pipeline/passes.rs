@@ -9,11 +9,14 @@
 //! knots, and `knot_passes` counts the passes run.
 //!
 //! Invariant: every decision is taken on whole-mesh figures (the survey's graded share and
-//! largest |ln ratio|, the blends' held-back counts over every process), so every process of
+//! largest |ln ratio|, the blends' held-back counts and the fitted boundaries' RMS distances
+//! over every process), so every process of
 //! a job decides alike and the choice is the serial run's on any number of processes.
 
 use super::clock::Clock;
-use super::spline::{SplineSetup, auto_graded_is_decisive, auto_holds_back_too_many};
+use super::spline::{
+    SplineSetup, auto_graded_is_decisive, auto_graded_keeps_the_boundary, auto_holds_back_too_many,
+};
 use super::{CurveError, Job};
 use crate::spline::{AUTO_GRADED_SHARE, AUTO_MIN_LOG_RATIO, KnotIntervals, KnotParams, Knots};
 
@@ -71,6 +74,15 @@ pub(crate) trait Passes {
         clock: &mut Clock,
         pass: Self::Pass,
     ) -> Result<Self::Pass, CurveError>;
+    /// RMS distance of `pass`'s fitted boundary from the smooth boundary (the target map's)
+    /// over the whole mesh ([`super::misfit::boundary_sq_sum`]), timed as the validity stage.
+    fn boundary_rms(
+        &mut self,
+        job: &Job,
+        setup: &SplineSetup,
+        clock: &mut Clock,
+        pass: &Self::Pass,
+    ) -> f64;
     /// Whether the second pass starts from the first one's fit.
     fn warm_start(&self) -> bool {
         true
@@ -86,9 +98,11 @@ pub(crate) trait Passes {
 ///    uniform: no facet's |ln ratio| reaches [`AUTO_MIN_LOG_RATIO`]). The uniform blend stops
 ///    once it holds back more than that: its count so far is a lower bound of its end's;
 /// 3. else a second pass with graded knots from the uniform fit, kept when decisive
-///    ([`auto_graded_is_decisive`]) against the uniform count: against the lower bound
-///    first, and only when that does not decide is the uniform blend run to its end, so the
-///    choice and the output are those of the full passes.
+///    ([`auto_graded_is_decisive`]) against the uniform count and its fitted boundary is as
+///    close to the smooth boundary as the uniform fit's ([`auto_graded_keeps_the_boundary`],
+///    on [`Passes::boundary_rms`]): against the lower bound first, and only when that does
+///    not decide is the uniform blend run to its end, so the choice and the output are those
+///    of the full passes.
 pub(crate) fn spline_passes<P: Passes>(
     p: &mut P,
     job: &Job,
@@ -155,14 +169,29 @@ pub(crate) fn spline_passes<P: Passes>(
     let previous = p.warm_start().then_some(&first);
     let second = p.run(&graded_job, setup, clock, previous, None)?;
     let graded_held = P::held(&second).expect("an unbounded pass runs to its end");
+    // Measured only where the counts alone would keep graded knots, the uniform fit's once
+    // (the target map does not depend on the knots).
+    let mut uniform_boundary = None;
+    let mut keeps_boundary =
+        |p: &mut P, setup: &SplineSetup, clock: &mut Clock, first: &P::Pass| {
+            let uniform =
+                *uniform_boundary.get_or_insert_with(|| p.boundary_rms(job, setup, clock, first));
+            auto_graded_keeps_the_boundary(p.boundary_rms(job, setup, clock, &second), uniform)
+        };
     let first = match P::held(&first) {
         Ok(_) => first,
         // Decisive against a lower bound of the uniform count: decisive against the count.
-        Err(at_least) if auto_graded_is_decisive(graded_held, at_least) => return Ok(second),
+        Err(at_least)
+            if auto_graded_is_decisive(graded_held, at_least)
+                && keeps_boundary(p, setup, clock, &first) =>
+        {
+            return Ok(second);
+        }
         Err(_) => p.finish(&uniform_job, setup, clock, first)?,
     };
     let uniform_held = P::held(&first).expect("a finished pass ran to its end");
-    if auto_graded_is_decisive(graded_held, uniform_held) {
+    if auto_graded_is_decisive(graded_held, uniform_held) && keeps_boundary(p, setup, clock, &first)
+    {
         return Ok(second);
     }
     setup.set_knots(KnotIntervals::Uniform, uniform_knots, weights);
