@@ -301,11 +301,24 @@ fn glue_seams(job: &Job, pairs: &[PeriodicPair]) -> (Option<Glued>, Option<Strin
     if pairs.is_empty() {
         return (None, None);
     }
-    let seams = seam::glue(job.mesh, pairs);
-    let why = if seams.is_none() && pairs.iter().any(|p| p.transform.is_translation()) {
+    let rotations = pairs.iter().any(|p| !p.transform.is_translation());
+    let translations = pairs.iter().any(|p| p.transform.is_translation());
+    // The energy minimisation takes every control point as the same linear map of each
+    // coordinate (its rows), which a point seen rotated is not: rotations stay apart there.
+    let energy = job.options.energy.is_some();
+    let all = (rotations && !energy)
+        .then(|| seam::glue(job.mesh, pairs))
+        .flatten();
+    if all.is_some() {
+        return (all, None);
+    }
+    let seams = seam::glue_translations(job.mesh, pairs);
+    let why = if seams.is_none() && translations {
         Some("the mesh with its translation pairs glued is not manifold")
-    } else if pairs.iter().any(|p| !p.transform.is_translation()) {
-        Some("rotation pairs are not identified in the spline space")
+    } else if rotations && energy {
+        Some("rotation pairs are not identified in the spline space with --fit energy")
+    } else if rotations {
+        Some("the mesh with its rotation pairs glued is not manifold")
     } else {
         None
     };
@@ -888,7 +901,8 @@ fn solve_fit(
             source,
         },
     })?;
-    if factors {
+    // Across rotation seams the factor only preconditions the coupled CG.
+    if factors && !space.extraction.has_frames() {
         info.solver = FitSolver::Cholesky;
     }
     if let Some(f) = setup.used_features() {
