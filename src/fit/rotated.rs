@@ -64,12 +64,7 @@ impl Coupling {
                     }
                 }
                 let (gd, gr) = &blocks.cache[&blocks.masks[e]];
-                let frame = |id: u32| {
-                    frames
-                        .iter()
-                        .find(|f| f.0 == id)
-                        .map_or(IDENTITY, |f| f.1)
-                };
+                let frame = |id: u32| frames.iter().find(|f| f.0 == id).map_or(IDENTITY, |f| f.1);
                 let mut out = Vec::new();
                 for (i, &a) in ids.iter().enumerate() {
                     let ra = frame(a);

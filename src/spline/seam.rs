@@ -433,7 +433,12 @@ fn rigid_frame(
     (e, h): (usize, usize),
     cp: DVec3,
 ) -> Option<Frame> {
-    let (ge, oe, gh, oh) = (gm.element(e), mesh.element(e), gm.element(h), mesh.element(h));
+    let (ge, oe, gh, oh) = (
+        gm.element(e),
+        mesh.element(e),
+        gm.element(h),
+        mesh.element(h),
+    );
     let x = |v: u32| DVec3::from(mesh.coords[v as usize]);
     let ce = centre(mesh, oe);
     let size = oe.iter().map(|&v| (x(v) - ce).length()).fold(0.0, f64::max);
@@ -502,8 +507,8 @@ pub fn unwrap(
             let Some(j) = gh.iter().position(|x| x == g) else {
                 continue;
             };
-            let d = DVec3::from(mesh.coords[oe[i] as usize])
-                - DVec3::from(mesh.coords[oh[j] as usize]);
+            let d =
+                DVec3::from(mesh.coords[oe[i] as usize]) - DVec3::from(mesh.coords[oh[j] as usize]);
             let d = snap(d)
                 .ok_or_else(|| format!("element {e} sees control point {c} moved by no period"))?;
             if s.is_some_and(|s| s != d) {
