@@ -71,7 +71,7 @@ pub trait FitSpace: Sync {
     /// rotations ([`crate::spline::Extraction::frames`]): the element's net takes R P for
     /// such a point P, so the fit couples the coordinates there ([`rotated`]). `None` (the
     /// default): none.
-    fn frames(&self, _e: usize) -> Option<&[(u32, [[f64; 3]; 3])]> {
+    fn frames(&self, _e: usize) -> Option<&[crate::spline::extraction::SeamFrame]> {
         None
     }
     /// Whether some element has [`FitSpace::frames`].
@@ -751,7 +751,7 @@ impl FitSpace for crate::spline::SplineSpace {
     fn net_shift(&self, e: usize) -> Option<BezierNet> {
         crate::spline::eval::shift_net(&self.extraction, e)
     }
-    fn frames(&self, e: usize) -> Option<&[(u32, [[f64; 3]; 3])]> {
+    fn frames(&self, e: usize) -> Option<&[crate::spline::extraction::SeamFrame]> {
         self.extraction.frames(e)
     }
     fn has_frames(&self) -> bool {

@@ -228,3 +228,108 @@ pub(crate) fn rotate_back(r: &Mat3, v: DVec3) -> DVec3 {
         r[0][2] * v.x + r[1][2] * v.y + r[2][2] * v.z,
     )
 }
+
+#[cfg(test)]
+mod tests {
+    use crate::fit::{FitParams, FitSolver};
+    use crate::math::linalg::DVec3;
+    use crate::mesh::periodic::{PeriodicSpec, resolve};
+    use crate::mesh::{LinearMesh, Topology};
+    use crate::spline::SplineSpace;
+    use crate::spline::seam::{glue, glue_translations, interior_view, unwrap};
+
+    /// Quads of the annulus 1 ≤ r ≤ 2 over `cells` of `around` cells of `step` degrees, `nr`
+    /// cells across; `closed`: the last column meets the first (a whole ring, `cells` ·
+    /// `step` = 360). Sides tagged 3 (hub), 4 (shroud) and, open, 1 (θ = 0), 2 (the end).
+    fn annulus(nr: usize, cells: usize, step: f64, closed: bool) -> LinearMesh {
+        let columns = if closed { cells } else { cells + 1 };
+        let id = |i: usize, j: usize| ((j % columns) * (nr + 1) + i) as u32;
+        let mut coords = Vec::new();
+        for j in 0..columns {
+            let t = (step * j as f64).to_radians();
+            for i in 0..=nr {
+                let r = 1.0 + i as f64 / nr as f64;
+                coords.push([r * t.cos(), r * t.sin(), 0.0]);
+            }
+        }
+        let (mut elements, mut facets, mut tags) = (Vec::new(), Vec::new(), Vec::new());
+        for j in 0..cells {
+            for i in 0..nr {
+                elements.extend([id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)]);
+            }
+            facets.extend([id(0, j), id(0, j + 1), id(nr, j), id(nr, j + 1)]);
+            tags.extend([3, 4]);
+        }
+        if !closed {
+            for i in 0..nr {
+                facets.extend([id(i, 0), id(i + 1, 0), id(i, cells), id(i + 1, cells)]);
+                tags.extend([1, 2]);
+            }
+        }
+        LinearMesh {
+            dim: 2,
+            coords,
+            elements,
+            tagged_facets: facets,
+            facet_tags: tags,
+            tag_names: [(1, "lo"), (2, "hi"), (3, "hub"), (4, "shroud")]
+                .map(|(t, n)| (t, n.to_string()))
+                .into(),
+            ..Default::default()
+        }
+    }
+
+    /// The sector of 4 × 3 cells of 7.5° glued through its rotation by 30°, and the whole
+    /// ring of 48 such columns: the space of the glued sector is the ring's, restricted to
+    /// its first four columns, so the nets agree (initial and fitted: the ring's fit is
+    /// rotationally symmetric, and the sector's coupled fit must find the same map).
+    #[test]
+    fn a_rotation_glued_sector_is_the_whole_rings_spline() {
+        let (nr, nt) = (3, 4);
+        let sector = annulus(nr, nt, 7.5, false);
+        let ring = annulus(nr, 48, 7.5, true);
+        let (st, rt) = (Topology::build(&sector), Topology::build(&ring));
+        let spec = PeriodicSpec {
+            master: "lo".into(),
+            slave: "hi".into(),
+            from_file: false,
+        };
+        let pairs = resolve(&sector, &st, &[spec]).expect("the sides are images");
+        assert!(!pairs[0].transform.is_translation());
+        let glued = glue(&sector, &pairs).expect("a manifold glued sector");
+        assert!(glue_translations(&sector, &pairs).is_none());
+        let mut space = SplineSpace::build_with_knots(&glued.mesh, &glued.topo, &[], None);
+        unwrap(&mut space, &sector, &st, &glued).expect("the seam is identified");
+        assert!(space.extraction.has_frames());
+        let whole = SplineSpace::build_with_knots(&ring, &rt, &[], None);
+        assert_eq!(space.n_spline_elements(), sector.n_elements());
+        let gap = |a: &SplineSpace, ca: &[[f64; 3]], b: &SplineSpace, cb: &[[f64; 3]]| {
+            (0..sector.n_elements())
+                .flat_map(|e| {
+                    let (x, y) = (a.element_bezier_with(e, ca), b.element_bezier_with(e, cb));
+                    (0..9).map(move |l| (DVec3::from(x[l]) - DVec3::from(y[l])).length())
+                })
+                .fold(0.0, f64::max)
+        };
+        let initial = gap(&space, &space.control_points, &whole, &whole.control_points);
+        assert!(initial < 1e-13, "initial nets differ by {initial:e}");
+        let view = interior_view(&sector, &st, &glued);
+        let mut params = FitParams::default();
+        params.cg.rel_tol = 1e-13;
+        for solver in [FitSolver::Cholesky, FitSolver::Cg] {
+            params.solver = solver;
+            let (cs, info) = crate::fit::fit(&space, &sector, &view.topo, &params, |_, _| {})
+                .expect("the coupled fit converges");
+            let (cr, _) = crate::fit::fit(&whole, &ring, &rt, &params, |_, _| {})
+                .expect("the ring's fit converges");
+            let fitted = gap(&space, &cs, &whole, &cr);
+            assert!(
+                fitted < 1e-10,
+                "{solver:?}: fitted nets differ by {fitted:e} ({} iterations)",
+                info.cg.iterations
+            );
+            // The fit moved the map: the comparison is not that of the initial nets.
+            assert!(gap(&whole, &whole.control_points, &whole, &cr) > 1e-4);
+        }
+    }
+}

@@ -63,7 +63,7 @@ pub(crate) struct SplineSetup {
     pub(crate) knot_intervals: crate::spline::KnotIntervals,
     /// Spline passes run to choose the knots (`--knot-intervals auto`: 1 or 2).
     pub(crate) knot_passes: usize,
-    /// Translation-periodic seams identified in the spline space (`--periodic`,
+    /// Periodic seams identified in the spline space (`--periodic`,
     /// [`crate::spline::seam`]): the space is built on this glued mesh.
     pub(crate) seams: Option<Glued>,
     /// Why a periodic pair is not identified in the spline space (it is then made an exact
@@ -80,7 +80,7 @@ pub(crate) struct SplineSetup {
 }
 
 impl SplineSetup {
-    /// The setup of `job`; the translation pairs among `periodic` are glued first
+    /// The setup of `job`; the periodic pairs among `periodic` are glued first
     /// ([`SplineSetup::glue_seams`]), so that everything fitted to the boundary sees their
     /// seams as interior.
     pub(crate) fn new(job: &Job, periodic: &[PeriodicPair]) -> Result<Self, CurveError> {
@@ -295,8 +295,8 @@ impl SplineSetup {
     }
 }
 
-/// The translation pairs among `pairs` glued for the spline space, and why some pair stays
-/// apart (for the report), if one does.
+/// The periodic pairs among `pairs` glued for the spline space (rotations too, except with
+/// `--fit energy`), and why some pair stays apart (for the report), if one does.
 fn glue_seams(job: &Job, pairs: &[PeriodicPair]) -> (Option<Glued>, Option<String>) {
     if pairs.is_empty() {
         return (None, None);
@@ -403,7 +403,7 @@ pub(crate) fn auto_graded_is_decisive(graded: usize, uniform: usize) -> bool {
 }
 
 /// The spline geometry's stages (the job's geometry is not [`Geometry::Straight`]); the
-/// translation pairs among `periodic` are identified in the spline space where they can be.
+/// periodic pairs among `periodic` are identified in the spline space where they can be.
 ///
 /// `--knot-intervals auto` decides in one spline pass (space, fit, certified blend) where it
 /// can:

@@ -53,8 +53,11 @@ pub struct Extraction {
     /// Per rotated element, the control points it sees rotated and the rotation R of each:
     /// the element takes R P + t for such a point P (t is in `node_shifts`), so its net is
     /// no longer the same linear map of every coordinate and E_e alone does not describe it.
-    pub frames: Vec<Vec<(u32, [[f64; 3]; 3])>>,
+    pub frames: Vec<Vec<SeamFrame>>,
 }
+
+/// A control point an element sees rotated across a periodic seam, and the rotation R (rows).
+pub type SeamFrame = (u32, [[f64; 3]; 3]);
 
 /// The explicit rows of one element's `E_e`: row i (Bernstein index, x fastest) has the
 /// entries `offsets[i]..offsets[i + 1]` of `cols` / `weights`, sorted by column.
@@ -149,7 +152,7 @@ impl Extraction {
 
     /// The control points element `e` sees rotated across a periodic seam, with their
     /// rotations, if it has any.
-    pub fn frames(&self, e: usize) -> Option<&[(u32, [[f64; 3]; 3])]> {
+    pub fn frames(&self, e: usize) -> Option<&[SeamFrame]> {
         match self.frame_of.get(e) {
             Some(&i) if i != u32::MAX => Some(&self.frames[i as usize]),
             _ => None,

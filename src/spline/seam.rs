@@ -1,9 +1,9 @@
-//! Translation-periodic seams identified in the spline space.
+//! Periodic seams identified in the spline space.
 //!
 //! Input: the linear mesh, its topology and the verified periodic pairs
 //! ([`crate::mesh::periodic::PeriodicPair`]). [`glue`] gives the mesh whose image-side vertices
-//! are replaced by their masters' (translations only; chains of pairs, as at the corners of a
-//! doubly periodic box, glue to one representative) and its topology: the seam facets are
+//! are replaced by their masters' (translations and rotations; chains of pairs, as at the
+//! corners of a doubly periodic box, glue to one representative) and its topology: the seam facets are
 //! interior there, so the stencils of [`super::SplineSpace`] built on it reach across the seam
 //! and the two sides share control points. [`unwrap`] then puts the space back onto the
 //! input's geometry, element by element:
@@ -16,6 +16,11 @@
 //!   The shifts enter [`super::Extraction::node_shifts`] (the rows `E_e` sum to 1 and are
 //!   unchanged), so the least-squares matrix is that of the glued space and only the nets,
 //!   and through them the fit's right-hand side, carry the shift.
+//! * across a rotation seam the element sees the point through the rigid map R P + t of the
+//!   pairs' transforms (and their inverses, composed) that carries the common glued vertices
+//!   from the home's positions to the element's: t joins the shifts, and R, where it is not
+//!   the identity, [`super::Extraction::frames`]. Such an element's net is no longer one
+//!   linear map of each coordinate: the fit couples them (`fit::rotated`).
 //!
 //! [`interior_view`] gives the input's topology with the seam facets interior, on which the
 //! pipeline builds everything fitted to the boundary (targets, features, kinks, weights).
@@ -25,7 +30,10 @@
 //! Invariants: where [`glue`] returns a mesh, its topology is manifold and every seam facet is
 //! interior; [`unwrap`] refuses (and the caller keeps the sides apart) when a shift is not a
 //! combination of the translations to `SHIFT_REL_TOL` of the period, or two common vertices
-//! disagree. Rotations are not glued: their control points would couple the components.
+//! disagree (translations), or when no such rigid map carries them (rotations).
+//! [`glue_translations`] and [`glue_share`] (a rank's sub-mesh) glue the translations only,
+//! for the consumers that take the coordinates apart (the energy minimisation, the
+//! distributed CG).
 
 use super::intervals::{KnotIntervals, KnotParams, KnotSurvey, Knots};
 use super::{ControlPoint, SplineSpace};
@@ -603,106 +611,4 @@ pub fn unwrap(
         space.extraction.frames = frames;
     }
     Ok(count)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::fit::{FitParams, FitSolver};
-    use crate::mesh::periodic::{PeriodicSpec, resolve};
-
-    /// Quads of the annulus 1 ≤ r ≤ 2 over `cells` of `around` cells of `step` degrees, `nr`
-    /// cells across; `closed`: the last column meets the first (a whole ring, `cells` ·
-    /// `step` = 360). Sides tagged 3 (hub), 4 (shroud) and, open, 1 (θ = 0), 2 (the end).
-    fn annulus(nr: usize, cells: usize, step: f64, closed: bool) -> LinearMesh {
-        let columns = if closed { cells } else { cells + 1 };
-        let id = |i: usize, j: usize| ((j % columns) * (nr + 1) + i) as u32;
-        let mut coords = Vec::new();
-        for j in 0..columns {
-            let t = (step * j as f64).to_radians();
-            for i in 0..=nr {
-                let r = 1.0 + i as f64 / nr as f64;
-                coords.push([r * t.cos(), r * t.sin(), 0.0]);
-            }
-        }
-        let (mut elements, mut facets, mut tags) = (Vec::new(), Vec::new(), Vec::new());
-        for j in 0..cells {
-            for i in 0..nr {
-                elements.extend([id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1)]);
-            }
-            facets.extend([id(0, j), id(0, j + 1), id(nr, j), id(nr, j + 1)]);
-            tags.extend([3, 4]);
-        }
-        if !closed {
-            for i in 0..nr {
-                facets.extend([id(i, 0), id(i + 1, 0), id(i, cells), id(i + 1, cells)]);
-                tags.extend([1, 2]);
-            }
-        }
-        LinearMesh {
-            dim: 2,
-            coords,
-            elements,
-            tagged_facets: facets,
-            facet_tags: tags,
-            tag_names: [(1, "lo"), (2, "hi"), (3, "hub"), (4, "shroud")]
-                .map(|(t, n)| (t, n.to_string()))
-                .into(),
-            ..Default::default()
-        }
-    }
-
-    /// The sector of 4 × 3 cells of 7.5° glued through its rotation by 30°, and the whole
-    /// ring of 48 such columns: the space of the glued sector is the ring's, restricted to
-    /// its first four columns, so the nets agree (initial and fitted: the ring's fit is
-    /// rotationally symmetric, and the sector's coupled fit must find the same map).
-    #[test]
-    fn a_rotation_glued_sector_is_the_whole_rings_spline() {
-        let (nr, nt) = (3, 4);
-        let sector = annulus(nr, nt, 7.5, false);
-        let ring = annulus(nr, 48, 7.5, true);
-        let (st, rt) = (Topology::build(&sector), Topology::build(&ring));
-        let spec = PeriodicSpec {
-            master: "lo".into(),
-            slave: "hi".into(),
-            from_file: false,
-        };
-        let pairs = resolve(&sector, &st, &[spec]).expect("the sides are images");
-        assert!(!pairs[0].transform.is_translation());
-        let glued = glue(&sector, &pairs).expect("a manifold glued sector");
-        assert!(glue_translations(&sector, &pairs).is_none());
-        let mut space = SplineSpace::build_with_knots(&glued.mesh, &glued.topo, &[], None);
-        unwrap(&mut space, &sector, &st, &glued).expect("the seam is identified");
-        assert!(space.extraction.has_frames());
-        let whole = SplineSpace::build_with_knots(&ring, &rt, &[], None);
-        assert_eq!(space.n_spline_elements(), sector.n_elements());
-        let gap = |a: &SplineSpace, ca: &[[f64; 3]], b: &SplineSpace, cb: &[[f64; 3]]| {
-            (0..sector.n_elements())
-                .flat_map(|e| {
-                    let (x, y) = (a.element_bezier_with(e, ca), b.element_bezier_with(e, cb));
-                    (0..9).map(move |l| (DVec3::from(x[l]) - DVec3::from(y[l])).length())
-                })
-                .fold(0.0, f64::max)
-        };
-        let initial = gap(&space, &space.control_points, &whole, &whole.control_points);
-        assert!(initial < 1e-13, "initial nets differ by {initial:e}");
-        let view = interior_view(&sector, &st, &glued);
-        let mut params = FitParams::default();
-        params.cg.rel_tol = 1e-13;
-        for solver in [FitSolver::Cholesky, FitSolver::Cg] {
-            params.solver = solver;
-            let (cs, info) = crate::fit::fit(&space, &sector, &view.topo, &params, |_, _| {})
-                .expect("the coupled fit converges");
-            let (cr, _) = crate::fit::fit(&whole, &ring, &rt, &params, |_, _| {})
-                .expect("the ring's fit converges");
-            let fitted = gap(&space, &cs, &whole, &cr);
-            assert!(
-                fitted < 1e-10,
-                "{solver:?}: fitted nets differ by {fitted:e} ({} iterations)",
-                info.cg.iterations
-            );
-            // The fit moved the map: the comparison is not that of the initial nets.
-            assert!(gap(&whole, &whole.control_points, &whole, &cr) > 1e-4);
-        }
-    }
 }
