@@ -287,7 +287,9 @@ pub fn glue_share(
             "under mpirun the seams of a partitioned input are not identified in the spline space"
         })
     } else if pairs.iter().any(|p| !p.transform.is_translation()) {
-        Some("rotation pairs are not identified in the spline space")
+        // The distributed CG solves the three coordinates apart, which a point seen rotated
+        // couples (`crate::fit::rotated`).
+        Some("under mpirun rotation pairs are not identified in the spline space")
     } else {
         None
     };

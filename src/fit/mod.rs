@@ -30,6 +30,7 @@ pub mod features;
 mod normal_matrix;
 pub mod partial;
 mod rhs;
+pub mod rotated;
 pub mod smooth;
 
 use crate::params::{ParamError, above, in_range};
@@ -65,6 +66,17 @@ pub trait FitSpace: Sync {
     /// E_e C plus this. `None` (the default): none.
     fn net_shift(&self, _e: usize) -> Option<BezierNet> {
         None
+    }
+    /// The control points element `e` sees rotated across a periodic seam, with their
+    /// rotations ([`crate::spline::Extraction::frames`]): the element's net takes R P for
+    /// such a point P, so the fit couples the coordinates there ([`rotated`]). `None` (the
+    /// default): none.
+    fn frames(&self, _e: usize) -> Option<&[crate::spline::extraction::SeamFrame]> {
+        None
+    }
+    /// Whether some element has [`FitSpace::frames`].
+    fn has_frames(&self) -> bool {
+        false
     }
     /// When E_e is a matrix shared by every element with the same key times the selection of
     /// 3^d distinct control points (in local-node order), return the key and write the
@@ -607,9 +619,18 @@ pub fn fit_with_targets_from(
 ) -> Result<(Vec<[f64; 3]>, FitInfo), CgError> {
     let t = std::time::Instant::now();
     let (mut k, mut rhs) = normal_equations_with(space, mesh, topo, params, smooth);
+    // Across rotation seams the coordinates are coupled ([`rotated`]).
+    let mut coupling = space.has_frames().then(|| {
+        let features = params.features.as_deref();
+        let blocks = ElementBlocks::with_features(space, mesh, topo, &params.weights, features);
+        rotated::Coupling::of(space, &blocks).expect("a space with frames")
+    });
     let scale = control_point_scales(space, &size_levels(mesh));
     if let Some(d) = &scale {
         k.scale_symmetric(d);
+        if let Some(c) = &mut coupling {
+            c.scale_symmetric(d);
+        }
         for (r, &d) in rhs.iter_mut().zip(d) {
             *r = r.map(|x| d * x);
         }
@@ -638,7 +659,14 @@ pub fn fit_with_targets_from(
     }
     // The solve takes K (the CPU's blocked solvers release it as they reorder it).
     let (unknowns, nonzeros) = (k.n(), k.indices().len());
-    let cg = solve(k, &rhs, &mut delta, &params.cg)?;
+    let cg = match &coupling {
+        // On the CPU, factored as the fit would factor K ([`rotated`]).
+        Some(c) => {
+            let factor = params.solver.factors(space.dim(), k.n(), true);
+            rotated::solve(&k, c, &rhs, &mut delta, &params.cg, factor)?
+        }
+        None => solve(k, &rhs, &mut delta, &params.cg)?,
+    };
     if let Some(d) = &scale {
         for (x, &d) in delta.iter_mut().zip(d) {
             *x = x.map(|x| d * x);
@@ -734,6 +762,12 @@ impl FitSpace for crate::spline::SplineSpace {
     fn net_shift(&self, e: usize) -> Option<BezierNet> {
         crate::spline::eval::shift_net(&self.extraction, e)
     }
+    fn frames(&self, e: usize) -> Option<&[crate::spline::extraction::SeamFrame]> {
+        self.extraction.frames(e)
+    }
+    fn has_frames(&self) -> bool {
+        self.extraction.has_frames()
+    }
     /// By sum factorisation: E_e = (M_z ⊗ M_y ⊗ M_x) N_e with N_e the local nodes' control
     /// point entries, so E_eᵀ f applies the transposed 1D matrices direction by direction
     /// (3 · 3^d · 3 multiply-adds each) and then N_eᵀ, instead of expanding the rows.
@@ -757,9 +791,14 @@ impl FitSpace for crate::spline::SplineSpace {
             }
             t = u;
         }
+        let frames = x.frames(e);
         for (l, &node) in x.element_nodes(e).iter().enumerate() {
             for (g, w) in x.node_entries(node) {
-                out.push((g, (t[l] * w).into()));
+                // A point seen rotated takes Rᵀ of its share ([`rotated`]).
+                match frames.and_then(|f| f.iter().find(|f| f.0 == g)) {
+                    Some((_, r)) => out.push((g, (rotated::rotate_back(r, t[l]) * w).into())),
+                    None => out.push((g, (t[l] * w).into())),
+                }
             }
         }
     }

@@ -63,7 +63,7 @@ pub(crate) struct SplineSetup {
     pub(crate) knot_intervals: crate::spline::KnotIntervals,
     /// Spline passes run to choose the knots (`--knot-intervals auto`: 1 or 2).
     pub(crate) knot_passes: usize,
-    /// Translation-periodic seams identified in the spline space (`--periodic`,
+    /// Periodic seams identified in the spline space (`--periodic`,
     /// [`crate::spline::seam`]): the space is built on this glued mesh.
     pub(crate) seams: Option<Glued>,
     /// Why a periodic pair is not identified in the spline space (it is then made an exact
@@ -80,7 +80,7 @@ pub(crate) struct SplineSetup {
 }
 
 impl SplineSetup {
-    /// The setup of `job`; the translation pairs among `periodic` are glued first
+    /// The setup of `job`; the periodic pairs among `periodic` are glued first
     /// ([`SplineSetup::glue_seams`]), so that everything fitted to the boundary sees their
     /// seams as interior.
     pub(crate) fn new(job: &Job, periodic: &[PeriodicPair]) -> Result<Self, CurveError> {
@@ -299,17 +299,30 @@ impl SplineSetup {
     }
 }
 
-/// The translation pairs among `pairs` glued for the spline space, and why some pair stays
-/// apart (for the report), if one does.
+/// The periodic pairs among `pairs` glued for the spline space (rotations too, except with
+/// `--fit energy`), and why some pair stays apart (for the report), if one does.
 fn glue_seams(job: &Job, pairs: &[PeriodicPair]) -> (Option<Glued>, Option<String>) {
     if pairs.is_empty() {
         return (None, None);
     }
-    let seams = seam::glue(job.mesh, pairs);
-    let why = if seams.is_none() && pairs.iter().any(|p| p.transform.is_translation()) {
+    let rotations = pairs.iter().any(|p| !p.transform.is_translation());
+    let translations = pairs.iter().any(|p| p.transform.is_translation());
+    // The energy minimisation takes every control point as the same linear map of each
+    // coordinate (its rows), which a point seen rotated is not: rotations stay apart there.
+    let energy = job.options.energy.is_some();
+    let all = (rotations && !energy)
+        .then(|| seam::glue(job.mesh, pairs))
+        .flatten();
+    if all.is_some() {
+        return (all, None);
+    }
+    let seams = seam::glue_translations(job.mesh, pairs);
+    let why = if seams.is_none() && translations {
         Some("the mesh with its translation pairs glued is not manifold")
-    } else if pairs.iter().any(|p| !p.transform.is_translation()) {
-        Some("rotation pairs are not identified in the spline space")
+    } else if rotations && energy {
+        Some("rotation pairs are not identified in the spline space with --fit energy")
+    } else if rotations {
+        Some("the mesh with its rotation pairs glued is not manifold")
     } else {
         None
     };
@@ -416,7 +429,7 @@ pub(crate) fn auto_graded_keeps_the_boundary(graded: f64, uniform: f64) -> bool 
 }
 
 /// The spline geometry's stages (the job's geometry is not [`Geometry::Straight`]); the
-/// translation pairs among `periodic` are identified in the spline space where they can be.
+/// periodic pairs among `periodic` are identified in the spline space where they can be.
 ///
 /// `--knot-intervals auto` decides in one spline pass (space, fit, certified blend) where it
 /// can:
@@ -939,7 +952,8 @@ fn solve_fit(
             source,
         },
     })?;
-    if factors {
+    // Across rotation seams the factor only preconditions the coupled CG.
+    if factors && !space.extraction.has_frames() {
         info.solver = FitSolver::Cholesky;
     }
     if let Some(f) = setup.used_features() {

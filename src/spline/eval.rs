@@ -1,6 +1,6 @@
-//! Bézier elements of the spline space: an element's net from the control points (plus its
-//! periodic seam offsets, [`Extraction::node_shift`]), and the rows of global basis functions
-//! (CPU, f64). Points and derivatives of a net are the
+//! Bézier elements of the spline space: an element's net from the control points (rotated
+//! where it sees them across a rotation seam, [`Extraction::frames`], plus its periodic seam
+//! offsets, [`Extraction::node_shift`]), and the rows of global basis functions (CPU, f64). Points and derivatives of a net are the
 //! foundation's ([`crate::math::bernstein`]).
 
 use super::extraction::Extraction;
@@ -13,10 +13,15 @@ pub fn bezier_net(ext: &Extraction, e: usize, cps: &[[f64; 3]]) -> BezierNet {
     let n = ext.n_local();
     // Positions of the local nodes.
     let mut p = [[0.0f64; 3]; 27];
+    let frames = ext.frames(e);
     for (l, &node) in ext.element_nodes(e).iter().enumerate() {
         let mut x = [0.0; 3];
         for (g, w) in ext.node_entries(node) {
-            let c = cps[g as usize];
+            let mut c = cps[g as usize];
+            // Across a rotation seam the point is seen rotated (its offset is in the shift).
+            if let Some((_, r)) = frames.and_then(|f| f.iter().find(|f| f.0 == g)) {
+                c = std::array::from_fn(|i| r[i][0] * c[0] + r[i][1] * c[1] + r[i][2] * c[2]);
+            }
             for i in 0..3 {
                 x[i] += w * c[i];
             }
@@ -69,7 +74,8 @@ fn to_bernstein(ext: &Extraction, e: usize, mut p: BezierNet) -> BezierNet {
 }
 
 /// The global basis functions that are non-zero on element `e` at `u`, as
-/// (control point, value) pairs sorted by control point (duplicates summed).
+/// (control point, value) pairs sorted by control point (duplicates summed). The scalar
+/// functions only: an element with [`Extraction::frames`] also rotates some of the points.
 pub fn basis_at(ext: &Extraction, e: usize, u: [f64; 3], out: &mut Vec<(u32, f64)>) {
     out.clear();
     let dim = ext.dim;

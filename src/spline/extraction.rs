@@ -47,7 +47,17 @@ pub struct Extraction {
     /// reaches control points across a periodic seam, the known translation that carries them
     /// to this element's side. Constant in the control points: the rows `E_e` are unchanged.
     pub node_shifts: Vec<[[f64; 3]; 27]>,
+    /// Rotation-periodic seams ([`super::seam`]): per element an index into `frames`, or
+    /// `NONE` for an element that sees every control point unrotated; empty when none does.
+    pub frame_of: Vec<u32>,
+    /// Per rotated element, the control points it sees rotated and the rotation R of each:
+    /// the element takes R P + t for such a point P (t is in `node_shifts`), so its net is
+    /// no longer the same linear map of every coordinate and E_e alone does not describe it.
+    pub frames: Vec<Vec<SeamFrame>>,
 }
+
+/// A control point an element sees rotated across a periodic seam, and the rotation R (rows).
+pub type SeamFrame = (u32, [[f64; 3]; 3]);
 
 /// The explicit rows of one element's `E_e`: row i (Bernstein index, x fastest) has the
 /// entries `offsets[i]..offsets[i + 1]` of `cols` / `weights`, sorted by column.
@@ -138,6 +148,20 @@ impl Extraction {
             Some(&i) if i != u32::MAX => Some(&self.node_shifts[i as usize]),
             _ => None,
         }
+    }
+
+    /// The control points element `e` sees rotated across a periodic seam, with their
+    /// rotations, if it has any.
+    pub fn frames(&self, e: usize) -> Option<&[SeamFrame]> {
+        match self.frame_of.get(e) {
+            Some(&i) if i != u32::MAX => Some(&self.frames[i as usize]),
+            _ => None,
+        }
+    }
+
+    /// Whether some element sees control points rotated (rotation-periodic seams glued).
+    pub fn has_frames(&self) -> bool {
+        !self.frames.is_empty()
     }
 
     /// The three 1D Bernstein matrices of element `e` (x, y, z; identity for z in 2D).

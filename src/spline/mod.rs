@@ -315,6 +315,8 @@ impl SplineSpace {
                 constraint_entries: q2.constraint_entries,
                 shift_of: Vec::new(),
                 node_shifts: Vec::new(),
+                frame_of: Vec::new(),
+                frames: Vec::new(),
             },
             classes,
         }

@@ -1,9 +1,9 @@
-//! Translation-periodic seams identified in the spline space.
+//! Periodic seams identified in the spline space.
 //!
 //! Input: the linear mesh, its topology and the verified periodic pairs
 //! ([`crate::mesh::periodic::PeriodicPair`]). [`glue`] gives the mesh whose image-side vertices
-//! are replaced by their masters' (translations only; chains of pairs, as at the corners of a
-//! doubly periodic box, glue to one representative) and its topology: the seam facets are
+//! are replaced by their masters' (translations and rotations; chains of pairs, as at the
+//! corners of a doubly periodic box, glue to one representative) and its topology: the seam facets are
 //! interior there, so the stencils of [`super::SplineSpace`] built on it reach across the seam
 //! and the two sides share control points. [`unwrap`] then puts the space back onto the
 //! input's geometry, element by element:
@@ -16,6 +16,11 @@
 //!   The shifts enter [`super::Extraction::node_shifts`] (the rows `E_e` sum to 1 and are
 //!   unchanged), so the least-squares matrix is that of the glued space and only the nets,
 //!   and through them the fit's right-hand side, carry the shift.
+//! * across a rotation seam the element sees the point through the rigid map R P + t of the
+//!   pairs' transforms (and their inverses, composed) that carries the common glued vertices
+//!   from the home's positions to the element's: t joins the shifts, and R, where it is not
+//!   the identity, [`super::Extraction::frames`]. Such an element's net is no longer one
+//!   linear map of each coordinate: the fit couples them (`fit::rotated`).
 //!
 //! [`interior_view`] gives the input's topology with the seam facets interior, on which the
 //! pipeline builds everything fitted to the boundary (targets, features, kinks, weights).
@@ -25,13 +30,16 @@
 //! Invariants: where [`glue`] returns a mesh, its topology is manifold and every seam facet is
 //! interior; [`unwrap`] refuses (and the caller keeps the sides apart) when a shift is not a
 //! combination of the translations to `SHIFT_REL_TOL` of the period, or two common vertices
-//! disagree. Rotations are not glued: their control points would couple the components.
+//! disagree (translations), or when no such rigid map carries them (rotations).
+//! [`glue_translations`] and [`glue_share`] (a rank's sub-mesh) glue the translations only,
+//! for the consumers that take the coordinates apart (the energy minimisation, the
+//! distributed CG).
 
 use super::intervals::{KnotIntervals, KnotParams, KnotSurvey, Knots};
 use super::{ControlPoint, SplineSpace};
 use crate::math::linalg::DVec3;
 use crate::mesh::LinearMesh;
-use crate::mesh::periodic::PeriodicPair;
+use crate::mesh::periodic::{PeriodicPair, Rigid};
 use crate::mesh::topology::{NONE, Topology};
 
 /// Largest distance of a measured shift from its combination of the translations, relative to
@@ -46,8 +54,11 @@ pub struct Glued {
     pub mesh: LinearMesh,
     /// The topology of `mesh`.
     pub topo: Topology,
-    /// The periods: the translation of each glued pair.
+    /// The periods: the translation of each glued translation pair.
     pub translations: Vec<[f64; 3]>,
+    /// The transforms of the glued rotation pairs (empty: translations only, see
+    /// [`glue_share`]).
+    pub rotations: Vec<Rigid>,
     /// The order in which [`unwrap`] picks a control point's home among the elements holding
     /// its entity (the lowest): each element's global index on a rank's sub-mesh, so that
     /// every rank picks the same home whatever its local numbering; `None`: the element's
@@ -87,11 +98,18 @@ pub fn knot_survey(input: &LinearMesh, g: &Glued) -> KnotSurvey {
     super::intervals::survey_glued(input, &g.mesh, &g.topo, &spline)
 }
 
-/// The input with the translation pairs among `pairs` glued, or `None` when there is none or
-/// the glued mesh is not manifold (a period of fewer elements than a stencil needs, for
-/// instance): the sides are then curved apart and made images afterwards.
+/// The input with the periodic pairs among `pairs` glued (translations and rotations), or
+/// `None` when there is none or the glued mesh is not manifold (a period of fewer elements
+/// than a stencil needs, for instance): the sides are then curved apart and made images
+/// afterwards.
 pub fn glue(mesh: &LinearMesh, pairs: &[PeriodicPair]) -> Option<Glued> {
-    glue_share(mesh, pairs, None)
+    glue_pairs(mesh, pairs, None, true)
+}
+
+/// [`glue`] of the translation pairs among `pairs` only (the rotation pairs stay apart): for
+/// the consumers that take a control point as the same linear map of every coordinate.
+pub fn glue_translations(mesh: &LinearMesh, pairs: &[PeriodicPair]) -> Option<Glued> {
+    glue_pairs(mesh, pairs, None, false)
 }
 
 /// How a rank's sub-mesh is glued ([`glue_share`]).
@@ -107,22 +125,34 @@ pub struct ShareOrder<'a> {
     pub near: &'a [bool],
 }
 
-/// [`glue`] of the whole mesh (`share`: `None`) or of a rank's ghosted sub-mesh, its pairs'
-/// vertex maps restricted to the vertices it holds (`share`: see [`ShareOrder`]).
+/// [`glue_translations`] of the whole mesh (`share`: `None`) or of a rank's ghosted
+/// sub-mesh, its pairs' vertex maps restricted to the vertices it holds (`share`: see
+/// [`ShareOrder`]). Rotation pairs are not glued here: the distributed fit's CG takes the
+/// three coordinates apart.
 pub fn glue_share(
     mesh: &LinearMesh,
     pairs: &[PeriodicPair],
     share: Option<&ShareOrder>,
 ) -> Option<Glued> {
-    let translations: Vec<&PeriodicPair> = pairs
+    glue_pairs(mesh, pairs, share, false)
+}
+
+/// [`glue_share`], with the rotation pairs glued too when `rotations`.
+fn glue_pairs(
+    mesh: &LinearMesh,
+    pairs: &[PeriodicPair],
+    share: Option<&ShareOrder>,
+    rotations: bool,
+) -> Option<Glued> {
+    let glued_pairs: Vec<&PeriodicPair> = pairs
         .iter()
-        .filter(|p| p.transform.is_translation())
+        .filter(|p| rotations || p.transform.is_translation())
         .collect();
-    if translations.is_empty() {
+    if glued_pairs.is_empty() {
         return None;
     }
     let mut parent: Vec<u32> = (0..mesh.n_vertices() as u32).collect();
-    for p in &translations {
+    for p in &glued_pairs {
         for &[b, a] in &p.vertex_map {
             let (rb, ra) = (find(&mut parent, b), find(&mut parent, a));
             // The smaller id represents the class: a master unless the chain says otherwise.
@@ -187,9 +217,15 @@ pub fn glue_share(
     Some(Glued {
         mesh: glued,
         topo,
-        translations: translations
+        translations: glued_pairs
             .iter()
+            .filter(|p| p.transform.is_translation())
             .map(|p| p.transform.translation)
+            .collect(),
+        rotations: glued_pairs
+            .iter()
+            .filter(|p| !p.transform.is_translation())
+            .map(|p| p.transform)
             .collect(),
         element_order: share.map(|o| o.element.to_vec()),
     })
@@ -359,10 +395,89 @@ fn lattice(translations: &[[f64; 3]]) -> Vec<DVec3> {
     out
 }
 
+/// The rigid maps Π T_i^{k_i}, k_i ∈ {−1, 0, 1}, of the glued pairs' transforms (translations
+/// and rotations): the maps that may carry a control point's home to an element across one
+/// seam of each pair.
+fn group(glued: &Glued) -> Vec<Rigid> {
+    let compose = |a: &Rigid, b: &Rigid| -> Rigid {
+        // (a ∘ b)(x) = R_a (R_b x + t_b) + t_a.
+        let (ra, rb) = (&a.rotation, &b.rotation);
+        Rigid {
+            rotation: std::array::from_fn(|i| {
+                std::array::from_fn(|j| (0..3).map(|k| ra[i][k] * rb[k][j]).sum())
+            }),
+            translation: a.apply(b.translation),
+        }
+    };
+    let mut out = vec![Rigid::translation([0.0; 3])];
+    let pairs = glued
+        .translations
+        .iter()
+        .map(|&t| Rigid::translation(t))
+        .chain(glued.rotations.iter().copied());
+    for t in pairs {
+        let inv = t.inverse();
+        out = out
+            .iter()
+            .flat_map(|s| [compose(&inv, s), *s, compose(&t, s)])
+            .collect();
+    }
+    out
+}
+
+/// How element `e` sees a control point homed in element `h`: the map carrying the point
+/// from its home's side to `e`'s.
+type Frame = (DVec3, Option<[[f64; 3]; 3]>);
+
+/// [`Frame`] of a control point homed in `h` for element `e` when rotation pairs are glued:
+/// the map of [`group`] that carries every glued vertex common to `e` and `h` from its
+/// position in `h` to its position in `e` (to `SHIFT_REL_TOL` of `e`'s size); among several
+/// (vertices on a rotation axis), and with no common vertex, the one bringing the home
+/// entity's centre `cp` nearest `e`'s.
+fn rigid_frame(
+    mesh: &LinearMesh,
+    gm: &LinearMesh,
+    group: &[Rigid],
+    (e, h): (usize, usize),
+    cp: DVec3,
+) -> Option<Frame> {
+    let (ge, oe, gh, oh) = (
+        gm.element(e),
+        mesh.element(e),
+        gm.element(h),
+        mesh.element(h),
+    );
+    let x = |v: u32| DVec3::from(mesh.coords[v as usize]);
+    let ce = centre(mesh, oe);
+    let size = oe.iter().map(|&v| (x(v) - ce).length()).fold(0.0, f64::max);
+    let tol = SHIFT_REL_TOL * size;
+    let common: Vec<(DVec3, DVec3)> = ge
+        .iter()
+        .enumerate()
+        .filter_map(|(i, g)| {
+            let j = gh.iter().position(|y| y == g)?;
+            Some((x(oh[j]), x(oe[i])))
+        })
+        .collect();
+    let fits = |t: &&Rigid| {
+        common
+            .iter()
+            .all(|(a, b)| (DVec3::from(t.apply(a.to_array())) - *b).length() <= tol)
+    };
+    let near = |t: &Rigid| (DVec3::from(t.apply(cp.to_array())) - ce).length();
+    let t = group
+        .iter()
+        .filter(fits)
+        .min_by(|a, b| near(a).total_cmp(&near(b)))?;
+    let rotation = (!t.is_translation()).then_some(t.rotation);
+    Some((DVec3::from(t.translation), rotation))
+}
+
 /// Put `space`, built on `glued`, back onto the input's geometry (module docs): keys and
-/// initial control points of the input's entities, and the seam shifts of the elements whose
-/// stencils cross a seam. Returns the number of elements with a shift, or why the seams
-/// cannot be identified (then `space` must not be used).
+/// initial control points of the input's entities, and the seam shifts (and, across rotation
+/// seams, the rotations: [`super::Extraction::frames`]) of the elements whose stencils cross
+/// a seam. Returns the number of elements with a shift, or why the seams cannot be
+/// identified (then `space` must not be used).
 pub fn unwrap(
     space: &mut SplineSpace,
     mesh: &LinearMesh,
@@ -376,6 +491,7 @@ pub fn unwrap(
         .map(|&k| home_of(mesh, topo, glued, k))
         .collect();
     let lattice = lattice(&glued.translations);
+    let group = (!glued.rotations.is_empty()).then(|| group(glued));
     let period = glued
         .translations
         .iter()
@@ -390,54 +506,66 @@ pub fn unwrap(
         ((s - d).length() <= tol).then_some(s)
     };
     let gm = &glued.mesh;
+    // The translation of a control point homed in `h` as element `e` sees it.
+    let shift = |e: usize, c: u32, h: usize| -> Result<DVec3, String> {
+        let (ge, oe) = (gm.element(e), mesh.element(e));
+        let (gh, oh) = (gm.element(h), mesh.element(h));
+        let mut s: Option<DVec3> = None;
+        for (i, g) in ge.iter().enumerate() {
+            let Some(j) = gh.iter().position(|x| x == g) else {
+                continue;
+            };
+            let d =
+                DVec3::from(mesh.coords[oe[i] as usize]) - DVec3::from(mesh.coords[oh[j] as usize]);
+            let d = snap(d)
+                .ok_or_else(|| format!("element {e} sees control point {c} moved by no period"))?;
+            if s.is_some_and(|s| s != d) {
+                return Err(format!(
+                    "element {e} meets the home of control point {c} across two seams"
+                ));
+            }
+            s = Some(d);
+        }
+        // No common vertex (a stencil reaching further): the period that brings the point
+        // nearest to the element.
+        Ok(s.unwrap_or_else(|| {
+            let (ce, cp) = (centre(mesh, oe), centre(mesh, &homes[c as usize].2));
+            lattice
+                .iter()
+                .copied()
+                .min_by(|a, b| (cp + *a - ce).length().total_cmp(&(cp + *b - ce).length()))
+                .unwrap_or(DVec3::ZERO)
+        }))
+    };
+    let frame = |e: usize, c: u32| -> Result<Frame, String> {
+        let h = homes[c as usize].0;
+        match &group {
+            None => Ok((shift(e, c, h)?, None)),
+            Some(group) => {
+                let cp = centre(mesh, &homes[c as usize].2);
+                rigid_frame(mesh, gm, group, (e, h), cp).ok_or_else(|| {
+                    format!("element {e} sees control point {c} moved by no periodic transform")
+                })
+            }
+        }
+    };
     let ext = &space.extraction;
     let n = ext.n_local();
-    let shifts: Vec<Result<Option<[[f64; 3]; 27]>, String>> = (0..space.n_elements())
+    type Seen = (Option<[[f64; 3]; 27]>, Vec<(u32, [[f64; 3]; 3])>);
+    let shifts: Vec<Result<Seen, String>> = (0..space.n_elements())
         .into_par_iter()
         .map(|e| {
             let mut out = [[0.0; 3]; 27];
             let mut any = false;
-            let (ge, oe) = (gm.element(e), mesh.element(e));
-            let mut cache: Vec<(u32, DVec3)> = Vec::new();
+            let mut cache: Vec<(u32, Frame)> = Vec::new();
             for (l, &node) in ext.element_nodes(e).iter().enumerate().take(n) {
                 for (c, w) in ext.node_entries(node) {
-                    let s = match cache.iter().find(|p| p.0 == c) {
+                    let (s, _) = match cache.iter().find(|p| p.0 == c) {
                         Some(p) => p.1,
                         None => {
-                            let h = homes[c as usize].0;
-                            let (gh, oh) = (gm.element(h), mesh.element(h));
-                            let mut s: Option<DVec3> = None;
-                            for (i, g) in ge.iter().enumerate() {
-                                let Some(j) = gh.iter().position(|x| x == g) else {
-                                    continue;
-                                };
-                                let d = DVec3::from(mesh.coords[oe[i] as usize])
-                                    - DVec3::from(mesh.coords[oh[j] as usize]);
-                                let d = snap(d).ok_or_else(|| {
-                                    format!("element {e} sees control point {c} moved by no period")
-                                })?;
-                                if s.is_some_and(|s| s != d) {
-                                    return Err(format!(
-                                        "element {e} meets the home of control point {c} across two seams"
-                                    ));
-                                }
-                                s = Some(d);
-                            }
-                            // No common vertex (a stencil reaching further): the period that
-                            // brings the point nearest to the element.
-                            let s = s.unwrap_or_else(|| {
-                                let (ce, cp) =
-                                    (centre(mesh, oe), centre(mesh, &homes[c as usize].2));
-                                lattice
-                                    .iter()
-                                    .copied()
-                                    .min_by(|a, b| {
-                                        (cp + *a - ce).length().total_cmp(&(cp + *b - ce).length())
-                                    })
-                                    .unwrap_or(DVec3::ZERO)
-                            });
-                            cache.push((c, s));
-                            s
+                            let f = frame(e, c)?;
+                            cache.push((c, f));
+                            f
                         }
                     };
                     if s != DVec3::ZERO {
@@ -447,15 +575,26 @@ pub fn unwrap(
                     }
                 }
             }
-            Ok(any.then_some(out))
+            let rotated = cache
+                .into_iter()
+                .filter_map(|(c, (_, r))| r.map(|r| (c, r)))
+                .collect();
+            Ok((any.then_some(out), rotated))
         })
         .collect();
     let mut shift_of = vec![NONE; space.n_elements()];
     let mut node_shifts = Vec::new();
+    let mut frame_of = vec![NONE; space.n_elements()];
+    let mut frames = Vec::new();
     for (e, s) in shifts.into_iter().enumerate() {
-        if let Some(s) = s? {
+        let (s, rotated) = s?;
+        if let Some(s) = s {
             shift_of[e] = node_shifts.len() as u32;
             node_shifts.push(s);
+        }
+        if !rotated.is_empty() {
+            frame_of[e] = frames.len() as u32;
+            frames.push(rotated);
         }
     }
     let count = node_shifts.len();
@@ -466,6 +605,10 @@ pub fn unwrap(
     if count > 0 {
         space.extraction.shift_of = shift_of;
         space.extraction.node_shifts = node_shifts;
+    }
+    if !frames.is_empty() {
+        space.extraction.frame_of = frame_of;
+        space.extraction.frames = frames;
     }
     Ok(count)
 }
