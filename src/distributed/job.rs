@@ -428,8 +428,7 @@ struct RankPasses<'a> {
     topo: &'a Topology,
     mine: &'a [usize],
     bytes: [u64; 2],
-    /// From the uniform fit, as the serial second pass starts (from C0 with periodic pairs,
-    /// whose passes have a setup each there).
+    /// From the uniform fit, as the serial second pass starts (from C0 with periodic pairs).
     warm_start: bool,
 }
 
@@ -439,11 +438,18 @@ impl Passes for RankPasses<'_> {
     fn elements(&self) -> usize {
         self.local.n_global as usize
     }
-    fn survey(&mut self, clock: &mut Clock) -> Self::Survey {
+    // The rank's glued share is its `local`'s (the setup's seams are those).
+    fn survey(&mut self, _: &SplineSetup, clock: &mut Clock) -> Self::Survey {
         let (comm, local, topo) = (self.comm, self.local, self.topo);
         clock.run(Stage::Spline, || super::knots::survey(comm, local, topo))
     }
-    fn knots(&mut self, clock: &mut Clock, survey: Self::Survey, params: &KnotParams) -> Knots {
+    fn knots(
+        &mut self,
+        _: &SplineSetup,
+        clock: &mut Clock,
+        survey: Self::Survey,
+        params: &KnotParams,
+    ) -> Knots {
         let (comm, local, topo) = (self.comm, self.local, self.topo);
         clock.run(Stage::Spline, || {
             super::knots::knots(comm, survey, local, topo, params)

@@ -47,10 +47,17 @@ pub(crate) trait Passes {
     type Survey: KnotFigures;
     /// Elements of the whole mesh.
     fn elements(&self) -> usize;
-    /// The whole mesh's knot survey, timed as the spline stage.
-    fn survey(&mut self, clock: &mut Clock) -> Self::Survey;
+    /// The whole mesh's knot survey (on the glued mesh where `setup` glues seams), timed as
+    /// the spline stage.
+    fn survey(&mut self, setup: &SplineSetup, clock: &mut Clock) -> Self::Survey;
     /// This process's knots of `params` from `survey`, timed as the spline stage.
-    fn knots(&mut self, clock: &mut Clock, survey: Self::Survey, params: &KnotParams) -> Knots;
+    fn knots(
+        &mut self,
+        setup: &SplineSetup,
+        clock: &mut Clock,
+        survey: Self::Survey,
+        params: &KnotParams,
+    ) -> Knots;
     /// One pass of `job` on `setup`: the space, the fit (started from `previous`'s fitted
     /// control points where given) and the certificate of the job's path; with `most`, the
     /// certified blend is given up once it holds back more than `most` elements.
@@ -126,19 +133,19 @@ pub(crate) fn spline_passes<P: Passes>(
     // The features, kinks and targets of the setup do not depend on the knots: graded ones
     // are put in its place.
     let graded_pass = |p: &mut P, setup: &mut SplineSetup, clock: &mut Clock, survey| {
-        let knots = p.knots(clock, survey, &graded.knots);
+        let knots = p.knots(setup, clock, survey, &graded.knots);
         setup.set_knots(KnotIntervals::Graded, knots, weights);
         p.run(&graded_job, setup, clock, None, None)
     };
     match options.knots.intervals {
         KnotIntervals::Uniform => return p.run(&uniform_job, setup, clock, None, None),
         KnotIntervals::Graded => {
-            let survey = p.survey(clock);
+            let survey = p.survey(setup, clock);
             return graded_pass(p, setup, clock, survey);
         }
         KnotIntervals::Auto => {}
     }
-    let survey = p.survey(clock);
+    let survey = p.survey(setup, clock);
     if survey.graded_share() >= AUTO_GRADED_SHARE {
         return graded_pass(p, setup, clock, survey);
     }
@@ -160,8 +167,8 @@ pub(crate) fn spline_passes<P: Passes>(
         Ok(held) if near_uniform || !auto_holds_back_too_many(held, n) => return Ok(first),
         _ => {}
     }
-    let survey = p.survey(clock);
-    let knots = p.knots(clock, survey, &graded.knots);
+    let survey = p.survey(setup, clock);
+    let knots = p.knots(setup, clock, survey, &graded.knots);
     let uniform_knots = setup.set_knots(KnotIntervals::Graded, knots, weights);
     setup.knot_passes = 2;
     // The graded fit starts from the uniform one where the two spaces share control points

@@ -181,7 +181,7 @@ impl SplineSetup {
 
     /// Puts `knots` of `intervals` in place of the setup's knots and returns those (the
     /// features, kinks and targets do not depend on the knots). With glued seams, `knots`
-    /// must be measured on the glued mesh (the distributed job's survey of its glued shares).
+    /// must be measured on the glued mesh (the passes' survey, [`super::passes::Passes::survey`]).
     pub(crate) fn set_knots(
         &mut self,
         intervals: crate::spline::KnotIntervals,
@@ -454,82 +454,38 @@ pub(crate) fn auto_graded_keeps_the_boundary(graded: f64, uniform: f64) -> bool 
 /// mpirun runs too.
 ///
 /// Both passes share the setup (features, kinks, smooth targets: they do not depend on the
-/// knots); the setup names the knots used and the passes run (`knot_passes`). With periodic
-/// pairs each pass has its own setup (its knots are measured on the glued mesh,
-/// [`seam::knot_weights`]), and the same rules choose between them
-/// ([`curve_spline_periodic`]).
+/// knots); the setup names the knots used and the passes run (`knot_passes`). With glued
+/// periodic seams the knot surfaces are surveyed on the glued mesh ([`seam::knot_survey`]),
+/// for the choice and the graded knots alike.
 pub(super) fn curve_spline(
     job: &Job,
     clock: &mut Clock,
     periodic: &[PeriodicPair],
 ) -> Result<(SplineSetup, SplineOutcome), CurveError> {
     use crate::spline::KnotIntervals;
-    if !periodic.is_empty() {
-        return curve_spline_periodic(job, clock, periodic);
-    }
     let uniform = job.options.with_knots(KnotIntervals::Uniform);
     let uniform_job = Job {
         options: &uniform,
         ..*job
     };
-    let mut setup = clock.run(Stage::Spline, || SplineSetup::new(&uniform_job, &[]))?;
-    let pass = super::passes::spline_passes(&mut Whole { job }, job, &mut setup, clock)?;
+    let mut setup = clock.run(Stage::Spline, || SplineSetup::new(&uniform_job, periodic))?;
+    let mut whole = Whole {
+        job,
+        warm_start: periodic.is_empty(),
+    };
+    let pass = super::passes::spline_passes(&mut whole, job, &mut setup, clock)?;
     match pass {
         First::Done(outcome) => Ok((setup, outcome)),
         First::Exceeded { .. } => unreachable!("the pass kept ran to its end"),
     }
 }
 
-/// [`curve_spline`] with periodic pairs: each pass has its own setup (its knots are measured
-/// on the glued mesh, [`seam::knot_weights`]), and `auto`'s rules choose between them, each
-/// pass run to its end.
-fn curve_spline_periodic(
-    job: &Job,
-    clock: &mut Clock,
-    periodic: &[PeriodicPair],
-) -> Result<(SplineSetup, SplineOutcome), CurveError> {
-    use crate::spline::KnotIntervals;
-    if job.options.knots.intervals != KnotIntervals::Auto {
-        return curve_spline_with(job, clock, periodic);
-    }
-    let (uniform, graded) = (
-        job.options.with_knots(KnotIntervals::Uniform),
-        job.options.with_knots(KnotIntervals::Graded),
-    );
-    let uniform_job = Job {
-        options: &uniform,
-        ..*job
-    };
-    let graded_job = Job {
-        options: &graded,
-        ..*job
-    };
-    let held = |o: &SplineOutcome| o.blend.as_ref().map_or(0, |b| b.reduced_elements);
-    // The share is the input's (the seams hold a few facets of it).
-    let share = clock.run(Stage::Spline, || {
-        SplineSpace::knot_survey(job.mesh, job.topo).graded_share
-    });
-    if share >= crate::spline::AUTO_GRADED_SHARE {
-        return curve_spline_with(&graded_job, clock, periodic);
-    }
-    let first = curve_spline_with(&uniform_job, clock, periodic)?;
-    if !auto_holds_back_too_many(held(&first.1), job.mesh.n_elements()) {
-        return Ok(first);
-    }
-    let mut second = curve_spline_with(&graded_job, clock, periodic)?;
-    second.0.knot_passes = 2;
-    let boundary = |(setup, o): &(SplineSetup, SplineOutcome)| {
-        let (sum, n) = fitted_boundary_sq_sum(job, setup, &o.space, |_| true);
-        misfit::rms(sum, n)
-    };
-    let kept = auto_graded_is_decisive(held(&second.1), held(&first.1))
-        && auto_graded_keeps_the_boundary(boundary(&second), boundary(&first));
-    Ok(if kept { second } else { first })
-}
-
 /// The serial job's passes ([`super::passes`]): every element in this process.
 struct Whole<'a> {
     job: &'a Job<'a>,
+    /// The graded pass starts from the uniform fit; not with periodic pairs, whose second
+    /// pass starts from C0 as under mpirun, so the periodic outputs stay the same there.
+    warm_start: bool,
 }
 
 impl super::passes::Passes for Whole<'_> {
@@ -538,20 +494,27 @@ impl super::passes::Passes for Whole<'_> {
     fn elements(&self) -> usize {
         self.job.mesh.n_elements()
     }
-    fn survey(&mut self, clock: &mut Clock) -> Self::Survey {
+    fn survey(&mut self, setup: &SplineSetup, clock: &mut Clock) -> Self::Survey {
         let (mesh, topo) = (self.job.mesh, self.job.topo);
-        clock.run(Stage::Spline, || SplineSpace::knot_survey(mesh, topo))
+        clock.run(Stage::Spline, || match &setup.seams {
+            Some(g) => seam::knot_survey(mesh, g),
+            None => SplineSpace::knot_survey(mesh, topo),
+        })
     }
     fn knots(
         &mut self,
+        setup: &SplineSetup,
         clock: &mut Clock,
         survey: Self::Survey,
         params: &crate::spline::KnotParams,
     ) -> Knots {
-        let topo = self.job.topo;
+        let topo = setup.seams.as_ref().map_or(self.job.topo, |g| &g.topo);
         clock.run(Stage::Spline, || {
             crate::spline::intervals::knot_weights_from(survey, topo, params)
         })
+    }
+    fn warm_start(&self) -> bool {
+        self.warm_start
     }
     fn run(
         &mut self,
@@ -634,29 +597,8 @@ impl First {
     }
 }
 
-fn curve_spline_with(
-    job: &Job,
-    clock: &mut Clock,
-    periodic: &[PeriodicPair],
-) -> Result<(SplineSetup, SplineOutcome), CurveError> {
-    let setup = clock.run(Stage::Spline, || SplineSetup::new(job, periodic))?;
-    let outcome = spline_pass(job, &setup, clock)?;
-    Ok((setup, outcome))
-}
-
-/// One spline pass on `setup`: the space, then the fit and certificate of the job's path.
-fn spline_pass(
-    job: &Job,
-    setup: &SplineSetup,
-    clock: &mut Clock,
-) -> Result<SplineOutcome, CurveError> {
-    match spline_pass_within(job, setup, clock, None, None)? {
-        First::Done(outcome) => Ok(outcome),
-        First::Exceeded { .. } => unreachable!("an unbounded pass runs to its end"),
-    }
-}
-
-/// [`spline_pass`]; with `most`, the least-squares path's blend is given up once it holds
+/// One spline pass on `setup`: the space, then the fit and certificate of the job's path;
+/// with `most`, the least-squares path's blend is given up once it holds
 /// back more than `most` elements ([`blend_search_at_most`]): `auto`'s uniform pass then
 /// needs only that count to go on to graded knots, not the blend's remaining rounds.
 fn spline_pass_within(
