@@ -72,15 +72,15 @@ value_enum! {
         #[value(help = "Every knot interval 1 (the paper's construction)")]
         Uniform,
         #[value(help = "Knot intervals from the cells' extents, one ratio per knot surface: \
-            graded (boundary-layer) grids are reproduced exactly and stay C¹ (distributed \
-            runs use uniform)")]
+            graded (boundary-layer) grids are reproduced exactly and stay C¹")]
         Graded,
         #[value(help = "Graded where at least 30 % of the interior facets lie on \
             consistently graded knot surfaces (boundary-layer grids; one spline pass), else \
             uniform, and graded where the certified blend then holds back more than a tenth \
-            of the elements and graded knots hold back at most half as many (a second pass; the report's \
+            of the elements and graded knots hold back at most half as many with a fitted \
+            boundary within 1.1× of uniform knots' (a second pass; the report's \
             `knot_intervals` and `knot_passes` name the knots used and the passes; \
-            distributed runs use uniform)")]
+            the same choice under mpirun)")]
         Auto,
     }
 }
