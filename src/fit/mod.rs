@@ -463,14 +463,27 @@ pub fn smooth_targets_shared(
     params: &FitParams,
     share: Option<&dyn InheritShare>,
 ) -> Option<SmoothTargets> {
+    smooth_targets_seamed(mesh, topo, params, share, &[])
+}
+
+/// [`smooth_targets_shared`] with the walls' continuations across periodic seams
+/// ([`SmoothTargets::build_seamed`]; `partners` empty: none).
+pub fn smooth_targets_seamed(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    params: &FitParams,
+    share: Option<&dyn InheritShare>,
+    partners: &[Option<(u32, crate::mesh::periodic::Rigid)>],
+) -> Option<SmoothTargets> {
     match params.targets {
         FitTargets::Chords => None,
-        FitTargets::Smooth(p) => Some(SmoothTargets::build_shared(
+        FitTargets::Smooth(p) => Some(SmoothTargets::build_seamed(
             mesh,
             topo,
             &p,
             params.features.as_deref(),
             share,
+            partners,
         )),
     }
 }

@@ -332,4 +332,51 @@ mod tests {
             assert!(gap(&whole, &whole.control_points, &whole, &cr) > 1e-4);
         }
     }
+
+    /// The smooth targets of the glued sector, its hub and shroud continued across the seam
+    /// through the rotation ([`crate::fit::SmoothTargets::build_seamed`]), are the whole
+    /// ring's on the sector's elements, at the seam as in its middle. Built from each side's
+    /// wall alone, the seam vertices have no model and their neighbours one-sided ones.
+    #[test]
+    fn the_glued_sectors_wall_targets_are_the_whole_rings() {
+        use crate::fit::smooth::{SmoothParams, SmoothTargets};
+        let sector = annulus(3, 4, 7.5, false);
+        let ring = annulus(3, 48, 7.5, true);
+        let (st, rt) = (Topology::build(&sector), Topology::build(&ring));
+        let spec = PeriodicSpec {
+            master: "lo".into(),
+            slave: "hi".into(),
+            from_file: false,
+        };
+        let pairs = resolve(&sector, &st, &[spec]).expect("the sides are images");
+        let glued = glue(&sector, &pairs).expect("a manifold glued sector");
+        let view = interior_view(&sector, &st, &glued);
+        // Hub and shroud end on both sides of the seam.
+        assert_eq!(view.wall_partners.iter().flatten().count(), 4);
+        let params = SmoothParams::default();
+        let whole = SmoothTargets::build(&ring, &rt, &params);
+        let gap = |t: &SmoothTargets| {
+            (0..sector.n_elements())
+                .flat_map(|e| {
+                    let (a, b) = (
+                        t.element_corrections(&sector, &view.topo, e),
+                        whole.element_corrections(&ring, &rt, e),
+                    );
+                    (0..9).map(move |l| (DVec3::from(a[l]) - DVec3::from(b[l])).length())
+                })
+                .fold(0.0, f64::max)
+        };
+        let seamed = SmoothTargets::build_seamed(
+            &sector,
+            &view.topo,
+            &params,
+            None,
+            None,
+            &view.wall_partners,
+        );
+        let apart = SmoothTargets::build(&sector, &view.topo, &params);
+        let (both, one) = (gap(&seamed), gap(&apart));
+        assert!(both < 1e-14, "seamed targets {both:e} from the ring's");
+        assert!(one > 1e-6, "one-sided targets {one:e} from the ring's");
+    }
 }

@@ -102,6 +102,7 @@ use crate::math::Lattice;
 use crate::math::linalg::DVec3;
 use crate::math::reference::{HEX_EDGES, HEX_VERTEX_PARAMS};
 use crate::mesh::features::Features;
+use crate::mesh::periodic::Rigid;
 use crate::mesh::topology::NONE;
 use crate::mesh::{LinearMesh, Topology};
 use higher::two_ring;
@@ -253,6 +254,24 @@ impl SmoothTargets {
         features: Option<&Features>,
         share: Option<&dyn InheritShare>,
     ) -> SmoothTargets {
+        Self::build_seamed(mesh, topo, params, features, share, &[])
+    }
+
+    /// [`SmoothTargets::build_shared`] of a 2D mesh whose walls go on across periodic seams:
+    /// `partners[v]` (empty: none) is, at a wall vertex ending on a seam, the other side's
+    /// vertex on the same glued vertex and the rigid map carrying that side onto this one
+    /// ([`crate::spline::seam::SeamView::wall_partners`]). The models at and next to such a
+    /// vertex are fitted over the wall on both sides, the other side's points carried over by
+    /// the map, so they are two-sided as in the interior of the wall, and the models of the
+    /// two sides' seam vertices are images of each other.
+    pub fn build_seamed(
+        mesh: &LinearMesh,
+        topo: &Topology,
+        params: &SmoothParams,
+        features: Option<&Features>,
+        share: Option<&dyn InheritShare>,
+        partners: &[Option<(u32, Rigid)>],
+    ) -> SmoothTargets {
         let nv = mesh.n_vertices();
         let cos_max = params.feature_angle_deg.to_radians().cos();
         // Boundary fans: facets at each boundary vertex.
@@ -262,8 +281,12 @@ impl SmoothTargets {
                 fan[v as usize].push(f);
             }
         }
-        let (mut models, ell) = one_ring_models(mesh, topo, params, features, &fan);
-        let mut higher = two_ring_models(mesh, topo, &fan, &mut models, &ell, cos_max);
+        let seam = Seam {
+            fan: &fan,
+            partners,
+        };
+        let (mut models, ell) = one_ring_models(mesh, topo, params, features, &fan, &seam);
+        let mut higher = two_ring_models(mesh, topo, &fan, &mut models, &ell, cos_max, &seam);
         let arc_normals = coarse_normals(mesh, topo, &fan, &models);
         let smooth_vertices = models.iter().filter(|m| m.is_some()).count();
         let feature_vertices =
@@ -594,6 +617,7 @@ fn one_ring_models(
     params: &SmoothParams,
     features: Option<&Features>,
     fan: &[Vec<u32>],
+    seam: &Seam,
 ) -> (Vec<Option<VertexModel>>, Vec<f64>) {
     let nv = mesh.n_vertices();
     let cos_max = params.feature_angle_deg.to_radians().cos();
@@ -619,14 +643,19 @@ fn one_ring_models(
             }
             let xv = mesh.coords[v];
             if mesh.dim == 2 {
-                if fan[v].len() != 2 {
-                    return;
-                }
                 let other = |f: u32| {
                     let e = topo.edges[f as usize];
                     if e[0] as usize == v { e[1] } else { e[0] }
                 };
-                let (a, b) = (x(other(fan[v][0])), x(other(fan[v][1])));
+                // A wall ending on a seam goes on through its partner across.
+                let (a, b) = match (fan[v].len(), seam.across(v)) {
+                    (2, _) => (x(other(fan[v][0])), x(other(fan[v][1]))),
+                    (1, Some((w, t))) => match seam.next(topo, w, None) {
+                        Some(b) => (x(other(fan[v][0])), t.apply(x(b))),
+                        None => return,
+                    },
+                    _ => return,
+                };
                 let xd = DVec3::from(xv);
                 let (ua, ub) = (DVec3::from(a) - xd, DVec3::from(b) - xd);
                 let (la, lb) = (ua.length(), ub.length());
@@ -667,6 +696,7 @@ fn two_ring_models(
     models: &mut [Option<VertexModel>],
     ell: &[f64],
     cos_max: f64,
+    seam: &Seam,
 ) -> Vec<Option<HigherModel>> {
     let nv = mesh.n_vertices();
     let mut higher: Vec<Option<HigherModel>> = vec![None; nv];
@@ -676,7 +706,8 @@ fn two_ring_models(
         .with_min_len(1024)
         .map_init(RingScratch::default, |scratch, v| {
             let m = models_ref[v]?;
-            let ring = two_ring(mesh, topo, fan, models_ref, v as u32, cos_max, scratch);
+            let mut ring = two_ring(mesh, topo, fan, models_ref, v as u32, cos_max, scratch);
+            seam.extend_ring(mesh, topo, models_ref, v as u32, &scratch.first, &mut ring);
             // Next to a feature the ring is one-sided (see `two_ring`).
             let how = if scratch.one_sided(models_ref) {
                 Height::ONE_SIDED
@@ -693,6 +724,72 @@ fn two_ring_models(
         }
     }
     higher
+}
+
+/// The 2D walls' continuations across periodic seams ([`SmoothTargets::build_seamed`]).
+struct Seam<'a> {
+    /// Boundary facets at each vertex.
+    fan: &'a [Vec<u32>],
+    /// Per vertex (empty: none), the partner across the seam and the map from its side.
+    partners: &'a [Option<(u32, Rigid)>],
+}
+
+impl Seam<'_> {
+    /// The partner of wall end `v` and the map carrying its side onto v's.
+    fn across(&self, v: usize) -> Option<(u32, &Rigid)> {
+        let (w, t) = self.partners.get(v)?.as_ref()?;
+        (self.fan[v].len() == 1 && self.fan[*w as usize].len() == 1).then_some((*w, t))
+    }
+
+    /// The wall vertex next to `u` along the boundary chain, away from `from`.
+    fn next(&self, topo: &Topology, u: u32, from: Option<u32>) -> Option<u32> {
+        self.fan[u as usize]
+            .iter()
+            .map(|&f| {
+                let e = topo.edges[f as usize];
+                if e[0] == u { e[1] } else { e[0] }
+            })
+            .find(|&n| Some(n) != from)
+    }
+
+    /// Adds to the two-ring `ring` of `v` (first ring `first`) the wall points across a seam
+    /// the chain reaches within two steps, carried onto v's side: from a seam end v its
+    /// partner's two next vertices (the second through a smooth vertex only, as
+    /// [`two_ring`]), from a smooth seam end in the first ring its partner's next.
+    fn extend_ring(
+        &self,
+        mesh: &LinearMesh,
+        topo: &Topology,
+        models: &[Option<VertexModel>],
+        v: u32,
+        first: &[u32],
+        ring: &mut Vec<[f64; 3]>,
+    ) {
+        if self.partners.is_empty() {
+            return;
+        }
+        let x = |u: u32| mesh.coords[u as usize];
+        if let Some((w, t)) = self.across(v as usize)
+            && let Some(b) = self.next(topo, w, None)
+        {
+            ring.push(t.apply(x(b)));
+            if models[b as usize].is_some()
+                && let Some(c) = self.next(topo, b, Some(w))
+            {
+                ring.push(t.apply(x(c)));
+            }
+        }
+        for &u in first {
+            if models[u as usize].is_none() {
+                continue;
+            }
+            if let Some((w, t)) = self.across(u as usize)
+                && let Some(b) = self.next(topo, w, None)
+            {
+                ring.push(t.apply(x(b)));
+            }
+        }
+    }
 }
 
 /// The normals of the smooth boundary vertices of a 3D mesh and whether each is coarse (a

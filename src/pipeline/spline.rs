@@ -138,13 +138,15 @@ impl SplineSetup {
             _ => kinks::Kinks::default(),
         };
         let fitted = options.geometry == Geometry::SplineFitted;
+        // The walls' models at a seam are fitted over both sides.
+        let partners = view.as_ref().map_or(&[][..], |v| &v.wall_partners[..]);
         let targets = if fitted {
-            crate::fit::smooth_targets_shared(mesh, topo, &fit_params, share)
+            crate::fit::smooth_targets_seamed(mesh, topo, &fit_params, share, partners)
         } else {
             None
         };
         let blend_targets = match (&targets, fitted) {
-            (None, true) => crate::fit::smooth_targets_shared(
+            (None, true) => crate::fit::smooth_targets_seamed(
                 mesh,
                 topo,
                 &FitParams {
@@ -152,6 +154,7 @@ impl SplineSetup {
                     ..fit_params.clone()
                 },
                 share,
+                partners,
             ),
             _ => None,
         };

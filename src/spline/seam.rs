@@ -246,6 +246,11 @@ pub struct SeamView {
     pub seam_ends: Vec<bool>,
     /// Per boundary facet of `topo`, its index among the input's boundary facets.
     pub boundary_rows: Vec<u32>,
+    /// Per vertex of a 2D mesh, where the wall curve ending at it on a seam goes on: the
+    /// other side's vertex on the same glued vertex, and the rigid map carrying that side
+    /// onto this one, so the smooth targets see the wall on both sides (empty in 3D, or
+    /// `None` at every other vertex).
+    pub wall_partners: Vec<Option<(u32, Rigid)>>,
 }
 
 /// [`SeamView`] of the input (`mesh`, `topo`) glued as `glued`.
@@ -282,11 +287,75 @@ pub fn interior_view(mesh: &LinearMesh, topo: &Topology, glued: &Glued) -> SeamV
             view.facet_elements[f][1] == NONE
         })
         .collect();
+    let wall_partners = if mesh.dim == 2 {
+        wall_partners(mesh, topo, glued, &across, &seam_ends)
+    } else {
+        Vec::new()
+    };
     SeamView {
         topo: view,
         seam_ends,
         boundary_rows,
+        wall_partners,
     }
+}
+
+/// [`SeamView::wall_partners`]: each wall end `v` on a seam facet of `across` (a facet of
+/// the input with the element and side across the seam) is paired with the vertex of the
+/// facet across that glues to the same vertex, through the map of [`group`] that carries the
+/// facet across onto v's (to `SHIFT_REL_TOL` of the facet's length).
+fn wall_partners(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    glued: &Glued,
+    across: &[(u32, u32, u8)],
+    seam_ends: &[bool],
+) -> Vec<Option<(u32, Rigid)>> {
+    let mut glued_of = vec![u32::MAX; mesh.n_vertices()];
+    for e in 0..mesh.n_elements() {
+        for (&v, &g) in mesh.element(e).iter().zip(glued.mesh.element(e)) {
+            glued_of[v as usize] = g;
+        }
+    }
+    let maps = group(glued);
+    let x = |v: u32| DVec3::from(mesh.coords[v as usize]);
+    let mut out = vec![None; mesh.n_vertices()];
+    for &(f, b, sb) in across {
+        let here = topo.facet_vertices(f as usize);
+        let there = topo.facet_vertices(topo.element_facet(b as usize, sb as usize) as usize);
+        // The facet's vertices paired with those across (same glued vertex).
+        let pairs: Vec<(u32, u32)> = here
+            .iter()
+            .filter_map(|&v| {
+                let w = there
+                    .iter()
+                    .copied()
+                    .find(|&w| glued_of[w as usize] == glued_of[v as usize])?;
+                Some((v, w))
+            })
+            .collect();
+        if pairs.len() != here.len() {
+            continue;
+        }
+        let size = (x(here[0]) - x(here[here.len() - 1])).length();
+        let miss = |t: &Rigid| {
+            pairs
+                .iter()
+                .map(|&(v, w)| (DVec3::from(t.apply(mesh.coords[w as usize])) - x(v)).length())
+                .fold(0.0, f64::max)
+        };
+        let Some(t) = maps
+            .iter()
+            .min_by(|a, b| miss(a).total_cmp(&miss(b)))
+            .filter(|t| miss(t) <= SHIFT_REL_TOL * size)
+        else {
+            continue;
+        };
+        for &(v, w) in pairs.iter().filter(|&&(v, _)| seam_ends[v as usize]) {
+            out[v as usize] = Some((w, *t));
+        }
+    }
+    out
 }
 
 /// Element `h`'s input vertex at its glued corner `g`.

@@ -452,10 +452,12 @@ fn rotation_seams_are_glued_c1_on_generated_sectors() {
     // Rotation pairs are identified in the spline space: an element sees the control points
     // across the seam through the rotation, and the fit couples their coordinates. Generated
     // annulus sectors of 30° and 90°, boundary-layer graded. With graded knots every element
-    // stays a C¹ spline element in 3D: the derivative across the seam, carried over by the
+    // stays a C¹ spline element: the derivative across the seam, carried over by the
     // rotation (Gmsh's Jacobians), turns by rounding only, as across the interior facets
     // (kept C⁰, 0.26° to 0.83° on average and up to 1.2°, when the sides were curved apart).
-    // In 2D the misfit rounds make the wall rows Q2 (C⁰ between them), and uniform knots hold
+    // In 2D that needs the wall's smooth targets at the seam fitted over both sides: built
+    // from one side, a C¹ spline cannot follow both sides' targets and the misfit rounds made
+    // the wall rows Q2 (C⁰ between them; 1.5° and 4.0° across the seam). Uniform knots hold
     // every element back, so the angle is not asserted there. Everywhere: the report says
     // c1, the written images are exact, the smallest scaled Jacobian is within 0.999 of the
     // input's (curved apart: 0.9964 against 0.9995 on the uniform 30° sector), and where the
@@ -505,10 +507,15 @@ fn rotation_seams_are_glued_c1_on_generated_sectors() {
                     "{what}: min scaled Jacobian {sj} < {input_sj}"
                 );
                 assert_exact_images(&out, 1);
-                if dim == 3 && knots == "graded" {
+                if knots == "graded" {
                     assert_eq!(held, 0, "{what}");
+                    if dim == 2 {
+                        assert_eq!(report["q2_elements"], 0, "{what}");
+                    }
                     let p = probe(&out);
-                    assert!(p["seam_facets"].as_u64().unwrap() >= 12, "{what}: {p}");
+                    // Every facet of the 6 × (2 layers in 3D) seam.
+                    let facets = if dim == 3 { 12 } else { 6 };
+                    assert!(p["seam_facets"].as_u64().unwrap() >= facets, "{what}: {p}");
                     let seam = p["seam_angle_max"].as_f64().unwrap();
                     let inside = p["interior_angle_max"].as_f64().unwrap();
                     assert!(

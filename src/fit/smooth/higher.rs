@@ -159,7 +159,8 @@ fn monomials(u: f64, w: f64) -> [f64; 14] {
 /// Reusable buffers of [`two_ring`] (one per worker, so the rings allocate nothing).
 #[derive(Default)]
 pub(in crate::fit) struct RingScratch {
-    first: Vec<u32>,
+    /// The first ring of the last [`two_ring`].
+    pub(super) first: Vec<u32>,
     ring: Vec<u32>,
 }
 
