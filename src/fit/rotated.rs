@@ -236,7 +236,7 @@ mod tests {
     use crate::mesh::periodic::{PeriodicSpec, resolve};
     use crate::mesh::{LinearMesh, Topology};
     use crate::spline::SplineSpace;
-    use crate::spline::seam::{glue, glue_translations, interior_view, unwrap};
+    use crate::spline::seam::{Glued, glue, glue_translations, interior_view, unwrap};
 
     /// Quads of the annulus 1 ≤ r ≤ 2 over `cells` of `around` cells of `step` degrees, `nr`
     /// cells across; `closed`: the last column meets the first (a whole ring, `cells` ·
@@ -279,15 +279,11 @@ mod tests {
         }
     }
 
-    /// The sector of 4 × 3 cells of 7.5° glued through its rotation by 30°, and the whole
-    /// ring of 48 such columns: the space of the glued sector is the ring's, restricted to
-    /// its first four columns, so the nets agree (initial and fitted: the ring's fit is
-    /// rotationally symmetric, and the sector's coupled fit must find the same map).
-    #[test]
-    fn a_rotation_glued_sector_is_the_whole_rings_spline() {
-        let (nr, nt) = (3, 4);
-        let sector = annulus(nr, nt, 7.5, false);
-        let ring = annulus(nr, 48, 7.5, true);
+    /// The sector of 4 × 3 cells of 7.5° (sides `lo` and `hi`, 30° apart), the whole ring of
+    /// 48 such columns, their topologies, and the sector glued through its rotation.
+    fn sector_and_ring() -> (LinearMesh, LinearMesh, Topology, Topology, Glued) {
+        let sector = annulus(3, 4, 7.5, false);
+        let ring = annulus(3, 48, 7.5, true);
         let (st, rt) = (Topology::build(&sector), Topology::build(&ring));
         let spec = PeriodicSpec {
             master: "lo".into(),
@@ -296,8 +292,18 @@ mod tests {
         };
         let pairs = resolve(&sector, &st, &[spec]).expect("the sides are images");
         assert!(!pairs[0].transform.is_translation());
-        let glued = glue(&sector, &pairs).expect("a manifold glued sector");
         assert!(glue_translations(&sector, &pairs).is_none());
+        let glued = glue(&sector, &pairs).expect("a manifold glued sector");
+        (sector, ring, st, rt, glued)
+    }
+
+    /// The sector of 4 × 3 cells of 7.5° glued through its rotation by 30°, and the whole
+    /// ring of 48 such columns: the space of the glued sector is the ring's, restricted to
+    /// its first four columns, so the nets agree (initial and fitted: the ring's fit is
+    /// rotationally symmetric, and the sector's coupled fit must find the same map).
+    #[test]
+    fn a_rotation_glued_sector_is_the_whole_rings_spline() {
+        let (sector, ring, st, rt, glued) = sector_and_ring();
         let mut space = SplineSpace::build_with_knots(&glued.mesh, &glued.topo, &[], None);
         unwrap(&mut space, &sector, &st, &glued).expect("the seam is identified");
         assert!(space.extraction.has_frames());
@@ -340,16 +346,7 @@ mod tests {
     #[test]
     fn the_glued_sectors_wall_targets_are_the_whole_rings() {
         use crate::fit::smooth::{SmoothParams, SmoothTargets};
-        let sector = annulus(3, 4, 7.5, false);
-        let ring = annulus(3, 48, 7.5, true);
-        let (st, rt) = (Topology::build(&sector), Topology::build(&ring));
-        let spec = PeriodicSpec {
-            master: "lo".into(),
-            slave: "hi".into(),
-            from_file: false,
-        };
-        let pairs = resolve(&sector, &st, &[spec]).expect("the sides are images");
-        let glued = glue(&sector, &pairs).expect("a manifold glued sector");
+        let (sector, ring, st, rt, glued) = sector_and_ring();
         let view = interior_view(&sector, &st, &glued);
         // Hub and shroud end on both sides of the seam.
         assert_eq!(view.wall_partners.iter().flatten().count(), 4);
