@@ -711,10 +711,22 @@ unsafe fn block_step_avx2(
 /// One aggregate of the second partition: y = (L Lᵀ)⁻¹ r gathered at `rows`; returns rᵀy.
 #[inline(always)]
 fn pair_block(l: &[f64], first: &[u32], rows: &[u32], r: &[V4], y: &mut [V4]) -> V4 {
+    gather(rows, r, y);
+    block_solve(l, first, y);
+    gathered_dot(rows, r, y)
+}
+
+/// `y` = `r` at `rows` (a second-partition aggregate's right-hand side).
+#[inline(always)]
+fn gather(rows: &[u32], r: &[V4], y: &mut [V4]) {
     for (y, &i) in y.iter_mut().zip(rows) {
         *y = r[i as usize];
     }
-    block_solve(l, first, y);
+}
+
+/// Σ r[rows[k]] · y[k] per component (rᵀy of a second-partition aggregate).
+#[inline(always)]
+fn gathered_dot(rows: &[u32], r: &[V4], y: &[V4]) -> V4 {
     let mut rz = [0.0; 4];
     for (y, &i) in y.iter().zip(rows) {
         let r = r[i as usize];
@@ -729,19 +741,10 @@ fn pair_block(l: &[f64], first: &[u32], rows: &[u32], r: &[V4], y: &mut [V4]) ->
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 unsafe fn pair_block_avx2(l: &[f64], first: &[u32], rows: &[u32], r: &[V4], y: &mut [V4]) -> V4 {
-    for (y, &i) in y.iter_mut().zip(rows) {
-        *y = r[i as usize];
-    }
+    gather(rows, r, y);
     avx2::forward::<false>(l, first, y);
     avx2::backward(l, first, y);
-    let mut rz = [0.0; 4];
-    for (y, &i) in y.iter().zip(rows) {
-        let r = r[i as usize];
-        for c in 0..4 {
-            rz[c] += r[c] * y[c];
-        }
-    }
-    rz
+    gathered_dot(rows, r, y)
 }
 
 /// The block kernels' loops written in AVX2 registers, one 256-bit operation per vector entry
