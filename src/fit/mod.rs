@@ -453,22 +453,13 @@ pub fn smooth_targets(
     topo: &Topology,
     params: &FitParams,
 ) -> Option<SmoothTargets> {
-    smooth_targets_shared(mesh, topo, params, None)
+    smooth_targets_shared(mesh, topo, params, None, &[])
 }
 
-/// [`smooth_targets`] on a rank's part of a distributed mesh ([`SmoothTargets::build_shared`]).
+/// [`smooth_targets`] on a rank's part of a distributed mesh and with the walls'
+/// continuations across periodic seams ([`SmoothTargets::build_shared`]; `share` `None`:
+/// the whole mesh; `partners` empty: none).
 pub fn smooth_targets_shared(
-    mesh: &LinearMesh,
-    topo: &Topology,
-    params: &FitParams,
-    share: Option<&dyn InheritShare>,
-) -> Option<SmoothTargets> {
-    smooth_targets_seamed(mesh, topo, params, share, &[])
-}
-
-/// [`smooth_targets_shared`] with the walls' continuations across periodic seams
-/// ([`SmoothTargets::build_seamed`]; `partners` empty: none).
-pub fn smooth_targets_seamed(
     mesh: &LinearMesh,
     topo: &Topology,
     params: &FitParams,
@@ -477,7 +468,7 @@ pub fn smooth_targets_seamed(
 ) -> Option<SmoothTargets> {
     match params.targets {
         FitTargets::Chords => None,
-        FitTargets::Smooth(p) => Some(SmoothTargets::build_seamed(
+        FitTargets::Smooth(p) => Some(SmoothTargets::build_shared(
             mesh,
             topo,
             &p,

@@ -340,7 +340,7 @@ mod tests {
     }
 
     /// The smooth targets of the glued sector, its hub and shroud continued across the seam
-    /// through the rotation ([`crate::fit::SmoothTargets::build_seamed`]), are the whole
+    /// through the rotation ([`crate::fit::SmoothTargets::build_shared`]), are the whole
     /// ring's on the sector's elements, at the seam as in its middle. Built from each side's
     /// wall alone, the seam vertices have no model and their neighbours one-sided ones.
     #[test]
@@ -363,7 +363,7 @@ mod tests {
                 })
                 .fold(0.0, f64::max)
         };
-        let seamed = SmoothTargets::build_seamed(
+        let seamed = SmoothTargets::build_shared(
             &sector,
             &view.topo,
             &params,

@@ -241,30 +241,19 @@ impl SmoothTargets {
         params: &SmoothParams,
         features: Option<&Features>,
     ) -> SmoothTargets {
-        Self::build_shared(mesh, topo, params, features, None)
+        Self::build_shared(mesh, topo, params, features, None, &[])
     }
 
     /// [`SmoothTargets::build_with_features`] on a rank's part of a mesh distributed over
-    /// ranks (`share`, see [`InheritShare`]; `None`: the whole mesh): the vertices of the
-    /// rank's own elements inherit the whole mesh's interior models.
+    /// ranks (`share`, see [`InheritShare`]; `None`: the whole mesh), whose vertices of the
+    /// rank's own elements inherit the whole mesh's interior models, and, in 2D, with walls
+    /// that go on across periodic seams: `partners[v]` (empty: none) is, at a wall vertex
+    /// ending on a seam, the other side's vertex on the same glued vertex and the rigid map
+    /// carrying that side onto this one ([`crate::spline::seam::SeamView::wall_partners`]).
+    /// The models at and next to such a vertex are fitted over the wall on both sides, the
+    /// other side's points carried over by the map, so they are two-sided as in the interior
+    /// of the wall, and the models of the two sides' seam vertices are images of each other.
     pub fn build_shared(
-        mesh: &LinearMesh,
-        topo: &Topology,
-        params: &SmoothParams,
-        features: Option<&Features>,
-        share: Option<&dyn InheritShare>,
-    ) -> SmoothTargets {
-        Self::build_seamed(mesh, topo, params, features, share, &[])
-    }
-
-    /// [`SmoothTargets::build_shared`] of a 2D mesh whose walls go on across periodic seams:
-    /// `partners[v]` (empty: none) is, at a wall vertex ending on a seam, the other side's
-    /// vertex on the same glued vertex and the rigid map carrying that side onto this one
-    /// ([`crate::spline::seam::SeamView::wall_partners`]). The models at and next to such a
-    /// vertex are fitted over the wall on both sides, the other side's points carried over by
-    /// the map, so they are two-sided as in the interior of the wall, and the models of the
-    /// two sides' seam vertices are images of each other.
-    pub fn build_seamed(
         mesh: &LinearMesh,
         topo: &Topology,
         params: &SmoothParams,
@@ -726,7 +715,7 @@ fn two_ring_models(
     higher
 }
 
-/// The 2D walls' continuations across periodic seams ([`SmoothTargets::build_seamed`]).
+/// The 2D walls' continuations across periodic seams ([`SmoothTargets::build_shared`]).
 struct Seam<'a> {
     /// Boundary facets at each vertex.
     fan: &'a [Vec<u32>],

@@ -141,12 +141,12 @@ impl SplineSetup {
         // The walls' models at a seam are fitted over both sides.
         let partners = view.as_ref().map_or(&[][..], |v| &v.wall_partners[..]);
         let targets = if fitted {
-            crate::fit::smooth_targets_seamed(mesh, topo, &fit_params, share, partners)
+            crate::fit::smooth_targets_shared(mesh, topo, &fit_params, share, partners)
         } else {
             None
         };
         let blend_targets = match (&targets, fitted) {
-            (None, true) => crate::fit::smooth_targets_seamed(
+            (None, true) => crate::fit::smooth_targets_shared(
                 mesh,
                 topo,
                 &FitParams {
