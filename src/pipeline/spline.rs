@@ -404,7 +404,7 @@ pub(crate) fn auto_holds_back_too_many(held: usize, elements: usize) -> bool {
 /// graded (O-grids of smooth shapes) they hold back nearly as many elements or more (level-2
 /// O-grid cylinder: 672 against 800 of 1,536), and the uniform spline's boundary is the better
 /// one there (4.7× Gmsh-with-CAD's max error against 26×); on graded meshes they hold back a
-/// third or less of uniform knots' (BENCHMARKS.md, "Graded knot intervals").
+/// third or less of uniform knots' (`git show 81dad3f:BENCHMARKS.md`, "Graded knot intervals").
 pub(crate) fn auto_graded_is_decisive(graded: usize, uniform: usize) -> bool {
     graded as f64 <= AUTO_MIN_GAIN * uniform as f64
 }

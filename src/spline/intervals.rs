@@ -47,10 +47,10 @@
 //! the elements with uniform knots and at most half as many with graded ones (not tried where
 //! no facet's |ln ratio| reaches [`AUTO_MIN_LOG_RATIO`]). The share alone does not
 //! separate every mesh where graded knots win from unstructured ones (sphere_r6 0.043
-//! against systems_of_equations_ex9 0.051, BENCHMARKS.md, "Graded knot intervals"), hence the
-//! outcome rule below the threshold. Without a fit (`info`, `plot`), auto is uniform. Under
-//! mpirun the ranks decide alike on the whole mesh's survey and counts, and use the serial
-//! weights (`distributed::knots`).
+//! against systems_of_equations_ex9 0.051; `git show 81dad3f:BENCHMARKS.md`, "Graded knot
+//! intervals"), hence the outcome rule below the threshold. Without a fit (`info`, `plot`),
+//! auto is uniform. Under mpirun the ranks decide alike on the whole mesh's survey and
+//! counts, and use the serial weights (`distributed::knots`).
 //!
 //! **Glued periodic seams** ([`survey_glued`]): the knot surfaces are continued on the glued
 //! topology, across the seams, and every element is measured on its own vertices of the
@@ -157,7 +157,7 @@ pub struct KnotSurfaceInfo {
 /// a uniform pass. Real meshes: 0.37 (turbine) to 0.74 (NACA4412) where graded knots hold back
 /// fewer elements (or, on spheremesh01 and 70degCone_3D, as many); 0.25 (cylinder-hex) and
 /// below where uniform knots are kept, 0.14 and below on the rest; the generated O-grids of the
-/// fidelity tests 0.06 to 0.12 (BENCHMARKS.md, "Graded knot intervals").
+/// fidelity tests 0.06 to 0.12 (`git show 81dad3f:BENCHMARKS.md`, "Graded knot intervals").
 pub const AUTO_GRADED_SHARE: f64 = 0.3;
 
 /// With `--knot-intervals auto`: where no interior facet's cells differ this much in extent
@@ -166,7 +166,7 @@ pub const AUTO_GRADED_SHARE: f64 = 0.3;
 /// after the uniform one: graded knots that close to uniform do not hold back half as many
 /// elements (sfepy/hsphere8, largest |ln ratio| < 0.05: 20 % held back against uniform
 /// knots' 24 %). Every mesh where graded knots were kept after a uniform pass has facets of
-/// |ln ratio| ≥ 0.2 (BENCHMARKS.md, "Automatic choice").
+/// |ln ratio| ≥ 0.2 (`git show 81dad3f:BENCHMARKS.md`, "Automatic choice").
 pub const AUTO_MIN_LOG_RATIO: f64 = 0.1;
 
 /// Smallest |weighted mean log-ratio| of a consistently graded surface ([`graded_share`]).
