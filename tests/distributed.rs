@@ -603,6 +603,52 @@ fn a_bad_share_of_the_input_stops_every_rank_with_one_error_line() {
     }
 }
 
+/// A smooth shape whose ghost rings hold all of it on one rank and not on another: the
+/// generated torus of 189 hexes at 2 and 3 ranks. A rank holding the whole torus finds no
+/// feature, a rank with a cut fringe finds features there, and the 3D feature models'
+/// in-plane inheritance is collective over the ranks: the featureless rank takes part in it
+/// with no source (`FeatureModels::join_shared_inheritance`). When it skipped it the ranks'
+/// collective calls parted and every rank count hung (`timeout` turns that into a failure);
+/// now the run ends with the serial output within [`RANK_TOLERANCE`] of the diagonal.
+#[test]
+fn a_rank_without_features_takes_part_in_the_shared_inheritance() {
+    if !have_mpirun() {
+        return;
+    }
+    let input = binary_generated("torus189.msh", &["torus", "--elements", "200"]);
+    let tol = ["--cg-tol", RANK_CG_TOL];
+    let (out, _, serial_report) = curve_with_report(0, &input, "torus189", &tol);
+    assert_eq!(serial_report["elements"], 189);
+    let serial = read(&out);
+    let diag = diagonal(&serial);
+    for np in [2usize, 3] {
+        let out = scratch(&format!("torus189_np{np}.msh"));
+        let _ = std::fs::remove_file(&out);
+        let o = Command::new("timeout")
+            .args(["120", "mpirun", "--oversubscribe", "-np", &np.to_string()])
+            .envs(mpirun(np).get_envs().filter_map(|(k, v)| Some((k, v?))))
+            .args([
+                BIN,
+                "curve",
+                input.to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+            ])
+            .args(tol)
+            .output()
+            .unwrap();
+        assert_ne!(o.status.code(), Some(124), "{np} ranks: hung");
+        assert!(
+            o.status.success(),
+            "{np} ranks: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let worst = compare(&serial, &read(&out)) / diag;
+        eprintln!("torus189: {np} ranks: {worst:.2e} of the diagonal");
+        assert!(worst <= RANK_TOLERANCE, "{np} ranks: {worst:.3e}");
+    }
+}
+
 /// Largest peak memory of a rank at 4 ranks relative to the one-thread serial run's on the
 /// 98k-hex cylinder. Every rank holds its part and 2 ghost rings, and its share of K once
 /// (taken apart into the local numbering, not copied); the fit's CG, whose preconditioner
