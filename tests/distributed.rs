@@ -611,7 +611,7 @@ fn a_bad_share_of_the_input_stops_every_rank_with_one_error_line() {
 /// collective calls parted and the run hung at 2, 3 and 4 ranks (`timeout` turns that into a
 /// failure); now it ends with the serial run's elements, knots and held-back count, valid by
 /// Gmsh's Jacobians. (Its nodes are 2.3e-3 and 3.7e-3 of the diagonal from the serial run's,
-/// as on the generated tori that never hung: 1.5e-3 on 60 hexes, 5.9e-4 and 1.9e-3 on 1,000:
+/// as on the generated tori that never hung: 1.5e-3 on 72 hexes, 5.9e-4 and 1.9e-3 on 975:
 /// not the serial output yet, a defect of its own.)
 #[test]
 fn a_rank_without_features_takes_part_in_the_shared_inheritance() {
