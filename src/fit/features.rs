@@ -246,6 +246,16 @@ impl FeatureModels {
         out
     }
 
+    /// On a rank of a distributed mesh whose sub-mesh has no feature while another rank's has
+    /// some: the rank's part in the collective in-plane inheritance of [`FeatureModels::build`]
+    /// (`nearest_shared` over `share`), with no rim vertex and no planar patch, so that every
+    /// rank makes the same collective calls. Its vertices hand on no model, as its own build
+    /// with no feature would find.
+    pub fn join_shared_inheritance(mesh: &LinearMesh, decay: f64, share: &dyn InheritShare) {
+        let adj = adjacency(mesh.n_vertices(), std::iter::empty());
+        nearest_shared(mesh, &adj, &|_| None, &|_| false, decay, Some(share));
+    }
+
     /// The 2D problem inside each planar patch: its rim vertices take their feature curve's
     /// model (in the plane) for the patch, and the patch's other vertices inherit the model of
     /// the nearest rim vertex (along the patch's edges) with weight 1 − d / (`decay` · ℓ), ℓ

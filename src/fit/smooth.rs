@@ -280,9 +280,20 @@ impl SmoothTargets {
         let smooth_vertices = models.iter().filter(|m| m.is_some()).count();
         let feature_vertices =
             topo.vertex_on_boundary.iter().filter(|&&b| b).count() - smooth_vertices;
+        // In 3D the feature models' in-plane inheritance is collective over a share: a rank
+        // whose sub-mesh has no feature (a smooth shape whose ghost rings hold all of it)
+        // joins it while another rank's has some (its cut fringe), or the ranks' collective
+        // calls would part and wait for each other for ever.
+        let any_features = match share {
+            Some(s) if mesh.dim == 3 => s.any(features.is_some()),
+            _ => features.is_some(),
+        };
         let feature_models = features.map(|f| {
             FeatureModels::build(mesh, topo, f, cos_max, params.decay, &fan, &models, share)
         });
+        if let (None, true, Some(s)) = (&feature_models, any_features, share) {
+            FeatureModels::join_shared_inheritance(mesh, params.decay, s);
+        }
         // A 3D planar patch is its own 2D problem (its vertices take in-plane models below):
         // the cells next to it inherit from the curved boundary, not from the plane.
         let in_plane_3d = |v: usize| {
