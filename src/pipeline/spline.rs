@@ -515,19 +515,33 @@ fn demote_before_fit_if_fewer(
     let mut demote = vec![false; n];
     let demoted = clock.run(Stage::Validity, || {
         let mut space = setup.build(job, &demote);
-        for round in 0..=MAX_DEMOTION_ROUNDS {
-            let bad = uncertified(&certify_space(job, &space, &|_| 0.0));
-            if bad.is_empty() {
+        let all: Vec<usize> = (0..n).collect();
+        let mut bad = initially_uncertified(job, &space, &all);
+        for round in 0..MAX_DEMOTION_ROUNDS {
+            let now: Vec<usize> = (0..n).filter(|&e| bad[e]).collect();
+            if now.is_empty() {
                 return Some(space);
             }
-            if round == MAX_DEMOTION_ROUNDS {
-                break;
-            }
             let is_q2 = |e: usize| !space.is_spline(e);
-            demote_with_rings(job.mesh, job.topo, &bad, round, &is_q2, &mut demote);
-            space = setup.build(job, &demote);
+            demote_with_rings(job.mesh, job.topo, &now, round, &is_q2, &mut demote);
+            let next = setup.build(job, &demote);
+            // Only an element whose initial net changed can change its certificate.
+            let changed: Vec<usize> = {
+                use rayon::prelude::*;
+                (0..n)
+                    .into_par_iter()
+                    .filter(|&e| next.element_bezier(e) != space.element_bezier(e))
+                    .collect()
+            };
+            for (&e, b) in changed
+                .iter()
+                .zip(initially_uncertified(job, &next, &changed))
+            {
+                bad[e] = b;
+            }
+            space = next;
         }
-        None
+        (!bad.contains(&true)).then_some(space)
     });
     let Some(mut space) = demoted.filter(|_| demote.contains(&true)) else {
         return Ok(outcome);
@@ -1024,6 +1038,20 @@ fn blend_within(
         }
         Bounded::Exceeded(at_least) => Err(at_least),
     })
+}
+
+/// Whether the space's current map is not certified valid on each of `elements` (the exact
+/// certificate's decision, [`crate::validity::certify_screened`] at target 0), in order.
+fn initially_uncertified(job: &Job, space: &SplineSpace, elements: &[usize]) -> Vec<bool> {
+    let net = |e: usize| space.element_bezier(e);
+    let depth = job.options.line_search.certificate_depth;
+    let screened =
+        crate::validity::certify_screened(job.executor, space.dim, elements, &net, depth, &|_| 0.0);
+    screened
+        .bounds
+        .iter()
+        .map(|b| !b.certified_positive())
+        .collect()
 }
 
 /// Certified bounds of the space's current map, exact where at most `target(e)`
