@@ -486,7 +486,8 @@ pub(super) fn curve_spline(
     }
 }
 
-/// The least-squares pass kept (`outcome`, on `setup`'s knots), or, where its blend holds
+/// The least-squares pass kept (`outcome`, on `setup`'s knots), or, with
+/// `--demote-uncertified` (serial only: the ranks under mpirun do not run it), where its blend holds
 /// back elements and the initial spline map of the setup is not certified valid on some
 /// element, the same pass with those elements demoted to Q2 *before* the fit (the demotion
 /// rounds of `--fit energy`, [`demote_with_rings`]), when its blend holds back strictly
@@ -508,7 +509,10 @@ fn demote_before_fit_if_fewer(
         Some(b) if outcome.energy.is_none() && outcome.fit.is_some() => b.reduced_elements,
         _ => return Ok(outcome),
     };
-    if held == 0 || job.options.geometry != Geometry::SplineFitted {
+    if held == 0
+        || job.options.geometry != Geometry::SplineFitted
+        || !job.options.demote_uncertified
+    {
         return Ok(outcome);
     }
     let n = job.mesh.n_elements();
