@@ -145,6 +145,11 @@ pub(crate) struct JobArgs {
     /// certified valid.
     #[arg(long)]
     snap_boundary: bool,
+    /// Where the certified blend holds back elements and the initial spline map is not
+    /// certified on some, fit again with those elements Q2 from the start and keep that output
+    /// when it holds back fewer (one process only).
+    #[arg(long)]
+    demote_uncertified: bool,
     /// Accept an element in the line search only when its certified det J bound exceeds this
     /// fraction of its straight input element's smallest corner det J (0: any positive).
     #[arg(long, default_value_t = 0.1)]
@@ -325,6 +330,7 @@ impl JobArgs {
                 ..Default::default()
             },
             snap_boundary: self.snap_boundary,
+            demote_uncertified: self.demote_uncertified,
             line_search_mode: self.line_search.into(),
             mesh: MeshOptions {
                 allow_invalid: self.allow_invalid,

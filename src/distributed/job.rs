@@ -93,6 +93,9 @@ fn check_supported(options: &CurveOptions) -> Result<(), CurveError> {
     if options.snap_boundary {
         return unsupported("--snap-boundary");
     }
+    if options.demote_uncertified {
+        return unsupported("--demote-uncertified");
+    }
     // The edits name vertices by their place in the file; a rank's sub-mesh numbers them
     // otherwise, so they would hit other vertices.
     if options.features.edits.is_some() {

@@ -72,6 +72,10 @@ pub struct CurveOptions {
     pub line_search_mode: LineSearchMode,
     /// Move boundary vertex nodes back to the input vertices where that stays certified valid.
     pub snap_boundary: bool,
+    /// Redo the least-squares pass with the elements whose initial spline map is not certified
+    /// made Q2 before the fit, kept where its blend holds back fewer elements (serial only:
+    /// `pipeline::spline`'s `demote_before_fit_if_fewer`).
+    pub demote_uncertified: bool,
     /// Sharp features kept by the spline space and the fit (`docs/features.md`).
     pub features: FeatureOptions,
     pub mesh: MeshOptions,
@@ -110,6 +114,7 @@ impl Default for CurveOptions {
             line_search: LineSearchParams::default(),
             line_search_mode: LineSearchMode::Local,
             snap_boundary: false,
+            demote_uncertified: false,
             features: Default::default(),
             mesh: MeshOptions::default(),
             output: OutputOptions::default(),
