@@ -234,7 +234,7 @@ pub const GRADED_DEEP_MIDPOINT: f64 = 3.0;
 /// Default interior midpoint weight of the smooth preset's elements near extraordinary
 /// vertices and edges ([`FitWeights::extraordinary_midpoint`]). Measured on the real meshes
 /// with extraordinary vertices (`BENCHMARKS.md`, "Midpoint weight at extraordinary
-/// vertices"): 0.5–2.5 left hsphere8's min scaled Jacobian below the 0.805 of 0.05 (0.742–0.797)
+/// vertices"): 1–2.5 left hsphere8's min scaled Jacobian below the 0.805 of 0.05 (0.743–0.797)
 /// and 4 or more held back more of it (28 % and up against 11 % with 3).
 pub const EXTRAORDINARY_MIDPOINT: f64 = 3.0;
 
