@@ -91,6 +91,10 @@ pub(crate) struct JobArgs {
     /// least 3 with graded ones).
     #[arg(long)]
     w_deep_midpoint: Option<f64>,
+    /// Position weight at the interior midpoints and centres of elements at an extraordinary
+    /// interior vertex or edge (overrides the preset).
+    #[arg(long)]
+    w_extraordinary_midpoint: Option<f64>,
     /// Position weight at midpoints of boundary edges and faces (overrides the preset).
     #[arg(long)]
     w_boundary_midpoint: Option<f64>,
@@ -267,6 +271,10 @@ impl JobArgs {
             (&mut weights.corner, self.w_corner),
             (&mut weights.boundary_corner, self.w_boundary_corner),
             (&mut weights.midpoint, self.w_midpoint),
+            (
+                &mut weights.extraordinary_midpoint,
+                self.w_extraordinary_midpoint,
+            ),
             (&mut weights.boundary_midpoint, self.w_boundary_midpoint),
             (&mut weights.frame_corner, self.w_frame_corner),
             (&mut weights.frame_midpoint, self.w_frame_midpoint),

@@ -3,6 +3,8 @@
 //! [`super::assembly`]) and the matrix-free product ([`MatrixFree`]).
 
 use super::*;
+use crate::math::reference::{HEX_SIDES, QUAD_SIDES};
+use crate::mesh::topology::NONE;
 
 /// The symmetric matrix K in CSR form (`u32` column indices, `usize` row offsets, columns
 /// sorted within each row), applied to 3-component vectors.
@@ -341,7 +343,8 @@ fn corner_of(l: [usize; 3]) -> usize {
 pub struct ElementBlocks {
     /// Per element: bit c (c < 8) for a boundary corner c (of `weighted_boundary`), bit
     /// 8 + i for a sample i that takes the feature weight, `DEEP_BIT` for an element a ring
-    /// away from that boundary, the size level in the 8 bits from `LEVEL_SHIFT`.
+    /// away from that boundary, `EXTRAORDINARY_BIT` for one near an extraordinary vertex, the
+    /// size level in the 8 bits from `LEVEL_SHIFT`.
     pub masks: Vec<u64>,
     /// (G^d, G^r), row-major 3^d × 3^d, per mask.
     pub cache: HashMap<u64, (Vec<f64>, Vec<f64>)>,
@@ -361,6 +364,10 @@ pub(super) fn sample_weight(
 /// Weight-mask bit of an element none of whose vertices belongs to an element touching the
 /// boundary ([`FitWeights::deep_midpoint`]; above the feature bits 8..35).
 pub(super) const DEEP_BIT: u64 = 1 << 40;
+
+/// Weight-mask bit of an element without a boundary corner within two element rings of an
+/// extraordinary vertex or edge ([`FitWeights::extraordinary_midpoint`]).
+pub(super) const EXTRAORDINARY_BIT: u64 = 1 << 41;
 
 /// Bit offset of an element's size level in its weight mask.
 pub(super) const LEVEL_SHIFT: u32 = 48;
@@ -385,10 +392,17 @@ fn sample_weight_unscaled(w: &FitWeights, mask: u64, i: usize, l: [usize; 3], co
     } else if !corner {
         if boundary_midpoint(mask, l) {
             w.boundary_midpoint
-        } else if mask & DEEP_BIT != 0 {
-            w.deep_midpoint.unwrap_or(w.midpoint)
         } else {
-            w.midpoint
+            let base = if mask & DEEP_BIT != 0 {
+                w.deep_midpoint.unwrap_or(w.midpoint)
+            } else {
+                w.midpoint
+            };
+            if mask & EXTRAORDINARY_BIT != 0 {
+                base.max(w.extraordinary_midpoint)
+            } else {
+                base
+            }
         }
     } else if mask & (1 << corner_of(l)) != 0 {
         w.boundary_corner
@@ -587,6 +601,7 @@ impl ElementBlocks {
                 vs.iter().for_each(|&v| near[v as usize] = true);
             }
         }
+        let extraordinary = extraordinary_elements(space.n_elements(), mesh, topo, w);
         let masks: Vec<u64> = (0..space.n_elements())
             .map(|e| {
                 let mut m = 0u64;
@@ -597,6 +612,10 @@ impl ElementBlocks {
                 }
                 if mesh.element(e).iter().all(|&v| !near[v as usize]) {
                     m |= DEEP_BIT;
+                }
+                // Not at the boundary's corners, whose midpoints pull the fitted boundary.
+                if extraordinary[e] && m & 0xFF == 0 {
+                    m |= EXTRAORDINARY_BIT;
                 }
                 if let Some(f) = features {
                     m |= features::sample_mask(f, mesh, e) << 8;
@@ -610,6 +629,87 @@ impl ElementBlocks {
         }
         ElementBlocks { masks, cache }
     }
+}
+
+/// Per vertex, whether it is an extraordinary interior vertex: not on the boundary, and in 2D
+/// of valence other than 4; in 3D with other than 8 elements around it or on an edge of
+/// valence other than 4 (an extraordinary edge with an end point inside the mesh). Vertices
+/// on a facet glued across a periodic seam ([`Topology::with_interior_facets`]: the elements
+/// on its two sides hold different copies of them) are not counted: their elements on the
+/// other side are not theirs.
+///
+/// On a rank's ghosted sub-mesh the answer at a vertex whose elements are all on the rank
+/// (own or ghost) is the whole mesh's: every element around its edges is one of them, and
+/// so is every facet deciding whether it is on the boundary.
+pub fn extraordinary_vertices(mesh: &LinearMesh, topo: &Topology) -> Vec<bool> {
+    let regular = 1usize << topo.dim;
+    let mut ev: Vec<bool> = (0..topo.n_vertices)
+        .map(|v| !topo.vertex_on_boundary[v] && topo.vertex_valence(v) != regular)
+        .collect();
+    if topo.dim == 3 {
+        for (edge, &valence) in topo.edges.iter().zip(&topo.edge_valence) {
+            if valence != 4 {
+                for &v in edge {
+                    ev[v as usize] |= !topo.vertex_on_boundary[v as usize];
+                }
+            }
+        }
+    }
+    let side = |e: u32, s: u8| -> Vec<u32> {
+        let vs = mesh.element(e as usize);
+        let mut out: Vec<u32> = if topo.dim == 2 {
+            QUAD_SIDES[s as usize].iter().map(|&i| vs[i]).collect()
+        } else {
+            HEX_SIDES[s as usize].iter().map(|&i| vs[i]).collect()
+        };
+        out.sort_unstable();
+        out
+    };
+    for (els, sides) in topo.facet_elements.iter().zip(&topo.facet_sides) {
+        if els[1] == NONE {
+            continue;
+        }
+        let (a, b) = (side(els[0], sides[0]), side(els[1], sides[1]));
+        if a != b {
+            for v in a.into_iter().chain(b) {
+                ev[v as usize] = false;
+            }
+        }
+    }
+    ev
+}
+
+/// The elements whose interior midpoints may take [`FitWeights::extraordinary_midpoint`]:
+/// those sharing a vertex with an element at an extraordinary vertex
+/// ([`extraordinary_vertices`]); none where that weight is not above the midpoint weights it
+/// would replace (the position and frame presets), so those fits are unchanged.
+///
+/// Why two element rings: hsphere8's ratio-guard rejections sit in the elements at its
+/// valence-3 diagonal and in their neighbours (51, 15 of them at the diagonal), sphere_r6's at
+/// and around its irregular interior vertices; weighting only the elements at the vertices
+/// kept 22 % and 15 % held back, the two rings 11 % and 8 % (`BENCHMARKS.md`, "Midpoint weight
+/// at extraordinary vertices").
+fn extraordinary_elements(
+    n: usize,
+    mesh: &LinearMesh,
+    topo: &Topology,
+    w: &FitWeights,
+) -> Vec<bool> {
+    let deep = w.deep_midpoint.unwrap_or(w.midpoint);
+    if w.extraordinary_midpoint <= w.midpoint.min(deep) {
+        return vec![false; n];
+    }
+    let ev = extraordinary_vertices(mesh, topo);
+    let mut near = vec![false; topo.n_vertices];
+    for e in 0..n {
+        let vs = mesh.element(e);
+        if vs.iter().any(|&v| ev[v as usize]) {
+            vs.iter().for_each(|&v| near[v as usize] = true);
+        }
+    }
+    (0..n)
+        .map(|e| mesh.element(e).iter().any(|&v| near[v as usize]))
+        .collect()
 }
 
 /// The vertices that take the boundary weights ([`FitWeights::boundary_corner`], the

@@ -187,6 +187,7 @@ fn energy_of_an_affine_image_is_known() {
             boundary_corner: 0.0,
             midpoint: 0.0,
             deep_midpoint: None,
+            extraordinary_midpoint: 0.0,
             boundary_midpoint: 0.0,
             frame_corner: 0.0,
             frame_midpoint: 0.0,
