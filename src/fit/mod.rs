@@ -176,7 +176,8 @@ impl FitWeights {
             boundary_corner: 20.0,
             midpoint: 0.05,
             deep_midpoint: None,
-            extraordinary_midpoint: EXTRAORDINARY_MIDPOINT,
+            // Off (0: the midpoints keep their own weight); see `EXTRAORDINARY_MIDPOINT`.
+            extraordinary_midpoint: 0.0,
             boundary_midpoint: 1.0,
             frame_corner: 0.0,
             frame_midpoint: 0.0,
@@ -231,11 +232,14 @@ impl FitWeights {
 /// knots ([`FitWeights::for_knots`]).
 pub const GRADED_DEEP_MIDPOINT: f64 = 3.0;
 
-/// Default interior midpoint weight of the smooth preset's elements near extraordinary
-/// vertices and edges ([`FitWeights::extraordinary_midpoint`]). Measured on the real meshes
-/// with extraordinary vertices (`BENCHMARKS.md`, "Midpoint weight at extraordinary
+/// The interior midpoint weight near extraordinary vertices and edges
+/// ([`FitWeights::extraordinary_midpoint`]) that holds back fewest elements on the real
+/// meshes with extraordinary lines (`BENCHMARKS.md`, "Midpoint weight at extraordinary
 /// vertices"): 1–2.5 left hsphere8's min scaled Jacobian below the 0.805 of 0.05 (0.743–0.797)
-/// and 4 or more held back more of it (28 % and up against 11 % with 3).
+/// and 4 or more held back more of it (28 % and up against 11 % with 3). Not the smooth
+/// preset's default (0: the midpoints keep their own weight there): with it `auto` keeps uniform knots on meshes
+/// whose graded knots follow the CAD wall far better (the level-2 disk's max error 1.02× →
+/// 5.45× Gmsh-with-CAD's), so it is set with `--w-extraordinary-midpoint 3`.
 pub const EXTRAORDINARY_MIDPOINT: f64 = 3.0;
 
 /// The fit presets of the command line (`--fit`): which weights and targets the least-squares
