@@ -29,11 +29,18 @@
 //! coordinate) are the serial solver's, [`crate::solve::cg_loop`], with the ranks' dot
 //! products as its reductions. Block Gauss–Seidel, whose sweeps run in an order across the
 //! whole matrix, is refused ([`CgError::Unavailable`]).
+//!
+//! **Rotation seams.** Across glued rotation-periodic seams the fit's system is
+//! (K ⊗ I₃ + C) δ = b ([`crate::fit::rotated`]): [`pcg_coupled`] adds each rank's share C_s
+//! (its own elements' couplings) to K_s's product before the halo exchange, and runs the
+//! serial coupled recurrence ([`crate::solve::coupled_loop`], one α and β over the three
+//! coordinates) under K's block-Jacobi pair, as the serial solve on its CG path.
 
 use super::blocks::{Aggregation, GlobalBlocks};
 use super::comm::Comm;
 use super::local::Key;
 use crate::fit::NormalMatrix;
+use crate::fit::rotated::Coupling;
 use crate::solve::blocked::RowTemplates;
 use crate::solve::{CgError, CgInfo, CgParams, CgPreconditioner};
 use rayon::prelude::*;
@@ -356,6 +363,42 @@ pub fn pcg(
     params: &CgParams,
     aggregation: Option<&Aggregation>,
 ) -> Result<CgInfo, CgError> {
+    solve(comm, halo, k, None, b_partial, x, params, aggregation)
+}
+
+/// [`pcg`] of the system (K ⊗ I₃ + C) δ = b of a fit across rotation seams
+/// ([`crate::fit::rotated`]): `c` is this rank's share C_s of C in its local numbering
+/// (`None` when none of its elements sees a control point rotated; the rank still takes
+/// part), added to K_s's product before the halo exchange, so the exchange sums both. The
+/// loop is the serial coupled one ([`crate::solve::coupled_loop`]: one recurrence over the
+/// three coordinates), preconditioned by the block-Jacobi pair of K per coordinate on
+/// `aggregation` (which must be the pair's), as the serial `rotated::solve` is on the CG path.
+#[allow(clippy::too_many_arguments)]
+pub fn pcg_coupled(
+    comm: &dyn Comm,
+    halo: &Halo,
+    k: &LocalMatrix,
+    c: Option<&Coupling>,
+    b_partial: &[[f64; 3]],
+    x: &mut [[f64; 3]],
+    params: &CgParams,
+    aggregation: Option<&Aggregation>,
+) -> Result<CgInfo, CgError> {
+    solve(comm, halo, k, Some(c), b_partial, x, params, aggregation)
+}
+
+/// [`pcg`] (`coupled`: `None`) or [`pcg_coupled`] (`Some` of the rank's C_s).
+#[allow(clippy::too_many_arguments)]
+fn solve(
+    comm: &dyn Comm,
+    halo: &Halo,
+    k: &LocalMatrix,
+    coupled: Option<Option<&Coupling>>,
+    b_partial: &[[f64; 3]],
+    x: &mut [[f64; 3]],
+    params: &CgParams,
+    aggregation: Option<&Aggregation>,
+) -> Result<CgInfo, CgError> {
     let mut b = b_partial.to_vec();
     halo.sum_partials(comm, flat(&mut b), 3);
     let mut diag = k.diagonal();
@@ -376,10 +419,15 @@ pub fn pcg(
     }
     let apply = |p: &[[f64; 3]], y: &mut [[f64; 3]]| {
         k.apply(p, y);
+        if let Some(Some(c)) = coupled {
+            c.apply_add(p, y);
+        }
         halo.sum_partials(comm, flat(y), 3);
     };
-    // The serial solver's preconditioner on every share (the module docs).
+    // The serial solver's preconditioner on every share (the module docs); the coupled
+    // solve's is K's block-Jacobi pair whatever the option, as serially.
     let m = match (params.preconditioner, aggregation) {
+        (_, Some(a)) if coupled.is_some() => Local::Blocks(GlobalBlocks::new(comm, halo, k, a)?),
         (CgPreconditioner::Jacobi, _) => Local::Point(diag),
         (CgPreconditioner::BlockSgs { .. }, _) => {
             return Err(CgError::Unavailable {
@@ -404,6 +452,9 @@ pub fn pcg(
         Local::Blocks(b) => b.apply(comm, r, z),
     };
     let ranks = OwnedRows { comm, halo };
+    if coupled.is_some() {
+        return crate::solve::coupled_loop(&ranks, apply, precondition, &b, x, params);
+    }
     crate::solve::cg_loop(&ranks, apply, precondition, &b, x, params, |_, _| {})
 }
 

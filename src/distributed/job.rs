@@ -24,8 +24,9 @@
 //! its own elements, the ranks agreeing on the rejected elements of every round in global ids
 //! ([`crate::validity::blend::blend_search_shared`]); sample its own elements with a global
 //! node numbering ([`super::sample`]), with periodic pairs resolved over the whole mesh (the
-//! translation seams glued in the spline space: the share read again with its ghost rings
-//! across the seams) and the image sides' nodes made the transform of their masters'
+//! seams glued in the spline space: the share read again with its ghost rings across the
+//! seams; across rotation seams the CG couples the coordinates, [`super::cg::pcg_coupled`])
+//! and the image sides' nodes made the transform of their masters'
 //! ([`super::periodic`]),
 //! check them and route them back to their file runs for the collective write; no rank reads
 //! or holds the whole mesh.
@@ -35,7 +36,7 @@
 //! stops; the blend's factors are the serial search's for the same fitted map.
 
 use super::blocks::Aggregation;
-use super::cg::{Halo, LocalMatrix, pcg};
+use super::cg::{Halo, LocalMatrix, pcg, pcg_coupled};
 use super::comm::Comm;
 use super::local::{GHOST_DEPTH, LocalShare};
 use super::read::LocalMesh;
@@ -199,6 +200,8 @@ struct ShareJob<'a> {
     job: &'a Job<'a>,
     setup: &'a SplineSetup,
     mine: &'a [usize],
+    /// Node tag → representative tag of the glued seams ([`super::periodic::Resolved::seam_map`]).
+    seam_map: &'a std::collections::HashMap<u64, u64>,
 }
 
 /// This rank's share of the fit, timed as [`Stage::Fit`] with its assembly and CG parts
@@ -235,11 +238,24 @@ fn fit_share(
     let fit_params = &setup.fit_params;
     // The preconditioner's aggregates (the serial run's: rank 0 grows them on the whole
     // mesh's stencils) before the assembly, while a rank holds least.
+    // Across rotation seams the coordinates are coupled (`crate::fit::rotated`): every rank
+    // runs the coupled CG when some rank's elements see a control point rotated.
+    let mut rotated = [f64::from(u8::from(s.extraction.has_frames()))];
+    comm.max_f64(&mut rotated);
+    let coupled = rotated[0] > 0.0;
+    // The coupled solve is preconditioned by K's block-Jacobi pair, as serially.
+    let preconditioner = if coupled {
+        crate::solve::CgPreconditioner::BlockJacobiPair {
+            size: crate::solve::block_jacobi::DEFAULT_BLOCK,
+        }
+    } else {
+        fit_params.cg.preconditioner
+    };
     let aggregation = clock.run(Stage::FitCg, || {
         let stencils = super::blocks::own_stencils(s, halo, j.mine);
-        Aggregation::for_preconditioner(comm, halo, &stencils, &fit_params.cg.preconditioner)
+        Aggregation::for_preconditioner(comm, halo, &stencils, &preconditioner)
     });
-    let (k, b, scale) = clock.run(Stage::FitAssembly, || assemble_share(j, s, halo));
+    let (k, b, scale, coupling) = clock.run(Stage::FitAssembly, || assemble_share(j, s, halo));
     // The unknowns are displacements from the initial control points, scaled like K.
     let mut delta: Vec<[f64; 3]> = match start {
         Some(start) => halo
@@ -260,15 +276,28 @@ fn fit_share(
     }
     let cg = clock
         .run(Stage::FitCg, || {
-            pcg(
-                comm,
-                halo,
-                &k,
-                &b,
-                &mut delta,
-                &fit_params.cg,
-                aggregation.as_ref(),
-            )
+            if coupled {
+                pcg_coupled(
+                    comm,
+                    halo,
+                    &k,
+                    coupling.as_ref(),
+                    &b,
+                    &mut delta,
+                    &fit_params.cg,
+                    aggregation.as_ref(),
+                )
+            } else {
+                pcg(
+                    comm,
+                    halo,
+                    &k,
+                    &b,
+                    &mut delta,
+                    &fit_params.cg,
+                    aggregation.as_ref(),
+                )
+            }
         })
         .map_err(|source| CurveError::Solve {
             input: j.job.input.to_owned(),
@@ -290,13 +319,19 @@ fn fit_share(
 }
 
 /// This rank's rows of the scaled normal equations: the local matrix over its halo, the
-/// right-hand side of its halo's control points and the scaling D (by global control point).
+/// right-hand side of its halo's control points, the scaling D (by global control point)
+/// and, across rotation seams, its share of the coupling C in the halo's numbering.
 #[allow(clippy::type_complexity)]
 fn assemble_share(
     j: &ShareJob,
     s: &SplineSpace,
     halo: &Halo,
-) -> (LocalMatrix, Vec<[f64; 3]>, Option<Vec<f64>>) {
+) -> (
+    LocalMatrix,
+    Vec<[f64; 3]>,
+    Option<Vec<f64>>,
+    Option<crate::fit::rotated::Coupling>,
+) {
     let (comm, local, setup, mine) = (j.comm, j.local, j.setup, j.mine);
     let topo = setup.topo(j.job);
     let mesh = &local.mesh;
@@ -332,6 +367,10 @@ fn assemble_share(
     }
     drop(d_halo);
     sys.matrix.scale_symmetric(&d);
+    let coupling = sys.coupling.take().map(|mut c| {
+        c.scale_symmetric(&d);
+        c.restricted(&halo.global)
+    });
     for (r, &d) in sys.rhs.iter_mut().zip(&d) {
         *r = r.map(|x| d * x);
     }
@@ -339,7 +378,12 @@ fn assemble_share(
     let b: Vec<[f64; 3]> = halo.global.iter().map(|&g| sys.rhs[g as usize]).collect();
     let scale = sys.scale.take();
     drop(sys.rhs);
-    (LocalMatrix::from_matrix(sys.matrix, halo), b, scale)
+    (
+        LocalMatrix::from_matrix(sys.matrix, halo),
+        b,
+        scale,
+        coupling,
+    )
 }
 
 /// The post-fit Q2 marks of the sub-mesh's elements (own and ghost) from the fitted control
@@ -430,6 +474,7 @@ struct RankPasses<'a> {
     local: &'a LocalMesh,
     topo: &'a Topology,
     mine: &'a [usize],
+    seam_map: &'a std::collections::HashMap<u64, u64>,
     bytes: [u64; 2],
     /// From the uniform fit, as the serial second pass starts (from C0 with periodic pairs).
     warm_start: bool,
@@ -520,6 +565,7 @@ impl<'a> RankPasses<'a> {
             job,
             setup,
             mine: self.mine,
+            seam_map: self.seam_map,
         }
     }
 }
@@ -537,8 +583,11 @@ fn share_pass(
     let (comm, local, job, setup) = (j.comm, j.local, j.job, j.setup);
     let (mesh, topo) = (&local.mesh, job.topo);
     let mut s = clock.run(Stage::Spline, || setup.build(job, &[]));
+    // A space on the glued seams numbers its control points by the glued entities: so do the
+    // halo's keys, for the serial run's aggregates.
+    let reps = |_: &SplineSpace| setup.live_seams().map(|_| j.seam_map);
     let mut halo = clock.run(Stage::Partition, || {
-        super::local::halo(comm, local, topo, &s)
+        super::local::halo(comm, local, topo, &s, reps(&s))
     });
     let before_fit = comm.bytes_sent();
     let start = previous.map(|p| spline::carry_over(p, &p.control_points, &s));
@@ -565,7 +614,7 @@ fn share_pass(
                 }),
             );
             halo = clock.run(Stage::Partition, || {
-                super::local::halo(comm, local, topo, &s)
+                super::local::halo(comm, local, topo, &s, reps(&s))
             });
             // The refit starts from this fit where the two spaces share control points, as
             // the serial refit does (`pipeline::spline::fit_demoting_misfits`): a cold start
@@ -668,10 +717,11 @@ fn run_share(
     let resolved = clock.run(Stage::Topology, || {
         periodic_pairs(comm, input, options, &local, &topo)
     })?;
-    // Translation seams are glued in the spline space as serially: the share is read again
+    // Periodic seams are glued in the spline space as serially: the share is read again
     // with its ghost rings run on across the seams (the elements across a seam are neighbours
-    // there), then glued ([`super::periodic::glue_share`]). Gmsh's partitioned inputs are not
-    // read through the seams: their seams stay apart.
+    // there), then glued ([`super::periodic::glue_share`]; across rotations the fit couples
+    // the coordinates). Gmsh's partitioned inputs are not read through the seams: their seams
+    // stay apart.
     let seam_map = resolved.seam_map();
     let across = !seam_map.is_empty() && !super::read_parts::is_partitioned(input);
     if across {
@@ -682,7 +732,6 @@ fn run_share(
             agree(comm, local_topology(input, &local))
         })?;
     }
-    drop(seam_map);
     let seams = clock.run(Stage::Spline, || {
         super::periodic::glue_share(comm, &local, &resolved, across)
     });
@@ -717,6 +766,7 @@ fn run_share(
         local: &local,
         topo: &topo,
         mine: &mine,
+        seam_map: &seam_map,
         bytes: [0; 2],
         warm_start: options.periodic.pairs.is_empty(),
     };

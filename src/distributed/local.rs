@@ -45,9 +45,21 @@ pub fn min_over_halo(comm: &dyn Comm, halo: &Halo, v: &mut [f64]) {
 /// A control point's entity kind and the sorted global ids of the entity.
 pub type Key = [u64; 5];
 
-/// The global key of control point `cp` of the space built on `local`.
-pub fn key_of(cp: ControlPoint, local: &LocalMesh, topo: &Topology) -> Key {
-    let gv = |v: u32| local.global_vertex[v as usize];
+/// The global key of control point `cp` of the space built on `local`; with `seams` (node
+/// tag → representative tag, [`super::periodic::Resolved::seam_map`]) that of the glued
+/// entity, whose vertices are the representatives: a space glued along periodic seams
+/// numbers its control points by the glued mesh's entities (`spline::seam::unwrap` renames
+/// the keys to one side's entity, not the numbering).
+pub fn key_of(
+    cp: ControlPoint,
+    local: &LocalMesh,
+    topo: &Topology,
+    seams: Option<&HashMap<u64, u64>>,
+) -> Key {
+    let gv = |v: u32| {
+        let t = local.global_vertex[v as usize];
+        seams.and_then(|m| m.get(&t)).copied().unwrap_or(t)
+    };
     let ge = |e: u32| local.global_element[e as usize];
     let (kind, ids): (u64, Vec<u64>) = match cp {
         ControlPoint::Cell(e) => (0, vec![ge(e)]),
@@ -83,12 +95,18 @@ pub fn touched(space: &SplineSpace, n_owned: usize) -> Vec<u32> {
 /// The halo of the own elements' control points (see the module docs): each rank sends the
 /// keys of its control points to the owners of its ghosts and keeps the keys it has in common
 /// with each.
-pub fn halo(comm: &dyn Comm, local: &LocalMesh, topo: &Topology, space: &SplineSpace) -> Halo {
+pub fn halo(
+    comm: &dyn Comm,
+    local: &LocalMesh,
+    topo: &Topology,
+    space: &SplineSpace,
+    seams: Option<&HashMap<u64, u64>>,
+) -> Halo {
     let (rank, size) = (comm.rank(), comm.size());
     let global = touched(space, local.n_owned);
     let keys: Vec<Key> = global
         .iter()
-        .map(|&c| key_of(space.control_point_keys[c as usize], local, topo))
+        .map(|&c| key_of(space.control_point_keys[c as usize], local, topo, seams))
         .collect();
     let mut by_key: Vec<(Key, u32)> = keys
         .iter()

@@ -15,10 +15,12 @@
 //! error. The boundary groups of the sides are gathered whole (one all-gather of 21 doubles per
 //! facet of A and B): this is replicated, like the 2D post-fit misfit sides.
 //!
-//! **Glue.** [`Resolved::seam_map`] gives every image node of a translation pair its
-//! representative tag; the job reads its share again with the ghost rings run on across the
-//! seams, and [`glue_share`] glues it as the serial job glues the whole mesh (the ranks agree
-//! that all of them can). Rotation pairs are not glued (C⁰, as serially).
+//! **Glue.** [`Resolved::seam_map`] gives every image node of a pair (translation or
+//! rotation) its representative tag; the job reads its share again with the ghost rings run
+//! on across the seams, and [`glue_share`] glues it as the serial job glues the whole mesh
+//! (the ranks agree that all of them can). Across a rotation seam each rank's elements,
+//! ghosts too, then see the control points across it rotated (`spline::seam::unwrap`, homes
+//! by global element), and the fit couples the coordinates (`super::cg::pcg_coupled`).
 //!
 //! **Images.** After sampling, every rank
 //! contributes the order-P nodes of its own A and B facets (global tag, straight-sided position
@@ -192,9 +194,9 @@ pub struct Resolved {
 }
 
 impl Resolved {
-    /// Node tag → representative tag of the glued translation seams (the lowest tag of each
-    /// chain of pairs, as `spline::seam::glue` represents a class by its lowest vertex); only
-    /// the tags represented by another. Empty without translation pairs.
+    /// Node tag → representative tag of the glued seams (the lowest tag of each chain of
+    /// pairs, as `spline::seam::glue` represents a class by its lowest vertex); only the tags
+    /// represented by another. Empty without pairs.
     pub fn seam_map(&self) -> HashMap<u64, u64> {
         let mut parent: HashMap<u64, u64> = HashMap::new();
         fn find(parent: &mut HashMap<u64, u64>, mut t: u64) -> u64 {
@@ -203,10 +205,7 @@ impl Resolved {
             }
             t
         }
-        for (p, map) in self.pairs.iter().zip(&self.tag_maps) {
-            if !p.transform.is_translation() {
-                continue;
-            }
+        for map in &self.tag_maps {
             for &[b, a] in map {
                 let (rb, ra) = (find(&mut parent, b), find(&mut parent, a));
                 if ra != rb {
@@ -243,12 +242,13 @@ impl Resolved {
     }
 }
 
-/// The translation seams of `pairs` glued on this rank's sub-mesh (`spline::seam::glue_share`:
-/// classes represented by their lowest node tag, homes by the lowest global element, only the
-/// own elements' entities checked manifold), and why a pair stays apart, as the serial
-/// `pipeline::spline::glue_seams` says it. Collective: the ranks agree, so that either every
-/// rank glues its seams or none does. `across`: the ghost rings run across the seams (the
-/// share was read through [`Resolved::seam_map`]); otherwise nothing is glued.
+/// The seams of `pairs` (translations and rotations) glued on this rank's sub-mesh
+/// (`spline::seam::glue_share`: classes represented by their lowest node tag, homes by the
+/// lowest global element, only the own elements' entities checked manifold), and why a pair
+/// stays apart, as the serial `pipeline::spline::glue_seams` says it. Collective: the ranks
+/// agree, so that either every rank glues its seams or none does. `across`: the ghost rings
+/// run across the seams (the share was read through [`Resolved::seam_map`]); otherwise
+/// nothing is glued.
 pub fn glue_share(
     comm: &dyn Comm,
     local: &LocalMesh,
@@ -260,7 +260,8 @@ pub fn glue_share(
         return (None, None);
     }
     let translations = pairs.iter().any(|p| p.transform.is_translation());
-    let glued = if translations && across {
+    let rotations = pairs.iter().any(|p| !p.transform.is_translation());
+    let glued = if across {
         let mesh = &local.mesh;
         let mut near = vec![false; mesh.n_vertices()];
         for e in 0..local.n_owned {
@@ -273,26 +274,35 @@ pub fn glue_share(
             element: &local.global_element,
             near: &near,
         };
-        crate::spline::seam::glue_share(mesh, &resolved.local_pairs(local), Some(&order))
+        let pairs = resolved.local_pairs(local);
+        // Every pair, as the serial job glues them; where that is not manifold on some rank,
+        // the translations alone (the serial fallback).
+        let all = crate::spline::seam::glue_share(mesh, &pairs, Some(&order), true);
+        let mut ok = [f64::from(u8::from(all.is_some()))];
+        comm.min_f64(&mut ok);
+        match all.filter(|_| ok[0] > 0.0) {
+            Some(g) => Some((g, true)),
+            None if rotations && translations => {
+                crate::spline::seam::glue_share(mesh, &pairs, Some(&order), false)
+                    .map(|g| (g, false))
+            }
+            None => None,
+        }
     } else {
         None
     };
     let mut ok = [f64::from(u8::from(glued.is_some()))];
     comm.min_f64(&mut ok);
     let glued = glued.filter(|_| ok[0] > 0.0);
-    let why = if glued.is_none() && translations {
-        Some(if across {
-            "the mesh with its translation pairs glued is not manifold"
-        } else {
-            "under mpirun the seams of a partitioned input are not identified in the spline space"
-        })
-    } else if pairs.iter().any(|p| !p.transform.is_translation()) {
-        // The distributed CG solves the three coordinates apart, which a point seen rotated
-        // couples (`crate::fit::rotated`).
-        Some("under mpirun rotation pairs are not identified in the spline space")
-    } else {
-        None
+    let why = match &glued {
+        Some((_, true)) => None,
+        _ if !across => Some(
+            "under mpirun the seams of a partitioned input are not identified in the spline space",
+        ),
+        None if translations => Some("the mesh with its translation pairs glued is not manifold"),
+        _ => Some("the mesh with its rotation pairs glued is not manifold"),
     };
+    let glued = glued.map(|(g, _)| g);
     (glued, why.map(str::to_string))
 }
 

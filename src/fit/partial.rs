@@ -51,6 +51,14 @@ impl FitSpace for Subset<'_> {
     fn add_transposed(&self, e: usize, f: &BezierNet, out: &mut Vec<(u32, [f64; 3])>) {
         self.inner.add_transposed(self.elements[e], f, out)
     }
+    fn frames(&self, e: usize) -> Option<&[crate::spline::extraction::SeamFrame]> {
+        self.inner.frames(self.elements[e])
+    }
+    fn has_frames(&self) -> bool {
+        self.elements
+            .iter()
+            .any(|&e| self.inner.frames(e).is_some())
+    }
 }
 
 /// One share of the fit's system: K_s, the right-hand side F_s − K_s C0 (both unscaled), and
@@ -59,6 +67,10 @@ pub struct PartialSystem {
     pub matrix: NormalMatrix,
     pub rhs: Vec<[f64; 3]>,
     pub scale: Option<Vec<f64>>,
+    /// The share's C_s of the coupling across rotation seams ([`super::rotated`], unscaled):
+    /// `None` when none of its elements sees a control point rotated. Summed over a partition
+    /// of the elements, the shares give the serial C.
+    pub coupling: Option<super::rotated::Coupling>,
 }
 
 /// Shortest edge of each element (the size h_e of [`super::size_levels`]).
@@ -177,6 +189,12 @@ pub fn partial_normal_equations_levelled(
         elements,
     };
     let matrix = super::assembly::assemble_matrix(&subset, &sub_blocks);
+    let coupling = super::rotated::Coupling::of(&subset, &sub_blocks);
     let scale = super::control_point_scales(space, levels);
-    PartialSystem { matrix, rhs, scale }
+    PartialSystem {
+        matrix,
+        rhs,
+        scale,
+        coupling,
+    }
 }

@@ -139,8 +139,34 @@ impl Coupling {
         self.blocks.len()
     }
 
+    /// C restricted to the control points `rows` (increasing; every row and column stored is
+    /// one of them) and renumbered by their place in it: a rank's share in its local
+    /// numbering (`distributed::cg`).
+    pub fn restricted(&self, rows: &[u32]) -> Coupling {
+        let at = |g: u32| {
+            rows.binary_search(&g)
+                .expect("a coupled control point is one of the rows") as u32
+        };
+        let mut indptr = vec![0usize];
+        let (mut cols, mut blocks) = (Vec::new(), Vec::new());
+        for &g in rows {
+            let g = g as usize;
+            for k in self.indptr[g]..self.indptr[g + 1] {
+                cols.push(at(self.cols[k]));
+                blocks.push(self.blocks[k]);
+            }
+            indptr.push(cols.len());
+        }
+        debug_assert_eq!(cols.len(), self.cols.len(), "a coupled row outside `rows`");
+        Coupling {
+            indptr,
+            cols,
+            blocks,
+        }
+    }
+
     /// y += C x.
-    fn apply_add(&self, x: &[[f64; 3]], y: &mut [[f64; 3]]) {
+    pub(crate) fn apply_add(&self, x: &[[f64; 3]], y: &mut [[f64; 3]]) {
         for (r, y) in y.iter_mut().enumerate() {
             for k in self.indptr[r]..self.indptr[r + 1] {
                 let (m, v) = (&self.blocks[k], x[self.cols[k] as usize]);

@@ -217,7 +217,7 @@ impl SplineSetup {
     }
 
     /// The seams as glued for the spline space, unless identifying them failed.
-    fn live_seams(&self) -> Option<&Glued> {
+    pub(crate) fn live_seams(&self) -> Option<&Glued> {
         let failed = self.seams_failed.load(std::sync::atomic::Ordering::Relaxed);
         self.seams.as_ref().filter(|_| !failed)
     }

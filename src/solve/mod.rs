@@ -9,7 +9,8 @@
 //! residuals reached. Each coordinate runs its own CG recurrence (its own α, β); they share the
 //! operator application, so the matrix is read once per iteration for all three.
 //! [`pcg_coupled`] is the variant for operators that couple the components of a node
-//! (elasticity): one recurrence over all unknowns, with a caller-supplied preconditioner.
+//! (elasticity, the fit across rotation seams): one recurrence over all unknowns, with a
+//! caller-supplied preconditioner; its loop, [`coupled_loop`], takes [`Reductions`] too.
 //!
 //! [`pcg`] on an assembled matrix with block Jacobi (the fit's default) or block Gauss–Seidel
 //! runs through [`blocked`]: unknowns renumbered by aggregates, rows stored by value template,
@@ -240,18 +241,6 @@ fn dot3(a: &[[f64; 3]], b: &[[f64; 3]]) -> [f64; 3] {
     partials
         .iter()
         .fold([0.0; 3], |a, b| [a[0] + b[0], a[1] + b[1], a[2] + b[2]])
-}
-
-/// r = b − A x.
-fn residual(op: &dyn LinOp, b: &[[f64; 3]], x: &[[f64; 3]]) -> Vec<[f64; 3]> {
-    let mut r = vec![[0.0; 3]; b.len()];
-    op.apply(x, &mut r);
-    r.par_iter_mut().zip(b.par_iter()).for_each(|(r, b)| {
-        for k in 0..3 {
-            r[k] = b[k] - r[k];
-        }
-    });
-    r
 }
 
 /// x += α p, r −= α A p (per component α).
@@ -552,11 +541,6 @@ pub trait Preconditioner: Sync {
     fn apply(&self, r: &[[f64; 3]], z: &mut [[f64; 3]]);
 }
 
-fn dot_all(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
-    let d = dot3(a, b);
-    d[0] + d[1] + d[2]
-}
-
 /// Solve A x = b by preconditioned CG for an operator that couples the three components of a
 /// node (linear elasticity): one recurrence over all 3n unknowns, unlike [`pcg`]'s three.
 /// Stops when ‖r‖ ≤ rel_tol·‖b‖ (Euclidean norm over all components) or ≤ abs_tol.
@@ -570,8 +554,37 @@ pub fn pcg_coupled(
     let n = op.nrows();
     assert_eq!(b.len(), n);
     assert_eq!(x.len(), n);
-    let mut r = residual(op, b, x);
-    let bnorm = dot_all(b, b).sqrt();
+    coupled_loop(
+        &Rows,
+        |v, y| op.apply(v, y),
+        |r, z| pre.apply(r, z),
+        b,
+        x,
+        params,
+    )
+}
+
+/// The loop of [`pcg_coupled`] from `x`, with the dot products of `reduce` summed over the
+/// three components: the serial solver runs it on all rows ([`Rows`]), the distributed one
+/// with its sums over the processes.
+pub fn coupled_loop(
+    reduce: &dyn Reductions,
+    mut apply: impl FnMut(&[[f64; 3]], &mut [[f64; 3]]),
+    mut precondition: impl FnMut(&[[f64; 3]], &mut [[f64; 3]]),
+    b: &[[f64; 3]],
+    x: &mut [[f64; 3]],
+    params: &CgParams,
+) -> Result<CgInfo, CgError> {
+    let n = b.len();
+    let all = |d: [f64; 3]| d[0] + d[1] + d[2];
+    let mut r = vec![[0.0; 3]; n];
+    apply(x, &mut r);
+    r.par_iter_mut().zip(b.par_iter()).for_each(|(r, b)| {
+        for k in 0..3 {
+            r[k] = b[k] - r[k];
+        }
+    });
+    let bnorm = all(reduce.dot(b, b)).sqrt();
     let target = (params.rel_tol * bnorm).max(params.abs_tol);
     let rel = |rr: f64| {
         if bnorm > 0.0 {
@@ -581,10 +594,10 @@ pub fn pcg_coupled(
         }
     };
     let mut z = vec![[0.0; 3]; n];
-    pre.apply(&r, &mut z);
+    precondition(&r, &mut z);
     let mut p = z.clone();
-    let mut rz = dot_all(&r, &z);
-    let mut rr = dot_all(&r, &r);
+    let (rz3, rr3) = reduce.dot2((&r, &z), (&r, &r));
+    let (mut rz, mut rr) = (all(rz3), all(rr3));
     let mut ap = vec![[0.0; 3]; n];
     let mut it = 0;
     while rr.sqrt() > target {
@@ -595,8 +608,8 @@ pub fn pcg_coupled(
                 rel_tol: params.rel_tol,
             });
         }
-        op.apply(&p, &mut ap);
-        let pap = dot_all(&p, &ap);
+        apply(&p, &mut ap);
+        let pap = all(reduce.dot(&p, &ap));
         if !(pap > 0.0) {
             return Err(CgError::NotPositiveDefinite {
                 iteration: it,
@@ -605,12 +618,13 @@ pub fn pcg_coupled(
         }
         let alpha = rz / pap;
         advance(x, &mut r, &p, &ap, [alpha; 3]);
-        pre.apply(&r, &mut z);
-        let rz_new = dot_all(&r, &z);
+        precondition(&r, &mut z);
+        let (rz3, rr3) = reduce.dot2((&r, &z), (&r, &r));
+        let rz_new = all(rz3);
         let beta = if rz > 0.0 { rz_new / rz } else { 0.0 };
         new_direction(&mut p, &z, [beta; 3]);
         rz = rz_new;
-        rr = dot_all(&r, &r);
+        rr = all(rr3);
         it += 1;
     }
     Ok(CgInfo {

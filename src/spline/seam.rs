@@ -31,9 +31,9 @@
 //! interior; [`unwrap`] refuses (and the caller keeps the sides apart) when a shift is not a
 //! combination of the translations to `SHIFT_REL_TOL` of the period, or two common vertices
 //! disagree (translations), or when no such rigid map carries them (rotations).
-//! [`glue_translations`] and [`glue_share`] (a rank's sub-mesh) glue the translations only,
-//! for the consumers that take the coordinates apart (the energy minimisation, the
-//! distributed CG).
+//! [`glue_translations`] glues the translations only, for the consumer that takes the
+//! coordinates apart (the energy minimisation); [`glue_share`] glues a rank's sub-mesh as
+//! either glues the whole mesh (the distributed CG couples the coordinates across rotations).
 
 use super::intervals::{KnotIntervals, KnotParams, KnotSurvey, Knots};
 use super::{ControlPoint, SplineSpace};
@@ -57,7 +57,7 @@ pub struct Glued {
     /// The periods: the translation of each glued translation pair.
     pub translations: Vec<[f64; 3]>,
     /// The transforms of the glued rotation pairs (empty: translations only, see
-    /// [`glue_share`]).
+    /// [`glue_translations`]).
     pub rotations: Vec<Rigid>,
     /// The order in which [`unwrap`] picks a control point's home among the elements holding
     /// its entity (the lowest): each element's global index on a rank's sub-mesh, so that
@@ -125,19 +125,20 @@ pub struct ShareOrder<'a> {
     pub near: &'a [bool],
 }
 
-/// [`glue_translations`] of the whole mesh (`share`: `None`) or of a rank's ghosted
-/// sub-mesh, its pairs' vertex maps restricted to the vertices it holds (`share`: see
-/// [`ShareOrder`]). Rotation pairs are not glued here: the distributed fit's CG takes the
-/// three coordinates apart.
+/// [`glue`] (`rotations`) or [`glue_translations`] of the whole mesh (`share`: `None`) or of
+/// a rank's ghosted sub-mesh, its pairs' vertex maps restricted to the vertices it holds
+/// (`share`: see [`ShareOrder`]); the distributed fit couples the coordinates across the
+/// rotations (`distributed::cg`).
 pub fn glue_share(
     mesh: &LinearMesh,
     pairs: &[PeriodicPair],
     share: Option<&ShareOrder>,
+    rotations: bool,
 ) -> Option<Glued> {
-    glue_pairs(mesh, pairs, share, false)
+    glue_pairs(mesh, pairs, share, rotations)
 }
 
-/// [`glue_share`], with the rotation pairs glued too when `rotations`.
+/// [`glue_share`]: the rotation pairs glued too when `rotations`.
 fn glue_pairs(
     mesh: &LinearMesh,
     pairs: &[PeriodicPair],
