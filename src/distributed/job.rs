@@ -806,20 +806,24 @@ fn run_share(
         )?;
         super::sample::to_file_order(comm, &local, &mut output);
         // The serial report's feature summary when any rank found features (absolute
-        // deviations here; relative to the diagonal in the report).
+        // deviations here; relative to the diagonal in the report). None, as serially, when
+        // the whole mesh has no feature vertex: a rank's features may all lie on the cut
+        // fringe of its ghost rings, which the summary does not count.
         let mut any = [f64::from(u8::from(setup.features.is_some()))];
         comm.max_f64(&mut any);
-        let features = (any[0] > 0.0).then(|| {
-            super::features::feature_report(
-                comm,
-                &local,
-                setup.topo(&job),
-                setup.features.as_ref(),
-                &options.features.params,
-                output.feature_deviation,
-                1.0,
-            )
-        });
+        let features = (any[0] > 0.0)
+            .then(|| {
+                super::features::feature_report(
+                    comm,
+                    &local,
+                    setup.topo(&job),
+                    setup.features.as_ref(),
+                    &options.features.params,
+                    output.feature_deviation,
+                    1.0,
+                )
+            })
+            .filter(|r| r.found.feature_vertices > 0);
         Ok::<_, CurveError>((output, features))
     })?;
     let bytes_sample = comm.bytes_sent() - bytes_before;
