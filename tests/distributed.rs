@@ -1713,10 +1713,9 @@ fn turned_periodic_input(name: &str, args: &str, deg: f64) -> PathBuf {
     input
 }
 
-/// `periodic_probe.py` (Gmsh's `getPeriodicNodes` and node coordinates) on `file`: one link,
-/// image side `image` of master `master`, every node of the image side paired, each pair the
-/// affine image of its master to [`PERIODIC_IMAGE_TOL`] of the diagonal. Returns the link.
-fn assert_gmsh_pairs_exact(file: &Path, master: &str, image: &str) -> Value {
+/// What `periodic_probe.py` finds in `file`: Gmsh's periodic links and the facet angles
+/// across the seams and inside, from the written file's Jacobians.
+fn periodic_probe(file: &Path) -> Value {
     let out = common::run_ok(
         common::python()
             .arg(concat!(
@@ -1725,7 +1724,14 @@ fn assert_gmsh_pairs_exact(file: &Path, master: &str, image: &str) -> Value {
             ))
             .arg(file),
     );
-    let p: Value = serde_json::from_slice(&out.stdout).unwrap();
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// `periodic_probe.py` (Gmsh's `getPeriodicNodes` and node coordinates) on `file`: one link,
+/// image side `image` of master `master`, every node of the image side paired, each pair the
+/// affine image of its master to [`PERIODIC_IMAGE_TOL`] of the diagonal. Returns the link.
+fn assert_gmsh_pairs_exact(file: &Path, master: &str, image: &str) -> Value {
+    let p = periodic_probe(file);
     let what = file.display();
     let links = p["links"].as_array().unwrap();
     assert_eq!(links.len(), 1, "{what}: {links:?}");
@@ -1939,18 +1945,7 @@ fn translation_seams_are_glued_across_ranks() {
                 "{what}: a node is {worst:e} from the serial run's"
             );
             if angle {
-                let p: Value = serde_json::from_slice(
-                    &common::run_ok(
-                        common::python()
-                            .arg(concat!(
-                                env!("CARGO_MANIFEST_DIR"),
-                                "/tests/external/periodic_probe.py"
-                            ))
-                            .arg(&out),
-                    )
-                    .stdout,
-                )
-                .unwrap();
+                let p = periodic_probe(&out);
                 assert!(p["seam_facets"].as_u64().unwrap() > 0, "{what}: {p}");
                 for w in ["max", "mean"] {
                     let seam = p[format!("seam_angle_{w}")].as_f64().unwrap();
@@ -2032,18 +2027,7 @@ fn rotation_seams_are_glued_across_ranks() {
                     "{what}: CG {rank_its} iterations, serial {its}"
                 );
                 if knots == "graded" {
-                    let p: Value = serde_json::from_slice(
-                        &common::run_ok(
-                            common::python()
-                                .arg(concat!(
-                                    env!("CARGO_MANIFEST_DIR"),
-                                    "/tests/external/periodic_probe.py"
-                                ))
-                                .arg(&out),
-                        )
-                        .stdout,
-                    )
-                    .unwrap();
+                    let p = periodic_probe(&out);
                     // Every facet of the 6 × 1 seam.
                     assert!(p["seam_facets"].as_u64().unwrap() >= 6, "{what}: {p}");
                     let seam = p["seam_angle_max"].as_f64().unwrap();
