@@ -260,6 +260,22 @@ impl JobArgs {
     /// an adapter is an error).
     pub(crate) fn resolve(self, output: OutputOptions) -> anyhow::Result<CurveOptions> {
         polyspline::fit::check_kink_angle(self.kink_angle)?;
+        // The rule redoes the least-squares spline pass: refused where there is none, not
+        // silently ignored (`--fit energy` demotes uncertified elements itself).
+        if self.demote_uncertified
+            && (self.straight
+                || matches!(self.method, values::Method::Elastic)
+                || matches!(
+                    self.fit,
+                    values::FitPreset::None | values::FitPreset::Energy
+                ))
+        {
+            anyhow::bail!(
+                "--demote-uncertified applies to the least-squares spline fit only: not with \
+                 --straight, --method elastic, --fit none or --fit energy (which demotes \
+                 uncertified elements itself)"
+            );
+        }
         let backend = BackendChoice::from(self.backend).resolve(self.precision.map(Into::into))?;
         Ok(self.options(backend, output))
     }

@@ -130,6 +130,32 @@ fn generate_refuses_element_counts_out_of_range() {
     assert!(files_in(&d).is_empty());
 }
 
+/// `--demote-uncertified` redoes the least-squares spline pass: where the job has none it is
+/// refused in one line, before any output is written.
+#[test]
+fn demote_uncertified_is_refused_where_no_fit_runs() {
+    let d = dir("demote");
+    let input = two_quads(&d);
+    for extra in [
+        &["--straight"][..],
+        &["--fit", "none"],
+        &["--fit", "energy"],
+        &["--method", "elastic"],
+    ] {
+        let e = fails(
+            bin()
+                .arg("curve")
+                .arg(&input)
+                .arg("-o")
+                .arg(d.join("out.msh"))
+                .arg("--demote-uncertified")
+                .args(extra),
+        );
+        assert!(e.contains("--demote-uncertified"), "{extra:?}: {e}");
+    }
+    assert!(!d.join("out.msh").exists());
+}
+
 #[test]
 fn outputs_are_checked_before_any_work() {
     let d = dir("outputs");
