@@ -70,6 +70,14 @@ fn binary_turbine(name: &str) -> PathBuf {
     turbine
 }
 
+/// [`mpirun`] under `timeout 120`: a run whose ranks hang exits with status 124.
+fn mpirun_within_120s(np: usize) -> Command {
+    let mut c = Command::new("timeout");
+    c.args(["120", "mpirun", "--oversubscribe", "-np", &np.to_string()])
+        .envs(mpirun(np).get_envs().filter_map(|(k, v)| Some((k, v?))));
+    c
+}
+
 fn have_mpirun() -> bool {
     let ok = Command::new("mpirun")
         .arg("--version")
@@ -576,16 +584,14 @@ fn a_bad_share_of_the_input_stops_every_rank_with_one_error_line() {
         for (bad, what) in cases {
             let out = scratch(&format!("defect_np{np}.msh"));
             let _ = std::fs::remove_file(&out);
-            let mut cmd = Command::new("timeout");
-            cmd.args(["120", "mpirun", "--oversubscribe", "-np", &np.to_string()])
-                .envs(mpirun(np).get_envs().filter_map(|(k, v)| Some((k, v?))))
-                .args([
-                    BIN,
-                    "curve",
-                    bad.to_str().unwrap(),
-                    "-o",
-                    out.to_str().unwrap(),
-                ]);
+            let mut cmd = mpirun_within_120s(np);
+            cmd.args([
+                BIN,
+                "curve",
+                bad.to_str().unwrap(),
+                "-o",
+                out.to_str().unwrap(),
+            ]);
             let o = cmd.output().unwrap();
             let name = bad.file_name().unwrap().to_string_lossy();
             assert_ne!(o.status.code(), Some(124), "{name} at {np} ranks: hung");
@@ -625,9 +631,7 @@ fn a_rank_without_features_takes_part_in_the_shared_inheritance() {
         let out = scratch(&format!("torus189_np{np}.msh"));
         let report = scratch(&format!("torus189_np{np}.json"));
         let _ = std::fs::remove_file(&out);
-        let o = Command::new("timeout")
-            .args(["120", "mpirun", "--oversubscribe", "-np", &np.to_string()])
-            .envs(mpirun(np).get_envs().filter_map(|(k, v)| Some((k, v?))))
+        let o = mpirun_within_120s(np)
             .args([
                 BIN,
                 "curve",
