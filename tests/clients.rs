@@ -737,9 +737,15 @@ fn cli_volume_name_and_vtu_boundary() {
             "would overwrite the mesh output",
         ),
         (vec!["--vtu-boundary", "b.msh"], "extension .vtu"),
-        (vec!["--volume-name", ""], "--volume-name"),
+        (vec!["--volume-name", ""], "must be non-empty"),
     ] {
-        let out = scratch("cli_refused.vtu");
+        // The volume name is an MSH (and CGNS, Abaqus) option: refused for a VTU output.
+        let ext = if args[0] == "--volume-name" {
+            "msh"
+        } else {
+            "vtu"
+        };
+        let out = scratch(&format!("cli_refused.{ext}"));
         let _ = std::fs::remove_file(&out);
         let args: Vec<String> = args
             .iter()

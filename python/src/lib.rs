@@ -196,7 +196,8 @@ fn curve_file(
             .into_iter()
             .map(Into::into),
     );
-    let files: FileArgs = options::parse(py, argv)?;
+    let (mut files, matches) = options::parse_matches::<FileArgs>(py, argv)?;
+    files.record_given(&matches);
     let progress = PyProgress::new(progress);
     let result = py.detach(|| {
         let job = prepare_files(files).map_err(|e| (e, "OutputError"))?;
@@ -221,7 +222,9 @@ fn curve_mesh(
     progress: Option<Py<PyAny>>,
 ) -> PyResult<Curved> {
     let argv = options::argv::<JobArgs>(py, options, &[])?;
-    let job: JobArgs = options::parse(py, argv.into_iter().map(Into::into).collect())?;
+    let (mut job, matches) =
+        options::parse_matches::<JobArgs>(py, argv.into_iter().map(Into::into).collect())?;
+    job.record_given(&matches);
     let source = match mesh.extract::<PathBuf>() {
         Ok(path) => Source::Path(path),
         Err(_) => Source::Raw(convert::raw_from_py(mesh)?),
@@ -300,9 +303,14 @@ impl Curved {
     /// `polyspline curve`; atomically, as the command line writes.
     fn write(&self, py: Python<'_>, path: PathBuf, options: &Bound<'_, PyDict>) -> PyResult<()> {
         let argv = options::argv::<OutputArgs>(py, options, &[])?;
-        let out: OutputArgs = options::parse(py, argv.into_iter().map(Into::into).collect())?;
+        let (mut out, matches) =
+            options::parse_matches::<OutputArgs>(py, argv.into_iter().map(Into::into).collect())?;
+        out.record_given(&matches);
         let ho = &self.ho;
         let result = py.detach(|| -> anyhow::Result<()> {
+            if let Some(format) = polyspline::pipeline::OutputFormat::from_path(&path) {
+                out.refuse_inapplicable(format)?;
+            }
             let options = out.options();
             options.check()?;
             polyspline::pipeline::write_high_order(ho, &path, &options, &[])?;

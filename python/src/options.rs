@@ -6,7 +6,7 @@
 //! leaves an option at its default; every other value is passed as `str(value)`. Parse errors
 //! are `polyspline.ParameterError` (a `ValueError`) with clap's one-line message.
 
-use clap::{ArgAction, Args, Command, FromArgMatches};
+use clap::{ArgAction, ArgMatches, Args, Command, FromArgMatches};
 use pyo3::exceptions::PyTypeError;
 use pyo3::prelude::*;
 use pyo3::types::{PyBool, PyDict};
@@ -67,6 +67,14 @@ pub(crate) fn argv<T: Args>(
 
 /// Parse `argv` into group `T`, as the command line would.
 pub(crate) fn parse<T: Args + FromArgMatches>(py: Python<'_>, argv: Vec<OsString>) -> PyResult<T> {
+    Ok(parse_matches(py, argv)?.0)
+}
+
+/// [`parse`], with the matches (which tell the options given from those left at defaults).
+pub(crate) fn parse_matches<T: Args + FromArgMatches>(
+    py: Python<'_>,
+    argv: Vec<OsString>,
+) -> PyResult<(T, ArgMatches)> {
     let message = |e: clap::Error| {
         let text = e.to_string();
         let line = text.lines().next().unwrap_or_default();
@@ -74,7 +82,8 @@ pub(crate) fn parse<T: Args + FromArgMatches>(py: Python<'_>, argv: Vec<OsString
         super::error(py, "ParameterError", line)
     };
     let matches = command::<T>().try_get_matches_from(argv).map_err(message)?;
-    T::from_arg_matches(&matches).map_err(message)
+    let parsed = T::from_arg_matches(&matches).map_err(message)?;
+    Ok((parsed, matches))
 }
 
 /// Option id → default value as the command line spells it (`None`: no default; flags:

@@ -34,6 +34,22 @@ def test_out_of_range_option_has_the_cli_message(tmp_path):
         polyspline.curve(QUADS, snap_boundary="yes")
 
 
+def test_an_option_the_job_cannot_use_is_refused_with_the_cli_message(tmp_path):
+    with pytest.raises(polyspline.ParameterError) as e:
+        polyspline.curve_file(QUADS, tmp_path / "o.msh", straight=True, snap_boundary=True,
+                              backend="cpu")
+    assert str(e.value) == cli_error("curve", QUADS, "-o", tmp_path / "o.msh", "--straight",
+                                     "--snap-boundary", "--backend", "cpu")
+    assert "--snap-boundary" in str(e.value) and not (tmp_path / "o.msh").exists()
+    with pytest.raises(polyspline.ParameterError, match="--young"):
+        polyspline.curve(QUADS, young=3.0, backend="cpu")
+    c = polyspline.curve(QUADS, order=2, backend="cpu")
+    with pytest.raises(polyspline.ParameterError, match="--binary"):
+        c.write(tmp_path / "o.vtu", binary=True)
+    assert not (tmp_path / "o.vtu").exists()
+    c.write(tmp_path / "o.msh", binary=True)
+
+
 def test_missing_and_garbled_inputs_are_input_errors(tmp_path):
     missing = tmp_path / "missing.msh"
     with pytest.raises(polyspline.InputError) as e:

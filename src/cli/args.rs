@@ -36,6 +36,11 @@ pub(crate) struct ElasticArgs {
 }
 
 impl ElasticArgs {
+    /// `--elastic-solver`.
+    pub(crate) fn solver(&self) -> values::ElasticSolver {
+        self.elastic_solver
+    }
+
     /// The elastic analogy's parameters; `cg_tol` is `--cg-tol` (default: the elastic CG's).
     pub(crate) fn params(&self, cg_tol: Option<f64>) -> ElasticParams {
         ElasticParams {
@@ -70,6 +75,11 @@ pub(crate) struct KnotArgs {
 }
 
 impl KnotArgs {
+    /// Whether `--knot-intervals uniform` was chosen (no interval is graded).
+    pub(crate) fn uniform(&self) -> bool {
+        self.knot_intervals == values::KnotIntervals::Uniform
+    }
+
     pub(crate) fn params(&self) -> KnotParams {
         KnotParams {
             intervals: self.knot_intervals.into(),

@@ -17,7 +17,8 @@ use polyspline::fit::{
 use polyspline::io::output::{check_outputs, prepare};
 use polyspline::mesh::MeshOptions;
 use polyspline::pipeline::{
-    CurveOptions, CurveReport, Geometry, Method, OutputFormat, OutputOptions, curve_prepared,
+    CurveError, CurveOptions, CurveReport, Geometry, Method, OutputFormat, OutputOptions,
+    curve_prepared,
 };
 use polyspline::progress::Progress;
 use polyspline::solve::{CgParams, CgPreconditioner};
@@ -31,6 +32,13 @@ pub(super) struct Args {
     /// No progress spinner on stderr (it is also off when stderr is not a terminal).
     #[arg(short, long)]
     quiet: bool,
+}
+
+impl Args {
+    /// Record which options `matches` (the subcommand's parse) holds from the command line.
+    pub(super) fn record_given(&mut self, matches: &clap::ArgMatches) {
+        self.files.record_given(matches);
+    }
 }
 
 /// The input, the outputs, and the options of the job and of the writers.
@@ -53,6 +61,14 @@ pub(crate) struct FileArgs {
     pub(crate) job: JobArgs,
     #[command(flatten)]
     pub(crate) out: OutputArgs,
+}
+
+impl FileArgs {
+    /// Record which options `matches` (this group's parse) holds from the command line.
+    pub(crate) fn record_given(&mut self, matches: &clap::ArgMatches) {
+        self.job.record_given(matches);
+        self.out.record_given(matches);
+    }
 }
 
 /// How to curve: every option of the job but the files and the writers'.
@@ -184,6 +200,10 @@ pub(crate) struct JobArgs {
     /// Float type of the GPU kernels (default: f64 where the adapter has it).
     #[arg(long, value_enum)]
     precision: Option<values::Precision>,
+    /// The options given (on the command line or as keywords), for [`JobArgs::resolve`]'s
+    /// refusal of those this job cannot use.
+    #[arg(skip)]
+    given: Given,
 }
 
 /// How to write: the options of the output formats.
@@ -206,9 +226,45 @@ pub(crate) struct OutputArgs {
     /// holds the volume cells only).
     #[arg(long, value_name = "FILE.vtu")]
     pub(crate) vtu_boundary: Option<PathBuf>,
+    /// The options given, for [`OutputArgs::refuse_inapplicable`].
+    #[arg(skip)]
+    given: Given,
 }
 
 impl OutputArgs {
+    /// Record which options `matches` (this group's parse) holds from the command line.
+    pub(crate) fn record_given(&mut self, matches: &clap::ArgMatches) {
+        self.given = Given::of(matches);
+    }
+
+    /// Refuse the writers' options given for an output format that does not use them.
+    pub(crate) fn refuse_inapplicable(&self, format: OutputFormat) -> anyhow::Result<()> {
+        let name = match format {
+            OutputFormat::Msh => "Gmsh MSH",
+            OutputFormat::Vtu => "VTU",
+            OutputFormat::Cgns => "CGNS",
+            OutputFormat::Inp => "Abaqus",
+        };
+        let msh = format!("the output is {name}, not Gmsh MSH");
+        self.given.refuse(&[
+            Rule::new(
+                &["msh_version", "binary"],
+                format == OutputFormat::Msh,
+                &msh,
+            ),
+            Rule::new(
+                &["vtu_encoding"],
+                format == OutputFormat::Vtu || self.vtu_boundary.is_some(),
+                &format!("the output is {name}, not VTU, and no --vtu-boundary is written"),
+            ),
+            Rule::new(
+                &["volume_name"],
+                format != OutputFormat::Vtu,
+                "VTU cells carry no group names",
+            ),
+        ])
+    }
+
     /// The library's output options (unchecked: the writers validate them).
     pub(crate) fn options(self) -> OutputOptions {
         OutputOptions {
@@ -260,24 +316,148 @@ impl JobArgs {
     /// an adapter is an error).
     pub(crate) fn resolve(self, output: OutputOptions) -> anyhow::Result<CurveOptions> {
         polyspline::fit::check_kink_angle(self.kink_angle)?;
-        // The rule redoes the least-squares spline pass: refused where there is none, not
-        // silently ignored (`--fit energy` demotes uncertified elements itself).
-        if self.demote_uncertified
-            && (self.straight
-                || matches!(self.method, values::Method::Elastic)
-                || matches!(
-                    self.fit,
-                    values::FitPreset::None | values::FitPreset::Energy
-                ))
-        {
-            anyhow::bail!(
-                "--demote-uncertified applies to the least-squares spline fit only: not with \
-                 --straight, --method elastic, --fit none or --fit energy (which demotes \
-                 uncertified elements itself)"
-            );
-        }
         let backend = BackendChoice::from(self.backend).resolve(self.precision.map(Into::into))?;
+        self.refuse_inapplicable(backend.gpu().is_some())?;
         Ok(self.options(backend, output))
+    }
+
+    /// Record which options `matches` (this group's parse) holds from the command line.
+    pub(crate) fn record_given(&mut self, matches: &clap::ArgMatches) {
+        self.given = Given::of(matches);
+    }
+
+    /// Refuse the options given that this job cannot use (`gpu`: it runs on a GPU), naming
+    /// them and why, instead of ignoring them. One rule per group of options: the job uses
+    /// them exactly when the rule's condition holds.
+    fn refuse_inapplicable(&self, gpu: bool) -> anyhow::Result<()> {
+        use values::{ElasticSolver as Es, EnergySolver as En, FitPreset as Fp, FitSolver as Fs};
+        let elastic = self.method == values::Method::Elastic;
+        let spline = !self.straight;
+        let fitted = spline && self.fit != Fp::None;
+        let no_fit = if self.straight {
+            "--straight writes the straight-sided elevation: no spline, fit or line search"
+        } else {
+            "--fit none samples the initial spline: nothing is fitted"
+        };
+        let fit_cg = fitted && self.fit_solver != Fs::Cholesky;
+        let elastic_cg = elastic && self.elastic.solver() != Es::Cholesky;
+        let no_cg = if !fitted && !elastic {
+            no_fit.to_string()
+        } else {
+            "no CG solve runs: --fit-solver cholesky, without --method elastic solved by CG"
+                .to_string()
+        };
+        let preconditioner = if !fit_cg {
+            no_cg.clone()
+        } else {
+            "the GPU backend's CG uses the diagonal, jacobi".to_string()
+        };
+        let energy = self.fit == Fp::Energy;
+        let energy_solver = self.energy.energy_solver;
+        self.given.refuse(&[
+            Rule::new(
+                &[
+                    "w_corner",
+                    "w_boundary_corner",
+                    "w_midpoint",
+                    "w_deep_midpoint",
+                    "w_extraordinary_midpoint",
+                    "w_boundary_midpoint",
+                    "w_frame_corner",
+                    "w_frame_midpoint",
+                    "w_feature",
+                    "fit_solver",
+                ],
+                fitted,
+                no_fit,
+            ),
+            Rule::new(&["cg_tol"], fit_cg || elastic_cg, &no_cg),
+            Rule::new(
+                &["cg_preconditioner"],
+                fit_cg
+                    && (!gpu || self.cg_preconditioner == Some(values::CgPreconditioner::Jacobi)),
+                &preconditioner,
+            ),
+            Rule::new(
+                &["kink_angle"],
+                fitted && FitPreset::from(self.fit).smooth_targets(),
+                if fitted {
+                    "kinks are found for the targets of --fit smooth and --fit energy only"
+                } else {
+                    no_fit
+                },
+            ),
+            Rule::new(
+                &[
+                    "knot_intervals",
+                    "feature_angle",
+                    "no_feature_tags",
+                    "feature_edits",
+                    "ignore_features",
+                    "max_bisections",
+                    "min_det_fraction",
+                    "min_quality_fraction",
+                    "percentile_quality_fraction",
+                    "line_search",
+                    "snap_boundary",
+                ],
+                spline,
+                no_fit,
+            ),
+            Rule::new(
+                &["knot_max_ratio", "knot_max_spread"],
+                spline && !self.knots.uniform(),
+                if spline {
+                    "--knot-intervals uniform grades no interval"
+                } else {
+                    no_fit
+                },
+            ),
+            // The rule redoes the least-squares spline pass (`--fit energy` demotes
+            // uncertified elements itself).
+            Rule::new(
+                &["demote_uncertified"],
+                fitted && !elastic && !energy,
+                "the demotion redoes the least-squares spline fit: not with --straight, \
+                 --method elastic, --fit none or --fit energy (which demotes uncertified \
+                 elements itself)",
+            ),
+            Rule::new(
+                &[
+                    "young",
+                    "poisson",
+                    "elastic_solver",
+                    "elastic_stiffening",
+                ],
+                elastic,
+                "the elastic analogy runs with --method elastic only",
+            ),
+            Rule::new(
+                &["elastic_preconditioner"],
+                elastic_cg,
+                "the elastic analogy's CG runs with --method elastic and an --elastic-solver other than cholesky",
+            ),
+            Rule::new(
+                &["energy_solver", "energy_weight", "energy_max_iterations"],
+                energy,
+                "the energy minimiser runs with --fit energy only",
+            ),
+            Rule::new(
+                &["energy_tol"],
+                energy && energy_solver == En::Lbfgs,
+                "L-BFGS runs with --fit energy and --energy-solver lbfgs only",
+            ),
+            Rule::new(
+                &["energy_sweep_tol"],
+                energy && energy_solver == En::Colored,
+                "coloured sweeps run with --fit energy and --energy-solver colored only",
+            ),
+            Rule::new(
+                &["precision"],
+                gpu,
+                "the job runs on the CPU: --backend cpu, or --backend auto without a hardware GPU",
+            ),
+        ])
     }
 
     /// The preset's weights with the single weights given on the command line.
@@ -422,6 +602,69 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The options given on the command line or as keyword arguments (clap ids), as opposed to
+/// those left at their defaults: an option given where the job cannot use it is refused.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Given(Vec<String>);
+
+impl Given {
+    /// The arguments of `matches` whose value came from the command line.
+    fn of(matches: &clap::ArgMatches) -> Given {
+        use clap::parser::ValueSource;
+        Given(
+            matches
+                .ids()
+                .filter(|id| matches.value_source(id.as_str()) == Some(ValueSource::CommandLine))
+                .map(|id| id.as_str().to_owned())
+                .collect(),
+        )
+    }
+
+    /// The first rule whose options were given though the job does not use them, as one line
+    /// naming them and why.
+    fn refuse(&self, rules: &[Rule]) -> anyhow::Result<()> {
+        for rule in rules.iter().filter(|r| !r.applies) {
+            let given: Vec<String> = rule
+                .options
+                .iter()
+                .filter(|id| self.0.iter().any(|g| g == *id))
+                .map(|id| format!("--{}", id.replace('_', "-")))
+                .collect();
+            if !given.is_empty() {
+                let (verb, pronoun) = match given.len() {
+                    1 => ("does", "it"),
+                    _ => ("do", "them"),
+                };
+                // An options error, as the library's own refusals (Python: ParameterError).
+                return Err(CurveError::Options(format!(
+                    "{} {verb} not apply to this job ({}); drop {pronoun}",
+                    given.join(", "),
+                    rule.why
+                ))
+                .into());
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Options (clap ids), whether the job uses them, and why not when it does not.
+struct Rule<'a> {
+    options: &'a [&'a str],
+    applies: bool,
+    why: &'a str,
+}
+
+impl<'a> Rule<'a> {
+    fn new(options: &'a [&'a str], applies: bool, why: &'a str) -> Self {
+        Rule {
+            options,
+            applies,
+            why,
+        }
+    }
+}
+
 /// A `curve` job whose options and outputs passed every check that needs no work.
 pub(crate) struct Prepared {
     mesh: PathBuf,
@@ -478,6 +721,7 @@ pub(crate) fn prepare_files(args: FileArgs) -> anyhow::Result<Prepared> {
             .chain(report.as_deref())
             .collect();
         check_outputs(&outputs, &inputs)?;
+        out.refuse_inapplicable(format)?;
         Ok(parts)
     };
     // Under mpirun every rank finds the same error: one line, from rank 0.

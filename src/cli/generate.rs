@@ -216,6 +216,14 @@ pub(super) fn run(args: Args) -> anyhow::Result<()> {
     let output = &args.output;
     Shape::from(args.shape.kind).check(args.shape.elements)?;
     check_outputs(&[output], &[])?;
+    // Binary is a Gmsh MSH option: refused for another format, not ignored.
+    let format = polyspline::pipeline::OutputFormat::from_path(output);
+    if args.binary && format.is_some_and(|f| f != polyspline::pipeline::OutputFormat::Msh) {
+        anyhow::bail!(
+            "{}: --binary does not apply (it sets the Gmsh MSH writer and the output is not .msh); drop it",
+            output.display()
+        );
+    }
     let made = make(&args.shape, output)?;
     if let Some(line) = &made.spacing {
         eprintln!("{line}");

@@ -23,7 +23,7 @@ mod plot;
 mod values;
 
 use args::{ElasticArgs, FeatureArgs, KnotArgs, PeriodicArgs};
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 use polyspline::io::read_raw;
 use polyspline::mesh::HighOrderMesh;
 use std::path::Path;
@@ -65,6 +65,17 @@ enum Command {
 /// Exit status of `check` when the mesh has an invalid element (sampled det J ≤ 0): distinct
 /// from 1 (an error) and 2 (a usage error), so a script can tell a bad mesh from a failed run.
 pub const EXIT_INVALID_MESH: u8 = 3;
+
+/// The process arguments, parsed; `curve` also records which options were given, so that it
+/// can refuse one given where the job cannot use it (clap errors exit as [`Parser::parse`]'s).
+pub fn parse() -> Cli {
+    let matches = Cli::command().get_matches();
+    let mut cli = Cli::from_arg_matches(&matches).unwrap_or_else(|e| e.exit());
+    if let (Command::Curve(args), Some(("curve", m))) = (&mut cli.command, matches.subcommand()) {
+        args.record_given(m);
+    }
+    cli
+}
 
 /// Run the parsed command: the process's exit status on success (0, or
 /// [`EXIT_INVALID_MESH`] from `check`).

@@ -156,6 +156,192 @@ fn demote_uncertified_is_refused_where_no_fit_runs() {
     assert!(!d.join("out.msh").exists());
 }
 
+/// An option given where the job cannot use it is refused in one line naming it (and no file
+/// is written), never ignored: every group of the table in `cli::curve`, and the same options
+/// where they do apply run.
+#[test]
+fn options_that_cannot_apply_are_refused_by_name() {
+    let d = dir("inapplicable");
+    let input = two_quads(&d);
+    let refused: &[(&[&str], &str, &[&str])] = &[
+        (
+            &["--straight", "--snap-boundary"],
+            "msh",
+            &["--snap-boundary"],
+        ),
+        (
+            &["--straight", "--knot-intervals", "graded"],
+            "msh",
+            &["--knot-intervals"],
+        ),
+        (
+            &["--straight", "--feature-angle", "20"],
+            "msh",
+            &["--feature-angle"],
+        ),
+        (
+            &["--straight", "--max-bisections", "3"],
+            "msh",
+            &["--max-bisections"],
+        ),
+        (&["--straight", "--w-corner", "5"], "msh", &["--w-corner"]),
+        (
+            &["--fit", "none", "--w-corner", "5", "--fit-solver", "cg"],
+            "msh",
+            &["--w-corner", "--fit-solver"],
+        ),
+        (&["--fit", "none", "--cg-tol", "1e-8"], "msh", &["--cg-tol"]),
+        (
+            &["--fit-solver", "cholesky", "--cg-preconditioner", "jacobi"],
+            "msh",
+            &["--cg-preconditioner"],
+        ),
+        (
+            &["--fit", "position", "--kink-angle", "20"],
+            "msh",
+            &["--kink-angle"],
+        ),
+        (
+            &["--knot-intervals", "uniform", "--knot-max-ratio", "3"],
+            "msh",
+            &["--knot-max-ratio"],
+        ),
+        (
+            &["--young", "3", "--poisson", "0.3"],
+            "msh",
+            &["--young", "--poisson"],
+        ),
+        (
+            &[
+                "--method",
+                "elastic",
+                "--elastic-solver",
+                "cholesky",
+                "--elastic-preconditioner",
+                "jacobi",
+            ],
+            "msh",
+            &["--elastic-preconditioner"],
+        ),
+        (&["--energy-weight", "2"], "msh", &["--energy-weight"]),
+        (
+            &["--fit", "energy", "--energy-sweep-tol", "0.1"],
+            "msh",
+            &["--energy-sweep-tol"],
+        ),
+        (
+            &["--backend", "cpu", "--precision", "f32"],
+            "msh",
+            &["--precision"],
+        ),
+        (
+            &["--binary", "--msh-version", "2.2"],
+            "vtu",
+            &["--binary", "--msh-version"],
+        ),
+        (&["--volume-name", "v"], "vtu", &["--volume-name"]),
+        (&["--vtu-encoding", "ascii"], "msh", &["--vtu-encoding"]),
+    ];
+    for (extra, ext, names) in refused {
+        let out = d.join(format!("out.{ext}"));
+        let e = fails(
+            bin()
+                .arg("curve")
+                .arg(&input)
+                .arg("-o")
+                .arg(&out)
+                .args(*extra),
+        );
+        assert!(e.contains("not apply to this job"), "{extra:?}: {e}");
+        for n in *names {
+            assert!(e.contains(n), "{extra:?}: {e} names no {n}");
+        }
+        assert!(!out.exists(), "{extra:?}: wrote {}", out.display());
+    }
+    // `generate` too: binary is an MSH option.
+    let out = d.join("g.vtu");
+    let e = fails(
+        bin()
+            .args(["generate", "disc", "--elements", "50", "--binary", "-o"])
+            .arg(&out),
+    );
+    assert!(e.contains("--binary"), "{e}");
+    assert!(!out.exists());
+    // Where they apply, the same options run.
+    let applies: &[(&[&str], &str)] = &[
+        (
+            &[
+                "--method",
+                "elastic",
+                "--young",
+                "3",
+                "--snap-boundary",
+                "--w-corner",
+                "4",
+            ],
+            "msh",
+        ),
+        (
+            &[
+                "--fit",
+                "energy",
+                "--energy-solver",
+                "colored",
+                "--energy-sweep-tol",
+                "0.1",
+            ],
+            "msh",
+        ),
+        (
+            &[
+                "--method",
+                "elastic",
+                "--fit-solver",
+                "cholesky",
+                "--cg-tol",
+                "1e-7",
+            ],
+            "msh",
+        ),
+        (
+            &[
+                "--knot-intervals",
+                "graded",
+                "--knot-max-ratio",
+                "3",
+                "--kink-angle",
+                "20",
+            ],
+            "msh",
+        ),
+        (
+            &["--binary", "--msh-version", "2.2", "--volume-name", "v"],
+            "msh",
+        ),
+        (&["--vtu-encoding", "ascii"], "vtu"),
+        (&["--straight", "--order", "3"], "msh"),
+    ];
+    for (extra, ext) in applies {
+        let out = d.join(format!("ok.{ext}"));
+        let o = run(
+            bin()
+                .arg("curve")
+                .arg("-q")
+                .arg(&input)
+                .arg("-o")
+                .arg(&out)
+                .args(*extra),
+            Duration::from_secs(20),
+        );
+        assert!(
+            o.status.success(),
+            "{extra:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        assert!(out.exists(), "{extra:?}");
+    }
+}
+
 #[test]
 fn outputs_are_checked_before_any_work() {
     let d = dir("outputs");
