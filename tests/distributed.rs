@@ -503,6 +503,7 @@ fn unsupported_options_under_mpirun_fail_with_one_line_and_write_nothing() {
     std::fs::write(&edits, "").unwrap();
     for (args, what) in [
         (vec!["--fit", "energy"], "--fit energy"),
+        (vec!["--fit-solver", "cholesky"], "--fit-solver cholesky"),
         (
             vec!["--cg-preconditioner", "block-sgs"],
             "--cg-preconditioner block-sgs",

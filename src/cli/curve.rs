@@ -139,7 +139,8 @@ pub(crate) struct JobArgs {
     knots: KnotArgs,
     /// Solver of the fit's normal equations: `auto` factors small systems (at most 12,000
     /// control points in 2D, 1,500 in 3D) by sparse Cholesky on the CPU backend and solves
-    /// the rest by CG; `cg` and `cholesky` force one (distributed runs always use CG).
+    /// the rest by CG; `cg` and `cholesky` force one (distributed runs use CG: `auto` is CG
+    /// there and `cholesky` is refused).
     #[arg(long, value_enum, default_value_t = FitSolver::default().into())]
     fit_solver: values::FitSolver,
     /// Relative tolerance of the conjugate-gradient solves (fit and elastic analogy)

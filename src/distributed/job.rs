@@ -107,6 +107,11 @@ fn check_supported(options: &CurveOptions) -> Result<(), CurveError> {
     if options.fit.weights.deep_midpoint.is_some() {
         return unsupported("--w-deep-midpoint");
     }
+    // The ranks solve by CG (`auto` means CG here); a factorisation of the whole system is
+    // not distributed.
+    if options.fit.solver == crate::fit::FitSolver::Cholesky {
+        return unsupported("--fit-solver cholesky");
+    }
     // The sweeps of block Gauss–Seidel run across the whole matrix in one order (the CG
     // refuses it too: `CgError::Unavailable`).
     if let crate::solve::CgPreconditioner::BlockSgs { .. } = options.fit.cg.preconditioner {
