@@ -24,7 +24,10 @@ use std::collections::{BTreeSet, HashMap};
 /// facets belong to the same two element rings (a facet of the cut fringe of the ghost layer
 /// touches no vertex of a one-ring element). The size scaling D of a control point, the
 /// largest level of the elements using it, is agreed over the halo instead
-/// ([`min_over_halo`]), so no ghost's own stencil is needed.
+/// ([`min_over_halo`]), so no ghost's own stencil is needed. What reads farther is taken
+/// from the ranks that compute it instead of deeper rings ([`VertexHalo`]): the interior
+/// inheritance's paths, and on coarse surfaces the arc normals, whose flag and grid normal
+/// read the two-ring models of vertices two rings out (`fit::smooth`).
 pub const GHOST_DEPTH: usize = 2;
 
 /// `v[i]` ← min over the ranks sharing control point `halo.global[i]` of their values (one
@@ -216,33 +219,57 @@ impl BlendShare for LocalShare<'_> {
 /// [`InheritShare`] of a ghosted sub-mesh: a rank computes the vertices of its own elements;
 /// the other vertices of the elements around them take the records of the rank owning the
 /// lowest global element among the ghosts at that vertex (a vertex of one of its own
-/// elements). The whole mesh's vertex order is the node tags' (the file's order, as the
-/// serial reader numbers the vertices, wherever the tags increase through the file).
+/// elements); with [`InheritShare::exchange_all`], every other vertex of its ghost rings does.
+/// The whole mesh's vertex order is the node tags' (the file's order, as the serial reader
+/// numbers the vertices, wherever the tags increase through the file).
 pub struct VertexHalo<'a> {
     comm: &'a dyn Comm,
-    global_vertex: &'a [u64],
+    local: &'a LocalMesh,
     computed: Vec<bool>,
-    /// Per rank: the local vertices whose records it asked for, in its order.
+    /// The vertices around the computed ones: per rank, the local vertices whose records it
+    /// asked for, in its order, and the local vertices whose records come from it.
+    around: Lists,
+    /// The same for every vertex of the ghost rings, made at the first
+    /// [`InheritShare::exchange_all`].
+    all: std::cell::OnceCell<Lists>,
+}
+
+/// Per rank: the local vertices whose records it asked for (`give`), and the local vertices
+/// whose records come from it (`take`), both in the order asked.
+struct Lists {
     give: Vec<(usize, Vec<u32>)>,
-    /// Per rank: the local vertices whose records come from it, in the order asked.
     take: Vec<(usize, Vec<u32>)>,
 }
 
 impl<'a> VertexHalo<'a> {
     /// The halo of `local`'s vertices (collective: one exchange of the requests).
     pub fn new(comm: &'a dyn Comm, local: &'a LocalMesh) -> Self {
-        let (mesh, size) = (&local.mesh, comm.size());
+        let mesh = &local.mesh;
         let mut computed = vec![false; mesh.n_vertices()];
         for e in 0..local.n_owned {
             for &v in mesh.element(e) {
                 computed[v as usize] = true;
             }
         }
+        let around = Self::lists(comm, local, &computed, false);
+        VertexHalo {
+            comm,
+            local,
+            computed,
+            around,
+            all: std::cell::OnceCell::new(),
+        }
+    }
+
+    /// The request lists of the vertices not computed here: those of the ghosts touching a
+    /// computed vertex, or (`all`) those of every ghost (collective: one exchange).
+    fn lists(comm: &dyn Comm, local: &LocalMesh, computed: &[bool], all: bool) -> Lists {
+        let (mesh, size) = (&local.mesh, comm.size());
         // Per vertex needed: the lowest global ghost element at it.
         let mut from: HashMap<u32, (u64, usize)> = HashMap::new();
         for e in local.n_owned..mesh.n_elements() {
             let vs = mesh.element(e);
-            if !vs.iter().any(|&v| computed[v as usize]) {
+            if !all && !vs.iter().any(|&v| computed[v as usize]) {
                 continue;
             }
             let g = local.global_element[e];
@@ -289,12 +316,25 @@ impl<'a> VertexHalo<'a> {
             .enumerate()
             .filter(|(_, t)| !t.is_empty())
             .collect();
-        VertexHalo {
-            comm,
-            global_vertex: &local.global_vertex,
-            computed,
-            give,
-            take,
+        Lists { give, take }
+    }
+
+    /// Replaces the records of `lists`' taken vertices by the ranks' that give them.
+    fn swap(&self, lists: &Lists, records: &mut [f64]) {
+        let n = RECORD_LEN;
+        let mut send = vec![Vec::new(); self.comm.size()];
+        for (q, list) in &lists.give {
+            send[*q] = list
+                .iter()
+                .flat_map(|&v| &records[v as usize * n..(v as usize + 1) * n])
+                .copied()
+                .collect();
+        }
+        let recv = self.comm.exchange_f64(&send);
+        for (q, list) in &lists.take {
+            for (&v, r) in list.iter().zip(recv[*q].chunks_exact(n)) {
+                records[v as usize * n..(v as usize + 1) * n].copy_from_slice(r);
+            }
         }
     }
 }
@@ -304,24 +344,16 @@ impl InheritShare for VertexHalo<'_> {
         self.computed[v]
     }
     fn order(&self, v: usize) -> u64 {
-        self.global_vertex[v]
+        self.local.global_vertex[v]
     }
     fn exchange(&self, records: &mut [f64]) {
-        let n = RECORD_LEN;
-        let mut send = vec![Vec::new(); self.comm.size()];
-        for (q, list) in &self.give {
-            send[*q] = list
-                .iter()
-                .flat_map(|&v| &records[v as usize * n..(v as usize + 1) * n])
-                .copied()
-                .collect();
-        }
-        let recv = self.comm.exchange_f64(&send);
-        for (q, list) in &self.take {
-            for (&v, r) in list.iter().zip(recv[*q].chunks_exact(n)) {
-                records[v as usize * n..(v as usize + 1) * n].copy_from_slice(r);
-            }
-        }
+        self.swap(&self.around, records);
+    }
+    fn exchange_all(&self, records: &mut [f64]) {
+        let all = self
+            .all
+            .get_or_init(|| Self::lists(self.comm, self.local, &self.computed, true));
+        self.swap(all, records);
     }
     fn any(&self, local: bool) -> bool {
         let mut x = [u64::from(local)];

@@ -276,7 +276,10 @@ impl SmoothTargets {
         };
         let (mut models, ell) = one_ring_models(mesh, topo, params, features, &fan, &seam);
         let mut higher = two_ring_models(mesh, topo, &fan, &mut models, &ell, cos_max, &seam);
-        let arc_normals = coarse_normals(mesh, topo, &fan, &models);
+        let arc_normals = match share {
+            Some(s) if mesh.dim == 3 => shared_coarse_normals(mesh, topo, &fan, &models, s),
+            _ => coarse_normals(mesh, topo, &fan, &models),
+        };
         let smooth_vertices = models.iter().filter(|m| m.is_some()).count();
         let feature_vertices =
             topo.vertex_on_boundary.iter().filter(|&&b| b).count() - smooth_vertices;
@@ -845,6 +848,68 @@ fn coarse_normals(
     if any { out } else { Vec::new() }
 }
 
+/// [`coarse_normals`] on a rank's part of a distributed mesh: the whole mesh's for every
+/// vertex the rank holds. A computed vertex's flag reads the two-ring models of its fan's
+/// vertices and its grid normal whether the vertices two steps along its grid lines have a
+/// model: vertices up to two rings out, whose own fans and two rings reach past the ghost
+/// rings. So the models' normals (and whether there is one) of the vertices the rank does
+/// not compute are first taken from ranks that compute them, and the arc normals found from
+/// them on the computed vertices are then handed to the ranks holding those as ghosts (the
+/// interior samples read their sources' arc normals, [`SmoothTargets::inherited_arc`]).
+/// Collective; empty where no rank has a coarse vertex (fringes of ghost rings included).
+fn shared_coarse_normals(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    fan: &[Vec<u32>],
+    models: &[Option<VertexModel>],
+    share: &dyn InheritShare,
+) -> Vec<Option<([f64; 3], bool)>> {
+    if !share.any(!coarse_normals(mesh, topo, fan, models).is_empty()) {
+        return Vec::new();
+    }
+    let (nv, n) = (mesh.n_vertices(), RECORD_LEN);
+    let mut records = vec![0.0; nv * n];
+    for (r, m) in records.chunks_exact_mut(n).zip(models) {
+        if let Some(m) = m {
+            r[0] = 1.0;
+            r[1..4].copy_from_slice(&m.normal);
+        }
+    }
+    share.exchange_all(&mut records);
+    let a3 = |r: &[f64]| [r[1], r[2], r[3]];
+    let seen: Vec<Option<VertexModel>> = (0..nv)
+        .map(|v| {
+            let r = &records[v * n..(v + 1) * n];
+            match share.computes(v) {
+                true => models[v],
+                false => (r[0] > 0.0).then(|| VertexModel {
+                    normal: a3(r),
+                    h: [[0.0; 3]; 3],
+                    weight: 1.0,
+                }),
+            }
+        })
+        .collect();
+    let mut arcs = coarse_normals(mesh, topo, fan, &seen);
+    arcs.resize(nv, None);
+    records.fill(0.0);
+    for (r, a) in records.chunks_exact_mut(n).zip(&arcs) {
+        if let Some((normal, coarse)) = a {
+            r[0] = 1.0;
+            r[1..4].copy_from_slice(normal);
+            r[4] = f64::from(u8::from(*coarse));
+        }
+    }
+    share.exchange_all(&mut records);
+    for (v, a) in arcs.iter_mut().enumerate() {
+        let r = &records[v * n..(v + 1) * n];
+        if !share.computes(v) {
+            *a = (r[0] > 0.0).then(|| (a3(r), r[4] > 0.0));
+        }
+    }
+    arcs
+}
+
 /// The two opposite pairs of edge neighbours of `v` (its grid lines) when its boundary fan
 /// `fan` is four quads around it, each neighbour in two of them.
 fn grid_pairs(topo: &Topology, fan: &[u32], v: u32) -> Option<[(u32, u32); 2]> {
@@ -902,6 +967,9 @@ pub trait InheritShare {
     /// the vertices this rank does not compute but whose neighbours it does are replaced by
     /// those of a rank that computes them.
     fn exchange(&self, records: &mut [f64]);
+    /// Collective: [`InheritShare::exchange`] for every vertex this rank holds but does not
+    /// compute (its whole ghost rings).
+    fn exchange_all(&self, records: &mut [f64]);
     /// Collective: whether `local` is true on any rank.
     fn any(&self, local: bool) -> bool;
 }
@@ -1039,12 +1107,23 @@ fn inherit_interior(
         sources: vec![NONE; nv],
         scale: vec![f64::NAN; nv],
     };
+    // A source another rank computed, by its order: the local vertex of that order, where
+    // this rank holds it (the arcs of the interior samples read the sources' vertices).
+    let of_order: HashMap<u64, u32> = match share {
+        Some(s) if nearest.iter().flatten().any(|n| n.local == NONE) => {
+            (0..nv).map(|v| (s.order(v), v as u32)).collect()
+        }
+        _ => HashMap::new(),
+    };
     for (v, n) in nearest.iter().enumerate() {
         let Some(n) = n else {
             continue;
         };
         let s = &n.source;
-        out.sources[v] = n.local;
+        out.sources[v] = match n.local {
+            NONE => of_order.get(&s.order).copied().unwrap_or(NONE),
+            local => local,
+        };
         out.scale[v] = s.ell;
         if !n.is_source {
             let g = 1.0 - n.dist / (decay * s.ell);
