@@ -45,7 +45,7 @@ use super::share::read_share;
 use crate::mesh::Topology;
 use crate::pipeline::clock::{Clock, peak_memory_bytes};
 use crate::pipeline::passes::{Passes, spline_passes};
-use crate::pipeline::spline::{self, SplineSetup};
+use crate::pipeline::spline::{self, Demoted, SplineSetup};
 use crate::pipeline::{
     CurveError, CurveOptions, CurveReport, Geometry, Job, LineSearchMode, Method, Outcomes,
     RankFigures, SpaceCounts, SplineFigures,
@@ -94,9 +94,6 @@ fn check_supported(options: &CurveOptions) -> Result<(), CurveError> {
     if options.snap_boundary {
         return unsupported("--snap-boundary");
     }
-    if options.demote_uncertified {
-        return unsupported("--demote-uncertified");
-    }
     // The edits name vertices by their place in the file; a rank's sub-mesh numbers them
     // otherwise, so they would hit other vertices.
     if options.features.edits.is_some() {
@@ -133,6 +130,8 @@ struct Share {
     local: LocalMesh,
     cg: crate::solve::CgInfo,
     blend: crate::validity::blend::BlendInfo,
+    /// Elements of the whole mesh demoted to Q2 before the fit (`--demote-uncertified`).
+    demoted: usize,
     /// This rank's share of the sampled output, in global node tags.
     output: RankOutput,
     /// Own control points (counted once over the ranks), spline, Q2 and kink elements.
@@ -464,6 +463,8 @@ struct Pass {
     cg: crate::solve::CgInfo,
     nonzeros: usize,
     blend: Result<Blend, usize>,
+    /// Elements of the whole mesh demoted to Q2 before the fit (`--demote-uncertified`).
+    demoted: usize,
 }
 
 /// The certified blend's factors, nets and figures.
@@ -515,9 +516,27 @@ impl Passes for RankPasses<'_> {
         clock: &mut Clock,
         previous: Option<&Pass>,
         most: Option<usize>,
+        demote: Option<&Demoted>,
     ) -> Result<Pass, CurveError> {
         let j = self.share_job(job, setup);
-        share_pass(&j, clock, previous.map(|p| &p.s), most, &mut self.bytes)
+        share_pass(
+            &j,
+            clock,
+            previous.map(|p| &p.s),
+            most,
+            demote,
+            &mut self.bytes,
+        )
+    }
+    fn demotion(&mut self, job: &Job, setup: &SplineSetup, clock: &mut Clock) -> Option<Demoted> {
+        let share = RankDemotion {
+            comm: self.comm,
+            local: self.local,
+            mine: self.mine,
+        };
+        clock.run(Stage::Validity, || {
+            spline::demotion_marks(job, setup, &share)
+        })
     }
     fn held(pass: &Pass) -> Result<usize, usize> {
         match &pass.blend {
@@ -559,6 +578,39 @@ impl Passes for RankPasses<'_> {
     }
 }
 
+/// A rank's share of the demotion rounds (`--demote-uncertified`): it certifies its own
+/// elements, and every round's marks are united over the ranks by global element id, so the
+/// marks of its own and ghost elements are the serial run's.
+struct RankDemotion<'a> {
+    comm: &'a dyn Comm,
+    local: &'a LocalMesh,
+    mine: &'a [usize],
+}
+
+impl spline::DemotionShare for RankDemotion<'_> {
+    fn own(&self) -> &[usize] {
+        self.mine
+    }
+    fn unite(&self, marks: &mut [bool]) -> usize {
+        let global = &self.local.global_element;
+        let send: Vec<f64> = (0..marks.len())
+            .filter(|&e| marks[e])
+            .map(|e| global[e] as f64)
+            .collect();
+        let all: std::collections::HashSet<u64> = self
+            .comm
+            .all_gather_f64(&send)
+            .concat()
+            .into_iter()
+            .map(|g| g as u64)
+            .collect();
+        for (m, g) in marks.iter_mut().zip(global) {
+            *m = all.contains(g);
+        }
+        all.len()
+    }
+}
+
 impl<'a> RankPasses<'a> {
     fn share_job<'j>(&self, job: &'j Job<'j>, setup: &'j SplineSetup) -> ShareJob<'j>
     where
@@ -575,19 +627,21 @@ impl<'a> RankPasses<'a> {
     }
 }
 
-/// One spline pass of this rank's share (see [`Pass`]): the space of `j.setup`, its halo, the
-/// fit (from `previous`'s fitted control points where given; in 2D with the serial run's
-/// post-fit Q2 rounds), then the certified blend ([`blend_share`]).
+/// One spline pass of this rank's share (see [`Pass`]): the space of `j.setup` (the elements
+/// of `demote` Q2), its halo, the fit (from `previous`'s fitted control points where given;
+/// in 2D with the serial run's post-fit Q2 rounds), then the certified blend ([`blend_share`]).
 fn share_pass(
     j: &ShareJob,
     clock: &mut Clock,
     previous: Option<&SplineSpace>,
     most: Option<usize>,
+    demote: Option<&Demoted>,
     bytes: &mut [u64; 2],
 ) -> Result<Pass, CurveError> {
     let (comm, local, job, setup) = (j.comm, j.local, j.job, j.setup);
     let (mesh, topo) = (&local.mesh, job.topo);
-    let mut s = clock.run(Stage::Spline, || setup.build(job, &[]));
+    let q2 = demote.map_or(&[][..], |d| &d.marks[..]);
+    let mut s = clock.run(Stage::Spline, || setup.build(job, q2));
     // A space on the glued seams numbers its control points by the glued entities: so do the
     // halo's keys, for the serial run's aggregates.
     let reps = |_: &SplineSpace| setup.live_seams().map(|_| j.seam_map);
@@ -614,9 +668,7 @@ fn share_pass(
             }
             let previous = std::mem::replace(
                 &mut s,
-                clock.run(Stage::Spline, || {
-                    setup.build_with_misfits(job, &[], &misfit)
-                }),
+                clock.run(Stage::Spline, || setup.build_with_misfits(job, q2, &misfit)),
             );
             halo = clock.run(Stage::Partition, || {
                 super::local::halo(comm, local, topo, &s, reps(&s))
@@ -637,6 +689,7 @@ fn share_pass(
         cg,
         nonzeros,
         blend,
+        demoted: demote.map_or(0, |d| d.count),
     })
 }
 
@@ -783,6 +836,7 @@ fn run_share(
         cg,
         nonzeros,
         blend,
+        demoted,
     } = pass;
     let Ok((factors, nets, blend)) = blend else {
         unreachable!("the pass kept ran its blend to the end")
@@ -862,6 +916,7 @@ fn run_share(
         local,
         cg,
         blend,
+        demoted,
         output,
         counts,
         knot_intervals,
@@ -977,6 +1032,7 @@ pub fn curve(
         boundary_facets: sizes[1] as usize,
         spline: Some(SplineFigures {
             knot_surfaces: share.knot_surfaces,
+            demoted: share.demoted,
             ..SplineFigures::blended(
                 space,
                 (crate::fit::FitSolver::Cg, share.cg, nonzeros),

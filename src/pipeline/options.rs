@@ -73,8 +73,8 @@ pub struct CurveOptions {
     /// Move boundary vertex nodes back to the input vertices where that stays certified valid.
     pub snap_boundary: bool,
     /// Redo the least-squares pass with the elements whose initial spline map is not certified
-    /// made Q2 before the fit, kept where its blend holds back fewer elements (serial only:
-    /// `pipeline::spline`'s `demote_before_fit_if_fewer`).
+    /// made Q2 before the fit, kept where its blend holds back fewer elements
+    /// (`pipeline::passes`'s `demote_before_fit_if_fewer`, under mpirun too).
     pub demote_uncertified: bool,
     /// Sharp features kept by the spline space and the fit (`docs/features.md`).
     pub features: FeatureOptions,

@@ -478,104 +478,103 @@ pub(super) fn curve_spline(
     };
     let pass = super::passes::spline_passes(&mut whole, job, &mut setup, clock)?;
     match pass {
-        First::Done(outcome) => {
-            let outcome = demote_before_fit_if_fewer(job, &setup, clock, outcome)?;
-            Ok((setup, outcome))
-        }
+        First::Done(outcome) => Ok((setup, outcome)),
         First::Exceeded { .. } => unreachable!("the pass kept ran to its end"),
     }
 }
 
-/// The least-squares pass kept (`outcome`, on `setup`'s knots), or, with
-/// `--demote-uncertified` (serial only: the ranks under mpirun do not run it), where its blend holds
-/// back elements and the initial spline map of the setup is not certified valid on some
-/// element, the same pass with those elements demoted to Q2 *before* the fit (the demotion
-/// rounds of `--fit energy`, [`demote_with_rings`]), when its blend holds back strictly
-/// fewer elements (a tie keeps the pass as it was: its output is unchanged).
-///
-/// Why: the blend's straight end is certified, but it holds back every element around an
-/// area where the spline map cannot be valid whatever the fit (its initial map is
-/// uncertified there, and the held-back factors spread to every Bernstein point those
-/// elements share): on spheremesh01 84 of 113 elements held back, 40 with the area's
-/// elements Q2 from the start. Not always: on sphere_r6 the Q2 area holds back more (966
-/// against 688), hence the comparison. Both outputs are certified, so the one kept is.
-fn demote_before_fit_if_fewer(
+/// The elements `--demote-uncertified` makes Q2 before the fit ([`demotion_marks`]).
+pub(crate) struct Demoted {
+    /// Marks on this process's elements (its own and, under mpirun, its ghosts).
+    pub marks: Vec<bool>,
+    /// Elements marked in the whole mesh.
+    pub count: usize,
+}
+
+/// Where the processes of a job hold the elements the demotion rounds judge: the serial job
+/// all of them, a rank under mpirun its own (plus ghosts it builds the space on).
+pub(crate) trait DemotionShare {
+    /// The elements this process certifies: every element of the mesh is one process's.
+    fn own(&self) -> &[usize];
+    /// `marks` (on this process's elements) made the union of every process's marks, element
+    /// by element of the whole mesh; returns how many elements of the whole mesh are marked.
+    /// Collective.
+    fn unite(&self, marks: &mut [bool]) -> usize;
+}
+
+/// The serial job's share: every element.
+struct AllElements(Vec<usize>);
+
+impl DemotionShare for AllElements {
+    fn own(&self) -> &[usize] {
+        &self.0
+    }
+    fn unite(&self, marks: &mut [bool]) -> usize {
+        marks.iter().filter(|&&m| m).count()
+    }
+}
+
+/// `--demote-uncertified`: the elements whose initial spline map on `setup` (its knots) is
+/// not certified valid, demoted to Q2 in rounds as `--fit energy` demotes them
+/// ([`demote_with_rings`]: after the first round with their vertex rings) until every
+/// element's initial map is certified; `None` when none is uncertified, or some still is after
+/// [`MAX_DEMOTION_ROUNDS`]. Each process certifies its own elements ([`DemotionShare::own`])
+/// and every round's marks are united over the processes, so every process takes the same
+/// marks and rounds as the serial job. Only the elements whose initial net changed are
+/// certified again.
+pub(crate) fn demotion_marks(
     job: &Job,
     setup: &SplineSetup,
-    clock: &mut Clock,
-    outcome: SplineOutcome,
-) -> Result<SplineOutcome, CurveError> {
-    let held = match &outcome.blend {
-        Some(b) if outcome.energy.is_none() && outcome.fit.is_some() => b.reduced_elements,
-        _ => return Ok(outcome),
-    };
-    if held == 0
-        || job.options.geometry != Geometry::SplineFitted
-        || !job.options.demote_uncertified
-    {
-        return Ok(outcome);
-    }
+    share: &dyn DemotionShare,
+) -> Option<Demoted> {
+    use rayon::prelude::*;
     let n = job.mesh.n_elements();
+    let own = share.own();
     let mut demote = vec![false; n];
-    let demoted = clock.run(Stage::Validity, || {
-        let mut space = setup.build(job, &demote);
-        let all: Vec<usize> = (0..n).collect();
-        let mut bad = initially_uncertified(job, &space, &all);
-        for round in 0..MAX_DEMOTION_ROUNDS {
-            let now: Vec<usize> = (0..n).filter(|&e| bad[e]).collect();
-            if now.is_empty() {
-                return Some(space);
-            }
-            let is_q2 = |e: usize| !space.is_spline(e);
-            demote_with_rings(job.mesh, job.topo, &now, round, &is_q2, &mut demote);
-            let next = setup.build(job, &demote);
-            // Only an element whose initial net changed can change its certificate.
-            let changed: Vec<usize> = {
-                use rayon::prelude::*;
-                (0..n)
-                    .into_par_iter()
-                    .filter(|&e| next.element_bezier(e) != space.element_bezier(e))
-                    .collect()
-            };
-            for (&e, b) in changed
-                .iter()
-                .zip(initially_uncertified(job, &next, &changed))
-            {
-                bad[e] = b;
-            }
-            space = next;
+    let mut space = setup.build(job, &demote);
+    let mut bad = vec![false; n];
+    for (&e, b) in own.iter().zip(initially_uncertified(job, &space, own)) {
+        bad[e] = b;
+    }
+    for round in 0..MAX_DEMOTION_ROUNDS {
+        let now: Vec<usize> = own.iter().copied().filter(|&e| bad[e]).collect();
+        let mut fresh = vec![false; n];
+        let is_q2 = |e: usize| !space.is_spline(e);
+        demote_with_rings(job.mesh, job.topo, &now, round, &is_q2, &mut fresh);
+        // No element of the whole mesh uncertified: the marks so far are the demotion.
+        if share.unite(&mut fresh) == 0 {
+            let count = share.unite(&mut demote);
+            return (count > 0).then_some(Demoted {
+                marks: demote,
+                count,
+            });
         }
-        (!bad.contains(&true)).then_some(space)
-    });
-    let Some(mut space) = demoted.filter(|_| demote.contains(&true)) else {
-        return Ok(outcome);
-    };
-    clock.check()?;
-    let mut misfit = Vec::new();
-    let start = carry_over(&outcome.space, &outcome.space.control_points, &space);
-    let (c_star, fit) = fit_demoting_misfits(
-        job,
-        setup,
-        clock,
-        &mut space,
-        &demote,
-        &mut misfit,
-        Some(start),
-    )?;
-    clock.check()?;
-    space.control_points = c_star;
-    // Given up once it holds back as many as the pass kept: that one stays.
-    let bounded = clock.run(Stage::Validity, || {
-        blend_within(job, setup, &space, Some(held - 1))
-    })?;
-    let (factors, blend) = match bounded {
-        Ok(done) if done.1.reduced_elements < held => done,
-        _ => return Ok(outcome),
-    };
-    let demoted = demote.iter().filter(|&&d| d).count();
-    Ok(SplineOutcome::blended(
-        space, factors, fit, blend, demoted, None,
-    ))
+        for (d, f) in demote.iter_mut().zip(&fresh) {
+            *d |= f;
+        }
+        let next = setup.build(job, &demote);
+        // Only an element whose initial net changed can change its certificate.
+        let changed: Vec<usize> = own
+            .par_iter()
+            .copied()
+            .filter(|&e| next.element_bezier(e) != space.element_bezier(e))
+            .collect();
+        for (&e, b) in changed
+            .iter()
+            .zip(initially_uncertified(job, &next, &changed))
+        {
+            bad[e] = b;
+        }
+        space = next;
+    }
+    if share.unite(&mut bad) > 0 {
+        return None;
+    }
+    let count = share.unite(&mut demote);
+    (count > 0).then_some(Demoted {
+        marks: demote,
+        count,
+    })
 }
 
 /// The serial job's passes ([`super::passes`]): every element in this process.
@@ -621,8 +620,13 @@ impl super::passes::Passes for Whole<'_> {
         clock: &mut Clock,
         previous: Option<&First>,
         most: Option<usize>,
+        demote: Option<&Demoted>,
     ) -> Result<First, CurveError> {
-        spline_pass_within(job, setup, clock, previous.map(First::space), most)
+        spline_pass_within(job, setup, clock, previous.map(First::space), most, demote)
+    }
+    fn demotion(&mut self, job: &Job, setup: &SplineSetup, clock: &mut Clock) -> Option<Demoted> {
+        let all = AllElements((0..job.mesh.n_elements()).collect());
+        clock.run(Stage::Validity, || demotion_marks(job, setup, &all))
     }
     fn held(pass: &First) -> Result<usize, usize> {
         match pass {
@@ -698,20 +702,23 @@ impl First {
 /// One spline pass on `setup`: the space, then the fit and certificate of the job's path;
 /// with `most`, the least-squares path's blend is given up once it holds
 /// back more than `most` elements ([`blend_search_at_most`]): `auto`'s uniform pass then
-/// needs only that count to go on to graded knots, not the blend's remaining rounds.
+/// needs only that count to go on to graded knots, not the blend's remaining rounds. The
+/// elements of `demote` are Q2 from the start (least squares only).
 fn spline_pass_within(
     job: &Job,
     setup: &SplineSetup,
     clock: &mut Clock,
     previous: Option<&SplineSpace>,
     most: Option<usize>,
+    demote: Option<&Demoted>,
 ) -> Result<First, CurveError> {
-    let space = clock.run(Stage::Spline, || {
-        setup.build(job, &vec![false; job.mesh.n_elements()])
-    });
+    let marks = demote.map_or(&[][..], |d| &d.marks[..]);
+    let space = clock.run(Stage::Spline, || setup.build(job, marks));
     clock.check()?;
     match (job.options.geometry, &job.options.energy) {
-        (Geometry::SplineFitted, None) => fit_and_blend(job, setup, clock, space, previous, most),
+        (Geometry::SplineFitted, None) => {
+            fit_and_blend(job, setup, clock, space, previous, most, demote)
+        }
         (Geometry::SplineFitted, Some(params)) => {
             fit_with_energy(job, setup, clock, space, params).map(First::Done)
         }
@@ -720,8 +727,8 @@ fn spline_pass_within(
 }
 
 /// Least squares: one fit, then the certified blend from the straight elevation to it (valid
-/// for every input whose straight elevation is certified); with `most`, as
-/// [`spline_pass_within`].
+/// for every input whose straight elevation is certified); with `most` and `demote` (the
+/// elements Q2 in `space`, kept Q2 through the misfit rounds), as [`spline_pass_within`].
 fn fit_and_blend(
     job: &Job,
     setup: &SplineSetup,
@@ -729,18 +736,21 @@ fn fit_and_blend(
     mut space: SplineSpace,
     previous: Option<&SplineSpace>,
     most: Option<usize>,
+    demote: Option<&Demoted>,
 ) -> Result<First, CurveError> {
     let mut misfit = Vec::new();
     let start = previous.map(|p| carry_over(p, &p.control_points, &space));
+    let marks = demote.map_or(&[][..], |d| &d.marks[..]);
     let (c_star, fit) =
-        fit_demoting_misfits(job, setup, clock, &mut space, &[], &mut misfit, start)?;
+        fit_demoting_misfits(job, setup, clock, &mut space, marks, &mut misfit, start)?;
     clock.check()?;
     space.control_points = c_star;
     let bounded = clock.run(Stage::Validity, || blend_within(job, setup, &space, most))?;
+    let demoted = demote.map_or(0, |d| d.count);
     Ok(match bounded {
-        Ok((factors, blend)) => {
-            First::Done(SplineOutcome::blended(space, factors, fit, blend, 0, None))
-        }
+        Ok((factors, blend)) => First::Done(SplineOutcome::blended(
+            space, factors, fit, blend, demoted, None,
+        )),
         Err(at_least) => First::Exceeded {
             space,
             fit,
