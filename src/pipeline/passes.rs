@@ -6,7 +6,8 @@
 //! survey into its knots and runs one pass, space, fit and certified blend, on its elements:
 //! the serial job on the whole mesh, a rank on its share), the [`Job`] (options as asked) and
 //! the [`SplineSetup`] of uniform knots. Output: the pass kept; the setup ends with that pass's
-//! knots, and `knot_passes` counts the passes run.
+//! knots and fit weights (with or without the extraordinary midpoint weight's refit), and
+//! `knot_passes` counts the passes run to choose the knots.
 //!
 //! Invariant: every decision is taken on whole-mesh figures (the survey's graded share and
 //! largest |ln ratio|, the blends' held-back counts and the fitted boundaries' RMS distances
@@ -16,6 +17,7 @@
 use super::clock::Clock;
 use super::spline::{
     SplineSetup, auto_graded_is_decisive, auto_graded_keeps_the_boundary, auto_holds_back_too_many,
+    extraordinary_refit_is_kept, extraordinary_refit_most,
 };
 use super::{CurveError, Job};
 use crate::spline::{AUTO_GRADED_SHARE, AUTO_MIN_LOG_RATIO, KnotIntervals, KnotParams, Knots};
@@ -94,6 +96,9 @@ pub(crate) trait Passes {
     fn warm_start(&self) -> bool {
         true
     }
+    /// Elements of the whole mesh whose interior midpoints the extraordinary midpoint weight
+    /// raises under `setup`'s fit weights ([`crate::fit::extraordinary_reweighted`]).
+    fn reweighted(&mut self, job: &Job, setup: &SplineSetup) -> usize;
 }
 
 /// The spline passes of `job`'s knot intervals on `setup` (built with uniform knots): uniform
@@ -110,7 +115,67 @@ pub(crate) trait Passes {
 ///    on [`Passes::boundary_rms`]): against the lower bound first, and only when that does
 ///    not decide is the uniform blend run to its end, so the choice and the output are those
 ///    of the full passes.
+///
+/// These passes fit without [`crate::fit::FitWeights::extraordinary_midpoint`]. Where the
+/// pass kept holds back more than [`super::spline::AUTO_MAX_HELD_BACK`] of the elements and
+/// the weight raises some element's midpoints ([`Passes::reweighted`]), it is fitted once
+/// more with the weight, on its knots and from its fit, and the refit kept by
+/// [`extraordinary_refit_is_kept`]; the setup ends with the weights of the pass kept.
 pub(crate) fn spline_passes<P: Passes>(
+    p: &mut P,
+    job: &Job,
+    setup: &mut SplineSetup,
+    clock: &mut Clock,
+) -> Result<P::Pass, CurveError> {
+    // The knots are chosen without the extraordinary midpoint weight: it keeps more of the
+    // uniform spline on O-grids, whose graded knots `auto` would then lose (see
+    // `extraordinary_refit_is_kept`).
+    let weight = job.options.fit.weights.extraordinary_midpoint;
+    let mut off = job.options.clone();
+    off.fit.weights.extraordinary_midpoint = 0.0;
+    setup.fit_params.weights.extraordinary_midpoint = 0.0;
+    let kept = knot_passes(
+        p,
+        &Job {
+            options: &off,
+            ..*job
+        },
+        setup,
+        clock,
+    )?;
+    let n = p.elements();
+    let least_squares = job.options.geometry == super::Geometry::SplineFitted
+        && job.options.energy.is_none()
+        && weight > 0.0;
+    let held = match P::held(&kept) {
+        Ok(held) if least_squares && auto_holds_back_too_many(held, n) => held,
+        _ => return Ok(kept),
+    };
+    setup.fit_params.weights.extraordinary_midpoint = weight;
+    if p.reweighted(job, setup) == 0 {
+        setup.fit_params.weights.extraordinary_midpoint = 0.0;
+        return Ok(kept);
+    }
+    let kept_options = job.options.with_knots(setup.knot_intervals);
+    let kept_job = Job {
+        options: &kept_options,
+        ..*job
+    };
+    // Given up once it holds back more than it may to be kept.
+    let most = extraordinary_refit_most(held, n);
+    let previous = p.warm_start().then_some(&kept);
+    let refit = p.run(&kept_job, setup, clock, previous, Some(most))?;
+    match P::held(&refit) {
+        Ok(h) if extraordinary_refit_is_kept(h, held, n) => Ok(refit),
+        _ => {
+            setup.fit_params.weights.extraordinary_midpoint = 0.0;
+            Ok(kept)
+        }
+    }
+}
+
+/// The knot passes of [`spline_passes`], on the job's weights as given.
+fn knot_passes<P: Passes>(
     p: &mut P,
     job: &Job,
     setup: &mut SplineSetup,
