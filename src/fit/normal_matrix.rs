@@ -643,8 +643,9 @@ fn weight_masks(
 }
 
 /// Per element, whether [`FitWeights::extraordinary_midpoint`] raises the weight of its
-/// interior midpoints under `w`: an element near an extraordinary vertex or edge
-/// ([`extraordinary_elements`]) without a boundary corner, whose own midpoint weight is lower.
+/// interior midpoints under `w`: an element within two element rings of an extraordinary
+/// vertex or edge ([`extraordinary_vertices`]) without a boundary corner, whose own midpoint
+/// weight is lower.
 /// The fit under `w` is the fit without that weight where no element is.
 pub fn extraordinary_reweighted(
     mesh: &LinearMesh,
