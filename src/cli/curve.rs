@@ -107,8 +107,9 @@ pub(crate) struct JobArgs {
     /// least 3 with graded ones).
     #[arg(long)]
     w_deep_midpoint: Option<f64>,
-    /// Position weight at the interior midpoints and centres of elements at an extraordinary
-    /// interior vertex or edge (overrides the preset).
+    /// Position weight at the interior midpoints and centres of elements near an extraordinary
+    /// interior vertex or edge, in the refit of a pass that holds back more than a tenth of
+    /// the elements (overrides the preset; 0: no refit).
     #[arg(long)]
     w_extraordinary_midpoint: Option<f64>,
     /// Position weight at midpoints of boundary edges and faces (overrides the preset).

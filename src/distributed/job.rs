@@ -139,6 +139,8 @@ struct Share {
     knot_intervals: KnotIntervals,
     /// Spline passes run to choose the knots (`auto`: 1 or 2).
     knot_passes: usize,
+    /// The extraordinary midpoint weight of the fit kept.
+    extraordinary_midpoint: f64,
     /// The whole mesh's knot surfaces, with graded knots.
     knot_surfaces: Option<crate::spline::KnotSurfaceInfo>,
     input_msj: f64,
@@ -576,6 +578,19 @@ impl Passes for RankPasses<'_> {
     fn warm_start(&self) -> bool {
         self.warm_start
     }
+    // The own elements' (the rank's ghost rings hold every element of their two rings).
+    fn reweighted(&mut self, job: &Job, setup: &SplineSetup) -> usize {
+        let fit = &setup.fit_params;
+        let r = crate::fit::extraordinary_reweighted(
+            &self.local.mesh,
+            setup.topo(job),
+            &fit.weights,
+            fit.features.as_deref(),
+        );
+        let mut v = [r[..self.local.n_owned].iter().filter(|&&r| r).count() as f64];
+        self.comm.sum_f64(&mut v);
+        v[0] as usize
+    }
 }
 
 /// A rank's share of the demotion rounds (`--demote-uncertified`): it certifies its own
@@ -921,6 +936,7 @@ fn run_share(
         counts,
         knot_intervals,
         knot_passes: setup.knot_passes,
+        extraordinary_midpoint: setup.fit_params.weights.extraordinary_midpoint,
         knot_surfaces: (knot_intervals == KnotIntervals::Graded).then_some(setup.knot_info),
         input_msj,
         halo,
@@ -1015,6 +1031,7 @@ pub fn curve(
         kink_elements: counts[3],
         knot_intervals: share.knot_intervals,
         knot_passes: share.knot_passes,
+        extraordinary_midpoint: share.extraordinary_midpoint,
         features: share.features.map(|mut f| {
             f.feature_vertex_deviation_max /= deviation.diagonal;
             f.planarity_max /= deviation.diagonal;

@@ -35,7 +35,8 @@ pub mod smooth;
 
 use crate::params::{ParamError, above, in_range};
 pub use normal_matrix::{
-    ElementBlocks, MatrixFree, NormalMatrix, extraordinary_vertices, mask_level, size_levels,
+    ElementBlocks, MatrixFree, NormalMatrix, extraordinary_reweighted, extraordinary_vertices,
+    mask_level, size_levels,
 };
 use normal_matrix::{control_point_scales, sample_weight};
 pub use smooth::{InheritShare, RECORD_LEN, SmoothParams, SmoothTargets};
@@ -128,6 +129,8 @@ pub struct FitWeights {
     /// ([`extraordinary_vertices`]), where it is larger than their [`FitWeights::midpoint`] or
     /// [`FitWeights::deep_midpoint`]: the poly-spline is not C¹ there, and the weak interior
     /// weight of the smooth preset lets the fit bend those elements between their corners.
+    /// The pipeline's passes fit without it and refit with it only where the pass kept holds
+    /// back too many elements (`pipeline::passes::spline_passes`).
     pub extraordinary_midpoint: f64,
     /// Position weight at midpoints of edges, faces and cells whose corners are all boundary
     /// vertices: the boundary sides' midpoints, where the smooth targets lie on the surface,
@@ -176,8 +179,7 @@ impl FitWeights {
             boundary_corner: 20.0,
             midpoint: 0.05,
             deep_midpoint: None,
-            // Off (0: the midpoints keep their own weight); see `EXTRAORDINARY_MIDPOINT`.
-            extraordinary_midpoint: 0.0,
+            extraordinary_midpoint: EXTRAORDINARY_MIDPOINT,
             boundary_midpoint: 1.0,
             frame_corner: 0.0,
             frame_midpoint: 0.0,
@@ -232,14 +234,13 @@ impl FitWeights {
 /// knots ([`FitWeights::for_knots`]).
 pub const GRADED_DEEP_MIDPOINT: f64 = 3.0;
 
-/// The interior midpoint weight near extraordinary vertices and edges
-/// ([`FitWeights::extraordinary_midpoint`]) that holds back fewest elements on the real
-/// meshes with extraordinary lines (`BENCHMARKS.md`, "Midpoint weight at extraordinary
-/// vertices"): 1–2.5 left hsphere8's min scaled Jacobian below the 0.805 of 0.05 (0.743–0.797)
-/// and 4 or more held back more of it (28 % and up against 11 % with 3). Not the smooth
-/// preset's default (0: the midpoints keep their own weight there): with it `auto` keeps uniform knots on meshes
-/// whose graded knots follow the CAD wall far better (the level-2 disk's max error 1.02× →
-/// 5.45× Gmsh-with-CAD's), so it is set with `--w-extraordinary-midpoint 3`.
+/// Default interior midpoint weight of the smooth preset near extraordinary vertices and
+/// edges ([`FitWeights::extraordinary_midpoint`]), the one that holds back fewest elements on
+/// the real meshes with extraordinary lines (`BENCHMARKS.md`, "Midpoint weight at
+/// extraordinary vertices"): 1–2.5 left hsphere8's min scaled Jacobian below the 0.805 of
+/// 0.05 (0.743–0.797) and 4 or more held back more of it (28 % and up against 11 % with 3).
+/// The pipeline chooses the knots without it and refits the pass kept with it where that
+/// pass holds back too many (`pipeline::passes::spline_passes`).
 pub const EXTRAORDINARY_MIDPOINT: f64 = 3.0;
 
 /// The fit presets of the command line (`--fit`): which weights and targets the least-squares

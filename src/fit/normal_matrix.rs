@@ -590,45 +590,80 @@ impl ElementBlocks {
             }
             (gd, gr)
         };
-        let levels = size_levels(mesh);
-        let on_boundary = weighted_boundary(topo, features, w);
-        // Vertices of the elements that touch the boundary: an element with none of them is
-        // "deep" (a ring away from the wall).
-        let mut near = vec![false; on_boundary.len()];
-        for e in 0..space.n_elements() {
-            let vs = mesh.element(e);
-            if vs.iter().any(|&v| on_boundary[v as usize]) {
-                vs.iter().for_each(|&v| near[v as usize] = true);
-            }
-        }
-        let extraordinary = extraordinary_elements(space.n_elements(), mesh, topo, w);
-        let masks: Vec<u64> = (0..space.n_elements())
-            .map(|e| {
-                let mut m = 0u64;
-                for (c, &v) in mesh.element(e).iter().enumerate() {
-                    if on_boundary[v as usize] {
-                        m |= 1 << c;
-                    }
-                }
-                if mesh.element(e).iter().all(|&v| !near[v as usize]) {
-                    m |= DEEP_BIT;
-                }
-                // Not at the boundary's corners, whose midpoints pull the fitted boundary.
-                if extraordinary[e] && m & 0xFF == 0 {
-                    m |= EXTRAORDINARY_BIT;
-                }
-                if let Some(f) = features {
-                    m |= features::sample_mask(f, mesh, e) << 8;
-                }
-                m | (levels[e] as u64) << LEVEL_SHIFT
-            })
-            .collect();
+        let masks = weight_masks(space.n_elements(), mesh, topo, w, features);
         let mut cache = HashMap::new();
         for &m in &masks {
             cache.entry(m).or_insert_with(|| g_of(m));
         }
         ElementBlocks { masks, cache }
     }
+}
+
+/// Per element, its weight mask ([`ElementBlocks::masks`]).
+fn weight_masks(
+    n: usize,
+    mesh: &LinearMesh,
+    topo: &Topology,
+    w: &FitWeights,
+    features: Option<&crate::mesh::features::Features>,
+) -> Vec<u64> {
+    let levels = size_levels(mesh);
+    let on_boundary = weighted_boundary(topo, features, w);
+    // Vertices of the elements that touch the boundary: an element with none of them is
+    // "deep" (a ring away from the wall).
+    let mut near = vec![false; on_boundary.len()];
+    for e in 0..n {
+        let vs = mesh.element(e);
+        if vs.iter().any(|&v| on_boundary[v as usize]) {
+            vs.iter().for_each(|&v| near[v as usize] = true);
+        }
+    }
+    let extraordinary = extraordinary_elements(n, mesh, topo, w);
+    (0..n)
+        .map(|e| {
+            let mut m = 0u64;
+            for (c, &v) in mesh.element(e).iter().enumerate() {
+                if on_boundary[v as usize] {
+                    m |= 1 << c;
+                }
+            }
+            if mesh.element(e).iter().all(|&v| !near[v as usize]) {
+                m |= DEEP_BIT;
+            }
+            // Not at the boundary's corners, whose midpoints pull the fitted boundary.
+            if extraordinary[e] && m & 0xFF == 0 {
+                m |= EXTRAORDINARY_BIT;
+            }
+            if let Some(f) = features {
+                m |= features::sample_mask(f, mesh, e) << 8;
+            }
+            m | (levels[e] as u64) << LEVEL_SHIFT
+        })
+        .collect()
+}
+
+/// Per element, whether [`FitWeights::extraordinary_midpoint`] raises the weight of its
+/// interior midpoints under `w`: an element within two element rings of an extraordinary
+/// vertex or edge ([`extraordinary_vertices`]) without a boundary corner, whose own midpoint
+/// weight is lower.
+/// The fit under `w` is the fit without that weight where no element is.
+pub fn extraordinary_reweighted(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    w: &FitWeights,
+    features: Option<&crate::mesh::features::Features>,
+) -> Vec<bool> {
+    weight_masks(mesh.n_elements(), mesh, topo, w, features)
+        .into_iter()
+        .map(|m| {
+            let base = if m & DEEP_BIT != 0 {
+                w.deep_midpoint.unwrap_or(w.midpoint)
+            } else {
+                w.midpoint
+            };
+            m & EXTRAORDINARY_BIT != 0 && base < w.extraordinary_midpoint
+        })
+        .collect()
 }
 
 /// Per vertex, whether it is an extraordinary interior vertex: not on the boundary, and in 2D

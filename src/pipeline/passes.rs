@@ -6,7 +6,8 @@
 //! survey into its knots and runs one pass, space, fit and certified blend, on its elements:
 //! the serial job on the whole mesh, a rank on its share), the [`Job`] (options as asked) and
 //! the [`SplineSetup`] of uniform knots. Output: the pass kept; the setup ends with that pass's
-//! knots, and `knot_passes` counts the passes run.
+//! knots and fit weights (with or without the extraordinary midpoint weight's refit), and
+//! `knot_passes` counts the passes run to choose the knots.
 //!
 //! Invariant: every decision is taken on whole-mesh figures (the survey's graded share and
 //! largest |ln ratio|, the blends' held-back counts and the fitted boundaries' RMS distances
@@ -16,7 +17,7 @@
 use super::clock::Clock;
 use super::spline::{
     Demoted, SplineSetup, auto_graded_is_decisive, auto_graded_keeps_the_boundary,
-    auto_holds_back_too_many,
+    auto_holds_back_too_many, extraordinary_refit_is_kept, extraordinary_refit_most,
 };
 use super::{CurveError, Job};
 use crate::spline::{AUTO_GRADED_SHARE, AUTO_MIN_LOG_RATIO, KnotIntervals, KnotParams, Knots};
@@ -101,6 +102,9 @@ pub(crate) trait Passes {
     fn warm_start(&self) -> bool {
         true
     }
+    /// Elements of the whole mesh whose interior midpoints the extraordinary midpoint weight
+    /// raises under `setup`'s fit weights ([`crate::fit::extraordinary_reweighted`]).
+    fn reweighted(&mut self, job: &Job, setup: &SplineSetup) -> usize;
 }
 
 /// The spline passes of `job`'s knot intervals on `setup` (built with uniform knots): uniform
@@ -118,6 +122,12 @@ pub(crate) trait Passes {
 ///    not decide is the uniform blend run to its end, so the choice and the output are those
 ///    of the full passes.
 ///
+/// These passes fit without [`crate::fit::FitWeights::extraordinary_midpoint`]. Where the
+/// pass kept holds back more than [`super::spline::AUTO_MAX_HELD_BACK`] of the elements and
+/// the weight raises some element's midpoints ([`Passes::reweighted`]), it is fitted once
+/// more with the weight, on its knots and from its fit, and the refit kept by
+/// [`extraordinary_refit_is_kept`]; the setup ends with the weights of the pass kept.
+///
 /// Then, with `--demote-uncertified`, the pass kept is redone with the elements whose initial
 /// map is not certified Q2 from the start ([`demote_before_fit_if_fewer`]).
 pub(crate) fn spline_passes<P: Passes>(
@@ -126,9 +136,65 @@ pub(crate) fn spline_passes<P: Passes>(
     setup: &mut SplineSetup,
     clock: &mut Clock,
 ) -> Result<P::Pass, CurveError> {
-    let kept = knot_passes(p, job, setup, clock)?;
+    let kept = weighted_passes(p, job, setup, clock)?;
     demote_before_fit_if_fewer(p, job, setup, clock, kept)
 }
+
+/// The knot passes without the extraordinary midpoint weight, then its refit of the pass kept
+/// ([`spline_passes`] before the demotion).
+fn weighted_passes<P: Passes>(
+    p: &mut P,
+    job: &Job,
+    setup: &mut SplineSetup,
+    clock: &mut Clock,
+) -> Result<P::Pass, CurveError> {
+    // The knots are chosen without the extraordinary midpoint weight: it keeps more of the
+    // uniform spline on O-grids, whose graded knots `auto` would then lose (see
+    // `extraordinary_refit_is_kept`).
+    let weight = job.options.fit.weights.extraordinary_midpoint;
+    let mut off = job.options.clone();
+    off.fit.weights.extraordinary_midpoint = 0.0;
+    setup.fit_params.weights.extraordinary_midpoint = 0.0;
+    let kept = knot_passes(
+        p,
+        &Job {
+            options: &off,
+            ..*job
+        },
+        setup,
+        clock,
+    )?;
+    let n = p.elements();
+    let least_squares = job.options.geometry == super::Geometry::SplineFitted
+        && job.options.energy.is_none()
+        && weight > 0.0;
+    let held = match P::held(&kept) {
+        Ok(held) if least_squares && auto_holds_back_too_many(held, n) => held,
+        _ => return Ok(kept),
+    };
+    setup.fit_params.weights.extraordinary_midpoint = weight;
+    if p.reweighted(job, setup) == 0 {
+        setup.fit_params.weights.extraordinary_midpoint = 0.0;
+        return Ok(kept);
+    }
+    let kept_options = job.options.with_knots(setup.knot_intervals);
+    let kept_job = Job {
+        options: &kept_options,
+        ..*job
+    };
+    // Given up once it holds back more than it may to be kept.
+    let most = extraordinary_refit_most(held, n);
+    let previous = p.warm_start().then_some(&kept);
+    let refit = p.run(&kept_job, setup, clock, previous, Some(most), None)?;
+    match P::held(&refit) {
+        Ok(h) if extraordinary_refit_is_kept(h, held, n) => Ok(refit),
+        _ => {
+            setup.fit_params.weights.extraordinary_midpoint = 0.0;
+            Ok(kept)
+        }
+    }
+}
+
 
 /// The pass kept (`kept`, on `setup`'s knots), or, with `--demote-uncertified`, where its
 /// blend holds back elements and the initial spline map is not certified valid on some
@@ -186,7 +252,7 @@ fn demote_before_fit_if_fewer<P: Passes>(
     })
 }
 
-/// The passes of the job's knot intervals ([`spline_passes`] before the demotion).
+/// The knot passes of [`spline_passes`], on the job's weights as given.
 fn knot_passes<P: Passes>(
     p: &mut P,
     job: &Job,

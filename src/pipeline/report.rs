@@ -290,6 +290,9 @@ pub(crate) struct SpaceCounts {
     pub knot_intervals: KnotIntervals,
     /// Spline passes run to choose the knots (the report's `knot_passes`).
     pub knot_passes: usize,
+    /// The extraordinary midpoint weight of the fit kept (0 where its refit was not kept:
+    /// `pipeline::passes::spline_passes`).
+    pub extraordinary_midpoint: f64,
     /// Deviations relative to the diagonal.
     pub features: Option<FeatureReport>,
 }
@@ -362,6 +365,7 @@ impl CurveReport {
                         .count(),
                     knot_intervals: setup.knot_intervals,
                     knot_passes: setup.knot_passes,
+                    extraordinary_midpoint: setup.fit_params.weights.extraordinary_midpoint,
                     features: setup.features.as_ref().map(|f| {
                         let (vertex, planarity) = f.deviations(mesh, ho, setup.boundary_rows());
                         FeatureReport {
@@ -476,7 +480,11 @@ impl CurveReport {
             features: spline.and_then(|s| s.space.features),
             fit_weights: fit.map(|_| {
                 let graded = spline.map(|s| s.space.knot_intervals) == Some(KnotIntervals::Graded);
-                options.fit.weights.for_knots(graded)
+                let mut w = options.fit.weights.for_knots(graded);
+                if let Some(s) = spline {
+                    w.extraordinary_midpoint = s.space.extraordinary_midpoint;
+                }
+                w
             }),
             fit_targets: fit.map(|_| options.fit.targets),
             fit_solver: fit.map(|f| f.0),

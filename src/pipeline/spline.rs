@@ -431,6 +431,34 @@ pub(crate) fn auto_graded_keeps_the_boundary(graded: f64, uniform: f64) -> bool 
     graded <= AUTO_BOUNDARY_SLACK * uniform
 }
 
+/// The pass kept by the knot choice, refitted with the extraordinary midpoint weight
+/// ([`crate::fit::FitWeights::extraordinary_midpoint`]; see
+/// [`super::passes::spline_passes`]): whether the refit, holding back `refit` of the mesh's
+/// `elements` against the pass's `held`, is kept: where it holds back at most
+/// [`AUTO_MAX_HELD_BACK`] of the elements, or at most [`AUTO_MIN_GAIN`] as many as the pass
+/// (the rules of the knot choice: the spline kept, or decisively more of it).
+///
+/// Why not wherever it holds back fewer: the weight keeps the spline near extraordinary
+/// vertices and edges, but where the spline kept is not valid enough to be kept anyway, the
+/// elements it keeps lie further from the wall than the blend's (the level-2 O-grid cylinder,
+/// `scripts/fidelity_shapes.py`: 800 → 672 of 1,536 held back, max boundary error 4.68× →
+/// 5.99× Gmsh-with-CAD's). Kept on hsphere8 (24 → 11 %), sphere_r6 (15 → 8 %); the knots are
+/// chosen without the weight, which kept uniform knots' spline on the level-2 disk and
+/// beam-sphere and so cost them their graded knots (disk: max error 1.02× → 5.45×).
+pub(crate) fn extraordinary_refit_is_kept(refit: usize, held: usize, elements: usize) -> bool {
+    refit < held
+        && (!auto_holds_back_too_many(refit, elements) || auto_graded_is_decisive(refit, held))
+}
+
+/// The most elements a refit of [`extraordinary_refit_is_kept`] may hold back to be kept,
+/// where the pass holds back `held` > [`AUTO_MAX_HELD_BACK`] of the mesh's `elements`.
+pub(crate) fn extraordinary_refit_most(held: usize, elements: usize) -> usize {
+    let most = (AUTO_MAX_HELD_BACK * elements as f64)
+        .floor()
+        .max((AUTO_MIN_GAIN * held as f64).floor()) as usize;
+    most.min(held.saturating_sub(1))
+}
+
 /// The spline geometry's stages (the job's geometry is not [`Geometry::Straight`]); the
 /// periodic pairs among `periodic` are identified in the spline space where they can be.
 ///
@@ -647,6 +675,18 @@ impl super::passes::Passes for Whole<'_> {
         let (factors, blend) = clock.run(Stage::Validity, || blend(job, setup, &space))?;
         let outcome = SplineOutcome::blended(space, factors, fit, blend, 0, None);
         Ok(First::Done(outcome))
+    }
+    fn reweighted(&mut self, job: &Job, setup: &SplineSetup) -> usize {
+        let fit = &setup.fit_params;
+        crate::fit::extraordinary_reweighted(
+            job.mesh,
+            setup.topo(job),
+            &fit.weights,
+            fit.features.as_deref(),
+        )
+        .iter()
+        .filter(|&&r| r)
+        .count()
     }
     fn boundary_rms(
         &mut self,
