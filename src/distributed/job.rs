@@ -280,6 +280,19 @@ fn fit_share(
             super::cg::keep_closer_starts(comm, halo, &k, &b, &mut delta)
         });
     }
+    // Across rotation seams the serial fit runs its coupled CG to the factorisation's
+    // accuracy where it would factor K (`crate::fit::FitSolver::cg_params`): so do the ranks,
+    // and both give the direct solution. (Elsewhere the ranks' CG stops at `--cg-tol` where
+    // the serial run factors: docs/distributed.md.)
+    let cg_params = if coupled {
+        let mut unknowns = [halo.owned.iter().filter(|&&o| o).count() as u64];
+        comm.sum_u64(&mut unknowns);
+        fit_params
+            .solver
+            .cg_params(s.dim, unknowns[0] as usize, &fit_params.cg)
+    } else {
+        fit_params.cg
+    };
     let cg = clock
         .run(Stage::FitCg, || {
             if coupled {
@@ -290,7 +303,7 @@ fn fit_share(
                     coupling.as_ref(),
                     &b,
                     &mut delta,
-                    &fit_params.cg,
+                    &cg_params,
                     aggregation.as_ref(),
                 )
             } else {
@@ -300,7 +313,7 @@ fn fit_share(
                     &k,
                     &b,
                     &mut delta,
-                    &fit_params.cg,
+                    &cg_params,
                     aggregation.as_ref(),
                 )
             }

@@ -293,7 +293,9 @@ pub enum FitTargets {
 pub enum FitSolver {
     /// Sparse Cholesky for systems of at most [`FitSolver::DIRECT_2D`] (2D) or
     /// [`FitSolver::DIRECT_3D`] (3D) control points on the CPU backend, CG otherwise. Both
-    /// solve the same system; CG stops at `--cg-tol`, the factorisation at rounding.
+    /// solve the same system; CG stops at `--cg-tol`, the factorisation at rounding. Where a
+    /// CG stands in for the factorisation (the coupled fit across rotation seams, serially and
+    /// under mpirun) it runs to [`DIRECT_CG_TOL`] ([`FitSolver::cg_params`]).
     #[default]
     Auto,
     /// Preconditioned CG ([`crate::solve`]) on any size and backend.
@@ -332,13 +334,36 @@ impl FitSolver {
             }
         }
     }
+
+    /// The CG parameters of a solve of a `dim`-D system of `unknowns` control points that
+    /// this choice would factor on the CPU ([`FitSolver::factors`]) but that runs CG: `cg`
+    /// with its tolerance tightened to [`DIRECT_CG_TOL`], so that it gives the
+    /// factorisation's solution (the fit across rotation seams, whose coupled CG the factor
+    /// only preconditions serially and K's block-Jacobi pair under mpirun); `cg` itself where
+    /// the choice runs CG anyway.
+    pub fn cg_params(self, dim: usize, unknowns: usize, cg: &CgParams) -> CgParams {
+        let mut cg = *cg;
+        if self.factors(dim, unknowns, true) {
+            cg.rel_tol = cg.rel_tol.min(DIRECT_CG_TOL);
+        }
+        cg
+    }
 }
+
+/// The relative residual of a CG standing in for the fit's sparse Cholesky
+/// ([`FitSolver::cg_params`]). At the default `--cg-tol` (1e-6) the rotation-periodic
+/// sectors' coupled fit, preconditioned by K's factor serially and by K's block-Jacobi pair
+/// on the ranks, stopped up to 8e-7 of the diagonal apart (30° sector, 12 × 6 × 1 hexes,
+/// uniform knots); at 1e-10 both are the direct solution to well below that (6e-11), for a
+/// few iterations more (16 → 21 serially, 35 → 56 on the ranks, 90° sector).
+pub const DIRECT_CG_TOL: f64 = 1e-10;
 
 /// Fit parameters.
 #[derive(Clone, Debug)]
 pub struct FitParams {
     pub weights: FitWeights,
-    /// CG or sparse Cholesky ([`FitSolver`]); distributed runs always use CG.
+    /// CG or sparse Cholesky ([`FitSolver`]); distributed runs always use CG (across
+    /// rotation seams to [`DIRECT_CG_TOL`] where the serial run factors).
     pub solver: FitSolver,
     pub cg: CgParams,
     pub targets: FitTargets,
@@ -688,10 +713,12 @@ pub fn fit_with_targets_from(
     // The solve takes K (the CPU's blocked solvers release it as they reorder it).
     let (unknowns, nonzeros) = (k.n(), k.indices().len());
     let cg = match &coupling {
-        // On the CPU, factored as the fit would factor K ([`rotated`]).
+        // On the CPU, factored as the fit would factor K ([`rotated`]), and then run to the
+        // factorisation's accuracy.
         Some(c) => {
             let factor = params.solver.factors(space.dim(), k.n(), true);
-            rotated::solve(&k, c, &rhs, &mut delta, &params.cg, factor)?
+            let cg = params.solver.cg_params(space.dim(), k.n(), &params.cg);
+            rotated::solve(&k, c, &rhs, &mut delta, &cg, factor)?
         }
         None => solve(k, &rhs, &mut delta, &params.cg)?,
     };

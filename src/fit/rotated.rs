@@ -16,8 +16,9 @@
 //! the seams). The right-hand side needs R_{e,c}ᵀ on the rotated points' rows, which
 //! [`FitSpace::add_transposed`] applies. The system is solved by [`crate::solve::pcg_coupled`]
 //! (one recurrence over the three coordinates), preconditioned by K⁻¹ ⊗ I₃ (K factored where
-//! the fit would factor it) or by K's pair of block-Jacobi partitions: C has low rank, so the
-//! factored preconditioner leaves a handful of iterations.
+//! the fit would factor it, and the CG then run to the factorisation's accuracy,
+//! [`super::FitSolver::cg_params`]) or by K's pair of block-Jacobi partitions: C has low
+//! rank, so the factored preconditioner leaves a few iterations.
 //!
 //! Invariant: without frames nothing here runs, and the fit is the ordinary one.
 
