@@ -195,7 +195,6 @@ fn weighted_passes<P: Passes>(
     }
 }
 
-
 /// The pass kept (`kept`, on `setup`'s knots), or, with `--demote-uncertified`, where its
 /// blend holds back elements and the initial spline map is not certified valid on some
 /// element of the whole mesh, the same pass with those elements demoted to Q2 *before* the
