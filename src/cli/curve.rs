@@ -344,15 +344,14 @@ impl JobArgs {
         let fit_cg = fitted && self.fit_solver != Fs::Cholesky;
         let elastic_cg = elastic && self.elastic.solver() != Es::Cholesky;
         let no_cg = if !fitted && !elastic {
-            no_fit.to_string()
+            no_fit
         } else {
             "no CG solve runs: --fit-solver cholesky, without --method elastic solved by CG"
-                .to_string()
         };
         let preconditioner = if !fit_cg {
-            no_cg.clone()
+            no_cg
         } else {
-            "the GPU backend's CG uses the diagonal, jacobi".to_string()
+            "the GPU backend's CG uses the diagonal, jacobi"
         };
         let energy = self.fit == Fp::Energy;
         let energy_solver = self.energy.energy_solver;
@@ -373,12 +372,12 @@ impl JobArgs {
                 fitted,
                 no_fit,
             ),
-            Rule::new(&["cg_tol"], fit_cg || elastic_cg, &no_cg),
+            Rule::new(&["cg_tol"], fit_cg || elastic_cg, no_cg),
             Rule::new(
                 &["cg_preconditioner"],
                 fit_cg
                     && (!gpu || self.cg_preconditioner == Some(values::CgPreconditioner::Jacobi)),
-                &preconditioner,
+                preconditioner,
             ),
             Rule::new(
                 &["kink_angle"],
