@@ -1817,20 +1817,6 @@ fn turned_periodic_input(name: &str, args: &str, deg: f64) -> PathBuf {
     input
 }
 
-/// What `periodic_probe.py` finds in `file`: Gmsh's periodic links and the facet angles
-/// across the seams and inside, from the written file's Jacobians.
-fn periodic_probe(file: &Path) -> Value {
-    let out = common::run_ok(
-        common::python()
-            .arg(concat!(
-                env!("CARGO_MANIFEST_DIR"),
-                "/tests/external/periodic_probe.py"
-            ))
-            .arg(file),
-    );
-    serde_json::from_slice(&out.stdout).unwrap()
-}
-
 /// `periodic_probe.py` (Gmsh's `getPeriodicNodes` and node coordinates) on `file`: one link,
 /// image side `image` of master `master`, every node of the image side paired, each pair the
 /// affine image of its master to [`PERIODIC_IMAGE_TOL`] of the diagonal. Returns the link.
@@ -1841,7 +1827,7 @@ fn assert_gmsh_pairs_exact(file: &Path, master: &str, image: &str) -> Value {
 /// [`assert_gmsh_pairs_exact`] for a file with several periodic pairs: one link per pair of
 /// `pairs` (master, image), each as there. Returns the links in the order of `pairs`.
 fn assert_gmsh_links_exact(file: &Path, pairs: &[(&str, &str)]) -> Vec<Value> {
-    let p = periodic_probe(file);
+    let p = common::periodic_probe(file);
     let what = file.display();
     let links = p["links"].as_array().unwrap();
     assert_eq!(links.len(), pairs.len(), "{what}: {links:?}");
@@ -2062,16 +2048,7 @@ fn translation_seams_are_glued_across_ranks() {
                 "{what}: a node is {worst:e} from the serial run's"
             );
             if angle {
-                let p = periodic_probe(&out);
-                assert!(p["seam_facets"].as_u64().unwrap() > 0, "{what}: {p}");
-                for w in ["max", "mean"] {
-                    let seam = p[format!("seam_angle_{w}")].as_f64().unwrap();
-                    let inside = p[format!("interior_angle_{w}")].as_f64().unwrap();
-                    assert!(
-                        seam <= inside.max(1e-3),
-                        "{what}: {w} seam angle {seam}° > interior {inside}°"
-                    );
-                }
+                common::assert_seams_no_rougher(&out, &what);
             }
         }
     }
@@ -2174,15 +2151,8 @@ fn rotation_seams_are_glued_across_ranks() {
                     );
                 }
                 if knots == Some("graded") {
-                    let p = periodic_probe(&out);
                     // Every facet of the 6 × 1 seam.
-                    assert!(p["seam_facets"].as_u64().unwrap() >= 6, "{what}: {p}");
-                    let seam = p["seam_angle_max"].as_f64().unwrap();
-                    let inside = p["interior_angle_max"].as_f64().unwrap();
-                    assert!(
-                        seam <= 1e-4 && inside <= 1e-4,
-                        "{what}: seam {seam}°, interior {inside}°"
-                    );
+                    common::assert_seams_c1(&out, 6, &what);
                 }
             }
         }
@@ -2272,16 +2242,9 @@ fn rotation_and_translation_pairs_are_glued_across_ranks() {
                     worst <= DIRECT_RANK_TOLERANCE,
                     "{what}: a node is {worst:e} of the diagonal from the serial run's"
                 );
-                let p = periodic_probe(&out);
                 // Every facet of the 12 × 6 translation seam and of the 6 × 4 rotation one
                 // but its top row, whose nodes on zmax the probe pairs through the z link.
-                assert!(p["seam_facets"].as_u64().unwrap() >= 90, "{what}: {p}");
-                let seam = p["seam_angle_max"].as_f64().unwrap();
-                let inside = p["interior_angle_max"].as_f64().unwrap();
-                assert!(
-                    seam <= 1e-4 && inside <= 1e-4,
-                    "{what}: seam {seam}°, interior {inside}°"
-                );
+                common::assert_seams_c1(&out, 90, &what);
             }
         }
     }

@@ -266,3 +266,46 @@ pub fn compare_rows_all_valid(compare_json: &Value) -> &[Value] {
     }
     rows
 }
+
+/// What `tests/external/periodic_probe.py` finds in `file`: Gmsh's periodic links and the facet
+/// angles across the seams and inside, from the written file's Jacobians.
+pub fn periodic_probe(file: &Path) -> Value {
+    let out = run_ok(
+        python()
+            .arg(concat!(
+                env!("CARGO_MANIFEST_DIR"),
+                "/tests/external/periodic_probe.py"
+            ))
+            .arg(file),
+    );
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// The seams of `file` no rougher than its interior ([`periodic_probe`]): some seam facet
+/// found, and the largest and the mean facet angle across the seams at most the interior's
+/// (floored at 1e-3°, so the comparison stays meaningful where the interior is C¹ throughout).
+pub fn assert_seams_no_rougher(file: &Path, what: &str) {
+    let p = periodic_probe(file);
+    assert!(p["seam_facets"].as_u64().unwrap() > 0, "{what}: {p}");
+    for w in ["max", "mean"] {
+        let seam = p[format!("seam_angle_{w}")].as_f64().unwrap();
+        let inside = p[format!("interior_angle_{w}")].as_f64().unwrap();
+        assert!(
+            seam <= inside.max(1e-3),
+            "{what}: {w} seam angle {seam}° > interior {inside}°"
+        );
+    }
+}
+
+/// The seams of `file` C¹ as its interior ([`periodic_probe`]): at least `facets` seam facets,
+/// and the largest facet angle across the seams and inside at most 1e-4° (rounding).
+pub fn assert_seams_c1(file: &Path, facets: u64, what: &str) {
+    let p = periodic_probe(file);
+    assert!(p["seam_facets"].as_u64().unwrap() >= facets, "{what}: {p}");
+    let seam = p["seam_angle_max"].as_f64().unwrap();
+    let inside = p["interior_angle_max"].as_f64().unwrap();
+    assert!(
+        seam <= 1e-4 && inside <= 1e-4,
+        "{what}: seam {seam}°, interior {inside}°"
+    );
+}

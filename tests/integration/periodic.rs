@@ -151,16 +151,6 @@ fn curve(input: &Path, out: &Path, args: &[&str]) -> Value {
     serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap()
 }
 
-/// Gmsh's view of the periodic pairs of `file` (`periodic_probe.py`).
-fn probe(file: &Path) -> Value {
-    let out = run_ok(
-        python()
-            .arg(Path::new(ROOT).join("tests/external/periodic_probe.py"))
-            .arg(file),
-    );
-    serde_json::from_slice(&out.stdout).unwrap()
-}
-
 /// `cmd` fails with one error line that contains every one of `says`.
 fn assert_refused(cmd: &mut std::process::Command, says: &[&str]) {
     let run = cmd.output().unwrap();
@@ -185,7 +175,7 @@ fn pyfr_periodic_sizes(msh: &Path) -> String {
 /// Every node of each image entity is paired in Gmsh, and its coordinates are the affine
 /// image of its master's to `IMAGE_TOL` of the diagonal. Returns the links by image name.
 fn assert_exact_images(file: &Path, expect: usize) -> BTreeMap<String, Value> {
-    let p = probe(file);
+    let p = common::periodic_probe(file);
     let diag = p["diagonal"].as_f64().unwrap();
     let links = p["links"].as_array().unwrap();
     assert_eq!(links.len(), expect, "{}: links {links:?}", file.display());
@@ -356,19 +346,9 @@ fn seam_facet_angle_is_no_worse_than_the_interior() {
             let report = curve(&input, &out, &args);
             let per = &report["periodic"];
             if i == 0 {
-                let p = probe(&out);
-                assert!(p["seam_facets"].as_u64().unwrap() > 0, "{p}");
-                // Largest and mean angle: C¹ spline facets meet at rounding-level angles, the
-                // interior's large ones are where the blend held the fit back (C⁰ there); the
-                // floor keeps the comparison meaningful where the interior is C¹ throughout.
-                for what in ["max", "mean"] {
-                    let seam = p[format!("seam_angle_{what}")].as_f64().unwrap();
-                    let interior = p[format!("interior_angle_{what}")].as_f64().unwrap();
-                    assert!(
-                        seam <= interior.max(1e-3),
-                        "{dim}D: {what} seam {seam}° > interior {interior}°"
-                    );
-                }
+                // C¹ spline facets meet at rounding-level angles, the interior's large ones are
+                // where the blend held the fit back (C⁰ there).
+                common::assert_seams_no_rougher(&out, &format!("{dim}D"));
             }
             assert_eq!(per["seam"], "c1", "{dim}D {run:?}: {per}");
             assert_eq!(per["pairs"][0]["kind"], "translation", "{dim}D {run:?}");
@@ -512,16 +492,8 @@ fn rotation_seams_are_glued_c1_on_generated_sectors() {
                     if dim == 2 {
                         assert_eq!(report["q2_elements"], 0, "{what}");
                     }
-                    let p = probe(&out);
                     // Every facet of the 6 × (2 layers in 3D) seam.
-                    let facets = if dim == 3 { 12 } else { 6 };
-                    assert!(p["seam_facets"].as_u64().unwrap() >= facets, "{what}: {p}");
-                    let seam = p["seam_angle_max"].as_f64().unwrap();
-                    let inside = p["interior_angle_max"].as_f64().unwrap();
-                    assert!(
-                        seam <= 1e-4 && inside <= 1e-4,
-                        "{what}: seam {seam}°, interior {inside}°"
-                    );
+                    common::assert_seams_c1(&out, if dim == 3 { 12 } else { 6 }, &what);
                 }
             }
         }
@@ -1079,7 +1051,7 @@ fn cgns_output_carries_the_periodic_pairs() {
         // section, so a side's two end nodes sit on the neighbouring sides and stay unpaired;
         // in 3D it mixes up the sections sharing nodes, so only 2D is asked of it).
         if name != "sector3d" && common::have_gmsh(&test) {
-            let g = probe(&out);
+            let g = common::periodic_probe(&out);
             let links = g["links"].as_array().unwrap();
             let p = &pairs[0];
             assert_eq!(links.len(), 1, "{name}: {g}");
