@@ -243,6 +243,22 @@ fn dot3(a: &[[f64; 3]], b: &[[f64; 3]]) -> [f64; 3] {
         .fold([0.0; 3], |a, b| [a[0] + b[0], a[1] + b[1], a[2] + b[2]])
 }
 
+/// r = b − A x, with A applied by `apply`: the start of every CG loop here and of the GPU
+/// solver's host loop (and its f64 check of the final residual).
+pub(crate) fn residual(
+    apply: &mut impl FnMut(&[[f64; 3]], &mut [[f64; 3]]),
+    b: &[[f64; 3]],
+    x: &[[f64; 3]],
+    r: &mut [[f64; 3]],
+) {
+    apply(x, r);
+    r.par_iter_mut().zip(b.par_iter()).for_each(|(r, b)| {
+        for k in 0..3 {
+            r[k] = b[k] - r[k];
+        }
+    });
+}
+
 /// x += α p, r −= α A p (per component α).
 fn advance(
     x: &mut [[f64; 3]],
@@ -501,12 +517,7 @@ pub fn cg_loop(
 ) -> Result<CgInfo, CgError> {
     let n = b.len();
     let mut r = vec![[0.0; 3]; n];
-    apply(x, &mut r);
-    r.par_iter_mut().zip(b.par_iter()).for_each(|(r, b)| {
-        for k in 0..3 {
-            r[k] = b[k] - r[k];
-        }
-    });
+    residual(&mut apply, b, x, &mut r);
     let stop = Stopping::new(reduce.dot(b, b).map(f64::sqrt), params);
     let mut z = vec![[0.0; 3]; n];
     precondition(&r, &mut z);
@@ -578,12 +589,7 @@ pub fn coupled_loop(
     let n = b.len();
     let all = |d: [f64; 3]| d[0] + d[1] + d[2];
     let mut r = vec![[0.0; 3]; n];
-    apply(x, &mut r);
-    r.par_iter_mut().zip(b.par_iter()).for_each(|(r, b)| {
-        for k in 0..3 {
-            r[k] = b[k] - r[k];
-        }
-    });
+    residual(&mut apply, b, x, &mut r);
     let bnorm = all(reduce.dot(b, b)).sqrt();
     let target = (params.rel_tol * bnorm).max(params.abs_tol);
     let rel = |rr: f64| {

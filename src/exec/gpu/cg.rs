@@ -19,7 +19,7 @@ pub use crate::exec::cpu::cg::{CgKernelParams, CgState};
 pub use crate::exec::cpu::dot::DotParams;
 pub use crate::exec::cpu::spmv::SpmvParams;
 use crate::fit::NormalMatrix;
-use crate::solve::{CgError, CgInfo, CgParams, LinOp, Stopping};
+use crate::solve::{CgError, CgInfo, CgParams, LinOp, Stopping, residual};
 
 pub const SPMV_SOURCE: &str = include_str!("../../../shaders/spmv.wgsl");
 pub const DOT_SOURCE: &str = include_str!("../../../shaders/dot.wgsl");
@@ -447,16 +447,6 @@ impl<'c> CgKernels<'c> {
     }
 }
 
-/// r = b − A x in f64.
-fn residual(a: &NormalMatrix, b: &[[f64; 3]], x: &[[f64; 3]], res: &mut [[f64; 3]]) {
-    a.apply(x, res);
-    for (r, b) in res.iter_mut().zip(b) {
-        for k in 0..3 {
-            r[k] = b[k] - r[k];
-        }
-    }
-}
-
 /// Jacobi-PCG for `a` x = b with the iteration on the GPU (see the module docs). Same
 /// contract as [`crate::solve::pcg`]; a device failure is [`CgError::Device`].
 pub fn pcg(
@@ -486,7 +476,7 @@ pub fn pcg(
     let mut res = vec![[0.0; 3]; n];
     for _round in 0..MAX_REFINEMENTS {
         // f64 residual of the current iterate.
-        residual(a, b, x, &mut res);
+        residual(&mut |v, y| a.apply(v, y), b, x, &mut res);
         let rr = dot3(&res, &res);
         if stop.converged(rr) {
             return Ok(CgInfo {
@@ -550,7 +540,8 @@ pub fn pcg(
         }
         total += st.iterations as usize;
     }
-    residual(a, b, x, &mut res);
+    // The final iterate's residual in f64.
+    residual(&mut |v, y| a.apply(v, y), b, x, &mut res);
     let rr = dot3(&res, &res);
     if stop.converged(rr) {
         return Ok(CgInfo {
