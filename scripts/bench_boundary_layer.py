@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """Boundary-layer meshes: polyspline against Gmsh with the exact CAD (issue 16).
 
-usage: python3 scripts/bench_boundary_layer.py [--runs N] [--timeout S] [--json] [--keep DIR] [CASE ...]
+usage: python3 scripts/bench_boundary_layer.py [--runs N] [--timeout S] [--json] [--keep DIR]
+       [--gmsh setOrder(2),HighOrder,...] [CASE ...]
 
 Builds nothing: run `cargo build --release` first (or set POLYSPLINE to a binary). Needs the
 `gmsh` Python module (4.15) and numpy.
@@ -236,7 +237,7 @@ def run_ours(lin, out, extra, runs, timeout):
 # ---------------------------------------------------------------- driver
 
 
-def bench(case, tmp, runs, timeout):
+def bench(case, tmp, runs, timeout, gmsh_methods):
     lin = os.path.join(tmp, case + ".msh")
     info = run_worker("linear", case, lin, timeout)
     rows = []
@@ -249,7 +250,7 @@ def bench(case, tmp, runs, timeout):
         if "error" not in row:
             row.update(run_worker("file", case, out, timeout))
         rows.append(row)
-    for m in GMSH_METHODS:
+    for m in gmsh_methods:
         row = {"method": "Gmsh " + m}
         row.update(run_worker("gmsh", case, m, timeout))
         rows.append(row)
@@ -294,12 +295,18 @@ def main():
     ap.add_argument("--json", action="store_true", help="print one JSON object instead of Markdown")
     ap.add_argument("--keep", help="write the meshes into this directory instead of a temporary one")
     ap.add_argument("--table-from", metavar="JSON", help="print the table of an earlier --json run, run nothing")
+    ap.add_argument("--gmsh", default=",".join(GMSH_METHODS), metavar="LIST",
+                    help="Gmsh methods to run, comma-separated (empty: none; the optimisers take minutes)")
     ap.add_argument("cases", nargs="*", metavar="CASE", help=f"default: all of {', '.join(CASES)}")
     args = ap.parse_args()
     args.cases = args.cases or list(CASES)
     for c in args.cases:
         if c not in CASES:
             ap.error(f"unknown case {c!r} (cases: {', '.join(CASES)})")
+    gmsh_methods = [m for m in args.gmsh.split(",") if m]
+    for m in gmsh_methods:
+        if m not in GMSH_METHODS:
+            ap.error(f"unknown Gmsh method {m!r} (methods: {', '.join(GMSH_METHODS)})")
     if args.table_from:
         print_table(json.load(open(args.table_from)))
         return
@@ -311,7 +318,7 @@ def main():
             os.makedirs(args.keep, exist_ok=True)
             tmp = args.keep
         for case in args.cases:
-            info, rows = bench(case, tmp, args.runs, args.timeout)
+            info, rows = bench(case, tmp, args.runs, args.timeout, gmsh_methods)
             results[case] = {"linear": info, "rows": rows}
             if not args.json:
                 print(case_line(case, info), file=sys.stderr, flush=True)
