@@ -246,13 +246,16 @@ impl SmoothTargets {
 
     /// [`SmoothTargets::build_with_features`] on a rank's part of a mesh distributed over
     /// ranks (`share`, see [`InheritShare`]; `None`: the whole mesh), whose vertices of the
-    /// rank's own elements inherit the whole mesh's interior models, and, in 2D, with walls
-    /// that go on across periodic seams: `partners[v]` (empty: none) is, at a wall vertex
-    /// ending on a seam, the other side's vertex on the same glued vertex and the rigid map
-    /// carrying that side onto this one ([`crate::spline::seam::SeamView::wall_partners`]).
-    /// The models at and next to such a vertex are fitted over the wall on both sides, the
-    /// other side's points carried over by the map, so they are two-sided as in the interior
-    /// of the wall, and the models of the two sides' seam vertices are images of each other.
+    /// rank's own elements inherit the whole mesh's interior models, and with walls that go
+    /// on across periodic seams: `partners[v]` (empty: none) is, at a wall vertex on a seam,
+    /// the other side's vertex on the same glued vertex and the rigid map carrying that side
+    /// onto this one ([`crate::spline::seam::SeamView::wall_partners`]). The models at and
+    /// next to such a vertex are fitted over the wall on both sides, the other side's points
+    /// carried over by the map (2D: along the boundary curve; 3D: the vertex's fan and two
+    /// rings, its neighbours' rings through it, and where a rim meets the seam the rim's
+    /// curve and patch models, `FeatureModels::build`), so they are
+    /// two-sided as in the interior of the wall, and the models of the two sides' seam
+    /// vertices are images of each other.
     pub fn build_shared(
         mesh: &LinearMesh,
         topo: &Topology,
