@@ -1621,6 +1621,40 @@ fn auto_knots_two_passes_choose_as_the_serial_run_on_2_3_ranks() {
     }
 }
 
+/// `--knot-intervals auto` on deal.II's example.msh with `--fit-solver cg --cg-tol 1e-10`
+/// chooses graded knots on 2 and 3 ranks as serially. Both fitted boundaries are rounding
+/// there (the 2D spline holds the boundary): the graded and uniform RMS distances were
+/// 2.7e-15 and 3.9e-15 of the diagonal serially, 2.7e-15 and 1.8e-15 on 2 ranks, where
+/// `AUTO_BOUNDARY_SLACK` then rejected graded knots (229 elements held back against serial
+/// 21); below `AUTO_BOUNDARY_FLOOR` both count as on the boundary. The serial run is the
+/// oracle: knots, passes, held-back count and output within [`RANK_TOLERANCE`].
+#[test]
+fn auto_knots_on_a_boundary_fitted_to_rounding_choose_as_the_serial_run() {
+    if !have_mpirun() {
+        return;
+    }
+    let example = Path::new(env!("CARGO_MANIFEST_DIR")).join("meshes/real/dealii/example.msh");
+    let input = binary_straight(&example, "exact_example.msh");
+    let args = ["--fit-solver", "cg", "--cg-tol", "1e-10"];
+    let (out, _, serial) = curve_with_report(0, &input, "exact_example", &args);
+    assert_eq!(serial["knot_passes"], 2, "auto ran both passes");
+    assert_eq!(serial["knot_intervals"], "graded");
+    let serial_mesh = read(&out);
+    let diag = diagonal(&serial_mesh);
+    for np in [2, 3] {
+        let (out, _, r) = curve_with_report(np, &input, "exact_example", &args);
+        let worst = compare(&serial_mesh, &read(&out)) / diag;
+        eprintln!(
+            "exact_example: {np} ranks: {} knots, {} held back, {worst:.2e} of the diagonal",
+            r["knot_intervals"], r["reduced_elements"]
+        );
+        for key in ["knot_intervals", "knot_passes", "reduced_elements"] {
+            assert_eq!(r[key], serial[key], "np {np}: {key}");
+        }
+        assert!(worst <= RANK_TOLERANCE, "np {np}: {worst:.3e}");
+    }
+}
+
 /// Issue #32's demotion before the fit (`--demote-uncertified`) under mpirun: where the
 /// initial spline map is not certified on some elements, each rank certifies its own
 /// elements, the ranks unite every demotion round's marks by global element id and keep the

@@ -580,12 +580,17 @@ impl Passes for RankPasses<'_> {
         pass: &Pass,
     ) -> f64 {
         // Each boundary side once: the own elements' (the ghosts' outer sides are no boundary).
+        // The diagonal is the whole mesh's (the ranks' boxes reduced), as the serial job's.
         let (comm, n_owned) = (self.comm, self.local.n_owned);
+        let (mut lo, mut hi) = self.local.mesh.bounding_box();
         clock.run(Stage::Validity, || {
             let (sum, n) = spline::fitted_boundary_sq_sum(job, setup, &pass.s, |e| e < n_owned);
             let mut v = [sum, n as f64];
             comm.sum_f64(&mut v);
-            crate::pipeline::misfit::rms(v[0], v[1] as usize)
+            comm.min_f64(&mut lo);
+            comm.max_f64(&mut hi);
+            let rms = crate::pipeline::misfit::rms(v[0], v[1] as usize);
+            rms / crate::pipeline::misfit::diagonal(lo, hi)
         })
     }
     fn warm_start(&self) -> bool {
