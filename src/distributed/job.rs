@@ -145,7 +145,8 @@ struct Share {
     knot_surfaces: Option<crate::spline::KnotSurfaceInfo>,
     input_msj: f64,
     halo: Halo,
-    nonzeros: usize,
+    /// Stored entries of the rank's share of K and of the whole K.
+    nonzeros: [usize; 2],
     bytes_fit: u64,
     bytes_validity: u64,
     bytes_sample: u64,
@@ -218,7 +219,7 @@ fn fit_stage(
     s: &mut SplineSpace,
     halo: &Halo,
     start: Option<&[[f64; 3]]>,
-) -> Result<(crate::solve::CgInfo, usize), CurveError> {
+) -> Result<(crate::solve::CgInfo, [usize; 2]), CurveError> {
     let t = Instant::now();
     let fit = fit_share(j, clock, s, halo, start);
     clock.add(Stage::Fit, t.elapsed().as_secs_f64());
@@ -230,15 +231,15 @@ fn fit_stage(
 /// with its preconditioner's aggregates grown first ([`Stage::FitCg`]), and the fitted
 /// control points (projected onto planar patches) in `s`. The CG starts from the control
 /// points `start` where given (one per control point of `s`), as the serial fit's warm start
-/// does ([`crate::fit::fit_with_targets_from`]). Returns the CG's figures and the local
-/// matrix's stored entries.
+/// does ([`crate::fit::fit_with_targets_from`]). Returns the CG's figures and the stored
+/// entries of the rank's local matrix and of the whole K ([`LocalMatrix::global_nonzeros`]).
 fn fit_share(
     j: &ShareJob,
     clock: &mut Clock,
     s: &mut SplineSpace,
     halo: &Halo,
     start: Option<&[[f64; 3]]>,
-) -> Result<(crate::solve::CgInfo, usize), CurveError> {
+) -> Result<(crate::solve::CgInfo, [usize; 2]), CurveError> {
     // The boundary is fitted on the topology with the glued seams interior.
     let (comm, topo, setup) = (j.comm, j.setup.topo(j.job), j.setup);
     let fit_params = &setup.fit_params;
@@ -334,7 +335,7 @@ fn fit_share(
         crate::fit::features::project_onto_planes(s, topo, f, &mut c_star);
     }
     s.control_points = c_star;
-    Ok((cg, k.nonzeros()))
+    Ok((cg, [k.nonzeros(), k.global_nonzeros(comm, halo)]))
 }
 
 /// This rank's rows of the scaled normal equations: the local matrix over its halo, the
@@ -476,7 +477,8 @@ struct Pass {
     s: SplineSpace,
     halo: Halo,
     cg: crate::solve::CgInfo,
-    nonzeros: usize,
+    /// Stored entries of the rank's share of K and of the whole K.
+    nonzeros: [usize; 2],
     blend: Result<Blend, usize>,
     /// Elements of the whole mesh demoted to Q2 before the fit (`--demote-uncertified`).
     demoted: usize,
@@ -1031,7 +1033,7 @@ pub fn curve(
         owned_control_points: share.halo.owned.iter().filter(|&&o| o).count(),
         shared_control_points: share.halo.shared(),
         neighbours: share.halo.neighbours.len(),
-        matrix_nonzeros: share.nonzeros,
+        matrix_nonzeros: share.nonzeros[0],
         bytes_sent: comm.bytes_sent(),
         bytes_fit: share.bytes_fit,
         bytes_validity: share.bytes_validity,
@@ -1056,7 +1058,7 @@ pub fn curve(
             f
         }),
     };
-    let nonzeros = per_rank.iter().map(|f| f.matrix_nonzeros).sum();
+    let nonzeros = share.nonzeros[1];
     let n_global = share.local.n_global as usize;
     let outcomes = Outcomes {
         dimension: out.dim,
