@@ -1592,10 +1592,12 @@ fn binary_straight(input: &Path, name: &str) -> PathBuf {
 /// (744 quads: 229 against 21) it is close enough and `auto` keeps graded knots. At 2 and 3
 /// ranks the report's knots, passes, knot surfaces and held-back count are the serial run's,
 /// and the output is the serial output within [`RANK_TOLERANCE`] of the diagonal (the fit's
-/// CG to [`RANK_CG_TOL`]: example.msh's serial fit is factored, the ranks' is CG). Measured:
-/// 3.2e-11 and 4.7e-12 (cylinder), 9.8e-10 and 8.3e-10 (example.msh) at 2 and 3 ranks. With
-/// each rank deciding on its own elements' boundary sums (no reduction) the ranks split on
-/// example.msh at 2 ranks and the run fails.
+/// CG to [`RANK_CG_TOL`]; example.msh's serial fit is factored, and the ranks' CG runs to the
+/// factorisation's accuracy, `fit::DIRECT_CG_TOL`). Measured: 3.2e-11 and 4.7e-12
+/// (cylinder), 5.5e-12 and 5.5e-12 (example.msh; 9.8e-10 and 8.3e-10 with the ranks' CG
+/// stopped at [`RANK_CG_TOL`]) at 2 and 3 ranks. With each rank deciding on its own
+/// elements' boundary sums (no reduction) the ranks split on example.msh at 2 ranks and the
+/// run fails.
 #[test]
 fn auto_knots_two_passes_choose_as_the_serial_run_on_2_3_ranks() {
     if !have_mpirun() {
@@ -1702,7 +1704,8 @@ fn auto_knots_on_a_boundary_fitted_to_rounding_choose_as_the_serial_run() {
 /// demoted, Q2 and held-back counts, and the output is the serial output within
 /// [`RANK_TOLERANCE`] of the diagonal (the fit's CG to [`RANK_CG_TOL`]); the serial runs
 /// without the rule are the oracle that it acted. Measured: 4.2e-11 and 1.9e-11 of the
-/// diagonal (cylinder), 8.4e-13 and 8.4e-13 (spheremesh01) at 2 and 3 ranks. With each rank
+/// diagonal (cylinder), 8.5e-15 and 8.5e-15 (spheremesh01, factored serially: the ranks' CG
+/// runs to `fit::DIRECT_CG_TOL`) at 2 and 3 ranks. With each rank
 /// keeping its own marks (no union over the ranks) the cylinder at 2 ranks reported 220
 /// demoted elements against the serial 352.
 #[test]
