@@ -44,7 +44,7 @@ use crate::fit::rotated::Coupling;
 use crate::solve::blocked::RowTemplates;
 use crate::solve::{CgError, CgInfo, CgParams, CgPreconditioner};
 use rayon::prelude::*;
-use std::collections::{HashMap, HashSet};
+use std::collections::HashSet;
 
 /// The control points of this rank and how they are shared.
 pub struct Halo {
@@ -282,58 +282,56 @@ impl LocalMatrix {
         self.indices.len()
     }
 
-    /// The stored entries of the whole K, on every rank (collective): each row once, on its
-    /// owner, with the union of the columns every rank touching it holds (a column named by
-    /// its key, [`Halo::keys`]: the local numbers are each rank's own). Summing the ranks'
-    /// [`LocalMatrix::nonzeros`] counts a shared row once per rank, each time with that
-    /// rank's own elements' columns only (the generated 975-hex torus: 229,838 and 254,085
-    /// at 2 and 4 ranks against K's 206,295).
+    /// The stored entries of the whole K, on every rank (collective): each entry (r, c) is
+    /// counted by the lowest rank whose share holds it. A lower rank q holding an entry of
+    /// this rank's share touches both r and c, which are then on the list this rank shares
+    /// with q: each rank sends its higher neighbours, per row of their shared list, the
+    /// columns of its share on the same list (as positions in it, the same on both sides),
+    /// and counts its entries none of its lower neighbours sent. Summing the ranks'
+    /// [`LocalMatrix::nonzeros`] counts an entry once per rank holding it (the generated
+    /// 975-hex torus: 229,838 and 254,085 at 2 and 4 ranks against K's 206,295).
     pub fn global_nonzeros(&self, comm: &dyn Comm, halo: &Halo) -> usize {
         let me = comm.rank();
-        // A shared row's owner is the lowest rank touching it: the ranks above send it their
-        // columns of the row, row by row in the lists' order (the same on both sides), each
-        // as its count and its columns' keys (exact as f64, as the halo's keys travel).
+        let mut position = vec![u32::MAX; halo.len()];
         let mut send = vec![Vec::new(); comm.size()];
-        for (q, list) in halo.neighbours.iter().filter(|(q, _)| *q < me) {
-            send[*q] = list
-                .iter()
-                .flat_map(|&i| {
-                    let cols = self.row(i as usize).0;
-                    std::iter::once(cols.len() as f64).chain(
-                        cols.iter()
-                            .flat_map(|&c| halo.keys[c as usize].map(|x| x as f64)),
-                    )
-                })
-                .collect();
+        for (p, list) in halo.neighbours.iter().filter(|(p, _)| *p > me) {
+            for (k, &i) in list.iter().enumerate() {
+                position[i as usize] = k as u32;
+            }
+            let out = &mut send[*p];
+            for &i in list {
+                let at = out.len();
+                out.push(0.0);
+                for &c in self.row(i as usize).0 {
+                    if position[c as usize] != u32::MAX {
+                        out.push(f64::from(position[c as usize]));
+                    }
+                }
+                out[at] = (out.len() - at - 1) as f64;
+            }
+            for &i in list {
+                position[i as usize] = u32::MAX;
+            }
         }
         let recv = comm.exchange_f64(&send);
-        // Per owned shared row, the other ranks' columns.
-        let mut extra: HashMap<u32, HashSet<Key>> = HashMap::new();
-        for (q, list) in halo.neighbours.iter().filter(|(q, _)| *q > me) {
+        drop(send);
+        // The entries the lower neighbours hold, in this rank's local numbering.
+        let mut below: HashSet<(u32, u32)> = HashSet::new();
+        for (q, list) in halo.neighbours.iter().filter(|(q, _)| *q < me) {
             let mut at = 0;
             for &i in list {
                 let n = recv[*q][at] as usize;
-                let cols = &recv[*q][at + 1..at + 1 + 5 * n];
-                if halo.owned[i as usize] {
-                    let keys = cols
-                        .chunks_exact(5)
-                        .map(|k| std::array::from_fn(|j| k[j] as u64));
-                    extra.entry(i).or_default().extend(keys);
-                }
-                at += 1 + 5 * n;
+                let cols = recv[*q][at + 1..at + 1 + n].iter();
+                below.extend(cols.map(|&k| (i, list[k as usize])));
+                at += 1 + n;
             }
         }
-        let mut count = [0u64];
-        for i in (0..halo.len()).filter(|&i| halo.owned[i]) {
-            let own = self.row(i).0;
-            count[0] += match extra.get_mut(&(i as u32)) {
-                None => own.len(),
-                Some(all) => {
-                    all.extend(own.iter().map(|&c| halo.keys[c as usize]));
-                    all.len()
-                }
-            } as u64;
-        }
+        let mut count = [(0..halo.len())
+            .map(|r| {
+                let cols = self.row(r).0.iter();
+                cols.filter(|&&c| !below.contains(&(r as u32, c))).count() as u64
+            })
+            .sum::<u64>()];
         comm.sum_u64(&mut count);
         count[0] as usize
     }
