@@ -17,8 +17,7 @@
 use super::clock::Clock;
 use super::spline::{
     Demoted, SplineSetup, auto_graded_is_decisive, auto_graded_keeps_the_boundary,
-    auto_holds_back_too_many, demotes_by_default, extraordinary_refit_is_kept,
-    extraordinary_refit_most,
+    auto_holds_back_too_many, extraordinary_refit_is_kept, extraordinary_refit_most,
 };
 use super::{CurveError, Job};
 use crate::spline::{AUTO_GRADED_SHARE, AUTO_MIN_LOG_RATIO, KnotIntervals, KnotParams, Knots};
@@ -130,9 +129,8 @@ pub(crate) trait Passes {
 /// more with the weight, on its knots and from its fit, and the refit kept by
 /// [`extraordinary_refit_is_kept`]; the setup ends with the weights of the pass kept.
 ///
-/// Then, with `--demote-uncertified` or by default where the pass kept holds back too many
-/// ([`demotes_by_default`]), the pass kept is redone with the elements whose initial map is
-/// not certified Q2 from the start ([`demote_before_fit_if_fewer`]).
+/// Then, with `--demote-uncertified`, the pass kept is redone with the elements whose initial
+/// map is not certified Q2 from the start ([`demote_before_fit_if_fewer`]).
 pub(crate) fn spline_passes<P: Passes>(
     p: &mut P,
     job: &Job,
@@ -198,8 +196,7 @@ fn weighted_passes<P: Passes>(
     }
 }
 
-/// The pass kept (`kept`, on `setup`'s knots), or, with `--demote-uncertified` (without it,
-/// with the IGA method where [`demotes_by_default`] on the whole mesh's count), where its
+/// The pass kept (`kept`, on `setup`'s knots), or, with `--demote-uncertified`, where its
 /// blend holds back elements and the initial spline map is not certified valid on some
 /// element of the whole mesh, the same pass with those elements demoted to Q2 *before* the
 /// fit ([`Passes::demotion`]: the demotion rounds of `--fit energy`), started from `kept`'s
@@ -224,10 +221,8 @@ fn demote_before_fit_if_fewer<P: Passes>(
     let Ok(held) = P::held(&kept) else {
         return Ok(kept);
     };
-    let asked = options.demote_uncertified
-        || (matches!(options.method, super::Method::Iga) && demotes_by_default(held, p.elements()));
     if held == 0
-        || !asked
+        || !options.demote_uncertified
         || options.geometry != super::Geometry::SplineFitted
         || options.energy.is_some()
     {

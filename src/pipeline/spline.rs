@@ -472,25 +472,6 @@ pub(crate) fn extraordinary_refit_most(held: usize, elements: usize) -> usize {
     most.min(held.saturating_sub(1))
 }
 
-/// Without `--demote-uncertified`, the demotion redo runs by default only on meshes of at most
-/// this many elements ([`demotes_by_default`]).
-pub const DEFAULT_DEMOTION_MAX_ELEMENTS: usize = 5_000;
-
-/// Without `--demote-uncertified`: whether the pass kept, holding back `held` of the mesh's
-/// `elements`, is redone with its uncertified elements Q2 before the fit
-/// ([`super::passes::spline_passes`]): where it holds back more than [`AUTO_MAX_HELD_BACK`]
-/// of the elements, on meshes of at most [`DEFAULT_DEMOTION_MAX_ELEMENTS`].
-///
-/// Why: on every real mesh whose initial spline map is uncertified somewhere the demoted pass
-/// holds back fewer (naca0012_omg 48 → 38 of 450, spheremesh01 84 → 40 of 113,
-/// n0012_113-33 226 → 144 of 3,584, NACA4412_2.msh 1,472 → 1,260 of 14,336), but the redo
-/// is a whole second pass: only where the spline kept falls short of the target, and not on
-/// large meshes, where it costs 1.8× the job (NACA4412_2.msh, 14,336 hexes); the option asks
-/// for it there. Meshes whose initial map is certified everywhere pay one certificate of it.
-pub(crate) fn demotes_by_default(held: usize, elements: usize) -> bool {
-    elements <= DEFAULT_DEMOTION_MAX_ELEMENTS && auto_holds_back_too_many(held, elements)
-}
-
 /// The spline geometry's stages (the job's geometry is not [`Geometry::Straight`]); the
 /// periodic pairs among `periodic` are identified in the spline space where they can be.
 ///
