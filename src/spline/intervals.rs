@@ -29,7 +29,10 @@
 //! `max_spread`, Kruskal-like. Both elements of a refused pair become Q2 elements
 //! ([`super::Q2Reason::KnotSplit`]): ratios are tied only across a face with a spline element on
 //! at least one side, so the surface is cut there, and the Q2 elements' constraints keep the
-//! map C⁰ across the cut (C¹ is kept where the mesh is regular enough for one ratio).
+//! map C⁰ across the cut (C¹ is kept where the mesh is regular enough for one ratio). A
+//! surface whose ratio exceeds [`KnotParams::max_ratio`] (a boundary layer ending in one
+//! far-field cell 10⁶ times as high as its last layer) is split the same way: every element
+//! along it becomes Q2, and the surfaces are rebuilt once without their ties.
 //!
 //! Invariants: the weights lie in `[1/(1+r), r/(1+r)]` with `r` = [`KnotParams::max_ratio`];
 //! a tensor-product grid (any spacing per direction) under an affine map gets exactly its
@@ -83,7 +86,8 @@ pub enum KnotIntervals {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct KnotParams {
     pub intervals: KnotIntervals,
-    /// Largest ratio of neighbouring intervals (≥ 1); larger measured ratios are clamped.
+    /// Largest ratio of neighbouring intervals (≥ 1); a knot surface whose ratio is larger is
+    /// split (its elements Q2), the ratio left on its facets clamped.
     pub max_ratio: f64,
     /// Largest spread (max − min) of the measured log-ratios within one knot surface before
     /// it is split (`f64::INFINITY`: never split).
@@ -137,7 +141,7 @@ pub struct KnotSurfaceInfo {
     pub graded: usize,
     /// Surfaces closing on themselves with opposite orientation (given uniform knots).
     pub non_orientable: usize,
-    /// Surfaces whose measured ratio was clamped to `max_ratio`.
+    /// Surfaces whose measured ratio exceeded `max_ratio` (split, their elements Q2).
     pub clamped: usize,
     /// Largest |ln ratio| assigned.
     pub max_abs_log_ratio: f64,
@@ -790,12 +794,90 @@ pub(crate) fn surface_ratios(survey: KnotSurvey, ne: usize, params: &KnotParams)
 
     // Knot surfaces: facets tied across each spline element's neighbours; split where one
     // ratio cannot fit, and rebuilt without the split elements' ties.
-    let split = split_elements(ne, nf, &all, &measured, params.max_spread);
-    let kept: Vec<Tie> = all
-        .into_iter()
-        .filter(|t| !split[t.element as usize])
+    let mut split = split_elements(ne, nf, &all, &measured, params.max_spread);
+    let cap = params.max_ratio.ln();
+    let mut ratios = ratios_of(&all, &split, &measured, cap);
+    // A surface whose ratio exceeds the cap by far cannot be reproduced by any interval it may
+    // take (a boundary layer ending in one far-field cell 10⁶ times as high): the elements along it
+    // are split off (C⁰ across it), as where a surface spreads too far, so the clamped ratio
+    // does not distort the thin cells on its fine side, and the surfaces are rebuilt once.
+    let (clamped, beyond_cap) = (ratios.clamped_roots.len(), ratios.info.clamped);
+    if clamped > 0 {
+        for t in &all {
+            for (f, e) in [(t.f, t.element), (t.f2(), t.neighbour)] {
+                if ratios
+                    .clamped_roots
+                    .binary_search(&ratios.root[f as usize])
+                    .is_ok()
+                {
+                    split[e as usize] = true;
+                }
+            }
+        }
+        ratios = ratios_of(&all, &split, &measured, cap);
+    }
+    drop((all, measured));
+    let SurfaceRoots {
+        root,
+        sign,
+        rho_root,
+        mut info,
+        ..
+    } = ratios;
+    info.split_elements = split.iter().filter(|&&s| s).count();
+    info.graded_share = share;
+    if clamped > 0 {
+        // The surfaces beyond the cap before the split (split off or clamped), not the single
+        // facets left between split elements.
+        info.clamped = beyond_cap;
+    }
+    let rho = root
+        .iter()
+        .zip(&sign)
+        .map(|(&r, &s)| {
+            let v = rho_root[r as usize];
+            if s { -v } else { v }
+        })
         .collect();
-    let mut uf = surfaces(nf, &kept, &measured);
+    SurfaceRatios { rho, split, info }
+}
+
+/// A knot surface is split off (C⁰ across it) when its log-ratio exceeds this multiple of the
+/// cap's (`--knot-max-ratio` cubed: 4096 at the default 16); below, its ratio is clamped. The
+/// generated O-grids with first cell 1e-6 and growth 1.05 end in one far-field cell ~10⁶
+/// times their last layer; clamped, that jump distorted every thin cell on its fine side.
+/// Ratios just above the cap (a 3D sector's 18, the C-grids' 330–350) are followed better
+/// clamped: split at the cap itself, a C-grid's held-back count and min scaled Jacobian got
+/// worse and a rotation sector's seam rougher than its interior.
+const SPLIT_LOG_RATIO: f64 = 3.0;
+
+/// The surfaces of the ties of the elements not `split` ([`surfaces`]) and each one's ratio
+/// ([`surface_ratios`]), clamped to ±`cap`; `clamped_roots` holds those beyond
+/// [`SPLIT_LOG_RATIO`] × `cap`.
+struct SurfaceRoots {
+    /// Per facet: its surface's root and the facet's sign relative to it.
+    root: Vec<u32>,
+    sign: Vec<bool>,
+    /// Per root: the surface's log-ratio (clamped).
+    rho_root: Vec<f64>,
+    /// Roots whose ratio lies beyond [`SPLIT_LOG_RATIO`] × the cap, ascending.
+    clamped_roots: Vec<u32>,
+    info: KnotSurfaceInfo,
+}
+
+fn ratios_of(
+    all: &[Tie],
+    split: &[bool],
+    measured: &[Option<(f64, f64)>],
+    cap: f64,
+) -> SurfaceRoots {
+    let nf = measured.len();
+    let kept: Vec<Tie> = all
+        .iter()
+        .filter(|t| !split[t.element as usize])
+        .copied()
+        .collect();
+    let mut uf = surfaces(nf, &kept, measured);
     drop(kept);
 
     // 3. One ratio per surface: the weighted mean of its facets' measured ratios.
@@ -812,13 +894,9 @@ pub(crate) fn surface_ratios(survey: KnotSurvey, ne: usize, params: &KnotParams)
             weight[r as usize] += w;
         }
     }
-    let cap = params.max_ratio.ln();
-    let mut info = KnotSurfaceInfo {
-        split_elements: split.iter().filter(|&&s| s).count(),
-        graded_share: share,
-        ..Default::default()
-    };
+    let mut info = KnotSurfaceInfo::default();
     let mut rho_root = vec![0.0f64; nf];
+    let mut clamped_roots = Vec::new();
     for r in 0..nf {
         if weight[r] == 0.0 || root[r] as usize != r {
             continue;
@@ -834,6 +912,9 @@ pub(crate) fn surface_ratios(survey: KnotSurvey, ne: usize, params: &KnotParams)
         let mut rho = sum[r] / weight[r];
         if rho.abs() > cap {
             info.clamped += 1;
+            if rho.abs() > SPLIT_LOG_RATIO * cap {
+                clamped_roots.push(r as u32);
+            }
             rho = rho.clamp(-cap, cap);
         }
         if rho != 0.0 {
@@ -842,16 +923,13 @@ pub(crate) fn surface_ratios(survey: KnotSurvey, ne: usize, params: &KnotParams)
         info.max_abs_log_ratio = info.max_abs_log_ratio.max(rho.abs());
         rho_root[r] = rho;
     }
-    drop((uf, sum, weight, measured));
-    let rho = root
-        .iter()
-        .zip(&sign)
-        .map(|(&r, &s)| {
-            let v = rho_root[r as usize];
-            if s { -v } else { v }
-        })
-        .collect();
-    SurfaceRatios { rho, split, info }
+    SurfaceRoots {
+        root,
+        sign,
+        rho_root,
+        clamped_roots,
+        info,
+    }
 }
 
 /// The extraction weights (step 4) of every element of `topo` from their facets' ratios `rho(f)`
