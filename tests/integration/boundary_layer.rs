@@ -924,6 +924,19 @@ fn graded_naca_ogrid_keeps_the_spline() {
     );
 }
 
+/// `curve` of `input` into `out` with `args`: its report, and the elements held back of all.
+fn curve_held_back(input: &Path, out: &Path, args: &[&str]) -> (serde_json::Value, u64, u64) {
+    let (run, report) = common::curve_with_report(input, out, args);
+    let report = report.unwrap_or_else(|| panic!("{}", String::from_utf8_lossy(&run.stderr)));
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(report).unwrap()).unwrap();
+    let (held, elements) = (
+        r["reduced_elements"].as_u64().unwrap(),
+        r["elements"].as_u64().unwrap(),
+    );
+    (r, held, elements)
+}
+
 /// `polyspline generate ogrid --first-height 1e-6 --growth 1.05` (128 × 48 cells): 47 layers
 /// growing from 1e-6 reach 2e-4 from the wall, and one far-field cell ~2·10⁶ times as high
 /// as the last layer ends the grid at 20. No knot interval ratio up to `--knot-max-ratio` can
@@ -955,14 +968,7 @@ fn a_far_field_cell_beyond_the_knot_ratio_cap_is_split_off() {
                 .arg(&input),
         );
         let out = dir.join(format!("ogrid_fine_{layers}_p2.msh"));
-        let (run, report) = common::curve_with_report(&input, &out, &[]);
-        let report = report.unwrap_or_else(|| panic!("{}", String::from_utf8_lossy(&run.stderr)));
-        let r: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(report).unwrap()).unwrap();
-        let (held, elements) = (
-            r["reduced_elements"].as_u64().unwrap(),
-            r["elements"].as_u64().unwrap(),
-        );
+        let (r, held, elements) = curve_held_back(&input, &out, &[]);
         eprintln!(
             "{layers} layers: {held} of {elements} held back, {} Q2, {} knots",
             r["q2_elements"], r["knot_intervals"]
@@ -996,14 +1002,7 @@ fn an_uncertified_initial_map_is_made_q2_before_the_fit() {
         "the initial spline map is certified"
     );
     let out = dir.join("sphere.msh");
-    let (run, report) = common::curve_with_report(&input, &out, &["--demote-uncertified"]);
-    let report = report.unwrap_or_else(|| panic!("{}", String::from_utf8_lossy(&run.stderr)));
-    let r: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(report).unwrap()).unwrap();
-    let (held, elements) = (
-        r["reduced_elements"].as_u64().unwrap(),
-        r["elements"].as_u64().unwrap(),
-    );
+    let (r, held, elements) = curve_held_back(&input, &out, &["--demote-uncertified"]);
     eprintln!(
         "spheremesh01: {held} of {elements} held back, {} demoted",
         r["demoted_elements"]

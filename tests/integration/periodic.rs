@@ -634,15 +634,20 @@ fn gmsh_periodic_sections_are_used_without_the_option() {
 /// Largest distance of the nodes of `group` of `file` from the analytic `wall`
 /// (`wall_error.py`, Gmsh's reading).
 fn wall_error(file: &Path, group: &str, wall: &str) -> f64 {
+    let v = wall_error_report(file, group, wall);
+    assert!(v["nodes"].as_u64().unwrap() > 0, "{group}: {v}");
+    v["max_error"].as_f64().unwrap()
+}
+
+/// `wall_error.py`'s report on the nodes of `group` of `file` against the analytic `wall`.
+fn wall_error_report(file: &Path, group: &str, wall: &str) -> Value {
     let out = run_ok(
         python()
             .arg(Path::new(ROOT).join("tests/external/wall_error.py"))
             .arg(file)
             .args([group, wall]),
     );
-    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
-    assert!(v["nodes"].as_u64().unwrap() > 0, "{group}: {v}");
-    v["max_error"].as_f64().unwrap()
+    serde_json::from_slice(&out.stdout).unwrap()
 }
 
 #[test]
@@ -724,14 +729,7 @@ fn generated_channel_and_sector_are_periodic_and_curve_onto_their_walls() {
 /// (`wall_error.py`: `seam` with a node on a periodic side, `inner` without, `_rim` with one on
 /// another boundary group too).
 fn wall_error_by_kind(file: &Path, group: &str, wall: &str) -> BTreeMap<String, f64> {
-    let out = run_ok(
-        python()
-            .arg(Path::new(ROOT).join("tests/external/wall_error.py"))
-            .arg(file)
-            .args([group, wall]),
-    );
-    let v: Value = serde_json::from_slice(&out.stdout).unwrap();
-    serde_json::from_value(v["by_kind"].clone()).unwrap()
+    serde_json::from_value(wall_error_report(file, group, wall)["by_kind"].clone()).unwrap()
 }
 
 #[test]
