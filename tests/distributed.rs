@@ -452,36 +452,6 @@ fn the_generated_torus_gives_the_serial_output_on_2_3_4_ranks() {
     assert_eq!(serial["elements"], 975);
 }
 
-/// The generated torus of 189 hexes (1,017 control points) at the default options: the serial
-/// fit factors K (`--fit-solver auto`), and the ranks' CG, standing in for the factor, runs to
-/// its accuracy (`fit::DIRECT_CG_TOL`), so 1, 2, 3 and 4 ranks write the serial output within
-/// 1e-9 of the diagonal, with the serial report's K entries. With the ranks' CG stopped at the
-/// default `--cg-tol` (1e-6) the outputs differed by 2.7e-6 of the diagonal at 2 and 4 ranks.
-#[test]
-fn the_small_torus_the_serial_run_factors_gives_its_output_on_1_to_4_ranks() {
-    if !have_mpirun() {
-        return;
-    }
-    let input = binary_generated("torus189.msh", &["torus", "--elements", "189"]);
-    let (out, _, serial) = curve_with_report(0, &input, "torus189", &[]);
-    assert_eq!(serial["elements"], 189);
-    assert_eq!(serial["fit_solver"], "cholesky", "the serial fit factors");
-    let serial_mesh = read(&out);
-    let diag = diagonal(&serial_mesh);
-    for np in 1..=4 {
-        let (out, _, r) = curve_with_report(np, &input, "torus189", &[]);
-        let worst = compare(&serial_mesh, &read(&out)) / diag;
-        eprintln!(
-            "torus189: {np} ranks: {worst:.2e} of the diagonal, CG {}",
-            r["cg_iterations"]
-        );
-        assert!(worst <= 1e-9, "{np} ranks: {worst:.3e} of the diagonal");
-        for key in ["knot_intervals", "matrix_nonzeros", "reduced_elements"] {
-            assert_eq!(r[key], serial[key], "{np} ranks: {key}");
-        }
-    }
-}
-
 /// Temporaries (`.NAME.*.tmp`) beside `out`.
 fn temporaries(out: &Path) -> usize {
     if !out.parent().unwrap().is_dir() {
@@ -676,36 +646,40 @@ fn a_bad_share_of_the_input_stops_every_rank_with_one_error_line() {
     }
 }
 
-/// A smooth shape whose ghost rings hold all of it on one rank and not on another: the
-/// generated torus of 189 hexes at 2 and 3 ranks. A rank holding the whole torus finds no
-/// feature, a rank with a cut fringe finds features there, and the 3D feature models'
-/// in-plane inheritance is collective over the ranks: the featureless rank takes part in it
-/// with no source (`FeatureModels::join_shared_inheritance`). When it skipped it the ranks'
-/// collective calls parted and the run hung at 2, 3 and 4 ranks (`timeout` turns that into a
-/// failure); now it ends with the serial run's elements, knots and held-back count, valid by
-/// Gmsh's Jacobians. (Its nodes are 2.7e-6 of the diagonal from the serial run's: the serial
-/// run factors this small system, the ranks run CG to the default tolerance; the larger torus
-/// gives the serial output, [`the_generated_torus_gives_the_serial_output_on_2_3_4_ranks`].)
+/// The generated torus of 189 hexes (1,017 control points) at the default options, at 1–4
+/// ranks:
+/// * A smooth shape whose ghost rings hold all of it on one rank and not on another: a rank
+///   holding the whole torus finds no feature, a rank with a cut fringe finds features there,
+///   and the 3D feature models' in-plane inheritance is collective over the ranks, so the
+///   featureless rank takes part in it with no source
+///   (`FeatureModels::join_shared_inheritance`). When it skipped it the ranks' collective
+///   calls parted and the run hung at 2, 3 and 4 ranks (`timeout` turns that into a failure).
+/// * The serial fit factors K (`--fit-solver auto`), and the ranks' CG, standing in for the
+///   factor, runs to its accuracy (`fit::DIRECT_CG_TOL`), so every rank count writes the
+///   serial output within 1e-9 of the diagonal, with the serial report's K entries, knots,
+///   held-back count and features (none serially, though a rank's cut fringe has some), valid
+///   by Gmsh's Jacobians. With the ranks' CG stopped at the default `--cg-tol` (1e-6) the
+///   outputs differed by 2.7e-6 of the diagonal at 2 and 4 ranks.
 #[test]
-fn a_rank_without_features_takes_part_in_the_shared_inheritance() {
+fn the_small_torus_gives_the_serial_output_on_1_to_4_ranks() {
     if !have_mpirun() {
         return;
     }
-    let input = binary_generated("torus189.msh", &["torus", "--elements", "200"]);
-    let (_, _, serial) = curve_with_report(0, &input, "torus189", &[]);
+    let input = binary_generated("torus189.msh", &["torus", "--elements", "189"]);
+    let (out, _, serial) = curve_with_report(0, &input, "torus189", &[]);
     assert_eq!(serial["elements"], 189);
-    for np in [2usize, 3] {
+    assert_eq!(serial["fit_solver"], "cholesky", "the serial fit factors");
+    let serial_mesh = read(&out);
+    let diag = diagonal(&serial_mesh);
+    for np in 1..=4usize {
         let out = scratch(&format!("torus189_np{np}.msh"));
         let report = scratch(&format!("torus189_np{np}.json"));
         let _ = std::fs::remove_file(&out);
         let o = mpirun_within_120s(np)
-            .args([
-                BIN,
-                "curve",
-                input.to_str().unwrap(),
-                "-o",
-                out.to_str().unwrap(),
-            ])
+            .args([BIN, "curve", "-q"])
+            .arg(&input)
+            .arg("-o")
+            .arg(&out)
             .arg("--report")
             .arg(&report)
             .output()
@@ -717,17 +691,24 @@ fn a_rank_without_features_takes_part_in_the_shared_inheritance() {
             String::from_utf8_lossy(&o.stderr)
         );
         let r: Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
-        // `features`: the torus has none (null serially), though a rank's cut fringe has some.
+        let mesh = read(&out);
+        let worst = compare(&serial_mesh, &mesh) / diag;
+        eprintln!(
+            "torus189: {np} ranks: {worst:.2e} of the diagonal, CG {}",
+            r["cg_iterations"]
+        );
+        assert!(worst <= 1e-9, "{np} ranks: {worst:.3e} of the diagonal");
         for key in [
             "elements",
             "knot_intervals",
             "knot_passes",
+            "matrix_nonzeros",
             "reduced_elements",
             "features",
         ] {
             assert_eq!(r[key], serial[key], "{np} ranks: {key}");
         }
-        assert_eq!(read(&out).n_elements(), 189);
+        assert_eq!(mesh.n_elements(), 189);
         if let Some((min, _, _)) = common::gmsh_det_range(&out, &scratch("torus189_jobs.json")) {
             assert!(min > 0.0, "{np} ranks: Gmsh's smallest det J is {min}");
         }
