@@ -30,9 +30,10 @@
 //! ([`super::Q2Reason::KnotSplit`]): ratios are tied only across a face with a spline element on
 //! at least one side, so the surface is cut there, and the Q2 elements' constraints keep the
 //! map C⁰ across the cut (C¹ is kept where the mesh is regular enough for one ratio). A
-//! surface whose ratio exceeds [`KnotParams::max_ratio`] (a boundary layer ending in one
-//! far-field cell 10⁶ times as high as its last layer) is split the same way: every element
-//! along it becomes Q2, and the surfaces are rebuilt once without their ties.
+//! surface whose ratio exceeds [`KnotParams::max_ratio`] is clamped to it, and one whose ratio
+//! exceeds its cube (a boundary layer ending in one far-field cell 10⁶ times as high as its
+//! last layer) is split the same way: every element along it becomes Q2, and the surfaces are
+//! rebuilt once without their ties.
 //!
 //! Invariants: the weights lie in `[1/(1+r), r/(1+r)]` with `r` = [`KnotParams::max_ratio`];
 //! a tensor-product grid (any spacing per direction) under an affine map gets exactly its
@@ -87,7 +88,7 @@ pub enum KnotIntervals {
 pub struct KnotParams {
     pub intervals: KnotIntervals,
     /// Largest ratio of neighbouring intervals (≥ 1); a knot surface whose ratio is larger is
-    /// split (its elements Q2), the ratio left on its facets clamped.
+    /// clamped to it, and split (its elements Q2) where the ratio exceeds its cube.
     pub max_ratio: f64,
     /// Largest spread (max − min) of the measured log-ratios within one knot surface before
     /// it is split (`f64::INFINITY`: never split).
@@ -141,7 +142,8 @@ pub struct KnotSurfaceInfo {
     pub graded: usize,
     /// Surfaces closing on themselves with opposite orientation (given uniform knots).
     pub non_orientable: usize,
-    /// Surfaces whose measured ratio exceeded `max_ratio` (split, their elements Q2).
+    /// Surfaces whose measured ratio exceeded `max_ratio` (clamped, or split with their
+    /// elements Q2 beyond its cube).
     pub clamped: usize,
     /// Largest |ln ratio| assigned.
     pub max_abs_log_ratio: f64,
@@ -525,7 +527,11 @@ fn ties(topo: &Topology, spline: &[bool], corners: Corners) -> Vec<Tie> {
 
 /// The knot surfaces of `ties` (facets in one set share a ratio up to sign), with the
 /// measured log-ratios as the sets' values.
-fn surfaces(nf: usize, ties: &[Tie], measured: &[Option<(f64, f64)>]) -> SignedUnionFind {
+fn surfaces<'a>(
+    nf: usize,
+    ties: impl IntoIterator<Item = &'a Tie>,
+    measured: &[Option<(f64, f64)>],
+) -> SignedUnionFind {
     let mut uf = SignedUnionFind::with_values((0..nf).map(|f| measured[f].map(|(m, _)| m)));
     for t in ties {
         uf.union(t.f, t.f2(), t.opposite());
@@ -798,15 +804,15 @@ pub(crate) fn surface_ratios(survey: KnotSurvey, ne: usize, params: &KnotParams)
     let cap = params.max_ratio.ln();
     let mut ratios = ratios_of(&all, &split, &measured, cap);
     // A surface whose ratio exceeds the cap by far cannot be reproduced by any interval it may
-    // take (a boundary layer ending in one far-field cell 10⁶ times as high): the elements along it
-    // are split off (C⁰ across it), as where a surface spreads too far, so the clamped ratio
+    // take (a boundary layer ending in one far-field cell 10⁶ times as high): the elements along
+    // it are split off (C⁰ across it), as where a surface spreads too far, so the clamped ratio
     // does not distort the thin cells on its fine side, and the surfaces are rebuilt once.
-    let (clamped, beyond_cap) = (ratios.clamped_roots.len(), ratios.info.clamped);
-    if clamped > 0 {
+    let beyond_cap = ratios.info.clamped;
+    if !ratios.split_roots.is_empty() {
         for t in &all {
             for (f, e) in [(t.f, t.element), (t.f2(), t.neighbour)] {
                 if ratios
-                    .clamped_roots
+                    .split_roots
                     .binary_search(&ratios.root[f as usize])
                     .is_ok()
                 {
@@ -826,11 +832,9 @@ pub(crate) fn surface_ratios(survey: KnotSurvey, ne: usize, params: &KnotParams)
     } = ratios;
     info.split_elements = split.iter().filter(|&&s| s).count();
     info.graded_share = share;
-    if clamped > 0 {
-        // The surfaces beyond the cap before the split (split off or clamped), not the single
-        // facets left between split elements.
-        info.clamped = beyond_cap;
-    }
+    // The surfaces beyond the cap before any split (split off or clamped), not the single
+    // facets a split leaves between split elements.
+    info.clamped = beyond_cap;
     let rho = root
         .iter()
         .zip(&sign)
@@ -852,7 +856,7 @@ pub(crate) fn surface_ratios(survey: KnotSurvey, ne: usize, params: &KnotParams)
 const SPLIT_LOG_RATIO: f64 = 3.0;
 
 /// The surfaces of the ties of the elements not `split` ([`surfaces`]) and each one's ratio
-/// ([`surface_ratios`]), clamped to ±`cap`; `clamped_roots` holds those beyond
+/// ([`surface_ratios`]), clamped to ±`cap`; `split_roots` holds those beyond
 /// [`SPLIT_LOG_RATIO`] × `cap`.
 struct SurfaceRoots {
     /// Per facet: its surface's root and the facet's sign relative to it.
@@ -861,7 +865,7 @@ struct SurfaceRoots {
     /// Per root: the surface's log-ratio (clamped).
     rho_root: Vec<f64>,
     /// Roots whose ratio lies beyond [`SPLIT_LOG_RATIO`] × the cap, ascending.
-    clamped_roots: Vec<u32>,
+    split_roots: Vec<u32>,
     info: KnotSurfaceInfo,
 }
 
@@ -872,13 +876,8 @@ fn ratios_of(
     cap: f64,
 ) -> SurfaceRoots {
     let nf = measured.len();
-    let kept: Vec<Tie> = all
-        .iter()
-        .filter(|t| !split[t.element as usize])
-        .copied()
-        .collect();
-    let mut uf = surfaces(nf, &kept, measured);
-    drop(kept);
+    let kept = all.iter().filter(|t| !split[t.element as usize]);
+    let mut uf = surfaces(nf, kept, measured);
 
     // 3. One ratio per surface: the weighted mean of its facets' measured ratios.
     let mut sum = vec![0.0f64; nf];
@@ -896,7 +895,7 @@ fn ratios_of(
     }
     let mut info = KnotSurfaceInfo::default();
     let mut rho_root = vec![0.0f64; nf];
-    let mut clamped_roots = Vec::new();
+    let mut split_roots = Vec::new();
     for r in 0..nf {
         if weight[r] == 0.0 || root[r] as usize != r {
             continue;
@@ -913,7 +912,7 @@ fn ratios_of(
         if rho.abs() > cap {
             info.clamped += 1;
             if rho.abs() > SPLIT_LOG_RATIO * cap {
-                clamped_roots.push(r as u32);
+                split_roots.push(r as u32);
             }
             rho = rho.clamp(-cap, cap);
         }
@@ -927,7 +926,7 @@ fn ratios_of(
         root,
         sign,
         rho_root,
-        clamped_roots,
+        split_roots,
         info,
     }
 }
