@@ -589,7 +589,7 @@ impl Passes for RankPasses<'_> {
             comm.min_f64(&mut lo);
             comm.max_f64(&mut hi);
             let rms = crate::pipeline::misfit::rms(v[0], v[1] as usize);
-            rms / crate::pipeline::misfit::diagonal(lo, hi)
+            rms / crate::math::linalg::box_diagonal(lo, hi)
         })
     }
     fn warm_start(&self) -> bool {

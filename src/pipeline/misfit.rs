@@ -256,16 +256,6 @@ pub(crate) fn rms(sum: f64, n: usize) -> f64 {
     if n == 0 { 0.0 } else { (sum / n as f64).sqrt() }
 }
 
-/// The diagonal of the box `[lo, hi]` (positive): what [`rms`] is measured against where its
-/// size matters (`--knot-intervals auto`'s floor, the same on every rank).
-pub(crate) fn diagonal(lo: [f64; 3], hi: [f64; 3]) -> f64 {
-    (0..3)
-        .map(|k| (hi[k] - lo[k]).powi(2))
-        .sum::<f64>()
-        .sqrt()
-        .max(f64::MIN_POSITIVE)
-}
-
 /// Distance of `p` from the side of the net `t` through `u` that varies in the directions
 /// `others` (Gauss–Newton from `u`, the parameters kept in [0, 1]).
 fn nearest_on_side(

@@ -711,7 +711,7 @@ impl super::passes::Passes for Whole<'_> {
         clock.run(Stage::Validity, || {
             let (sum, n) = fitted_boundary_sq_sum(job, setup, pass.space(), |_| true);
             let (lo, hi) = job.mesh.bounding_box();
-            misfit::rms(sum, n) / misfit::diagonal(lo, hi)
+            misfit::rms(sum, n) / crate::math::linalg::box_diagonal(lo, hi)
         })
     }
 }
