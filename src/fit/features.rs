@@ -19,8 +19,8 @@
 
 use super::smooth::{
     Height, HigherModel, InheritShare, RingScratch, Source, VertexModel, adjacency, dedup_points,
-    fan_model, fit_parabola, nearest_shared, quad_fan_model, refine_model, refine_patch_model,
-    two_ring_from,
+    fan_across, fan_model, fit_parabola, nearest_shared, quad_fan_model, refine_model,
+    refine_patch_model, two_ring_from,
 };
 use crate::math::linalg::DVec3;
 use crate::math::reference::HEX_VERTEX_PARAMS;
@@ -475,33 +475,6 @@ fn facing_across(
     let theirs =
         normal(topo.faces[f as usize].map(|u| DVec3::from(t.apply(mesh.coords[u as usize]))));
     mine.dot(theirs) >= cos_max
-}
-
-/// The quads of the facets `own` at `v` and of the partner `w`'s facets `theirs` carried over
-/// by `t`, and their distinct corners other than v ([`super::smooth`]'s fan across a seam).
-fn fan_across(
-    mesh: &LinearMesh,
-    topo: &Topology,
-    (v, own): (u32, &[u32]),
-    (w, theirs): (u32, &[u32]),
-    t: &Rigid,
-) -> (Vec<[DVec3; 4]>, Vec<DVec3>) {
-    let x = |u: u32| DVec3::from(mesh.coords[u as usize]);
-    let there = |u: u32| DVec3::from(t.apply(mesh.coords[u as usize]));
-    let mut quads = Vec::new();
-    let mut nb = Vec::new();
-    for &f in own {
-        let q = topo.faces[f as usize];
-        quads.push(q.map(x));
-        nb.extend(q.iter().filter(|&&u| u != v).map(|&u| x(u)));
-    }
-    for &f in theirs {
-        let q = topo.faces[f as usize];
-        quads.push(q.map(there));
-        nb.extend(q.iter().filter(|&&u| u != w).map(|&u| there(u)));
-    }
-    dedup_points(x(v), &mut nb);
-    (quads, nb)
 }
 
 /// The curve model `m` of `v` (neighbours `nbs` along the feature curve) refitted as a height

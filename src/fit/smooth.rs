@@ -790,9 +790,8 @@ impl Seam<'_> {
             .then_some((*w, t))
     }
 
-    /// The fan of 3D wall vertex `v` on a seam completed by its partner's across, carried
-    /// onto v's side: the quads (corners in the facets' order) and their distinct corners
-    /// other than v; `None` away from seams.
+    /// The fan of 3D wall vertex `v` on a seam completed by its partner's across
+    /// ([`fan_across`]); `None` away from seams.
     fn fan_across(
         &self,
         mesh: &LinearMesh,
@@ -800,22 +799,8 @@ impl Seam<'_> {
         v: u32,
     ) -> Option<(Vec<[DVec3; 4]>, Vec<DVec3>)> {
         let (w, t) = self.across_3d(v as usize)?;
-        let x = |u: u32| DVec3::from(mesh.coords[u as usize]);
-        let there = |u: u32| DVec3::from(t.apply(mesh.coords[u as usize]));
-        let mut quads: Vec<[DVec3; 4]> = Vec::new();
-        let mut nb: Vec<DVec3> = Vec::new();
-        for &f in &self.fan[v as usize] {
-            let q = topo.faces[f as usize];
-            quads.push(q.map(x));
-            nb.extend(q.iter().filter(|&&u| u != v).map(|&u| x(u)));
-        }
-        for &f in &self.fan[w as usize] {
-            let q = topo.faces[f as usize];
-            quads.push(q.map(there));
-            nb.extend(q.iter().filter(|&&u| u != w).map(|&u| there(u)));
-        }
-        dedup_points(x(v), &mut nb);
-        Some((quads, nb))
+        let (own, theirs) = (&self.fan[v as usize], &self.fan[w as usize]);
+        Some(fan_across(mesh, topo, (v, own), (w, theirs), t))
     }
 
     /// Adds to the two-ring `ring` of 3D wall vertex `v` (first ring `first`) the wall points
@@ -915,6 +900,34 @@ impl Seam<'_> {
             }
         }
     }
+}
+
+/// The quads of the boundary facets `own` at `v` and of the partner `w`'s facets `theirs`
+/// carried over by the periodic map `t` (corners in the facets' order), and their distinct
+/// corners other than v: a wall's fan cut by a periodic seam, completed by the other side's.
+pub(super) fn fan_across(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    (v, own): (u32, &[u32]),
+    (w, theirs): (u32, &[u32]),
+    t: &Rigid,
+) -> (Vec<[DVec3; 4]>, Vec<DVec3>) {
+    let x = |u: u32| DVec3::from(mesh.coords[u as usize]);
+    let there = |u: u32| DVec3::from(t.apply(mesh.coords[u as usize]));
+    let mut quads = Vec::with_capacity(own.len() + theirs.len());
+    let mut nb = Vec::new();
+    for &f in own {
+        let q = topo.faces[f as usize];
+        quads.push(q.map(x));
+        nb.extend(q.iter().filter(|&&u| u != v).map(|&u| x(u)));
+    }
+    for &f in theirs {
+        let q = topo.faces[f as usize];
+        quads.push(q.map(there));
+        nb.extend(q.iter().filter(|&&u| u != w).map(|&u| there(u)));
+    }
+    dedup_points(x(v), &mut nb);
+    (quads, nb)
 }
 
 /// Removes from `pts` the points within 10⁻⁶ of their spread around `x` of `x` or of an
