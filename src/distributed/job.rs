@@ -592,6 +592,31 @@ impl Passes for RankPasses<'_> {
             rms / crate::math::linalg::box_diagonal(lo, hi)
         })
     }
+    fn output_boundary_shift(
+        &mut self,
+        job: &Job,
+        setup: &SplineSetup,
+        clock: &mut Clock,
+        pass: &Pass,
+        reference: &Pass,
+    ) -> f64 {
+        // As `boundary_rms`: each boundary side once, the whole mesh's diagonal.
+        let (comm, n_owned) = (self.comm, self.local.n_owned);
+        let (mut lo, mut hi) = self.local.mesh.bounding_box();
+        let factors = pass.blend.as_ref().map_or(&[][..], |b| &b.0[..]);
+        clock.run(Stage::Validity, || {
+            let (sum, n) =
+                spline::output_boundary_sq_sum(job, setup, &pass.s, factors, &reference.s, |e| {
+                    e < n_owned
+                });
+            let mut v = [sum, n as f64];
+            comm.sum_f64(&mut v);
+            comm.min_f64(&mut lo);
+            comm.max_f64(&mut hi);
+            let rms = crate::pipeline::misfit::rms(v[0], v[1] as usize);
+            rms / crate::math::linalg::box_diagonal(lo, hi)
+        })
+    }
     fn warm_start(&self) -> bool {
         self.warm_start
     }

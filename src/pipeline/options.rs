@@ -74,7 +74,9 @@ pub struct CurveOptions {
     pub snap_boundary: bool,
     /// Redo the least-squares pass with the elements whose initial spline map is not certified
     /// made Q2 before the fit, kept where its blend holds back fewer elements
-    /// (`pipeline::passes`'s `demote_before_fit_if_fewer`, under mpirun too).
+    /// (`pipeline::passes`'s `demote_before_fit_if_fewer`, under mpirun too); without it the
+    /// redo runs only where `pipeline::spline::demotes_by_default`, and is kept only where
+    /// `pipeline::spline::demotion_keeps_the_boundary`.
     pub demote_uncertified: bool,
     /// Sharp features kept by the spline space and the fit (`docs/features.md`).
     pub features: FeatureOptions,

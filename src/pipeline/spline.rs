@@ -472,6 +472,49 @@ pub(crate) fn extraordinary_refit_most(held: usize, elements: usize) -> usize {
     most.min(held.saturating_sub(1))
 }
 
+/// Without `--demote-uncertified`: the demotion redo is kept only where its output boundary is
+/// at most this many times as far from the pass kept's fitted boundary as the pass kept's own
+/// output ([`demotion_keeps_the_boundary`]).
+pub const DEMOTION_BOUNDARY_SLACK: f64 = 1.1;
+
+/// Without `--demote-uncertified`, after the demotion redo: whether the redone pass, whose
+/// output boundary is `redone` (RMS distance from the pass kept's fitted boundary relative to
+/// the bounding-box diagonal, [`super::passes::Passes::output_boundary_shift`]) against the
+/// pass kept's own output's `kept`, keeps the boundary ([`DEMOTION_BOUNDARY_SLACK`], both
+/// raised to [`AUTO_BOUNDARY_FLOOR`]).
+///
+/// Why: the demoted elements' boundary is the target map's (Q2), no longer the least-squares
+/// spline's, and the spline fitted across many elements' targets can be much the closer to the
+/// smooth surface. On the level-2 O-grid torus (`scripts/fidelity_shapes.py`, 1,536 hexes) the
+/// uniform pass holds back 1,024 elements, but only halfway to the target map (factor 1.5),
+/// for the quality guard, not validity; the initial map is uncertified around the inner
+/// equator and the demotion rounds spread to 1,408 elements, every boundary side among them:
+/// 0 held back, but the boundary's RMS distance from the exact torus went from 4.1× to 11.6×
+/// Gmsh-with-CAD's (max 16.0×). Held-back counts alone do not see it: the demoted boundary
+/// lies on the target map.
+pub(crate) fn demotion_keeps_the_boundary(redone: f64, kept: f64) -> bool {
+    redone.max(AUTO_BOUNDARY_FLOOR) <= DEMOTION_BOUNDARY_SLACK * kept.max(AUTO_BOUNDARY_FLOOR)
+}
+
+/// Without `--demote-uncertified`, the demotion redo runs by default only on meshes of at most
+/// this many elements ([`demotes_by_default`]).
+pub const DEFAULT_DEMOTION_MAX_ELEMENTS: usize = 5_000;
+
+/// Without `--demote-uncertified`: whether the pass kept, holding back `held` of the mesh's
+/// `elements`, is redone with its uncertified elements Q2 before the fit
+/// ([`super::passes::spline_passes`]): where it holds back more than [`AUTO_MAX_HELD_BACK`]
+/// of the elements, on meshes of at most [`DEFAULT_DEMOTION_MAX_ELEMENTS`].
+///
+/// Why: on every real mesh whose initial spline map is uncertified somewhere the demoted pass
+/// holds back fewer (naca0012_omg 48 → 38 of 450, spheremesh01 84 → 40 of 113,
+/// n0012_113-33 226 → 144 of 3,584, NACA4412_2.msh 1,472 → 1,260 of 14,336), but the redo
+/// is a whole second pass: only where the spline kept falls short of the target, and not on
+/// large meshes, where it costs 1.8× the job (NACA4412_2.msh, 14,336 hexes); the option asks
+/// for it there. Meshes whose initial map is certified everywhere pay one certificate of it.
+pub(crate) fn demotes_by_default(held: usize, elements: usize) -> bool {
+    elements <= DEFAULT_DEMOTION_MAX_ELEMENTS && auto_holds_back_too_many(held, elements)
+}
+
 /// The spline geometry's stages (the job's geometry is not [`Geometry::Straight`]); the
 /// periodic pairs among `periodic` are identified in the spline space where they can be.
 ///
@@ -714,6 +757,31 @@ impl super::passes::Passes for Whole<'_> {
             misfit::rms(sum, n) / crate::math::linalg::box_diagonal(lo, hi)
         })
     }
+    fn output_boundary_shift(
+        &mut self,
+        job: &Job,
+        setup: &SplineSetup,
+        clock: &mut Clock,
+        pass: &First,
+        reference: &First,
+    ) -> f64 {
+        let First::Done(outcome) = pass else {
+            unreachable!("a pass run to its end")
+        };
+        let factors = outcome.blend_factors.as_deref().unwrap_or(&[]);
+        clock.run(Stage::Validity, || {
+            let (sum, n) = output_boundary_sq_sum(
+                job,
+                setup,
+                &outcome.space,
+                factors,
+                reference.space(),
+                |_| true,
+            );
+            let (lo, hi) = job.mesh.bounding_box();
+            misfit::rms(sum, n) / crate::math::linalg::box_diagonal(lo, hi)
+        })
+    }
 }
 
 /// The fitted map's boundary distance from the target map's, squared and summed over the
@@ -726,6 +794,33 @@ pub(crate) fn fitted_boundary_sq_sum(
     which: impl Fn(usize) -> bool + Sync,
 ) -> (f64, usize) {
     misfit::boundary_sq_sum(setup.topo(job), space, &setup.target_map(job), &which)
+}
+
+/// The output boundary of a pass (the certified blend of `factors` on `space`) against the
+/// fitted boundary of `reference` (a pass's space with its fitted control points): squared
+/// distance summed over the boundary sides of the elements `which` takes, and the count
+/// ([`misfit::boundary_sq_sum`]); how far a pass's output leaves another pass's least-squares
+/// boundary ([`super::passes::Passes::output_boundary_shift`]).
+pub(crate) fn output_boundary_sq_sum(
+    job: &Job,
+    setup: &SplineSetup,
+    space: &SplineSpace,
+    factors: &[f32],
+    reference: &SplineSpace,
+    which: impl Fn(usize) -> bool + Sync,
+) -> (f64, usize) {
+    let target_map = setup.target_map(job);
+    let (ids_mesh, ids_topo) = setup.entity_mesh(job);
+    let blended = Blended::new(
+        job.mesh,
+        &target_map,
+        space,
+        ids_mesh,
+        ids_topo,
+        factors.to_vec(),
+    )
+    .with_geometry(job.mesh);
+    misfit::boundary_sq_sum(setup.topo(job), &blended, reference, &which)
 }
 
 /// A spline pass that may stop early ([`spline_pass_within`]): `auto`'s uniform pass.

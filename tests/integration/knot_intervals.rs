@@ -629,7 +629,10 @@ fn auto_knots_run_the_spline_once() {
     );
     let (_, r) = run(&disc, "disc", "auto");
     let (_, uniform) = run(&disc, "disc", "uniform");
-    assert!(held(&uniform) > 0.1);
+    // By default the pass kept is redone with its uncertified elements demoted only where it
+    // holds back more than a tenth: a demoted output says the uniform pass did.
+    let demoted = uniform["demoted_elements"].as_u64().unwrap() > 0;
+    assert!(held(&uniform) > 0.1 || demoted, "{}", held(&uniform));
     assert_eq!(r["knot_passes"], 2);
 }
 
