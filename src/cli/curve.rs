@@ -145,8 +145,9 @@ pub(crate) struct JobArgs {
     #[arg(long, value_enum, default_value_t = FitSolver::default().into())]
     fit_solver: values::FitSolver,
     /// Relative tolerance of the conjugate-gradient solves (fit and elastic analogy)
-    /// [default: 1e-6]; 1e-8 makes the output independent of the number of MPI ranks to 1e-6
-    /// of the diagonal, at about half again the fit's CG iterations.
+    /// [default: 1e-6]. Under mpirun the ranks' CG takes the serial solve's iterates (the
+    /// serial preconditioner) and stops where it stops, so no tighter tolerance is needed for
+    /// the serial run's output (docs/distributed.md).
     #[arg(long, value_name = "CG_TOL")]
     cg_tol: Option<f64>,
     /// Preconditioner of the fit's CG solve on the CPU: the diagonal, exact inverses of the
@@ -155,9 +156,8 @@ pub(crate) struct JobArgs {
     /// 40 % of block Jacobi's iterations, each about 2.4 times as costly), or the average of
     /// block Jacobi on two staggered partitions (block Jacobi pair: about 60 % of block
     /// Jacobi's iterations, two block solves each; the default). The GPU solver always uses
-    /// the diagonal. Distributed runs use block Jacobi on each rank's rows (their default) or
-    /// the diagonal, which gives the serial output on any number of ranks; the pair and block
-    /// SGS are refused there.
+    /// the diagonal. Distributed runs apply the serial preconditioner (the serial run's
+    /// aggregates, on any number of ranks); block SGS is refused there.
     #[arg(long, value_enum)]
     cg_preconditioner: Option<values::CgPreconditioner>,
     /// Most bisections of the validity line search.

@@ -69,49 +69,101 @@ pub struct Finished {
     pub report: CurveReport,
 }
 
-/// The options the distributed job runs; anything else is one bounded error line.
+/// The options the distributed job runs; anything else is one bounded error line. Every
+/// option is named here, none left to `..`: an option added to [`CurveOptions`] (or to the
+/// fit's weights, solver or features) does not compile until this says whether the ranks run
+/// it or refuse it, so none is ignored under mpirun. The output options are the collective
+/// writer's (`launch::check_output`).
 fn check_supported(options: &CurveOptions) -> Result<(), CurveError> {
     let unsupported = |what: &str| {
         Err(CurveError::Options(format!(
             "{what} is not available under mpirun yet (docs/distributed.md); run it on one process"
         )))
     };
-    if options.geometry != Geometry::SplineFitted {
+    // `_`: the ranks run it as the serial job does (the same stage functions and checks).
+    let CurveOptions {
+        order: _,
+        subdivide,
+        geometry,
+        method,
+        fit,
+        knots: _,
+        line_search: _,
+        line_search_mode: _,
+        snap_boundary,
+        demote_uncertified: _,
+        features,
+        mesh: _,
+        output: _,
+        backend,
+        energy,
+        periodic: _,
+    } = options;
+    let crate::fit::FitParams {
+        weights,
+        solver,
+        cg,
+        targets: _,
+        features: _,
+    } = fit;
+    let crate::fit::FitWeights {
+        corner: _,
+        boundary_corner: _,
+        midpoint: _,
+        deep_midpoint,
+        extraordinary_midpoint: _,
+        boundary_midpoint: _,
+        frame_corner: _,
+        frame_midpoint: _,
+        feature: _,
+    } = weights;
+    let crate::solve::CgParams {
+        rel_tol: _,
+        abs_tol: _,
+        max_iters: _,
+        preconditioner,
+    } = cg;
+    let crate::pipeline::FeatureOptions {
+        params: _,
+        edits,
+        ignore: _,
+    } = features;
+    if *geometry != Geometry::SplineFitted {
         return unsupported("--straight or --fit none");
     }
-    if options.energy.is_some() {
+    if energy.is_some() {
         return unsupported("--fit energy");
     }
-    if !matches!(options.method, Method::Iga) {
+    if !matches!(method, Method::Iga) {
         return unsupported("--method elastic");
     }
-    if options.backend.gpu().is_some() {
+    if backend.gpu().is_some() {
         return unsupported("the GPU backend");
     }
-    if options.subdivide.is_some() {
+    if subdivide.is_some() {
         return unsupported("--subdivide");
     }
-    if options.snap_boundary {
+    if *snap_boundary {
         return unsupported("--snap-boundary");
     }
     // The edits name vertices by their place in the file; a rank's sub-mesh numbers them
     // otherwise, so they would hit other vertices.
-    if options.features.edits.is_some() {
+    if edits.is_some() {
         return unsupported("--feature-edits");
     }
     // The deep midpoints are found on the mesh a rank holds, whose cut fringe is not the
     // whole mesh's boundary.
-    if options.fit.weights.deep_midpoint.is_some() {
+    if deep_midpoint.is_some() {
         return unsupported("--w-deep-midpoint");
     }
     // The ranks solve by CG (`auto` means CG here); a factorisation of the whole system is
     // not distributed.
-    if options.fit.solver == crate::fit::FitSolver::Cholesky {
+    if *solver == crate::fit::FitSolver::Cholesky {
         return unsupported("--fit-solver cholesky");
     }
     // The sweeps of block Gauss–Seidel run across the whole matrix in one order (the CG
     // refuses it too: `CgError::Unavailable`).
-    if let crate::solve::CgPreconditioner::BlockSgs { .. } = options.fit.cg.preconditioner {
+    if let crate::solve::CgPreconditioner::BlockSgs { .. } = preconditioner {
         return unsupported("--cg-preconditioner block-sgs");
     }
     Ok(())

@@ -77,20 +77,31 @@ pub enum Outcome {
     Share,
 }
 
-/// The output options the collective writer takes: one MSH 4.1 file (ASCII or binary).
+/// The output options the collective writer takes: one MSH 4.1 file (ASCII or binary). Every
+/// output option is named (none left to `..`), so one added later does not compile until it
+/// is written or refused here.
 fn check_output(output: &Path, options: &CurveOptions) -> Result<(), CurveError> {
     let refuse = |what: &str| {
         Err(CurveError::Options(format!(
             "{what} is not available under mpirun yet (docs/distributed.md); run it on one process"
         )))
     };
+    // `_`: written by the collective writers (`vtu_encoding`: a VTU output's only, refused
+    // below with the format).
+    let crate::io::high_order::OutputOptions {
+        msh_version,
+        binary: _,
+        vtu_encoding: _,
+        volume_name: _,
+        vtu_boundary,
+    } = &options.output;
     if OutputFormat::from_path(output) != Some(OutputFormat::Msh) {
         return refuse("an output other than .msh");
     }
-    if options.output.msh_version != MshVersion::V41 {
+    if *msh_version != MshVersion::V41 {
         return refuse("--msh-version 2.2");
     }
-    if options.output.vtu_boundary.is_some() {
+    if vtu_boundary.is_some() {
         return refuse("--vtu-boundary");
     }
     Ok(())

@@ -288,7 +288,8 @@ fn new_direction(p: &mut [[f64; 3]], z: &[[f64; 3]], beta: [f64; 3]) {
 }
 
 /// The stopping rule and step lengths of the three per-component recurrences: one rule for
-/// [`cg_loop`] (serial and distributed), [`blocked`] and the GPU solver's host loop.
+/// [`cg_loop`] (serial and distributed), [`blocked`], the GPU solver's host loop and
+/// [`coupled_loop`] (its one recurrence as the first component).
 pub struct Stopping {
     bnorm: [f64; 3],
     /// ‖r‖ at which a component has converged: max(rel_tol·‖b‖, abs_tol).
@@ -554,7 +555,8 @@ pub trait Preconditioner: Sync {
 
 /// Solve A x = b by preconditioned CG for an operator that couples the three components of a
 /// node (linear elasticity): one recurrence over all 3n unknowns, unlike [`pcg`]'s three.
-/// Stops when ‖r‖ ≤ rel_tol·‖b‖ (Euclidean norm over all components) or ≤ abs_tol.
+/// Stops when ‖r‖ ≤ rel_tol·‖b‖ (Euclidean norm over all components) or ≤ abs_tol
+/// ([`Stopping`]'s rule).
 pub fn pcg_coupled(
     op: &dyn LinOp,
     pre: &dyn Preconditioner,
@@ -587,55 +589,38 @@ pub fn coupled_loop(
     params: &CgParams,
 ) -> Result<CgInfo, CgError> {
     let n = b.len();
-    let all = |d: [f64; 3]| d[0] + d[1] + d[2];
+    // One recurrence: its sums over the three components are [`Stopping`]'s first component,
+    // the other two are zero (converged from the start, never stepped).
+    let one = |d: [f64; 3]| [d[0] + d[1] + d[2], 0.0, 0.0];
     let mut r = vec![[0.0; 3]; n];
     residual(&mut apply, b, x, &mut r);
-    let bnorm = all(reduce.dot(b, b)).sqrt();
-    let target = (params.rel_tol * bnorm).max(params.abs_tol);
-    let rel = |rr: f64| {
-        if bnorm > 0.0 {
-            rr.sqrt() / bnorm
-        } else {
-            rr.sqrt()
-        }
-    };
+    let stop = Stopping::new(one(reduce.dot(b, b)).map(f64::sqrt), params);
     let mut z = vec![[0.0; 3]; n];
     precondition(&r, &mut z);
     let mut p = z.clone();
     let (rz3, rr3) = reduce.dot2((&r, &z), (&r, &r));
-    let (mut rz, mut rr) = (all(rz3), all(rr3));
+    let (mut rz, mut rr) = (one(rz3), one(rr3));
     let mut ap = vec![[0.0; 3]; n];
     let mut it = 0;
-    while rr.sqrt() > target {
+    while !stop.converged(rr) {
         if it >= params.max_iters {
-            return Err(CgError::NoConvergence {
-                iterations: it,
-                rel_residual: rel(rr),
-                rel_tol: params.rel_tol,
-            });
+            return Err(stop.no_convergence(it, rr));
         }
         apply(&p, &mut ap);
-        let pap = all(reduce.dot(&p, &ap));
-        if !(pap > 0.0) {
-            return Err(CgError::NotPositiveDefinite {
-                iteration: it,
-                curvature: pap,
-            });
-        }
-        let alpha = rz / pap;
+        let [alpha, _, _] = stop.alpha(it, rr, rz, one(reduce.dot(&p, &ap)))?;
         advance(x, &mut r, &p, &ap, [alpha; 3]);
         precondition(&r, &mut z);
         let (rz3, rr3) = reduce.dot2((&r, &z), (&r, &r));
-        let rz_new = all(rz3);
-        let beta = if rz > 0.0 { rz_new / rz } else { 0.0 };
+        let rz_new = one(rz3);
+        let [beta, _, _] = Stopping::beta(rz, rz_new);
         new_direction(&mut p, &z, [beta; 3]);
         rz = rz_new;
-        rr = all(rr3);
+        rr = one(rr3);
         it += 1;
     }
     Ok(CgInfo {
         iterations: it,
-        rel_residual: rel(rr),
+        rel_residual: stop.rel(rr),
     })
 }
 
@@ -792,6 +777,42 @@ mod tests {
             );
             assert_eq!(seen.get(), 7);
         }
+    }
+
+    /// The coupled loop stops by the same rule as the per-component one: a NaN residual
+    /// never converges (it used to end the coupled loop at once, "converged").
+    #[test]
+    fn a_nan_residual_fails_in_both_loops() {
+        let op = Lap(50);
+        let mut b = vec![[1.0; 3]; 50];
+        b[7][1] = f64::NAN;
+        let params = CgParams::default();
+        let mut x = vec![[0.0; 3]; 50];
+        let three = pcg(&op, &b, &mut x, &params, |_, _| {});
+        assert!(three.is_err(), "{three:?}");
+        let mut x = vec![[0.0; 3]; 50];
+        let coupled = pcg_coupled(&op, &Jacobi::new(&op).unwrap(), &b, &mut x, &params);
+        assert!(
+            matches!(coupled, Err(CgError::NotPositiveDefinite { .. })),
+            "{coupled:?}"
+        );
+        // Finite data: the coupled loop reaches the tolerance on ‖r‖ over all components.
+        b[7][1] = 2.0;
+        let mut x = vec![[0.0; 3]; 50];
+        let info = pcg_coupled(&op, &Jacobi::new(&op).unwrap(), &b, &mut x, &params).unwrap();
+        let mut r = vec![[0.0; 3]; 50];
+        op.apply(&x, &mut r);
+        let norm = |v: &[[f64; 3]]| v.iter().flatten().map(|a| a * a).sum::<f64>().sqrt();
+        let rr: Vec<[f64; 3]> = r
+            .iter()
+            .zip(&b)
+            .map(|(r, b)| std::array::from_fn(|k| b[k] - r[k]))
+            .collect();
+        assert!(norm(&rr) <= 1.0001 * params.rel_tol * norm(&b), "{info:?}");
+        assert!(
+            info.rel_residual <= params.rel_tol && info.iterations > 0,
+            "{info:?}"
+        );
     }
 
     #[test]
