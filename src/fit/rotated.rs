@@ -418,9 +418,7 @@ mod tests {
     /// sees the points across the seam rotated, so its energy is the ring's element's at the
     /// fitted maps (which agree, above); the least-squares term couples the coordinates as
     /// the fit does, so it vanishes at the coupled fit's C*; and the gradient (Rᵀ on the
-    /// rotated points' shares) is the value's by central differences. Without the rotation
-    /// in the nets the seam elements' energies differ from the ring's by 0.1–1 (sheared),
-    /// without the coupling the term at C* is 1e-3, without the Rᵀ the differences miss.
+    /// rotated points' shares) is the value's by central differences.
     #[test]
     fn the_energy_sees_the_seam_as_the_ring_does() {
         use crate::energy::{Energy, EnergyParams};

@@ -665,7 +665,14 @@ impl super::passes::Passes for Whole<'_> {
     }
     fn held(pass: &First) -> Result<usize, usize> {
         match pass {
-            First::Done(o) => Ok(o.blend.as_ref().map_or(0, |b| b.reduced_elements)),
+            First::Done(o) => Ok(match (&o.blend, &o.energy) {
+                (Some(b), _) => b.reduced_elements,
+                // `--fit energy` starts from the least-squares fit's certified step: the
+                // elements its full step leaves uncertified are held back from the fit there
+                // (a shortened or damped step), as the blend's are.
+                (None, Some(_)) => o.invalid_at_full_step,
+                (None, None) => 0,
+            }),
             First::Exceeded { at_least, .. } => Err(*at_least),
         }
     }
