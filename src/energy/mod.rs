@@ -45,7 +45,7 @@
 //!
 //! **Rotation seams.** Where the space sees control points rotated across a periodic seam
 //! ([`FitSpace::frames`]: element e takes R C for such a point), the element's net applies R to
-//! those points ([`Energy::net`]), their gradient shares take Rᵀ, and the least-squares term is
+//! those points (`Energy::net`), their gradient shares take Rᵀ, and the least-squares term is
 //! the coupled fit's, (δ − δ*)ᵀ (K ⊗ I₃ + C) (δ − δ*) ([`crate::fit::rotated`]), so C* is still
 //! its minimum. The coloured solver's local problem for such a point is that of Rᵀ M (f and
 //! det are invariant under a rotation on the left, and M + (R v) ψᵀ = R (Rᵀ M + v ψᵀ)) plus
