@@ -267,11 +267,18 @@ impl Locals {
                 kd[c] += k.data()[p] * (x[j][c] - c0[j][c]);
             }
         }
+        // Across rotation seams the row also takes the coupling's (C δ)_i (C_ii = 0).
+        if let Some(c) = &energy.coupling {
+            c.row_apply_add(i, &|j| [0, 1, 2].map(|k| x[j][k] - c0[j][k]), &mut kd);
+        }
         let b = [0, 1, 2].map(|c| kd[c] - energy.rhs[i][c]);
         let mut points = Vec::with_capacity(self.support[i].len() * nq);
         for &(e, kk) in &self.support[i] {
             let (e, kk) = (e as usize, kk as usize);
             let r = &energy.rows[e];
+            // An element that sees the point as R C changes M by (R v) ψᵀ; f and det are
+            // invariant under M → Rᵀ M, so the point is Rᵀ M with the same ψ and v.
+            let frame = energy.rotated[e].iter().find(|f| f.0 as usize == kk);
             for q in 0..nq {
                 let db = &energy.dbq[q];
                 let mut phi = [0.0; 3];
@@ -283,9 +290,16 @@ impl Locals {
                 }
                 let p = &energy.pinv[e * nq + q];
                 let psi = [0, 1, 2].map(|j| p.col(j).dot(DVec3::from(phi)));
+                let mut m = from_dmat3(&energy.m_at(e, q, &nets[e]));
+                if let Some((_, rm)) = frame {
+                    let rt = crate::math::linalg::transpose(rm);
+                    m = std::array::from_fn(|a| {
+                        std::array::from_fn(|b| (0..3).map(|c| rt[a][c] * m[c][b]).sum())
+                    });
+                }
                 points.push(LocalPoint {
                     w: energy.qw[q] * energy.scale[e],
-                    m: from_dmat3(&energy.m_at(e, q, &nets[e])),
+                    m,
                     psi,
                 });
             }
@@ -394,10 +408,15 @@ pub(crate) fn minimize(
                                 let certified = support[i].iter().all(|&(e, kk)| {
                                     let (e, kk) = (e as usize, kk as usize);
                                     let mut net = nets[e];
+                                    // The element sees the move as R v across a rotation seam.
+                                    let seen = energy.rotated[e]
+                                        .iter()
+                                        .find(|f| f.0 as usize == kk)
+                                        .map_or(vn, |(_, rm)| super::rotate(rm, vn));
                                     for a in 0..nb {
                                         let w = col(e, kk, a);
                                         for c in 0..dim {
-                                            net[a][c] += w * vn[c];
+                                            net[a][c] += w * seen[c];
                                         }
                                     }
                                     det_jacobian_bounds(dim, &net, validity.depth).lower

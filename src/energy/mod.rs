@@ -43,6 +43,14 @@
 //! support elements, colour after colour, until a sweep stalls (with a GPU, the first Newton
 //! step's derivatives come from `shaders/local_newton.wgsl`).
 //!
+//! **Rotation seams.** Where the space sees control points rotated across a periodic seam
+//! ([`FitSpace::frames`]: element e takes R C for such a point), the element's net applies R to
+//! those points (`Energy::net`), their gradient shares take Rᵀ, and the least-squares term is
+//! the coupled fit's, (δ − δ*)ᵀ (K ⊗ I₃ + C) (δ − δ*) ([`crate::fit::rotated`]), so C* is still
+//! its minimum. The coloured solver's local problem for such a point is that of Rᵀ M (f and
+//! det are invariant under a rotation on the left, and M + (R v) ψᵀ = R (Rᵀ M + v ψᵀ)) plus
+//! the coupling's row in its linear term: the local kernels (CPU and GPU) are unchanged.
+//!
 //! **Determinism.** Element contributions are computed in parallel into per-element slots and
 //! summed in element order, so values and iterates do not depend on the thread count.
 
@@ -112,6 +120,12 @@ pub struct Energy<'a> {
     pub(crate) rows: Vec<ElementRows>,
     /// Per element: the constant part of its net (periodic seam offsets), if any.
     shifts: Vec<Option<Box<BezierNet>>>,
+    /// Per element: the control points it sees rotated across a rotation seam, as (column in
+    /// its rows, R): its net takes R C for them ([`FitSpace::frames`]); empty for most.
+    pub(crate) rotated: Vec<Vec<(u32, Mat3)>>,
+    /// The least-squares coupling across rotation seams ([`crate::fit::rotated`]): the fit's
+    /// matrix is K ⊗ I₃ + C there; `None` without rotation seams.
+    pub(crate) coupling: Option<crate::fit::rotated::Coupling>,
     /// Smallest input element size vol^{1/d}.
     pub(crate) h_min: f64,
     /// Control points that carry the boundary (a non-zero extraction weight at a Bernstein
@@ -130,6 +144,22 @@ impl<'a> Energy<'a> {
         c_star: &[[f64; 3]],
         params: &EnergyParams,
     ) -> Result<Self, EnergyError> {
+        let smooth = crate::fit::smooth_targets(mesh, topo, fit);
+        Self::with_targets(space, mesh, topo, fit, smooth.as_ref(), c_star, params)
+    }
+
+    /// [`Energy::new`] with the fit's smooth targets `smooth` (those C* was fitted to, e.g.
+    /// with the walls' continuations across periodic seams) instead of targets rebuilt from
+    /// `fit`.
+    pub fn with_targets(
+        space: &'a dyn FitSpace,
+        mesh: &LinearMesh,
+        topo: &Topology,
+        fit: &FitParams,
+        smooth: Option<&crate::fit::SmoothTargets>,
+        c_star: &[[f64; 3]],
+        params: &EnergyParams,
+    ) -> Result<Self, EnergyError> {
         let weight = params.weight;
         if !(weight >= 0.0 && weight.is_finite()) {
             return Err(EnergyError::Weight(weight));
@@ -138,7 +168,15 @@ impl<'a> Energy<'a> {
         let nb = if dim == 2 { 9 } else { 27 };
         // The fit's own normal equations (features and their weights included), so the
         // least-squares term is the one C* minimises.
-        let (k, rhs) = crate::fit::normal_equations(space, mesh, topo, fit);
+        let (k, rhs) = crate::fit::normal_equations_with(space, mesh, topo, fit, smooth);
+        // Across rotation seams the fit's matrix couples the coordinates (K ⊗ I₃ + C), and C*
+        // minimises that one.
+        let coupling = space.has_frames().then(|| {
+            let features = fit.features.as_deref();
+            let blocks =
+                crate::fit::ElementBlocks::with_features(space, mesh, topo, &fit.weights, features);
+            crate::fit::rotated::Coupling::of(space, &blocks).expect("a space with frames")
+        });
         let c0 = space.control_points();
         let ls_offset: f64 = c_star
             .iter()
@@ -229,6 +267,20 @@ impl<'a> Energy<'a> {
                 }
             }
         }
+        let rotated = per_element
+            .iter()
+            .enumerate()
+            .map(|(e, (_, _, r))| match space.frames(e) {
+                Some(frames) => frames
+                    .iter()
+                    .filter_map(|(g, m)| {
+                        let k = r.ids.binary_search(g).ok()?;
+                        Some((k as u32, *m))
+                    })
+                    .collect(),
+                None => Vec::new(),
+            })
+            .collect();
         let mut pinv = Vec::with_capacity(nq * per_element.len());
         let mut scale = Vec::with_capacity(per_element.len());
         let mut rows = Vec::with_capacity(per_element.len());
@@ -262,6 +314,8 @@ impl<'a> Energy<'a> {
             shifts: (0..space.n_elements())
                 .map(|e| space.net_shift(e).map(Box::new))
                 .collect(),
+            rotated,
+            coupling,
             h_min,
             frozen,
         })
@@ -289,12 +343,21 @@ impl<'a> Energy<'a> {
     pub(crate) fn net(&self, e: usize, cps: &[[f64; 3]]) -> BezierNet {
         let ElementRows { ids, r } = &self.rows[e];
         let m = ids.len();
+        // The control points as the element sees them (rotated across a seam; the few
+        // elements along rotation seams only).
+        let seen = (!self.rotated[e].is_empty()).then(|| {
+            let mut seen: Vec<[f64; 3]> = ids.iter().map(|&id| cps[id as usize]).collect();
+            for &(k, ref rm) in &self.rotated[e] {
+                seen[k as usize] = rotate(rm, seen[k as usize]);
+            }
+            seen
+        });
         let mut net = [[0.0; 3]; 27];
         for a in 0..self.nb {
             for (k, &id) in ids.iter().enumerate() {
                 let w = r[a * m + k];
                 if w != 0.0 {
-                    let c = cps[id as usize];
+                    let c = seen.as_ref().map_or(cps[id as usize], |s| s[k]);
                     for i in 0..3 {
                         net[a][i] += w * c[i];
                     }
@@ -365,6 +428,9 @@ impl<'a> Energy<'a> {
             .collect();
         let mut kd = vec![[0.0; 3]; delta.len()];
         self.k.apply(&delta, &mut kd);
+        if let Some(c) = &self.coupling {
+            c.apply_add(&delta, &mut kd);
+        }
         let parts: Vec<f64> = delta
             .par_chunks(4096)
             .zip(kd.par_chunks(4096))
@@ -419,6 +485,10 @@ impl<'a> Energy<'a> {
                         }
                     }
                 }
+                // A point seen as R C takes Rᵀ of its share.
+                for &(k, ref rm) in &self.rotated[e] {
+                    gc[k as usize] = rotate_back(rm, gc[k as usize]);
+                }
                 (s, gc)
             })
             .collect();
@@ -469,6 +539,16 @@ impl<'a> Energy<'a> {
             .map(|b| b.lower)
             .collect()
     }
+}
+
+/// R v (R by rows).
+pub(crate) fn rotate(r: &Mat3, v: [f64; 3]) -> [f64; 3] {
+    std::array::from_fn(|i| r[i][0] * v[0] + r[i][1] * v[1] + r[i][2] * v[2])
+}
+
+/// Rᵀ v (R by rows).
+pub(crate) fn rotate_back(r: &Mat3, v: [f64; 3]) -> [f64; 3] {
+    std::array::from_fn(|i| r[0][i] * v[0] + r[1][i] * v[1] + r[2][i] * v[2])
 }
 
 /// J = Σ_a B_a ⊗ ∇b_a (J₃₃ = 1 in 2D).

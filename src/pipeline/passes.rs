@@ -78,8 +78,9 @@ pub(crate) trait Passes {
     /// demoted in rounds ([`super::spline::demotion_marks`], each process certifying its own
     /// elements), as marks on this process's elements; timed as the validity stage.
     fn demotion(&mut self, job: &Job, setup: &SplineSetup, clock: &mut Clock) -> Option<Demoted>;
-    /// Elements `pass` holds back over the whole mesh: `Ok` when it ran to its end, else
-    /// `Err` with the lower bound at which it stopped.
+    /// Elements `pass` holds back over the whole mesh (its blend's; with `--fit energy`, the
+    /// elements its least-squares fit's full step leaves uncertified): `Ok` when it ran to its
+    /// end, else `Err` with the lower bound at which it stopped.
     fn held(pass: &Self::Pass) -> Result<usize, usize>;
     /// A pass that stopped early, its blend run to its end (on its own space: the setup's
     /// knots may be another pass's).
@@ -134,6 +135,11 @@ pub(crate) trait Passes {
 ///    on [`Passes::boundary_rms`]): against the lower bound first, and only when that does
 ///    not decide is the uniform blend run to its end, so the choice and the output are those
 ///    of the full passes.
+///
+/// With `--fit energy` (no blend) a pass holds back the elements its least-squares fit's full
+/// step leaves uncertified ([`Passes::held`]): the energy starts from a shortened or damped
+/// step there, so uniform knots that leave many of them (the 3D annular sector: 96 of 144)
+/// are weighed against graded knots as the blend's counts are.
 ///
 /// These passes fit without [`crate::fit::FitWeights::extraordinary_midpoint`]. Where the
 /// pass kept holds back more than [`super::spline::AUTO_MAX_HELD_BACK`] of the elements and

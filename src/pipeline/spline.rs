@@ -302,28 +302,22 @@ impl SplineSetup {
     }
 }
 
-/// The periodic pairs among `pairs` glued for the spline space (rotations too, except with
-/// `--fit energy`), and why some pair stays apart (for the report), if one does.
+/// The periodic pairs among `pairs` glued for the spline space (translations and rotations;
+/// the energy minimisation sees rotated points through their frames as the fit does,
+/// [`crate::energy`]), and why some pair stays apart (for the report), if one does.
 fn glue_seams(job: &Job, pairs: &[PeriodicPair]) -> (Option<Glued>, Option<String>) {
     if pairs.is_empty() {
         return (None, None);
     }
     let rotations = pairs.iter().any(|p| !p.transform.is_translation());
     let translations = pairs.iter().any(|p| p.transform.is_translation());
-    // The energy minimisation takes every control point as the same linear map of each
-    // coordinate (its rows), which a point seen rotated is not: rotations stay apart there.
-    let energy = job.options.energy.is_some();
-    let all = (rotations && !energy)
-        .then(|| seam::glue(job.mesh, pairs))
-        .flatten();
+    let all = rotations.then(|| seam::glue(job.mesh, pairs)).flatten();
     if all.is_some() {
         return (all, None);
     }
     let seams = seam::glue_translations(job.mesh, pairs);
     let why = if seams.is_none() && translations {
         Some("the mesh with its translation pairs glued is not manifold")
-    } else if rotations && energy {
-        Some("rotation pairs are not identified in the spline space with --fit energy")
     } else if rotations {
         Some("the mesh with its rotation pairs glued is not manifold")
     } else {
@@ -714,7 +708,14 @@ impl super::passes::Passes for Whole<'_> {
     }
     fn held(pass: &First) -> Result<usize, usize> {
         match pass {
-            First::Done(o) => Ok(o.blend.as_ref().map_or(0, |b| b.reduced_elements)),
+            First::Done(o) => Ok(match (&o.blend, &o.energy) {
+                (Some(b), _) => b.reduced_elements,
+                // `--fit energy` starts from the least-squares fit's certified step: the
+                // elements its full step leaves uncertified are held back from the fit there
+                // (a shortened or damped step), as the blend's are.
+                (None, Some(_)) => o.invalid_at_full_step,
+                (None, None) => 0,
+            }),
             First::Exceeded { at_least, .. } => Err(*at_least),
         }
     }
@@ -1285,7 +1286,8 @@ fn minimize_energy(
     use crate::energy::{Energy, Validity, minimize_on};
     let (mesh, topo, fit) = (job.mesh, setup.topo(job), &setup.fit_params);
     let start = &step.control_points;
-    let energy = Energy::new(space, mesh, topo, fit, c_star, params)?;
+    let smooth = setup.targets.as_ref();
+    let energy = Energy::with_targets(space, mesh, topo, fit, smooth, c_star, params)?;
     let depth = job.options.line_search.certificate_depth;
     let validity = Validity::for_start(&energy, job.executor, depth, thresholds, start)?;
     let (mut c, info) = minimize_on(&energy, &validity, start, params, job.executor, &mut |_| {})?;

@@ -31,8 +31,8 @@
 //! interior; [`unwrap`] refuses (and the caller keeps the sides apart) when a shift is not a
 //! combination of the translations to `SHIFT_REL_TOL` of the period, or two common vertices
 //! disagree (translations), or when no such rigid map carries them (rotations).
-//! [`glue_translations`] glues the translations only, for the consumer that takes the
-//! coordinates apart (the energy minimisation); [`glue_share`] glues a rank's sub-mesh as
+//! [`glue_translations`] glues the translations only (where the rotation pairs' glued mesh is
+//! not manifold); [`glue_share`] glues a rank's sub-mesh as
 //! either glues the whole mesh (the distributed CG couples the coordinates across rotations).
 
 use super::intervals::{KnotIntervals, KnotParams, KnotSurvey, Knots};
