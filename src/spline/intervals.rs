@@ -1050,16 +1050,16 @@ mod tests {
             if ra == rb {
                 conflict[ra] |= flip;
             } else {
-                for x in 0..n {
-                    if root[x] == rb {
-                        root[x] = ra;
-                        sign[x] ^= flip;
+                for (r, s) in root.iter_mut().zip(sign.iter_mut()) {
+                    if *r == rb {
+                        *r = ra;
+                        *s ^= flip;
                     }
                 }
                 conflict[ra] |= conflict[rb];
             }
-            for x in 0..n {
-                assert_eq!(uf.find(x as u32), (root[x] as u32, sign[x]), "facet {x}");
+            for (x, (&r, &s)) in root.iter().zip(&sign).enumerate() {
+                assert_eq!(uf.find(x as u32), (r as u32, s), "facet {x}");
             }
             for r in (0..n).filter(|&r| root[r] == r) {
                 let (lo, hi) = uf.lo_hi(r as u32);
