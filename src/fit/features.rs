@@ -399,9 +399,9 @@ impl FeatureModels {
         let relaxable = |w: usize| plane_of.contains_key(&(w as u32));
         let nearest = nearest_shared(mesh, &adj, &source, &relaxable, decay, share);
         for (&v, &n) in &plane_of {
-            let model = match nearest[v as usize].filter(|n| !n.is_source) {
+            let model = match nearest.at[v as usize].filter(|n| !n.is_source) {
                 Some(near) => {
-                    let s = near.source;
+                    let s = nearest.source(&near);
                     if let Some(h) = s.higher {
                         self.in_plane_higher.insert(v, h);
                     }

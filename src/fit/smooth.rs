@@ -1260,16 +1260,16 @@ fn inherit_interior(
     // A source another rank computed, by its order: the local vertex of that order, where
     // this rank holds it (the arcs of the interior samples read the sources' vertices).
     let of_order: HashMap<u64, u32> = match share {
-        Some(s) if nearest.iter().flatten().any(|n| n.local == NONE) => {
+        Some(s) if nearest.at.iter().flatten().any(|n| n.local == NONE) => {
             (0..nv).map(|v| (s.order(v), v as u32)).collect()
         }
         _ => HashMap::new(),
     };
-    for (v, n) in nearest.iter().enumerate() {
+    for (v, n) in nearest.at.iter().enumerate() {
         let Some(n) = n else {
             continue;
         };
-        let s = &n.source;
+        let s = nearest.source(n);
         out.sources[v] = match n.local {
             NONE => of_order.get(&s.order).copied().unwrap_or(NONE),
             local => local,
@@ -1299,8 +1299,24 @@ pub(super) struct Nearest {
     pub local: u32,
     /// Whether the vertex is its own source.
     pub is_source: bool,
-    /// What the source hands on.
-    pub source: Source,
+    /// The source's entry in [`NearestSources::sources`].
+    source: u32,
+}
+
+/// What [`nearest_shared`] finds: per vertex its nearest source, if any, and the sources'
+/// models once each (a vertex refers to its source's entry rather than holding a copy of the
+/// model: most vertices of a large mesh have none, and a model is a few hundred bytes).
+#[derive(Debug)]
+pub(super) struct NearestSources {
+    pub at: Vec<Option<Nearest>>,
+    sources: Vec<Source>,
+}
+
+impl NearestSources {
+    /// What `n`'s source hands on.
+    pub fn source(&self, n: &Nearest) -> &Source {
+        &self.sources[n.source as usize]
+    }
 }
 
 /// Multi-source Dijkstra along the edges `adj` ([`adjacency`]): the vertices `source` gives
@@ -1319,11 +1335,23 @@ pub(super) fn nearest_shared(
     relaxable: &dyn Fn(usize) -> bool,
     decay: f64,
     share: Option<&dyn InheritShare>,
-) -> Vec<Option<Nearest>> {
+) -> NearestSources {
     let nv = mesh.n_vertices();
     let computes = |v: usize| share.is_none_or(|s| s.computes(v));
     let order = |v: u32| share.map_or(u64::from(v), |s| s.order(v as usize));
-    let sources: Vec<Option<Source>> = (0..nv).map(|v| source(v).filter(|_| computes(v))).collect();
+    // The computed sources' models in `table`, in vertex order, and each vertex's entry
+    // there (`NONE`: not a source).
+    let mut table: Vec<Source> = Vec::new();
+    let entry: Vec<u32> = (0..nv)
+        .map(|v| match source(v).filter(|_| computes(v)) {
+            Some(s) => {
+                table.push(s);
+                (table.len() - 1) as u32
+            }
+            None => NONE,
+        })
+        .collect();
+    let is_source = |v: usize| entry[v] != NONE;
     let relaxable = |w: usize| computes(w) && relaxable(w);
     // Sources received from other ranks (slot nv + i), and the local slot of a computed
     // source by its order.
@@ -1332,26 +1360,27 @@ pub(super) fn nearest_shared(
     if share.is_some() {
         slot_of.extend(
             (0..nv)
-                .filter(|&v| sources[v].is_some())
+                .filter(|&v| is_source(v))
                 .map(|v| (order(v as u32), v as u32)),
         );
     }
-    let mut seeds = vec![Reach::NONE; nv];
+    // The latest records of the vertices other ranks compute (none without `share`).
+    let mut seeds = vec![Reach::NONE; if share.is_some() { nv } else { 0 }];
     let reach = loop {
         let mut reach: Vec<Reach> = (0..nv)
-            .map(|v| match (&sources[v], computes(v)) {
-                (Some(_), _) => Reach {
+            .map(|v| match (is_source(v), computes(v)) {
+                (true, _) => Reach {
                     dist: 0.0,
                     via: (0.0, order(v as u32)),
                     src: v as u32,
                 },
-                (None, true) => Reach::NONE,
-                (None, false) => seeds[v],
+                (false, true) => Reach::NONE,
+                (false, false) => seeds[v],
             })
             .collect();
         let slot = |src: u32| -> &Source {
             match (src as usize).checked_sub(nv) {
-                None => sources[src as usize].as_ref().expect("a source"),
+                None => &table[entry[src as usize] as usize],
                 Some(i) => &remote[i],
             }
         };
@@ -1388,7 +1417,9 @@ pub(super) fn nearest_shared(
             break reach;
         }
     };
-    reach
+    // The received sources follow the computed ones in the table.
+    let n_local = table.len();
+    let at = reach
         .iter()
         .enumerate()
         .map(|(v, r)| {
@@ -1399,12 +1430,14 @@ pub(super) fn nearest_shared(
                 // A source's path starts at itself; any other vertex's at a neighbour.
                 is_source: r.via.1 == order(v as u32),
                 source: match i.checked_sub(nv) {
-                    None => sources[i].expect("a source"),
-                    Some(k) => remote[k],
+                    None => entry[i],
+                    Some(k) => (n_local + k) as u32,
                 },
             })
         })
-        .collect()
+        .collect();
+    table.extend(remote);
+    NearestSources { at, sources: table }
 }
 
 /// The neighbours of every vertex along `edges`: offsets (`nv` + 1) into the list of

@@ -463,25 +463,59 @@ fn unique_edges(
         })
         .collect();
     keys.par_sort_unstable();
-    let mut edges = Vec::new();
-    let mut edge_valence = Vec::new();
-    let mut element_edges = vec![NONE; ne * nle];
-    for (i, &(k, slot)) in keys.iter().enumerate() {
-        if i == 0 || keys[i - 1].0 != k {
-            edges.push([(k >> 32) as u32, k as u32]);
-            edge_valence.push(0);
-        }
-        let id = edges.len() - 1;
-        element_edges[slot as usize] = id as u32;
-        edge_valence[id] += 1;
-    }
+    let first = run_starts(&keys, |a, b| a.0 == b.0);
+    let edges = first
+        .par_iter()
+        .map(|&i| {
+            let k = keys[i as usize].0;
+            [(k >> 32) as u32, k as u32]
+        })
+        .collect();
+    let edge_valence = first
+        .par_iter()
+        .enumerate()
+        .map(|(id, &i)| first.get(id + 1).map_or(keys.len() as u32, |&j| j) - i)
+        .collect();
+    let element_edges = slot_ids(&keys, &first, ne * nle, |&(_, slot)| slot);
     (edges, edge_valence, element_edges)
+}
+
+/// The start of every run of equal entries (`same`) of the sorted `keys`, in order: the
+/// unique entries' first places.
+fn run_starts<K: Sync>(keys: &[K], same: impl Fn(&K, &K) -> bool + Sync) -> Vec<u32> {
+    (0..keys.len())
+        .into_par_iter()
+        .filter(|&i| i == 0 || !same(&keys[i - 1], &keys[i]))
+        .map(|i| i as u32)
+        .collect()
+}
+
+/// Per slot (`n` of them, each `slot(key)` of exactly one of the sorted `keys`), the number of
+/// its key's run (`first`: [`run_starts`]).
+fn slot_ids<K: Sync>(
+    keys: &[K],
+    first: &[u32],
+    n: usize,
+    slot: impl Fn(&K) -> u32 + Sync,
+) -> Vec<u32> {
+    use std::sync::atomic::{AtomicU32, Ordering};
+    // Every slot is written once, by its run's task: relaxed stores, read after the join.
+    let ids: Vec<AtomicU32> = (0..n)
+        .into_par_iter()
+        .map(|_| AtomicU32::new(NONE))
+        .collect();
+    first.par_iter().enumerate().for_each(|(id, &i)| {
+        let end = first.get(id + 1).map_or(keys.len(), |&j| j as usize);
+        for k in &keys[i as usize..end] {
+            ids[slot(k) as usize].store(id as u32, Ordering::Relaxed);
+        }
+    });
+    ids.into_par_iter().map(AtomicU32::into_inner).collect()
 }
 
 /// The unique faces of a hex mesh (in order of their sorted vertex keys, each with the
 /// vertices of its first element side) and the face of each element side slot.
 fn unique_faces(elems: &[u32], ne: usize) -> (Vec<[u32; 4]>, Vec<u32>) {
-    let mut faces = Vec::new();
     let mut keys: Vec<([u32; 4], u32)> = (0..ne * 6)
         .into_par_iter()
         .map(|slot| {
@@ -492,14 +526,16 @@ fn unique_faces(elems: &[u32], ne: usize) -> (Vec<[u32; 4]>, Vec<u32>) {
         })
         .collect();
     keys.par_sort_unstable();
-    let mut element_faces = vec![NONE; ne * 6];
-    for (i, &(k, slot)) in keys.iter().enumerate() {
-        if i == 0 || keys[i - 1].0 != k {
-            let (e, l) = (slot as usize / 6, slot as usize % 6);
-            faces.push(HEX_SIDES[l].map(|c| elems[e * 8 + c]));
-        }
-        element_faces[slot as usize] = (faces.len() - 1) as u32;
-    }
+    let first = run_starts(&keys, |a, b| a.0 == b.0);
+    let faces = first
+        .par_iter()
+        .map(|&i| {
+            let slot = keys[i as usize].1 as usize;
+            let (e, l) = (slot / 6, slot % 6);
+            HEX_SIDES[l].map(|c| elems[e * 8 + c])
+        })
+        .collect();
+    let element_faces = slot_ids(&keys, &first, ne * 6, |&(_, slot)| slot);
     (faces, element_faces)
 }
 
@@ -638,4 +674,72 @@ fn components(ne: usize, facet_elements: &[[u32; 2]], facet_count: &[u32]) -> (V
     }
 
     (element_component, n_components)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::collections::BTreeMap;
+
+    /// A structured n³ hex grid with its vertices numbered in a scrambled order, so that the
+    /// sorted keys' runs do not follow the elements.
+    fn scrambled_grid(n: usize) -> Vec<u32> {
+        let nv = (n + 1).pow(3);
+        let label = |v: usize| ((v * 7919) % nv) as u32;
+        let id = |i: usize, j: usize, k: usize| label(i + (n + 1) * (j + (n + 1) * k));
+        let mut elems = Vec::new();
+        for k in 0..n {
+            for j in 0..n {
+                for i in 0..n {
+                    elems.extend([
+                        id(i, j, k),
+                        id(i + 1, j, k),
+                        id(i + 1, j + 1, k),
+                        id(i, j + 1, k),
+                        id(i, j, k + 1),
+                        id(i + 1, j, k + 1),
+                        id(i + 1, j + 1, k + 1),
+                        id(i, j + 1, k + 1),
+                    ]);
+                }
+            }
+        }
+        elems
+    }
+
+    /// The unique edges and faces, their numbering, valences and first sides equal those of
+    /// an ordered map from each key to the slots that have it.
+    #[test]
+    fn unique_edges_and_faces_match_an_ordered_map() {
+        let n = 12;
+        let elems = scrambled_grid(n);
+        let ne = n * n * n;
+        let (edges, valence, element_edges) = unique_edges(&elems, 3, ne, 8);
+        let mut by_edge: BTreeMap<[u32; 2], Vec<usize>> = BTreeMap::new();
+        for slot in 0..ne * 12 {
+            let [a, b] = HEX_EDGES[slot % 12].map(|c| elems[slot / 12 * 8 + c]);
+            by_edge.entry([a.min(b), a.max(b)]).or_default().push(slot);
+        }
+        assert_eq!(edges.len(), 3 * n * (n + 1) * (n + 1));
+        assert_eq!(edges, by_edge.keys().copied().collect::<Vec<_>>());
+        for (id, slots) in by_edge.values().enumerate() {
+            assert_eq!(valence[id] as usize, slots.len());
+            assert!(slots.iter().all(|&s| element_edges[s] == id as u32));
+        }
+
+        let (faces, element_faces) = unique_faces(&elems, ne);
+        let mut by_face: BTreeMap<[u32; 4], Vec<usize>> = BTreeMap::new();
+        for slot in 0..ne * 6 {
+            let mut k = HEX_SIDES[slot % 6].map(|c| elems[slot / 6 * 8 + c]);
+            k.sort_unstable();
+            by_face.entry(k).or_default().push(slot);
+        }
+        assert_eq!(faces.len(), 3 * n * n * (n + 1));
+        assert_eq!(faces.len(), by_face.len());
+        for (id, slots) in by_face.values().enumerate() {
+            let s = slots[0];
+            assert_eq!(faces[id], HEX_SIDES[s % 6].map(|c| elems[s / 6 * 8 + c]));
+            assert!(slots.iter().all(|&s| element_faces[s] == id as u32));
+        }
+    }
 }

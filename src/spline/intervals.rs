@@ -231,25 +231,27 @@ pub struct Knots {
 
 /// Union-find with the orientation of each facet relative to its parent.
 struct SignedUnionFind {
-    parent: Vec<u32>,
-    /// `ρ(x) = sign[x] · ρ(parent[x])`, sign ±1 stored as `true` for −1.
-    flip: Vec<bool>,
+    /// Per facet: its parent, with `ρ(x) = sign · ρ(parent)` in the top bit (set: −1), so that
+    /// one load gives both (the survey runs it over every tie of a mesh, and the facets'
+    /// entries are visited in no cache-friendly order).
+    link: Vec<u32>,
     /// Root: a cycle with an odd number of flips was found.
     conflict: Vec<bool>,
     /// Root: smallest and largest value of the set's members, in the root's orientation
     /// (empty: `lo > hi`).
-    lo: Vec<f64>,
-    hi: Vec<f64>,
+    range: Vec<[f64; 2]>,
 }
+
+/// The flip bit of [`SignedUnionFind::link`].
+const FLIP: u32 = 1 << 31;
 
 impl SignedUnionFind {
     fn new(n: usize) -> Self {
+        assert!(n <= FLIP as usize, "at most 2^31 facets");
         SignedUnionFind {
-            parent: (0..n as u32).collect(),
-            flip: vec![false; n],
+            link: (0..n as u32).collect(),
             conflict: vec![false; n],
-            lo: vec![f64::INFINITY; n],
-            hi: vec![f64::NEG_INFINITY; n],
+            range: vec![[f64::INFINITY, f64::NEG_INFINITY]; n],
         }
     }
 
@@ -259,10 +261,16 @@ impl SignedUnionFind {
         let mut u = Self::new(values.len());
         for (i, v) in values.into_iter().enumerate() {
             if let Some(v) = v {
-                (u.lo[i], u.hi[i]) = (v, v);
+                u.range[i] = [v, v];
             }
         }
         u
+    }
+
+    /// Root `r`'s smallest and largest value.
+    fn lo_hi(&self, r: u32) -> (f64, f64) {
+        let [lo, hi] = self.range[r as usize];
+        (lo, hi)
     }
 
     /// The range of the set `a`'s and `b`'s would form under `ρ(a) = ±ρ(b)`, in `a`'s root's
@@ -270,16 +278,18 @@ impl SignedUnionFind {
     fn merged_range(&mut self, a: u32, b: u32, opposite: bool) -> (f64, f64) {
         let (ra, fa) = self.find(a);
         let (rb, fb) = self.find(b);
-        let (lo, hi) = (self.lo[ra as usize], self.hi[ra as usize]);
+        self.merged_roots(ra, rb, fa ^ fb ^ opposite)
+    }
+
+    /// [`SignedUnionFind::merged_range`] of roots `ra` and `rb` under `ρ(ra) = ±ρ(rb)`
+    /// (`flip`: minus).
+    fn merged_roots(&self, ra: u32, rb: u32, flip: bool) -> (f64, f64) {
+        let (lo, hi) = self.lo_hi(ra);
         if ra == rb {
             return (lo, hi);
         }
-        let (blo, bhi) = (self.lo[rb as usize], self.hi[rb as usize]);
-        let (blo, bhi) = if fa ^ fb ^ opposite {
-            (-bhi, -blo)
-        } else {
-            (blo, bhi)
-        };
+        let (blo, bhi) = self.lo_hi(rb);
+        let (blo, bhi) = if flip { (-bhi, -blo) } else { (blo, bhi) };
         (lo.min(blo), hi.max(bhi))
     }
 
@@ -287,17 +297,20 @@ impl SignedUnionFind {
     /// runs for every tie of a mesh).
     fn find(&mut self, x: u32) -> (u32, bool) {
         let (mut r, mut parity) = (x, false);
-        while self.parent[r as usize] != r {
-            parity ^= self.flip[r as usize];
-            r = self.parent[r as usize];
+        loop {
+            let l = self.link[r as usize];
+            if l & !FLIP == r {
+                break;
+            }
+            parity ^= l & FLIP != 0;
+            r = l & !FLIP;
         }
         // Point every node on the path at the root, with its flip relative to the root.
         let (mut y, mut py) = (x, parity);
-        while self.parent[y as usize] != y {
-            let (next, next_parity) = (self.parent[y as usize], py ^ self.flip[y as usize]);
-            self.parent[y as usize] = r;
-            self.flip[y as usize] = py;
-            (y, py) = (next, next_parity);
+        while y != r {
+            let l = self.link[y as usize];
+            self.link[y as usize] = r | if py { FLIP } else { 0 };
+            (y, py) = (l & !FLIP, py ^ (l & FLIP != 0));
         }
         (r, parity)
     }
@@ -312,10 +325,10 @@ impl SignedUnionFind {
             }
             return;
         }
-        let (lo, hi) = self.merged_range(a, b, opposite);
-        self.parent[rb as usize] = ra;
-        self.flip[rb as usize] = fa ^ fb ^ opposite;
-        (self.lo[ra as usize], self.hi[ra as usize]) = (lo, hi);
+        let flip = fa ^ fb ^ opposite;
+        let (lo, hi) = self.merged_roots(ra, rb, flip);
+        self.link[rb as usize] = ra | if flip { FLIP } else { 0 };
+        self.range[ra as usize] = [lo, hi];
         if self.conflict[rb as usize] {
             self.conflict[ra as usize] = true;
         }
@@ -901,8 +914,9 @@ fn ratios_of(
             continue;
         }
         info.surfaces += 1;
-        if uf.hi[r] >= uf.lo[r] {
-            info.max_spread = info.max_spread.max(uf.hi[r] - uf.lo[r]);
+        let (lo, hi) = uf.lo_hi(r as u32);
+        if hi >= lo {
+            info.max_spread = info.max_spread.max(hi - lo);
         }
         if uf.conflict[r] {
             info.non_orientable += 1;
@@ -984,6 +998,79 @@ mod tests {
         u.union(0, 2, true);
         let r = u.find(0).0 as usize;
         assert!(u.conflict[r]);
+    }
+
+    /// Against a brute force that relabels a whole set on every union (the root of the union
+    /// of `a`'s and `b`'s sets is `a`'s root, as the surfaces' sums and ranges are taken in
+    /// its orientation): on random signed ties, every facet's root and sign, every root's
+    /// range and conflict flag, and the ranges a tie would form, agree exactly.
+    #[test]
+    fn signed_union_find_matches_relabelling() {
+        let n = 300usize;
+        let mut seed = 0x2545_f491_4f6c_dd1du64;
+        let mut next = move |m: u64| {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed % m
+        };
+        let values: Vec<Option<f64>> = (0..n)
+            .map(|_| (next(4) != 0).then(|| next(2001) as f64 / 1000.0 - 1.0))
+            .collect();
+        let mut uf = SignedUnionFind::with_values(values.iter().copied());
+        let (mut root, mut sign, mut conflict) =
+            ((0..n).collect::<Vec<_>>(), vec![false; n], vec![false; n]);
+        let range_of = |root: &[usize], sign: &[bool], r: usize| {
+            (0..n)
+                .filter(|&x| root[x] == r)
+                .filter_map(|x| values[x].map(|v| if sign[x] { -v } else { v }))
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+                    (lo.min(v), hi.max(v))
+                })
+        };
+        for _ in 0..400 {
+            let (a, b, opposite) = (
+                next(n as u64) as usize,
+                next(n as u64) as usize,
+                next(2) == 1,
+            );
+            let (ra, rb) = (root[a], root[b]);
+            let flip = sign[a] ^ sign[b] ^ opposite;
+            let expected = if ra == rb {
+                range_of(&root, &sign, ra)
+            } else {
+                let (lo, hi) = range_of(&root, &sign, ra);
+                let (blo, bhi) = range_of(&root, &sign, rb);
+                let (blo, bhi) = if flip { (-bhi, -blo) } else { (blo, bhi) };
+                (lo.min(blo), hi.max(bhi))
+            };
+            let got = uf.merged_range(a as u32, b as u32, opposite);
+            assert_eq!(format!("{got:?}"), format!("{expected:?}"));
+            uf.union(a as u32, b as u32, opposite);
+            if ra == rb {
+                conflict[ra] |= flip;
+            } else {
+                for (r, s) in root.iter_mut().zip(sign.iter_mut()) {
+                    if *r == rb {
+                        *r = ra;
+                        *s ^= flip;
+                    }
+                }
+                conflict[ra] |= conflict[rb];
+            }
+            for (x, (&r, &s)) in root.iter().zip(&sign).enumerate() {
+                assert_eq!(uf.find(x as u32), (r as u32, s), "facet {x}");
+            }
+            for r in (0..n).filter(|&r| root[r] == r) {
+                let (lo, hi) = uf.lo_hi(r as u32);
+                assert_eq!(
+                    format!("{:?}", (lo, hi)),
+                    format!("{:?}", range_of(&root, &sign, r))
+                );
+                assert_eq!(uf.conflict[r], conflict[r], "root {r}");
+            }
+        }
+        assert!(root.iter().filter(|&&r| r == root[0]).count() > n / 2);
     }
 
     #[test]
