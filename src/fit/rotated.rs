@@ -267,7 +267,7 @@ pub(crate) fn rotate_back(r: &Mat3, v: DVec3) -> DVec3 {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use crate::fit::{FitParams, FitSolver};
     use crate::math::linalg::DVec3;
     use crate::mesh::periodic::{PeriodicSpec, resolve};
@@ -318,7 +318,7 @@ mod tests {
 
     /// The sector of 4 × 3 cells of 7.5° (sides `lo` and `hi`, 30° apart), the whole ring of
     /// 48 such columns, their topologies, and the sector glued through its rotation.
-    fn sector_and_ring() -> (LinearMesh, LinearMesh, Topology, Topology, Glued) {
+    pub(crate) fn sector_and_ring() -> (LinearMesh, LinearMesh, Topology, Topology, Glued) {
         let sector = annulus(3, 4, 7.5, false);
         let ring = annulus(3, 48, 7.5, true);
         let (st, rt) = (Topology::build(&sector), Topology::build(&ring));
@@ -412,69 +412,5 @@ mod tests {
         let (both, one) = (gap(&seamed), gap(&apart));
         assert!(both < 1e-14, "seamed targets {both:e} from the ring's");
         assert!(one > 1e-6, "one-sided targets {one:e} from the ring's");
-    }
-
-    /// The degeneration energy on the glued sector ([`crate::energy`]): each element's net
-    /// sees the points across the seam rotated, so its energy is the ring's element's at the
-    /// fitted maps (which agree, above); the least-squares term couples the coordinates as
-    /// the fit does, so it vanishes at the coupled fit's C*; and the gradient (Rᵀ on the
-    /// rotated points' shares) is the value's by central differences.
-    #[test]
-    fn the_energy_sees_the_seam_as_the_ring_does() {
-        use crate::energy::{Energy, EnergyParams};
-        let (sector, ring, st, rt, glued) = sector_and_ring();
-        let mut space = SplineSpace::build_with_knots(&glued.mesh, &glued.topo, &[], None);
-        unwrap(&mut space, &sector, &st, &glued).expect("the seam is identified");
-        let whole = SplineSpace::build_with_knots(&ring, &rt, &[], None);
-        let view = interior_view(&sector, &st, &glued);
-        let mut params = FitParams::default();
-        params.cg.rel_tol = 1e-13;
-        params.solver = FitSolver::Cholesky;
-        let (cs, _) = crate::fit::fit(&space, &sector, &view.topo, &params, |_, _| {}).unwrap();
-        let (cr, _) = crate::fit::fit(&whole, &ring, &rt, &params, |_, _| {}).unwrap();
-        let ep = EnergyParams::default();
-        let es = Energy::new(&space, &sector, &view.topo, &params, &cs, &ep).unwrap();
-        let er = Energy::new(&whole, &ring, &rt, &params, &cr, &ep).unwrap();
-        let (ds, dr) = (es.degeneration(&cs), er.degeneration(&cr));
-        for e in 0..sector.n_elements() {
-            assert!(
-                (ds[e] - dr[e]).abs() <= 1e-9 * dr[e].abs().max(1e-12),
-                "element {e}: {} on the sector, {} on the ring",
-                ds[e],
-                dr[e]
-            );
-        }
-        let total: f64 = ds.iter().sum();
-        let ls = es.value(&cs) - total;
-        assert!(ls.abs() <= 1e-9 * total, "least-squares term {ls:e} at C*");
-        // Between the initial map and C*, off any symmetry.
-        let c: Vec<[f64; 3]> = (space.control_points.iter().zip(&cs).enumerate())
-            .map(|(i, (a, b))| {
-                let w = 0.3 + 0.4 * ((i as f64) * 0.77).sin().abs();
-                [a[0] + w * (b[0] - a[0]), a[1] + w * (b[1] - a[1]), 0.0]
-            })
-            .collect();
-        let mut g = vec![[0.0; 3]; c.len()];
-        es.value_and_gradient(&c, &mut g);
-        let gmax = g.iter().flatten().fold(0.0f64, |a, b| a.max(b.abs()));
-        let h = 1e-7;
-        let rotated: Vec<u32> = (0..sector.n_elements())
-            .filter_map(|e| space.extraction.frames(e))
-            .flat_map(|f| f.iter().map(|f| f.0))
-            .collect();
-        assert!(!rotated.is_empty());
-        for &i in &rotated {
-            for k in 0..2 {
-                let (mut cp, mut cm) = (c.clone(), c.clone());
-                cp[i as usize][k] += h;
-                cm[i as usize][k] -= h;
-                let fd = (es.value(&cp) - es.value(&cm)) / (2.0 * h);
-                let an = g[i as usize][k];
-                assert!(
-                    (fd - an).abs() <= 1e-5 * gmax,
-                    "control point {i} component {k}: finite difference {fd}, analytic {an}"
-                );
-            }
-        }
     }
 }
