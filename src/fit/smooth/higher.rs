@@ -122,12 +122,6 @@ impl HigherModel {
         self.scale * (conic + m.iter().zip(&self.c).map(|(a, b)| a * b).sum::<f64>())
     }
 
-    /// Whether this is a coarse curve's [`conic_fit`] (beyond whose branch only its quadratic
-    /// part is kept, so that its targets jump where offset points leave the branch).
-    pub(in crate::fit) fn is_conic(&self) -> bool {
-        self.conic.is_some()
-    }
-
     /// g(ξ_p) − Σ φ g(ξ_j): the cubic and quartic terms' share of the correction's length
     /// along the normal (the linear terms cancel as for H).
     pub(in crate::fit) fn correction(&self, p: [f64; 3], xs: &[[f64; 3]], phi: f64) -> f64 {
