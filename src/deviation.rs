@@ -18,7 +18,7 @@
 //! the four edges).
 
 use crate::math::lagrange::lagrange_values;
-use crate::math::linalg::DVec3;
+use crate::math::linalg::{DVec3, box_diagonal};
 use crate::mesh::HighOrderMesh;
 use crate::mesh::{LinearMesh, Topology};
 use rayon::prelude::*;
@@ -377,7 +377,7 @@ impl<'a> BoundaryTree<'a> {
 /// Bounding-box diagonal of `mesh` (positive).
 fn diagonal(mesh: &LinearMesh) -> f64 {
     let (lo, hi) = mesh.bounding_box();
-    (v(hi) - v(lo)).length().max(f64::MIN_POSITIVE)
+    box_diagonal(lo, hi)
 }
 
 /// Vertex deviation alone: (max, rms) distance of the output's boundary vertex nodes from the

@@ -63,7 +63,9 @@ pub(crate) struct KnotArgs {
     /// Knot intervals of the spline elements.
     #[arg(long, value_enum, default_value_t = KnotIntervals::default().into())]
     knot_intervals: values::KnotIntervals,
-    /// With graded knot intervals: the largest ratio of neighbouring intervals.
+    /// With graded knot intervals: the largest ratio of neighbouring intervals (larger ones are
+    /// clamped to it); a knot surface whose cells' ratio exceeds its cube is split (the
+    /// elements along it Q2, C⁰ there).
     #[arg(long, default_value_t = KnotParams::default().max_ratio, value_name = "R")]
     knot_max_ratio: f64,
     /// With graded knot intervals: the largest spread (max − min) of the measured

@@ -145,7 +145,8 @@ struct Share {
     knot_surfaces: Option<crate::spline::KnotSurfaceInfo>,
     input_msj: f64,
     halo: Halo,
-    nonzeros: usize,
+    /// Stored entries of the rank's share of K and of the whole K.
+    nonzeros: [usize; 2],
     bytes_fit: u64,
     bytes_validity: u64,
     bytes_sample: u64,
@@ -218,7 +219,7 @@ fn fit_stage(
     s: &mut SplineSpace,
     halo: &Halo,
     start: Option<&[[f64; 3]]>,
-) -> Result<(crate::solve::CgInfo, usize), CurveError> {
+) -> Result<(crate::solve::CgInfo, [usize; 2]), CurveError> {
     let t = Instant::now();
     let fit = fit_share(j, clock, s, halo, start);
     clock.add(Stage::Fit, t.elapsed().as_secs_f64());
@@ -230,15 +231,15 @@ fn fit_stage(
 /// with its preconditioner's aggregates grown first ([`Stage::FitCg`]), and the fitted
 /// control points (projected onto planar patches) in `s`. The CG starts from the control
 /// points `start` where given (one per control point of `s`), as the serial fit's warm start
-/// does ([`crate::fit::fit_with_targets_from`]). Returns the CG's figures and the local
-/// matrix's stored entries.
+/// does ([`crate::fit::fit_with_targets_from`]). Returns the CG's figures and the stored
+/// entries of the rank's local matrix and of the whole K ([`LocalMatrix::global_nonzeros`]).
 fn fit_share(
     j: &ShareJob,
     clock: &mut Clock,
     s: &mut SplineSpace,
     halo: &Halo,
     start: Option<&[[f64; 3]]>,
-) -> Result<(crate::solve::CgInfo, usize), CurveError> {
+) -> Result<(crate::solve::CgInfo, [usize; 2]), CurveError> {
     // The boundary is fitted on the topology with the glued seams interior.
     let (comm, topo, setup) = (j.comm, j.setup.topo(j.job), j.setup);
     let fit_params = &setup.fit_params;
@@ -280,19 +281,16 @@ fn fit_share(
             super::cg::keep_closer_starts(comm, halo, &k, &b, &mut delta)
         });
     }
-    // Across rotation seams the serial fit runs its coupled CG to the factorisation's
-    // accuracy where it would factor K (`crate::fit::FitSolver::cg_params`): so do the ranks,
-    // and both give the direct solution. (Elsewhere the ranks' CG stops at `--cg-tol` where
-    // the serial run factors: docs/distributed.md.)
-    let cg_params = if coupled {
-        let mut unknowns = [halo.owned.iter().filter(|&&o| o).count() as u64];
-        comm.sum_u64(&mut unknowns);
-        fit_params
-            .solver
-            .cg_params(s.dim, unknowns[0] as usize, &fit_params.cg)
-    } else {
-        fit_params.cg
-    };
+    // Where the serial fit factors K (the whole mesh's size: every rank decides alike) the
+    // ranks' CG runs to the factorisation's accuracy (`crate::fit::FitSolver::cg_params`),
+    // as the serial coupled CG across rotation seams does, and gives the direct solution:
+    // stopped at `--cg-tol`, the 189-hex generated torus differed from the serial output by
+    // 2.7e-6 of the diagonal.
+    let mut unknowns = [halo.owned.iter().filter(|&&o| o).count() as u64];
+    comm.sum_u64(&mut unknowns);
+    let cg_params = fit_params
+        .solver
+        .cg_params(s.dim, unknowns[0] as usize, &fit_params.cg);
     let cg = clock
         .run(Stage::FitCg, || {
             if coupled {
@@ -334,7 +332,7 @@ fn fit_share(
         crate::fit::features::project_onto_planes(s, topo, f, &mut c_star);
     }
     s.control_points = c_star;
-    Ok((cg, k.nonzeros()))
+    Ok((cg, [k.nonzeros(), k.global_nonzeros(comm, halo)]))
 }
 
 /// This rank's rows of the scaled normal equations: the local matrix over its halo, the
@@ -476,7 +474,8 @@ struct Pass {
     s: SplineSpace,
     halo: Halo,
     cg: crate::solve::CgInfo,
-    nonzeros: usize,
+    /// Stored entries of the rank's share of K and of the whole K.
+    nonzeros: [usize; 2],
     blend: Result<Blend, usize>,
     /// Elements of the whole mesh demoted to Q2 before the fit (`--demote-uncertified`).
     demoted: usize,
@@ -580,12 +579,17 @@ impl Passes for RankPasses<'_> {
         pass: &Pass,
     ) -> f64 {
         // Each boundary side once: the own elements' (the ghosts' outer sides are no boundary).
+        // The diagonal is the whole mesh's (the ranks' boxes reduced), as the serial job's.
         let (comm, n_owned) = (self.comm, self.local.n_owned);
+        let (mut lo, mut hi) = self.local.mesh.bounding_box();
         clock.run(Stage::Validity, || {
             let (sum, n) = spline::fitted_boundary_sq_sum(job, setup, &pass.s, |e| e < n_owned);
             let mut v = [sum, n as f64];
             comm.sum_f64(&mut v);
-            crate::pipeline::misfit::rms(v[0], v[1] as usize)
+            comm.min_f64(&mut lo);
+            comm.max_f64(&mut hi);
+            let rms = crate::pipeline::misfit::rms(v[0], v[1] as usize);
+            rms / crate::math::linalg::box_diagonal(lo, hi)
         })
     }
     fn warm_start(&self) -> bool {
@@ -1026,7 +1030,7 @@ pub fn curve(
         owned_control_points: share.halo.owned.iter().filter(|&&o| o).count(),
         shared_control_points: share.halo.shared(),
         neighbours: share.halo.neighbours.len(),
-        matrix_nonzeros: share.nonzeros,
+        matrix_nonzeros: share.nonzeros[0],
         bytes_sent: comm.bytes_sent(),
         bytes_fit: share.bytes_fit,
         bytes_validity: share.bytes_validity,
@@ -1051,7 +1055,7 @@ pub fn curve(
             f
         }),
     };
-    let nonzeros = per_rank.iter().map(|f| f.matrix_nonzeros).sum();
+    let nonzeros = share.nonzeros[1];
     let n_global = share.local.n_global as usize;
     let outcomes = Outcomes {
         dimension: out.dim,

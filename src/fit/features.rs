@@ -18,12 +18,14 @@
 //!   coplanar vertices), so every step of the line search keeps them there.
 
 use super::smooth::{
-    Height, HigherModel, InheritShare, RingScratch, Source, VertexModel, adjacency, fan_model,
-    fit_parabola, nearest_shared, refine_model, refine_patch_model, two_ring_from,
+    Height, HigherModel, InheritShare, RingScratch, Source, VertexModel, adjacency, dedup_points,
+    fan_across, fan_model, fit_parabola, nearest_shared, quad_fan_model, refine_model,
+    refine_patch_model, two_ring_from,
 };
 use crate::math::linalg::DVec3;
 use crate::math::reference::HEX_VERTEX_PARAMS;
 use crate::mesh::features::{Features, RIM_Q2_MIN_ASPECT};
+use crate::mesh::periodic::Rigid;
 use crate::mesh::{LinearMesh, Topology};
 use crate::spline::{ControlPoint, SplineSpace};
 use std::collections::HashMap;
@@ -76,8 +78,11 @@ impl FeatureModels {
     /// patch's facet normals and the patch normal at a vertex (beyond it: no model); the
     /// in-plane models of planar patches decay over `decay` × the rim's edge length. `fan`
     /// holds the boundary facets at each vertex and `smooth` the smooth vertices' models,
-    /// through which the patch models' second rings are reached; `share` as in
-    /// [`super::SmoothTargets::build_shared`].
+    /// through which the patch models' second rings are reached; `share` and `partners` as in
+    /// [`super::SmoothTargets::build_shared`]: in 3D, where a feature curve ends on a
+    /// periodic seam (a rim meeting it), its curve and the patches at its end go on on the
+    /// partner's side, carried over by the periodic map, so the vertex's models are the ones
+    /// of the glued boundary, as along the rest of the rim.
     #[allow(clippy::too_many_arguments)]
     pub fn build(
         mesh: &LinearMesh,
@@ -88,6 +93,7 @@ impl FeatureModels {
         fan_all: &[Vec<u32>],
         smooth: &[Option<VertexModel>],
         share: Option<&dyn InheritShare>,
+        partners: &[Option<(u32, Rigid)>],
     ) -> FeatureModels {
         let mut out = FeatureModels {
             edge_mask: features.edge_mask.clone(),
@@ -153,13 +159,35 @@ impl FeatureModels {
                 // facets' normal then seeds the height function). Not next to thin cells
                 // (as for the curve models below): a boundary layer's cells follow the
                 // quadric and its inherited models, and fold under a more accurate wall.
-                let Some((quadric, ell, normal)) = fan_model(mesh, topo, v, &own, cos_max) else {
+                // At a seam the patch goes on across: the partner's facets of the patch
+                // (those facing as v's do once carried over).
+                let across =
+                    partners
+                        .get(v as usize)
+                        .and_then(Option::as_ref)
+                        .and_then(|&(w, t)| {
+                            let theirs: Vec<u32> = fan
+                                .get(&w)?
+                                .iter()
+                                .map(|&(f, _)| f)
+                                .filter(|&f| facing_across(mesh, topo, &own, f, &t, cos_max))
+                                .collect();
+                            (!theirs.is_empty()).then_some((w, t, theirs))
+                        });
+                let fitted = match &across {
+                    None => fan_model(mesh, topo, v, &own, cos_max),
+                    Some((w, t, theirs)) => {
+                        let (quads, nb) = fan_across(mesh, topo, (v, &own), (*w, theirs), t);
+                        quad_fan_model(x(v), &quads, &nb, cos_max)
+                    }
+                };
+                let Some((quadric, ell, normal)) = fitted else {
                     continue;
                 };
                 let seed = quadric.unwrap_or_else(|| flat(normal));
                 let refined = (shortest[v as usize] >= RIM_Q2_MIN_ASPECT * ell)
                     .then(|| {
-                        let ring = two_ring_from(
+                        let mut ring = two_ring_from(
                             mesh,
                             topo,
                             &own,
@@ -169,6 +197,22 @@ impl FeatureModels {
                             cos_max,
                             &mut scratch,
                         );
+                        if let Some((w, t, theirs)) = &across {
+                            let more = two_ring_from(
+                                mesh,
+                                topo,
+                                theirs,
+                                fan_all,
+                                smooth,
+                                *w,
+                                cos_max,
+                                &mut scratch,
+                            );
+                            let mut pts: Vec<DVec3> = ring.iter().map(|&p| p.into()).collect();
+                            pts.extend(more.iter().map(|&p| DVec3::from(t.apply(p))));
+                            dedup_points(x(v), &mut pts);
+                            ring = pts.into_iter().map(Into::into).collect();
+                        }
                         refine_patch_model(mesh.coords[v as usize], &seed, &ring, ell)
                     })
                     .flatten();
@@ -181,15 +225,42 @@ impl FeatureModels {
             }
         }
         // Curve models where a feature curve passes through (two feature edges), and their
-        // refits over two neighbours each way.
+        // refits over two neighbours each way. A curve ending on a seam goes on through the
+        // partner's curve: its next two vertices there, carried over, are points numbered
+        // from the vertex count on (`across`, read through `xa`).
         let along = features.curve_neighbours(topo);
-        let mut refits: HashMap<u32, (VertexModel, HigherModel)> = HashMap::new();
+        let nv = mesh.n_vertices() as u32;
+        let mut across: Vec<DVec3> = Vec::new();
+        let mut along_x = along.clone();
         for (&v, nbs) in &along {
-            if let [a, b] = nbs[..]
-                && let Some(m) = curve_model(x(v), x(a), x(b))
+            let Some((w, t)) = partners.get(v as usize).and_then(Option::as_ref) else {
+                continue;
+            };
+            let (&[_], Some(&[c])) = (&nbs[..], along.get(w).map(|l| &l[..])) else {
+                continue;
+            };
+            let id = nv + across.len() as u32;
+            across.push(t.apply(mesh.coords[c as usize]).into());
+            along_x.entry(v).or_default().push(id);
+            let mut next = vec![v];
+            if let Some(&[p, q]) = along.get(&c).map(|l| &l[..]) {
+                let d = if p == *w { q } else { p };
+                next.push(nv + across.len() as u32);
+                across.push(t.apply(mesh.coords[d as usize]).into());
+            }
+            along_x.insert(id, next);
+        }
+        let xa = |u: u32| match u.checked_sub(nv) {
+            None => x(u),
+            Some(i) => across[i as usize],
+        };
+        let mut refits: HashMap<u32, (VertexModel, HigherModel)> = HashMap::new();
+        for &v in along.keys() {
+            if let [a, b] = along_x[&v][..]
+                && let Some(m) = curve_model(x(v), xa(a), xa(b))
             {
                 out.curve.insert(v, m);
-                if let Some(h) = curve_higher(&along, v, [a, b], &m, &x) {
+                if let Some(h) = curve_higher(&along_x, v, [a, b], &m, &xa) {
                     refits.insert(v, h);
                 }
             }
@@ -200,8 +271,8 @@ impl FeatureModels {
         // the exact wall as in 2D (wall RMS 0.17× → 0.0074× the chords'; with the parabola,
         // 0.18× at the tip's edges).
         for (&v, &h) in &refits {
-            let nbs = &along[&v];
-            let along_len = nbs.iter().map(|&w| (x(w) - x(v)).length()).sum::<f64>() / 2.0;
+            let nbs = &along_x[&v];
+            let along_len = nbs.iter().map(|&w| (xa(w) - x(v)).length()).sum::<f64>() / 2.0;
             if shortest[v as usize] >= RIM_Q2_MIN_ASPECT * along_len {
                 out.curve_higher.insert(v, h);
             } else {
@@ -220,8 +291,8 @@ impl FeatureModels {
                 continue;
             };
             let higher = out.rim_higher.get(&v).copied();
-            let binormal = along.get(&v).and_then(|nbs| match nbs[..] {
-                [a, b] => Some((x(a) - x(v)).cross(x(b) - x(v)).normalize_or_zero()),
+            let binormal = along_x.get(&v).and_then(|nbs| match nbs[..] {
+                [a, b] => Some((xa(a) - x(v)).cross(xa(b) - x(v)).normalize_or_zero()),
                 _ => None,
             });
             let binormal = binormal.filter(|b| *b != DVec3::ZERO);
@@ -379,6 +450,28 @@ impl FeatureModels {
             BoundaryEntity::Facet(f) => Some(self.facet_patch.get(&f).copied()),
         }
     }
+}
+
+/// Whether facet `f` of the partner's side, carried over by `t`, faces as the facets `own`
+/// do (its normal within acos(`cos_max`) of theirs): a facet of the same wall across a seam.
+fn facing_across(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    own: &[u32],
+    f: u32,
+    t: &Rigid,
+    cos_max: f64,
+) -> bool {
+    let normal = |q: [DVec3; 4]| (q[2] - q[0]).cross(q[3] - q[1]).normalize_or_zero();
+    let x = |u: u32| DVec3::from(mesh.coords[u as usize]);
+    let mine = own
+        .iter()
+        .map(|&g| normal(topo.faces[g as usize].map(x)))
+        .sum::<DVec3>()
+        .normalize_or_zero();
+    let theirs =
+        normal(topo.faces[f as usize].map(|u| DVec3::from(t.apply(mesh.coords[u as usize]))));
+    mine.dot(theirs) >= cos_max
 }
 
 /// The curve model `m` of `v` (neighbours `nbs` along the feature curve) refitted as a height

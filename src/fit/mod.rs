@@ -295,7 +295,8 @@ pub enum FitSolver {
     /// [`FitSolver::DIRECT_3D`] (3D) control points on the CPU backend, CG otherwise. Both
     /// solve the same system; CG stops at `--cg-tol`, the factorisation at rounding. Where a
     /// CG stands in for the factorisation (the coupled fit across rotation seams, serially and
-    /// under mpirun) it runs to [`DIRECT_CG_TOL`] ([`FitSolver::cg_params`]).
+    /// under mpirun; every fit under mpirun) it runs to [`DIRECT_CG_TOL`]
+    /// ([`FitSolver::cg_params`]).
     #[default]
     Auto,
     /// Preconditioned CG ([`crate::solve`]) on any size and backend.
@@ -339,8 +340,9 @@ impl FitSolver {
     /// this choice would factor on the CPU ([`FitSolver::factors`]) but that runs CG: `cg`
     /// with its tolerance tightened to [`DIRECT_CG_TOL`], so that it gives the
     /// factorisation's solution (the fit across rotation seams, whose coupled CG the factor
-    /// only preconditions serially and K's block-Jacobi pair under mpirun); `cg` itself where
-    /// the choice runs CG anyway.
+    /// only preconditions serially and K's block-Jacobi pair under mpirun, and every fit
+    /// under mpirun, whose ranks run CG where the serial run factors); `cg` itself where the
+    /// choice runs CG anyway.
     pub fn cg_params(self, dim: usize, unknowns: usize, cg: &CgParams) -> CgParams {
         let mut cg = *cg;
         if self.factors(dim, unknowns, true) {
@@ -362,8 +364,8 @@ pub const DIRECT_CG_TOL: f64 = 1e-10;
 #[derive(Clone, Debug)]
 pub struct FitParams {
     pub weights: FitWeights,
-    /// CG or sparse Cholesky ([`FitSolver`]); distributed runs always use CG (across
-    /// rotation seams to [`DIRECT_CG_TOL`] where the serial run factors).
+    /// CG or sparse Cholesky ([`FitSolver`]); distributed runs always use CG (to
+    /// [`DIRECT_CG_TOL`] where the serial run factors).
     pub solver: FitSolver,
     pub cg: CgParams,
     pub targets: FitTargets,

@@ -109,7 +109,7 @@ use higher::two_ring;
 pub(super) use higher::{
     Height, HigherModel, RingScratch, refine_model, refine_patch_model, two_ring_from,
 };
-pub(super) use one_ring::{fan_model, fit_parabola};
+pub(super) use one_ring::{fan_model, fit_parabola, quad_fan_model};
 use rayon::prelude::*;
 use std::cmp::Reverse;
 use std::collections::{BinaryHeap, HashMap};
@@ -246,13 +246,16 @@ impl SmoothTargets {
 
     /// [`SmoothTargets::build_with_features`] on a rank's part of a mesh distributed over
     /// ranks (`share`, see [`InheritShare`]; `None`: the whole mesh), whose vertices of the
-    /// rank's own elements inherit the whole mesh's interior models, and, in 2D, with walls
-    /// that go on across periodic seams: `partners[v]` (empty: none) is, at a wall vertex
-    /// ending on a seam, the other side's vertex on the same glued vertex and the rigid map
-    /// carrying that side onto this one ([`crate::spline::seam::SeamView::wall_partners`]).
-    /// The models at and next to such a vertex are fitted over the wall on both sides, the
-    /// other side's points carried over by the map, so they are two-sided as in the interior
-    /// of the wall, and the models of the two sides' seam vertices are images of each other.
+    /// rank's own elements inherit the whole mesh's interior models, and with walls that go
+    /// on across periodic seams: `partners[v]` (empty: none) is, at a wall vertex on a seam,
+    /// the other side's vertex on the same glued vertex and the rigid map carrying that side
+    /// onto this one ([`crate::spline::seam::SeamView::wall_partners`]). The models at and
+    /// next to such a vertex are fitted over the wall on both sides, the other side's points
+    /// carried over by the map (2D: along the boundary curve; 3D: the vertex's fan and two
+    /// rings, its neighbours' rings through it, and where a rim meets the seam the rim's
+    /// curve and patch models, `FeatureModels::build`), so they are
+    /// two-sided as in the interior of the wall, and the models of the two sides' seam
+    /// vertices are images of each other.
     pub fn build_shared(
         mesh: &LinearMesh,
         topo: &Topology,
@@ -271,6 +274,7 @@ impl SmoothTargets {
             }
         }
         let seam = Seam {
+            dim: mesh.dim,
             fan: &fan,
             partners,
         };
@@ -292,7 +296,17 @@ impl SmoothTargets {
             _ => features.is_some(),
         };
         let feature_models = features.map(|f| {
-            FeatureModels::build(mesh, topo, f, cos_max, params.decay, &fan, &models, share)
+            FeatureModels::build(
+                mesh,
+                topo,
+                f,
+                cos_max,
+                params.decay,
+                &fan,
+                &models,
+                share,
+                partners,
+            )
         });
         if let (None, true, Some(s)) = (&feature_models, any_features, share) {
             FeatureModels::join_shared_inheritance(mesh, params.decay, s);
@@ -680,10 +694,16 @@ fn one_ring_models(
                     weight: 1.0,
                 });
             } else {
-                if fan[v].len() < 3 {
-                    return;
-                }
-                if let Some((m, l, _)) = fan_model(mesh, topo, v as u32, &fan[v], cos_max) {
+                // A wall's fan cut by a seam is completed by the other side's.
+                let fitted = match seam.fan_across(mesh, topo, v as u32) {
+                    Some((quads, nb)) if quads.len() >= 3 => {
+                        quad_fan_model(DVec3::from(xv), &quads, &nb, cos_max)
+                    }
+                    Some(_) => return,
+                    None if fan[v].len() < 3 => return,
+                    None => fan_model(mesh, topo, v as u32, &fan[v], cos_max),
+                };
+                if let Some((m, l, _)) = fitted {
                     *ell = l;
                     *model = m;
                 }
@@ -710,18 +730,34 @@ fn two_ring_models(
     let refined: Vec<Option<(VertexModel, HigherModel)>> = (0..nv)
         .into_par_iter()
         .with_min_len(1024)
-        .map_init(RingScratch::default, |scratch, v| {
-            let m = models_ref[v]?;
-            let mut ring = two_ring(mesh, topo, fan, models_ref, v as u32, cos_max, scratch);
-            seam.extend_ring(mesh, topo, models_ref, v as u32, &scratch.first, &mut ring);
-            // Next to a feature the ring is one-sided (see `two_ring`).
-            let how = if scratch.one_sided(models_ref) {
-                Height::ONE_SIDED
-            } else {
-                Height::CENTRED
-            };
-            refine_model(mesh.dim, mesh.coords[v], &m, &ring, ell[v], how)
-        })
+        .map_init(
+            || (RingScratch::default(), RingScratch::default()),
+            |(scratch, across), v| {
+                let m = models_ref[v]?;
+                let mut ring = two_ring(mesh, topo, fan, models_ref, v as u32, cos_max, scratch);
+                let mut one_sided = scratch.one_sided(models_ref);
+                if mesh.dim == 2 {
+                    seam.extend_ring(mesh, topo, models_ref, v as u32, &scratch.first, &mut ring);
+                } else {
+                    let ends_one_sided = seam.extend_ring_3d(
+                        mesh,
+                        topo,
+                        models_ref,
+                        (v as u32, cos_max),
+                        (&scratch.first, across),
+                        &mut ring,
+                    );
+                    one_sided |= ends_one_sided;
+                }
+                // Next to a feature the ring is one-sided (see `two_ring`).
+                let how = if one_sided {
+                    Height::ONE_SIDED
+                } else {
+                    Height::CENTRED
+                };
+                refine_model(mesh.dim, mesh.coords[v], &m, &ring, ell[v], how)
+            },
+        )
         .collect();
     for (v, r) in refined.into_iter().enumerate() {
         if let Some((m, h)) = r {
@@ -732,8 +768,10 @@ fn two_ring_models(
     higher
 }
 
-/// The 2D walls' continuations across periodic seams ([`SmoothTargets::build_shared`]).
+/// The walls' continuations across periodic seams ([`SmoothTargets::build_shared`]).
 struct Seam<'a> {
+    /// The mesh's dimension.
+    dim: usize,
     /// Boundary facets at each vertex.
     fan: &'a [Vec<u32>],
     /// Per vertex (empty: none), the partner across the seam and the map from its side.
@@ -741,10 +779,79 @@ struct Seam<'a> {
 }
 
 impl Seam<'_> {
-    /// The partner of wall end `v` and the map carrying its side onto v's.
+    /// The partner of 2D wall end `v` and the map carrying its side onto v's.
     fn across(&self, v: usize) -> Option<(u32, &Rigid)> {
         let (w, t) = self.partners.get(v)?.as_ref()?;
-        (self.fan[v].len() == 1 && self.fan[*w as usize].len() == 1).then_some((*w, t))
+        (self.dim == 2 && self.fan[v].len() == 1 && self.fan[*w as usize].len() == 1)
+            .then_some((*w, t))
+    }
+
+    /// The partner of 3D wall vertex `v` on a seam and the map carrying its side onto v's.
+    fn across_3d(&self, v: usize) -> Option<(u32, &Rigid)> {
+        let (w, t) = self.partners.get(v)?.as_ref()?;
+        (self.dim == 3 && !self.fan[v].is_empty() && !self.fan[*w as usize].is_empty())
+            .then_some((*w, t))
+    }
+
+    /// The fan of 3D wall vertex `v` on a seam completed by its partner's across
+    /// ([`fan_across`]); `None` away from seams.
+    fn fan_across(
+        &self,
+        mesh: &LinearMesh,
+        topo: &Topology,
+        v: u32,
+    ) -> Option<(Vec<[DVec3; 4]>, Vec<DVec3>)> {
+        let (w, t) = self.across_3d(v as usize)?;
+        let (own, theirs) = (&self.fan[v as usize], &self.fan[w as usize]);
+        Some(fan_across(mesh, topo, (v, own), (w, theirs), t))
+    }
+
+    /// Adds to the two-ring `ring` of 3D wall vertex `v` (first ring `first`) the wall points
+    /// across the seams it reaches, carried onto v's side, so that the ring is the one of the
+    /// glued wall: at a vertex on a seam its partner's two-ring (found with `scratch`), from a
+    /// smooth vertex on a seam in the first ring its partner's first ring. Points met on both
+    /// sides (the seam's own) are kept once. Returns whether the partner's first ring reached
+    /// a vertex without a smooth model (the ring is then one-sided, as on v's side).
+    fn extend_ring_3d(
+        &self,
+        mesh: &LinearMesh,
+        topo: &Topology,
+        models: &[Option<VertexModel>],
+        (v, cos_max): (u32, f64),
+        (first, scratch): (&[u32], &mut RingScratch),
+        ring: &mut Vec<[f64; 3]>,
+    ) -> bool {
+        if self.partners.is_empty() {
+            return false;
+        }
+        let len = ring.len();
+        let mut one_sided = false;
+        if let Some((w, t)) = self.across_3d(v as usize) {
+            let across = two_ring(mesh, topo, self.fan, models, w, cos_max, scratch);
+            ring.extend(across.iter().map(|&p| t.apply(p)));
+            one_sided = scratch.one_sided(models);
+        }
+        for &u in first {
+            if models[u as usize].is_none() {
+                continue;
+            }
+            if let Some((w, t)) = self.across_3d(u as usize) {
+                for &f in &self.fan[w as usize] {
+                    ring.extend(
+                        topo.facet_vertices(f as usize)
+                            .iter()
+                            .filter(|&&y| y != w)
+                            .map(|&y| t.apply(mesh.coords[y as usize])),
+                    );
+                }
+            }
+        }
+        if ring.len() > len {
+            let mut pts: Vec<DVec3> = ring.iter().map(|&p| DVec3::from(p)).collect();
+            dedup_points(DVec3::from(mesh.coords[v as usize]), &mut pts);
+            *ring = pts.into_iter().map(Into::into).collect();
+        }
+        one_sided
     }
 
     /// The wall vertex next to `u` along the boundary chain, away from `from`.
@@ -854,6 +961,49 @@ impl ArcVertex {
         }
         arcs::edge_arc(x[0], x[1], v[0].normal.into(), v[1].normal.into())
     }
+}
+
+/// The quads of the boundary facets `own` at `v` and of the partner `w`'s facets `theirs`
+/// carried over by the periodic map `t` (corners in the facets' order), and their distinct
+/// corners other than v: a wall's fan cut by a periodic seam, completed by the other side's.
+pub(super) fn fan_across(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    (v, own): (u32, &[u32]),
+    (w, theirs): (u32, &[u32]),
+    t: &Rigid,
+) -> (Vec<[DVec3; 4]>, Vec<DVec3>) {
+    let x = |u: u32| DVec3::from(mesh.coords[u as usize]);
+    let there = |u: u32| DVec3::from(t.apply(mesh.coords[u as usize]));
+    let mut quads = Vec::with_capacity(own.len() + theirs.len());
+    let mut nb = Vec::new();
+    for &f in own {
+        let q = topo.faces[f as usize];
+        quads.push(q.map(x));
+        nb.extend(q.iter().filter(|&&u| u != v).map(|&u| x(u)));
+    }
+    for &f in theirs {
+        let q = topo.faces[f as usize];
+        quads.push(q.map(there));
+        nb.extend(q.iter().filter(|&&u| u != w).map(|&u| there(u)));
+    }
+    dedup_points(x(v), &mut nb);
+    (quads, nb)
+}
+
+/// Removes from `pts` the points within 10⁻⁶ of their spread around `x` of `x` or of an
+/// earlier point: the seam's points reached on both sides of a periodic seam, once directly
+/// and once carried over by the transform (which matches them to the pair's tolerance only).
+pub(super) fn dedup_points(x: DVec3, pts: &mut Vec<DVec3>) {
+    let spread = pts.iter().map(|&p| (p - x).length()).fold(0.0, f64::max);
+    let tol = 1e-6 * spread;
+    let mut kept: Vec<DVec3> = Vec::with_capacity(pts.len());
+    for &p in pts.iter() {
+        if (p - x).length() > tol && kept.iter().all(|&q| (p - q).length() > tol) {
+            kept.push(p);
+        }
+    }
+    *pts = kept;
 }
 
 /// The normals of the smooth boundary vertices of a 3D mesh, whether each is coarse and the

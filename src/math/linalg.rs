@@ -87,6 +87,15 @@ pub fn norm2_rows(m: &DMat3) -> f64 {
     norm2(&from_dmat3(m))
 }
 
+/// The diagonal of the box `[lo, hi]`, at least the smallest positive `f64` (what lengths
+/// are measured against, relative).
+#[inline]
+pub fn box_diagonal(lo: [f64; 3], hi: [f64; 3]) -> f64 {
+    (DVec3::from(hi) - DVec3::from(lo))
+        .length()
+        .max(f64::MIN_POSITIVE)
+}
+
 /// `a` scaled to unit length by division (the zero vector stays zero).
 #[inline]
 pub fn unit(a: DVec3) -> DVec3 {

@@ -90,7 +90,8 @@ pub(crate) trait Passes {
         pass: Self::Pass,
     ) -> Result<Self::Pass, CurveError>;
     /// RMS distance of `pass`'s fitted boundary from the smooth boundary (the target map's)
-    /// over the whole mesh ([`super::misfit::boundary_sq_sum`]), timed as the validity stage.
+    /// over the whole mesh ([`super::misfit::boundary_sq_sum`]), relative to the whole mesh's
+    /// bounding-box diagonal, timed as the validity stage.
     fn boundary_rms(
         &mut self,
         job: &Job,

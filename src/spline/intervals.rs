@@ -29,7 +29,11 @@
 //! `max_spread`, Kruskal-like. Both elements of a refused pair become Q2 elements
 //! ([`super::Q2Reason::KnotSplit`]): ratios are tied only across a face with a spline element on
 //! at least one side, so the surface is cut there, and the Q2 elements' constraints keep the
-//! map C⁰ across the cut (C¹ is kept where the mesh is regular enough for one ratio).
+//! map C⁰ across the cut (C¹ is kept where the mesh is regular enough for one ratio). A
+//! surface whose ratio exceeds [`KnotParams::max_ratio`] is clamped to it, and one whose ratio
+//! exceeds its cube (a boundary layer ending in one far-field cell 10⁶ times as high as its
+//! last layer) is split the same way: every element along it becomes Q2, and the surfaces are
+//! rebuilt once without their ties.
 //!
 //! Invariants: the weights lie in `[1/(1+r), r/(1+r)]` with `r` = [`KnotParams::max_ratio`];
 //! a tensor-product grid (any spacing per direction) under an affine map gets exactly its
@@ -83,7 +87,8 @@ pub enum KnotIntervals {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
 pub struct KnotParams {
     pub intervals: KnotIntervals,
-    /// Largest ratio of neighbouring intervals (≥ 1); larger measured ratios are clamped.
+    /// Largest ratio of neighbouring intervals (≥ 1); a knot surface whose ratio is larger is
+    /// clamped to it, and split (its elements Q2) where the ratio exceeds its cube.
     pub max_ratio: f64,
     /// Largest spread (max − min) of the measured log-ratios within one knot surface before
     /// it is split (`f64::INFINITY`: never split).
@@ -137,7 +142,8 @@ pub struct KnotSurfaceInfo {
     pub graded: usize,
     /// Surfaces closing on themselves with opposite orientation (given uniform knots).
     pub non_orientable: usize,
-    /// Surfaces whose measured ratio was clamped to `max_ratio`.
+    /// Surfaces whose measured ratio exceeded `max_ratio` (clamped, or split with their
+    /// elements Q2 beyond its cube).
     pub clamped: usize,
     /// Largest |ln ratio| assigned.
     pub max_abs_log_ratio: f64,
@@ -521,7 +527,11 @@ fn ties(topo: &Topology, spline: &[bool], corners: Corners) -> Vec<Tie> {
 
 /// The knot surfaces of `ties` (facets in one set share a ratio up to sign), with the
 /// measured log-ratios as the sets' values.
-fn surfaces(nf: usize, ties: &[Tie], measured: &[Option<(f64, f64)>]) -> SignedUnionFind {
+fn surfaces<'a>(
+    nf: usize,
+    ties: impl IntoIterator<Item = &'a Tie>,
+    measured: &[Option<(f64, f64)>],
+) -> SignedUnionFind {
     let mut uf = SignedUnionFind::with_values((0..nf).map(|f| measured[f].map(|(m, _)| m)));
     for t in ties {
         uf.union(t.f, t.f2(), t.opposite());
@@ -790,13 +800,84 @@ pub(crate) fn surface_ratios(survey: KnotSurvey, ne: usize, params: &KnotParams)
 
     // Knot surfaces: facets tied across each spline element's neighbours; split where one
     // ratio cannot fit, and rebuilt without the split elements' ties.
-    let split = split_elements(ne, nf, &all, &measured, params.max_spread);
-    let kept: Vec<Tie> = all
-        .into_iter()
-        .filter(|t| !split[t.element as usize])
+    let mut split = split_elements(ne, nf, &all, &measured, params.max_spread);
+    let cap = params.max_ratio.ln();
+    let mut ratios = ratios_of(&all, &split, &measured, cap);
+    // A surface whose ratio exceeds the cap by far cannot be reproduced by any interval it may
+    // take (a boundary layer ending in one far-field cell 10⁶ times as high): the elements along
+    // it are split off (C⁰ across it), as where a surface spreads too far, so the clamped ratio
+    // does not distort the thin cells on its fine side, and the surfaces are rebuilt once.
+    let beyond_cap = ratios.info.clamped;
+    if !ratios.split_roots.is_empty() {
+        for t in &all {
+            for (f, e) in [(t.f, t.element), (t.f2(), t.neighbour)] {
+                if ratios
+                    .split_roots
+                    .binary_search(&ratios.root[f as usize])
+                    .is_ok()
+                {
+                    split[e as usize] = true;
+                }
+            }
+        }
+        ratios = ratios_of(&all, &split, &measured, cap);
+    }
+    drop((all, measured));
+    let SurfaceRoots {
+        root,
+        sign,
+        rho_root,
+        mut info,
+        ..
+    } = ratios;
+    info.split_elements = split.iter().filter(|&&s| s).count();
+    info.graded_share = share;
+    // The surfaces beyond the cap before any split (split off or clamped), not the single
+    // facets a split leaves between split elements.
+    info.clamped = beyond_cap;
+    let rho = root
+        .iter()
+        .zip(&sign)
+        .map(|(&r, &s)| {
+            let v = rho_root[r as usize];
+            if s { -v } else { v }
+        })
         .collect();
-    let mut uf = surfaces(nf, &kept, &measured);
-    drop(kept);
+    SurfaceRatios { rho, split, info }
+}
+
+/// A knot surface is split off (C⁰ across it) when its log-ratio exceeds this multiple of the
+/// cap's (`--knot-max-ratio` cubed: 4096 at the default 16); below, its ratio is clamped. The
+/// generated O-grids with first cell 1e-6 and growth 1.05 end in one far-field cell ~10⁶
+/// times their last layer; clamped, that jump distorted every thin cell on its fine side.
+/// Ratios just above the cap (a 3D sector's 18, the C-grids' 330–350) are followed better
+/// clamped: split at the cap itself, a C-grid's held-back count and min scaled Jacobian got
+/// worse and a rotation sector's seam rougher than its interior.
+const SPLIT_LOG_RATIO: f64 = 3.0;
+
+/// The surfaces of the ties of the elements not `split` ([`surfaces`]) and each one's ratio
+/// ([`surface_ratios`]), clamped to ±`cap`; `split_roots` holds those beyond
+/// [`SPLIT_LOG_RATIO`] × `cap`.
+struct SurfaceRoots {
+    /// Per facet: its surface's root and the facet's sign relative to it.
+    root: Vec<u32>,
+    sign: Vec<bool>,
+    /// Per root: the surface's log-ratio (clamped).
+    rho_root: Vec<f64>,
+    /// Roots whose ratio lies beyond [`SPLIT_LOG_RATIO`] × the cap, ascending.
+    split_roots: Vec<u32>,
+    info: KnotSurfaceInfo,
+}
+
+fn ratios_of(
+    all: &[Tie],
+    split: &[bool],
+    measured: &[Option<(f64, f64)>],
+    cap: f64,
+) -> SurfaceRoots {
+    let nf = measured.len();
+    let kept = all.iter().filter(|t| !split[t.element as usize]);
+    let mut uf = surfaces(nf, kept, measured);
 
     // 3. One ratio per surface: the weighted mean of its facets' measured ratios.
     let mut sum = vec![0.0f64; nf];
@@ -812,13 +893,9 @@ pub(crate) fn surface_ratios(survey: KnotSurvey, ne: usize, params: &KnotParams)
             weight[r as usize] += w;
         }
     }
-    let cap = params.max_ratio.ln();
-    let mut info = KnotSurfaceInfo {
-        split_elements: split.iter().filter(|&&s| s).count(),
-        graded_share: share,
-        ..Default::default()
-    };
+    let mut info = KnotSurfaceInfo::default();
     let mut rho_root = vec![0.0f64; nf];
+    let mut split_roots = Vec::new();
     for r in 0..nf {
         if weight[r] == 0.0 || root[r] as usize != r {
             continue;
@@ -834,6 +911,9 @@ pub(crate) fn surface_ratios(survey: KnotSurvey, ne: usize, params: &KnotParams)
         let mut rho = sum[r] / weight[r];
         if rho.abs() > cap {
             info.clamped += 1;
+            if rho.abs() > SPLIT_LOG_RATIO * cap {
+                split_roots.push(r as u32);
+            }
             rho = rho.clamp(-cap, cap);
         }
         if rho != 0.0 {
@@ -842,16 +922,13 @@ pub(crate) fn surface_ratios(survey: KnotSurvey, ne: usize, params: &KnotParams)
         info.max_abs_log_ratio = info.max_abs_log_ratio.max(rho.abs());
         rho_root[r] = rho;
     }
-    drop((uf, sum, weight, measured));
-    let rho = root
-        .iter()
-        .zip(&sign)
-        .map(|(&r, &s)| {
-            let v = rho_root[r as usize];
-            if s { -v } else { v }
-        })
-        .collect();
-    SurfaceRatios { rho, split, info }
+    SurfaceRoots {
+        root,
+        sign,
+        rho_root,
+        split_roots,
+        info,
+    }
 }
 
 /// The extraction weights (step 4) of every element of `topo` from their facets' ratios `rho(f)`

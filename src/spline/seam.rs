@@ -247,10 +247,10 @@ pub struct SeamView {
     pub seam_ends: Vec<bool>,
     /// Per boundary facet of `topo`, its index among the input's boundary facets.
     pub boundary_rows: Vec<u32>,
-    /// Per vertex of a 2D mesh, where the wall curve ending at it on a seam goes on: the
-    /// other side's vertex on the same glued vertex, and the rigid map carrying that side
-    /// onto this one, so the smooth targets see the wall on both sides (empty in 3D, or
-    /// `None` at every other vertex).
+    /// Per vertex, where the wall curve (2D) or surface (3D) cut at it by a seam goes on:
+    /// the other side's vertex on the same glued vertex, and the rigid map carrying that
+    /// side onto this one, so the smooth targets see the wall on both sides (`None` at every
+    /// other vertex).
     pub wall_partners: Vec<Option<(u32, Rigid)>>,
 }
 
@@ -288,11 +288,7 @@ pub fn interior_view(mesh: &LinearMesh, topo: &Topology, glued: &Glued) -> SeamV
             view.facet_elements[f][1] == NONE
         })
         .collect();
-    let wall_partners = if mesh.dim == 2 {
-        wall_partners(mesh, topo, glued, &across, &seam_ends)
-    } else {
-        Vec::new()
-    };
+    let wall_partners = wall_partners(mesh, topo, glued, &across, &seam_ends);
     SeamView {
         topo: view,
         seam_ends,

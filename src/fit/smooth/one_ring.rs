@@ -22,21 +22,40 @@ pub(in crate::fit) fn fan_model(
     cos_max: f64,
 ) -> Option<(Option<VertexModel>, f64, [f64; 3])> {
     let x = |w: u32| DVec3::from(mesh.coords[w as usize]);
+    let quads: Vec<[DVec3; 4]> = faces
+        .iter()
+        .map(|&f| topo.faces[f as usize].map(x))
+        .collect();
+    let mut nb: Vec<u32> = faces
+        .iter()
+        .flat_map(|&f| topo.faces[f as usize])
+        .filter(|&w| w != v)
+        .collect();
+    nb.sort_unstable();
+    nb.dedup();
+    let nb: Vec<DVec3> = nb.into_iter().map(x).collect();
+    quad_fan_model(x(v), &quads, &nb, cos_max)
+}
+
+/// [`fan_model`] at the point `xv` from its fan's quads (corners in the facets' order) and
+/// its distinct neighbour points `nb`: a wall's fan at a periodic seam is completed by the
+/// other side's quads carried over by the periodic transform.
+pub(in crate::fit) fn quad_fan_model(
+    xv: DVec3,
+    quads: &[[DVec3; 4]],
+    nb: &[DVec3],
+    cos_max: f64,
+) -> Option<(Option<VertexModel>, f64, [f64; 3])> {
     let mut area = DVec3::ZERO;
-    let mut normals = Vec::with_capacity(faces.len());
-    let mut nb: Vec<u32> = Vec::new();
+    let mut normals = Vec::with_capacity(quads.len());
     let mut total_area = 0.0;
-    for &f in faces {
-        let q = topo.faces[f as usize];
-        let a = (x(q[2]) - x(q[0])).cross(x(q[3]) - x(q[1]));
+    for q in quads {
+        let a = (q[2] - q[0]).cross(q[3] - q[1]);
         area += a;
         let l = a.length();
         total_area += 0.5 * l;
         normals.push(a / l.max(f64::MIN_POSITIVE));
-        nb.extend(q.iter().copied().filter(|&w| w != v));
     }
-    nb.sort_unstable();
-    nb.dedup();
     let la = area.length();
     if la == 0.0 || nb.len() < 5 {
         return None;
@@ -45,8 +64,8 @@ pub(in crate::fit) fn fan_model(
     if normals.iter().any(|nf| nf.dot(n0) < cos_max) {
         return None;
     }
-    let ell = (total_area / faces.len() as f64).sqrt();
-    let pts: Vec<[f64; 3]> = nb.iter().map(|&w| (x(w) - x(v)).into()).collect();
+    let ell = (total_area / quads.len() as f64).sqrt();
+    let pts: Vec<[f64; 3]> = nb.iter().map(|&w| (w - xv).into()).collect();
     let model = fit_quadric(n0.into(), &pts, ell).map(|(normal, h)| VertexModel {
         normal,
         h,

@@ -24,27 +24,21 @@ pub fn lattice_scaled_jacobian(dim: usize, net: &Net) -> f64 {
     const B: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.25, 0.5, 0.25], [0.0, 0.0, 1.0]];
     const D: [[f64; 3]; 3] = [[-2.0, 2.0, 0.0], [-1.0, 0.0, 1.0], [0.0, -2.0, 2.0]];
     let n = if dim == 2 { 9 } else { 27 };
-    // `m` along `axis`: out[.., i, ..] = Σ_a m[i][a] src[.., a, ..].
-    let along = |src: &Net, axis: usize, m: &[[f64; 3]; 3]| -> Net {
-        let stride = [1, 3, 9][axis];
-        let mut out = [[0.0f64; 3]; 27];
-        for (o, slot) in out.iter_mut().enumerate().take(n) {
-            let i = (o / stride) % 3;
-            let base = o - i * stride;
-            let (p0, p1, p2) = (src[base], src[base + stride], src[base + 2 * stride]);
-            *slot = std::array::from_fn(|q| m[i][0] * p0[q] + m[i][1] * p1[q] + m[i][2] * p2[q]);
+    let z = |src: Net, m: &[[f64; 3]; 3]| {
+        if dim == 2 {
+            src
+        } else {
+            along::<9>(&src, n, m)
         }
-        out
     };
-    let z = |src: Net, m: &[[f64; 3]; 3]| if dim == 2 { src } else { along(&src, 2, m) };
-    let bx = along(net, 0, &B);
+    let bx = along::<1>(net, n, &B);
     let cols = [
-        z(along(&along(net, 0, &D), 1, &B), &B),
-        z(along(&bx, 1, &D), &B),
+        z(along::<3>(&along::<1>(net, n, &D), n, &B), &B),
+        z(along::<3>(&bx, n, &D), &B),
         if dim == 2 {
             [[0.0; 3]; 27]
         } else {
-            along(&along(&bx, 1, &B), 2, &D)
+            along::<9>(&along::<3>(&bx, n, &B), n, &D)
         },
     ];
     let mut min = f64::INFINITY;
@@ -61,6 +55,28 @@ pub fn lattice_scaled_jacobian(dim: usize, net: &Net) -> f64 {
         min = min.min(if sj.is_nan() { -1.0 } else { sj });
     }
     min
+}
+
+/// `m` along the axis of stride `STRIDE` (1, 3 or 9) of the first `n` (9 or 27) slots of a
+/// lattice net: out[.., i, ..] = Σ_a m[i][a] src[.., a, ..], the other slots 0.
+///
+/// Loops over (outer, i, inner) with the stride a constant: no integer division per slot (a
+/// runtime stride's `o / stride % 3` per slot costs more than the slot's products). Each slot
+/// is m[i][0] p₀ + m[i][1] p₁ + m[i][2] p₂, summed left to right.
+#[inline(always)]
+fn along<const STRIDE: usize>(src: &Net, n: usize, m: &[[f64; 3]; 3]) -> Net {
+    let mut out = [[0.0f64; 3]; 27];
+    for hi in 0..n / (3 * STRIDE) {
+        for (i, mi) in m.iter().enumerate() {
+            for lo in 0..STRIDE {
+                let base = lo + 3 * STRIDE * hi;
+                let (p0, p1, p2) = (src[base], src[base + STRIDE], src[base + 2 * STRIDE]);
+                out[base + i * STRIDE] =
+                    std::array::from_fn(|q| mi[0] * p0[q] + mi[1] * p1[q] + mi[2] * p2[q]);
+            }
+        }
+    }
+    out
 }
 
 /// An upper bound of max det J: the product over directions of the largest Bernstein
