@@ -638,7 +638,11 @@ fn coarse_conic_model(
         let (u, h) = ((p - x).dot(t) / ell, (p - x).dot(n) / ell);
         if curve_conic_height(abc, u).is_some_and(|hc| (hc - h).abs() <= 1e-6 * (1.0 + h.abs())) {
             let side = usize::from(u > 0.0);
-            span[side] = if u > 0.0 { span[side].min(u) } else { span[side].max(u) };
+            span[side] = if u > 0.0 {
+                span[side].min(u)
+            } else {
+                span[side].max(u)
+            };
         }
     }
     if !(span[0] < 0.0 && span[1] > 0.0 && span[1].is_finite() && span[0].is_finite()) {
@@ -809,5 +813,46 @@ mod tests {
         // points beyond the tip's neighbours are no graph over its tangent.
         let used = [0, 2, 5, 9];
         assert!(refine_with(2, e(0.0).into(), &m, &pts, ell, &used, Height::CENTRED).is_none());
+    }
+
+    /// Next to the 41° tip of a 1 × 0.2 ellipse, points offset from the curve along its
+    /// normals (a boundary layer's outer cells, which inherit the model) reach tangent
+    /// coordinates near the end of the conic's branch. The conic term of an edge's correction
+    /// between the tip's column and the vertex's then grows smoothly with the offset, with the
+    /// wall's sign and within 4× the wall's up to 0.9 of the tip's radius of curvature (0.04),
+    /// instead of following the branch towards its vertical tangent (7.8× at 0.028) and
+    /// jumping where a corner leaves it.
+    #[test]
+    fn coarse_conic_goes_on_along_its_tangent_beyond_its_neighbours() {
+        let b = 0.2;
+        let at = |t: f64, d: f64| {
+            let n = unit(DVec3::new(b * t.cos(), t.sin(), 0.0));
+            DVec3::new(t.cos(), b * t.sin(), 0.0) + d * n
+        };
+        let ts = [-0.1512, 0.0, 0.1512, 0.266, 0.3569];
+        let pts: Vec<[f64; 3]> = [0, 1, 3, 4].map(|i| at(ts[i], 0.0).into()).to_vec();
+        let m = VertexModel {
+            normal: unit(DVec3::new(b * ts[2].cos(), ts[2].sin(), 0.0)).into(),
+            h: [[0.0; 3]; 3],
+            weight: 1.0,
+        };
+        let ell = 0.5 * (at(ts[3], 0.0) - at(ts[1], 0.0)).length();
+        let (_, hm) =
+            refine_model(2, at(ts[2], 0.0).into(), &m, &pts, ell, Height::CENTRED).unwrap();
+        assert!(hm.conic.is_some());
+        let conic_term = |d: f64| {
+            let (x, y) = (at(ts[2], d), at(ts[1], d));
+            hm.correction((0.5 * (x + y)).into(), &[x.into(), y.into()], 0.5)
+        };
+        let wall = conic_term(0.0);
+        assert!(wall.abs() > 1e-4, "{wall:e}");
+        for k in 1..=36 {
+            let d = 1e-3 * k as f64;
+            let c = conic_term(d);
+            assert!(
+                c * wall > 0.0 && c.abs() <= 4.0 * wall.abs(),
+                "offset {d}: {c:e} against the wall's {wall:e}"
+            );
+        }
     }
 }
