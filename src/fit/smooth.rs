@@ -912,7 +912,8 @@ struct ArcVertex {
     /// Whether a vertex sharing a boundary facet turns its normal by more than
     /// [`arcs::COARSE_TURN_DEG`].
     coarse: bool,
-    /// At a coarse regular vertex, the conics of its two grid lines where they are fixed.
+    /// At a coarse regular vertex, the conics of its two grid lines where they are fixed and
+    /// their planes hold the normal ([`arcs::LineConic::is_normal_section`]).
     lines: [Option<arcs::LineConic>; 2],
 }
 
@@ -1058,6 +1059,7 @@ fn coarse_normals(
                     arcs::grid_normal(xv, pairs, outer, n.into())
                 })
                 .map_or(n, Into::into);
+            let lines = lines.map(|c| c.filter(|c| c.is_normal_section(n.into())));
             Some(ArcVertex {
                 normal: n,
                 coarse,

@@ -20,6 +20,7 @@
 //! on ellipses), an edge midpoint takes that conic's point instead of the circle's: next to an
 //! ellipse's coarse tip (an O-grid's leading and trailing edges, four cells around the tip) the
 //! circular arc on the exact normals is off by 17 % of the chord's sagitta, the conic not at all.
+//! Only where the conic's plane holds the surface normal ([`LineConic::is_normal_section`]).
 //!
 //! Input: the corners and normals of one boundary entity. Output: the displacement of its
 //! sample from the multilinear point, or `None` (degenerate chord or normals) to keep the
@@ -30,6 +31,10 @@ use crate::math::linalg::{DVec3, unit};
 /// A smooth boundary vertex is coarse when the normal of a vertex it shares a boundary facet
 /// with turns from its own by more than this angle (degrees).
 pub(super) const COARSE_TURN_DEG: f64 = 30.0;
+
+/// A grid line's conic ([`LineConic`]) replaces the circular arcs only where its normal at the
+/// vertex is within this angle (degrees) of the surface normal.
+const LINE_CONIC_NORMAL_DEG: f64 = 5.0;
 
 /// Displacement of the edge midpoint (a + b) / 2 onto the circular arc from a to b whose
 /// tangents at a and b are the chord's projections onto the planes normal to `na` and `nb`.
@@ -113,6 +118,19 @@ impl LineConic {
             abc,
             ell,
         })
+    }
+
+    /// Whether the conic's plane holds the surface normal `normal` at its vertex to within
+    /// [`LINE_CONIC_NORMAL_DEG`] (a normal section, whose curvature is the surface's): only
+    /// then does it replace the circular arcs. A grid line that leaves the normal plane also
+    /// turns within the tangent plane, and its conic's midpoints move sideways by that share,
+    /// which the face centres' arcs across the other grid direction do not: the parallels of
+    /// a coarse torus (16 around, 8 around the tube) off its equators, which at the tube's
+    /// top and bottom turn within the tangent plane alone, left the faces' centres between
+    /// their edges' midpoints and held back 160 of its 192 elements at half their targets.
+    pub(super) fn is_normal_section(&self, normal: DVec3) -> bool {
+        let len = normal.length();
+        len > 0.0 && self.n.dot(normal).abs() >= LINE_CONIC_NORMAL_DEG.to_radians().cos() * len
     }
 
     /// Displacement of the midpoint of the chord from this conic's vertex `v` to its grid-line
@@ -238,6 +256,32 @@ mod tests {
 
     fn torus_distance(x: DVec3) -> f64 {
         ((x.x.hypot(x.y) - 1.0).hypot(x.z) - 0.5).abs()
+    }
+
+    /// On a coarse torus (16 × 8 facets) every grid line's conic puts its edge midpoints on
+    /// the torus, but only the meridians' are normal sections at every vertex; the parallels'
+    /// only on the equators: elsewhere they turn within the tangent plane too (alone at the
+    /// tube's top and bottom), sideways to the faces' arcs across them.
+    #[test]
+    fn only_normal_sections_of_a_coarse_torus_keep_their_line_conics() {
+        let (dpsi, dth) = (std::f64::consts::TAU / 16.0, std::f64::consts::TAU / 8.0);
+        for j in 0..8 {
+            let th = j as f64 * dth;
+            let (v, n) = torus(0.0, th);
+            let meridian = |k: f64| torus(0.0, th + k * dth).0;
+            let parallel = |k: f64| torus(k * dpsi, th).0;
+            for (line, normal_section) in [
+                (&meridian as &dyn Fn(f64) -> DVec3, true),
+                (&parallel, j % 4 == 0),
+            ] {
+                let c = LineConic::fit(line(-1.0), v, line(1.0), [line(-2.0), line(2.0)]).unwrap();
+                assert_eq!(c.is_normal_section(n), normal_section, "{j}");
+                assert_eq!(c.is_normal_section(-n), normal_section, "{j}");
+                let m = 0.5 * (v + line(1.0)) + c.edge_midpoint(v, line(1.0)).unwrap();
+                let off = torus_distance(m);
+                assert!(off < 1e-9, "{j}: {off:e}");
+            }
+        }
     }
 
     /// On a circle (normals in its plane, either orientation) the edge target is exact
