@@ -206,8 +206,8 @@ pub struct SmoothTargets {
     /// ([`HigherModel`]); interior vertices share their source's.
     higher: Vec<Option<HigherModel>>,
     /// 3D, with at least one coarse vertex ([`arcs`]), else empty: the normal of each smooth
-    /// boundary vertex, and whether it is coarse.
-    arc_normals: Vec<Option<([f64; 3], bool)>>,
+    /// boundary vertex, whether it is coarse, and a coarse vertex's grid-line conics.
+    arc_normals: Vec<Option<ArcVertex>>,
     /// With arc normals: the smooth boundary vertex each vertex takes its model from (itself
     /// on the boundary, the nearest one for an interior vertex that inherited one), else
     /// `NONE`; empty without arc normals.
@@ -494,30 +494,32 @@ impl SmoothTargets {
         cs: &[usize],
         l: [usize; 3],
     ) -> Option<DVec3> {
-        let normals: Vec<([f64; 3], bool)> = ks
+        let normals: Vec<ArcVertex> = ks
             .iter()
             .map(|&k| self.arc_normals[k])
             .collect::<Option<_>>()?;
-        if !normals.iter().any(|&(_, coarse)| coarse) {
+        if !normals.iter().any(|a| a.coarse) {
             return None;
         }
         let (x, n) = (
             |i: usize| DVec3::from(xs[i]),
-            |i: usize| DVec3::from(normals[i].0),
+            |i: usize| DVec3::from(normals[i].normal),
         );
+        let edge =
+            |i: usize, j: usize| ArcVertex::edge_target([&normals[i], &normals[j]], [x(i), x(j)]);
         match ks.len() {
-            2 => arcs::edge_arc(x(0), x(1), n(0), n(1)),
+            2 => edge(0, 1),
             4 => {
                 // Corners in the face's lattice order: index p₁ + 2 p₂ of their parameters
                 // along the face's two free directions.
                 let free: Vec<usize> = (0..3).filter(|&k| l[k] == 1).collect();
-                let (mut xf, mut nf) = ([DVec3::ZERO; 4], [DVec3::ZERO; 4]);
+                let (mut xf, mut nf, mut at) = ([DVec3::ZERO; 4], [DVec3::ZERO; 4], [0; 4]);
                 for (i, &c) in cs.iter().enumerate() {
                     let p = HEX_VERTEX_PARAMS[c];
                     let j = p[free[0]] as usize + 2 * p[free[1]] as usize;
-                    (xf[j], nf[j]) = (x(i), n(i));
+                    (xf[j], nf[j], at[j]) = (x(i), n(i), i);
                 }
-                arcs::face_arc(&xf, &nf)
+                arcs::face_arc(&xf, &nf, |i, j| edge(at[i], at[j]))
             }
             _ => None,
         }
@@ -569,32 +571,33 @@ impl SmoothTargets {
                 .binary_search(&[a.min(b), a.max(b)])
                 .is_ok_and(|id| topo.edge_on_boundary[id])
         };
-        let normals: Vec<([f64; 3], bool)> = corners
+        let normals: Vec<ArcVertex> = corners
             .iter()
             .map(|&v| self.arc_normals[v as usize])
             .collect::<Option<_>>()?;
-        if !normals.iter().any(|&(_, coarse)| coarse) {
+        if !normals.iter().any(|a| a.coarse) {
             return None;
         }
         let x = |i: usize| DVec3::from(mesh.coords[corners[i] as usize]);
-        let n = |i: usize| DVec3::from(normals[i].0);
+        let n = |i: usize| DVec3::from(normals[i].normal);
+        let target =
+            |i: usize, j: usize| ArcVertex::edge_target([&normals[i], &normals[j]], [x(i), x(j)]);
         let arc = match free.len() {
-            1 if corners[0] != corners[1] && edge(corners[0], corners[1]) => {
-                arcs::edge_arc(x(0), x(1), n(0), n(1))?
-            }
+            1 if corners[0] != corners[1] && edge(corners[0], corners[1]) => target(0, 1)?,
             2 => {
                 // Corners in the face's lattice order along the two remaining directions.
                 let (mut xf, mut nf, mut vf) = ([DVec3::ZERO; 4], [DVec3::ZERO; 4], [NONE; 4]);
+                let mut at = [0; 4];
                 for (i, &c) in keep.iter().enumerate() {
                     let p = par(c);
                     let j = p[free[0]] as usize + 2 * p[free[1]] as usize;
-                    (xf[j], nf[j], vf[j]) = (x(i), n(i), corners[i]);
+                    (xf[j], nf[j], vf[j], at[j]) = (x(i), n(i), corners[i], i);
                 }
                 let [a, b, c, d] = vf;
                 if a == NONE || !(edge(a, b) && edge(a, c) && edge(b, d) && edge(c, d)) {
                     return None;
                 }
-                arcs::face_arc(&xf, &nf)?
+                arcs::face_arc(&xf, &nf, |i, j| target(at[i], at[j]))?
             }
             _ => return None,
         };
@@ -902,6 +905,65 @@ impl Seam<'_> {
     }
 }
 
+/// A smooth boundary vertex of a 3D mesh with a coarse vertex ([`coarse_normals`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct ArcVertex {
+    normal: [f64; 3],
+    /// Whether a vertex sharing a boundary facet turns its normal by more than
+    /// [`arcs::COARSE_TURN_DEG`].
+    coarse: bool,
+    /// At a coarse regular vertex, the conics of its two grid lines where they are fixed and
+    /// their planes hold the normal ([`arcs::LineConic::is_normal_section`]).
+    lines: [Option<arcs::LineConic>; 2],
+}
+
+impl ArcVertex {
+    /// Values per vertex in a record of [`shared_coarse_normals`].
+    const LEN: usize = 5 + 2 * arcs::LineConic::LEN;
+
+    fn write(&self, r: &mut [f64]) {
+        r[0] = 1.0;
+        r[1..4].copy_from_slice(&self.normal);
+        r[4] = f64::from(u8::from(self.coarse));
+        for (k, line) in self.lines.iter().enumerate() {
+            if let Some(c) = line {
+                c.write(&mut r[5 + k * arcs::LineConic::LEN..]);
+            }
+        }
+    }
+
+    fn read(r: &[f64]) -> Option<ArcVertex> {
+        let l = arcs::LineConic::LEN;
+        (r[0] > 0.0).then(|| ArcVertex {
+            normal: [r[1], r[2], r[3]],
+            coarse: r[4] > 0.0,
+            lines: [0, 1].map(|k| arcs::LineConic::read(&r[5 + k * l..5 + (k + 1) * l])),
+        })
+    }
+
+    /// Displacement of the midpoint of the boundary edge between `v[0]` and `v[1]` (at `x`):
+    /// the mean of the points of the grid-line conics of its ends that hold it, else the
+    /// circular arc on their normals ([`arcs::edge_arc`]).
+    fn edge_target(v: [&ArcVertex; 2], x: [DVec3; 2]) -> Option<DVec3> {
+        let (mut sum, mut k) = (DVec3::ZERO, 0.0);
+        for (i, j) in [(0, 1), (1, 0)] {
+            if let Some(d) = v[i]
+                .lines
+                .iter()
+                .flatten()
+                .find_map(|c| c.edge_midpoint(x[i], x[j]))
+            {
+                sum += d;
+                k += 1.0;
+            }
+        }
+        if k > 0.0 {
+            return Some(sum / k);
+        }
+        arcs::edge_arc(x[0], x[1], v[0].normal.into(), v[1].normal.into())
+    }
+}
+
 /// The quads of the boundary facets `own` at `v` and of the partner `w`'s facets `theirs`
 /// carried over by the periodic map `t` (corners in the facets' order), and their distinct
 /// corners other than v: a wall's fan cut by a periodic seam, completed by the other side's.
@@ -945,21 +1007,21 @@ pub(super) fn dedup_points(x: DVec3, pts: &mut Vec<DVec3>) {
     *pts = kept;
 }
 
-/// The normals of the smooth boundary vertices of a 3D mesh and whether each is coarse (a
-/// vertex sharing a boundary facet turns its normal by more than [`arcs::COARSE_TURN_DEG`]),
-/// or nothing when no vertex is coarse (the targets then come from the models alone).
+/// The normals of the smooth boundary vertices of a 3D mesh, whether each is coarse and the
+/// coarse regular vertices' grid-line conics ([`ArcVertex`]), or nothing when no vertex is
+/// coarse (the targets then come from the models alone).
 fn coarse_normals(
     mesh: &LinearMesh,
     topo: &Topology,
     fan: &[Vec<u32>],
     models: &[Option<VertexModel>],
-) -> Vec<Option<([f64; 3], bool)>> {
+) -> Vec<Option<ArcVertex>> {
     if mesh.dim != 3 {
         return Vec::new();
     }
     let cos_turn = arcs::COARSE_TURN_DEG.to_radians().cos();
     let mut any = false;
-    let out: Vec<Option<([f64; 3], bool)>> = (0..mesh.n_vertices())
+    let out: Vec<Option<ArcVertex>> = (0..mesh.n_vertices())
         .map(|v| {
             let n = models[v]?.normal;
             let coarse = fan[v].iter().any(|&f| {
@@ -971,6 +1033,7 @@ fn coarse_normals(
             any |= coarse;
             // At a coarse regular vertex the grid lines' circles give the normal far more
             // accurately than the fan (the arcs need it to a fraction of a degree).
+            let mut lines = [None; 2];
             let n = coarse
                 .then(|| grid_pairs(topo, &fan[v], v as u32))
                 .flatten()
@@ -988,11 +1051,20 @@ fn coarse_normals(
                             .filter(|&w| models[w as usize].is_some())
                     };
                     let outer = pairs.map(|(a, b)| Some([x(beyond(a)?), x(beyond(b)?)]));
-                    let pairs = pairs.map(|(a, b)| (x(a), x(b)));
-                    arcs::grid_normal(x(v as u32), pairs, outer, n.into())
+                    let (xv, pairs) = (x(v as u32), pairs.map(|(a, b)| (x(a), x(b))));
+                    for k in 0..2 {
+                        lines[k] = outer[k]
+                            .and_then(|o| arcs::LineConic::fit(pairs[k].0, xv, pairs[k].1, o));
+                    }
+                    arcs::grid_normal(xv, pairs, outer, n.into())
                 })
                 .map_or(n, Into::into);
-            Some((n, coarse))
+            let lines = lines.map(|c| c.filter(|c| c.is_normal_section(n.into())));
+            Some(ArcVertex {
+                normal: n,
+                coarse,
+                lines,
+            })
         })
         .collect();
     if any { out } else { Vec::new() }
@@ -1013,7 +1085,7 @@ fn shared_coarse_normals(
     fan: &[Vec<u32>],
     models: &[Option<VertexModel>],
     share: &dyn InheritShare,
-) -> Vec<Option<([f64; 3], bool)>> {
+) -> Vec<Option<ArcVertex>> {
     if !share.any(!coarse_normals(mesh, topo, fan, models).is_empty()) {
         return Vec::new();
     }
@@ -1043,18 +1115,16 @@ fn shared_coarse_normals(
     let mut arcs = coarse_normals(mesh, topo, fan, &seen);
     arcs.resize(nv, None);
     records.fill(0.0);
+    const { assert!(ArcVertex::LEN <= RECORD_LEN) };
     for (r, a) in records.chunks_exact_mut(n).zip(&arcs) {
-        if let Some((normal, coarse)) = a {
-            r[0] = 1.0;
-            r[1..4].copy_from_slice(normal);
-            r[4] = f64::from(u8::from(*coarse));
+        if let Some(a) = a {
+            a.write(r);
         }
     }
     share.exchange_all(&mut records);
     for (v, a) in arcs.iter_mut().enumerate() {
-        let r = &records[v * n..(v + 1) * n];
         if !share.computes(v) {
-            *a = (r[0] > 0.0).then(|| (a3(r), r[4] > 0.0));
+            *a = ArcVertex::read(&records[v * n..(v + 1) * n]);
         }
     }
     arcs

@@ -16,6 +16,12 @@
 //!   midpoints (their normals the normalised sums of the end normals), averaged over the two
 //!   directions.
 //!
+//! Along a grid line whose five points around a coarse vertex fix a conic ([`LineConic`], exact
+//! on ellipses), an edge midpoint takes that conic's point instead of the circle's: next to an
+//! ellipse's coarse tip (an O-grid's leading and trailing edges, four cells around the tip) the
+//! circular arc on the exact normals is off by 17 % of the chord's sagitta, the conic not at all.
+//! Only where the conic's plane holds the surface normal ([`LineConic::is_normal_section`]).
+//!
 //! Input: the corners and normals of one boundary entity. Output: the displacement of its
 //! sample from the multilinear point, or `None` (degenerate chord or normals) to keep the
 //! models' target. Normals may point either way: only the lines they span matter.
@@ -25,6 +31,10 @@ use crate::math::linalg::{DVec3, unit};
 /// A smooth boundary vertex is coarse when the normal of a vertex it shares a boundary facet
 /// with turns from its own by more than this angle (degrees).
 pub(super) const COARSE_TURN_DEG: f64 = 30.0;
+
+/// A grid line's conic ([`LineConic`]) replaces the circular arcs only where its normal at the
+/// vertex is within this angle (degrees) of the surface normal.
+const LINE_CONIC_NORMAL_DEG: f64 = 5.0;
 
 /// Displacement of the edge midpoint (a + b) / 2 onto the circular arc from a to b whose
 /// tangents at a and b are the chord's projections onto the planes normal to `na` and `nb`.
@@ -55,13 +65,43 @@ fn circle_tangent(a: DVec3, v: DVec3, b: DVec3) -> Option<DVec3> {
     (la > 0.0 && lb > 0.0).then(|| lb / la * da + la / lb * db)
 }
 
-/// The tangent at `v` of its grid line through `a` and `b`: with the next points `outer` beyond
-/// them, that of the conic through the five ([`super::higher::conic_fit`], exact on ellipses:
-/// next to an ellipse's coarse tip the circle's is off by degrees), else (or when that fails)
-/// that of the circle through the three.
-fn line_tangent(a: DVec3, v: DVec3, b: DVec3, outer: Option<[DVec3; 2]>) -> Option<DVec3> {
-    let circle = circle_tangent(a, v, b)?;
-    let conic = outer.and_then(|[a2, b2]| {
+/// The conic through a vertex and four points of one of its grid lines, in the vertex's frame:
+/// A u² + B uη + C η² − 2η = 0 with u, η the coordinates along the conic's tangent `t` and
+/// normal `n` at the vertex, in units of `ell` ([`super::higher::conic_fit`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub(super) struct LineConic {
+    t: DVec3,
+    n: DVec3,
+    abc: [f64; 3],
+    ell: f64,
+}
+
+impl LineConic {
+    /// Values per conic in a per-vertex record ([`LineConic::write`], [`LineConic::read`]).
+    pub(super) const LEN: usize = 10;
+
+    /// Writes the conic into `out` ([`LineConic::LEN`] values).
+    pub(super) fn write(&self, out: &mut [f64]) {
+        out[0..3].copy_from_slice(&self.t.to_array());
+        out[3..6].copy_from_slice(&self.n.to_array());
+        out[6..9].copy_from_slice(&self.abc);
+        out[9] = self.ell;
+    }
+
+    /// The conic written by [`LineConic::write`]; `None` for an unset slot (all zero).
+    pub(super) fn read(r: &[f64]) -> Option<LineConic> {
+        (r[9] > 0.0).then(|| LineConic {
+            t: DVec3::new(r[0], r[1], r[2]),
+            n: DVec3::new(r[3], r[4], r[5]),
+            abc: [r[6], r[7], r[8]],
+            ell: r[9],
+        })
+    }
+
+    /// The conic of the grid line of `v` through `a` and `b` and the next points `[a2, b2]`
+    /// beyond them; `None` where the five are (nearly) collinear or fix no conic whose branch
+    /// through `v` holds `a` and `b`.
+    pub(super) fn fit(a: DVec3, v: DVec3, b: DVec3, [a2, b2]: [DVec3; 2]) -> Option<LineConic> {
         let plane = (a - v).cross(b - v);
         let lp = plane.length();
         let d = b - a;
@@ -70,10 +110,79 @@ fn line_tangent(a: DVec3, v: DVec3, b: DVec3, outer: Option<[DVec3; 2]>) -> Opti
         }
         let binormal = plane / lp;
         let n0 = unit(binormal.cross(d));
-        let (n, _) = super::higher::conic_fit(v, n0, binormal, &[a, b, a2, b2], 0.5 * d.length())?;
-        let t = n.cross(binormal);
-        Some(t.dot(circle).signum() * t)
-    });
+        let ell = 0.5 * d.length();
+        let (n, abc) = super::higher::conic_fit(v, n0, binormal, &[a, b, a2, b2], ell)?;
+        Some(LineConic {
+            t: n.cross(binormal),
+            n,
+            abc,
+            ell,
+        })
+    }
+
+    /// Whether the conic's plane holds the surface normal `normal` at its vertex to within
+    /// [`LINE_CONIC_NORMAL_DEG`] (a normal section, whose curvature is the surface's): only
+    /// then does it replace the circular arcs. A grid line that leaves the normal plane also
+    /// turns within the tangent plane, and its conic's midpoints move sideways by that share,
+    /// which the face centres' arcs across the other grid direction do not: the parallels of
+    /// a coarse torus (16 around, 8 around the tube) off its equators, which at the tube's
+    /// top and bottom turn within the tangent plane alone, left the faces' centres between
+    /// their edges' midpoints and held back 160 of its 192 elements at half their targets.
+    pub(super) fn is_normal_section(&self, normal: DVec3) -> bool {
+        let len = normal.length();
+        len > 0.0 && self.n.dot(normal).abs() >= LINE_CONIC_NORMAL_DEG.to_radians().cos() * len
+    }
+
+    /// Displacement of the midpoint of the chord from this conic's vertex `v` to its grid-line
+    /// neighbour `b` onto the conic, along the chord's normal in the conic's plane (so the
+    /// circle's arc midpoint on a circle). `None` when `b` is not on this conic (the vertex's
+    /// other grid line) or the chord's normal meets it only far off.
+    pub(super) fn edge_midpoint(&self, v: DVec3, b: DVec3) -> Option<DVec3> {
+        let [qa, qb, qc] = self.abc;
+        let f = |u: f64, h: f64| qa * u * u + qb * u * h + qc * h * h - 2.0 * h;
+        let e = b - v;
+        let (ub, hb) = (e.dot(self.t) / self.ell, e.dot(self.n) / self.ell);
+        let len = ub.hypot(hb);
+        // On this line's plane, and on the conic: b is one of the points it was fitted through.
+        let binormal = self.t.cross(self.n);
+        let grad = (2.0 * qa * ub + qb * hb).hypot(qb * ub + 2.0 * qc * hb - 2.0);
+        if !(len > 0.0
+            && e.dot(binormal).abs() <= 1e-6 * e.length()
+            && f(ub, hb).abs() <= 1e-6 * grad * len)
+        {
+            return None;
+        }
+        let (mu, mh) = (0.5 * ub, 0.5 * hb);
+        let (cu, ch) = (-hb / len, ub / len);
+        // f(m + s c) = α s² + β s + γ.
+        let alpha = qa * cu * cu + qb * cu * ch + qc * ch * ch;
+        let beta = 2.0 * qa * mu * cu + qb * (mu * ch + mh * cu) + 2.0 * qc * mh * ch - 2.0 * ch;
+        let gamma = f(mu, mh);
+        let s = if alpha.abs() <= 1e-12 * beta.abs() {
+            -gamma / beta
+        } else {
+            let disc = beta * beta - 4.0 * alpha * gamma;
+            if !(disc >= 0.0) {
+                return None;
+            }
+            // The root nearer the chord (the other lies on the conic's far side).
+            let q = -0.5 * (beta + beta.signum() * disc.sqrt());
+            let (s1, s2) = (q / alpha, gamma / q);
+            if s1.abs() < s2.abs() { s1 } else { s2 }
+        };
+        (s.is_finite() && s.abs() <= 0.5 * len).then(|| s * self.ell * (cu * self.t + ch * self.n))
+    }
+}
+
+/// The tangent at `v` of its grid line through `a` and `b`: with the next points `outer` beyond
+/// them, that of the conic through the five ([`LineConic`], exact on ellipses: next to an
+/// ellipse's coarse tip the circle's is off by degrees), else (or when that fails) that of the
+/// circle through the three.
+fn line_tangent(a: DVec3, v: DVec3, b: DVec3, outer: Option<[DVec3; 2]>) -> Option<DVec3> {
+    let circle = circle_tangent(a, v, b)?;
+    let conic = outer
+        .and_then(|o| LineConic::fit(a, v, b, o))
+        .map(|c| c.t.dot(circle).signum() * c.t);
     Some(conic.unwrap_or(circle / circle.length()))
 }
 
@@ -110,14 +219,20 @@ fn mid_normal(na: DVec3, nb: DVec3) -> Option<DVec3> {
 }
 
 /// Displacement of the centre of the boundary quad with corners `x` and normals `n` (lattice
-/// order: corner i at (i mod 2, i / 2) of the face's parameters) from the corners' average.
-pub(super) fn face_arc(x: &[DVec3; 4], n: &[DVec3; 4]) -> Option<DVec3> {
+/// order: corner i at (i mod 2, i / 2) of the face's parameters) from the corners' average;
+/// `edge(i, j)` is the displacement of the midpoint of its edge from corner i to corner j
+/// ([`edge_arc`], or a grid line's conic).
+pub(super) fn face_arc(
+    x: &[DVec3; 4],
+    n: &[DVec3; 4],
+    edge: impl Fn(usize, usize) -> Option<DVec3>,
+) -> Option<DVec3> {
     let centre = 0.25 * (x[0] + x[1] + x[2] + x[3]);
     let mut sum = DVec3::ZERO;
     // Across from the midpoint of edge (i, j) to that of the opposite edge (k, l).
     for [i, j, k, l] in [[0, 1, 2, 3], [0, 2, 1, 3]] {
-        let m1 = 0.5 * (x[i] + x[j]) + edge_arc(x[i], x[j], n[i], n[j])?;
-        let m2 = 0.5 * (x[k] + x[l]) + edge_arc(x[k], x[l], n[k], n[l])?;
+        let m1 = 0.5 * (x[i] + x[j]) + edge(i, j)?;
+        let m2 = 0.5 * (x[k] + x[l]) + edge(k, l)?;
         let (n1, n2) = (mid_normal(n[i], n[j])?, mid_normal(n[k], n[l])?);
         sum += 0.5 * (m1 + m2) + edge_arc(m1, m2, n1, n2)?;
     }
@@ -141,6 +256,32 @@ mod tests {
 
     fn torus_distance(x: DVec3) -> f64 {
         ((x.x.hypot(x.y) - 1.0).hypot(x.z) - 0.5).abs()
+    }
+
+    /// On a coarse torus (16 × 8 facets) every grid line's conic puts its edge midpoints on
+    /// the torus, but only the meridians' are normal sections at every vertex; the parallels'
+    /// only on the equators: elsewhere they turn within the tangent plane too (alone at the
+    /// tube's top and bottom), sideways to the faces' arcs across them.
+    #[test]
+    fn only_normal_sections_of_a_coarse_torus_keep_their_line_conics() {
+        let (dpsi, dth) = (std::f64::consts::TAU / 16.0, std::f64::consts::TAU / 8.0);
+        for j in 0..8 {
+            let th = j as f64 * dth;
+            let (v, n) = torus(0.0, th);
+            let meridian = |k: f64| torus(0.0, th + k * dth).0;
+            let parallel = |k: f64| torus(k * dpsi, th).0;
+            for (line, normal_section) in [
+                (&meridian as &dyn Fn(f64) -> DVec3, true),
+                (&parallel, j % 4 == 0),
+            ] {
+                let c = LineConic::fit(line(-1.0), v, line(1.0), [line(-2.0), line(2.0)]).unwrap();
+                assert_eq!(c.is_normal_section(n), normal_section, "{j}");
+                assert_eq!(c.is_normal_section(-n), normal_section, "{j}");
+                let m = 0.5 * (v + line(1.0)) + c.edge_midpoint(v, line(1.0)).unwrap();
+                let off = torus_distance(m);
+                assert!(off < 1e-9, "{j}: {off:e}");
+            }
+        }
     }
 
     /// On a circle (normals in its plane, either orientation) the edge target is exact
@@ -220,7 +361,8 @@ mod tests {
                     let e = m + edge_arc(x[a], x[b], n[a], n[b]).unwrap();
                     worst_edge = worst_edge.max(torus_distance(e));
                 }
-                let f = 0.25 * (x[0] + x[1] + x[2] + x[3]) + face_arc(&x, &n).unwrap();
+                let arc = |i: usize, j: usize| edge_arc(x[i], x[j], n[i], n[j]);
+                let f = 0.25 * (x[0] + x[1] + x[2] + x[3]) + face_arc(&x, &n, arc).unwrap();
                 worst_face = worst_face.max(torus_distance(f));
             }
         }

@@ -37,8 +37,9 @@ pub(crate) struct HigherModel {
     form: [f64; 3],
     /// Coarse curves ([`conic_fit`]): the scaled coefficients (A, B, C) of the conic
     /// A u² + B uη + C η² − 2η = 0 through the vertex and its four ring points, which then
-    /// replaces the circle (`form` and `c` zero).
-    conic: Option<[f64; 3]>,
+    /// replaces the circle (`form` and `c` zero), and the span [u₋, u₊] of its two neighbours
+    /// along the curve, beyond which it goes on along its tangent ([`conic_excess`]).
+    conic: Option<([f64; 3], [f64; 2])>,
 }
 
 /// Height above its tangent plane of the conic with curvature form q = a u² + b uw + d w²
@@ -71,13 +72,13 @@ fn form_in(k: &[[f64; 3]; 3], t1: DVec3, t2: DVec3) -> [f64; 3] {
 
 impl HigherModel {
     /// Values in a record ([`HigherModel::write`], [`HigherModel::read`]).
-    pub(crate) const LEN: usize = 26;
+    pub(crate) const LEN: usize = 28;
 
     /// Writes the model into `out` (`LEN` values), to travel between ranks.
     pub(crate) fn write(&self, out: &mut [f64]) {
-        let conic = self.conic.unwrap_or([0.0; 3]);
+        let (conic, span) = self.conic.unwrap_or(([0.0; 3], [0.0; 2]));
         let flag = f64::from(u8::from(self.conic.is_some()));
-        let parts: [&[f64]; 8] = [
+        let parts: [&[f64]; 9] = [
             &self.origin,
             &self.t[0],
             &self.t[1],
@@ -86,6 +87,7 @@ impl HigherModel {
             &self.form,
             &[flag],
             &conic,
+            &span,
         ];
         for (o, x) in out.iter_mut().zip(parts.into_iter().flatten()) {
             *o = *x;
@@ -101,7 +103,7 @@ impl HigherModel {
             scale: r[9],
             c: std::array::from_fn(|k| r[10 + k]),
             form: a3(19),
-            conic: (r[22] != 0.0).then(|| a3(23)),
+            conic: (r[22] != 0.0).then(|| (a3(23), [r[26], r[27]])),
         }
     }
 
@@ -114,18 +116,13 @@ impl HigherModel {
         let m = &monomials(u, w)[5..];
         let [a, b, d] = self.form;
         let q = a * u * u + b * u * w + d * w * w;
-        // Beyond the conic's reach (far from the vertex) only its quadratic part is kept.
+        // Beyond the circle's or sphere's reach (far from the vertex) only its quadratic part
+        // is kept; a coarse curve's conic goes on along its tangent beyond its neighbours.
         let conic = match self.conic {
-            Some(abc) => curve_conic_height(abc, u).map_or(0.0, |h| h - 0.5 * abc[0] * u * u),
+            Some((abc, span)) => conic_excess(abc, span, u),
             None => conic_height(self.form, u, w).map_or(0.0, |h| h - 0.5 * q),
         };
         self.scale * (conic + m.iter().zip(&self.c).map(|(a, b)| a * b).sum::<f64>())
-    }
-
-    /// Whether this is a coarse curve's [`conic_fit`] (beyond whose branch only its quadratic
-    /// part is kept, so that its targets jump where offset points leave the branch).
-    pub(in crate::fit) fn is_conic(&self) -> bool {
-        self.conic.is_some()
     }
 
     /// g(ξ_p) − Σ φ g(ξ_j): the cubic and quartic terms' share of the correction's length
@@ -517,6 +514,33 @@ fn curve_conic_height([a, b, c]: [f64; 3], u: f64) -> Option<f64> {
     (p > 0.0 && disc >= 0.0).then(|| 2.0 * a * u * u / (p + disc.sqrt()))
 }
 
+/// The conic's height above its tangent minus its quadratic part, η(u) − A u²/2
+/// ([`curve_conic_height`]), inside `span` (its neighbours along the curve, where the
+/// boundary's own samples lie), and beyond it the tangent line of that difference at the
+/// span's end (C¹, so the samples' corrections, which a linear term does not change, keep no
+/// conic term there). Offset points far off the curve (a boundary layer's outer cells, which
+/// inherit the model) reach tangent coordinates near the end of the conic's branch, where
+/// η(u) turns vertical: at the 41° tip of an ellipse O-grid a cell 0.028 off the wall, 0.7 of
+/// the tip's radius of curvature, took η's second differences of 1.2× its own height (its
+/// target map's Jacobian ratio fell to 0.75× its straight ratio, the certified blend held it
+/// at the straight elevation, and the thin cells below with it back to the wall), and the
+/// next row left the branch, where the term jumped to zero.
+fn conic_excess(abc: [f64; 3], [lo, hi]: [f64; 2], u: f64) -> f64 {
+    let [a, b, c] = abc;
+    let uc = u.clamp(lo, hi);
+    let Some(h) = curve_conic_height(abc, uc) else {
+        return 0.0;
+    };
+    // dη/du on the conic: −F_u / F_η, F = A u² + B uη + C η² − 2η (F_η = −2 at the origin).
+    let f_h = b * uc + 2.0 * c * h - 2.0;
+    let slope = if f_h < 0.0 {
+        -(2.0 * a * uc + b * h) / f_h
+    } else {
+        0.0
+    };
+    h - 0.5 * a * uc * uc + (slope - a * uc) * (u - uc)
+}
+
 /// A plane curve turns by more than this (degrees) between a vertex's tangent and the chord to
 /// a ring point for [`conic_fit`] to replace the circle-plus-polynomial height function.
 const CONIC_SLOPE_DEG: f64 = 15.0;
@@ -607,6 +631,23 @@ fn coarse_conic_model(
     }
     let (n, abc) = conic_fit(x, n0, binormal, &pts, ell)?;
     let t = n.cross(binormal);
+    // The neighbours: on each side of the vertex, the ring point on the conic's branch
+    // nearest along the tangent (`conic_fit` found one on each side).
+    let mut span = [f64::NEG_INFINITY, f64::INFINITY];
+    for &p in &pts {
+        let (u, h) = ((p - x).dot(t) / ell, (p - x).dot(n) / ell);
+        if curve_conic_height(abc, u).is_some_and(|hc| (hc - h).abs() <= 1e-6 * (1.0 + h.abs())) {
+            let side = usize::from(u > 0.0);
+            span[side] = if u > 0.0 {
+                span[side].min(u)
+            } else {
+                span[side].max(u)
+            };
+        }
+    }
+    if !(span[0] < 0.0 && span[1] > 0.0 && span[1].is_finite() && span[0].is_finite()) {
+        return None;
+    }
     let (t, n3): ([f64; 3], [f64; 3]) = (t.into(), n.into());
     let q = 0.5 * abc[0] / ell;
     let h = outer(t, t).map(|r| r.map(|v| q * v));
@@ -622,7 +663,7 @@ fn coarse_conic_model(
             scale: ell,
             c: [0.0; 9],
             form: [0.0; 3],
-            conic: Some(abc),
+            conic: Some((abc, span)),
         },
     ))
 }
@@ -772,5 +813,46 @@ mod tests {
         // points beyond the tip's neighbours are no graph over its tangent.
         let used = [0, 2, 5, 9];
         assert!(refine_with(2, e(0.0).into(), &m, &pts, ell, &used, Height::CENTRED).is_none());
+    }
+
+    /// Next to the 41° tip of a 1 × 0.2 ellipse, points offset from the curve along its
+    /// normals (a boundary layer's outer cells, which inherit the model) reach tangent
+    /// coordinates near the end of the conic's branch. The conic term of an edge's correction
+    /// between the tip's column and the vertex's then grows smoothly with the offset, with the
+    /// wall's sign and within 4× the wall's up to 0.9 of the tip's radius of curvature (0.04),
+    /// instead of following the branch towards its vertical tangent (7.8× at 0.028) and
+    /// jumping where a corner leaves it.
+    #[test]
+    fn coarse_conic_goes_on_along_its_tangent_beyond_its_neighbours() {
+        let b = 0.2;
+        let at = |t: f64, d: f64| {
+            let n = unit(DVec3::new(b * t.cos(), t.sin(), 0.0));
+            DVec3::new(t.cos(), b * t.sin(), 0.0) + d * n
+        };
+        let ts = [-0.1512, 0.0, 0.1512, 0.266, 0.3569];
+        let pts: Vec<[f64; 3]> = [0, 1, 3, 4].map(|i| at(ts[i], 0.0).into()).to_vec();
+        let m = VertexModel {
+            normal: unit(DVec3::new(b * ts[2].cos(), ts[2].sin(), 0.0)).into(),
+            h: [[0.0; 3]; 3],
+            weight: 1.0,
+        };
+        let ell = 0.5 * (at(ts[3], 0.0) - at(ts[1], 0.0)).length();
+        let (_, hm) =
+            refine_model(2, at(ts[2], 0.0).into(), &m, &pts, ell, Height::CENTRED).unwrap();
+        assert!(hm.conic.is_some());
+        let conic_term = |d: f64| {
+            let (x, y) = (at(ts[2], d), at(ts[1], d));
+            hm.correction((0.5 * (x + y)).into(), &[x.into(), y.into()], 0.5)
+        };
+        let wall = conic_term(0.0);
+        assert!(wall.abs() > 1e-4, "{wall:e}");
+        for k in 1..=36 {
+            let d = 1e-3 * k as f64;
+            let c = conic_term(d);
+            assert!(
+                c * wall > 0.0 && c.abs() <= 4.0 * wall.abs(),
+                "offset {d}: {c:e} against the wall's {wall:e}"
+            );
+        }
     }
 }
