@@ -1023,14 +1023,7 @@ fn default_options_demote_where_too_many_are_held_back() {
             .join("meshes/real/hopr")
             .join(format!("{name}.cgns"));
         let out = dir.join(format!("{name}.msh"));
-        let (run, report) = common::curve_with_report(&input, &out, &[]);
-        let report = report.unwrap_or_else(|| panic!("{}", String::from_utf8_lossy(&run.stderr)));
-        let r: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(report).unwrap()).unwrap();
-        let (held, elements) = (
-            r["reduced_elements"].as_u64().unwrap(),
-            r["elements"].as_u64().unwrap(),
-        );
+        let (r, held, elements) = curve_held_back(&input, &out, &[]);
         eprintln!(
             "{name}: {held} of {elements} held back, {} demoted",
             r["demoted_elements"]
