@@ -444,19 +444,7 @@ fn rotation_seams_are_glued_c1_on_generated_sectors() {
     // spline is kept whole, sampling the two sides from it already gives images to rounding.
     for (dim, deg) in [(3, 30), (3, 90), (2, 30), (2, 90)] {
         let name = format!("rsector{dim}d_{deg}");
-        let linear = scratch_in("periodic_rotation", &format!("{name}.msh"));
-        let layers = if dim == 3 {
-            " --layers 2 --span 0.5"
-        } else {
-            ""
-        };
-        let args = format!("--sector {deg} --around 12 --across 6 --first-height 0.02{layers}");
-        run_ok(
-            polyspline()
-                .args(["generate", "sector", "-o"])
-                .arg(&linear)
-                .args(args.split(' ')),
-        );
+        let linear = generated_sector("periodic_rotation", &name, dim, deg);
         for knots in ["graded", "uniform"] {
             for order in ["2", "3"] {
                 let what = format!("{name} {knots} order {order}");
@@ -516,19 +504,7 @@ fn rotation_seams_are_c1_with_the_energy_fit() {
     // and the smallest scaled Jacobian within 0.999 of the input's (apart: 0.996).
     for (dim, solver) in [(3, "lbfgs"), (3, "colored"), (2, "lbfgs")] {
         let name = format!("esector{dim}d");
-        let linear = scratch_in("periodic_energy", &format!("{name}.msh"));
-        let layers = if dim == 3 {
-            " --layers 2 --span 0.5"
-        } else {
-            ""
-        };
-        let args = format!("--sector 30 --around 12 --across 6 --first-height 0.02{layers}");
-        run_ok(
-            polyspline()
-                .args(["generate", "sector", "-o"])
-                .arg(&linear)
-                .args(args.split(' ')),
-        );
+        let linear = generated_sector("periodic_energy", &name, dim, 30);
         let what = format!("{name} {solver}");
         let out = scratch_in("periodic_energy", &format!("{name}_{solver}.msh"));
         let report = curve(
@@ -1332,4 +1308,23 @@ fn a_periodic_link_without_physical_groups_is_refused() {
         );
     }
     assert!(!out.exists());
+}
+
+/// `generate sector` of `deg` degrees, 12 cells around and 6 across, first height 0.02 (in 3D
+/// two layers over a span of 0.5), written as `name.msh` in the scratch folder `dir`.
+fn generated_sector(dir: &str, name: &str, dim: usize, deg: u32) -> PathBuf {
+    let linear = scratch_in(dir, &format!("{name}.msh"));
+    let layers = if dim == 3 {
+        " --layers 2 --span 0.5"
+    } else {
+        ""
+    };
+    let args = format!("--sector {deg} --around 12 --across 6 --first-height 0.02{layers}");
+    run_ok(
+        polyspline()
+            .args(["generate", "sector", "-o"])
+            .arg(&linear)
+            .args(args.split(' ')),
+    );
+    linear
 }
