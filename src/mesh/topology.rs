@@ -686,25 +686,9 @@ mod tests {
     fn scrambled_grid(n: usize) -> Vec<u32> {
         let nv = (n + 1).pow(3);
         let label = |v: usize| ((v * 7919) % nv) as u32;
-        let id = |i: usize, j: usize, k: usize| label(i + (n + 1) * (j + (n + 1) * k));
-        let mut elems = Vec::new();
-        for k in 0..n {
-            for j in 0..n {
-                for i in 0..n {
-                    elems.extend([
-                        id(i, j, k),
-                        id(i + 1, j, k),
-                        id(i + 1, j + 1, k),
-                        id(i, j + 1, k),
-                        id(i, j, k + 1),
-                        id(i + 1, j, k + 1),
-                        id(i + 1, j + 1, k + 1),
-                        id(i, j + 1, k + 1),
-                    ]);
-                }
-            }
-        }
-        elems
+        let xs: Vec<f64> = (0..=n).map(|i| i as f64).collect();
+        let grid = crate::mesh::generate::grid_3d(&xs, &xs, &xs);
+        grid.elements.iter().map(|&v| label(v as usize)).collect()
     }
 
     /// The unique edges and faces, their numbering, valences and first sides equal those of
