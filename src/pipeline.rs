@@ -32,6 +32,7 @@ pub(crate) mod misfit;
 mod options;
 pub(crate) mod passes;
 mod report;
+pub(crate) mod share;
 pub(crate) mod spline;
 
 use crate::elastic::{ElasticError, ElasticInfo, ElasticParams, elastic_analogy};

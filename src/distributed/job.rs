@@ -16,7 +16,9 @@
 //! (`pipeline::spline::SplineSetup`); run the serial job's spline passes
 //! (`pipeline::passes::spline_passes`, one or two passes of what follows) with graded or
 //! `auto` knots surveyed over the whole mesh, the serial knot weights taken
-//! ([`super::knots`]) and `auto` deciding on the whole mesh's figures; agree on the shared
+//! ([`super::knots`]) and `auto` deciding on the whole mesh's figures; each pass is the
+//! serial pass's sequence (`pipeline::share::least_squares_pass`: space, fit, misfit rounds,
+//! certified blend) over this rank's `Share` (`RankPasses`); agree on the shared
 //! control points by keys of
 //! global entity ids ([`super::local`]); assemble the normal equations over its own elements
 //! with the whole mesh's size levels ([`crate::fit::partial`]); solve them with the
@@ -45,17 +47,17 @@ use super::share::read_share;
 use crate::mesh::Topology;
 use crate::pipeline::clock::{Clock, peak_memory_bytes};
 use crate::pipeline::passes::{Passes, spline_passes};
+use crate::pipeline::share::{
+    Blend, LeastSquares, Share, blend_within, finish_blend, least_squares_pass,
+};
 use crate::pipeline::spline::{self, Demoted, SplineSetup};
 use crate::pipeline::{
-    CurveError, CurveOptions, CurveReport, Geometry, Job, LineSearchMode, Method, Outcomes,
-    RankFigures, SpaceCounts, SplineFigures,
+    CurveError, CurveOptions, CurveReport, Geometry, Job, Method, Outcomes, RankFigures,
+    SpaceCounts, SplineFigures,
 };
 use crate::progress::{Silent, Stage};
 use crate::spline::{ElementClass, KnotIntervals, KnotParams, Knots, Q2Reason, SplineSpace};
-use crate::validity::CpuCertifier;
-use crate::validity::blend::{
-    BlendInfo, Blended, Bounded, NetCache, blend_search_shared, blend_search_shared_at_most,
-};
+use crate::validity::blend::Blended;
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::Instant;
@@ -178,7 +180,7 @@ fn agree<T>(comm: &dyn Comm, r: Result<T, CurveError>) -> Result<T, CurveError> 
 }
 
 /// What a rank has after its share of the setup, fit and blend.
-struct Share {
+struct RankShare {
     local: LocalMesh,
     cg: crate::solve::CgInfo,
     blend: crate::validity::blend::BlendInfo,
@@ -259,8 +261,6 @@ struct ShareJob<'a> {
     job: &'a Job<'a>,
     setup: &'a SplineSetup,
     mine: &'a [usize],
-    /// Node tag → representative tag of the glued seams ([`super::periodic::Resolved::seam_map`]).
-    seam_map: &'a std::collections::HashMap<u64, u64>,
 }
 
 /// This rank's share of the fit, timed as [`Stage::Fit`] with its assembly and CG parts
@@ -268,10 +268,10 @@ struct ShareJob<'a> {
 fn fit_stage(
     j: &ShareJob,
     clock: &mut Clock,
-    s: &mut SplineSpace,
+    s: &SplineSpace,
     halo: &Halo,
     start: Option<&[[f64; 3]]>,
-) -> Result<(crate::solve::CgInfo, [usize; 2]), CurveError> {
+) -> Result<Fitted, CurveError> {
     let t = Instant::now();
     let fit = fit_share(j, clock, s, halo, start);
     clock.add(Stage::Fit, t.elapsed().as_secs_f64());
@@ -280,18 +280,19 @@ fn fit_stage(
 
 /// This rank's share of the fit: its rows of the normal equations with the whole mesh's size
 /// levels, the scaling agreed over the halo ([`Stage::FitAssembly`]), the distributed CG
-/// with its preconditioner's aggregates grown first ([`Stage::FitCg`]), and the fitted
-/// control points (projected onto planar patches) in `s`. The CG starts from the control
-/// points `start` where given (one per control point of `s`), as the serial fit's warm start
-/// does ([`crate::fit::fit_with_targets_from`]). Returns the CG's figures and the stored
-/// entries of the rank's local matrix and of the whole K ([`LocalMatrix::global_nonzeros`]).
+/// with its preconditioner's aggregates grown first ([`Stage::FitCg`]). The CG starts from
+/// the control points `start` where given (one per control point of `s`), as the serial
+/// fit's warm start does ([`crate::fit::fit_with_targets_from`]). Returns the fitted control
+/// points of `s` (projected onto planar patches; `s` keeps its own), the CG's figures and the
+/// stored entries of the rank's local matrix and of the whole K
+/// ([`LocalMatrix::global_nonzeros`]).
 fn fit_share(
     j: &ShareJob,
     clock: &mut Clock,
-    s: &mut SplineSpace,
+    s: &SplineSpace,
     halo: &Halo,
     start: Option<&[[f64; 3]]>,
-) -> Result<(crate::solve::CgInfo, [usize; 2]), CurveError> {
+) -> Result<Fitted, CurveError> {
     // The boundary is fitted on the topology with the glued seams interior.
     let (comm, topo, setup) = (j.comm, j.setup.topo(j.job), j.setup);
     let fit_params = &setup.fit_params;
@@ -383,9 +384,12 @@ fn fit_share(
     if let Some(f) = setup.used_features() {
         crate::fit::features::project_onto_planes(s, topo, f, &mut c_star);
     }
-    s.control_points = c_star;
-    Ok((cg, [k.nonzeros(), k.global_nonzeros(comm, halo)]))
+    Ok((c_star, cg, [k.nonzeros(), k.global_nonzeros(comm, halo)]))
 }
+
+/// The fitted control points, the CG's figures and the stored entries of the rank's share of
+/// K and of the whole K ([`fit_share`]).
+type Fitted = (Vec<[f64; 3]>, crate::solve::CgInfo, [usize; 2]);
 
 /// This rank's rows of the scaled normal equations: the local matrix over its halo, the
 /// right-hand side of its halo's control points, the scaling D (by global control point)
@@ -455,8 +459,8 @@ fn assemble_share(
     )
 }
 
-/// The post-fit Q2 marks of the sub-mesh's elements (own and ghost) from the fitted control
-/// points of `s`, or `None` when no element of the mesh is marked (collective). Each rank
+/// The post-fit Q2 marks of the sub-mesh's elements (own and ghost) from the control points
+/// `fitted` of `s`, or `None` when no element of the mesh is marked (collective). Each rank
 /// measures the boundary sides of its own elements; every rank gathers all of them (a 2D
 /// boundary: a few hundred to a few thousand sides) and finds the same runs as the serial
 /// [`crate::pipeline::misfit::misfit_elements`], the vertices keyed by node tag.
@@ -465,13 +469,14 @@ fn misfit_marks(
     local: &LocalMesh,
     topo: &Topology,
     s: &crate::spline::SplineSpace,
+    fitted: &[[f64; 3]],
     targets: &crate::fit::SmoothTargets,
 ) -> Option<Vec<bool>> {
     use crate::pipeline::misfit::{SideFigures, boundary_sides, marked_sides};
     let mesh = &local.mesh;
     let mut own = vec![false; mesh.n_elements()];
     own[..local.n_owned].fill(true);
-    let sides = boundary_sides(mesh, topo, s, &s.control_points, targets, &own);
+    let sides = boundary_sides(mesh, topo, s, fitted, targets, &own);
     // Per side: its element's global id, 4 vertex keys (-1: none), deviation, over.
     const WIDTH: usize = 7;
     let mut send = Vec::with_capacity(WIDTH * sides.len());
@@ -519,22 +524,17 @@ fn misfit_marks(
     )
 }
 
-/// One spline pass of a rank's share: its space, halo and fit, and the certified blend's
-/// outcome (factors and nets owned, so that the setup can change knots between passes), or
-/// the elements it holds back at least over the whole mesh when it stopped early.
-struct Pass {
-    s: SplineSpace,
+/// A rank's figures of one least-squares pass's fit ([`LeastSquares::fit`]).
+struct RankFit {
+    /// The halo of the pass's space.
     halo: Halo,
     cg: crate::solve::CgInfo,
     /// Stored entries of the rank's share of K and of the whole K.
     nonzeros: [usize; 2],
-    blend: Result<Blend, usize>,
-    /// Elements of the whole mesh demoted to Q2 before the fit (`--demote-uncertified`).
-    demoted: usize,
 }
 
-/// The certified blend's factors, nets and figures.
-type Blend = (Vec<f32>, NetCache, BlendInfo);
+/// One least-squares pass of a rank's share.
+type Pass = LeastSquares<RankFit>;
 
 /// The spline passes of a rank's share ([`crate::pipeline::passes`], the serial job's
 /// driver): the whole mesh's knot survey over the ranks ([`super::knots`]), each rank
@@ -584,15 +584,8 @@ impl Passes for RankPasses<'_> {
         most: Option<usize>,
         demote: Option<&Demoted>,
     ) -> Result<Pass, CurveError> {
-        let j = self.share_job(job, setup);
-        share_pass(
-            &j,
-            clock,
-            previous.map(|p| &p.s),
-            most,
-            demote,
-            &mut self.bytes,
-        )
+        let previous = previous.map(|p| &p.space);
+        least_squares_pass(self, job, setup, clock, previous, most, demote)
     }
     fn demotion(&mut self, job: &Job, setup: &SplineSetup, clock: &mut Clock) -> Option<Demoted> {
         let share = RankDemotion {
@@ -606,7 +599,7 @@ impl Passes for RankPasses<'_> {
     }
     fn held(pass: &Pass) -> Result<usize, usize> {
         match &pass.blend {
-            Ok((_, _, info)) => Ok(info.reduced_elements),
+            Ok((_, info)) => Ok(info.reduced_elements),
             Err(at_least) => Err(*at_least),
         }
     }
@@ -615,13 +608,9 @@ impl Passes for RankPasses<'_> {
         job: &Job,
         setup: &SplineSetup,
         clock: &mut Clock,
-        mut pass: Pass,
+        pass: Pass,
     ) -> Result<Pass, CurveError> {
-        if pass.blend.is_err() {
-            let j = self.share_job(job, setup);
-            pass.blend = blend_share(&j, clock, &pass.s, None, &mut self.bytes)?;
-        }
-        Ok(pass)
+        finish_blend(self, job, setup, clock, pass)
     }
     fn boundary_rms(
         &mut self,
@@ -635,7 +624,7 @@ impl Passes for RankPasses<'_> {
         let (comm, n_owned) = (self.comm, self.local.n_owned);
         let (mut lo, mut hi) = self.local.mesh.bounding_box();
         clock.run(Stage::Validity, || {
-            let (sum, n) = spline::fitted_boundary_sq_sum(job, setup, &pass.s, |e| e < n_owned);
+            let (sum, n) = spline::fitted_boundary_sq_sum(job, setup, &pass.space, |e| e < n_owned);
             let mut v = [sum, n as f64];
             comm.sum_f64(&mut v);
             comm.min_f64(&mut lo);
@@ -655,12 +644,16 @@ impl Passes for RankPasses<'_> {
         // As `boundary_rms`: each boundary side once, the whole mesh's diagonal.
         let (comm, n_owned) = (self.comm, self.local.n_owned);
         let (mut lo, mut hi) = self.local.mesh.bounding_box();
-        let factors = pass.blend.as_ref().map_or(&[][..], |b| &b.0[..]);
+        let factors = pass.blend.as_ref().map_or(&[][..], |b| &b.0.0[..]);
         clock.run(Stage::Validity, || {
-            let (sum, n) =
-                spline::output_boundary_sq_sum(job, setup, &pass.s, factors, &reference.s, |e| {
-                    e < n_owned
-                });
+            let (sum, n) = spline::output_boundary_sq_sum(
+                job,
+                setup,
+                &pass.space,
+                factors,
+                &reference.space,
+                |e| e < n_owned,
+            );
             let mut v = [sum, n as f64];
             comm.sum_f64(&mut v);
             comm.min_f64(&mut lo);
@@ -731,101 +724,71 @@ impl<'a> RankPasses<'a> {
             job,
             setup,
             mine: self.mine,
-            seam_map: self.seam_map,
         }
     }
 }
 
-/// One spline pass of this rank's share (see [`Pass`]): the space of `j.setup` (the elements
-/// of `demote` Q2), its halo, the fit (from `previous`'s fitted control points where given;
-/// in 2D with the serial run's post-fit Q2 rounds), then the certified blend ([`blend_share`]).
-fn share_pass(
-    j: &ShareJob,
-    clock: &mut Clock,
-    previous: Option<&SplineSpace>,
-    most: Option<usize>,
-    demote: Option<&Demoted>,
-    bytes: &mut [u64; 2],
-) -> Result<Pass, CurveError> {
-    let (comm, local, job, setup) = (j.comm, j.local, j.job, j.setup);
-    let (mesh, topo) = (&local.mesh, job.topo);
-    let q2 = demote.map_or(&[][..], |d| &d.marks[..]);
-    let mut s = clock.run(Stage::Spline, || setup.build(job, q2));
-    // A space on the glued seams numbers its control points by the glued entities: so do the
-    // halo's keys, for the serial run's aggregates.
-    let reps = |_: &SplineSpace| setup.live_seams().map(|_| j.seam_map);
-    let mut halo = clock.run(Stage::Partition, || {
-        super::local::halo(comm, local, topo, &s, reps(&s))
-    });
-    let before_fit = comm.bytes_sent();
-    let start = previous.map(|p| spline::carry_over(p, &p.control_points, &s));
-    let (mut cg, mut nonzeros) = fit_stage(j, clock, &mut s, &halo, start.as_deref())?;
-    drop(start);
-    // The serial run's post-fit Q2 choice of 2D meshes (`pipeline::misfit`), its runs of
-    // misfit sides found over the whole boundary: mark, rebuild, refit.
-    if let Some(targets) = setup.targets.as_ref().filter(|_| topo.dim == 2) {
-        let mut misfit = vec![false; mesh.n_elements()];
-        for _ in 0..crate::pipeline::misfit::MISFIT_ROUNDS {
-            let marks = clock.run(Stage::Spline, || {
-                misfit_marks(comm, local, setup.topo(job), &s, targets)
-            });
-            let Some(marks) = marks else {
-                break;
-            };
-            for (m, x) in misfit.iter_mut().zip(marks) {
-                *m |= x;
-            }
-            let previous = std::mem::replace(
-                &mut s,
-                clock.run(Stage::Spline, || setup.build_with_misfits(job, q2, &misfit)),
-            );
-            halo = clock.run(Stage::Partition, || {
-                super::local::halo(comm, local, topo, &s, reps(&s))
-            });
-            // The refit starts from this fit where the two spaces share control points, as
-            // the serial refit does (`pipeline::spline::fit_demoting_misfits`): a cold start
-            // stops the CG elsewhere.
-            let start = spline::carry_over(&previous, &previous.control_points, &s);
-            drop(previous);
-            (cg, nonzeros) = fit_stage(j, clock, &mut s, &halo, Some(&start))?;
-        }
+/// A rank's part of the least-squares pass ([`least_squares_pass`]): its rows of the fit
+/// with the distributed CG over the halo of each space (timed as [`Stage::Partition`]), the
+/// misfit sides of the whole boundary gathered, the blend judging its own elements in rounds
+/// agreed over the ranks. `bytes` adds the bytes sent in the fits and their misfit rounds
+/// (with the halos of the rebuilt spaces) and in the blends.
+impl Share for RankPasses<'_> {
+    type Fit = RankFit;
+    fn fit(
+        &mut self,
+        job: &Job,
+        setup: &SplineSetup,
+        clock: &mut Clock,
+        space: &SplineSpace,
+        start: Option<&[[f64; 3]]>,
+        round: usize,
+    ) -> Result<(Vec<[f64; 3]>, RankFit), CurveError> {
+        let (comm, local) = (self.comm, self.local);
+        let before = comm.bytes_sent();
+        // A space on the glued seams numbers its control points by the glued entities: so do
+        // the halo's keys, for the serial run's aggregates.
+        let reps = setup.live_seams().map(|_| self.seam_map);
+        let halo = clock.run(Stage::Partition, || {
+            super::local::halo(comm, local, job.topo, space, reps)
+        });
+        // The first space's halo is the pass's set-up; a misfit round's counts with its fit.
+        let before = if round == 0 {
+            comm.bytes_sent()
+        } else {
+            before
+        };
+        let j = self.share_job(job, setup);
+        let (c_star, cg, nonzeros) = fit_stage(&j, clock, space, &halo, start)?;
+        self.bytes[0] += comm.bytes_sent() - before;
+        Ok((c_star, RankFit { halo, cg, nonzeros }))
     }
-    bytes[0] += comm.bytes_sent() - before_fit;
-    let blend = blend_share(j, clock, &s, most, bytes)?;
-    Ok(Pass {
-        s,
-        halo,
-        cg,
-        nonzeros,
-        blend,
-        demoted: demote.map_or(0, |d| d.count),
-    })
-}
-
-/// The certified blend of this rank's share to the fitted map of `s`, each rank judging its
-/// own elements; with `most`, given up once the whole mesh holds back more than `most`
-/// elements (`Err` with that count), on every rank at the same round.
-fn blend_share(
-    j: &ShareJob,
-    clock: &mut Clock,
-    s: &SplineSpace,
-    most: Option<usize>,
-    bytes: &mut [u64; 2],
-) -> Result<Result<Blend, usize>, CurveError> {
-    let (comm, local, job, setup) = (j.comm, j.local, j.job, j.setup);
-    let (mesh, options) = (&local.mesh, job.options);
-    let before = comm.bytes_sent();
-    let target_map = clock.run(Stage::Validity, || setup.target_map(job));
-    let blend = clock.run(Stage::Validity, || {
-        let params = options
-            .line_search
-            .blend(options.line_search_mode == LineSearchMode::Global);
-        let (ids_mesh, ids_topo) = setup.entity_mesh(job);
-        let mut blended =
-            Blended::new(mesh, &target_map, s, ids_mesh, ids_topo, Vec::new()).with_geometry(mesh);
-        let share = LocalShare {
+    fn misfit_marks(
+        &mut self,
+        job: &Job,
+        setup: &SplineSetup,
+        space: &SplineSpace,
+        fitted: &[[f64; 3]],
+        targets: &crate::fit::SmoothTargets,
+    ) -> Option<Vec<bool>> {
+        let before = self.comm.bytes_sent();
+        let topo = setup.topo(job);
+        let marks = misfit_marks(self.comm, self.local, topo, space, fitted, targets);
+        self.bytes[0] += self.comm.bytes_sent() - before;
+        marks
+    }
+    fn blend(
+        &mut self,
+        job: &Job,
+        setup: &SplineSetup,
+        space: &SplineSpace,
+        most: Option<usize>,
+    ) -> Result<Result<Blend, usize>, CurveError> {
+        let (comm, local) = (self.comm, self.local);
+        let before = comm.bytes_sent();
+        let judged = LocalShare {
             comm,
-            mine: j.mine,
+            mine: self.mine,
             global: &local.global_element,
             local_of: local
                 .global_element
@@ -834,28 +797,10 @@ fn blend_share(
                 .map(|(i, &g)| (g, i))
                 .collect(),
         };
-        let searched = match most {
-            None => {
-                blend_search_shared(&CpuCertifier, &mut blended, &params, &share).map(Bounded::Done)
-            }
-            Some(most) => {
-                blend_search_shared_at_most(&CpuCertifier, &mut blended, &params, &share, most)
-            }
-        }
-        .map_err(|source| CurveError::Blend {
-            input: job.input.to_owned(),
-            source,
-        });
-        Ok::<_, CurveError>(match agree(comm, searched)? {
-            Bounded::Done(info) => {
-                let factors = std::mem::take(&mut blended.factors);
-                Ok((factors, blended.into_cache(), info))
-            }
-            Bounded::Exceeded(at_least) => Err(at_least),
-        })
-    })?;
-    bytes[1] += comm.bytes_sent() - before;
-    Ok(blend)
+        let blend = agree(comm, blend_within(job, setup, space, most, &judged));
+        self.bytes[1] += comm.bytes_sent() - before;
+        blend
+    }
 }
 
 /// This rank's read, setup, fit, certified blend and sampling (see the module docs), each
@@ -866,7 +811,7 @@ fn run_share(
     options: &CurveOptions,
     order: usize,
     clock: &mut Clock,
-) -> Result<Share, CurveError> {
+) -> Result<RankShare, CurveError> {
     let mut local = clock.run(Stage::Read, || {
         read_share(comm, input, GHOST_DEPTH, &options.mesh, None)
     })?;
@@ -939,15 +884,13 @@ fn run_share(
     };
     let pass = spline_passes(&mut passes, &job, &mut setup, clock)?;
     let [bytes_fit, bytes_validity] = passes.bytes;
-    let Pass {
-        s,
-        halo,
-        cg,
-        nonzeros,
+    let LeastSquares {
+        space: s,
+        fit: RankFit { halo, cg, nonzeros },
         blend,
         demoted,
     } = pass;
-    let Ok((factors, nets, blend)) = blend else {
+    let Ok(((factors, nets), blend)) = blend else {
         unreachable!("the pass kept ran its blend to the end")
     };
     // The certified blend found, for sampling (its nets computed once).
@@ -1021,7 +964,7 @@ fn run_share(
         ),
         (_, seam) => seam,
     };
-    Ok(Share {
+    Ok(RankShare {
         local,
         cg,
         blend,

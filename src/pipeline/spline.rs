@@ -7,8 +7,9 @@
 //! element; or an error, and nothing is sampled.
 //!
 //! Three paths, by geometry and fit:
-//! - least squares ([`fit_and_blend`]): fit once, then the certified blend between the
-//!   straight elevation and the fitted map ([`crate::validity::blend`]);
+//! - least squares ([`least_squares_pass`], shared with the job under mpirun): fit once,
+//!   then the certified blend between the straight elevation and the fitted map
+//!   ([`crate::validity::blend`]);
 //! - `--fit energy` ([`fit_with_energy`]): fit, certified line search, energy; where the initial
 //!   map is not certified, those elements are demoted to Q2 and the fit repeated, and when that
 //!   does not give a certified start the least-squares fit is blended instead;
@@ -16,6 +17,10 @@
 
 use super::clock::Clock;
 use super::misfit;
+use super::share::{
+    Blend, LeastSquares, WholeMesh, blend_within, finish_blend, fit_demoting_misfits,
+    least_squares_pass,
+};
 use super::{CurveError, Geometry, Job};
 use crate::energy::{EnergyError, EnergyInfo, EnergyParams};
 use crate::fit::{
@@ -29,14 +34,12 @@ use crate::spline::seam::{self, Glued, SeamView};
 use crate::spline::{
     ElementRows, KnotSurfaceInfo, KnotWeights, Knots, Q2Reason, SplineSpace, kinks,
 };
-use crate::validity::blend::{
-    BlendInfo, Blended, Bounded, NetCache, blend_search, blend_search_at_most,
-};
+use crate::validity::blend::{Alone, BlendInfo, Blended, NetCache};
 use crate::validity::certificate::{
     MAX_DEMOTION_ROUNDS, certify_mesh, demote_with_rings, uncertified,
 };
 use crate::validity::line_search::{CertifiedStep, acceptance_thresholds, certified_step};
-use crate::validity::{DetBounds, LineSearchInfo, LineSearchMode, ValidityError};
+use crate::validity::{DetBounds, LineSearchInfo, ValidityError};
 use std::collections::HashMap;
 
 /// What the spline space and the fit are built from.
@@ -527,8 +530,9 @@ pub(crate) fn demotes_by_default(held: usize, elements: usize) -> bool {
 ///    (graded knots all but uniform: they do not hold back half as many).
 ///
 /// The uniform pass's blend stops as soon as it holds back more than
-/// [`AUTO_MAX_HELD_BACK`] of the elements ([`blend_search_at_most`]: its count so far is a
-/// lower bound of the final one). Graded knots holding back at most [`AUTO_MIN_GAIN`] of
+/// [`AUTO_MAX_HELD_BACK`] of the elements
+/// ([`crate::validity::blend::blend_search_at_most`]: its count so far is a lower bound of
+/// the final one). Graded knots holding back at most [`AUTO_MIN_GAIN`] of
 /// that bound are then kept at once; otherwise the uniform blend is run to its end and the
 /// rule applied to its count, so the choice and the output are those of the full passes.
 /// The passes and the choice are [`super::passes::spline_passes`], which the job under
@@ -557,7 +561,7 @@ pub(super) fn curve_spline(
     let pass = super::passes::spline_passes(&mut whole, job, &mut setup, clock)?;
     match pass {
         First::Done(outcome) => Ok((setup, outcome)),
-        First::Exceeded { .. } => unreachable!("the pass kept ran to its end"),
+        First::Exceeded(_) => unreachable!("the pass kept ran to its end"),
     }
 }
 
@@ -716,7 +720,10 @@ impl super::passes::Passes for Whole<'_> {
                 (None, Some(_)) => o.invalid_at_full_step,
                 (None, None) => 0,
             }),
-            First::Exceeded { at_least, .. } => Err(*at_least),
+            First::Exceeded(pass) => match pass.blend {
+                Err(at_least) => Err(at_least),
+                Ok(_) => unreachable!("a pass given up has no blend"),
+            },
         }
     }
     fn finish(
@@ -726,12 +733,11 @@ impl super::passes::Passes for Whole<'_> {
         clock: &mut Clock,
         pass: First,
     ) -> Result<First, CurveError> {
-        let First::Exceeded { space, fit, .. } = pass else {
+        let First::Exceeded(pass) = pass else {
             return Ok(pass);
         };
-        let (factors, blend) = clock.run(Stage::Validity, || blend(job, setup, &space))?;
-        let outcome = SplineOutcome::blended(space, factors, fit, blend, 0, None);
-        Ok(First::Done(outcome))
+        let pass = finish_blend(&mut WholeMesh, job, setup, clock, pass)?;
+        Ok(First::least_squares(pass))
     }
     fn reweighted(&mut self, job: &Job, setup: &SplineSetup) -> usize {
         let fit = &setup.fit_params;
@@ -830,13 +836,9 @@ pub(crate) fn output_boundary_sq_sum(
 enum First {
     /// Run to its end.
     Done(SplineOutcome),
-    /// Its blend held back more than the bound, at least `at_least` elements, and was not
-    /// run further: the fitted space and the fit's figures.
-    Exceeded {
-        space: SplineSpace,
-        fit: FitInfo,
-        at_least: usize,
-    },
+    /// A least-squares pass whose blend held back more than the bound (`Err` with the count
+    /// it held back at least) and was not run further: the fitted space and the fit's figures.
+    Exceeded(LeastSquares<FitInfo>),
 }
 
 impl First {
@@ -844,16 +846,32 @@ impl First {
     fn space(&self) -> &SplineSpace {
         match self {
             First::Done(o) => &o.space,
-            First::Exceeded { space, .. } => space,
+            First::Exceeded(pass) => &pass.space,
+        }
+    }
+
+    /// A least-squares pass: run to its end, or given up.
+    fn least_squares(pass: LeastSquares<FitInfo>) -> First {
+        match pass.blend {
+            Ok((factors, blend)) => First::Done(SplineOutcome::blended(
+                pass.space,
+                factors,
+                pass.fit,
+                blend,
+                pass.demoted,
+                None,
+            )),
+            Err(_) => First::Exceeded(pass),
         }
     }
 }
 
 /// One spline pass on `setup`: the space, then the fit and certificate of the job's path;
-/// with `most`, the least-squares path's blend is given up once it holds
-/// back more than `most` elements ([`blend_search_at_most`]): `auto`'s uniform pass then
-/// needs only that count to go on to graded knots, not the blend's remaining rounds. The
-/// elements of `demote` are Q2 from the start (least squares only).
+/// with `most`, the least-squares path's blend is given up once it holds back more than
+/// `most` elements ([`crate::validity::blend::blend_search_at_most`]): `auto`'s uniform pass
+/// then needs only that count to go on to graded knots, not the blend's remaining rounds.
+/// The elements of `demote` are Q2 from the start (least squares only: the pass of
+/// [`least_squares_pass`], which the job under mpirun runs too).
 fn spline_pass_within(
     job: &Job,
     setup: &SplineSetup,
@@ -862,51 +880,19 @@ fn spline_pass_within(
     most: Option<usize>,
     demote: Option<&Demoted>,
 ) -> Result<First, CurveError> {
+    if let (Geometry::SplineFitted, None) = (job.options.geometry, &job.options.energy) {
+        let pass = least_squares_pass(&mut WholeMesh, job, setup, clock, previous, most, demote)?;
+        return Ok(First::least_squares(pass));
+    }
     let marks = demote.map_or(&[][..], |d| &d.marks[..]);
     let space = clock.run(Stage::Spline, || setup.build(job, marks));
     clock.check()?;
-    match (job.options.geometry, &job.options.energy) {
-        (Geometry::SplineFitted, None) => {
-            fit_and_blend(job, setup, clock, space, previous, most, demote)
-        }
-        (Geometry::SplineFitted, Some(params)) => {
+    match &job.options.energy {
+        Some(params) if job.options.geometry == Geometry::SplineFitted => {
             fit_with_energy(job, setup, clock, space, params).map(First::Done)
         }
         _ => certify_initial(job, clock, space).map(First::Done),
     }
-}
-
-/// Least squares: one fit, then the certified blend from the straight elevation to it (valid
-/// for every input whose straight elevation is certified); with `most` and `demote` (the
-/// elements Q2 in `space`, kept Q2 through the misfit rounds), as [`spline_pass_within`].
-fn fit_and_blend(
-    job: &Job,
-    setup: &SplineSetup,
-    clock: &mut Clock,
-    mut space: SplineSpace,
-    previous: Option<&SplineSpace>,
-    most: Option<usize>,
-    demote: Option<&Demoted>,
-) -> Result<First, CurveError> {
-    let mut misfit = Vec::new();
-    let start = previous.map(|p| carry_over(p, &p.control_points, &space));
-    let marks = demote.map_or(&[][..], |d| &d.marks[..]);
-    let (c_star, fit) =
-        fit_demoting_misfits(job, setup, clock, &mut space, marks, &mut misfit, start)?;
-    clock.check()?;
-    space.control_points = c_star;
-    let bounded = clock.run(Stage::Validity, || blend_within(job, setup, &space, most))?;
-    let demoted = demote.map_or(0, |d| d.count);
-    Ok(match bounded {
-        Ok((factors, blend)) => First::Done(SplineOutcome::blended(
-            space, factors, fit, blend, demoted, None,
-        )),
-        Err(at_least) => First::Exceeded {
-            space,
-            fit,
-            at_least,
-        },
-    })
 }
 
 /// `--fit energy`: fit; take the full step when certified, else search towards the initial
@@ -925,8 +911,16 @@ fn fit_with_energy(
     let mut misfit = Vec::new();
     for round in 0.. {
         clock.check()?;
-        let (c_star, info) =
-            fit_demoting_misfits(job, setup, clock, &mut space, &demote, &mut misfit, None)?;
+        let (c_star, info) = fit_demoting_misfits(
+            &mut WholeMesh,
+            job,
+            setup,
+            clock,
+            &mut space,
+            &demote,
+            &mut misfit,
+            None,
+        )?;
         clock.check()?;
         let (thresholds, step) = clock.run(Stage::Validity, || {
             let fraction = job.options.line_search.min_det_fraction;
@@ -1028,7 +1022,7 @@ fn certify_initial(
 
 /// The least-squares fit of the space's control points (planar patches projected back), timed
 /// as [`Stage::Fit`] with its assembly and CG parts.
-fn fit(
+pub(super) fn fit(
     job: &Job,
     setup: &SplineSetup,
     clock: &mut Clock,
@@ -1040,55 +1034,6 @@ fn fit(
     clock.add(Stage::FitAssembly, info.assembly_seconds);
     clock.add(Stage::FitCg, info.solve_seconds);
     Ok((c_star, info))
-}
-
-/// [`fit`], then up to [`misfit::MISFIT_ROUNDS`] times: the spline elements whose boundary
-/// side stays far off its smooth targets ([`misfit::misfit_elements`]) join `misfit` (marks
-/// per element, kept across calls), the space is rebuilt with them (and `demote`) as Q2 and
-/// the fit repeated. Only with smooth targets and in 2D (on the 3D O-grid cylinder the
-/// elements marked next to the sharp rims leave the boundary further off, not closer); the
-/// rounds stop when no element is marked.
-fn fit_demoting_misfits(
-    job: &Job,
-    setup: &SplineSetup,
-    clock: &mut Clock,
-    space: &mut SplineSpace,
-    demote: &[bool],
-    misfit: &mut Vec<bool>,
-    mut start: Option<Vec<[f64; 3]>>,
-) -> Result<(Vec<[f64; 3]>, FitInfo), CurveError> {
-    let mut round = 0;
-    loop {
-        clock.check()?;
-        let (c_star, info) = fit(job, setup, clock, space, start.as_deref())?;
-        let Some(targets) = setup.targets.as_ref() else {
-            return Ok((c_star, info));
-        };
-        if job.topo.dim != 2 || round == misfit::MISFIT_ROUNDS {
-            return Ok((c_star, info));
-        }
-        round += 1;
-        let marks = clock.run(Stage::Spline, || {
-            misfit::misfit_elements(job.mesh, setup.topo(job), space, &c_star, targets)
-        });
-        if !marks.contains(&true) {
-            return Ok((c_star, info));
-        }
-        misfit.resize(job.mesh.n_elements(), false);
-        for (m, x) in misfit.iter_mut().zip(marks) {
-            *m |= x;
-        }
-        let previous = std::mem::replace(
-            space,
-            clock.run(Stage::Spline, || {
-                setup.build_with_misfits(job, demote, misfit)
-            }),
-        );
-        // The next fit starts from this one where the two spaces share control points (most
-        // of the mesh: only the marked elements' entities change): 10-35 % fewer CG
-        // iterations on the real 2D meshes.
-        start = Some(carry_over(&previous, &c_star, space));
-    }
 }
 
 /// Control points of `to` taken from `from_points` (the control points of the space `from`)
@@ -1163,45 +1108,9 @@ fn solve_fit(
 }
 
 /// The certified blend from the straight elevation to the fitted map (`validity::blend`).
-fn blend(
-    job: &Job,
-    setup: &SplineSetup,
-    space: &SplineSpace,
-) -> Result<((Vec<f32>, NetCache), BlendInfo), CurveError> {
-    let done = blend_within(job, setup, space, None)?;
+fn blend(job: &Job, setup: &SplineSetup, space: &SplineSpace) -> Result<Blend, CurveError> {
+    let done = blend_within(job, setup, space, None, &Alone)?;
     Ok(done.expect("an unbounded blend runs to its end"))
-}
-
-/// The factors, nets and figures of [`blend`], or, with `most`, the number of elements held
-/// back (a lower bound) when the search gives up on holding back more than `most`.
-#[allow(clippy::type_complexity)]
-fn blend_within(
-    job: &Job,
-    setup: &SplineSetup,
-    space: &SplineSpace,
-    most: Option<usize>,
-) -> Result<Result<((Vec<f32>, NetCache), BlendInfo), usize>, CurveError> {
-    let target_map = setup.target_map(job);
-    let (ids_mesh, ids_topo) = setup.entity_mesh(job);
-    let mut blended = Blended::new(job.mesh, &target_map, space, ids_mesh, ids_topo, Vec::new())
-        .with_geometry(job.mesh);
-    let global = job.options.line_search_mode == LineSearchMode::Global;
-    let params = job.options.line_search.blend(global);
-    let searched = match most {
-        None => blend_search(job.executor, &mut blended, &params).map(Bounded::Done),
-        Some(most) => blend_search_at_most(job.executor, &mut blended, &params, most),
-    }
-    .map_err(|source| CurveError::Blend {
-        input: job.input.to_owned(),
-        source,
-    })?;
-    Ok(match searched {
-        Bounded::Done(info) => {
-            let factors = std::mem::take(&mut blended.factors);
-            Ok(((factors, blended.into_cache()), info))
-        }
-        Bounded::Exceeded(at_least) => Err(at_least),
-    })
 }
 
 /// Whether the space's current map is not certified valid on each of `elements` (the exact
