@@ -209,7 +209,9 @@ const SIDE_SAMPLES: usize = 5;
 ///
 /// The distance is to the nearest point, not to the point of the same parameters: two maps of
 /// one boundary may slide along it against each other (a spline's parametrisation of a graded
-/// wall does), and only the distance across it is an error of the shape.
+/// wall does), and only the distance across it is an error of the shape. Sides whose element
+/// has the same net in both maps (an element the blend does not hold back, against its own
+/// fit) are counted at distance 0 without projecting.
 pub(crate) fn boundary_sq_sum(
     topo: &Topology,
     map: &dyn BezierElements,
@@ -234,6 +236,11 @@ pub(crate) fn boundary_sq_sum(
             let others: Vec<usize> = (0..dim).filter(|&j| j != k).collect();
             let (m, t) = (map.bezier_net(e), surface.bezier_net(e));
             let per = if dim == 2 { 1 } else { SIDE_SAMPLES };
+            // The same net: every distance is 0 (the projection takes no step there).
+            let points = if dim == 2 { 9 } else { 27 };
+            if m[..points] == t[..points] {
+                return (0.0, SIDE_SAMPLES * per);
+            }
             let mut sum = 0.0;
             for i in 0..SIDE_SAMPLES * per {
                 let mut u = [0.0; 3];
@@ -243,11 +250,22 @@ pub(crate) fn boundary_sq_sum(
                     u[others[1]] = at(i / SIDE_SAMPLES);
                 }
                 let p = DVec3::from(eval_net_with_derivatives(dim, &m, u).0);
-                sum += nearest_on_side(dim, &t, u, &others, p).powi(2);
+                sum += nearest_on_side(dim, &t, u, &others, p).0.powi(2);
             }
             (sum, SIDE_SAMPLES * per)
         })
         .reduce(|| (0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1))
+}
+
+/// The samples [`boundary_sq_sum`] counts over the boundary sides of the elements `e` with
+/// `which(e)`.
+pub(crate) fn boundary_samples(topo: &Topology, which: &dyn Fn(usize) -> bool) -> usize {
+    let per_side = SIDE_SAMPLES.pow(topo.dim as u32 - 1);
+    topo.boundary_facets
+        .iter()
+        .filter(|&&f| which(topo.facet_elements[f as usize][0] as usize))
+        .count()
+        * per_side
 }
 
 /// The root mean square of `n` squared distances summing to `sum` ([`boundary_sq_sum`]); 0
@@ -256,39 +274,66 @@ pub(crate) fn rms(sum: f64, n: usize) -> f64 {
     if n == 0 { 0.0 } else { (sum / n as f64).sqrt() }
 }
 
+/// Gauss–Newton steps of [`nearest_on_side`] at most.
+const PROJECTION_STEPS: usize = 6;
+
+/// [`nearest_on_side`] stops once the residual's component along the side is at most this
+/// share of the residual: the distance it returns is then within `PROJECTION_TOLERANCE`² / 2
+/// (relatively) of the distance at the converged point.
+const PROJECTION_TOLERANCE: f64 = 1e-3;
+
+/// ... or at most this share of the side's size (the norm of its tangents): a map whose
+/// boundary lies on the side (a planar cap, the same fit) only slides along it, and what is
+/// left is rounding.
+const PROJECTION_FLOOR: f64 = 1e-12;
+
 /// Distance of `p` from the side of the net `t` through `u` that varies in the directions
-/// `others` (Gauss–Newton from `u`, the parameters kept in [0, 1]).
+/// `others` (Gauss–Newton from `u`, the parameters kept in [0, 1]), and the Gauss–Newton
+/// steps taken. The steps stop once the residual is across the side (its component along the
+/// side at most [`PROJECTION_TOLERANCE`] of it, or [`PROJECTION_FLOOR`] of the side's size):
+/// a further step would move the point found by that component, and the distance by its
+/// square; where the residual is 0 (`p` on the side at `u`, the same map) no step is taken.
 fn nearest_on_side(
     dim: usize,
     t: &crate::math::BezierNet,
     mut u: [f64; 3],
     others: &[usize],
     p: DVec3,
-) -> f64 {
-    for _ in 0..6 {
+) -> (f64, usize) {
+    for steps in 0..PROJECTION_STEPS {
         let (x, d) = eval_net_with_derivatives(dim, t, u);
         let r = p - DVec3::from(x);
         let j: Vec<DVec3> = others.iter().map(|&o| DVec3::from(d[o])).collect();
+        let g: Vec<f64> = j.iter().map(|j| j.dot(r)).collect();
         let step = if j.len() == 1 {
             let a = j[0].dot(j[0]);
             if a <= 0.0 {
                 break;
             }
-            [j[0].dot(r) / a, 0.0]
+            [g[0] / a, 0.0]
         } else {
             let (a, bb, c) = (j[0].dot(j[0]), j[0].dot(j[1]), j[1].dot(j[1]));
             let det = a * c - bb * bb;
             if det <= 0.0 {
                 break;
             }
-            let (g0, g1) = (j[0].dot(r), j[1].dot(r));
-            [(c * g0 - bb * g1) / det, (a * g1 - bb * g0) / det]
+            [(c * g[0] - bb * g[1]) / det, (a * g[1] - bb * g[0]) / det]
         };
+        // The squared length of r's component along the side (its projection on the
+        // tangents, J (JᵀJ)⁻¹ Jᵀ r) and the side's squared size.
+        let along: f64 = step.iter().zip(&g).map(|(s, g)| s * g).sum();
+        let size: f64 = j.iter().map(|j| j.length_squared()).sum();
+        if along <= PROJECTION_TOLERANCE.powi(2) * r.length_squared()
+            || along <= PROJECTION_FLOOR.powi(2) * size
+        {
+            return (r.length(), steps);
+        }
         for (q, &o) in others.iter().enumerate() {
             u[o] = (u[o] + step[q]).clamp(0.0, 1.0);
         }
     }
-    (p - DVec3::from(eval_net_with_derivatives(dim, t, u).0)).length()
+    let x = eval_net_with_derivatives(dim, t, u).0;
+    ((p - DVec3::from(x)).length(), PROJECTION_STEPS)
 }
 
 /// What the marking needs of one boundary side: its vertices by a key common to every
@@ -402,6 +447,107 @@ mod tests {
                 over: i != 0,
             })
             .collect()
+    }
+
+    /// The nearest point of the paraboloid z = x² + y² / 2 (2D: the parabola y = x² at z = 0)
+    /// to `p` over x, y ∈ [−1, 1], by a grid search zoomed in ten times (independent of the
+    /// Bernstein nets and of Gauss–Newton): its distance.
+    fn nearest_on_paraboloid(dim: usize, p: DVec3) -> f64 {
+        let at = |x: f64, y: f64| {
+            if dim == 2 {
+                DVec3::new(x, x * x, 0.0)
+            } else {
+                DVec3::new(x, y, x * x + y * y / 2.0)
+            }
+        };
+        let (mut c, mut half) = ([0.0, 0.0], 1.0);
+        let n = 40;
+        for _ in 0..12 {
+            let mut best = (f64::INFINITY, c);
+            for i in 0..=n {
+                for j in 0..=if dim == 2 { 0 } else { n } {
+                    let x = (c[0] - half + 2.0 * half * i as f64 / n as f64).clamp(-1.0, 1.0);
+                    let y = (c[1] - half + 2.0 * half * j as f64 / n as f64).clamp(-1.0, 1.0);
+                    let y = if dim == 2 { 0.0 } else { y };
+                    let d = (p - at(x, y)).length();
+                    if d < best.0 {
+                        best = (d, [x, y]);
+                    }
+                }
+            }
+            c = best.1;
+            half /= 8.0;
+        }
+        (p - at(c[0], c[1])).length()
+    }
+
+    /// The quadratic net whose side u_{last} = 0 is that paraboloid (x = 2u₀ − 1, y = 2u₁ − 1),
+    /// the rest of the element above it.
+    fn paraboloid_net(dim: usize) -> crate::math::BezierNet {
+        let mut net = [[0.0; 3]; 27];
+        for (i, point) in net
+            .iter_mut()
+            .enumerate()
+            .take(if dim == 2 { 9 } else { 27 })
+        {
+            let l = [i % 3, (i / 3) % 3, i / 9];
+            let x = l[0] as f64 - 1.0;
+            // The Bézier points of x² over [−1, 1]: 1, −1, 1.
+            let sq = |l: usize| if l == 1 { -1.0 } else { 1.0 };
+            *point = if dim == 2 {
+                [x, sq(l[0]) + l[1] as f64, 0.0]
+            } else {
+                let y = l[1] as f64 - 1.0;
+                [x, y, sq(l[0]) + sq(l[1]) / 2.0 + l[2] as f64]
+            };
+        }
+        net
+    }
+
+    #[test]
+    fn the_projection_stops_early_at_the_nearest_point() {
+        let mut early = 0;
+        for dim in [2, 3] {
+            let t = paraboloid_net(dim);
+            let others: Vec<usize> = (0..dim - 1).collect();
+            // Points off the side at parameters v by h along the normal, projected from u
+            // (slid along the side by `slide`, as a second fit's parametrisation is).
+            for (v, h, slide) in [
+                (0.3, 1e-3, 0.02),
+                (0.7, -2e-2, -0.05),
+                (0.55, 1e-6, 0.001),
+                (0.45, 0.0, 0.03),
+                (0.2, 0.1, 0.1),
+            ] {
+                let mut u = [v, 0.6 * v, 0.0];
+                u[dim - 1] = 0.0;
+                let (x, d) = eval_net_with_derivatives(dim, &t, u);
+                let normal = if dim == 2 {
+                    DVec3::from(d[0]).cross(DVec3::Z)
+                } else {
+                    DVec3::from(d[0]).cross(DVec3::from(d[1]))
+                }
+                .normalize();
+                let p = DVec3::from(x) + h * normal;
+                for &o in &others {
+                    u[o] += slide;
+                }
+                let (distance, steps) = nearest_on_side(dim, &t, u, &others, p);
+                let exact = nearest_on_paraboloid(dim, p);
+                assert!(
+                    (distance - exact).abs() <= 1e-6 * exact + 1e-11,
+                    "{dim}D v {v} h {h} slide {slide}: {distance:e} against {exact:e} ({steps} steps)"
+                );
+                early += usize::from(steps < PROJECTION_STEPS);
+            }
+            // The same point: no step.
+            let mut u = [0.4, 0.3, 0.0];
+            u[dim - 1] = 0.0;
+            let p = DVec3::from(eval_net_with_derivatives(dim, &t, u).0);
+            assert_eq!(nearest_on_side(dim, &t, u, &others, p), (0.0, 0));
+        }
+        // The near and on-side points stop before the last step.
+        assert!(early >= 8, "{early} of 10 stopped early");
     }
 
     #[test]

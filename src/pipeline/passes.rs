@@ -17,8 +17,8 @@
 use super::clock::Clock;
 use super::spline::{
     Demoted, SplineSetup, auto_graded_is_decisive, auto_graded_keeps_the_boundary,
-    auto_holds_back_too_many, demotes_by_default, demotion_keeps_the_boundary,
-    extraordinary_refit_is_kept, extraordinary_refit_most,
+    auto_holds_back_too_many, demotes_by_default, demotion_is_refused_beforehand,
+    demotion_keeps_the_boundary, extraordinary_refit_is_kept, extraordinary_refit_most,
 };
 use super::{CurveError, Job};
 use crate::spline::{AUTO_GRADED_SHARE, AUTO_MIN_LOG_RATIO, KnotIntervals, KnotParams, Knots};
@@ -112,6 +112,23 @@ pub(crate) trait Passes {
         pass: &Self::Pass,
         reference: &Self::Pass,
     ) -> f64;
+    /// RMS distance of the target map's boundary from `reference`'s fitted boundary over the
+    /// boundary sides of `demote`'s elements, the squares summed over them and divided by the
+    /// whole mesh's boundary samples, relative to the whole mesh's bounding-box diagonal and
+    /// timed as the validity stage: the part of a demotion redo's
+    /// [`Passes::output_boundary_shift`] that those sides make where they stay on the target
+    /// map ([`demotion_is_refused_beforehand`]). `None` where it is not measured: the redo
+    /// then runs and is judged on its output.
+    fn demoted_boundary_shift(
+        &mut self,
+        _job: &Job,
+        _setup: &SplineSetup,
+        _clock: &mut Clock,
+        _reference: &Self::Pass,
+        _demote: &Demoted,
+    ) -> Option<f64> {
+        None
+    }
     /// Whether the second pass starts from the first one's fit.
     fn warm_start(&self) -> bool {
         true
@@ -225,8 +242,10 @@ fn weighted_passes<P: Passes>(
 /// pass as it was: its output is unchanged). Run by default (without the option), the redone
 /// pass is kept only where its output boundary also stays as close to `kept`'s fitted
 /// boundary as `kept`'s own output ([`Passes::output_boundary_shift`],
-/// [`demotion_keeps_the_boundary`]). Every process decides on the whole mesh's counts and
-/// distances, so alike and as the serial job.
+/// [`demotion_keeps_the_boundary`]), and the serial job does not run it where the demoted
+/// elements' sides alone would be refused ([`Passes::demoted_boundary_shift`],
+/// [`demotion_is_refused_beforehand`]; under mpirun it is run and refused). Every process
+/// decides on the whole mesh's counts and distances, so alike and as the serial job.
 ///
 /// Why: the blend's straight end is certified, but it holds back every element around an
 /// area where the spline map cannot be valid whatever the fit (its initial map is
@@ -269,6 +288,16 @@ fn demote_before_fit_if_fewer<P: Passes>(
     let Some(demote) = p.demotion(&job, setup, clock) else {
         return Ok(kept);
     };
+    // By default the redo is judged against the pass kept's own output, and not run where its
+    // demoted sides alone already move the boundary further.
+    let guard = (!options.demote_uncertified)
+        .then(|| p.output_boundary_shift(&job, setup, clock, &kept, &kept));
+    if let Some(before) = guard
+        && let Some(demoted) = p.demoted_boundary_shift(&job, setup, clock, &kept, &demote)
+        && demotion_is_refused_beforehand(demoted, before)
+    {
+        return Ok(kept);
+    }
     // Given up once it holds back as many as the pass kept: that one stays.
     let redone = p.run(
         &job,
@@ -282,10 +311,9 @@ fn demote_before_fit_if_fewer<P: Passes>(
     if !fewer {
         return Ok(kept);
     }
-    if options.demote_uncertified {
+    let Some(before) = guard else {
         return Ok(redone);
-    }
-    let before = p.output_boundary_shift(&job, setup, clock, &kept, &kept);
+    };
     let after = p.output_boundary_shift(&job, setup, clock, &redone, &kept);
     Ok(if demotion_keeps_the_boundary(after, before) {
         redone
