@@ -1032,16 +1032,18 @@ fn curve_held_back(input: &Path, out: &Path, args: &[&str]) -> (serde_json::Valu
 /// follow that jump: clamped, it distorted the thin cells on its fine side and the blend held
 /// back every element of the four outer rings (2D: 1,104 of 6,144, 18.0 %; with three hex
 /// layers `auto` fell back to uniform knots and held back all 18,432). The surface is split
-/// instead (the two rings on its sides Q2): at most 12 % held back in 2D, graded knots and at
-/// most half held back with three layers, and Gmsh finds every element of the written files
-/// valid (its Jacobian ratio, `scripts/jacobian_ratio.py`).
+/// instead (the two rings on its sides Q2): at most 13 % held back in 2D (12.8 %: 11.1 %
+/// before the scaled Jacobian kept 0.85 × the straight mesh's, when the min scaled Jacobian
+/// fell from 0.739 to 0.604), graded knots and at most half held back with three layers, and
+/// Gmsh finds every element of the written files valid (its Jacobian ratio,
+/// `scripts/jacobian_ratio.py`).
 #[test]
 fn a_far_field_cell_beyond_the_knot_ratio_cap_is_split_off() {
     if !common::have_gmsh("the generated O-grids' validity was not checked by Gmsh") {
         return;
     }
     let dir = common::test_dir();
-    for (layers, most, q2) in [(0, 0.12, 256), (3, 0.5, 3 * 256)] {
+    for (layers, most, q2) in [(0, 0.13, 256), (3, 0.5, 3 * 256)] {
         let input = dir.join(format!("ogrid_fine_{layers}.msh"));
         common::run_ok(
             common::polyspline()
