@@ -1014,16 +1014,20 @@ pub(crate) fn weights_from_ratios(
 mod tests {
     use super::*;
 
-    /// The runs joined by the workers equal the serial join, empty runs included.
-    #[test]
-    fn concat_matches_the_serial_join() {
-        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
-        let mut next = move |m: u64| {
+    /// A xorshift generator: `next(m)` is a pseudo-random number below `m`.
+    fn xorshift(mut seed: u64) -> impl FnMut(u64) -> u64 {
+        move |m| {
             seed ^= seed << 13;
             seed ^= seed >> 7;
             seed ^= seed << 17;
             seed % m
-        };
+        }
+    }
+
+    /// The runs joined by the workers equal the serial join, empty runs included.
+    #[test]
+    fn concat_matches_the_serial_join() {
+        let mut next = xorshift(0x9e37_79b9_7f4a_7c15);
         let parts: Vec<Vec<u64>> = (0..200u64)
             .map(|k| (0..next(3) * next(3000)).map(|i| (k << 32) | i).collect())
             .collect();
@@ -1095,13 +1099,7 @@ mod tests {
     #[test]
     fn signed_union_find_matches_relabelling() {
         let n = 300usize;
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut next = move |m: u64| {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed % m
-        };
+        let mut next = xorshift(0x2545_f491_4f6c_dd1d);
         let values: Vec<Option<f64>> = (0..n)
             .map(|_| (next(4) != 0).then(|| next(2001) as f64 / 1000.0 - 1.0))
             .collect();
