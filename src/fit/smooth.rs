@@ -338,6 +338,8 @@ impl SmoothTargets {
         // A model's scale is its source's boundary edge length (every model so far is a
         // boundary vertex's own or inherited from its source).
         let mut scale: Vec<f64> = (0..nv)
+            .into_par_iter()
+            .with_min_len(1024)
             .map(|v| match (models[v], inherited.scale.get(v)) {
                 (None, _) => f64::INFINITY,
                 (Some(_), Some(&l)) if !l.is_nan() => l,
@@ -641,7 +643,8 @@ fn one_ring_models(
 ) -> (Vec<Option<VertexModel>>, Vec<f64>) {
     let nv = mesh.n_vertices();
     let cos_max = params.feature_angle_deg.to_radians().cos();
-    let mut models: Vec<Option<VertexModel>> = vec![None; nv];
+    // Made by the workers, not written out on the calling thread (`ell` is calloc's zeros).
+    let mut models: Vec<Option<VertexModel>> = (0..nv).into_par_iter().map(|_| None).collect();
     let mut ell = vec![0.0; nv];
     let mut non_manifold = vec![false; nv];
     for &v in &topo.non_manifold.vertices {
@@ -725,7 +728,6 @@ fn two_ring_models(
     seam: &Seam,
 ) -> Vec<Option<HigherModel>> {
     let nv = mesh.n_vertices();
-    let mut higher: Vec<Option<HigherModel>> = vec![None; nv];
     let models_ref = &*models;
     let refined: Vec<Option<(VertexModel, HigherModel)>> = (0..nv)
         .into_par_iter()
@@ -759,13 +761,18 @@ fn two_ring_models(
             },
         )
         .collect();
-    for (v, r) in refined.into_iter().enumerate() {
-        if let Some((m, h)) = r {
-            models[v] = Some(m);
-            higher[v] = Some(h);
-        }
-    }
-    higher
+    // The refined models replace the first pass's and the height functions are kept, by the
+    // workers.
+    models
+        .par_iter_mut()
+        .zip(refined)
+        .with_min_len(1024)
+        .map(|(model, r)| {
+            let (m, h) = r?;
+            *model = Some(m);
+            Some(h)
+        })
+        .collect()
 }
 
 /// The walls' continuations across periodic seams ([`SmoothTargets::build_shared`]).
@@ -1020,8 +1027,9 @@ fn coarse_normals(
         return Vec::new();
     }
     let cos_turn = arcs::COARSE_TURN_DEG.to_radians().cos();
-    let mut any = false;
     let out: Vec<Option<ArcVertex>> = (0..mesh.n_vertices())
+        .into_par_iter()
+        .with_min_len(1024)
         .map(|v| {
             let n = models[v]?.normal;
             let coarse = fan[v].iter().any(|&f| {
@@ -1030,7 +1038,6 @@ fn coarse_normals(
                         .is_some_and(|m| DVec3::from(m.normal).dot(n.into()).abs() < cos_turn)
                 })
             });
-            any |= coarse;
             // At a coarse regular vertex the grid lines' circles give the normal far more
             // accurately than the fan (the arcs need it to a fraction of a degree).
             let mut lines = [None; 2];
@@ -1067,6 +1074,7 @@ fn coarse_normals(
             })
         })
         .collect();
+    let any = out.par_iter().any(|a| a.is_some_and(|a| a.coarse));
     if any { out } else { Vec::new() }
 }
 

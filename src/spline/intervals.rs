@@ -481,59 +481,90 @@ fn ties(topo: &Topology, spline: &[bool], corners: Corners) -> Vec<Tie> {
     let second = |f: u32, e: usize| corners.elements(topo, f as usize).0[0] != e as u32;
     let dim = topo.dim;
     let sides = topo.sides();
-    (0..topo.n_elements)
-        .into_par_iter()
-        .filter(|&e| spline[e])
-        .flat_map_iter(|e| {
-            let mut out = Vec::with_capacity(sides * (sides - 2));
-            for side in 0..sides {
-                let f = topo.element_facet(e, side);
-                for other in 0..sides {
-                    if other / 2 == side / 2 {
-                        continue;
-                    }
-                    let n = topo.neighbor(e, other);
-                    if n == NONE || n as usize == e {
-                        continue;
-                    }
-                    let g = topo.element_facet(e, other);
-                    // The vertices f and g share (an edge in 3D, a vertex in 2D).
-                    let fv = topo.facet_vertices(f as usize);
-                    let (mut shared, mut n_shared) = ([0u32; 2], 0);
-                    for &v in topo.facet_vertices(g as usize) {
-                        if fv.contains(&v) {
-                            if n_shared < 2 {
-                                shared[n_shared] = v;
-                            }
-                            n_shared += 1;
+    let ties_of = |e: usize, out: &mut Vec<Tie>| {
+        for side in 0..sides {
+            let f = topo.element_facet(e, side);
+            for other in 0..sides {
+                if other / 2 == side / 2 {
+                    continue;
+                }
+                let n = topo.neighbor(e, other);
+                if n == NONE || n as usize == e {
+                    continue;
+                }
+                let g = topo.element_facet(e, other);
+                // The vertices f and g share (an edge in 3D, a vertex in 2D).
+                let fv = topo.facet_vertices(f as usize);
+                let (mut shared, mut n_shared) = ([0u32; 2], 0);
+                for &v in topo.facet_vertices(g as usize) {
+                    if fv.contains(&v) {
+                        if n_shared < 2 {
+                            shared[n_shared] = v;
                         }
-                    }
-                    if n_shared != dim - 1 {
-                        continue;
-                    }
-                    let common = &shared[..n_shared];
-                    let mut found = None;
-                    for s2 in 0..sides {
-                        let f2 = topo.element_facet(n as usize, s2);
-                        if f2 == g {
-                            continue;
-                        }
-                        let v2 = topo.facet_vertices(f2 as usize);
-                        if common.iter().all(|v| v2.contains(v)) {
-                            if found.is_some() {
-                                found = None;
-                                break;
-                            }
-                            found = Some(f2);
-                        }
-                    }
-                    if let Some(f2) = found {
-                        let opposite = second(f, e) ^ second(f2, n as usize);
-                        out.push(Tie::new(e as u32, n, f, f2, opposite));
+                        n_shared += 1;
                     }
                 }
+                if n_shared != dim - 1 {
+                    continue;
+                }
+                let common = &shared[..n_shared];
+                let mut found = None;
+                for s2 in 0..sides {
+                    let f2 = topo.element_facet(n as usize, s2);
+                    if f2 == g {
+                        continue;
+                    }
+                    let v2 = topo.facet_vertices(f2 as usize);
+                    if common.iter().all(|v| v2.contains(v)) {
+                        if found.is_some() {
+                            found = None;
+                            break;
+                        }
+                        found = Some(f2);
+                    }
+                }
+                if let Some(f2) = found {
+                    let opposite = second(f, e) ^ second(f2, n as usize);
+                    out.push(Tie::new(e as u32, n, f, f2, opposite));
+                }
+            }
+        }
+    };
+    // Runs of elements give their ties in parallel, and the runs' lists are joined by the
+    // workers too (rayon's collect of a flat map appends them on the calling thread).
+    let ne = topo.n_elements;
+    let parts: Vec<Vec<Tie>> = (0..ne.div_ceil(TIE_RUN))
+        .into_par_iter()
+        .map(|k| {
+            let mut out = Vec::new();
+            for e in (k * TIE_RUN..ne.min((k + 1) * TIE_RUN)).filter(|&e| spline[e]) {
+                ties_of(e, &mut out);
             }
             out
+        })
+        .collect();
+    concat(&parts)
+}
+
+/// Elements per run of [`ties`].
+const TIE_RUN: usize = 2048;
+
+/// `parts` one after the other, written by the workers: each slot's part is found by a
+/// binary search of the parts' starts (rayon hands each worker a contiguous range, so the
+/// parts are read in order).
+pub(crate) fn concat<T: Copy + Send + Sync>(parts: &[Vec<T>]) -> Vec<T> {
+    let mut starts = Vec::with_capacity(parts.len() + 1);
+    starts.push(0usize);
+    for p in parts {
+        starts.push(starts[starts.len() - 1] + p.len());
+    }
+    let total = starts[parts.len()];
+    (0..total)
+        .into_par_iter()
+        .with_min_len(1 << 12)
+        .map(|i| {
+            let k = starts.partition_point(|&s| s <= i) - 1;
+            parts[k][i - starts[k]]
         })
         .collect()
 }
@@ -983,6 +1014,67 @@ pub(crate) fn weights_from_ratios(
 mod tests {
     use super::*;
 
+    /// A xorshift generator: `next(m)` is a pseudo-random number below `m`.
+    fn xorshift(mut seed: u64) -> impl FnMut(u64) -> u64 {
+        move |m| {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            seed % m
+        }
+    }
+
+    /// The runs joined by the workers equal the serial join, empty runs included.
+    #[test]
+    fn concat_matches_the_serial_join() {
+        let mut next = xorshift(0x9e37_79b9_7f4a_7c15);
+        let parts: Vec<Vec<u64>> = (0..200u64)
+            .map(|k| (0..next(3) * next(3000)).map(|i| (k << 32) | i).collect())
+            .collect();
+        assert!(parts.iter().any(Vec::is_empty));
+        assert_eq!(concat(&parts), parts.concat());
+        assert!(concat::<u64>(&[]).is_empty());
+    }
+
+    /// On a structured 14³ grid (more elements than one run of [`ties`]) where a random half
+    /// of the elements are spline elements, the ties are, in element order, side order and
+    /// neighbour order, one per spline element, side and face neighbour across a face not
+    /// parallel to that side, continued onto the neighbour's facet on the same side.
+    #[test]
+    fn ties_follow_the_elements_of_a_grid() {
+        let xs: Vec<f64> = (0..=14).map(f64::from).collect();
+        let mesh = crate::mesh::generate::grid_3d(&xs, &xs, &xs);
+        let topo = Topology::build(&mesh);
+        let ne = topo.n_elements;
+        assert!(ne > TIE_RUN);
+        let spline: Vec<bool> = (0..ne).map(|e| (e * 2_654_435_761) % 7 < 4).collect();
+        let corners = Corners {
+            mesh: &mesh,
+            unglued: None,
+            global: None,
+        };
+        let got: Vec<(u32, u32, u32, u32)> = ties(&topo, &spline, corners)
+            .iter()
+            .map(|t| (t.element, t.neighbour, t.f, t.f2()))
+            .collect();
+        let mut want = Vec::new();
+        for e in (0..ne).filter(|&e| spline[e]) {
+            for side in 0..6 {
+                for other in (0..6).filter(|o| o / 2 != side / 2) {
+                    let n = topo.neighbor(e, other);
+                    if n != NONE {
+                        let (f, f2) = (
+                            topo.element_facet(e, side),
+                            topo.element_facet(n as usize, side),
+                        );
+                        want.push((e as u32, n, f, f2));
+                    }
+                }
+            }
+        }
+        assert_eq!(got, want);
+    }
+
     #[test]
     fn signed_union_find_detects_odd_cycles() {
         let mut u = SignedUnionFind::new(4);
@@ -1007,13 +1099,7 @@ mod tests {
     #[test]
     fn signed_union_find_matches_relabelling() {
         let n = 300usize;
-        let mut seed = 0x2545_f491_4f6c_dd1du64;
-        let mut next = move |m: u64| {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            seed % m
-        };
+        let mut next = xorshift(0x2545_f491_4f6c_dd1d);
         let values: Vec<Option<f64>> = (0..n)
             .map(|_| (next(4) != 0).then(|| next(2001) as f64 / 1000.0 - 1.0))
             .collect();
