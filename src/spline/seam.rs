@@ -255,7 +255,7 @@ pub struct SeamView {
     /// Every vertex of a seam facet paired with each vertex of the other side on the same
     /// glued vertex: (v, w, t) with t the rigid map carrying w's side onto v's (x_v = t x_w),
     /// in both directions, sorted. The interior inheritance of the smooth targets walks
-    /// across the seam along them ([`crate::fit::SmoothTargets::build_shared`]).
+    /// across the seam along them (`fit::SmoothTargets::build_shared`).
     pub seam_links: Vec<(u32, u32, Rigid)>,
 }
 
