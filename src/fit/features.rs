@@ -18,9 +18,9 @@
 //!   coplanar vertices), so every step of the line search keeps them there.
 
 use super::smooth::{
-    Height, HigherModel, InheritShare, Paths, RingScratch, Source, VertexModel, adjacency,
-    dedup_points, fan_across, fan_model, fit_parabola, nearest_shared, quad_fan_model,
-    refine_model, refine_patch_model, seam_adjacency, two_ring_from,
+    Height, HigherModel, InheritShare, Paths, RingScratch, SeamLink, SeamSides, Source,
+    VertexModel, adjacency, dedup_points, fan_across, fan_model, fit_parabola, nearest_shared,
+    quad_fan_model, refine_model, refine_patch_model, seam_adjacency, two_ring_from,
 };
 use crate::math::linalg::DVec3;
 use crate::math::reference::HEX_VERTEX_PARAMS;
@@ -94,7 +94,7 @@ impl FeatureModels {
         fan_all: &[Vec<u32>],
         smooth: &[Option<VertexModel>],
         share: Option<&dyn InheritShare>,
-        (partners, links): (&[Option<(u32, Rigid)>], &[(u32, u32, Rigid)]),
+        (partners, links): SeamSides,
     ) -> FeatureModels {
         let mut out = FeatureModels {
             edge_mask: features.edge_mask.clone(),
@@ -343,7 +343,7 @@ impl FeatureModels {
         features: &Features,
         along: &HashMap<u32, Vec<u32>>,
         decay: f64,
-        (share, links): (Option<&dyn InheritShare>, &[(u32, u32, Rigid)]),
+        (share, links): (Option<&dyn InheritShare>, &[SeamLink]),
     ) {
         let x = |v: u32| DVec3::from(mesh.coords[v as usize]);
         let mut adj: Vec<[u32; 2]> = Vec::new();

@@ -516,10 +516,7 @@ pub fn smooth_targets_shared(
     topo: &Topology,
     params: &FitParams,
     share: Option<&dyn InheritShare>,
-    (partners, links): (
-        &[Option<(u32, crate::mesh::periodic::Rigid)>],
-        &[(u32, u32, crate::mesh::periodic::Rigid)],
-    ),
+    (partners, links): smooth::SeamSides,
 ) -> Option<SmoothTargets> {
     match params.targets {
         FitTargets::Chords => None,

@@ -114,6 +114,14 @@ use rayon::prelude::*;
 use std::cmp::Reverse;
 use std::collections::{BinaryHeap, HashMap};
 
+/// A seam link ([`crate::spline::seam::SeamView::seam_links`]): a vertex, the other side's
+/// vertex on the same glued vertex, and the map carrying that side onto the vertex's.
+pub type SeamLink = (u32, u32, Rigid);
+
+/// The walls' partners across periodic seams and the seams' links
+/// ([`SmoothTargets::build_shared`]'s `partners` and `links`).
+pub type SeamSides<'a> = (&'a [Option<(u32, Rigid)>], &'a [SeamLink]);
+
 /// Parameters of the smooth-boundary reconstruction.
 #[deny(missing_docs)]
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
@@ -1350,7 +1358,7 @@ fn inherit_interior(
     in_plane_3d: &dyn Fn(usize) -> bool,
     models: &mut [Option<VertexModel>],
     higher: &mut [Option<HigherModel>],
-    (share, links): (Option<&dyn InheritShare>, &[(u32, u32, Rigid)]),
+    (share, links): (Option<&dyn InheritShare>, &[SeamLink]),
 ) -> Inherited {
     let nv = mesh.n_vertices();
     let nearest = {
