@@ -21,6 +21,10 @@
 //! | quality | `quality_stage` | sampled quality and boundary distances |
 //! | write | [`crate::io::high_order::prepare_high_order`] | the output file |
 //!
+//! From sample on, the stages are the job's tail (`tail::finish_job`: sample, quality, the
+//! report from the outcomes), one sequence for the serial job (`WholeJob`) and a rank under
+//! mpirun over a `tail::JobShare`.
+//!
 //! Invariant: nothing is written unless every element is certified valid. With
 //! [`Method::Elastic`] the spline is fitted and sampled as usual, then only its boundary nodes
 //! are kept: the straight order-P mesh is moved onto them by linear elasticity
@@ -34,6 +38,7 @@ pub(crate) mod passes;
 mod report;
 pub(crate) mod share;
 pub(crate) mod spline;
+pub(crate) mod tail;
 
 use crate::elastic::{ElasticError, ElasticInfo, ElasticParams, elastic_analogy};
 use crate::energy::EnergyError;
@@ -271,55 +276,82 @@ fn curve_mesh(
         topo: &topo,
         executor: executor.as_ref(),
     };
-    let mut spline = match options.geometry {
+    let spline = match options.geometry {
         Geometry::Straight => None,
         _ => Some(spline::curve_spline(&job, &mut clock, &periodic)?),
     };
-    clock.check()?;
-    let mut ho = clock.run(Stage::Sample, || {
-        sample_stage(&job, spline.as_mut(), order, elastic.is_none())
-    })?;
-    clock.check()?;
-    let snapped = options.snap_boundary.then(|| {
-        let depth = options.line_search.certificate_depth;
-        clock.run(Stage::Snap, || snap_boundary(&mesh, &topo, &mut ho, depth))
-    });
-    let elastic = match elastic {
-        Some(params) => {
-            let (moved, info, bound) = elastic_stage(&job, &mut clock, &params, &ho, order)?;
-            ho = moved;
-            Some((info, bound))
-        }
-        None => None,
-    };
-    let seams = match periodic.is_empty() {
-        true => None,
-        false => Some(clock.run(Stage::Periodic, || {
-            periodic_stage(&job, &periodic, &mut ho, order)
-        })?),
-    };
-    clock.check()?;
-    let (min_scaled_jacobian, deviation) =
-        clock.run(Stage::Quality, || quality_stage(&job, &ho))?;
-    clock.set(Stage::Total, start.elapsed().as_secs_f64());
-    let done = Finished {
-        ho,
-        snapped,
+    let mut whole = WholeJob {
+        job: &job,
+        spline,
+        order,
         elastic,
-        input_min_scaled_jacobian: mesh.min_scaled_jacobian().map_or(f64::NAN, |m| m.0),
-        min_scaled_jacobian,
-        deviation,
-        periodic: seams.map(|info| (periodic, info)),
+        periodic,
+        done: Finished::default(),
     };
-    let gpu_traffic = clock.gpu_traffic();
-    let mut report = CurveReport::assemble(&job, spline.as_ref(), &done, clock.into_timings());
-    report.gpu_traffic = gpu_traffic;
+    let (ho, report) = tail::finish_job(&mut whole, input, options, clock, start)?;
     Ok(Curved {
         mesh,
         topo,
-        ho: done.ho,
+        ho,
         report,
     })
+}
+
+/// The serial job's share of the tail ([`tail::JobShare`]): every element is its own.
+struct WholeJob<'a> {
+    job: &'a Job<'a>,
+    spline: Option<(SplineSetup, SplineOutcome)>,
+    order: usize,
+    /// The elastic analogy's parameters with `--method elastic`.
+    elastic: Option<ElasticParams>,
+    /// The periodic pairs resolved on the input.
+    periodic: Vec<crate::mesh::periodic::PeriodicPair>,
+    /// The outcomes of the stages after sampling.
+    done: Finished,
+}
+
+impl tail::JobShare for WholeJob<'_> {
+    type Output = HighOrderMesh;
+    fn sample(&mut self, clock: &mut Clock) -> Result<HighOrderMesh, CurveError> {
+        let (job, order) = (self.job, self.order);
+        let mut ho = clock.run(Stage::Sample, || {
+            sample_stage(job, self.spline.as_mut(), order, self.elastic.is_none())
+        })?;
+        clock.check()?;
+        let options = job.options;
+        self.done.snapped = options.snap_boundary.then(|| {
+            let depth = options.line_search.certificate_depth;
+            clock.run(Stage::Snap, || {
+                snap_boundary(job.mesh, job.topo, &mut ho, depth)
+            })
+        });
+        if let Some(params) = &self.elastic {
+            let (moved, info, bound) = elastic_stage(job, clock, params, &ho, order)?;
+            ho = moved;
+            self.done.elastic = Some((info, bound));
+        }
+        if !self.periodic.is_empty() {
+            let info = clock.run(Stage::Periodic, || {
+                periodic_stage(job, &self.periodic, &mut ho, order)
+            })?;
+            self.done.periodic = Some((std::mem::take(&mut self.periodic), info));
+        }
+        Ok(ho)
+    }
+    fn quality(
+        &mut self,
+        ho: &HighOrderMesh,
+    ) -> Result<(f64, crate::deviation::BoundaryDeviation), CurveError> {
+        quality_stage(self.job, ho)
+    }
+    fn outcomes(
+        &mut self,
+        ho: &HighOrderMesh,
+        quality: (f64, crate::deviation::BoundaryDeviation),
+        _clock: &Clock,
+    ) -> report::Outcomes {
+        CurveReport::outcomes(self.job, self.spline.as_ref(), ho, &self.done, quality)
+    }
 }
 
 /// The options no stage can run with are refused before reading: the output order and the

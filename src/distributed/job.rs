@@ -30,8 +30,9 @@
 //! seams; across rotation seams the CG couples the coordinates, [`super::cg::pcg_coupled`])
 //! and the image sides' nodes made the transform of their masters'
 //! ([`super::periodic`]),
-//! check them and route them back to their file runs for the collective write; no rank reads
-//! or holds the whole mesh.
+//! check them and route them back to their file runs for the collective write (the serial
+//! job's tail, `pipeline::tail::finish_job`: sample, quality, outcomes, over this rank's
+//! `JobShare`, `RankJob`); no rank reads or holds the whole mesh.
 //! Invariant: the result is the serial run's (the same knots too) up to the order of the
 //! sums: the CG applies the serial preconditioner on the serial aggregates
 //! ([`super::blocks`]), so it takes the serial iterates and stops where the serial solve
@@ -51,6 +52,7 @@ use crate::pipeline::share::{
     Blend, LeastSquares, Share, blend_within, finish_blend, least_squares_pass,
 };
 use crate::pipeline::spline::{self, Demoted, SplineSetup};
+use crate::pipeline::tail::{JobShare, finish_job};
 use crate::pipeline::{
     CurveError, CurveOptions, CurveReport, Geometry, Job, Method, Outcomes, RankFigures,
     SpaceCounts, SplineFigures,
@@ -179,38 +181,37 @@ fn agree<T>(comm: &dyn Comm, r: Result<T, CurveError>) -> Result<T, CurveError> 
     })
 }
 
-/// What a rank has after its share of the setup, fit and blend.
-struct RankShare {
-    local: LocalMesh,
-    cg: crate::solve::CgInfo,
+/// A rank's share of the job's tail ([`JobShare`]): its own elements sampled in global node
+/// tags, the quality reduced and its outcomes summed over the ranks.
+struct RankJob<'a> {
+    comm: &'a dyn Comm,
+    local: &'a LocalMesh,
+    job: &'a Job<'a>,
+    setup: &'a SplineSetup,
+    order: usize,
+    /// The pass kept: its space, its fit's figures and its certified blend's factors and nets
+    /// (taken when sampled).
+    space: &'a SplineSpace,
+    fit: &'a RankFit,
+    cache: Option<(Vec<f32>, crate::validity::blend::NetCache)>,
     blend: crate::validity::blend::BlendInfo,
     /// Elements of the whole mesh demoted to Q2 before the fit (`--demote-uncertified`).
     demoted: usize,
-    /// This rank's share of the sampled output, in global node tags.
-    output: RankOutput,
-    /// Own control points (counted once over the ranks), spline, Q2 and kink elements.
-    counts: [usize; 4],
-    knot_intervals: KnotIntervals,
-    /// Spline passes run to choose the knots (`auto`: 1 or 2).
-    knot_passes: usize,
-    /// The extraordinary midpoint weight of the fit kept.
-    extraordinary_midpoint: f64,
-    /// The whole mesh's knot surfaces, with graded knots.
-    knot_surfaces: Option<crate::spline::KnotSurfaceInfo>,
+    /// The input's smallest scaled Jacobian over the ranks.
     input_msj: f64,
-    halo: Halo,
-    /// Stored entries of the rank's share of K and of the whole K.
-    nonzeros: [usize; 2],
-    bytes_fit: u64,
-    bytes_validity: u64,
-    bytes_sample: u64,
+    /// The periodic pairs (`--periodic`), resolved over the whole mesh.
+    pairs: &'a [crate::mesh::periodic::PeriodicPair],
+    /// Bytes sent by the fits, the blends and the sampling.
+    bytes: [u64; 3],
     /// The whole mesh's feature summary (deviations absolute), when any rank found features.
     features: Option<crate::mesh::features::FeatureReport>,
-    /// The periodic pairs (`--periodic`), resolved over the whole mesh.
-    pairs: Vec<crate::mesh::periodic::PeriodicPair>,
     /// `c1` when the seams are glued in the spline space (on every rank alike), else `c0`
     /// with why ([`SplineSetup::seam_continuity`]).
     seam: (&'static str, Option<String>),
+    /// Own control points (counted once over the ranks), spline, Q2 and kink elements, and
+    /// the output's nodes and boundary facets, summed over the ranks.
+    counts: [usize; 4],
+    sizes: [u64; 2],
 }
 
 /// The topology of a ghosted sub-mesh, checked curvable where the serial check would see the
@@ -803,15 +804,16 @@ impl Share for RankPasses<'_> {
     }
 }
 
-/// This rank's read, setup, fit, certified blend and sampling (see the module docs), each
-/// stage on `clock`.
+/// This rank's read, setup, fit, certified blend, then the job's tail on its share (sampling,
+/// quality and the report; see the module docs), each stage on `clock`; `start` is the job's.
 fn run_share(
     comm: &dyn Comm,
     input: &Path,
     options: &CurveOptions,
     order: usize,
-    clock: &mut Clock,
-) -> Result<RankShare, CurveError> {
+    mut clock: Clock,
+    start: Instant,
+) -> Result<Finished, CurveError> {
     let mut local = clock.run(Stage::Read, || {
         read_share(comm, input, GHOST_DEPTH, &options.mesh, None)
     })?;
@@ -882,109 +884,235 @@ fn run_share(
         bytes: [0; 2],
         warm_start: options.periodic.pairs.is_empty(),
     };
-    let pass = spline_passes(&mut passes, &job, &mut setup, clock)?;
+    let pass = spline_passes(&mut passes, &job, &mut setup, &mut clock)?;
     let [bytes_fit, bytes_validity] = passes.bytes;
     let LeastSquares {
-        space: s,
-        fit: RankFit { halo, cg, nonzeros },
+        space,
+        fit,
         blend,
         demoted,
     } = pass;
-    let Ok(((factors, nets), blend)) = blend else {
+    let Ok((cache, blend)) = blend else {
         unreachable!("the pass kept ran its blend to the end")
     };
-    // The certified blend found, for sampling (its nets computed once).
-    let target_map = setup.target_map(&job);
-    let (ids_mesh, ids_topo) = setup.entity_mesh(&job);
-    let blended = Blended::with_cache(mesh, &target_map, &s, ids_mesh, ids_topo, factors, nets)
-        .with_geometry(mesh);
-    let bytes_before = comm.bytes_sent();
-    let (output, features) = clock.run(Stage::Sample, || {
-        let seams = super::periodic::Seams {
-            pairs: &pairs,
-            input,
-            depth: options.line_search.certificate_depth,
-            boundary_rows: setup.boundary_rows(),
-        };
-        let mut output = sample_share(
-            comm,
-            &local,
-            &topo,
-            &blended,
-            order,
-            setup.features.as_ref(),
-            Some(&seams),
-        )?;
-        super::sample::to_file_order(comm, &local, &mut output);
-        // The serial report's feature summary when any rank found features (absolute
-        // deviations here; relative to the diagonal in the report). None, as serially, when
-        // the whole mesh has no feature vertex: a rank's features may all lie on the cut
-        // fringe of its ghost rings, which the summary does not count.
-        let mut any = [f64::from(u8::from(setup.features.is_some()))];
-        comm.max_f64(&mut any);
-        let features = (any[0] > 0.0)
-            .then(|| {
-                super::features::feature_report(
-                    comm,
-                    &local,
-                    setup.topo(&job),
-                    setup.features.as_ref(),
-                    &options.features.params,
-                    output.feature_deviation,
-                    1.0,
-                )
-            })
-            .filter(|r| r.found.feature_vertices > 0);
-        Ok::<_, CurveError>((output, features))
-    })?;
-    let bytes_sample = comm.bytes_sent() - bytes_before;
-    let class = |c: &ElementClass| -> [usize; 3] {
-        [
-            matches!(c, ElementClass::Spline) as usize,
-            matches!(c, ElementClass::Q2(_)) as usize,
-            (*c == ElementClass::Q2(Q2Reason::BoundaryKink)) as usize,
-        ]
-    };
-    let mut counts = [halo.owned.iter().filter(|&&o| o).count(), 0, 0, 0];
-    for c in &s.classes[..local.n_owned] {
-        for (n, x) in counts[1..].iter_mut().zip(class(c)) {
-            *n += x;
-        }
-    }
-    let knot_intervals = setup.knot_intervals;
-    drop(blended);
-    // Putting a glued space back on the sub-mesh may fail on one rank: c1 only when on all.
-    let seam = setup.seam_continuity();
-    let mut glued = [f64::from(u8::from(seam.0 == "c1"))];
-    comm.min_f64(&mut glued);
-    let seam = match (glued[0] > 0.0, seam) {
-        (false, ("c1", _)) => (
-            "c0",
-            Some("the glued spline space could not be put back on every rank's elements".into()),
-        ),
-        (_, seam) => seam,
-    };
-    Ok(RankShare {
-        local,
-        cg,
+    let mut rank = RankJob {
+        comm,
+        local: &local,
+        job: &job,
+        setup: &setup,
+        order,
+        space: &space,
+        fit: &fit,
+        cache: Some(cache),
         blend,
         demoted,
-        output,
-        counts,
-        knot_intervals,
-        knot_passes: setup.knot_passes,
-        extraordinary_midpoint: setup.fit_params.weights.extraordinary_midpoint,
-        knot_surfaces: (knot_intervals == KnotIntervals::Graded).then_some(setup.knot_info),
         input_msj,
-        halo,
-        nonzeros,
-        bytes_fit,
-        bytes_validity,
-        bytes_sample,
-        features,
-        pairs,
-        seam,
+        pairs: &pairs,
+        bytes: [bytes_fit, bytes_validity, 0],
+        features: None,
+        seam: ("c0", None),
+        counts: [0; 4],
+        sizes: [0; 2],
+    };
+    let (output, report) = finish_job(&mut rank, input, options, clock, start)?;
+    let mut tag_names = local.mesh.tag_names.clone();
+    if options.periodic.pyfr_names {
+        for (i, p) in pairs.iter().enumerate() {
+            tag_names.insert(p.master_tag, format!("periodic_{i}_l"));
+            tag_names.insert(p.slave_tag, format!("periodic_{i}_r"));
+        }
+    }
+    Ok(Finished {
+        tag_names,
+        output,
+        report,
     })
+}
+
+impl JobShare for RankJob<'_> {
+    type Output = RankOutput;
+    fn sample(&mut self, clock: &mut Clock) -> Result<RankOutput, CurveError> {
+        let (comm, local, job, setup) = (self.comm, self.local, self.job, self.setup);
+        let (input, options, mesh) = (job.input, job.options, job.mesh);
+        // The certified blend found, for sampling (its nets computed once).
+        let (factors, nets) = self.cache.take().expect("the share is sampled once");
+        let target_map = setup.target_map(job);
+        let (ids_mesh, ids_topo) = setup.entity_mesh(job);
+        let blended = Blended::with_cache(
+            mesh,
+            &target_map,
+            self.space,
+            ids_mesh,
+            ids_topo,
+            factors,
+            nets,
+        )
+        .with_geometry(mesh);
+        let bytes_before = comm.bytes_sent();
+        let (output, features) = clock.run(Stage::Sample, || {
+            let seams = super::periodic::Seams {
+                pairs: self.pairs,
+                input,
+                depth: options.line_search.certificate_depth,
+                boundary_rows: setup.boundary_rows(),
+            };
+            let mut output = sample_share(
+                comm,
+                local,
+                job.topo,
+                &blended,
+                self.order,
+                setup.features.as_ref(),
+                Some(&seams),
+            )?;
+            super::sample::to_file_order(comm, local, &mut output);
+            // The serial report's feature summary when any rank found features (absolute
+            // deviations here; relative to the diagonal in the report). None, as serially,
+            // when the whole mesh has no feature vertex: a rank's features may all lie on the
+            // cut fringe of its ghost rings, which the summary does not count.
+            let mut any = [f64::from(u8::from(setup.features.is_some()))];
+            comm.max_f64(&mut any);
+            let features = (any[0] > 0.0)
+                .then(|| {
+                    super::features::feature_report(
+                        comm,
+                        local,
+                        setup.topo(job),
+                        setup.features.as_ref(),
+                        &options.features.params,
+                        output.feature_deviation,
+                        1.0,
+                    )
+                })
+                .filter(|r| r.found.feature_vertices > 0);
+            Ok::<_, CurveError>((output, features))
+        })?;
+        self.bytes[2] = comm.bytes_sent() - bytes_before;
+        self.features = features;
+        drop(blended);
+        // Putting a glued space back on the sub-mesh may fail on one rank: c1 only when on all.
+        let seam = setup.seam_continuity();
+        let mut glued = [f64::from(u8::from(seam.0 == "c1"))];
+        comm.min_f64(&mut glued);
+        self.seam = match (glued[0] > 0.0, seam) {
+            (false, ("c1", _)) => (
+                "c0",
+                Some(
+                    "the glued spline space could not be put back on every rank's elements".into(),
+                ),
+            ),
+            (_, seam) => seam,
+        };
+        Ok(output)
+    }
+    fn quality(
+        &mut self,
+        out: &RankOutput,
+    ) -> Result<(f64, crate::deviation::BoundaryDeviation), CurveError> {
+        let (comm, local) = (self.comm, self.local);
+        let quality = super::sample::global_quality(comm, self.job.input, local, out)?;
+        let class = |c: &ElementClass| -> [usize; 3] {
+            [
+                matches!(c, ElementClass::Spline) as usize,
+                matches!(c, ElementClass::Q2(_)) as usize,
+                (*c == ElementClass::Q2(Q2Reason::BoundaryKink)) as usize,
+            ]
+        };
+        let halo = &self.fit.halo;
+        let mut counts = [halo.owned.iter().filter(|&&o| o).count() as u64, 0, 0, 0];
+        for c in &self.space.classes[..local.n_owned] {
+            for (n, x) in counts[1..].iter_mut().zip(class(c)) {
+                *n += x as u64;
+            }
+        }
+        let npf = (self.order + 1).pow(out.dim as u32 - 1);
+        let mut sizes = [
+            out.node_tags.len() as u64,
+            (out.boundary.len() / npf) as u64,
+        ];
+        comm.sum_u64(&mut counts);
+        comm.sum_u64(&mut sizes);
+        self.counts = counts.map(|c| c as usize);
+        self.sizes = sizes;
+        Ok(quality)
+    }
+    fn outcomes(
+        &mut self,
+        out: &RankOutput,
+        (min_sj, deviation): (f64, crate::deviation::BoundaryDeviation),
+        clock: &Clock,
+    ) -> Outcomes {
+        let (comm, local, setup) = (self.comm, self.local, self.setup);
+        let RankFit { halo, cg, nonzeros } = self.fit;
+        let [bytes_fit, bytes_validity, bytes_sample] = self.bytes;
+        let figures = RankFigures {
+            rank: comm.rank(),
+            elements: local.n_owned,
+            ghost_elements: local.mesh.n_elements() - local.n_owned,
+            control_points: halo.len(),
+            owned_control_points: halo.owned.iter().filter(|&&o| o).count(),
+            shared_control_points: halo.shared(),
+            neighbours: halo.neighbours.len(),
+            matrix_nonzeros: nonzeros[0],
+            bytes_sent: comm.bytes_sent(),
+            bytes_fit,
+            bytes_validity,
+            bytes_gather: bytes_sample,
+            peak_memory_bytes: peak_memory_bytes(),
+            peak_memory_by_stage: clock.peaks(),
+            timings: clock.timings().clone(),
+        };
+        let per_rank = gather_figures(comm, &figures);
+        let counts = self.counts;
+        let knot_intervals = setup.knot_intervals;
+        let space = SpaceCounts {
+            control_points: counts[0],
+            spline_elements: counts[1],
+            q2_elements: counts[2],
+            kink_elements: counts[3],
+            knot_intervals,
+            knot_passes: setup.knot_passes,
+            extraordinary_midpoint: setup.fit_params.weights.extraordinary_midpoint,
+            features: self.features.take().map(|mut f| {
+                f.feature_vertex_deviation_max /= deviation.diagonal;
+                f.planarity_max /= deviation.diagonal;
+                f
+            }),
+        };
+        let n_global = local.n_global as usize;
+        Outcomes {
+            dimension: out.dim,
+            elements: n_global,
+            order: self.order,
+            output_nodes: self.sizes[0] as usize,
+            output_elements: n_global,
+            boundary_facets: self.sizes[1] as usize,
+            spline: Some(SplineFigures {
+                knot_surfaces: (knot_intervals == KnotIntervals::Graded).then_some(setup.knot_info),
+                demoted: self.demoted,
+                ..SplineFigures::blended(
+                    space,
+                    (crate::fit::FitSolver::Cg, *cg, nonzeros[1]),
+                    self.blend.clone(),
+                )
+            }),
+            snapped: None,
+            elastic: None,
+            periodic: periodic_report(
+                self.pairs,
+                out,
+                &self.seam,
+                self.job.options,
+                deviation.diagonal,
+            ),
+            input_min_scaled_jacobian: self.input_msj,
+            min_scaled_jacobian: min_sj,
+            deviation,
+            // The distributed job runs on the CPU only.
+            gpu: None,
+            per_rank: Some(per_rank),
+        }
+    }
 }
 
 /// The periodic pairs of `--periodic` and of the input's `$Periodic` over the whole mesh
@@ -1027,101 +1155,14 @@ pub fn curve(
     // The serial job's option checks (elastic is refused above, so no elastic parameters).
     let (order, _) = crate::pipeline::check_options(options)?;
     let start = Instant::now();
-    let mut clock = Clock::with_peaks(&Silent);
-    let share = run_share(comm, input, options, order, &mut clock)?;
-    let out = &share.output;
-    let (min_sj, deviation, counts, sizes) = clock.run(Stage::Quality, || {
-        let (min_sj, deviation) = super::sample::global_quality(comm, input, &share.local, out)?;
-        let mut counts = share.counts.map(|c| c as u64);
-        let npf = (order + 1).pow(out.dim as u32 - 1);
-        let mut sizes = [
-            out.node_tags.len() as u64,
-            (out.boundary.len() / npf) as u64,
-        ];
-        comm.sum_u64(&mut counts);
-        comm.sum_u64(&mut sizes);
-        Ok::<_, CurveError>((min_sj, deviation, counts.map(|c| c as usize), sizes))
-    })?;
-    let figures = RankFigures {
-        rank: comm.rank(),
-        elements: share.local.n_owned,
-        ghost_elements: share.local.mesh.n_elements() - share.local.n_owned,
-        control_points: share.halo.len(),
-        owned_control_points: share.halo.owned.iter().filter(|&&o| o).count(),
-        shared_control_points: share.halo.shared(),
-        neighbours: share.halo.neighbours.len(),
-        matrix_nonzeros: share.nonzeros[0],
-        bytes_sent: comm.bytes_sent(),
-        bytes_fit: share.bytes_fit,
-        bytes_validity: share.bytes_validity,
-        bytes_gather: share.bytes_sample,
-        peak_memory_bytes: peak_memory_bytes(),
-        peak_memory_by_stage: clock.peaks(),
-        timings: clock.timings().clone(),
-    };
-    let per_rank = gather_figures(comm, &figures);
-    clock.set(Stage::Total, start.elapsed().as_secs_f64());
-    let space = SpaceCounts {
-        control_points: counts[0],
-        spline_elements: counts[1],
-        q2_elements: counts[2],
-        kink_elements: counts[3],
-        knot_intervals: share.knot_intervals,
-        knot_passes: share.knot_passes,
-        extraordinary_midpoint: share.extraordinary_midpoint,
-        features: share.features.map(|mut f| {
-            f.feature_vertex_deviation_max /= deviation.diagonal;
-            f.planarity_max /= deviation.diagonal;
-            f
-        }),
-    };
-    let nonzeros = share.nonzeros[1];
-    let n_global = share.local.n_global as usize;
-    let outcomes = Outcomes {
-        dimension: out.dim,
-        elements: n_global,
+    run_share(
+        comm,
+        input,
+        options,
         order,
-        output_nodes: sizes[0] as usize,
-        output_elements: n_global,
-        boundary_facets: sizes[1] as usize,
-        spline: Some(SplineFigures {
-            knot_surfaces: share.knot_surfaces,
-            demoted: share.demoted,
-            ..SplineFigures::blended(
-                space,
-                (crate::fit::FitSolver::Cg, share.cg, nonzeros),
-                share.blend,
-            )
-        }),
-        snapped: None,
-        elastic: None,
-        periodic: periodic_report(
-            &share.pairs,
-            &share.output,
-            &share.seam,
-            options,
-            deviation.diagonal,
-        ),
-        input_min_scaled_jacobian: share.input_msj,
-        min_scaled_jacobian: min_sj,
-        deviation,
-        // The distributed job runs on the CPU only.
-        gpu: None,
-        per_rank: Some(per_rank),
-    };
-    let report = CurveReport::build(input, options, outcomes, clock.into_timings());
-    let mut tag_names = share.local.mesh.tag_names.clone();
-    if options.periodic.pyfr_names {
-        for (i, p) in share.pairs.iter().enumerate() {
-            tag_names.insert(p.master_tag, format!("periodic_{i}_l"));
-            tag_names.insert(p.slave_tag, format!("periodic_{i}_r"));
-        }
-    }
-    Ok(Finished {
-        tag_names,
-        output: share.output,
-        report,
-    })
+        Clock::with_peaks(&Silent),
+        start,
+    )
 }
 
 /// The report's `periodic` (and the seams' certified bound) when the job has pairs: the

@@ -4,9 +4,10 @@
 //!
 //! Input: the stages' outcomes over the whole mesh ([`Outcomes`]), the options and the stage
 //! clock's timings. Output: the report. [`CurveReport::build`] is the one place a report is
-//! made: the serial job gathers its outcomes in [`CurveReport::assemble`], the distributed job
-//! (`distributed::job`) sums and reduces its ranks' shares into the same [`Outcomes`] and adds
-//! the fields that exist only under mpirun (`ranks`, `per_rank`). Invariant: a field derived
+//! made, at the end of the job's one tail (`pipeline::tail::finish_job`): the serial job gathers
+//! its outcomes in [`CurveReport::outcomes`], the distributed job (`distributed::job`) sums and
+//! reduces its ranks' shares into the same [`Outcomes`] and adds the fields that exist only
+//! under mpirun (`ranks`, `per_rank`). Invariant: a field derived
 //! from the options is written the same way for both, so an option or a figure is added once.
 
 use super::spline::{SplineOutcome, SplineSetup};
@@ -297,15 +298,13 @@ pub(crate) struct SpaceCounts {
     pub features: Option<FeatureReport>,
 }
 
-/// The outcomes of the stages after sampling.
+/// The outcomes of the serial job's stages that follow sampling (`--snap-boundary`, the
+/// elastic analogy, periodic seams).
+#[derive(Default)]
 pub(super) struct Finished {
-    pub ho: HighOrderMesh,
     pub snapped: Option<usize>,
     /// The elastic solve and the certified bound of its mesh.
     pub elastic: Option<(ElasticInfo, f64)>,
-    pub input_min_scaled_jacobian: f64,
-    pub min_scaled_jacobian: f64,
-    pub deviation: BoundaryDeviation,
     /// The periodic pairs and what making the seams exact images did.
     pub periodic: Option<(
         Vec<crate::mesh::periodic::PeriodicPair>,
@@ -340,14 +339,16 @@ pub struct PeriodicReport {
 }
 
 impl CurveReport {
-    /// The report of `job` from its stages' outcomes (`output` empty: set when written).
-    pub(super) fn assemble(
+    /// The serial `job`'s outcomes: its spline, its output `ho` with the stages after
+    /// sampling `done` and its sampled `quality`.
+    pub(super) fn outcomes(
         job: &Job,
         spline: Option<&(SplineSetup, SplineOutcome)>,
+        ho: &HighOrderMesh,
         done: &Finished,
-        timings: BTreeMap<String, f64>,
-    ) -> CurveReport {
-        let (mesh, options, ho) = (job.mesh, job.options, &done.ho);
+        (min_scaled_jacobian, deviation): (f64, BoundaryDeviation),
+    ) -> Outcomes {
+        let (mesh, options) = (job.mesh, job.options);
         let setup = spline.map(|(setup, _)| setup);
         let figures = spline.map(|(setup, o)| {
             let space = &o.space;
@@ -390,7 +391,7 @@ impl CurveReport {
             }
         });
         let periodic = done.periodic.as_ref().map(|(pairs, info)| {
-            let diagonal = done.deviation.diagonal;
+            let diagonal = deviation.diagonal;
             let report = PeriodicReport {
                 pairs: pairs.iter().map(|p| p.summary(diagonal)).collect(),
                 node_pairs: ho.periodic.iter().map(|l| l.node_pairs.len()).sum(),
@@ -410,7 +411,7 @@ impl CurveReport {
             .executor
             .gpu()
             .map(|g| (g.adapter.clone(), g.precision, job.executor.fallbacks()));
-        let outcomes = Outcomes {
+        Outcomes {
             dimension: mesh.dim,
             elements: mesh.n_elements(),
             order: ho.order,
@@ -421,13 +422,12 @@ impl CurveReport {
             snapped: done.snapped,
             elastic: done.elastic,
             periodic,
-            input_min_scaled_jacobian: done.input_min_scaled_jacobian,
-            min_scaled_jacobian: done.min_scaled_jacobian,
-            deviation: done.deviation,
+            input_min_scaled_jacobian: mesh.min_scaled_jacobian().map_or(f64::NAN, |m| m.0),
+            min_scaled_jacobian,
+            deviation,
             gpu,
             per_rank: None,
-        };
-        CurveReport::build(job.input, options, outcomes, timings)
+        }
     }
 
     /// The report of the output written to `output`: its path, the seconds of
