@@ -504,19 +504,18 @@ pub fn smooth_targets(
     topo: &Topology,
     params: &FitParams,
 ) -> Option<SmoothTargets> {
-    smooth_targets_shared(mesh, topo, params, None, (&[], &[]))
+    smooth_targets_shared(mesh, topo, params, None, &[])
 }
 
 /// [`smooth_targets`] on a rank's part of a distributed mesh and with the walls'
 /// continuations across periodic seams ([`SmoothTargets::build_shared`]; `share` `None`:
-/// the whole mesh): `partners` the wall vertices' and `links` the seams' vertex pairs
-/// ([`crate::spline::seam::SeamView`]; empty: none).
+/// the whole mesh; `partners` empty: none).
 pub fn smooth_targets_shared(
     mesh: &LinearMesh,
     topo: &Topology,
     params: &FitParams,
     share: Option<&dyn InheritShare>,
-    (partners, links): smooth::SeamSides,
+    partners: &[Option<(u32, crate::mesh::periodic::Rigid)>],
 ) -> Option<SmoothTargets> {
     match params.targets {
         FitTargets::Chords => None,
@@ -527,7 +526,6 @@ pub fn smooth_targets_shared(
             params.features.as_deref(),
             share,
             partners,
-            links,
         )),
     }
 }
