@@ -200,6 +200,11 @@ pub(crate) fn boundary_sides(
 /// Parameters per direction at which [`boundary_sq_sum`] measures a boundary side.
 const SIDE_SAMPLES: usize = 5;
 
+/// The samples [`boundary_sq_sum`] takes on one boundary side of a `dim`-dimensional mesh.
+fn samples_per_side(dim: usize) -> usize {
+    SIDE_SAMPLES.pow(dim as u32 - 1)
+}
+
 /// Squared distances of `map`'s boundary from `surface`'s (both over the elements of `topo`),
 /// summed over the boundary sides of the elements `e` with `which(e)`, and their count: for
 /// every such side, the points of `map` at 5 × 5 (2D: 5) parameters inside the side (the
@@ -235,14 +240,14 @@ pub(crate) fn boundary_sq_sum(
             let (k, b) = (s / 2, (s % 2) as f64);
             let others: Vec<usize> = (0..dim).filter(|&j| j != k).collect();
             let (m, t) = (map.bezier_net(e), surface.bezier_net(e));
-            let per = if dim == 2 { 1 } else { SIDE_SAMPLES };
+            let samples = samples_per_side(dim);
             // The same net: every distance is 0 (the projection takes no step there).
             let points = if dim == 2 { 9 } else { 27 };
             if m[..points] == t[..points] {
-                return (0.0, SIDE_SAMPLES * per);
+                return (0.0, samples);
             }
             let mut sum = 0.0;
-            for i in 0..SIDE_SAMPLES * per {
+            for i in 0..samples {
                 let mut u = [0.0; 3];
                 u[k] = b;
                 u[others[0]] = at(i % SIDE_SAMPLES);
@@ -252,7 +257,7 @@ pub(crate) fn boundary_sq_sum(
                 let p = DVec3::from(eval_net_with_derivatives(dim, &m, u).0);
                 sum += nearest_on_side(dim, &t, u, &others, p).0.powi(2);
             }
-            (sum, SIDE_SAMPLES * per)
+            (sum, samples)
         })
         .reduce(|| (0.0, 0), |a, b| (a.0 + b.0, a.1 + b.1))
 }
@@ -260,12 +265,11 @@ pub(crate) fn boundary_sq_sum(
 /// The samples [`boundary_sq_sum`] counts over the boundary sides of the elements `e` with
 /// `which(e)`.
 pub(crate) fn boundary_samples(topo: &Topology, which: &dyn Fn(usize) -> bool) -> usize {
-    let per_side = SIDE_SAMPLES.pow(topo.dim as u32 - 1);
     topo.boundary_facets
         .iter()
         .filter(|&&f| which(topo.facet_elements[f as usize][0] as usize))
         .count()
-        * per_side
+        * samples_per_side(topo.dim)
 }
 
 /// The root mean square of `n` squared distances summing to `sum` ([`boundary_sq_sum`]); 0
