@@ -47,11 +47,11 @@ use super::sample::{RankOutput, sample_share};
 use super::share::read_share;
 use crate::mesh::Topology;
 use crate::pipeline::clock::{Clock, peak_memory_bytes};
-use crate::pipeline::passes::{Passes, spline_passes};
+use crate::pipeline::passes::{Passes, Reduce, spline_passes};
 use crate::pipeline::share::{
     Blend, LeastSquares, Share, blend_within, finish_blend, least_squares_pass,
 };
-use crate::pipeline::spline::{self, Demoted, SplineSetup};
+use crate::pipeline::spline::{Demoted, SplineSetup};
 use crate::pipeline::tail::{JobShare, finish_job};
 use crate::pipeline::{
     CurveError, CurveOptions, CurveReport, Geometry, Job, Method, Outcomes, RankFigures,
@@ -588,16 +588,6 @@ impl Passes for RankPasses<'_> {
         let previous = previous.map(|p| &p.space);
         least_squares_pass(self, job, setup, clock, previous, most, demote)
     }
-    fn demotion(&mut self, job: &Job, setup: &SplineSetup, clock: &mut Clock) -> Option<Demoted> {
-        let share = RankDemotion {
-            comm: self.comm,
-            local: self.local,
-            mine: self.mine,
-        };
-        clock.run(Stage::Validity, || {
-            spline::demotion_marks(job, setup, &share)
-        })
-    }
     fn held(pass: &Pass) -> Result<usize, usize> {
         match &pass.blend {
             Ok((_, info)) => Ok(info.reduced_elements),
@@ -613,87 +603,20 @@ impl Passes for RankPasses<'_> {
     ) -> Result<Pass, CurveError> {
         finish_blend(self, job, setup, clock, pass)
     }
-    fn boundary_rms(
-        &mut self,
-        job: &Job,
-        setup: &SplineSetup,
-        clock: &mut Clock,
-        pass: &Pass,
-    ) -> f64 {
-        // Each boundary side once: the own elements' (the ghosts' outer sides are no boundary).
-        // The diagonal is the whole mesh's (the ranks' boxes reduced), as the serial job's.
-        let (comm, n_owned) = (self.comm, self.local.n_owned);
-        let (mut lo, mut hi) = self.local.mesh.bounding_box();
-        clock.run(Stage::Validity, || {
-            let (sum, n) = spline::fitted_boundary_sq_sum(job, setup, &pass.space, |e| e < n_owned);
-            let mut v = [sum, n as f64];
-            comm.sum_f64(&mut v);
-            comm.min_f64(&mut lo);
-            comm.max_f64(&mut hi);
-            let rms = crate::pipeline::misfit::rms(v[0], v[1] as usize);
-            rms / crate::math::linalg::box_diagonal(lo, hi)
-        })
-    }
-    fn output_boundary_shift(
-        &mut self,
-        job: &Job,
-        setup: &SplineSetup,
-        clock: &mut Clock,
-        pass: &Pass,
-        reference: &Pass,
-    ) -> f64 {
-        // As `boundary_rms`: each boundary side once, the whole mesh's diagonal.
-        let (comm, n_owned) = (self.comm, self.local.n_owned);
-        let (mut lo, mut hi) = self.local.mesh.bounding_box();
-        let factors = pass.blend.as_ref().map_or(&[][..], |b| &b.0.0[..]);
-        clock.run(Stage::Validity, || {
-            let (sum, n) = spline::output_boundary_sq_sum(
-                job,
-                setup,
-                &pass.space,
-                factors,
-                &reference.space,
-                |e| e < n_owned,
-            );
-            let mut v = [sum, n as f64];
-            comm.sum_f64(&mut v);
-            comm.min_f64(&mut lo);
-            comm.max_f64(&mut hi);
-            let rms = crate::pipeline::misfit::rms(v[0], v[1] as usize);
-            rms / crate::math::linalg::box_diagonal(lo, hi)
-        })
-    }
     fn warm_start(&self) -> bool {
         self.warm_start
     }
-    // The own elements' (the rank's ghost rings hold every element of their two rings).
-    fn reweighted(&mut self, job: &Job, setup: &SplineSetup) -> usize {
-        let fit = &setup.fit_params;
-        let r = crate::fit::extraordinary_reweighted(
-            &self.local.mesh,
-            setup.topo(job),
-            &fit.weights,
-            fit.features.as_deref(),
-        );
-        let mut v = [r[..self.local.n_owned].iter().filter(|&&r| r).count() as f64];
-        self.comm.sum_f64(&mut v);
-        v[0] as usize
+    fn owned(&self, _: &Job) -> usize {
+        self.local.n_owned
     }
-}
-
-/// A rank's share of the demotion rounds (`--demote-uncertified`): it certifies its own
-/// elements, and every round's marks are united over the ranks by global element id, so the
-/// marks of its own and ghost elements are the serial run's.
-struct RankDemotion<'a> {
-    comm: &'a dyn Comm,
-    local: &'a LocalMesh,
-    mine: &'a [usize],
-}
-
-impl spline::DemotionShare for RankDemotion<'_> {
-    fn own(&self) -> &[usize] {
-        self.mine
+    fn reduce(&self, op: Reduce, v: &mut [f64]) {
+        match op {
+            Reduce::Sum => self.comm.sum_f64(v),
+            Reduce::Min => self.comm.min_f64(v),
+            Reduce::Max => self.comm.max_f64(v),
+        }
     }
+    // By global element id: the marks of the own and ghost elements are the serial run's.
     fn unite(&self, marks: &mut [bool]) -> usize {
         let global = &self.local.global_element;
         let send: Vec<f64> = (0..marks.len())
@@ -711,6 +634,12 @@ impl spline::DemotionShare for RankDemotion<'_> {
             *m = all.contains(g);
         }
         all.len()
+    }
+    fn space(pass: &Pass) -> &SplineSpace {
+        &pass.space
+    }
+    fn factors(pass: &Pass) -> &[f32] {
+        pass.blend.as_ref().map_or(&[][..], |b| &b.0.0[..])
     }
 }
 

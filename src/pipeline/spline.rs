@@ -595,45 +595,23 @@ pub(crate) struct Demoted {
     pub count: usize,
 }
 
-/// Where the processes of a job hold the elements the demotion rounds judge: the serial job
-/// all of them, a rank under mpirun its own (plus ghosts it builds the space on).
-pub(crate) trait DemotionShare {
-    /// The elements this process certifies: every element of the mesh is one process's.
-    fn own(&self) -> &[usize];
-    /// `marks` (on this process's elements) made the union of every process's marks, element
-    /// by element of the whole mesh; returns how many elements of the whole mesh are marked.
-    /// Collective.
-    fn unite(&self, marks: &mut [bool]) -> usize;
-}
-
-/// The serial job's share: every element.
-struct AllElements(Vec<usize>);
-
-impl DemotionShare for AllElements {
-    fn own(&self) -> &[usize] {
-        &self.0
-    }
-    fn unite(&self, marks: &mut [bool]) -> usize {
-        marks.iter().filter(|&&m| m).count()
-    }
-}
-
 /// `--demote-uncertified`: the elements whose initial spline map on `setup` (its knots) is
 /// not certified valid, demoted to Q2 in rounds as `--fit energy` demotes them
 /// ([`demote_with_rings`]: after the first round with their vertex rings) until every
 /// element's initial map is certified; `None` when none is uncertified, or some still is after
-/// [`MAX_DEMOTION_ROUNDS`]. Each process certifies its own elements ([`DemotionShare::own`])
-/// and every round's marks are united over the processes, so every process takes the same
-/// marks and rounds as the serial job. Only the elements whose initial net changed are
-/// certified again.
-pub(crate) fn demotion_marks(
+/// [`MAX_DEMOTION_ROUNDS`]. Each process certifies its own elements
+/// ([`super::passes::Passes::owned`]) and every round's marks are united over the processes
+/// ([`super::passes::Passes::unite`]), so every process takes the same marks and rounds as the
+/// serial job. Only the elements whose initial net changed are certified again.
+pub(crate) fn demotion_marks<P: super::passes::Passes + ?Sized>(
     job: &Job,
     setup: &SplineSetup,
-    share: &dyn DemotionShare,
+    share: &P,
 ) -> Option<Demoted> {
     use rayon::prelude::*;
     let n = job.mesh.n_elements();
-    let own = share.own();
+    let own: Vec<usize> = (0..share.owned(job)).collect();
+    let own = &own[..];
     let mut demote = vec![false; n];
     let mut space = setup.build(job, &demote);
     let mut bad = vec![false; n];
@@ -728,10 +706,6 @@ impl super::passes::Passes for Whole<'_> {
     ) -> Result<First, CurveError> {
         spline_pass_within(job, setup, clock, previous.map(First::space), most, demote)
     }
-    fn demotion(&mut self, job: &Job, setup: &SplineSetup, clock: &mut Clock) -> Option<Demoted> {
-        let all = AllElements((0..job.mesh.n_elements()).collect());
-        clock.run(Stage::Validity, || demotion_marks(job, setup, &all))
-    }
     fn held(pass: &First) -> Result<usize, usize> {
         match pass {
             First::Done(o) => Ok(match (&o.blend, &o.energy) {
@@ -761,74 +735,21 @@ impl super::passes::Passes for Whole<'_> {
         let pass = finish_blend(&mut WholeMesh, job, setup, clock, pass)?;
         Ok(First::least_squares(pass))
     }
-    fn reweighted(&mut self, job: &Job, setup: &SplineSetup) -> usize {
-        let fit = &setup.fit_params;
-        crate::fit::extraordinary_reweighted(
-            job.mesh,
-            setup.topo(job),
-            &fit.weights,
-            fit.features.as_deref(),
-        )
-        .iter()
-        .filter(|&&r| r)
-        .count()
+    fn owned(&self, job: &Job) -> usize {
+        job.mesh.n_elements()
     }
-    fn boundary_rms(
-        &mut self,
-        job: &Job,
-        setup: &SplineSetup,
-        clock: &mut Clock,
-        pass: &First,
-    ) -> f64 {
-        clock.run(Stage::Validity, || {
-            let (sum, n) = fitted_boundary_sq_sum(job, setup, pass.space(), |_| true);
-            let (lo, hi) = job.mesh.bounding_box();
-            misfit::rms(sum, n) / crate::math::linalg::box_diagonal(lo, hi)
-        })
+    fn reduce(&self, _: super::passes::Reduce, _: &mut [f64]) {}
+    fn unite(&self, marks: &mut [bool]) -> usize {
+        marks.iter().filter(|&&m| m).count()
     }
-    fn output_boundary_shift(
-        &mut self,
-        job: &Job,
-        setup: &SplineSetup,
-        clock: &mut Clock,
-        pass: &First,
-        reference: &First,
-    ) -> f64 {
+    fn space(pass: &First) -> &SplineSpace {
+        pass.space()
+    }
+    fn factors(pass: &First) -> &[f32] {
         let First::Done(outcome) = pass else {
             unreachable!("a pass run to its end")
         };
-        let factors = outcome.blend_factors.as_deref().unwrap_or(&[]);
-        clock.run(Stage::Validity, || {
-            let (sum, n) = output_boundary_sq_sum(
-                job,
-                setup,
-                &outcome.space,
-                factors,
-                reference.space(),
-                |_| true,
-            );
-            let (lo, hi) = job.mesh.bounding_box();
-            misfit::rms(sum, n) / crate::math::linalg::box_diagonal(lo, hi)
-        })
-    }
-    fn demoted_boundary_shift(
-        &mut self,
-        job: &Job,
-        setup: &SplineSetup,
-        clock: &mut Clock,
-        reference: &First,
-        demote: &Demoted,
-    ) -> Option<f64> {
-        Some(clock.run(Stage::Validity, || {
-            let topo = setup.topo(job);
-            let (sum, _) =
-                misfit::boundary_sq_sum(topo, &setup.target_map(job), reference.space(), &|e| {
-                    demote.marks[e]
-                });
-            let n = misfit::boundary_samples(topo, &|_| true);
-            let (lo, hi) = job.mesh.bounding_box();
-            misfit::rms(sum, n) / crate::math::linalg::box_diagonal(lo, hi)
-        }))
+        outcome.blend_factors.as_deref().unwrap_or(&[])
     }
 }
 
