@@ -11,10 +11,13 @@
 //!
 //! Stages per rank: read its contiguous run of the file's elements by offsets, move the
 //! elements to their Morton parts and read [`GHOST_DEPTH`] vertex rings of ghosts
-//! ([`super::share`], [`super::read`]); build the topology, features, smooth targets
-//! and spline space on that sub-mesh with the serial stage functions
-//! (`pipeline::spline::SplineSetup`); run the serial job's spline passes
-//! (`pipeline::passes::spline_passes`, one or two passes of what follows) with graded or
+//! ([`super::share`], [`super::read`]); build the topology on that sub-mesh (the entities
+//! of its own elements checked); run the serial job's head (`pipeline::head`, over the
+//! ranks' reduction: every stage that may fail on one rank agreed, the input's smallest
+//! scaled Jacobian, the seams' gluing rule, then `spline_job`: the features, smooth targets
+//! and spline space on that sub-mesh with the serial stage functions,
+//! `pipeline::spline::SplineSetup`, and the serial job's spline passes,
+//! `pipeline::passes::spline_passes`, one or two passes of what follows) with graded or
 //! `auto` knots surveyed over the whole mesh, the serial knot weights taken
 //! ([`super::knots`]) and `auto` deciding on the whole mesh's figures; each pass is the
 //! serial pass's sequence (`pipeline::share::least_squares_pass`: space, fit, misfit rounds,
@@ -47,7 +50,8 @@ use super::sample::{RankOutput, sample_share};
 use super::share::read_share;
 use crate::mesh::Topology;
 use crate::pipeline::clock::{Clock, peak_memory_bytes};
-use crate::pipeline::passes::{Passes, Reduce, spline_passes};
+use crate::pipeline::head::{Reduce, Reduction, agreed, check_pyfr_names, spline_job};
+use crate::pipeline::passes::Passes;
 use crate::pipeline::share::{
     Blend, LeastSquares, Share, blend_within, finish_blend, least_squares_pass,
 };
@@ -171,14 +175,6 @@ fn check_supported(options: &CurveOptions) -> Result<(), CurveError> {
         return unsupported("--cg-preconditioner block-sgs");
     }
     Ok(())
-}
-
-/// [`super::comm::agree`] for a stage of the job: the ranks that did not fail stop with an
-/// error the launcher does not print (the lowest failing rank prints its own).
-fn agree<T>(comm: &dyn Comm, r: Result<T, CurveError>) -> Result<T, CurveError> {
-    super::comm::agree(comm, r, |q| {
-        CurveError::Options(format!("stopped: rank {q} failed"))
-    })
 }
 
 /// A rank's share of the job's tail ([`JobShare`]): its own elements sampled in global node
@@ -553,6 +549,15 @@ struct RankPasses<'a> {
     warm_start: bool,
 }
 
+impl Reduction for RankPasses<'_> {
+    fn reduce(&self, op: Reduce, v: &mut [f64]) {
+        self.comm.reduce(op, v)
+    }
+    fn lowest_failed(&self, failed: bool) -> Option<usize> {
+        self.comm.lowest_failed(failed)
+    }
+}
+
 impl Passes for RankPasses<'_> {
     type Pass = Pass;
     type Survey = super::knots::SharedSurvey;
@@ -608,13 +613,6 @@ impl Passes for RankPasses<'_> {
     }
     fn owned(&self, _: &Job) -> usize {
         self.local.n_owned
-    }
-    fn reduce(&self, op: Reduce, v: &mut [f64]) {
-        match op {
-            Reduce::Sum => self.comm.sum_f64(v),
-            Reduce::Min => self.comm.min_f64(v),
-            Reduce::Max => self.comm.max_f64(v),
-        }
     }
     // By global element id: the marks of the own and ghost elements are the serial run's.
     fn unite(&self, marks: &mut [bool]) -> usize {
@@ -727,7 +725,7 @@ impl Share for RankPasses<'_> {
                 .map(|(i, &g)| (g, i))
                 .collect(),
         };
-        let blend = agree(comm, blend_within(job, setup, space, most, &judged));
+        let blend = agreed(comm, blend_within(job, setup, space, most, &judged));
         self.bytes[1] += comm.bytes_sent() - before;
         blend
     }
@@ -748,18 +746,14 @@ fn run_share(
     })?;
     // Checks of a rank's own share fail on that rank alone: agreed before the next collective.
     let (mut topo, input_msj) = clock.run(Stage::Topology, || {
-        let topo = agree(comm, local_topology(input, &local))?;
-        let mut msj = [local
-            .mesh
-            .min_scaled_jacobian()
-            .map_or(f64::INFINITY, |m| m.0)];
-        comm.min_f64(&mut msj);
-        Ok::<_, CurveError>((topo, msj[0]))
+        let topo = agreed(comm, local_topology(input, &local))?;
+        Ok::<_, CurveError>((topo, comm.input_min_scaled_jacobian(&local.mesh)))
     })?;
     // Periodic pairs over the whole mesh: every rank finds the same pairs, or the same error.
     let resolved = clock.run(Stage::Topology, || {
         periodic_pairs(comm, input, options, &local, &topo)
     })?;
+    check_pyfr_names(input, options.periodic.pyfr_names, &resolved.pairs)?;
     // Periodic seams are glued in the spline space as serially: the share is read again
     // with its ghost rings run on across the seams (the elements across a seam are neighbours
     // there), then glued ([`super::periodic::glue_share`]; across rotations the fit couples
@@ -772,7 +766,7 @@ fn run_share(
             read_share(comm, input, GHOST_DEPTH, &options.mesh, Some(&seam_map))
         })?;
         topo = clock.run(Stage::Topology, || {
-            agree(comm, local_topology(input, &local))
+            agreed(comm, local_topology(input, &local))
         })?;
     }
     let seams = clock.run(Stage::Spline, || {
@@ -789,20 +783,10 @@ fn run_share(
         topo: &topo,
         executor: executor.as_ref(),
     };
-    // The setup of uniform knots; graded ones are put in place once surveyed (as the serial
-    // `curve_spline` does: the features, kinks and targets do not depend on the knots).
-    let uniform = options.with_knots(KnotIntervals::Uniform);
-    let uniform_job = Job {
-        options: &uniform,
-        ..job
-    };
-    let mut setup = clock.run(Stage::Spline, || {
-        let inherit = super::local::VertexHalo::new(comm, &local);
-        agree(
-            comm,
-            SplineSetup::with_seams(&uniform_job, seams, Some(&inherit)),
-        )
-    })?;
+    // The smooth targets of the whole mesh on every rank's share.
+    let inherit = clock.run(Stage::Spline, || {
+        super::local::VertexHalo::new(comm, &local)
+    });
     let mine: Vec<usize> = (0..local.n_owned).collect();
     let mut passes = RankPasses {
         comm,
@@ -813,7 +797,7 @@ fn run_share(
         bytes: [0; 2],
         warm_start: options.periodic.pairs.is_empty(),
     };
-    let pass = spline_passes(&mut passes, &job, &mut setup, &mut clock)?;
+    let (setup, pass) = spline_job(&mut passes, &job, &mut clock, seams, Some(&inherit))?;
     let [bytes_fit, bytes_validity] = passes.bytes;
     let LeastSquares {
         space,
@@ -1054,21 +1038,14 @@ fn periodic_pairs(
     local: &LocalMesh,
     topo: &Topology,
 ) -> Result<super::periodic::Resolved, CurveError> {
+    // Every rank read the file's `$Periodic` links (the same on every rank).
+    if options.periodic.pairs.is_empty() && local.mesh.declared_periodic.is_empty() {
+        return Ok(Default::default());
+    }
     let periodic_err = |source| CurveError::Periodic {
         input: input.to_owned(),
         source,
     };
-    // Every rank read the file's `$Periodic` links (the same on every rank).
-    if options.periodic.pairs.is_empty() && local.mesh.declared_periodic.is_empty() {
-        if options.periodic.pyfr_names {
-            // The serial job's refusal (`pipeline::curve`).
-            return Err(periodic_err(crate::mesh::periodic::PeriodicError {
-                spec: "--periodic-pyfr-names".into(),
-                what: "the mesh has no periodic pair to name: give one with --periodic A:B (or in a Gmsh input's $Periodic section)".into(),
-            }));
-        }
-        return Ok(Default::default());
-    }
     super::periodic::resolve(comm, local, topo, &options.periodic.pairs).map_err(periodic_err)
 }
 

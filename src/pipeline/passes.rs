@@ -15,6 +15,7 @@
 //! a job decides alike and the choice is the serial run's on any number of processes.
 
 use super::clock::Clock;
+use super::head::{Reduce, Reduction};
 use super::misfit;
 use super::spline::{
     Demoted, SplineSetup, auto_graded_is_decisive, auto_graded_keeps_the_boundary,
@@ -23,7 +24,6 @@ use super::spline::{
     extraordinary_refit_most, fitted_boundary_sq_sum, output_boundary_sq_sum,
 };
 use super::{CurveError, Job};
-use crate::math::linalg::box_diagonal;
 use crate::progress::Stage;
 use crate::spline::{
     AUTO_GRADED_SHARE, AUTO_MIN_LOG_RATIO, KnotIntervals, KnotParams, Knots, SplineSpace,
@@ -47,20 +47,12 @@ impl KnotFigures for crate::spline::KnotSurvey {
     }
 }
 
-/// A reduction over the processes of a job ([`Passes::reduce`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(crate) enum Reduce {
-    Sum,
-    Min,
-    Max,
-}
-
 /// What differs between the jobs that run spline passes: where the elements are and how
 /// their figures are summed. Every method is collective over the job's processes; the
 /// measures of the whole mesh (the boundary distances, the demotion, the reweighted count)
 /// are provided once over the narrow methods that differ ([`Passes::owned`],
-/// [`Passes::reduce`], [`Passes::unite`]).
-pub(crate) trait Passes {
+/// [`Reduction::reduce`], [`Passes::unite`]).
+pub(crate) trait Passes: Reduction {
     /// One pass's outcome (its fitted space and, unless it stopped early, its blend).
     type Pass;
     /// The whole mesh's knot survey.
@@ -108,9 +100,6 @@ pub(crate) trait Passes {
     /// element; a rank's own elements, before its ghosts). Every element of the whole mesh is
     /// one process's own.
     fn owned(&self, job: &Job) -> usize;
-    /// `v` reduced element-wise by `op` over the job's processes, in place (the serial job:
-    /// left as it is).
-    fn reduce(&self, op: Reduce, v: &mut [f64]);
     /// `marks` (on this process's elements) made the union of every process's marks, element
     /// by element of the whole mesh; returns how many elements of the whole mesh are marked.
     fn unite(&self, marks: &mut [bool]) -> usize;
@@ -125,20 +114,13 @@ pub(crate) trait Passes {
     fn demotion(&mut self, job: &Job, setup: &SplineSetup, clock: &mut Clock) -> Option<Demoted> {
         clock.run(Stage::Validity, || demotion_marks(job, setup, &*self))
     }
-    /// The whole mesh's bounding-box diagonal (the processes' boxes reduced).
-    fn diagonal(&self, job: &Job) -> f64 {
-        let (mut lo, mut hi) = job.mesh.bounding_box();
-        self.reduce(Reduce::Min, &mut lo);
-        self.reduce(Reduce::Max, &mut hi);
-        box_diagonal(lo, hi)
-    }
     /// The RMS of the squared distances `(sum, n)` of this process's own boundary sides summed
     /// over the processes (each boundary side once: a rank's ghosts' outer sides are no
     /// boundary), relative to the whole mesh's bounding-box diagonal.
     fn whole_rms(&self, job: &Job, (sum, n): (f64, usize)) -> f64 {
         let mut v = [sum, n as f64];
         self.reduce(Reduce::Sum, &mut v);
-        misfit::rms(v[0], v[1] as usize) / self.diagonal(job)
+        misfit::rms(v[0], v[1] as usize) / self.diagonal(job.mesh)
     }
     /// RMS distance of `pass`'s fitted boundary from the smooth boundary (the target map's)
     /// over the whole mesh ([`super::misfit::boundary_sq_sum`]), relative to the whole mesh's

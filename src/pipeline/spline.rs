@@ -83,17 +83,10 @@ pub(crate) struct SplineSetup {
 }
 
 impl SplineSetup {
-    /// The setup of `job`; the periodic pairs among `periodic` are glued first
-    /// ([`SplineSetup::glue_seams`]), so that everything fitted to the boundary sees their
-    /// seams as interior.
-    pub(crate) fn new(job: &Job, periodic: &[PeriodicPair]) -> Result<Self, CurveError> {
-        Self::with_seams(job, glue_seams(job, periodic), None)
-    }
-
-    /// [`SplineSetup::new`] with its seams glued already, and why some pair stays apart (a
-    /// rank's sub-mesh glued by the distributed job, `seam::glue_share`); on a rank's part of
-    /// a distributed mesh, `share` makes its smooth targets the whole mesh's
-    /// ([`crate::fit::InheritShare`]).
+    /// The setup of `job` with its periodic seams glued already (the job's head,
+    /// [`super::head::glue_seams`]), so that everything fitted to the boundary sees them as
+    /// interior, and why some pair stays apart; on a rank's part of a distributed mesh,
+    /// `share` makes its smooth targets the whole mesh's ([`crate::fit::InheritShare`]).
     pub(crate) fn with_seams(
         job: &Job,
         (seams, seam_c0): (Option<Glued>, Option<String>),
@@ -307,26 +300,12 @@ impl SplineSetup {
 
 /// The periodic pairs among `pairs` glued for the spline space (translations and rotations;
 /// the energy minimisation sees rotated points through their frames as the fit does,
-/// [`crate::energy`]), and why some pair stays apart (for the report), if one does.
+/// [`crate::energy`]), and why some pair stays apart (for the report), if one does: the
+/// job's rule ([`super::head::glue_seams`]) on the whole mesh.
 fn glue_seams(job: &Job, pairs: &[PeriodicPair]) -> (Option<Glued>, Option<String>) {
-    if pairs.is_empty() {
-        return (None, None);
-    }
-    let rotations = pairs.iter().any(|p| !p.transform.is_translation());
-    let translations = pairs.iter().any(|p| p.transform.is_translation());
-    let all = rotations.then(|| seam::glue(job.mesh, pairs)).flatten();
-    if all.is_some() {
-        return (all, None);
-    }
-    let seams = seam::glue_translations(job.mesh, pairs);
-    let why = if seams.is_none() && translations {
-        Some("the mesh with its translation pairs glued is not manifold")
-    } else if rotations {
-        Some("the mesh with its rotation pairs glued is not manifold")
-    } else {
-        None
-    };
-    (seams, why.map(str::to_string))
+    super::head::glue_seams(&super::head::OneProcess, pairs, true, |rotations| {
+        seam::glue_share(job.mesh, pairs, None, rotations)
+    })
 }
 
 /// The certified spline geometry and the report's figures of how it was reached.
@@ -569,18 +548,12 @@ pub(super) fn curve_spline(
     clock: &mut Clock,
     periodic: &[PeriodicPair],
 ) -> Result<(SplineSetup, SplineOutcome), CurveError> {
-    use crate::spline::KnotIntervals;
-    let uniform = job.options.with_knots(KnotIntervals::Uniform);
-    let uniform_job = Job {
-        options: &uniform,
-        ..*job
-    };
-    let mut setup = clock.run(Stage::Spline, || SplineSetup::new(&uniform_job, periodic))?;
+    let seams = clock.run(Stage::Spline, || glue_seams(job, periodic));
     let mut whole = Whole {
         job,
         warm_start: periodic.is_empty(),
     };
-    let pass = super::passes::spline_passes(&mut whole, job, &mut setup, clock)?;
+    let (setup, pass) = super::head::spline_job(&mut whole, job, clock, seams, None)?;
     match pass {
         First::Done(outcome) => Ok((setup, outcome)),
         First::Exceeded(_) => unreachable!("the pass kept ran to its end"),
@@ -667,6 +640,13 @@ struct Whole<'a> {
     warm_start: bool,
 }
 
+impl super::head::Reduction for Whole<'_> {
+    fn reduce(&self, _: super::head::Reduce, _: &mut [f64]) {}
+    fn lowest_failed(&self, failed: bool) -> Option<usize> {
+        failed.then_some(0)
+    }
+}
+
 impl super::passes::Passes for Whole<'_> {
     type Pass = First;
     type Survey = crate::spline::KnotSurvey;
@@ -738,7 +718,6 @@ impl super::passes::Passes for Whole<'_> {
     fn owned(&self, job: &Job) -> usize {
         job.mesh.n_elements()
     }
-    fn reduce(&self, _: super::passes::Reduce, _: &mut [f64]) {}
     fn unite(&self, marks: &mut [bool]) -> usize {
         marks.iter().filter(|&&m| m).count()
     }
