@@ -32,6 +32,7 @@
 //! job fails with [`CurveError::Invalid`] and writes nothing.
 
 pub(crate) mod clock;
+pub(crate) mod head;
 pub(crate) mod misfit;
 mod options;
 pub(crate) mod passes;
@@ -56,6 +57,7 @@ use crate::solve::CgError;
 use crate::validity::ValidityError;
 use crate::validity::blend::{BlendError, Blended};
 use clock::Clock;
+use head::{OneProcess, Reduction};
 use report::Finished;
 use spline::{SplineOutcome, SplineSetup};
 use std::path::{Path, PathBuf};
@@ -249,7 +251,10 @@ fn curve_mesh(
     let mut clock = Clock::new(progress).counting(&options.backend);
     let mesh = clock.run(Stage::Read, read)?;
     clock.check()?;
-    let topo = clock.run(Stage::Topology, || topology(input, &mesh))?;
+    let (topo, input_msj) = clock.run(Stage::Topology, || {
+        let topo = topology(input, &mesh)?;
+        Ok::<_, CurveError>((topo, OneProcess.input_min_scaled_jacobian(&mesh)))
+    })?;
     let periodic = clock
         .run(Stage::Topology, || {
             crate::mesh::periodic::resolve(&mesh, &topo, &options.periodic.pairs)
@@ -258,15 +263,7 @@ fn curve_mesh(
             input: input.to_owned(),
             source,
         })?;
-    if options.periodic.pyfr_names && periodic.is_empty() {
-        return Err(CurveError::Periodic {
-            input: input.to_owned(),
-            source: crate::mesh::periodic::PeriodicError {
-                spec: "--periodic-pyfr-names".into(),
-                what: "the mesh has no periodic pair to name: give one with --periodic A:B (or in a Gmsh input's $Periodic section)".into(),
-            },
-        });
-    }
+    head::check_pyfr_names(input, options.periodic.pyfr_names, &periodic)?;
     clock.check()?;
     let executor = crate::exec::executor(&options.backend);
     let job = Job {
@@ -286,6 +283,7 @@ fn curve_mesh(
         order,
         elastic,
         periodic,
+        input_msj,
         done: Finished::default(),
     };
     let (ho, report) = tail::finish_job(&mut whole, input, options, clock, start)?;
@@ -306,6 +304,8 @@ struct WholeJob<'a> {
     elastic: Option<ElasticParams>,
     /// The periodic pairs resolved on the input.
     periodic: Vec<crate::mesh::periodic::PeriodicPair>,
+    /// The input's smallest scaled Jacobian.
+    input_msj: f64,
     /// The outcomes of the stages after sampling.
     done: Finished,
 }
@@ -350,7 +350,8 @@ impl tail::JobShare for WholeJob<'_> {
         quality: (f64, crate::deviation::BoundaryDeviation),
         _clock: &Clock,
     ) -> report::Outcomes {
-        CurveReport::outcomes(self.job, self.spline.as_ref(), ho, &self.done, quality)
+        let spline = self.spline.as_ref();
+        CurveReport::outcomes(self.job, spline, ho, &self.done, quality, self.input_msj)
     }
 }
 

@@ -23,22 +23,43 @@ pub fn agree<T, E>(
     r: Result<T, E>,
     elsewhere: impl FnOnce(usize) -> E,
 ) -> Result<T, E> {
-    let mut lowest = [if r.is_err() {
+    match (lowest_failed(comm, r.is_err()), r) {
+        (Some(q), Ok(_)) => Err(elsewhere(q)),
+        (_, r) => r,
+    }
+}
+
+/// The lowest rank whose stage failed (`failed`: this rank's did), when any did ([`agree`]'s
+/// one min-reduce); the first such rank is the one [`failing_rank`] names.
+pub fn lowest_failed(comm: &dyn Comm, failed: bool) -> Option<usize> {
+    let mut lowest = [if failed {
         comm.rank() as f64
     } else {
         f64::INFINITY
     }];
     comm.min_f64(&mut lowest);
-    if lowest[0].is_finite() {
-        let q = lowest[0] as usize;
-        // Only the first failure counts: later stages do not run.
-        let _ = FAILING_RANK.compare_exchange(usize::MAX, q, Ordering::Relaxed, Ordering::Relaxed);
-        return match r {
-            Ok(_) => Err(elsewhere(q)),
-            e => e,
-        };
+    if !lowest[0].is_finite() {
+        return None;
     }
-    r
+    let q = lowest[0] as usize;
+    // Only the first failure counts: later stages do not run.
+    let _ = FAILING_RANK.compare_exchange(usize::MAX, q, Ordering::Relaxed, Ordering::Relaxed);
+    Some(q)
+}
+
+/// The ranks of a communicator as the job's processes ([`crate::pipeline::head`]).
+impl crate::pipeline::head::Reduction for dyn Comm + '_ {
+    fn reduce(&self, op: crate::pipeline::head::Reduce, v: &mut [f64]) {
+        use crate::pipeline::head::Reduce;
+        match op {
+            Reduce::Sum => self.sum_f64(v),
+            Reduce::Min => self.min_f64(v),
+            Reduce::Max => self.max_f64(v),
+        }
+    }
+    fn lowest_failed(&self, failed: bool) -> Option<usize> {
+        lowest_failed(self, failed)
+    }
 }
 
 /// The rank that found the job's first error, agreed over the ranks by [`agree`]; `None` when

@@ -11,10 +11,13 @@
 //!
 //! Stages per rank: read its contiguous run of the file's elements by offsets, move the
 //! elements to their Morton parts and read [`GHOST_DEPTH`] vertex rings of ghosts
-//! ([`super::share`], [`super::read`]); build the topology, features, smooth targets
-//! and spline space on that sub-mesh with the serial stage functions
-//! (`pipeline::spline::SplineSetup`); run the serial job's spline passes
-//! (`pipeline::passes::spline_passes`, one or two passes of what follows) with graded or
+//! ([`super::share`], [`super::read`]); build the topology on that sub-mesh (the entities
+//! of its own elements checked); run the serial job's head (`pipeline::head`, over the
+//! ranks' reduction: every stage that may fail on one rank agreed, the input's smallest
+//! scaled Jacobian, the seams' gluing rule, then `spline_job`: the features, smooth targets
+//! and spline space on that sub-mesh with the serial stage functions,
+//! `pipeline::spline::SplineSetup`, and the serial job's spline passes,
+//! `pipeline::passes::spline_passes`, one or two passes of what follows) with graded or
 //! `auto` knots surveyed over the whole mesh, the serial knot weights taken
 //! ([`super::knots`]) and `auto` deciding on the whole mesh's figures; each pass is the
 //! serial pass's sequence (`pipeline::share::least_squares_pass`: space, fit, misfit rounds,
@@ -47,11 +50,12 @@ use super::sample::{RankOutput, sample_share};
 use super::share::read_share;
 use crate::mesh::Topology;
 use crate::pipeline::clock::{Clock, peak_memory_bytes};
-use crate::pipeline::passes::{Passes, spline_passes};
+use crate::pipeline::head::{Reduce, Reduction, agreed, check_pyfr_names, spline_job};
+use crate::pipeline::passes::Passes;
 use crate::pipeline::share::{
     Blend, LeastSquares, Share, blend_within, finish_blend, least_squares_pass,
 };
-use crate::pipeline::spline::{self, Demoted, SplineSetup};
+use crate::pipeline::spline::{Demoted, SplineSetup};
 use crate::pipeline::tail::{JobShare, finish_job};
 use crate::pipeline::{
     CurveError, CurveOptions, CurveReport, Geometry, Job, Method, Outcomes, RankFigures,
@@ -171,14 +175,6 @@ fn check_supported(options: &CurveOptions) -> Result<(), CurveError> {
         return unsupported("--cg-preconditioner block-sgs");
     }
     Ok(())
-}
-
-/// [`super::comm::agree`] for a stage of the job: the ranks that did not fail stop with an
-/// error the launcher does not print (the lowest failing rank prints its own).
-fn agree<T>(comm: &dyn Comm, r: Result<T, CurveError>) -> Result<T, CurveError> {
-    super::comm::agree(comm, r, |q| {
-        CurveError::Options(format!("stopped: rank {q} failed"))
-    })
 }
 
 /// A rank's share of the job's tail ([`JobShare`]): its own elements sampled in global node
@@ -553,6 +549,15 @@ struct RankPasses<'a> {
     warm_start: bool,
 }
 
+impl Reduction for RankPasses<'_> {
+    fn reduce(&self, op: Reduce, v: &mut [f64]) {
+        self.comm.reduce(op, v)
+    }
+    fn lowest_failed(&self, failed: bool) -> Option<usize> {
+        self.comm.lowest_failed(failed)
+    }
+}
+
 impl Passes for RankPasses<'_> {
     type Pass = Pass;
     type Survey = super::knots::SharedSurvey;
@@ -588,16 +593,6 @@ impl Passes for RankPasses<'_> {
         let previous = previous.map(|p| &p.space);
         least_squares_pass(self, job, setup, clock, previous, most, demote)
     }
-    fn demotion(&mut self, job: &Job, setup: &SplineSetup, clock: &mut Clock) -> Option<Demoted> {
-        let share = RankDemotion {
-            comm: self.comm,
-            local: self.local,
-            mine: self.mine,
-        };
-        clock.run(Stage::Validity, || {
-            spline::demotion_marks(job, setup, &share)
-        })
-    }
     fn held(pass: &Pass) -> Result<usize, usize> {
         match &pass.blend {
             Ok((_, info)) => Ok(info.reduced_elements),
@@ -613,87 +608,13 @@ impl Passes for RankPasses<'_> {
     ) -> Result<Pass, CurveError> {
         finish_blend(self, job, setup, clock, pass)
     }
-    fn boundary_rms(
-        &mut self,
-        job: &Job,
-        setup: &SplineSetup,
-        clock: &mut Clock,
-        pass: &Pass,
-    ) -> f64 {
-        // Each boundary side once: the own elements' (the ghosts' outer sides are no boundary).
-        // The diagonal is the whole mesh's (the ranks' boxes reduced), as the serial job's.
-        let (comm, n_owned) = (self.comm, self.local.n_owned);
-        let (mut lo, mut hi) = self.local.mesh.bounding_box();
-        clock.run(Stage::Validity, || {
-            let (sum, n) = spline::fitted_boundary_sq_sum(job, setup, &pass.space, |e| e < n_owned);
-            let mut v = [sum, n as f64];
-            comm.sum_f64(&mut v);
-            comm.min_f64(&mut lo);
-            comm.max_f64(&mut hi);
-            let rms = crate::pipeline::misfit::rms(v[0], v[1] as usize);
-            rms / crate::math::linalg::box_diagonal(lo, hi)
-        })
-    }
-    fn output_boundary_shift(
-        &mut self,
-        job: &Job,
-        setup: &SplineSetup,
-        clock: &mut Clock,
-        pass: &Pass,
-        reference: &Pass,
-    ) -> f64 {
-        // As `boundary_rms`: each boundary side once, the whole mesh's diagonal.
-        let (comm, n_owned) = (self.comm, self.local.n_owned);
-        let (mut lo, mut hi) = self.local.mesh.bounding_box();
-        let factors = pass.blend.as_ref().map_or(&[][..], |b| &b.0.0[..]);
-        clock.run(Stage::Validity, || {
-            let (sum, n) = spline::output_boundary_sq_sum(
-                job,
-                setup,
-                &pass.space,
-                factors,
-                &reference.space,
-                |e| e < n_owned,
-            );
-            let mut v = [sum, n as f64];
-            comm.sum_f64(&mut v);
-            comm.min_f64(&mut lo);
-            comm.max_f64(&mut hi);
-            let rms = crate::pipeline::misfit::rms(v[0], v[1] as usize);
-            rms / crate::math::linalg::box_diagonal(lo, hi)
-        })
-    }
     fn warm_start(&self) -> bool {
         self.warm_start
     }
-    // The own elements' (the rank's ghost rings hold every element of their two rings).
-    fn reweighted(&mut self, job: &Job, setup: &SplineSetup) -> usize {
-        let fit = &setup.fit_params;
-        let r = crate::fit::extraordinary_reweighted(
-            &self.local.mesh,
-            setup.topo(job),
-            &fit.weights,
-            fit.features.as_deref(),
-        );
-        let mut v = [r[..self.local.n_owned].iter().filter(|&&r| r).count() as f64];
-        self.comm.sum_f64(&mut v);
-        v[0] as usize
+    fn owned(&self, _: &Job) -> usize {
+        self.local.n_owned
     }
-}
-
-/// A rank's share of the demotion rounds (`--demote-uncertified`): it certifies its own
-/// elements, and every round's marks are united over the ranks by global element id, so the
-/// marks of its own and ghost elements are the serial run's.
-struct RankDemotion<'a> {
-    comm: &'a dyn Comm,
-    local: &'a LocalMesh,
-    mine: &'a [usize],
-}
-
-impl spline::DemotionShare for RankDemotion<'_> {
-    fn own(&self) -> &[usize] {
-        self.mine
-    }
+    // By global element id: the marks of the own and ghost elements are the serial run's.
     fn unite(&self, marks: &mut [bool]) -> usize {
         let global = &self.local.global_element;
         let send: Vec<f64> = (0..marks.len())
@@ -711,6 +632,12 @@ impl spline::DemotionShare for RankDemotion<'_> {
             *m = all.contains(g);
         }
         all.len()
+    }
+    fn space(pass: &Pass) -> &SplineSpace {
+        &pass.space
+    }
+    fn factors(pass: &Pass) -> &[f32] {
+        pass.blend.as_ref().map_or(&[][..], |b| &b.0.0[..])
     }
 }
 
@@ -798,7 +725,7 @@ impl Share for RankPasses<'_> {
                 .map(|(i, &g)| (g, i))
                 .collect(),
         };
-        let blend = agree(comm, blend_within(job, setup, space, most, &judged));
+        let blend = agreed(comm, blend_within(job, setup, space, most, &judged));
         self.bytes[1] += comm.bytes_sent() - before;
         blend
     }
@@ -819,18 +746,14 @@ fn run_share(
     })?;
     // Checks of a rank's own share fail on that rank alone: agreed before the next collective.
     let (mut topo, input_msj) = clock.run(Stage::Topology, || {
-        let topo = agree(comm, local_topology(input, &local))?;
-        let mut msj = [local
-            .mesh
-            .min_scaled_jacobian()
-            .map_or(f64::INFINITY, |m| m.0)];
-        comm.min_f64(&mut msj);
-        Ok::<_, CurveError>((topo, msj[0]))
+        let topo = agreed(comm, local_topology(input, &local))?;
+        Ok::<_, CurveError>((topo, comm.input_min_scaled_jacobian(&local.mesh)))
     })?;
     // Periodic pairs over the whole mesh: every rank finds the same pairs, or the same error.
     let resolved = clock.run(Stage::Topology, || {
         periodic_pairs(comm, input, options, &local, &topo)
     })?;
+    check_pyfr_names(input, options.periodic.pyfr_names, &resolved.pairs)?;
     // Periodic seams are glued in the spline space as serially: the share is read again
     // with its ghost rings run on across the seams (the elements across a seam are neighbours
     // there), then glued ([`super::periodic::glue_share`]; across rotations the fit couples
@@ -843,7 +766,7 @@ fn run_share(
             read_share(comm, input, GHOST_DEPTH, &options.mesh, Some(&seam_map))
         })?;
         topo = clock.run(Stage::Topology, || {
-            agree(comm, local_topology(input, &local))
+            agreed(comm, local_topology(input, &local))
         })?;
     }
     let seams = clock.run(Stage::Spline, || {
@@ -860,20 +783,10 @@ fn run_share(
         topo: &topo,
         executor: executor.as_ref(),
     };
-    // The setup of uniform knots; graded ones are put in place once surveyed (as the serial
-    // `curve_spline` does: the features, kinks and targets do not depend on the knots).
-    let uniform = options.with_knots(KnotIntervals::Uniform);
-    let uniform_job = Job {
-        options: &uniform,
-        ..job
-    };
-    let mut setup = clock.run(Stage::Spline, || {
-        let inherit = super::local::VertexHalo::new(comm, &local);
-        agree(
-            comm,
-            SplineSetup::with_seams(&uniform_job, seams, Some(&inherit)),
-        )
-    })?;
+    // The smooth targets of the whole mesh on every rank's share.
+    let inherit = clock.run(Stage::Spline, || {
+        super::local::VertexHalo::new(comm, &local)
+    });
     let mine: Vec<usize> = (0..local.n_owned).collect();
     let mut passes = RankPasses {
         comm,
@@ -884,7 +797,7 @@ fn run_share(
         bytes: [0; 2],
         warm_start: options.periodic.pairs.is_empty(),
     };
-    let pass = spline_passes(&mut passes, &job, &mut setup, &mut clock)?;
+    let (setup, pass) = spline_job(&mut passes, &job, &mut clock, seams, Some(&inherit))?;
     let [bytes_fit, bytes_validity] = passes.bytes;
     let LeastSquares {
         space,
@@ -1125,21 +1038,14 @@ fn periodic_pairs(
     local: &LocalMesh,
     topo: &Topology,
 ) -> Result<super::periodic::Resolved, CurveError> {
+    // Every rank read the file's `$Periodic` links (the same on every rank).
+    if options.periodic.pairs.is_empty() && local.mesh.declared_periodic.is_empty() {
+        return Ok(Default::default());
+    }
     let periodic_err = |source| CurveError::Periodic {
         input: input.to_owned(),
         source,
     };
-    // Every rank read the file's `$Periodic` links (the same on every rank).
-    if options.periodic.pairs.is_empty() && local.mesh.declared_periodic.is_empty() {
-        if options.periodic.pyfr_names {
-            // The serial job's refusal (`pipeline::curve`).
-            return Err(periodic_err(crate::mesh::periodic::PeriodicError {
-                spec: "--periodic-pyfr-names".into(),
-                what: "the mesh has no periodic pair to name: give one with --periodic A:B (or in a Gmsh input's $Periodic section)".into(),
-            }));
-        }
-        return Ok(Default::default());
-    }
     super::periodic::resolve(comm, local, topo, &options.periodic.pairs).map_err(periodic_err)
 }
 

@@ -245,8 +245,8 @@ impl Resolved {
 /// The seams of `pairs` (translations and rotations) glued on this rank's sub-mesh
 /// (`spline::seam::glue_share`: classes represented by their lowest node tag, homes by the
 /// lowest global element, only the own elements' entities checked manifold), and why a pair
-/// stays apart, as the serial `pipeline::spline::glue_seams` says it. Collective: the ranks
-/// agree, so that either every rank glues its seams or none does. `across`: the ghost rings
+/// stays apart: the serial job's rule (`pipeline::head::glue_seams`) with the ranks' reduction.
+/// Collective: either every rank glues its seams or none does. `across`: the ghost rings
 /// run across the seams (the share was read through [`Resolved::seam_map`]); otherwise
 /// nothing is glued.
 pub fn glue_share(
@@ -256,54 +256,25 @@ pub fn glue_share(
     across: bool,
 ) -> (Option<crate::spline::seam::Glued>, Option<String>) {
     let pairs = &resolved.pairs;
-    if pairs.is_empty() {
-        return (None, None);
+    if pairs.is_empty() || !across {
+        return crate::pipeline::head::glue_seams(comm, pairs, across, |_| None);
     }
-    let translations = pairs.iter().any(|p| p.transform.is_translation());
-    let rotations = pairs.iter().any(|p| !p.transform.is_translation());
-    let glued = if across {
-        let mesh = &local.mesh;
-        let mut near = vec![false; mesh.n_vertices()];
-        for e in 0..local.n_owned {
-            for &v in mesh.element(e) {
-                near[v as usize] = true;
-            }
+    let mesh = &local.mesh;
+    let mut near = vec![false; mesh.n_vertices()];
+    for e in 0..local.n_owned {
+        for &v in mesh.element(e) {
+            near[v as usize] = true;
         }
-        let order = crate::spline::seam::ShareOrder {
-            vertex: &local.global_vertex,
-            element: &local.global_element,
-            near: &near,
-        };
-        let pairs = resolved.local_pairs(local);
-        // Every pair, as the serial job glues them; where that is not manifold on some rank,
-        // the translations alone (the serial fallback).
-        let all = crate::spline::seam::glue_share(mesh, &pairs, Some(&order), true);
-        let mut ok = [f64::from(u8::from(all.is_some()))];
-        comm.min_f64(&mut ok);
-        match all.filter(|_| ok[0] > 0.0) {
-            Some(g) => Some((g, true)),
-            None if rotations && translations => {
-                crate::spline::seam::glue_share(mesh, &pairs, Some(&order), false)
-                    .map(|g| (g, false))
-            }
-            None => None,
-        }
-    } else {
-        None
+    }
+    let order = crate::spline::seam::ShareOrder {
+        vertex: &local.global_vertex,
+        element: &local.global_element,
+        near: &near,
     };
-    let mut ok = [f64::from(u8::from(glued.is_some()))];
-    comm.min_f64(&mut ok);
-    let glued = glued.filter(|_| ok[0] > 0.0);
-    let why = match &glued {
-        Some((_, true)) => None,
-        _ if !across => Some(
-            "under mpirun the seams of a partitioned input are not identified in the spline space",
-        ),
-        None if translations => Some("the mesh with its translation pairs glued is not manifold"),
-        _ => Some("the mesh with its rotation pairs glued is not manifold"),
-    };
-    let glued = glued.map(|(g, _)| g);
-    (glued, why.map(str::to_string))
+    let local_pairs = resolved.local_pairs(local);
+    crate::pipeline::head::glue_seams(comm, pairs, across, |rotations| {
+        crate::spline::seam::glue_share(mesh, &local_pairs, Some(&order), rotations)
+    })
 }
 
 /// What the seam pass needs besides the sampled nodes.

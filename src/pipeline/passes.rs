@@ -15,13 +15,19 @@
 //! a job decides alike and the choice is the serial run's on any number of processes.
 
 use super::clock::Clock;
+use super::head::{Reduce, Reduction};
+use super::misfit;
 use super::spline::{
     Demoted, SplineSetup, auto_graded_is_decisive, auto_graded_keeps_the_boundary,
     auto_holds_back_too_many, demotes_by_default, demotion_is_refused_beforehand,
-    demotion_keeps_the_boundary, extraordinary_refit_is_kept, extraordinary_refit_most,
+    demotion_keeps_the_boundary, demotion_marks, extraordinary_refit_is_kept,
+    extraordinary_refit_most, fitted_boundary_sq_sum, output_boundary_sq_sum,
 };
 use super::{CurveError, Job};
-use crate::spline::{AUTO_GRADED_SHARE, AUTO_MIN_LOG_RATIO, KnotIntervals, KnotParams, Knots};
+use crate::progress::Stage;
+use crate::spline::{
+    AUTO_GRADED_SHARE, AUTO_MIN_LOG_RATIO, KnotIntervals, KnotParams, Knots, SplineSpace,
+};
 
 /// The whole mesh's knot figures `auto` decides on (the serial [`crate::spline::KnotSurvey`],
 /// or its assembly over ranks).
@@ -42,8 +48,11 @@ impl KnotFigures for crate::spline::KnotSurvey {
 }
 
 /// What differs between the jobs that run spline passes: where the elements are and how
-/// their figures are summed. Every method is collective over the job's processes.
-pub(crate) trait Passes {
+/// their figures are summed. Every method is collective over the job's processes; the
+/// measures of the whole mesh (the boundary distances, the demotion, the reweighted count)
+/// are provided once over the narrow methods that differ ([`Passes::owned`],
+/// [`Reduction::reduce`], [`Passes::unite`]).
+pub(crate) trait Passes: Reduction {
     /// One pass's outcome (its fitted space and, unless it stopped early, its blend).
     type Pass;
     /// The whole mesh's knot survey.
@@ -74,10 +83,6 @@ pub(crate) trait Passes {
         most: Option<usize>,
         demote: Option<&Demoted>,
     ) -> Result<Self::Pass, CurveError>;
-    /// The elements of the whole mesh whose initial spline map on `setup` is not certified,
-    /// demoted in rounds ([`super::spline::demotion_marks`], each process certifying its own
-    /// elements), as marks on this process's elements; timed as the validity stage.
-    fn demotion(&mut self, job: &Job, setup: &SplineSetup, clock: &mut Clock) -> Option<Demoted>;
     /// Elements `pass` holds back over the whole mesh (its blend's; with `--fit energy`, the
     /// elements its least-squares fit's full step leaves uncertified): `Ok` when it ran to its
     /// end, else `Err` with the lower bound at which it stopped.
@@ -91,6 +96,32 @@ pub(crate) trait Passes {
         clock: &mut Clock,
         pass: Self::Pass,
     ) -> Result<Self::Pass, CurveError>;
+    /// This process's own elements: the first `owned` of its mesh (the serial job's every
+    /// element; a rank's own elements, before its ghosts). Every element of the whole mesh is
+    /// one process's own.
+    fn owned(&self, job: &Job) -> usize;
+    /// `marks` (on this process's elements) made the union of every process's marks, element
+    /// by element of the whole mesh; returns how many elements of the whole mesh are marked.
+    fn unite(&self, marks: &mut [bool]) -> usize;
+    /// `pass`'s space with its fitted control points.
+    fn space(pass: &Self::Pass) -> &SplineSpace;
+    /// The certified blend's factors of `pass` run to its end (none without a blend).
+    fn factors(pass: &Self::Pass) -> &[f32];
+    /// The elements of the whole mesh whose initial spline map on `setup` is not certified,
+    /// demoted in rounds ([`demotion_marks`], each process certifying its own elements
+    /// ([`Passes::owned`]) and the rounds' marks united over the processes
+    /// ([`Passes::unite`])), as marks on this process's elements; timed as the validity stage.
+    fn demotion(&mut self, job: &Job, setup: &SplineSetup, clock: &mut Clock) -> Option<Demoted> {
+        clock.run(Stage::Validity, || demotion_marks(job, setup, &*self))
+    }
+    /// The RMS of the squared distances `(sum, n)` of this process's own boundary sides summed
+    /// over the processes (each boundary side once: a rank's ghosts' outer sides are no
+    /// boundary), relative to the whole mesh's bounding-box diagonal.
+    fn whole_rms(&self, job: &Job, (sum, n): (f64, usize)) -> f64 {
+        let mut v = [sum, n as f64];
+        self.reduce(Reduce::Sum, &mut v);
+        misfit::rms(v[0], v[1] as usize) / self.diagonal(job.mesh)
+    }
     /// RMS distance of `pass`'s fitted boundary from the smooth boundary (the target map's)
     /// over the whole mesh ([`super::misfit::boundary_sq_sum`]), relative to the whole mesh's
     /// bounding-box diagonal, timed as the validity stage.
@@ -100,7 +131,13 @@ pub(crate) trait Passes {
         setup: &SplineSetup,
         clock: &mut Clock,
         pass: &Self::Pass,
-    ) -> f64;
+    ) -> f64 {
+        let owned = self.owned(job);
+        clock.run(Stage::Validity, || {
+            let own = fitted_boundary_sq_sum(job, setup, Self::space(pass), |e| e < owned);
+            self.whole_rms(job, own)
+        })
+    }
     /// RMS distance of `pass`'s output boundary (its certified blend run to its end) from
     /// `reference`'s fitted boundary over the whole mesh ([`super::spline::output_boundary_sq_sum`]),
     /// relative to the whole mesh's bounding-box diagonal, timed as the validity stage.
@@ -111,31 +148,60 @@ pub(crate) trait Passes {
         clock: &mut Clock,
         pass: &Self::Pass,
         reference: &Self::Pass,
-    ) -> f64;
+    ) -> f64 {
+        let owned = self.owned(job);
+        let (space, factors) = (Self::space(pass), Self::factors(pass));
+        clock.run(Stage::Validity, || {
+            let reference = Self::space(reference);
+            let own = output_boundary_sq_sum(job, setup, space, factors, reference, |e| e < owned);
+            self.whole_rms(job, own)
+        })
+    }
     /// RMS distance of the target map's boundary from `reference`'s fitted boundary over the
     /// boundary sides of `demote`'s elements, the squares summed over them and divided by the
     /// whole mesh's boundary samples, relative to the whole mesh's bounding-box diagonal and
     /// timed as the validity stage: the part of a demotion redo's
     /// [`Passes::output_boundary_shift`] that those sides make where they stay on the target
-    /// map ([`demotion_is_refused_beforehand`]). `None` where it is not measured: the redo
-    /// then runs and is judged on its output.
+    /// map ([`demotion_is_refused_beforehand`]).
     fn demoted_boundary_shift(
         &mut self,
-        _job: &Job,
-        _setup: &SplineSetup,
-        _clock: &mut Clock,
-        _reference: &Self::Pass,
-        _demote: &Demoted,
-    ) -> Option<f64> {
-        None
+        job: &Job,
+        setup: &SplineSetup,
+        clock: &mut Clock,
+        reference: &Self::Pass,
+        demote: &Demoted,
+    ) -> f64 {
+        let owned = self.owned(job);
+        clock.run(Stage::Validity, || {
+            let topo = setup.topo(job);
+            let target_map = setup.target_map(job);
+            let marked = |e: usize| e < owned && demote.marks[e];
+            let (sum, _) =
+                misfit::boundary_sq_sum(topo, &target_map, Self::space(reference), &marked);
+            let n = misfit::boundary_samples(topo, &|e| e < owned);
+            self.whole_rms(job, (sum, n))
+        })
     }
     /// Whether the second pass starts from the first one's fit.
     fn warm_start(&self) -> bool {
         true
     }
     /// Elements of the whole mesh whose interior midpoints the extraordinary midpoint weight
-    /// raises under `setup`'s fit weights ([`crate::fit::extraordinary_reweighted`]).
-    fn reweighted(&mut self, job: &Job, setup: &SplineSetup) -> usize;
+    /// raises under `setup`'s fit weights ([`crate::fit::extraordinary_reweighted`]): this
+    /// process's own elements' (a rank's ghost rings hold every element of their two rings),
+    /// summed over the processes.
+    fn reweighted(&mut self, job: &Job, setup: &SplineSetup) -> usize {
+        let fit = &setup.fit_params;
+        let r = crate::fit::extraordinary_reweighted(
+            job.mesh,
+            setup.topo(job),
+            &fit.weights,
+            fit.features.as_deref(),
+        );
+        let mut v = [r[..self.owned(job)].iter().filter(|&&r| r).count() as f64];
+        self.reduce(Reduce::Sum, &mut v);
+        v[0] as usize
+    }
 }
 
 /// The spline passes of `job`'s knot intervals on `setup` (built with uniform knots): uniform
@@ -244,7 +310,7 @@ fn weighted_passes<P: Passes>(
 /// boundary as `kept`'s own output ([`Passes::output_boundary_shift`],
 /// [`demotion_keeps_the_boundary`]), and the serial job does not run it where the demoted
 /// elements' sides alone would be refused ([`Passes::demoted_boundary_shift`],
-/// [`demotion_is_refused_beforehand`]; under mpirun it is run and refused). Every process
+/// [`demotion_is_refused_beforehand`]). Every process
 /// decides on the whole mesh's counts and distances, so alike and as the serial job.
 ///
 /// Why: the blend's straight end is certified, but it holds back every element around an
@@ -293,8 +359,10 @@ fn demote_before_fit_if_fewer<P: Passes>(
     let guard = (!options.demote_uncertified)
         .then(|| p.output_boundary_shift(&job, setup, clock, &kept, &kept));
     if let Some(before) = guard
-        && let Some(demoted) = p.demoted_boundary_shift(&job, setup, clock, &kept, &demote)
-        && demotion_is_refused_beforehand(demoted, before)
+        && demotion_is_refused_beforehand(
+            p.demoted_boundary_shift(&job, setup, clock, &kept, &demote),
+            before,
+        )
     {
         return Ok(kept);
     }

@@ -340,13 +340,15 @@ pub struct PeriodicReport {
 
 impl CurveReport {
     /// The serial `job`'s outcomes: its spline, its output `ho` with the stages after
-    /// sampling `done` and its sampled `quality`.
+    /// sampling `done`, its sampled `quality` and the input's smallest scaled Jacobian (the
+    /// job's head's, [`super::head::Reduction::input_min_scaled_jacobian`]).
     pub(super) fn outcomes(
         job: &Job,
         spline: Option<&(SplineSetup, SplineOutcome)>,
         ho: &HighOrderMesh,
         done: &Finished,
         (min_scaled_jacobian, deviation): (f64, BoundaryDeviation),
+        input_min_scaled_jacobian: f64,
     ) -> Outcomes {
         let (mesh, options) = (job.mesh, job.options);
         let setup = spline.map(|(setup, _)| setup);
@@ -422,7 +424,7 @@ impl CurveReport {
             snapped: done.snapped,
             elastic: done.elastic,
             periodic,
-            input_min_scaled_jacobian: mesh.min_scaled_jacobian().map_or(f64::NAN, |m| m.0),
+            input_min_scaled_jacobian,
             min_scaled_jacobian,
             deviation,
             gpu,

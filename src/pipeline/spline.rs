@@ -83,17 +83,10 @@ pub(crate) struct SplineSetup {
 }
 
 impl SplineSetup {
-    /// The setup of `job`; the periodic pairs among `periodic` are glued first
-    /// ([`SplineSetup::glue_seams`]), so that everything fitted to the boundary sees their
-    /// seams as interior.
-    pub(crate) fn new(job: &Job, periodic: &[PeriodicPair]) -> Result<Self, CurveError> {
-        Self::with_seams(job, glue_seams(job, periodic), None)
-    }
-
-    /// [`SplineSetup::new`] with its seams glued already, and why some pair stays apart (a
-    /// rank's sub-mesh glued by the distributed job, `seam::glue_share`); on a rank's part of
-    /// a distributed mesh, `share` makes its smooth targets the whole mesh's
-    /// ([`crate::fit::InheritShare`]).
+    /// The setup of `job` with its periodic seams glued already (the job's head,
+    /// [`super::head::glue_seams`]), so that everything fitted to the boundary sees them as
+    /// interior, and why some pair stays apart; on a rank's part of a distributed mesh,
+    /// `share` makes its smooth targets the whole mesh's ([`crate::fit::InheritShare`]).
     pub(crate) fn with_seams(
         job: &Job,
         (seams, seam_c0): (Option<Glued>, Option<String>),
@@ -307,26 +300,12 @@ impl SplineSetup {
 
 /// The periodic pairs among `pairs` glued for the spline space (translations and rotations;
 /// the energy minimisation sees rotated points through their frames as the fit does,
-/// [`crate::energy`]), and why some pair stays apart (for the report), if one does.
+/// [`crate::energy`]), and why some pair stays apart (for the report), if one does: the
+/// job's rule ([`super::head::glue_seams`]) on the whole mesh.
 fn glue_seams(job: &Job, pairs: &[PeriodicPair]) -> (Option<Glued>, Option<String>) {
-    if pairs.is_empty() {
-        return (None, None);
-    }
-    let rotations = pairs.iter().any(|p| !p.transform.is_translation());
-    let translations = pairs.iter().any(|p| p.transform.is_translation());
-    let all = rotations.then(|| seam::glue(job.mesh, pairs)).flatten();
-    if all.is_some() {
-        return (all, None);
-    }
-    let seams = seam::glue_translations(job.mesh, pairs);
-    let why = if seams.is_none() && translations {
-        Some("the mesh with its translation pairs glued is not manifold")
-    } else if rotations {
-        Some("the mesh with its rotation pairs glued is not manifold")
-    } else {
-        None
-    };
-    (seams, why.map(str::to_string))
+    super::head::glue_seams(&super::head::OneProcess, pairs, true, |rotations| {
+        seam::glue_share(job.mesh, pairs, None, rotations)
+    })
 }
 
 /// The certified spline geometry and the report's figures of how it was reached.
@@ -569,18 +548,12 @@ pub(super) fn curve_spline(
     clock: &mut Clock,
     periodic: &[PeriodicPair],
 ) -> Result<(SplineSetup, SplineOutcome), CurveError> {
-    use crate::spline::KnotIntervals;
-    let uniform = job.options.with_knots(KnotIntervals::Uniform);
-    let uniform_job = Job {
-        options: &uniform,
-        ..*job
-    };
-    let mut setup = clock.run(Stage::Spline, || SplineSetup::new(&uniform_job, periodic))?;
+    let seams = clock.run(Stage::Spline, || glue_seams(job, periodic));
     let mut whole = Whole {
         job,
         warm_start: periodic.is_empty(),
     };
-    let pass = super::passes::spline_passes(&mut whole, job, &mut setup, clock)?;
+    let (setup, pass) = super::head::spline_job(&mut whole, job, clock, seams, None)?;
     match pass {
         First::Done(outcome) => Ok((setup, outcome)),
         First::Exceeded(_) => unreachable!("the pass kept ran to its end"),
@@ -595,45 +568,23 @@ pub(crate) struct Demoted {
     pub count: usize,
 }
 
-/// Where the processes of a job hold the elements the demotion rounds judge: the serial job
-/// all of them, a rank under mpirun its own (plus ghosts it builds the space on).
-pub(crate) trait DemotionShare {
-    /// The elements this process certifies: every element of the mesh is one process's.
-    fn own(&self) -> &[usize];
-    /// `marks` (on this process's elements) made the union of every process's marks, element
-    /// by element of the whole mesh; returns how many elements of the whole mesh are marked.
-    /// Collective.
-    fn unite(&self, marks: &mut [bool]) -> usize;
-}
-
-/// The serial job's share: every element.
-struct AllElements(Vec<usize>);
-
-impl DemotionShare for AllElements {
-    fn own(&self) -> &[usize] {
-        &self.0
-    }
-    fn unite(&self, marks: &mut [bool]) -> usize {
-        marks.iter().filter(|&&m| m).count()
-    }
-}
-
 /// `--demote-uncertified`: the elements whose initial spline map on `setup` (its knots) is
 /// not certified valid, demoted to Q2 in rounds as `--fit energy` demotes them
 /// ([`demote_with_rings`]: after the first round with their vertex rings) until every
 /// element's initial map is certified; `None` when none is uncertified, or some still is after
-/// [`MAX_DEMOTION_ROUNDS`]. Each process certifies its own elements ([`DemotionShare::own`])
-/// and every round's marks are united over the processes, so every process takes the same
-/// marks and rounds as the serial job. Only the elements whose initial net changed are
-/// certified again.
-pub(crate) fn demotion_marks(
+/// [`MAX_DEMOTION_ROUNDS`]. Each process certifies its own elements
+/// ([`super::passes::Passes::owned`]) and every round's marks are united over the processes
+/// ([`super::passes::Passes::unite`]), so every process takes the same marks and rounds as the
+/// serial job. Only the elements whose initial net changed are certified again.
+pub(crate) fn demotion_marks<P: super::passes::Passes + ?Sized>(
     job: &Job,
     setup: &SplineSetup,
-    share: &dyn DemotionShare,
+    share: &P,
 ) -> Option<Demoted> {
     use rayon::prelude::*;
     let n = job.mesh.n_elements();
-    let own = share.own();
+    let own: Vec<usize> = (0..share.owned(job)).collect();
+    let own = &own[..];
     let mut demote = vec![false; n];
     let mut space = setup.build(job, &demote);
     let mut bad = vec![false; n];
@@ -689,6 +640,13 @@ struct Whole<'a> {
     warm_start: bool,
 }
 
+impl super::head::Reduction for Whole<'_> {
+    fn reduce(&self, _: super::head::Reduce, _: &mut [f64]) {}
+    fn lowest_failed(&self, failed: bool) -> Option<usize> {
+        failed.then_some(0)
+    }
+}
+
 impl super::passes::Passes for Whole<'_> {
     type Pass = First;
     type Survey = crate::spline::KnotSurvey;
@@ -728,10 +686,6 @@ impl super::passes::Passes for Whole<'_> {
     ) -> Result<First, CurveError> {
         spline_pass_within(job, setup, clock, previous.map(First::space), most, demote)
     }
-    fn demotion(&mut self, job: &Job, setup: &SplineSetup, clock: &mut Clock) -> Option<Demoted> {
-        let all = AllElements((0..job.mesh.n_elements()).collect());
-        clock.run(Stage::Validity, || demotion_marks(job, setup, &all))
-    }
     fn held(pass: &First) -> Result<usize, usize> {
         match pass {
             First::Done(o) => Ok(match (&o.blend, &o.energy) {
@@ -761,74 +715,20 @@ impl super::passes::Passes for Whole<'_> {
         let pass = finish_blend(&mut WholeMesh, job, setup, clock, pass)?;
         Ok(First::least_squares(pass))
     }
-    fn reweighted(&mut self, job: &Job, setup: &SplineSetup) -> usize {
-        let fit = &setup.fit_params;
-        crate::fit::extraordinary_reweighted(
-            job.mesh,
-            setup.topo(job),
-            &fit.weights,
-            fit.features.as_deref(),
-        )
-        .iter()
-        .filter(|&&r| r)
-        .count()
+    fn owned(&self, job: &Job) -> usize {
+        job.mesh.n_elements()
     }
-    fn boundary_rms(
-        &mut self,
-        job: &Job,
-        setup: &SplineSetup,
-        clock: &mut Clock,
-        pass: &First,
-    ) -> f64 {
-        clock.run(Stage::Validity, || {
-            let (sum, n) = fitted_boundary_sq_sum(job, setup, pass.space(), |_| true);
-            let (lo, hi) = job.mesh.bounding_box();
-            misfit::rms(sum, n) / crate::math::linalg::box_diagonal(lo, hi)
-        })
+    fn unite(&self, marks: &mut [bool]) -> usize {
+        marks.iter().filter(|&&m| m).count()
     }
-    fn output_boundary_shift(
-        &mut self,
-        job: &Job,
-        setup: &SplineSetup,
-        clock: &mut Clock,
-        pass: &First,
-        reference: &First,
-    ) -> f64 {
+    fn space(pass: &First) -> &SplineSpace {
+        pass.space()
+    }
+    fn factors(pass: &First) -> &[f32] {
         let First::Done(outcome) = pass else {
             unreachable!("a pass run to its end")
         };
-        let factors = outcome.blend_factors.as_deref().unwrap_or(&[]);
-        clock.run(Stage::Validity, || {
-            let (sum, n) = output_boundary_sq_sum(
-                job,
-                setup,
-                &outcome.space,
-                factors,
-                reference.space(),
-                |_| true,
-            );
-            let (lo, hi) = job.mesh.bounding_box();
-            misfit::rms(sum, n) / crate::math::linalg::box_diagonal(lo, hi)
-        })
-    }
-    fn demoted_boundary_shift(
-        &mut self,
-        job: &Job,
-        setup: &SplineSetup,
-        clock: &mut Clock,
-        reference: &First,
-        demote: &Demoted,
-    ) -> Option<f64> {
-        Some(clock.run(Stage::Validity, || {
-            let topo = setup.topo(job);
-            let (sum, _) =
-                misfit::boundary_sq_sum(topo, &setup.target_map(job), reference.space(), &|e| {
-                    demote.marks[e]
-                });
-            let n = misfit::boundary_samples(topo, &|_| true);
-            let (lo, hi) = job.mesh.bounding_box();
-            misfit::rms(sum, n) / crate::math::linalg::box_diagonal(lo, hi)
-        }))
+        outcome.blend_factors.as_deref().unwrap_or(&[])
     }
 }
 
