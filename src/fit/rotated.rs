@@ -279,11 +279,19 @@ pub(crate) mod tests {
     /// cells across; `closed`: the last column meets the first (a whole ring, `cells` ·
     /// `step` = 360). Sides tagged 3 (hub), 4 (shroud) and, open, 1 (θ = 0), 2 (the end).
     fn annulus(nr: usize, cells: usize, step: f64, closed: bool) -> LinearMesh {
+        let angles: Vec<f64> = (0..=cells).map(|j| step * j as f64).collect();
+        annulus_at(nr, &angles, closed)
+    }
+
+    /// [`annulus`] with its columns at `angles` (degrees; closed: the last is 360, the
+    /// first column's).
+    fn annulus_at(nr: usize, angles: &[f64], closed: bool) -> LinearMesh {
+        let cells = angles.len() - 1;
         let columns = if closed { cells } else { cells + 1 };
         let id = |i: usize, j: usize| ((j % columns) * (nr + 1) + i) as u32;
         let mut coords = Vec::new();
         for j in 0..columns {
-            let t = (step * j as f64).to_radians();
+            let t = angles[j].to_radians();
             for i in 0..=nr {
                 let r = 1.0 + i as f64 / nr as f64;
                 coords.push([r * t.cos(), r * t.sin(), 0.0]);
@@ -407,10 +415,69 @@ pub(crate) mod tests {
             None,
             None,
             &view.wall_partners,
+            &view.seam_links,
         );
         let apart = SmoothTargets::build(&sector, &view.topo, &params);
         let (both, one) = (gap(&seamed), gap(&apart));
         assert!(both < 1e-14, "seamed targets {both:e} from the ring's");
         assert!(one > 1e-6, "one-sided targets {one:e} from the ring's");
+    }
+
+    /// A 30° sector whose hub cells are 1°, 24°, 4° and 1° wide, 8 cells across, and the ring
+    /// of 12 such sectors. The seam's interior vertex next to the hub is too far from its own
+    /// hub vertex (ℓ = 1°) and from the 29° one to inherit their models: on the ring its
+    /// nearest source is the hub vertex 1° past the seam, which in the sector lies across it.
+    /// Inheriting along the seam links, the glued sector's targets are the ring's on every
+    /// element (interior samples too); inheriting along its own side only, the seam vertex on
+    /// the 30° side takes the 25° hub vertex's model instead, and the sector's two sides of
+    /// the seam see different targets there.
+    #[test]
+    fn interior_vertices_inherit_across_a_rotation_seam() {
+        use crate::fit::smooth::{SmoothParams, SmoothTargets};
+        let pattern = [0.0, 1.0, 25.0, 29.0];
+        let sector = annulus_at(8, &[0.0, 1.0, 25.0, 29.0, 30.0], false);
+        let angles: Vec<f64> = (0..12)
+            .flat_map(|k| pattern.map(|a| a + 30.0 * k as f64))
+            .chain([360.0])
+            .collect();
+        let ring = annulus_at(8, &angles, true);
+        let (st, rt) = (Topology::build(&sector), Topology::build(&ring));
+        let spec = PeriodicSpec {
+            master: "lo".into(),
+            slave: "hi".into(),
+            from_file: false,
+        };
+        let pairs = resolve(&sector, &st, &[spec]).expect("the sides are images");
+        let glued = glue(&sector, &pairs).expect("a manifold glued sector");
+        let view = interior_view(&sector, &st, &glued);
+        // Both sides' 9 seam vertices, each way.
+        assert_eq!(view.seam_links.len(), 18);
+        let params = SmoothParams::default();
+        let whole = SmoothTargets::build(&ring, &rt, &params);
+        let gap = |t: &SmoothTargets| {
+            (0..sector.n_elements())
+                .flat_map(|e| {
+                    let (a, b) = (
+                        t.element_corrections(&sector, &view.topo, e),
+                        whole.element_corrections(&ring, &rt, e),
+                    );
+                    (0..9).map(move |l| (DVec3::from(a[l]) - DVec3::from(b[l])).length())
+                })
+                .fold(0.0, f64::max)
+        };
+        let build = |links| {
+            SmoothTargets::build_shared(
+                &sector,
+                &view.topo,
+                &params,
+                None,
+                None,
+                &view.wall_partners,
+                links,
+            )
+        };
+        let (across, own) = (gap(&build(&view.seam_links)), gap(&build(&[])));
+        assert!(across < 1e-14, "targets {across:e} from the ring's");
+        assert!(own > 1e-5, "own-side inheritance {own:e} from the ring's");
     }
 }
