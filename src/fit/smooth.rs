@@ -1223,8 +1223,9 @@ pub trait InheritShare {
     /// run's vertex indices), below 2⁵³.
     fn order(&self, v: usize) -> u64;
     /// Collective: `records` holds [`RECORD_LEN`] values per local vertex; the records of
-    /// the vertices this rank does not compute but whose neighbours it does are replaced by
-    /// those of a rank that computes them.
+    /// the vertices this rank does not compute but whose neighbours it does (along the mesh
+    /// edges or across a periodic seam: the other side's vertex glued to a computed one) are
+    /// replaced by those of a rank that computes them.
     fn exchange(&self, records: &mut [f64]);
     /// Collective: [`InheritShare::exchange`] for every vertex this rank holds but does not
     /// compute (its whole ghost rings).
