@@ -384,6 +384,25 @@ pub(crate) mod tests {
         }
     }
 
+    /// The largest distance between the corrections of the sector's targets `t` and the
+    /// ring's `whole` on the sector's elements (the ring's first ones, in the same order).
+    fn gap_to_ring(
+        t: &crate::fit::smooth::SmoothTargets,
+        (sector, topo): (&LinearMesh, &Topology),
+        whole: &crate::fit::smooth::SmoothTargets,
+        (ring, rt): (&LinearMesh, &Topology),
+    ) -> f64 {
+        (0..sector.n_elements())
+            .flat_map(|e| {
+                let (a, b) = (
+                    t.element_corrections(sector, topo, e),
+                    whole.element_corrections(ring, rt, e),
+                );
+                (0..9).map(move |l| (DVec3::from(a[l]) - DVec3::from(b[l])).length())
+            })
+            .fold(0.0, f64::max)
+    }
+
     /// The smooth targets of the glued sector, its hub and shroud continued across the seam
     /// through the rotation ([`crate::fit::SmoothTargets::build_shared`]), are the whole
     /// ring's on the sector's elements, at the seam as in its middle. Built from each side's
@@ -397,17 +416,7 @@ pub(crate) mod tests {
         assert_eq!(view.wall_partners.iter().flatten().count(), 4);
         let params = SmoothParams::default();
         let whole = SmoothTargets::build(&ring, &rt, &params);
-        let gap = |t: &SmoothTargets| {
-            (0..sector.n_elements())
-                .flat_map(|e| {
-                    let (a, b) = (
-                        t.element_corrections(&sector, &view.topo, e),
-                        whole.element_corrections(&ring, &rt, e),
-                    );
-                    (0..9).map(move |l| (DVec3::from(a[l]) - DVec3::from(b[l])).length())
-                })
-                .fold(0.0, f64::max)
-        };
+        let gap = |t: &SmoothTargets| gap_to_ring(t, (&sector, &view.topo), &whole, (&ring, &rt));
         let seamed = SmoothTargets::build_shared(
             &sector,
             &view.topo,
@@ -454,17 +463,7 @@ pub(crate) mod tests {
         assert_eq!(view.seam_links.len(), 18);
         let params = SmoothParams::default();
         let whole = SmoothTargets::build(&ring, &rt, &params);
-        let gap = |t: &SmoothTargets| {
-            (0..sector.n_elements())
-                .flat_map(|e| {
-                    let (a, b) = (
-                        t.element_corrections(&sector, &view.topo, e),
-                        whole.element_corrections(&ring, &rt, e),
-                    );
-                    (0..9).map(move |l| (DVec3::from(a[l]) - DVec3::from(b[l])).length())
-                })
-                .fold(0.0, f64::max)
-        };
+        let gap = |t: &SmoothTargets| gap_to_ring(t, (&sector, &view.topo), &whole, (&ring, &rt));
         let build = |links| {
             SmoothTargets::build_shared(
                 &sector,
