@@ -327,19 +327,25 @@ pub(crate) mod tests {
     /// The sector of 4 × 3 cells of 7.5° (sides `lo` and `hi`, 30° apart), the whole ring of
     /// 48 such columns, their topologies, and the sector glued through its rotation.
     pub(crate) fn sector_and_ring() -> (LinearMesh, LinearMesh, Topology, Topology, Glued) {
-        let sector = annulus(3, 4, 7.5, false);
-        let ring = annulus(3, 48, 7.5, true);
-        let (st, rt) = (Topology::build(&sector), Topology::build(&ring));
+        let (sector, ring) = (annulus(3, 4, 7.5, false), annulus(3, 48, 7.5, true));
+        let (st, rt, glued) = glued_to_ring(&sector, &ring);
+        (sector, ring, st, rt, glued)
+    }
+
+    /// The topologies of `sector` and `ring`, and the sector glued through the rotation
+    /// carrying its side `lo` onto `hi` (checked a rotation, glued as one).
+    fn glued_to_ring(sector: &LinearMesh, ring: &LinearMesh) -> (Topology, Topology, Glued) {
+        let (st, rt) = (Topology::build(sector), Topology::build(ring));
         let spec = PeriodicSpec {
             master: "lo".into(),
             slave: "hi".into(),
             from_file: false,
         };
-        let pairs = resolve(&sector, &st, &[spec]).expect("the sides are images");
+        let pairs = resolve(sector, &st, &[spec]).expect("the sides are images");
         assert!(!pairs[0].transform.is_translation());
-        assert!(glue_translations(&sector, &pairs).is_none());
-        let glued = glue(&sector, &pairs).expect("a manifold glued sector");
-        (sector, ring, st, rt, glued)
+        assert!(glue_translations(sector, &pairs).is_none());
+        let glued = glue(sector, &pairs).expect("a manifold glued sector");
+        (st, rt, glued)
     }
 
     /// The sector of 4 × 3 cells of 7.5° glued through its rotation by 30°, and the whole
@@ -450,14 +456,7 @@ pub(crate) mod tests {
             .chain([360.0])
             .collect();
         let ring = annulus_at(8, &angles, true);
-        let (st, rt) = (Topology::build(&sector), Topology::build(&ring));
-        let spec = PeriodicSpec {
-            master: "lo".into(),
-            slave: "hi".into(),
-            from_file: false,
-        };
-        let pairs = resolve(&sector, &st, &[spec]).expect("the sides are images");
-        let glued = glue(&sector, &pairs).expect("a manifold glued sector");
+        let (st, rt, glued) = glued_to_ring(&sector, &ring);
         let view = interior_view(&sector, &st, &glued);
         // Both sides' 9 seam vertices, each way.
         assert_eq!(view.seam_links.len(), 18);
