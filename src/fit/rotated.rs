@@ -390,6 +390,20 @@ pub(crate) mod tests {
         }
     }
 
+    /// The smooth targets of the glued `sector` (its [`crate::spline::seam::SeamView`]
+    /// `view`) with the walls continued across the seam and the inheritance along `links`.
+    fn seamed_targets(
+        sector: &LinearMesh,
+        view: &crate::spline::seam::SeamView,
+        params: &crate::fit::smooth::SmoothParams,
+        links: &[crate::fit::smooth::SeamLink],
+    ) -> crate::fit::smooth::SmoothTargets {
+        let partners = &view.wall_partners;
+        crate::fit::smooth::SmoothTargets::build_shared(
+            sector, &view.topo, params, None, None, partners, links,
+        )
+    }
+
     /// The largest distance between the corrections of the sector's targets `t` and the
     /// ring's `whole` on the sector's elements (the ring's first ones, in the same order).
     fn gap_to_ring(
@@ -423,15 +437,7 @@ pub(crate) mod tests {
         let params = SmoothParams::default();
         let whole = SmoothTargets::build(&ring, &rt, &params);
         let gap = |t: &SmoothTargets| gap_to_ring(t, (&sector, &view.topo), &whole, (&ring, &rt));
-        let seamed = SmoothTargets::build_shared(
-            &sector,
-            &view.topo,
-            &params,
-            None,
-            None,
-            &view.wall_partners,
-            &view.seam_links,
-        );
+        let seamed = seamed_targets(&sector, &view, &params, &view.seam_links);
         let apart = SmoothTargets::build(&sector, &view.topo, &params);
         let (both, one) = (gap(&seamed), gap(&apart));
         assert!(both < 1e-14, "seamed targets {both:e} from the ring's");
@@ -463,17 +469,7 @@ pub(crate) mod tests {
         let params = SmoothParams::default();
         let whole = SmoothTargets::build(&ring, &rt, &params);
         let gap = |t: &SmoothTargets| gap_to_ring(t, (&sector, &view.topo), &whole, (&ring, &rt));
-        let build = |links| {
-            SmoothTargets::build_shared(
-                &sector,
-                &view.topo,
-                &params,
-                None,
-                None,
-                &view.wall_partners,
-                links,
-            )
-        };
+        let build = |links| seamed_targets(&sector, &view, &params, links);
         let (across, own) = (gap(&build(&view.seam_links)), gap(&build(&[])));
         assert!(across < 1e-14, "targets {across:e} from the ring's");
         assert!(own > 1e-5, "own-side inheritance {own:e} from the ring's");
