@@ -262,14 +262,30 @@ impl<'a> VertexHalo<'a> {
     }
 
     /// The request lists of the vertices not computed here: those of the ghosts touching a
-    /// computed vertex, or (`all`) those of every ghost (collective: one exchange).
+    /// computed vertex (across periodic seams too: a ghost glued to a computed vertex, where
+    /// the inheritance steps over to the other side), or (`all`) those of every ghost
+    /// (collective: one exchange).
     fn lists(comm: &dyn Comm, local: &LocalMesh, computed: &[bool], all: bool) -> Lists {
         let (mesh, size) = (&local.mesh, comm.size());
+        // The glued vertices of the computed ones (none without glued seams).
+        let glued = local.glued.as_deref().map(|g| &g.mesh);
+        let mut glued_computed = vec![false; glued.map_or(0, |g| g.n_vertices())];
+        if let Some(g) = glued {
+            for e in 0..mesh.n_elements() {
+                for (&v, &w) in mesh.element(e).iter().zip(g.element(e)) {
+                    glued_computed[w as usize] |= computed[v as usize];
+                }
+            }
+        }
+        let touches = |e: usize| {
+            mesh.element(e).iter().any(|&v| computed[v as usize])
+                || glued.is_some_and(|g| g.element(e).iter().any(|&w| glued_computed[w as usize]))
+        };
         // Per vertex needed: the lowest global ghost element at it.
         let mut from: HashMap<u32, (u64, usize)> = HashMap::new();
         for e in local.n_owned..mesh.n_elements() {
             let vs = mesh.element(e);
-            if !all && !vs.iter().any(|&v| computed[v as usize]) {
+            if !all && !touches(e) {
                 continue;
             }
             let g = local.global_element[e];

@@ -18,9 +18,9 @@
 //!   coplanar vertices), so every step of the line search keeps them there.
 
 use super::smooth::{
-    Height, HigherModel, InheritShare, RingScratch, Source, VertexModel, adjacency, dedup_points,
-    fan_across, fan_model, fit_parabola, nearest_shared, quad_fan_model, refine_model,
-    refine_patch_model, two_ring_from,
+    Height, HigherModel, InheritShare, Paths, RingScratch, SeamLink, SeamSides, Source,
+    VertexModel, adjacency, dedup_points, fan_across, fan_model, fit_parabola, nearest_shared,
+    quad_fan_model, refine_model, refine_patch_model, seam_adjacency, two_ring_from,
 };
 use crate::math::linalg::DVec3;
 use crate::math::reference::HEX_VERTEX_PARAMS;
@@ -82,7 +82,8 @@ impl FeatureModels {
     /// [`super::SmoothTargets::build_shared`]: in 3D, where a feature curve ends on a
     /// periodic seam (a rim meeting it), its curve and the patches at its end go on on the
     /// partner's side, carried over by the periodic map, so the vertex's models are the ones
-    /// of the glued boundary, as along the rest of the rim.
+    /// of the glued boundary, as along the rest of the rim. A planar patch cut by a seam takes
+    /// its in-plane models across it along `links` as the interior does.
     #[allow(clippy::too_many_arguments)]
     pub fn build(
         mesh: &LinearMesh,
@@ -93,7 +94,7 @@ impl FeatureModels {
         fan_all: &[Vec<u32>],
         smooth: &[Option<VertexModel>],
         share: Option<&dyn InheritShare>,
-        partners: &[Option<(u32, Rigid)>],
+        (partners, links): SeamSides,
     ) -> FeatureModels {
         let mut out = FeatureModels {
             edge_mask: features.edge_mask.clone(),
@@ -310,7 +311,7 @@ impl FeatureModels {
                 }
             }
         }
-        out.in_plane_models(mesh, topo, features, &along, decay, share);
+        out.in_plane_models(mesh, topo, features, &along, decay, (share, links));
         out
     }
 
@@ -320,8 +321,12 @@ impl FeatureModels {
     /// rank makes the same collective calls. Its vertices hand on no model, as its own build
     /// with no feature would find.
     pub fn join_shared_inheritance(mesh: &LinearMesh, decay: f64, share: &dyn InheritShare) {
-        let adj = adjacency(mesh.n_vertices(), std::iter::empty());
-        nearest_shared(mesh, &adj, &|_| None, &|_| false, decay, Some(share));
+        let paths = Paths {
+            adj: &adjacency(mesh.n_vertices(), std::iter::empty()),
+            seams: &(Vec::new(), Vec::new()),
+            relaxable: &|_| false,
+        };
+        nearest_shared(mesh, &paths, &|_| None, decay, Some(share));
     }
 
     /// The 2D problem inside each planar patch: its rim vertices take their feature curve's
@@ -329,7 +334,8 @@ impl FeatureModels {
     /// the nearest rim vertex (along the patch's edges) with weight 1 − d / (`decay` · ℓ), ℓ
     /// the rim's edge length there — as interior vertices of a 2D mesh inherit its boundary's.
     /// Those beyond reach keep a flat model. On a rank's part of a distributed mesh
-    /// (`share`), the whole mesh's nearest rim vertices ([`nearest_shared`]).
+    /// (`share`), the whole mesh's nearest rim vertices ([`nearest_shared`]); the paths run
+    /// on across periodic seams along `links` (a patch cut by a seam is one patch).
     fn in_plane_models(
         &mut self,
         mesh: &LinearMesh,
@@ -337,7 +343,7 @@ impl FeatureModels {
         features: &Features,
         along: &HashMap<u32, Vec<u32>>,
         decay: f64,
-        share: Option<&dyn InheritShare>,
+        (share, links): (Option<&dyn InheritShare>, &[SeamLink]),
     ) {
         let x = |v: u32| DVec3::from(mesh.coords[v as usize]);
         let mut adj: Vec<[u32; 2]> = Vec::new();
@@ -389,12 +395,16 @@ impl FeatureModels {
                 higher: self.rim_higher.get(&v32).copied(),
                 ell: ell(v32),
                 order: share.map_or(v as u64, |s| s.order(v)),
+                turned: false,
             })
         };
         let nv = mesh.n_vertices();
-        let adj = adjacency(nv, adj.iter().copied());
-        let relaxable = |w: usize| plane_of.contains_key(&(w as u32));
-        let nearest = nearest_shared(mesh, &adj, &source, &relaxable, decay, share);
+        let paths = Paths {
+            adj: &adjacency(nv, adj.iter().copied()),
+            seams: &seam_adjacency(nv, links),
+            relaxable: &|w: usize| plane_of.contains_key(&(w as u32)),
+        };
+        let nearest = nearest_shared(mesh, &paths, &source, decay, share);
         for (&v, &n) in &plane_of {
             let model = match nearest.at[v as usize].filter(|n| !n.is_source) {
                 Some(near) => {

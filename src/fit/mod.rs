@@ -504,18 +504,19 @@ pub fn smooth_targets(
     topo: &Topology,
     params: &FitParams,
 ) -> Option<SmoothTargets> {
-    smooth_targets_shared(mesh, topo, params, None, &[])
+    smooth_targets_shared(mesh, topo, params, None, (&[], &[]))
 }
 
 /// [`smooth_targets`] on a rank's part of a distributed mesh and with the walls'
 /// continuations across periodic seams ([`SmoothTargets::build_shared`]; `share` `None`:
-/// the whole mesh; `partners` empty: none).
+/// the whole mesh): `partners` the wall vertices' and `links` the seams' vertex pairs
+/// ([`crate::spline::seam::SeamView`]; empty: none).
 pub fn smooth_targets_shared(
     mesh: &LinearMesh,
     topo: &Topology,
     params: &FitParams,
     share: Option<&dyn InheritShare>,
-    partners: &[Option<(u32, crate::mesh::periodic::Rigid)>],
+    (partners, links): smooth::SeamSides,
 ) -> Option<SmoothTargets> {
     match params.targets {
         FitTargets::Chords => None,
@@ -526,6 +527,7 @@ pub fn smooth_targets_shared(
             params.features.as_deref(),
             share,
             partners,
+            links,
         )),
     }
 }

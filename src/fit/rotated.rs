@@ -279,11 +279,19 @@ pub(crate) mod tests {
     /// cells across; `closed`: the last column meets the first (a whole ring, `cells` ·
     /// `step` = 360). Sides tagged 3 (hub), 4 (shroud) and, open, 1 (θ = 0), 2 (the end).
     fn annulus(nr: usize, cells: usize, step: f64, closed: bool) -> LinearMesh {
+        let angles: Vec<f64> = (0..=cells).map(|j| step * j as f64).collect();
+        annulus_at(nr, &angles, closed)
+    }
+
+    /// [`annulus`] with its columns at `angles` (degrees; closed: the last is 360, the
+    /// first column's).
+    fn annulus_at(nr: usize, angles: &[f64], closed: bool) -> LinearMesh {
+        let cells = angles.len() - 1;
         let columns = if closed { cells } else { cells + 1 };
         let id = |i: usize, j: usize| ((j % columns) * (nr + 1) + i) as u32;
         let mut coords = Vec::new();
         for j in 0..columns {
-            let t = (step * j as f64).to_radians();
+            let t = angles[j].to_radians();
             for i in 0..=nr {
                 let r = 1.0 + i as f64 / nr as f64;
                 coords.push([r * t.cos(), r * t.sin(), 0.0]);
@@ -319,19 +327,25 @@ pub(crate) mod tests {
     /// The sector of 4 × 3 cells of 7.5° (sides `lo` and `hi`, 30° apart), the whole ring of
     /// 48 such columns, their topologies, and the sector glued through its rotation.
     pub(crate) fn sector_and_ring() -> (LinearMesh, LinearMesh, Topology, Topology, Glued) {
-        let sector = annulus(3, 4, 7.5, false);
-        let ring = annulus(3, 48, 7.5, true);
-        let (st, rt) = (Topology::build(&sector), Topology::build(&ring));
+        let (sector, ring) = (annulus(3, 4, 7.5, false), annulus(3, 48, 7.5, true));
+        let (st, rt, glued) = glued_to_ring(&sector, &ring);
+        (sector, ring, st, rt, glued)
+    }
+
+    /// The topologies of `sector` and `ring`, and the sector glued through the rotation
+    /// carrying its side `lo` onto `hi` (checked a rotation, glued as one).
+    fn glued_to_ring(sector: &LinearMesh, ring: &LinearMesh) -> (Topology, Topology, Glued) {
+        let (st, rt) = (Topology::build(sector), Topology::build(ring));
         let spec = PeriodicSpec {
             master: "lo".into(),
             slave: "hi".into(),
             from_file: false,
         };
-        let pairs = resolve(&sector, &st, &[spec]).expect("the sides are images");
+        let pairs = resolve(sector, &st, &[spec]).expect("the sides are images");
         assert!(!pairs[0].transform.is_translation());
-        assert!(glue_translations(&sector, &pairs).is_none());
-        let glued = glue(&sector, &pairs).expect("a manifold glued sector");
-        (sector, ring, st, rt, glued)
+        assert!(glue_translations(sector, &pairs).is_none());
+        let glued = glue(sector, &pairs).expect("a manifold glued sector");
+        (st, rt, glued)
     }
 
     /// The sector of 4 × 3 cells of 7.5° glued through its rotation by 30°, and the whole
@@ -376,6 +390,39 @@ pub(crate) mod tests {
         }
     }
 
+    /// The smooth targets of the glued `sector` (its [`crate::spline::seam::SeamView`]
+    /// `view`) with the walls continued across the seam and the inheritance along `links`.
+    fn seamed_targets(
+        sector: &LinearMesh,
+        view: &crate::spline::seam::SeamView,
+        params: &crate::fit::smooth::SmoothParams,
+        links: &[crate::fit::smooth::SeamLink],
+    ) -> crate::fit::smooth::SmoothTargets {
+        let partners = &view.wall_partners;
+        crate::fit::smooth::SmoothTargets::build_shared(
+            sector, &view.topo, params, None, None, partners, links,
+        )
+    }
+
+    /// The largest distance between the corrections of the sector's targets `t` and the
+    /// ring's `whole` on the sector's elements (the ring's first ones, in the same order).
+    fn gap_to_ring(
+        t: &crate::fit::smooth::SmoothTargets,
+        (sector, topo): (&LinearMesh, &Topology),
+        whole: &crate::fit::smooth::SmoothTargets,
+        (ring, rt): (&LinearMesh, &Topology),
+    ) -> f64 {
+        (0..sector.n_elements())
+            .flat_map(|e| {
+                let (a, b) = (
+                    t.element_corrections(sector, topo, e),
+                    whole.element_corrections(ring, rt, e),
+                );
+                (0..9).map(move |l| (DVec3::from(a[l]) - DVec3::from(b[l])).length())
+            })
+            .fold(0.0, f64::max)
+    }
+
     /// The smooth targets of the glued sector, its hub and shroud continued across the seam
     /// through the rotation ([`crate::fit::SmoothTargets::build_shared`]), are the whole
     /// ring's on the sector's elements, at the seam as in its middle. Built from each side's
@@ -389,28 +436,42 @@ pub(crate) mod tests {
         assert_eq!(view.wall_partners.iter().flatten().count(), 4);
         let params = SmoothParams::default();
         let whole = SmoothTargets::build(&ring, &rt, &params);
-        let gap = |t: &SmoothTargets| {
-            (0..sector.n_elements())
-                .flat_map(|e| {
-                    let (a, b) = (
-                        t.element_corrections(&sector, &view.topo, e),
-                        whole.element_corrections(&ring, &rt, e),
-                    );
-                    (0..9).map(move |l| (DVec3::from(a[l]) - DVec3::from(b[l])).length())
-                })
-                .fold(0.0, f64::max)
-        };
-        let seamed = SmoothTargets::build_shared(
-            &sector,
-            &view.topo,
-            &params,
-            None,
-            None,
-            &view.wall_partners,
-        );
+        let gap = |t: &SmoothTargets| gap_to_ring(t, (&sector, &view.topo), &whole, (&ring, &rt));
+        let seamed = seamed_targets(&sector, &view, &params, &view.seam_links);
         let apart = SmoothTargets::build(&sector, &view.topo, &params);
         let (both, one) = (gap(&seamed), gap(&apart));
         assert!(both < 1e-14, "seamed targets {both:e} from the ring's");
         assert!(one > 1e-6, "one-sided targets {one:e} from the ring's");
+    }
+
+    /// A 30° sector whose hub cells are 1°, 24°, 4° and 1° wide, 8 cells across, and the ring
+    /// of 12 such sectors. The seam's interior vertex next to the hub is too far from its own
+    /// hub vertex (ℓ = 1°) and from the 29° one to inherit their models: on the ring its
+    /// nearest source is the hub vertex 1° past the seam, which in the sector lies across it.
+    /// Inheriting along the seam links, the glued sector's targets are the ring's on every
+    /// element (interior samples too); inheriting along its own side only, the seam vertex on
+    /// the 30° side takes the 25° hub vertex's model instead, and the sector's two sides of
+    /// the seam see different targets there.
+    #[test]
+    fn interior_vertices_inherit_across_a_rotation_seam() {
+        use crate::fit::smooth::{SmoothParams, SmoothTargets};
+        let pattern = [0.0, 1.0, 25.0, 29.0];
+        let sector = annulus_at(8, &[0.0, 1.0, 25.0, 29.0, 30.0], false);
+        let angles: Vec<f64> = (0..12)
+            .flat_map(|k| pattern.map(|a| a + 30.0 * k as f64))
+            .chain([360.0])
+            .collect();
+        let ring = annulus_at(8, &angles, true);
+        let (st, rt, glued) = glued_to_ring(&sector, &ring);
+        let view = interior_view(&sector, &st, &glued);
+        // Both sides' 9 seam vertices, each way.
+        assert_eq!(view.seam_links.len(), 18);
+        let params = SmoothParams::default();
+        let whole = SmoothTargets::build(&ring, &rt, &params);
+        let gap = |t: &SmoothTargets| gap_to_ring(t, (&sector, &view.topo), &whole, (&ring, &rt));
+        let build = |links| seamed_targets(&sector, &view, &params, links);
+        let (across, own) = (gap(&build(&view.seam_links)), gap(&build(&[])));
+        assert!(across < 1e-14, "targets {across:e} from the ring's");
+        assert!(own > 1e-5, "own-side inheritance {own:e} from the ring's");
     }
 }

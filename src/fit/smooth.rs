@@ -114,6 +114,14 @@ use rayon::prelude::*;
 use std::cmp::Reverse;
 use std::collections::{BinaryHeap, HashMap};
 
+/// A seam link ([`crate::spline::seam::SeamView::seam_links`]): a vertex, the other side's
+/// vertex on the same glued vertex, and the map carrying that side onto the vertex's.
+pub type SeamLink = (u32, u32, Rigid);
+
+/// The walls' partners across periodic seams and the seams' links
+/// ([`SmoothTargets::build_shared`]'s `partners` and `links`).
+pub type SeamSides<'a> = (&'a [Option<(u32, Rigid)>], &'a [SeamLink]);
+
 /// Parameters of the smooth-boundary reconstruction.
 #[deny(missing_docs)]
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
@@ -165,6 +173,23 @@ impl VertexModel {
             s += phi * y.dot(hy);
         }
         (-s * DVec3::from(self.normal)).into()
+    }
+
+    /// The model seen through the rigid map `t` (a periodic seam's): normal R n, H' = R H Rᵀ.
+    pub(crate) fn carried(&self, t: &Rigid) -> VertexModel {
+        let r = t.rotation.map(DVec3::from);
+        let rot = |x: [f64; 3]| [r[0].dot(x.into()), r[1].dot(x.into()), r[2].dot(x.into())];
+        // R H Rᵀ: the rows of H Rᵀ are R applied to the rows of H (H symmetric), then R on
+        // its columns.
+        let hrt = self.h.map(rot);
+        let h = std::array::from_fn(|i| {
+            std::array::from_fn(|j| (0..3).map(|k| t.rotation[i][k] * hrt[k][j]).sum())
+        });
+        VertexModel {
+            normal: rot(self.normal),
+            h,
+            ..*self
+        }
     }
 
     /// How far the points `xs` reach from `p` along the model's curved directions:
@@ -241,7 +266,7 @@ impl SmoothTargets {
         params: &SmoothParams,
         features: Option<&Features>,
     ) -> SmoothTargets {
-        Self::build_shared(mesh, topo, params, features, None, &[])
+        Self::build_shared(mesh, topo, params, features, None, &[], &[])
     }
 
     /// [`SmoothTargets::build_with_features`] on a rank's part of a mesh distributed over
@@ -255,7 +280,12 @@ impl SmoothTargets {
     /// rings, its neighbours' rings through it, and where a rim meets the seam the rim's
     /// curve and patch models, `FeatureModels::build`), so they are
     /// two-sided as in the interior of the wall, and the models of the two sides' seam
-    /// vertices are images of each other.
+    /// vertices are images of each other. `links` (empty: none) are the seams' vertex pairs
+    /// ([`crate::spline::seam::SeamView::seam_links`]): the interior vertices inherit their
+    /// models along the mesh edges and across the seams through them, a model reached across
+    /// carried by the seam's map, so a vertex next to a seam takes the nearest wall vertex on
+    /// either side, and the two sides' vertices on a seam take images of the same model.
+    #[allow(clippy::too_many_arguments)]
     pub fn build_shared(
         mesh: &LinearMesh,
         topo: &Topology,
@@ -263,6 +293,7 @@ impl SmoothTargets {
         features: Option<&Features>,
         share: Option<&dyn InheritShare>,
         partners: &[Option<(u32, Rigid)>],
+        links: &[(u32, u32, Rigid)],
     ) -> SmoothTargets {
         let nv = mesh.n_vertices();
         let cos_max = params.feature_angle_deg.to_radians().cos();
@@ -305,7 +336,7 @@ impl SmoothTargets {
                 &fan,
                 &models,
                 share,
-                partners,
+                (partners, links),
             )
         });
         if let (None, true, Some(s)) = (&feature_models, any_features, share) {
@@ -329,7 +360,7 @@ impl SmoothTargets {
                 &in_plane_3d,
                 &mut models,
                 &mut higher,
-                share,
+                (share, links),
             )
         } else {
             Inherited::default()
@@ -1192,8 +1223,9 @@ pub trait InheritShare {
     /// run's vertex indices), below 2⁵³.
     fn order(&self, v: usize) -> u64;
     /// Collective: `records` holds [`RECORD_LEN`] values per local vertex; the records of
-    /// the vertices this rank does not compute but whose neighbours it does are replaced by
-    /// those of a rank that computes them.
+    /// the vertices this rank does not compute but whose neighbours it does (along the mesh
+    /// edges or across a periodic seam: the other side's vertex glued to a computed one) are
+    /// replaced by those of a rank that computes them.
     fn exchange(&self, records: &mut [f64]);
     /// Collective: [`InheritShare::exchange`] for every vertex this rank holds but does not
     /// compute (its whole ghost rings).
@@ -1205,7 +1237,7 @@ pub trait InheritShare {
 /// Values per vertex in the records of [`InheritShare::exchange`]: the distance to the source
 /// (∞: none), the predecessor's distance and order, the source's order and boundary edge
 /// length ℓ, its model's normal and H, and its height function's cubic and quartic terms (a
-/// flag, then the terms).
+/// flag, plus 2 for a source carried across a rotation seam, then the terms).
 pub const RECORD_LEN: usize = 5 + 3 + 9 + 1 + HigherModel::LEN;
 
 /// A vertex's place in the inheritance: the distance along mesh edges to its source, the
@@ -1234,16 +1266,35 @@ impl Reach {
     }
 }
 
-/// The model a source hands on, its boundary edge length ℓ and its order.
+/// The model a source hands on, its boundary edge length ℓ and its order, and whether it was
+/// carried across a rotation seam.
 #[derive(Clone, Copy, Debug)]
 pub(super) struct Source {
     pub model: VertexModel,
     pub higher: Option<HigherModel>,
     pub ell: f64,
     pub order: u64,
+    pub turned: bool,
 }
 
 impl Source {
+    /// The source as the other side of a seam sees it: its models carried by `t`.
+    fn carried(&self, t: &Rigid) -> Source {
+        Source {
+            model: self.model.carried(t),
+            higher: self.higher.map(|h| h.carried(t)),
+            turned: self.turned || !t.is_translation(),
+            ..*self
+        }
+    }
+
+    /// The bits of the source's part of its record: sources with the same key are the same.
+    fn key(&self) -> Vec<u64> {
+        let mut out = [0.0; RECORD_LEN];
+        self.write(&Reach::NONE, &mut out);
+        out[3..].iter().map(|x| x.to_bits()).collect()
+    }
+
     /// Writes `reach` from this source into `out` ([`RECORD_LEN`] values).
     fn write(&self, reach: &Reach, out: &mut [f64]) {
         out[..5].copy_from_slice(&[
@@ -1257,7 +1308,7 @@ impl Source {
         for (k, row) in self.model.h.iter().enumerate() {
             out[8 + 3 * k..11 + 3 * k].copy_from_slice(row);
         }
-        out[17] = f64::from(u8::from(self.higher.is_some()));
+        out[17] = f64::from(u8::from(self.higher.is_some()) + 2 * u8::from(self.turned));
         if let Some(h) = &self.higher {
             h.write(&mut out[18..]);
         }
@@ -1280,9 +1331,10 @@ impl Source {
                 h: [a3(8), a3(11), a3(14)],
                 weight: 1.0,
             },
-            higher: (r[17] != 0.0).then(|| HigherModel::read(&r[18..])),
+            higher: (r[17] % 2.0 != 0.0).then(|| HigherModel::read(&r[18..])),
             ell: r[4],
             order: r[3] as u64,
+            turned: r[17] >= 2.0,
         };
         Some((reach, source))
     }
@@ -1301,7 +1353,11 @@ struct Inherited {
 /// Interior vertices inherit the nearest smooth boundary vertex's model (Dijkstra along mesh
 /// edges from the smooth boundary vertices that are not `in_plane_3d`, cut off at decay · ℓ)
 /// with weight γ = 1 − d / (decay · ℓ), and its [`HigherModel`]; on a rank's part of a
-/// distributed mesh (`share`), the whole mesh's ([`nearest_shared`]).
+/// distributed mesh (`share`), the whole mesh's ([`nearest_shared`]). The paths run across
+/// periodic seams along `links` ([`SmoothTargets::build_shared`]), a source reached across
+/// handed on through the seam's map. A vertex whose source lies across a rotation seam has
+/// no source vertex in [`Inherited::sources`] (its arcs would be the other side's); across
+/// translations it keeps it, the arcs' displacements being the same on both sides.
 #[allow(clippy::too_many_arguments)]
 fn inherit_interior(
     mesh: &LinearMesh,
@@ -1311,7 +1367,7 @@ fn inherit_interior(
     in_plane_3d: &dyn Fn(usize) -> bool,
     models: &mut [Option<VertexModel>],
     higher: &mut [Option<HigherModel>],
-    share: Option<&dyn InheritShare>,
+    (share, links): (Option<&dyn InheritShare>, &[SeamLink]),
 ) -> Inherited {
     let nv = mesh.n_vertices();
     let nearest = {
@@ -1324,24 +1380,31 @@ fn inherit_interior(
                 higher: higher[v],
                 ell: ell[v],
                 order: order(v as u32),
+                turned: false,
             })
         };
         let adj = adjacency(nv, topo.edges.iter().copied());
         let relaxable = |w: usize| !topo.vertex_on_boundary[w];
-        nearest_shared(mesh, &adj, &source, &relaxable, decay, share)
+        let paths = Paths {
+            adj: &adj,
+            seams: &seam_adjacency(nv, links),
+            relaxable: &relaxable,
+        };
+        nearest_shared(mesh, &paths, &source, decay, share)
     };
     let mut out = Inherited {
         vertices: 0,
         sources: vec![NONE; nv],
         scale: vec![f64::NAN; nv],
     };
-    // A source another rank computed, by its order: the local vertex of that order, where
-    // this rank holds it (the arcs of the interior samples read the sources' vertices).
-    let of_order: HashMap<u64, u32> = match share {
-        Some(s) if nearest.at.iter().flatten().any(|n| n.local == NONE) => {
-            (0..nv).map(|v| (s.order(v), v as u32)).collect()
-        }
-        _ => HashMap::new(),
+    // A source another rank computed or one carried across a seam, by its order: the local
+    // vertex of that order, where this rank holds it (the arcs of the interior samples read
+    // the sources' vertices).
+    let of_order: HashMap<u64, u32> = if nearest.at.iter().flatten().any(|n| n.local == NONE) {
+        let order = |v: usize| share.map_or(v as u64, |s| s.order(v));
+        (0..nv).map(|v| (order(v), v as u32)).collect()
+    } else {
+        HashMap::new()
     };
     for (v, n) in nearest.at.iter().enumerate() {
         let Some(n) = n else {
@@ -1349,6 +1412,7 @@ fn inherit_interior(
         };
         let s = nearest.source(n);
         out.sources[v] = match n.local {
+            _ if s.turned => NONE,
             NONE => of_order.get(&s.order).copied().unwrap_or(NONE),
             local => local,
         };
@@ -1397,20 +1461,88 @@ impl NearestSources {
     }
 }
 
-/// Multi-source Dijkstra along the edges `adj` ([`adjacency`]): the vertices `source` gives
-/// a model to are the sources, and a `relaxable` vertex takes the nearest path a neighbour
-/// hands on within decay · ℓ of its source ([`Reach::before`]). On a rank's part of a
-/// distributed mesh (`share`) the sources are its computed vertices and those of the other
-/// ranks, whose distances and models come in as records over the ranks' borders; each round
-/// relaxes the computed vertices from scratch from the latest records, until no record
-/// changes on any rank. Each vertex's nearest path is the unique fixed point of "a vertex
-/// takes the nearest of its neighbours' paths within their sources' cut-off", ties going as
-/// in the serial Dijkstra, so the computed vertices get the serial result.
+/// Where the inheritance's paths run ([`nearest_shared`]): the mesh edges (`adj`,
+/// [`adjacency`]), the periodic seams (`seams`, [`seam_adjacency`]; zero-length steps to the
+/// same glued vertex on the other side, the source carried by the seam's map), and the
+/// vertices that take a path (`relaxable`).
+pub(super) struct Paths<'a> {
+    pub adj: &'a (Vec<u32>, Vec<u32>),
+    pub seams: &'a (Vec<u32>, Vec<(u32, Rigid)>),
+    pub relaxable: &'a dyn Fn(usize) -> bool,
+}
+
+/// The steps across periodic seams of the vertices of `links` ((v, w, t): x_v = t x_w,
+/// [`crate::spline::seam::SeamView::seam_links`]): offsets (`nv` + 1) into the list of
+/// (other side's vertex, map carrying this side onto it). Empty `links`: no steps.
+pub(super) fn seam_adjacency(
+    nv: usize,
+    links: &[(u32, u32, Rigid)],
+) -> (Vec<u32>, Vec<(u32, Rigid)>) {
+    let mut offsets = vec![0u32; nv + 1];
+    for &(_, w, _) in links {
+        offsets[w as usize + 1] += 1;
+    }
+    for i in 0..nv {
+        offsets[i + 1] += offsets[i];
+    }
+    let mut fill = offsets.clone();
+    let mut steps = vec![(0, Rigid::translation([0.0; 3])); links.len()];
+    // From w the step goes to v, the map carrying w's side onto v's.
+    for &(v, w, t) in links {
+        steps[fill[w as usize] as usize] = (v, t);
+        fill[w as usize] += 1;
+    }
+    (offsets, steps)
+}
+
+/// The sources of [`nearest_shared`] by slot: below the vertex count the computed sources
+/// (`entry` into `table` by vertex), above it those received from other ranks and those
+/// carried across seams (`extra`), each once (`slot_of`, by [`Source::key`]).
+struct Slots {
+    nv: usize,
+    table: Vec<Source>,
+    entry: Vec<u32>,
+    extra: Vec<Source>,
+    slot_of: HashMap<Vec<u64>, u32>,
+}
+
+impl Slots {
+    fn get(&self, src: u32) -> &Source {
+        match (src as usize).checked_sub(self.nv) {
+            None => &self.table[self.entry[src as usize] as usize],
+            Some(i) => &self.extra[i],
+        }
+    }
+
+    /// The slot of `s`, added when new.
+    fn slot(&mut self, s: Source) -> u32 {
+        let (nv, extra) = (self.nv, &mut self.extra);
+        *self.slot_of.entry(s.key()).or_insert_with(|| {
+            extra.push(s);
+            (nv + extra.len() - 1) as u32
+        })
+    }
+
+    /// The slot of source `src` carried by `t`.
+    fn carried(&mut self, src: u32, t: &Rigid) -> u32 {
+        let s = self.get(src).carried(t);
+        self.slot(s)
+    }
+}
+
+/// Multi-source Dijkstra along `paths` ([`Paths`]): the vertices `source` gives a model to
+/// are the sources, and a relaxable vertex takes the nearest path a neighbour (or its
+/// partner across a seam) hands on within decay · ℓ of its source ([`Reach::before`]). On a
+/// rank's part of a distributed mesh (`share`) the sources are its computed vertices and
+/// those of the other ranks, whose distances and models come in as records over the ranks'
+/// borders; each round relaxes the computed vertices from scratch from the latest records,
+/// until no record changes on any rank. Each vertex's nearest path is the unique fixed point
+/// of "a vertex takes the nearest of its neighbours' paths within their sources' cut-off",
+/// ties going as in the serial Dijkstra, so the computed vertices get the serial result.
 pub(super) fn nearest_shared(
     mesh: &LinearMesh,
-    adj: &(Vec<u32>, Vec<u32>),
+    paths: &Paths,
     source: &dyn Fn(usize) -> Option<Source>,
-    relaxable: &dyn Fn(usize) -> bool,
     decay: f64,
     share: Option<&dyn InheritShare>,
 ) -> NearestSources {
@@ -1429,24 +1561,27 @@ pub(super) fn nearest_shared(
             None => NONE,
         })
         .collect();
-    let is_source = |v: usize| entry[v] != NONE;
-    let relaxable = |w: usize| computes(w) && relaxable(w);
-    // Sources received from other ranks (slot nv + i), and the local slot of a computed
-    // source by its order.
-    let mut remote: Vec<Source> = Vec::new();
-    let mut slot_of: HashMap<u64, u32> = HashMap::new();
-    if share.is_some() {
-        slot_of.extend(
-            (0..nv)
-                .filter(|&v| is_source(v))
-                .map(|v| (order(v as u32), v as u32)),
-        );
-    }
+    let relaxable = |w: usize| computes(w) && (paths.relaxable)(w);
+    // The local slot of a computed source, to find it again among the records.
+    let slot_of = match share {
+        Some(_) => (0..nv)
+            .filter(|&v| entry[v] != NONE)
+            .map(|v| (table[entry[v] as usize].key(), v as u32))
+            .collect(),
+        None => HashMap::new(),
+    };
+    let mut slots = Slots {
+        nv,
+        table,
+        entry,
+        extra: Vec::new(),
+        slot_of,
+    };
     // The latest records of the vertices other ranks compute (none without `share`).
     let mut seeds = vec![Reach::NONE; if share.is_some() { nv } else { 0 }];
     let reach = loop {
         let mut reach: Vec<Reach> = (0..nv)
-            .map(|v| match (is_source(v), computes(v)) {
+            .map(|v| match (slots.entry[v] != NONE, computes(v)) {
                 (true, _) => Reach {
                     dist: 0.0,
                     via: (0.0, order(v as u32)),
@@ -1456,14 +1591,13 @@ pub(super) fn nearest_shared(
                 (false, false) => seeds[v],
             })
             .collect();
-        let slot = |src: u32| -> &Source {
-            match (src as usize).checked_sub(nv) {
-                None => &table[entry[src as usize] as usize],
-                Some(i) => &remote[i],
-            }
+        let walk = Walk {
+            paths,
+            relaxable: &relaxable,
+            decay,
+            order: &order,
         };
-        let cutoff = |src: u32| decay * slot(src).ell;
-        nearest_sources(mesh, adj, &mut reach, &relaxable, &cutoff, &order);
+        nearest_sources(mesh, &walk, &mut reach, &mut slots);
         let Some(share) = share else {
             break reach;
         };
@@ -1472,7 +1606,7 @@ pub(super) fn nearest_shared(
             if r.src == NONE {
                 out[0] = f64::INFINITY;
             } else {
-                slot(r.src).write(r, out);
+                slots.get(r.src).write(r, out);
             }
         }
         share.exchange(&mut records);
@@ -1480,13 +1614,10 @@ pub(super) fn nearest_shared(
         for v in (0..nv).filter(|&v| !computes(v)) {
             let new = match Source::read(&records[v * RECORD_LEN..(v + 1) * RECORD_LEN]) {
                 None => Reach::NONE,
-                Some((r, s)) => {
-                    let src = *slot_of.entry(s.order).or_insert_with(|| {
-                        remote.push(s);
-                        (nv + remote.len() - 1) as u32
-                    });
-                    Reach { src, ..r }
-                }
+                Some((r, s)) => Reach {
+                    src: slots.slot(s),
+                    ..r
+                },
             };
             changed |= new != seeds[v];
             seeds[v] = new;
@@ -1495,8 +1626,8 @@ pub(super) fn nearest_shared(
             break reach;
         }
     };
-    // The received sources follow the computed ones in the table.
-    let n_local = table.len();
+    // The received and carried sources follow the computed ones in the table.
+    let n_local = slots.table.len();
     let at = reach
         .iter()
         .enumerate()
@@ -1508,14 +1639,15 @@ pub(super) fn nearest_shared(
                 // A source's path starts at itself; any other vertex's at a neighbour.
                 is_source: r.via.1 == order(v as u32),
                 source: match i.checked_sub(nv) {
-                    None => entry[i],
+                    None => slots.entry[i],
                     Some(k) => (n_local + k) as u32,
                 },
             })
         })
         .collect();
-    table.extend(remote);
-    NearestSources { at, sources: table }
+    let mut sources = slots.table;
+    sources.extend(slots.extra);
+    NearestSources { at, sources }
 }
 
 /// The neighbours of every vertex along `edges`: offsets (`nv` + 1) into the list of
@@ -1543,18 +1675,24 @@ pub(super) fn adjacency(
     (offsets, adj)
 }
 
-/// Dijkstra along the edges (`adj`, [`adjacency`]) from the vertices whose `reach` is
-/// finite: a `relaxable` vertex takes the nearest path ([`Reach::before`]) a neighbour hands
-/// on within its source's `cutoff`; vertices are settled in the order of (distance, `order`).
-fn nearest_sources(
-    mesh: &LinearMesh,
-    (offsets, adj): &(Vec<u32>, Vec<u32>),
-    reach: &mut [Reach],
-    relaxable: &dyn Fn(usize) -> bool,
-    cutoff: &dyn Fn(u32) -> f64,
-    order: &dyn Fn(u32) -> u64,
-) {
+/// How one round of [`nearest_sources`] walks: along `paths`, into the vertices
+/// `relaxable` allows, within decay · ℓ of the source, settling by (distance, `order`).
+struct Walk<'a> {
+    paths: &'a Paths<'a>,
+    relaxable: &'a dyn Fn(usize) -> bool,
+    decay: f64,
+    order: &'a dyn Fn(u32) -> u64,
+}
+
+/// Dijkstra along the edges and seams ([`Walk`]) from the vertices whose `reach` is finite:
+/// a relaxable vertex takes the nearest path ([`Reach::before`]) a neighbour hands on within
+/// its source's cut-off, a step across a seam handing on the source carried by the seam's
+/// map (a new slot in `slots`) at the same distance; vertices are settled in the order of
+/// (distance, order).
+fn nearest_sources(mesh: &LinearMesh, walk: &Walk, reach: &mut [Reach], slots: &mut Slots) {
     let x = |v: u32| DVec3::from(mesh.coords[v as usize]);
+    let ((offsets, adj), (seam_offsets, seams)) = (walk.paths.adj, walk.paths.seams);
+    let order = walk.order;
     let mut heap = BinaryHeap::new();
     for (v, r) in reach.iter().enumerate() {
         if r.dist.is_finite() {
@@ -1567,19 +1705,31 @@ fn nearest_sources(
         if d > r.dist {
             continue;
         }
-        let cut = cutoff(r.src);
-        for &w in &adj[offsets[v as usize] as usize..offsets[v as usize + 1] as usize] {
-            if !relaxable(w as usize) {
+        let cut = walk.decay * slots.get(r.src).ell;
+        let (i, j) = (offsets[v as usize], offsets[v as usize + 1]);
+        let across = seam_offsets
+            .get(v as usize..v as usize + 2)
+            .map_or(&[][..], |o| &seams[o[0] as usize..o[1] as usize]);
+        let steps = adj[i as usize..j as usize]
+            .iter()
+            .map(|&w| (w, None))
+            .chain(across.iter().map(|(w, t)| (*w, Some(t))));
+        for (w, t) in steps {
+            if !(walk.relaxable)(w as usize) {
                 continue;
             }
-            let nd = d + (x(w) - x(v)).length();
+            let nd = match t {
+                None => d + (x(w) - x(v)).length(),
+                Some(_) => d,
+            };
             let next = Reach {
                 dist: nd,
                 via: (d, ov),
                 src: r.src,
             };
             if nd < cut && next.before(&reach[w as usize]) {
-                reach[w as usize] = next;
+                let src = t.map_or(r.src, |t| slots.carried(r.src, t));
+                reach[w as usize] = Reach { src, ..next };
                 heap.push(Reverse((nd.to_bits(), order(w), w)));
             }
         }

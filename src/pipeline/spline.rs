@@ -135,7 +135,9 @@ impl SplineSetup {
         };
         let fitted = options.geometry == Geometry::SplineFitted;
         // The walls' models at a seam are fitted over both sides.
-        let partners = view.as_ref().map_or(&[][..], |v| &v.wall_partners[..]);
+        let partners = view.as_ref().map_or((&[][..], &[][..]), |v| {
+            (&v.wall_partners[..], &v.seam_links[..])
+        });
         let targets = if fitted {
             crate::fit::smooth_targets_shared(mesh, topo, &fit_params, share, partners)
         } else {

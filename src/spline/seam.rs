@@ -252,6 +252,11 @@ pub struct SeamView {
     /// side onto this one, so the smooth targets see the wall on both sides (`None` at every
     /// other vertex).
     pub wall_partners: Vec<Option<(u32, Rigid)>>,
+    /// Every vertex of a seam facet paired with each vertex of the other side on the same
+    /// glued vertex: (v, w, t) with t the rigid map carrying w's side onto v's (x_v = t x_w),
+    /// in both directions, sorted. The interior inheritance of the smooth targets walks
+    /// across the seam along them (`fit::SmoothTargets::build_shared`).
+    pub seam_links: Vec<(u32, u32, Rigid)>,
 }
 
 /// [`SeamView`] of the input (`mesh`, `topo`) glued as `glued`.
@@ -288,26 +293,37 @@ pub fn interior_view(mesh: &LinearMesh, topo: &Topology, glued: &Glued) -> SeamV
             view.facet_elements[f][1] == NONE
         })
         .collect();
-    let wall_partners = wall_partners(mesh, topo, glued, &across, &seam_ends);
+    let mut seam_links = seam_links(mesh, topo, glued, &across);
+    // A wall end's partner: the last seam facet's (a corner of a doubly periodic box has
+    // several).
+    let mut wall_partners = vec![None; mesh.n_vertices()];
+    for &(v, w, t) in &seam_links {
+        if seam_ends[v as usize] {
+            wall_partners[v as usize] = Some((w, t));
+        }
+    }
+    // A vertex is met once per seam facet holding it: each pair once.
+    seam_links.sort_by_key(|&(v, w, _)| (v, w));
+    seam_links.dedup_by_key(|&mut (v, w, _)| (v, w));
     SeamView {
         topo: view,
         seam_ends,
         boundary_rows,
         wall_partners,
+        seam_links,
     }
 }
 
-/// [`SeamView::wall_partners`]: each wall end `v` on a seam facet of `across` (a facet of
-/// the input with the element and side across the seam) is paired with the vertex of the
-/// facet across that glues to the same vertex, through the map of [`group`] that carries the
-/// facet across onto v's (to `SHIFT_REL_TOL` of the facet's length).
-fn wall_partners(
+/// [`SeamView::seam_links`], facet by facet of `across` (a facet of the input with the
+/// element and side across the seam): each vertex `v` of the facet is paired with the vertex
+/// of the facet across that glues to the same vertex, through the map of [`group`] that
+/// carries the facet across onto v's (to `SHIFT_REL_TOL` of the facet's length).
+fn seam_links(
     mesh: &LinearMesh,
     topo: &Topology,
     glued: &Glued,
     across: &[(u32, u32, u8)],
-    seam_ends: &[bool],
-) -> Vec<Option<(u32, Rigid)>> {
+) -> Vec<(u32, u32, Rigid)> {
     let mut glued_of = vec![u32::MAX; mesh.n_vertices()];
     for e in 0..mesh.n_elements() {
         for (&v, &g) in mesh.element(e).iter().zip(glued.mesh.element(e)) {
@@ -316,7 +332,7 @@ fn wall_partners(
     }
     let maps = group(glued);
     let x = |v: u32| DVec3::from(mesh.coords[v as usize]);
-    let mut out = vec![None; mesh.n_vertices()];
+    let mut out: Vec<(u32, u32, Rigid)> = Vec::new();
     for &(f, b, sb) in across {
         let here = topo.facet_vertices(f as usize);
         let there = topo.facet_vertices(topo.element_facet(b as usize, sb as usize) as usize);
@@ -348,9 +364,7 @@ fn wall_partners(
         else {
             continue;
         };
-        for &(v, w) in pairs.iter().filter(|&&(v, _)| seam_ends[v as usize]) {
-            out[v as usize] = Some((w, *t));
-        }
+        out.extend(pairs.iter().map(|&(v, w)| (v, w, *t)));
     }
     out
 }

@@ -18,6 +18,7 @@
 use super::VertexModel;
 use super::one_ring::{outer, sym_outer, tangent_frame};
 use crate::math::linalg::{DVec3, unit};
+use crate::mesh::periodic::Rigid;
 use crate::mesh::{LinearMesh, Topology};
 
 /// The cubic and quartic part of a vertex's height function over its model's tangent frame
@@ -104,6 +105,20 @@ impl HigherModel {
             c: std::array::from_fn(|k| r[10 + k]),
             form: a3(19),
             conic: (r[22] != 0.0).then(|| (a3(23), [r[26], r[27]])),
+        }
+    }
+
+    /// The height function seen through the rigid map `t` (a periodic seam's): its origin
+    /// moved and its tangent frame turned by `t`, the same function of the moved points.
+    pub(crate) fn carried(&self, t: &Rigid) -> HigherModel {
+        let turn = |a: [f64; 3]| {
+            let r = &t.rotation;
+            std::array::from_fn(|i| r[i][0] * a[0] + r[i][1] * a[1] + r[i][2] * a[2])
+        };
+        HigherModel {
+            origin: t.apply(self.origin),
+            t: self.t.map(turn),
+            ..*self
         }
     }
 
