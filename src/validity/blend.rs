@@ -19,11 +19,15 @@
 //! of max det J, both refined by subdivision until the test is decided,
 //! [`super::certify_ratio`]) is at least max(q_min · r_S, q_p · min(r_S, P)), r_S the
 //! straight element's ratio (from its corners) and P the 1st percentile of r_S over the mesh.
-//! Its smallest scaled Jacobian over the lattice {0, ½, 1}^d must also be at least q_min × the
-//! straight element's (det J alone does not see a thin cell sheared along its length).
 //! Every accepted element then has r_B ≥ q_min · r_S, so the mesh's smallest ratio is at least
 //! q_min × the straight mesh's; and an element below q_p · P has r_S < P, which only 1 % of
 //! the elements have, so the 1st percentile is at least q_p × the straight mesh's.
+//! Its smallest scaled Jacobian over the lattice {0, ¼, ½, ¾, 1}^d must also be at least
+//! max(q_min · s_S, q_p · min(s_S, P_s)), s_S the straight element's (over the same lattice)
+//! and P_s the 1st percentile of s_S over the mesh (det J alone does not see a thin cell
+//! sheared along its length): by the same argument every accepted element keeps at least
+//! q_p × the straight mesh's smallest scaled Jacobian, and the 1st percentile keeps q_p × the
+//! straight mesh's.
 //! The factors of the entities of rejected elements are halved towards 1 (twice, then set
 //! to 1: the target map), then towards 0 (the straight elevation, at most `max_bisections`
 //! halvings); global mode bisects one factor for the whole mesh instead. An element whose
@@ -36,7 +40,7 @@ mod shape;
 
 pub use entities::{EntityIds, entity_ids};
 use shape::{corner_ratio, hadamard_upper};
-pub use shape::{lattice_scaled_jacobian, max_det_bound};
+pub use shape::{fine_lattice_scaled_jacobian, lattice_scaled_jacobian, max_det_bound};
 
 use super::{Certifier, DetBounds, certify_ratio, certify_screened, det_jacobian_bernstein};
 use crate::math::linalg::DVec3;
@@ -62,7 +66,7 @@ pub struct BlendParams {
     /// (0: no quality test).
     pub min_quality_fraction: f64,
     /// q_p: elements keep at least this fraction of min(their straight ratio, the straight
-    /// mesh's 1st percentile).
+    /// mesh's 1st percentile), and the same of the scaled Jacobian.
     pub percentile_quality_fraction: f64,
     /// One factor for the whole mesh (the paper's bisection) instead of one per entity.
     pub global: bool,
@@ -335,7 +339,12 @@ fn straight_reference(
     let mesh = blended.geometry;
     let shapes: Vec<StraightShape> = mine
         .par_iter()
-        .map(|&e| (corner_ratio(mesh, e), lattice_scaled_jacobian(dim, &net(e))))
+        .map(|&e| {
+            (
+                corner_ratio(mesh, e),
+                fine_lattice_scaled_jacobian(dim, &net(e)),
+            )
+        })
         .collect();
     let mut lower = vec![0.0; n];
     let mut ratio = vec![(f64::NAN, f64::NAN); n];
@@ -489,11 +498,19 @@ fn search(
     let mut sorted = share.concat(mine.iter().map(|&e| straight_ratio[e]).collect());
     sorted.sort_by(f64::total_cmp);
     let p1 = sorted.get(sorted.len() / 100).copied().unwrap_or(1.0);
+    // The same for the straight elements' scaled Jacobians.
+    let mut sorted_sj = share.concat(mine.iter().map(|&e| reference[e].1).collect());
+    sorted_sj.sort_by(f64::total_cmp);
+    let sj_p1 = sorted_sj.get(sorted_sj.len() / 100).copied().unwrap_or(1.0);
     let det_target = |e: usize| params.min_det_fraction.max(0.0) * straight_lower[e];
     let quality = params.min_quality_fraction > 0.0 || params.percentile_quality_fraction > 0.0;
     let ratio_target = |e: usize| {
         let r = straight_ratio[e];
         (params.min_quality_fraction * r).max(params.percentile_quality_fraction * r.min(p1))
+    };
+    let sj_target = |e: usize| {
+        let s = reference[e].1;
+        (params.min_quality_fraction * s).max(params.percentile_quality_fraction * s.min(sj_p1))
     };
     // (valid, accepted, certified lower bound): det J above its target, then (only then,
     // since it costs the det J polynomial) the ratio bound.
@@ -504,8 +521,7 @@ fn search(
         if !quality {
             return (true, true, b.lower);
         }
-        let shape =
-            || lattice_scaled_jacobian(dim, net) >= params.min_quality_fraction * reference[e].1;
+        let shape = || fine_lattice_scaled_jacobian(dim, net) >= sj_target(e);
         // Cheap first: the screened lower bound against the Hadamard upper bound of max det J.
         if b.lower >= ratio_target(e) * hadamard_upper(dim, net) {
             return (true, shape(), b.lower);

@@ -57,6 +57,31 @@ pub fn lattice_scaled_jacobian(dim: usize, net: &Net) -> f64 {
     min
 }
 
+/// Smallest scaled Jacobian over the finer lattice {0, ¼, ½, ¾, 1}^d: the
+/// [`lattice_scaled_jacobian`] of the 2^d halves of the element (de Casteljau at ½ along each
+/// axis; a scaled Jacobian does not change when a parameter is scaled), the lattice on which
+/// the report and `scripts/` sample the output's scaled Jacobian.
+pub fn fine_lattice_scaled_jacobian(dim: usize, net: &Net) -> f64 {
+    const LOW: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.5, 0.5, 0.0], [0.25, 0.5, 0.25]];
+    const HIGH: [[f64; 3]; 3] = [[0.25, 0.5, 0.25], [0.0, 0.5, 0.5], [0.0, 0.0, 1.0]];
+    let n = if dim == 2 { 9 } else { 27 };
+    let mut min = f64::INFINITY;
+    for x in [&LOW, &HIGH] {
+        let nx = along::<1>(net, n, x);
+        for y in [&LOW, &HIGH] {
+            let ny = along::<3>(&nx, n, y);
+            if dim == 2 {
+                min = min.min(lattice_scaled_jacobian(dim, &ny));
+                continue;
+            }
+            for z in [&LOW, &HIGH] {
+                min = min.min(lattice_scaled_jacobian(dim, &along::<9>(&ny, n, z)));
+            }
+        }
+    }
+    min
+}
+
 /// `m` along the axis of stride `STRIDE` (1, 3 or 9) of the first `n` (9 or 27) slots of a
 /// lattice net: out[.., i, ..] = Σ_a m[i][a] src[.., a, ..], the other slots 0.
 ///
