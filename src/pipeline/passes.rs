@@ -78,8 +78,7 @@ pub(crate) trait Passes {
     /// demoted in rounds ([`super::spline::demotion_marks`], each process certifying its own
     /// elements), as marks on this process's elements; timed as the validity stage.
     fn demotion(&mut self, job: &Job, setup: &SplineSetup, clock: &mut Clock) -> Option<Demoted>;
-    /// Elements `pass` holds back over the whole mesh (its blend's under the element rules,
-    /// before the scaled Jacobian's floor, `BlendInfo::reduced_before_floor`; with `--fit energy`, the
+    /// Elements `pass` holds back over the whole mesh (its blend's; with `--fit energy`, the
     /// elements its least-squares fit's full step leaves uncertified): `Ok` when it ran to its
     /// end, else `Err` with the lower bound at which it stopped.
     fn held(pass: &Self::Pass) -> Result<usize, usize>;

@@ -445,20 +445,7 @@ fn boundary_layer_cells_keep_their_jacobian_ratio_by_gmsh() {
             dir.join(format!("{name}_p2.msh")),
             dir.join(format!("{name}_s.msh")),
         );
-        common::run_ok(
-            Command::new(exe)
-                .args(["curve", "-q"])
-                .arg(&input)
-                .arg("-o")
-                .arg(&ours),
-        );
-        common::run_ok(
-            Command::new(exe)
-                .args(["curve", "-q", "--straight"])
-                .arg(&input)
-                .arg("-o")
-                .arg(&straight),
-        );
+        curve_and_straight(exe, &input, &ours, &straight);
         let (o, s) = (gmsh_ratio(&ours), gmsh_ratio(&straight));
         assert!(o.0 > 0.0, "{name}: Gmsh finds an invalid element");
         assert!(
@@ -483,6 +470,29 @@ gmsh.initialize(['-nopopup']); gmsh.option.setNumber('General.Terminal', 0)\n\
 gmsh.open(sys.argv[1]); d = gmsh.model.getDimension(); tags = []\n\
 for t in gmsh.model.mesh.getElementTypes(d): tags += list(gmsh.model.mesh.getElementsByType(t)[0])\n\
 print(min(gmsh.model.mesh.getElementQualities(tags, 'minSJ')))\n";
+    python_number(script, file)
+}
+
+/// `curve` with the default options into `ours` and `curve --straight` into `straight`.
+fn curve_and_straight(exe: &str, input: &Path, ours: &Path, straight: &Path) {
+    common::run_ok(
+        Command::new(exe)
+            .args(["curve", "-q"])
+            .arg(input)
+            .arg("-o")
+            .arg(ours),
+    );
+    common::run_ok(
+        Command::new(exe)
+            .args(["curve", "-q", "--straight"])
+            .arg(input)
+            .arg("-o")
+            .arg(straight),
+    );
+}
+
+/// The number the Python `script` prints for `file` (its first argument).
+fn python_number(script: &str, file: &Path) -> f64 {
     let out = common::run_ok(common::python().arg("-c").arg(script).arg(file));
     String::from_utf8(out.stdout)
         .unwrap()
@@ -716,12 +726,7 @@ uvw = np.array([[a, b, c] for c in g for b in g for a in g]).ravel()\n\
 jac, det, _ = gmsh.model.mesh.getJacobians(t, uvw)\n\
 J = np.array(jac).reshape(n, 125, 3, 3); D = np.array(det).reshape(n, 125)\n\
 print((D / np.linalg.norm(J, axis=3).prod(axis=2)).min())\n";
-    let out = common::run_ok(common::python().arg("-c").arg(script).arg(file));
-    String::from_utf8(out.stdout)
-        .unwrap()
-        .trim()
-        .parse()
-        .unwrap()
+    python_number(script, file)
 }
 
 /// The coarse tip of `extruded_coarse_ellipse_tips_keep_their_curved_wall`, extruded by one
@@ -748,20 +753,7 @@ fn extruded_coarse_ellipse_tips_keep_the_inputs_scaled_jacobian() {
             dir.join(format!("coarse_tip_sj_{layers}_p2.msh")),
             dir.join(format!("coarse_tip_sj_{layers}_s.msh")),
         );
-        common::run_ok(
-            Command::new(exe)
-                .args(["curve", "-q"])
-                .arg(&input)
-                .arg("-o")
-                .arg(&ours),
-        );
-        common::run_ok(
-            Command::new(exe)
-                .args(["curve", "-q", "--straight"])
-                .arg(&input)
-                .arg("-o")
-                .arg(&straight),
-        );
+        curve_and_straight(exe, &input, &ours, &straight);
         let (sj, sj_straight) = (gmsh_sampled_sj(&ours), gmsh_sampled_sj(&straight));
         eprintln!("{layers} layers: min scaled Jacobian {sj:.4}, straight {sj_straight:.4}");
         assert!(
