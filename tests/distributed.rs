@@ -149,13 +149,14 @@ const RANK_CG_TOL: &str = "1e-8";
 
 /// The report's `blend` figures that are the serial run's exactly under mpirun: the blend's
 /// decisions, and the straight mesh's ratios (the input's).
-const BLEND_FIGURES: [&str; 10] = [
+const BLEND_FIGURES: [&str; 11] = [
     "invalid_at_full_step",
     "poor_at_full_step",
     "straight_ratio_min",
     "straight_ratio_p1",
     "rounds",
     "reduced_elements",
+    "reduced_before_floor",
     "reduced_points",
     "target_points",
     "straight_points",

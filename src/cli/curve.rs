@@ -183,8 +183,8 @@ pub(crate) struct JobArgs {
     /// fraction of its straight-sided elevation's (0: no quality test).
     #[arg(long, default_value_t = 0.55)]
     min_quality_fraction: f64,
-    /// Keep every element's Jacobian ratio at least this fraction of min(its straight ratio,
-    /// the straight mesh's 1st percentile).
+    /// Keep every element's Jacobian ratio and scaled Jacobian at least this fraction of
+    /// min(its straight-sided elevation's, the straight mesh's 1st percentile).
     #[arg(long, default_value_t = 0.85)]
     percentile_quality_fraction: f64,
     /// Shorten the fitted step per control point around invalid elements (`local`), or by

@@ -595,7 +595,7 @@ impl Passes for RankPasses<'_> {
     }
     fn held(pass: &Pass) -> Result<usize, usize> {
         match &pass.blend {
-            Ok((_, info)) => Ok(info.reduced_elements),
+            Ok((_, info)) => Ok(info.reduced_before_floor),
             Err(at_least) => Err(*at_least),
         }
     }

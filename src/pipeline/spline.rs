@@ -691,7 +691,9 @@ impl super::passes::Passes for Whole<'_> {
     fn held(pass: &First) -> Result<usize, usize> {
         match pass {
             First::Done(o) => Ok(match (&o.blend, &o.energy) {
-                (Some(b), _) => b.reduced_elements,
+                // Before the scaled Jacobian's floor: the passes are weighed on the element
+                // rules (`validity::blend`).
+                (Some(b), _) => b.reduced_before_floor,
                 // `--fit energy` starts from the least-squares fit's certified step: the
                 // elements its full step leaves uncertified are held back from the fit there
                 // (a shortened or damped step), as the blend's are.

@@ -43,8 +43,8 @@ pub struct LineSearchParams {
     /// over max det J, certified) is at least this fraction of its straight elevation's
     /// ([`blend`]); 0 turns the test off.
     pub min_quality_fraction: f64,
-    /// … and at least this fraction of min(its straight ratio, the straight mesh's 1st
-    /// percentile) ([`blend`]).
+    /// … and its ratio and scaled Jacobian at least this fraction of min(its straight
+    /// elevation's, the straight mesh's 1st percentile) ([`blend`]).
     pub percentile_quality_fraction: f64,
 }
 

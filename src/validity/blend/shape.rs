@@ -57,6 +57,69 @@ pub fn lattice_scaled_jacobian(dim: usize, net: &Net) -> f64 {
     min
 }
 
+/// Smallest scaled Jacobian over the finer lattice {0, ¼, ½, ¾, 1}^d, the lattice on which
+/// the report and `scripts/` sample the output's scaled Jacobian (sampled, not certified).
+///
+/// The columns at the 5^d points, one axis at a time: the values B and derivatives D of the
+/// quadratic Bernstein basis at the five parameters along x, then y, then z.
+pub fn fine_lattice_scaled_jacobian(dim: usize, net: &Net) -> f64 {
+    const T: [f64; 5] = [0.0, 0.25, 0.5, 0.75, 1.0];
+    let b: [[f64; 3]; 5] = T.map(|t| [(1.0 - t) * (1.0 - t), 2.0 * t * (1.0 - t), t * t]);
+    let d: [[f64; 3]; 5] = T.map(|t| [-2.0 * (1.0 - t), 2.0 - 4.0 * t, 2.0 * t]);
+    let nz = if dim == 2 { 1 } else { 3 };
+    let dot = |m: &[f64; 3], p: [[f64; 3]; 3]| -> [f64; 3] {
+        std::array::from_fn(|q| m[0] * p[0][q] + m[1] * p[1][q] + m[2] * p[2][q])
+    };
+    // Along x: [i][y][z] of the values and of the derivatives.
+    let mut bx = [[[[0.0; 3]; 3]; 3]; 5];
+    let mut dx = bx;
+    for z in 0..nz {
+        for y in 0..3 {
+            let row = [0, 1, 2].map(|x| net[x + 3 * y + 9 * z]);
+            for i in 0..5 {
+                bx[i][y][z] = dot(&b[i], row);
+                dx[i][y][z] = dot(&d[i], row);
+            }
+        }
+    }
+    // Along y: [i][j][z] of (∂x, ∂y, values) before z.
+    let mut xy = [[[[[0.0; 3]; 3]; 3]; 5]; 5];
+    for i in 0..5 {
+        for j in 0..5 {
+            for z in 0..nz {
+                let (vb, vd) = (
+                    [0, 1, 2].map(|y| bx[i][y][z]),
+                    [0, 1, 2].map(|y| dx[i][y][z]),
+                );
+                xy[i][j][z] = [dot(&b[j], vd), dot(&d[j], vb), dot(&b[j], vb)];
+            }
+        }
+    }
+    let mut min = f64::INFINITY;
+    for row in &xy {
+        for c in row {
+            // Along z (3D): the columns at the five points of this (x, y).
+            let along =
+                |k: usize, m: &[[f64; 3]; 5], l: usize| dot(&m[l], [0, 1, 2].map(|z| c[z][k]));
+            let planes: [[[f64; 3]; 3]; 5] = if dim == 2 {
+                [c[0]; 5]
+            } else {
+                std::array::from_fn(|l| [along(0, &b, l), along(1, &b, l), along(2, &d, l)])
+            };
+            for &jac in &planes[..if dim == 2 { 1 } else { 5 }] {
+                let [j0, j1, j2] = jac.map(DVec3::from);
+                let sj = if dim == 2 {
+                    (jac[0][0] * jac[1][1] - jac[0][1] * jac[1][0]) / (j0.length() * j1.length())
+                } else {
+                    j0.cross(j1).dot(j2) / (j0.length() * j1.length() * j2.length())
+                };
+                min = min.min(if sj.is_nan() { -1.0 } else { sj });
+            }
+        }
+    }
+    min
+}
+
 /// `m` along the axis of stride `STRIDE` (1, 3 or 9) of the first `n` (9 or 27) slots of a
 /// lattice net: out[.., i, ..] = Σ_a m[i][a] src[.., a, ..], the other slots 0.
 ///
