@@ -2163,27 +2163,6 @@ impl BlockedSystem {
 }
 
 #[cfg(test)]
-impl TemplateMatrix {
-    /// A copy (tests compare kernels on one matrix).
-    fn clone_for_test(&self) -> Self {
-        TemplateMatrix {
-            indptr: self.indptr.clone(),
-            cols: self.cols.clone(),
-            packed: self.packed.as_ref().map(|p| PackedColumns {
-                base: p.base.clone(),
-                start: p.start.clone(),
-                offsets: p.offsets.clone(),
-                wide: p.wide.clone(),
-            }),
-            template: self.template.clone(),
-            template_start: self.template_start.clone(),
-            values: self.values.clone(),
-            portable: self.portable,
-        }
-    }
-}
-
-#[cfg(test)]
 impl BlockedSystem {
     /// z = M⁻¹ r in the original numbering, by the solve's own passes (a zero step, the
     /// second partition's pass and the direction update with β = 0).
@@ -2361,37 +2340,18 @@ mod tests {
             wide += usize::from(span > 65_535);
         }
         assert!((6..n / 100).contains(&wide), "{wide} wide rows");
-        // x in the matrix's (aggregate) order.
-        let xo = test_vector(n);
-        let x: Vec<V4> = agg
-            .rows
-            .iter()
-            .map(|&r| {
-                let v = xo[r as usize];
-                [v[0], v[1], v[2], 0.0]
-            })
-            .collect();
+        let x = test_vector(n);
+        let (mut full, mut packed) = (full, packed);
         for portable in [false, true] {
-            let (mut full, mut packed) = (full.clone_for_test(), packed.clone_for_test());
             full.portable = portable;
             packed.portable = portable;
-            let (mut y0, mut y1) = (vec![[0.0; 4]; n], vec![[0.0; 4]; n]);
-            let d0 = full.apply_dot(&x, &mut y0);
-            let d1 = packed.apply_dot(&x, &mut y1);
-            assert_eq!(d0.map(f64::to_bits), d1.map(f64::to_bits));
+            let y0 = template_product(&a, &full, &agg, &x);
+            let y1 = template_product(&a, &packed, &agg, &x);
             for (i, (u, v)) in y0.iter().zip(&y1).enumerate() {
                 assert_eq!(u.map(f64::to_bits), v.map(f64::to_bits), "row {i}");
             }
-        }
-        // And the product is A's (the oracle: the plain CSR product).
-        let mut y = vec![[0.0; 4]; n];
-        packed.apply_dot(&x, &mut y);
-        let want = matvec(&a, &xo);
-        for (k, &r) in agg.rows.iter().enumerate() {
-            for c in 0..3 {
-                let w = want[r as usize][c];
-                assert!((y[k][c] - w).abs() <= 1e-12 * (1.0 + w.abs()), "row {r}");
-            }
+            // And the product is A's (the oracle: the plain CSR product).
+            assert_close(&y1, &matvec(&a, &x), 1e-12);
         }
     }
 
