@@ -20,6 +20,11 @@
 //!   template table, which stays in cache, so the product streams 4 B per entry instead of 12.
 //!   The values are A's own f64 values bit for bit (templates are found by exact comparison):
 //!   the operator is A exactly, and a matrix without repeats just has one template per row.
+//! * **Packed columns** ([`BlockedKind::Jacobi`] and the pair). A row's columns are stored
+//!   as 16-bit offsets from its smallest column where they span less than 2¹⁶ (in aggregate
+//!   order a row's neighbours are near: all but a few rows on the fit's systems), in 32 bits
+//!   otherwise; the product then streams 2 B per entry, with the same sums in the same order
+//!   (the same bits). The 32-bit array is never made; Gauss–Seidel keeps it.
 //! * **Fused passes.** One iteration is three parallel passes: the product A p with the
 //!   partial sums of pᵀAp; per aggregate the updates of x and r, the block solve z = M⁻¹ r and
 //!   the partial sums of rᵀz and rᵀr; then p = z + β p.
@@ -78,9 +83,11 @@ macro_rules! dispatch {
 
 /// A in aggregate order with rows stored by template (see the module docs).
 pub struct TemplateMatrix {
-    /// Row i's columns (new numbering) are `cols[indptr[i]..indptr[i + 1]]`.
+    /// Row i's columns (new numbering) are `cols[indptr[i]..indptr[i + 1]]` until
+    /// [`Self::pack`] moves them into `packed`.
     indptr: Vec<usize>,
     cols: Vec<u32>,
+    packed: Option<PackedColumns>,
     /// Template of each row; template t's values are `values[template_start[t]..]`, in the
     /// order of the row's columns.
     template: Vec<u32>,
@@ -88,6 +95,79 @@ pub struct TemplateMatrix {
     values: Vec<f64>,
     /// Run the portable kernels even where AVX2 is available.
     portable: bool,
+}
+
+/// [`PackedColumns::base`] of a row stored with 32-bit columns.
+const WIDE: u32 = u32::MAX;
+
+/// A's columns in 16 bits where a row's columns span less than 2¹⁶: row i (of `n` entries,
+/// [`TemplateMatrix`]'s `indptr`) has columns `base[i] + offsets[start[i]..start[i] + n]`,
+/// or, where `base[i]` is [`WIDE`], `wide[start[i]..start[i] + n]`. The product reads
+/// 2 B per entry instead of 4 (the columns are its largest stream).
+struct PackedColumns {
+    base: Vec<u32>,
+    start: Vec<usize>,
+    offsets: Vec<u16>,
+    wide: Vec<u32>,
+}
+
+impl PackedColumns {
+    /// The columns of A (CSR `indptr`, `indices`) renumbered as [`TemplateMatrix::renumbered`]
+    /// renumbers them, packed.
+    fn new(indptr: &[usize], indices: &[u32], rows: &[u32], slot: &[u32]) -> Self {
+        let old = |i: usize| {
+            let r = rows[i] as usize;
+            &indices[indptr[r]..indptr[r + 1]]
+        };
+        // Per row: its smallest new column, and whether its span fits 16 bits.
+        let span: Vec<(u32, bool)> = (0..rows.len())
+            .into_par_iter()
+            .with_min_len(ROW_CHUNK)
+            .map(|i| {
+                let (lo, hi) = old(i).iter().fold((u32::MAX, 0), |(lo, hi), &c| {
+                    let c = slot[c as usize];
+                    (lo.min(c), hi.max(c))
+                });
+                (lo, hi.saturating_sub(lo) <= u32::from(u16::MAX))
+            })
+            .collect();
+        // Row i's entries in `offsets` (narrow rows) and in `wide` (the others).
+        let (mut narrow, mut wide_at) = (vec![0usize], vec![0usize]);
+        let (mut base, mut start) = (Vec::with_capacity(rows.len()), Vec::new());
+        start.reserve(rows.len());
+        for (i, &(lo, fits)) in span.iter().enumerate() {
+            let len = old(i).len();
+            let (n, w) = (*narrow.last().unwrap(), *wide_at.last().unwrap());
+            base.push(if fits { lo } else { WIDE });
+            start.push(if fits { n } else { w });
+            narrow.push(n + if fits { len } else { 0 });
+            wide_at.push(w + if fits { 0 } else { len });
+        }
+        drop(span);
+        let mut offsets = vec![0u16; *narrow.last().unwrap()];
+        let mut wide = vec![0u32; *wide_at.last().unwrap()];
+        split_at_offsets(&mut offsets, &narrow)
+            .into_par_iter()
+            .zip(split_at_offsets(&mut wide, &wide_at))
+            .enumerate()
+            .with_min_len(256)
+            .for_each(|(i, (o, w))| {
+                let new = old(i).iter().map(|&c| slot[c as usize]);
+                match base[i] {
+                    WIDE => w.iter_mut().zip(new).for_each(|(w, c)| *w = c),
+                    lo => o
+                        .iter_mut()
+                        .zip(new)
+                        .for_each(|(o, c)| *o = (c - lo) as u16),
+                }
+            });
+        PackedColumns {
+            base,
+            start,
+            offsets,
+            wide,
+        }
+    }
 }
 
 /// A hash of a row's value sequence (four independent lanes, so it is not latency-bound).
@@ -220,6 +300,7 @@ impl TemplateMatrix {
             rows,
             slot,
             hash_row,
+            false,
         )
     }
 
@@ -233,6 +314,7 @@ impl TemplateMatrix {
         rows: &[u32],
         slot: &[u32],
         hash: impl Fn(&[f64]) -> u64 + Sync,
+        pack: bool,
     ) -> Self {
         let row_values = |i: usize| {
             let r = rows[i] as usize;
@@ -241,7 +323,7 @@ impl TemplateMatrix {
         let mut table = RowTemplates::default();
         let template = table.add_rows(rows.len(), row_values, hash);
         drop(data);
-        Self::renumbered(indptr, indices, template, table, rows, slot)
+        Self::renumbered(indptr, indices, template, table, rows, slot, pack)
     }
 
     /// A whose rows are already stored by template (row r of the old numbering takes the
@@ -254,13 +336,15 @@ impl TemplateMatrix {
         table: RowTemplates,
         rows: &[u32],
         slot: &[u32],
+        pack: bool,
     ) -> Self {
         let template = rows.iter().map(|&r| row_template[r as usize]).collect();
-        Self::renumbered(indptr, indices, template, table, rows, slot)
+        Self::renumbered(indptr, indices, template, table, rows, slot, pack)
     }
 
     /// The columns of A renumbered (new row i is old row `rows[i]`, old column c is new
-    /// column `slot[c]`); owned `indices` are released once copied.
+    /// column `slot[c]`), in 16 bits where they fit when `pack` ([`PackedColumns`]); owned
+    /// `indices` are released once copied.
     fn renumbered(
         indptr: &[usize],
         indices: Cow<[u32]>,
@@ -268,6 +352,7 @@ impl TemplateMatrix {
         table: RowTemplates,
         rows: &[u32],
         slot: &[u32],
+        pack: bool,
     ) -> Self {
         let mut new_indptr = Vec::with_capacity(rows.len() + 1);
         new_indptr.push(0usize);
@@ -275,8 +360,39 @@ impl TemplateMatrix {
             let r = r as usize;
             new_indptr.push(new_indptr.last().unwrap() + indptr[r + 1] - indptr[r]);
         }
+        let (cols, packed) = if pack {
+            (
+                Vec::new(),
+                Some(PackedColumns::new(indptr, &indices, rows, slot)),
+            )
+        } else {
+            (
+                Self::renumbered_columns(indptr, &indices, rows, slot, &new_indptr),
+                None,
+            )
+        };
+        drop(indices);
+        TemplateMatrix {
+            indptr: new_indptr,
+            cols,
+            packed,
+            template,
+            template_start: table.start,
+            values: table.values,
+            portable: portable_from_env(),
+        }
+    }
+
+    /// The renumbered columns in 32 bits, row by row (`new_indptr`).
+    fn renumbered_columns(
+        indptr: &[usize],
+        indices: &[u32],
+        rows: &[u32],
+        slot: &[u32],
+        new_indptr: &[usize],
+    ) -> Vec<u32> {
         let mut cols = vec![0u32; indices.len()];
-        split_at_offsets(&mut cols, &new_indptr)
+        split_at_offsets(&mut cols, new_indptr)
             .into_par_iter()
             .zip(rows.par_iter())
             .with_min_len(256)
@@ -286,15 +402,7 @@ impl TemplateMatrix {
                     *c = slot[old as usize];
                 }
             });
-        drop(indices);
-        TemplateMatrix {
-            indptr: new_indptr,
-            cols,
-            template,
-            template_start: table.start,
-            values: table.values,
-            portable: portable_from_env(),
-        }
+        cols
     }
 
     pub fn nrows(&self) -> usize {
@@ -306,14 +414,61 @@ impl TemplateMatrix {
         self.template_start.len() - 1
     }
 
-    /// Row i as (columns, values).
+    /// Row i as (columns, values) where the columns are not packed.
     #[inline(always)]
     fn row(&self, i: usize) -> (&[u32], &[f64]) {
-        let t = self.template[i] as usize;
+        debug_assert!(self.packed.is_none(), "the columns are packed");
         (
             &self.cols[self.indptr[i]..self.indptr[i + 1]],
-            &self.values[self.template_start[t]..self.template_start[t + 1]],
+            self.values_of(i),
         )
+    }
+
+    /// `f(column, value)` for row i's entries in their stored order, packed or not.
+    #[inline]
+    fn for_each_entry(&self, i: usize, mut f: impl FnMut(usize, f64)) {
+        let vals = self.values_of(i);
+        match &self.packed {
+            None => {
+                let cols = &self.cols[self.indptr[i]..self.indptr[i + 1]];
+                cols.iter().zip(vals).for_each(|(&c, &v)| f(c as usize, v));
+            }
+            Some(p) => {
+                let at = p.start[i]..p.start[i] + vals.len();
+                match p.base[i] {
+                    WIDE => p.wide[at]
+                        .iter()
+                        .zip(vals)
+                        .for_each(|(&c, &v)| f(c as usize, v)),
+                    lo => p.offsets[at]
+                        .iter()
+                        .zip(vals)
+                        .for_each(|(&o, &v)| f(lo as usize + o as usize, v)),
+                }
+            }
+        }
+    }
+
+    /// Row i's values.
+    #[inline(always)]
+    fn values_of(&self, i: usize) -> &[f64] {
+        let t = self.template[i] as usize;
+        &self.values[self.template_start[t]..self.template_start[t + 1]]
+    }
+
+    /// Row i of A times x, from the packed columns where they are.
+    #[inline(always)]
+    fn row_times(&self, i: usize, x: &[V4]) -> V4 {
+        let Some(p) = &self.packed else {
+            let (cols, vals) = self.row(i);
+            return super::row_dot(cols, vals, x);
+        };
+        let vals = self.values_of(i);
+        let at = p.start[i]..p.start[i] + vals.len();
+        match p.base[i] {
+            WIDE => super::row_dot(&p.wide[at], vals, x),
+            base => super::row_dot(&p.offsets[at], vals, &x[base as usize..]),
+        }
     }
 
     /// y = A x, returning xᵀ A x per lane (a fixed-chunk sum).
@@ -338,8 +493,7 @@ impl TemplateMatrix {
 fn spmv_chunk(a: &TemplateMatrix, base: usize, x: &[V4], y: &mut [V4]) -> V4 {
     let mut dot = [0.0; 4];
     for (j, y) in y.iter_mut().enumerate() {
-        let (cols, vals) = a.row(base + j);
-        *y = super::row_dot(cols, vals, x);
+        *y = a.row_times(base + j, x);
         let xi = x[base + j];
         for d in 0..4 {
             dot[d] += xi[d] * y[d];
@@ -1294,14 +1448,13 @@ impl SecondPartition {
         let (factors, factor_start) = factor_blocks(&start, &old_rows, |b, l| {
             let s = start[b];
             for (ii, &i) in rows[s..start[b + 1]].iter().enumerate() {
-                let (cols, vals) = a.row(i as usize);
                 let ri = ii * (ii + 1) / 2;
-                for (&c, &v) in cols.iter().zip(vals) {
-                    let j = slot[c as usize] as usize;
+                a.for_each_entry(i as usize, |c, v| {
+                    let j = slot[c] as usize;
                     if (s..=s + ii).contains(&j) {
                         l[ri + j - s] += v;
                     }
-                }
+                });
             }
         })?;
         let first = envelope_starts(&start, &factors, &factor_start);
@@ -1451,10 +1604,13 @@ impl BlockedSystem {
         } else {
             (agg, None)
         };
+        // Gauss–Seidel's operator keeps only the couplings between aggregates, from 32-bit
+        // columns; block Jacobi and the pair multiply by the whole of A, from packed ones.
+        let pack = order.is_none();
         let a = match values {
-            Values::Csr(data) => {
-                TemplateMatrix::with_hash(indptr, indices, data, &agg.rows, &agg.slot, hash_row)
-            }
+            Values::Csr(data) => TemplateMatrix::with_hash(
+                indptr, indices, data, &agg.rows, &agg.slot, hash_row, pack,
+            ),
             Values::Templates(row_template, table) => TemplateMatrix::from_templates(
                 indptr,
                 indices,
@@ -1462,20 +1618,19 @@ impl BlockedSystem {
                 table,
                 &agg.rows,
                 &agg.slot,
+                pack,
             ),
         };
         let start = &agg.start;
         let fill = |b: usize, l: &mut [f64]| {
             let s = start[b];
             for i in s..start[b + 1] {
-                let (cols, vals) = a.row(i);
                 let ri = (i - s) * (i - s + 1) / 2;
-                for (&c, &v) in cols.iter().zip(vals) {
-                    let c = c as usize;
+                a.for_each_entry(i, |c, v| {
                     if (s..=i).contains(&c) {
                         l[ri + c - s] += v;
                     }
-                }
+                });
             }
         };
         let (factors, factor_start, first) = if order.is_some() {
@@ -2130,6 +2285,76 @@ mod tests {
         assert_close(&template_product(&a, &m, &agg, &x), &matvec(&a, &x), 1e-14);
     }
 
+    /// The product from 16-bit columns gives the bits of the product from 32-bit ones, on a
+    /// matrix of more than 2¹⁶ rows whose rows near its two ends couple across the whole
+    /// range (kept in 32 bits) and whose other rows span a few columns (packed).
+    #[test]
+    fn packed_columns_give_the_bits_of_the_full_columns() {
+        let g = 280; // 78,400 rows
+        let n = g * g;
+        let mut a = laplacian(g, |x, y| 0.01 * ((x * 7 + y * 3) % 11) as f64);
+        // Couple rows k and n − 1 − k (k < 3) symmetrically: CSR rows rebuilt with the extra
+        // column in order.
+        let far = |r: usize| match r {
+            0..3 => Some(n - 1 - r),
+            r if r >= n - 3 => Some(n - 1 - r),
+            _ => None,
+        };
+        let (mut indptr, mut indices, mut data) = (vec![0], Vec::new(), Vec::new());
+        for r in 0..n {
+            let mut row: Vec<(u32, f64)> = (a.0[r]..a.0[r + 1]).map(|k| (a.1[k], a.2[k])).collect();
+            if let Some(c) = far(r) {
+                row.push((c as u32, -0.25));
+            }
+            row.sort_by_key(|e| e.0);
+            indices.extend(row.iter().map(|e| e.0));
+            data.extend(row.iter().map(|e| e.1));
+            indptr.push(indices.len());
+        }
+        a = (indptr, indices, data);
+        let agg = Aggregates::new(&a.0, &a.1, 64);
+        let full = TemplateMatrix::new(&a.0, &a.1, &a.2, &agg.rows, &agg.slot);
+        let with = |pack| {
+            let (i, d) = (Cow::Borrowed(&a.1[..]), Cow::Borrowed(&a.2[..]));
+            TemplateMatrix::with_hash(&a.0, i, d, &agg.rows, &agg.slot, hash_row, pack)
+        };
+        let packed = with(true);
+        assert!(full.packed.is_none() && with(false).packed.is_none());
+        // The block factors read the packed entries as the unpacked ones.
+        for i in (0..n).step_by(97).chain([0, 1, 2, n - 1]) {
+            let k = agg.slot[i] as usize;
+            let (mut e0, mut e1) = (Vec::new(), Vec::new());
+            full.for_each_entry(k, |c, v| e0.push((c, v.to_bits())));
+            packed.for_each_entry(k, |c, v| e1.push((c, v.to_bits())));
+            assert_eq!(e0, e1, "row {i}");
+        }
+        // A row is kept in 32 bits exactly when its columns span 2¹⁶ or more: the six rows
+        // coupled across the whole range and the few that the aggregation's renumbering puts
+        // next to them.
+        let p = packed.packed.as_ref().unwrap();
+        let mut wide = 0;
+        for k in 0..n {
+            let (cols, _) = full.row(k);
+            let span = cols.iter().max().unwrap() - cols.iter().min().unwrap();
+            assert_eq!(p.base[k] == WIDE, span > 65_535, "row {k}: span {span}");
+            wide += usize::from(span > 65_535);
+        }
+        assert!((6..n / 100).contains(&wide), "{wide} wide rows");
+        let x = test_vector(n);
+        let (mut full, mut packed) = (full, packed);
+        for portable in [false, true] {
+            full.portable = portable;
+            packed.portable = portable;
+            let y0 = template_product(&a, &full, &agg, &x);
+            let y1 = template_product(&a, &packed, &agg, &x);
+            for (i, (u, v)) in y0.iter().zip(&y1).enumerate() {
+                assert_eq!(u.map(f64::to_bits), v.map(f64::to_bits), "row {i}");
+            }
+            // And the product is A's (the oracle: the plain CSR product).
+            assert_close(&y1, &matvec(&a, &x), 1e-12);
+        }
+    }
+
     #[test]
     fn distinct_rows_and_hash_collisions_keep_their_own_values() {
         // Every diagonal differs, so every row is its own template; a constant hash sends every
@@ -2147,6 +2372,7 @@ mod tests {
                 &agg.rows,
                 &agg.slot,
                 |_| 7,
+                true,
             ),
         ] {
             assert_eq!(m.n_templates(), 144);
@@ -2163,6 +2389,7 @@ mod tests {
             &agg.rows,
             &agg.slot,
             |_| 7,
+            false,
         );
         assert_eq!(plain.n_templates(), collided.n_templates());
         assert_close(

@@ -412,24 +412,48 @@ pub fn preconditioner(
     }
 }
 
+/// A stored column index: 32-bit, or a 16-bit offset into a slice of x that starts at the row's
+/// smallest column (`blocked`'s packed columns).
+pub(crate) trait Column: Copy {
+    fn index(self) -> usize;
+}
+
+impl Column for u32 {
+    #[inline(always)]
+    fn index(self) -> usize {
+        self as usize
+    }
+}
+
+impl Column for u16 {
+    #[inline(always)]
+    fn index(self) -> usize {
+        usize::from(self)
+    }
+}
+
 /// Σ_k vals[k] x[cols[k]] for one CSR row, on N-component entries. Four partial sums break
 /// the dependency chain of the accumulation; their order is fixed, so every caller gets the
 /// same bits for the same row.
 #[inline(always)]
-pub(crate) fn row_dot<const N: usize>(cols: &[u32], vals: &[f64], x: &[[f64; N]]) -> [f64; N] {
+pub(crate) fn row_dot<const N: usize, C: Column>(
+    cols: &[C],
+    vals: &[f64],
+    x: &[[f64; N]],
+) -> [f64; N] {
     let mut s = [[0.0; N]; 4];
     let mut ci = cols.chunks_exact(4);
     let mut vi = vals.chunks_exact(4);
     for (c, v) in (&mut ci).zip(&mut vi) {
         for l in 0..4 {
-            let xc = x[c[l] as usize];
+            let xc = x[c[l].index()];
             for d in 0..N {
                 s[l][d] += v[l] * xc[d];
             }
         }
     }
     for (&c, &v) in ci.remainder().iter().zip(vi.remainder()) {
-        let xc = x[c as usize];
+        let xc = x[c.index()];
         for d in 0..N {
             s[0][d] += v * xc[d];
         }
