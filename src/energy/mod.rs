@@ -63,6 +63,7 @@ pub use colored::{CpuEnergyKernel, EnergyKernel, KernelError};
 pub use params::{EnergyError, EnergyInfo, EnergyParams, EnergyScale, EnergySolver, EnergyStop};
 
 use crate::fit::{FitParams, FitSpace, NormalMatrix};
+use crate::math::bernstein::net_len;
 use crate::math::bernstein::{bernstein2, bernstein2_derivative, elevated_net};
 pub use crate::math::linalg::Mat3;
 use crate::math::linalg::{DMat3, DVec3, inverse, norm2_rows};
@@ -165,7 +166,7 @@ impl<'a> Energy<'a> {
             return Err(EnergyError::Weight(weight));
         }
         let dim = space.dim();
-        let nb = if dim == 2 { 9 } else { 27 };
+        let nb = net_len(dim);
         // The fit's own normal equations (features and their weights included), so the
         // least-squares term is the one C* minimises.
         let (k, rhs) = crate::fit::normal_equations_with(space, mesh, topo, fit, smooth);

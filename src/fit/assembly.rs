@@ -38,6 +38,7 @@
 //! elements.
 
 use super::{ElementBlocks, FitSpace, NormalMatrix};
+use crate::math::bernstein::net_len;
 use crate::solve::block_jacobi::split_at_offsets;
 use crate::solve::blocked::{RowTemplates, hash_row};
 use rayon::prelude::*;
@@ -241,7 +242,7 @@ impl ElementMatrices {
 /// shared table.
 fn element_matrices(space: &dyn FitSpace, blocks: &ElementBlocks) -> ElementMatrices {
     let ne = space.n_elements();
-    let nb = if space.dim() == 2 { 9 } else { 27 };
+    let nb = net_len(space.dim());
 
     let mut kinds: Vec<Matrix> = (0..ne)
         .into_par_iter()

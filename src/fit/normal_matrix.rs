@@ -3,6 +3,7 @@
 //! [`super::assembly`]) and the matrix-free product ([`MatrixFree`]).
 
 use super::*;
+use crate::math::bernstein::net_len;
 use crate::math::reference::{HEX_SIDES, QUAD_SIDES};
 use crate::mesh::topology::NONE;
 
@@ -268,7 +269,7 @@ struct Samples {
 
 impl Samples {
     fn new(dim: usize) -> Self {
-        let n = if dim == 2 { 9 } else { 27 };
+        let n = net_len(dim);
         let nz = if dim == 2 { 1 } else { 3 };
         let db = |t: f64| [-2.0 * (1.0 - t), 2.0 * (1.0 - 2.0 * t), 2.0 * t];
         let mut s = Samples {
@@ -563,7 +564,7 @@ impl ElementBlocks {
         features: Option<&crate::mesh::features::Features>,
     ) -> Self {
         let dim = space.dim();
-        let nb = if dim == 2 { 9 } else { 27 };
+        let nb = net_len(dim);
         let samples = Samples::new(dim);
         let g_of = |mask: u64| -> (Vec<f64>, Vec<f64>) {
             let mut gd = vec![0.0; nb * nb];
@@ -834,7 +835,7 @@ impl LinOp for MatrixFree<'_> {
     }
     fn apply(&self, x: &[[f64; 3]], y: &mut [[f64; 3]]) {
         let n = self.nrows();
-        let nb = if self.space.dim() == 2 { 9 } else { 27 };
+        let nb = net_len(self.space.dim());
         let sum = (0..self.rows.len())
             .into_par_iter()
             .fold(
@@ -876,7 +877,7 @@ impl LinOp for MatrixFree<'_> {
     }
     fn diagonal(&self) -> Vec<f64> {
         let n = self.nrows();
-        let nb = if self.space.dim() == 2 { 9 } else { 27 };
+        let nb = net_len(self.space.dim());
         let mut diag = vec![0.0; n];
         for (e, (o, c, w)) in self.rows.iter().enumerate() {
             let (gd, gr) = &self.blocks.cache[&self.blocks.masks[e]];

@@ -20,6 +20,7 @@
 
 use super::{FitSpace, FitWeights, SmoothTargets, sample_weight};
 use crate::math::Lattice;
+use crate::math::bernstein::net_len;
 use crate::math::linalg::DVec3;
 use crate::math::reference::HEX_VERTEX_PARAMS;
 use crate::mesh::{LinearMesh, Topology};
@@ -73,7 +74,7 @@ pub(super) fn displacement_rhs_of(
     subset: Option<&[usize]>,
 ) -> Vec<[f64; 3]> {
     let dim = space.dim();
-    let nb = if dim == 2 { 9 } else { 27 };
+    let nb = net_len(dim);
     let c0 = space.control_points();
     let ne = subset.map_or(space.n_elements(), |s| s.len());
     let at = |i: usize| subset.map_or(i, |s| s[i]);

@@ -23,6 +23,7 @@
 //! Invariant: without frames nothing here runs, and the fit is the ordinary one.
 
 use super::{ElementBlocks, FitSpace, NormalMatrix};
+use crate::math::bernstein::net_len;
 use crate::math::linalg::DVec3;
 use crate::solve::{CgError, CgInfo, CgParams, LinOp, Preconditioner};
 use rayon::prelude::*;
@@ -46,7 +47,7 @@ impl Coupling {
         if !space.has_frames() {
             return None;
         }
-        let nb = if space.dim() == 2 { 9 } else { 27 };
+        let nb = net_len(space.dim());
         let per_element: Vec<Vec<((u32, u32), Mat3)>> = (0..space.n_elements())
             .into_par_iter()
             .filter_map(|e| space.frames(e).map(|f| (e, f)))

@@ -99,6 +99,7 @@ mod one_ring;
 
 use super::features::{BoundaryEntity, FeatureModels};
 use crate::math::Lattice;
+use crate::math::bernstein::net_len;
 use crate::math::linalg::DVec3;
 use crate::math::reference::{HEX_EDGES, HEX_VERTEX_PARAMS};
 use crate::mesh::features::Features;
@@ -426,7 +427,7 @@ impl SmoothTargets {
         lattice: &Lattice,
     ) -> Lattice {
         let dim = self.dim;
-        let n = if dim == 2 { 9 } else { 27 };
+        let n = net_len(dim);
         let verts = mesh.element(e);
         let mut out = [[0.0; 3]; 27];
         // Without a vertex model, only feature models at boundary entities (whose vertices are

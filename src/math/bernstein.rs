@@ -21,6 +21,12 @@ pub type BezierNet = [[f64; 3]; 27];
 /// are pulled back to Bernstein points.
 pub type Lattice = [[f64; 3]; 27];
 
+/// Entries of a [`BezierNet`] (and of a [`Lattice`]) that a `dim`-dimensional element uses: 3^d.
+#[inline]
+pub const fn net_len(dim: usize) -> usize {
+    if dim == 2 { 9 } else { 27 }
+}
+
 /// Elements that are tensor-product quadratic Bézier maps of \[0,1\]^d.
 pub trait BezierElements: Sync {
     fn dim(&self) -> usize;
@@ -47,7 +53,7 @@ pub fn bernstein2_derivative(t: f64) -> [f64; 3] {
 pub fn bernstein_values(dim: usize, u: [f64; 3]) -> [f64; 27] {
     let b = [bernstein2(u[0]), bernstein2(u[1]), bernstein2(u[2])];
     let mut out = [0.0; 27];
-    let n = if dim == 2 { 9 } else { 27 };
+    let n = net_len(dim);
     for (i, o) in out.iter_mut().enumerate().take(n) {
         let z = if dim == 2 { 1.0 } else { b[2][i / 9] };
         *o = b[0][i % 3] * b[1][(i / 3) % 3] * z;
@@ -93,7 +99,7 @@ pub fn eval_net_with_derivatives(
         bernstein2_derivative(u[1]),
         bernstein2_derivative(u[2]),
     ];
-    let n = if dim == 2 { 9 } else { 27 };
+    let n = net_len(dim);
     let mut x = [0.0; 3];
     let mut d = [[0.0; 3]; 3];
     for (i, p) in net.iter().enumerate().take(n) {
@@ -213,7 +219,7 @@ mod tests {
                 }
             }
             let b = bernstein_values(dim, u);
-            let n = if dim == 2 { 9 } else { 27 };
+            let n = net_len(dim);
             assert!((b[..n].iter().sum::<f64>() - 1.0).abs() < 1e-15);
         }
     }

@@ -33,6 +33,7 @@
 //! so the distributed run gathers its ranks' sides and marks the same runs.
 
 use crate::fit::SmoothTargets;
+use crate::math::bernstein::net_len;
 use crate::math::bernstein::{BezierElements, eval_net_with_derivatives};
 use crate::math::linalg::DVec3;
 use crate::math::reference::HEX_VERTEX_PARAMS;
@@ -242,7 +243,7 @@ pub(crate) fn boundary_sq_sum(
             let (m, t) = (map.bezier_net(e), surface.bezier_net(e));
             let samples = samples_per_side(dim);
             // The same net: every distance is 0 (the projection takes no step there).
-            let points = if dim == 2 { 9 } else { 27 };
+            let points = net_len(dim);
             if m[..points] == t[..points] {
                 return (0.0, samples);
             }
@@ -489,11 +490,7 @@ mod tests {
     /// the rest of the element above it.
     fn paraboloid_net(dim: usize) -> crate::math::BezierNet {
         let mut net = [[0.0; 3]; 27];
-        for (i, point) in net
-            .iter_mut()
-            .enumerate()
-            .take(if dim == 2 { 9 } else { 27 })
-        {
+        for (i, point) in net.iter_mut().enumerate().take(net_len(dim)) {
             let l = [i % 3, (i / 3) % 3, i / 9];
             let x = l[0] as f64 - 1.0;
             // The Bézier points of x² over [−1, 1]: 1, −1, 1.

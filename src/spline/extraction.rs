@@ -20,6 +20,7 @@
 //! [`Extraction::to_csr`] the whole operator (for small meshes, tests and assembly).
 
 use super::knots::Op1d;
+use crate::math::bernstein::net_len;
 
 /// The factored extraction operator of a [`crate::spline::SplineSpace`].
 #[derive(Clone, Debug, Default)]
@@ -110,7 +111,7 @@ impl Iterator for NodeEntries<'_> {
 impl Extraction {
     /// Local nodes (and Bernstein points) per element: 9 or 27.
     pub fn n_local(&self) -> usize {
-        if self.dim == 2 { 9 } else { 27 }
+        net_len(self.dim)
     }
 
     pub fn n_elements(&self) -> usize {

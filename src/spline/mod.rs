@@ -48,6 +48,7 @@ pub use intervals::{
 pub use knots::Op1d;
 pub use stencil::Entity;
 
+use crate::math::bernstein::net_len;
 use crate::mesh::LinearMesh;
 use crate::mesh::topology::{NONE, Topology};
 use rayon::prelude::*;
@@ -185,7 +186,7 @@ impl SplineSpace {
         let dim = topo.dim;
         assert!(dim == 2 || dim == 3, "quad or hex meshes only");
         let ne = topo.n_elements;
-        let nl = if dim == 2 { 9 } else { 27 };
+        let nl = net_len(dim);
         for count in [ne, topo.n_vertices, topo.edges.len(), topo.faces.len()] {
             assert!(
                 count < stencil::MAX_ENTITIES,

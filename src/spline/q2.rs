@@ -19,6 +19,7 @@
 use super::ControlPoint;
 use super::classify::{ElementClass, corner_of};
 use super::knots::Op1d;
+use crate::math::bernstein::net_len;
 use crate::math::reference::{HEX_EDGES, HEX_VERTEX_PARAMS};
 use crate::mesh::LinearMesh;
 use crate::mesh::topology::{NONE, Topology};
@@ -37,7 +38,7 @@ pub(crate) enum LocalEntity {
 
 /// The local entity of each tensor position a ∈ {0,1,2}^d (index 9z + 3y + x).
 pub(crate) fn local_entities(dim: usize) -> Vec<LocalEntity> {
-    let n = if dim == 2 { 9 } else { 27 };
+    let n = net_len(dim);
     (0..n)
         .map(|i| {
             let a = [i % 3, (i / 3) % 3, i / 9];
@@ -167,7 +168,7 @@ impl Q2Builder<'_> {
                 [1.0, 0.0, 0.0]
             }
         });
-        let nl = if dim == 2 { 9 } else { 27 };
+        let nl = net_len(dim);
         let nodes = &self.local_nodes[s as usize * nl..(s as usize + 1) * nl];
         for (slot, &g) in nodes.iter().enumerate() {
             let w = b[0][slot % 3] * b[1][(slot / 3) % 3] * b[2][slot / 9];
@@ -210,7 +211,7 @@ impl Q2Builder<'_> {
         let topo = self.topo;
         let dim = topo.dim;
         let ne = topo.n_elements;
-        let nl = if dim == 2 { 9 } else { 27 };
+        let nl = net_len(dim);
         let local = local_entities(dim);
 
         // Entities used by Q2 elements.

@@ -19,6 +19,7 @@
 //! linear in the number of elements.
 
 use super::classify::{Q2Reason, corner_of};
+use crate::math::bernstein::net_len;
 use crate::math::reference::{HEX_EDGES, HEX_SIDES, QUAD_SIDES};
 use crate::mesh::LinearMesh;
 use crate::mesh::topology::{NONE, Topology};
@@ -321,7 +322,7 @@ impl StencilResolver<'_> {
     pub fn stencil(&self, e: usize, out: &mut [u32]) -> Result<(), Q2Reason> {
         let dim = self.topo.dim;
         let ns = 2 * dim;
-        let n = if dim == 2 { 9 } else { 27 };
+        let n = net_len(dim);
         debug_assert_eq!(out.len(), n);
         let start = Walk {
             x: e as u32,

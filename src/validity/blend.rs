@@ -53,6 +53,7 @@ use shape::{corner_ratio, hadamard_upper};
 pub use shape::{fine_lattice_scaled_jacobian, lattice_scaled_jacobian, max_det_bound};
 
 use super::{Certifier, DetBounds, certify_ratio, certify_screened, det_jacobian_bernstein};
+use crate::math::bernstein::net_len;
 use crate::math::linalg::DVec3;
 use crate::math::{BezierElements, BezierNet};
 use crate::mesh::{LinearMesh, Topology};
@@ -246,7 +247,7 @@ impl<'a> Blended<'a> {
     }
 
     fn points(&self) -> usize {
-        if self.fitted.dim() == 2 { 9 } else { 27 }
+        net_len(self.fitted.dim())
     }
 
     fn refresh(&mut self) {
@@ -900,7 +901,7 @@ mod tests {
         let b = |t: f64| [(1.0 - t) * (1.0 - t), 2.0 * t * (1.0 - t), t * t];
         let (bx, by, bz) = (b(xi[0]), b(xi[1]), b(xi[2]));
         let mut x = [0.0; 3];
-        for i in 0..if dim == 2 { 9 } else { 27 } {
+        for i in 0..net_len(dim) {
             let w = bx[i % 3] * by[(i / 3) % 3] * if dim == 2 { 1.0 } else { bz[i / 9] };
             for k in 0..3 {
                 x[k] += w * net[i][k];
@@ -923,11 +924,7 @@ mod tests {
         };
         for (dim, amp) in [(2, 0.3), (3, 0.3), (2, 1.5), (3, 1.5)] {
             let mut net = [[0.0; 3]; 27];
-            for (i, p) in net
-                .iter_mut()
-                .enumerate()
-                .take(if dim == 2 { 9 } else { 27 })
-            {
+            for (i, p) in net.iter_mut().enumerate().take(net_len(dim)) {
                 let l = [i % 3, (i / 3) % 3, i / 9];
                 for k in 0..dim {
                     p[k] = [1.0, 2.0, 0.5][k] * l[k] as f64 / 2.0 + amp * 0.5 * rand();

@@ -13,6 +13,7 @@ use crate::common;
 
 use polyspline::fit::{FitParams, FitTargets, FitWeights, SmoothParams};
 use polyspline::io::read_raw;
+use polyspline::math::bernstein::net_len;
 use polyspline::mesh::HighOrderMesh;
 use polyspline::mesh::MeshOptions;
 use polyspline::mesh::high_order::lattice_point;
@@ -657,7 +658,7 @@ fn smooth_targets_converge() {
             for e in 0..m.n_elements() {
                 let x = m.element_coords(e);
                 let corr = st.element_corrections(&m, &t, e);
-                let n_samples = if shape.dim == 2 { 9 } else { 27 };
+                let n_samples = net_len(shape.dim);
                 for (i, c) in corr.iter().enumerate().take(n_samples) {
                     let l = [i % 3, (i / 3) % 3, i / 9];
                     let on = (0..shape.dim).any(|k| {

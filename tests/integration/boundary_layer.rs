@@ -8,6 +8,7 @@
 use crate::common::{self, write_linear};
 
 use polyspline::fit::{FitParams, FitTargets, FitWeights};
+use polyspline::math::bernstein::net_len;
 use polyspline::mesh::generate::{extrude, grid_2d};
 use polyspline::mesh::{LinearMesh, Topology};
 use polyspline::pipeline::{CurveOptions, LineSearchMode, curve_in_memory};
@@ -274,7 +275,7 @@ impl BezierElements for Garbage<'_> {
     fn bezier_net(&self, e: usize) -> polyspline::math::BezierNet {
         let mut net = self.mesh.bezier_net(e);
         let ids = entity_ids(self.mesh, self.topo, e);
-        let n = if self.mesh.dim == 2 { 9 } else { 27 };
+        let n = net_len(self.mesh.dim);
         for i in 0..n {
             let s = self.shift[ids[i] as usize];
             for k in 0..self.mesh.dim {
@@ -344,7 +345,7 @@ fn the_blend_certifies_any_fitted_map() {
         }
         assert!(info.min_det_lower_bound > 0.0);
         // Conforming: every shared Bernstein point is the same in all its elements.
-        let np = if dim == 2 { 9 } else { 27 };
+        let np = net_len(dim);
         let mut at: Vec<Option<[f64; 3]>> = vec![None; n_ids];
         for e in 0..mesh.n_elements() {
             let net = blended.bezier_net(e);

@@ -8,6 +8,7 @@ use polyspline::energy::colored::color_control_points;
 use polyspline::energy::{Energy, EnergyParams, EnergyScale, EnergySolver, Validity, minimize};
 use polyspline::fit::{FitParams, FitSpace, FitWeights};
 use polyspline::math::BezierNet;
+use polyspline::math::bernstein::net_len;
 use polyspline::mesh::generate::{extrude, grid_2d, star_2d, uniform};
 use polyspline::mesh::{LinearMesh, Topology};
 use polyspline::pipeline::{CurveOptions, curve_in_memory};
@@ -123,7 +124,7 @@ struct OwnNets {
 
 impl OwnNets {
     fn new(m: &LinearMesh, map: impl Fn([f64; 3]) -> [f64; 3]) -> Self {
-        let nb = if m.dim == 2 { 9 } else { 27 };
+        let nb = net_len(m.dim);
         let mut cps = Vec::new();
         for e in 0..m.n_elements() {
             let x = m.element_coords(e);
@@ -135,7 +136,7 @@ impl OwnNets {
         OwnNets { dim: m.dim, cps }
     }
     fn nb(&self) -> usize {
-        if self.dim == 2 { 9 } else { 27 }
+        net_len(self.dim)
     }
 }
 

@@ -4,6 +4,7 @@
 
 use polyspline::fit::{FitSpace, FitWeights, MatrixFree, assemble};
 use polyspline::io::read_mesh;
+use polyspline::math::bernstein::net_len;
 use polyspline::mesh::generate::{extrude, star_2d, uniform};
 use polyspline::mesh::{LinearMesh, MeshOptions, Topology};
 use polyspline::solve::LinOp;
@@ -198,7 +199,7 @@ fn transposed_extraction_by_sum_factorisation_matches_the_rows() {
         let t = Topology::build(&m);
         let s = SplineSpace::build(&m, &t);
         let n = s.control_points().len();
-        let nb = if s.dim() == 2 { 9 } else { 27 };
+        let nb = net_len(s.dim());
         for e in 0..s.n_elements() {
             let f: polyspline::math::BezierNet = std::array::from_fn(|i| {
                 let x = (e * 31 + i) as f64;

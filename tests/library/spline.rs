@@ -3,6 +3,7 @@
 //! classification by hand, the design's worked numbers, and invariance under relabelling.
 
 use crate::common::dist;
+use polyspline::math::bernstein::net_len;
 use polyspline::math::reference::HEX_VERTEX_PARAMS;
 use polyspline::mesh::generate::{extrude, grid_2d, grid_3d, l_shape, star_2d, uniform};
 use polyspline::mesh::topology::NONE;
@@ -206,7 +207,7 @@ fn partition_of_unity_and_nonnegativity() {
         let mut basis = Vec::new();
         for e in 0..mesh.n_elements() {
             space.extraction.rows(e, &mut rows);
-            assert_eq!(rows.n_rows(), if dim == 2 { 9 } else { 27 });
+            assert_eq!(rows.n_rows(), net_len(dim));
             for _ in 0..10 {
                 let u = rng.point();
                 let (bx, by, bz) = (bern(u[0]), bern(u[1]), bern(u[2]));
@@ -324,7 +325,7 @@ fn explicit_rows_and_csr_match_the_bezier_nets() {
         let (_, space) = build(&mesh);
         let space = perturbed(&space, &mut rng, 0.3);
         let csr = space.extraction.to_csr();
-        let n = if mesh.dim == 2 { 9 } else { 27 };
+        let n = net_len(mesh.dim);
         assert_eq!(csr.n_rows, n * mesh.n_elements());
         assert_eq!(csr.n_cols, space.n_control_points());
         for e in 0..mesh.n_elements() {
@@ -402,7 +403,7 @@ fn single_element_reproduces_its_multilinear_map() {
     for mesh in [quad, hex] {
         let (_, space) = build(&mesh);
         assert!(space.is_spline(0));
-        assert_eq!(space.n_control_points(), if mesh.dim == 2 { 9 } else { 27 });
+        assert_eq!(space.n_control_points(), net_len(mesh.dim));
         for _ in 0..50 {
             let u = rng.point();
             let d = dist(space.eval(0, u), multilinear(&mesh, 0, u));

@@ -1,6 +1,7 @@
 //! Mesh entities of the Bernstein points of quadratic elements: the blend's factors are per
 //! entity, so that every element on an entity blends its shared points alike (conformity).
 
+use crate::math::bernstein::net_len;
 use crate::mesh::{LinearMesh, Topology};
 
 /// Global ids of the mesh entities of an element's 3^d Bernstein points: vertices first
@@ -52,7 +53,7 @@ enum Slot {
 /// it is computed once, not for every point of every judged element.
 const fn slots(dim: usize) -> [Slot; 27] {
     use crate::math::reference::HEX_VERTEX_PARAMS;
-    let n = if dim == 2 { 9 } else { 27 };
+    let n = net_len(dim);
     let mut out = [Slot::Cell; 27];
     let mut i = 0;
     while i < n {
@@ -175,7 +176,7 @@ mod tests {
         for mesh in [star.clone(), extrude(&star, &[0.0, 0.3, 0.7])] {
             let topo = Topology::build(&mesh);
             let ids = EntityIds::new(&mesh, &topo);
-            let np = if mesh.dim == 2 { 9 } else { 27 };
+            let np = net_len(mesh.dim);
             let (mut at, mut named) = (HashMap::new(), HashMap::new());
             for e in 0..mesh.n_elements() {
                 let of = ids.of(e);

@@ -2,6 +2,7 @@
 //! max det J, the lattice scaled Jacobian, and the straight element's Jacobian ratio.
 
 use super::Net;
+use crate::math::bernstein::net_len;
 use crate::math::linalg::DVec3;
 use crate::mesh::LinearMesh;
 use crate::validity::det_jacobian_bernstein;
@@ -23,7 +24,7 @@ pub fn max_det_bound(dim: usize, net: &Net) -> f64 {
 pub fn lattice_scaled_jacobian(dim: usize, net: &Net) -> f64 {
     const B: [[f64; 3]; 3] = [[1.0, 0.0, 0.0], [0.25, 0.5, 0.25], [0.0, 0.0, 1.0]];
     const D: [[f64; 3]; 3] = [[-2.0, 2.0, 0.0], [-1.0, 0.0, 1.0], [0.0, -2.0, 2.0]];
-    let n = if dim == 2 { 9 } else { 27 };
+    let n = net_len(dim);
     let z = |src: Net, m: &[[f64; 3]; 3]| {
         if dim == 2 {
             src
