@@ -733,7 +733,9 @@ fn the_small_torus_gives_the_serial_output_on_1_to_4_ranks() {
 /// product's columns in 16 bits (`solve::blocked`, packed columns; the ranks' CG keeps 32-bit
 /// columns), the serial peak is 0.86 × what it was (`/usr/bin/time`, one thread: 259 → 224 MB)
 /// and rank 0 is at 0.626 of it (0.505–0.511 for the others; serial 228 MB), the same bytes
-/// as before against a smaller serial run.
+/// as before against a smaller serial run. With the ranks' share of K in packed columns too
+/// (`distributed::cg::LocalMatrix`), rank 0 is at 0.614 (0.504–0.510 for the
+/// others; serial 228 MB): rank 0's peak is not the share's columns.
 const MEMORY_SHARE: f64 = 0.65;
 
 /// Run `cmd` to completion; its peak resident memory in bytes (`wait4`'s `ru_maxrss`, this

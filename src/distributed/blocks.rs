@@ -414,13 +414,12 @@ impl Partition {
         // Local row i's entries in its block: (row, column, value) in global numbers.
         let entries = |i: u32, f: &mut dyn FnMut(u32, u32, f64)| {
             let g = numbers[i as usize];
-            let (cols, values) = k.row(i as usize);
-            for (&c, &v) in cols.iter().zip(values) {
-                let h = numbers[c as usize];
+            k.for_each_entry(i as usize, |c, v| {
+                let h = numbers[c];
                 if of[h as usize] == of[g as usize] {
                     f(g, h, v);
                 }
-            }
+            });
         };
         // To each other home: the rows this rank sends r of, the rows it wants z of, and its
         // partial entries of those rows.

@@ -41,7 +41,7 @@ use super::comm::Comm;
 use super::local::Key;
 use crate::fit::NormalMatrix;
 use crate::fit::rotated::Coupling;
-use crate::solve::blocked::RowTemplates;
+use crate::solve::blocked::{PackedColumns, RowTemplates};
 use crate::solve::{CgError, CgInfo, CgParams, CgPreconditioner};
 use rayon::prelude::*;
 use std::collections::HashSet;
@@ -194,10 +194,13 @@ impl Halo {
     }
 }
 
-/// This rank's share of K in its local numbering (rows and columns of `halo.global`).
+/// This rank's share of K in its local numbering (rows and columns of `halo.global`), its
+/// columns stored as the serial blocked CG stores its product's (`solve::blocked`'s packed
+/// columns: 16-bit offsets from each row's smallest column where they fit, 32-bit otherwise).
 pub struct LocalMatrix {
+    /// Row r's entries are `indptr[r]..indptr[r + 1]` (of the values where they are full).
     indptr: Vec<usize>,
-    indices: Vec<u32>,
+    columns: PackedColumns,
     values: LocalValues,
 }
 
@@ -227,8 +230,8 @@ impl LocalMatrix {
             indptr.push(indices.len());
         }
         LocalMatrix {
+            columns: PackedColumns::from_csr(&indptr, &indices),
             indptr,
-            indices,
             values: LocalValues::Full(data),
         }
     }
@@ -271,15 +274,17 @@ impl LocalMatrix {
                 .expect("a column of this rank's share is one of its control points")
                 as u32;
         }
+        let columns = PackedColumns::from_csr(&indptr, &indices);
+        drop(indices);
         LocalMatrix {
             indptr,
-            indices,
+            columns,
             values,
         }
     }
 
     pub fn nonzeros(&self) -> usize {
-        self.indices.len()
+        *self.indptr.last().unwrap()
     }
 
     /// The stored entries of the whole K, on every rank (collective): each entry (r, c) is
@@ -302,11 +307,11 @@ impl LocalMatrix {
             for &i in list {
                 let at = out.len();
                 out.push(0.0);
-                for &c in self.row(i as usize).0 {
-                    if position[c as usize] != u32::MAX {
-                        out.push(f64::from(position[c as usize]));
+                self.for_each_entry(i as usize, |c, _| {
+                    if position[c] != u32::MAX {
+                        out.push(f64::from(position[c]));
                     }
-                }
+                });
                 out[at] = (out.len() - at - 1) as f64;
             }
             for &i in list {
@@ -328,34 +333,40 @@ impl LocalMatrix {
         }
         let mut count = [(0..halo.len())
             .map(|r| {
-                let cols = self.row(r).0.iter();
-                cols.filter(|&&c| !below.contains(&(r as u32, c))).count() as u64
+                let mut n = 0;
+                self.for_each_entry(r, |c, _| {
+                    n += u64::from(!below.contains(&(r as u32, c as u32)));
+                });
+                n
             })
             .sum::<u64>()];
         comm.sum_u64(&mut count);
         count[0] as usize
     }
 
-    /// Row r's columns and values.
-    pub(super) fn row(&self, r: usize) -> (&[u32], &[f64]) {
-        let (lo, hi) = (self.indptr[r], self.indptr[r + 1]);
-        let values = match &self.values {
-            LocalValues::Full(data) => &data[lo..hi],
+    /// Row r's values, in the order of its columns.
+    fn values(&self, r: usize) -> &[f64] {
+        match &self.values {
+            LocalValues::Full(data) => &data[self.indptr[r]..self.indptr[r + 1]],
             LocalValues::Templated(row_template, table) => table.get(row_template[r]),
-        };
-        (&self.indices[lo..hi], values)
+        }
+    }
+
+    /// `f(column, value)` for row r's entries in their stored order.
+    #[inline]
+    pub(super) fn for_each_entry(&self, r: usize, f: impl FnMut(usize, f64)) {
+        self.columns.for_each_entry(r, self.values(r), f);
     }
 
     fn apply(&self, x: &[[f64; 3]], y: &mut [[f64; 3]]) {
         y.par_iter_mut().enumerate().for_each(|(r, y)| {
             let mut s = [0.0; 3];
-            let (cols, values) = self.row(r);
-            for (&c, &a) in cols.iter().zip(values) {
-                let xv = x[c as usize];
+            self.for_each_entry(r, |c, a| {
+                let xv = x[c];
                 for k in 0..3 {
                     s[k] += a * xv[k];
                 }
-            }
+            });
             *y = s;
         });
     }
@@ -363,10 +374,13 @@ impl LocalMatrix {
     fn diagonal(&self) -> Vec<f64> {
         (0..self.indptr.len() - 1)
             .map(|r| {
-                let (cols, values) = self.row(r);
-                cols.iter()
-                    .position(|&c| c as usize == r)
-                    .map_or(0.0, |j| values[j])
+                let mut d = None;
+                self.for_each_entry(r, |c, v| {
+                    if c == r {
+                        d = d.or(Some(v));
+                    }
+                });
+                d.unwrap_or(0.0)
             })
             .collect()
     }
@@ -610,14 +624,16 @@ mod tests {
         );
         assert!(matches!(templated.values, LocalValues::Templated(..)));
         let parts = LocalMatrix::from_matrix(NormalMatrix::new(5, indptr, indices, data), &halo);
+        let entries = |k: &LocalMatrix| {
+            let mut e = Vec::new();
+            (0..3).for_each(|r| k.for_each_entry(r, |c, v| e.push((r, c, v))));
+            e
+        };
         assert_eq!(copy.indptr, vec![0, 2, 5, 7]);
-        assert_eq!(copy.indices, vec![0, 1, 0, 1, 2, 1, 2]);
-        let values = |k: &LocalMatrix| (0..3).map(|r| k.row(r).1.to_vec()).collect::<Vec<_>>();
+        let columns: Vec<usize> = entries(&copy).iter().map(|e| e.1).collect();
+        assert_eq!(columns, vec![0, 1, 0, 1, 2, 1, 2]);
         for k in [&parts, &templated] {
-            assert_eq!(
-                (&k.indptr, &k.indices, values(k)),
-                (&copy.indptr, &copy.indices, values(&copy))
-            );
+            assert_eq!((&k.indptr, entries(k)), (&copy.indptr, entries(&copy)));
         }
     }
 }

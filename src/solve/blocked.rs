@@ -104,11 +104,19 @@ const WIDE: u32 = u32::MAX;
 /// [`TemplateMatrix`]'s `indptr`) has columns `base[i] + offsets[start[i]..start[i] + n]`,
 /// or, where `base[i]` is [`WIDE`], `wide[start[i]..start[i] + n]`. The product reads
 /// 2 B per entry instead of 4 (the columns are its largest stream).
-struct PackedColumns {
+/// The distributed CG's share of K keeps its columns so too (`distributed::cg::LocalMatrix`).
+pub(crate) struct PackedColumns {
     base: Vec<u32>,
     start: Vec<usize>,
     offsets: Vec<u16>,
     wide: Vec<u32>,
+}
+
+/// One row's stored columns ([`PackedColumns::row`]).
+pub(crate) enum RowColumns<'a> {
+    /// Column `base + offsets[k]`.
+    Narrow(usize, &'a [u16]),
+    Wide(&'a [u32]),
 }
 
 impl PackedColumns {
@@ -119,13 +127,52 @@ impl PackedColumns {
             let r = rows[i] as usize;
             &indices[indptr[r]..indptr[r + 1]]
         };
+        Self::build(rows.len(), old, |c| slot[c as usize])
+    }
+
+    /// The columns of a CSR matrix (`indptr`, `indices`) as they are, packed.
+    pub(crate) fn from_csr(indptr: &[usize], indices: &[u32]) -> Self {
+        let row = |i: usize| &indices[indptr[i]..indptr[i + 1]];
+        Self::build(indptr.len() - 1, row, |c| c)
+    }
+
+    /// Row i's stored columns, of `n` entries.
+    #[inline(always)]
+    pub(crate) fn row(&self, i: usize, n: usize) -> RowColumns<'_> {
+        let at = self.start[i]..self.start[i] + n;
+        match self.base[i] {
+            WIDE => RowColumns::Wide(&self.wide[at]),
+            base => RowColumns::Narrow(base as usize, &self.offsets[at]),
+        }
+    }
+
+    /// `f(column, value)` for row i's entries (`vals`, in the order of its columns).
+    #[inline]
+    pub(crate) fn for_each_entry(&self, i: usize, vals: &[f64], mut f: impl FnMut(usize, f64)) {
+        match self.row(i, vals.len()) {
+            RowColumns::Wide(cols) => cols.iter().zip(vals).for_each(|(&c, &v)| f(c as usize, v)),
+            RowColumns::Narrow(base, offsets) => offsets
+                .iter()
+                .zip(vals)
+                .for_each(|(&o, &v)| f(base + usize::from(o), v)),
+        }
+    }
+
+    /// Packed columns of `n` rows: row i's columns are `new(c)` for c in `old(i)`.
+    fn build<'a>(
+        n: usize,
+        old: impl Fn(usize) -> &'a [u32] + Sync,
+        new: impl Fn(u32) -> u32 + Sync,
+    ) -> Self {
+        let rows = 0..n;
         // Per row: its smallest new column, and whether its span fits 16 bits.
-        let span: Vec<(u32, bool)> = (0..rows.len())
+        let span: Vec<(u32, bool)> = rows
+            .clone()
             .into_par_iter()
             .with_min_len(ROW_CHUNK)
             .map(|i| {
                 let (lo, hi) = old(i).iter().fold((u32::MAX, 0), |(lo, hi), &c| {
-                    let c = slot[c as usize];
+                    let c = new(c);
                     (lo.min(c), hi.max(c))
                 });
                 (lo, hi.saturating_sub(lo) <= u32::from(u16::MAX))
@@ -133,8 +180,8 @@ impl PackedColumns {
             .collect();
         // Row i's entries in `offsets` (narrow rows) and in `wide` (the others).
         let (mut narrow, mut wide_at) = (vec![0usize], vec![0usize]);
-        let (mut base, mut start) = (Vec::with_capacity(rows.len()), Vec::new());
-        start.reserve(rows.len());
+        let (mut base, mut start) = (Vec::with_capacity(n), Vec::new());
+        start.reserve(n);
         for (i, &(lo, fits)) in span.iter().enumerate() {
             let len = old(i).len();
             let (n, w) = (*narrow.last().unwrap(), *wide_at.last().unwrap());
@@ -152,12 +199,12 @@ impl PackedColumns {
             .enumerate()
             .with_min_len(256)
             .for_each(|(i, (o, w))| {
-                let new = old(i).iter().map(|&c| slot[c as usize]);
+                let cols = old(i).iter().map(|&c| new(c));
                 match base[i] {
-                    WIDE => w.iter_mut().zip(new).for_each(|(w, c)| *w = c),
+                    WIDE => w.iter_mut().zip(cols).for_each(|(w, c)| *w = c),
                     lo => o
                         .iter_mut()
-                        .zip(new)
+                        .zip(cols)
                         .for_each(|(o, c)| *o = (c - lo) as u16),
                 }
             });
@@ -433,19 +480,7 @@ impl TemplateMatrix {
                 let cols = &self.cols[self.indptr[i]..self.indptr[i + 1]];
                 cols.iter().zip(vals).for_each(|(&c, &v)| f(c as usize, v));
             }
-            Some(p) => {
-                let at = p.start[i]..p.start[i] + vals.len();
-                match p.base[i] {
-                    WIDE => p.wide[at]
-                        .iter()
-                        .zip(vals)
-                        .for_each(|(&c, &v)| f(c as usize, v)),
-                    lo => p.offsets[at]
-                        .iter()
-                        .zip(vals)
-                        .for_each(|(&o, &v)| f(lo as usize + o as usize, v)),
-                }
-            }
+            Some(p) => p.for_each_entry(i, vals, f),
         }
     }
 
@@ -464,10 +499,9 @@ impl TemplateMatrix {
             return super::row_dot(cols, vals, x);
         };
         let vals = self.values_of(i);
-        let at = p.start[i]..p.start[i] + vals.len();
-        match p.base[i] {
-            WIDE => super::row_dot(&p.wide[at], vals, x),
-            base => super::row_dot(&p.offsets[at], vals, &x[base as usize..]),
+        match p.row(i, vals.len()) {
+            RowColumns::Wide(cols) => super::row_dot(cols, vals, x),
+            RowColumns::Narrow(base, offsets) => super::row_dot(offsets, vals, &x[base..]),
         }
     }
 
