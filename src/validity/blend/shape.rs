@@ -2,7 +2,7 @@
 //! max det J, the lattice scaled Jacobian, and the straight element's Jacobian ratio.
 
 use super::Net;
-use crate::math::bernstein::net_len;
+use crate::math::bernstein::{bernstein2, bernstein2_derivative, net_len};
 use crate::math::linalg::DVec3;
 use crate::mesh::LinearMesh;
 use crate::validity::det_jacobian_bernstein;
@@ -42,20 +42,21 @@ pub fn lattice_scaled_jacobian(dim: usize, net: &Net) -> f64 {
             along::<9>(&along::<3>(&bx, n, &B), n, &D)
         },
     ];
-    let mut min = f64::INFINITY;
-    for p in 0..n {
-        let jac = [cols[0][p], cols[1][p], cols[2][p]];
-        let [j0, j1, j2] = jac.map(DVec3::from);
-        let sj = if dim == 2 {
-            let det = jac[0][0] * jac[1][1] - jac[0][1] * jac[1][0];
-            det / (j0.length() * j1.length())
-        } else {
-            let det = j0.cross(j1).dot(j2);
-            det / (j0.length() * j1.length() * j2.length())
-        };
-        min = min.min(if sj.is_nan() { -1.0 } else { sj });
-    }
-    min
+    (0..n)
+        .map(|p| scaled_jacobian(dim, [cols[0][p], cols[1][p], cols[2][p]]))
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// det J / (|J₁| |J₂| (|J₃|)) of the columns `jac` (the third unused in 2D); −1 where it is
+/// NaN (a zero column), so a degenerate point counts as the worst shape.
+fn scaled_jacobian(dim: usize, jac: [[f64; 3]; 3]) -> f64 {
+    let [j0, j1, j2] = jac.map(DVec3::from);
+    let sj = if dim == 2 {
+        (jac[0][0] * jac[1][1] - jac[0][1] * jac[1][0]) / (j0.length() * j1.length())
+    } else {
+        j0.cross(j1).dot(j2) / (j0.length() * j1.length() * j2.length())
+    };
+    if sj.is_nan() { -1.0 } else { sj }
 }
 
 /// Smallest scaled Jacobian over the finer lattice {0, ¼, ½, ¾, 1}^d, the lattice on which
@@ -65,8 +66,7 @@ pub fn lattice_scaled_jacobian(dim: usize, net: &Net) -> f64 {
 /// quadratic Bernstein basis at the five parameters along x, then y, then z.
 pub fn fine_lattice_scaled_jacobian(dim: usize, net: &Net) -> f64 {
     const T: [f64; 5] = [0.0, 0.25, 0.5, 0.75, 1.0];
-    let b: [[f64; 3]; 5] = T.map(|t| [(1.0 - t) * (1.0 - t), 2.0 * t * (1.0 - t), t * t]);
-    let d: [[f64; 3]; 5] = T.map(|t| [-2.0 * (1.0 - t), 2.0 - 4.0 * t, 2.0 * t]);
+    let (b, d) = (T.map(bernstein2), T.map(bernstein2_derivative));
     let nz = if dim == 2 { 1 } else { 3 };
     let dot = |m: &[f64; 3], p: [[f64; 3]; 3]| -> [f64; 3] {
         std::array::from_fn(|q| m[0] * p[0][q] + m[1] * p[1][q] + m[2] * p[2][q])
@@ -108,13 +108,7 @@ pub fn fine_lattice_scaled_jacobian(dim: usize, net: &Net) -> f64 {
                 std::array::from_fn(|l| [along(0, &b, l), along(1, &b, l), along(2, &d, l)])
             };
             for &jac in &planes[..if dim == 2 { 1 } else { 5 }] {
-                let [j0, j1, j2] = jac.map(DVec3::from);
-                let sj = if dim == 2 {
-                    (jac[0][0] * jac[1][1] - jac[0][1] * jac[1][0]) / (j0.length() * j1.length())
-                } else {
-                    j0.cross(j1).dot(j2) / (j0.length() * j1.length() * j2.length())
-                };
-                min = min.min(if sj.is_nan() { -1.0 } else { sj });
+                min = min.min(scaled_jacobian(dim, jac));
             }
         }
     }
