@@ -759,32 +759,59 @@ fn peak_of(cmd: &mut Command) -> u64 {
     usage.ru_maxrss as u64 * 1024
 }
 
+/// On the 98,304-hex cylinder at the default options, 4 ranks write the serial output (within
+/// [`RANK_TOLERANCE`] of the diagonal, the serial CG iterations and knot choice: issue #33 measured
+/// 1.5e-4 on a 292k cylinder when each rank's solve stopped elsewhere and borderline blend
+/// decisions flipped; the 1,536-hex cylinder of
+/// [`at_the_default_options_1_2_4_ranks_give_the_serial_output`] has few borderline elements
+/// and no rank share spanning many blocks), and every rank peaks well below the serial run's
+/// memory. Both from the same two runs.
 #[test]
-fn every_rank_peaks_well_below_the_serial_memory() {
+fn on_98k_hexes_4_ranks_write_the_serial_output_each_well_below_the_serial_memory() {
     if !have_mpirun() {
         return;
     }
     let input = binary_cylinder("memory.msh", 100000);
-    // One thread, as each rank has: the serial peak grows with rayon's threads.
+    let (serial_out, serial_json) = (scratch("memory_serial.msh"), scratch("memory_serial.json"));
+    // One thread, as each rank has: the serial peak grows with rayon's threads (the output
+    // does not depend on the thread count).
     let serial = peak_of(Command::new(BIN).env("RAYON_NUM_THREADS", "1").args([
         "curve",
         input.to_str().unwrap(),
         "-o",
-        scratch("memory_serial.msh").to_str().unwrap(),
+        serial_out.to_str().unwrap(),
+        "--report",
+        serial_json.to_str().unwrap(),
         "-q",
     ]));
-    let report = scratch("memory_np4.json");
+    let (out, report) = (scratch("memory_np4.msh"), scratch("memory_np4.json"));
     common::run_ok(mpirun(4).args([
         BIN,
         "curve",
         input.to_str().unwrap(),
         "-o",
-        scratch("memory_np4.msh").to_str().unwrap(),
+        out.to_str().unwrap(),
         "--report",
         report.to_str().unwrap(),
         "-q",
     ]));
     let r: Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let s: Value = serde_json::from_str(&std::fs::read_to_string(&serial_json).unwrap()).unwrap();
+    let serial_mesh = read(&serial_out);
+    let d = compare(&serial_mesh, &read(&out)) / diagonal(&serial_mesh);
+    eprintln!(
+        "4 ranks: {d:.2e} of the diagonal from serial, CG {} (serial {}), held back {} (serial {})",
+        r["cg_iterations"], s["cg_iterations"], r["reduced_elements"], s["reduced_elements"]
+    );
+    assert!(d <= RANK_TOLERANCE, "4 ranks: {d:.3e} of the diagonal");
+    for key in [
+        "cg_iterations",
+        "reduced_elements",
+        "knot_intervals",
+        "knot_passes",
+    ] {
+        assert_eq!(r[key], s[key], "4 ranks: {key}");
+    }
     let peaks: Vec<u64> = r["per_rank"]
         .as_array()
         .unwrap()
