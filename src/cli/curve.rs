@@ -187,6 +187,11 @@ pub(crate) struct JobArgs {
     /// min(its straight-sided elevation's, the straight mesh's 1st percentile).
     #[arg(long, default_value_t = 0.85)]
     percentile_quality_fraction: f64,
+    /// Keep only the element rules (det J, the Jacobian ratio's and q_min × the straight
+    /// scaled Jacobian): no scaled Jacobian floor of --percentile-quality-fraction × min(the
+    /// straight element's, the straight mesh's 1st percentile).
+    #[arg(long)]
+    no_scaled_jacobian_floor: bool,
     /// Shorten the fitted step per control point around invalid elements (`local`), or by
     /// one factor for the whole mesh as in the paper (`global`).
     #[arg(long, value_enum, default_value_t = values::LineSearchMode::Local)]
@@ -402,6 +407,7 @@ impl JobArgs {
                     "min_det_fraction",
                     "min_quality_fraction",
                     "percentile_quality_fraction",
+                    "no_scaled_jacobian_floor",
                     "line_search",
                     "snap_boundary",
                 ],
@@ -535,6 +541,7 @@ impl JobArgs {
                 min_det_fraction: self.min_det_fraction,
                 min_quality_fraction: self.min_quality_fraction,
                 percentile_quality_fraction: self.percentile_quality_fraction,
+                scaled_jacobian_floor: !self.no_scaled_jacobian_floor,
                 ..Default::default()
             },
             snap_boundary: self.snap_boundary,

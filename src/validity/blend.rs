@@ -29,7 +29,13 @@
 //! Jacobian at least max(q_min · s_S, q_p · min(s_S, P_s)), P_s the 1st percentile of s_S
 //! over the mesh. By the ratio's argument every element then keeps at least q_p × the
 //! straight mesh's smallest scaled Jacobian, and the 1st percentile keeps q_p × the straight
-//! mesh's. What is guaranteed: the blended map's scaled Jacobian at every point of that
+//! mesh's. Holding an element back to its floor moves the points it shares with neighbours
+//! whose floor may be lower (a corner cell of an O-grid next to cells of a high s_S), so in
+//! phase 2 an element's scaled Jacobian must also stay at least min(its value where phase 1
+//! ended, m), m the smallest such value around the elements the floor first rejects: the
+//! floor never lowers the mesh's smallest scaled Jacobian below phase 1's (m is at least
+//! that; an element back at its straight elevation, accepted as ever, keeps s_S). What is
+//! guaranteed: the blended map's scaled Jacobian at every point of that
 //! lattice is at least the targets (sampled there: `floor` accepts without sampling only
 //! where a certified lower bound over the whole element reaches them).
 //! The spline passes (`pipeline::passes`) weigh the elements held back under the element
@@ -81,6 +87,8 @@ pub struct BlendParams {
     pub percentile_quality_fraction: f64,
     /// One factor for the whole mesh (the paper's bisection) instead of one per entity.
     pub global: bool,
+    /// Apply the scaled Jacobian's floor after the element rules (phase 2 of the search).
+    pub scaled_jacobian_floor: bool,
 }
 
 impl Default for BlendParams {
@@ -92,6 +100,7 @@ impl Default for BlendParams {
             min_quality_fraction: 0.55,
             percentile_quality_fraction: 0.85,
             global: false,
+            scaled_jacobian_floor: true,
         }
     }
 }
@@ -503,9 +512,15 @@ fn search(
     sorted.sort_by(f64::total_cmp);
     let p1 = sorted.get(sorted.len() / 100).copied().unwrap_or(1.0);
     // The same for the straight elements' scaled Jacobians.
+    // Without the floor, its target is the element rule's (q_min · s_S): phase 2 finds
+    // nothing below it.
     let fractions = (
         params.min_quality_fraction,
-        params.percentile_quality_fraction,
+        if params.scaled_jacobian_floor {
+            params.percentile_quality_fraction
+        } else {
+            0.0
+        },
     );
     let sj =
         StraightScaledJacobians::new(blended.straight, mine, &straight_lower, fractions, share);
@@ -517,7 +532,7 @@ fn search(
     };
     // Judged: det J above its target, then (only then, since it costs the det J polynomial)
     // the ratio bound, then the scaled Jacobian against its two targets.
-    let accept = |e: usize, b: &DetBounds, net: &Net| -> Judged {
+    let accept = |e: usize, b: &DetBounds, net: &Net, kept: f64| -> Judged {
         let judged = |accepted: bool, floor: bool, lower: f64| Judged {
             valid: true,
             accepted,
@@ -536,7 +551,7 @@ fn search(
             return judged(true, true, b.lower);
         }
         let hadamard = hadamard_upper(dim, net);
-        let shape = || sj.verdict(e, net, b.lower / hadamard);
+        let shape = || sj.verdict(e, net, b.lower / hadamard, kept);
         // Cheap first: the screened lower bound against the Hadamard upper bound of max det J.
         if b.lower >= ratio_target(e) * hadamard {
             let (own, floor) = shape();
@@ -553,28 +568,27 @@ fn search(
     // the target map's smooth corrections, any other's the spline's evaluation) and shared by
     // the screen, the certificate and the quality test, a chunk of elements at a time so that
     // the full-fit call does not hold every element's net at once.
-    let judge = |blended: &Blended, factors: &[f32], reduced: &[bool], elements: &[usize]| {
-        let blend =
-            |e: usize| blended.net_with(e, factors, reduced.get(e).copied().unwrap_or(false));
-        let mut verdicts = Vec::with_capacity(elements.len());
-        for chunk in elements.chunks(JUDGE_CHUNK) {
-            let nets: Vec<Net> = chunk.par_iter().map(|&e| blend(e)).collect();
-            let net = |e: usize| match chunk.binary_search(&e) {
-                Ok(i) => nets[i],
-                _ => blend(e),
-            };
-            let cert = certify_screened(certifier, dim, chunk, &net, depth, &det_target);
-            verdicts.par_extend(
-                chunk
-                    .par_iter()
-                    .zip(&nets)
-                    .zip(&cert.bounds)
-                    .map(|((&e, n), b)| accept(e, b, n)),
-            );
-        }
-        verdicts
-    };
-    let first = judge(blended, &[], &[], mine);
+    let judge =
+        |blended: &Blended, factors: &[f32], reduced: &[bool], elements: &[usize], kept: &[f64]| {
+            let blend =
+                |e: usize| blended.net_with(e, factors, reduced.get(e).copied().unwrap_or(false));
+            let mut verdicts = Vec::with_capacity(elements.len());
+            for chunk in elements.chunks(JUDGE_CHUNK) {
+                let nets: Vec<Net> = chunk.par_iter().map(|&e| blend(e)).collect();
+                let net = |e: usize| match chunk.binary_search(&e) {
+                    Ok(i) => nets[i],
+                    _ => blend(e),
+                };
+                let cert = certify_screened(certifier, dim, chunk, &net, depth, &det_target);
+                verdicts.par_extend(chunk.par_iter().zip(&nets).zip(&cert.bounds).map(
+                    |((&e, n), b)| {
+                        accept(e, b, n, kept.get(e).copied().unwrap_or(f64::NEG_INFINITY))
+                    },
+                ));
+            }
+            verdicts
+        };
+    let first = judge(blended, &[], &[], mine, &[]);
     let mut info = BlendInfo {
         invalid_at_full_step: share.sum(first.iter().filter(|r| !r.valid).count()),
         poor_at_full_step: share.sum(first.iter().filter(|r| r.valid && !r.floor).count()),
@@ -625,11 +639,46 @@ fn search(
     // from where phase 1 ended (factors only go down, so phase 1's held-back elements stay).
     let mut floored = params.global;
     let mut before_floor = None;
+    // Phase 2's second target of this process's elements besides the floor (−∞ until set):
+    // min(the element's scaled Jacobian where phase 1 ended, `lowest`), recorded before the
+    // element's first change in phase 2, `lowest` the smallest of those values around the
+    // elements the floor rejects first. Holding an element back to its floor then pushes no
+    // neighbour below where phase 1 left it, unless that is above `lowest`; and `lowest` is
+    // at least phase 1's smallest scaled Jacobian, which the mesh therefore keeps.
+    let mut kept: Vec<f64> = Vec::new();
+    let mut lowest = f64::INFINITY;
+    // The scaled Jacobians at the current factors of the elements of `elements` whose
+    // second target is not set (this process's).
+    let unset = |kept: &[f64], factors: &[f32], reduced: &[bool], elements: &[usize]| {
+        let unset: Vec<usize> = elements
+            .iter()
+            .copied()
+            .filter(|&e| owned[e] && kept[e] == f64::NEG_INFINITY)
+            .collect();
+        let values: Vec<f64> = unset
+            .par_iter()
+            .map(|&e| fine_lattice_scaled_jacobian(dim, &blended.net_with(e, factors, reduced[e])))
+            .collect();
+        unset.into_iter().zip(values).collect::<Vec<_>>()
+    };
     loop {
         // Until no process has a rejected element: a process whose own elements are all
         // accepted still takes part in every round's exchange.
         while any_bad {
-            let mut recheck = reduce_rejected(blended, &mut factors, &bad, params.max_bisections);
+            let mut recheck = around(blended, &bad);
+            if !kept.is_empty() {
+                // Every point lowered now is on an element of `recheck`: those not changed yet
+                // in phase 2 are at phase 1's factors.
+                let first = unset(&kept, &factors, &reduced, &recheck);
+                if lowest == f64::INFINITY {
+                    let here = first.iter().map(|v| v.1).fold(f64::INFINITY, f64::min);
+                    lowest = share.min(here);
+                }
+                for (e, v) in first {
+                    kept[e] = v.min(lowest);
+                }
+            }
+            reduce_rejected(blended, &mut factors, &bad, params.max_bisections);
             for &e in &recheck {
                 reduced[e] = blended.ids.of(e)[..np]
                     .iter()
@@ -643,7 +692,7 @@ fn search(
                 }
             }
             recheck.retain(|&e| owned[e]);
-            let r = judge(blended, &factors, &reduced, &recheck);
+            let r = judge(blended, &factors, &reduced, &recheck, &kept);
             info.rounds += 1;
             let mut mine_bad = Vec::new();
             for (&e, r) in recheck.iter().zip(&r) {
@@ -675,6 +724,9 @@ fn search(
         if any_bad && factors.is_empty() {
             factors = vec![FITTED; blended.ids.len()];
             reduced = vec![false; n];
+        }
+        if any_bad {
+            kept = vec![f64::NEG_INFINITY; n];
         }
     }
     blended.factors = factors;
@@ -741,8 +793,9 @@ fn is_straight(blended: &Blended, factors: &[f32], e: usize) -> bool {
 }
 
 /// The search's judge: the verdicts on `elements` of the blend with `factors`, `reduced`
-/// marking the elements with a point below the fitted map.
-type Judge<'j> = dyn Fn(&Blended, &[f32], &[bool], &[usize]) -> Vec<Judged> + 'j;
+/// marking the elements with a point below the fitted map, and the floor at least `kept`
+/// (per element; −∞ where it is empty).
+type Judge<'j> = dyn Fn(&Blended, &[f32], &[bool], &[usize], &[f64]) -> Vec<Judged> + 'j;
 
 /// Global mode: bisection on one factor in [0, 2] for the whole mesh (0, the straight
 /// elevation, is accepted). Leaves the factor found in `factors` and returns the verdicts on
@@ -761,7 +814,7 @@ fn global_bisection(
     for _ in 0..2 * params.max_bisections.max(1) {
         let mid = 0.5 * (lo + hi);
         factors.fill(mid);
-        let r = judge(blended, factors, &reduced, mine);
+        let r = judge(blended, factors, &reduced, mine, &[]);
         info.rounds += 1;
         if share.sum(r.iter().filter(|r| !r.floor).count()) == 0 {
             lo = mid;
@@ -770,17 +823,11 @@ fn global_bisection(
         }
     }
     factors.fill(lo);
-    judge(blended, factors, &reduced, mine)
+    judge(blended, factors, &reduced, mine, &[])
 }
 
-/// One round's reduction: the factors of the rejected elements `bad` lowered ([`reduce`]);
-/// returns the elements to judge again (sorted), those sharing a changed point.
-fn reduce_rejected(
-    blended: &Blended,
-    factors: &mut [f32],
-    bad: &[usize],
-    max_bisections: usize,
-) -> Vec<usize> {
+/// One round's reduction: the factors of the rejected elements `bad` lowered ([`reduce`]).
+fn reduce_rejected(blended: &Blended, factors: &mut [f32], bad: &[usize], max_bisections: usize) {
     let np = blended.points();
     let mut touched = vec![false; factors.len()];
     for &e in bad {
@@ -796,7 +843,11 @@ fn reduce_rejected(
             }
         }
     }
-    // Elements sharing a changed point contain one of the rejected elements' vertices.
+}
+
+/// The elements to judge again after [`reduce_rejected`] of `bad` (sorted): those sharing a
+/// point it may change, which contain one of the rejected elements' vertices.
+fn around(blended: &Blended, bad: &[usize]) -> Vec<usize> {
     let mut recheck: Vec<usize> = bad
         .iter()
         .flat_map(|&e| blended.ids.mesh.element(e).to_vec())

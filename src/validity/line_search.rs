@@ -46,6 +46,9 @@ pub struct LineSearchParams {
     /// … and its ratio and scaled Jacobian at least this fraction of min(its straight
     /// elevation's, the straight mesh's 1st percentile) ([`blend`]).
     pub percentile_quality_fraction: f64,
+    /// Hold elements back until their scaled Jacobian also meets the floor
+    /// max(q_min · s_S, q_p · min(s_S, P_s)) ([`blend`]); without it only the element rules.
+    pub scaled_jacobian_floor: bool,
 }
 
 impl Default for LineSearchParams {
@@ -57,6 +60,7 @@ impl Default for LineSearchParams {
             min_det_fraction: 0.1,
             min_quality_fraction: 0.55,
             percentile_quality_fraction: 0.85,
+            scaled_jacobian_floor: true,
         }
     }
 }
@@ -72,6 +76,7 @@ impl LineSearchParams {
             min_quality_fraction: self.min_quality_fraction,
             percentile_quality_fraction: self.percentile_quality_fraction,
             global,
+            scaled_jacobian_floor: self.scaled_jacobian_floor,
         }
     }
 }

@@ -716,16 +716,17 @@ fn extruded_coarse_ellipse_tips_keep_their_curved_wall() {
     }
 }
 
-/// The smallest scaled Jacobian det J / (|∂x/∂u| |∂x/∂v| |∂x/∂w|) of a written hexahedral
-/// file, sampled by Gmsh's own Jacobians on the lattice {0, ¼, ½, ¾, 1}³ of every element.
+/// The smallest scaled Jacobian det J / (|∂x/∂u| |∂x/∂v| (|∂x/∂w|)) of a written
+/// quadrilateral or hexahedral file, sampled by Gmsh's own Jacobians on the lattice
+/// {0, ¼, ½, ¾, 1}^d of every element.
 fn gmsh_sampled_sj(file: &Path) -> f64 {
     let script = "import sys, gmsh, numpy as np\n\
 gmsh.initialize(['-nopopup']); gmsh.option.setNumber('General.Terminal', 0)\n\
-gmsh.open(sys.argv[1]); t = gmsh.model.mesh.getElementTypes(3)[0]\n\
+gmsh.open(sys.argv[1]); d = gmsh.model.getDimension(); t = gmsh.model.mesh.getElementTypes(d)[0]\n\
 n = len(gmsh.model.mesh.getElementsByType(t)[0]); g = np.linspace(-1, 1, 5)\n\
-uvw = np.array([[a, b, c] for c in g for b in g for a in g]).ravel()\n\
+uvw = np.array([[a, b, c] for c in (g if d == 3 else [0]) for b in g for a in g]).ravel()\n\
 jac, det, _ = gmsh.model.mesh.getJacobians(t, uvw)\n\
-J = np.array(jac).reshape(n, 125, 3, 3); D = np.array(det).reshape(n, 125)\n\
+J = np.array(jac).reshape(n, -1, 3, 3)[:, :, :d]; D = np.array(det).reshape(n, -1)\n\
 print((D / np.linalg.norm(J, axis=3).prod(axis=2)).min())\n";
     python_number(script, file)
 }
@@ -762,6 +763,57 @@ fn extruded_coarse_ellipse_tips_keep_the_inputs_scaled_jacobian() {
             "{layers} layers: min scaled Jacobian {sj} against straight {sj_straight}"
         );
     }
+}
+
+/// The generated disc of 3,072 quads (`generate disc --elements 3000`), an O-grid whose corner
+/// cells have the straight mesh's smallest scaled Jacobian (0.707). The scaled Jacobian's
+/// floor (max(q_min · s_S, 0.85 × min(s_S, P_s)), after the element rules) holds back cells
+/// whose own straight scaled Jacobian s_S is high to a floor near 0.85 × the 1st percentile
+/// P_s; that moves the vertices and edges they share with their neighbours, whose floor is
+/// lower (0.85 × 0.707 = 0.60 at the corners). The floor must not push those below where the
+/// element rules left them: the written file's smallest scaled Jacobian, sampled by Gmsh on
+/// {0, ¼, ½, ¾, 1}², is at least that of the same curve without the floor
+/// (`--no-scaled-jacobian-floor`, measured 0.680; with the floor 0.692, and 0.667 when
+/// holding cells back to their floor pulled the neighbours sharing their points down towards
+/// those neighbours' lower floor), and at least 0.85× the straight-sided elevation's.
+#[test]
+fn the_scaled_jacobian_floor_lowers_no_neighbour_below_the_element_rules() {
+    if !common::have_gmsh("the floor's scaled Jacobian on the disc was not checked by Gmsh") {
+        return;
+    }
+    let exe = env!("CARGO_BIN_EXE_polyspline");
+    let dir = out_dir();
+    let input = dir.join("floor_disc.msh");
+    common::run_ok(
+        Command::new(exe)
+            .args(["generate", "disc", "--elements", "3000", "-o"])
+            .arg(&input),
+    );
+    let (ours, no_floor, straight) = (
+        dir.join("floor_disc_p2.msh"),
+        dir.join("floor_disc_no_floor.msh"),
+        dir.join("floor_disc_s.msh"),
+    );
+    curve_and_straight(exe, &input, &ours, &straight);
+    common::run_ok(
+        Command::new(exe)
+            .args(["curve", "-q", "--no-scaled-jacobian-floor"])
+            .arg(&input)
+            .arg("-o")
+            .arg(&no_floor),
+    );
+    let [sj, sj_no_floor, sj_straight] = [&ours, &no_floor, &straight].map(|f| gmsh_sampled_sj(f));
+    eprintln!(
+        "min scaled Jacobian {sj:.4}, without the floor {sj_no_floor:.4}, straight {sj_straight:.4}"
+    );
+    assert!(
+        sj >= sj_no_floor - 1e-9,
+        "min scaled Jacobian {sj} with the floor, {sj_no_floor} without"
+    );
+    assert!(
+        sj >= 0.85 * sj_straight,
+        "min scaled Jacobian {sj} against straight {sj_straight}"
+    );
 }
 
 /// The generated O-grid (`kind` "ogrid") or C-grid ("cgrid") around `wall`, extruded by

@@ -114,17 +114,18 @@ impl<'a> StraightScaledJacobians<'a> {
     }
 
     /// Whether the blended net `net` of element `e` meets its scaled Jacobian's targets
-    /// (own, floor) on the fine lattice, `bound` a certified lower bound of its scaled
-    /// Jacobian over the element. Decided without sampling where the bound reaches the floor
-    /// of the straight element's coarse value (an upper bound of the floor); else the coarse
-    /// lattice rejects below a target, and only the elements it passes and the bound does not
-    /// are sampled on the fine lattice.
-    pub(super) fn verdict(&self, e: usize, net: &Net, bound: f64) -> (bool, bool) {
+    /// (own, max(floor, `kept`)) on the fine lattice, `bound` a certified lower bound of its
+    /// scaled Jacobian over the element. Decided without sampling where the bound reaches the
+    /// second target at the straight element's coarse value (an upper bound of the floor);
+    /// else the coarse lattice rejects below a target, and only the elements it passes and
+    /// the bound does not are sampled on the fine lattice.
+    pub(super) fn verdict(&self, e: usize, net: &Net, bound: f64, kept: f64) -> (bool, bool) {
         let upper = self.coarse[e] + ROUNDING * self.coarse[e].abs().max(1.0);
-        if bound >= self.targets(upper).1 {
+        if bound >= self.targets(upper).1.max(kept) {
             return (true, true);
         }
         let (own, floor) = self.targets(self.fine(e));
+        let floor = floor.max(kept);
         if bound >= floor {
             return (true, true);
         }
