@@ -79,7 +79,8 @@
 //! quarter turn or more and no polynomial model follows the surface there. The 3D boundary
 //! edge midpoints and face centres at such vertices take circular arcs on the vertex normals
 //! instead (`arcs`; regular coarse vertices take their normal from the conics through five
-//! points of their grid lines, or the circles through three). An interior sample whose vertices inherited their models from the corners of
+//! points of their grid lines, or the circles through three; at and next to a periodic seam the
+//! fan and the grid lines go on over the other side, carried across by the seam's map). An interior sample whose vertices inherited their models from the corners of
 //! such a boundary edge or face (after dropping its directions across the layers, along which
 //! the sources do not change) takes that entity's arc, times the mean inherited weight: the
 //! models and the arcs differ there by far more than a boundary-layer cell's height, so a thin
@@ -285,7 +286,10 @@ impl SmoothTargets {
     /// ([`crate::spline::seam::SeamView::seam_links`]): the interior vertices inherit their
     /// models along the mesh edges and across the seams through them, a model reached across
     /// carried by the seam's map, so a vertex next to a seam takes the nearest wall vertex on
-    /// either side, and the two sides' vertices on a seam take images of the same model.
+    /// either side, and the two sides' vertices on a seam take images of the same model. On a
+    /// coarse wall (the module docs' coarse surfaces) the fans and grid lines that give the
+    /// arcs' normals go on across the seams through `links` too (a seam corner's three glued
+    /// vertices included), so the arcs at and next to a seam are those of the glued wall.
     #[allow(clippy::too_many_arguments)]
     pub fn build_shared(
         mesh: &LinearMesh,
@@ -309,12 +313,13 @@ impl SmoothTargets {
             dim: mesh.dim,
             fan: &fan,
             partners,
+            links,
         };
         let (mut models, ell) = one_ring_models(mesh, topo, params, features, &fan, &seam);
         let mut higher = two_ring_models(mesh, topo, &fan, &mut models, &ell, cos_max, &seam);
         let arc_normals = match share {
-            Some(s) if mesh.dim == 3 => shared_coarse_normals(mesh, topo, &fan, &models, s),
-            _ => coarse_normals(mesh, topo, &fan, &models),
+            Some(s) if mesh.dim == 3 => shared_coarse_normals(mesh, topo, &fan, &models, &seam, s),
+            _ => coarse_normals(mesh, topo, &fan, &models, &seam),
         };
         let smooth_vertices = models.iter().filter(|m| m.is_some()).count();
         let feature_vertices =
@@ -807,6 +812,14 @@ fn two_ring_models(
         .collect()
 }
 
+/// A vertex as seen from another vertex's side of the periodic seams: where the rigid map
+/// `map` carries it (`None`: where it is).
+#[derive(Clone, Copy, Debug)]
+struct Seen {
+    v: u32,
+    map: Option<Rigid>,
+}
+
 /// The walls' continuations across periodic seams ([`SmoothTargets::build_shared`]).
 struct Seam<'a> {
     /// The mesh's dimension.
@@ -815,6 +828,8 @@ struct Seam<'a> {
     fan: &'a [Vec<u32>],
     /// Per vertex (empty: none), the partner across the seam and the map from its side.
     partners: &'a [Option<(u32, Rigid)>],
+    /// The seams' vertex pairs, sorted (empty: none).
+    links: &'a [SeamLink],
 }
 
 impl Seam<'_> {
@@ -891,6 +906,118 @@ impl Seam<'_> {
             *ring = pts.into_iter().map(Into::into).collect();
         }
         one_sided
+    }
+
+    /// Where `s` lies on the side of the vertex it is seen from.
+    fn at(&self, mesh: &LinearMesh, s: Seen) -> DVec3 {
+        let x = mesh.coords[s.v as usize];
+        DVec3::from(s.map.map_or(x, |t| t.apply(x)))
+    }
+
+    /// The boundary quads around `s`, each as its corners in the facet's order starting from
+    /// the centre: its own fan and, at a wall vertex on seams, the fans of the vertices glued
+    /// to it carried across ([`Seam::images`]), all seen from the side `s` is seen from.
+    fn star(&self, topo: &Topology, s: Seen) -> Vec<[Seen; 4]> {
+        let quads = |v: u32, map: Option<Rigid>| {
+            self.fan[v as usize].iter().filter_map(move |&f| {
+                let q = topo.facet_vertices(f as usize);
+                let i = q.iter().position(|&u| u == v)?;
+                (q.len() == 4).then(|| {
+                    std::array::from_fn(|k| Seen {
+                        v: q[(i + k) % 4],
+                        map,
+                    })
+                })
+            })
+        };
+        self.images(s)
+            .into_iter()
+            .flat_map(|u| quads(u.v, u.map))
+            .collect()
+    }
+
+    /// `s` and the vertices glued to it across the seams (through `links`, transitively: a
+    /// corner where two seams meet has three), each seen from the side `s` is seen from.
+    fn images(&self, s: Seen) -> Vec<Seen> {
+        let mut out = vec![s];
+        let mut k = 0;
+        while let Some(&u) = out.get(k) {
+            let first = self.links.partition_point(|l| l.0 < u.v);
+            for &(_, w, t) in self.links[first..].iter().take_while(|l| l.0 == u.v) {
+                if out.iter().all(|o| o.v != w) {
+                    let map = Some(u.map.map_or(t, |m| m.after(&t)));
+                    out.push(Seen { v: w, map });
+                }
+            }
+            k += 1;
+        }
+        out
+    }
+
+    /// [`grid_pairs`] of `s` over its [`Seam::star`]: the two opposite pairs of its edge
+    /// neighbours when the star is four quads, a wall's grid lines going on across a seam.
+    fn grid_pairs(&self, mesh: &LinearMesh, topo: &Topology, s: Seen) -> Option<[(Seen, Seen); 2]> {
+        let star = self.star(topo, s);
+        if star.len() != 4 {
+            return None;
+        }
+        let sides: Vec<[Seen; 2]> = star.iter().map(|q| [q[1], q[3]]).collect();
+        let centre = self.at(mesh, s);
+        let spread = sides
+            .iter()
+            .flatten()
+            .map(|&u| (self.at(mesh, u) - centre).length())
+            .fold(0.0, f64::max);
+        let same =
+            |a: Seen, b: Seen| (self.at(mesh, a) - self.at(mesh, b)).length() <= 1e-6 * spread;
+        let mut nbs: Vec<Seen> = Vec::with_capacity(4);
+        for &u in sides.iter().flatten() {
+            if !nbs.iter().any(|&n| same(n, u)) {
+                nbs.push(u);
+            }
+        }
+        if nbs.len() != 4 {
+            return None;
+        }
+        let holds = |side: &[Seen; 2], u: Seen| side.iter().any(|&y| same(y, u));
+        let opposite = |w: Seen| {
+            nbs.iter().copied().find(|&u| {
+                !same(u, w) && !sides.iter().any(|side| holds(side, u) && holds(side, w))
+            })
+        };
+        let a = nbs[0];
+        let b = opposite(a)?;
+        let c = nbs.iter().copied().find(|&u| !same(u, a) && !same(u, b))?;
+        let d = opposite(c)?;
+        Some([(a, b), (c, d)])
+    }
+
+    /// The vertex next to `a` along the grid line coming from the point `from` (a neighbour
+    /// of `a`), across a seam where the line crosses one.
+    fn beyond(&self, mesh: &LinearMesh, topo: &Topology, a: Seen, from: DVec3) -> Option<Seen> {
+        let pairs = self.grid_pairs(mesh, topo, a)?;
+        let tol = 1e-6 * (self.at(mesh, a) - from).length();
+        let is_from = |u: Seen| (self.at(mesh, u) - from).length() <= tol;
+        pairs.into_iter().find_map(|(p, q)| {
+            if is_from(p) {
+                Some(q)
+            } else {
+                is_from(q).then_some(p)
+            }
+        })
+    }
+
+    /// Whether 3D wall vertex `v` lies on a seam or has an edge neighbour on one.
+    fn near(&self, topo: &Topology, v: u32) -> bool {
+        let on = |u: u32| {
+            let first = self.links.partition_point(|l| l.0 < u);
+            self.links.get(first).is_some_and(|l| l.0 == u)
+        };
+        on(v)
+            || self
+                .star(topo, Seen { v, map: None })
+                .iter()
+                .any(|q| on(q[1].v) || on(q[3].v))
     }
 
     /// The wall vertex next to `u` along the boundary chain, away from `from`.
@@ -1054,43 +1181,84 @@ fn coarse_normals(
     topo: &Topology,
     fan: &[Vec<u32>],
     models: &[Option<VertexModel>],
+    seam: &Seam,
 ) -> Vec<Option<ArcVertex>> {
     if mesh.dim != 3 {
         return Vec::new();
     }
     let cos_turn = arcs::COARSE_TURN_DEG.to_radians().cos();
+    let x = |w: u32| DVec3::from(mesh.coords[w as usize]);
+    // Whether a vertex of the facets `fan` turns its normal (carried by `turn`) from `n`.
+    let turns = |fan: &[u32], n: DVec3, turn: &dyn Fn([f64; 3]) -> [f64; 3]| {
+        fan.iter().any(|&f| {
+            topo.facet_vertices(f as usize).iter().any(|&w| {
+                models[w as usize]
+                    .is_some_and(|m| DVec3::from(turn(m.normal)).dot(n).abs() < cos_turn)
+            })
+        })
+    };
+    // The two grid lines at `v` (opposite pairs of edge neighbours) and the next points beyond
+    // them that have a model.
+    type Lines = ([(DVec3, DVec3); 2], [Option<[DVec3; 2]>; 2]);
+    let grid_lines = |v: u32| -> Option<Lines> {
+        let own = grid_pairs(topo, &fan[v as usize], v).map(|pairs| {
+            // The next vertex along the grid line from v through its neighbour a.
+            let beyond = |a: u32| {
+                grid_pairs(topo, &fan[a as usize], a)?
+                    .into_iter()
+                    .find_map(|(p, q)| (p == v).then_some(q).or((q == v).then_some(p)))
+                    .filter(|&w| models[w as usize].is_some())
+            };
+            let outer = pairs.map(|(a, b)| Some([x(beyond(a)?), x(beyond(b)?)]));
+            (pairs.map(|(a, b)| (x(a), x(b))), outer)
+        });
+        if own.is_some_and(|(_, outer)| outer.iter().all(Option::is_some))
+            || seam.links.is_empty()
+            || !seam.near(topo, v)
+        {
+            return own;
+        }
+        // A grid line cut by a periodic seam goes on over the other side, carried across.
+        let me = Seen { v, map: None };
+        let pairs = seam.grid_pairs(mesh, topo, me)?;
+        let xv = x(v);
+        let beyond = |a: Seen| {
+            seam.beyond(mesh, topo, a, xv)
+                .filter(|w| models[w.v as usize].is_some())
+                .map(|w| seam.at(mesh, w))
+        };
+        let outer = pairs.map(|(a, b)| Some([beyond(a)?, beyond(b)?]));
+        Some((
+            pairs.map(|(a, b)| (seam.at(mesh, a), seam.at(mesh, b))),
+            outer,
+        ))
+    };
     let out: Vec<Option<ArcVertex>> = (0..mesh.n_vertices())
         .into_par_iter()
         .with_min_len(1024)
         .map(|v| {
             let n = models[v]?.normal;
-            let coarse = fan[v].iter().any(|&f| {
-                topo.facet_vertices(f as usize).iter().any(|&w| {
-                    models[w as usize]
-                        .is_some_and(|m| DVec3::from(m.normal).dot(n.into()).abs() < cos_turn)
-                })
-            });
+            // At a wall vertex on seams the fan goes on over those glued to it, carried across.
+            let coarse = turns(&fan[v], n.into(), &|m| m)
+                || seam
+                    .images(Seen {
+                        v: v as u32,
+                        map: None,
+                    })
+                    .iter()
+                    .skip(1)
+                    .any(|u| {
+                        let t = u.map.expect("an image across a seam has a map");
+                        turns(&fan[u.v as usize], n.into(), &|m| t.rotate(m))
+                    });
             // At a coarse regular vertex the grid lines' circles give the normal far more
             // accurately than the fan (the arcs need it to a fraction of a degree).
             let mut lines = [None; 2];
             let n = coarse
-                .then(|| grid_pairs(topo, &fan[v], v as u32))
+                .then(|| grid_lines(v as u32))
                 .flatten()
-                .and_then(|pairs| {
-                    let x = |w: u32| DVec3::from(mesh.coords[w as usize]);
-                    // The next vertex along the grid line from v through its neighbour a.
-                    let beyond = |a: u32| {
-                        grid_pairs(topo, &fan[a as usize], a)?
-                            .into_iter()
-                            .find_map(|(p, q)| {
-                                (p == v as u32)
-                                    .then_some(q)
-                                    .or((q == v as u32).then_some(p))
-                            })
-                            .filter(|&w| models[w as usize].is_some())
-                    };
-                    let outer = pairs.map(|(a, b)| Some([x(beyond(a)?), x(beyond(b)?)]));
-                    let (xv, pairs) = (x(v as u32), pairs.map(|(a, b)| (x(a), x(b))));
+                .and_then(|(pairs, outer)| {
+                    let xv = x(v as u32);
                     for k in 0..2 {
                         lines[k] = outer[k]
                             .and_then(|o| arcs::LineConic::fit(pairs[k].0, xv, pairs[k].1, o));
@@ -1124,9 +1292,10 @@ fn shared_coarse_normals(
     topo: &Topology,
     fan: &[Vec<u32>],
     models: &[Option<VertexModel>],
+    seam: &Seam,
     share: &dyn InheritShare,
 ) -> Vec<Option<ArcVertex>> {
-    if !share.any(!coarse_normals(mesh, topo, fan, models).is_empty()) {
+    if !share.any(!coarse_normals(mesh, topo, fan, models, seam).is_empty()) {
         return Vec::new();
     }
     let (nv, n) = (mesh.n_vertices(), RECORD_LEN);
@@ -1152,7 +1321,7 @@ fn shared_coarse_normals(
             }
         })
         .collect();
-    let mut arcs = coarse_normals(mesh, topo, fan, &seen);
+    let mut arcs = coarse_normals(mesh, topo, fan, &seen, seam);
     arcs.resize(nv, None);
     records.fill(0.0);
     const { assert!(ArcVertex::LEN <= RECORD_LEN) };

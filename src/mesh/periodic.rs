@@ -141,6 +141,23 @@ impl Rigid {
         std::array::from_fn(|i| r[i][0] * x[0] + r[i][1] * x[1] + r[i][2] * x[2] + t[i])
     }
 
+    /// R v: the map's turn of a direction (a normal, a tangent).
+    pub fn rotate(&self, v: [f64; 3]) -> [f64; 3] {
+        let r = &self.rotation;
+        std::array::from_fn(|i| r[i][0] * v[0] + r[i][1] * v[1] + r[i][2] * v[2])
+    }
+
+    /// The map `self` ∘ `b`: x ↦ R (R_b x + t_b) + t.
+    pub fn after(&self, b: &Rigid) -> Rigid {
+        let (ra, rb) = (&self.rotation, &b.rotation);
+        Rigid {
+            rotation: std::array::from_fn(|i| {
+                std::array::from_fn(|j| (0..3).map(|k| ra[i][k] * rb[k][j]).sum())
+            }),
+            translation: self.apply(b.translation),
+        }
+    }
+
     /// Rᵀ (x − t).
     pub fn apply_inverse(&self, x: [f64; 3]) -> [f64; 3] {
         let r = &self.rotation;

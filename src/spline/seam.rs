@@ -479,16 +479,6 @@ fn lattice(translations: &[[f64; 3]]) -> Vec<DVec3> {
 /// and rotations): the maps that may carry a control point's home to an element across one
 /// seam of each pair.
 fn group(glued: &Glued) -> Vec<Rigid> {
-    let compose = |a: &Rigid, b: &Rigid| -> Rigid {
-        // (a ∘ b)(x) = R_a (R_b x + t_b) + t_a.
-        let (ra, rb) = (&a.rotation, &b.rotation);
-        Rigid {
-            rotation: std::array::from_fn(|i| {
-                std::array::from_fn(|j| (0..3).map(|k| ra[i][k] * rb[k][j]).sum())
-            }),
-            translation: a.apply(b.translation),
-        }
-    };
     let mut out = vec![Rigid::translation([0.0; 3])];
     let pairs = glued
         .translations
@@ -499,7 +489,7 @@ fn group(glued: &Glued) -> Vec<Rigid> {
         let inv = t.inverse();
         out = out
             .iter()
-            .flat_map(|s| [compose(&inv, s), *s, compose(&t, s)])
+            .flat_map(|s| [inv.after(s), *s, t.after(s)])
             .collect();
     }
     out
