@@ -1254,6 +1254,60 @@ fn bad_partitioned_inputs_fail_with_one_line_on_every_rank() {
     }
 }
 
+/// Gmsh's split parts of a periodic mesh repeat its `$Periodic` links, and the ranks take the
+/// pairs from them as a single file's: on the generated channel (its sides paired by the file)
+/// split into 3 parts, 2 ranks without `--periodic` pair the sides as the file says, write them
+/// as exact images (Gmsh's `getPeriodicNodes`), and give the output of the same parts with the
+/// pair named by `--periodic` (the parts' seams are not glued in the spline space under
+/// mpirun either way: the report says `c0` and why). Before the parts' links were read, the
+/// ranks curved the sides as ordinary boundaries and wrote no `$Periodic` section.
+#[test]
+fn the_ranks_take_the_periodic_pairs_of_gmsh_parts() {
+    if !have_mpirun() {
+        return;
+    }
+    let input = scratch("pparts_in.msh");
+    common::run_ok(Command::new(BIN).args([
+        "generate",
+        "channel",
+        "--around",
+        "24",
+        "--across",
+        "6",
+        "--first-height",
+        "0.02",
+        "--bump",
+        "0.15",
+        "-o",
+        input.to_str().unwrap(),
+    ]));
+    let Some(parts) = gmsh_partition(&input, 3, "pparts", true) else {
+        return;
+    };
+    let (a, b) = ("periodic_left", "periodic_right");
+    let (from_file, _, r) = curve_with_report(2, &parts[0], "pparts_file", &[]);
+    let pairs = r["periodic"]["pairs"].as_array().unwrap();
+    assert_eq!(pairs.len(), 1, "{}", r["periodic"]);
+    assert_eq!(pairs[0]["master"], a);
+    assert_eq!(pairs[0]["slave"], b);
+    assert_eq!(pairs[0]["from_file"], true);
+    assert_eq!(r["periodic"]["written_mismatch"], 0.0, "{}", r["periodic"]);
+    assert_gmsh_pairs_exact(&from_file, a, b);
+    let (given, _, rg) = curve_with_report(
+        2,
+        &parts[0],
+        "pparts_given",
+        &["--periodic", "periodic_left:periodic_right"],
+    );
+    assert_eq!(rg["periodic"]["seam"], r["periodic"]["seam"]);
+    let (f, g) = (read(&from_file), read(&given));
+    let d = compare(&g, &f) / diagonal(&g);
+    assert!(
+        d <= RANK_TOLERANCE,
+        "{d:e} of the diagonal from the run naming the pair"
+    );
+}
+
 /// `curve INPUT -q --report … ARGS` on `np` ranks (0: the binary without mpirun), the files
 /// named `NAME_np<np>` in the scratch folder: the output, the report and its JSON.
 fn curve_with_report(

@@ -65,6 +65,8 @@ pub(super) struct PartData {
     pub lines: Records,
     pub node_tags: Vec<u64>,
     pub node_coords: Vec<[f64; 3]>,
+    /// The part's `$Periodic` links (Gmsh writes the whole mesh's into every part).
+    pub periodic: Vec<crate::mesh::raw::DeclaredPeriodic>,
 }
 
 /// Check that a part's header is that of a Gmsh partition: MSH 4 with
@@ -93,6 +95,7 @@ pub(super) fn read_part(path: &Path) -> Result<PartData, ParseError> {
         partitions,
         node_tags: m.node_tags,
         node_coords: m.points,
+        periodic: m.periodic,
         ..PartData::default()
     };
     let entities = &m.header.entities;

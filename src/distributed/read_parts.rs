@@ -8,6 +8,10 @@
 //! vertex rings with the rank owning each, the tagged boundary facets among their nodes, and
 //! the coordinates of those nodes.
 //!
+//! Every part repeats the whole mesh's `$Periodic` links (Gmsh writes them so); each rank
+//! reads those of its parts and every rank gets all of them ([`gather_periodic`]), so the
+//! periodic pairs are resolved as from the single file.
+//!
 //! Steps: (1) the part names come from the given part's name and its number of partitions K;
 //! every rank checks that all K exist (a missing part is one error on every rank); (2) rank r
 //! reads parts ⌊rK/P⌋ … ⌊(r+1)K/P⌋ − 1 whole (K may differ from P), keeping the cells of the
@@ -32,7 +36,7 @@ pub use super::part_file::is_partitioned;
 use super::part_file::{part_names, read_part};
 use super::partition::{Grid, sort_value, thresholds};
 use super::read::{Elements, LocalMesh};
-use crate::mesh::raw::{CellKind, Location, ParseError, RawBlock, RawMesh};
+use crate::mesh::raw::{CellKind, DeclaredPeriodic, Location, ParseError, RawBlock, RawMesh};
 use crate::mesh::{LinearMesh, MeshOptions};
 use std::collections::{BTreeMap, HashMap, HashSet};
 use std::path::{Path, PathBuf};
@@ -67,6 +71,44 @@ struct Read {
     facet_nodes: Vec<u64>,
     nodes: HashMap<u64, [f64; 3]>,
     tag_names: BTreeMap<i32, String>,
+    /// Every part's `$Periodic` links, the same on every rank ([`gather_periodic`]).
+    periodic: Vec<DeclaredPeriodic>,
+}
+
+/// Every rank's links of `mine` (its parts' `$Periodic`), in rank order, on every rank: a
+/// rank reading no part still needs them, and the pairs must be the same everywhere. A link
+/// travels as `[dim, master, slave (NaN: not named), affine flag, 16 entries, precision,
+/// source length, source bytes…]` (its place in its part is in the source text).
+fn gather_periodic(comm: &dyn Comm, mine: &[DeclaredPeriodic]) -> Vec<DeclaredPeriodic> {
+    let mut send = Vec::new();
+    for d in mine {
+        let [a, b] = d.sides.map_or([f64::NAN; 2], |s| s.map(f64::from));
+        send.extend([d.dim as f64, a, b, d.affine.is_some() as u8 as f64]);
+        send.extend(d.affine.unwrap_or([0.0; 16]));
+        send.push(d.precision);
+        send.push(d.source.len() as f64);
+        send.extend(d.source.bytes().map(f64::from));
+    }
+    let mut out = Vec::new();
+    for v in comm.all_gather_f64(&send) {
+        let mut at = 0;
+        while at < v.len() {
+            let sides = (!v[at + 1].is_nan()).then(|| [v[at + 1] as i32, v[at + 2] as i32]);
+            let affine = (v[at + 3] != 0.0).then(|| std::array::from_fn(|i| v[at + 4 + i]));
+            let len = v[at + 21] as usize;
+            let bytes: Vec<u8> = v[at + 22..at + 22 + len].iter().map(|&b| b as u8).collect();
+            out.push(DeclaredPeriodic {
+                dim: v[at] as usize,
+                sides,
+                source: String::from_utf8_lossy(&bytes).into_owned(),
+                affine,
+                precision: v[at + 20],
+                location: Location::File,
+            });
+            at += 22 + len;
+        }
+    }
+    out
 }
 
 /// Read the rank's parts (step 2 of the module docs); `three_d` from every rank's parts.
@@ -77,10 +119,18 @@ fn read_mine(comm: &dyn Comm, parts: &[PathBuf]) -> Result<Read, ParseError> {
     let mut data = Vec::new();
     let read = (lo..hi).try_for_each(|i| {
         // The part's name and the place in it (line or byte) where the parser stopped.
-        let d = read_part(&parts[i]).map_err(|e| match e.location {
+        let mut d = read_part(&parts[i]).map_err(|e| match e.location {
             Location::File => err(format!("{}: {}", parts[i].display(), e.message)),
             _ => err(format!("{}: {e}", parts[i].display())),
         })?;
+        // The place in the part goes into the text: the links travel to every rank.
+        for link in &mut d.periodic {
+            let part = parts[i].display();
+            link.source = match std::mem::take(&mut link.location) {
+                Location::File => format!("{} in {part}", link.source),
+                at => format!("{} at {at} of {part}", link.source),
+            };
+        }
         if d.partitions != k as u64 {
             return Err(err(format!(
                 "{} declares {} partitions, {} declares {k}: the parts are not of one partitioned mesh",
@@ -93,6 +143,13 @@ fn read_mine(comm: &dyn Comm, parts: &[PathBuf]) -> Result<Read, ParseError> {
         Ok(())
     });
     agree(comm, read)?;
+    let periodic = gather_periodic(
+        comm,
+        &data
+            .iter_mut()
+            .flat_map(|d| std::mem::take(&mut d.periodic))
+            .collect::<Vec<_>>(),
+    );
     let mut hex = [data.iter().any(|d| !d.hexes.items.is_empty()) as u64];
     comm.sum_u64(&mut hex);
     let three_d = hex[0] > 0;
@@ -104,6 +161,7 @@ fn read_mine(comm: &dyn Comm, parts: &[PathBuf]) -> Result<Read, ParseError> {
         facet_nodes: Vec::new(),
         nodes: HashMap::new(),
         tag_names: BTreeMap::new(),
+        periodic,
     };
     for d in data {
         let (cells, facets) = if three_d {
@@ -461,8 +519,7 @@ pub fn read_parts_share(
         point_locations: Vec::new(),
         declared_dim: Some(3),
         blocks: vec![block, fblock],
-        // The parts' `$Periodic` sections are not read (give the pairs with `--periodic`).
-        periodic: Vec::new(),
+        periodic: r.periodic,
         tag_names: r.tag_names,
     };
     let mesh = agree(comm, LinearMesh::from_raw(raw, options))?;

@@ -156,6 +156,9 @@ pub(crate) struct TaggedMesh {
     pub(crate) points: Vec<[f64; 3]>,
     /// One per Gmsh element type, in order of first appearance.
     pub(crate) blocks: Vec<TaggedBlock>,
+    /// The links of `$Periodic`, their sides as physical tags (a part of a partitioned mesh
+    /// repeats the whole mesh's links; node pairs naming nodes it does not hold are kept unread).
+    pub(crate) periodic: Vec<crate::mesh::raw::DeclaredPeriodic>,
 }
 
 /// Parse a MSH 4 file held in memory keeping the file's numbering: node tags, element tags,
@@ -172,6 +175,7 @@ pub(crate) fn read_keeping_tags(data: &[u8]) -> Result<TaggedMesh, ParseError> {
             "element tags are kept only from MSH 4 files",
         ));
     }
+    let periodic = r.declared_periodic();
     let mut kept = r.keep.take().unwrap_or_default();
     kept.cells
         .resize_with(r.blocks.list.len(), Default::default);
@@ -198,6 +202,7 @@ pub(crate) fn read_keeping_tags(data: &[u8]) -> Result<TaggedMesh, ParseError> {
         node_tags: kept.node_tags,
         points: r.mesh.points,
         blocks,
+        periodic,
     })
 }
 
