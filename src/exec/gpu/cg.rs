@@ -17,11 +17,11 @@
 //! which components still run and the breakdown test are decided by the kernels
 //! (`finalize_alpha`, `finalize_beta`) in the device's precision, [`CG_BATCH`] iterations per
 //! submit with one read-back of the state. Driving the iteration from the host would cost
-//! three synchronous read-backs per iteration (pᵀAp, then rᵀz and rᵀr) instead of one per
-//! batch, and in f32 would compute α and β in f64 from f32 sums, a different solver. What the
-//! two share: the stopping rule and its targets, the iteration record and the final error
-//! ([`Stopping`]), the f64 residual (`solve::residual`), and the step arithmetic: the kernels' CPU
-//! twin computes α and β with the CPU loop's [`crate::solve::step_lengths`] and
+//! two synchronous read-backs per iteration (pᵀAp; rᵀz with rᵀr) instead of one per batch,
+//! and in f32 would compute α and β in f64 from f32 sums, a different solver. What the two
+//! share: the stopping rule and its targets, the iteration record and the final error
+//! ([`Stopping`]), the f64 residual (`solve::residual`), and the step arithmetic: the
+//! kernels' CPU twin computes α and β with the CPU loop's [`crate::solve::step_lengths`] and
 //! [`crate::solve::direction_weights`].
 
 use super::{
