@@ -41,7 +41,7 @@
 //! aggregates) added in order, so the result does not depend on the thread count.
 
 use super::block_jacobi::{Aggregates, FactorValue, factor_blocks, split_at_offsets};
-use super::{CgError, CgInfo, CgParams, Stopping};
+use super::{CgError, CgInfo, CgParams, CgSteps, Pair, Stopping, iterate};
 use rayon::prelude::*;
 use std::borrow::Cow;
 use std::collections::HashMap;
@@ -2023,9 +2023,15 @@ impl BlockedSystem {
         let bnorm = sum(&bb).map(f64::sqrt);
         let stop = Stopping::new([bnorm[0], bnorm[1], bnorm[2]], params);
         let (it, rr) = match &self.op {
-            Operator::Whole(a) => self.solve_jacobi(a, &stop, params, &mut xp, r, progress)?,
+            Operator::Whole(a) => {
+                let mut steps = JacobiSteps::new(self, a, &mut xp, r);
+                iterate(&stop, params.max_iters, &mut steps, progress)?
+            }
             Operator::Split { off, order } => {
-                self.solve_eisenstat(off, order, &stop, params, &mut xp, r, progress)?
+                let mut steps = EisenstatSteps::new(self, off, order, std::mem::take(&mut xp), r);
+                let done = iterate(&stop, params.max_iters, &mut steps, progress)?;
+                xp = steps.v.x;
+                done
             }
         };
         for (&i, xp) in rows.iter().zip(&xp) {
@@ -2033,7 +2039,7 @@ impl BlockedSystem {
         }
         Ok(CgInfo {
             iterations: it,
-            rel_residual: stop.rel(head(rr)),
+            rel_residual: stop.rel(rr),
         })
     }
 
@@ -2076,77 +2082,113 @@ impl BlockedSystem {
                 }),
         }
     }
+}
 
-    /// Block-Jacobi PCG from x with residual r; returns (iterations, rᵀr).
-    fn solve_jacobi(
-        &self,
-        a: &TemplateMatrix,
-        stop: &Stopping,
-        params: &CgParams,
-        xp: &mut [V4],
-        mut r: Vec<V4>,
-        mut progress: impl super::CgMonitor,
-    ) -> Result<(usize, V4), CgError> {
-        let n = xp.len();
-        let mut z = written_zeros(n);
-        let mut p = written_zeros(n);
-        let mut ap = written_zeros(n);
-        // The second partition's M₂⁻¹ r, in its own order (allocated once per solve).
-        let mut z2 = match self.second {
-            Some(_) => written_zeros(n),
-            None => Vec::new(),
-        };
-        // z = M⁻¹ r (a zero step leaves x and r as they are).
-        let (mut rz, mut rr) =
-            self.update_and_precondition(a.portable, [0.0; 4], xp, &mut r, &mut z, &p, &ap);
-        if let Some(second) = &self.second {
-            rz = self.add_second(second, a.portable, rz, &r, &mut z2);
+/// The block-Jacobi steps of [`iterate`] (and the pair's): the product with pᵀAp in one pass
+/// ([`TemplateMatrix::apply_dot`]); the updates of x and r, the block solves z = M⁻¹ r and
+/// rᵀz, rᵀr in another ([`BlockedSystem::update_and_precondition`], the pair's second
+/// partition in one more); p = z + β p in the last.
+struct JacobiSteps<'a> {
+    sys: &'a BlockedSystem,
+    a: &'a TemplateMatrix,
+    x: &'a mut [V4],
+    r: Vec<V4>,
+    z: Vec<V4>,
+    p: Vec<V4>,
+    ap: Vec<V4>,
+    /// The second partition's M₂⁻¹ r, in its own order (allocated once per solve).
+    z2: Vec<V4>,
+}
+
+impl<'a> JacobiSteps<'a> {
+    /// The steps from x (aggregate order) with residual r.
+    fn new(sys: &'a BlockedSystem, a: &'a TemplateMatrix, x: &'a mut [V4], r: Vec<V4>) -> Self {
+        let n = x.len();
+        JacobiSteps {
+            sys,
+            a,
+            x,
+            r,
+            z: written_zeros(n),
+            p: written_zeros(n),
+            ap: written_zeros(n),
+            z2: match sys.second {
+                Some(_) => written_zeros(n),
+                None => Vec::new(),
+            },
         }
-        match self.second {
-            Some(_) => self.next_direction([0.0; 4], &z, &z2, &mut p),
-            None => p.copy_from_slice(&z),
-        }
-        let mut it = 0;
-        while !stop.converged(head(rr)) {
-            if it >= params.max_iters {
-                return Err(stop.no_convergence(it, head(rr)));
-            }
-            let pap = a.apply_dot(&p, &mut ap);
-            let [a0, a1, a2] = stop.alpha(it, head(rr), head(rz), head(pap))?;
-            let alpha = [a0, a1, a2, 0.0];
-            let (mut rz_new, rr_new) =
-                self.update_and_precondition(a.portable, alpha, xp, &mut r, &mut z, &p, &ap);
-            if let Some(second) = &self.second {
-                rz_new = self.add_second(second, a.portable, rz_new, &r, &mut z2);
-            }
-            let [b0, b1, b2] = Stopping::beta(head(rz), head(rz_new));
-            self.next_direction([b0, b1, b2, 0.0], &z, &z2, &mut p);
-            rz = rz_new;
-            rr = rr_new;
-            it += 1;
-            if progress.iteration(it, stop.rel(head(rr))).is_break() {
-                return Err(CgError::Cancelled { iterations: it });
-            }
-        }
-        Ok((it, rr))
     }
 
-    /// Symmetric block Gauss–Seidel PCG in Eisenstat's form (see
-    /// [`Self::symmetric_gauss_seidel`]) from x with residual r; returns (iterations, rᵀr).
-    #[allow(clippy::too_many_arguments)]
-    fn solve_eisenstat(
-        &self,
-        off: &OffBlock,
-        order: &SweepOrder,
-        stop: &Stopping,
-        params: &CgParams,
-        xp: &mut Vec<V4>,
+    /// x += α p, r −= α A p, z = M⁻¹ r (the pair's z₂ too); returns (rᵀz, rᵀr).
+    fn update(&mut self, alpha: V4) -> Pair {
+        let JacobiSteps { sys, a, .. } = *self;
+        let (mut rz, rr) = sys.update_and_precondition(
+            a.portable,
+            alpha,
+            self.x,
+            &mut self.r,
+            &mut self.z,
+            &self.p,
+            &self.ap,
+        );
+        if let Some(second) = &sys.second {
+            rz = sys.add_second(second, a.portable, rz, &self.r, &mut self.z2);
+        }
+        (head(rz), head(rr))
+    }
+}
+
+impl CgSteps for JacobiSteps<'_> {
+    fn start(&mut self) -> Pair {
+        // z = M⁻¹ r (a zero step leaves x and r as they are).
+        let sums = self.update([0.0; 4]);
+        match self.sys.second {
+            Some(_) => self
+                .sys
+                .next_direction([0.0; 4], &self.z, &self.z2, &mut self.p),
+            None => self.p.copy_from_slice(&self.z),
+        }
+        sums
+    }
+
+    fn curvature(&mut self) -> [f64; 3] {
+        head(self.a.apply_dot(&self.p, &mut self.ap))
+    }
+
+    fn step(&mut self, alpha: [f64; 3]) -> Pair {
+        self.update(lanes(alpha))
+    }
+
+    fn direction(&mut self, beta: [f64; 3]) {
+        self.sys
+            .next_direction(lanes(beta), &self.z, &self.z2, &mut self.p);
+    }
+}
+
+/// The steps of [`iterate`] for symmetric block Gauss–Seidel in Eisenstat's form (see
+/// [`BlockedSystem::symmetric_gauss_seidel`]): the curvature is the backward sweep, which
+/// forms the direction p̃ = z̃ + β p̃ as it goes (so [`CgSteps::direction`] only keeps β),
+/// and the forward sweep; the step is [`BlockedSystem::eisenstat_step`].
+struct EisenstatSteps<'a> {
+    sys: &'a BlockedSystem,
+    off: &'a OffBlock,
+    order: &'a SweepOrder,
+    v: Eisenstat,
+    beta: V4,
+}
+
+impl<'a> EisenstatSteps<'a> {
+    /// The steps from x (aggregate order) with residual r.
+    fn new(
+        sys: &'a BlockedSystem,
+        off: &'a OffBlock,
+        order: &'a SweepOrder,
+        x: Vec<V4>,
         r: Vec<V4>,
-        mut progress: impl super::CgMonitor,
-    ) -> Result<(usize, V4), CgError> {
-        let n = xp.len();
-        let mut v = Eisenstat {
-            x: std::mem::take(xp),
+    ) -> Self {
+        let n = x.len();
+        let v = Eisenstat {
+            x,
             rt: r.clone(),
             r,
             zt: written_zeros(n),
@@ -2155,44 +2197,48 @@ impl BlockedSystem {
             v: written_zeros(n),
             w: written_zeros(n),
         };
+        EisenstatSteps {
+            sys,
+            off,
+            order,
+            v,
+            beta: [0.0; 4],
+        }
+    }
+}
+
+impl CgSteps for EisenstatSteps<'_> {
+    fn start(&mut self) -> Pair {
         // r̃ = (D + L)⁻¹ r (t = 0, so w stays 0), then z̃ = D r̃ by a zero step.
-        self.forward(off, order, &v.t, &v.p, &mut v.rt, &mut v.w);
-        let (mut rz, mut rr) = self.eisenstat_step(off.portable, [0.0; 4], &mut v);
-        let mut beta = [0.0; 4];
-        let mut it = 0;
-        let result = loop {
-            if stop.converged(head(rr)) {
-                break Ok((it, rr));
-            }
-            if it >= params.max_iters {
-                break Err(stop.no_convergence(it, head(rr)));
-            }
-            // p̃ = z̃ + β p̃ (fused), t = (D + U)⁻¹ p̃ and u = U t; v = (D + L)⁻¹ u and w = L t.
-            self.backward(
-                off,
-                order,
-                Some((beta, &v.zt)),
-                &mut v.p,
-                &mut v.t,
-                &mut v.v,
-            );
-            let pq = self.forward(off, order, &v.t, &v.p, &mut v.v, &mut v.w);
-            let [a0, a1, a2] = match stop.alpha(it, head(rr), head(rz), head(pq)) {
-                Ok(a) => a,
-                Err(e) => break Err(e),
-            };
-            let (rz_new, rr_new) = self.eisenstat_step(off.portable, [a0, a1, a2, 0.0], &mut v);
-            let [b0, b1, b2] = Stopping::beta(head(rz), head(rz_new));
-            beta = [b0, b1, b2, 0.0];
-            rz = rz_new;
-            rr = rr_new;
-            it += 1;
-            if progress.iteration(it, stop.rel(head(rr))).is_break() {
-                break Err(CgError::Cancelled { iterations: it });
-            }
-        };
-        *xp = v.x;
-        result
+        let (sys, off, v) = (self.sys, self.off, &mut self.v);
+        sys.forward(off, self.order, &v.t, &v.p, &mut v.rt, &mut v.w);
+        let (rz, rr) = sys.eisenstat_step(off.portable, [0.0; 4], v);
+        (head(rz), head(rr))
+    }
+
+    fn curvature(&mut self) -> [f64; 3] {
+        // p̃ = z̃ + β p̃ (fused), t = (D + U)⁻¹ p̃ and u = U t; v = (D + L)⁻¹ u and w = L t.
+        let (sys, off, order, v) = (self.sys, self.off, self.order, &mut self.v);
+        sys.backward(
+            off,
+            order,
+            Some((self.beta, &v.zt)),
+            &mut v.p,
+            &mut v.t,
+            &mut v.v,
+        );
+        head(sys.forward(off, order, &v.t, &v.p, &mut v.v, &mut v.w))
+    }
+
+    fn step(&mut self, alpha: [f64; 3]) -> Pair {
+        let (rz, rr) = self
+            .sys
+            .eisenstat_step(self.off.portable, lanes(alpha), &mut self.v);
+        (head(rz), head(rr))
+    }
+
+    fn direction(&mut self, beta: [f64; 3]) {
+        self.beta = lanes(beta);
     }
 }
 
@@ -2242,6 +2288,11 @@ fn s_end(start: &[usize], b: usize) -> std::ops::Range<usize> {
 /// The three components of a 4-lane entry.
 fn head(v: V4) -> [f64; 3] {
     [v[0], v[1], v[2]]
+}
+
+/// Three components as a 4-lane entry (lane 3 zero).
+fn lanes(v: [f64; 3]) -> V4 {
+    [v[0], v[1], v[2], 0.0]
 }
 
 #[cfg(test)]

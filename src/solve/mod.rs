@@ -12,11 +12,13 @@
 //! (elasticity, the fit across rotation seams): one recurrence over all unknowns, with a
 //! caller-supplied preconditioner; its loop, [`coupled_loop`], takes [`Reductions`] too.
 //!
-//! [`pcg`] on an assembled matrix with block Jacobi (the fit's default) or block Gauss–Seidel
-//! runs through [`blocked`]: unknowns renumbered by aggregates, rows stored by value template,
-//! vector updates, block solves and dot products fused into three passes per iteration.
-//! [`pcg_with`] is the generic loop (any operator, any preconditioner): [`cg_loop`], which the
-//! distributed solver runs too, with its own [`Reductions`] (sums over the processes).
+//! Every CPU solver here runs one loop, [`iterate`] ([`steps`]), over the
+//! [`CgSteps`] that hold its vectors: [`pcg`] on an assembled matrix with block Jacobi, its
+//! pair (the fit's default) or block Gauss–Seidel runs the steps of [`blocked`] (unknowns
+//! renumbered by aggregates, rows stored by value template, vector updates, block solves and
+//! dot products fused into three passes per iteration); [`pcg_with`] the generic steps
+//! [`Vectors`] (any operator, any preconditioner) through [`cg_loop`], which the distributed
+//! solver runs too, with its own [`Reductions`] (sums over the processes).
 //!
 //! Every loop reports each iteration to a [`CgMonitor`] (a closure `|iteration, rel_residual|`
 //! is one), which may stop the solve: [`Cancellable`] stops it when the caller asks
@@ -28,12 +30,14 @@
 pub mod block_jacobi;
 pub mod blocked;
 pub mod direct;
+pub mod steps;
 
 use crate::params::{ParamError, above, in_range};
 pub use block_jacobi::BlockJacobi;
 pub use blocked::{BlockedKind, BlockedSystem};
 use rayon::prelude::*;
 use std::ops::ControlFlow;
+pub use steps::{CgSteps, Coupled, Vectors, iterate};
 
 /// A symmetric positive definite operator on vectors of 3-component entries.
 pub trait LinOp: Sync {
@@ -259,37 +263,9 @@ pub(crate) fn residual(
     });
 }
 
-/// x += α p, r −= α A p (per component α).
-fn advance(
-    x: &mut [[f64; 3]],
-    r: &mut [[f64; 3]],
-    p: &[[f64; 3]],
-    ap: &[[f64; 3]],
-    alpha: [f64; 3],
-) {
-    x.par_iter_mut()
-        .zip(r.par_iter_mut())
-        .zip(p.par_iter().zip(ap.par_iter()))
-        .for_each(|((x, r), (p, ap))| {
-            for k in 0..3 {
-                x[k] += alpha[k] * p[k];
-                r[k] -= alpha[k] * ap[k];
-            }
-        });
-}
-
-/// p = z + β p (per component β).
-fn new_direction(p: &mut [[f64; 3]], z: &[[f64; 3]], beta: [f64; 3]) {
-    p.par_iter_mut().zip(z.par_iter()).for_each(|(p, z)| {
-        for k in 0..3 {
-            p[k] = z[k] + beta[k] * p[k];
-        }
-    });
-}
-
-/// The stopping rule and step lengths of the three per-component recurrences: one rule for
-/// [`cg_loop`] (serial and distributed), [`blocked`], the GPU solver's host loop and
-/// [`coupled_loop`] (its one recurrence as the first component).
+/// The stopping rule, step lengths and iteration record of the three per-component
+/// recurrences: one rule for the loop [`iterate`] (serial, distributed and [`blocked`]; the
+/// coupled recurrence as the first component) and the GPU solver's host loop.
 pub struct Stopping {
     bnorm: [f64; 3],
     /// ‖r‖ at which a component has converged: max(rel_tol·‖b‖, abs_tol).
@@ -349,24 +325,67 @@ impl Stopping {
         rz: [f64; 3],
         pap: [f64; 3],
     ) -> Result<[f64; 3], CgError> {
-        let mut alpha = [0.0; 3];
-        for k in 0..3 {
-            if self.running(rr, k) {
-                if !(pap[k] > 0.0) {
-                    return Err(CgError::NotPositiveDefinite {
-                        iteration,
-                        curvature: pap[k],
-                    });
-                }
-                alpha[k] = rz[k] / pap[k];
-            }
-        }
-        Ok(alpha)
+        let running = std::array::from_fn(|k| self.running(rr, k));
+        step_lengths(running, rz, pap).map_err(|k| CgError::NotPositiveDefinite {
+            iteration,
+            curvature: pap[k],
+        })
     }
 
     fn beta(rz: [f64; 3], rz_new: [f64; 3]) -> [f64; 3] {
-        std::array::from_fn(|k| if rz[k] > 0.0 { rz_new[k] / rz[k] } else { 0.0 })
+        direction_weights(rz, rz_new)
     }
+
+    /// The iteration record: `progress` told of `iteration` at squared residual norms `rr`;
+    /// [`CgError::Cancelled`] when it stops the solve.
+    pub fn record(
+        &self,
+        progress: &mut impl CgMonitor,
+        iteration: usize,
+        rr: [f64; 3],
+    ) -> Result<(), CgError> {
+        match progress.iteration(iteration, self.rel(rr)) {
+            ControlFlow::Break(()) => Err(CgError::Cancelled {
+                iterations: iteration,
+            }),
+            ControlFlow::Continue(()) => Ok(()),
+        }
+    }
+}
+
+/// α = rᵀz / pᵀAp for the `running` components (0 for the others), at any precision: the
+/// arithmetic of [`Stopping`]'s steps and of the GPU kernel's CPU twin
+/// (`exec::cpu::cg::finalize_alpha`, whose `running` compares squared norms as the shader
+/// does). `Err(k)`: the first running component k whose pᵀAp is not positive.
+pub fn step_lengths<T>(running: [bool; 3], rz: [T; 3], pap: [T; 3]) -> Result<[T; 3], usize>
+where
+    T: Copy + Default + PartialOrd + std::ops::Div<Output = T>,
+{
+    let mut alpha = [T::default(); 3];
+    for k in 0..3 {
+        if running[k] {
+            if !(pap[k] > T::default()) {
+                return Err(k);
+            }
+            alpha[k] = rz[k] / pap[k];
+        }
+    }
+    Ok(alpha)
+}
+
+/// β = rᵀz_new / rᵀz per component (0 where rᵀz is not positive), at any precision: the
+/// arithmetic of [`Stopping`]'s steps and of `exec::cpu::cg::finalize_beta`.
+pub fn direction_weights<T>(rz: [T; 3], rz_new: [T; 3]) -> [T; 3]
+where
+    T: Copy + Default + PartialOrd + std::ops::Div<Output = T>,
+{
+    std::array::from_fn(|k| {
+        if rz[k] > T::default() {
+            rz_new[k] / rz[k]
+        } else {
+            T::default()
+        }
+    })
 }
 
 /// Point Jacobi: z = D⁻¹ r.
@@ -526,48 +545,28 @@ impl Reductions for Rows {
     }
 }
 
-/// The one preconditioned CG loop of the three per-component recurrences, from `x`: the serial
-/// [`pcg_with`] and the distributed solver run it with their own operator, preconditioner and
-/// [`Reductions`]. The stopping rule is [`Stopping`]'s: ‖r‖ ≤ max(rel_tol·‖b‖, abs_tol) per
-/// component, ‖·‖ from `reduce`. `progress` sees every iteration; when it breaks, the solve
-/// ends with [`CgError::Cancelled`] (x is the last iterate).
+/// Preconditioned CG of the three per-component recurrences from `x`, on vectors in the
+/// caller's numbering: the loop [`iterate`] over [`Vectors`] with the caller's operator,
+/// preconditioner and [`Reductions`] (the serial [`pcg_with`] and the distributed solver).
+/// The stopping rule is [`Stopping`]'s: ‖r‖ ≤ max(rel_tol·‖b‖, abs_tol) per component, ‖·‖
+/// from `reduce`. `progress` sees every iteration; when it breaks, the solve ends with
+/// [`CgError::Cancelled`] (x is the last iterate).
 pub fn cg_loop(
     reduce: &dyn Reductions,
     mut apply: impl FnMut(&[[f64; 3]], &mut [[f64; 3]]),
-    mut precondition: impl FnMut(&[[f64; 3]], &mut [[f64; 3]]),
+    precondition: impl FnMut(&[[f64; 3]], &mut [[f64; 3]]),
     b: &[[f64; 3]],
     x: &mut [[f64; 3]],
     params: &CgParams,
-    mut progress: impl CgMonitor,
+    progress: impl CgMonitor,
 ) -> Result<CgInfo, CgError> {
-    let n = b.len();
-    let mut r = vec![[0.0; 3]; n];
+    let mut r = vec![[0.0; 3]; b.len()];
     residual(&mut apply, b, x, &mut r);
     let stop = Stopping::new(reduce.dot(b, b).map(f64::sqrt), params);
-    let mut z = vec![[0.0; 3]; n];
-    precondition(&r, &mut z);
-    let mut p = z.clone();
-    let (mut rz, mut rr) = reduce.dot2((&r, &z), (&r, &r));
-    let mut ap = vec![[0.0; 3]; n];
-    let mut it = 0;
-    while !stop.converged(rr) {
-        if it >= params.max_iters {
-            return Err(stop.no_convergence(it, rr));
-        }
-        apply(&p, &mut ap);
-        let alpha = stop.alpha(it, rr, rz, reduce.dot(&p, &ap))?;
-        advance(x, &mut r, &p, &ap, alpha);
-        precondition(&r, &mut z);
-        let (rz_new, rr_new) = reduce.dot2((&r, &z), (&r, &r));
-        new_direction(&mut p, &z, Stopping::beta(rz, rz_new));
-        (rz, rr) = (rz_new, rr_new);
-        it += 1;
-        if progress.iteration(it, stop.rel(rr)).is_break() {
-            return Err(CgError::Cancelled { iterations: it });
-        }
-    }
+    let mut steps = Vectors::new(reduce, apply, precondition, x, r);
+    let (iterations, rr) = iterate(&stop, params.max_iters, &mut steps, progress)?;
     Ok(CgInfo {
-        iterations: it,
+        iterations,
         rel_residual: stop.rel(rr),
     })
 }
@@ -602,48 +601,23 @@ pub fn pcg_coupled(
 }
 
 /// The loop of [`pcg_coupled`] from `x`, with the dot products of `reduce` summed over the
-/// three components: the serial solver runs it on all rows ([`Rows`]), the distributed one
-/// with its sums over the processes.
+/// three components ([`iterate`] over [`Coupled`] [`Vectors`]): the serial solver runs it on
+/// all rows ([`Rows`]), the distributed one with its sums over the processes.
 pub fn coupled_loop(
     reduce: &dyn Reductions,
     mut apply: impl FnMut(&[[f64; 3]], &mut [[f64; 3]]),
-    mut precondition: impl FnMut(&[[f64; 3]], &mut [[f64; 3]]),
+    precondition: impl FnMut(&[[f64; 3]], &mut [[f64; 3]]),
     b: &[[f64; 3]],
     x: &mut [[f64; 3]],
     params: &CgParams,
 ) -> Result<CgInfo, CgError> {
-    let n = b.len();
-    // One recurrence: its sums over the three components are [`Stopping`]'s first component,
-    // the other two are zero (converged from the start, never stepped).
-    let one = |d: [f64; 3]| [d[0] + d[1] + d[2], 0.0, 0.0];
-    let mut r = vec![[0.0; 3]; n];
+    let mut r = vec![[0.0; 3]; b.len()];
     residual(&mut apply, b, x, &mut r);
-    let stop = Stopping::new(one(reduce.dot(b, b)).map(f64::sqrt), params);
-    let mut z = vec![[0.0; 3]; n];
-    precondition(&r, &mut z);
-    let mut p = z.clone();
-    let (rz3, rr3) = reduce.dot2((&r, &z), (&r, &r));
-    let (mut rz, mut rr) = (one(rz3), one(rr3));
-    let mut ap = vec![[0.0; 3]; n];
-    let mut it = 0;
-    while !stop.converged(rr) {
-        if it >= params.max_iters {
-            return Err(stop.no_convergence(it, rr));
-        }
-        apply(&p, &mut ap);
-        let [alpha, _, _] = stop.alpha(it, rr, rz, one(reduce.dot(&p, &ap)))?;
-        advance(x, &mut r, &p, &ap, [alpha; 3]);
-        precondition(&r, &mut z);
-        let (rz3, rr3) = reduce.dot2((&r, &z), (&r, &r));
-        let rz_new = one(rz3);
-        let [beta, _, _] = Stopping::beta(rz, rz_new);
-        new_direction(&mut p, &z, [beta; 3]);
-        rz = rz_new;
-        rr = one(rr3);
-        it += 1;
-    }
+    let stop = Stopping::new(steps::one(reduce.dot(b, b)).map(f64::sqrt), params);
+    let mut steps = Coupled(Vectors::new(reduce, apply, precondition, x, r));
+    let (iterations, rr) = iterate(&stop, params.max_iters, &mut steps, |_, _| {})?;
     Ok(CgInfo {
-        iterations: it,
+        iterations,
         rel_residual: stop.rel(rr),
     })
 }

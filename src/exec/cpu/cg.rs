@@ -1,6 +1,10 @@
 //! CPU twin of `shaders/cg.wgsl`: second reduction stage with α/β, and the vector updates.
+//! Its α and β are the CPU solvers' arithmetic ([`step_lengths`], [`direction_weights`]) at
+//! the kernel's precision; which components run is the shader's test (rᵀr > target² in that
+//! precision).
 
 use super::{Real, Vec4};
+use crate::solve::{direction_weights, step_lengths};
 
 /// Uniform block of `cg.wgsl`.
 #[repr(C)]
@@ -36,6 +40,11 @@ pub struct Scalars<T> {
     pub alpha: Vec4<T>,
     pub beta: Vec4<T>,
     pub pap: Vec4<T>,
+}
+
+/// The three components of a lane vector (the fourth is zero).
+fn head<T: Real>(v: Vec4<T>) -> [T; 3] {
+    [v[0], v[1], v[2]]
 }
 
 fn add<T: Real>(a: Vec4<T>, b: Vec4<T>) -> Vec4<T> {
@@ -84,16 +93,10 @@ pub fn finalize_alpha<T: Real>(
             running = false;
         }
         if running {
-            for k in 0..3 {
-                if scalars.rr[k] > scalars.target2[k] {
-                    if pap[k] > T::of(0.0) {
-                        alpha[k] = scalars.rz[k] / pap[k];
-                    } else {
-                        state.breakdown = state.iterations + 1;
-                        alpha = [T::of(0.0); 4];
-                        break;
-                    }
-                }
+            let active = std::array::from_fn(|k| scalars.rr[k] > scalars.target2[k]);
+            match step_lengths(active, head(scalars.rz), head(pap)) {
+                Ok([a0, a1, a2]) => alpha = [a0, a1, a2, T::of(0.0)],
+                Err(_) => state.breakdown = state.iterations + 1,
             }
             state.iterations += 1;
         } else {
@@ -134,11 +137,8 @@ pub fn finalize_beta<T: Real>(
     let (rz_new, rr_new) = reduce_partials(params, partials);
     let mut beta = [T::of(0.0); 4];
     if state.done == 0 {
-        for k in 0..3 {
-            if scalars.rz[k] > T::of(0.0) {
-                beta[k] = rz_new[k] / scalars.rz[k];
-            }
-        }
+        let [b0, b1, b2] = direction_weights(head(scalars.rz), head(rz_new));
+        beta = [b0, b1, b2, T::of(0.0)];
         scalars.rz = rz_new;
         scalars.rr = rr_new;
     }

@@ -11,6 +11,18 @@
 //! the GPU's arithmetic is f32. The GPU solver is point-Jacobi PCG whatever
 //! `CgParams::preconditioner` asks for (the block-Jacobi triangular solves are sequential per
 //! aggregate and are not ported to WGSL).
+//!
+//! [`pcg`] does not run the CPU solvers' loop ([`crate::solve::iterate`]), whose steps return
+//! their sums to the host after every pass: here the vectors stay on the device, and α, β,
+//! which components still run and the breakdown test are decided by the kernels
+//! (`finalize_alpha`, `finalize_beta`) in the device's precision, [`CG_BATCH`] iterations per
+//! submit with one read-back of the state. Driving the iteration from the host would cost
+//! two synchronous read-backs per iteration (pᵀAp; rᵀz with rᵀr) instead of one per batch,
+//! and in f32 would compute α and β in f64 from f32 sums, a different solver. What the two
+//! share: the stopping rule and its targets, the iteration record and the final error
+//! ([`Stopping`]), the f64 residual (`solve::residual`), and the step arithmetic: the
+//! kernels' CPU twin computes α and β with the CPU loop's [`crate::solve::step_lengths`] and
+//! [`crate::solve::direction_weights`].
 
 use super::{
     Bound, GpuContext, GpuError, ITEM_WORKGROUP, Precision, bytes_to_reals, groups, reals_to_bytes,
@@ -523,11 +535,7 @@ pub fn pcg(
                 });
             }
             let rr_now: [f64; 3] = std::array::from_fn(|k| sc[4 + k] * scale[k] * scale[k]);
-            let iterations = total + st.iterations as usize;
-            if progress.iteration(iterations, rel(rr_now)).is_break() {
-                return Err(CgError::Cancelled { iterations });
-            }
-            Ok(())
+            stop.record(&mut progress, total + st.iterations as usize, rr_now)
         })?;
         for (x, d) in x.iter_mut().zip(&d) {
             for k in 0..3 {
