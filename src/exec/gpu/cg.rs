@@ -10,7 +10,10 @@
 //! solves for the correction (displacement unknowns), so the f64 tolerance is met although
 //! the GPU's arithmetic is f32. The GPU solver is point-Jacobi PCG whatever
 //! `CgParams::preconditioner` asks for (the block-Jacobi triangular solves are sequential per
-//! aggregate and are not ported to WGSL).
+//! aggregate and are not ported to WGSL). A matrix whose values are not summed yet
+//! ([`NormalMatrix::unsummed`]) gets them from `shaders/assemble.wgsl` on the device
+//! ([`super::assemble`]); in f64 its residuals are then products on the device too, so the
+//! host never sums them.
 
 use super::{
     Bound, GpuContext, GpuError, ITEM_WORKGROUP, Precision, bytes_to_reals, groups, reals_to_bytes,
@@ -51,6 +54,7 @@ struct Block {
     indices: wgpu::Buffer,
     data: wgpu::Buffer,
     n_rows: usize,
+    nnz: usize,
 }
 
 /// A CSR matrix on the GPU, split into row blocks whose index and value arrays each fit one
@@ -62,7 +66,57 @@ pub struct GpuMatrix {
 }
 
 impl GpuMatrix {
+    /// `a` on the device: its values uploaded, or, when they are not summed yet
+    /// ([`NormalMatrix::unsummed`]), summed on the device by `assemble.wgsl` from the element
+    /// tables. The host sums and uploads them instead where the tables would move more bytes
+    /// than the values ([`super::assemble::moves_less`]: graded knots, whose elements each have
+    /// their own 27 × 27 matrix) or the device cannot hold them.
     pub fn new(ctx: &GpuContext, a: &NormalMatrix) -> Result<GpuMatrix, GpuError> {
+        if let Some((sums, scale)) = a.unsummed()
+            && super::assemble::moves_less(ctx.precision, sums, a.indices().len())
+        {
+            match super::assemble::DeviceTables::new(ctx, sums, scale) {
+                Ok(tables) => match Self::build(ctx, a, Some((&tables, sums))) {
+                    Err(GpuError::TooLarge(_)) => {}
+                    built => return built,
+                },
+                Err(GpuError::TooLarge(_)) => {}
+                Err(e) => return Err(e),
+            }
+        }
+        Self::build(ctx, a, None)
+    }
+
+    /// `a`, whose values are not summed yet, with its values summed on the device whatever
+    /// the bytes (`GpuError::TooLarge` where the device cannot hold the element tables).
+    pub fn summed_on_device(ctx: &GpuContext, a: &NormalMatrix) -> Result<GpuMatrix, GpuError> {
+        let Some((sums, scale)) = a.unsummed() else {
+            return Err(GpuError::TooLarge("the values are summed already".into()));
+        };
+        let tables = super::assemble::DeviceTables::new(ctx, sums, scale)?;
+        Self::build(ctx, a, Some((&tables, sums)))
+    }
+
+    /// The values of every row as the device holds them (read back, row by row).
+    pub fn values(&self, ctx: &GpuContext) -> Result<Vec<f64>, GpuError> {
+        let mut out = Vec::new();
+        for b in &self.blocks {
+            let bytes = b.data.size();
+            let reals = bytes_to_reals(ctx.precision, &ctx.read_back(&b.data, bytes)?);
+            out.extend_from_slice(&reals[..b.nnz]);
+        }
+        Ok(out)
+    }
+
+    /// The row blocks of `a`, their values summed by `device` or uploaded.
+    fn build(
+        ctx: &GpuContext,
+        a: &NormalMatrix,
+        device: Option<(
+            &super::assemble::DeviceTables,
+            &crate::fit::assembly::RowSums,
+        )>,
+    ) -> Result<GpuMatrix, GpuError> {
         let sz = ctx.precision.size() as u64;
         let vec_bytes = 4 * sz * a.n() as u64;
         if vec_bytes > ctx.max_binding() || a.n() > ctx.max_workgroups() as usize * ITEM_WORKGROUP {
@@ -91,6 +145,20 @@ impl GpuMatrix {
                 .iter()
                 .map(|&k| (k - k0) as u32)
                 .collect();
+            let indptr = ctx.storage("indptr", bytemuck::cast_slice(&indptr), false);
+            let indices = ctx.storage("indices", bytemuck::cast_slice(&a.indices()[k0..k1]), false);
+            let data = match device {
+                Some((tables, sums)) => {
+                    let data = ctx.storage_zeroed("data", sz * (k1 - k0) as u64);
+                    tables.sum_rows(ctx, sums, (r0, r1), [&indptr, &indices, &data])?;
+                    data
+                }
+                None => ctx.storage(
+                    "data",
+                    &reals_to_bytes(ctx.precision, a.data()[k0..k1].iter().copied()),
+                    false,
+                ),
+            };
             blocks.push(Block {
                 params: ctx.uniform(
                     "spmv params",
@@ -101,14 +169,11 @@ impl GpuMatrix {
                         _pad1: 0,
                     },
                 ),
-                indptr: ctx.storage("indptr", bytemuck::cast_slice(&indptr), false),
-                indices: ctx.storage("indices", bytemuck::cast_slice(&a.indices()[k0..k1]), false),
-                data: ctx.storage(
-                    "data",
-                    &reals_to_bytes(ctx.precision, a.data()[k0..k1].iter().copied()),
-                    false,
-                ),
+                indptr,
+                indices,
+                data,
                 n_rows: r1 - r0,
+                nnz: k1 - k0,
             });
             r0 = r1;
         }
@@ -428,6 +493,48 @@ impl<'c> CgKernels<'c> {
         Ok((st, d))
     }
 
+    /// A x on the device (x uploaded, A x read back).
+    fn product(&self, x: &[[f64; 3]]) -> Result<Vec<[f64; 3]>, GpuError> {
+        let ctx = self.ctx;
+        let bytes = 4 * ctx.precision.size() as u64 * self.n as u64;
+        let xb = ctx.storage("x", &vec4_bytes(ctx.precision, x), false);
+        let yb = ctx.storage_zeroed("y", bytes);
+        let binds = self.matrix.bind(ctx, &self.pipelines[0], &xb, &yb);
+        let mut enc = ctx.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            self.matrix
+                .encode(ctx, &mut pass, &self.pipelines[0], &binds);
+        }
+        ctx.submit(enc);
+        Ok(from_vec4(&bytes_to_reals(
+            ctx.precision,
+            &ctx.read_back(&yb, bytes)?,
+        )))
+    }
+
+    /// r = b − A x in f64: A x on the host, or on the device when A's values were summed
+    /// there in f64 (the host never held them; from x = 0, r = b without a product).
+    fn residual(
+        &self,
+        a: &NormalMatrix,
+        b: &[[f64; 3]],
+        x: &[[f64; 3]],
+        r: &mut [[f64; 3]],
+    ) -> Result<(), CgError> {
+        if a.unsummed().is_none() || !super::assemble::exact(self.ctx.precision) {
+            residual(&mut |v, y| a.apply(v, y), b, x, r);
+        } else if x.iter().all(|v| *v == [0.0; 3]) {
+            r.copy_from_slice(b);
+        } else {
+            let ax = self
+                .product(x)
+                .map_err(|e| CgError::Device(e.to_string()))?;
+            residual(&mut |_, y| y.copy_from_slice(&ax), b, x, r);
+        }
+        Ok(())
+    }
+
     /// One CG iteration: Ap, pᵀAp, α and the x/r/z update, rᵀz, β and the p update.
     fn encode_iteration(&self, pass: &mut wgpu::ComputePass<'_>, binds: [&Bound; 4]) {
         let [spmv, dot, fin_a, upd_xr, fin_b, upd_p] = &self.pipelines;
@@ -476,7 +583,7 @@ pub fn pcg(
     let mut res = vec![[0.0; 3]; n];
     for _round in 0..MAX_REFINEMENTS {
         // f64 residual of the current iterate.
-        residual(&mut |v, y| a.apply(v, y), b, x, &mut res);
+        kernels.residual(a, b, x, &mut res)?;
         let rr = dot3(&res, &res);
         if stop.converged(rr) {
             return Ok(CgInfo {
@@ -541,7 +648,7 @@ pub fn pcg(
         total += st.iterations as usize;
     }
     // The final iterate's residual in f64.
-    residual(&mut |v, y| a.apply(v, y), b, x, &mut res);
+    kernels.residual(a, b, x, &mut res)?;
     let rr = dot3(&res, &res);
     if stop.converged(rr) {
         return Ok(CgInfo {
