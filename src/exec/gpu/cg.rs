@@ -12,8 +12,8 @@
 //! `CgParams::preconditioner` asks for (the block-Jacobi triangular solves are sequential per
 //! aggregate and are not ported to WGSL). A matrix whose values are not summed yet
 //! ([`NormalMatrix::unsummed`]) gets them from `shaders/assemble.wgsl` on the device
-//! ([`super::assemble`]); in f64 its residuals are then products on the device too, so the
-//! host never sums them.
+//! ([`super::assemble`]). In f64 the refinement's residuals are products on the device, so
+//! the host never sums them.
 
 use super::{
     Bound, GpuContext, GpuError, ITEM_WORKGROUP, Precision, bytes_to_reals, groups, reals_to_bytes,
@@ -513,8 +513,9 @@ impl<'c> CgKernels<'c> {
         )))
     }
 
-    /// r = b − A x in f64: A x on the host, or on the device when A's values were summed
-    /// there in f64 (the host never held them; from x = 0, r = b without a product).
+    /// r = b − A x in f64: in f64 A x on the device (whoever summed A's values: the host
+    /// need not hold them, and the iterates do not depend on where they were summed; from
+    /// x = 0, r = b without a product), in f32 on the host.
     fn residual(
         &self,
         a: &NormalMatrix,
@@ -522,7 +523,7 @@ impl<'c> CgKernels<'c> {
         x: &[[f64; 3]],
         r: &mut [[f64; 3]],
     ) -> Result<(), CgError> {
-        if a.unsummed().is_none() || !super::assemble::exact(self.ctx.precision) {
+        if !super::assemble::exact(self.ctx.precision) {
             residual(&mut |v, y| a.apply(v, y), b, x, r);
         } else if x.iter().all(|v| *v == [0.0; 3]) {
             r.copy_from_slice(b);
