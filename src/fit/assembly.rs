@@ -383,6 +383,83 @@ fn incidence(elem_cols: &[u32], elem_ptr: &[usize], n: usize) -> Incidence {
     }
 }
 
+impl Incidence {
+    /// Control point c's (element, local index) pairs, in element order.
+    fn of(&self, c: usize) -> impl Iterator<Item = (&u32, &u16)> {
+        let r = self.start[c]..self.start[c + 1];
+        self.inc_elem[r.clone()].iter().zip(&self.inc_local[r])
+    }
+}
+
+/// Row c's distinct columns, unsorted, into `cols`: the union of its incident elements'
+/// columns. `mark[j] == c` once column j is in the row (a marker per thread, not per row).
+fn row_columns(
+    em: &ElementMatrices,
+    inc: &Incidence,
+    mark: &mut [u32],
+    c: usize,
+    cols: &mut Vec<u32>,
+) {
+    cols.clear();
+    for (&e, _) in inc.of(c) {
+        let e = e as usize;
+        for &j in &em.elem_cols[em.elem_ptr[e]..em.elem_ptr[e + 1]] {
+            if mark[j as usize] != c as u32 {
+                mark[j as usize] = c as u32;
+                cols.push(j);
+            }
+        }
+    }
+}
+
+/// The n + 1 row offsets of K: the rows' lengths counted in parallel (splits of at least
+/// `split` rows, one marker each), then summed.
+fn row_offsets(em: &ElementMatrices, inc: &Incidence, n: usize, split: usize) -> Vec<usize> {
+    let lengths: Vec<usize> = (0..n)
+        .into_par_iter()
+        .with_min_len(split)
+        .map_init(
+            || (vec![u32::MAX; n], Vec::new()),
+            |(mark, cols), c| {
+                row_columns(em, inc, mark, c, cols);
+                cols.len()
+            },
+        )
+        .collect();
+    let mut indptr = Vec::with_capacity(n + 1);
+    indptr.push(0usize);
+    for l in lengths {
+        indptr.push(indptr[indptr.len() - 1] + l);
+    }
+    indptr
+}
+
+/// Row c's values over its columns `cols` into `row_vals`: row i of each incident element's
+/// matrix scattered through `pos` (column → position, set here), summed in element order.
+fn sum_row(
+    em: &ElementMatrices,
+    inc: &Incidence,
+    c: usize,
+    cols: &[u32],
+    pos: &mut [u32],
+    row_vals: &mut [f64],
+) {
+    // Written before the sums read it: see `block_jacobi::factor_blocks`.
+    row_vals.fill(0.0);
+    for (p, &j) in cols.iter().enumerate() {
+        pos[j as usize] = p as u32;
+    }
+    for (&e, &i) in inc.of(c) {
+        let e = e as usize;
+        let ids = &em.elem_cols[em.elem_ptr[e]..em.elem_ptr[e + 1]];
+        let m = ids.len();
+        let k = &em.matrix(e)[i as usize * m..(i as usize + 1) * m];
+        for (&j, &v) in ids.iter().zip(k) {
+            row_vals[pos[j as usize] as usize] += v;
+        }
+    }
+}
+
 /// Assemble K.
 pub fn assemble_matrix(space: &dyn FitSpace, blocks: &ElementBlocks) -> NormalMatrix {
     let n = space.control_points().len();
@@ -414,45 +491,13 @@ fn assemble_rows(
         .filter(|k| !matches!(k, Matrix::Shared(_)))
         .count();
     let template_share = template_share.filter(|_| 2 * own <= em.kinds.len());
-    let (elem_ptr, elem_cols) = (&em.elem_ptr, &em.elem_cols);
-    let matrix_of = |e: usize| em.matrix(e);
-    let inc = incidence(elem_cols, elem_ptr, n);
-    let incident = |c: usize| {
-        let r = inc.start[c]..inc.start[c + 1];
-        inc.inc_elem[r.clone()].iter().zip(&inc.inc_local[r])
-    };
+    let inc = incidence(&em.elem_cols, &em.elem_ptr, n);
 
-    // 3. Rows. `mark[j] == c` once column j is in row c; at most ~32 markers are made per pass
-    // (one per split), not one per row range rayon cuts.
-    let row_columns = |mark: &mut Vec<u32>, c: usize, cols: &mut Vec<u32>| {
-        cols.clear();
-        for (&e, _) in incident(c) {
-            let e = e as usize;
-            for &j in &elem_cols[elem_ptr[e]..elem_ptr[e + 1]] {
-                if mark[j as usize] != c as u32 {
-                    mark[j as usize] = c as u32;
-                    cols.push(j);
-                }
-            }
-        }
-    };
+    // 3. Rows.
+    let row_columns =
+        |mark: &mut Vec<u32>, c: usize, cols: &mut Vec<u32>| row_columns(&em, &inc, mark, c, cols);
     let split = (n / 32).max(1024);
-    let lengths: Vec<usize> = (0..n)
-        .into_par_iter()
-        .with_min_len(split)
-        .map_init(
-            || (vec![u32::MAX; n], Vec::new()),
-            |(mark, cols), c| {
-                row_columns(mark, c, cols);
-                cols.len()
-            },
-        )
-        .collect();
-    let mut indptr = Vec::with_capacity(n + 1);
-    indptr.push(0usize);
-    for l in lengths {
-        indptr.push(indptr[indptr.len() - 1] + l);
-    }
+    let indptr = row_offsets(&em, &inc, n, split);
     let mut indices = vec![0u32; indptr[n]];
     // The values: row templates, or the whole value array once they stop paying.
     let mut table = template_share.map(|_| RowTemplates::default());
@@ -489,20 +534,7 @@ fn assemble_rows(
                     row_columns(mark, c, cols);
                     sort_columns(cols, bits);
                     row_cols.copy_from_slice(cols);
-                    // Written before the sums read it: see `block_jacobi::factor_blocks`.
-                    row_vals.fill(0.0);
-                    for (p, &j) in cols.iter().enumerate() {
-                        pos[j as usize] = p as u32;
-                    }
-                    for (&e, &i) in incident(c) {
-                        let e = e as usize;
-                        let ids = &elem_cols[elem_ptr[e]..elem_ptr[e + 1]];
-                        let m = ids.len();
-                        let k = &matrix_of(e)[i as usize * m..(i as usize + 1) * m];
-                        for (&j, &v) in ids.iter().zip(k) {
-                            row_vals[pos[j as usize] as usize] += v;
-                        }
-                    }
+                    sum_row(&em, &inc, c, cols, pos, row_vals);
                 },
             );
         if let Some(t) = &mut table {
@@ -523,6 +555,191 @@ fn assemble_rows(
         Some(t) => NormalMatrix::from_templates(indptr, indices, row_template, t),
         None => NormalMatrix::new(n, indptr, indices, data),
     }
+}
+
+/// K's values left unsummed: the element matrices and the incidence the rows are summed from
+/// ([`assemble_deferred`]). The host sums a row when asked ([`RowSums::row`], the arithmetic of
+/// [`assemble_matrix`], so the same bits); a device sums all of them from [`RowSums::tables`]
+/// and [`RowSums::incidence`] (the GPU's `assemble` kernel).
+pub struct RowSums {
+    em: ElementMatrices,
+    inc: Incidence,
+}
+
+/// The element matrices flat, as a device reads them: per element (and one past the last)
+/// its first column in `elem_cols` and the offset of its m × m matrix (row-major over its
+/// columns, m the element's column count) in `mats`.
+pub struct ElementTables<'a> {
+    pub elements: Vec<[u32; 2]>,
+    pub elem_cols: &'a [u32],
+    pub mats: Vec<f64>,
+    /// Bits of the local index in a packed incidence entry (`element << bits | local`).
+    pub local_bits: u32,
+}
+
+impl RowSums {
+    /// The number of rows.
+    pub fn n(&self) -> usize {
+        self.inc.start.len() - 1
+    }
+
+    /// Row c's values over its sorted columns `cols` (f64, the bits of [`assemble_matrix`]'s),
+    /// with `pos` a column → position scratch of n entries.
+    pub fn row(&self, c: usize, cols: &[u32], pos: &mut [u32], out: &mut [f64]) {
+        sum_row(&self.em, &self.inc, c, cols, pos, out);
+    }
+
+    /// The diagonal: per row, its incident elements' diagonal entries summed in element order
+    /// (each element holds the row's own column once), the bits of the assembled diagonal.
+    pub fn diagonal(&self) -> Vec<f64> {
+        (0..self.n())
+            .into_par_iter()
+            .with_min_len(1024)
+            .map(|c| {
+                let mut s = 0.0;
+                for (&e, &i) in self.inc.of(c) {
+                    let e = e as usize;
+                    let m = self.em.elem_ptr[e + 1] - self.em.elem_ptr[e];
+                    s += self.em.matrix(e)[i as usize * (m + 1)];
+                }
+                s
+            })
+            .collect()
+    }
+
+    /// What a device reads the sums from, in entries: the element matrices' values, the
+    /// elements' columns, the elements (and one past the last) and the incidence.
+    pub fn device_entries(&self) -> [usize; 4] {
+        let em = &self.em;
+        let own: usize = em
+            .kinds
+            .iter()
+            .map(|k| match k {
+                Matrix::Own(l) => l.k.len(),
+                _ => 0,
+            })
+            .sum();
+        let mats = em.table.iter().map(Vec::len).sum::<usize>() + em.factored.len() + own;
+        [
+            mats,
+            em.elem_cols.len(),
+            em.kinds.len() + 1,
+            self.inc.inc_elem.len(),
+        ]
+    }
+
+    /// The element matrices as one flat table (the shared (pattern, mask) entries once, then
+    /// the own matrices), or why a 32-bit device index cannot address them.
+    pub fn tables(&self) -> Result<ElementTables<'_>, String> {
+        let em = &self.em;
+        let ne = em.kinds.len();
+        let mut mats: Vec<f64> = Vec::new();
+        let mut table_at = Vec::with_capacity(em.table.len());
+        for t in &em.table {
+            table_at.push(mats.len());
+            mats.extend_from_slice(t);
+        }
+        let factored_at = mats.len();
+        mats.extend_from_slice(&em.factored);
+        let mut elements = Vec::with_capacity(ne + 1);
+        let mut max_m = 1;
+        for e in 0..ne {
+            let m = em.elem_ptr[e + 1] - em.elem_ptr[e];
+            max_m = max_m.max(m);
+            let at = match &em.kinds[e] {
+                Matrix::Shared(_) => table_at[em.table_index[e] as usize],
+                Matrix::Factored(i) => factored_at + *i as usize * em.nb * em.nb,
+                Matrix::Own(l) => {
+                    mats.extend_from_slice(&l.k);
+                    mats.len() - l.k.len()
+                }
+            };
+            elements.push([em.elem_ptr[e], at]);
+        }
+        elements.push([em.elem_ptr[ne], 0]);
+        let local_bits = usize::BITS - (max_m - 1).leading_zeros();
+        let fits = |x: usize| u32::try_from(x).is_ok();
+        if !fits(mats.len()) || !fits(em.elem_cols.len()) || !fits(ne << local_bits) {
+            return Err(format!(
+                "{ne} elements with {} matrix entries exceed 32-bit indices",
+                mats.len()
+            ));
+        }
+        Ok(ElementTables {
+            elements: elements
+                .iter()
+                .map(|&[c, m]| [c as u32, m as u32])
+                .collect(),
+            elem_cols: &em.elem_cols,
+            mats,
+            local_bits,
+        })
+    }
+
+    /// The incidence of rows `rows` as a device reads it: offsets relative to the first row's
+    /// (one per row and one past the last) and entries `element << local_bits | local index`,
+    /// in element order.
+    pub fn incidence(&self, rows: std::ops::Range<usize>, local_bits: u32) -> (Vec<u32>, Vec<u32>) {
+        let inc = &self.inc;
+        let (k0, k1) = (inc.start[rows.start], inc.start[rows.end]);
+        let start = inc.start[rows.start..=rows.end]
+            .iter()
+            .map(|&k| (k - k0) as u32)
+            .collect();
+        let packed = inc.inc_elem[k0..k1]
+            .iter()
+            .zip(&inc.inc_local[k0..k1])
+            .map(|(&e, &i)| (e << local_bits) | i as u32)
+            .collect();
+        (start, packed)
+    }
+
+    /// Every row's values over the columns `indices` (rows `indptr`), times d_r d_c when
+    /// `scale` is given: the value array of [`assemble_matrix`] (and its scaling) to the bit.
+    pub fn values(&self, indptr: &[usize], indices: &[u32], scale: Option<&[f64]>) -> Vec<f64> {
+        let n = self.n();
+        let mut data = vec![0.0; indptr[n]];
+        split_at_offsets(&mut data, indptr)
+            .into_par_iter()
+            .enumerate()
+            .with_min_len(256)
+            .for_each_init(
+                || vec![0u32; n],
+                |pos, (c, row)| {
+                    let cols = &indices[indptr[c]..indptr[c + 1]];
+                    self.row(c, cols, pos, row);
+                    if let Some(d) = scale {
+                        super::normal_matrix::scale_row(cols, d, c, row);
+                    }
+                },
+            );
+        data
+    }
+}
+
+/// K with its structure (row offsets and sorted columns) and its values left to whoever
+/// solves with it ([`RowSums`]): a device that sums the rows itself never receives them, and
+/// the host sums them with [`assemble_matrix`]'s bits when it needs them.
+pub fn assemble_deferred(space: &dyn FitSpace, blocks: &ElementBlocks) -> NormalMatrix {
+    let n = space.control_points().len();
+    let em = element_matrices(space, blocks);
+    let inc = incidence(&em.elem_cols, &em.elem_ptr, n);
+    let split = (n / 32).max(1024);
+    let indptr = row_offsets(&em, &inc, n, split);
+    let mut indices = vec![0u32; indptr[n]];
+    split_at_offsets(&mut indices, &indptr)
+        .into_par_iter()
+        .enumerate()
+        .with_min_len((split / 4).max(256))
+        .for_each_init(
+            || (vec![u32::MAX; n], vec![0u64; n.div_ceil(64)], Vec::new()),
+            |(mark, bits, cols), (c, out)| {
+                row_columns(&em, &inc, mark, c, cols);
+                sort_columns(cols, bits);
+                out.copy_from_slice(cols);
+            },
+        );
+    NormalMatrix::deferred(indptr, indices, std::sync::Arc::new(RowSums { em, inc }))
 }
 
 #[cfg(test)]

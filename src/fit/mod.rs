@@ -594,9 +594,35 @@ pub fn assemble_with_features(
     smooth: Option<&SmoothTargets>,
     features: Option<&crate::mesh::features::Features>,
 ) -> (NormalMatrix, Vec<[f64; 3]>) {
+    assemble_on(space, mesh, topo, w, (smooth, features), Summing::Host)
+}
+
+/// Where the values of the fit's K are summed: by the host ([`assembly::assemble_matrix`]), or
+/// left to the solver ([`assembly::assemble_deferred`]: a GPU executor sums them on its
+/// device, and the host sums a row with the same bits only where it uses one).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Summing {
+    Host,
+    Solver,
+}
+
+fn assemble_on(
+    space: &dyn FitSpace,
+    mesh: &LinearMesh,
+    topo: &Topology,
+    w: &FitWeights,
+    (smooth, features): (
+        Option<&SmoothTargets>,
+        Option<&crate::mesh::features::Features>,
+    ),
+    summing: Summing,
+) -> (NormalMatrix, Vec<[f64; 3]>) {
     let blocks = ElementBlocks::with_features(space, mesh, topo, w, features);
     let rhs = rhs::displacement_rhs(space, mesh, topo, w, &blocks.masks, smooth);
-    let k = assembly::assemble_matrix(space, &blocks);
+    let k = match summing {
+        Summing::Host => assembly::assemble_matrix(space, &blocks),
+        Summing::Solver => assembly::assemble_deferred(space, &blocks),
+    };
     (k, rhs)
 }
 
@@ -652,21 +678,29 @@ pub fn fit_with_targets(
         &crate::solve::CgParams,
     ) -> Result<crate::solve::CgInfo, CgError>,
 ) -> Result<(Vec<[f64; 3]>, FitInfo), CgError> {
-    fit_with_targets_from(space, mesh, topo, params, smooth, None, solve)
+    fit_with_targets_from(
+        space,
+        mesh,
+        topo,
+        params,
+        smooth,
+        (None, Summing::Host),
+        solve,
+    )
 }
 
 /// [`fit_with_targets`] with the CG started from the control points `start` (one per control
 /// point of `space`) instead of from the space's initial control points: a nearby solution,
 /// such as the fit of a slightly different space, saves iterations. The stopping test is
 /// relative to the right-hand side as from a cold start, so the result meets the same
-/// tolerance.
+/// tolerance. `summing` says where K's values are summed.
 pub fn fit_with_targets_from(
     space: &dyn FitSpace,
     mesh: &LinearMesh,
     topo: &Topology,
     params: &FitParams,
     smooth: Option<&SmoothTargets>,
-    start: Option<&[[f64; 3]]>,
+    (start, summing): (Option<&[[f64; 3]]>, Summing),
     solve: impl FnOnce(
         NormalMatrix,
         &[[f64; 3]],
@@ -675,7 +709,9 @@ pub fn fit_with_targets_from(
     ) -> Result<crate::solve::CgInfo, CgError>,
 ) -> Result<(Vec<[f64; 3]>, FitInfo), CgError> {
     let t = std::time::Instant::now();
-    let (mut k, mut rhs) = normal_equations_with(space, mesh, topo, params, smooth);
+    let features = params.features.as_deref();
+    let targets = (smooth, features);
+    let (mut k, mut rhs) = assemble_on(space, mesh, topo, &params.weights, targets, summing);
     // Across rotation seams the coordinates are coupled ([`rotated`]).
     let mut coupling = space.has_frames().then(|| {
         let features = params.features.as_deref();

@@ -39,6 +39,14 @@ enum Values {
         /// The expanded values, made by the first [`NormalMatrix::data`].
         full: std::sync::OnceLock<Vec<f64>>,
     },
+    /// Values not summed yet ([`super::assembly::assemble_deferred`]): the element matrices
+    /// they are summed from, the symmetric scaling D to apply, and the value array once the
+    /// host has asked for it.
+    Deferred {
+        sums: std::sync::Arc<super::assembly::RowSums>,
+        scale: Option<Vec<f64>>,
+        full: std::sync::OnceLock<Vec<f64>>,
+    },
 }
 
 impl NormalMatrix {
@@ -83,10 +91,37 @@ impl NormalMatrix {
         }
     }
 
+    /// The matrix of the row offsets `indptr` and sorted columns `indices` whose values are
+    /// the row sums of `sums`.
+    pub(crate) fn deferred(
+        indptr: Vec<usize>,
+        indices: Vec<u32>,
+        sums: std::sync::Arc<super::assembly::RowSums>,
+    ) -> Self {
+        NormalMatrix {
+            indptr,
+            indices,
+            values: Values::Deferred {
+                sums,
+                scale: None,
+                full: std::sync::OnceLock::new(),
+            },
+        }
+    }
+
+    /// For a matrix whose values are not summed yet, the element matrices they are summed
+    /// from and the symmetric scaling D (value_rc · d_r d_c) to apply after the sums.
+    pub fn unsummed(&self) -> Option<(&super::assembly::RowSums, Option<&[f64]>)> {
+        match &self.values {
+            Values::Deferred { sums, scale, .. } => Some((sums, scale.as_deref())),
+            _ => None,
+        }
+    }
+
     /// The number of distinct row value sequences stored, `None` for a plain value array.
     pub fn n_templates(&self) -> Option<usize> {
         match &self.values {
-            Values::Full(_) => None,
+            Values::Full(_) | Values::Deferred { .. } => None,
             Values::Templated { table, .. } => Some(table.len()),
         }
     }
@@ -115,6 +150,9 @@ impl NormalMatrix {
                 table,
                 full,
             } => full.get_or_init(|| expand(&self.indptr, row_template, table)),
+            Values::Deferred { sums, scale, full } => {
+                full.get_or_init(|| sums.values(&self.indptr, &self.indices, scale.as_deref()))
+            }
         }
     }
 
@@ -130,6 +168,9 @@ impl NormalMatrix {
             } => full
                 .into_inner()
                 .unwrap_or_else(|| expand(&self.indptr, &row_template, &table)),
+            Values::Deferred { sums, scale, full } => full
+                .into_inner()
+                .unwrap_or_else(|| sums.values(&self.indptr, &self.indices, scale.as_deref())),
         };
         (self.indptr, self.indices, data)
     }
@@ -150,6 +191,15 @@ impl NormalMatrix {
     /// The stored values, for in-place rescaling (the structure stays fixed; row templates
     /// are expanded).
     pub fn data_mut(&mut self) -> &mut [f64] {
+        if matches!(self.values, Values::Deferred { .. }) {
+            self.data();
+            let Values::Deferred { full, .. } =
+                std::mem::replace(&mut self.values, Values::Full(Vec::new()))
+            else {
+                unreachable!("matched just above")
+            };
+            self.values = Values::Full(full.into_inner().expect("summed just above"));
+        }
         if matches!(self.values, Values::Templated { .. }) {
             let Values::Templated {
                 row_template,
@@ -166,7 +216,9 @@ impl NormalMatrix {
         }
         match &mut self.values {
             Values::Full(d) => d,
-            Values::Templated { .. } => unreachable!("expanded just above"),
+            Values::Templated { .. } | Values::Deferred { .. } => {
+                unreachable!("expanded just above")
+            }
         }
     }
 
@@ -200,14 +252,11 @@ impl NormalMatrix {
                     )?
                     .solve(b, x, params, progress)
                 }
-                Values::Full(data) => crate::solve::BlockedSystem::from_parts(
-                    self.indptr,
-                    self.indices,
-                    data,
-                    size,
-                    kind,
-                )?
-                .solve(b, x, params, progress),
+                Values::Full(_) | Values::Deferred { .. } => {
+                    let (indptr, indices, data) = self.into_parts();
+                    crate::solve::BlockedSystem::from_parts(indptr, indices, data, size, kind)?
+                        .solve(b, x, params, progress)
+                }
             },
             None => crate::solve::pcg(&self, b, x, params, progress),
         }
@@ -234,6 +283,29 @@ impl LinOp for NormalMatrix {
         self.n()
     }
     fn apply(&self, x: &[[f64; 3]], y: &mut [[f64; 3]]) {
+        if let Values::Deferred { sums, scale, full } = &self.values
+            && full.get().is_none()
+        {
+            // Each row summed where it is used, not kept: the product of the value array.
+            let (indptr, indices, n) = (&self.indptr, &self.indices, self.n());
+            let scale = scale.as_deref();
+            y.par_iter_mut()
+                .enumerate()
+                .with_min_len(256)
+                .for_each_init(
+                    || (vec![0u32; n], Vec::new()),
+                    |(pos, row), (r, y)| {
+                        let cols = &indices[indptr[r]..indptr[r + 1]];
+                        row.resize(cols.len(), 0.0);
+                        sums.row(r, cols, pos, row);
+                        if let Some(d) = scale {
+                            scale_row(cols, d, r, row);
+                        }
+                        *y = crate::solve::row_dot(cols, row, x);
+                    },
+                );
+            return;
+        }
         let (indptr, indices, data) = (self.indptr(), self.indices(), self.data());
         y.par_iter_mut()
             .enumerate()
@@ -244,6 +316,15 @@ impl LinOp for NormalMatrix {
             });
     }
     fn diagonal(&self) -> Vec<f64> {
+        if let Some((sums, scale)) = self.unsummed() {
+            let mut diag = sums.diagonal();
+            if let Some(d) = scale {
+                for (r, v) in diag.iter_mut().enumerate() {
+                    *v *= d[r] * d[r];
+                }
+            }
+            return diag;
+        }
         let (indptr, indices, data) = (self.indptr(), self.indices(), self.data());
         (0..self.n())
             .map(|r| {
@@ -483,6 +564,14 @@ pub(super) fn control_point_scales(space: &dyn FitSpace, levels: &[u16]) -> Opti
 impl NormalMatrix {
     /// K ← D K D for the diagonal D = diag(`d`).
     pub fn scale_symmetric(&mut self, d: &[f64]) {
+        if let Values::Deferred { scale, full, .. } = &mut self.values
+            && scale.is_none()
+            && full.get().is_none()
+        {
+            // Applied after the sums, wherever they run.
+            *scale = Some(d.to_vec());
+            return;
+        }
         let (indptr, indices) = (&self.indptr, &self.indices);
         if let Values::Templated {
             row_template,
@@ -543,7 +632,7 @@ impl NormalMatrix {
 }
 
 /// Row r's values `v` (columns `cols`) times d_r d_c.
-fn scale_row(cols: &[u32], d: &[f64], r: usize, v: &mut [f64]) {
+pub(super) fn scale_row(cols: &[u32], d: &[f64], r: usize, v: &mut [f64]) {
     for (v, &c) in v.iter_mut().zip(cols) {
         *v *= d[r] * d[c as usize];
     }

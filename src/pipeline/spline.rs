@@ -24,7 +24,8 @@ use super::share::{
 use super::{CurveError, Geometry, Job};
 use crate::energy::{EnergyError, EnergyInfo, EnergyParams};
 use crate::fit::{
-    FitInfo, FitParams, FitSolver, FitTargets, SmoothTargets, TargetMap, fit_with_targets_from,
+    FitInfo, FitParams, FitSolver, FitTargets, SmoothTargets, Summing, TargetMap,
+    fit_with_targets_from,
 };
 use crate::mesh::features::Features;
 use crate::mesh::periodic::PeriodicPair;
@@ -1008,13 +1009,18 @@ fn solve_fit(
         space.control_points.len(),
         matches!(job.options.backend, crate::exec::gpu::Backend::Cpu),
     );
+    // A device sums K's values itself: the host keeps only its structure.
+    let summing = match job.executor.gpu() {
+        Some(_) if !factors => Summing::Solver,
+        _ => Summing::Host,
+    };
     let (mut c_star, mut info) = fit_with_targets_from(
         space,
         job.mesh,
         setup.topo(job),
         &setup.fit_params,
         setup.targets.as_ref(),
-        start,
+        (start, summing),
         |k, rhs, x, cg| {
             if factors {
                 return crate::solve::direct::cholesky(

@@ -483,6 +483,151 @@ fn spmv_matches_cpu_and_row_sums() {
     }
 }
 
+/// A cylinder's spline space with uniform knots (shared element matrices, and Q2 elements
+/// with constrained nodes, matrices of their own) or graded knots (every element its own).
+fn assembly_space(mesh: &LinearMesh, topo: &Topology, graded: bool) -> SplineSpace {
+    if !graded {
+        return SplineSpace::build(mesh, topo);
+    }
+    let weights: Vec<_> = (0..mesh.n_elements())
+        .map(|e| {
+            let f = |k: usize| 0.3 + 0.4 * (((e * 5 + k * 3) % 11) as f64 / 10.0);
+            [[f(0), f(1)], [f(2), f(3)], [f(4), f(5)]]
+        })
+        .collect();
+    SplineSpace::build_with_knots(mesh, topo, &[], Some(&weights))
+}
+
+/// `assemble.wgsl` on lavapipe sums K into the GPU matrix: in f64 the bits of the host
+/// assembly (`fit::assembly::assemble_matrix`, then the symmetric scaling) and of its CPU
+/// twin; in f32 the twin's bits, within `ASSEMBLE_TOL_F32` of each entry's sum of term
+/// magnitudes from the f64 values; on uniform and graded knots, scaled or not.
+#[test]
+fn assemble_kernel_matches_twin_and_host_assembly() {
+    use polyspline::exec::gpu::assemble::ASSEMBLE_TOL_F32;
+    use polyspline::exec::gpu::cg::GpuMatrix;
+    use polyspline::fit::assembly::{assemble_deferred, assemble_matrix};
+    use polyspline::fit::{ElementBlocks, FitWeights};
+    let mesh =
+        polyspline::mesh::generate::generate(polyspline::mesh::generate::Kind::Cylinder, 1500);
+    let topo = Topology::build(&mesh);
+    for prec in [Precision::F32, Precision::F64] {
+        let Some(ctx) = context(prec) else { return };
+        for graded in [false, true] {
+            let s = assembly_space(&mesh, &topo, graded);
+            let blocks = ElementBlocks::new(&s, &mesh, &topo, &FitWeights::position());
+            let n = s.control_points.len();
+            let d: Vec<f64> = (0..n).map(|i| [1.0, 0.5, 0.125][i % 3]).collect();
+            for scale in [None, Some(&d)] {
+                let case = format!("{prec:?} graded {graded} scaled {}", scale.is_some());
+                let mut host = assemble_matrix(&s, &blocks);
+                let mut k = assemble_deferred(&s, &blocks);
+                if let Some(d) = scale {
+                    host.scale_symmetric(d);
+                    k.scale_symmetric(d);
+                }
+                let m = GpuMatrix::summed_on_device(&ctx, &k).unwrap();
+                let got = m.values(&ctx).unwrap();
+                assert_eq!(got.len(), host.indices().len(), "{case}");
+                let twin: Vec<f64> = match prec {
+                    Precision::F64 => cpu::assemble::assemble_all::<f64>(&k, |v| v).unwrap(),
+                    Precision::F32 => cpu::assemble::assemble_all::<f32>(&k, |v| v)
+                        .unwrap()
+                        .into_iter()
+                        .map(f64::from)
+                        .collect(),
+                };
+                let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                assert!(bits(&got) == bits(&twin), "{case}: kernel and twin differ");
+                match prec {
+                    Precision::F64 => {
+                        assert!(bits(&got) == bits(host.data()), "{case}: not the host's K")
+                    }
+                    Precision::F32 => {
+                        let mags = cpu::assemble::assemble_all::<f64>(&k, f64::abs).unwrap();
+                        for (i, ((g, h), m)) in got.iter().zip(host.data()).zip(&mags).enumerate() {
+                            assert!(
+                                (g - h).abs() <= ASSEMBLE_TOL_F32 * m,
+                                "{case}: entry {i}: {g} against {h} (terms {m})"
+                            );
+                        }
+                    }
+                }
+                assert_eq!(m.n, n);
+            }
+        }
+    }
+}
+
+/// The fit under the GPU executor with K summed on the device gives the control points of
+/// the same solve with K summed and uploaded by the host, from a cold and from a warm start:
+/// bit for bit in f64, with the same iteration count; in f32 they agree to the tolerance.
+#[test]
+fn fit_with_device_sums_is_the_host_sums_fit() {
+    use polyspline::fit::{Summing, fit_with_targets_from};
+    let mesh =
+        polyspline::mesh::generate::generate(polyspline::mesh::generate::Kind::Cylinder, 1500);
+    let topo = Topology::build(&mesh);
+    let s = SplineSpace::build(&mesh, &topo);
+    let params = FitParams::default();
+    for prec in [Precision::F32, Precision::F64] {
+        let Some(ctx) = context(prec) else { return };
+        let gpu = polyspline::exec::GpuExecutor::new(&ctx);
+        // A warm start: the initial control points moved by a thousandth of the size.
+        let warm: Vec<[f64; 3]> = s
+            .control_points
+            .iter()
+            .enumerate()
+            .map(|(i, c)| c.map(|v| v + 1e-3 * (i as f64).sin()))
+            .collect();
+        for start in [None, Some(&warm[..])] {
+            let fit = |summing: Summing| {
+                let before = ctx.traffic().uploaded_bytes;
+                let (c, info) = fit_with_targets_from(
+                    &s,
+                    &mesh,
+                    &topo,
+                    &params,
+                    None,
+                    (start, summing),
+                    |k, b, x, cg| {
+                        polyspline::exec::Executor::pcg(&gpu, k, b, x, cg, &mut |_, _| {})
+                    },
+                )
+                .unwrap();
+                (c, info.cg, ctx.traffic().uploaded_bytes - before)
+            };
+            let case = format!("{prec:?} warm {}", start.is_some());
+            let (host, hi, host_up) = fit(Summing::Host);
+            let (device, di, device_up) = fit(Summing::Solver);
+            assert!(hi.iterations > 10, "{case}: {hi:?}");
+            assert!(
+                device_up < host_up,
+                "{case}: {device_up} bytes up against {host_up}"
+            );
+            match prec {
+                Precision::F64 => {
+                    let flat =
+                        |c: &[[f64; 3]]| c.concat().iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                    assert!(
+                        flat(&host) == flat(&device),
+                        "{case}: control points differ"
+                    );
+                    assert_eq!(hi.iterations, di.iterations, "{case}");
+                }
+                Precision::F32 => {
+                    let (lo, hi) = mesh.bounding_box();
+                    let diag = (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f64>().sqrt();
+                    for (a, b) in host.iter().zip(&device) {
+                        let d = norm([a[0] - b[0], a[1] - b[1], a[2] - b[2]]);
+                        assert!(d <= 1e-5 * diag, "{case}: {d:e}");
+                    }
+                }
+            }
+        }
+    }
+}
+
 /// Point-Jacobi PCG, one body per executor: each solution's residual checked in f64, the two
 /// solutions within 1e-5 of each other, and in f64 the same iteration count give or take.
 #[test]

@@ -384,7 +384,9 @@ fn right_hand_side_is_the_gradient_of_the_misfit() {
 /// size level, so the start must be carried into the scaled unknowns correctly).
 #[test]
 fn a_started_fit_reaches_the_same_control_points() {
-    use polyspline::fit::{FitParams, fit_with_targets, fit_with_targets_from, size_levels};
+    use polyspline::fit::{
+        FitParams, Summing, fit_with_targets, fit_with_targets_from, size_levels,
+    };
     let real = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("meshes/real");
     let m = read_mesh(
         &real.join("trixi-juliacon2024-naca4412/NACA4412_2_2D_unique.inp"),
@@ -414,8 +416,16 @@ fn a_started_fit_reaches_the_same_control_points() {
             .fold(0.0f64, f64::max)
             / diag
     };
-    let (again, info) =
-        fit_with_targets_from(&s, &m, &t, &p, targets.as_ref(), Some(&cold), solve).unwrap();
+    let (again, info) = fit_with_targets_from(
+        &s,
+        &m,
+        &t,
+        &p,
+        targets.as_ref(),
+        (Some(&cold[..]), Summing::Host),
+        solve,
+    )
+    .unwrap();
     assert!(
         info.cg.iterations <= 1,
         "{} iterations from the solution",
@@ -427,8 +437,16 @@ fn a_started_fit_reaches_the_same_control_points() {
         .enumerate()
         .map(|(i, c)| [c[0] + 1e-3 * (i as f64 * 0.37).sin(), c[1], c[2]])
         .collect();
-    let (back, info) =
-        fit_with_targets_from(&s, &m, &t, &p, targets.as_ref(), Some(&nudged), solve).unwrap();
+    let (back, info) = fit_with_targets_from(
+        &s,
+        &m,
+        &t,
+        &p,
+        targets.as_ref(),
+        (Some(&nudged[..]), Summing::Host),
+        solve,
+    )
+    .unwrap();
     assert!(info.cg.iterations > 0);
     assert!(info.cg.iterations <= cold_info.cg.iterations + 10);
     // Both stop at the same relative residual: as close to the converged fit as each other.

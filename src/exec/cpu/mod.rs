@@ -4,6 +4,7 @@
 //! correctness stays the f64 CPU pipeline (`sample`, `validity`, `solve`), and the tests also
 //! check both against independent oracles.
 
+pub mod assemble;
 pub mod cg;
 pub mod dot;
 pub mod evaluate;

@@ -10,7 +10,10 @@
 //! solves for the correction (displacement unknowns), so the f64 tolerance is met although
 //! the GPU's arithmetic is f32. The GPU solver is point-Jacobi PCG whatever
 //! `CgParams::preconditioner` asks for (the block-Jacobi triangular solves are sequential per
-//! aggregate and are not ported to WGSL).
+//! aggregate and are not ported to WGSL). A matrix whose values are not summed yet
+//! ([`NormalMatrix::unsummed`]) gets them from `shaders/assemble.wgsl` on the device
+//! ([`super::assemble`]). In f64 the refinement's residuals are products on the device, so
+//! the host never sums them.
 //!
 //! [`pcg`] does not run the CPU solvers' loop ([`crate::solve::iterate`]), whose steps return
 //! their sums to the host after every pass: here the vectors stay on the device, and α, β,
@@ -20,7 +23,7 @@
 //! two synchronous read-backs per iteration (pᵀAp; rᵀz with rᵀr) instead of one per batch,
 //! and in f32 would compute α and β in f64 from f32 sums, a different solver. What the two
 //! share: the stopping rule and its targets, the iteration record and the final error
-//! ([`Stopping`]), the f64 residual (`solve::residual`), and the step arithmetic: the
+//! ([`Stopping`]), the f32 refinement's f64 residual (`solve::residual`), and the step arithmetic: the
 //! kernels' CPU twin computes α and β with the CPU loop's [`crate::solve::step_lengths`] and
 //! [`crate::solve::direction_weights`].
 
@@ -63,6 +66,7 @@ struct Block {
     indices: wgpu::Buffer,
     data: wgpu::Buffer,
     n_rows: usize,
+    nnz: usize,
 }
 
 /// A CSR matrix on the GPU, split into row blocks whose index and value arrays each fit one
@@ -74,7 +78,57 @@ pub struct GpuMatrix {
 }
 
 impl GpuMatrix {
+    /// `a` on the device: its values uploaded, or, when they are not summed yet
+    /// ([`NormalMatrix::unsummed`]), summed on the device by `assemble.wgsl` from the element
+    /// tables. The host sums and uploads them instead where the tables would move more bytes
+    /// than the values ([`super::assemble::moves_less`]: graded knots, whose elements each have
+    /// their own 27 × 27 matrix) or the device cannot hold them.
     pub fn new(ctx: &GpuContext, a: &NormalMatrix) -> Result<GpuMatrix, GpuError> {
+        if let Some((sums, scale)) = a.unsummed()
+            && super::assemble::moves_less(ctx.precision, sums, a.indices().len())
+        {
+            match super::assemble::DeviceTables::new(ctx, sums, scale) {
+                Ok(tables) => match Self::build(ctx, a, Some((&tables, sums))) {
+                    Err(GpuError::TooLarge(_)) => {}
+                    built => return built,
+                },
+                Err(GpuError::TooLarge(_)) => {}
+                Err(e) => return Err(e),
+            }
+        }
+        Self::build(ctx, a, None)
+    }
+
+    /// `a`, whose values are not summed yet, with its values summed on the device whatever
+    /// the bytes (`GpuError::TooLarge` where the device cannot hold the element tables).
+    pub fn summed_on_device(ctx: &GpuContext, a: &NormalMatrix) -> Result<GpuMatrix, GpuError> {
+        let Some((sums, scale)) = a.unsummed() else {
+            return Err(GpuError::TooLarge("the values are summed already".into()));
+        };
+        let tables = super::assemble::DeviceTables::new(ctx, sums, scale)?;
+        Self::build(ctx, a, Some((&tables, sums)))
+    }
+
+    /// The values of every row as the device holds them (read back, row by row).
+    pub fn values(&self, ctx: &GpuContext) -> Result<Vec<f64>, GpuError> {
+        let mut out = Vec::new();
+        for b in &self.blocks {
+            let bytes = b.data.size();
+            let reals = bytes_to_reals(ctx.precision, &ctx.read_back(&b.data, bytes)?);
+            out.extend_from_slice(&reals[..b.nnz]);
+        }
+        Ok(out)
+    }
+
+    /// The row blocks of `a`, their values summed by `device` or uploaded.
+    fn build(
+        ctx: &GpuContext,
+        a: &NormalMatrix,
+        device: Option<(
+            &super::assemble::DeviceTables,
+            &crate::fit::assembly::RowSums,
+        )>,
+    ) -> Result<GpuMatrix, GpuError> {
         let sz = ctx.precision.size() as u64;
         let vec_bytes = 4 * sz * a.n() as u64;
         if vec_bytes > ctx.max_binding() || a.n() > ctx.max_workgroups() as usize * ITEM_WORKGROUP {
@@ -103,6 +157,20 @@ impl GpuMatrix {
                 .iter()
                 .map(|&k| (k - k0) as u32)
                 .collect();
+            let indptr = ctx.storage("indptr", bytemuck::cast_slice(&indptr), false);
+            let indices = ctx.storage("indices", bytemuck::cast_slice(&a.indices()[k0..k1]), false);
+            let data = match device {
+                Some((tables, sums)) => {
+                    let data = ctx.storage_zeroed("data", sz * (k1 - k0) as u64);
+                    tables.sum_rows(ctx, sums, (r0, r1), [&indptr, &indices, &data])?;
+                    data
+                }
+                None => ctx.storage(
+                    "data",
+                    &reals_to_bytes(ctx.precision, a.data()[k0..k1].iter().copied()),
+                    false,
+                ),
+            };
             blocks.push(Block {
                 params: ctx.uniform(
                     "spmv params",
@@ -113,14 +181,11 @@ impl GpuMatrix {
                         _pad1: 0,
                     },
                 ),
-                indptr: ctx.storage("indptr", bytemuck::cast_slice(&indptr), false),
-                indices: ctx.storage("indices", bytemuck::cast_slice(&a.indices()[k0..k1]), false),
-                data: ctx.storage(
-                    "data",
-                    &reals_to_bytes(ctx.precision, a.data()[k0..k1].iter().copied()),
-                    false,
-                ),
+                indptr,
+                indices,
+                data,
                 n_rows: r1 - r0,
+                nnz: k1 - k0,
             });
             r0 = r1;
         }
@@ -440,6 +505,49 @@ impl<'c> CgKernels<'c> {
         Ok((st, d))
     }
 
+    /// A x on the device (x uploaded, A x read back).
+    fn product(&self, x: &[[f64; 3]]) -> Result<Vec<[f64; 3]>, GpuError> {
+        let ctx = self.ctx;
+        let bytes = 4 * ctx.precision.size() as u64 * self.n as u64;
+        let xb = ctx.storage("x", &vec4_bytes(ctx.precision, x), false);
+        let yb = ctx.storage_zeroed("y", bytes);
+        let binds = self.matrix.bind(ctx, &self.pipelines[0], &xb, &yb);
+        let mut enc = ctx.device.create_command_encoder(&Default::default());
+        {
+            let mut pass = enc.begin_compute_pass(&Default::default());
+            self.matrix
+                .encode(ctx, &mut pass, &self.pipelines[0], &binds);
+        }
+        ctx.submit(enc);
+        Ok(from_vec4(&bytes_to_reals(
+            ctx.precision,
+            &ctx.read_back(&yb, bytes)?,
+        )))
+    }
+
+    /// r = b − A x in f64: in f64 A x on the device (whoever summed A's values: the host
+    /// need not hold them, and the iterates do not depend on where they were summed; from
+    /// x = 0, r = b without a product), in f32 on the host.
+    fn residual(
+        &self,
+        a: &NormalMatrix,
+        b: &[[f64; 3]],
+        x: &[[f64; 3]],
+        r: &mut [[f64; 3]],
+    ) -> Result<(), CgError> {
+        if !super::assemble::exact(self.ctx.precision) {
+            residual(&mut |v, y| a.apply(v, y), b, x, r);
+        } else if x.iter().all(|v| *v == [0.0; 3]) {
+            r.copy_from_slice(b);
+        } else {
+            let ax = self
+                .product(x)
+                .map_err(|e| CgError::Device(e.to_string()))?;
+            residual(&mut |_, y| y.copy_from_slice(&ax), b, x, r);
+        }
+        Ok(())
+    }
+
     /// One CG iteration: Ap, pᵀAp, α and the x/r/z update, rᵀz, β and the p update.
     fn encode_iteration(&self, pass: &mut wgpu::ComputePass<'_>, binds: [&Bound; 4]) {
         let [spmv, dot, fin_a, upd_xr, fin_b, upd_p] = &self.pipelines;
@@ -488,7 +596,7 @@ pub fn pcg(
     let mut res = vec![[0.0; 3]; n];
     for _round in 0..MAX_REFINEMENTS {
         // f64 residual of the current iterate.
-        residual(&mut |v, y| a.apply(v, y), b, x, &mut res);
+        kernels.residual(a, b, x, &mut res)?;
         let rr = dot3(&res, &res);
         if stop.converged(rr) {
             return Ok(CgInfo {
@@ -549,7 +657,7 @@ pub fn pcg(
         total += st.iterations as usize;
     }
     // The final iterate's residual in f64.
-    residual(&mut |v, y| a.apply(v, y), b, x, &mut res);
+    kernels.residual(a, b, x, &mut res)?;
     let rr = dot3(&res, &res);
     if stop.converged(rr) {
         return Ok(CgInfo {

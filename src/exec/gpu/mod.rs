@@ -14,6 +14,7 @@
 //! warning when the variable is unset. Without any Vulkan driver, adapter selection fails
 //! within milliseconds with [`GpuError::NoAdapter`].
 
+pub mod assemble;
 pub mod cg;
 pub mod evaluate;
 pub mod executor;
@@ -570,7 +571,8 @@ pub fn shader_source(source: &str, precision: Precision) -> String {
 }
 
 /// The WGSL sources by file name, for validation.
-pub const SHADERS: [(&str, &str); 6] = [
+pub const SHADERS: [(&str, &str); 7] = [
+    ("assemble.wgsl", assemble::SOURCE),
     ("evaluate.wgsl", evaluate::SOURCE),
     ("jacobian_check.wgsl", jacobian_check::SOURCE),
     ("spmv.wgsl", cg::SPMV_SOURCE),

@@ -40,7 +40,8 @@ include!(concat!(env!("OUT_DIR"), "/shader_reflection.rs"));
 pub const ITEM_WORKGROUP: u32 = 64;
 
 /// The kernels dispatched as `groups(n, ITEM_WORKGROUP)` workgroups.
-const ITEM_KERNELS: [&str; 6] = [
+const ITEM_KERNELS: [&str; 7] = [
+    "assemble",
     "evaluate",
     "jacobian_check",
     "local_newton",
@@ -146,5 +147,8 @@ mod tests {
         assert_eq!(k.bindings.len(), 4);
         assert_eq!(k.bindings[1].kind, BindingKind::StorageRead);
         assert_eq!(kernel("update_p").bindings.len(), 4);
+        let k = kernel("assemble");
+        assert_eq!(k.bindings.len(), 10);
+        assert_eq!(k.bindings[9].kind, BindingKind::StorageReadWrite);
     }
 }
