@@ -9,7 +9,7 @@
 //! the coordinates of those nodes.
 //!
 //! Every part repeats the whole mesh's `$Periodic` links (Gmsh writes them so); each rank
-//! reads those of its parts and every rank gets all of them ([`gather_periodic`]), so the
+//! reads those of its parts and every rank gets all of them (`gather_periodic`), so the
 //! periodic pairs are resolved as from the single file.
 //!
 //! Steps: (1) the part names come from the given part's name and its number of partitions K;
