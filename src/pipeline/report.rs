@@ -160,7 +160,8 @@ pub struct CurveReport {
     /// With `gpu` only (absent otherwise): what each stage moved between host and device and
     /// through device memory, and the dispatches, submits and read-backs it issued, counted by
     /// the device context, under the keys of `timings` (every stage run; the fit's traffic is
-    /// its CG's, the assembly runs on the CPU). `write` runs after the report and moves nothing.
+    /// its CG's and, where K's values are summed on the device, its assembly's; the matrix's
+    /// structure is built on the CPU). `write` runs after the report and moves nothing.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub gpu_traffic: Option<BTreeMap<String, GpuTraffic>>,
     /// Under mpirun only (absent otherwise): the number of ranks.
