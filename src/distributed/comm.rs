@@ -29,6 +29,16 @@ pub fn agree<T, E>(
     }
 }
 
+/// Bytes (text, a file's header) as the collectives carry them: one f64 each.
+pub fn bytes_as_f64(bytes: &[u8]) -> Vec<f64> {
+    bytes.iter().map(|&b| f64::from(b)).collect()
+}
+
+/// The bytes of [`bytes_as_f64`] back.
+pub fn f64_as_bytes(v: &[f64]) -> Vec<u8> {
+    v.iter().map(|&b| b as u8).collect()
+}
+
 /// The lowest rank whose stage failed (`failed`: this rank's did), when any did ([`agree`]'s
 /// one min-reduce); the first such rank is the one [`failing_rank`] names.
 pub fn lowest_failed(comm: &dyn Comm, failed: bool) -> Option<usize> {

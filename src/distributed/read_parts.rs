@@ -31,7 +31,7 @@
 //! Invariant: the local mesh is what [`super::share::read_share`] makes of the unpartitioned
 //! file when the cells' tags follow the file's order (as Gmsh numbers them).
 
-use super::comm::Comm;
+use super::comm::{Comm, bytes_as_f64, f64_as_bytes};
 pub use super::part_file::is_partitioned;
 use super::part_file::{part_names, read_part};
 use super::partition::{Grid, sort_value, thresholds};
@@ -49,16 +49,13 @@ fn err(what: impl Into<String>) -> ParseError {
 fn agree<T>(comm: &dyn Comm, r: Result<T, ParseError>) -> Result<T, ParseError> {
     let msg: Vec<f64> = match &r {
         Ok(_) => Vec::new(),
-        Err(e) => e.message.bytes().map(|b| b as f64).collect(),
+        Err(e) => bytes_as_f64(e.message.as_bytes()),
     };
     let all = comm.all_gather_f64(&msg);
     match all.iter().position(|m| !m.is_empty()) {
         None => r,
         Some(q) if q == comm.rank() => r,
-        Some(q) => {
-            let text: Vec<u8> = all[q].iter().map(|&b| b as u8).collect();
-            Err(err(String::from_utf8_lossy(&text)))
-        }
+        Some(q) => Err(err(String::from_utf8_lossy(&f64_as_bytes(&all[q])))),
     }
 }
 
@@ -87,7 +84,7 @@ fn gather_periodic(comm: &dyn Comm, mine: &[DeclaredPeriodic]) -> Vec<DeclaredPe
         send.extend(d.affine.unwrap_or([0.0; 16]));
         send.push(d.precision);
         send.push(d.source.len() as f64);
-        send.extend(d.source.bytes().map(f64::from));
+        send.extend(bytes_as_f64(d.source.as_bytes()));
     }
     let mut out = Vec::new();
     for v in comm.all_gather_f64(&send) {
@@ -96,11 +93,11 @@ fn gather_periodic(comm: &dyn Comm, mine: &[DeclaredPeriodic]) -> Vec<DeclaredPe
             let sides = (!v[at + 1].is_nan()).then(|| [v[at + 1] as i32, v[at + 2] as i32]);
             let affine = (v[at + 3] != 0.0).then(|| std::array::from_fn(|i| v[at + 4 + i]));
             let len = v[at + 21] as usize;
-            let bytes: Vec<u8> = v[at + 22..at + 22 + len].iter().map(|&b| b as u8).collect();
             out.push(DeclaredPeriodic {
                 dim: v[at] as usize,
                 sides,
-                source: String::from_utf8_lossy(&bytes).into_owned(),
+                source: String::from_utf8_lossy(&f64_as_bytes(&v[at + 22..at + 22 + len]))
+                    .into_owned(),
                 affine,
                 precision: v[at + 20],
                 location: Location::File,

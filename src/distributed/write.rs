@@ -505,11 +505,8 @@ pub struct WriteOptions<'a> {
 
 /// Bytes as f64 (one each) from rank 0 to every rank.
 pub(super) fn broadcast_bytes(comm: &dyn Comm, bytes: &[u8]) -> Vec<u8> {
-    let v: Vec<f64> = bytes.iter().map(|&b| b as f64).collect();
-    comm.all_gather_f64(if comm.rank() == 0 { &v } else { &[] })[0]
-        .iter()
-        .map(|&b| b as u8)
-        .collect()
+    let v = super::comm::bytes_as_f64(bytes);
+    super::comm::f64_as_bytes(&comm.all_gather_f64(if comm.rank() == 0 { &v } else { &[] })[0])
 }
 
 /// Write the ranks' outputs into one MSH 4.1 file at `path` (see the module docs). Collective.
