@@ -628,6 +628,114 @@ fn fit_with_device_sums_is_the_host_sums_fit() {
     }
 }
 
+/// A matrix larger than one storage binding goes up as row blocks. With the context's binding
+/// limit lowered to half of K's values (the element tables still fit), `assemble.wgsl` sums every block from its own rows
+/// (the host's bits in f64, the f32 tolerance otherwise), the product over the blocks is the
+/// host's, and the device CG over the blocks is the one-block CG: in f64 the same control
+/// points bit for bit and the same iterations (a row's sum does not depend on its block).
+#[test]
+fn row_blocks_sum_multiply_and_solve_as_one_matrix() {
+    use polyspline::exec::gpu::assemble::ASSEMBLE_TOL_F32;
+    use polyspline::exec::gpu::cg::GpuMatrix;
+    use polyspline::fit::assembly::{assemble_deferred, assemble_matrix};
+    use polyspline::fit::{ElementBlocks, FitWeights, Summing, fit_with_targets_from};
+    let mesh =
+        polyspline::mesh::generate::generate(polyspline::mesh::generate::Kind::Cylinder, 1500);
+    let topo = Topology::build(&mesh);
+    let s = SplineSpace::build(&mesh, &topo);
+    let blocks = ElementBlocks::new(&s, &mesh, &topo, &FitWeights::position());
+    // Scaled symmetrically, as the fit's K is: the kernel reads each row's scale by its
+    // global row number.
+    let d: Vec<f64> = (0..s.control_points.len())
+        .map(|i| [1.0, 0.5, 0.125][i % 3])
+        .collect();
+    let mut host = assemble_matrix(&s, &blocks);
+    host.scale_symmetric(&d);
+    let mut k = assemble_deferred(&s, &blocks);
+    k.scale_symmetric(&d);
+    let params = FitParams::default();
+    for prec in [Precision::F32, Precision::F64] {
+        let Some(whole) = context(prec) else { return };
+        let fit = |ctx: &GpuContext| {
+            let gpu = polyspline::exec::GpuExecutor::new(ctx);
+            fit_with_targets_from(
+                &s,
+                &mesh,
+                &topo,
+                &params,
+                None,
+                (None, Summing::Solver),
+                |k, b, x, cg| polyspline::exec::Executor::pcg(&gpu, k, b, x, cg, &mut |_, _| {}),
+            )
+            .unwrap()
+        };
+        let (one, one_info) = fit(&whole);
+        drop(whole);
+        let Some(mut ctx) = context(prec) else { return };
+        let sz = prec.size() as u64;
+        ctx.limits.max_storage_buffer_binding_size = sz * host.indices().len() as u64 / 2 + 64;
+        let case = format!("{prec:?}");
+
+        let m = GpuMatrix::summed_on_device(&ctx, &k).unwrap();
+        assert!(m.n_blocks() >= 2, "{case}: {} row blocks", m.n_blocks());
+        let got = m.values(&ctx).unwrap();
+        assert_eq!(got.len(), host.indices().len(), "{case}");
+        let mags = cpu::assemble::assemble_all::<f64>(&k, f64::abs).unwrap();
+        for (i, ((g, h), m)) in got.iter().zip(host.data()).zip(&mags).enumerate() {
+            match prec {
+                Precision::F64 => assert_eq!(g.to_bits(), h.to_bits(), "{case}: entry {i}"),
+                Precision::F32 => assert!(
+                    (g - h).abs() <= ASSEMBLE_TOL_F32 * m,
+                    "{case}: entry {i}: {g} against {h} (terms {m})"
+                ),
+            }
+        }
+
+        let op = GpuOperator::new(&ctx, &host).unwrap();
+        assert!(op.n_blocks() >= 2, "{case}: {} row blocks", op.n_blocks());
+        let x: Vec<[f64; 3]> = (0..host.n())
+            .map(|i| [1.0, (i % 7) as f64 - 3.0, ((i * 31) % 11) as f64 / 11.0])
+            .collect();
+        let mut want = vec![[0.0; 3]; host.n()];
+        host.apply(&x, &mut want);
+        let got = op.try_apply(&x).unwrap();
+        let tol = match prec {
+            Precision::F32 => SPMV_TOL_F32,
+            Precision::F64 => SPMV_TOL_F64,
+        };
+        for r in 0..host.n() {
+            let scale: f64 = (host.indptr()[r]..host.indptr()[r + 1])
+                .map(|j| host.data()[j].abs() * 3.0)
+                .sum();
+            for c in 0..3 {
+                assert!(
+                    (got[r][c] - want[r][c]).abs() <= tol * scale,
+                    "{case} row {r}: {:?} against {:?}",
+                    got[r],
+                    want[r]
+                );
+            }
+        }
+
+        let (split, split_info) = fit(&ctx);
+        let flat = |c: &[[f64; 3]]| c.concat().iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+        match prec {
+            Precision::F64 => {
+                assert!(flat(&one) == flat(&split), "{case}: control points differ");
+                assert_eq!(one_info.cg.iterations, split_info.cg.iterations, "{case}");
+            }
+            Precision::F32 => {
+                let (lo, hi) = mesh.bounding_box();
+                let diag = (0..3).map(|k| (hi[k] - lo[k]).powi(2)).sum::<f64>().sqrt();
+                for (a, b) in one.iter().zip(&split) {
+                    let d = norm([a[0] - b[0], a[1] - b[1], a[2] - b[2]]);
+                    assert!(d <= 1e-5 * diag, "{case}: {d:e}");
+                }
+            }
+        }
+    }
+}
+
 /// Point-Jacobi PCG, one body per executor: each solution's residual checked in f64, the two
 /// solutions within 1e-5 of each other, and in f64 the same iteration count give or take.
 #[test]
