@@ -1258,9 +1258,9 @@ fn bad_partitioned_inputs_fail_with_one_line_on_every_rank() {
 /// pairs from them as a single file's: on the generated channel (its sides paired by the file)
 /// split into 3 parts, 2 ranks without `--periodic` pair the sides as the file says, write them
 /// as exact images (Gmsh's `getPeriodicNodes`), and give the output of the same parts with the
-/// pair named by `--periodic` (the parts' seams are not glued in the spline space under
-/// mpirun either way: the report says `c0` and why). Before the parts' links were read, the
-/// ranks curved the sides as ordinary boundaries and wrote no `$Periodic` section.
+/// pair named by `--periodic`; the seams are glued in the spline space (`c1`). Before the
+/// parts' links were read, the ranks curved the sides as ordinary boundaries and wrote no
+/// `$Periodic` section.
 #[test]
 fn the_ranks_take_the_periodic_pairs_of_gmsh_parts() {
     if !have_mpirun() {
@@ -1291,6 +1291,7 @@ fn the_ranks_take_the_periodic_pairs_of_gmsh_parts() {
     assert_eq!(pairs[0]["master"], a);
     assert_eq!(pairs[0]["slave"], b);
     assert_eq!(pairs[0]["from_file"], true);
+    assert_eq!(r["periodic"]["seam"], "c1", "{}", r["periodic"]);
     assert_eq!(r["periodic"]["written_mismatch"], 0.0, "{}", r["periodic"]);
     assert_gmsh_pairs_exact(&from_file, a, b);
     let (given, _, rg) = curve_with_report(
@@ -1306,6 +1307,70 @@ fn the_ranks_take_the_periodic_pairs_of_gmsh_parts() {
         d <= RANK_TOLERANCE,
         "{d:e} of the diagonal from the run naming the pair"
     );
+}
+
+/// Gmsh's split parts are glued across their periodic seams as a single file is: the
+/// generated channel (24 × 6, graded towards its walls, order 3) turned so that the first
+/// Morton cut runs between its sides (the ranks holding side A and those holding side B
+/// disjoint at 2 and 3 ranks, the parts recomputed from the file), split by Gmsh's
+/// partitioner into 3 binary parts and curved on 2 and 3 ranks with the pair named by
+/// `--periodic`: the report says `c1`, the output is the single file's on as many ranks to
+/// 1e-12 of the diagonal (measured 1e-16: the same shares, ghost rings run on across the
+/// seams) and the serial run's within [`RANK_TOLERANCE`], Gmsh pairs every image node to
+/// 1e-12 of the diagonal, and the facet angle across the seam measured by Gmsh on the written
+/// file is no larger than across the interior facets. With the parts' ghost rings stopping at
+/// the seams (each side fitted on its own) the run said `c0` and was 2.5e-4 of the diagonal
+/// from the serial one.
+#[test]
+fn the_seams_of_gmsh_parts_are_glued_across_ranks() {
+    if !have_mpirun() || !common::have_gmsh(&common::current_test()) {
+        return;
+    }
+    let input = turned_periodic_input(
+        "pseam",
+        "channel --around 24 --across 6 --first-height 0.02 --bump 0.15",
+        90.0,
+    );
+    let Some(parts) = gmsh_partition(&input, 3, "pseam_parts", true) else {
+        return;
+    };
+    let (a, b) = ("periodic_left", "periodic_right");
+    let opts = [
+        "--periodic",
+        "periodic_left:periodic_right",
+        "--order",
+        "3",
+        "--cg-tol",
+        "1e-10",
+    ];
+    let (serial, _, sr) = curve_with_report(0, &input, "pseam_serial", &opts);
+    assert_eq!(sr["periodic"]["seam"], "c1", "{}", sr["periodic"]);
+    let serial = read(&serial);
+    let diag = diagonal(&serial);
+    for np in [2, 3] {
+        let what = format!("parts on {np} ranks");
+        let (ra, rb) = (
+            morton_ranks_of(&input, np, a),
+            morton_ranks_of(&input, np, b),
+        );
+        assert!(ra.is_disjoint(&rb), "{what}: {a} on {ra:?}, {b} on {rb:?}");
+        let (out, _, r) = curve_with_report(np, &parts[0], "pseam_parts", &opts);
+        assert_eq!(r["periodic"]["seam"], "c1", "{what}: {}", r["periodic"]);
+        assert_gmsh_pairs_exact(&out, a, b);
+        let parted = read(&out);
+        let (single, _, _) = curve_with_report(np, &input, "pseam_single", &opts);
+        let d = compare(&read(&single), &parted) / diag;
+        assert!(
+            d <= 1e-12,
+            "{what}: {d:e} of the diagonal from the single file's run"
+        );
+        let d = compare(&serial, &parted) / diag;
+        assert!(
+            d <= RANK_TOLERANCE,
+            "{what}: {d:e} of the diagonal from the serial run"
+        );
+        common::assert_seams_no_rougher(&out, &what);
+    }
 }
 
 /// `curve INPUT -q --report … ARGS` on `np` ranks (0: the binary without mpirun), the files

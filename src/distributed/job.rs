@@ -757,11 +757,9 @@ fn run_share(
     // Periodic seams are glued in the spline space as serially: the share is read again
     // with its ghost rings run on across the seams (the elements across a seam are neighbours
     // there), then glued ([`super::periodic::glue_share`]; across rotations the fit couples
-    // the coordinates). Gmsh's partitioned inputs are not read through the seams: their seams
-    // stay apart.
+    // the coordinates), a single file's share and Gmsh's parts alike.
     let seam_map = resolved.seam_map();
-    let across = !seam_map.is_empty() && !super::read_parts::is_partitioned(input);
-    if across {
+    if !seam_map.is_empty() {
         local = clock.run(Stage::Read, || {
             read_share(comm, input, GHOST_DEPTH, &options.mesh, Some(&seam_map))
         })?;
@@ -770,7 +768,7 @@ fn run_share(
         })?;
     }
     let seams = clock.run(Stage::Spline, || {
-        super::periodic::glue_share(comm, &local, &resolved, across)
+        super::periodic::glue_share(comm, &local, &resolved)
     });
     let pairs = resolved.pairs;
     local.glued = seams.0.clone().map(std::sync::Arc::new);
@@ -993,6 +991,9 @@ impl JobShare for RankJob<'_> {
             }),
         };
         let n_global = local.n_global as usize;
+        // Coupled across rotation seams where some rank's elements see a point rotated.
+        let mut coupled = [f64::from(u8::from(self.space.extraction.has_frames()))];
+        comm.max_f64(&mut coupled);
         Outcomes {
             dimension: out.dim,
             elements: n_global,
@@ -1003,6 +1004,7 @@ impl JobShare for RankJob<'_> {
             spline: Some(SplineFigures {
                 knot_surfaces: (knot_intervals == KnotIntervals::Graded).then_some(setup.knot_info),
                 demoted: self.demoted,
+                coupled: coupled[0] > 0.0,
                 ..SplineFigures::blended(
                     space,
                     (crate::fit::FitSolver::Cg, *cg, nonzeros[1]),

@@ -246,18 +246,17 @@ impl Resolved {
 /// (`spline::seam::glue_share`: classes represented by their lowest node tag, homes by the
 /// lowest global element, only the own elements' entities checked manifold), and why a pair
 /// stays apart: the serial job's rule (`pipeline::head::glue_seams`) with the ranks' reduction.
-/// Collective: either every rank glues its seams or none does. `across`: the ghost rings
-/// run across the seams (the share was read through [`Resolved::seam_map`]); otherwise
-/// nothing is glued.
+/// Collective: either every rank glues its seams or none does. The share must have been read
+/// with its ghost rings run on across the seams ([`Resolved::seam_map`]), a single file's or
+/// Gmsh's parts alike.
 pub fn glue_share(
     comm: &dyn Comm,
     local: &LocalMesh,
     resolved: &Resolved,
-    across: bool,
 ) -> (Option<crate::spline::seam::Glued>, Option<String>) {
     let pairs = &resolved.pairs;
-    if pairs.is_empty() || !across {
-        return crate::pipeline::head::glue_seams(comm, pairs, across, |_| None);
+    if pairs.is_empty() {
+        return (None, None);
     }
     let mesh = &local.mesh;
     let mut near = vec![false; mesh.n_vertices()];
@@ -272,7 +271,7 @@ pub fn glue_share(
         near: &near,
     };
     let local_pairs = resolved.local_pairs(local);
-    crate::pipeline::head::glue_seams(comm, pairs, across, |rotations| {
+    crate::pipeline::head::glue_seams(comm, pairs, |rotations| {
         crate::spline::seam::glue_share(mesh, &local_pairs, Some(&order), rotations)
     })
 }

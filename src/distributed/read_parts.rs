@@ -24,7 +24,9 @@
 //! by node tag (rank t mod P): every rank files its cells under the homes of their nodes, its
 //! facets under the home of their smallest node tag, its nodes under their home, then asks
 //! the homes of the nodes it has: per ring, the cells around them (not its own), then the
-//! facets and the coordinates.
+//! facets and the coordinates. With glued periodic seams (the share read a second time, the
+//! pairs known) a node stands for its seam representative in the rings' directories, so the
+//! rings run on across the seams as a single file's do.
 //!
 //! Every error is agreed on by all ranks before the next collective step (the first failing
 //! rank's message on every rank), so a bad part set never leaves a rank waiting.
@@ -272,9 +274,19 @@ fn home(t: u64, size: usize) -> usize {
 
 /// The cells within `depth` vertex rings of `own` and not in it, with their owners (step 5):
 /// every rank files its cells under the homes of their nodes, then per ring asks the homes of
-/// its newest nodes for the cells around them. Collective (the same number of exchanges on
-/// every rank). Ids and tags travel as f64 (exact below 2⁵³).
-fn ghost_rings(comm: &dyn Comm, own: &Elements, npe: usize, depth: usize) -> (Elements, Vec<u32>) {
+/// its newest nodes for the cells around them. With `seams` (node tag → its representative,
+/// for the image nodes of glued periodic seams) a node stands for its representative: cells
+/// are filed and asked for under the representatives, so the rings run on across the seams as
+/// [`super::read::MshFile::ghosts`]' do, whatever ranks hold the two sides. Collective (the
+/// same number of exchanges on every rank). Ids and tags travel as f64 (exact below 2⁵³).
+fn ghost_rings(
+    comm: &dyn Comm,
+    own: &Elements,
+    npe: usize,
+    depth: usize,
+    seams: Option<&HashMap<u64, u64>>,
+) -> (Elements, Vec<u32>) {
+    let glued = |t: u64| seams.and_then(|m| m.get(&t)).copied().unwrap_or(t);
     let (rank, size) = (comm.rank(), comm.size());
     let rec = 3 + npe;
     let mut send = vec![Vec::new(); size];
@@ -282,7 +294,7 @@ fn ghost_rings(comm: &dyn Comm, own: &Elements, npe: usize, depth: usize) -> (El
     for i in 0..own.global.len() {
         let nodes = &own.nodes[i * npe..(i + 1) * npe];
         homes.clear();
-        homes.extend(nodes.iter().map(|&t| home(t, size)));
+        homes.extend(nodes.iter().map(|&t| home(glued(t), size)));
         homes.sort_unstable();
         homes.dedup();
         for &q in &homes {
@@ -299,12 +311,18 @@ fn ghost_rings(comm: &dyn Comm, own: &Elements, npe: usize, depth: usize) -> (El
     let mut around: HashMap<u64, Vec<u32>> = HashMap::new();
     for (k, c) in filed.chunks_exact(rec).enumerate() {
         for &t in &c[3..] {
-            if home(t as u64, size) == rank {
-                around.entry(t as u64).or_default().push(k as u32);
+            let g = glued(t as u64);
+            if home(g, size) == rank {
+                let cells = around.entry(g).or_default();
+                // A cell holding both sides of a seam node is filed once under it.
+                if cells.last() != Some(&(k as u32)) {
+                    cells.push(k as u32);
+                }
             }
         }
     }
-    let mut have: HashSet<u64> = own.nodes.iter().copied().collect();
+    // Representatives of the nodes reached.
+    let mut have: HashSet<u64> = own.nodes.iter().map(|&t| glued(t)).collect();
     let mut seen: HashSet<u64> = own.global.iter().copied().collect();
     let mut frontier: Vec<u64> = have.iter().copied().collect();
     let (mut ghosts, mut owner) = (Elements::default(), Vec::new());
@@ -344,8 +362,8 @@ fn ghost_rings(comm: &dyn Comm, own: &Elements, npe: usize, depth: usize) -> (El
                 for &t in &c[3..] {
                     let t = t as u64;
                     ghosts.nodes.push(t);
-                    if have.insert(t) {
-                        frontier.push(t);
+                    if have.insert(glued(t)) {
+                        frontier.push(glued(t));
                     }
                 }
             }
@@ -459,12 +477,14 @@ fn facets_and_coordinates(
 }
 
 /// Read this rank's share of the partitioned mesh `path` is a part of, with `depth` vertex
-/// rings of ghosts (see the module docs). Collective.
+/// rings of ghosts (see the module docs); with `seams` (node tag → representative tag of glued
+/// periodic seams) the rings run on across the seams (step 5 of the module docs). Collective.
 pub fn read_parts_share(
     comm: &dyn Comm,
     path: &Path,
     depth: usize,
     options: &MeshOptions,
+    seams: Option<&HashMap<u64, u64>>,
 ) -> Result<LocalMesh, ParseError> {
     let (parts, tag_names) = agree(comm, part_names(path))?;
     let mut r = read_mine(comm, &parts)?;
@@ -483,7 +503,7 @@ pub fn read_parts_share(
             )))
         }),
     )?;
-    let (ghosts, owner) = ghost_rings(comm, &own, r.npe, depth);
+    let (ghosts, owner) = ghost_rings(comm, &own, r.npe, depth, seams);
     let n_owned = own.global.len();
     let (mut global_element, mut tags, mut nodes) = (own.global, own.tags, own.nodes);
     global_element.extend_from_slice(&ghosts.global);

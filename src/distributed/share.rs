@@ -36,8 +36,8 @@ use std::collections::{HashMap, HashSet};
 use std::path::Path;
 
 /// Read this rank's share with `depth` vertex rings of ghosts (see the module docs); with
-/// `seams` (node tag → representative tag of glued periodic seams, single files only) the
-/// rings run on across the seams ([`MshFile::ghosts`]).
+/// `seams` (node tag → representative tag of glued periodic seams) the rings run on across
+/// the seams ([`MshFile::ghosts`], and for Gmsh's parts `read_parts`' rings).
 pub fn read_share(
     comm: &dyn Comm,
     path: &Path,
@@ -52,7 +52,8 @@ pub fn read_share(
     // Gmsh's partitioned files: each rank reads its parts (`super::read_parts`, whose errors
     // are agreed like the ones below).
     if super::read_parts::is_partitioned(path) {
-        return super::read_parts::read_parts_share(comm, path, depth, options).map_err(wrap);
+        return super::read_parts::read_parts_share(comm, path, depth, options, seams)
+            .map_err(wrap);
     }
     // Each step that can fail on one rank alone (a truncated or corrupt run of the file, a
     // node missing or not finite among its share's) is agreed before the next collective, so

@@ -113,13 +113,11 @@ pub(crate) fn check_pyfr_names(
 /// The seams of `pairs` (the whole mesh's) glued in the spline space, and why some pair stays
 /// apart: every pair where the glued mesh is manifold on every process, else the translation
 /// pairs alone (the rotation pairs apart), else none. `glue(rotations)` glues the mesh this
-/// process holds (`rotations`: the rotation pairs too); `across`: the mesh a process holds
-/// runs across the seams (a rank's share read through them; not Gmsh's partitioned inputs),
-/// otherwise nothing is glued. Every process glues alike or none does.
+/// process holds (`rotations`: the rotation pairs too; a rank's share is read with its ghost
+/// rings run on across the seams). Every process glues alike or none does.
 pub(crate) fn glue_seams<R: Reduction + ?Sized>(
     reduction: &R,
     pairs: &[PeriodicPair],
-    across: bool,
     glue: impl Fn(bool) -> Option<Glued>,
 ) -> (Option<Glued>, Option<String>) {
     if pairs.is_empty() {
@@ -127,24 +125,17 @@ pub(crate) fn glue_seams<R: Reduction + ?Sized>(
     }
     let translations = pairs.iter().any(|p| p.transform.is_translation());
     let rotations = pairs.iter().any(|p| !p.transform.is_translation());
-    let glued = if across {
-        let all = glue(true);
-        let everywhere = reduction.all(all.is_some());
-        match all.filter(|_| everywhere) {
-            Some(g) => Some((g, true)),
-            None if rotations && translations => glue(false).map(|g| (g, false)),
-            None => None,
-        }
-    } else {
-        None
+    let all = glue(true);
+    let everywhere = reduction.all(all.is_some());
+    let glued = match all.filter(|_| everywhere) {
+        Some(g) => Some((g, true)),
+        None if rotations && translations => glue(false).map(|g| (g, false)),
+        None => None,
     };
     let everywhere = reduction.all(glued.is_some());
     let glued = glued.filter(|_| everywhere);
     let why = match &glued {
         Some((_, true)) => None,
-        _ if !across => Some(
-            "under mpirun the seams of a partitioned input are not identified in the spline space",
-        ),
         None if translations => Some("the mesh with its translation pairs glued is not manifold"),
         _ => Some("the mesh with its rotation pairs glued is not manifold"),
     };
@@ -399,7 +390,7 @@ mod tests {
     /// whole mesh does, where the whole mesh glues iff every share does: all pairs where they
     /// glue everywhere; with rotation and translation pairs, the translations alone where the
     /// rotations fail on some process; nothing where that fails too, or with translations
-    /// alone; nothing where the shares do not run across the seams.
+    /// alone.
     #[test]
     fn the_seams_glue_alike_on_every_process_and_as_one_process() {
         let rotation = Rigid {
@@ -409,33 +400,27 @@ mod tests {
         let translation = Rigid::translation([1.5, 0.0, 0.0]);
         let both = [periodic_pair(translation), periodic_pair(rotation)];
         let one = [periodic_pair(translation)];
-        // (pairs, across, the processes where gluing with rotations / without them fails,
-        // what every process keeps: the glue's `rotations` flag, or none, and why).
-        type Case<'a> = (&'a [PeriodicPair], bool, &'a [usize], &'a [usize]);
-        let cases: [(Case, Option<bool>, Option<&str>); 7] = [
-            ((&both, true, &[], &[]), Some(true), None),
-            (
-                (&both, true, &[1], &[]),
-                Some(false),
-                Some("rotation pairs"),
-            ),
-            ((&both, true, &[0], &[1]), None, Some("translation pairs")),
-            ((&one, true, &[], &[]), Some(true), None),
-            ((&one, true, &[1], &[]), None, Some("translation pairs")),
-            ((&both, false, &[], &[]), None, Some("partitioned input")),
-            ((&[], true, &[0, 1], &[0, 1]), None, None),
+        // (pairs, the processes where gluing with rotations / without them fails, what every
+        // process keeps: the glue's `rotations` flag, or none, and why).
+        type Case<'a> = (&'a [PeriodicPair], &'a [usize], &'a [usize]);
+        let cases: [(Case, Option<bool>, Option<&str>); 6] = [
+            ((&both, &[], &[]), Some(true), None),
+            ((&both, &[1], &[]), Some(false), Some("rotation pairs")),
+            ((&both, &[0], &[1]), None, Some("translation pairs")),
+            ((&one, &[], &[]), Some(true), None),
+            ((&one, &[1], &[]), None, Some("translation pairs")),
+            ((&[], &[0, 1], &[0, 1]), None, None),
         ];
-        for ((pairs, across, fail_all, fail_translations), want, why) in cases {
+        for ((pairs, fail_all, fail_translations), want, why) in cases {
             let fails = (fail_all, fail_translations);
             let got = on_team(2, |m| {
-                let (g, why) = glue_seams(m, pairs, across, fake_glue(&[m.rank], fails));
+                let (g, why) = glue_seams(m, pairs, fake_glue(&[m.rank], fails));
                 (
                     g.map(|g| (g.translations[0][0], g.translations[0][1] > 0.0)),
                     why,
                 )
             });
-            let (whole, whole_why) =
-                glue_seams(&OneProcess, pairs, across, fake_glue(&[0, 1], fails));
+            let (whole, whole_why) = glue_seams(&OneProcess, pairs, fake_glue(&[0, 1], fails));
             let whole = whole.map(|g| g.translations[0][1] > 0.0);
             assert_eq!(whole, want, "{want:?} {why:?}");
             for (rank, (g, w)) in got.iter().enumerate() {

@@ -97,6 +97,12 @@ pub struct CurveReport {
     pub matrix_nonzeros: Option<usize>,
     /// Relative residual of the fit's solve.
     pub cg_rel_residual: Option<f64>,
+    /// Where the fit's coupled solve ran, when the least-squares fit couples the coordinates
+    /// across rotation seams (its system K ⊗ I₃ + C, `fit::rotated`; absent otherwise):
+    /// always `cpu`, under `--backend gpu` too (the coupled CG has no device kernel: the fit's
+    /// entry of `gpu_traffic` then counts no dispatch of its solve).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub coupled_fit_device: Option<&'static str>,
     /// `--line-search`: one step for the whole mesh or one per control point.
     pub line_search_mode: LineSearchMode,
     /// Step of the certified search (1 = the full least-squares fit everywhere): with the
@@ -247,6 +253,8 @@ pub(crate) struct SplineFigures {
     pub knot_surfaces: Option<KnotSurfaceInfo>,
     /// The fit's solver, its CG figures and the stored entries of its matrix.
     pub fit: Option<(FitSolver, CgInfo, usize)>,
+    /// The fit couples the coordinates across rotation seams (its solve runs on the CPU).
+    pub coupled: bool,
     pub demoted: usize,
     pub alpha: Option<f64>,
     pub invalid_at_full_step: usize,
@@ -270,6 +278,7 @@ impl SplineFigures {
             space,
             knot_surfaces: None,
             fit: Some(fit),
+            coupled: false,
             demoted: 0,
             alpha: Some(0.5 * blend.min_factor),
             invalid_at_full_step: blend.invalid_at_full_step,
@@ -382,6 +391,7 @@ impl CurveReport {
                 knot_surfaces: (setup.knot_intervals == KnotIntervals::Graded)
                     .then_some(setup.knot_info),
                 fit: o.fit.as_ref().map(|f| (f.solver, f.cg, f.nonzeros)),
+                coupled: o.fit.is_some() && space.extraction.has_frames(),
                 demoted: o.demoted,
                 alpha: o.alpha,
                 invalid_at_full_step: o.invalid_at_full_step,
@@ -494,6 +504,9 @@ impl CurveReport {
             cg_iterations: fit.map(|f| f.1.iterations),
             matrix_nonzeros: fit.map(|f| f.2),
             cg_rel_residual: fit.map(|f| f.1.rel_residual),
+            coupled_fit_device: spline
+                .filter(|s| s.coupled && s.fit.is_some())
+                .map(|_| "cpu"),
             line_search_mode: options.line_search_mode,
             line_search_alpha: spline.and_then(|s| s.alpha),
             invalid_at_full_step: spline.map_or(0, |s| s.invalid_at_full_step),

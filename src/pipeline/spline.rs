@@ -306,7 +306,7 @@ impl SplineSetup {
 /// [`crate::energy`]), and why some pair stays apart (for the report), if one does: the
 /// job's rule ([`super::head::glue_seams`]) on the whole mesh.
 fn glue_seams(job: &Job, pairs: &[PeriodicPair]) -> (Option<Glued>, Option<String>) {
-    super::head::glue_seams(&super::head::OneProcess, pairs, true, |rotations| {
+    super::head::glue_seams(&super::head::OneProcess, pairs, |rotations| {
         seam::glue_share(job.mesh, pairs, None, rotations)
     })
 }

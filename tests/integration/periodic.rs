@@ -1043,6 +1043,78 @@ fn coarse_walls_take_their_arcs_across_rotation_seams() {
     }
 }
 
+/// Across rotation seams the fit's coupled solve (K ⊗ I₃ + C, `fit::rotated`) runs on the
+/// CPU, under `--backend gpu` too, and the report says so: `coupled_fit_device` is `cpu` on
+/// the 30° sectors (2D and 3D, seams `c1`) and, with a GPU adapter, the device's own count of
+/// the fit's dispatches (`gpu_traffic.fit`) is 0 there. A fit not coupled (the sector with its
+/// pair not declared, the generated channel's translation seams) has no such field.
+#[test]
+fn the_report_says_where_the_coupled_fit_ran() {
+    let sector_in = |dim: usize| {
+        let path = scratch_in("periodic_coupled", &format!("sector{dim}d_in.msh"));
+        common::write_linear(&sector(dim, 30.0, 3, 6), &path);
+        path
+    };
+    for dim in [2, 3] {
+        let input = sector_in(dim);
+        let out = scratch_in("periodic_coupled", &format!("sector{dim}d.msh"));
+        let r = curve(&input, &out, &["--periodic", "theta_lo:theta_hi"]);
+        assert_eq!(r["periodic"]["seam"], "c1", "{}", r["periodic"]);
+        assert_eq!(r["coupled_fit_device"], "cpu", "{dim}D");
+        let plain = curve(&input, &out, &[]);
+        assert!(plain.get("coupled_fit_device").is_none(), "{dim}D: {plain}");
+    }
+    let channel = scratch_in("periodic_coupled", "channel.msh");
+    run_ok(
+        polyspline()
+            .args([
+                "generate", "channel", "--around", "12", "--across", "4", "-o",
+            ])
+            .arg(&channel),
+    );
+    let out = scratch_in("periodic_coupled", "channel_o2.msh");
+    let r = curve(&channel, &out, &[]);
+    assert_eq!(r["periodic"]["seam"], "c1", "{}", r["periodic"]);
+    assert!(r.get("coupled_fit_device").is_none(), "{r}");
+    // Under `--backend gpu` (where an adapter exists).
+    let input = sector_in(3);
+    let out = scratch_in("periodic_coupled", "sector3d_gpu.msh");
+    let report = out.with_extension("json");
+    let run = polyspline()
+        .arg("curve")
+        .arg(&input)
+        .arg("-o")
+        .arg(&out)
+        .args([
+            "-q",
+            "--backend",
+            "gpu",
+            "--periodic",
+            "theta_lo:theta_hi",
+            "--report",
+        ])
+        .arg(&report)
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&run.stderr);
+    if !run.status.success() && err.contains("GPU adapter") {
+        common::skip(
+            &common::current_test(),
+            &format!("the GPU run was not checked: {}", err.trim()),
+        );
+        return;
+    }
+    assert!(run.status.success(), "{err}");
+    let r: Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_eq!(r["backend"], "gpu");
+    assert_eq!(r["coupled_fit_device"], "cpu", "{r}");
+    assert_eq!(
+        r["gpu_traffic"]["fit"]["dispatches"], 0,
+        "{}",
+        r["gpu_traffic"]
+    );
+}
+
 #[test]
 fn a_wrong_periodic_pair_is_refused_in_one_line() {
     let turbine = Path::new(ROOT).join(TURBINE);

@@ -1,6 +1,6 @@
 //! The `curve --report` JSON against its documented contract, `docs/curve-report.schema.json`,
 //! with the `jsonschema` package as the oracle (`tests/external/report_schema.py`): reports of
-//! a 2D and a 3D real mesh, the elastic method, the energy fit with the global line search and
+//! a 2D and a 3D real mesh, a generated rotation sector, the elastic method, the energy fit with the global line search and
 //! (with an adapter) the GPU backend validate, and every object of the schema is closed and
 //! met in one of them, so a report field added without documenting it fails here.
 
@@ -27,6 +27,15 @@ fn curve_reports_validate_against_the_documented_schema() {
         "meshes/real/dealii/example.msh",
         "meshes/real/mfem/cylinder-hex.mesh",
     );
+    let sector = scratch_in("report_schema", "sector_in.msh");
+    common::run_ok(
+        common::polyspline()
+            .args([
+                "generate", "sector", "--sector", "30", "--around", "4", "--across", "4", "-o",
+            ])
+            .arg(&sector),
+    );
+    let sector = sector.to_str().unwrap().to_string();
     let mut reports = vec![
         report_of("quads", d2, &[]).unwrap(),
         report_of("hexes", d3, &[]).unwrap(),
@@ -37,6 +46,8 @@ fn curve_reports_validate_against_the_documented_schema() {
             &["--periodic", "periodic_1:periodic_2"],
         )
         .unwrap(),
+        // A rotation sector: its fit is coupled across the seam (`coupled_fit_device`).
+        report_of("sector", &sector, &[]).unwrap(),
         report_of(
             "energy",
             d2,
