@@ -813,6 +813,17 @@ mod tests {
         grid.elements.iter().map(|&v| label(v as usize)).collect()
     }
 
+    /// `f` of the vertex → element lists of the elements `corners` (`npe` each).
+    fn with_around<R>(corners: &[u32], nv: usize, npe: usize, f: impl FnOnce(Around) -> R) -> R {
+        let (offsets, elements) = vertex_elements(corners, nv, npe);
+        f(Around {
+            corners,
+            npe,
+            offsets: &offsets,
+            elements: &elements,
+        })
+    }
+
     /// The keys gathered per lowest vertex, in blocks of any size, equal all (key, slot)
     /// pairs sorted, for the hex edges and faces of a scrambled grid and the sides of a quad
     /// grid.
@@ -904,14 +915,9 @@ mod tests {
         let elems = scrambled_grid(n);
         let ne = n * n * n;
         let nv = (n + 1).pow(3);
-        let (offsets, around) = vertex_elements(&elems, nv, 8);
-        let around = Around {
-            corners: &elems,
-            npe: 8,
-            offsets: &offsets,
-            elements: &around,
-        };
-        let (edges, valence, element_edges) = unique_edges(&elems, 3, ne, 8, around);
+        let (edges, valence, element_edges) = with_around(&elems, nv, 8, |around| {
+            unique_edges(&elems, 3, ne, 8, around)
+        });
         let mut by_edge: BTreeMap<[u32; 2], Vec<usize>> = BTreeMap::new();
         for slot in 0..ne * 12 {
             let [a, b] = HEX_EDGES[slot % 12].map(|c| elems[slot / 12 * 8 + c]);
@@ -924,7 +930,8 @@ mod tests {
             assert!(slots.iter().all(|&s| element_edges[s] == id as u32));
         }
 
-        let (faces, element_faces) = unique_faces(&elems, ne, around);
+        let (faces, element_faces) =
+            with_around(&elems, nv, 8, |around| unique_faces(&elems, ne, around));
         let mut by_face: BTreeMap<[u32; 4], Vec<usize>> = BTreeMap::new();
         for slot in 0..ne * 6 {
             let mut k = HEX_SIDES[slot % 6].map(|c| elems[slot / 6 * 8 + c]);
