@@ -1,7 +1,10 @@
 //! Mesh topology: unique edges and faces, adjacency, boundary, components, valences.
 //!
-//! Input: a [`LinearMesh`]. Output: a [`Topology`] built by sorting entity keys (O(n log n)
-//! with a parallel sort, linear memory), with these conventions:
+//! Input: a [`LinearMesh`]. Output: a [`Topology`] built from sorted entity keys, with these
+//! conventions. The keys are sorted without a global sort: a key starts with the entity's
+//! lowest vertex, so the slots are gathered per lowest vertex through the vertex → element
+//! lists (a counting sort) and each vertex's few keys are sorted alone (`keys_by_lowest_vertex`;
+//! linear time and memory, in parallel over blocks of vertices).
 //!
 //! * **Local sides and edges** are those of the reference element
 //!   ([`crate::math::reference`]): side `2k + s` is the side where coordinate k equals s, hex
@@ -217,10 +220,17 @@ impl Topology {
         let nsides = 2 * dim;
         let elems = &mesh.elements;
 
-        let (edges, edge_valence, element_edges) = unique_edges(elems, dim, ne, npe);
+        let (vertex_offsets, vertex_elements) = vertex_elements(elems, nv, npe);
+        let around = Around {
+            corners: elems,
+            npe,
+            offsets: &vertex_offsets,
+            elements: &vertex_elements,
+        };
+        let (edges, edge_valence, element_edges) = unique_edges(elems, dim, ne, npe, around);
         // Facets: edges in 2D (already unique), faces in 3D.
         let (faces, element_faces) = if dim == 3 {
-            unique_faces(elems, ne)
+            unique_faces(elems, ne, around)
         } else {
             (Vec::new(), Vec::new())
         };
@@ -247,7 +257,6 @@ impl Topology {
             &facet_sides,
             &element_edges,
         );
-        let (vertex_offsets, vertex_elements) = vertex_elements(elems, nv, npe);
         let (element_component, n_components) = components(ne, &facet_elements, &facet_count);
 
         let mut topo = Topology {
@@ -444,25 +453,24 @@ fn unique_edges(
     dim: usize,
     ne: usize,
     npe: usize,
+    around: Around,
 ) -> (Vec<[u32; 2]>, Vec<u32>, Vec<u32>) {
-    // Sort (key, slot) pairs; one slot per local edge.
+    // Sorted (key, slot) pairs; one slot per local edge.
     let local_edges: Vec<[usize; 2]> = if dim == 2 {
         QUAD_SIDES.to_vec()
     } else {
         HEX_EDGES.to_vec()
     };
     let nle = local_edges.len();
-    let mut keys: Vec<(u64, u32)> = (0..ne * nle)
-        .into_par_iter()
-        .map(|slot| {
+    let at_corner = around.at_corner(nle, |l| local_edges[l]);
+    let keys: Vec<(u64, u32)> =
+        keys_by_lowest_vertex(ne, nle, around, &at_corner, KEY_BLOCK, |slot| {
             let (e, l) = (slot / nle, slot % nle);
             let a = elems[e * npe + local_edges[l][0]];
             let b = elems[e * npe + local_edges[l][1]];
             let (lo, hi) = if a < b { (a, b) } else { (b, a) };
-            (((lo as u64) << 32) | hi as u64, slot as u32)
-        })
-        .collect();
-    keys.par_sort_unstable();
+            (lo, ((lo as u64) << 32) | hi as u64)
+        });
     let first = run_starts(&keys, |a, b| a.0 == b.0);
     let edges = first
         .par_iter()
@@ -478,6 +486,122 @@ fn unique_edges(
         .collect();
     let element_edges = slot_ids(&keys, &first, ne * nle, |&(_, slot)| slot);
     (edges, edge_valence, element_edges)
+}
+
+/// The elements' corners (`npe` vertices each) and the vertex → element lists of
+/// [`vertex_elements`] (an element once per corner at the vertex, elements in order).
+#[derive(Clone, Copy)]
+struct Around<'a> {
+    corners: &'a [u32],
+    npe: usize,
+    offsets: &'a [u32],
+    elements: &'a [u32],
+}
+
+impl Around<'_> {
+    /// For each corner of an element, the local entities (of `per_element`, each with the
+    /// corners `local(l)`) that contain it.
+    fn at_corner<const N: usize>(
+        &self,
+        per_element: usize,
+        local: impl Fn(usize) -> [usize; N],
+    ) -> Vec<Vec<usize>> {
+        (0..self.npe)
+            .map(|c| {
+                (0..per_element)
+                    .filter(|&l| local(l).contains(&c))
+                    .collect()
+            })
+            .collect()
+    }
+}
+
+/// Vertices per task of [`keys_by_lowest_vertex`].
+const KEY_BLOCK: usize = 4096;
+
+/// The pairs (key, slot) of all `ne · per_element` slots (slot = element · per_element +
+/// local), sorted, where `key_at(slot)` is (the lowest vertex of the slot's entity, its key)
+/// and every key starts with that vertex: equal to sorting all pairs (the slot breaks ties),
+/// without a global sort. A counting pass sizes each block of `block` vertices; then
+/// per block, in parallel, each vertex's slots are gathered from the elements around it (the
+/// local entities `at_corner` of the vertex's corner, all of them where the element has the
+/// vertex at more than one corner) and sorted.
+fn keys_by_lowest_vertex<K: Ord + Copy + Send + Sync>(
+    ne: usize,
+    per_element: usize,
+    around: Around,
+    at_corner: &[Vec<usize>],
+    block: usize,
+    key_at: impl Fn(usize) -> (u32, K) + Sync,
+) -> Vec<(K, u32)> {
+    let nv = around.offsets.len() - 1;
+    let n_blocks = nv.div_ceil(block);
+    let counts = (0..ne * per_element)
+        .into_par_iter()
+        .fold(
+            || vec![0usize; n_blocks],
+            |mut c, slot| {
+                c[key_at(slot).0 as usize / block] += 1;
+                c
+            },
+        )
+        .reduce(
+            || vec![0usize; n_blocks],
+            |mut a, b| {
+                a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+                a
+            },
+        );
+    let mut start = vec![0usize; n_blocks + 1];
+    for b in 0..n_blocks {
+        start[b + 1] = start[b] + counts[b];
+    }
+    let mut keys: Vec<(K, u32)> = Vec::with_capacity(ne * per_element);
+    // The first slot's pair fills the vector; every entry is written below.
+    if ne * per_element > 0 {
+        keys.resize(ne * per_element, (key_at(0).1, 0));
+    }
+    let mut parts = Vec::with_capacity(n_blocks);
+    let mut rest = keys.as_mut_slice();
+    for b in 0..n_blocks {
+        let (part, tail) = rest.split_at_mut(start[b + 1] - start[b]);
+        parts.push(part);
+        rest = tail;
+    }
+    parts.into_par_iter().enumerate().for_each(|(b, part)| {
+        let mut n = 0;
+        for v in b * block..((b + 1) * block).min(nv) {
+            let first = n;
+            let elements =
+                &around.elements[around.offsets[v] as usize..around.offsets[v + 1] as usize];
+            for (i, &e) in elements.iter().enumerate() {
+                if i > 0 && elements[i - 1] == e {
+                    continue; // the element again, at another of its corners
+                }
+                let (e, npe) = (e as usize, around.npe);
+                let corners = &around.corners[e * npe..(e + 1) * npe];
+                let all: Vec<usize>;
+                let locals = if elements.get(i + 1) == Some(&(e as u32)) {
+                    all = (0..per_element).collect();
+                    &all
+                } else {
+                    let c = corners.iter().position(|&x| x as usize == v);
+                    &at_corner[c.expect("the vertex is a corner of the element")]
+                };
+                for &l in locals {
+                    let slot = e * per_element + l;
+                    let (lo, key) = key_at(slot);
+                    if lo as usize == v {
+                        part[n] = (key, slot as u32);
+                        n += 1;
+                    }
+                }
+            }
+            part[first..n].sort_unstable();
+        }
+        debug_assert_eq!(n, part.len());
+    });
+    keys
 }
 
 /// The start of every run of equal entries (`same`) of the sorted `keys`, in order: the
@@ -515,17 +639,15 @@ fn slot_ids<K: Sync>(
 
 /// The unique faces of a hex mesh (in order of their sorted vertex keys, each with the
 /// vertices of its first element side) and the face of each element side slot.
-fn unique_faces(elems: &[u32], ne: usize) -> (Vec<[u32; 4]>, Vec<u32>) {
-    let mut keys: Vec<([u32; 4], u32)> = (0..ne * 6)
-        .into_par_iter()
-        .map(|slot| {
+fn unique_faces(elems: &[u32], ne: usize, around: Around) -> (Vec<[u32; 4]>, Vec<u32>) {
+    let at_corner = around.at_corner(6, |l| HEX_SIDES[l]);
+    let keys: Vec<([u32; 4], u32)> =
+        keys_by_lowest_vertex(ne, 6, around, &at_corner, KEY_BLOCK, |slot| {
             let (e, l) = (slot / 6, slot % 6);
             let mut k = HEX_SIDES[l].map(|c| elems[e * 8 + c]);
             k.sort_unstable();
-            (k, slot as u32)
-        })
-        .collect();
-    keys.par_sort_unstable();
+            (k[0], k)
+        });
     let first = run_starts(&keys, |a, b| a.0 == b.0);
     let faces = first
         .par_iter()
@@ -691,6 +813,100 @@ mod tests {
         grid.elements.iter().map(|&v| label(v as usize)).collect()
     }
 
+    /// `f` of the vertex → element lists of the elements `corners` (`npe` each).
+    fn with_around<R>(corners: &[u32], nv: usize, npe: usize, f: impl FnOnce(Around) -> R) -> R {
+        let (offsets, elements) = vertex_elements(corners, nv, npe);
+        f(Around {
+            corners,
+            npe,
+            offsets: &offsets,
+            elements: &elements,
+        })
+    }
+
+    /// The keys gathered per lowest vertex, in blocks of any size, equal all (key, slot)
+    /// pairs sorted, for the hex edges and faces of a scrambled grid and the sides of a quad
+    /// grid.
+    #[test]
+    fn keys_by_lowest_vertex_equal_a_full_sort() {
+        fn check<K: Ord + Copy + Send + Sync + std::fmt::Debug, const N: usize>(
+            ne: usize,
+            around: Around,
+            local: impl Fn(usize) -> [usize; N],
+            per: usize,
+            key_at: impl Fn(usize) -> (u32, K) + Sync,
+        ) {
+            let at_corner = around.at_corner(per, local);
+            let mut all: Vec<(K, u32)> = (0..ne * per)
+                .map(|slot| (key_at(slot).1, slot as u32))
+                .collect();
+            all.sort();
+            for block in [1, 7, 100, 1 << 20] {
+                assert_eq!(
+                    keys_by_lowest_vertex(ne, per, around, &at_corner, block, &key_at),
+                    all,
+                    "block {block}"
+                );
+            }
+        }
+        let n: usize = 6;
+        let (ne, nv) = (n * n * n, (n + 1).pow(3));
+        let elems = scrambled_grid(n);
+        let (offsets, elements) = vertex_elements(&elems, nv, 8);
+        let around = Around {
+            corners: &elems,
+            npe: 8,
+            offsets: &offsets,
+            elements: &elements,
+        };
+        check(
+            ne,
+            around,
+            |l| HEX_EDGES[l],
+            12,
+            |slot| {
+                let [a, b] = HEX_EDGES[slot % 12].map(|c| elems[slot / 12 * 8 + c]);
+                (a.min(b), [a.min(b), a.max(b)])
+            },
+        );
+        check(
+            ne,
+            around,
+            |l| HEX_SIDES[l],
+            6,
+            |slot| {
+                let mut k = HEX_SIDES[slot % 6].map(|c| elems[slot / 6 * 8 + c]);
+                k.sort_unstable();
+                (k[0], k)
+            },
+        );
+        let xs: Vec<f64> = (0..=9).map(|i| i as f64).collect();
+        let quads = crate::mesh::generate::grid_2d(&xs, &xs[..5]);
+        // As generated, and with one element's corner 2 moved onto its corner 1 (that element
+        // listed twice at the vertex).
+        let mut collapsed = quads.elements.clone();
+        collapsed[2] = collapsed[1];
+        for corners in [&quads.elements, &collapsed] {
+            let (offsets, elements) = vertex_elements(corners, quads.n_vertices(), 4);
+            let around = Around {
+                corners,
+                npe: 4,
+                offsets: &offsets,
+                elements: &elements,
+            };
+            check(
+                quads.n_elements(),
+                around,
+                |l| QUAD_SIDES[l],
+                4,
+                |slot| {
+                    let [a, b] = QUAD_SIDES[slot % 4].map(|c| corners[slot / 4 * 4 + c]);
+                    (a.min(b), (a.min(b), a.max(b)))
+                },
+            );
+        }
+    }
+
     /// The unique edges and faces, their numbering, valences and first sides equal those of
     /// an ordered map from each key to the slots that have it.
     #[test]
@@ -698,7 +914,10 @@ mod tests {
         let n = 12;
         let elems = scrambled_grid(n);
         let ne = n * n * n;
-        let (edges, valence, element_edges) = unique_edges(&elems, 3, ne, 8);
+        let nv = (n + 1).pow(3);
+        let (edges, valence, element_edges) = with_around(&elems, nv, 8, |around| {
+            unique_edges(&elems, 3, ne, 8, around)
+        });
         let mut by_edge: BTreeMap<[u32; 2], Vec<usize>> = BTreeMap::new();
         for slot in 0..ne * 12 {
             let [a, b] = HEX_EDGES[slot % 12].map(|c| elems[slot / 12 * 8 + c]);
@@ -711,7 +930,8 @@ mod tests {
             assert!(slots.iter().all(|&s| element_edges[s] == id as u32));
         }
 
-        let (faces, element_faces) = unique_faces(&elems, ne);
+        let (faces, element_faces) =
+            with_around(&elems, nv, 8, |around| unique_faces(&elems, ne, around));
         let mut by_face: BTreeMap<[u32; 4], Vec<usize>> = BTreeMap::new();
         for slot in 0..ne * 6 {
             let mut k = HEX_SIDES[slot % 6].map(|c| elems[slot / 6 * 8 + c]);
