@@ -840,14 +840,34 @@ impl Seam<'_> {
             .then_some((*w, t))
     }
 
-    /// The partner of 3D wall vertex `v` on a seam and the map carrying its side onto v's.
-    fn across_3d(&self, v: usize) -> Option<(u32, &Rigid)> {
-        let (w, t) = self.partners.get(v)?.as_ref()?;
-        (self.dim == 3 && !self.fan[v].is_empty() && !self.fan[*w as usize].is_empty())
-            .then_some((*w, t))
+    /// The wall vertices glued to 3D wall vertex `v` on a seam, each with the map carrying
+    /// its side onto v's: every image across the seams ([`Seam::images`]; a corner where two
+    /// seams meet has three), else the partner alone; empty away from seams.
+    fn across_3d(&self, v: usize) -> Vec<(u32, Rigid)> {
+        let Some(Some((w, t))) = self.partners.get(v) else {
+            return Vec::new();
+        };
+        if self.dim != 3 || self.fan[v].is_empty() {
+            return Vec::new();
+        }
+        let images: Vec<(u32, Rigid)> = if self.links.is_empty() {
+            vec![(*w, *t)]
+        } else {
+            self.images(Seen {
+                v: v as u32,
+                map: None,
+            })
+            .into_iter()
+            .filter_map(|s| Some((s.v, s.map?)))
+            .collect()
+        };
+        images
+            .into_iter()
+            .filter(|&(u, _)| !self.fan[u as usize].is_empty())
+            .collect()
     }
 
-    /// The fan of 3D wall vertex `v` on a seam completed by its partner's across
+    /// The fan of 3D wall vertex `v` on a seam completed by those of the vertices glued to it
     /// ([`fan_across`]); `None` away from seams.
     fn fan_across(
         &self,
@@ -855,17 +875,37 @@ impl Seam<'_> {
         topo: &Topology,
         v: u32,
     ) -> Option<(Vec<[DVec3; 4]>, Vec<DVec3>)> {
-        let (w, t) = self.across_3d(v as usize)?;
-        let (own, theirs) = (&self.fan[v as usize], &self.fan[w as usize]);
-        Some(fan_across(mesh, topo, (v, own), (w, theirs), t))
+        let across = self.across_3d(v as usize);
+        if across.is_empty() {
+            return None;
+        }
+        let (mut quads, mut nb) = (Vec::new(), Vec::new());
+        for (w, t) in across {
+            let (q, n) = fan_across(
+                mesh,
+                topo,
+                (v, &self.fan[v as usize]),
+                (w, &self.fan[w as usize]),
+                &t,
+            );
+            quads.extend(if quads.is_empty() {
+                q
+            } else {
+                q[self.fan[v as usize].len()..].to_vec()
+            });
+            nb.extend(n);
+        }
+        dedup_points(DVec3::from(mesh.coords[v as usize]), &mut nb);
+        Some((quads, nb))
     }
 
     /// Adds to the two-ring `ring` of 3D wall vertex `v` (first ring `first`) the wall points
     /// across the seams it reaches, carried onto v's side, so that the ring is the one of the
-    /// glued wall: at a vertex on a seam its partner's two-ring (found with `scratch`), from a
-    /// smooth vertex on a seam in the first ring its partner's first ring. Points met on both
-    /// sides (the seam's own) are kept once. Returns whether the partner's first ring reached
-    /// a vertex without a smooth model (the ring is then one-sided, as on v's side).
+    /// glued wall: at a vertex on a seam the two-rings of the vertices glued to it (found with
+    /// `scratch`), from a smooth vertex on a seam in the first ring the first rings of those
+    /// glued to it. Points met on both sides (the seam's own) are kept once. Returns whether
+    /// a first ring across reached a vertex without a smooth model (the ring is then
+    /// one-sided, as on v's side).
     fn extend_ring_3d(
         &self,
         mesh: &LinearMesh,
@@ -880,16 +920,16 @@ impl Seam<'_> {
         }
         let len = ring.len();
         let mut one_sided = false;
-        if let Some((w, t)) = self.across_3d(v as usize) {
+        for (w, t) in self.across_3d(v as usize) {
             let across = two_ring(mesh, topo, self.fan, models, w, cos_max, scratch);
             ring.extend(across.iter().map(|&p| t.apply(p)));
-            one_sided = scratch.one_sided(models);
+            one_sided |= scratch.one_sided(models);
         }
         for &u in first {
             if models[u as usize].is_none() {
                 continue;
             }
-            if let Some((w, t)) = self.across_3d(u as usize) {
+            for (w, t) in self.across_3d(u as usize) {
                 for &f in &self.fan[w as usize] {
                     ring.extend(
                         topo.facet_vertices(f as usize)

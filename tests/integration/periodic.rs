@@ -1641,3 +1641,61 @@ fn generated_sector(dir: &str, name: &str, dim: usize, deg: u32) -> PathBuf {
     );
     linear
 }
+
+#[test]
+fn hub_cells_on_two_seams_fit_the_cylinder_as_the_interior() {
+    if !common::have_gmsh(&common::current_test()) {
+        return;
+    }
+    // A 40° sector of the annulus, 0.5 long, periodic in θ (a rotation) and in z (a
+    // translation): glued, every hub cell is the same as every other. The hub's corner cells,
+    // on both seams, have wall vertices glued to three others; their fans and two-rings are
+    // completed by all three (the models must see the whole glued wall), so those cells sit as
+    // close to the cylinder r = 1 as the interior's (found: 4.45e-8 and 4.41e-8 against
+    // 4.18e-8). With one partner kept per wall vertex (the last seam's), the corners were
+    // 1.84e-6 from the cylinder and the θ seam's column 1.46e-7.
+    let linear = scratch_in("periodic_corner", "sector.msh");
+    run_ok(
+        polyspline()
+            .args(["generate", "sector", "-o"])
+            .arg(&linear)
+            .args(
+                "--sector 40 --around 6 --across 8 --first-height 0.02 --layers 4 --span 0.5"
+                    .split(' '),
+            ),
+    );
+    let out = scratch_in("periodic_corner", "sector_o3.msh");
+    let pairs = [
+        "--periodic",
+        "periodic_lo:periodic_hi",
+        "--periodic",
+        "zmin:zmax",
+    ];
+    let args = [
+        &pairs[..],
+        &[
+            "--order",
+            "3",
+            "--knot-intervals",
+            "uniform",
+            "--allow-invalid",
+        ],
+    ];
+    let report = curve(&linear, &out, &args.concat());
+    assert_eq!(report["periodic"]["seam"], "c1", "{}", report["periodic"]);
+    let run = run_ok(
+        python()
+            .arg(Path::new(ROOT).join("tests/external/cylinder_cells.py"))
+            .arg(&out)
+            .args(["hub", "1"]),
+    );
+    let e: BTreeMap<String, f64> = serde_json::from_slice(&run.stdout).unwrap();
+    for kind in ["corner", "theta", "z"] {
+        assert!(
+            e[kind] <= 1.1 * e["interior"],
+            "hub {kind} cells {:e} from the cylinder, interior {:e} ({e:?})",
+            e[kind],
+            e["interior"]
+        );
+    }
+}
