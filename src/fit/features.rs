@@ -582,51 +582,16 @@ fn curve_model(x: DVec3, a: DVec3, b: DVec3) -> Option<VertexModel> {
     })
 }
 
-/// Per vertex, whether its corner samples take the feature weight ([`sample_mask`]): the
-/// feature vertices, except where a feature curve passes along thin cells (a boundary layer's
-/// wall rim: shortest edge at the vertex below [`RIM_Q2_MIN_ASPECT`] × the curve's edges
-/// there, as for `FeatureModels::rim_higher`). There the corners take the wall's boundary
-/// corner weight, as the wall's other vertices do: the wall's targets along the rim are its
-/// targets at mid-height, and a corner weight far above the midpoints' makes the quadratic
-/// spline trade the rim's edge midpoints for its vertices, bending the thin cells along the
-/// rim away from the wall (an extruded ellipse O-grid's rim midpoints 7.6e-5 off the exact
-/// wall against 1.8e-5 at mid-height, with a 1e-5 first cell).
-pub fn weighted_vertices(features: &Features, mesh: &LinearMesh, topo: &Topology) -> Vec<bool> {
-    let mut weighted = features.vertex_mask.clone();
-    if features.dim != 3 || features.edges.is_empty() {
-        return weighted;
-    }
-    let x = |v: u32| DVec3::from(mesh.coords[v as usize]);
-    let mut shortest = vec![f64::INFINITY; mesh.n_vertices()];
-    for &[a, b] in &topo.edges {
-        let l = (x(a) - x(b)).length();
-        for w in [a, b] {
-            shortest[w as usize] = shortest[w as usize].min(l);
-        }
-    }
-    for (v, nbs) in features.curve_neighbours(topo) {
-        if nbs.len() > 2 || features.corners.binary_search(&v).is_ok() {
-            continue;
-        }
-        let along_len = nbs.iter().map(|&w| (x(w) - x(v)).length()).sum::<f64>() / nbs.len() as f64;
-        if shortest[v as usize] < RIM_Q2_MIN_ASPECT * along_len {
-            weighted[v as usize] = false;
-        }
-    }
-    weighted
-}
-
 /// Samples of element `e` that take the feature weight, as bits of the 3^d lattice index
-/// (9z + 3y + x): its corners at the vertices marked in `weighted` ([`weighted_vertices`]).
-/// Midpoints of feature edges keep the midpoint weight: weighting them as strongly as the
-/// vertices makes the quadratic spline trade vertex position for midpoint position where the
-/// spacing along a feature changes, sliding feature vertices along their curve (measured on
-/// the real meshes).
-pub fn sample_mask(weighted: &[bool], mesh: &LinearMesh, e: usize) -> u64 {
+/// (9z + 3y + x): its corners at feature vertices. Midpoints of feature edges keep the
+/// midpoint weight: weighting them as strongly as the vertices makes the quadratic spline
+/// trade vertex position for midpoint position where the spacing along a feature changes,
+/// sliding feature vertices along their curve (measured on the real meshes).
+pub fn sample_mask(features: &Features, mesh: &LinearMesh, e: usize) -> u64 {
     let verts = mesh.element(e);
     let mut mask = 0u64;
     for (c, &v) in verts.iter().enumerate() {
-        if weighted[v as usize] {
+        if features.vertex_mask[v as usize] {
             let p = HEX_VERTEX_PARAMS[c];
             let i = 2 * p[0] as usize + 6 * p[1] as usize + 18 * p[2] as usize;
             mask |= 1 << i;

@@ -709,7 +709,6 @@ fn weight_masks(
         }
     }
     let extraordinary = extraordinary_elements(n, mesh, topo, w);
-    let weighted = features.map(|f| features::weighted_vertices(f, mesh, topo));
     (0..n)
         .map(|e| {
             let mut m = 0u64;
@@ -725,7 +724,7 @@ fn weight_masks(
             if extraordinary[e] && m & 0xFF == 0 {
                 m |= EXTRAORDINARY_BIT;
             }
-            if let Some(f) = &weighted {
+            if let Some(f) = features {
                 m |= features::sample_mask(f, mesh, e) << 8;
             }
             m | (levels[e] as u64) << LEVEL_SHIFT
