@@ -443,6 +443,44 @@ fn normal_system(mesh: &LinearMesh) -> (polyspline::fit::NormalMatrix, Vec<[f64;
     assemble(&s, mesh, &topo, &FitParams::default().weights)
 }
 
+/// `op`'s product with a test vector is `k`'s host product, row by row within the spmv
+/// tolerance of the row's magnitudes; and with 1 in lane 0, lane 0 is the row sum.
+fn assert_product_is_the_hosts(
+    op: &GpuOperator,
+    k: &polyspline::fit::NormalMatrix,
+    prec: Precision,
+    case: &str,
+) {
+    let x: Vec<[f64; 3]> = (0..k.n())
+        .map(|i| [1.0, (i % 7) as f64 - 3.0, ((i * 31) % 11) as f64 / 11.0])
+        .collect();
+    let mut want = vec![[0.0; 3]; k.n()];
+    k.apply(&x, &mut want);
+    let got = op.try_apply(&x).unwrap();
+    let tol = match prec {
+        Precision::F32 => SPMV_TOL_F32,
+        Precision::F64 => SPMV_TOL_F64,
+    };
+    for r in 0..k.n() {
+        let row = k.indptr()[r]..k.indptr()[r + 1];
+        let scale: f64 = row.clone().map(|j| k.data()[j].abs() * 3.0).sum();
+        for c in 0..3 {
+            assert!(
+                (got[r][c] - want[r][c]).abs() <= tol * scale,
+                "{case} {prec:?} row {r}: {:?} against {:?}",
+                got[r],
+                want[r]
+            );
+        }
+        // Oracle: with x = 1 in lane 0, y is the row sum.
+        let sum: f64 = row.map(|j| k.data()[j]).sum();
+        assert!(
+            (got[r][0] - sum).abs() <= tol * scale,
+            "{case} {prec:?} row {r}"
+        );
+    }
+}
+
 #[test]
 fn spmv_matches_cpu_and_row_sums() {
     for prec in [Precision::F32, Precision::F64] {
@@ -450,34 +488,7 @@ fn spmv_matches_cpu_and_row_sums() {
         for (name, mesh) in meshes().into_iter().take(6) {
             let (k, _) = normal_system(&mesh);
             let op = GpuOperator::new(&ctx, &k).unwrap();
-            let x: Vec<[f64; 3]> = (0..k.n())
-                .map(|i| [1.0, (i % 7) as f64 - 3.0, ((i * 31) % 11) as f64 / 11.0])
-                .collect();
-            let mut want = vec![[0.0; 3]; k.n()];
-            k.apply(&x, &mut want);
-            let got = op.try_apply(&x).unwrap();
-            let tol = match prec {
-                Precision::F32 => SPMV_TOL_F32,
-                Precision::F64 => SPMV_TOL_F64,
-            };
-            for r in 0..k.n() {
-                let scale: f64 = (k.indptr()[r]..k.indptr()[r + 1])
-                    .map(|j| k.data()[j].abs() * 3.0f64.max(1.0))
-                    .sum();
-                for c in 0..3 {
-                    assert!(
-                        (got[r][c] - want[r][c]).abs() <= tol * scale,
-                        "{name} {prec:?} row {r}: {:?} vs {:?}",
-                        got[r],
-                        want[r]
-                    );
-                }
-                // Oracle: with x = 1 in lane 0, y is the row sum.
-                let sum: f64 = (k.indptr()[r]..k.indptr()[r + 1])
-                    .map(|j| k.data()[j])
-                    .sum();
-                assert!((got[r][0] - sum).abs() <= tol * scale);
-            }
+            assert_product_is_the_hosts(&op, &k, prec, &name);
             assert_eq!(op.nrows(), k.n());
         }
     }
@@ -693,29 +704,7 @@ fn row_blocks_sum_multiply_and_solve_as_one_matrix() {
 
         let op = GpuOperator::new(&ctx, &host).unwrap();
         assert!(op.n_blocks() >= 2, "{case}: {} row blocks", op.n_blocks());
-        let x: Vec<[f64; 3]> = (0..host.n())
-            .map(|i| [1.0, (i % 7) as f64 - 3.0, ((i * 31) % 11) as f64 / 11.0])
-            .collect();
-        let mut want = vec![[0.0; 3]; host.n()];
-        host.apply(&x, &mut want);
-        let got = op.try_apply(&x).unwrap();
-        let tol = match prec {
-            Precision::F32 => SPMV_TOL_F32,
-            Precision::F64 => SPMV_TOL_F64,
-        };
-        for r in 0..host.n() {
-            let scale: f64 = (host.indptr()[r]..host.indptr()[r + 1])
-                .map(|j| host.data()[j].abs() * 3.0)
-                .sum();
-            for c in 0..3 {
-                assert!(
-                    (got[r][c] - want[r][c]).abs() <= tol * scale,
-                    "{case} row {r}: {:?} against {:?}",
-                    got[r],
-                    want[r]
-                );
-            }
-        }
+        assert_product_is_the_hosts(&op, &host, prec, &case);
 
         let (split, split_info) = fit(&ctx);
         let flat = |c: &[[f64; 3]]| c.concat().iter().map(|v| v.to_bits()).collect::<Vec<_>>();

@@ -948,6 +948,21 @@ fn wall_error_by_kind(file: &Path, group: &str, wall: &str) -> BTreeMap<String, 
     serde_json::from_value(wall_error_report(file, group, wall)["by_kind"].clone()).unwrap()
 }
 
+/// A 40° sector of the annulus (hub r = 1, shroud r = 2), 6 columns and 8 layers graded to
+/// both walls, 0.5 long, written to `linear`.
+fn sector_40(linear: PathBuf) -> PathBuf {
+    run_ok(
+        polyspline()
+            .args(["generate", "sector", "-o"])
+            .arg(&linear)
+            .args(
+                "--sector 40 --around 6 --across 8 --first-height 0.02 --layers 4 --span 0.5"
+                    .split(' '),
+            ),
+    );
+    linear
+}
+
 #[test]
 fn walls_at_3d_seams_are_fitted_from_both_sides() {
     if !common::have_gmsh(&common::current_test()) {
@@ -964,16 +979,7 @@ fn walls_at_3d_seams_are_fitted_from_both_sides() {
     // side only, the walls' seam facets were 13–15 % farther than the interior's (hub 3.5e-6
     // against 3.1e-6, 3× farther than both sides now), 1.8× at the hub's rim corners once
     // the other vertices were two-sided, and the seam facet angle reached 3.6° against 2.0°.
-    let linear = scratch_in("periodic_walls", "sector3d.msh");
-    run_ok(
-        polyspline()
-            .args(["generate", "sector", "-o"])
-            .arg(&linear)
-            .args(
-                "--sector 40 --around 6 --across 8 --first-height 0.02 --layers 4 --span 0.5"
-                    .split(' '),
-            ),
-    );
+    let linear = sector_40(scratch_in("periodic_walls", "sector3d.msh"));
     let out = scratch_in("periodic_walls", "sector3d_o3.msh");
     let report = curve(&linear, &out, &["--order", "3"]);
     assert_eq!(report["periodic"]["seam"], "c1", "{}", report["periodic"]);
@@ -1654,16 +1660,7 @@ fn hub_cells_on_two_seams_fit_the_cylinder_as_the_interior() {
     // close to the cylinder r = 1 as the interior's (found: 4.45e-8 and 4.41e-8 against
     // 4.18e-8). With one partner kept per wall vertex (the last seam's), the corners were
     // 1.84e-6 from the cylinder and the θ seam's column 1.46e-7.
-    let linear = scratch_in("periodic_corner", "sector.msh");
-    run_ok(
-        polyspline()
-            .args(["generate", "sector", "-o"])
-            .arg(&linear)
-            .args(
-                "--sector 40 --around 6 --across 8 --first-height 0.02 --layers 4 --span 0.5"
-                    .split(' '),
-            ),
-    );
+    let linear = sector_40(scratch_in("periodic_corner", "sector.msh"));
     let out = scratch_in("periodic_corner", "sector_o3.msh");
     let pairs = [
         "--periodic",
@@ -1671,16 +1668,7 @@ fn hub_cells_on_two_seams_fit_the_cylinder_as_the_interior() {
         "--periodic",
         "zmin:zmax",
     ];
-    let args = [
-        &pairs[..],
-        &[
-            "--order",
-            "3",
-            "--knot-intervals",
-            "uniform",
-            "--allow-invalid",
-        ],
-    ];
+    let args = [&pairs[..], &["--order", "3", "--knot-intervals", "uniform"]];
     let report = curve(&linear, &out, &args.concat());
     assert_eq!(report["periodic"]["seam"], "c1", "{}", report["periodic"]);
     let run = run_ok(
