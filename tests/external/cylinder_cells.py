@@ -15,34 +15,24 @@ import sys
 
 import gmsh
 
+from wall_error import group_facets, open_group
+
 
 def main():
     path, group, radius = sys.argv[1], sys.argv[2], float(sys.argv[3])
-    gmsh.initialize(["-nopopup"])
-    gmsh.option.setNumber("General.Terminal", 0)
-    gmsh.open(path)
-    dim = gmsh.model.getDimension()
-    tag = next(
-        t for d, t in gmsh.model.getPhysicalGroups(dim - 1)
-        if gmsh.model.getPhysicalName(d, t) == group
-    )
-    tags, coords = gmsh.model.mesh.getNodesForPhysicalGroup(dim - 1, tag)
+    dim, tag, tags, coords = open_group(path, group)
     x = {int(tags[i]): coords[3 * i:3 * i + 3] for i in range(len(tags))}
     angle = {v: math.atan2(p[1], p[0]) for v, p in x.items()}
     a_lo, a_hi = min(angle.values()), max(angle.values())
     z_lo, z_hi = min(p[2] for p in x.values()), max(p[2] for p in x.values())
     tol = 1e-9
     out = {}
-    for ent in gmsh.model.getEntitiesForPhysicalGroup(dim - 1, tag):
-        for etype, _, enodes in zip(*gmsh.model.mesh.getElements(dim - 1, ent)):
-            nn = gmsh.model.mesh.getElementProperties(etype)[3]
-            for k in range(len(enodes) // nn):
-                facet = [int(v) for v in enodes[k * nn:(k + 1) * nn]]
-                on_a = any(min(abs(angle[v] - a_lo), abs(angle[v] - a_hi)) < tol for v in facet)
-                on_z = any(min(abs(x[v][2] - z_lo), abs(x[v][2] - z_hi)) < tol for v in facet)
-                key = ("corner" if on_z else "theta") if on_a else ("z" if on_z else "interior")
-                e = max(abs(math.hypot(x[v][0], x[v][1]) - radius) for v in facet)
-                out[key] = max(out.get(key, 0.0), e)
+    for facet in group_facets(dim, tag):
+        on_a = any(min(abs(angle[v] - a_lo), abs(angle[v] - a_hi)) < tol for v in facet)
+        on_z = any(min(abs(x[v][2] - z_lo), abs(x[v][2] - z_hi)) < tol for v in facet)
+        key = ("corner" if on_z else "theta") if on_a else ("z" if on_z else "interior")
+        e = max(abs(math.hypot(x[v][0], x[v][1]) - radius) for v in facet)
+        out[key] = max(out.get(key, 0.0), e)
     gmsh.finalize()
     print(json.dumps(out))
 

@@ -17,8 +17,9 @@ import sys
 import gmsh
 
 
-def main():
-    path, group, wall = sys.argv[1:4]
+def open_group(path, group):
+    """Open `path` in Gmsh; the mesh's dimension, the boundary group's tag, and its nodes'
+    tags and flat coordinates."""
     gmsh.initialize(["-nopopup"])
     gmsh.option.setNumber("General.Terminal", 0)
     gmsh.open(path)
@@ -28,6 +29,21 @@ def main():
         if gmsh.model.getPhysicalName(d, t) == group
     )
     tags, coords = gmsh.model.mesh.getNodesForPhysicalGroup(dim - 1, tag)
+    return dim, tag, tags, coords
+
+
+def group_facets(dim, tag):
+    """Every facet of boundary group `tag`, as the list of its node tags (high-order too)."""
+    for ent in gmsh.model.getEntitiesForPhysicalGroup(dim - 1, tag):
+        for etype, _, enodes in zip(*gmsh.model.mesh.getElements(dim - 1, ent)):
+            nn = gmsh.model.mesh.getElementProperties(etype)[3]
+            for k in range(len(enodes) // nn):
+                yield [int(v) for v in enodes[k * nn:(k + 1) * nn]]
+
+
+def main():
+    path, group, wall = sys.argv[1:4]
+    dim, tag, tags, coords = open_group(path, group)
     kind, value = wall.split("=")
     value = float(value)
     error = {}
@@ -53,16 +69,12 @@ def main():
         if t != tag and not any(e in periodic for e in ents):
             rim.update(int(v) for v in gmsh.model.mesh.getNodesForPhysicalGroup(d, t)[0])
     by_kind = {}
-    for ent in gmsh.model.getEntitiesForPhysicalGroup(dim - 1, tag):
-        for etype, _, enodes in zip(*gmsh.model.mesh.getElements(dim - 1, ent)):
-            nn = gmsh.model.mesh.getElementProperties(etype)[3]
-            for k in range(len(enodes) // nn):
-                facet = [int(v) for v in enodes[k * nn:(k + 1) * nn]]
-                key = "seam" if any(v in seam for v in facet) else "inner"
-                if any(v in rim for v in facet):
-                    key += "_rim"
-                worst = max(error[v] for v in facet)
-                by_kind[key] = max(by_kind.get(key, 0.0), worst)
+    for facet in group_facets(dim, tag):
+        key = "seam" if any(v in seam for v in facet) else "inner"
+        if any(v in rim for v in facet):
+            key += "_rim"
+        worst = max(error[v] for v in facet)
+        by_kind[key] = max(by_kind.get(key, 0.0), worst)
     gmsh.finalize()
     print(json.dumps({"nodes": n, "max_error": max(error.values()), "by_kind": by_kind}))
 
