@@ -50,6 +50,11 @@ pub struct FeatureModels {
     /// boundary layer take their wall vertex's: a thin cell's inner side then moves with its
     /// wall side (a parabola inside under a more accurate rim folds the cell).
     rim_higher: HashMap<u32, HigherModel>,
+    /// Feature vertices on a thin rim: two neighbours along the curve (across a periodic seam
+    /// too, as for the curve models) and a mesh edge shorter than [`RIM_Q2_MIN_ASPECT`] × the
+    /// curve's edges there. Their corner samples take [`thin_rim_weight`], not the feature
+    /// weight ([`thin_rim_mask`]).
+    thin_rim: Vec<u32>,
     /// The in-plane models' higher terms, inherited from thin rims (`rim_higher`).
     pub(crate) in_plane_higher: HashMap<u32, HigherModel>,
     /// Boundary facet id → patch (boundary facets at feature vertices).
@@ -257,9 +262,14 @@ impl FeatureModels {
         };
         let mut refits: HashMap<u32, (VertexModel, HigherModel)> = HashMap::new();
         for &v in along.keys() {
-            if let [a, b] = along_x[&v][..]
-                && let Some(m) = curve_model(x(v), xa(a), xa(b))
-            {
+            let [a, b] = along_x[&v][..] else {
+                continue;
+            };
+            let along_len = ((xa(a) - x(v)).length() + (xa(b) - x(v)).length()) / 2.0;
+            if shortest[v as usize] < RIM_Q2_MIN_ASPECT * along_len {
+                out.thin_rim.push(v);
+            }
+            if let Some(m) = curve_model(x(v), xa(a), xa(b)) {
                 out.curve.insert(v, m);
                 if let Some(h) = curve_higher(&along_x, v, [a, b], &m, &xa) {
                     refits.insert(v, h);
@@ -452,6 +462,16 @@ impl FeatureModels {
         }
     }
 
+    /// Per vertex of a mesh of `n` vertices, whether it lies on a thin rim (see
+    /// `FeatureModels::thin_rim`; [`Features::thin_rim`]).
+    pub fn thin_rim_mask(&self, n: usize) -> Vec<bool> {
+        let mut mask = vec![false; n];
+        for &v in &self.thin_rim {
+            mask[v as usize] = true;
+        }
+        mask
+    }
+
     /// `None` on a feature edge (curve models), else the patch of `at` if it has one.
     fn patch_of(&self, at: BoundaryEntity) -> Option<Option<u32>> {
         match at {
@@ -583,21 +603,49 @@ fn curve_model(x: DVec3, a: DVec3, b: DVec3) -> Option<VertexModel> {
 }
 
 /// Samples of element `e` that take the feature weight, as bits of the 3^d lattice index
-/// (9z + 3y + x): its corners at feature vertices. Midpoints of feature edges keep the
-/// midpoint weight: weighting them as strongly as the vertices makes the quadratic spline
-/// trade vertex position for midpoint position where the spacing along a feature changes,
-/// sliding feature vertices along their curve (measured on the real meshes).
+/// (9z + 3y + x): its corners at feature vertices off thin rims ([`thin_rim_corners`]).
+/// Midpoints of feature edges keep the midpoint weight: weighting them as strongly as the
+/// vertices makes the quadratic spline trade vertex position for midpoint position where the
+/// spacing along a feature changes, sliding feature vertices along their curve (measured on
+/// the real meshes).
 pub fn sample_mask(features: &Features, mesh: &LinearMesh, e: usize) -> u64 {
     let verts = mesh.element(e);
     let mut mask = 0u64;
     for (c, &v) in verts.iter().enumerate() {
-        if features.vertex_mask[v as usize] {
+        if features.vertex_mask[v as usize] && !features.on_thin_rim(v) {
             let p = HEX_VERTEX_PARAMS[c];
             let i = 2 * p[0] as usize + 6 * p[1] as usize + 18 * p[2] as usize;
             mask |= 1 << i;
         }
     }
     mask
+}
+
+/// Corners of element `e` (bit c for corner c) at thin-rim vertices ([`Features::thin_rim`]),
+/// whose samples take [`thin_rim_weight`] instead of the feature weight.
+pub fn thin_rim_corners(features: &Features, mesh: &LinearMesh, e: usize) -> u64 {
+    let verts = mesh.element(e);
+    let mut mask = 0u64;
+    for (c, &v) in verts.iter().enumerate() {
+        if features.on_thin_rim(v) {
+            mask |= 1 << c;
+        }
+    }
+    mask
+}
+
+/// The corner weight at a thin rim's vertices (a boundary layer's wall rim, where a feature
+/// curve runs along cells much thinner than its edges): half the wall's boundary corner weight,
+/// and never above the feature weight. The wall's targets along the rim are its targets at
+/// mid-height, but a rim vertex is a corner of half as many of the wall's elements as a vertex
+/// inside the wall, and a rim edge midpoint of one element: with the feature weight (100
+/// against the midpoints' 1) the quadratic spline trades the rim's edge midpoints for its
+/// vertices and bends the thin cells along the rim away from the wall (a Gmsh-made extruded
+/// ellipse O-grid with 1e-5 wall cells: rim midpoints 7.6e-5 off the exact ellipse, the wall's
+/// face centres at mid-height 1.8e-5); with the boundary corner weight 3.0e-5, with half of it
+/// 1.8e-5, as at mid-height.
+pub fn thin_rim_weight(w: &super::FitWeights) -> f64 {
+    w.feature.min(0.5 * w.boundary_corner)
 }
 
 /// Project the boundary control points of `space` in `cps` onto the planes of the planar

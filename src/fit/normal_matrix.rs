@@ -426,7 +426,8 @@ pub struct ElementBlocks {
     /// Per element: bit c (c < 8) for a boundary corner c (of `weighted_boundary`), bit
     /// 8 + i for a sample i that takes the feature weight, `DEEP_BIT` for an element a ring
     /// away from that boundary, `EXTRAORDINARY_BIT` for one near an extraordinary vertex, the
-    /// size level in the 8 bits from `LEVEL_SHIFT`.
+    /// size level in the 8 bits from `LEVEL_SHIFT`, bit `THIN_RIM_SHIFT` + c for a corner c
+    /// on a thin rim.
     pub masks: Vec<u64>,
     /// (G^d, G^r), row-major 3^d × 3^d, per mask.
     pub cache: HashMap<u64, (Vec<f64>, Vec<f64>)>,
@@ -453,6 +454,10 @@ pub(super) const EXTRAORDINARY_BIT: u64 = 1 << 41;
 
 /// Bit offset of an element's size level in its weight mask.
 pub(super) const LEVEL_SHIFT: u32 = 48;
+
+/// Bit offset of the corners at thin-rim vertices in a weight mask (bit `THIN_RIM_SHIFT + c`
+/// for corner c, [`features::thin_rim_weight`]), above the size level.
+pub(super) const THIN_RIM_SHIFT: u32 = 56;
 
 /// The weight factor 4^k of size level k (bits 48.. of the mask; see [`size_levels`]).
 fn size_scale(mask: u64) -> f64 {
@@ -486,6 +491,8 @@ fn sample_weight_unscaled(w: &FitWeights, mask: u64, i: usize, l: [usize; 3], co
                 base
             }
         }
+    } else if mask & (1 << (THIN_RIM_SHIFT as usize + corner_of(l))) != 0 {
+        features::thin_rim_weight(w)
     } else if mask & (1 << corner_of(l)) != 0 {
         w.boundary_corner
     } else {
@@ -726,6 +733,7 @@ fn weight_masks(
             }
             if let Some(f) = features {
                 m |= features::sample_mask(f, mesh, e) << 8;
+                m |= features::thin_rim_corners(f, mesh, e) << THIN_RIM_SHIFT;
             }
             m | (levels[e] as u64) << LEVEL_SHIFT
         })

@@ -410,6 +410,15 @@ impl SmoothTargets {
         }
     }
 
+    /// Per vertex, whether it lies on a thin rim (`features::FeatureModels`); empty without
+    /// features. The fit weighs the corners there by [`super::features::thin_rim_weight`]
+    /// ([`crate::mesh::features::Features::thin_rim`]).
+    pub fn thin_rim_mask(&self) -> Vec<bool> {
+        self.feature_models
+            .as_ref()
+            .map_or_else(Vec::new, |f| f.thin_rim_mask(self.models.len()))
+    }
+
     /// The model of vertex `v`, if it has one.
     pub fn vertex_model(&self, v: usize) -> Option<&VertexModel> {
         self.models[v].as_ref()

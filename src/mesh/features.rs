@@ -186,6 +186,10 @@ pub struct Features {
     pub vertex_mask: Vec<bool>,
     /// Per topology edge: a feature edge (3D; all false in 2D).
     pub edge_mask: Vec<bool>,
+    /// Per vertex: a feature vertex on a thin rim, as the fit's feature models classify it
+    /// with the curve continued across periodic seams (`fit::features::FeatureModels`);
+    /// empty (none) until the smooth targets set it.
+    pub thin_rim: Vec<bool>,
 }
 
 /// What [`Features`] found, for `info` and reports.
@@ -269,6 +273,7 @@ impl Features {
             planes,
             vertex_mask,
             edge_mask,
+            thin_rim: Vec::new(),
         })
     }
 
@@ -279,6 +284,11 @@ impl Features {
         params: &FeatureParams,
     ) -> Features {
         Self::detect(mesh, topo, params, &[], Path::new("")).expect("no edits, so no edit errors")
+    }
+
+    /// Whether vertex `v` lies on a thin rim ([`Features::thin_rim`]).
+    pub fn on_thin_rim(&self, v: u32) -> bool {
+        self.thin_rim.get(v as usize).copied().unwrap_or(false)
     }
 
     /// True when nothing was found.

@@ -106,7 +106,7 @@ impl SplineSetup {
             c.iter_mut().zip(&along).for_each(|(c, &a)| *c |= a);
             c
         });
-        let fit_params = FitParams {
+        let mut fit_params = FitParams {
             features: used.cloned().map(std::sync::Arc::new),
             weights: options
                 .fit
@@ -144,6 +144,10 @@ impl SplineSetup {
         } else {
             None
         };
+        // The fit weighs thin rims' corners as their models classify them (across seams too).
+        if let (Some(t), Some(f)) = (&targets, fit_params.features.as_mut()) {
+            std::sync::Arc::make_mut(f).thin_rim = t.thin_rim_mask();
+        }
         let blend_targets = match (&targets, fitted) {
             (None, true) => crate::fit::smooth_targets_shared(
                 mesh,
