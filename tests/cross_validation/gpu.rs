@@ -1527,6 +1527,22 @@ fn sector_system() -> (polyspline::fit::NormalMatrix, Coupling, Vec<[f64; 3]>) {
     system.expect("the sector's fit is coupled")
 }
 
+/// The CPU's coupled CG with K's diagonal (`fit::rotated::solve`, `OnK::Jacobi`) on
+/// (`k` ⊗ I₃ + `c`) x = `b` to 1e-10 of ‖b‖: its parameters, solution and figures.
+fn cpu_coupled_reference(
+    k: &polyspline::fit::NormalMatrix,
+    c: &Coupling,
+    b: &[[f64; 3]],
+) -> (CgParams, Vec<[f64; 3]>, polyspline::solve::CgInfo) {
+    let params = CgParams {
+        rel_tol: 1e-10,
+        ..Default::default()
+    };
+    let mut x = vec![[0.0; 3]; k.n()];
+    let info = polyspline::fit::rotated::solve(k, c, b, &mut x, &params, OnK::Jacobi).unwrap();
+    (params, x, info)
+}
+
 /// (K ⊗ I₃ + C) x on the host, in f64.
 fn coupled_product(
     k: &polyspline::fit::NormalMatrix,
@@ -1537,6 +1553,15 @@ fn coupled_product(
     k.apply(x, &mut y);
     c.apply_add(x, &mut y);
     y
+}
+
+/// ‖a − b‖ over all three coordinates.
+fn distance_all(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
+    a.iter()
+        .zip(b)
+        .flat_map(|(a, b)| [0, 1, 2].map(|p| (a[p] - b[p]).powi(2)))
+        .sum::<f64>()
+        .sqrt()
 }
 
 /// ‖v‖ over all three coordinates.
@@ -1673,12 +1698,7 @@ fn coupled_cg_on_the_device_is_the_cpu_coupled_cg() {
     const COUPLED_TOL: [(Precision, f64); 2] = [(Precision::F32, 1e-5), (Precision::F64, 1e-8)];
     let (k, c, b) = sector_system();
     let n = k.n();
-    let params = CgParams {
-        rel_tol: 1e-10,
-        ..Default::default()
-    };
-    let mut want = vec![[0.0; 3]; n];
-    let ci = polyspline::fit::rotated::solve(&k, &c, &b, &mut want, &params, OnK::Jacobi).unwrap();
+    let (params, want, ci) = cpu_coupled_reference(&k, &c, &b);
     let bn = norm_all(&b);
     let residual = |x: &[[f64; 3]]| {
         let ax = coupled_product(&k, &c, x);
@@ -1729,13 +1749,7 @@ fn coupled_cg_on_the_device_is_the_cpu_coupled_cg() {
             rn / bn,
             outputs()
         );
-        let dn = norm_all(
-            &want
-                .iter()
-                .zip(&got)
-                .map(|(a, b)| [0, 1, 2].map(|p| a[p] - b[p]))
-                .collect::<Vec<_>>(),
-        );
+        let dn = distance_all(&want, &got);
         assert!(
             dn <= tol * xn,
             "{prec:?}: solutions {:e} apart (|x| {xn:e}); {}",
@@ -1764,12 +1778,7 @@ fn coupled_cg_twins_are_the_cpu_coupled_cg() {
     use cpu::coupling::{BlockRows, coupling};
     let (k, c, b) = sector_system();
     let n = k.n();
-    let params = CgParams {
-        rel_tol: 1e-10,
-        ..Default::default()
-    };
-    let mut want = vec![[0.0; 3]; n];
-    let ci = polyspline::fit::rotated::solve(&k, &c, &b, &mut want, &params, OnK::Jacobi).unwrap();
+    let (_, want, ci) = cpu_coupled_reference(&k, &c, &b);
     let inv: Vec<f64> = k.diagonal().iter().map(|d| 1.0 / d).collect();
     let rows = BlockRows::of(&c);
     let indptr: Vec<u32> = k.indptr().iter().map(|&v| v as u32).collect();
@@ -1838,12 +1847,6 @@ fn coupled_cg_twins_are_the_cpu_coupled_cg() {
         "twins: {iterations} iterations, cpu: {ci:?}"
     );
     let got: Vec<[f64; 3]> = x.iter().map(|v| [v[0], v[1], v[2]]).collect();
-    let dn = norm_all(
-        &want
-            .iter()
-            .zip(&got)
-            .map(|(a, b)| [0, 1, 2].map(|p| a[p] - b[p]))
-            .collect::<Vec<_>>(),
-    );
+    let dn = distance_all(&want, &got);
     assert!(dn <= 1e-8 * norm_all(&want), "solutions {dn:e} apart");
 }
