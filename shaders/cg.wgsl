@@ -3,6 +3,10 @@
 // vector updates (update_xr: x += α p, r −= α Ap, z = D⁻¹ r; update_p: p = z + β p).
 // Components that have converged (rr ≤ target²) take α = 0 and keep their iterate, so
 // iterations batched past convergence change nothing and 0/0 never occurs.
+// Coupled (params.coupled = 1: the fit's system K ⊗ I₃ + C across rotation seams): one
+// recurrence over the three coordinates, as the CPU's solve::Coupled steps: the finalisers sum
+// the three lanes of each reduction into lane 0 (rz, rr and target² live in lane 0, lanes 1
+// and 2 never run) and step all three lanes by lane 0's α and β.
 // CPU twin: src/exec/cpu/cg.rs.
 alias real = f32;
 
@@ -12,7 +16,8 @@ struct Params {
     n: u32,
     n_partials: u32,
     max_iters: u32,
-    _pad: u32,
+    // 1: one recurrence over the three lanes (see above).
+    coupled: u32,
 }
 
 struct Scalars {
@@ -67,6 +72,22 @@ fn reduce_partials(l: u32) {
     }
 }
 
+// The three lanes' sum in lane 0 (the coupled recurrence's sums), or `v` itself.
+fn sums(v: vec4<real>) -> vec4<real> {
+    if params.coupled != 0u {
+        return vec4<real>(v.x + v.y + v.z, 0.0, 0.0, 0.0);
+    }
+    return v;
+}
+
+// Lane 0's step on all three lanes (coupled), or `v` itself.
+fn steps(v: vec4<real>) -> vec4<real> {
+    if params.coupled != 0u {
+        return vec4<real>(v.x, v.x, v.x, 0.0);
+    }
+    return v;
+}
+
 // After dot_partial(p, Ap): α_k = rz_k / pᵀAp_k for the running components.
 @compute @workgroup_size(WG)
 fn finalize_alpha(@builtin(local_invocation_id) lid: vec3<u32>) {
@@ -74,7 +95,7 @@ fn finalize_alpha(@builtin(local_invocation_id) lid: vec3<u32>) {
     if lid.x != 0u {
         return;
     }
-    let pap = s0[0];
+    let pap = sums(s0[0]);
     var alpha = vec4<real>(0.0, 0.0, 0.0, 0.0);
     var running = false;
     if state.done == 0u && state.breakdown == 0u {
@@ -104,7 +125,7 @@ fn finalize_alpha(@builtin(local_invocation_id) lid: vec3<u32>) {
         }
     }
     scalars.pap = pap;
-    scalars.alpha = alpha;
+    scalars.alpha = steps(alpha);
 }
 
 @compute @workgroup_size(64)
@@ -126,8 +147,8 @@ fn finalize_beta(@builtin(local_invocation_id) lid: vec3<u32>) {
     if lid.x != 0u {
         return;
     }
-    let rz_new = s0[0];
-    let rr_new = s1[0];
+    let rz_new = sums(s0[0]);
+    let rr_new = sums(s1[0]);
     var beta = vec4<real>(0.0, 0.0, 0.0, 0.0);
     if state.done == 0u {
         for (var k = 0u; k < 3u; k++) {
@@ -138,7 +159,7 @@ fn finalize_beta(@builtin(local_invocation_id) lid: vec3<u32>) {
         scalars.rz = rz_new;
         scalars.rr = rr_new;
     }
-    scalars.beta = beta;
+    scalars.beta = steps(beta);
 }
 
 @compute @workgroup_size(64)

@@ -991,7 +991,8 @@ impl JobShare for RankJob<'_> {
             }),
         };
         let n_global = local.n_global as usize;
-        // Coupled across rotation seams where some rank's elements see a point rotated.
+        // Coupled across rotation seams where some rank's elements see a point rotated (the
+        // ranks' coupled CG runs on the CPU).
         let mut coupled = [f64::from(u8::from(self.space.extraction.has_frames()))];
         comm.max_f64(&mut coupled);
         Outcomes {
@@ -1004,7 +1005,7 @@ impl JobShare for RankJob<'_> {
             spline: Some(SplineFigures {
                 knot_surfaces: (knot_intervals == KnotIntervals::Graded).then_some(setup.knot_info),
                 demoted: self.demoted,
-                coupled: coupled[0] > 0.0,
+                coupled: (coupled[0] > 0.0).then_some("cpu"),
                 ..SplineFigures::blended(
                     space,
                     (crate::fit::FitSolver::Cg, *cg, nonzeros[1]),

@@ -17,6 +17,7 @@ pub mod gpu;
 use crate::energy::EnergyKernel;
 use crate::exec::gpu::{Backend, GpuContext, GpuError};
 use crate::fit::NormalMatrix;
+use crate::fit::rotated::Coupling;
 use crate::math::BezierElements;
 use crate::mesh::HighOrderMesh;
 use crate::mesh::{LinearMesh, Topology};
@@ -52,6 +53,21 @@ pub trait Executor: Certifier + EnergyKernel {
     fn pcg(
         &self,
         k: NormalMatrix,
+        b: &[[f64; 3]],
+        x: &mut [[f64; 3]],
+        params: &CgParams,
+        progress: &mut dyn crate::solve::CgMonitor,
+    ) -> Result<CgInfo, CgError>;
+
+    /// Solve the fit's coupled system across rotation seams, (`k` ⊗ I₃ + `c`) x = `b`, by the
+    /// coupled CG (one recurrence over the three coordinates, [`crate::solve::pcg_coupled`])
+    /// from `x`, preconditioned by K alone (⊗ I₃): on the CPU by K's block-Jacobi pair
+    /// ([`crate::fit::rotated::solve`], which does not report its iterations to
+    /// `progress`), on a device by K's diagonal as its uncoupled CG. Errors as [`Self::pcg`].
+    fn pcg_coupled(
+        &self,
+        k: NormalMatrix,
+        c: &Coupling,
         b: &[[f64; 3]],
         x: &mut [[f64; 3]],
         params: &CgParams,

@@ -465,6 +465,59 @@ pub struct FitInfo {
     pub nonzeros: usize,
     pub assembly_seconds: f64,
     pub solve_seconds: f64,
+    /// Where the coupled solve across rotation seams ran (`cpu`, `gpu`; [`FitSolve`]); `None`
+    /// when the fit does not couple the coordinates.
+    pub coupled_device: Option<&'static str>,
+}
+
+/// How the fit's normal equations are solved: K δ = b (the three coordinates apart) and,
+/// across rotation seams, (K ⊗ I₃ + C) δ = b ([`rotated`]). Every closure
+/// `FnOnce(NormalMatrix, &b, &mut δ, &CgParams)` is one, its coupled solve the CPU's.
+pub trait FitSolve: Sized {
+    /// K δ = `b` from `delta`; the solve owns K.
+    fn solve(
+        self,
+        k: NormalMatrix,
+        b: &[[f64; 3]],
+        delta: &mut [[f64; 3]],
+        cg: &CgParams,
+    ) -> Result<CgInfo, CgError>;
+
+    /// (K ⊗ I₃ + C) δ = `b` from `delta`; `factor`: whether the fit would factor K on the CPU
+    /// ([`FitSolver::factors`]), where this solve then preconditions by K's factor (else by
+    /// K's block-Jacobi pair). Returns the CG's figures and where it ran (`cpu`, or a
+    /// device's executor name). By default [`rotated::solve`] on the CPU.
+    fn solve_coupled(
+        self,
+        k: NormalMatrix,
+        c: &rotated::Coupling,
+        b: &[[f64; 3]],
+        delta: &mut [[f64; 3]],
+        cg: &CgParams,
+        factor: bool,
+    ) -> Result<(CgInfo, &'static str), CgError> {
+        let on_k = if factor {
+            rotated::OnK::Factor
+        } else {
+            rotated::OnK::BlockJacobiPair
+        };
+        Ok((rotated::solve(&k, c, b, delta, cg, on_k)?, "cpu"))
+    }
+}
+
+impl<F> FitSolve for F
+where
+    F: FnOnce(NormalMatrix, &[[f64; 3]], &mut [[f64; 3]], &CgParams) -> Result<CgInfo, CgError>,
+{
+    fn solve(
+        self,
+        k: NormalMatrix,
+        b: &[[f64; 3]],
+        delta: &mut [[f64; 3]],
+        cg: &CgParams,
+    ) -> Result<CgInfo, CgError> {
+        self(k, b, delta, cg)
+    }
 }
 
 /// Assemble K and the right-hand side of the displacement system (F − K C0).
@@ -715,6 +768,20 @@ pub fn fit_with_targets_from(
         &crate::solve::CgParams,
     ) -> Result<crate::solve::CgInfo, CgError>,
 ) -> Result<(Vec<[f64; 3]>, FitInfo), CgError> {
+    fit_with_solver(space, mesh, topo, params, smooth, (start, summing), solve)
+}
+
+/// [`fit_with_targets_from`] with the normal equations, coupled across rotation seams or
+/// not, solved by `solver` ([`FitSolve`]).
+pub fn fit_with_solver(
+    space: &dyn FitSpace,
+    mesh: &LinearMesh,
+    topo: &Topology,
+    params: &FitParams,
+    smooth: Option<&SmoothTargets>,
+    (start, summing): (Option<&[[f64; 3]]>, Summing),
+    solver: impl FitSolve,
+) -> Result<(Vec<[f64; 3]>, FitInfo), CgError> {
     let t = std::time::Instant::now();
     let features = params.features.as_deref();
     let targets = (smooth, features);
@@ -759,15 +826,16 @@ pub fn fit_with_targets_from(
     }
     // The solve takes K (the CPU's blocked solvers release it as they reorder it).
     let (unknowns, nonzeros) = (k.n(), k.indices().len());
-    let cg = match &coupling {
+    let (cg, coupled_device) = match &coupling {
         // On the CPU, factored as the fit would factor K ([`rotated`]), and then run to the
-        // factorisation's accuracy.
+        // factorisation's accuracy (on a device too).
         Some(c) => {
             let factor = params.solver.factors(space.dim(), k.n(), true);
             let cg = params.solver.cg_params(space.dim(), k.n(), &params.cg);
-            rotated::solve(&k, c, &rhs, &mut delta, &cg, factor)?
+            let (info, device) = solver.solve_coupled(k, c, &rhs, &mut delta, &cg, factor)?;
+            (info, Some(device))
         }
-        None => solve(k, &rhs, &mut delta, &params.cg)?,
+        None => (solver.solve(k, &rhs, &mut delta, &params.cg)?, None),
     };
     if let Some(d) = &scale {
         for (x, &d) in delta.iter_mut().zip(d) {
@@ -790,6 +858,7 @@ pub fn fit_with_targets_from(
             nonzeros,
             assembly_seconds,
             solve_seconds,
+            coupled_device,
         },
     ))
 }

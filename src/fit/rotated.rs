@@ -18,7 +18,9 @@
 //! (one recurrence over the three coordinates), preconditioned by K⁻¹ ⊗ I₃ (K factored where
 //! the fit would factor it, and the CG then run to the factorisation's accuracy,
 //! [`super::FitSolver::cg_params`]) or by K's pair of block-Jacobi partitions: C has low
-//! rank, so the factored preconditioner leaves a few iterations.
+//! rank, so the factored preconditioner leaves a few iterations. On a device the same
+//! recurrence runs with K's diagonal ⊗ I₃ ([`OnK::Jacobi`], the device CG's preconditioner),
+//! C's product a kernel over its block rows ([`Coupling::block_rows`]).
 //!
 //! Invariant: without frames nothing here runs, and the fit is the ordinary one.
 
@@ -34,6 +36,7 @@ type Mat3 = [[f64; 3]; 3];
 const IDENTITY: Mat3 = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
 
 /// The coupling C between control points seen in different frames, as 3 × 3 blocks by rows.
+#[derive(Clone, Debug)]
 pub struct Coupling {
     indptr: Vec<usize>,
     cols: Vec<u32>,
@@ -177,8 +180,19 @@ impl Coupling {
         }
     }
 
+    /// The rows holding blocks, in increasing order: (row, the blocks' columns, the blocks),
+    /// each block 3 × 3 by rows (what a device kernel over C's block rows uploads).
+    pub fn block_rows(&self) -> impl Iterator<Item = (usize, &[u32], &[Mat3])> {
+        (0..self.indptr.len() - 1)
+            .filter(|&r| self.indptr[r + 1] > self.indptr[r])
+            .map(|r| {
+                let k = self.indptr[r]..self.indptr[r + 1];
+                (r, &self.cols[k.clone()], &self.blocks[k])
+            })
+    }
+
     /// y += C x.
-    pub(crate) fn apply_add(&self, x: &[[f64; 3]], y: &mut [[f64; 3]]) {
+    pub fn apply_add(&self, x: &[[f64; 3]], y: &mut [[f64; 3]]) {
         for (r, y) in y.iter_mut().enumerate() {
             for k in self.indptr[r]..self.indptr[r + 1] {
                 let (m, v) = (&self.blocks[k], x[self.cols[k] as usize]);
@@ -210,17 +224,30 @@ impl LinOp for Rotated<'_> {
     }
 }
 
-/// K⁻¹ ⊗ I₃, exact or by K's block-Jacobi pair.
-enum OnK {
-    Factor(crate::solve::direct::SparseCholesky),
-    Blocks(crate::solve::block_jacobi::BlockJacobiPair),
+/// Which approximation of K⁻¹ ⊗ I₃ preconditions the coupled CG ([`solve`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OnK {
+    /// K's sparse Cholesky factor (the fit's small systems on the CPU).
+    Factor,
+    /// K's pair of block-Jacobi partitions ([`crate::solve::block_jacobi::BlockJacobiPair`]).
+    BlockJacobiPair,
+    /// K's diagonal: the device CG's preconditioner, and its CPU reference.
+    Jacobi,
 }
 
-impl Preconditioner for OnK {
+/// K⁻¹ ⊗ I₃ as [`OnK`] chose it.
+enum OnKBuilt {
+    Factor(crate::solve::direct::SparseCholesky),
+    Blocks(crate::solve::block_jacobi::BlockJacobiPair),
+    Jacobi(crate::solve::Jacobi),
+}
+
+impl Preconditioner for OnKBuilt {
     fn apply(&self, r: &[[f64; 3]], z: &mut [[f64; 3]]) {
         match self {
-            OnK::Blocks(b) => b.apply(r, z),
-            OnK::Factor(f) => {
+            OnKBuilt::Blocks(b) => b.apply(r, z),
+            OnKBuilt::Jacobi(j) => j.apply(r, z),
+            OnKBuilt::Factor(f) => {
                 let mut m = faer::Mat::<f64>::from_fn(r.len(), 3, |i, c| r[i][c]);
                 f.solve_in_place(&mut m)
                     .expect("the solve's scratch was allocated for the factor");
@@ -233,27 +260,29 @@ impl Preconditioner for OnK {
 }
 
 /// Solve (K ⊗ I₃ + C) δ = `b` from `delta` by [`crate::solve::pcg_coupled`], preconditioned by
-/// K factored (`factor`) or by K's block-Jacobi pair (module docs).
+/// K factored, by K's block-Jacobi pair or by K's diagonal (`on_k`; module docs).
 pub fn solve(
     k: &NormalMatrix,
     c: &Coupling,
     b: &[[f64; 3]],
     delta: &mut [[f64; 3]],
     params: &CgParams,
-    factor: bool,
+    on_k: OnK,
 ) -> Result<CgInfo, CgError> {
-    let (indptr, indices, data) = (k.indptr(), k.indices(), k.data());
-    let pre = if factor {
-        OnK::Factor(crate::solve::direct::SparseCholesky::new(
-            indptr, indices, data,
-        )?)
-    } else {
-        OnK::Blocks(crate::solve::block_jacobi::BlockJacobiPair::new(
-            indptr,
-            indices,
-            data,
+    let pre = match on_k {
+        OnK::Factor => OnKBuilt::Factor(crate::solve::direct::SparseCholesky::new(
+            k.indptr(),
+            k.indices(),
+            k.data(),
+        )?),
+        OnK::BlockJacobiPair => OnKBuilt::Blocks(crate::solve::block_jacobi::BlockJacobiPair::new(
+            k.indptr(),
+            k.indices(),
+            k.data(),
             crate::solve::block_jacobi::DEFAULT_BLOCK,
-        )?)
+        )?),
+        // The diagonal of K ⊗ I₃ + C is K's (C's diagonal blocks vanish).
+        OnK::Jacobi => OnKBuilt::Jacobi(crate::solve::Jacobi::new(k)?),
     };
     crate::solve::pcg_coupled(&Rotated { k, c }, &pre, b, delta, params)
 }

@@ -98,9 +98,10 @@ pub struct CurveReport {
     /// Relative residual of the fit's solve.
     pub cg_rel_residual: Option<f64>,
     /// Where the fit's coupled solve ran, when the least-squares fit couples the coordinates
-    /// across rotation seams (its system K ⊗ I₃ + C, `fit::rotated`; absent otherwise):
-    /// always `cpu`, under `--backend gpu` too (the coupled CG has no device kernel: the fit's
-    /// entry of `gpu_traffic` then counts no dispatch of its solve).
+    /// across rotation seams (its system K ⊗ I₃ + C, `fit::rotated`; absent otherwise): `gpu`
+    /// under `--backend gpu` (the device's coupled CG, `exec::gpu::cg::pcg_coupled`), `cpu`
+    /// on the CPU backend, with `--fit-solver cholesky` (K's factor preconditions it on the
+    /// CPU) and under mpirun (the ranks' fit runs on the CPU).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub coupled_fit_device: Option<&'static str>,
     /// `--line-search`: one step for the whole mesh or one per control point.
@@ -253,8 +254,9 @@ pub(crate) struct SplineFigures {
     pub knot_surfaces: Option<KnotSurfaceInfo>,
     /// The fit's solver, its CG figures and the stored entries of its matrix.
     pub fit: Option<(FitSolver, CgInfo, usize)>,
-    /// The fit couples the coordinates across rotation seams (its solve runs on the CPU).
-    pub coupled: bool,
+    /// Where the fit's coupled solve across rotation seams ran (`cpu`, `gpu`); `None` when
+    /// the fit does not couple the coordinates.
+    pub coupled: Option<&'static str>,
     pub demoted: usize,
     pub alpha: Option<f64>,
     pub invalid_at_full_step: usize,
@@ -278,7 +280,7 @@ impl SplineFigures {
             space,
             knot_surfaces: None,
             fit: Some(fit),
-            coupled: false,
+            coupled: None,
             demoted: 0,
             alpha: Some(0.5 * blend.min_factor),
             invalid_at_full_step: blend.invalid_at_full_step,
@@ -391,7 +393,7 @@ impl CurveReport {
                 knot_surfaces: (setup.knot_intervals == KnotIntervals::Graded)
                     .then_some(setup.knot_info),
                 fit: o.fit.as_ref().map(|f| (f.solver, f.cg, f.nonzeros)),
-                coupled: o.fit.is_some() && space.extraction.has_frames(),
+                coupled: o.fit.as_ref().and_then(|f| f.coupled_device),
                 demoted: o.demoted,
                 alpha: o.alpha,
                 invalid_at_full_step: o.invalid_at_full_step,
@@ -504,9 +506,7 @@ impl CurveReport {
             cg_iterations: fit.map(|f| f.1.iterations),
             matrix_nonzeros: fit.map(|f| f.2),
             cg_rel_residual: fit.map(|f| f.1.rel_residual),
-            coupled_fit_device: spline
-                .filter(|s| s.coupled && s.fit.is_some())
-                .map(|_| "cpu"),
+            coupled_fit_device: spline.filter(|s| s.fit.is_some()).and_then(|s| s.coupled),
             line_search_mode: options.line_search_mode,
             line_search_alpha: spline.and_then(|s| s.alpha),
             invalid_at_full_step: spline.map_or(0, |s| s.invalid_at_full_step),

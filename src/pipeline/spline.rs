@@ -23,14 +23,16 @@ use super::share::{
 };
 use super::{CurveError, Geometry, Job};
 use crate::energy::{EnergyError, EnergyInfo, EnergyParams};
+use crate::fit::rotated::{Coupling, OnK};
 use crate::fit::{
-    FitInfo, FitParams, FitSolver, FitTargets, SmoothTargets, Summing, TargetMap,
-    fit_with_targets_from,
+    FitInfo, FitParams, FitSolve, FitSolver, FitTargets, NormalMatrix, SmoothTargets, Summing,
+    TargetMap, fit_with_solver,
 };
 use crate::mesh::features::Features;
 use crate::mesh::periodic::PeriodicPair;
 use crate::mesh::{LinearMesh, Topology};
 use crate::progress::{Progress, Stage};
+use crate::solve::{CgError, CgInfo, CgParams};
 use crate::spline::seam::{self, Glued, SeamView};
 use crate::spline::{
     ElementRows, KnotSurfaceInfo, KnotWeights, Knots, Q2Reason, SplineSpace, kinks,
@@ -1018,31 +1020,17 @@ fn solve_fit(
         Some(_) if !factors => Summing::Solver,
         _ => Summing::Host,
     };
-    let (mut c_star, mut info) = fit_with_targets_from(
+    let (mut c_star, mut info) = fit_with_solver(
         space,
         job.mesh,
         setup.topo(job),
         &setup.fit_params,
         setup.targets.as_ref(),
         (start, summing),
-        |k, rhs, x, cg| {
-            if factors {
-                return crate::solve::direct::cholesky(
-                    k.indptr(),
-                    k.indices(),
-                    k.data(),
-                    rhs,
-                    x,
-                    job.topo.dim,
-                );
-            }
-            // Asked every iteration, so a cancelled job stops within one iteration rather
-            // than at the end of the solve.
-            let mut report = crate::solve::Cancellable {
-                progress: |i, r| progress.cg(i, r),
-                cancelled: || progress.cancelled(),
-            };
-            job.executor.pcg(k, rhs, x, cg, &mut report)
+        JobSolve {
+            job,
+            factors,
+            progress,
         },
     )
     .map_err(|source| match source {
@@ -1060,6 +1048,67 @@ fn solve_fit(
         crate::fit::features::project_onto_planes(space, setup.topo(job), f, &mut c_star);
     }
     Ok((c_star, info))
+}
+
+/// The fit's solve in a job: K factored where `factors`, else the executor's CG; across
+/// rotation seams the executor's coupled CG, or, where `factors`, the CPU's preconditioned by
+/// K's factor.
+struct JobSolve<'a, 'j> {
+    job: &'a Job<'j>,
+    factors: bool,
+    progress: &'a dyn Progress,
+}
+
+impl JobSolve<'_, '_> {
+    /// The progress receiver as a CG monitor, asked every iteration, so a cancelled job stops
+    /// within one iteration rather than at the end of the solve.
+    fn monitor(&self) -> impl crate::solve::CgMonitor + '_ {
+        crate::solve::Cancellable {
+            progress: |i, r| self.progress.cg(i, r),
+            cancelled: || self.progress.cancelled(),
+        }
+    }
+}
+
+impl FitSolve for JobSolve<'_, '_> {
+    fn solve(
+        self,
+        k: NormalMatrix,
+        rhs: &[[f64; 3]],
+        x: &mut [[f64; 3]],
+        cg: &CgParams,
+    ) -> Result<CgInfo, CgError> {
+        if self.factors {
+            let (indptr, indices, data) = (k.indptr(), k.indices(), k.data());
+            return crate::solve::direct::cholesky(
+                indptr,
+                indices,
+                data,
+                rhs,
+                x,
+                self.job.topo.dim,
+            );
+        }
+        self.job.executor.pcg(k, rhs, x, cg, &mut self.monitor())
+    }
+
+    fn solve_coupled(
+        self,
+        k: NormalMatrix,
+        c: &Coupling,
+        rhs: &[[f64; 3]],
+        x: &mut [[f64; 3]],
+        cg: &CgParams,
+        _: bool,
+    ) -> Result<(CgInfo, &'static str), CgError> {
+        if self.factors {
+            let info = crate::fit::rotated::solve(&k, c, rhs, x, cg, OnK::Factor)?;
+            return Ok((info, "cpu"));
+        }
+        let executor = self.job.executor;
+        let info = executor.pcg_coupled(k, c, rhs, x, cg, &mut self.monitor())?;
+        Ok((info, executor.name()))
+    }
 }
 
 /// The certified blend from the straight elevation to the fitted map (`validity::blend`).

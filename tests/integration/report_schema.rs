@@ -58,7 +58,11 @@ fn curve_reports_validate_against_the_documented_schema() {
     // The per-rank objects are written only under mpirun (the distributed test binary).
     let mut may_miss = vec!["rank"];
     match report_of("gpu", d3, &["--backend", "gpu"]) {
-        Ok(r) => reports.push(r),
+        Ok(r) => {
+            reports.push(r);
+            // The sector's coupled fit on the device (`coupled_fit_device`: `gpu`).
+            reports.push(report_of("sector_gpu", &sector, &["--backend", "gpu"]).unwrap());
+        }
         Err(e) if e.contains("no GPU adapter") || e.contains("no hardware GPU adapter") => {
             common::skip(
                 &test,

@@ -1,7 +1,9 @@
 //! CPU twin of `shaders/cg.wgsl`: second reduction stage with α/β, and the vector updates.
 //! Its α and β are the CPU solvers' arithmetic ([`step_lengths`], [`direction_weights`]) at
 //! the kernel's precision; which components run is the shader's test (rᵀr > target² in that
-//! precision).
+//! precision). Coupled (`CgKernelParams::coupled`), the finalisers run the one recurrence
+//! of the CPU's coupled CG (`solve::Coupled`): each reduction's three lanes summed into lane 0,
+//! lane 0's α and β stepping all three.
 
 use super::{Real, Vec4};
 use crate::solve::{direction_weights, step_lengths};
@@ -13,7 +15,9 @@ pub struct CgKernelParams {
     pub n: u32,
     pub n_partials: u32,
     pub max_iters: u32,
-    pub _pad: u32,
+    /// 1: one recurrence over the three lanes (the fit's coupled system across rotation
+    /// seams), 0: one per lane.
+    pub coupled: u32,
 }
 const _: () = assert!(std::mem::size_of::<CgKernelParams>() == 16);
 
@@ -51,6 +55,23 @@ fn add<T: Real>(a: Vec4<T>, b: Vec4<T>) -> Vec4<T> {
     std::array::from_fn(|k| a[k] + b[k])
 }
 
+/// The three lanes' sum in lane 0 (coupled), or `v` itself: the shader's `sums`.
+fn sums<T: Real>(params: &CgKernelParams, v: Vec4<T>) -> Vec4<T> {
+    if params.coupled != 0 {
+        let z = T::of(0.0);
+        return [v[0] + v[1] + v[2], z, z, z];
+    }
+    v
+}
+
+/// Lane 0 on the three lanes (coupled), or `v` itself: the shader's `steps`.
+fn steps<T: Real>(params: &CgKernelParams, v: Vec4<T>) -> Vec4<T> {
+    if params.coupled != 0 {
+        return [v[0], v[0], v[0], T::of(0.0)];
+    }
+    v
+}
+
 /// Sum the partial pairs into (a·b, a·a) with the shader's lane order and tree.
 fn reduce_partials<T: Real>(params: &CgKernelParams, partials: &[Vec4<T>]) -> (Vec4<T>, Vec4<T>) {
     let mut s0 = [[T::of(0.0); 4]; WG];
@@ -81,6 +102,7 @@ pub fn finalize_alpha<T: Real>(
     partials: &[Vec4<T>],
 ) {
     let (pap, _) = reduce_partials(params, partials);
+    let pap = sums(params, pap);
     let mut alpha = [T::of(0.0); 4];
     let mut running = false;
     if state.done == 0 && state.breakdown == 0 {
@@ -104,7 +126,7 @@ pub fn finalize_alpha<T: Real>(
         }
     }
     scalars.pap = pap;
-    scalars.alpha = alpha;
+    scalars.alpha = steps(params, alpha);
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -135,6 +157,7 @@ pub fn finalize_beta<T: Real>(
     partials: &[Vec4<T>],
 ) {
     let (rz_new, rr_new) = reduce_partials(params, partials);
+    let (rz_new, rr_new) = (sums(params, rz_new), sums(params, rr_new));
     let mut beta = [T::of(0.0); 4];
     if state.done == 0 {
         let [b0, b1, b2] = direction_weights(head(scalars.rz), head(rz_new));
@@ -142,7 +165,7 @@ pub fn finalize_beta<T: Real>(
         scalars.rz = rz_new;
         scalars.rr = rr_new;
     }
-    scalars.beta = beta;
+    scalars.beta = steps(params, beta);
 }
 
 pub fn update_p<T: Real>(

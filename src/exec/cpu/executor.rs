@@ -4,6 +4,7 @@ use crate::energy::colored::{LocalDerivatives, LocalProblem};
 use crate::energy::{CpuEnergyKernel, EnergyKernel, KernelError};
 use crate::exec::{Executor, ExecutorError};
 use crate::fit::NormalMatrix;
+use crate::fit::rotated::{Coupling, OnK};
 use crate::math::{BezierElements, BezierNet};
 use crate::mesh::HighOrderMesh;
 use crate::mesh::{LinearMesh, Topology};
@@ -39,6 +40,18 @@ impl Executor for CpuExecutor {
         progress: &mut dyn crate::solve::CgMonitor,
     ) -> Result<CgInfo, CgError> {
         k.pcg(b, x, params, progress)
+    }
+
+    fn pcg_coupled(
+        &self,
+        k: NormalMatrix,
+        c: &Coupling,
+        b: &[[f64; 3]],
+        x: &mut [[f64; 3]],
+        params: &CgParams,
+        _progress: &mut dyn crate::solve::CgMonitor,
+    ) -> Result<CgInfo, CgError> {
+        crate::fit::rotated::solve(&k, c, b, x, params, OnK::BlockJacobiPair)
     }
 
     fn sample(

@@ -6,6 +6,7 @@
 
 pub mod assemble;
 pub mod cg;
+pub mod coupling;
 pub mod dot;
 pub mod evaluate;
 pub mod executor;

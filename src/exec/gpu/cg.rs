@@ -15,6 +15,16 @@
 //! ([`super::assemble`]). In f64 the refinement's residuals are products on the device, so
 //! the host never sums them.
 //!
+//! [`pcg_coupled`] solves the fit's coupled system across rotation seams, (K ⊗ I₃ + C) x = b
+//! ([`crate::fit::rotated`]), with the same kernels and buffers: each product is spmv.wgsl's
+//! K p followed by `shaders/coupling.wgsl`'s C p over C's block rows (CPU twin
+//! [`crate::exec::cpu::coupling`]), and cg.wgsl's finalisers run one recurrence over the
+//! three coordinates (`CgKernelParams::coupled`: the sums of the three lanes, one α and β),
+//! as the CPU's [`crate::solve::pcg_coupled`] does; preconditioned by K's diagonal ⊗ I₃ (C's
+//! diagonal blocks vanish), the uncoupled solver's point Jacobi. Its f32 refinement scales
+//! the three coordinates of the residual by one norm (a coupled system is not solved
+//! coordinate by coordinate).
+//!
 //! [`pcg`] does not run the CPU solvers' loop ([`crate::solve::iterate`]), whose steps return
 //! their sums to the host after every pass: here the vectors stay on the device, and α, β,
 //! which components still run and the breakdown test are decided by the kernels
@@ -31,14 +41,17 @@ use super::{
     Bound, GpuContext, GpuError, ITEM_WORKGROUP, Precision, bytes_to_reals, groups, reals_to_bytes,
 };
 pub use crate::exec::cpu::cg::{CgKernelParams, CgState};
+pub use crate::exec::cpu::coupling::{BlockRows, CouplingParams};
 pub use crate::exec::cpu::dot::DotParams;
 pub use crate::exec::cpu::spmv::SpmvParams;
 use crate::fit::NormalMatrix;
+use crate::fit::rotated::Coupling;
 use crate::solve::{CgError, CgInfo, CgParams, LinOp, Stopping, residual};
 
 pub const SPMV_SOURCE: &str = include_str!("../../../shaders/spmv.wgsl");
 pub const DOT_SOURCE: &str = include_str!("../../../shaders/dot.wgsl");
 pub const CG_SOURCE: &str = include_str!("../../../shaders/cg.wgsl");
+pub const COUPLING_SOURCE: &str = include_str!("../../../shaders/coupling.wgsl");
 
 /// Iterations encoded per submit (one read-back of a few bytes per batch).
 pub const CG_BATCH: usize = 10;
@@ -240,6 +253,73 @@ impl GpuMatrix {
     }
 }
 
+/// The coupling C's block rows on the device, for `coupling.wgsl` (y += C x after spmv.wgsl's
+/// y = K x).
+pub struct GpuCoupling {
+    params: wgpu::Buffer,
+    rows: wgpu::Buffer,
+    indptr: wgpu::Buffer,
+    cols: wgpu::Buffer,
+    blocks: wgpu::Buffer,
+    n_rows: usize,
+    pipeline: wgpu::ComputePipeline,
+}
+
+impl GpuCoupling {
+    /// `c` uploaded ([`BlockRows`]); `GpuError::TooLarge` where its blocks exceed a binding.
+    pub fn new(ctx: &GpuContext, c: &Coupling) -> Result<GpuCoupling, GpuError> {
+        let rows = BlockRows::of(c);
+        let bytes = 4 * ctx.precision.size() as u64 * rows.blocks.len() as u64;
+        if bytes > ctx.max_binding()
+            || rows.rows.len() > ctx.max_workgroups() as usize * ITEM_WORKGROUP
+        {
+            return Err(GpuError::TooLarge(format!(
+                "the coupling's {} blocks need {bytes} bytes (binding limit {})",
+                rows.cols.len(),
+                ctx.max_binding()
+            )));
+        }
+        Ok(GpuCoupling {
+            params: ctx.uniform("coupling params", &rows.params()),
+            rows: ctx.storage("coupling rows", bytemuck::cast_slice(&rows.rows), false),
+            indptr: ctx.storage("coupling indptr", bytemuck::cast_slice(&rows.indptr), false),
+            cols: ctx.storage("coupling cols", bytemuck::cast_slice(&rows.cols), false),
+            blocks: ctx.storage(
+                "coupling blocks",
+                &reals_to_bytes(ctx.precision, rows.blocks.iter().flatten().copied()),
+                false,
+            ),
+            n_rows: rows.rows.len(),
+            pipeline: ctx.pipeline(COUPLING_SOURCE, "coupling"),
+        })
+    }
+
+    /// The bind group of y += C x.
+    fn bind(&self, ctx: &GpuContext, x: &wgpu::Buffer, y: &wgpu::Buffer) -> Bound {
+        ctx.bind(
+            &self.pipeline,
+            &[
+                (0, &self.params),
+                (1, &self.rows),
+                (2, &self.indptr),
+                (3, &self.cols),
+                (4, &self.blocks),
+                (5, x),
+                (6, y),
+            ],
+        )
+    }
+
+    fn encode(&self, ctx: &GpuContext, pass: &mut wgpu::ComputePass<'_>, bound: &Bound) {
+        ctx.dispatch(
+            pass,
+            &self.pipeline,
+            bound,
+            groups(self.n_rows, ITEM_WORKGROUP),
+        );
+    }
+}
+
 /// Vectors of three components as vec4 lanes at precision `p`.
 fn vec4_bytes(p: Precision, v: &[[f64; 3]]) -> Vec<u8> {
     reals_to_bytes(p, v.iter().flat_map(|x| [x[0], x[1], x[2], 0.0]))
@@ -260,6 +340,8 @@ pub struct GpuOperator<'a> {
     ctx: &'a GpuContext,
     matrix: GpuMatrix,
     pipeline: wgpu::ComputePipeline,
+    /// C of the coupled system K ⊗ I₃ + C, applied after K ([`GpuOperator::coupled`]).
+    coupling: Option<GpuCoupling>,
     failed: std::sync::Mutex<Option<GpuError>>,
 }
 
@@ -269,7 +351,17 @@ impl<'a> GpuOperator<'a> {
             ctx,
             matrix: GpuMatrix::new(ctx, a)?,
             pipeline: ctx.pipeline(SPMV_SOURCE, "spmv"),
+            coupling: None,
             failed: std::sync::Mutex::new(None),
+        })
+    }
+
+    /// The coupled operator K ⊗ I₃ + C of the fit across rotation seams: spmv.wgsl, then
+    /// coupling.wgsl.
+    pub fn coupled(ctx: &'a GpuContext, a: &NormalMatrix, c: &Coupling) -> Result<Self, GpuError> {
+        Ok(GpuOperator {
+            coupling: Some(GpuCoupling::new(ctx, c)?),
+            ..Self::new(ctx, a)?
         })
     }
 
@@ -280,10 +372,14 @@ impl<'a> GpuOperator<'a> {
         let xb = ctx.storage("x", &vec4_bytes(ctx.precision, x), false);
         let yb = ctx.storage_zeroed("y", bytes);
         let binds = self.matrix.bind(ctx, &self.pipeline, &xb, &yb);
+        let coupled = self.coupling.as_ref().map(|c| (c, c.bind(ctx, &xb, &yb)));
         let mut enc = ctx.device.create_command_encoder(&Default::default());
         {
             let mut pass = enc.begin_compute_pass(&Default::default());
             self.matrix.encode(ctx, &mut pass, &self.pipeline, &binds);
+            if let Some((c, bound)) = &coupled {
+                c.encode(ctx, &mut pass, bound);
+            }
         }
         ctx.submit(enc);
         Ok(from_vec4(&bytes_to_reals(
@@ -367,13 +463,20 @@ struct CgKernels<'c> {
     /// x (the inner correction d), r, z, p, Ap, 1/diag, partials, scalars, state.
     buffers: [wgpu::Buffer; 9],
     spmv_binds: Vec<Bound>,
+    /// C and its bind group of Ap += C p, for the coupled system.
+    coupling: Option<(GpuCoupling, Bound)>,
     dot_pap: Bound,
     dot_rz: Bound,
     staging: wgpu::Buffer,
 }
 
 impl<'c> CgKernels<'c> {
-    fn new(ctx: &'c GpuContext, a: &NormalMatrix, inv: &[f64]) -> Result<Self, GpuError> {
+    fn new(
+        ctx: &'c GpuContext,
+        a: &NormalMatrix,
+        c: Option<&Coupling>,
+        inv: &[f64],
+    ) -> Result<Self, GpuError> {
         let (n, prec) = (a.n(), ctx.precision);
         let sz = prec.size() as u64;
         let vbytes = 4 * sz * n as u64;
@@ -411,6 +514,14 @@ impl<'c> CgKernels<'c> {
         );
         let dot = &pipelines[1];
         let spmv_binds = matrix.bind(ctx, &pipelines[0], p, ap);
+        let coupling = match c {
+            Some(c) => {
+                let c = GpuCoupling::new(ctx, c)?;
+                let bound = c.bind(ctx, p, ap);
+                Some((c, bound))
+            }
+            None => None,
+        };
         let dot_pap = ctx.bind(dot, &[(0, &dot_params), (1, p), (2, ap), (3, partials)]);
         let dot_rz = ctx.bind(dot, &[(0, &dot_params), (1, r), (2, z), (3, partials)]);
         let staging = ctx.device.create_buffer(&wgpu::BufferDescriptor {
@@ -426,6 +537,7 @@ impl<'c> CgKernels<'c> {
             pipelines,
             buffers,
             spmv_binds,
+            coupling,
             dot_pap,
             dot_rz,
             staging,
@@ -461,7 +573,7 @@ impl<'c> CgKernels<'c> {
                 n: n as u32,
                 n_partials: DOT_WORKGROUPS,
                 max_iters,
-                _pad: 0,
+                coupled: u32::from(self.coupling.is_some()),
             },
         );
         let fa = ctx.bind(fin_a, &[(0, &cgp), (1, scalars), (2, state), (3, partials)]);
@@ -505,18 +617,25 @@ impl<'c> CgKernels<'c> {
         Ok((st, d))
     }
 
-    /// A x on the device (x uploaded, A x read back).
+    /// A x on the device (x uploaded, A x read back; A = K ⊗ I₃ + C when coupled).
     fn product(&self, x: &[[f64; 3]]) -> Result<Vec<[f64; 3]>, GpuError> {
         let ctx = self.ctx;
         let bytes = 4 * ctx.precision.size() as u64 * self.n as u64;
         let xb = ctx.storage("x", &vec4_bytes(ctx.precision, x), false);
         let yb = ctx.storage_zeroed("y", bytes);
         let binds = self.matrix.bind(ctx, &self.pipelines[0], &xb, &yb);
+        let coupled = self
+            .coupling
+            .as_ref()
+            .map(|(c, _)| (c, c.bind(ctx, &xb, &yb)));
         let mut enc = ctx.device.create_command_encoder(&Default::default());
         {
             let mut pass = enc.begin_compute_pass(&Default::default());
             self.matrix
                 .encode(ctx, &mut pass, &self.pipelines[0], &binds);
+            if let Some((c, bound)) = &coupled {
+                c.encode(ctx, &mut pass, bound);
+            }
         }
         ctx.submit(enc);
         Ok(from_vec4(&bytes_to_reals(
@@ -525,18 +644,25 @@ impl<'c> CgKernels<'c> {
         )))
     }
 
-    /// r = b − A x in f64: in f64 A x on the device (whoever summed A's values: the host
-    /// need not hold them, and the iterates do not depend on where they were summed; from
-    /// x = 0, r = b without a product), in f32 on the host.
+    /// r = b − A x in f64 (A = K ⊗ I₃ + C when `c` is given): in f64 A x on the device
+    /// (whoever summed K's values: the host need not hold them, and the iterates do not
+    /// depend on where they were summed; from x = 0, r = b without a product), in f32 on the
+    /// host.
     fn residual(
         &self,
-        a: &NormalMatrix,
+        (a, c): (&NormalMatrix, Option<&Coupling>),
         b: &[[f64; 3]],
         x: &[[f64; 3]],
         r: &mut [[f64; 3]],
     ) -> Result<(), CgError> {
         if !super::assemble::exact(self.ctx.precision) {
-            residual(&mut |v, y| a.apply(v, y), b, x, r);
+            let mut apply = |v: &[[f64; 3]], y: &mut [[f64; 3]]| {
+                a.apply(v, y);
+                if let Some(c) = c {
+                    c.apply_add(v, y);
+                }
+            };
+            residual(&mut apply, b, x, r);
         } else if x.iter().all(|v| *v == [0.0; 3]) {
             r.copy_from_slice(b);
         } else {
@@ -554,6 +680,9 @@ impl<'c> CgKernels<'c> {
         let [fa, uxr, fb, up] = binds;
         let lanes = groups(self.n, ITEM_WORKGROUP);
         self.matrix.encode(self.ctx, pass, spmv, &self.spmv_binds);
+        if let Some((c, bound)) = &self.coupling {
+            c.encode(self.ctx, pass, bound);
+        }
         for (pipeline, bind, groups) in [
             (dot, &self.dot_pap, DOT_WORKGROUPS),
             (fin_a, fa, 1),
@@ -575,6 +704,34 @@ pub fn pcg(
     b: &[[f64; 3]],
     x: &mut [[f64; 3]],
     params: &CgParams,
+    progress: impl crate::solve::CgMonitor,
+) -> Result<CgInfo, CgError> {
+    solve_on_device(ctx, (a, None), b, x, params, progress)
+}
+
+/// The coupled CG for (`a` ⊗ I₃ + `c`) x = b with the iteration on the GPU, preconditioned by
+/// `a`'s diagonal ⊗ I₃ (see the module docs): the recurrence, stopping rule and iterates of
+/// [`crate::solve::pcg_coupled`] with [`crate::fit::rotated::OnK::Jacobi`], to the device's
+/// rounding. A device failure is [`CgError::Device`].
+pub fn pcg_coupled(
+    ctx: &GpuContext,
+    a: &NormalMatrix,
+    c: &Coupling,
+    b: &[[f64; 3]],
+    x: &mut [[f64; 3]],
+    params: &CgParams,
+    progress: impl crate::solve::CgMonitor,
+) -> Result<CgInfo, CgError> {
+    solve_on_device(ctx, (a, Some(c)), b, x, params, progress)
+}
+
+/// [`pcg`] (`c` None) or [`pcg_coupled`].
+fn solve_on_device(
+    ctx: &GpuContext,
+    (a, c): (&NormalMatrix, Option<&Coupling>),
+    b: &[[f64; 3]],
+    x: &mut [[f64; 3]],
+    params: &CgParams,
     mut progress: impl crate::solve::CgMonitor,
 ) -> Result<CgInfo, CgError> {
     let n = a.n();
@@ -585,8 +742,18 @@ pub fn pcg(
         return Err(CgError::BadDiagonal { row, value });
     }
     let inv: Vec<f64> = diag.iter().map(|d| 1.0 / d).collect();
-    let kernels = CgKernels::new(ctx, a, &inv).map_err(|e| CgError::Device(e.to_string()))?;
-    let stop = Stopping::new(dot3(b, b).map(f64::sqrt), params);
+    let kernels = CgKernels::new(ctx, a, c, &inv).map_err(|e| CgError::Device(e.to_string()))?;
+    // The coupled recurrence's sums are over the three coordinates, in the first component
+    // (the CPU's `solve::Coupled`), the other two converged from the start.
+    let coupled = c.is_some();
+    let sums = |d: [f64; 3]| {
+        if coupled {
+            [d[0] + d[1] + d[2], 0.0, 0.0]
+        } else {
+            d
+        }
+    };
+    let stop = Stopping::new(sums(dot3(b, b)).map(f64::sqrt), params);
     let rel = |rr: [f64; 3]| stop.rel(rr);
     let inner_reduction = match ctx.precision {
         Precision::F32 => F32_INNER_REDUCTION,
@@ -596,8 +763,8 @@ pub fn pcg(
     let mut res = vec![[0.0; 3]; n];
     for _round in 0..MAX_REFINEMENTS {
         // f64 residual of the current iterate.
-        kernels.residual(a, b, x, &mut res)?;
-        let rr = dot3(&res, &res);
+        kernels.residual((a, c), b, x, &mut res)?;
+        let rr = sums(dot3(&res, &res));
         if stop.converged(rr) {
             return Ok(CgInfo {
                 iterations: total,
@@ -608,9 +775,11 @@ pub fn pcg(
             break;
         }
         // Inner problem A d = res / s from d = 0, each component scaled by its residual norm
-        // s_k (the components have separate recurrences, so this is exact) so that f32 sees
-        // O(1) values: no underflow of squared norms when b is tiny.
-        let scale: [f64; 3] = std::array::from_fn(|k| if rr[k] > 0.0 { rr[k].sqrt() } else { 1.0 });
+        // s_k (the components have separate recurrences, so this is exact; coupled, all three
+        // by the one norm) so that f32 sees O(1) values: no underflow of squared norms when b
+        // is tiny.
+        let norm = |k: usize| if rr[k] > 0.0 { rr[k].sqrt() } else { 1.0 };
+        let scale: [f64; 3] = std::array::from_fn(|k| norm(if coupled { 0 } else { k }));
         for r in res.iter_mut() {
             for k in 0..3 {
                 r[k] /= scale[k];
@@ -621,8 +790,8 @@ pub fn pcg(
             .zip(&inv)
             .map(|(r, d)| r.map(|v| v * d))
             .collect();
-        let rz = dot3(&res, &zv);
-        let rr_scaled = dot3(&res, &res);
+        let rz = sums(dot3(&res, &zv));
+        let rr_scaled = sums(dot3(&res, &res));
         let mut sc = vec![0.0f64; SCALARS];
         for k in 0..3 {
             sc[k] = rz[k];
@@ -635,11 +804,12 @@ pub fn pcg(
             };
         }
         let max_iters = (params.max_iters - total).min(u32::MAX as usize) as u32;
+        let lanes = if coupled { 1 } else { 3 };
         let (st, d) = kernels.solve(&res, &zv, sc, max_iters, |st, sc| {
             if st.breakdown > 0 {
                 return Err(CgError::NotPositiveDefinite {
                     iteration: total + st.breakdown as usize - 1,
-                    curvature: (0..3).map(|k| sc[20 + k]).fold(f64::INFINITY, f64::min),
+                    curvature: (0..lanes).map(|k| sc[20 + k]).fold(f64::INFINITY, f64::min),
                 });
             }
             let rr_now: [f64; 3] = std::array::from_fn(|k| sc[4 + k] * scale[k] * scale[k]);
@@ -657,8 +827,8 @@ pub fn pcg(
         total += st.iterations as usize;
     }
     // The final iterate's residual in f64.
-    kernels.residual(a, b, x, &mut res)?;
-    let rr = dot3(&res, &res);
+    kernels.residual((a, c), b, x, &mut res)?;
+    let rr = sums(dot3(&res, &res));
     if stop.converged(rr) {
         return Ok(CgInfo {
             iterations: total,

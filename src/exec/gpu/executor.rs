@@ -8,6 +8,7 @@ use crate::energy::colored::{LocalDerivatives, LocalProblem};
 use crate::energy::{EnergyKernel, KernelError};
 use crate::exec::{Executor, ExecutorError};
 use crate::fit::NormalMatrix;
+use crate::fit::rotated::Coupling;
 use crate::math::{BezierElements, BezierNet};
 use crate::mesh::HighOrderMesh;
 use crate::mesh::{LinearMesh, Topology};
@@ -74,6 +75,18 @@ impl Executor for GpuExecutor<'_> {
         progress: &mut dyn crate::solve::CgMonitor,
     ) -> Result<CgInfo, CgError> {
         super::cg::pcg(self.ctx(), &k, b, x, params, progress)
+    }
+
+    fn pcg_coupled(
+        &self,
+        k: NormalMatrix,
+        c: &Coupling,
+        b: &[[f64; 3]],
+        x: &mut [[f64; 3]],
+        params: &CgParams,
+        progress: &mut dyn crate::solve::CgMonitor,
+    ) -> Result<CgInfo, CgError> {
+        super::cg::pcg_coupled(self.ctx(), &k, c, b, x, params, progress)
     }
 
     fn sample(

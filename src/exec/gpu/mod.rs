@@ -571,8 +571,9 @@ pub fn shader_source(source: &str, precision: Precision) -> String {
 }
 
 /// The WGSL sources by file name, for validation.
-pub const SHADERS: [(&str, &str); 7] = [
+pub const SHADERS: [(&str, &str); 8] = [
     ("assemble.wgsl", assemble::SOURCE),
+    ("coupling.wgsl", cg::COUPLING_SOURCE),
     ("evaluate.wgsl", evaluate::SOURCE),
     ("jacobian_check.wgsl", jacobian_check::SOURCE),
     ("spmv.wgsl", cg::SPMV_SOURCE),

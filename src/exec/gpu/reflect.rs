@@ -40,8 +40,9 @@ include!(concat!(env!("OUT_DIR"), "/shader_reflection.rs"));
 pub const ITEM_WORKGROUP: u32 = 64;
 
 /// The kernels dispatched as `groups(n, ITEM_WORKGROUP)` workgroups.
-const ITEM_KERNELS: [&str; 7] = [
+const ITEM_KERNELS: [&str; 8] = [
     "assemble",
+    "coupling",
     "evaluate",
     "jacobian_check",
     "local_newton",
