@@ -1723,7 +1723,7 @@ impl BlockedSystem {
             ring: lines.ring.clone(),
         };
         let n = self.agg.rows.len();
-        let blocks = LineBlocks::new(n, &renamed, |i, f| a.for_each_entry(i, |c, v| f(c, v)))?;
+        let blocks = LineBlocks::new(n, &renamed, |i, f| a.for_each_entry(i, f))?;
         let (share_start, share_at) = blocks.shares(n);
         self.lines = Some(LineSystem {
             blocks,
