@@ -73,7 +73,7 @@ pub enum CgPreconditioner {
     BlockJacobiPair { size: usize },
     /// Block Jacobi on aggregates of at most `size` unknowns plus the line blocks of the
     /// fit's control points ([`lines`]): z = M⁻¹ r + Σ_l R_lᵀ K_l⁻¹ R_l r. Lines exist only
-    /// where the matrix comes with them (the fit's [`crate::fit::NormalMatrix`]); elsewhere
+    /// where the matrix comes with them (the fit's normal matrix); elsewhere
     /// (other operators, the distributed solve, the coupled fit) this is the pair.
     BlockJacobiLines { size: usize },
 }
