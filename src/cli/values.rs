@@ -195,6 +195,7 @@ pub(super) enum CgPreconditioner {
     BlockJacobi,
     BlockSgs,
     BlockJacobiPair,
+    BlockJacobiLines,
 }
 
 impl From<CgPreconditioner> for LibCgPreconditioner {
@@ -210,6 +211,9 @@ impl From<CgPreconditioner> for LibCgPreconditioner {
             CgPreconditioner::BlockJacobiPair => LibCgPreconditioner::BlockJacobiPair {
                 size: DEFAULT_BLOCK,
             },
+            CgPreconditioner::BlockJacobiLines => LibCgPreconditioner::BlockJacobiLines {
+                size: DEFAULT_BLOCK,
+            },
         }
     }
 }
@@ -221,6 +225,7 @@ impl From<LibCgPreconditioner> for CgPreconditioner {
             LibCgPreconditioner::BlockJacobi { .. } => CgPreconditioner::BlockJacobi,
             LibCgPreconditioner::BlockSgs { .. } => CgPreconditioner::BlockSgs,
             LibCgPreconditioner::BlockJacobiPair { .. } => CgPreconditioner::BlockJacobiPair,
+            LibCgPreconditioner::BlockJacobiLines { .. } => CgPreconditioner::BlockJacobiLines,
         }
     }
 }

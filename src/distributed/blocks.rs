@@ -291,7 +291,9 @@ impl Aggregation {
             CgPreconditioner::BlockJacobi { size } => {
                 Some(Aggregation::new(comm, halo, stencils, size, false))
             }
-            CgPreconditioner::BlockJacobiPair { size } => {
+            // The lines would cross the ranks' shares: the pair instead.
+            CgPreconditioner::BlockJacobiPair { size }
+            | CgPreconditioner::BlockJacobiLines { size } => {
                 Some(Aggregation::new(comm, halo, stencils, size, true))
             }
             CgPreconditioner::Jacobi | CgPreconditioner::BlockSgs { .. } => None,

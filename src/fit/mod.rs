@@ -824,6 +824,9 @@ pub fn fit_with_solver(
     if start.is_some() {
         keep_closer_starts(&k, &rhs, &mut delta);
     }
+    if params.cg.preconditioner.with_lines() && coupling.is_none() {
+        k.set_lines(control_point_lines(space));
+    }
     // The solve takes K (the CPU's blocked solvers release it as they reorder it).
     let (unknowns, nonzeros) = (k.n(), k.indices().len());
     let (cg, coupled_device) = match &coupling {
@@ -861,6 +864,22 @@ pub fn fit_with_solver(
             coupled_device,
         },
     ))
+}
+
+/// The lattice lines of `space`'s control points ([`crate::solve::lines`]), from the
+/// stencils of its elements whose local nodes are distinct plain control points.
+pub fn control_point_lines(space: &dyn FitSpace) -> crate::solve::lines::Lines {
+    let len = if space.dim() == 3 { 27 } else { 9 };
+    let (mut ids, mut stencils) = (Vec::new(), Vec::new());
+    for e in 0..space.n_elements() {
+        if space.element_factors(e, &mut ids).is_some() && ids.len() == len {
+            stencils.extend_from_slice(&ids);
+        }
+    }
+    crate::solve::lines::Lines::from_stencils(
+        space.control_points().len(),
+        stencils.chunks_exact(len),
+    )
 }
 
 /// Zero every component of the start `delta` whose residual ‖rhs − K δ‖ is not below the

@@ -20,6 +20,9 @@ pub struct NormalMatrix {
     indptr: Vec<usize>,
     indices: Vec<u32>,
     values: Values,
+    /// The control points' lattice lines, for the line blocks of
+    /// [`crate::solve::CgPreconditioner::BlockJacobiLines`] ([`Self::set_lines`]).
+    lines: Option<crate::solve::lines::Lines>,
 }
 
 /// A matrix stored by row template: row offsets, columns, template per row, templates.
@@ -62,6 +65,7 @@ impl NormalMatrix {
         NormalMatrix {
             indptr,
             indices,
+            lines: None,
             values: Values::Full(data),
         }
     }
@@ -83,6 +87,7 @@ impl NormalMatrix {
         NormalMatrix {
             indptr,
             indices,
+            lines: None,
             values: Values::Templated {
                 row_template,
                 table,
@@ -101,6 +106,7 @@ impl NormalMatrix {
         NormalMatrix {
             indptr,
             indices,
+            lines: None,
             values: Values::Deferred {
                 sums,
                 scale: None,
@@ -154,6 +160,12 @@ impl NormalMatrix {
                 full.get_or_init(|| sums.values(&self.indptr, &self.indices, scale.as_deref()))
             }
         }
+    }
+
+    /// Give the solve the control points' lattice lines (unknowns numbered as K's rows), for
+    /// [`crate::solve::CgPreconditioner::BlockJacobiLines`].
+    pub fn set_lines(&mut self, lines: crate::solve::lines::Lines) {
+        self.lines = Some(lines);
     }
 
     /// The CSR arrays (row offsets, columns, values), without copying them (row templates
@@ -227,13 +239,30 @@ impl NormalMatrix {
     /// ([`crate::solve::BlockedSystem::from_parts`]; row templates are taken as they are), so
     /// the solve's peak memory does not hold A twice. Same iterates as `pcg(&self, ..)`.
     pub fn pcg(
-        self,
+        mut self,
         b: &[[f64; 3]],
         x: &mut [[f64; 3]],
         params: &crate::solve::CgParams,
         progress: impl crate::solve::CgMonitor,
     ) -> Result<crate::solve::CgInfo, CgError> {
-        match params.preconditioner.blocked() {
+        // Line blocks on block Jacobi where asked for and known; the preconditioner's own
+        // blocked kind otherwise.
+        let lines = self
+            .lines
+            .take()
+            .filter(|_| params.preconditioner.with_lines());
+        let blocked = params
+            .preconditioner
+            .blocked()
+            .map(|(size, kind)| match lines {
+                Some(_) => (size, crate::solve::BlockedKind::Jacobi),
+                None => (size, kind),
+            });
+        let with_lines = |sys: crate::solve::BlockedSystem| match &lines {
+            Some(l) => sys.with_lines(l),
+            None => Ok(sys),
+        };
+        match blocked {
             Some((size, kind)) => match self.values {
                 Values::Templated {
                     row_template,
@@ -242,20 +271,22 @@ impl NormalMatrix {
                 } => {
                     // An expanded copy, if one was asked for, is not kept through the solve.
                     drop(full);
-                    crate::solve::BlockedSystem::from_templates(
+                    with_lines(crate::solve::BlockedSystem::from_templates(
                         self.indptr,
                         self.indices,
                         row_template,
                         table,
                         size,
                         kind,
-                    )?
+                    )?)?
                     .solve(b, x, params, progress)
                 }
                 Values::Full(_) | Values::Deferred { .. } => {
                     let (indptr, indices, data) = self.into_parts();
-                    crate::solve::BlockedSystem::from_parts(indptr, indices, data, size, kind)?
-                        .solve(b, x, params, progress)
+                    with_lines(crate::solve::BlockedSystem::from_parts(
+                        indptr, indices, data, size, kind,
+                    )?)?
+                    .solve(b, x, params, progress)
                 }
             },
             None => crate::solve::pcg(&self, b, x, params, progress),

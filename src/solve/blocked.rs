@@ -41,6 +41,7 @@
 //! aggregates) added in order, so the result does not depend on the thread count.
 
 use super::block_jacobi::{Aggregates, FactorValue, factor_blocks, split_at_offsets};
+use super::lines::{LineBlocks, Lines};
 use super::{CgError, CgInfo, CgParams, CgSteps, Pair, Stopping, iterate};
 use rayon::prelude::*;
 use std::borrow::Cow;
@@ -580,6 +581,16 @@ pub struct BlockedSystem {
     first: Vec<u32>,
     /// The second partition of the pair preconditioner ([`BlockedKind::JacobiPair`]).
     second: Option<SecondPartition>,
+    /// Line blocks added to the preconditioner ([`Self::with_lines`]).
+    lines: Option<LineSystem>,
+}
+
+/// Line blocks in the system's numbering ([`super::lines`]), and per row the positions of its
+/// shares in the lines' order (row i's at `share_at[share_start[i]..share_start[i + 1]]`).
+struct LineSystem {
+    blocks: LineBlocks,
+    share_start: Vec<u32>,
+    share_at: Vec<u32>,
 }
 
 /// The diagonal blocks' factors as stored: f32 for block Jacobi and the pair (widened per block
@@ -1694,7 +1705,37 @@ impl BlockedSystem {
             factor_start,
             first,
             second,
+            lines: None,
         })
+    }
+
+    /// This block-Jacobi system (or pair) with the line blocks of `lines` (unknowns in A's
+    /// numbering) added to its preconditioner: z = M⁻¹ r + Σ_l R_lᵀ K_l⁻¹ R_l r
+    /// ([`super::lines`]). A Gauss–Seidel system is returned as it is.
+    pub fn with_lines(mut self, lines: &Lines) -> Result<Self, CgError> {
+        let Operator::Whole(a) = &self.op else {
+            return Ok(self);
+        };
+        let slot = &self.agg.slot;
+        let renamed = Lines {
+            points: lines.points.iter().map(|&p| slot[p as usize]).collect(),
+            start: lines.start.clone(),
+            ring: lines.ring.clone(),
+        };
+        let n = self.agg.rows.len();
+        let blocks = LineBlocks::new(n, &renamed, |i, f| a.for_each_entry(i, f))?;
+        let (share_start, share_at) = blocks.shares(n);
+        self.lines = Some(LineSystem {
+            blocks,
+            share_start,
+            share_at,
+        });
+        Ok(self)
+    }
+
+    /// Number of line segments in the preconditioner ([`Self::with_lines`]; 0 without).
+    pub fn n_line_blocks(&self) -> usize {
+        self.lines.as_ref().map_or(0, |l| l.blocks.len())
     }
 
     /// The group and colour boundaries of the symmetric block Gauss–Seidel preconditioner
@@ -2058,10 +2099,22 @@ impl BlockedSystem {
     }
 
     /// p = z + β p, where z is the first partition's z₁ alone or, for the pair, ½ (z₁ + z₂)
-    /// with z₂ gathered from the second partition's order (never stored: p is its only user).
-    fn next_direction(&self, beta: V4, z: &[V4], z2: &[V4], p: &mut [V4]) {
+    /// with z₂ gathered from the second partition's order (never stored: p is its only user),
+    /// plus, with lines, each row's shares of the line solves `zl` (in line order).
+    fn next_direction(&self, beta: V4, z: &[V4], z2: &[V4], zl: &[V4], p: &mut [V4]) {
+        let lines = |i: usize, v: &mut V4| {
+            if let Some(l) = &self.lines {
+                let (s, e) = (l.share_start[i] as usize, l.share_start[i + 1] as usize);
+                for &k in &l.share_at[s..e] {
+                    let w = zl[k as usize];
+                    for c in 0..4 {
+                        v[c] += w[c];
+                    }
+                }
+            }
+        };
         match &self.second {
-            None => p
+            None if self.lines.is_none() => p
                 .par_iter_mut()
                 .zip(z.par_iter())
                 .with_min_len(ROW_CHUNK)
@@ -2070,16 +2123,43 @@ impl BlockedSystem {
                         p[k] = z[k] + beta[k] * p[k];
                     }
                 }),
+            None => p
+                .par_iter_mut()
+                .zip(z.par_iter())
+                .enumerate()
+                .with_min_len(ROW_CHUNK)
+                .for_each(|(i, (p, z))| {
+                    let mut v = *z;
+                    lines(i, &mut v);
+                    for c in 0..4 {
+                        p[c] = v[c] + beta[c] * p[c];
+                    }
+                }),
             Some(second) => p
                 .par_iter_mut()
                 .zip(z.par_iter().zip(second.slot.par_iter()))
+                .enumerate()
                 .with_min_len(ROW_CHUNK)
-                .for_each(|(p, (z, &k))| {
+                .for_each(|(i, (p, (z, &k)))| {
                     let w = z2[k as usize];
+                    let mut v: V4 = std::array::from_fn(|c| 0.5 * (z[c] + w[c]));
+                    lines(i, &mut v);
                     for c in 0..4 {
-                        p[c] = 0.5 * (z[c] + w[c]) + beta[c] * p[c];
+                        p[c] = v[c] + beta[c] * p[c];
                     }
                 }),
+        }
+    }
+
+    /// The line solves' part of z ([`Self::with_lines`]), in line order: zl = K_l⁻¹ r per line;
+    /// returns rᵀz for z = z_blocks + Σ lines given rz = rᵀz_blocks.
+    fn add_lines(&self, rz: V4, r: &[V4], zl: &mut [V4]) -> V4 {
+        match &self.lines {
+            Some(l) => {
+                let rzl = l.blocks.solve(r, zl);
+                std::array::from_fn(|c| rz[c] + rzl[c])
+            }
+            None => rz,
         }
     }
 }
@@ -2098,6 +2178,8 @@ struct JacobiSteps<'a> {
     ap: Vec<V4>,
     /// The second partition's M₂⁻¹ r, in its own order (allocated once per solve).
     z2: Vec<V4>,
+    /// The line solves, in line order (allocated once per solve).
+    zl: Vec<V4>,
 }
 
 impl<'a> JacobiSteps<'a> {
@@ -2114,6 +2196,10 @@ impl<'a> JacobiSteps<'a> {
             ap: written_zeros(n),
             z2: match sys.second {
                 Some(_) => written_zeros(n),
+                None => Vec::new(),
+            },
+            zl: match &sys.lines {
+                Some(l) => written_zeros(l.blocks.points.len()),
                 None => Vec::new(),
             },
         }
@@ -2134,6 +2220,7 @@ impl<'a> JacobiSteps<'a> {
         if let Some(second) = &sys.second {
             rz = sys.add_second(second, a.portable, rz, &self.r, &mut self.z2);
         }
+        rz = sys.add_lines(rz, &self.r, &mut self.zl);
         (head(rz), head(rr))
     }
 }
@@ -2142,11 +2229,11 @@ impl CgSteps for JacobiSteps<'_> {
     fn start(&mut self) -> Pair {
         // z = M⁻¹ r (a zero step leaves x and r as they are).
         let sums = self.update([0.0; 4]);
-        match self.sys.second {
-            Some(_) => self
-                .sys
-                .next_direction([0.0; 4], &self.z, &self.z2, &mut self.p),
-            None => self.p.copy_from_slice(&self.z),
+        if self.sys.second.is_some() || self.sys.lines.is_some() {
+            self.sys
+                .next_direction([0.0; 4], &self.z, &self.z2, &self.zl, &mut self.p);
+        } else {
+            self.p.copy_from_slice(&self.z);
         }
         sums
     }
@@ -2161,7 +2248,7 @@ impl CgSteps for JacobiSteps<'_> {
 
     fn direction(&mut self, beta: [f64; 3]) {
         self.sys
-            .next_direction(lanes(beta), &self.z, &self.z2, &mut self.p);
+            .next_direction(lanes(beta), &self.z, &self.z2, &self.zl, &mut self.p);
     }
 }
 
@@ -2266,12 +2353,14 @@ impl BlockedSystem {
             vec![[0.0; 4]; n],
         );
         let mut z2 = vec![[0.0; 4]; n];
+        let mut zl = vec![[0.0; 4]; self.lines.as_ref().map_or(0, |l| l.blocks.points.len())];
         let _ =
             self.update_and_precondition(a.portable, [0.0; 4], &mut x, &mut rp, &mut z, &p, &ap);
         if let Some(second) = &self.second {
             self.add_second(second, a.portable, [0.0; 4], &rp, &mut z2);
         }
-        self.next_direction([0.0; 4], &z, &z2, &mut p);
+        self.add_lines([0.0; 4], &rp, &mut zl);
+        self.next_direction([0.0; 4], &z, &z2, &zl, &mut p);
         let mut out = vec![[0.0; 3]; n];
         for (&i, v) in rows.iter().zip(&p) {
             out[i as usize] = [v[0], v[1], v[2]];

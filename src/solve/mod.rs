@@ -30,6 +30,7 @@
 pub mod block_jacobi;
 pub mod blocked;
 pub mod direct;
+pub mod lines;
 pub mod steps;
 
 use crate::params::{ParamError, above, in_range};
@@ -70,6 +71,11 @@ pub enum CgPreconditioner {
     /// unknowns ([`block_jacobi::BlockJacobiPair`]); point Jacobi for operators that are not
     /// assembled.
     BlockJacobiPair { size: usize },
+    /// Block Jacobi on aggregates of at most `size` unknowns plus the line blocks of the
+    /// fit's control points ([`lines`]): z = M⁻¹ r + Σ_l R_lᵀ K_l⁻¹ R_l r. Lines exist only
+    /// where the matrix comes with them (the fit's normal matrix); elsewhere
+    /// (other operators, the distributed solve, the coupled fit) this is the pair.
+    BlockJacobiLines { size: usize },
 }
 
 impl CgPreconditioner {
@@ -80,8 +86,18 @@ impl CgPreconditioner {
             CgPreconditioner::BlockJacobi { size } => Some((size, BlockedKind::Jacobi)),
             CgPreconditioner::BlockSgs { size } => Some((size, BlockedKind::GaussSeidel)),
             CgPreconditioner::BlockJacobiPair { size } => Some((size, BlockedKind::JacobiPair)),
+            // Without lines (see [`Self::with_lines`]): the pair.
+            CgPreconditioner::BlockJacobiLines { size } => Some((size, BlockedKind::JacobiPair)),
             CgPreconditioner::Jacobi => None,
         }
+    }
+}
+
+impl CgPreconditioner {
+    /// Whether this preconditioner takes line blocks; with them, [`BlockedSystem`] runs
+    /// [`BlockedKind::Jacobi`] plus the lines (without them, [`Self::blocked`]'s kind).
+    pub fn with_lines(self) -> bool {
+        matches!(self, CgPreconditioner::BlockJacobiLines { .. })
     }
 }
 
@@ -422,11 +438,13 @@ pub fn preconditioner(
             CgPreconditioner::BlockJacobi { size } | CgPreconditioner::BlockSgs { size },
             Some((indptr, indices, data)),
         ) => Ok(Box::new(BlockJacobi::new(indptr, indices, data, size)?)),
-        (CgPreconditioner::BlockJacobiPair { size }, Some((indptr, indices, data))) => {
-            Ok(Box::new(block_jacobi::BlockJacobiPair::new(
-                indptr, indices, data, size,
-            )?))
-        }
+        (
+            CgPreconditioner::BlockJacobiPair { size }
+            | CgPreconditioner::BlockJacobiLines { size },
+            Some((indptr, indices, data)),
+        ) => Ok(Box::new(block_jacobi::BlockJacobiPair::new(
+            indptr, indices, data, size,
+        )?)),
         _ => Ok(Box::new(Jacobi::new(op)?)),
     }
 }
