@@ -320,6 +320,35 @@ impl GpuCoupling {
     }
 }
 
+/// y = A x on the device, x uploaded and y read back: spmv.wgsl's K x (`spmv` its pipeline),
+/// then coupling.wgsl's C x where `coupling` is given (A = K ⊗ I₃ + C), in one pass.
+fn apply_once(
+    ctx: &GpuContext,
+    matrix: &GpuMatrix,
+    spmv: &wgpu::ComputePipeline,
+    coupling: Option<&GpuCoupling>,
+    x: &[[f64; 3]],
+) -> Result<Vec<[f64; 3]>, GpuError> {
+    let bytes = 4 * ctx.precision.size() as u64 * matrix.n as u64;
+    let xb = ctx.storage("x", &vec4_bytes(ctx.precision, x), false);
+    let yb = ctx.storage_zeroed("y", bytes);
+    let binds = matrix.bind(ctx, spmv, &xb, &yb);
+    let coupled = coupling.map(|c| (c, c.bind(ctx, &xb, &yb)));
+    let mut enc = ctx.device.create_command_encoder(&Default::default());
+    {
+        let mut pass = enc.begin_compute_pass(&Default::default());
+        matrix.encode(ctx, &mut pass, spmv, &binds);
+        if let Some((c, bound)) = &coupled {
+            c.encode(ctx, &mut pass, bound);
+        }
+    }
+    ctx.submit(enc);
+    Ok(from_vec4(&bytes_to_reals(
+        ctx.precision,
+        &ctx.read_back(&yb, bytes)?,
+    )))
+}
+
 /// Vectors of three components as vec4 lanes at precision `p`.
 fn vec4_bytes(p: Precision, v: &[[f64; 3]]) -> Vec<u8> {
     reals_to_bytes(p, v.iter().flat_map(|x| [x[0], x[1], x[2], 0.0]))
@@ -366,26 +395,13 @@ impl<'a> GpuOperator<'a> {
     }
 
     pub fn try_apply(&self, x: &[[f64; 3]]) -> Result<Vec<[f64; 3]>, GpuError> {
-        let ctx = self.ctx;
-        let n = self.matrix.n;
-        let bytes = 4 * ctx.precision.size() as u64 * n as u64;
-        let xb = ctx.storage("x", &vec4_bytes(ctx.precision, x), false);
-        let yb = ctx.storage_zeroed("y", bytes);
-        let binds = self.matrix.bind(ctx, &self.pipeline, &xb, &yb);
-        let coupled = self.coupling.as_ref().map(|c| (c, c.bind(ctx, &xb, &yb)));
-        let mut enc = ctx.device.create_command_encoder(&Default::default());
-        {
-            let mut pass = enc.begin_compute_pass(&Default::default());
-            self.matrix.encode(ctx, &mut pass, &self.pipeline, &binds);
-            if let Some((c, bound)) = &coupled {
-                c.encode(ctx, &mut pass, bound);
-            }
-        }
-        ctx.submit(enc);
-        Ok(from_vec4(&bytes_to_reals(
-            ctx.precision,
-            &ctx.read_back(&yb, bytes)?,
-        )))
+        apply_once(
+            self.ctx,
+            &self.matrix,
+            &self.pipeline,
+            self.coupling.as_ref(),
+            x,
+        )
     }
 
     pub fn n_blocks(&self) -> usize {
@@ -619,29 +635,8 @@ impl<'c> CgKernels<'c> {
 
     /// A x on the device (x uploaded, A x read back; A = K ⊗ I₃ + C when coupled).
     fn product(&self, x: &[[f64; 3]]) -> Result<Vec<[f64; 3]>, GpuError> {
-        let ctx = self.ctx;
-        let bytes = 4 * ctx.precision.size() as u64 * self.n as u64;
-        let xb = ctx.storage("x", &vec4_bytes(ctx.precision, x), false);
-        let yb = ctx.storage_zeroed("y", bytes);
-        let binds = self.matrix.bind(ctx, &self.pipelines[0], &xb, &yb);
-        let coupled = self
-            .coupling
-            .as_ref()
-            .map(|(c, _)| (c, c.bind(ctx, &xb, &yb)));
-        let mut enc = ctx.device.create_command_encoder(&Default::default());
-        {
-            let mut pass = enc.begin_compute_pass(&Default::default());
-            self.matrix
-                .encode(ctx, &mut pass, &self.pipelines[0], &binds);
-            if let Some((c, bound)) = &coupled {
-                c.encode(ctx, &mut pass, bound);
-            }
-        }
-        ctx.submit(enc);
-        Ok(from_vec4(&bytes_to_reals(
-            ctx.precision,
-            &ctx.read_back(&yb, bytes)?,
-        )))
+        let coupling = self.coupling.as_ref().map(|(c, _)| c);
+        apply_once(self.ctx, &self.matrix, &self.pipelines[0], coupling, x)
     }
 
     /// r = b − A x in f64 (A = K ⊗ I₃ + C when `c` is given): in f64 A x on the device
