@@ -545,6 +545,11 @@ fn unsupported_options_under_mpirun_fail_with_one_line_and_write_nothing() {
             vec!["--cg-preconditioner", "block-sgs"],
             "--cg-preconditioner block-sgs",
         ),
+        // The lattice lines would cross the ranks' shares.
+        (
+            vec!["--cg-preconditioner", "block-jacobi-lines"],
+            "--cg-preconditioner block-jacobi-lines",
+        ),
         // The deep midpoints would be found on each rank's sub-mesh.
         (vec!["--w-deep-midpoint", "0.5"], "--w-deep-midpoint"),
         (

@@ -291,7 +291,8 @@ impl Aggregation {
             CgPreconditioner::BlockJacobi { size } => {
                 Some(Aggregation::new(comm, halo, stencils, size, false))
             }
-            // The lines would cross the ranks' shares: the pair instead.
+            // The lines are refused under mpirun (`job::check_supported`); the pair stands in
+            // for them if a caller of this module passes them.
             CgPreconditioner::BlockJacobiPair { size }
             | CgPreconditioner::BlockJacobiLines { size } => {
                 Some(Aggregation::new(comm, halo, stencils, size, true))

@@ -174,6 +174,10 @@ fn check_supported(options: &CurveOptions) -> Result<(), CurveError> {
     if let crate::solve::CgPreconditioner::BlockSgs { .. } = preconditioner {
         return unsupported("--cg-preconditioner block-sgs");
     }
+    // The lattice lines run through the whole mesh, across the ranks' shares.
+    if let crate::solve::CgPreconditioner::BlockJacobiLines { .. } = preconditioner {
+        return unsupported("--cg-preconditioner block-jacobi-lines");
+    }
     Ok(())
 }
 
