@@ -741,9 +741,9 @@ fn solve_cg(
             k: matrix,
             dinv: nodal,
         };
-        pcg_coupled(matrix, &pre, b, u, &params.cg)
+        pcg_coupled(matrix, &pre, b, u, &params.cg, |_, _| {})
     } else {
-        pcg_coupled(matrix, &nodal, b, u, &params.cg)
+        pcg_coupled(matrix, &nodal, b, u, &params.cg, |_, _| {})
     }
 }
 

@@ -155,9 +155,13 @@ pub(crate) struct JobArgs {
     /// symmetric Gauss–Seidel sweep over those blocks (block SGS, in Eisenstat's form: about
     /// 40 % of block Jacobi's iterations, each about 2.4 times as costly), or the average of
     /// block Jacobi on two staggered partitions (block Jacobi pair: about 60 % of block
-    /// Jacobi's iterations, two block solves each; the default). The GPU solver always uses
-    /// the diagonal. Distributed runs apply the serial preconditioner (the serial run's
-    /// aggregates, on any number of ranks); block SGS is refused there.
+    /// Jacobi's iterations, two block solves each; the default), or block Jacobi plus exact
+    /// solves on the control points' lattice lines (block Jacobi lines). The GPU solver always
+    /// uses the diagonal. Distributed runs apply the serial preconditioner (the serial run's
+    /// aggregates, on any number of ranks); block SGS and block Jacobi lines are refused there.
+    /// The fit across rotation seams couples the coordinates and runs one CG preconditioned by
+    /// the block Jacobi pair (the diagonal on the GPU) whatever this says (the report's
+    /// `coupled_fit_preconditioner`).
     #[arg(long, value_enum)]
     cg_preconditioner: Option<values::CgPreconditioner>,
     /// Most bisections of the validity line search.
@@ -852,6 +856,11 @@ fn print_summary(r: &CurveReport) {
         eprintln!(
             "fit: {solve}, relative residual {res:.2e}; {} elements invalid at the full step, {} control points damped, smallest step {alpha:.4}",
             r.invalid_at_full_step, r.damped_control_points
+        );
+    }
+    if let (Some(device), Some(pre)) = (r.coupled_fit_device, r.coupled_fit_preconditioner) {
+        eprintln!(
+            "fit: coupled across rotation seams, CG on {device} preconditioned by K's {pre} (--cg-preconditioner sets the uncoupled fit's only)"
         );
     }
     if let Some(e) = &r.energy {

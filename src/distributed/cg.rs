@@ -522,7 +522,7 @@ fn solve(
     };
     let ranks = OwnedRows { comm, halo };
     if coupled.is_some() {
-        return crate::solve::coupled_loop(&ranks, apply, precondition, &b, x, params);
+        return crate::solve::coupled_loop(&ranks, apply, precondition, &b, x, params, |_, _| {});
     }
     crate::solve::cg_loop(&ranks, apply, precondition, &b, x, params, |_, _| {})
 }

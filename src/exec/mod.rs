@@ -62,8 +62,9 @@ pub trait Executor: Certifier + EnergyKernel {
     /// Solve the fit's coupled system across rotation seams, (`k` ⊗ I₃ + `c`) x = `b`, by the
     /// coupled CG (one recurrence over the three coordinates, [`crate::solve::pcg_coupled`])
     /// from `x`, preconditioned by K alone (⊗ I₃): on the CPU by K's block-Jacobi pair
-    /// ([`crate::fit::rotated::solve`], which does not report its iterations to
-    /// `progress`), on a device by K's diagonal as its uncoupled CG. Errors as [`Self::pcg`].
+    /// ([`crate::fit::rotated::solve`]), on a device by K's diagonal as its uncoupled CG
+    /// ([`Self::coupled_preconditioner`]); `progress` sees every iteration on both. Errors as
+    /// [`Self::pcg`].
     fn pcg_coupled(
         &self,
         k: NormalMatrix,
@@ -73,6 +74,9 @@ pub trait Executor: Certifier + EnergyKernel {
         params: &CgParams,
         progress: &mut dyn crate::solve::CgMonitor,
     ) -> Result<CgInfo, CgError>;
+
+    /// What preconditions [`Self::pcg_coupled`]'s CG.
+    fn coupled_preconditioner(&self) -> crate::fit::rotated::OnK;
 
     /// The order-`p` Lagrange nodes of `source`'s elements.
     fn sample(

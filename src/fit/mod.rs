@@ -465,9 +465,19 @@ pub struct FitInfo {
     pub nonzeros: usize,
     pub assembly_seconds: f64,
     pub solve_seconds: f64,
-    /// Where the coupled solve across rotation seams ran (`cpu`, `gpu`; [`FitSolve`]); `None`
-    /// when the fit does not couple the coordinates.
-    pub coupled_device: Option<&'static str>,
+    /// How the coupled solve across rotation seams ran ([`FitSolve`]); `None` when the fit
+    /// does not couple the coordinates.
+    pub coupled: Option<CoupledRun>,
+}
+
+/// Where the fit's coupled CG across rotation seams ran and what preconditioned it: always an
+/// approximation of K⁻¹ ⊗ I₃ ([`rotated::OnK`]), whatever `--cg-preconditioner` asks for the
+/// uncoupled fit.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+pub struct CoupledRun {
+    /// `cpu`, or a device's executor name.
+    pub device: &'static str,
+    pub preconditioner: rotated::OnK,
 }
 
 /// How the fit's normal equations are solved: K δ = b (the three coordinates apart) and,
@@ -485,8 +495,8 @@ pub trait FitSolve: Sized {
 
     /// (K ⊗ I₃ + C) δ = `b` from `delta`; `factor`: whether the fit would factor K on the CPU
     /// ([`FitSolver::factors`]), where this solve then preconditions by K's factor (else by
-    /// K's block-Jacobi pair). Returns the CG's figures and where it ran (`cpu`, or a
-    /// device's executor name). By default [`rotated::solve`] on the CPU.
+    /// K's block-Jacobi pair). Returns the CG's figures, where it ran and its preconditioner.
+    /// By default [`rotated::solve`] on the CPU.
     fn solve_coupled(
         self,
         k: NormalMatrix,
@@ -495,13 +505,18 @@ pub trait FitSolve: Sized {
         delta: &mut [[f64; 3]],
         cg: &CgParams,
         factor: bool,
-    ) -> Result<(CgInfo, &'static str), CgError> {
+    ) -> Result<(CgInfo, CoupledRun), CgError> {
         let on_k = if factor {
             rotated::OnK::Factor
         } else {
             rotated::OnK::BlockJacobiPair
         };
-        Ok((rotated::solve(&k, c, b, delta, cg, on_k)?, "cpu"))
+        let info = rotated::solve(&k, c, b, delta, cg, on_k, &mut |_, _| {})?;
+        let run = CoupledRun {
+            device: "cpu",
+            preconditioner: on_k,
+        };
+        Ok((info, run))
     }
 }
 
@@ -829,7 +844,7 @@ pub fn fit_with_solver(
     }
     // The solve takes K (the CPU's blocked solvers release it as they reorder it).
     let (unknowns, nonzeros) = (k.n(), k.indices().len());
-    let (cg, coupled_device) = match &coupling {
+    let (cg, coupled) = match &coupling {
         // On the CPU, factored as the fit would factor K ([`rotated`]), and then run to the
         // factorisation's accuracy (on a device too).
         Some(c) => {
@@ -861,7 +876,7 @@ pub fn fit_with_solver(
             nonzeros,
             assembly_seconds,
             solve_seconds,
-            coupled_device,
+            coupled,
         },
     ))
 }

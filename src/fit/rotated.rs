@@ -225,14 +225,28 @@ impl LinOp for Rotated<'_> {
 }
 
 /// Which approximation of K⁻¹ ⊗ I₃ preconditions the coupled CG ([`solve`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum OnK {
     /// K's sparse Cholesky factor (the fit's small systems on the CPU).
+    #[serde(rename = "cholesky")]
     Factor,
     /// K's pair of block-Jacobi partitions ([`crate::solve::block_jacobi::BlockJacobiPair`]).
     BlockJacobiPair,
     /// K's diagonal: the device CG's preconditioner, and its CPU reference.
     Jacobi,
+}
+
+impl OnK {
+    /// The name the report gives it (`coupled_fit_preconditioner`): `cholesky`,
+    /// `block-jacobi-pair` or `jacobi`, as `--fit-solver` and `--cg-preconditioner` spell them.
+    pub fn name(self) -> &'static str {
+        match self {
+            OnK::Factor => "cholesky",
+            OnK::BlockJacobiPair => "block-jacobi-pair",
+            OnK::Jacobi => "jacobi",
+        }
+    }
 }
 
 /// K⁻¹ ⊗ I₃ as [`OnK`] chose it.
@@ -260,7 +274,8 @@ impl Preconditioner for OnKBuilt {
 }
 
 /// Solve (K ⊗ I₃ + C) δ = `b` from `delta` by [`crate::solve::pcg_coupled`], preconditioned by
-/// K factored, by K's block-Jacobi pair or by K's diagonal (`on_k`; module docs).
+/// K factored, by K's block-Jacobi pair or by K's diagonal (`on_k`; module docs). `progress`
+/// sees every iteration and may cancel the solve ([`crate::solve::CgMonitor`]).
 pub fn solve(
     k: &NormalMatrix,
     c: &Coupling,
@@ -268,6 +283,7 @@ pub fn solve(
     delta: &mut [[f64; 3]],
     params: &CgParams,
     on_k: OnK,
+    progress: &mut dyn crate::solve::CgMonitor,
 ) -> Result<CgInfo, CgError> {
     let pre = match on_k {
         OnK::Factor => OnKBuilt::Factor(crate::solve::direct::SparseCholesky::new(
@@ -284,7 +300,7 @@ pub fn solve(
         // The diagonal of K ⊗ I₃ + C is K's (C's diagonal blocks vanish).
         OnK::Jacobi => OnKBuilt::Jacobi(crate::solve::Jacobi::new(k)?),
     };
-    crate::solve::pcg_coupled(&Rotated { k, c }, &pre, b, delta, params)
+    crate::solve::pcg_coupled(&Rotated { k, c }, &pre, b, delta, params, progress)
 }
 
 /// Rᵀ applied to `v`.

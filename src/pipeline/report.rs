@@ -104,6 +104,12 @@ pub struct CurveReport {
     /// CPU) and under mpirun (the ranks' fit runs on the CPU).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub coupled_fit_device: Option<&'static str>,
+    /// What preconditioned that coupled CG (present with `coupled_fit_device`): K's factor
+    /// (`cholesky`), K's block-Jacobi pair (`block-jacobi-pair`, on the CPU and the ranks) or
+    /// K's diagonal (`jacobi`, on a device), whatever `--cg-preconditioner` (which applies to
+    /// the uncoupled fit) says.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub coupled_fit_preconditioner: Option<&'static str>,
     /// `--line-search`: one step for the whole mesh or one per control point.
     pub line_search_mode: LineSearchMode,
     /// Step of the certified search (1 = the full least-squares fit everywhere): with the
@@ -254,9 +260,9 @@ pub(crate) struct SplineFigures {
     pub knot_surfaces: Option<KnotSurfaceInfo>,
     /// The fit's solver, its CG figures and the stored entries of its matrix.
     pub fit: Option<(FitSolver, CgInfo, usize)>,
-    /// Where the fit's coupled solve across rotation seams ran (`cpu`, `gpu`); `None` when
-    /// the fit does not couple the coordinates.
-    pub coupled: Option<&'static str>,
+    /// How the fit's coupled solve across rotation seams ran; `None` when the fit does not
+    /// couple the coordinates.
+    pub coupled: Option<crate::fit::CoupledRun>,
     pub demoted: usize,
     pub alpha: Option<f64>,
     pub invalid_at_full_step: usize,
@@ -393,7 +399,7 @@ impl CurveReport {
                 knot_surfaces: (setup.knot_intervals == KnotIntervals::Graded)
                     .then_some(setup.knot_info),
                 fit: o.fit.as_ref().map(|f| (f.solver, f.cg, f.nonzeros)),
-                coupled: o.fit.as_ref().and_then(|f| f.coupled_device),
+                coupled: o.fit.as_ref().and_then(|f| f.coupled),
                 demoted: o.demoted,
                 alpha: o.alpha,
                 invalid_at_full_step: o.invalid_at_full_step,
@@ -469,6 +475,7 @@ impl CurveReport {
     ) -> CurveReport {
         let spline = o.spline.as_ref();
         let fit = spline.and_then(|s| s.fit);
+        let coupled = spline.filter(|s| s.fit.is_some()).and_then(|s| s.coupled);
         let blend = spline.and_then(|s| s.blend.clone());
         CurveReport {
             input: input.to_owned(),
@@ -506,7 +513,8 @@ impl CurveReport {
             cg_iterations: fit.map(|f| f.1.iterations),
             matrix_nonzeros: fit.map(|f| f.2),
             cg_rel_residual: fit.map(|f| f.1.rel_residual),
-            coupled_fit_device: spline.filter(|s| s.fit.is_some()).and_then(|s| s.coupled),
+            coupled_fit_device: coupled.map(|c| c.device),
+            coupled_fit_preconditioner: coupled.map(|c| c.preconditioner.name()),
             line_search_mode: options.line_search_mode,
             line_search_alpha: spline.and_then(|s| s.alpha),
             invalid_at_full_step: spline.map_or(0, |s| s.invalid_at_full_step),

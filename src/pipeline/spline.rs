@@ -25,8 +25,8 @@ use super::{CurveError, Geometry, Job};
 use crate::energy::{EnergyError, EnergyInfo, EnergyParams};
 use crate::fit::rotated::{Coupling, OnK};
 use crate::fit::{
-    FitInfo, FitParams, FitSolve, FitSolver, FitTargets, NormalMatrix, SmoothTargets, Summing,
-    TargetMap, fit_with_solver,
+    CoupledRun, FitInfo, FitParams, FitSolve, FitSolver, FitTargets, NormalMatrix, SmoothTargets,
+    Summing, TargetMap, fit_with_solver,
 };
 use crate::mesh::features::Features;
 use crate::mesh::periodic::PeriodicPair;
@@ -1100,14 +1100,23 @@ impl FitSolve for JobSolve<'_, '_> {
         x: &mut [[f64; 3]],
         cg: &CgParams,
         _: bool,
-    ) -> Result<(CgInfo, &'static str), CgError> {
+    ) -> Result<(CgInfo, CoupledRun), CgError> {
         if self.factors {
-            let info = crate::fit::rotated::solve(&k, c, rhs, x, cg, OnK::Factor)?;
-            return Ok((info, "cpu"));
+            let info =
+                crate::fit::rotated::solve(&k, c, rhs, x, cg, OnK::Factor, &mut self.monitor())?;
+            let run = CoupledRun {
+                device: "cpu",
+                preconditioner: OnK::Factor,
+            };
+            return Ok((info, run));
         }
         let executor = self.job.executor;
         let info = executor.pcg_coupled(k, c, rhs, x, cg, &mut self.monitor())?;
-        Ok((info, executor.name()))
+        let run = CoupledRun {
+            device: executor.name(),
+            preconditioner: executor.coupled_preconditioner(),
+        };
+        Ok((info, run))
     }
 }
 

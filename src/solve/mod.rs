@@ -597,13 +597,15 @@ pub trait Preconditioner: Sync {
 /// Solve A x = b by preconditioned CG for an operator that couples the three components of a
 /// node (linear elasticity): one recurrence over all 3n unknowns, unlike [`pcg`]'s three.
 /// Stops when ‖r‖ ≤ rel_tol·‖b‖ (Euclidean norm over all components) or ≤ abs_tol
-/// ([`Stopping`]'s rule).
+/// ([`Stopping`]'s rule). `progress` sees every iteration; when it breaks, the solve ends with
+/// [`CgError::Cancelled`].
 pub fn pcg_coupled(
     op: &dyn LinOp,
     pre: &dyn Preconditioner,
     b: &[[f64; 3]],
     x: &mut [[f64; 3]],
     params: &CgParams,
+    progress: impl CgMonitor,
 ) -> Result<CgInfo, CgError> {
     let n = op.nrows();
     assert_eq!(b.len(), n);
@@ -615,12 +617,14 @@ pub fn pcg_coupled(
         b,
         x,
         params,
+        progress,
     )
 }
 
 /// The loop of [`pcg_coupled`] from `x`, with the dot products of `reduce` summed over the
 /// three components ([`iterate`] over [`Coupled`] [`Vectors`]): the serial solver runs it on
-/// all rows ([`Rows`]), the distributed one with its sums over the processes.
+/// all rows ([`Rows`]), the distributed one with its sums over the processes. `progress` as
+/// [`cg_loop`]'s.
 pub fn coupled_loop(
     reduce: &dyn Reductions,
     mut apply: impl FnMut(&[[f64; 3]], &mut [[f64; 3]]),
@@ -628,12 +632,13 @@ pub fn coupled_loop(
     b: &[[f64; 3]],
     x: &mut [[f64; 3]],
     params: &CgParams,
+    progress: impl CgMonitor,
 ) -> Result<CgInfo, CgError> {
     let mut r = vec![[0.0; 3]; b.len()];
     residual(&mut apply, b, x, &mut r);
     let stop = Stopping::new(steps::one(reduce.dot(b, b)).map(f64::sqrt), params);
     let mut steps = Coupled(Vectors::new(reduce, apply, precondition, x, r));
-    let (iterations, rr) = iterate(&stop, params.max_iters, &mut steps, |_, _| {})?;
+    let (iterations, rr) = iterate(&stop, params.max_iters, &mut steps, progress)?;
     Ok(CgInfo {
         iterations,
         rel_residual: stop.rel(rr),
@@ -793,6 +798,24 @@ mod tests {
             );
             assert_eq!(seen.get(), 7);
         }
+        // The coupled loop (the fit across rotation seams, the elastic analogy) alike.
+        let params = CgParams {
+            rel_tol: 1e-12,
+            ..Default::default()
+        };
+        let pre = Jacobi::new(&op).unwrap();
+        let full = pcg_coupled(&op, &pre, &b, &mut vec![[0.0; 3]; 400], &params, |_, _| {});
+        assert!(full.unwrap().iterations > 10);
+        let seen = std::cell::Cell::new(0usize);
+        let monitor = Cancellable {
+            progress: |i: usize, _: f64| seen.set(i),
+            cancelled: || seen.get() >= 7,
+        };
+        let e = pcg_coupled(&op, &pre, &b, &mut vec![[0.0; 3]; 400], &params, monitor);
+        assert!(
+            matches!(e, Err(CgError::Cancelled { iterations: 7 })),
+            "coupled: {e:?}"
+        );
     }
 
     /// The coupled loop stops by the same rule as the per-component one: a NaN residual
@@ -807,7 +830,14 @@ mod tests {
         let three = pcg(&op, &b, &mut x, &params, |_, _| {});
         assert!(three.is_err(), "{three:?}");
         let mut x = vec![[0.0; 3]; 50];
-        let coupled = pcg_coupled(&op, &Jacobi::new(&op).unwrap(), &b, &mut x, &params);
+        let coupled = pcg_coupled(
+            &op,
+            &Jacobi::new(&op).unwrap(),
+            &b,
+            &mut x,
+            &params,
+            |_, _| {},
+        );
         assert!(
             matches!(coupled, Err(CgError::NotPositiveDefinite { .. })),
             "{coupled:?}"
@@ -815,7 +845,15 @@ mod tests {
         // Finite data: the coupled loop reaches the tolerance on ‖r‖ over all components.
         b[7][1] = 2.0;
         let mut x = vec![[0.0; 3]; 50];
-        let info = pcg_coupled(&op, &Jacobi::new(&op).unwrap(), &b, &mut x, &params).unwrap();
+        let info = pcg_coupled(
+            &op,
+            &Jacobi::new(&op).unwrap(),
+            &b,
+            &mut x,
+            &params,
+            |_, _| {},
+        )
+        .unwrap();
         let mut r = vec![[0.0; 3]; 50];
         op.apply(&x, &mut r);
         let norm = |v: &[[f64; 3]]| v.iter().flatten().map(|a| a * a).sum::<f64>().sqrt();

@@ -1459,7 +1459,7 @@ use polyspline::fit::rotated::{Coupling, OnK};
 /// (scaled): the generated 40° sector (6 columns, 8 cells across graded to hub and shroud,
 /// 4 layers over z ∈ [0, 0.5]) glued through its rotation.
 fn sector_system() -> (polyspline::fit::NormalMatrix, Coupling, Vec<[f64; 3]>) {
-    use polyspline::fit::{FitSolve, NormalMatrix, Summing, fit_with_solver};
+    use polyspline::fit::{CoupledRun, FitSolve, NormalMatrix, Summing, fit_with_solver};
     use polyspline::mesh::generate::boundary_layer::{BoundaryLayer, sector};
     use polyspline::mesh::periodic::{PeriodicSpec, resolve};
     use polyspline::solve::{CgError, CgInfo};
@@ -1484,13 +1484,17 @@ fn sector_system() -> (polyspline::fit::NormalMatrix, Coupling, Vec<[f64; 3]>) {
             _: &mut [[f64; 3]],
             _: &CgParams,
             _: bool,
-        ) -> Result<(CgInfo, &'static str), CgError> {
+        ) -> Result<(CgInfo, CoupledRun), CgError> {
             *self.0 = Some((k, c.clone(), b.to_vec()));
             let info = CgInfo {
                 iterations: 0,
                 rel_residual: 0.0,
             };
-            Ok((info, "none"))
+            let run = CoupledRun {
+                device: "none",
+                preconditioner: OnK::Jacobi,
+            };
+            Ok((info, run))
         }
     }
     let p = BoundaryLayer {
@@ -1539,7 +1543,9 @@ fn cpu_coupled_reference(
         ..Default::default()
     };
     let mut x = vec![[0.0; 3]; k.n()];
-    let info = polyspline::fit::rotated::solve(k, c, b, &mut x, &params, OnK::Jacobi).unwrap();
+    let info =
+        polyspline::fit::rotated::solve(k, c, b, &mut x, &params, OnK::Jacobi, &mut |_, _| {})
+            .unwrap();
     (params, x, info)
 }
 

@@ -1085,7 +1085,10 @@ fn curve_on_gpu(input: &Path, out: &Path, args: &[&str], what: &str) -> Option<V
 /// iterations (at least the 8 kernels of a coupled iteration each); with `--fit-solver
 /// cholesky` K's factor preconditions it on the CPU (`cpu`, no dispatch in the fit). A fit not
 /// coupled (the sector with its pair not declared, the generated channel's translation
-/// seams) has no such field.
+/// seams) has no such field. `coupled_fit_preconditioner` names what preconditioned the
+/// coupled CG: K's block-Jacobi pair on the CPU, also when `--cg-preconditioner` asks for
+/// another (which the summary line says), K's diagonal on the device, K's factor with
+/// `--fit-solver cholesky`.
 #[test]
 fn the_report_says_where_the_coupled_fit_ran() {
     let sector_in = |dim: usize| {
@@ -1099,8 +1102,36 @@ fn the_report_says_where_the_coupled_fit_ran() {
         let r = curve(&input, &out, &["--periodic", "theta_lo:theta_hi"]);
         assert_eq!(r["periodic"]["seam"], "c1", "{}", r["periodic"]);
         assert_eq!(r["coupled_fit_device"], "cpu", "{dim}D");
+        // The sectors are small enough to factor: `auto` runs the coupled CG on K's factor.
+        assert_eq!(r["coupled_fit_preconditioner"], "cholesky", "{dim}D");
         let plain = curve(&input, &out, &[]);
         assert!(plain.get("coupled_fit_device").is_none(), "{dim}D: {plain}");
+        assert!(plain.get("coupled_fit_preconditioner").is_none(), "{dim}D");
+        // With CG asked for, K's pair, whatever `--cg-preconditioner` says, and the summary
+        // line on stderr says so.
+        for asked in ["block-jacobi-pair", "block-jacobi-lines", "jacobi"] {
+            let mut cmd = polyspline();
+            cmd.arg("curve")
+                .arg(&input)
+                .arg("-o")
+                .arg(&out)
+                .args(["--periodic", "theta_lo:theta_hi", "--fit-solver", "cg"])
+                .args(["--cg-preconditioner", asked]);
+            let report = scratch_in("periodic_coupled", &format!("sector{dim}d_{asked}.json"));
+            let run = run_ok(cmd.arg("--report").arg(&report));
+            let r: serde_json::Value =
+                serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+            assert_eq!(r["coupled_fit_device"], "cpu", "{dim}D {asked}");
+            assert_eq!(
+                r["coupled_fit_preconditioner"], "block-jacobi-pair",
+                "{dim}D {asked}"
+            );
+            let stderr = String::from_utf8_lossy(&run.stderr);
+            assert!(
+                stderr.contains("coupled across rotation seams, CG on cpu preconditioned by K's block-jacobi-pair"),
+                "{dim}D {asked}: {stderr}"
+            );
+        }
     }
     let channel = scratch_in("periodic_coupled", "channel.msh");
     run_ok(
@@ -1125,6 +1156,12 @@ fn the_report_says_where_the_coupled_fit_ran() {
         };
         assert_eq!(r["periodic"]["seam"], "c1", "{what}: {}", r["periodic"]);
         assert_eq!(r["coupled_fit_device"], device, "{what}: {r}");
+        let pre = if device == "gpu" {
+            "jacobi"
+        } else {
+            "cholesky"
+        };
+        assert_eq!(r["coupled_fit_preconditioner"], pre, "{what}: {r}");
         let dispatches = r["gpu_traffic"]["fit"]["dispatches"].as_u64().unwrap();
         let iterations = r["cg_iterations"].as_u64().unwrap();
         assert!(iterations > 0, "{what}: {r}");

@@ -49,9 +49,13 @@ impl Executor for CpuExecutor {
         b: &[[f64; 3]],
         x: &mut [[f64; 3]],
         params: &CgParams,
-        _progress: &mut dyn crate::solve::CgMonitor,
+        progress: &mut dyn crate::solve::CgMonitor,
     ) -> Result<CgInfo, CgError> {
-        crate::fit::rotated::solve(&k, c, b, x, params, OnK::BlockJacobiPair)
+        crate::fit::rotated::solve(&k, c, b, x, params, self.coupled_preconditioner(), progress)
+    }
+
+    fn coupled_preconditioner(&self) -> OnK {
+        OnK::BlockJacobiPair
     }
 
     fn sample(

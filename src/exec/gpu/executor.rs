@@ -89,6 +89,11 @@ impl Executor for GpuExecutor<'_> {
         super::cg::pcg_coupled(self.ctx(), &k, c, b, x, params, progress)
     }
 
+    fn coupled_preconditioner(&self) -> crate::fit::rotated::OnK {
+        // The device's coupled CG is preconditioned by K's diagonal, as its uncoupled one.
+        crate::fit::rotated::OnK::Jacobi
+    }
+
     fn sample(
         &self,
         source: &dyn BezierElements,
