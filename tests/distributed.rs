@@ -4,7 +4,9 @@
 //! every element valid by Gmsh's own Jacobians, and a report whose per-rank shares add up and
 //! whose feature summary and boundary distances are the serial run's; each rank's peak memory
 //! against the serial run's on a larger mesh; a defect in one rank's share of the input stops
-//! every rank with one error line.
+//! every rank with one error line. Runs compared with each other take `--facet-smoothing 0`:
+//! the ranks do not lower the kinks at C⁰ facets (`fit::jumps`; their default is 0), the
+//! serial job does by default, and `mpirun -np 1` runs the serial job.
 #![cfg(feature = "mpi")]
 
 mod common;
@@ -171,28 +173,36 @@ fn mpirun_1_2_4_ranks_equal_the_serial_run() {
     // Binary MSH 4.1: each rank reads its share of it by offsets.
     let input = binary_cylinder("cylinder.msh", 1500);
     let serial_out = scratch("serial.msh");
-    common::run_ok(Command::new(BIN).arg("curve").args([
-        input.to_str().unwrap(),
-        "-o",
-        serial_out.to_str().unwrap(),
-        "-q",
-        "--cg-tol",
-        RANK_CG_TOL,
-    ]));
+    common::run_ok(
+        Command::new(BIN)
+            .args(["curve", "--facet-smoothing", "0"])
+            .args([
+                input.to_str().unwrap(),
+                "-o",
+                serial_out.to_str().unwrap(),
+                "-q",
+                "--cg-tol",
+                RANK_CG_TOL,
+            ]),
+    );
     let serial = read(&serial_out);
     let diag = diagonal(&serial);
     let serial_report: Value = {
         let path = scratch("serial.json");
-        common::run_ok(Command::new(BIN).arg("curve").args([
-            input.to_str().unwrap(),
-            "-o",
-            scratch("serial_again.msh").to_str().unwrap(),
-            "--report",
-            path.to_str().unwrap(),
-            "-q",
-            "--cg-tol",
-            RANK_CG_TOL,
-        ]));
+        common::run_ok(
+            Command::new(BIN)
+                .args(["curve", "--facet-smoothing", "0"])
+                .args([
+                    input.to_str().unwrap(),
+                    "-o",
+                    scratch("serial_again.msh").to_str().unwrap(),
+                    "--report",
+                    path.to_str().unwrap(),
+                    "-q",
+                    "--cg-tol",
+                    RANK_CG_TOL,
+                ]),
+        );
         serde_json::from_str(&std::fs::read_to_string(&path).unwrap()).unwrap()
     };
     // ASCII and binary: the ranks write one file collectively, each part at its offset.
@@ -211,6 +221,8 @@ fn mpirun_1_2_4_ranks_equal_the_serial_run() {
         cmd.args([
             BIN,
             "curve",
+            "--facet-smoothing",
+            "0",
             input.to_str().unwrap(),
             "-o",
             out.to_str().unwrap(),
@@ -355,7 +367,7 @@ fn assert_ranks_give_the_serial_output_on(
     let serial_report = scratch(&format!("{name}_serial.json"));
     common::run_ok(
         Command::new(BIN)
-            .arg("curve")
+            .args(["curve", "--facet-smoothing", "0"])
             .args([
                 input.to_str().unwrap(),
                 "-o",
@@ -380,6 +392,8 @@ fn assert_ranks_give_the_serial_output_on(
                 .args([
                     BIN,
                     "curve",
+                    "--facet-smoothing",
+                    "0",
                     input.to_str().unwrap(),
                     "-o",
                     out.to_str().unwrap(),
@@ -631,6 +645,8 @@ fn a_bad_share_of_the_input_stops_every_rank_with_one_error_line() {
             cmd.args([
                 BIN,
                 "curve",
+                "--facet-smoothing",
+                "0",
                 bad.to_str().unwrap(),
                 "-o",
                 out.to_str().unwrap(),
@@ -682,7 +698,7 @@ fn the_small_torus_gives_the_serial_output_on_1_to_4_ranks() {
         let report = scratch(&format!("torus189_np{np}.json"));
         let _ = std::fs::remove_file(&out);
         let o = mpirun_within_120s(np)
-            .args([BIN, "curve", "-q"])
+            .args([BIN, "curve", "--facet-smoothing", "0", "-q"])
             .arg(&input)
             .arg("-o")
             .arg(&out)
@@ -782,6 +798,8 @@ fn on_98k_hexes_4_ranks_write_the_serial_output_each_well_below_the_serial_memor
     // does not depend on the thread count).
     let serial = peak_of(Command::new(BIN).env("RAYON_NUM_THREADS", "1").args([
         "curve",
+        "--facet-smoothing",
+        "0",
         input.to_str().unwrap(),
         "-o",
         serial_out.to_str().unwrap(),
@@ -793,6 +811,8 @@ fn on_98k_hexes_4_ranks_write_the_serial_output_each_well_below_the_serial_memor
     common::run_ok(mpirun(4).args([
         BIN,
         "curve",
+        "--facet-smoothing",
+        "0",
         input.to_str().unwrap(),
         "-o",
         out.to_str().unwrap(),
@@ -948,6 +968,8 @@ fn the_morton_repartition_owns_and_ghosts_as_computed_from_the_file() {
             mpirun(np).env("POLYSPLINE_PARTITION", partition).args([
                 BIN,
                 "curve",
+                "--facet-smoothing",
+                "0",
                 input.to_str().unwrap(),
                 "-o",
                 scratch(&format!("repartition_{np}_{partition}.msh"))
@@ -1030,14 +1052,18 @@ fn partitioned_output_is_read_by_gmsh_as_the_serial_mesh() {
     }
     let input = binary_cylinder("parts_in.msh", 1500);
     let serial_out = scratch("parts_serial.msh");
-    common::run_ok(Command::new(BIN).arg("curve").args([
-        input.to_str().unwrap(),
-        "-o",
-        serial_out.to_str().unwrap(),
-        "-q",
-        "--cg-tol",
-        RANK_CG_TOL,
-    ]));
+    common::run_ok(
+        Command::new(BIN)
+            .args(["curve", "--facet-smoothing", "0"])
+            .args([
+                input.to_str().unwrap(),
+                "-o",
+                serial_out.to_str().unwrap(),
+                "-q",
+                "--cg-tol",
+                RANK_CG_TOL,
+            ]),
+    );
     for (np, binary) in [(2usize, false), (4, true)] {
         let name = format!("parts_np{np}{}", if binary { "_bin" } else { "" });
         let out = scratch(&format!("{name}.msh"));
@@ -1051,6 +1077,8 @@ fn partitioned_output_is_read_by_gmsh_as_the_serial_mesh() {
         cmd.args([
             BIN,
             "curve",
+            "--facet-smoothing",
+            "0",
             input.to_str().unwrap(),
             "-o",
             out.to_str().unwrap(),
@@ -1150,14 +1178,18 @@ fn gmsh_partitioned_input_curves_as_the_unpartitioned_mesh() {
     }
     let input = binary_cylinder("gpin.msh", 1500);
     let serial_out = scratch("gpin_serial.msh");
-    common::run_ok(Command::new(BIN).arg("curve").args([
-        input.to_str().unwrap(),
-        "-o",
-        serial_out.to_str().unwrap(),
-        "-q",
-        "--cg-tol",
-        RANK_CG_TOL,
-    ]));
+    common::run_ok(
+        Command::new(BIN)
+            .args(["curve", "--facet-smoothing", "0"])
+            .args([
+                input.to_str().unwrap(),
+                "-o",
+                serial_out.to_str().unwrap(),
+                "-q",
+                "--cg-tol",
+                RANK_CG_TOL,
+            ]),
+    );
     let serial = read(&serial_out);
     let diag = diagonal(&serial);
     // 3 binary parts on 2 and 4 ranks (a rank reads 1 or 2 parts, or none), 5 ASCII parts
@@ -1177,7 +1209,7 @@ fn gmsh_partitioned_input_curves_as_the_unpartitioned_mesh() {
         let out = scratch(&format!("{name}.msh"));
         let mut cmd = mpirun(np);
         // Any part names the set; the last one here.
-        cmd.args([BIN, "curve"])
+        cmd.args([BIN, "curve", "--facet-smoothing", "0"])
             .arg(parts.last().unwrap())
             .arg("-o")
             .arg(&out)
@@ -1396,7 +1428,7 @@ fn curve_with_report(
         c.arg(BIN);
         c
     };
-    cmd.arg("curve")
+    cmd.args(["curve", "--facet-smoothing", "0"])
         .arg(input)
         .arg("-o")
         .arg(&out)

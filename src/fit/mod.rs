@@ -27,6 +27,7 @@
 
 pub mod assembly;
 pub mod features;
+pub mod jumps;
 mod normal_matrix;
 pub mod partial;
 mod rhs;
@@ -373,6 +374,10 @@ pub struct FitParams {
     /// samples get [`FitWeights::feature`] (see [`features`]). `None` treats the boundary as
     /// one smooth surface.
     pub features: Option<std::sync::Arc<crate::mesh::features::Features>>,
+    /// Weight W of the fitted map's kinks at C⁰ facets against moving control points
+    /// ([`jumps`], `--facet-smoothing`, default [`FACET_SMOOTHING`]); 0: the fit's control
+    /// points are kept as they are.
+    pub facet_smoothing: f64,
 }
 
 impl FitParams {
@@ -397,6 +402,7 @@ impl Default for FitParams {
             },
             targets: FitTargets::Chords,
             features: None,
+            facet_smoothing: FACET_SMOOTHING,
         }
     }
 }
@@ -455,6 +461,9 @@ impl FitParams {
     }
 }
 
+/// The default weight of the kinks at C⁰ facets ([`FitParams::facet_smoothing`]).
+pub const FACET_SMOOTHING: f64 = 0.015;
+
 /// What the fit did.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct FitInfo {
@@ -468,6 +477,8 @@ pub struct FitInfo {
     /// Where the coupled solve across rotation seams ran (`cpu`, `gpu`; [`FitSolve`]); `None`
     /// when the fit does not couple the coordinates.
     pub coupled_device: Option<&'static str>,
+    /// What lowering the kinks at C⁰ facets did ([`jumps`]); `None` when it did not run.
+    pub facet_jumps: Option<jumps::JumpInfo>,
 }
 
 /// How the fit's normal equations are solved: K δ = b (the three coordinates apart) and,
@@ -862,6 +873,7 @@ pub fn fit_with_solver(
             assembly_seconds,
             solve_seconds,
             coupled_device,
+            facet_jumps: None,
         },
     ))
 }

@@ -104,6 +104,9 @@ pub struct CurveReport {
     /// CPU) and under mpirun (the ranks' fit runs on the CPU).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub coupled_fit_device: Option<&'static str>,
+    /// What lowering the fitted map's kinks at C⁰ facets did in the last fit
+    /// (`--facet-smoothing`, [`crate::fit::jumps`]); `None` when it did not run.
+    pub facet_jumps: Option<crate::fit::jumps::JumpInfo>,
     /// `--line-search`: one step for the whole mesh or one per control point.
     pub line_search_mode: LineSearchMode,
     /// Step of the certified search (1 = the full least-squares fit everywhere): with the
@@ -257,6 +260,8 @@ pub(crate) struct SplineFigures {
     /// Where the fit's coupled solve across rotation seams ran (`cpu`, `gpu`); `None` when
     /// the fit does not couple the coordinates.
     pub coupled: Option<&'static str>,
+    /// What lowering the kinks at C⁰ facets did ([`crate::fit::jumps`]).
+    pub facet_jumps: Option<crate::fit::jumps::JumpInfo>,
     pub demoted: usize,
     pub alpha: Option<f64>,
     pub invalid_at_full_step: usize,
@@ -281,6 +286,7 @@ impl SplineFigures {
             knot_surfaces: None,
             fit: Some(fit),
             coupled: None,
+            facet_jumps: None,
             demoted: 0,
             alpha: Some(0.5 * blend.min_factor),
             invalid_at_full_step: blend.invalid_at_full_step,
@@ -394,6 +400,7 @@ impl CurveReport {
                     .then_some(setup.knot_info),
                 fit: o.fit.as_ref().map(|f| (f.solver, f.cg, f.nonzeros)),
                 coupled: o.fit.as_ref().and_then(|f| f.coupled_device),
+                facet_jumps: o.fit.as_ref().and_then(|f| f.facet_jumps),
                 demoted: o.demoted,
                 alpha: o.alpha,
                 invalid_at_full_step: o.invalid_at_full_step,
@@ -507,6 +514,7 @@ impl CurveReport {
             matrix_nonzeros: fit.map(|f| f.2),
             cg_rel_residual: fit.map(|f| f.1.rel_residual),
             coupled_fit_device: spline.filter(|s| s.fit.is_some()).and_then(|s| s.coupled),
+            facet_jumps: spline.and_then(|s| s.facet_jumps),
             line_search_mode: options.line_search_mode,
             line_search_alpha: spline.and_then(|s| s.alpha),
             invalid_at_full_step: spline.map_or(0, |s| s.invalid_at_full_step),
