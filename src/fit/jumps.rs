@@ -20,7 +20,7 @@
 //! of length, as the anchor, so W is dimensionless.
 //!
 //! Movable: the control points in some j's rows that carry no Bernstein point of a boundary
-//! facet (the boundary is the fit's exactly, as in [`crate::energy`]); elements with periodic
+//! facet (the boundary is the fit's exactly, as in the energy stage); elements with periodic
 //! frames or seam offsets add no rows. One SPD system (I + W JᵀJ) δ = −W Jᵀ J C*, solved by
 //! CG, gives C = C* + δ on the movable points.
 //!
@@ -82,7 +82,7 @@ struct Row {
 /// The facet parameters of the points: ¼, ½, ¾ along each of the facet's directions.
 const AT: [f64; 3] = [0.25, 0.5, 0.75];
 
-/// The blend's element rules the smoothing keeps ([`crate::validity::blend`]'s q_min and
+/// The blend's element rules the smoothing keeps (the certified blend's q_min and
 /// q_p): a move stands only where every element it shapes stays inside them.
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
 pub struct JumpGuard {
