@@ -550,6 +550,8 @@ fn unsupported_options_under_mpirun_fail_with_one_line_and_write_nothing() {
             vec!["--cg-preconditioner", "block-jacobi-lines"],
             "--cg-preconditioner block-jacobi-lines",
         ),
+        // One solve over the whole mesh's C⁰ facets; each rank would see its share's cut.
+        (vec!["--facet-smoothing", "0.015"], "--facet-smoothing"),
         // The deep midpoints would be found on each rank's sub-mesh.
         (vec!["--w-deep-midpoint", "0.5"], "--w-deep-midpoint"),
         (

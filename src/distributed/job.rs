@@ -113,6 +113,7 @@ fn check_supported(options: &CurveOptions) -> Result<(), CurveError> {
         cg,
         targets: _,
         features: _,
+        facet_smoothing,
     } = fit;
     let crate::fit::FitWeights {
         corner: _,
@@ -141,6 +142,11 @@ fn check_supported(options: &CurveOptions) -> Result<(), CurveError> {
     }
     if energy.is_some() {
         return unsupported("--fit energy");
+    }
+    // One solve over the C⁰ facets of the whole mesh; the ranks' parts would each see a cut
+    // (the command line's default under mpirun is 0).
+    if *facet_smoothing > 0.0 {
+        return unsupported("--facet-smoothing");
     }
     if !matches!(method, Method::Iga) {
         return unsupported("--method elastic");

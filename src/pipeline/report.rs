@@ -110,6 +110,9 @@ pub struct CurveReport {
     /// the uncoupled fit) says.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub coupled_fit_preconditioner: Option<&'static str>,
+    /// What lowering the fitted map's kinks at C⁰ facets did in the last fit
+    /// (`--facet-smoothing`, [`crate::fit::jumps`]); `None` when it did not run.
+    pub facet_jumps: Option<crate::fit::jumps::JumpInfo>,
     /// `--line-search`: one step for the whole mesh or one per control point.
     pub line_search_mode: LineSearchMode,
     /// Step of the certified search (1 = the full least-squares fit everywhere): with the
@@ -263,6 +266,8 @@ pub(crate) struct SplineFigures {
     /// How the fit's coupled solve across rotation seams ran; `None` when the fit does not
     /// couple the coordinates.
     pub coupled: Option<crate::fit::CoupledRun>,
+    /// What lowering the kinks at C⁰ facets did ([`crate::fit::jumps`]).
+    pub facet_jumps: Option<crate::fit::jumps::JumpInfo>,
     pub demoted: usize,
     pub alpha: Option<f64>,
     pub invalid_at_full_step: usize,
@@ -287,6 +292,7 @@ impl SplineFigures {
             knot_surfaces: None,
             fit: Some(fit),
             coupled: None,
+            facet_jumps: None,
             demoted: 0,
             alpha: Some(0.5 * blend.min_factor),
             invalid_at_full_step: blend.invalid_at_full_step,
@@ -400,6 +406,7 @@ impl CurveReport {
                     .then_some(setup.knot_info),
                 fit: o.fit.as_ref().map(|f| (f.solver, f.cg, f.nonzeros)),
                 coupled: o.fit.as_ref().and_then(|f| f.coupled),
+                facet_jumps: o.fit.as_ref().and_then(|f| f.facet_jumps),
                 demoted: o.demoted,
                 alpha: o.alpha,
                 invalid_at_full_step: o.invalid_at_full_step,
@@ -515,6 +522,7 @@ impl CurveReport {
             cg_rel_residual: fit.map(|f| f.1.rel_residual),
             coupled_fit_device: coupled.map(|c| c.device),
             coupled_fit_preconditioner: coupled.map(|c| c.preconditioner.name()),
+            facet_jumps: spline.and_then(|s| s.facet_jumps),
             line_search_mode: options.line_search_mode,
             line_search_alpha: spline.and_then(|s| s.alpha),
             invalid_at_full_step: spline.map_or(0, |s| s.invalid_at_full_step),

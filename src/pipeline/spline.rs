@@ -1047,6 +1047,35 @@ fn solve_fit(
     if let Some(f) = setup.used_features() {
         crate::fit::features::project_onto_planes(space, setup.topo(job), f, &mut c_star);
     }
+    // Not across periodic seams: elements with seam frames or offsets add no jumps, so the
+    // seam's facets would keep kinks the interior's lose.
+    let w = setup.fit_params.facet_smoothing;
+    if w > 0.0 && setup.live_seams().is_none() {
+        let is_spline = |e: usize| space.is_spline(e);
+        let rules = &job.options.line_search;
+        let guard = crate::fit::jumps::JumpGuard {
+            min_quality_fraction: rules.min_quality_fraction,
+            percentile_quality_fraction: rules.percentile_quality_fraction,
+        };
+        let t = std::time::Instant::now();
+        let jumps = crate::fit::jumps::smooth_facet_jumps(
+            space,
+            job.mesh,
+            job.topo,
+            &is_spline,
+            w,
+            &guard,
+            &mut c_star,
+        )
+        .map_err(|source| CurveError::Solve {
+            input: job.input.to_owned(),
+            source,
+        })?;
+        info.facet_jumps = Some(crate::fit::jumps::JumpInfo {
+            seconds: t.elapsed().as_secs_f64(),
+            ..jumps
+        });
+    }
     Ok((c_star, info))
 }
 

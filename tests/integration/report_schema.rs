@@ -1,6 +1,6 @@
 //! The `curve --report` JSON against its documented contract, `docs/curve-report.schema.json`,
 //! with the `jsonschema` package as the oracle (`tests/external/report_schema.py`): reports of
-//! a 2D and a 3D real mesh, a generated rotation sector, the elastic method, the energy fit with the global line search and
+//! a 2D and a 3D real mesh, a generated rotation sector, the elastic method, the kink smoothing at C⁰ facets, the energy fit with the global line search and
 //! (with an adapter) the GPU backend validate, and every object of the schema is closed and
 //! met in one of them, so a report field added without documenting it fails here.
 
@@ -48,6 +48,8 @@ fn curve_reports_validate_against_the_documented_schema() {
         .unwrap(),
         // A rotation sector: its fit is coupled across the seam (`coupled_fit_device`).
         report_of("sector", &sector, &[]).unwrap(),
+        // The kinks at C⁰ facets lowered after the fit (`facet_jumps`; off by default).
+        report_of("facet_jumps", d2, &["--facet-smoothing", "0.015"]).unwrap(),
         report_of(
             "energy",
             d2,
