@@ -1016,10 +1016,9 @@ impl JobShare for RankJob<'_> {
                 knot_surfaces: (knot_intervals == KnotIntervals::Graded).then_some(setup.knot_info),
                 demoted: self.demoted,
                 // As serially on the CPU (`pcg_coupled` above).
-                coupled: (coupled[0] > 0.0).then_some(crate::fit::CoupledRun {
-                    device: "cpu",
-                    preconditioner: crate::fit::rotated::OnK::BlockJacobiPair,
-                }),
+                coupled: (coupled[0] > 0.0).then_some(crate::fit::CoupledRun::cpu(
+                    crate::fit::rotated::OnK::BlockJacobiPair,
+                )),
                 ..SplineFigures::blended(
                     space,
                     (crate::fit::FitSolver::Cg, *cg, nonzeros[1]),

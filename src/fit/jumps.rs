@@ -370,7 +370,7 @@ fn quality(dim: usize, net: &crate::math::bernstein::BezierNet) -> Quality {
             }
         }
     }
-    let (mut lo, mut hi, mut scaled) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY);
+    let mut q = Samples::new();
     let samples = if dim == 2 { 1 } else { 5 };
     for i in 0..5 {
         for j in 0..5 {
@@ -388,23 +388,52 @@ fn quality(dim: usize, net: &crate::math::bernstein::BezierNet) -> Quality {
                         }
                     }
                 }
-                let det = if dim == 2 {
-                    g[0][0] * g[1][1] - g[0][1] * g[1][0]
-                } else {
-                    g[0][0] * (g[1][1] * g[2][2] - g[1][2] * g[2][1])
-                        - g[0][1] * (g[1][0] * g[2][2] - g[1][2] * g[2][0])
-                        + g[0][2] * (g[1][0] * g[2][1] - g[1][1] * g[2][0])
-                };
-                let lengths: f64 = g[..dim].iter().map(|v| norm(*v)).product();
-                lo = lo.min(det);
-                hi = hi.max(det);
-                scaled = scaled.min(det / lengths);
+                q.add(dim, &g);
             }
         }
     }
-    Quality {
-        ratio: if hi > 0.0 { lo / hi } else { f64::NEG_INFINITY },
-        scaled,
+    q.quality()
+}
+
+/// The running min/max det J and smallest scaled Jacobian of an element's samples.
+struct Samples {
+    lo: f64,
+    hi: f64,
+    scaled: f64,
+}
+
+impl Samples {
+    fn new() -> Self {
+        Samples {
+            lo: f64::INFINITY,
+            hi: f64::NEG_INFINITY,
+            scaled: f64::INFINITY,
+        }
+    }
+
+    /// Adds the sample whose Jacobian has the reference-axis derivatives `g` as rows (in 2D
+    /// the first two; the third is not read).
+    fn add(&mut self, dim: usize, g: &[[f64; 3]; 3]) {
+        let det = if dim == 2 {
+            g[0][0] * g[1][1] - g[0][1] * g[1][0]
+        } else {
+            crate::math::linalg::det3(g)
+        };
+        let lengths: f64 = g[..dim].iter().map(|v| norm(*v)).product();
+        self.lo = self.lo.min(det);
+        self.hi = self.hi.max(det);
+        self.scaled = self.scaled.min(det / lengths);
+    }
+
+    fn quality(&self) -> Quality {
+        Quality {
+            ratio: if self.hi > 0.0 {
+                self.lo / self.hi
+            } else {
+                f64::NEG_INFINITY
+            },
+            scaled: self.scaled,
+        }
     }
 }
 
@@ -818,30 +847,17 @@ mod tests {
     fn quality_by_points(dim: usize, net: &crate::math::bernstein::BezierNet) -> Quality {
         let t = [0.0, 0.25, 0.5, 0.75, 1.0];
         let nz = if dim == 2 { 1 } else { 5 };
-        let (mut lo, mut hi, mut scaled) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY);
+        let mut q = Samples::new();
         for z in 0..nz {
             for y in 0..5 {
                 for x in 0..5 {
                     let u = [t[x], t[y], if dim == 2 { 0.0 } else { t[z] }];
                     let (_, d) = crate::math::bernstein::eval_net_with_derivatives(dim, net, u);
-                    let det = if dim == 2 {
-                        d[0][0] * d[1][1] - d[0][1] * d[1][0]
-                    } else {
-                        d[0][0] * (d[1][1] * d[2][2] - d[1][2] * d[2][1])
-                            - d[0][1] * (d[1][0] * d[2][2] - d[1][2] * d[2][0])
-                            + d[0][2] * (d[1][0] * d[2][1] - d[1][1] * d[2][0])
-                    };
-                    let lengths: f64 = d[..dim].iter().map(|v| norm(*v)).product();
-                    lo = lo.min(det);
-                    hi = hi.max(det);
-                    scaled = scaled.min(det / lengths);
+                    q.add(dim, &d);
                 }
             }
         }
-        Quality {
-            ratio: if hi > 0.0 { lo / hi } else { f64::NEG_INFINITY },
-            scaled,
-        }
+        q.quality()
     }
 
     #[test]

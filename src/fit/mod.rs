@@ -496,6 +496,16 @@ pub struct CoupledRun {
     pub preconditioner: rotated::OnK,
 }
 
+impl CoupledRun {
+    /// The coupled CG on the CPU ([`rotated::solve`]) with `preconditioner`.
+    pub fn cpu(preconditioner: rotated::OnK) -> Self {
+        CoupledRun {
+            device: "cpu",
+            preconditioner,
+        }
+    }
+}
+
 /// How the fit's normal equations are solved: K δ = b (the three coordinates apart) and,
 /// across rotation seams, (K ⊗ I₃ + C) δ = b ([`rotated`]). Every closure
 /// `FnOnce(NormalMatrix, &b, &mut δ, &CgParams)` is one, its coupled solve the CPU's.
@@ -528,11 +538,7 @@ pub trait FitSolve: Sized {
             rotated::OnK::BlockJacobiPair
         };
         let info = rotated::solve(&k, c, b, delta, cg, on_k, &mut |_, _| {})?;
-        let run = CoupledRun {
-            device: "cpu",
-            preconditioner: on_k,
-        };
-        Ok((info, run))
+        Ok((info, CoupledRun::cpu(on_k)))
     }
 }
 

@@ -1133,11 +1133,7 @@ impl FitSolve for JobSolve<'_, '_> {
         if self.factors {
             let info =
                 crate::fit::rotated::solve(&k, c, rhs, x, cg, OnK::Factor, &mut self.monitor())?;
-            let run = CoupledRun {
-                device: "cpu",
-                preconditioner: OnK::Factor,
-            };
-            return Ok((info, run));
+            return Ok((info, CoupledRun::cpu(OnK::Factor)));
         }
         let executor = self.job.executor;
         let info = executor.pcg_coupled(k, c, rhs, x, cg, &mut self.monitor())?;
