@@ -235,9 +235,6 @@ pub(crate) trait Passes: Reduction {
 /// step there, so uniform knots that leave many of them (the 3D annular sector: 96 of 144)
 /// are weighed against graded knots as the blend's counts are.
 ///
-/// Where the pass kept holds back too many, it is redone with the elements at sharp turns of
-/// interior grid lines Q2 ([`interior_kinks_if_fewer`]).
-///
 /// These passes fit without [`crate::fit::FitWeights::extraordinary_midpoint`]. Where the
 /// pass kept holds back more than [`super::spline::AUTO_MAX_HELD_BACK`] of the elements and
 /// the weight raises some element's midpoints ([`Passes::reweighted`]), it is fitted once
@@ -255,6 +252,7 @@ pub(crate) fn spline_passes<P: Passes>(
     clock: &mut Clock,
 ) -> Result<P::Pass, CurveError> {
     let kept = weighted_passes(p, job, setup, clock)?;
+    let kept = interior_kinks_if_fewer(p, job, setup, clock, kept)?;
     demote_before_fit_if_fewer(p, job, setup, clock, kept)
 }
 
@@ -271,9 +269,7 @@ pub(crate) fn spline_passes<P: Passes>(
 /// two edges from the valence-3 line; the fit slides those elements' midpoints within each
 /// shell layer by a tenth of their shortest edge, and the blend holds back 72 of 648 elements
 /// (11.1 %) and leaves the mesh's min scaled Jacobian at 0.807 (input 0.864). With those
-/// elements Q2 it holds back none and keeps 0.864, and the extraordinary midpoint weight's
-/// refit, which held back 72, is not run: the job costs the two passes it cost before. Run
-/// before that refit, on the passes' weights. Only where too many are held back: on
+/// elements Q2 it holds back none and keeps 0.864. Only where too many are held back: on
 /// sphere_r6 (8.4 % held back) the same elements Q2 hold back 6.5 % but raise its 99th
 /// percentile facet angle above the straight elevation's + 1° (57.6° against 56.3°).
 fn interior_kinks_if_fewer<P: Passes>(
@@ -316,8 +312,8 @@ fn interior_kinks_if_fewer<P: Passes>(
     Ok(kept)
 }
 
-/// The knot passes without the extraordinary midpoint weight, the interior kinks' redo, then
-/// the weight's refit of the pass kept ([`spline_passes`] before the demotion).
+/// The knot passes without the extraordinary midpoint weight, then its refit of the pass kept
+/// ([`spline_passes`] before the demotion).
 fn weighted_passes<P: Passes>(
     p: &mut P,
     job: &Job,
@@ -331,13 +327,15 @@ fn weighted_passes<P: Passes>(
     let mut off = job.options.clone();
     off.fit.weights.extraordinary_midpoint = 0.0;
     setup.fit_params.weights.extraordinary_midpoint = 0.0;
-    let off_job = Job {
-        options: &off,
-        ..*job
-    };
-    let kept = knot_passes(p, &off_job, setup, clock)?;
-    // Before the weight's refit: where the turns are the cause, the redo alone keeps the spline.
-    let kept = interior_kinks_if_fewer(p, &off_job, setup, clock, kept)?;
+    let kept = knot_passes(
+        p,
+        &Job {
+            options: &off,
+            ..*job
+        },
+        setup,
+        clock,
+    )?;
     let n = p.elements();
     let least_squares = job.options.geometry == super::Geometry::SplineFitted
         && job.options.energy.is_none()
