@@ -262,7 +262,8 @@ pub(crate) fn spline_passes<P: Passes>(
 /// counted by [`Passes::interior_kinks`]), the same pass with those elements Q2, started from
 /// `kept`'s fit, when its blend holds back strictly fewer elements of the whole mesh and its
 /// output boundary stays close to `kept`'s fitted boundary
-/// ([`interior_kinks_keep_the_boundary`]). `setup` ends with the spaces of the pass returned.
+/// ([`interior_kinks_keep_the_boundary`]); not with `--demote-uncertified`, whose demotion is
+/// then the remedy. `setup` ends with the spaces of the pass returned.
 ///
 /// Why: a C¹ spline cannot follow a grid line that turns by tens of degrees at one vertex. On
 /// hsphere8's cubed-sphere shell the lines crossing the block arcs turn by 48° and 37° one and
@@ -284,8 +285,10 @@ fn interior_kinks_if_fewer<P: Passes>(
         Ok(held) if auto_holds_back_too_many(held, p.elements()) => held,
         _ => return Ok(kept),
     };
+    // `--demote-uncertified` asks for its own remedy of the pass kept (the demotion below).
     if options.geometry != super::Geometry::SplineFitted
         || options.energy.is_some()
+        || options.demote_uncertified
         || p.interior_kinks(job, setup) == 0
     {
         return Ok(kept);
