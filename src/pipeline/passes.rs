@@ -244,7 +244,10 @@ pub(crate) trait Passes: Reduction {
 /// Then, with `--demote-uncertified` or by default where the pass kept holds back too many
 /// ([`demotes_by_default`]), the pass kept is redone with the elements whose initial map is
 /// not certified Q2 from the start ([`demote_before_fit_if_fewer`]; by default kept only
-/// where it keeps the boundary).
+/// where it keeps the boundary). Where no demoted pass is kept, and the pass kept still holds
+/// back too many, the elements at sharp turns of interior grid lines are made Q2 in a redo
+/// ([`interior_kinks_if_fewer`]): after the demotion, so that the demotion's results (and the
+/// ranks' agreement with the serial run under `--demote-uncertified`) stand wherever it acts.
 pub(crate) fn spline_passes<P: Passes>(
     p: &mut P,
     job: &Job,
@@ -252,8 +255,17 @@ pub(crate) fn spline_passes<P: Passes>(
     clock: &mut Clock,
 ) -> Result<P::Pass, CurveError> {
     let kept = weighted_passes(p, job, setup, clock)?;
-    let kept = interior_kinks_if_fewer(p, job, setup, clock, kept)?;
-    demote_before_fit_if_fewer(p, job, setup, clock, kept)
+    match demote_before_fit_if_fewer(p, job, setup, clock, kept)? {
+        Demotion::Redone(pass) => Ok(pass),
+        Demotion::Kept(kept) => interior_kinks_if_fewer(p, job, setup, clock, kept),
+    }
+}
+
+/// What [`demote_before_fit_if_fewer`] returns: the redone pass with the demoted elements Q2,
+/// or the pass it was given.
+enum Demotion<T> {
+    Redone(T),
+    Kept(T),
 }
 
 /// The pass kept (`kept`, on `setup`'s knots and weights), or, where its blend holds back more
@@ -262,8 +274,7 @@ pub(crate) fn spline_passes<P: Passes>(
 /// counted by [`Passes::interior_kinks`]), the same pass with those elements Q2, started from
 /// `kept`'s fit, when its blend holds back strictly fewer elements of the whole mesh and its
 /// output boundary stays close to `kept`'s fitted boundary
-/// ([`interior_kinks_keep_the_boundary`]); not with `--demote-uncertified`, whose demotion is
-/// then the remedy. `setup` ends with the spaces of the pass returned.
+/// ([`interior_kinks_keep_the_boundary`]). `setup` ends with the spaces of the pass returned.
 ///
 /// Why: a C¹ spline cannot follow a grid line that turns by tens of degrees at one vertex. On
 /// hsphere8's cubed-sphere shell the lines crossing the block arcs turn by 48° and 37° one and
@@ -285,10 +296,8 @@ fn interior_kinks_if_fewer<P: Passes>(
         Ok(held) if auto_holds_back_too_many(held, p.elements()) => held,
         _ => return Ok(kept),
     };
-    // `--demote-uncertified` asks for its own remedy of the pass kept (the demotion below).
     if options.geometry != super::Geometry::SplineFitted
         || options.energy.is_some()
-        || options.demote_uncertified
         || p.interior_kinks(job, setup) == 0
     {
         return Ok(kept);
@@ -402,10 +411,10 @@ fn demote_before_fit_if_fewer<P: Passes>(
     setup: &SplineSetup,
     clock: &mut Clock,
     kept: P::Pass,
-) -> Result<P::Pass, CurveError> {
+) -> Result<Demotion<P::Pass>, CurveError> {
     let options = job.options;
     let Ok(held) = P::held(&kept) else {
-        return Ok(kept);
+        return Ok(Demotion::Kept(kept));
     };
     let asked = options.demote_uncertified
         || (matches!(options.method, super::Method::Iga) && demotes_by_default(held, p.elements()));
@@ -414,7 +423,7 @@ fn demote_before_fit_if_fewer<P: Passes>(
         || options.geometry != super::Geometry::SplineFitted
         || options.energy.is_some()
     {
-        return Ok(kept);
+        return Ok(Demotion::Kept(kept));
     }
     // The pass kept's knots.
     let knots = options.with_knots(setup.knot_intervals);
@@ -423,7 +432,7 @@ fn demote_before_fit_if_fewer<P: Passes>(
         ..*job
     };
     let Some(demote) = p.demotion(&job, setup, clock) else {
-        return Ok(kept);
+        return Ok(Demotion::Kept(kept));
     };
     // By default the redo is judged against the pass kept's own output, and not run where its
     // demoted sides alone already move the boundary further.
@@ -435,7 +444,7 @@ fn demote_before_fit_if_fewer<P: Passes>(
             before,
         )
     {
-        return Ok(kept);
+        return Ok(Demotion::Kept(kept));
     }
     // Given up once it holds back as many as the pass kept: that one stays.
     let redone = p.run(
@@ -448,16 +457,16 @@ fn demote_before_fit_if_fewer<P: Passes>(
     )?;
     let fewer = matches!(P::held(&redone), Ok(fewer) if fewer < held);
     if !fewer {
-        return Ok(kept);
+        return Ok(Demotion::Kept(kept));
     }
     let Some(before) = guard else {
-        return Ok(redone);
+        return Ok(Demotion::Redone(redone));
     };
     let after = p.output_boundary_shift(&job, setup, clock, &redone, &kept);
     Ok(if demotion_keeps_the_boundary(after, before) {
-        redone
+        Demotion::Redone(redone)
     } else {
-        kept
+        Demotion::Kept(kept)
     })
 }
 
