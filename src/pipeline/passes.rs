@@ -141,7 +141,8 @@ pub(crate) trait Passes: Reduction {
     }
     /// RMS distance of `pass`'s output boundary (its certified blend run to its end) from
     /// `reference`'s fitted boundary over the whole mesh ([`super::spline::output_boundary_sq_sum`]),
-    /// relative to the whole mesh's bounding-box diagonal, timed as the validity stage.
+    /// relative to the whole mesh's bounding-box diagonal, timed as the validity stage; the
+    /// nearest points sought up to `reach` beyond each side ([`misfit::boundary_sq_sum_reaching`]).
     fn output_boundary_shift(
         &mut self,
         job: &Job,
@@ -149,12 +150,14 @@ pub(crate) trait Passes: Reduction {
         clock: &mut Clock,
         pass: &Self::Pass,
         reference: &Self::Pass,
+        reach: f64,
     ) -> f64 {
         let owned = self.owned(job);
         let (space, factors) = (Self::space(pass), Self::factors(pass));
         clock.run(Stage::Validity, || {
             let reference = Self::space(reference);
-            let own = output_boundary_sq_sum(job, setup, space, factors, reference, |e| e < owned);
+            let own =
+                output_boundary_sq_sum(job, setup, space, factors, reference, reach, |e| e < owned);
             self.whole_rms(job, own)
         })
     }
@@ -307,12 +310,13 @@ fn interior_kinks_if_fewer<P: Passes>(
         options: &knots,
         ..*job
     };
-    let before = p.output_boundary_shift(&job, setup, clock, &kept, &kept);
+    let before = p.output_boundary_shift(&job, setup, clock, &kept, &kept, misfit::SLIDE_REACH);
     setup.interior_kinks_q2 = true;
     // Given up once it holds back as many as the pass kept: that one stays.
     let redone = p.run(&job, setup, clock, Some(&kept), Some(held - 1), None)?;
     if matches!(P::held(&redone), Ok(fewer) if fewer < held) {
-        let after = p.output_boundary_shift(&job, setup, clock, &redone, &kept);
+        let after =
+            p.output_boundary_shift(&job, setup, clock, &redone, &kept, misfit::SLIDE_REACH);
         setup.interior_kinks_q2 = false;
         let fitted = p.boundary_rms(&job, setup, clock, &kept);
         if interior_kinks_keep_the_boundary(after, before, fitted) {
@@ -437,7 +441,7 @@ fn demote_before_fit_if_fewer<P: Passes>(
     // By default the redo is judged against the pass kept's own output, and not run where its
     // demoted sides alone already move the boundary further.
     let guard = (!options.demote_uncertified)
-        .then(|| p.output_boundary_shift(&job, setup, clock, &kept, &kept));
+        .then(|| p.output_boundary_shift(&job, setup, clock, &kept, &kept, 0.0));
     if let Some(before) = guard
         && demotion_is_refused_beforehand(
             p.demoted_boundary_shift(&job, setup, clock, &kept, &demote),
@@ -462,7 +466,7 @@ fn demote_before_fit_if_fewer<P: Passes>(
     let Some(before) = guard else {
         return Ok(Demotion::Redone(redone));
     };
-    let after = p.output_boundary_shift(&job, setup, clock, &redone, &kept);
+    let after = p.output_boundary_shift(&job, setup, clock, &redone, &kept, 0.0);
     Ok(if demotion_keeps_the_boundary(after, before) {
         Demotion::Redone(redone)
     } else {

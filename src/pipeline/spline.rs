@@ -814,6 +814,7 @@ pub(crate) fn output_boundary_sq_sum(
     space: &SplineSpace,
     factors: &[f32],
     reference: &SplineSpace,
+    reach: f64,
     which: impl Fn(usize) -> bool + Sync,
 ) -> (f64, usize) {
     let target_map = setup.target_map(job);
@@ -827,7 +828,7 @@ pub(crate) fn output_boundary_sq_sum(
         factors.to_vec(),
     )
     .with_geometry(job.mesh);
-    misfit::boundary_sq_sum(setup.topo(job), &blended, reference, &which)
+    misfit::boundary_sq_sum_reaching(setup.topo(job), &blended, reference, &which, reach)
 }
 
 /// A spline pass that may stop early ([`spline_pass_within`]): `auto`'s uniform pass.
