@@ -397,7 +397,14 @@ fn assert_ranks_give_the_serial_output_on(
             r["knot_intervals"]
         );
         assert!(d <= RANK_TOLERANCE, "{np} ranks: {d:.3e} of the diagonal");
-        assert_eq!(its, iterations, "{np} ranks: CG iterations");
+        // To one iteration: a redo of the spline passes (the interior kinks') starts from the
+        // pass kept's fit, which the ranks reach to the order of their sums, and a slowly
+        // converging CG (point Jacobi's ~200 iterations) may stop one iteration apart.
+        let (a, b) = (its.as_u64().unwrap(), iterations.as_u64().unwrap());
+        assert!(
+            a.abs_diff(b) <= 1,
+            "{np} ranks: CG iterations {a} against {b}"
+        );
         for key in [
             "knot_intervals",
             "knot_passes",
@@ -1759,9 +1766,11 @@ fn auto_knots_two_passes_choose_as_the_serial_run_on_2_3_ranks() {
     ];
     let held = |r: &Value| r["reduced_elements"].as_u64().unwrap();
     for (name, input, kept) in cases {
-        let tol = ["--cg-tol", RANK_CG_TOL];
+        // The counts before any redo decide the premise: the interior kinks' redo (which takes
+        // the cylinder's held back to 0 with either knots) is off.
+        let tol = ["--cg-tol", RANK_CG_TOL, "--interior-kink-angle", "180"];
         let serial_with = |knots: &str| {
-            let args = [tol[0], tol[1], "--knot-intervals", knots];
+            let args = [tol[0], tol[1], tol[2], tol[3], "--knot-intervals", knots];
             curve_with_report(0, &input, &format!("{name}_{knots}"), &args).2
         };
         let (uniform, graded) = (serial_with("uniform"), serial_with("graded"));

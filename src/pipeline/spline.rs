@@ -144,8 +144,8 @@ impl SplineSetup {
         };
         // And elements at sharp turns of the interior grid lines.
         let interior_kinks = match options.fit.targets {
-            FitTargets::Smooth(_) if options.geometry == Geometry::SplineFitted => {
-                kinks::interior_kink_elements(mesh, topo, kinks::INTERIOR_KINK_ANGLE_DEG)
+            FitTargets::Smooth(p) if options.geometry == Geometry::SplineFitted => {
+                kinks::interior_kink_elements(mesh, topo, p.interior_kink_angle_deg)
             }
             _ => Vec::new(),
         };
