@@ -136,6 +136,12 @@ pub(crate) struct JobArgs {
     /// this off.
     #[arg(long, default_value_t = 10.0, value_name = "DEG")]
     kink_angle: f64,
+    /// With `--fit smooth`: where the fitted pass holds back more than a tenth of the
+    /// elements, it is redone with the elements at regular interior vertices where an
+    /// interior grid line turns by more than this angle in degrees made Q2, and the redo kept
+    /// where it holds back fewer and keeps the boundary; 180 turns this off.
+    #[arg(long, default_value_t = polyspline::spline::kinks::INTERIOR_KINK_ANGLE_DEG, value_name = "DEG")]
+    interior_kink_angle: f64,
     /// After the fit, lower the map's kinks at C⁰ facets (where a Q2 element meets another
     /// element): W weighs the transversal-derivative jumps there against moving the interior
     /// control points from the fit (0: off). A move stands only where every element it
@@ -339,6 +345,7 @@ impl JobArgs {
     /// an adapter is an error).
     pub(crate) fn resolve(self, output: OutputOptions) -> anyhow::Result<CurveOptions> {
         polyspline::fit::check_kink_angle(self.kink_angle)?;
+        polyspline::fit::check_interior_kink_angle(self.interior_kink_angle)?;
         if let Some(w) = self.facet_smoothing
             && !(w.is_finite() && w >= 0.0)
         {
@@ -407,7 +414,7 @@ impl JobArgs {
                 preconditioner,
             ),
             Rule::new(
-                &["kink_angle"],
+                &["kink_angle", "interior_kink_angle"],
                 fitted && FitPreset::from(self.fit).smooth_targets(),
                 if fitted {
                     "kinks are found for the targets of --fit smooth and --fit energy only"
@@ -546,6 +553,7 @@ impl JobArgs {
                 targets: if FitPreset::from(self.fit).smooth_targets() {
                     FitTargets::Smooth(SmoothParams {
                         kink_angle_deg: self.kink_angle,
+                        interior_kink_angle_deg: self.interior_kink_angle,
                         ..Default::default()
                     })
                 } else {

@@ -434,6 +434,12 @@ pub fn check_kink_angle(deg: f64) -> Result<(), ParamError> {
     above("--kink-angle", deg, 0.0, 360.0)
 }
 
+/// `--interior-kink-angle`: degrees in (0, 360] (180 and above turn the interior kinks off),
+/// checked with every fit as [`check_kink_angle`].
+pub fn check_interior_kink_angle(deg: f64) -> Result<(), ParamError> {
+    above("--interior-kink-angle", deg, 0.0, 360.0)
+}
+
 impl FitParams {
     /// Weights (bounded by [`MAX_WEIGHT`]), CG and smooth-target parameters.
     pub fn check(&self) -> Result<(), ParamError> {
@@ -454,6 +460,7 @@ impl FitParams {
         self.cg.check()?;
         if let FitTargets::Smooth(s) = &self.targets {
             check_kink_angle(s.kink_angle_deg)?;
+            check_interior_kink_angle(s.interior_kink_angle_deg)?;
             in_range("smooth feature angle", s.feature_angle_deg, 0.0, 180.0)?;
             in_range("smooth decay", s.decay, 0.0, 1e6)?;
         }

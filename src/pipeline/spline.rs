@@ -52,6 +52,12 @@ pub(crate) struct SplineSetup {
     /// Elements made Q2 by feature creases and by kinks of boundary grid lines.
     crease: Vec<bool>,
     kinks: kinks::Kinks,
+    /// Elements at sharp turns of interior grid lines ([`kinks::interior_kink_elements`]; empty
+    /// where there are none to look for), made Q2 where [`SplineSetup::interior_kinks_q2`] is
+    /// set (the passes' redo, `pipeline::passes::interior_kinks_if_fewer`).
+    interior_kinks: Vec<bool>,
+    /// Whether the spaces built make [`SplineSetup::interior_kinks`]' elements Q2.
+    pub(crate) interior_kinks_q2: bool,
     /// The fit's parameters, with the features it keeps.
     pub(crate) fit_params: FitParams,
     /// The fit's smooth targets, shared by the fit and the blend's target map.
@@ -136,6 +142,13 @@ impl SplineSetup {
             }
             _ => kinks::Kinks::default(),
         };
+        // And elements at sharp turns of the interior grid lines.
+        let interior_kinks = match options.fit.targets {
+            FitTargets::Smooth(p) if options.geometry == Geometry::SplineFitted => {
+                kinks::interior_kink_elements(mesh, topo, p.interior_kink_angle_deg)
+            }
+            _ => Vec::new(),
+        };
         let fitted = options.geometry == Geometry::SplineFitted;
         // The walls' models at a seam are fitted over both sides.
         let partners = view.as_ref().map_or((&[][..], &[][..]), |v| {
@@ -172,6 +185,8 @@ impl SplineSetup {
             features,
             crease,
             kinks,
+            interior_kinks,
+            interior_kinks_q2: false,
             fit_params,
             targets,
             blend_targets,
@@ -245,6 +260,12 @@ impl SplineSetup {
         }
     }
 
+    /// Per element of this process's mesh, whether it is at a sharp turn of an interior grid
+    /// line ([`kinks::interior_kink_elements`]; empty where there are none to look for).
+    pub(crate) fn interior_kinks(&self) -> &[bool] {
+        &self.interior_kinks
+    }
+
     /// The features the fit keeps (none with `--ignore-features`).
     pub(crate) fn used_features(&self) -> Option<&Features> {
         self.fit_params.features.as_deref()
@@ -265,6 +286,14 @@ impl SplineSetup {
         let marks = [
             (&self.crease[..], Q2Reason::FeatureCrease),
             (&self.kinks.elements[..], Q2Reason::BoundaryKink),
+            (
+                if self.interior_kinks_q2 {
+                    &self.interior_kinks[..]
+                } else {
+                    &[]
+                },
+                Q2Reason::InteriorKink,
+            ),
             (demote, Q2Reason::InvalidSplineMap),
             (misfit, Q2Reason::BoundaryMisfit),
             (&self.knot_split[..], Q2Reason::KnotSplit),
@@ -480,6 +509,25 @@ pub const DEMOTION_BOUNDARY_SLACK: f64 = 1.1;
 pub(crate) fn demotion_keeps_the_boundary(redone: f64, kept: f64) -> bool {
     redone.max(AUTO_BOUNDARY_FLOOR) <= DEMOTION_BOUNDARY_SLACK * kept.max(AUTO_BOUNDARY_FLOOR)
 }
+
+/// After the interior kinks' redo (`pipeline::passes::interior_kinks_if_fewer`): whether it
+/// keeps the boundary. Its output boundary's RMS distance from the pass kept's fitted boundary
+/// (`redone`) may exceed the pass kept's own output's (`kept`, as
+/// [`demotion_keeps_the_boundary`]) by at most [`INTERIOR_KINK_BOUNDARY_SHARE`] of the pass
+/// kept's fitted boundary's RMS distance from the smooth boundary (`fitted`): a move within
+/// how far the least-squares spline itself is from the surface. Why not the demotion's rule
+/// alone: where the pass kept holds back no boundary side (hsphere8) its own output's shift is
+/// 0, and the redo's Q2 elements, whose boundary sides are their smooth targets, moved the
+/// boundary by 1.02e-6 of the diagonal against the fit's 1.30e-6 from the smooth boundary
+/// (its boundary vertices' largest distance from the input's, 4.53e-5, unchanged).
+pub(crate) fn interior_kinks_keep_the_boundary(redone: f64, kept: f64, fitted: f64) -> bool {
+    demotion_keeps_the_boundary(redone, kept)
+        || redone <= kept + INTERIOR_KINK_BOUNDARY_SHARE * fitted
+}
+
+/// Share of the pass kept's fitted boundary distance from the smooth boundary by which the
+/// interior kinks' redo may move the output boundary ([`interior_kinks_keep_the_boundary`]).
+pub(crate) const INTERIOR_KINK_BOUNDARY_SHARE: f64 = 1.0;
 
 /// Without `--demote-uncertified`, before the demotion redo: whether it is refused without
 /// running it, where `demoted` (the target map's boundary against the pass kept's fitted
@@ -766,6 +814,7 @@ pub(crate) fn output_boundary_sq_sum(
     space: &SplineSpace,
     factors: &[f32],
     reference: &SplineSpace,
+    reach: f64,
     which: impl Fn(usize) -> bool + Sync,
 ) -> (f64, usize) {
     let target_map = setup.target_map(job);
@@ -779,7 +828,7 @@ pub(crate) fn output_boundary_sq_sum(
         factors.to_vec(),
     )
     .with_geometry(job.mesh);
-    misfit::boundary_sq_sum(setup.topo(job), &blended, reference, &which)
+    misfit::boundary_sq_sum_reaching(setup.topo(job), &blended, reference, &which, reach)
 }
 
 /// A spline pass that may stop early ([`spline_pass_within`]): `auto`'s uniform pass.

@@ -51,6 +51,9 @@ pub enum Q2Reason {
     /// Made Q2 by the caller: the element touches a vertex where a boundary grid line kinks
     /// ([`crate::spline::kinks`]), which a C¹ spline cannot follow.
     BoundaryKink,
+    /// Made Q2 by the caller: the element touches a regular interior vertex where an interior
+    /// grid line turns sharply ([`crate::spline::kinks::interior_kink_elements`]).
+    InteriorKink,
     /// Made Q2 by the caller after the fit: a boundary side of the element stayed far from its
     /// smooth targets, much further than a neighbouring side and than a Q2 element would
     /// leave (`pipeline::misfit`).

@@ -174,6 +174,107 @@ pub fn detect(mesh: &LinearMesh, topo: &Topology, angle_deg: f64, exclude: &[boo
 
 impl Kinks {}
 
+/// Turning (degrees) of an interior grid line at a regular interior vertex above which the
+/// elements at the vertex are made Q2 ([`interior_kink_elements`]) by the smooth fit.
+///
+/// Chosen on the real meshes (`BENCHMARKS.md`, "Interior grid lines that turn sharply"): on
+/// hsphere8 the lines turn by 47.8° one edge from the valence-3 line and by 36.7° two edges
+/// from it, and both rings must be C⁰ (with only the first, 40–45°, the fit bends the next
+/// ring and the blend holds back 22 %; with both, none); 30° also takes acoustics_mesh3d's and
+/// cylinder-hex's smoothly curved lines.
+pub const INTERIOR_KINK_ANGLE_DEG: f64 = 35.0;
+
+/// The elements touching a regular interior vertex where an interior grid line turns by more
+/// than `angle_deg` degrees: the angle between the line's two edges at the vertex, v − a and
+/// b − v, for the opposite edges a–v and v–b (edges at v that share no element).
+///
+/// Why: a spline element is C¹ across its facets, so, as at the boundary's kinks, a grid line
+/// that turns sharply at a regular vertex is one the spline cannot follow. Block-structured
+/// shells are the case: in a cubed-sphere shell the lines crossing a block arc next to the
+/// valence-3 line of a block corner turn by 48° at every shell layer (sfepy's hsphere8), and
+/// the C¹ fit slides those elements' midpoints by a tenth of their shortest edge within the
+/// layer, which the blend's quality rules reject. Made Q2, the elements at such vertices are
+/// only C⁰ there and take the input's shape.
+///
+/// The rule reads the vertex's own elements only (every element at an interior vertex is in
+/// each rank's mesh that holds one of them with its ghost ring), so it marks the same
+/// elements on every process. Vertices on the boundary (a periodic seam's included) are not
+/// interior vertices of `topo`; `angle_deg` ≥ 180 (or NaN) finds none.
+pub fn interior_kink_elements(mesh: &LinearMesh, topo: &Topology, angle_deg: f64) -> Vec<bool> {
+    use rayon::prelude::*;
+    let ne = mesh.n_elements();
+    if angle_deg.is_nan() || angle_deg >= 180.0 {
+        return vec![false; ne];
+    }
+    let (full, edges_per) = if topo.dim == 3 { (8, 12) } else { (4, 4) };
+    let cos_max = angle_deg.to_radians().cos();
+    let x = |v: u32| DVec3::from_array(mesh.coords[v as usize]);
+    let kinked: Vec<bool> = (0..mesh.n_vertices())
+        .into_par_iter()
+        .map(|v| {
+            let at = topo.elements_at_vertex(v);
+            if topo.vertex_on_boundary[v] || at.len() != full {
+                return false;
+            }
+            // The edges at v, and per element its edges at v (3 in a hex, 2 in a quad).
+            let mut ids: Vec<u32> = Vec::with_capacity(2 * topo.dim);
+            let mut together: Vec<[usize; 3]> = Vec::with_capacity(full);
+            for &e in at {
+                let e = e as usize;
+                let mut own = [usize::MAX; 3];
+                let mut k = 0;
+                for &id in &topo.element_edges[e * edges_per..(e + 1) * edges_per] {
+                    if !topo.edges[id as usize].contains(&(v as u32)) {
+                        continue;
+                    }
+                    let i = match ids.iter().position(|&d| d == id) {
+                        Some(i) => i,
+                        None => {
+                            ids.push(id);
+                            ids.len() - 1
+                        }
+                    };
+                    if k < 3 {
+                        own[k] = i;
+                    }
+                    k += 1;
+                }
+                if k != topo.dim {
+                    return false;
+                }
+                together.push(own);
+            }
+            if ids.len() != 2 * topo.dim {
+                return false;
+            }
+            let far = |id: u32| {
+                let [a, b] = topo.edges[id as usize];
+                if a as usize == v { b } else { a }
+            };
+            let xv = DVec3::from_array(mesh.coords[v]);
+            (0..ids.len()).any(|i| {
+                // The one edge at v that shares no element with edge i: the line's other half.
+                let mut apart = (0..ids.len()).filter(|&j| {
+                    j != i && !together.iter().any(|t| t.contains(&i) && t.contains(&j))
+                });
+                let (Some(j), None) = (apart.next(), apart.next()) else {
+                    return false;
+                };
+                let d1 = unit(xv - x(far(ids[i])));
+                let d2 = unit(x(far(ids[j])) - xv);
+                d1.dot(d2) < cos_max
+            })
+        })
+        .collect();
+    let mut out = vec![false; ne];
+    for (v, _) in kinked.iter().enumerate().filter(|(_, k)| **k) {
+        for &e in topo.elements_at_vertex(v) {
+            out[e as usize] = true;
+        }
+    }
+    out
+}
+
 /// Boundary vertices of a hex mesh where a boundary facet's normal is more than `angle_deg`
 /// from the vertex normal (sharp features), and non-manifold vertices: an `exclude` mask for
 /// [`detect`].
@@ -385,6 +486,55 @@ mod tests {
         let mesh = sheared(&xs, 30.0, true, 1);
         let topo = Topology::build(&mesh);
         assert_eq!(detect(&mesh, &topo, 180.0, &[]).n_vertices, 0);
+    }
+
+    /// The interior kinks of `mesh` at `angle_deg`.
+    fn interior_of(mesh: &LinearMesh, angle_deg: f64) -> Vec<usize> {
+        marked(&interior_kink_elements(
+            mesh,
+            &Topology::build(mesh),
+            angle_deg,
+        ))
+    }
+
+    /// The shear of `sheared` turns the x-lines by exactly the bend at x = 0.5 (direction
+    /// (1, 0) → (1, tan b)): with three layers the grid has interior vertices there, and the
+    /// elements at them (x cells 4 and 5, every row and layer) are interior kinks where the
+    /// bend is above the angle, and no others; lines of a cylinder turning by 5.7° per vertex,
+    /// a bend of one layer (no interior vertex) and the same bend in 2D above the angle are not.
+    #[test]
+    fn interior_lines_kink_where_they_turn_by_more_than_the_angle() {
+        let xs = uniform(10, 0.1);
+        let mut column_sorted: Vec<usize> = (0..3)
+            .flat_map(|k| (0..8).flat_map(move |j| [(k * 8 + j) * 10 + 4, (k * 8 + j) * 10 + 5]))
+            .collect();
+        column_sorted.sort_unstable();
+        assert_eq!(
+            interior_of(&sheared(&xs, 40.0, false, 3), 35.0),
+            column_sorted
+        );
+        assert_eq!(
+            interior_of(&sheared(&xs, 40.0, true, 3), 35.0),
+            column_sorted
+        );
+        assert!(interior_of(&sheared(&xs, 30.0, false, 3), 35.0).is_empty());
+        assert_eq!(
+            interior_of(&sheared(&xs, 30.0, false, 3), 25.0),
+            column_sorted
+        );
+        // Rolled onto cylinders the x-lines turn by 0.1 rad (5.7°) at every vertex.
+        assert!(interior_of(&sheared(&xs, 0.0, true, 3), 10.0).is_empty());
+        assert!(interior_of(&sheared(&xs, 60.0, true, 1), 35.0).is_empty());
+        assert!(interior_of(&sheared(&xs, 60.0, false, 3), 180.0).is_empty());
+        // 2D: the same shear of a 10 × 8 grid, its x-lines turning at x = 0.5.
+        let mut flat = crate::mesh::generate::grid_2d(&xs, &uniform(8, 0.125));
+        let t = 40f64.to_radians().tan();
+        for p in &mut flat.coords {
+            p[1] += t * (p[0] - 0.5).max(0.0);
+        }
+        let want: Vec<usize> = (0..8).flat_map(|j| [j * 10 + 4, j * 10 + 5]).collect();
+        assert_eq!(interior_of(&flat, 35.0), want);
+        assert!(interior_of(&flat, 45.0).is_empty());
     }
 
     /// A cube grid of n³ cells on [−1, 1]³ pushed out onto the unit sphere (x → x·|x|∞/|x|):
