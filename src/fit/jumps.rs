@@ -22,7 +22,21 @@
 //! Movable: the control points in some j's rows that carry no Bernstein point of a boundary
 //! facet (the boundary is the fit's exactly, as in the energy stage); elements with periodic
 //! frames or seam offsets add no rows. One SPD system (I + W JᵀJ) δ = −W Jᵀ J C*, solved by
-//! CG, gives C = C* + δ on the movable points.
+//! CG (relative residual 10⁻⁶: a proposal the guard below still judges), gives C = C* + δ
+//! on the movable points. J is applied in factors (`Jumps`): each element's outward
+//! differences between its facet layer and the next at the facet's Bernstein positions (sparse
+//! over control points, two per Bernstein point of a Q2 element), then the facet's 3^(d−1) ×
+//! 3^(d−1) Bernstein values at the points, weighted; never as J's rows over both elements'
+//! points, which cost a full CSR of 9 × 54 entries per 3D facet.
+//!
+//! **Only the C⁰ facets' neighbourhood is evaluated.** A move reaches the elements of J's
+//! points (`near`), and an element's risk freezes points only through elements sharing a point
+//! with it (`around`, one more ring): the fitted quality is sampled there alone, the halvings
+//! re-sample only the elements of the points just halved, and every other element keeps the
+//! fit's control points without being looked at. Only the straight mesh's smallest values and
+//! 1st percentiles (the blend's, by definition over every element) and the supports (one
+//! element's control points: its Kronecker factors' non-zero columns, read without expanding
+//! its rows) cover the whole mesh.
 //!
 //! **Quality kept inside the blend's rules.** Straightening a kink bends the elements beside
 //! it, and the blend that follows holds back every element its rules reject (with the
@@ -63,20 +77,15 @@ pub struct JumpInfo {
     pub rms_after: f64,
     /// CG iterations of the solves (one per round).
     pub iterations: usize,
-    /// Elements within the margin of the blend's rules at the fit, or outside them: their
-    /// points and their neighbours' stay at the fit.
+    /// Elements within the margin of the blend's rules at the fit, or outside them, among
+    /// those sharing a control point with an element a move can reach (no other is
+    /// evaluated): their points and their neighbours' stay at the fit.
     pub at_risk_elements: usize,
     /// Elements a move took below their needs (the moves of their points then halved),
     /// counted once per halving.
     pub frozen_elements: usize,
     /// Wall time of the smoothing, set by the caller (0 when it is not).
     pub seconds: f64,
-}
-
-/// One row of J: control point ids (sorted, distinct) and coefficients.
-struct Row {
-    cols: Vec<u32>,
-    vals: Vec<f64>,
 }
 
 /// The facet parameters of the points: ¼, ½, ¾ along each of the facet's directions.
@@ -122,35 +131,41 @@ pub fn smooth_facet_jumps(
                 })
         })
         .collect();
-    let rows: Vec<Row> = facets
-        .par_iter()
-        .flat_map_iter(|&f| facet_rows(space, mesh, topo, f, c))
-        .collect();
-    let mut frozen = boundary_points(space, topo, c.len());
-    let jc = |c: &[[f64; 3]]| -> Vec<[f64; 3]> { rows.par_iter().map(|r| apply(r, c)).collect() };
-    let rms = |j: &[[f64; 3]]| {
-        let s: f64 = j.iter().map(|v| v.iter().map(|x| x * x).sum::<f64>()).sum();
-        (s / j.len().max(1) as f64).sqrt()
-    };
-    let j0 = jc(c);
+    let jumps = Jumps::new(space, mesh, topo, &facets, c);
+    let j0 = jumps.of(&jumps.diff.times(c));
     let mut info = JumpInfo {
         facets: facets.len(),
-        rms_before: rms(&j0),
-        rms_after: rms(&j0),
+        rms_before: jumps.rms(&j0),
+        rms_after: jumps.rms(&j0),
         ..Default::default()
     };
-    if rows.is_empty() {
+    if jumps.points() == 0 {
         return Ok(info);
     }
     let dim = topo.dim;
     let start = c.to_vec();
-    // The elements each control point shapes, and the quality each element must keep.
+    // The region: the points in J's rows, the elements they shape (`near`, the only ones a
+    // move can reach) and the elements sharing a point with those (`around`, the only ones
+    // whose risk can freeze a point of J's rows). Nothing beyond is evaluated.
     let supports = Supports::new(space);
-    let needs = Needs::new(space, mesh, guard, &start);
+    let mut in_rows = vec![false; c.len()];
+    jumps
+        .diff
+        .cols
+        .iter()
+        .for_each(|&id| in_rows[id as usize] = true);
+    let rows_points: Vec<usize> = (0..c.len()).filter(|&i| in_rows[i]).collect();
+    let near = supports.elements_of(rows_points.iter().copied());
+    let around = supports.elements_of(
+        near.iter()
+            .flat_map(|&e| supports.element(e).iter().map(|&id| id as usize)),
+    );
+    let needs = Needs::new(space, mesh, guard, &start, &around);
+    let mut frozen = boundary_points(space, topo, &near, c.len());
     // Elements at risk at the fit (outside the rules, or within MARGIN of them) are held back,
     // or may be: their points and those of every element sharing one stay at the fit, so
     // the blend's reduction of them meets neighbours as the fit left them.
-    for e in (0..space.n_elements()).filter(|&e| needs.at_risk[e]) {
+    for &e in around.iter().filter(|&&e| needs.at_risk[e]) {
         info.at_risk_elements += 1;
         for &id in supports.element(e) {
             for &n in supports.of(id as usize) {
@@ -160,7 +175,7 @@ pub fn smooth_facet_jumps(
             }
         }
     }
-    let (movable, delta, iterations) = solve(&rows, &j0, &frozen, weight)?;
+    let (movable, delta, iterations) = solve(&jumps, &rows_points, &j0, &frozen, weight)?;
     info.iterations = iterations;
     // The move of each movable point, halved for every element it takes below its needs
     // ([`HALVINGS`] times, then dropped), until no element is.
@@ -169,6 +184,7 @@ pub fn smooth_facet_jumps(
         slot[id] = i as u32;
     }
     let mut halved = vec![0u32; movable.len()];
+    let mut touched = supports.elements_of(movable.iter().copied());
     loop {
         for (i, &id) in movable.iter().enumerate() {
             let share = if halved[i] > HALVINGS {
@@ -180,7 +196,7 @@ pub fn smooth_facet_jumps(
                 c[id][k] = start[id][k] + share * delta[i][k];
             }
         }
-        let poorer = needs.poorer(space, dim, &supports, &movable, c);
+        let poorer = needs.poorer(space, dim, &touched, c);
         if poorer.is_empty() {
             break;
         }
@@ -192,12 +208,14 @@ pub fn smooth_facet_jumps(
             .collect();
         points.sort_unstable();
         points.dedup();
-        for id in points {
+        for &id in &points {
             halved[slot[id as usize] as usize] += 1;
         }
+        // Only the elements of the points just halved change.
+        touched = supports.elements_of(points.iter().map(|&id| id as usize));
     }
-    info.moved = (0..c.len()).filter(|&i| c[i] != start[i]).count();
-    info.rms_after = rms(&jc(c));
+    info.moved = movable.iter().filter(|&&i| c[i] != start[i]).count();
+    info.rms_after = jumps.rms(&jumps.of(&jumps.diff.times(c)));
     Ok(info)
 }
 
@@ -221,7 +239,13 @@ impl Needs {
     /// sampled scaled Jacobian s_S, as in the blend) times [`MARGIN`], at most the fit's own
     /// values (an element the fit leaves outside the rules must only not get poorer), and at
     /// least the straight mesh's smallest values (the mesh's minimum is not lowered).
-    fn new(space: &dyn FitSpace, mesh: &LinearMesh, guard: &JumpGuard, fit: &[[f64; 3]]) -> Self {
+    fn new(
+        space: &dyn FitSpace,
+        mesh: &LinearMesh,
+        guard: &JumpGuard,
+        fit: &[[f64; 3]],
+        region: &[usize],
+    ) -> Self {
         let dim = mesh.dim;
         let n = space.n_elements();
         let straight: Vec<(f64, f64)> = (0..n)
@@ -255,9 +279,9 @@ impl Needs {
             guard.percentile_quality_fraction,
         );
         let target = |s: f64, p: f64| (qm * s).max(qp * s.min(p));
-        let per: Vec<(f64, f64, bool)> = (0..n)
-            .into_par_iter()
-            .map(|e| {
+        let per: Vec<(f64, f64, bool)> = region
+            .par_iter()
+            .map(|&e| {
                 let q = quality(dim, &space.bezier_net_with(e, fit));
                 let (r, s) = straight[e];
                 let (tr, ts) = (MARGIN * target(r, p_r), MARGIN * target(s, p_s));
@@ -268,30 +292,29 @@ impl Needs {
                 )
             })
             .collect();
-        Needs {
-            ratio: per.iter().map(|p| p.0).collect(),
-            scaled: per.iter().map(|p| p.1).collect(),
-            at_risk: per.iter().map(|p| p.2).collect(),
+        let mut needs = Needs {
+            ratio: vec![f64::NAN; n],
+            scaled: vec![f64::NAN; n],
+            at_risk: vec![false; n],
+        };
+        for (&e, p) in region.iter().zip(per) {
+            (needs.ratio[e], needs.scaled[e], needs.at_risk[e]) = p;
         }
+        needs
     }
 
-    /// The elements around the `moved` points that `c` takes below their needs.
+    /// The elements of `elements` (each inside the region of [`Needs::new`]) that `c` takes
+    /// below their needs.
     fn poorer(
         &self,
         space: &dyn FitSpace,
         dim: usize,
-        supports: &Supports,
-        moved: &[usize],
+        elements: &[usize],
         c: &[[f64; 3]],
     ) -> Vec<usize> {
-        let mut touched: Vec<usize> = moved
-            .iter()
-            .flat_map(|&id| supports.of(id).iter().map(|&e| e as usize))
-            .collect();
-        touched.sort_unstable();
-        touched.dedup();
-        touched
-            .into_par_iter()
+        elements
+            .par_iter()
+            .copied()
             .filter(|&e| {
                 let q = quality(dim, &space.bezier_net_with(e, c));
                 !(q.ratio >= self.ratio[e] && q.scaled >= self.scaled[e])
@@ -450,6 +473,21 @@ impl Supports {
             .map_init(
                 || (Vec::new(), Vec::new(), Vec::new()),
                 |(offsets, cols, weights), e| {
+                    // A Kronecker product times distinct nodes: a node is in a row where its
+                    // three 1D columns are non-zero.
+                    if let Some(m) = space.element_factors(e, cols) {
+                        let used = |k: usize, j: usize| m[k].iter().any(|row| row[j] != 0.0);
+                        let mut ids: Vec<u32> = cols
+                            .iter()
+                            .enumerate()
+                            .filter(|&(l, _)| {
+                                used(0, l % 3) && used(1, (l / 3) % 3) && used(2, l / 9)
+                            })
+                            .map(|(_, &id)| id)
+                            .collect();
+                        ids.sort_unstable();
+                        return ids;
+                    }
                     space.element_rows(e, offsets, cols, weights);
                     let mut ids: Vec<u32> = cols
                         .iter()
@@ -480,62 +518,18 @@ impl Supports {
     fn of(&self, id: usize) -> &[u32] {
         &self.point.cols[self.point.offsets[id]..self.point.offsets[id + 1]]
     }
-}
 
-/// The minimiser's move δ of the points in J's rows that are not `frozen`: (I + W JᵀJ) δ =
-/// −W Jᵀ J C* over them, with J C* = `j0`. Returns the points, their moves and the CG's
-/// iterations.
-fn solve(rows: &[Row], j0: &[[f64; 3]], frozen: &[bool], weight: f64) -> Result<Move, CgError> {
-    // Movable control points, numbered in id order.
-    let mut slot = vec![u32::MAX; frozen.len()];
-    for r in rows {
-        for &id in &r.cols {
-            if !frozen[id as usize] {
-                slot[id as usize] = 0;
+    /// The elements of the control points `ids`, sorted and distinct.
+    fn elements_of(&self, ids: impl Iterator<Item = usize>) -> Vec<usize> {
+        let mut seen = vec![false; self.element.rows()];
+        for id in ids {
+            for &e in self.of(id) {
+                seen[e as usize] = true;
             }
         }
+        (0..seen.len()).filter(|&e| seen[e]).collect()
     }
-    let mut movable = Vec::new();
-    for (id, s) in slot.iter_mut().enumerate() {
-        if *s == 0 {
-            *s = movable.len() as u32;
-            movable.push(id);
-        }
-    }
-    if movable.is_empty() {
-        return Ok((movable, Vec::new(), 0));
-    }
-    // J restricted to the movable points (compact columns) and its transpose; the operator
-    // I + W JᵀJ is applied without forming JᵀJ (a facet's rows couple two elements' 2 × 27
-    // points, so JᵀJ has ~50 times J's entries).
-    let mut j = Csr::default();
-    for row in rows {
-        for (&id, &v) in row.cols.iter().zip(&row.vals) {
-            let s = slot[id as usize];
-            if s != u32::MAX {
-                j.cols.push(s);
-                j.vals.push(v);
-            }
-        }
-        j.offsets.push(j.cols.len());
-    }
-    let jt = j.transpose(movable.len());
-    let op = Smoothing { j, jt, weight };
-    let mut b = vec![[0.0; 3]; movable.len()];
-    op.jt.mul(j0, &mut b);
-    b.iter_mut().flatten().for_each(|v| *v *= -weight);
-    let mut delta = vec![[0.0; 3]; movable.len()];
-    let params = CgParams {
-        rel_tol: 1e-8,
-        preconditioner: crate::solve::CgPreconditioner::Jacobi,
-        ..CgParams::default()
-    };
-    let cg = crate::solve::pcg(&op, &b, &mut delta, &params, |_, _| {})?;
-    Ok((movable, delta, cg.iterations))
 }
-
-/// The movable points, their moves and the CG's iterations ([`solve`]).
-type Move = (Vec<usize>, Vec<[f64; 3]>, usize);
 
 /// A sparse matrix by rows.
 struct Csr {
@@ -586,6 +580,13 @@ impl Csr {
         }
     }
 
+    /// A x.
+    fn times(&self, x: &[[f64; 3]]) -> Vec<[f64; 3]> {
+        let mut y = vec![[0.0; 3]; self.rows()];
+        self.mul(x, &mut y);
+        y
+    }
+
     /// y = A x.
     fn mul(&self, x: &[[f64; 3]], y: &mut [[f64; 3]]) {
         y.par_iter_mut().enumerate().for_each(|(r, y)| {
@@ -601,22 +602,369 @@ impl Csr {
     }
 }
 
-/// I + W JᵀJ on the movable points.
-struct Smoothing {
-    j: Csr,
-    jt: Csr,
+/// J in factors. At each of a facet's m = 3^(d−1) points p (numbered by their grid indices
+/// in the facet's directions of its first element a), each element x of the facet has the
+/// outward transversal derivative d_x(p) = Σ_β B(π_x(p), β) D_xβ: D_xβ = 2 (net_x(β on the
+/// facet) − net_x(β one layer in)) over the facet's m Bernstein positions β of x, B the
+/// quadratic Bernstein values at ¼, ½, ¾ (tensor products in 3D) and π_x(p) the point's grid
+/// index in x (the identity for a). Then j(p) = w_a(p) d_a(p) + w_b(p) d_b(p), w_a = ℓ_b /
+/// (ℓ_a + ℓ_b) at the fit. J is applied as the sparse differences D (two control points per
+/// Bernstein point of a Q2 element), then m × m per element and facet: a facet's 2m rows
+/// of D, not J's m rows over both elements' 2 × 27 points.
+struct Jumps {
+    /// Points (and Bernstein positions) per facet.
+    m: usize,
+    /// B(p, β), row-major m × m.
+    basis: Vec<f64>,
+    /// The differences D: 2m rows per facet, a's m then b's m.
+    diff: Csr,
+    /// π_b: per facet, each point's grid index in b.
+    perm: Vec<[u8; 9]>,
+    /// w_a(p) then w_b(p), 2m per facet; 0 at a point where an ℓ vanishes (no row).
+    weights: Vec<f64>,
+}
+
+impl Jumps {
+    /// The C⁰ `facets`' factors, ℓ at `c` (a facet whose vertices are not corners of both
+    /// elements has no points).
+    fn new(
+        space: &dyn FitSpace,
+        mesh: &LinearMesh,
+        topo: &Topology,
+        facets: &[usize],
+        c: &[[f64; 3]],
+    ) -> Self {
+        let dim = topo.dim;
+        let m = if dim == 2 { 3 } else { 9 };
+        let b1 = AT.map(bernstein2);
+        let basis: Vec<f64> = (0..m * m)
+            .map(|i| {
+                let (p, beta) = (i / m, i % m);
+                if dim == 2 {
+                    b1[p][beta]
+                } else {
+                    b1[p % 3][beta % 3] * b1[p / 3][beta / 3]
+                }
+            })
+            .collect();
+        // Each element's extraction rows once (an element has up to 2d C⁰ facets).
+        let mut at = vec![u32::MAX; space.n_elements()];
+        let mut elements: Vec<usize> = facets
+            .iter()
+            .flat_map(|&f| topo.facet_elements[f].map(|e| e as usize))
+            .collect();
+        elements.sort_unstable();
+        elements.dedup();
+        for (i, &e) in elements.iter().enumerate() {
+            at[e] = i as u32;
+        }
+        let rows: Vec<ExtractionRows> = elements
+            .par_iter()
+            .map(|&e| {
+                let mut r = ExtractionRows::default();
+                space.element_rows(e, &mut r.offsets, &mut r.cols, &mut r.weights);
+                r
+            })
+            .collect();
+        let rows_of = |e: usize| &rows[at[e] as usize];
+        let per: Vec<Option<FacetDiff>> = facets
+            .par_iter()
+            .map(|&f| facet_diff(mesh, topo, f, &rows_of))
+            .collect();
+        let mut diff = Csr::default();
+        let mut perm = Vec::new();
+        for d in per.into_iter().flatten() {
+            for &len in &d.lens[..2 * m] {
+                diff.offsets
+                    .push(diff.offsets.last().unwrap() + len as usize);
+            }
+            diff.cols.extend(d.cols);
+            diff.vals.extend(d.vals);
+            perm.push(d.perm);
+        }
+        let mut jumps = Jumps {
+            m,
+            basis,
+            diff,
+            perm,
+            weights: Vec::new(),
+        };
+        // ℓ at the fit.
+        let d = jumps.diff.times(c);
+        jumps.weights = (0..jumps.perm.len())
+            .into_par_iter()
+            .flat_map_iter(|f| {
+                let (ya, yb) = jumps.sides(f, &d);
+                let mut w = vec![0.0; 2 * m];
+                for p in 0..m {
+                    let (la, lb) = (norm(ya[p]), norm(yb[p]));
+                    if la > 0.0 && lb > 0.0 {
+                        w[p] = lb / (la + lb);
+                        w[m + p] = la / (la + lb);
+                    }
+                }
+                w
+            })
+            .collect();
+        jumps
+    }
+
+    /// The facets' points with a row (both ℓ positive).
+    fn points(&self) -> usize {
+        (0..self.weights.len() / 2)
+            .filter(|&i| self.weights[2 * (i / self.m) * self.m + i % self.m] > 0.0)
+            .count()
+    }
+
+    /// d_a(p) and d_b(p) of facet `f` from the differences `d` (D applied to the points).
+    fn sides(&self, f: usize, d: &[[f64; 3]]) -> ([[f64; 3]; 9], [[f64; 3]; 9]) {
+        let m = self.m;
+        let (da, db) = (
+            &d[2 * m * f..2 * m * f + m],
+            &d[2 * m * f + m..2 * m * (f + 1)],
+        );
+        let (mut ya, mut yb) = ([[0.0; 3]; 9], [[0.0; 3]; 9]);
+        for p in 0..m {
+            let (ra, rb) = (
+                &self.basis[p * m..(p + 1) * m],
+                &self.basis[self.perm[f][p] as usize * m..(self.perm[f][p] as usize + 1) * m],
+            );
+            for beta in 0..m {
+                for k in 0..3 {
+                    ya[p][k] += ra[beta] * da[beta][k];
+                    yb[p][k] += rb[beta] * db[beta][k];
+                }
+            }
+        }
+        (ya, yb)
+    }
+
+    /// j at every facet point (m per facet) from the differences `d`.
+    fn of(&self, d: &[[f64; 3]]) -> Vec<[f64; 3]> {
+        let m = self.m;
+        let mut j = vec![[0.0; 3]; m * self.perm.len()];
+        j.par_chunks_mut(m).enumerate().for_each(|(f, j)| {
+            let (ya, yb) = self.sides(f, d);
+            let w = &self.weights[2 * m * f..2 * m * (f + 1)];
+            for p in 0..m {
+                for k in 0..3 {
+                    j[p][k] = w[p] * ya[p][k] + w[m + p] * yb[p][k];
+                }
+            }
+        });
+        j
+    }
+
+    /// Jᵀ's step before Dᵀ: per facet the 2m vectors Bᵀ (w_a r) and Bᵀ π_b (w_b r), `r` one
+    /// vector per facet point.
+    fn back(&self, r: &[[f64; 3]]) -> Vec<[f64; 3]> {
+        let m = self.m;
+        let mut g = vec![[0.0; 3]; 2 * m * self.perm.len()];
+        g.par_chunks_mut(2 * m).enumerate().for_each(|(f, g)| {
+            let w = &self.weights[2 * m * f..2 * m * (f + 1)];
+            for p in 0..m {
+                let rp = r[m * f + p];
+                let pb = self.perm[f][p] as usize;
+                for beta in 0..m {
+                    let (ba, bb) = (
+                        w[p] * self.basis[p * m + beta],
+                        w[m + p] * self.basis[pb * m + beta],
+                    );
+                    for k in 0..3 {
+                        g[beta][k] += ba * rp[k];
+                        g[m + beta][k] += bb * rp[k];
+                    }
+                }
+            }
+        });
+        g
+    }
+
+    /// Root mean square of the j at the points with a row.
+    fn rms(&self, j: &[[f64; 3]]) -> f64 {
+        let s: f64 = j.iter().map(|v| v.iter().map(|x| x * x).sum::<f64>()).sum();
+        (s / self.points().max(1) as f64).sqrt()
+    }
+}
+
+/// An element's extraction rows ([`FitSpace::element_rows`]).
+#[derive(Default)]
+struct ExtractionRows {
+    offsets: Vec<usize>,
+    cols: Vec<u32>,
+    weights: Vec<f64>,
+}
+
+/// One facet's rows of D and its points' grid indices in b ([`Jumps`]).
+struct FacetDiff {
+    lens: [u16; 18],
+    cols: Vec<u32>,
+    vals: Vec<f64>,
+    perm: [u8; 9],
+}
+
+/// The grid index, in element `e`'s facet directions (those other than `k`), of each facet
+/// point: (s, t) ∈ {¼, ½, ¾}^(d−1) placed by its bilinear (2D: linear) weights over the
+/// facet's vertices, whose reference corners in `e` are `r` (None unless every point lands
+/// on that grid, once).
+fn grid_in(dim: usize, r: &[[f64; 3]], k: usize) -> Option<[u8; 9]> {
+    let axes: Vec<usize> = (0..dim).filter(|&a| a != k).collect();
+    let phis: Vec<Vec<f64>> = if dim == 2 {
+        AT.iter().map(|&t| vec![1.0 - t, t]).collect()
+    } else {
+        AT.iter()
+            .flat_map(|&s| {
+                AT.iter()
+                    .map(move |&t| vec![(1.0 - s) * (1.0 - t), s * (1.0 - t), s * t, (1.0 - s) * t])
+            })
+            .collect()
+    };
+    let mut out = [0u8; 9];
+    let mut seen = [false; 9];
+    for (q, phi) in phis.iter().enumerate() {
+        let mut index = 0usize;
+        for (n, &a) in axes.iter().enumerate() {
+            let u: f64 = phi.iter().zip(r).map(|(w, x)| w * x[a]).sum();
+            let g = (4.0 * u).round() - 1.0;
+            if !(0.0..=2.0).contains(&g) || (4.0 * u - (g + 1.0)).abs() > 1e-9 {
+                return None;
+            }
+            index += g as usize * if n == 0 { 1 } else { 3 };
+        }
+        if seen[index] {
+            return None;
+        }
+        seen[index] = true;
+        out[q] = index as u8;
+    }
+    Some(out)
+}
+
+/// Facet `f`'s rows of D ([`Jumps`]): per element x of the facet and Bernstein position β of
+/// the facet in x (numbered by x's grid of the facet's directions), 2 (net_x(β on the facet)
+/// − net_x(β one layer in)) over control points. None when a vertex of the facet is not a
+/// corner of both elements.
+fn facet_diff<'r>(
+    mesh: &LinearMesh,
+    topo: &Topology,
+    f: usize,
+    rows_of: &dyn Fn(usize) -> &'r ExtractionRows,
+) -> Option<FacetDiff> {
+    let dim = topo.dim;
+    let m = if dim == 2 { 3 } else { 9 };
+    let elements = topo.facet_elements[f].map(|e| e as usize);
+    let sides = topo.facet_sides[f].map(usize::from);
+    let local: &[usize] = if dim == 2 {
+        &QUAD_SIDES[sides[0]]
+    } else {
+        &HEX_SIDES[sides[0]]
+    };
+    let vertices: Vec<u32> = local
+        .iter()
+        .map(|&i| mesh.element(elements[0])[i])
+        .collect();
+    let grids = [0, 1].map(|x| {
+        let r = corners_in(mesh, elements[x], &vertices)?;
+        grid_in(dim, &r, sides[x] / 2)
+    });
+    let [Some(ga), Some(gb)] = grids else {
+        return None;
+    };
+    // Points numbered by a's grid: π_b(ga[q]) = gb[q].
+    let mut perm = [0u8; 9];
+    for q in 0..m {
+        perm[ga[q] as usize] = gb[q];
+    }
+    let mut out = FacetDiff {
+        lens: [0; 18],
+        cols: Vec::new(),
+        vals: Vec::new(),
+        perm,
+    };
+    let mut entries: Vec<(u32, f64)> = Vec::new();
+    for x in 0..2 {
+        let (e, s) = (elements[x], sides[x]);
+        let ExtractionRows {
+            offsets,
+            cols,
+            weights,
+        } = rows_of(e);
+        let k = s / 2;
+        let axes: Vec<usize> = (0..dim).filter(|&a| a != k).collect();
+        for beta in 0..m {
+            let mut l = [0usize; 3];
+            l[axes[0]] = beta % 3;
+            if dim == 3 {
+                l[axes[1]] = beta / 3;
+            }
+            let at = |layer: usize| {
+                let mut l = l;
+                l[k] = layer;
+                l[0] + 3 * l[1] + 9 * l[2]
+            };
+            entries.clear();
+            for (bernstein, factor) in [(at(2 * (s % 2)), 2.0), (at(1), -2.0)] {
+                for q in offsets[bernstein]..offsets[bernstein + 1] {
+                    entries.push((cols[q], factor * weights[q]));
+                }
+            }
+            entries.sort_unstable_by_key(|p| p.0);
+            let before = out.cols.len();
+            for &(id, v) in &entries {
+                if out.cols.len() > before && out.cols.last() == Some(&id) {
+                    *out.vals.last_mut().unwrap() += v;
+                } else {
+                    out.cols.push(id);
+                    out.vals.push(v);
+                }
+            }
+            out.lens[x * m + beta] = (out.cols.len() - before) as u16;
+        }
+    }
+    Some(out)
+}
+
+/// I + W JᵀJ on the movable points: J = [`Jumps`], its columns of the movable points.
+struct Smoothing<'a> {
+    jumps: &'a Jumps,
+    /// Dᵀ over all control points.
+    diff_t: Csr,
+    movable: &'a [usize],
     weight: f64,
 }
 
-impl crate::solve::LinOp for Smoothing {
+impl Smoothing<'_> {
+    /// Dᵀ g at the movable points.
+    fn back_to_movable(&self, g: &[[f64; 3]]) -> Vec<[f64; 3]> {
+        let t = &self.diff_t;
+        self.movable
+            .par_iter()
+            .map(|&id| {
+                let mut s = [0.0; 3];
+                for q in t.offsets[id]..t.offsets[id + 1] {
+                    let (r, v) = (t.cols[q] as usize, t.vals[q]);
+                    for d in 0..3 {
+                        s[d] += v * g[r][d];
+                    }
+                }
+                s
+            })
+            .collect()
+    }
+}
+
+impl crate::solve::LinOp for Smoothing<'_> {
     fn nrows(&self) -> usize {
-        self.jt.rows()
+        self.movable.len()
     }
 
     fn apply(&self, x: &[[f64; 3]], y: &mut [[f64; 3]]) {
-        let mut jx = vec![[0.0; 3]; self.j.rows()];
-        self.j.mul(x, &mut jx);
-        self.jt.mul(&jx, y);
+        let mut all = vec![[0.0; 3]; self.diff_t.rows()];
+        for (&id, x) in self.movable.iter().zip(x) {
+            all[id] = *x;
+        }
+        let j = self.jumps.of(&self.jumps.diff.times(&all));
+        y.copy_from_slice(&self.back_to_movable(&self.jumps.back(&j)));
         y.par_iter_mut().zip(x).for_each(|(y, x)| {
             for d in 0..3 {
                 y[d] = x[d] + self.weight * y[d];
@@ -624,36 +972,98 @@ impl crate::solve::LinOp for Smoothing {
         });
     }
 
+    /// 1 + W Σ_p J_pi² per point i: J's column of i, facet by facet.
     fn diagonal(&self) -> Vec<f64> {
-        (0..self.jt.rows())
-            .map(|i| {
-                let s: f64 = self.jt.vals[self.jt.offsets[i]..self.jt.offsets[i + 1]]
-                    .iter()
-                    .map(|v| v * v)
-                    .sum();
-                1.0 + self.weight * s
+        let (m, jumps) = (self.jumps.m, self.jumps);
+        let parts: Vec<Vec<(u32, f64)>> = (0..jumps.perm.len())
+            .into_par_iter()
+            .map(|f| {
+                let rows = 2 * m * f..2 * m * (f + 1);
+                let mut entries: Vec<(u32, usize, f64)> = rows
+                    .flat_map(|r| {
+                        let d = &jumps.diff;
+                        (d.offsets[r]..d.offsets[r + 1])
+                            .map(move |q| (d.cols[q], r - 2 * m * f, d.vals[q]))
+                    })
+                    .collect();
+                entries.sort_unstable_by_key(|e| e.0);
+                let w = &jumps.weights[2 * m * f..2 * m * (f + 1)];
+                let mut out = Vec::new();
+                for group in entries.chunk_by(|a, b| a.0 == b.0) {
+                    let mut column = [0.0; 9];
+                    for &(_, row, v) in group {
+                        let (x, beta) = (row / m, row % m);
+                        for (p, cp) in column.iter_mut().enumerate().take(m) {
+                            let pp = if x == 0 { p } else { jumps.perm[f][p] as usize };
+                            *cp += w[x * m + p] * jumps.basis[pp * m + beta] * v;
+                        }
+                    }
+                    out.push((group[0].0, column.iter().map(|v| v * v).sum::<f64>()));
+                }
+                out
             })
+            .collect();
+        let mut all = vec![0.0; self.diff_t.rows()];
+        for (i, s) in parts.into_iter().flatten() {
+            all[i as usize] += s;
+        }
+        self.movable
+            .iter()
+            .map(|&id| 1.0 + self.weight * all[id])
             .collect()
     }
 }
 
-fn apply(r: &Row, c: &[[f64; 3]]) -> [f64; 3] {
-    let mut s = [0.0; 3];
-    for (&id, &v) in r.cols.iter().zip(&r.vals) {
-        for d in 0..3 {
-            s[d] += v * c[id as usize][d];
-        }
+/// The minimiser's move δ of the points of `in_rows` (J's points) that are not `frozen`:
+/// (I + W JᵀJ) δ = −W Jᵀ J C* over them, with J C* = `j0`. Returns the points, their moves
+/// and the CG's iterations.
+fn solve(
+    jumps: &Jumps,
+    in_rows: &[usize],
+    j0: &[[f64; 3]],
+    frozen: &[bool],
+    weight: f64,
+) -> Result<Move, CgError> {
+    // Movable control points, numbered in id order.
+    let movable: Vec<usize> = in_rows.iter().copied().filter(|&i| !frozen[i]).collect();
+    if movable.is_empty() {
+        return Ok((movable, Vec::new(), 0));
     }
-    s
+    // D over all control points, the frozen ones held at 0, and its transpose's movable rows.
+    let op = Smoothing {
+        jumps,
+        diff_t: jumps.diff.transpose(frozen.len()),
+        movable: &movable,
+        weight,
+    };
+    let mut b = op.back_to_movable(&jumps.back(j0));
+    b.iter_mut().flatten().for_each(|v| *v *= -weight);
+    let mut delta = vec![[0.0; 3]; movable.len()];
+    let params = CgParams {
+        rel_tol: 1e-6,
+        preconditioner: crate::solve::CgPreconditioner::Jacobi,
+        ..CgParams::default()
+    };
+    let cg = crate::solve::pcg(&op, &b, &mut delta, &params, |_, _| {})?;
+    Ok((movable, delta, cg.iterations))
 }
 
-/// Control points with a non-zero weight at a Bernstein point of a boundary facet.
-fn boundary_points(space: &dyn FitSpace, topo: &Topology, n: usize) -> Vec<bool> {
+/// The movable points, their moves and the CG's iterations ([`solve`]).
+type Move = (Vec<usize>, Vec<[f64; 3]>, usize);
+
+/// Control points with a non-zero weight at a Bernstein point of a boundary facet of one of
+/// `elements`.
+fn boundary_points(
+    space: &dyn FitSpace,
+    topo: &Topology,
+    elements: &[usize],
+    n: usize,
+) -> Vec<bool> {
     let dim = topo.dim;
     let nb = net_len(dim);
     let (mut offsets, mut cols, mut weights) = (Vec::new(), Vec::new(), Vec::new());
     let mut frozen = vec![false; n];
-    for e in 0..space.n_elements() {
+    for &e in elements {
         let open: Vec<usize> = (0..2 * dim)
             .filter(|&s| topo.neighbor(e, s) == NONE)
             .collect();
@@ -689,144 +1099,8 @@ fn corners_in(mesh: &LinearMesh, e: usize, vertices: &[u32]) -> Option<Vec<[f64;
         .collect()
 }
 
-/// J's rows of facet `f` (one per facet point), ℓ taken at `c`.
-fn facet_rows(
-    space: &dyn FitSpace,
-    mesh: &LinearMesh,
-    topo: &Topology,
-    f: usize,
-    c: &[[f64; 3]],
-) -> Vec<Row> {
-    let dim = topo.dim;
-    let [a, b] = topo.facet_elements[f].map(|e| e as usize);
-    let [sa, sb] = topo.facet_sides[f].map(usize::from);
-    let local: Vec<usize> = if dim == 2 {
-        QUAD_SIDES[sa].to_vec()
-    } else {
-        HEX_SIDES[sa].to_vec()
-    };
-    let vertices: Vec<u32> = local.iter().map(|&i| mesh.element(a)[i]).collect();
-    let (Some(ra), Some(rb)) = (
-        corners_in(mesh, a, &vertices),
-        corners_in(mesh, b, &vertices),
-    ) else {
-        return Vec::new();
-    };
-    // Bilinear (3D: corners in cycle order at (0,0), (1,0), (1,1), (0,1)) or linear weights.
-    let points: Vec<Vec<f64>> = if dim == 2 {
-        AT.iter().map(|&t| vec![1.0 - t, t]).collect()
-    } else {
-        AT.iter()
-            .flat_map(|&s| {
-                AT.iter()
-                    .map(move |&t| vec![(1.0 - s) * (1.0 - t), s * (1.0 - t), s * t, (1.0 - s) * t])
-            })
-            .collect()
-    };
-    let rows_a = ElementRowsOf::new(space, a);
-    let rows_b = ElementRowsOf::new(space, b);
-    points
-        .iter()
-        .filter_map(|phi| {
-            let at = |r: &[[f64; 3]]| -> [f64; 3] {
-                std::array::from_fn(|k| phi.iter().zip(r).map(|(w, x)| w * x[k]).sum())
-            };
-            let da = rows_a.transversal(dim, sa, at(&ra));
-            let db = rows_b.transversal(dim, sb, at(&rb));
-            let (la, lb) = (norm(apply(&da, c)), norm(apply(&db, c)));
-            if !(la > 0.0 && lb > 0.0) {
-                return None;
-            }
-            Some(combine(&da, lb / (la + lb), &db, la / (la + lb)))
-        })
-        .collect()
-}
-
 fn norm(v: [f64; 3]) -> f64 {
     (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
-}
-
-/// wa · ra + wb · rb, columns merged.
-fn combine(ra: &Row, wa: f64, rb: &Row, wb: f64) -> Row {
-    let mut all: Vec<(u32, f64)> = ra
-        .cols
-        .iter()
-        .zip(&ra.vals)
-        .map(|(&c, &v)| (c, wa * v))
-        .chain(rb.cols.iter().zip(&rb.vals).map(|(&c, &v)| (c, wb * v)))
-        .collect();
-    all.sort_unstable_by_key(|p| p.0);
-    let mut row = Row {
-        cols: Vec::new(),
-        vals: Vec::new(),
-    };
-    for (c, v) in all {
-        if row.cols.last() == Some(&c) {
-            *row.vals.last_mut().unwrap() += v;
-        } else {
-            row.cols.push(c);
-            row.vals.push(v);
-        }
-    }
-    row
-}
-
-/// An element's extraction rows, kept for its facet points.
-struct ElementRowsOf {
-    offsets: Vec<usize>,
-    cols: Vec<u32>,
-    weights: Vec<f64>,
-}
-
-impl ElementRowsOf {
-    fn new(space: &dyn FitSpace, e: usize) -> Self {
-        let (mut offsets, mut cols, mut weights) = (Vec::new(), Vec::new(), Vec::new());
-        space.element_rows(e, &mut offsets, &mut cols, &mut weights);
-        ElementRowsOf {
-            offsets,
-            cols,
-            weights,
-        }
-    }
-
-    /// The row of the derivative transversal to local side `side`, out of the element, at the
-    /// reference point `u`, over control points.
-    fn transversal(&self, dim: usize, side: usize, u: [f64; 3]) -> Row {
-        let k = side / 2;
-        let sign = if side % 2 == 1 { 1.0 } else { -1.0 };
-        let b = [bernstein2(u[0]), bernstein2(u[1]), bernstein2(u[2])];
-        let db = [
-            bernstein2_derivative(u[0]),
-            bernstein2_derivative(u[1]),
-            bernstein2_derivative(u[2]),
-        ];
-        let mut all: Vec<(u32, f64)> = Vec::new();
-        for p in 0..net_len(dim) {
-            let l = [p % 3, (p / 3) % 3, p / 9];
-            let mut g = sign;
-            for j in 0..dim {
-                g *= if j == k { db[j][l[j]] } else { b[j][l[j]] };
-            }
-            if g == 0.0 {
-                continue;
-            }
-            for q in self.offsets[p]..self.offsets[p + 1] {
-                all.push((self.cols[q], g * self.weights[q]));
-            }
-        }
-        combine(
-            &Row {
-                cols: all.iter().map(|p| p.0).collect(),
-                vals: all.iter().map(|p| p.1).collect(),
-            },
-            1.0,
-            &Row {
-                cols: Vec::new(),
-                vals: Vec::new(),
-            },
-            0.0,
-        )
-    }
 }
 
 #[cfg(test)]
@@ -941,18 +1215,24 @@ mod tests {
             .collect()
     }
 
-    #[test]
-    fn kinks_of_a_q2_grid_are_lowered_and_its_boundary_kept() {
-        let u: Vec<f64> = (0..6).map(|i| i as f64).collect();
+    /// An n × n grid of unit squares whose interior vertices are moved by up to `amplitude`.
+    fn wobbled_grid(n: usize, amplitude: f64) -> LinearMesh {
+        let u: Vec<f64> = (0..=n).map(|i| i as f64).collect();
         let mut mesh = grid_2d(&u, &u);
-        let topo0 = Topology::build(&mesh);
-        // Interior vertices moved off the grid lines: every interior facet has a kink.
+        let topo = Topology::build(&mesh);
         for (v, p) in mesh.coords.iter_mut().enumerate() {
-            if !topo0.vertex_on_boundary[v] {
-                p[0] += 0.2 * ((v * 7 % 5) as f64 - 2.0) / 2.0;
-                p[1] += 0.2 * ((v * 3 % 5) as f64 - 2.0) / 2.0;
+            if !topo.vertex_on_boundary[v] {
+                p[0] += amplitude * ((v * 7 % 5) as f64 - 2.0) / 2.0;
+                p[1] += amplitude * ((v * 3 % 5) as f64 - 2.0) / 2.0;
             }
         }
+        mesh
+    }
+
+    #[test]
+    fn kinks_of_a_q2_grid_are_lowered_and_its_boundary_kept() {
+        // Interior vertices moved off the grid lines: every interior facet has a kink.
+        let mesh = wobbled_grid(5, 0.2);
         let (topo, space) = all_q2(&mesh);
         let c0 = space.control_points.clone();
         let mut c = c0.clone();
@@ -991,6 +1271,141 @@ mod tests {
                 if [p % 3, p / 3][k] == 2 * (usize::from(s) % 2) {
                     assert_eq!(a[p], b[p], "boundary facet {f} moved");
                 }
+            }
+        }
+    }
+
+    /// The distinct control points with a non-zero weight in element `e`'s net.
+    fn points_of(space: &SplineSpace, e: usize) -> Vec<usize> {
+        let (mut offsets, mut cols, mut weights) = (Vec::new(), Vec::new(), Vec::new());
+        FitSpace::element_rows(space, e, &mut offsets, &mut cols, &mut weights);
+        let mut ids: Vec<usize> = cols
+            .iter()
+            .zip(&weights)
+            .filter(|p| *p.1 != 0.0)
+            .map(|p| *p.0 as usize)
+            .collect();
+        ids.sort_unstable();
+        ids.dedup();
+        ids
+    }
+
+    #[test]
+    fn only_the_c0_facets_neighbourhood_moves_and_risk_two_rings_out_still_freezes() {
+        // A wobbled 12 × 12 spline grid with one Q2 element in the middle: its four facets
+        // are the only C⁰ facets.
+        let mesh = wobbled_grid(12, 0.15);
+        let topo = Topology::build(&mesh);
+        let centre = |e: usize| -> [f64; 2] {
+            let x = mesh.element_coords(e);
+            std::array::from_fn(|k| x[..4].iter().map(|p| p[k]).sum::<f64>() / 4.0)
+        };
+        let middle = (0..mesh.n_elements())
+            .min_by(|&a, &b| {
+                let d = |e: usize| (centre(e)[0] - 6.0).powi(2) + (centre(e)[1] - 6.0).powi(2);
+                d(a).total_cmp(&d(b))
+            })
+            .unwrap();
+        let mut demote = vec![false; mesh.n_elements()];
+        demote[middle] = true;
+        let space = SplineSpace::build_with_demoted(&mesh, &topo, &demote);
+        let n = mesh.n_elements();
+        let points: Vec<Vec<usize>> = (0..n).map(|e| points_of(&space, e)).collect();
+        let mut elements_of = vec![Vec::new(); space.control_points.len()];
+        for (e, ids) in points.iter().enumerate() {
+            ids.iter().for_each(|&id| elements_of[id].push(e));
+        }
+        let c0_elements: Vec<usize> = (0..topo.n_facets())
+            .filter(|&f| {
+                let [a, b] = topo.facet_elements[f];
+                b != NONE && !(space.is_spline(a as usize) && space.is_spline(b as usize))
+            })
+            .flat_map(|f| topo.facet_elements[f].map(|e| e as usize))
+            .collect();
+        let mut near_c0 = vec![false; space.control_points.len()];
+        c0_elements
+            .iter()
+            .for_each(|&e| points[e].iter().for_each(|&id| near_c0[id] = true));
+        let run = |c: &mut Vec<[f64; 3]>| {
+            smooth_facet_jumps(
+                &space,
+                &mesh,
+                &topo,
+                &|e| space.is_spline(e),
+                1.0,
+                &JumpGuard::default(),
+                c,
+            )
+            .unwrap()
+        };
+        let fit = space.control_points.clone();
+        let mut c = fit.clone();
+        let info = run(&mut c);
+        let moved: Vec<usize> = (0..c.len()).filter(|&i| c[i] != fit[i]).collect();
+        assert!(!moved.is_empty(), "{info:?}");
+        // Only points of the C⁰ facets' elements move: every element sharing no point with
+        // them keeps the fit's net exactly.
+        for e in 0..n {
+            if points[e].iter().all(|&id| !near_c0[id]) {
+                assert_eq!(
+                    space.element_bezier_with(e, &c),
+                    space.element_bezier_with(e, &fit),
+                    "element {e}, far from the C⁰ facets, moved"
+                );
+            }
+        }
+        // A point q whose elements have no point of a C⁰ facet's element (nor any point of
+        // J's rows: they are outside the elements a move reaches) but share a point with an
+        // element that moved.
+        let shaped = |id: usize| {
+            elements_of[id]
+                .iter()
+                .flat_map(|&e| points[e].iter().copied())
+        };
+        let moved_elements: Vec<bool> = (0..n)
+            .map(|e| points[e].iter().any(|id| moved.contains(id)))
+            .collect();
+        let q = (0..c.len())
+            .find(|&id| {
+                elements_of[id]
+                    .iter()
+                    .all(|&e| points[e].iter().all(|&p| !near_c0[p]))
+                    && shaped(id).any(|p| elements_of[p].iter().any(|&e| moved_elements[e]))
+            })
+            .expect("a point two rings out");
+        // The fit bent there: by the rule over the whole mesh, every point of every element
+        // sharing a point with an element at risk keeps the fit's position.
+        let mut bent = fit.clone();
+        bent[q][0] += 0.9;
+        let mut c = bent.clone();
+        let info = run(&mut c);
+        let all: Vec<usize> = (0..n).collect();
+        let needs = Needs::new(&space, &mesh, &JumpGuard::default(), &bent, &all);
+        let frozen_by = |e: usize| -> Vec<usize> {
+            points[e]
+                .iter()
+                .flat_map(|&p| {
+                    elements_of[p]
+                        .iter()
+                        .flat_map(|&m| points[m].iter().copied())
+                })
+                .collect()
+        };
+        let risk: Vec<usize> = (0..n).filter(|&e| needs.at_risk[e]).collect();
+        assert!(
+            risk.iter().any(|&e| {
+                points[e].iter().all(|&p| !near_c0[p])
+                    && frozen_by(e).iter().any(|id| moved.contains(id))
+            }),
+            "no element at risk two rings out: {risk:?}"
+        );
+        assert!(info.moved > 0, "{info:?}");
+        for &e in &risk {
+            for id in frozen_by(e) {
+                assert_eq!(
+                    c[id], bent[id],
+                    "point {id} beside element {e} at risk moved"
+                );
             }
         }
     }

@@ -472,8 +472,9 @@ impl FitParams {
 /// facet angle of the real meshes with many Q2 elements (unstructured_refined_ball,
 /// acoustics_mesh3d) under 0.7× the straight elevation's without holding back more elements
 /// (0.01 leaves acoustics at 0.701×; 0.02 holds back 59 instead of 40 of spheremesh01's 113).
-/// Not the default: the smoothing's supports and quality checks cover every element, up to
-/// 5× the job's CPU time (70degCone), 1.2× on the 52,728-hex cylinder.
+/// Not the default: the ranks do not run it, and where nearly every facet is C⁰ its solve
+/// costs as much as the fit (70degCone 2.9× the job's CPU time; acoustics 1.6×, the
+/// 52,728-hex cylinder 1.13×).
 pub const FACET_SMOOTHING: f64 = 0.015;
 
 /// What the fit did.
