@@ -651,41 +651,42 @@ fn progress_reports_stages_and_stays_off_stderr_pipes() {
     }
 }
 
+/// `curve` on hsphere8 with `args`, writing `name`.msh: the process's output and the report
+/// (`Null` where the run failed, having written nothing).
+fn curve_hsphere8(name: &str, args: &[&str]) -> (std::process::Output, serde_json::Value) {
+    let mesh = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("meshes/real/sfepy/hsphere8.vtk");
+    let out = scratch(&format!("{name}.msh"));
+    let (o, report) = common::curve_with_report(&mesh, &out, args);
+    let r = match report {
+        Some(report) => serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap(),
+        None => {
+            assert!(!out.exists(), "{name}: nothing may be written");
+            serde_json::Value::Null
+        }
+    };
+    (o, r)
+}
+
 /// `--kink-angle` on the command line: the smooth fit (the default) makes the elements at
 /// kinks of a cubed sphere's boundary grid lines Q2 and says how many, in the report and on the
 /// terminal; 180 turns it off, the paper's presets never use it, and a non-positive angle is
 /// refused before anything is written.
 #[test]
 fn kink_angle_on_the_command_line() {
-    let mesh = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("meshes/real/sfepy/hsphere8.vtk");
-    let run = |name: &str, args: &[&str]| -> (std::process::Output, serde_json::Value) {
-        let out = scratch(&format!("{name}.msh"));
-        let (o, report) = common::curve_with_report(&mesh, &out, args);
-        let r = match report {
-            Some(report) => {
-                serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap()
-            }
-            None => {
-                assert!(!out.exists(), "{name}: nothing may be written");
-                serde_json::Value::Null
-            }
-        };
-        (o, r)
-    };
-    let (o, on) = run("kinks_default", &[]);
+    let (o, on) = curve_hsphere8("kinks_default", &[]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let kinks = on["kink_elements"].as_u64().unwrap();
     assert!(kinks > 0, "the cubed sphere's block arcs kink");
     assert!(String::from_utf8_lossy(&o.stderr).contains(&format!("({kinks} at boundary kinks)")));
-    let (_, off) = run("kinks_off", &["--kink-angle", "180"]);
+    let (_, off) = curve_hsphere8("kinks_off", &["--kink-angle", "180"]);
     assert_eq!(off["kink_elements"], 0);
     assert!(on["q2_elements"].as_u64().unwrap() > off["q2_elements"].as_u64().unwrap());
     for preset in ["position", "frame"] {
-        let (_, r) = run(&format!("kinks_{preset}"), &["--fit", preset]);
+        let (_, r) = curve_hsphere8(&format!("kinks_{preset}"), &["--fit", preset]);
         assert_eq!(r["kink_elements"], 0, "{preset}");
     }
     for bad in ["0", "-5", "nan"] {
-        let (o, _) = run("kinks_bad", &[&format!("--kink-angle={bad}")]);
+        let (o, _) = curve_hsphere8("kinks_bad", &[&format!("--kink-angle={bad}")]);
         assert_eq!(o.status.code(), Some(1), "--kink-angle {bad}");
         assert!(String::from_utf8_lossy(&o.stderr).contains("--kink-angle"));
     }
@@ -699,26 +700,11 @@ fn kink_angle_on_the_command_line() {
 /// angle is refused before anything is written.
 #[test]
 fn interior_kink_angle_on_the_command_line() {
-    let mesh = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("meshes/real/sfepy/hsphere8.vtk");
-    let run = |name: &str, args: &[&str]| -> (std::process::Output, serde_json::Value) {
-        let out = scratch(&format!("{name}.msh"));
-        let (o, report) = common::curve_with_report(&mesh, &out, args);
-        let r = match report {
-            Some(report) => {
-                serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap()
-            }
-            None => {
-                assert!(!out.exists(), "{name}: nothing may be written");
-                serde_json::Value::Null
-            }
-        };
-        (o, r)
-    };
     let count = |r: &serde_json::Value, key: &str| r[key].as_u64().unwrap();
-    let (o, on) = run("interior_default", &[]);
+    let (o, on) = curve_hsphere8("interior_default", &[]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let (_, off) = run("interior_off", &["--interior-kink-angle", "180"]);
-    let (_, wide) = run("interior_40", &["--interior-kink-angle", "40"]);
+    let (_, off) = curve_hsphere8("interior_off", &["--interior-kink-angle", "180"]);
+    let (_, wide) = curve_hsphere8("interior_40", &["--interior-kink-angle", "40"]);
     let elements = count(&on, "elements");
     eprintln!(
         "held back: default {}, off {}, 40° {}; Q2: {}, {}, {}",
@@ -739,14 +725,14 @@ fn interior_kink_angle_on_the_command_line() {
             Some(deg)
         );
     }
-    let (o, _) = run(
+    let (o, _) = curve_hsphere8(
         "interior_position",
         &["--fit", "position", "--interior-kink-angle", "20"],
     );
     assert_eq!(o.status.code(), Some(1), "--fit position");
     assert!(String::from_utf8_lossy(&o.stderr).contains("--interior-kink-angle"));
     for bad in ["0", "-5", "nan"] {
-        let (o, _) = run("interior_bad", &[&format!("--interior-kink-angle={bad}")]);
+        let (o, _) = curve_hsphere8("interior_bad", &[&format!("--interior-kink-angle={bad}")]);
         assert_eq!(o.status.code(), Some(1), "--interior-kink-angle {bad}");
         assert!(String::from_utf8_lossy(&o.stderr).contains("--interior-kink-angle"));
     }
