@@ -29,7 +29,7 @@ use crate::mesh::HighOrderMesh;
 use crate::mesh::high_order::lattice_point;
 use crate::params::{ParamError, num};
 use crate::solve::direct::CholeskyPattern;
-use crate::solve::{CgError, CgInfo, CgParams, LinOp, Preconditioner, pcg_coupled};
+use crate::solve::{CgError, CgInfo, CgMonitor, CgParams, LinOp, Preconditioner, pcg_coupled};
 use rayon::prelude::*;
 use serde::Serialize;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -652,6 +652,17 @@ pub fn solve_displacement(
     prescribed: &[Option<[f64; 3]>],
     params: &ElasticParams,
 ) -> Result<(Vec<[f64; 3]>, ElasticInfo), ElasticError> {
+    solve_displacement_with_progress(reference, prescribed, params, &mut |_, _| {})
+}
+
+/// [`solve_displacement`], its CG (where it runs instead of the factorisation) reporting every
+/// iteration to `progress`, which may stop it ([`CgError::Cancelled`]).
+pub fn solve_displacement_with_progress(
+    reference: &HighOrderMesh,
+    prescribed: &[Option<[f64; 3]>],
+    params: &ElasticParams,
+    progress: &mut dyn CgMonitor,
+) -> Result<(Vec<[f64; 3]>, ElasticInfo), ElasticError> {
     let (dim, p) = (reference.dim, reference.order);
     if !(1..=MAX_ELASTIC_ORDER).contains(&p) {
         return Err(ElasticError::Order(p));
@@ -697,7 +708,8 @@ pub fn solve_displacement(
             Some((info, entries)) => (info, ElasticSolver::Cholesky, entries),
             None => {
                 u.iter_mut().for_each(|x| *x = [0.0; 3]);
-                (solve_cg(&matrix, params, &b, &mut u)?, ElasticSolver::Cg, 0)
+                let info = solve_cg(&matrix, params, &b, &mut u, progress)?;
+                (info, ElasticSolver::Cg, 0)
             }
         }
     };
@@ -734,6 +746,7 @@ fn solve_cg(
     params: &ElasticParams,
     b: &[[f64; 3]],
     u: &mut [[f64; 3]],
+    progress: &mut dyn CgMonitor,
 ) -> Result<CgInfo, CgError> {
     let nodal = NodalPreconditioner::new(matrix, params.preconditioner)?;
     if params.preconditioner == ElasticPreconditioner::BlockSgs {
@@ -741,9 +754,9 @@ fn solve_cg(
             k: matrix,
             dinv: nodal,
         };
-        pcg_coupled(matrix, &pre, b, u, &params.cg, |_, _| {})
+        pcg_coupled(matrix, &pre, b, u, &params.cg, progress)
     } else {
-        pcg_coupled(matrix, &nodal, b, u, &params.cg, |_, _| {})
+        pcg_coupled(matrix, &nodal, b, u, &params.cg, progress)
     }
 }
 
@@ -840,6 +853,16 @@ pub fn elastic_analogy(
     curved: &HighOrderMesh,
     params: &ElasticParams,
 ) -> Result<(HighOrderMesh, ElasticInfo), ElasticError> {
+    elastic_analogy_with_progress(straight, curved, params, &mut |_, _| {})
+}
+
+/// [`elastic_analogy`], its CG reporting to `progress` ([`solve_displacement_with_progress`]).
+pub fn elastic_analogy_with_progress(
+    straight: &HighOrderMesh,
+    curved: &HighOrderMesh,
+    params: &ElasticParams,
+    progress: &mut dyn CgMonitor,
+) -> Result<(HighOrderMesh, ElasticInfo), ElasticError> {
     assert_eq!(straight.nodes.len(), curved.nodes.len(), "same numbering");
     let mut prescribed = vec![None; straight.nodes.len()];
     for &n in &curved.boundary {
@@ -848,7 +871,7 @@ pub fn elastic_analogy(
             curved.nodes[n][k] - straight.nodes[n][k]
         }));
     }
-    let (u, info) = solve_displacement(straight, &prescribed, params)?;
+    let (u, info) = solve_displacement_with_progress(straight, &prescribed, params, progress)?;
     let mut out = straight.clone();
     for (n, x) in out.nodes.iter_mut().enumerate() {
         *x = match prescribed[n] {

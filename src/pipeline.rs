@@ -41,7 +41,7 @@ pub(crate) mod share;
 pub(crate) mod spline;
 pub(crate) mod tail;
 
-use crate::elastic::{ElasticError, ElasticInfo, ElasticParams, elastic_analogy};
+use crate::elastic::{ElasticError, ElasticInfo, ElasticParams, elastic_analogy_with_progress};
 use crate::energy::EnergyError;
 use crate::exec::Executor;
 use crate::io::output::{PendingFile, WriteError};
@@ -468,11 +468,22 @@ fn elastic_stage(
 ) -> Result<(HighOrderMesh, ElasticInfo, f64), CurveError> {
     let (mesh, topo) = (job.mesh, job.topo);
     let straight = clock.run(Stage::ElasticSample, || sample(mesh, mesh, topo, order));
+    // Every CG iteration reported and asked whether to stop, as the fit's.
+    let progress = clock.progress();
+    let mut monitor = crate::solve::Cancellable {
+        progress: |i, r| progress.elastic_cg(i, r),
+        cancelled: || progress.cancelled(),
+    };
     let (moved, info) = clock
-        .run(Stage::Elastic, || elastic_analogy(&straight, ho, params))
-        .map_err(|source| CurveError::Elastic {
-            input: job.input.to_owned(),
-            source,
+        .run(Stage::Elastic, || {
+            elastic_analogy_with_progress(&straight, ho, params, &mut monitor)
+        })
+        .map_err(|source| match source {
+            ElasticError::Solve(crate::solve::CgError::Cancelled { .. }) => CurveError::Cancelled,
+            source => CurveError::Elastic {
+                input: job.input.to_owned(),
+                source,
+            },
         })?;
     clock.add(Stage::ElasticAssembly, info.assembly_seconds);
     clock.add(Stage::ElasticCg, info.solve_seconds);

@@ -124,6 +124,8 @@ pub trait Progress: Sync {
     fn finished(&self, _stage: Stage) {}
     /// The fit's CG solve reached `iteration` with relative residual `rel_residual`.
     fn cg(&self, _iteration: usize, _rel_residual: f64) {}
+    /// The elastic analogy's CG solve reached `iteration` with relative residual `rel_residual`.
+    fn elastic_cg(&self, _iteration: usize, _rel_residual: f64) {}
     /// Whether the caller wants the job to stop: asked between stages (after every
     /// [`Progress::finished`] and between the rounds of the fit and the certificate), where
     /// the job then ends with `CurveError::Cancelled` and writes nothing.
@@ -177,6 +179,11 @@ impl Progress for Terminal {
     fn cg(&self, iteration: usize, rel_residual: f64) {
         self.bar.set_message(format!(
             "fit: CG iteration {iteration}, relative residual {rel_residual:.1e}"
+        ));
+    }
+    fn elastic_cg(&self, iteration: usize, rel_residual: f64) {
+        self.bar.set_message(format!(
+            "elastic analogy: CG iteration {iteration}, relative residual {rel_residual:.1e}"
         ));
     }
 }

@@ -8,6 +8,7 @@
 use polyspline::compare::facet_angle_jumps;
 use polyspline::elastic::{
     ElasticParams, ElasticPreconditioner, ElasticSolver, elastic_analogy, solve_displacement,
+    solve_displacement_with_progress,
 };
 use polyspline::mesh::HighOrderMesh;
 use polyspline::mesh::generate::{grid_2d, grid_3d};
@@ -81,6 +82,44 @@ fn zero_boundary_displacement_leaves_the_mesh_unchanged() {
             assert!(info.unknowns > 0);
         }
     }
+}
+
+/// The elastic analogy's CG reports every iteration to its monitor, which may stop it (a
+/// job's progress receiver, Ctrl-C in the Python package): run to its end the monitor sees
+/// iterations 1 to the count the solve reports; asked to stop once it has seen iteration 5 the
+/// solve ends there with `CgError::Cancelled`.
+#[test]
+fn the_elastic_cg_reports_to_its_monitor_and_stops_when_asked() {
+    let ho = straight(3, 2);
+    let params = ElasticParams {
+        solver: ElasticSolver::Cg,
+        ..tight()
+    };
+    let shear = |x: [f64; 3]| [0.05 * x[1], -0.03 * x[2], 0.02 * x[0] * x[1]];
+    let prescribed = prescribe(&ho, shear);
+    let mut seen = Vec::new();
+    let (_, info) =
+        solve_displacement_with_progress(&ho, &prescribed, &params, &mut |i: usize, _: f64| {
+            seen.push(i)
+        })
+        .unwrap();
+    assert!(info.cg.iterations > 5, "{} iterations", info.cg.iterations);
+    assert_eq!(seen, (1..=info.cg.iterations).collect::<Vec<_>>());
+    let last = std::cell::Cell::new(0usize);
+    let mut stop = polyspline::solve::Cancellable {
+        progress: |i: usize, _: f64| last.set(i),
+        cancelled: || last.get() >= 5,
+    };
+    let e = solve_displacement_with_progress(&ho, &prescribed, &params, &mut stop).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            polyspline::elastic::ElasticError::Solve(polyspline::solve::CgError::Cancelled {
+                iterations: 5
+            })
+        ),
+        "{e}"
+    );
 }
 
 #[test]
