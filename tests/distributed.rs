@@ -397,14 +397,7 @@ fn assert_ranks_give_the_serial_output_on(
             r["knot_intervals"]
         );
         assert!(d <= RANK_TOLERANCE, "{np} ranks: {d:.3e} of the diagonal");
-        // To one iteration: a redo of the spline passes (the interior kinks') starts from the
-        // pass kept's fit, which the ranks reach to the order of their sums, and a slowly
-        // converging CG (point Jacobi's ~200 iterations) may stop one iteration apart.
-        let (a, b) = (its.as_u64().unwrap(), iterations.as_u64().unwrap());
-        assert!(
-            a.abs_diff(b) <= 1,
-            "{np} ranks: CG iterations {a} against {b}"
-        );
+        assert_eq!(its, iterations, "{np} ranks: CG iterations");
         for key in [
             "knot_intervals",
             "knot_passes",
@@ -1766,11 +1759,9 @@ fn auto_knots_two_passes_choose_as_the_serial_run_on_2_3_ranks() {
     ];
     let held = |r: &Value| r["reduced_elements"].as_u64().unwrap();
     for (name, input, kept) in cases {
-        // The counts before any redo decide the premise: the interior kinks' redo (which takes
-        // the cylinder's held back to 0 with either knots) is off.
-        let tol = ["--cg-tol", RANK_CG_TOL, "--interior-kink-angle", "180"];
+        let tol = ["--cg-tol", RANK_CG_TOL];
         let serial_with = |knots: &str| {
-            let args = [tol[0], tol[1], tol[2], tol[3], "--knot-intervals", knots];
+            let args = [tol[0], tol[1], "--knot-intervals", knots];
             curve_with_report(0, &input, &format!("{name}_{knots}"), &args).2
         };
         let (uniform, graded) = (serial_with("uniform"), serial_with("graded"));
@@ -1855,9 +1846,7 @@ fn auto_knots_on_a_boundary_fitted_to_rounding_choose_as_the_serial_run() {
 /// [`RANK_TOLERANCE`] of the diagonal (the fit's CG to [`RANK_CG_TOL`]). Both hold back more
 /// than a tenth and have at most 5,000 elements, so the serial default runs the rule too: on
 /// spheremesh01 it keeps the redone pass (the same counts), on the cylinder it does not (its
-/// demoted elements' boundary leaves the first fit's) and makes the elements at the sharp
-/// turns of its interior grid lines Q2 instead (`pipeline::passes`' interior kinks' redo: 928
-/// → 0 held back), which 2 ranks do as the serial run. Measured: 4.2e-11 and 1.9e-11 of the diagonal (cylinder),
+/// demoted elements' boundary leaves the first fit's: 0 demoted, 928 held back). Measured: 4.2e-11 and 1.9e-11 of the diagonal (cylinder),
 /// 8.5e-15 and 8.5e-15 (spheremesh01, factored serially: the ranks' CG runs to
 /// `fit::DIRECT_CG_TOL`) at 2 and 3 ranks. With each rank
 /// keeping its own marks (no union over the ranks) the cylinder at 2 ranks reported 220
@@ -1884,8 +1873,7 @@ fn uncertified_initial_maps_are_demoted_as_the_serial_run_on_2_3_ranks() {
     let count = |r: &Value, key: &str| r[key].as_u64().unwrap();
     for (name, input, default_redoes) in cases {
         let tol = ["--cg-tol", RANK_CG_TOL];
-        let default_name = format!("{name}_default");
-        let (single_out, _, single) = curve_with_report(0, &input, &default_name, &tol);
+        let single = curve_with_report(0, &input, &format!("{name}_default"), &tol).2;
         let args = [tol[0], tol[1], "--demote-uncertified"];
         let (out, _, serial) = curve_with_report(0, &input, name, &args);
         eprintln!(
@@ -1906,25 +1894,10 @@ fn uncertified_initial_maps_are_demoted_as_the_serial_run_on_2_3_ranks() {
                 );
             }
         } else {
-            // The default's remedy is the interior kinks' redo, on the ranks too.
             assert_eq!(count(&single, "demoted_elements"), 0, "{name}: default");
-            let elements = count(&single, "elements");
-            for (r, run) in [(&single, "default"), (&serial, "option")] {
-                assert!(
-                    10 * count(r, "reduced_elements") <= elements,
-                    "{name}: {run}: {} of {elements} held back",
-                    count(r, "reduced_elements")
-                );
-            }
-            let (out, _, r) = curve_with_report(2, &input, &default_name, &tol);
-            let worst = compare(&read(&single_out), &read(&out)) / diagonal(&read(&single_out));
-            eprintln!("{name}: default at 2 ranks: {worst:.2e} of the diagonal");
-            for key in ["demoted_elements", "q2_elements", "reduced_elements"] {
-                assert_eq!(r[key], single[key], "{name}, default at 2 ranks: {key}");
-            }
             assert!(
-                worst <= RANK_TOLERANCE,
-                "{name}, default at 2 ranks: {worst:.3e}"
+                count(&serial, "reduced_elements") < count(&single, "reduced_elements"),
+                "{name}: the demoted pass holds back fewer"
             );
         }
         let serial_mesh = read(&out);

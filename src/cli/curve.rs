@@ -139,8 +139,9 @@ pub(crate) struct JobArgs {
     /// With `--fit smooth`: where the fitted pass holds back more than a tenth of the
     /// elements, it is redone with the elements at regular interior vertices where an
     /// interior grid line turns by more than this angle in degrees made Q2, and the redo kept
-    /// where it holds back fewer and keeps the boundary; 180 turns this off.
-    #[arg(long, default_value_t = polyspline::spline::kinks::INTERIOR_KINK_ANGLE_DEG, value_name = "DEG")]
+    /// where it holds back fewer and keeps the boundary; 35 is the measured choice, 180 (the
+    /// default) turns this off.
+    #[arg(long, default_value_t = 180.0, value_name = "DEG")]
     interior_kink_angle: f64,
     /// After the fit, lower the map's kinks at C⁰ facets (where a Q2 element meets another
     /// element): W weighs the transversal-derivative jumps there against moving the interior

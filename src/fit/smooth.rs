@@ -143,7 +143,7 @@ pub struct SmoothParams {
     /// Elements touching a regular interior vertex where an interior grid line turns by more
     /// than this angle ([`crate::spline::kinks::interior_kink_elements`]) become Q2 in the
     /// spline passes' redo where the pass kept holds back more than a tenth
-    /// (`pipeline::passes`); 180 or more turns the detection off.
+    /// (`pipeline::passes`); 180 or more (the default) turns the detection off.
     pub interior_kink_angle_deg: f64,
 }
 
@@ -153,7 +153,8 @@ impl Default for SmoothParams {
             feature_angle_deg: 30.0,
             decay: 1.0,
             kink_angle_deg: 10.0,
-            interior_kink_angle_deg: crate::spline::kinks::INTERIOR_KINK_ANGLE_DEG,
+            // Opt-in (`--interior-kink-angle`): see `crate::spline::kinks::INTERIOR_KINK_ANGLE_DEG`.
+            interior_kink_angle_deg: 180.0,
         }
     }
 }
