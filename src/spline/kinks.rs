@@ -176,10 +176,10 @@ impl Kinks {}
 
 /// Turning (degrees) of an interior grid line at a regular interior vertex above which the
 /// elements at the vertex are made Q2 ([`interior_kink_elements`]) by the smooth fit's redo,
-/// where it is asked for (`--interior-kink-angle 35`; off by default: with it on by default
-/// the boundary convergence of the smooth fit on the test suite's torus fell to order 2.1 and
-/// the automatic knots' single-pass and warm-start rules no longer held on the small
-/// generated meshes, not yet resolved).
+/// where it is asked for (`--interior-kink-angle 35`; off by default until the tests whose
+/// premises it changes are re-measured: the automatic knots' single-pass, skip and warm-start
+/// rules on small generated meshes, the post-fit Q2 choice on a structured airfoil O-grid;
+/// on the test suite's torus it lowers the boundary error at every level, BENCHMARKS.md).
 ///
 /// Chosen on the real meshes (`BENCHMARKS.md`, "Interior grid lines that turn sharply"): on
 /// hsphere8 the lines turn by 47.8° one edge from the valence-3 line and by 36.7° two edges
